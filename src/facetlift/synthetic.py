@@ -1,0 +1,622 @@
+"""Ground truth for experiments: analytic surfaces, orthographic mesh rendering, perturbations.
+
+Everything here follows :mod:`facetlift.conventions`: normals are ``(H, W, 3)`` with x right,
+y up and z toward the viewer; depth is distance along the viewing axis (``height = -depth``),
+NaN outside the mask; the value of pixel ``(r, c)`` is taken at its centre
+``x = (c + 0.5) h``, ``y = -(r + 0.5) h``.
+
+Analytic surfaces (:func:`analytic`)
+    Height functions with exact gradients: the normal map is the exact derivative of the height
+    at every pixel centre (at a crease the one-sided derivative of the branch that wins the
+    ``min``/``max``), and the depth is the exact height at the centre. Slopes do not depend on
+    the resolution: a surface is defined on normalised coordinates ``u, v`` in ``[-1, 1]``
+    (``u`` right, ``v`` up, ``s = min(H, W) h / 2`` world units per unit) and its height is
+    ``s * f(u, v)``, so ``p = df/du`` and ``q = df/dv``.
+
+Mesh rendering (:func:`render_mesh`)
+    One orthographic ray per pixel centre along the view direction; depth is the hit distance
+    along the view axis and the normal is the hit triangle's face normal in the image frame,
+    turned toward the viewer. Because a rendered triangle mesh is piecewise planar, these
+    normals are the exact derivative of the rendered depth at each pixel centre. Self-occlusions
+    give depth discontinuities that no integrator can recover from normals alone;
+    :func:`continuous_region` keeps the largest region free of them.
+
+Perturbations
+    :func:`add_angular_noise` (Gaussian angle about a random perpendicular axis, Sec. 5),
+    :func:`perturb_fraction` (Fig. 5a: a fraction of the samples rotated by up to 20 degrees),
+    :func:`remove_samples` (missing samples as NaN).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "ANALYTIC",
+    "VIEWS",
+    "GroundTruth",
+    "add_angular_noise",
+    "analytic",
+    "continuous_region",
+    "perturb_fraction",
+    "remove_samples",
+    "render_mesh",
+]
+
+
+@dataclass(eq=False)
+class GroundTruth:
+    """A test surface sampled on a pixel grid.
+
+    Attributes
+    ----------
+    depth : (H, W) float
+        Depth at pixel centres (larger is farther, ``height = -depth``), NaN outside `mask`.
+    normals : (H, W, 3) float
+        Unit normals (x right, y up, z toward the viewer), NaN outside `mask`.
+    mask : (H, W) bool
+        Pixels on the surface.
+    pixel_size : float
+        Pixel width in the units of `depth`.
+    name : str
+        A label for tables.
+    """
+
+    depth: np.ndarray
+    normals: np.ndarray
+    mask: np.ndarray
+    pixel_size: float = 1.0
+    name: str = ""
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.mask.shape
+
+    @property
+    def depth_range(self) -> float:
+        """max - min of the depth over the mask."""
+        d = self.depth[self.mask]
+        return float(d.max() - d.min()) if d.size else 0.0
+
+
+# ----------------------------------------------------------------------------------------------
+# analytic surfaces: each f(u, v) -> (f, f_u, f_v, inside)
+
+
+def _saddle(u, v):
+    return 0.5 * (u**2 - v**2), u, -v, np.ones(u.shape, bool)
+
+
+def _pyramid(u, v):
+    a = 0.8
+    use_u = np.abs(u) >= np.abs(v)
+    f = a * (1.0 - np.maximum(np.abs(u), np.abs(v)))
+    fu = np.where(use_u, -a * np.sign(u), 0.0)
+    fv = np.where(use_u, 0.0, -a * np.sign(v))
+    return f, fu, fv, np.ones(u.shape, bool)
+
+
+def _ramps(u, v):
+    # terraces: slope 1 over the first half of every period T, flat over the second half,
+    # plus a tilt along v; continuous, with creases at the ends of every ramp
+    T, a, tilt = 0.5, 0.8, 0.3
+    t = u + 1.0
+    k = np.floor(t / T)
+    r = t - k * T
+    g = k * T / 2 + np.minimum(r, T / 2)
+    gu = (r < T / 2).astype(float)
+    return a * g + tilt * v, a * gu, np.full(u.shape, tilt), np.ones(u.shape, bool)
+
+
+# (amplitude, u0, v0, sigma_u, sigma_v): head, nose, nose tip, brows, eye sockets, cheeks,
+# lips, chin
+_FACE = [
+    (0.55, 0.0, 0.0, 0.45, 0.6),
+    (0.18, 0.0, -0.05, 0.07, 0.18),
+    (0.06, 0.0, -0.2, 0.06, 0.05),
+    (0.07, -0.22, 0.22, 0.14, 0.05),
+    (0.07, 0.22, 0.22, 0.14, 0.05),
+    (-0.08, -0.22, 0.08, 0.09, 0.06),
+    (-0.08, 0.22, 0.08, 0.09, 0.06),
+    (0.06, -0.28, -0.2, 0.12, 0.12),
+    (0.06, 0.28, -0.2, 0.12, 0.12),
+    (0.05, 0.0, -0.4, 0.14, 0.03),
+    (0.06, 0.0, -0.6, 0.15, 0.08),
+]
+
+
+def _face(u, v):
+    f = np.zeros(u.shape)
+    fu = np.zeros(u.shape)
+    fv = np.zeros(u.shape)
+    for a, u0, v0, su, sv in _FACE:
+        g = a * np.exp(-0.5 * (((u - u0) / su) ** 2 + ((v - v0) / sv) ** 2))
+        f += g
+        fu -= g * (u - u0) / su**2
+        fv -= g * (v - v0) / sv**2
+    return f, fu, fv, np.ones(u.shape, bool)
+
+
+def _sphere(u, v):
+    R = 0.9
+    rr = u**2 + v**2
+    inside = rr < (0.95 * R) ** 2
+    f = np.sqrt(np.where(inside, R**2 - rr, 1.0))
+    return np.where(inside, f, np.nan), -u / f, -v / f, inside
+
+
+def _vase(u, v):
+    # surface of revolution about the vertical axis, radius profile R(v)
+    R = 0.45 + 0.2 * np.sin(2.5 * v + 0.5)
+    Rv = 0.5 * np.cos(2.5 * v + 0.5)
+    inside = (np.abs(u) < 0.95 * R) & (np.abs(v) < 0.9)
+    f = np.sqrt(np.where(inside, R**2 - u**2, 1.0))
+    return np.where(inside, f, np.nan), -u / f, R * Rv / f, inside
+
+
+def _tent(u, v):
+    # a hipped roof on a flat ground: ridge along u, 45-degree roof planes, steeper hip ends
+    a = 0.35 - np.abs(v)
+    b = 2.0 * (0.6 - np.abs(u))
+    roof = np.minimum(a, b)
+    f = np.maximum(roof, 0.0)
+    on_roof = roof > 0
+    use_a = a <= b
+    fu = np.where(on_roof & ~use_a, -2.0 * np.sign(u), 0.0)
+    fv = np.where(on_roof & use_a, -np.sign(v), 0.0)
+    return f, fu, fv, np.ones(u.shape, bool)
+
+
+def _plane(u, v):
+    return 0.3 * u - 0.2 * v, np.full(u.shape, 0.3), np.full(u.shape, -0.2), np.ones(u.shape, bool)
+
+
+_SURFACES = {
+    "saddle": _saddle,
+    "pyramid": _pyramid,
+    "ramps": _ramps,
+    "face": _face,
+    "sphere": _sphere,
+    "vase": _vase,
+    "tent": _tent,
+    "plane": _plane,
+}
+
+#: Names accepted by :func:`analytic`.
+ANALYTIC = tuple(_SURFACES)
+
+
+def _size(size, name: str = "size") -> tuple[int, int]:
+    if np.ndim(size) == 0:
+        size = (size, size)
+    try:
+        H, W = (int(s) for s in size)
+    except (TypeError, ValueError):
+        raise ValueError(f"`{name}` must be an int or a pair (H, W); got {size!r}") from None
+    if H < 2 or W < 2 or (H, W) != tuple(size):
+        raise ValueError(f"`{name}` must be integers >= 2; got {size!r}")
+    return H, W
+
+
+def analytic_height(name: str, x, y, *, scale: float = 1.0):
+    """Height and exact gradient of an analytic surface at world points.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`ANALYTIC`.
+    x, y : array_like of float
+        World coordinates (x right, y up) relative to the image centre.
+    scale : float
+        World units per normalised unit (``s`` in the module docstring).
+
+    Returns
+    -------
+    z, p, q : arrays like `x`
+        Height and its derivatives ``dz/dx``, ``dz/dy`` (NaN outside the surface's domain).
+    inside : array of bool
+    """
+    if name not in _SURFACES:
+        raise ValueError(f"`name` must be one of {list(ANALYTIC)}; got {name!r}")
+    u = np.asarray(x, float) / scale
+    v = np.asarray(y, float) / scale
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f, fu, fv, inside = _SURFACES[name](u, v)
+    z = np.where(inside, scale * f, np.nan)
+    p = np.where(inside, fu, np.nan)
+    q = np.where(inside, fv, np.nan)
+    return z, p, q, inside
+
+
+def analytic(name: str, size=128, *, pixel_size: float = 1.0) -> GroundTruth:
+    """Sample an analytic surface at the pixel centres of an image.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`ANALYTIC`: ``saddle`` (Fig. 6), ``pyramid`` and ``ramps`` (sharp creases,
+        Fig. 7), ``face`` (a smooth face-like sum of anisotropic Gaussians, Fig. 8),
+        ``sphere`` (a spherical cap on a disc), ``vase`` (a surface of revolution with an
+        irregular outline), ``tent`` (a hipped roof on flat ground), ``plane``.
+    size : int or (H, W)
+    pixel_size : float
+        Pixel width in world units.
+
+    Returns
+    -------
+    GroundTruth
+        Exact depth (``-height``) and normals at pixel centres.
+
+    Raises
+    ------
+    ValueError
+        Unknown `name`, bad `size` or `pixel_size`.
+    """
+    if name not in _SURFACES:
+        raise ValueError(f"`name` must be one of {list(ANALYTIC)}; got {name!r}")
+    H, W = _size(size)
+    h = float(pixel_size)
+    if not (np.isfinite(h) and h > 0):
+        raise ValueError(f"`pixel_size` must be a positive number; got {pixel_size!r}")
+    rows, cols = np.mgrid[0:H, 0:W].astype(float)
+    x = (cols + 0.5 - W / 2) * h
+    y = (H / 2 - rows - 0.5) * h
+    z, p, q, inside = analytic_height(name, x, y, scale=min(H, W) * h / 2)
+    n = np.stack([-p, -q, np.ones_like(p)], axis=-1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    n[~inside] = np.nan
+    return GroundTruth(depth=-z, normals=n, mask=inside, pixel_size=h, name=name)
+
+
+# ----------------------------------------------------------------------------------------------
+# mesh rendering
+
+_s3 = 1 / np.sqrt(3.0)
+
+#: Named view directions (the direction the rays travel, in the mesh's coordinates).
+VIEWS = {
+    "front": (0.0, 0.0, -1.0),
+    "back": (0.0, 0.0, 1.0),
+    "right": (-1.0, 0.0, 0.0),
+    "left": (1.0, 0.0, 0.0),
+    "top": (0.0, -1.0, 0.0),
+    "bottom": (0.0, 1.0, 0.0),
+    "oblique": (-_s3, -_s3, -_s3),
+    "oblique2": (_s3, -_s3, -_s3),
+}
+
+
+def _view_frame(view) -> np.ndarray:
+    """Rows X (right), Y (up), Z (toward the viewer) of the image frame in mesh coordinates."""
+    if isinstance(view, str):
+        if view not in VIEWS:
+            raise ValueError(f"`view` must be one of {list(VIEWS)} or a 3-vector; got {view!r}")
+        d = np.array(VIEWS[view])
+    else:
+        d = np.asarray(view, dtype=float)
+        if d.shape != (3,) or not np.isfinite(d).all() or np.linalg.norm(d) == 0:
+            raise ValueError(f"`view` must be a view name or a non-zero 3-vector; got {view!r}")
+    Z = -d / np.linalg.norm(d)
+    up = np.array([0.0, 1.0, 0.0])
+    if abs(Z @ up) > 0.99:  # looking along +-y: the mesh's -z/+z is up in the image
+        up = np.array([0.0, 0.0, -1.0 if Z[1] > 0 else 1.0])
+    Y = up - (up @ Z) * Z
+    Y /= np.linalg.norm(Y)
+    X = np.cross(Y, Z)
+    return np.stack([X, Y, Z])
+
+
+def _load_mesh(mesh):
+    import trimesh
+
+    if isinstance(mesh, trimesh.Trimesh):
+        return mesh
+    if isinstance(mesh, (str, Path)):
+        p = Path(mesh)
+        if not p.is_file():
+            raise ValueError(f"`mesh` file not found: {p}")
+        m = trimesh.load(p, force="mesh")
+        if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
+            raise ValueError(f"`mesh` {p} holds no triangles")
+        return m
+    raise ValueError(f"`mesh` must be a trimesh.Trimesh or a file path; got {type(mesh).__name__}")
+
+
+def _first_hits(mesh, origins, direction):
+    """Index of the first triangle hit by each ray (-1 for a miss)."""
+    dirs = np.broadcast_to(direction, origins.shape)
+    try:
+        from trimesh.ray.ray_pyembree import RayMeshIntersector
+
+        return RayMeshIntersector(mesh).intersects_first(origins, dirs)
+    except ImportError:  # pragma: no cover - embreex is installed in the test setup
+        from trimesh.ray.ray_triangle import RayMeshIntersector
+
+        return RayMeshIntersector(mesh).intersects_first(origins, dirs)
+
+
+def render_mesh(
+    mesh,
+    resolution=128,
+    *,
+    view="front",
+    margin: float = 0.05,
+    pixel_size: float = 1.0,
+    name: str | None = None,
+) -> GroundTruth:
+    """Orthographic depth and normal maps of a triangle mesh, one ray per pixel centre.
+
+    The mesh is scaled so that its projection fits the image with `margin` (a fraction of the
+    image size) on the tighter side, centred. Depth is the hit distance along the view axis from
+    a plane in front of the mesh, computed in float64 from the hit triangle's plane (the ray
+    caster only picks the triangle); the normal is that triangle's face normal in the image
+    frame (x right, y up, z toward the viewer), flipped toward the viewer where the winding
+    makes it face away. Pixels whose hit triangle is seen edge-on (``|n_z| < 1e-6``) are left
+    out of the mask, as are isolated single pixels.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh or path
+    resolution : int or (H, W)
+    view : str or (3,) array_like
+        A name in :data:`VIEWS` or the direction the rays travel, in mesh coordinates. The
+        image's up is the mesh's +y (or +-z when looking along y).
+    margin : float
+        Empty border on each side, as a fraction of the image size, in [0, 0.45].
+    pixel_size : float
+        Pixel width in the output's units (the depth is expressed in these units).
+    name : str, optional
+        Label; default ``"<file stem>@<view>"``.
+
+    Returns
+    -------
+    GroundTruth
+
+    Raises
+    ------
+    ValueError
+        Bad `mesh`, `resolution`, `view`, `margin` or `pixel_size`, or a mesh that covers no
+        pixel.
+    """
+    H, W = _size(resolution, "resolution")
+    if not (0 <= margin <= 0.45):
+        raise ValueError(f"`margin` must be in [0, 0.45]; got {margin!r}")
+    h = float(pixel_size)
+    if not (np.isfinite(h) and h > 0):
+        raise ValueError(f"`pixel_size` must be a positive number; got {pixel_size!r}")
+    label = name
+    if label is None:
+        stem = Path(mesh).stem if isinstance(mesh, (str, Path)) else "mesh"
+        label = f"{stem}@{view if isinstance(view, str) else 'custom'}"
+    m = _load_mesh(mesh)
+    frame = _view_frame(view)
+    V = np.asarray(m.vertices, dtype=float)
+    P = V @ frame.T  # image-frame coordinates of the vertices
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    ext = hi - lo
+    if ext[0] <= 0 and ext[1] <= 0:
+        raise ValueError("`mesh` projects to a single point in this view")
+    world_h = max(ext[0] / (W * (1 - 2 * margin)), ext[1] / (H * (1 - 2 * margin)))
+    centre = (lo + hi) / 2
+    rows, cols = np.mgrid[0:H, 0:W].astype(float)
+    x = centre[0] + (cols.ravel() + 0.5 - W / 2) * world_h
+    y = centre[1] + (H / 2 - rows.ravel() - 0.5) * world_h
+    z0 = hi[2] + 0.01 * max(ext.max(), world_h)
+    origins = np.column_stack([x, y, np.full_like(x, z0)]) @ frame
+    direction = -frame[2]
+    tri = _first_hits(m, origins, direction)
+    hit = tri >= 0
+    fn = np.asarray(m.face_normals, dtype=float)[tri[hit]] @ frame.T
+    fn[fn[:, 2] < 0] *= -1
+    ok = np.abs(fn[:, 2]) > 1e-6
+    idx = np.nonzero(hit)[0][ok]
+    fn = fn[ok]
+    # exact ray/plane intersection in float64: t = n.(v0 - o) / n.d, in the image frame
+    v0 = P[m.faces[tri[idx], 0]]
+    o = np.column_stack([x[idx], y[idx], np.full(idx.size, z0)])
+    t = np.einsum("ij,ij->i", fn, v0 - o) / (-fn[:, 2])
+    depth = np.full(H * W, np.nan)
+    normals = np.full((H * W, 3), np.nan)
+    depth[idx] = t / world_h * h
+    normals[idx] = fn / np.linalg.norm(fn, axis=1, keepdims=True)
+    depth = depth.reshape(H, W)
+    normals = normals.reshape(H, W, 3)
+    from .problem import clean_mask
+
+    mask = np.isfinite(depth)
+    if mask.any():
+        mask = clean_mask(mask, min_size=2)
+    if not mask.any():
+        raise ValueError("`mesh` covers no pixel of the image in this view")
+    depth[~mask] = np.nan
+    normals[~mask] = np.nan
+    return GroundTruth(depth=depth, normals=normals, mask=mask, pixel_size=h, name=label)
+
+
+def depth_jumps(gt: GroundTruth, *, tol: float = 0.5) -> np.ndarray:
+    """Pixels next to a depth discontinuity.
+
+    Two 8-neighbours ``a, b`` in the mask are split by a jump when their depth difference
+    departs from the one their normals predict (trapezoid rule on the slopes) by more than
+    ``0.5 |g_a - g_b| + tol`` pixel widths, ``g`` the slope along the offset: that bound is
+    never exceeded across a single crease of a continuous piecewise planar surface.
+
+    Returns
+    -------
+    (H, W) bool
+        Mask pixels with at least one such neighbour.
+    """
+    if not (tol >= 0):
+        raise ValueError(f"`tol` must be >= 0; got {tol!r}")
+    H, W = gt.shape
+    h = gt.pixel_size
+    n = gt.normals
+    with np.errstate(invalid="ignore", divide="ignore"):
+        p = -n[..., 0] / n[..., 2]
+        q = -n[..., 1] / n[..., 2]
+    d = gt.depth
+    out = np.zeros((H, W), bool)
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        a = (slice(0, H - dr), slice(max(0, -dc), W - max(0, dc)))
+        b = (slice(dr, H), slice(max(0, dc), W - max(0, -dc) if dc < 0 else W))
+        dx, dy = dc * h, -dr * h
+        ga = p[a] * dx + q[a] * dy
+        gb = p[b] * dx + q[b] * dy
+        pred = -0.5 * (ga + gb)  # depth = -height
+        with np.errstate(invalid="ignore"):
+            bad = np.abs(d[b] - d[a] - pred) > 0.5 * np.abs(ga - gb) + tol * h
+        bad &= gt.mask[a] & gt.mask[b]
+        out[a] |= bad
+        out[b] |= bad
+    return out
+
+
+def continuous_region(gt: GroundTruth, *, tol: float = 0.5) -> GroundTruth:
+    """The largest 8-connected part of `gt` after removing the pixels next to depth jumps.
+
+    See :func:`depth_jumps` for the test. Where a jump fades out inside the object (a fold),
+    the two sides stay connected around its end: the result is free of jumps between
+    neighbours, not necessarily of every inconsistency.
+    """
+    from .domain import Domain
+
+    keep = gt.mask & ~depth_jumps(gt, tol=tol)
+    if not keep.any():
+        raise ValueError("`gt` has no pixel away from depth jumps")
+    d = Domain.from_mask(keep)
+    big = int(np.argmax(d.component_sizes)) + 1
+    mask = d.labels == big
+    depth = np.where(mask, gt.depth, np.nan)
+    normals = np.where(mask[..., None], gt.normals, np.nan)
+    return replace(gt, depth=depth, normals=normals, mask=mask, name=gt.name + "+cont")
+
+
+# ----------------------------------------------------------------------------------------------
+# perturbations
+
+
+def _check_normals(normals) -> np.ndarray:
+    n = np.asarray(normals, dtype=float)
+    if n.ndim < 1 or n.shape[-1] != 3:
+        raise ValueError(f"`normals` must have shape (..., 3); got {n.shape}")
+    return n
+
+
+def _rng(rng):
+    return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+
+
+def _rotate(n, angles, rng, keep_front):
+    """Rotate unit vectors n (k, 3) by `angles` (rad) about random axes perpendicular to them."""
+    a = rng.normal(size=n.shape)
+    axis = a - np.einsum("ij,ij->i", a, n)[:, None] * n
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    side = np.cross(axis, n)  # unit, perpendicular to n, in the rotation plane
+    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    out = n * c + side * s
+    if keep_front:
+        flip = (out[:, 2] <= 0) & (n[:, 2] > 0)
+        out[flip] = n[flip] * c[flip] - side[flip] * s[flip]
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def add_angular_noise(normals, sigma_deg: float, rng=None, *, keep_front: bool = True):
+    """Rotate every normal by an angle ~ N(0, sigma) about a random perpendicular axis.
+
+    Parameters
+    ----------
+    normals : (..., 3) array_like
+        Unit normals; NaN rows stay NaN.
+    sigma_deg : float
+        Standard deviation of the rotation angle in degrees (the paper uses 5).
+    rng : numpy.random.Generator or seed
+    keep_front : bool
+        Where a rotation would turn a front-facing normal away from the viewer (``n_z <= 0``),
+        rotate by the opposite angle instead (same angle, so the angle distribution is kept).
+
+    Returns
+    -------
+    (..., 3) float
+        The noisy normals; the angle to the input is ``|N(0, sigma)|`` per normal.
+    """
+    n = _check_normals(normals)
+    if not (np.isfinite(sigma_deg) and sigma_deg >= 0):
+        raise ValueError(f"`sigma_deg` must be a finite number >= 0; got {sigma_deg!r}")
+    rng = _rng(rng)
+    flat = n.reshape(-1, 3).copy()
+    ok = np.isfinite(flat).all(axis=1)
+    angles = np.radians(sigma_deg) * rng.normal(size=int(ok.sum()))
+    flat[ok] = _rotate(flat[ok], angles, rng, keep_front)
+    return flat.reshape(n.shape)
+
+
+def _pick(ok: np.ndarray, fraction: float, rng) -> np.ndarray:
+    if not (0 <= fraction <= 1):
+        raise ValueError(f"`fraction` must be in [0, 1]; got {fraction!r}")
+    idx = np.nonzero(ok)[0]
+    k = int(round(fraction * idx.size))
+    chosen = np.zeros(ok.size, bool)
+    chosen[rng.choice(idx, size=k, replace=False)] = True
+    return chosen
+
+
+def perturb_fraction(
+    normals, fraction: float, *, max_deg: float = 20.0, rng=None, keep_front: bool = True
+):
+    """Rotate a random `fraction` of the samples by angles uniform in [0, `max_deg`] (Fig. 5a).
+
+    Parameters
+    ----------
+    normals : (H, W, 3) array_like
+        Unit normals; NaN samples are never chosen.
+    fraction : float
+        In [0, 1]; ``round(fraction * number of finite samples)`` are perturbed.
+    max_deg : float
+        Largest rotation angle in degrees.
+    rng : numpy.random.Generator or seed
+    keep_front : bool
+        See :func:`add_angular_noise`.
+
+    Returns
+    -------
+    perturbed : (H, W, 3) float
+    chosen : (H, W) bool
+        The perturbed samples (use them as inliers, or drop them with ``perturbed[chosen] =
+        nan`` to make them missing samples, Fig. 5b/c).
+    angles : (H, W) float
+        The rotation angle in degrees (0 where not perturbed, NaN where the input is NaN).
+    """
+    n = _check_normals(normals)
+    if not (np.isfinite(max_deg) and 0 <= max_deg <= 90):
+        raise ValueError(f"`max_deg` must be in [0, 90]; got {max_deg!r}")
+    rng = _rng(rng)
+    flat = n.reshape(-1, 3).copy()
+    ok = np.isfinite(flat).all(axis=1)
+    chosen = _pick(ok, fraction, rng)
+    ang = rng.uniform(0.0, max_deg, size=int(chosen.sum()))
+    flat[chosen] = _rotate(flat[chosen], np.radians(ang), rng, keep_front)
+    angles = np.where(ok, 0.0, np.nan)
+    angles[chosen] = ang
+    shape = n.shape[:-1]
+    return flat.reshape(n.shape), chosen.reshape(shape), angles.reshape(shape)
+
+
+def remove_samples(normals, fraction: float, rng=None):
+    """Set a random `fraction` of the finite normals to NaN (missing samples).
+
+    Returns
+    -------
+    normals : (..., 3) float
+        A copy with NaN rows at the removed samples.
+    removed : (...) bool
+    """
+    n = _check_normals(normals)
+    rng = _rng(rng)
+    flat = n.reshape(-1, 3).copy()
+    ok = np.isfinite(flat).all(axis=1)
+    chosen = _pick(ok, fraction, rng)
+    flat[chosen] = np.nan
+    return flat.reshape(n.shape), chosen.reshape(n.shape[:-1])
