@@ -1,0 +1,415 @@
+"""Round trips and error paths of facetlift.io."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import facetlift
+from facetlift import io
+
+DATA = Path(__file__).parents[1] / ".." / "shared" / "data" / "normal_maps"
+
+
+def bump_normals(H=24, W=30):
+    """Analytic normals of a Gaussian bump (x right, y up), plus its mask with a hole."""
+    r, c = np.mgrid[0:H, 0:W] + 0.5
+    x, y = c, -r
+    z = 3 * np.exp(-((x - W / 2) ** 2 + (y + H / 2) ** 2) / 40)
+    p = z * -2 * (x - W / 2) / 40
+    q = z * -2 * (y + H / 2) / 40
+    n = facetlift.normals_from_gradients(p, q)
+    mask = np.ones((H, W), bool)
+    mask[8:12, 10:14] = False
+    return n, mask
+
+
+@pytest.fixture
+def normals():
+    return bump_normals()
+
+
+@pytest.fixture
+def surface(normals):
+    n, mask = normals
+    return facetlift.integrate(n, mask)
+
+
+# ------------------------------------------------------------------------------ normal maps
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+def test_png_round_trip_exact_to_quantisation(tmp_path, normals, bits):
+    n, _ = normals
+    path = io.write_normals(tmp_path / "n.png", n, bits=bits)
+    back, alpha = io.read_normals(path)
+    assert alpha is None
+    assert back.dtype == np.float64 and back.shape == n.shape
+    step = 2.0 / (2**bits - 1)  # one quantisation level in [-1, 1]
+    err = np.abs(back - n).max()
+    assert err <= step / 2 + 1e-12
+    if bits == 16:  # a 16-bit file read as 8 bit would be off by up to 1/255
+        assert err < 2e-5
+
+
+def test_png_16bit_stays_16bit(tmp_path):
+    """Values that differ only below 8-bit precision survive the round trip."""
+    v = np.array([[[40000, 40001, 65535]]], np.uint16)
+    n = v / 65535 * 2 - 1
+    io.write_normals(tmp_path / "n.png", n, bits=16)
+    back, _ = io.read_normals(tmp_path / "n.png")
+    assert back[0, 0, 0] != back[0, 0, 1]
+    np.testing.assert_allclose(back, n, atol=1e-12)
+
+
+@pytest.mark.parametrize("ext", [".png", ".tif", ".exr", ".npy"])
+def test_alpha_channel_becomes_mask(tmp_path, normals, ext):
+    n, mask = normals
+    io.write_normals(tmp_path / f"n{ext}", n, mask)
+    back, alpha = io.read_normals(tmp_path / f"n{ext}")
+    np.testing.assert_array_equal(alpha, mask)
+    np.testing.assert_allclose(back, n, atol=2e-5)
+
+
+@pytest.mark.parametrize(
+    "ext, bits, atol", [(".exr", 32, 1e-7), (".npy", 32, 0), (".tif", 32, 1e-7),
+                        (".tif", 16, 2e-5), (".tif", 8, 4e-3)]
+)
+def test_float_and_tiff_round_trips(tmp_path, normals, ext, bits, atol):
+    n, _ = normals
+    io.write_normals(tmp_path / f"n{ext}", n, bits=bits)
+    back, alpha = io.read_normals(tmp_path / f"n{ext}")
+    assert alpha is None
+    np.testing.assert_allclose(back, n, atol=atol)
+
+
+def test_exr_xyz_channels(tmp_path, normals):
+    import OpenEXR
+
+    n, _ = normals
+    ch = {k: n[..., i].astype(np.float32) for i, k in enumerate("XYZ")}
+    hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    OpenEXR.File(hdr, ch).write(str(tmp_path / "n.exr"))
+    back, alpha = io.read_normals(tmp_path / "n.exr")
+    assert alpha is None
+    np.testing.assert_allclose(back, n, atol=1e-7)
+
+
+@pytest.mark.parametrize("ext", [".png", ".npy"])
+def test_y_down_flips_y_only(tmp_path, normals, ext):
+    n, _ = normals
+    io.write_normals(tmp_path / f"n{ext}", n, y_down=True)
+    raw, _ = io.read_normals(tmp_path / f"n{ext}")
+    np.testing.assert_allclose(raw[..., 1], -n[..., 1], atol=2e-5)
+    back, _ = io.read_normals(tmp_path / f"n{ext}", y_down=True)
+    np.testing.assert_allclose(back, n, atol=2e-5)
+
+
+def test_background_fill_decodes_as_nan(tmp_path):
+    px = np.zeros((2, 3, 3), np.uint8)
+    px[0, 0] = (128, 128, 255)  # facing the viewer
+    px[0, 1] = (127, 127, 127)  # mid-grey background
+    px[0, 2] = (255, 255, 255)  # white background
+    (tmp_path / "n.png").write_bytes(__import__("imagecodecs").png_encode(px))
+    n, _ = io.read_normals(tmp_path / "n.png")
+    assert np.isfinite(n[0, 0]).all() and n[0, 0, 2] == 1.0
+    assert np.isnan(n[0, 1:]).all() and np.isnan(n[1]).all()  # black too
+
+
+def test_nan_normals_written_to_png_read_back_as_nan(tmp_path, normals):
+    n, mask = normals
+    n = n.copy()
+    n[~mask] = np.nan
+    io.write_normals(tmp_path / "n.png", n)
+    back, _ = io.read_normals(tmp_path / "n.png")
+    np.testing.assert_array_equal(np.isnan(back).any(-1), ~mask)
+
+
+# ------------------------------------------------------------------------------ masks and K
+
+
+@pytest.mark.parametrize("ext", [".png", ".tif", ".npy"])
+def test_mask_round_trip(tmp_path, normals, ext):
+    _, mask = normals
+    io.write_mask(tmp_path / f"m{ext}", mask)
+    np.testing.assert_array_equal(io.read_mask(tmp_path / f"m{ext}", mask.shape), mask)
+
+
+def test_rgb_and_rgba_masks(tmp_path):
+    import imagecodecs
+
+    rgb = np.zeros((2, 2, 3), np.uint8)
+    rgb[0, 0, 2] = 9  # any channel nonzero is inside
+    (tmp_path / "rgb.png").write_bytes(imagecodecs.png_encode(rgb))
+    np.testing.assert_array_equal(io.read_mask(tmp_path / "rgb.png"), [[1, 0], [0, 0]])
+    rgba = np.full((2, 2, 4), 255, np.uint8)
+    rgba[0, 0, 3] = 0  # transparent: outside
+    rgba[1, 1, :3] = 0  # opaque black: outside
+    (tmp_path / "rgba.png").write_bytes(imagecodecs.png_encode(rgba))
+    np.testing.assert_array_equal(io.read_mask(tmp_path / "rgba.png"), [[0, 1], [1, 0]])
+
+
+def test_mask_shape_mismatch(tmp_path):
+    io.write_mask(tmp_path / "m.png", np.ones((4, 5)))
+    with pytest.raises(ValueError, match=r"`mask`.*size 4x5.*normal map is 6x5"):
+        io.read_mask(tmp_path / "m.png", (6, 5))
+
+
+def test_read_K(tmp_path):
+    K = np.array([[500.0, 0, 320.5], [0, 510, 240.25], [0, 0, 1]])
+    np.savetxt(tmp_path / "K.txt", K)
+    np.testing.assert_array_equal(io.read_K(tmp_path / "K.txt"), K)
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [("1 2 3\n4 5 6\n", r"3x3"), ("a b c\n", "cannot parse"),
+     ("-1 0 0\n0 1 0\n0 0 1\n", "focal"), ("1 0 0\n0 1 0\n1 0 1\n", "last row")],
+)
+def test_read_K_errors(tmp_path, text, match):
+    (tmp_path / "K.txt").write_text(text)
+    with pytest.raises(ValueError, match=match):
+        io.read_K(tmp_path / "K.txt")
+
+
+# ------------------------------------------------------------------------------ datasets
+
+
+def test_read_dataset_folder(tmp_path, normals):
+    n, mask = normals
+    io.write_normals(tmp_path / "normal_map.png", n, bits=8)
+    io.write_mask(tmp_path / "mask.png", mask)
+    ds = io.read_dataset(tmp_path)
+    assert ds["K"] is None
+    np.testing.assert_array_equal(ds["mask"], mask)
+    np.testing.assert_allclose(ds["normals"], n, atol=1 / 255 + 1e-12)
+    K = np.array([[100.0, 0, 15], [0, 100, 12], [0, 0, 1]])
+    np.savetxt(tmp_path / "K.txt", K)
+    np.testing.assert_array_equal(io.read_dataset(tmp_path)["K"], K)
+
+
+def test_read_dataset_errors(tmp_path):
+    with pytest.raises(ValueError, match="not a directory"):
+        io.read_dataset(tmp_path / "nope")
+    with pytest.raises(ValueError, match="no normal_map"):
+        io.read_dataset(tmp_path)
+
+
+@pytest.mark.parametrize(
+    "name", ["bini_supp_tent_ortho", "bini_human_ortho_real", "diligent_bear"]
+)
+def test_real_datasets(name):
+    folder = DATA / name
+    if not folder.is_dir():
+        pytest.skip(f"{folder} not present")
+    ds = io.read_dataset(folder)
+    n, mask = ds["normals"], ds["mask"]
+    assert n.shape[:2] == mask.shape and mask.any()
+    length = np.linalg.norm(n[mask], axis=-1)
+    # decoded inside the mask: unit length to quantisation, as in ../shared/data/SOURCES.md
+    assert np.all(np.abs(length - 1) < 0.015)
+    assert (ds["K"] is not None) == (folder / "K.txt").is_file()
+    if name == "bini_supp_tent_ortho":  # three distinct normals: flat, and +-45 deg about x
+        up = n[mask][:, 2] > 0.99
+        assert up.any()
+        tilted = n[mask][~up]
+        np.testing.assert_allclose(np.abs(tilted[:, 1]), np.sqrt(0.5), atol=1e-3)
+        np.testing.assert_allclose(tilted[:, 0], 0, atol=1e-3)
+    if name == "diligent_bear":
+        np.testing.assert_allclose(ds["K"][0, 2], 305.875)
+
+
+# ------------------------------------------------------------------------------ surfaces
+
+
+@pytest.mark.parametrize("ext, atol", [(".npy", 0), (".exr", 1e-5), (".tif", 1e-5)])
+def test_depth_round_trip_keeps_nan(tmp_path, surface, ext, atol):
+    path = surface.save(tmp_path / f"d{ext}")
+    d = io.read_depth(path)
+    np.testing.assert_array_equal(np.isnan(d), ~surface.mask)
+    np.testing.assert_allclose(d[surface.mask], surface.depth[surface.mask], atol=atol)
+
+
+def test_npz(tmp_path, surface):
+    with np.load(surface.save(tmp_path / "s.npz")) as z:
+        np.testing.assert_array_equal(z["depth"], surface.depth)
+        np.testing.assert_array_equal(z["vertex_depth"], surface.vertex_depth)
+        np.testing.assert_array_equal(z["mask"], surface.mask)
+        assert z["pixel_size"] == surface.pixel_size and np.isnan(z["K"]).all()
+
+
+@pytest.mark.parametrize("ext", [".ply", ".obj"])
+@pytest.mark.parametrize("triangles", [False, True])
+def test_mesh_round_trip(tmp_path, surface, ext, triangles):
+    import meshio
+
+    path = surface.save(tmp_path / f"m{ext}", triangles=triangles)
+    mesh = meshio.read(path)
+    verts, faces = surface.to_mesh(triangles=triangles)
+    np.testing.assert_allclose(mesh.points, verts, atol=1e-12)
+    assert len(mesh.cells) == 1
+    assert mesh.cells[0].type == ("triangle" if triangles else "quad")
+    np.testing.assert_array_equal(mesh.cells[0].data, faces)
+
+
+def test_ply_is_binary(tmp_path, surface):
+    head = surface.save(tmp_path / "m.ply").read_bytes()[:200]
+    assert b"format binary_little_endian" in head
+
+
+def test_preview(tmp_path, surface):
+    import imagecodecs
+
+    img = imagecodecs.png_decode(surface.save(tmp_path / "p.png", min_size=1).read_bytes())
+    assert img.shape == surface.shape + (3,) and img.dtype == np.uint8
+    assert (img[~surface.mask] == 255).all()  # background
+    inside = img[surface.mask].astype(float).mean(-1)
+    assert inside.std() > 5  # the bump is shaded, not flat
+    # lit from the upper left: the upper-left flank is brighter than the lower-right one
+    H, W = surface.shape
+    assert img[H // 2 - 4, W // 2 - 4].mean() > img[H // 2 + 4, W // 2 + 4].mean()
+    big = imagecodecs.png_decode(
+        io.write_preview(tmp_path / "q.png", surface, colormap="viridis").read_bytes()
+    )
+    assert min(big.shape[:2]) >= 256 and big.shape[1] > 2 * big.shape[0]
+
+
+def test_shade_flat_plane_is_uniform():
+    s = facetlift.integrate(np.dstack([np.zeros((5, 6, 2)), np.ones((5, 6))]))
+    sh = io.shade(s, light=(0, 0, 1))
+    np.testing.assert_allclose(sh, 1.0)
+
+
+# ------------------------------------------------------------------------------ atomicity
+
+
+def test_atomic_write_leaves_nothing_on_failure(tmp_path, surface, monkeypatch):
+    import meshio
+
+    def boom(path, *a, **k):
+        Path(path).write_bytes(b"partial")
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(meshio, "write", boom)
+    with pytest.raises(RuntimeError, match="disk full"):
+        surface.save(tmp_path / "m.ply")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_atomic_write_keeps_old_file_on_failure(tmp_path, surface, monkeypatch):
+    target = tmp_path / "d.npy"
+    surface.save(target)
+    before = target.read_bytes()
+
+    def boom(*a, **k):
+        raise OSError("no space left")
+
+    monkeypatch.setattr(np, "save", boom)
+    with pytest.raises(OSError, match="no space"):
+        surface.save(target)
+    assert target.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["d.npy"]
+
+
+def test_atomic_exr_failure(tmp_path, monkeypatch):
+    import OpenEXR
+
+    class Broken:
+        def __init__(self, *a):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *a):
+            return False
+
+        def write(self, path):
+            Path(path).write_bytes(b"half")
+            raise RuntimeError("exr failed")
+
+    monkeypatch.setattr(OpenEXR, "File", Broken)
+    with pytest.raises(RuntimeError, match="exr failed"):
+        io.write_depth(tmp_path / "d.exr", np.zeros((2, 2)))
+    assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------------------ errors
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(ValueError, match=r"`path`: file .*nope.png does not exist"):
+        io.read_normals(tmp_path / "nope.png")
+    with pytest.raises(ValueError, match="is a directory"):
+        io.read_normals(tmp_path)
+
+
+@pytest.mark.parametrize("ext", [".png", ".tif", ".exr", ".npy"])
+def test_corrupt_files(tmp_path, ext):
+    (tmp_path / f"bad{ext}").write_bytes(b"this is not an image at all")
+    with pytest.raises(ValueError, match=r"bad\.(png|tif|exr|npy)"):
+        io.read_normals(tmp_path / f"bad{ext}")
+
+
+@pytest.mark.parametrize("ext", [".png", ".exr", ".tif"])
+def test_truncated_files(tmp_path, normals, ext):
+    path = io.write_normals(tmp_path / f"n{ext}", normals[0])
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match=rf"n\{ext}"):
+        io.read_normals(path)
+
+
+def test_wrong_channel_counts(tmp_path):
+    import imagecodecs
+
+    (tmp_path / "g.png").write_bytes(imagecodecs.png_encode(np.zeros((3, 4), np.uint8)))
+    with pytest.raises(ValueError, match=r"\(H, W, 3\) RGB.*1 channel"):
+        io.read_normals(tmp_path / "g.png")
+    np.save(tmp_path / "two.npy", np.zeros((3, 4, 2)))
+    with pytest.raises(ValueError, match=r"2 channel"):
+        io.read_normals(tmp_path / "two.npy")
+    io.write_depth(tmp_path / "z.exr", np.zeros((3, 4)))
+    with pytest.raises(ValueError, match=r"channels R, G, B or X, Y, Z; got \['Z'\]"):
+        io.read_normals(tmp_path / "z.exr")
+
+
+def test_unsupported_pixel_type(tmp_path):
+    import tifffile
+
+    tifffile.imwrite(tmp_path / "n.tif", np.zeros((3, 4, 3), np.int32), photometric="rgb")
+    with pytest.raises(ValueError, match="pixel type int32"):
+        io.read_normals(tmp_path / "n.tif")
+
+
+def test_unknown_extensions(tmp_path, surface):
+    (tmp_path / "n.jpg").write_bytes(b"x")
+    with pytest.raises(ValueError, match=r"unsupported normal map format '\.jpg'.*\.png"):
+        io.read_normals(tmp_path / "n.jpg")
+    with pytest.raises(ValueError, match=r"unsupported surface format '\.stl'.*\.npz.*\.ply"):
+        surface.save(tmp_path / "m.stl")
+    with pytest.raises(ValueError, match=r"unsupported depth format '\.png'"):
+        io.write_depth(tmp_path / "d.png", surface.depth)
+    with pytest.raises(ValueError, match=r"unsupported mask format"):
+        io.read_mask(tmp_path / "n.jpg")
+    (tmp_path / "m.png").write_bytes(b"\x89PNG garbage")
+    with pytest.raises(ValueError, match=r"`mask`: .*m\.png is not a readable PNG"):
+        io.read_mask(tmp_path / "m.png")
+
+
+def test_writer_argument_errors(tmp_path, surface):
+    with pytest.raises(ValueError, match=r"`depth` must have shape \(H, W\)"):
+        io.write_depth(tmp_path / "d.npy", np.zeros(3))
+    with pytest.raises(ValueError, match=r"`faces` index out of range"):
+        io.write_mesh(tmp_path / "m.ply", np.zeros((3, 3)), [[0, 1, 5]])
+    with pytest.raises(ValueError, match=r"`vertices` must have shape"):
+        io.write_mesh(tmp_path / "m.ply", np.zeros((3, 2)), [[0, 1, 2]])
+    with pytest.raises(ValueError, match=r"`bits` must be one of \(8, 16\)"):
+        io.write_normals(tmp_path / "n.png", np.zeros((2, 2, 3)), bits=32)
+    with pytest.raises(ValueError, match=r"`mask` must have shape"):
+        io.write_normals(tmp_path / "n.png", np.zeros((2, 2, 3)), np.ones((3, 2)))
+    with pytest.raises(ValueError, match=r"takes only `triangles`"):
+        surface.save(tmp_path / "m.ply", colormap="viridis")
+    with pytest.raises(ValueError, match=r"takes no options"):
+        surface.save(tmp_path / "d.npy", triangles=True)
+    assert list(tmp_path.iterdir()) == []
