@@ -71,9 +71,12 @@ class Domain:
     @cached_property
     def corners(self) -> np.ndarray:
         """(m, 4) int64 vertex indices of each facet's corners, in the conventional order."""
-        r, c = self.pixels
+        H, W = self.shape
         vi = self.vertex_index
-        return np.stack([vi[r + dr, c + dc] for dr, dc in CORNER_OFFSETS], axis=1)
+        out = np.empty((self.n_facets, 4), dtype=np.int64)
+        for k, (dr, dc) in enumerate(CORNER_OFFSETS):
+            out[:, k] = vi[dr : dr + H, dc : dc + W][self.mask]
+        return out
 
     @cached_property
     def _labels(self) -> tuple[np.ndarray, int]:

@@ -10,7 +10,11 @@ Backends, tried in this order by ``backend="auto"``:
     default (minimum-degree ordering on A+A', no pivoting). Always available.
 ``"amg"``
     pyamg Ruge-Stueben multigrid as a conjugate-gradient preconditioner: no factorization, the
-    least memory, used by :func:`solve` for one-shot solves of large systems.
+    least memory.
+``"pcg"``
+    Conjugate gradients with a caller-supplied preconditioner, e.g. the fictitious-domain
+    spectral preconditioner of :mod:`facetlift.spectral` for facet operators: no setup and an
+    O(n log n) cost per iteration. :func:`solve` uses it when a preconditioner is given.
 
 :func:`factorize` returns an object whose ``solve(b)`` reuses the factorization (the paper's
 "prefactored" global step); :func:`solve` does a single solve with the fastest route.
@@ -19,7 +23,6 @@ Backends, tried in this order by ``backend="auto"``:
 from __future__ import annotations
 
 import logging
-import warnings
 from typing import Callable
 
 import numpy as np
@@ -28,7 +31,7 @@ import scipy.sparse.linalg as spla
 
 log = logging.getLogger(__name__)
 
-BACKENDS = ("auto", "pardiso", "superlu", "amg")
+BACKENDS = ("auto", "pardiso", "superlu", "amg", "pcg")
 
 #: Above this many unknowns, ``solve(..., backend="auto")`` prefers multigrid PCG to a
 #: factorization when PARDISO is not installed.
@@ -44,8 +47,7 @@ def available_backends() -> list[str]:
     out = []
     if _pardiso_lib() is not None:
         out.append("pardiso")
-    out.append("superlu")
-    out.append("amg")
+    out += ["superlu", "amg", "pcg"]
     return out
 
 
@@ -84,6 +86,8 @@ class Factor:
 def factorize(K: sp.spmatrix, backend: str = "auto") -> Factor:
     """Factorize the SPD matrix `K` (n, n) once for repeated solves."""
     backend = _check_backend(backend)
+    if backend == "pcg":
+        raise ValueError("`backend`='pcg' is a one-shot solver; factorize with another backend")
     if backend == "auto":
         backend = "pardiso" if _pardiso_lib() is not None else "superlu"
     if backend == "pardiso":
@@ -93,24 +97,59 @@ def factorize(K: sp.spmatrix, backend: str = "auto") -> Factor:
     return _amg_factor(K)
 
 
-def solve(K: sp.spmatrix, b: np.ndarray, backend: str = "auto", *, rtol: float = 1e-10):
-    """Solve ``K x = b`` once for an SPD `K` (n, n); `b` is (n,) or (n, k).
+def solve(
+    K: sp.spmatrix,
+    b: np.ndarray,
+    backend: str = "auto",
+    *,
+    rtol: float = 1e-11,
+    preconditioner: Callable[[np.ndarray], np.ndarray] | None = None,
+    x0: np.ndarray | None = None,
+) -> np.ndarray:
+    """Solve ``K x = b`` once for a symmetric positive (semi-)definite `K` (n, n).
 
-    With ``backend="auto"`` this factorizes with PARDISO when installed, otherwise it uses
-    SuperLU for small systems and multigrid-preconditioned CG (to relative residual `rtol`)
-    for large ones.
+    `b` is (n,). With ``backend="auto"``: preconditioned CG (to relative residual `rtol`) when
+    a `preconditioner` is given (then `K` may be singular with `b` in its range), else PARDISO
+    when installed, else SuperLU for small systems and multigrid-preconditioned CG for large
+    ones.
     """
     backend = _check_backend(backend)
     if backend == "auto":
-        if _pardiso_lib() is not None:
+        if preconditioner is not None:
+            backend = "pcg"
+        elif _pardiso_lib() is not None:
             backend = "pardiso"
-        elif K.shape[0] > AMG_THRESHOLD and b.ndim == 1:
+        elif K.shape[0] > AMG_THRESHOLD:
             backend = "amg"
         else:
             backend = "superlu"
+    if backend == "pcg":
+        if preconditioner is None:
+            raise ValueError("`backend`='pcg' needs a `preconditioner`")
+        return pcg(K, b, preconditioner, rtol=rtol, x0=x0)
     if backend == "amg":
         return _amg_factor(K, rtol=rtol).solve(b)
     return factorize(K, backend).solve(b)
+
+
+def pcg(K, b, preconditioner, *, rtol: float = 1e-11, x0=None, maxiter: int = 2000):
+    """Preconditioned conjugate gradients; raises :class:`SolverError` without convergence."""
+    n = K.shape[0]
+    M = spla.LinearOperator((n, n), matvec=preconditioner, dtype=float)
+    iters = [0]
+
+    def count(_):
+        iters[0] += 1
+
+    x, info = spla.cg(K, b, x0=x0, rtol=rtol, atol=0.0, M=M, maxiter=maxiter, callback=count)
+    if info != 0 or not np.all(np.isfinite(x)):
+        raise SolverError(f"preconditioned CG did not converge in {maxiter} iterations")
+    log.debug("pcg: %d iterations", iters[0])
+    pcg.last_iterations = iters[0]
+    return x
+
+
+pcg.last_iterations = 0
 
 
 # --------------------------------------------------------------------------------------------
@@ -236,7 +275,3 @@ def _pardiso_factor(K) -> Factor:
         call(-1, dummy, dummy)
 
     return Factor(_solve, "pardiso", release=_release)
-
-
-def warn_once(message: str) -> None:
-    warnings.warn(message, stacklevel=3)

@@ -175,10 +175,15 @@ def prepare(
     if not (np.isfinite(h) and h > 0):
         raise ValueError(f"`pixel_size` must be a positive finite number; got {pixel_size!r}")
 
-    finite = np.isfinite(n).all(-1)
-    length = np.where(finite, np.linalg.norm(np.where(finite[..., None], n, 0), axis=-1), 0.0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        length2 = np.einsum("ijk,ijk->ij", n, n)
+    finite = np.isfinite(length2)
+    if np.isinf(length2).any():
+        raise ValueError(
+            f"`normals` has values too large to normalise at {_where(np.isinf(length2))}"
+        )
     if mask is None:
-        m = finite & (length > 0)
+        m = finite & (length2 > 0)
     else:
         m = _bool_image(mask, "mask", (H, W))
     if not m.any():
@@ -190,15 +195,13 @@ def prepare(
     kn = m & finite
     if known is not None:
         kn &= _bool_image(known, "known", (H, W))
-    zero = kn & (length == 0)
+    zero = kn & (length2 == 0)
     if zero.any():
         raise ValueError(
             f"`normals` has zero-length normals inside the mask at {_where(zero)}; "
             "use NaN (or the `known` mask) for missing samples"
         )
-    unit = np.zeros_like(n)
-    unit[kn] = n[kn] / length[kn, None]
-    back = kn & (unit[..., 2] <= 0)
+    back = kn & (n[..., 2] <= 0)
     if back.any():
         if backfacing == "error":
             raise ValueError(
@@ -217,9 +220,10 @@ def prepare(
             "(facetlift.clean_mask does this)"
         )
     Kmat = None if K is None else _check_K(K)
-    r, c = domain.pixels
-    nf = unit[r, c]
-    kf = kn[r, c]
+    kf = kn[m]
+    nf = n[m]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nf /= np.sqrt(length2[m])[:, None]
     nf[~kf] = np.nan
     return Problem(domain=domain, normals=nf, known=kf, pixel_size=h, K=Kmat)
 

@@ -1,0 +1,94 @@
+"""Exact fast solves of the mean-subtracted facet operator on a full rectangle.
+
+On a rectangle of ``H x W`` facets whose facets all carry the block ``N = I - 11^T/4``, the
+operator ``K = sum_f C_f^T N C_f`` on the ``(H+1) x (W+1)`` vertex grid separates:
+
+    K = D_r (x) D_c - 1/4 T_r (x) T_c,
+
+where, per axis with ``m`` facets, ``T = S^T S`` (``S`` the m x (m+1) two-point sum) and
+``D = diag(T) = diag(1, 2, ..., 2, 1)``. ``D^{-1} T = I + D^{-1} A`` (``A`` the path adjacency)
+is diagonalised by the DCT-I basis ``v_k(j) = cos(pi k j / m)`` with eigenvalues
+``1 + cos(pi k / m)``. Hence ``K x = b`` is solved by two 2-D DCT-I transforms:
+``x = V diag(1 / (1 - lambda_r lambda_c / 4)) V^{-1} (D_r (x) D_c)^{-1} b``, the constant mode
+(``lambda_r = lambda_c = 2``) dropped. This is the global step of the paper's loop for every
+rectangular input, and the whole direct solve when every normal is known: O(n log n) instead of a
+sparse factorization.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.fft as sfft
+
+
+class RectangleSolver:
+    """Pseudo-inverse of the mean-subtracted facet operator on an H x W facet rectangle.
+
+    ``solve(b)`` takes (n,) with n = (H+1)(W+1) in row-major vertex order and returns the
+    solution with zero D-weighted mean (the constant is free).
+    """
+
+    backend = "spectral"
+
+    def __init__(self, H: int, W: int, workers: int | None = None):
+        self.H, self.W = H, W
+        self.workers = workers if workers is not None else -1
+        lr = 1.0 + np.cos(np.pi * np.arange(H + 1) / H)
+        lc = 1.0 + np.cos(np.pi * np.arange(W + 1) / W)
+        denom = 1.0 - 0.25 * np.outer(lr, lc)
+        denom[0, 0] = np.inf  # the constant mode
+        self._gain = 1.0 / denom
+        dr = np.full(H + 1, 2.0)
+        dr[[0, -1]] = 1.0
+        dc = np.full(W + 1, 2.0)
+        dc[[0, -1]] = 1.0
+        self._d = np.outer(dr, dc)
+        # dct1(dct1(x)) = 2m x along an axis of m+1 points
+        self._norm = 1.0 / (4.0 * H * W)
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        H, W = self.H, self.W
+        y = np.asarray(b, dtype=float).reshape(H + 1, W + 1) / self._d
+        # coefficients: V^{-1} y = D V D y / (2m) per axis, with dct1(y) = V D y
+        c = sfft.dctn(y, type=1, workers=self.workers) * self._d * self._norm
+        c *= self._gain
+        # back: V c = dct1(D^{-1} c)
+        x = sfft.dctn(c / self._d, type=1, workers=self.workers)
+        return x.ravel()
+
+
+def rectangle_solver(domain) -> RectangleSolver | None:
+    """A :class:`RectangleSolver` when `domain` is a full rectangle, else None."""
+    if domain.mask.all():
+        return RectangleSolver(*domain.shape)
+    return None
+
+
+class BoxPreconditioner:
+    """Preconditioner for facet operators on any mask: the exact rectangle pseudo-inverse on
+    the domain's bounding box, restricted to the domain's vertices.
+
+    Extending a residual by zeros to the box, solving there with :class:`RectangleSolver` and
+    restricting back is a fictitious-domain preconditioner. For the mean-subtracted operator
+    of the DGP method, conjugate gradients with it converge in a number of iterations that
+    does not grow with the resolution (about 25 to a relative residual of 1e-12 on masks with
+    holes, from 128^2 to 1024^2; more with many missing normals), and in one iteration when
+    the domain is the full box and every normal is known.
+    """
+
+    def __init__(self, domain, workers: int | None = None):
+        vm = domain.vertex_mask
+        rows = np.nonzero(vm.any(axis=1))[0]
+        cols = np.nonzero(vm.any(axis=0))[0]
+        self._r0, self._r1 = int(rows[0]), int(rows[-1]) + 1
+        self._c0, self._c1 = int(cols[0]), int(cols[-1]) + 1
+        box = vm[self._r0 : self._r1, self._c0 : self._c1]
+        self._inside = box.ravel()
+        self.exact = bool(box.all() and domain.mask.all())
+        self._solver = RectangleSolver(box.shape[0] - 1, box.shape[1] - 1, workers)
+        self._size = box.size
+
+    def __call__(self, r: np.ndarray) -> np.ndarray:
+        full = np.zeros(self._size)
+        full[self._inside] = r
+        return self._solver.solve(full)[self._inside]
