@@ -1,0 +1,255 @@
+"""The command line through main([...]): files, exit codes, messages."""
+
+import functools
+import importlib
+import json
+import re
+
+import numpy as np
+import pytest
+
+import facetlift
+from facetlift import io, linalg
+from facetlift.cli import main
+from facetlift.methods import REGISTRY
+
+
+def write_input(folder, H=20, W=26, *, alpha=False):
+    """A 16-bit normal map of a tilted roof with a ridge, and a mask with a hole."""
+    r, c = np.mgrid[0:H, 0:W] + 0.5
+    p = np.where(c < W / 2, 0.4, -0.4)
+    q = np.full((H, W), 0.1)
+    n = facetlift.normals_from_gradients(p, q)
+    mask = np.ones((H, W), bool)
+    mask[6:10, 4:8] = False
+    npath = io.write_normals(folder / "normal_map.png", n, mask if alpha else None)
+    mpath = io.write_mask(folder / "mask.png", mask)
+    return npath, mpath, mask
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_integrate_end_to_end(tmp_path, capsys):
+    npath, mpath, mask = write_input(tmp_path)
+    out = tmp_path / "out"
+    code, stdout, err = run(capsys, "integrate", npath, "--mask", mpath, "-o", out)
+    assert code == 0, err
+    for name in ("depth.npy", "mesh.ply", "preview.png"):
+        assert (out / name).is_file() and f"wrote {out / name}" in stdout
+    assert "20x26 pixels" in stdout and "method dgp" in stdout
+    n, _ = io.read_normals(npath)
+    expected = facetlift.integrate(n, mask)
+    depth = np.load(out / "depth.npy")
+    np.testing.assert_array_equal(np.isnan(depth), ~mask)
+    np.testing.assert_allclose(depth[mask], expected.depth[mask], atol=1e-9)
+
+
+def test_default_outdir_and_alpha_mask(tmp_path, capsys):
+    npath, _, mask = write_input(tmp_path, alpha=True)
+    code, stdout, err = run(capsys, "integrate", npath, "--save", "npz")
+    assert code == 0, err
+    out = tmp_path / "normal_map_facetlift"
+    assert [p.name for p in out.iterdir()] == ["surface.npz"]
+    assert "mask: alpha channel" in stdout
+    with np.load(out / "surface.npz") as z:
+        np.testing.assert_array_equal(z["mask"], mask)
+
+
+def test_dataset_folder_and_formats(tmp_path, capsys):
+    write_input(tmp_path)
+    out = tmp_path / "o"
+    code, _, err = run(capsys, "integrate", tmp_path, "-o", out, "-s", "exr", "-s", "tif",
+                       "--format", "obj", "--triangles", "--pixel-size", "0.5")
+    assert code == 0, err
+    assert sorted(p.name for p in out.iterdir()) == ["depth.exr", "depth.tif", "mesh.obj"]
+    assert "f " in (out / "mesh.obj").read_text() and len(
+        (out / "mesh.obj").read_text().split("\nf ")[1].split()) == 3
+
+
+def test_json_output(tmp_path, capsys):
+    npath, mpath, mask = write_input(tmp_path)
+    code, stdout, err = run(capsys, "integrate", npath, "-m", mpath, "-o", tmp_path / "j",
+                            "--json", "--solver", "iterative", "--tol", "1e-6")
+    assert code == 0, err
+    rec = json.loads(stdout)
+    assert rec["shape"] == [20, 26] and rec["facets"] == int(mask.sum())
+    assert rec["info"]["method"] == "dgp" and rec["info"]["solver"] == "iterative"
+    assert rec["info"]["converged"] is True and rec["info"]["iterations"] >= 1
+    assert set(rec["outputs"]) == {"npy", "ply", "png"}
+    assert all(tmp_path.joinpath(p).is_file() for p in rec["outputs"].values())
+    assert rec["timings"]["total"] >= rec["timings"]["integrate"] > 0
+
+
+def test_options_are_forwarded(tmp_path, capsys, monkeypatch):
+    npath, mpath, _ = write_input(tmp_path)
+    K = np.array([[50.0, 0, 13], [0, 50, 10], [0, 0, 1]])
+    np.savetxt(tmp_path / "K.txt", K)
+    seen = {}
+
+    def spy(normals, mask=None, **kw):
+        seen.update(kw)
+        raise ValueError("spy stops here")
+
+    monkeypatch.setattr(facetlift, "integrate", spy)
+    code, _, err = run(capsys, "integrate", npath, "--K", tmp_path / "K.txt", "--max-iter", 7,
+                       "--option", "flat_weight=1e-6", "--option", "mean-subtraction=false",
+                       "--option", "name=plain", "--backend", "superlu", "--y-down")
+    assert code == 1 and "spy stops here" in err
+    np.testing.assert_array_equal(seen.pop("K"), K)
+    assert seen == {"method": "dgp", "pixel_size": 1.0, "backfacing": "error", "max_iter": 7,
+                    "flat_weight": 1e-6, "mean_subtraction": False, "name": "plain",
+                    "backend": "superlu"}
+
+
+def test_discontinuities_forwarded_or_refused(tmp_path, capsys, monkeypatch):
+    npath, _, _ = write_input(tmp_path)
+    without = [k for k, v in REGISTRY.items() if not v.discontinuities]
+    if without:
+        code, _, err = run(capsys, "integrate", npath, "--method", without[0],
+                           "--discontinuities")
+        assert code == 1 and "does not handle depth discontinuities" in err
+    able = [k for k, v in REGISTRY.items() if v.discontinuities]
+    if able:
+        seen = {}
+
+        def spy(normals, mask=None, **kw):
+            seen.update(kw)
+            raise ValueError("spy")
+
+        monkeypatch.setattr(facetlift, "integrate", spy)
+        assert run(capsys, "integrate", npath, "--method", able[0], "--discontinuities")[0] == 1
+        assert seen["discontinuities"] is True
+
+
+def test_methods_lists_registry(capsys):
+    code, stdout, _ = run(capsys, "methods")
+    assert code == 0
+    assert stdout.startswith("dgp\n") and "solver='direct'" in stdout
+    for name in REGISTRY:
+        assert f"\n{name}" in "\n" + stdout
+    code, stdout, _ = run(capsys, "methods", "--json")
+    recs = {r["name"]: r for r in json.loads(stdout)}
+    assert recs["dgp"]["available"] and recs["dgp"]["options"]["max_iter"] == 5000
+    assert set(recs) == set(REGISTRY)
+
+
+def test_version_and_help(capsys):
+    code, stdout, _ = run(capsys, "--version")
+    assert code == 0 and facetlift.__version__ in stdout
+    code, stdout, _ = run(capsys, "integrate", "--help")
+    assert code == 0 and "Examples:" in stdout and "--mask" in stdout
+    code, stdout, _ = run(capsys)
+    assert code == 0 and "Usage: facetlift" in stdout and "integrate" in stdout
+
+
+def _one_line_error(err):
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("facetlift: error:"), err
+    assert "Traceback" not in err
+    return lines[0]
+
+
+@pytest.mark.parametrize(
+    "make_args, message",
+    [
+        (lambda t, n, m: [t / "missing.png"], "does not exist"),
+        (lambda t, n, m: [n, "--method", "nope"], r"`method` must be one of"),
+        (lambda t, n, m: [n, "--option", "nope=1"], r"unknown option\(s\) \['nope'\]"),
+        (lambda t, n, m: [n, "--option", "novalue"], "expected KEY=VALUE"),
+        (lambda t, n, m: [n, "--bogus"], "No such option"),
+        (lambda t, n, m: [n, "--solver", "magic"], "Invalid value for '--solver'"),
+        (lambda t, n, m: [n, "--pixel-size", "-1"], "`pixel_size` must be a positive"),
+        (lambda t, n, m: [n, "-s", "jpg"], "Invalid value for '-s'"),
+    ],
+)
+def test_bad_input_exits_1(tmp_path, capsys, make_args, message):
+    npath, mpath, _ = write_input(tmp_path)
+    code, _, err = run(capsys, "integrate", *make_args(tmp_path, npath, mpath))
+    assert code == 1
+    assert re.search(message, _one_line_error(err))
+
+
+def test_corrupt_png_exits_1(tmp_path, capsys):
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"\x89PNG\r\n\x1a\n truncated")
+    code, _, err = run(capsys, "integrate", bad)
+    assert code == 1 and "bad.png is not a readable PNG" in _one_line_error(err)
+
+
+def test_mask_of_other_size_exits_1(tmp_path, capsys):
+    npath, _, _ = write_input(tmp_path)
+    io.write_mask(tmp_path / "small.png", np.ones((5, 5)))
+    code, _, err = run(capsys, "integrate", npath, "--mask", tmp_path / "small.png")
+    assert code == 1 and "size 5x5" in _one_line_error(err)
+    assert not (tmp_path / "normal_map_facetlift").exists()
+
+
+def test_backfacing_exits_1_or_outlier(tmp_path, capsys):
+    n = np.zeros((6, 6, 3))
+    n[..., 2] = 1
+    n[2, 2] = (0.6, 0, -0.8)
+    io.write_normals(tmp_path / "n.npy", n)
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "a")
+    assert code == 1 and "back-facing" in _one_line_error(err)
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "b",
+                       "--backfacing", "outlier")
+    assert code == 0, err
+
+
+def test_solver_error_exits_2(tmp_path, capsys, monkeypatch):
+    npath, _, _ = write_input(tmp_path)
+
+    def fail(*a, **k):
+        raise linalg.SolverError("matrix is singular")
+
+    monkeypatch.setattr(importlib.import_module("facetlift.methods.dgp"), "run", fail)
+    code, _, err = run(capsys, "integrate", npath, "-o", tmp_path / "o")
+    assert code == 2 and "solver failed: matrix is singular" in _one_line_error(err)
+    assert not (tmp_path / "o").exists()
+
+
+def test_no_convergence_exits_2_after_writing(tmp_path, capsys):
+    npath, mpath, _ = write_input(tmp_path)
+    out = tmp_path / "o"
+    code, stdout, err = run(capsys, "integrate", npath, "-m", mpath, "-o", out, "--solver",
+                            "iterative", "--max-iter", "1", "--tol", "0", "--no-progress")
+    assert code == 2
+    assert "did not converge in 1 iterations" in err and "Traceback" not in err
+    assert "facetlift: warning:" in err  # the method's own warning, one line
+    assert (out / "depth.npy").is_file() and "not converged" in stdout
+
+
+@pytest.mark.parametrize("flag, solver, shown", [
+    ("--progress", "iterative", True), ("--no-progress", "iterative", False),
+    ("--progress", "direct", False),
+])
+def test_progress_bar_on_stderr(tmp_path, capsys, monkeypatch, flag, solver, shown):
+    npath, mpath, _ = write_input(tmp_path)
+    dgp = importlib.import_module("facetlift.methods.dgp")
+    real, calls = dgp.run, []
+
+    @functools.wraps(real)  # keeps the option signature that integrate() checks against
+    def spy(problem, **kw):
+        if "progress" in kw:
+            bar_update = kw["progress"]
+
+            def progress(it, dev):
+                calls.append((it, dev))
+                bar_update(it, dev)
+
+            kw["progress"] = progress
+        return real(problem, **kw)
+
+    monkeypatch.setattr(dgp, "run", spy)
+    code, stdout, err = run(capsys, "integrate", npath, "-m", mpath, "-o", tmp_path / "o",
+                            "--solver", solver, flag, "--json")
+    assert code == 0, err
+    json.loads(stdout)  # stdout stays clean JSON
+    assert ("integrating" in err) == shown
+    assert bool(calls) == shown
+    if shown:
+        assert calls[0][0] == 1 and calls[-1][0] == json.loads(stdout)["info"]["iterations"]
