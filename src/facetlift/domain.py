@@ -31,7 +31,7 @@ class Domain:
 
     @classmethod
     def from_mask(cls, mask: np.ndarray) -> Domain:
-        mask = np.ascontiguousarray(mask, dtype=bool)
+        mask = np.array(mask, dtype=bool, order="C", copy=True)
         mask.setflags(write=False)
         return cls(mask)
 
