@@ -27,10 +27,11 @@ def test_backends_agree(backend):
     assert np.allclose(x, ref, rtol=1e-8, atol=1e-9)
 
 
-@pytest.mark.parametrize("backend", [b for b in linalg.available_backends() if b != "pcg"])
+@pytest.mark.parametrize("backend", linalg.available_backends())
 def test_factor_reuse(backend):
     K, b = _spd()
-    f = linalg.factorize(K, backend)
+    d = K.diagonal()
+    f = linalg.factorize(K, backend, preconditioner=lambda r: r / d)
     for k in range(3):
         rhs = b * (k + 1)
         assert np.allclose(K @ f.solve(rhs), rhs, atol=1e-7)
@@ -46,8 +47,18 @@ def test_pcg_needs_preconditioner():
     K, b = _spd(10)
     with pytest.raises(ValueError, match="needs a `preconditioner`"):
         linalg.solve(K, b, "pcg")
-    with pytest.raises(ValueError, match="one-shot"):
+    with pytest.raises(ValueError, match="needs a `preconditioner`"):
         linalg.factorize(K, "pcg")
+
+
+def test_pcg_factor_warm_starts():
+    K, b = _spd()
+    d = K.diagonal()
+    f = linalg.factorize(K, "pcg", preconditioner=lambda r: r / d)
+    x1 = f.solve(b)
+    f.solve(b)
+    assert linalg.pcg.last_iterations <= 1
+    assert np.allclose(K @ x1, b, atol=1e-8)
 
 
 def test_singular_matrix_raises_solver_error():

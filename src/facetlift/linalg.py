@@ -83,13 +83,43 @@ class Factor:
                 pass
 
 
-def factorize(K: sp.spmatrix, backend: str = "auto") -> Factor:
-    """Factorize the SPD matrix `K` (n, n) once for repeated solves."""
+#: Above this many unknowns, ``factorize(..., backend="auto")`` with a preconditioner and
+#: without PARDISO returns warm-started PCG instead of a SuperLU factorization (which would
+#: need minutes and many GB at 2048^2).
+PCG_THRESHOLD = 400_000
+
+
+def factorize(
+    K: sp.spmatrix,
+    backend: str = "auto",
+    *,
+    preconditioner: Callable[[np.ndarray], np.ndarray] | None = None,
+    rtol: float = 1e-11,
+) -> Factor:
+    """Prepare the SPD matrix `K` (n, n) for repeated solves (``Factor.solve(b)``).
+
+    ``backend="auto"``: PARDISO when installed, else SuperLU, or, for more than
+    ``PCG_THRESHOLD`` unknowns when a `preconditioner` is given, conjugate gradients warm-started
+    from the previous solution (a loop's consecutive right-hand sides are close).
+    """
     backend = _check_backend(backend)
-    if backend == "pcg":
-        raise ValueError("`backend`='pcg' is a one-shot solver; factorize with another backend")
     if backend == "auto":
-        backend = "pardiso" if _pardiso_lib() is not None else "superlu"
+        if _pardiso_lib() is not None:
+            backend = "pardiso"
+        elif preconditioner is not None and K.shape[0] > PCG_THRESHOLD:
+            backend = "pcg"
+        else:
+            backend = "superlu"
+    if backend == "pcg":
+        if preconditioner is None:
+            raise ValueError("`backend`='pcg' needs a `preconditioner`")
+        state = {"x0": None}
+
+        def _solve(b):
+            state["x0"] = pcg(K, b, preconditioner, rtol=rtol, x0=state["x0"])
+            return state["x0"]
+
+        return Factor(_solve, "pcg")
     if backend == "pardiso":
         return _pardiso_factor(K)
     if backend == "superlu":
