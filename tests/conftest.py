@@ -1,0 +1,118 @@
+"""Shared test helpers: analytic height fields sampled on the facet grid.
+
+An :class:`Analytic` is a height ``z(x, y)`` with its gradient ``(p, q) = (dz/dx, dz/dy)``,
+sampled with the facetlift conventions: pixel ``(r, c)`` has its centre at
+``x = x0 + (c + 0.5) h``, ``y = y0 - (r + 0.5) h`` and vertex ``(i, j)`` is at
+``x = x0 + j h``, ``y = y0 - i h``, where ``(x0, y0)`` is the world position of vertex (0, 0).
+
+Fixtures: ``make_plane(p, q)``, ``saddle`` (x^2 - y^2), ``wave`` (sin x cos y) and
+``rel_err(estimate, truth)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import pytest
+
+import facetlift
+
+
+@dataclass(frozen=True)
+class Analytic:
+    """A height field z(x, y) (z toward the viewer) and its gradient."""
+
+    z: Callable
+    p: Callable
+    q: Callable
+    name: str = ""
+
+    def facet_xy(self, shape, h=1.0, origin=(0.0, 0.0)):
+        """World (x, y), each (H, W), of the pixel centres."""
+        r, c = np.indices(shape)
+        return origin[0] + (c + 0.5) * h, origin[1] - (r + 0.5) * h
+
+    def vertex_xy(self, shape, h=1.0, origin=(0.0, 0.0)):
+        """World (x, y), each (H+1, W+1), of the vertices."""
+        i, j = np.indices((shape[0] + 1, shape[1] + 1))
+        return origin[0] + j * h, origin[1] - i * h
+
+    def height(self, shape, h=1.0, origin=(0.0, 0.0)) -> np.ndarray:
+        """(H, W) heights at the pixel centres."""
+        return self.z(*self.facet_xy(shape, h, origin))
+
+    def vertex_height(self, shape, h=1.0, origin=(0.0, 0.0)) -> np.ndarray:
+        """(H+1, W+1) heights at the vertices."""
+        return self.z(*self.vertex_xy(shape, h, origin))
+
+    def gradients(self, shape, h=1.0, origin=(0.0, 0.0)):
+        """(p, q), each (H, W), at the pixel centres."""
+        x, y = self.facet_xy(shape, h, origin)
+        return self.p(x, y) + 0 * x, self.q(x, y) + 0 * y
+
+    def normals(self, shape, h=1.0, origin=(0.0, 0.0)) -> np.ndarray:
+        """(H, W, 3) unit normals at the pixel centres."""
+        return facetlift.normals_from_gradients(*self.gradients(shape, h, origin))
+
+
+def plane(p: float, q: float, c: float = 0.0) -> Analytic:
+    """z = p x + q y + c."""
+    return Analytic(
+        lambda x, y: p * x + q * y + c, lambda x, y: p + 0 * x, lambda x, y: q + 0 * y,
+        name=f"plane({p}, {q})",
+    )
+
+
+SADDLE = Analytic(
+    lambda x, y: x**2 - y**2, lambda x, y: 2 * x, lambda x, y: -2 * y, name="x^2 - y^2"
+)
+WAVE = Analytic(
+    lambda x, y: np.sin(x) * np.cos(y),
+    lambda x, y: np.cos(x) * np.cos(y),
+    lambda x, y: -np.sin(x) * np.sin(y),
+    name="sin(x) cos(y)",
+)
+
+
+def relative_error(estimate, truth) -> float:
+    """max |(estimate - truth) - mean| / (max(truth) - min(truth)) over finite entries.
+
+    The mean difference is removed first (orthographic depth is defined up to a constant).
+    Both arrays must be finite at the same places.
+    """
+    estimate = np.asarray(estimate, dtype=float)
+    truth = np.asarray(truth, dtype=float)
+    ok = np.isfinite(truth)
+    if not np.array_equal(ok, np.isfinite(estimate)):
+        raise AssertionError("estimate and truth are finite at different places")
+    d = estimate[ok] - truth[ok]
+    span = np.ptp(truth[ok])
+    return float(np.abs(d - d.mean()).max() / (span if span > 0 else 1.0))
+
+
+@pytest.fixture
+def make_plane():
+    return plane
+
+
+@pytest.fixture
+def saddle():
+    return SADDLE
+
+
+@pytest.fixture
+def wave():
+    return WAVE
+
+
+@pytest.fixture
+def rel_err():
+    return relative_error
+
+
+@pytest.fixture
+def analytic():
+    """The :class:`Analytic` class, to build other height fields: ``analytic(z, p, q)``."""
+    return Analytic
