@@ -1,0 +1,308 @@
+"""Input checking (facetlift.problem.prepare), gradients <-> normals, clean_mask."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import facetlift
+from facetlift.problem import Problem
+
+
+def up(shape=(6, 7)):
+    """Normals all facing the viewer."""
+    n = np.zeros((*shape, 3))
+    n[..., 2] = 1.0
+    return n
+
+
+def random_normals(shape, seed):
+    rng = np.random.default_rng(seed)
+    n = rng.normal(size=(*shape, 3))
+    n[..., 2] = np.abs(n[..., 2]) + 0.2
+    return n
+
+
+# ------------------------------------------------------------------------------------------
+# a good problem
+
+
+def test_prepare_normalises_and_orders_facets_row_major():
+    n = random_normals((5, 6), 0) * 3.0
+    mask = np.ones((5, 6), bool)
+    mask[0, 0] = mask[4, 5] = False
+    prob = facetlift.prepare(n, mask, pixel_size=0.5)
+    assert isinstance(prob, Problem) and not prob.perspective
+    r, c = prob.domain.pixels
+    assert np.array_equal(r * 6 + c, np.flatnonzero(mask))
+    np.testing.assert_allclose(np.linalg.norm(prob.normals, axis=1), 1.0, rtol=1e-14)
+    np.testing.assert_allclose(prob.normals, n[r, c] / np.linalg.norm(n[r, c], axis=1)[:, None])
+    assert prob.known.all() and prob.pixel_size == 0.5 and prob.K is None
+    p, q = prob.slopes
+    np.testing.assert_allclose(p, -n[r, c, 0] / n[r, c, 2])
+    np.testing.assert_allclose(q, -n[r, c, 1] / n[r, c, 2])
+    img = prob.normal_image()
+    assert img.shape == (5, 6, 3) and np.isnan(img[0, 0]).all()
+    np.testing.assert_allclose(img[mask], prob.normals)
+
+
+def test_prepare_default_mask_is_finite_nonzero_normals():
+    n = up((5, 5))
+    n[0, :] = np.nan
+    n[4, 4] = 0.0
+    prob = facetlift.prepare(n)
+    expected = np.ones((5, 5), bool)
+    expected[0, :] = False
+    expected[4, 4] = False
+    assert np.array_equal(prob.domain.mask, expected)
+    assert prob.known.all()
+
+
+def test_prepare_missing_samples_and_known():
+    n = up((5, 5))
+    n[1, 1] = np.nan
+    known = np.ones((5, 5), bool)
+    known[3, 2] = False
+    prob = facetlift.prepare(n, np.ones((5, 5), bool), known=known)
+    assert prob.known.sum() == 23
+    k = prob.domain.to_image(prob.known.astype(float))
+    assert k[1, 1] == 0 and k[3, 2] == 0
+    assert np.isnan(prob.normals[~prob.known]).all()
+    assert np.isnan(prob.slopes[0][~prob.known]).all()
+    # integer and float 0/1 masks are accepted like booleans
+    prob2 = facetlift.prepare(n, np.ones((5, 5), int), known=known.astype(float))
+    assert np.array_equal(prob2.known, prob.known)
+
+
+def test_backfacing_outlier_makes_missing_samples():
+    n = up((4, 5))
+    n[2, 3] = [0.3, 0.0, -1.0]
+    n[1, 1] = [1.0, 0.0, 0.0]  # n_z == 0 is back-facing too
+    prob = facetlift.prepare(n, backfacing="outlier")
+    assert (~prob.known).sum() == 2
+    k = prob.domain.to_image(prob.known.astype(float))
+    assert k[2, 3] == 0 and k[1, 1] == 0
+
+
+@pytest.mark.parametrize("K", [
+    [[500.0, 0.0, 3.0], [0.0, 400.0, 2.5], [0.0, 0.0, 1.0]],
+    np.array([[500.0, 0.2, 3.0], [0.0, 500.0, 2.5], [0.0, 0.0, 1.0]], dtype=np.float32),
+])
+def test_prepare_accepts_K(K):
+    prob = facetlift.prepare(up(), K=K)
+    assert prob.perspective and prob.K.shape == (3, 3) and prob.K.dtype == float
+    np.testing.assert_allclose(prob.K, np.asarray(K, float))
+
+
+def test_prepare_does_not_modify_inputs():
+    n = random_normals((4, 4), 1)
+    n[0, 0] = np.nan
+    mask = np.ones((4, 4), bool)
+    n0, mask0 = n.copy(), mask.copy()
+    facetlift.prepare(n, mask)
+    assert np.array_equal(n, n0, equal_nan=True) and np.array_equal(mask, mask0)
+
+
+# ------------------------------------------------------------------------------------------
+# errors
+
+
+def _with(n, idx, value):
+    n = n.copy()
+    n[idx] = value
+    return n
+
+
+@pytest.mark.parametrize(
+    "normals, match",
+    [
+        (np.ones((6, 7)), r"`normals` must have shape \(H, W, 3\); got \(6, 7\)"),
+        (np.ones((6, 7, 2)), r"`normals` must have shape \(H, W, 3\); got \(6, 7, 2\)"),
+        (np.ones((6, 7, 3, 1)), r"`normals` must have shape \(H, W, 3\)"),
+        (np.ones((0, 7, 3)), "`normals` must have at least one pixel"),
+        (np.full((2, 2, 3), "a"), "`normals` must be a real numeric array; got dtype <U1"),
+        (np.full((2, 2, 3), 1.0, dtype=object), "`normals` must be a real numeric array"),
+        (np.full((2, 2, 3), 1 + 0j), "`normals` must be a real numeric array; got dtype complex"),
+        ([[[0, 0, 1], [0, 0]]], "`normals` could not be read as an array"),
+        (_with(up(), (2, 3, 0), np.inf), r"`normals` contains inf at 1 pixel\(s\), first at "
+         r"\(row 2, col 3\)"),
+        (_with(up(), (1, 2, 2), -np.inf), "`normals` contains inf"),
+        (_with(up(), (4, 1), [0.2, 0.1, -1.0]), r"back-facing normals \(n_z <= 0\) inside the "
+         r"mask at 1 pixel\(s\), first at \(row 4, col 1\).*backfacing='outlier'"),
+        (_with(up(), (0, 0), [1.0, 0.0, 0.0]), r"back-facing normals"),
+        (np.full((3, 3, 3), np.nan), "`normals` has no finite, non-zero normal"),
+    ],
+)
+def test_bad_normals(normals, match):
+    with pytest.raises(ValueError, match=match):
+        facetlift.prepare(normals)
+
+
+def test_zero_length_normal_inside_mask():
+    n = _with(up(), (3, 4), 0.0)
+    with pytest.raises(ValueError, match=r"zero-length normals inside the mask at 1 pixel\(s\), "
+                       r"first at \(row 3, col 4\); use NaN"):
+        facetlift.prepare(n, np.ones((6, 7), bool))
+    # ... but fine where `known` says the sample is missing
+    known = np.ones((6, 7), bool)
+    known[3, 4] = False
+    assert (~facetlift.prepare(n, np.ones((6, 7), bool), known=known).known).sum() == 1
+
+
+@pytest.mark.parametrize(
+    "mask, match",
+    [
+        (np.zeros((6, 7), bool), "`mask` is empty"),
+        (np.ones((7, 6), bool),
+         r"`mask` must have shape \(6, 7\) to match `normals`; got \(7, 6\)"),
+        (np.ones((6, 7, 1), bool), r"`mask` must have shape \(6, 7\)"),
+        (np.full((6, 7), "x"), "`mask` must be a boolean or numeric array; got dtype <U1"),
+        (np.full((6, 7), None), "`mask` must be a boolean or numeric array; got dtype object"),
+        (_with(np.ones((6, 7)), (1, 1), np.nan), "`mask` contains NaN or inf"),
+    ],
+)
+def test_bad_mask(mask, match):
+    with pytest.raises(ValueError, match=match):
+        facetlift.prepare(up(), mask)
+
+
+def test_bad_known():
+    with pytest.raises(ValueError, match=r"`known` must have shape \(6, 7\)"):
+        facetlift.prepare(up(), known=np.ones((6, 6), bool))
+    with pytest.raises(ValueError, match="`known` contains NaN or inf"):
+        facetlift.prepare(up(), known=_with(np.ones((6, 7)), (0, 0), np.inf))
+
+
+def test_one_pixel_components_and_clean_mask():
+    mask = np.zeros((8, 9), bool)
+    mask[1:4, 1:5] = True
+    mask[6, 7] = True  # isolated
+    mask[0, 8] = True  # isolated (corner)
+    mask[6, 1:3] = True  # two pixels: fine
+    with pytest.raises(ValueError, match=r"`mask` has 2 one-pixel component\(s\) \(first at "
+                       r"row 0, col 8\).*facetlift.clean_mask"):
+        facetlift.prepare(up((8, 9)), mask)
+    cleaned = facetlift.clean_mask(mask)
+    expected = mask.copy()
+    expected[6, 7] = expected[0, 8] = False
+    assert cleaned.dtype == bool and np.array_equal(cleaned, expected)
+    assert facetlift.prepare(up((8, 9)), cleaned).domain.n_components == 2
+    # a pixel touching another only at a corner is not isolated (8-connectivity)
+    diag = np.zeros((4, 4), bool)
+    diag[1, 1] = diag[2, 2] = True
+    assert np.array_equal(facetlift.clean_mask(diag), diag)
+    block = np.zeros_like(mask)
+    block[1:4, 1:5] = True
+    assert np.array_equal(facetlift.clean_mask(mask, min_size=3), block)
+
+
+def test_one_pixel_domain_from_default_mask():
+    n = np.full((5, 5, 3), np.nan)
+    n[2, 2] = [0, 0, 1]
+    with pytest.raises(ValueError, match="one-pixel component"):
+        facetlift.prepare(n)
+
+
+@pytest.mark.parametrize(
+    "pixel_size, match",
+    [
+        (0, "`pixel_size` must be a positive finite number; got 0"),
+        (-1, "`pixel_size` must be a positive finite number; got -1"),
+        (float("nan"), "`pixel_size` must be a positive finite number; got nan"),
+        (float("inf"), "`pixel_size` must be a positive finite number; got inf"),
+        ("a", "`pixel_size` must be a positive number; got 'a'"),
+        (None, "`pixel_size` must be a positive number; got None"),
+        ([1.0, 2.0], "`pixel_size` must be a positive number"),
+    ],
+)
+def test_bad_pixel_size(pixel_size, match):
+    with pytest.raises(ValueError, match=match):
+        facetlift.prepare(up(), pixel_size=pixel_size)
+
+
+@pytest.mark.parametrize(
+    "K, match",
+    [
+        (np.eye(2), r"`K` must be a 3x3 intrinsics matrix; got shape \(2, 2\)"),
+        (np.ones(9), r"`K` must be a 3x3 intrinsics matrix; got shape \(9,\)"),
+        ([[500, 0, np.nan], [0, 500, 3], [0, 0, 1]], "`K` contains NaN or inf"),
+        ([[np.inf, 0, 3], [0, 500, 3], [0, 0, 1]], "`K` contains NaN or inf"),
+        ([[-500, 0, 3], [0, 500, 3], [0, 0, 1]], r"`K` must have positive focal lengths"),
+        ([[500, 0, 3], [0, 0, 3], [0, 0, 1]], r"`K` must have positive focal lengths"),
+        ([[500, 0, 3], [0, 500, 3], [0, 0, 2]], r"`K` must be upper-triangular with last row"),
+        ([[500, 0, 3], [1, 500, 3], [0, 0, 1]], r"`K` must be upper-triangular"),
+        ([["a", 0, 3], [0, 500, 3], [0, 0, 1]], "`K` must be a real numeric array"),
+    ],
+)
+def test_bad_K(K, match):
+    with pytest.raises(ValueError, match=match):
+        facetlift.prepare(up(), K=K)
+
+
+def test_bad_backfacing_option():
+    with pytest.raises(ValueError, match="`backfacing` must be 'error' or 'outlier'; got 'skip'"):
+        facetlift.prepare(up(), backfacing="skip")
+
+
+# ------------------------------------------------------------------------------------------
+# gradients <-> normals
+
+
+def test_gradients_normals_round_trip():
+    rng = np.random.default_rng(2)
+    p, q = rng.normal(0, 3, size=(2, 7, 9))
+    p[1, 2] = np.nan
+    n = facetlift.normals_from_gradients(p, q)
+    assert n.shape == (7, 9, 3)
+    ok = np.isfinite(p)
+    np.testing.assert_allclose(np.linalg.norm(n[ok], axis=-1), 1.0, rtol=1e-14)
+    assert np.all(n[ok][:, 2] > 0)
+    assert np.isnan(n[1, 2]).all()
+    p2, q2 = facetlift.gradients_from_normals(n)
+    np.testing.assert_allclose(p2[ok], p[ok], rtol=1e-12)
+    np.testing.assert_allclose(q2[ok], q[ok], rtol=1e-12)
+    assert np.isnan(p2[1, 2]) and np.isnan(q2[1, 2])
+    # and the other way, for unnormalised normals too
+    m = random_normals((4, 5), 3) * 7
+    np.testing.assert_allclose(
+        facetlift.normals_from_gradients(*facetlift.gradients_from_normals(m)),
+        m / np.linalg.norm(m, axis=-1, keepdims=True), rtol=1e-12,
+    )
+
+
+def test_gradient_sign_convention():
+    """A height rising to the right (p > 0) and up (q > 0) tilts the normal left and down."""
+    n = facetlift.normals_from_gradients([[1.0]], [[2.0]])
+    np.testing.assert_allclose(n[0, 0], np.array([-1.0, -2.0, 1.0]) / np.sqrt(6))
+    n_int = facetlift.normals_from_gradients(np.ones((2, 2), int), np.zeros((2, 2), bool))
+    np.testing.assert_allclose(n_int[0, 0], np.array([-1.0, 0.0, 1.0]) / np.sqrt(2))
+
+
+@pytest.mark.parametrize(
+    "p, q, match",
+    [
+        (np.ones(5), np.ones(5), r"`p` must be a 2-D \(H, W\) array; got shape \(5,\)"),
+        (np.ones((3, 4)), np.ones((4, 3)),
+         r"`q` must have the shape of `p` \(3, 4\); got \(4, 3\)"),
+        (np.full((3, 4), np.inf), np.ones((3, 4)), "`p` and `q` must not contain inf"),
+        (np.ones((3, 4)), np.full((3, 4), -np.inf), "`p` and `q` must not contain inf"),
+        (np.full((3, 4), "1"), np.ones((3, 4)), "`p` must be a real numeric array"),
+        (np.ones((3, 4)), np.ones((3, 4), complex), "`q` must be a real numeric array"),
+    ],
+)
+def test_normals_from_gradients_errors(p, q, match):
+    with pytest.raises(ValueError, match=match):
+        facetlift.normals_from_gradients(p, q)
+
+
+@pytest.mark.parametrize(
+    "normals, match",
+    [
+        (np.ones((3, 4)), r"`normals` must have shape \(H, W, 3\); got \(3, 4\)"),
+        (np.ones((3, 4, 2)), r"`normals` must have shape \(H, W, 3\); got \(3, 4, 2\)"),
+        (np.full((3, 4, 3), "a"), "`normals` must be a real numeric array"),
+    ],
+)
+def test_gradients_from_normals_errors(normals, match):
+    with pytest.raises(ValueError, match=match):
+        facetlift.gradients_from_normals(normals)
