@@ -1,0 +1,213 @@
+"""Error measures for reconstructed surfaces.
+
+Depth maps are ``(H, W)`` arrays in the convention of :mod:`facetlift.conventions` (NaN
+outside the domain). Orthographic depth is defined up to one constant per connected component,
+so :func:`normalized_error`, :func:`rmse` and :func:`mae` first align the estimate to the ground
+truth by subtracting the mean difference on every 8-connected component of the mask (the paper
+moves the reconstruction so that its centre coincides with the ground truth's, Sec. 5).
+Perspective depth is defined up to a scale, which :func:`made` fixes with BiNI's median ratio.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "align",
+    "angular_error",
+    "facet_normals",
+    "made",
+    "mae",
+    "normalized_error",
+    "rmse",
+]
+
+
+def _pair(estimate, truth, mask):
+    est = np.asarray(estimate, dtype=float)
+    gt = np.asarray(truth, dtype=float)
+    if est.ndim != 2:
+        raise ValueError(f"`estimate` must be an (H, W) depth map; got shape {est.shape}")
+    if gt.shape != est.shape:
+        raise ValueError(f"`truth` must have the shape of `estimate` {est.shape}; got {gt.shape}")
+    if mask is None:
+        m = np.isfinite(gt)
+    else:
+        m = np.asarray(mask)
+        if m.shape != est.shape:
+            raise ValueError(f"`mask` must have shape {est.shape}; got {m.shape}")
+        m = m.astype(bool) & np.isfinite(gt)
+    m = m & np.isfinite(est)
+    if not m.any():
+        raise ValueError("no pixel where `mask`, `estimate` and `truth` are all defined")
+    return est, gt, m
+
+
+def align(estimate, truth, mask=None) -> tuple[np.ndarray, np.ndarray]:
+    """Shift `estimate` by the mean difference to `truth` on each 8-connected component.
+
+    Parameters
+    ----------
+    estimate, truth : (H, W) array_like of float
+    mask : (H, W) array_like of bool, optional
+        Pixels to compare; default: where both are finite.
+
+    Returns
+    -------
+    aligned : (H, W) float
+        The shifted estimate, NaN outside the compared pixels.
+    mask : (H, W) bool
+        The compared pixels.
+    """
+    from .domain import Domain
+
+    est, gt, m = _pair(estimate, truth, mask)
+    d = Domain.from_mask(m)
+    r, c = d.pixels
+    diff = est[r, c] - gt[r, c]
+    shift = np.bincount(d.facet_component, diff, d.n_components) / d.component_sizes
+    out = np.full(est.shape, np.nan)
+    out[r, c] = est[r, c] - shift[d.facet_component]
+    return out, m
+
+
+def normalized_error(estimate, truth, mask=None) -> tuple[float, np.ndarray]:
+    """The paper's error: |aligned depth error| at facet centres / ground-truth depth range.
+
+    Returns
+    -------
+    mean : float
+        Mean normalised error over the compared pixels (multiply by 100 for percent).
+    error : (H, W) float
+        Per-pixel normalised error, NaN outside.
+
+    Raises
+    ------
+    ValueError
+        Shape mismatch, no common pixel, or a flat ground truth (zero depth range).
+    """
+    aligned, m = align(estimate, truth, mask)
+    gt = np.asarray(truth, dtype=float)
+    rng = float(gt[m].max() - gt[m].min())
+    if rng <= 0:
+        raise ValueError("`truth` has zero depth range on the mask: the error is undefined")
+    err = np.full(gt.shape, np.nan)
+    err[m] = np.abs(aligned[m] - gt[m]) / rng
+    return float(err[m].mean()), err
+
+
+def rmse(estimate, truth, mask=None) -> float:
+    """Root-mean-square depth error after :func:`align` (units of `truth`)."""
+    aligned, m = align(estimate, truth, mask)
+    gt = np.asarray(truth, dtype=float)
+    return float(np.sqrt(np.mean((aligned[m] - gt[m]) ** 2)))
+
+
+def mae(estimate, truth, mask=None) -> float:
+    """Mean absolute depth error after :func:`align` (units of `truth`)."""
+    aligned, m = align(estimate, truth, mask)
+    gt = np.asarray(truth, dtype=float)
+    return float(np.mean(np.abs(aligned[m] - gt[m])))
+
+
+def made(estimate, truth, mask=None) -> tuple[float, np.ndarray]:
+    """Mean absolute depth error after a median scale fit, as BiNI evaluates perspective data.
+
+    ``scale = nanmedian(truth / estimate)`` and ``MADE = nanmean(|scale * estimate - truth|)``
+    over the mask.
+
+    Returns
+    -------
+    made : float
+        In the units of `truth` (mm for DiLiGenT).
+    error : (H, W) float
+        ``|scale * estimate - truth|``, NaN outside the mask.
+    """
+    est, gt, m = _pair(estimate, truth, mask)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = float(np.nanmedian(gt[m] / est[m]))
+    if not np.isfinite(scale):
+        raise ValueError("`estimate` gives no finite scale to `truth` (zero or NaN depths)")
+    err = np.full(gt.shape, np.nan)
+    err[m] = np.abs(scale * est[m] - gt[m])
+    return float(np.nanmean(err[m])), err
+
+
+def _vertex_points(vertex_depth, pixel_size, K):
+    """(H+1, W+1, 3) vertex positions, x right, y up, z toward the viewer."""
+    vd = np.asarray(vertex_depth, dtype=float)
+    i, j = np.mgrid[0 : vd.shape[0], 0 : vd.shape[1]].astype(float)
+    if K is None:
+        return np.stack([j * pixel_size, -i * pixel_size, -vd], axis=-1)
+    K = np.asarray(K, dtype=float)
+    fx, s, cx = K[0]
+    fy, cy = K[1, 1], K[1, 2]
+    # facet corners lie half a pixel from the pixel centres (pixel centres at integer indices)
+    row, col = i - 0.5, j - 0.5
+    Y = (row - cy) * vd / fy
+    X = ((col - cx) * vd - s * Y) / fx
+    return np.stack([X, -Y, -vd], axis=-1)
+
+
+def facet_normals(vertex_depth, *, pixel_size: float = 1.0, K=None) -> np.ndarray:
+    """Normals of the facets of a vertex depth grid, from the cross product of the diagonals.
+
+    For an orthographic grid this is the normal ``(-s_x, -s_y, 1)`` of the facet's least-squares
+    plane, ``s_x = ((z1 + z2) - (z0 + z3)) / 2h`` and ``s_y = ((z0 + z1) - (z2 + z3)) / 2h``
+    (heights ``z = -depth`` at corners 0..3 in the conventional order, y up). For a perspective
+    grid (`K` given) the vertices are back-projected first.
+
+    Parameters
+    ----------
+    vertex_depth : (H+1, W+1) array_like of float
+    pixel_size : float
+    K : (3, 3) array_like, optional
+
+    Returns
+    -------
+    (H, W, 3) float
+        Unit normals toward the viewer, NaN where a corner is undefined.
+    """
+    vd = np.asarray(vertex_depth, dtype=float)
+    if vd.ndim != 2 or min(vd.shape) < 2:
+        raise ValueError(f"`vertex_depth` must be an (H+1, W+1) array; got shape {vd.shape}")
+    P = _vertex_points(vd, float(pixel_size), K)
+    P0, P1, P2, P3 = P[:-1, :-1], P[:-1, 1:], P[1:, 1:], P[1:, :-1]
+    n = np.cross(P3 - P1, P2 - P0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+def angular_error(surface, normals, mask=None) -> tuple[float, float, np.ndarray]:
+    """Angle between a reconstructed surface's facet normals and the input normals (Fig. 10).
+
+    Parameters
+    ----------
+    surface : facetlift.Surface
+        Uses ``vertex_depth``, ``pixel_size`` and ``K``.
+    normals : (H, W, 3) array_like
+        The input normals (x right, y up, z toward the viewer); need not be unit.
+    mask : (H, W) array_like of bool, optional
+        Default: the surface's mask.
+
+    Returns
+    -------
+    mean_deg, max_deg : float
+    error : (H, W) float
+        Degrees, NaN outside the compared pixels.
+    """
+    nin = np.asarray(normals, dtype=float)
+    H, W = surface.mask.shape
+    if nin.shape != (H, W, 3):
+        raise ValueError(f"`normals` must have shape {(H, W, 3)}; got {nin.shape}")
+    nrec = facet_normals(surface.vertex_depth, pixel_size=surface.pixel_size, K=surface.K)
+    m = surface.mask if mask is None else np.asarray(mask, bool) & surface.mask
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = nin / np.linalg.norm(nin, axis=-1, keepdims=True)
+        cross = np.linalg.norm(np.cross(u, nrec), axis=-1)
+        ang = np.degrees(np.arctan2(cross, np.einsum("...i,...i->...", u, nrec)))
+    m = m & np.isfinite(ang)
+    if not m.any():
+        raise ValueError("no pixel where both the surface and `normals` are defined")
+    err = np.where(m, ang, np.nan)
+    return float(err[m].mean()), float(err[m].max()), err

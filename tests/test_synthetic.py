@@ -1,0 +1,221 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from facetlift import normals_from_gradients, synthetic
+from facetlift.synthetic import (
+    GroundTruth,
+    add_angular_noise,
+    analytic,
+    analytic_height,
+    continuous_region,
+    depth_jumps,
+    perturb_fraction,
+    remove_samples,
+    render_mesh,
+)
+
+DATA = Path(__file__).parents[1] / ".." / "shared" / "data"
+SMOOTH = ("saddle", "face", "sphere", "vase", "plane")
+
+
+def _angle(a, b):
+    c = np.clip(np.einsum("...i,...i->...", a, b), -1, 1)
+    return np.degrees(np.arccos(c))
+
+
+@pytest.mark.parametrize("name", SMOOTH)
+def test_analytic_gradient_matches_finite_differences(name):
+    gt = analytic(name, 48)
+    H, W = gt.shape
+    rows, cols = np.nonzero(gt.mask)
+    x = cols + 0.5 - W / 2
+    y = H / 2 - rows - 0.5
+    s = min(H, W) / 2
+    e = 1e-5
+    z, p, q, inside = analytic_height(name, x, y, scale=s)
+    zx = (analytic_height(name, x + e, y, scale=s)[0] - analytic_height(name, x - e, y, scale=s)[0])
+    zy = (analytic_height(name, x, y + e, scale=s)[0] - analytic_height(name, x, y - e, scale=s)[0])
+    ok = np.isfinite(zx) & np.isfinite(zy)
+    assert ok.mean() > 0.95
+    np.testing.assert_allclose(zx[ok] / (2 * e), p[ok], atol=1e-5)
+    np.testing.assert_allclose(zy[ok] / (2 * e), q[ok], atol=1e-5)
+    # the stored normals are those of the gradient, the depth is -height
+    n = normals_from_gradients(p[None], q[None])[0]
+    np.testing.assert_allclose(gt.normals[rows, cols], n, atol=1e-12)
+    np.testing.assert_allclose(gt.depth[rows, cols], -z, atol=1e-12)
+
+
+def test_grid_differences_converge_at_second_order():
+    # central differences of the sampled depth approach the exact slope as O(h^2)
+    errs = []
+    for n in (64, 128, 256):
+        gt = analytic("face", n)
+        p = -gt.normals[..., 0] / gt.normals[..., 2]
+        fd = -(gt.depth[:, 2:] - gt.depth[:, :-2]) / 2  # pixel_size 1: dz/dx
+        errs.append(np.abs(fd - p[:, 1:-1]).max())
+    ratios = np.array(errs[:-1]) / np.array(errs[1:])
+    assert np.all(ratios > 3.3) and np.all(ratios < 4.7)
+
+
+@pytest.mark.parametrize("name", ["pyramid", "ramps", "tent"])
+def test_crease_surfaces_exact_on_planar_pieces(name):
+    gt = analytic(name, 64)
+    p = -gt.normals[..., 0] / gt.normals[..., 2]
+    q = -gt.normals[..., 1] / gt.normals[..., 2]
+    # where three horizontal neighbours lie on one plane, central differences are exact
+    y, x = np.mgrid[0:64, 0:64]
+    plane = np.stack([p, q, -gt.depth - p * x + q * y], axis=-1)
+    same = (np.abs(plane[:, :-2] - plane[:, 1:-1]).max(-1) < 1e-9) & (
+        np.abs(plane[:, 2:] - plane[:, 1:-1]).max(-1) < 1e-9
+    )
+    fd = -(gt.depth[:, 2:] - gt.depth[:, :-2]) / 2
+    assert same.mean() > 0.5
+    np.testing.assert_allclose(fd[same], p[:, 1:-1][same], atol=1e-9)
+
+
+def test_analytic_masks_and_errors():
+    assert analytic("sphere", 40).mask.sum() < 40 * 40
+    assert analytic("saddle", (20, 30)).shape == (20, 30)
+    assert np.isnan(analytic("vase", 40).depth[0, 0])
+    with pytest.raises(ValueError, match="`name` must be one of"):
+        analytic("teapot", 16)
+    with pytest.raises(ValueError, match="`size`"):
+        analytic("saddle", 1)
+    with pytest.raises(ValueError, match="`pixel_size`"):
+        analytic("saddle", 16, pixel_size=0)
+
+
+def _tilted_plane(a, b):
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
+    v[:, 2] = a * v[:, 0] + b * v[:, 1] + 3.0
+    return trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], process=False)
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_render_tilted_plane_exact(flip):
+    a, b = 0.4, -0.7
+    mesh = _tilted_plane(a, b)
+    if flip:
+        mesh.invert()  # winding away from the viewer: normals must still face it
+    gt = render_mesh(mesh, (40, 40), view="front", margin=0.0)
+    assert gt.mask.all()
+    n = normals_from_gradients(np.full((40, 40), a), np.full((40, 40), b))
+    np.testing.assert_allclose(gt.normals, n, atol=1e-12)
+    # pixel units: slopes are scale-free; depth = -height, y up = against the row index
+    np.testing.assert_allclose(np.diff(gt.depth, axis=1), -a, atol=1e-9)
+    np.testing.assert_allclose(np.diff(gt.depth, axis=0), b, atol=1e-9)
+
+
+def test_render_box_views():
+    box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
+    gt = render_mesh(box, 64, view="front", margin=0.1)
+    assert np.allclose(gt.normals[gt.mask], [0, 0, 1])
+    assert gt.depth_range < 1e-9
+    rows, cols = np.nonzero(gt.mask)
+    assert cols.max() - cols.min() + 1 == pytest.approx(64 * 0.8, abs=1)
+    assert rows.max() - rows.min() + 1 == pytest.approx(64 * 0.8 / 2, abs=1)
+    # an oblique view of a box sees three faces, each with a constant normal
+    ob = render_mesh(box, 64, view="oblique")
+    assert len(np.unique(np.round(ob.normals[ob.mask], 9), axis=0)) == 3
+    assert (ob.normals[ob.mask][:, 2] > 0).all()
+
+
+def test_render_errors():
+    box = trimesh.creation.box()
+    with pytest.raises(ValueError, match="`view` must be one of"):
+        render_mesh(box, 16, view="sideways")
+    with pytest.raises(ValueError, match="`view` must be"):
+        render_mesh(box, 16, view=(0, 0, 0))
+    with pytest.raises(ValueError, match="`margin`"):
+        render_mesh(box, 16, margin=0.6)
+    with pytest.raises(ValueError, match="`mesh` file not found"):
+        render_mesh("/nonexistent/mesh.ply", 16)
+    with pytest.raises(ValueError, match="`mesh` must be"):
+        render_mesh(3.0, 16)
+    with pytest.raises(ValueError, match="`resolution`"):
+        render_mesh(box, (16, 0))
+
+
+@pytest.mark.skipif(not (DATA / "meshes" / "spot.ply").is_file(), reason="data absent")
+def test_render_real_mesh_normals_match_depth():
+    gt = render_mesh(DATA / "meshes" / "spot.ply", 96, view="oblique")
+    assert gt.mask.sum() > 1000
+    assert (gt.normals[gt.mask][:, 2] > 0).all()
+    # away from jumps and creases, depth differences follow the normals
+    p = -gt.normals[..., 0] / gt.normals[..., 2]
+    same = np.abs(p[:, 1:] - p[:, :-1]) < 1e-12
+    fd = -np.diff(gt.depth, axis=1)
+    np.testing.assert_allclose(fd[same], p[:, 1:][same], atol=1e-6)
+
+
+def test_depth_jumps_and_continuous_region():
+    H, W = 20, 30
+    depth = np.zeros((H, W))
+    depth[:, 20:] = 10.0  # a step: a depth discontinuity with flat normals
+    normals = np.zeros((H, W, 3))
+    normals[..., 2] = 1.0
+    gt = GroundTruth(depth, normals, np.ones((H, W), bool), 1.0, "step")
+    jumps = depth_jumps(gt)
+    assert jumps[:, 19].all() and jumps[:, 20].all() and jumps.sum() == 2 * H
+    part = continuous_region(gt)
+    assert part.mask[:, :19].all() and not part.mask[:, 19:].any()
+    # a crease is not a jump
+    crease = analytic("pyramid", 32)
+    assert not depth_jumps(crease).any()
+    with pytest.raises(ValueError, match="`tol`"):
+        depth_jumps(gt, tol=-1)
+
+
+def test_angular_noise_statistics():
+    rng = np.random.default_rng(3)
+    n = normals_from_gradients(rng.normal(0, 0.3, (100, 100)), rng.normal(0, 0.3, (100, 100)))
+    n[0, 0] = np.nan
+    noisy = add_angular_noise(n, 5.0, np.random.default_rng(7))
+    assert np.isnan(noisy[0, 0]).all()
+    ang = _angle(n, noisy)[1:].ravel()
+    np.testing.assert_allclose(np.linalg.norm(noisy[1:], axis=-1), 1.0, atol=1e-12)
+    # |N(0, sigma)|: RMS = sigma, mean = sigma sqrt(2/pi)
+    assert np.sqrt(np.mean(ang**2)) == pytest.approx(5.0, rel=0.03)
+    assert ang.mean() == pytest.approx(5.0 * np.sqrt(2 / np.pi), rel=0.03)
+    # keep_front: strong noise never turns a normal away from the viewer
+    big = add_angular_noise(n, 20.0, np.random.default_rng(8))
+    assert (big[1:, :, 2] > 0).all() and (big[0, 1:, 2] > 0).all()
+    with pytest.raises(ValueError, match="`sigma_deg`"):
+        add_angular_noise(n, -1.0, rng)
+    with pytest.raises(ValueError, match="`normals`"):
+        add_angular_noise(np.zeros((4, 2)), 1.0, rng)
+
+
+@pytest.mark.parametrize("fraction", [0.15, 0.3, 0.5, 0.55])
+def test_perturb_fraction(fraction):
+    gt = analytic("sphere", 64)
+    out, chosen, angles = perturb_fraction(gt.normals, fraction, rng=np.random.default_rng(1))
+    k = int(gt.mask.sum())
+    assert chosen.sum() == round(fraction * k)
+    assert not (chosen & ~gt.mask).any()
+    np.testing.assert_array_equal(out[gt.mask & ~chosen], gt.normals[gt.mask & ~chosen])
+    meas = _angle(out[chosen], gt.normals[chosen])
+    np.testing.assert_allclose(meas, angles[chosen], atol=1e-5)
+    assert angles[chosen].max() <= 20.0 and angles[chosen].mean() == pytest.approx(10, rel=0.1)
+    with pytest.raises(ValueError, match="`fraction`"):
+        perturb_fraction(gt.normals, 1.5, rng=np.random.default_rng(1))
+    with pytest.raises(ValueError, match="`max_deg`"):
+        perturb_fraction(gt.normals, 0.1, max_deg=100, rng=np.random.default_rng(1))
+
+
+def test_remove_samples():
+    gt = analytic("face", 40)
+    out, removed = remove_samples(gt.normals, 0.3, np.random.default_rng(2))
+    assert removed.sum() == round(0.3 * 1600)
+    assert np.isnan(out[removed]).all() and np.isfinite(out[~removed]).all()
+    np.testing.assert_array_equal(out[~removed], gt.normals[~removed])
+
+
+def test_views_are_orthonormal_right_handed():
+    for view in synthetic.VIEWS:
+        F = synthetic._view_frame(view)
+        np.testing.assert_allclose(F @ F.T, np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(np.cross(F[0], F[1]), F[2], atol=1e-12)
