@@ -1,0 +1,90 @@
+import csv
+import sys
+import time
+import types
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from facetlift import methods
+from facetlift.bench import EXPERIMENTS, bench_command, run_bench
+
+DATA = Path(__file__).parents[1] / ".." / "shared" / "data"
+
+
+def _rows(path):
+    with open(path) as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_quick_bench_writes_every_table_and_figure(tmp_path):
+    t0 = time.perf_counter()
+    out = run_bench(tmp_path / "q", quick=True, progress=False)
+    assert time.perf_counter() - t0 < 120
+    for name in ["table1", "fig4", "fig5", "figs6-8", "fig9"]:
+        assert (out / f"{name}.csv").stat().st_size > 0
+        assert (out / f"{name}.md").read_text().startswith("|")
+    for name in ["fig4", "fig5", "fig6", "fig7", "fig8", "fig9"]:
+        assert (out / f"{name}.png").read_bytes()[:4] == b"\x89PNG"
+    report = (out / "report.md").read_text()
+    assert "Failed experiments" not in report
+    t1 = _rows(out / "table1.csv")
+    assert {r["resolution"] for r in t1} == {"32x32", "64x64"}
+    assert all(float(r["factorization_ms"]) >= 0 for r in t1)
+    f4 = _rows(out / "fig4.csv")
+    assert {r["mean_subtraction"] for r in f4} == {"True", "False"}
+    f9 = _rows(out / "fig9_runs.csv")
+    assert {r["condition"] for r in f9} == {"noise-free", "noise 5deg"}
+    assert all(r["status"] == "ok" for r in f9 if r["method"] == "dgp")
+    # a noise-free analytic surface is reconstructed closely by DGP
+    saddle = [r for r in f9 if r["model"] == "saddle" and r["method"] == "dgp"
+              and r["condition"] == "noise-free"]
+    assert float(saddle[0]["error_pct"]) < 1.0
+    if (DATA / "normal_maps").is_dir():
+        assert (out / "fig10.md").is_file() and (out / "bear.md").is_file()
+        assert any(r["status"] == "ok" for r in _rows(out / "fig10.csv"))
+
+
+def test_missing_and_failing_methods_are_recorded(tmp_path, monkeypatch):
+    def run(problem):
+        raise RuntimeError("boom")
+
+    mod = types.ModuleType("facetlift.methods._bench_test_boom")
+    mod.run = run
+    monkeypatch.setitem(sys.modules, mod.__name__, mod)
+    monkeypatch.setitem(methods.REGISTRY, "ghost", methods.MethodInfo(
+        name="ghost", module="_no_such_module", summary="", reference=""))
+    monkeypatch.setitem(methods.REGISTRY, "boom", methods.MethodInfo(
+        name="boom", module="_bench_test_boom", summary="", reference=""))
+    out = run_bench(tmp_path, quick=True, methods=["dgp", "ghost", "boom"],
+                    experiments=["maps"], progress=False)
+    rows = _rows(out / "figs6-8.csv")
+    status = {(r["model"], r["method"]): r["status"] for r in rows}
+    assert status[("saddle", "ghost")] == "unavailable"
+    assert status[("saddle", "boom")] == "failed"
+    assert status[("saddle", "dgp")] == "ok"
+    assert "boom" in next(r["message"] for r in rows if r["method"] == "boom")
+    report = (out / "report.md").read_text()
+    assert "| ghost | no |" in report
+
+
+def test_bench_input_errors(tmp_path):
+    with pytest.raises(ValueError, match="`methods`: unknown"):
+        run_bench(tmp_path, methods=["nope"], progress=False)
+    with pytest.raises(ValueError, match="`experiments`: unknown"):
+        run_bench(tmp_path, experiments=["fig99"], progress=False)
+    with pytest.raises(ValueError, match="`extra_meshes`"):
+        run_bench(tmp_path, extra_meshes=[tmp_path / "none.ply"], progress=False)
+    assert "fig9" in EXPERIMENTS
+
+
+def test_bench_command(tmp_path):
+    runner = CliRunner()
+    res = runner.invoke(bench_command, ["-o", str(tmp_path / "o"), "--quick", "--experiments",
+                                        "table1,fig4", "--no-progress"])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "o" / "table1.md").is_file() and (tmp_path / "o" / "fig4.png").is_file()
+    assert not (tmp_path / "o" / "fig9.csv").exists()
+    res = runner.invoke(bench_command, ["-o", str(tmp_path / "o"), "--methods", "nope"])
+    assert res.exit_code == 2 and "unknown" in res.output
