@@ -227,6 +227,10 @@ def integrate(normals, mask, method, pixel_size, y_down, K, orthographic, backfa
                 n, m, method=method, pixel_size=pixel_size, K=Kmat, backfacing=backfacing,
                 **opts,
             )
+    except ValueError as e:  # name the command-line flag where the library names a keyword
+        raise ValueError(
+            str(e).replace("pass backfacing='outlier'", "pass --backfacing outlier")
+        ) from None
     finally:
         if bar is not None:
             bar.close()
