@@ -1,0 +1,163 @@
+"""facetlift.Surface: depth/height/vertex depth, points and meshes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import facetlift
+from facetlift.domain import Domain
+
+
+def ring_mask(shape=(12, 15)):
+    m = np.zeros(shape, bool)
+    m[1:11, 2:14] = True
+    m[4:7, 6:9] = False
+    return m
+
+
+@pytest.fixture
+def plane_surface(make_plane):
+    f = make_plane(0.3, -0.2)
+    mask = ring_mask()
+    h = 0.4
+    return facetlift.integrate(f.normals(mask.shape, h), mask, pixel_size=h), f, h
+
+
+def test_arrays_shapes_and_nan_outside(plane_surface):
+    s, _, _ = plane_surface
+    H, W = s.shape
+    assert s.depth.shape == s.height.shape == s.mask.shape == (H, W)
+    assert s.vertex_depth.shape == (H + 1, W + 1)
+    assert np.array_equal(np.isfinite(s.depth), s.mask)
+    assert np.array_equal(np.isfinite(s.vertex_depth), Domain.from_mask(s.mask).vertex_mask)
+    np.testing.assert_array_equal(s.height, -s.depth)
+    assert s.pixel_size == 0.4 and s.K is None
+    assert abs(np.nanmean(s.depth)) < 1e-12  # the orthographic constant: zero mean
+
+
+def test_facet_depth_is_mean_of_corner_depths(wave):
+    """Conventions: the facet centre is the mean of its four corners."""
+    s = facetlift.integrate(wave.normals((9, 11), 0.2), pixel_size=0.2)
+    v = s.vertex_depth
+    corners = (v[:-1, :-1] + v[:-1, 1:] + v[1:, 1:] + v[1:, :-1]) / 4
+    np.testing.assert_allclose(s.depth, corners, rtol=0, atol=1e-12)
+
+
+def test_points_facets_orthographic(plane_surface):
+    s, f, h = plane_surface
+    pts = s.points("facets")
+    r, c = np.nonzero(s.mask)
+    assert pts.shape == (r.size, 3)
+    np.testing.assert_allclose(pts[:, 0], (c + 0.5) * h, rtol=1e-15)
+    np.testing.assert_allclose(pts[:, 1], -(r + 0.5) * h, rtol=1e-15)
+    np.testing.assert_allclose(pts[:, 2], s.height[r, c], rtol=1e-15)
+    # the points lie on the input plane z = 0.3 x - 0.2 y (+ a constant)
+    resid = pts[:, 2] - f.z(pts[:, 0], pts[:, 1])
+    assert np.ptp(resid) < 1e-12
+    assert s.points().shape == pts.shape  # "facets" is the default
+
+
+def test_points_vertices_orthographic(plane_surface):
+    s, f, h = plane_surface
+    pts = s.points("vertices")
+    i, j = np.nonzero(np.isfinite(s.vertex_depth))
+    assert pts.shape == (i.size, 3)
+    np.testing.assert_allclose(pts[:, 0], j * h, rtol=1e-15)
+    np.testing.assert_allclose(pts[:, 1], -i * h, rtol=1e-15)
+    np.testing.assert_allclose(pts[:, 2], -s.vertex_depth[i, j], rtol=1e-15)
+    assert np.ptp(pts[:, 2] - f.z(pts[:, 0], pts[:, 1])) < 1e-12
+
+
+def test_points_bad_where(plane_surface):
+    with pytest.raises(ValueError, match="`where` must be 'facets' or 'vertices'; got 'edges'"):
+        plane_surface[0].points("edges")
+
+
+def test_points_perspective_project_back_to_pixels():
+    """Facet points project to their pixel centre (integer index), vertex points to the
+    pixel corners (half-integers), through K."""
+    rng = np.random.default_rng(0)
+    mask = ring_mask((6, 8))
+    d = Domain.from_mask(mask)
+    K = np.array([[300.0, 0.5, 3.2], [0.0, 280.0, 2.7], [0.0, 0.0, 1.0]])
+    vdep = d.to_vertex_image(rng.uniform(5.0, 9.0, d.n_vertices))
+    s = facetlift.Surface(depth=d.to_image(rng.uniform(5.0, 9.0, d.n_facets)),
+                          vertex_depth=vdep, mask=mask, K=K)
+    for where, off in (("facets", 0.0), ("vertices", -0.5)):
+        pts = s.points(where)
+        cam = pts * [1.0, -1.0, -1.0]  # OpenCV camera frame: y down, z forward
+        uvw = cam @ K.T
+        col, row = uvw[:, 0] / uvw[:, 2], uvw[:, 1] / uvw[:, 2]
+        img = s.depth if where == "facets" else s.vertex_depth
+        r, c = np.nonzero(np.isfinite(img))
+        np.testing.assert_allclose(col, c + off, atol=1e-12)
+        np.testing.assert_allclose(row, r + off, atol=1e-12)
+        np.testing.assert_allclose(cam[:, 2], img[r, c], rtol=1e-15)
+
+
+def newell_normals(verts, faces):
+    """Unnormalised face normals of planar or non-planar polygons (Newell's method)."""
+    n = np.zeros((len(faces), 3))
+    k = faces.shape[1]
+    for a in range(k):
+        p, q = verts[faces[:, a]], verts[faces[:, (a + 1) % k]]
+        n += np.cross(p, q)
+    return n
+
+
+@pytest.mark.parametrize("triangles", [False, True])
+def test_mesh_counts_and_orientation(wave, triangles):
+    mask = ring_mask()
+    h = 0.25
+    s = facetlift.integrate(wave.normals(mask.shape, h, (-1.5, 1.5)), mask, pixel_size=h)
+    verts, faces = s.to_mesh(triangles=triangles)
+    m = int(mask.sum())
+    np.testing.assert_array_equal(verts, s.points("vertices"))
+    assert faces.shape == ((2 * m, 3) if triangles else (m, 4))
+    assert faces.min() == 0 and faces.max() == len(verts) - 1
+    assert np.issubdtype(faces.dtype, np.integer)
+    n = newell_normals(verts, faces)
+    assert np.all(n[:, 2] > 0)  # toward the viewer (+z)
+    # counter-clockwise seen from the viewer: positive signed area in the xy plane
+    area = n[:, 2] / 2
+    expected = h * h / (2 if triangles else 1)
+    np.testing.assert_allclose(area, expected, rtol=1e-12)
+
+
+@pytest.mark.parametrize("triangles", [False, True])
+def test_mesh_of_a_plane_has_the_input_normal(make_plane, triangles):
+    f = make_plane(0.6, 1.1)
+    mask = ring_mask()
+    s = facetlift.integrate(f.normals(mask.shape, 0.5), mask, pixel_size=0.5)
+    verts, faces = s.to_mesh(triangles=triangles)
+    n = newell_normals(verts, faces)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    np.testing.assert_allclose(n, np.tile([-0.6, -1.1, 1.0] / np.sqrt(1 + 0.36 + 1.21),
+                                          (len(n), 1)), atol=1e-12)
+
+
+def test_mesh_quads_are_the_facets(plane_surface):
+    """Quad k has the four corners of pixel k (row-major), reversed to be counter-clockwise."""
+    s, _, h = plane_surface
+    verts, quads = s.to_mesh()
+    r, c = np.nonzero(s.mask)
+    xy = verts[quads][:, :, :2]
+    # corners (r+1, c), (r+1, c+1), (r, c+1), (r, c)
+    np.testing.assert_allclose(xy[:, 0], np.column_stack([c, -(r + 1)]) * h)
+    np.testing.assert_allclose(xy[:, 1], np.column_stack([c + 1, -(r + 1)]) * h)
+    np.testing.assert_allclose(xy[:, 2], np.column_stack([c + 1, -r]) * h)
+    np.testing.assert_allclose(xy[:, 3], np.column_stack([c, -r]) * h)
+    _, tris = s.to_mesh(triangles=True)
+    # triangles 2k and 2k+1 split quad k along one of its diagonals
+    for quad, pair in zip(quads, tris.reshape(-1, 2, 3), strict=True):
+        assert set(pair.ravel()) == set(quad)
+        shared = set(pair[0]) & set(pair[1])
+        assert len(shared) == 2 and shared in ({quad[0], quad[2]}, {quad[1], quad[3]})
+
+
+def test_repr(plane_surface):
+    s = plane_surface[0]
+    text = repr(s)
+    assert text.startswith(f"Surface(12x15, {int(s.mask.sum())} facets, method='dgp'")
+    assert "iterations=1" in text
