@@ -1,0 +1,223 @@
+"""facetlift.integrate / facetlift.solve: dispatch, capability checks, the Surface built."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+import types
+
+import numpy as np
+import pytest
+
+import facetlift
+from facetlift import methods
+from facetlift.methods import MethodInfo, MethodResult
+
+EIGHT = {"dgp", "frankot_chellappa", "poisson", "alpha_surface", "m_estimator",
+         "regularization", "diffusion", "kernel"}
+
+
+@pytest.fixture
+def fake_method(monkeypatch):
+    """Register a method "fake" (module facetlift.methods._fake) with given capabilities and
+    a run() that returns whatever the test puts in ``box["result"]``."""
+    box = {"calls": 0}
+
+    def run(problem, *, scale=1.0, flag=False):
+        box["calls"] += 1
+        box["problem"], box["options"] = problem, {"scale": scale, "flag": flag}
+        return box["result"](problem) if callable(box.get("result")) else MethodResult(
+            depth=np.zeros(problem.domain.n_facets), info={"iterations": 0})
+
+    module = types.ModuleType("facetlift.methods._fake")
+    module.run = run
+    monkeypatch.setitem(sys.modules, "facetlift.methods._fake", module)
+
+    def register(**caps):
+        info = MethodInfo(name="fake", module="_fake", summary="test double", reference="-",
+                          **caps)
+        monkeypatch.setitem(methods.REGISTRY, "fake", info)
+        return box
+
+    return register
+
+
+def test_registry_lists_the_eight_methods():
+    assert EIGHT <= set(facetlift.METHODS)
+    for name, info in facetlift.METHODS.items():
+        assert info.name == name and info.summary and info.reference
+    dgp = methods.get("dgp")
+    assert dgp.masks and dgp.missing
+    assert {"solver", "tol", "max_iter", "mean_subtraction", "outlier_eps"} <= set(dgp.options())
+    assert dgp.options()["solver"] == "direct"
+
+
+def test_integrate_returns_a_surface_with_info(wave):
+    n = wave.normals((10, 12), 0.2)
+    s = facetlift.integrate(n, pixel_size=0.2)
+    assert isinstance(s, facetlift.Surface)
+    info = s.info
+    assert info["method"] == "dgp" and info["solver"] == "direct"
+    assert info["iterations"] == 1 and info["converged"] is True
+    assert isinstance(info["deviation"], list) and all(isinstance(v, float)
+                                                      for v in info["deviation"])
+    sec = info["seconds"]
+    assert {"prepare", "method", "total"} <= set(sec)
+    assert all(v >= 0 for v in sec.values()) and sec["total"] >= sec["method"]
+    assert info["outliers"] == 0 and info["missing"] == 0
+
+
+def test_solve_on_a_prepared_problem_equals_integrate(wave):
+    n = wave.normals((10, 12), 0.2)
+    mask = np.ones((10, 12), bool)
+    mask[2:4, 3:6] = False
+    a = facetlift.integrate(n, mask, pixel_size=0.2, solver="iterative")
+    b = facetlift.solve(facetlift.prepare(n, mask, pixel_size=0.2), "dgp", solver="iterative")
+    np.testing.assert_array_equal(a.depth, b.depth)
+    np.testing.assert_array_equal(a.vertex_depth, b.vertex_depth)
+    assert b.info["method"] == "dgp" and b.info["solver"] == "iterative"
+
+
+def test_integrate_accepts_lists_and_does_not_modify_input(saddle):
+    n = saddle.normals((5, 6), 0.3)
+    n[1, 1] = np.nan
+    mask = np.ones((5, 6), bool)
+    n0 = n.copy()
+    s = facetlift.integrate(n.tolist(), mask.tolist(), pixel_size=0.3)
+    assert np.array_equal(n, n0, equal_nan=True)
+    t = facetlift.integrate(n, mask, pixel_size=0.3)
+    np.testing.assert_array_equal(s.depth, t.depth)
+
+
+def test_library_does_not_print(wave, capsys):
+    facetlift.integrate(wave.normals((8, 8), 0.25), pixel_size=0.25, solver="iterative")
+    out = capsys.readouterr()
+    assert out.out == "" and out.err == ""
+
+
+def test_unknown_method(wave):
+    with pytest.raises(ValueError, match=r"`method` must be one of \[.*'dgp'.*\]; got 'dgq'"):
+        facetlift.integrate(wave.normals((4, 4)), method="dgq")
+
+
+def test_unknown_method_is_checked_before_the_input():
+    with pytest.raises(ValueError, match="`method` must be one of"):
+        facetlift.integrate(np.ones((4, 4)), method="nope")
+
+
+def test_unknown_option_lists_valid_options(wave):
+    with pytest.raises(
+        ValueError,
+        match=r"unknown option\(s\) \['bogus', 'tolerance'\] for method 'dgp'; valid options: "
+        r"\[.*'max_iter'.*'solver'.*'tol'.*\]",
+    ):
+        facetlift.integrate(wave.normals((4, 4)), bogus=1, tolerance=1e-3)
+
+
+def test_options_are_forwarded(fake_method, wave):
+    box = fake_method(missing=True)
+    facetlift.integrate(wave.normals((4, 5)), method="fake", scale=2.5)
+    assert box["options"] == {"scale": 2.5, "flag": False}
+    with pytest.raises(ValueError, match=r"unknown option\(s\) \['solver'\] for method 'fake'; "
+                       r"valid options: \['flag', 'scale'\]"):
+        facetlift.integrate(wave.normals((4, 5)), method="fake", solver="direct")
+
+
+def _missing_input(wave):
+    n = wave.normals((6, 6), 0.2)
+    n[2, 3] = np.nan
+    return n, np.ones((6, 6), bool)
+
+
+def test_method_without_missing_support_refuses_missing_samples(fake_method, wave):
+    box = fake_method(missing=False)
+    n, mask = _missing_input(wave)
+    with pytest.raises(ValueError, match=r"method 'fake' cannot take missing samples \(1 pixels"):
+        facetlift.integrate(n, mask, method="fake")
+    known = np.ones((6, 6), bool)
+    known[0, 0] = False
+    with pytest.raises(ValueError, match=r"cannot take missing samples \(1 pixels"):
+        facetlift.integrate(wave.normals((6, 6), 0.2), known=known, method="fake")
+    assert box["calls"] == 0  # refused before running
+    facetlift.integrate(wave.normals((6, 6), 0.2), method="fake")  # complete input is fine
+    assert box["calls"] == 1
+
+
+@pytest.mark.parametrize("name", sorted(n for n, i in methods.REGISTRY.items() if not i.missing))
+def test_registered_methods_without_missing_support_refuse(wave, name):
+    if importlib.util.find_spec(f"facetlift.methods.{methods.REGISTRY[name].module}") is None:
+        pytest.skip(f"method module {name!r} not written yet")
+    n, mask = _missing_input(wave)
+    with pytest.raises(ValueError, match=f"method '{name}' cannot take missing samples"):
+        facetlift.integrate(n, mask, method=name)
+
+
+def test_method_without_perspective_refuses_K(fake_method, wave):
+    box = fake_method(missing=True, perspective=False)
+    K = [[100.0, 0.0, 2.0], [0.0, 100.0, 2.0], [0.0, 0.0, 1.0]]
+    with pytest.raises(ValueError, match=r"method 'fake' does not support perspective input"):
+        facetlift.integrate(wave.normals((5, 5)), method="fake", K=K)
+    assert box["calls"] == 0
+
+
+def test_surface_from_facet_depths_only(fake_method):
+    """A method returning facet depths: vertex depths are the mean of the adjacent facets,
+    and each component's mean facet depth is zero (orthographic)."""
+    mask = np.zeros((6, 9), bool)
+    mask[1:5, 1:4] = True
+    mask[1:5, 6:8] = True
+    box = fake_method()
+    rng = np.random.default_rng(0)
+    raw = {}
+
+    def result(problem):
+        raw["d"] = rng.normal(size=problem.domain.n_facets) + 10 * problem.domain.facet_component
+        return MethodResult(depth=raw["d"].copy())
+
+    box["result"] = result
+    s = facetlift.integrate(np.dstack([np.zeros((6, 9, 2)), np.ones((6, 9))]), mask,
+                            method="fake")
+    d = box["problem"].domain
+    for k in range(d.n_components):
+        part = d.facet_component == k
+        np.testing.assert_allclose(s.depth[d.pixels][part],
+                                   raw["d"][part] - raw["d"][part].mean(), atol=1e-12)
+        assert abs(s.depth[d.labels == k + 1].mean()) < 1e-12
+    f = s.depth
+    # vertex (i, j) touches pixels (i-1..i, j-1..j): (2, 2) four domain pixels, (1, 1) only
+    # pixel (1, 1), (1, 2) pixels (1, 1) and (1, 2)
+    np.testing.assert_allclose(s.vertex_depth[2, 2], f[1:3, 1:3].mean(), atol=1e-12)
+    np.testing.assert_allclose(s.vertex_depth[1, 1], f[1, 1], atol=1e-12)
+    np.testing.assert_allclose(s.vertex_depth[1, 2], f[1, 1:3].mean(), atol=1e-12)
+
+
+def test_surface_from_vertex_depths_only(fake_method):
+    mask = np.ones((4, 5), bool)
+    box = fake_method()
+    rng = np.random.default_rng(1)
+    raw = {}
+
+    def result(problem):
+        raw["v"] = rng.normal(size=problem.domain.n_vertices) + 3.0
+        return MethodResult(vertex_depth=raw["v"].copy())
+
+    box["result"] = result
+    s = facetlift.integrate(np.dstack([np.zeros((4, 5, 2)), np.ones((4, 5))]), mask,
+                            method="fake")
+    v = raw["v"].reshape(5, 6)
+    centres = (v[:-1, :-1] + v[:-1, 1:] + v[1:, 1:] + v[1:, :-1]) / 4
+    shift = centres.mean()
+    np.testing.assert_allclose(s.depth, centres - shift, atol=1e-12)
+    np.testing.assert_allclose(s.vertex_depth, v - shift, atol=1e-12)
+
+
+def test_perspective_depths_are_not_shifted(fake_method):
+    box = fake_method(perspective=True)
+    box["result"] = lambda problem: MethodResult(
+        depth=np.full(problem.domain.n_facets, 7.0),
+        vertex_depth=np.full(problem.domain.n_vertices, 7.0))
+    K = [[100.0, 0.0, 2.0], [0.0, 100.0, 2.0], [0.0, 0.0, 1.0]]
+    s = facetlift.integrate(np.dstack([np.zeros((4, 4, 2)), np.ones((4, 4))]), K=K,
+                            method="fake")
+    assert np.all(s.depth == 7.0) and np.all(s.vertex_depth == 7.0)
+    assert s.K is not None and np.allclose(s.K, K)
