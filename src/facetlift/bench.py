@@ -497,7 +497,7 @@ class Bench:
     def fig9(self, models=None, extra_meshes=()):
         specs = self.specs()
         data = self.fig9_models(models, extra_meshes)
-        rows, skipped = [], []
+        rows, skipped, thumbs = [], [], []
         conds = [("noise-free", 0.0), (f"noise {self.s.noise_deg:g}deg", self.s.noise_deg)]
         domains = ["full"] + (["continuous"] if self.s.fig9_continuous else [])
         total = len(data) * len(conds) * len(domains) * len(specs)
@@ -520,11 +520,19 @@ class Bench:
             for domain in domains:
                 gt = gt_full
                 if domain == "continuous":
-                    if "@" not in name:  # analytic surfaces are continuous already
+                    reason = None
+                    if "@" in name:  # analytic surfaces are continuous already
+                        gt = synthetic.continuous_region(gt_full)
+                        if gt.depth_range < gt.pixel_size:
+                            reason = (f"largest jump-free region is flat (depth range "
+                                      f"{gt.depth_range:.3g})")
+                            skipped.append({"model": name + " (continuous)", "reason": reason})
+                    if "@" not in name or reason:
                         if bar is not None:
                             bar.update(len(conds) * len(specs))
                         continue
-                    gt = synthetic.continuous_region(gt_full)
+                elif domain == "full":
+                    thumbs.append(gt)
                 for cond, sigma in conds:
                     rng = np.random.default_rng([SEED, zlib.crc32(name.encode())])
                     nm = gt.normals if sigma == 0 else synthetic.add_angular_noise(
@@ -564,6 +572,7 @@ class Bench:
                 f"{s['model']} ({s['reason']})" for s in skipped) + "\n"
         _write_text(self.out / "fig9.md", text)
         self._fig9_plot(summary, domains)
+        self._thumbnails(thumbs)
         self.add(f"Fig. 9: mean normalised error over {len(data) - len(skipped)} models "
                  f"({self.s.fig9_size}x{self.s.fig9_size})", text)
 
@@ -574,8 +583,10 @@ class Bench:
         for dom, cond in keys:
             sub = [r for r in rows if r["domain"] == dom and r["condition"] == cond]
             models = list(dict.fromkeys(r["model"] for r in sub))
-            ok_all = [m for m in models
-                      if all(r["status"] == "ok" for r in sub if r["model"] == m)]
+            # models on which every method that could run succeeded
+            ok_all = [m for m in models if all(
+                r["status"] == "ok" for r in sub
+                if r["model"] == m and r["status"] not in ("unavailable", "unsupported"))]
             for spec in specs:
                 mine = [r for r in sub if r["method"] == spec.label]
                 errs = [r["error_pct"] for r in mine if r["status"] == "ok"]
@@ -617,6 +628,23 @@ class Bench:
             ax.legend(fontsize=8)
         fig.tight_layout()
         _savefig(fig, self.out / "fig9.png")
+
+    def _thumbnails(self, gts):
+        """fig9_models.png: the normal maps of the Fig. 9 data set."""
+        if not gts:
+            return
+        plt = _plt()
+        ncol = min(len(gts), 8)
+        nrow = -(-len(gts) // ncol)
+        fig, axes = plt.subplots(nrow, ncol, figsize=(1.3 * ncol, 1.45 * nrow), dpi=72,
+                                 squeeze=False)
+        for a in axes.flat:
+            a.axis("off")
+        for a, gt in zip(axes.flat, gts, strict=False):
+            a.imshow(np.where(gt.mask[..., None], np.nan_to_num(gt.normals) * 0.5 + 0.5, 1.0))
+            a.set_title(gt.name, fontsize=6)
+        fig.tight_layout()
+        _savefig(fig, self.out / "fig9_models.png")
 
     # -- Fig. 10 ------------------------------------------------------------------------------
     def _read_folder(self, folder: Path, stride: int):
