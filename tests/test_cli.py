@@ -253,3 +253,11 @@ def test_progress_bar_on_stderr(tmp_path, capsys, monkeypatch, flag, solver, sho
     assert bool(calls) == shown
     if shown:
         assert calls[0][0] == 1 and calls[-1][0] == json.loads(stdout)["info"]["iterations"]
+
+
+def test_verbose_logs_to_stderr_for_one_run(tmp_path, capsys):
+    npath, _, _ = write_input(tmp_path)
+    code, stdout, err = run(capsys, "-v", "integrate", npath, "-o", tmp_path / "a")
+    assert code == 0 and "facetlift: dgp:" in err and "facetlift: dgp:" not in stdout
+    code, _, err = run(capsys, "integrate", npath, "-o", tmp_path / "b")
+    assert code == 0 and err == ""

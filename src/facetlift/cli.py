@@ -49,7 +49,9 @@ CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
 @click.group(context_settings=CONTEXT)
 @click.version_option(__version__, "-V", "--version", prog_name="facetlift")
-def cli():
+@click.option("-v", "--verbose", count=True,
+              help="Log the library's progress on stderr (-vv for debug detail).")
+def cli(verbose):
     """facetlift: turn a normal map into a depth map and a mesh (normal integration).
 
     \b
@@ -60,6 +62,30 @@ def cli():
 
     Run 'facetlift COMMAND --help' for the options of a command.
     """
+    if verbose:
+        root = logging.getLogger("facetlift")
+        handler, level = _StderrHandler(), root.level
+        handler.setFormatter(logging.Formatter("%(name)s: %(message)s"))
+        root.addHandler(handler)
+        root.setLevel(logging.INFO if verbose == 1 else logging.DEBUG)
+
+        def restore():
+            root.removeHandler(handler)
+            root.setLevel(level)
+
+        click.get_current_context().call_on_close(restore)
+
+
+class _StderrHandler(logging.StreamHandler):
+    """Logs to whatever ``sys.stderr`` is when a record is emitted."""
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value):
+        pass
 
 
 def _parse_option(text: str) -> tuple[str, object]:
