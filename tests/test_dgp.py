@@ -476,11 +476,13 @@ def test_max_iter_reached_warns(wave):
 
 
 def test_noise_5_degrees(wave):
-    """5 deg Gaussian angular noise (Sec. 5). Least squares integration of i.i.d. slope noise
+    """5 deg Gaussian angular noise (Sec. 5). Least-squares integration of i.i.d. slope noise
     of std s on an n x n grid of spacing h leaves a height error of std about
-    s h sqrt(ln(n) / (2 pi)) (the Green's function of the discrete Laplacian grows like
-    ln(r) / (2 pi)); here s ~ 0.087 (slopes <= 1), h = 3/64, so ~3e-3 RMS and the max is a
-    few times that. The bounds below allow 2x."""
+    s h sqrt(ln(n) / (2 pi)) (the discrete Green's function grows like ln(r) / (2 pi)).
+    A tilt of sigma changes the slope by up to sigma (1 + |grad z|^2) <= 2 sigma here
+    (|grad z| <= 1), so s <= 2 sigma; with sigma = 5 deg, h = 3/64 that is <= 5.4e-3 RMS.
+    Over seeds 10-19 the RMS error was 1.1-2.0 and the max 3.6-6.7 times the sigma-based
+    estimate below (max 1.1% of the depth range); the bounds allow 3x and 10x."""
     n = 64
     shape, h, origin = square(n, -1.5, 1.5)
     truth = wave.height(shape, h, origin)
@@ -488,8 +490,8 @@ def test_noise_5_degrees(wave):
     s = facetlift.integrate(noisy, pixel_size=h)
     sigma = np.radians(5.0)
     expected_rms = sigma * h * np.sqrt(np.log(n) / (2 * np.pi))
-    assert rms_error(s, truth) < 2 * expected_rms
-    assert max_error(s, truth) < 8 * expected_rms
+    assert rms_error(s, truth) < 3 * expected_rms
+    assert max_error(s, truth) < 10 * expected_rms
     assert max_error(s, truth) / np.ptp(truth) < 0.02
     # the deviation reported is the mean angle between the result's facets and the input:
     # a good part of the 5 deg noise is not integrable and stays
@@ -614,5 +616,25 @@ def test_backends_agree(wave, backend, solver):
     ],
 )
 def test_bad_options(saddle, options, match):
+    with pytest.raises(ValueError, match=match):
+        facetlift.integrate(saddle.normals((6, 7), 0.1), pixel_size=0.1, **options)
+
+
+@pytest.mark.xfail(strict=True, reason="bug: dgp.run compares option values without checking "
+                   "their type: TypeError/OverflowError or an unnamed ValueError")
+@pytest.mark.parametrize(
+    "options, match",
+    [
+        ({"tol": "a"}, "`tol` must be"),
+        ({"tol": None}, "`tol` must be"),
+        ({"max_iter": "a"}, "`max_iter` must be a positive integer"),
+        ({"max_iter": None}, "`max_iter` must be a positive integer"),
+        ({"max_iter": float("inf")}, "`max_iter` must be a positive integer"),
+        ({"outlier_eps": "x"}, "`outlier_eps` must be in"),
+        ({"flat_weight": "x"}, "`flat_weight` must be > 0"),
+        ({"progress": 3, "solver": "iterative"}, "`progress` must be callable"),
+    ],
+)
+def test_bad_option_types(saddle, options, match):
     with pytest.raises(ValueError, match=match):
         facetlift.integrate(saddle.normals((6, 7), 0.1), pixel_size=0.1, **options)

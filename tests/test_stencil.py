@@ -134,3 +134,13 @@ def test_scatter_corners_is_gather_transpose():
     # adjoint identity <C z, v> = <z, C^T v>
     z = rng.normal(size=d.n_vertices)
     np.testing.assert_allclose(np.sum(z[d.corners] * v), z @ scatter_corners(d, v), rtol=1e-12)
+
+
+def test_facet_form_orientation():
+    """Entry (corner a, corner b) receives Q[a, b] (the module docstring), also for a
+    non-symmetric block."""
+    rng = np.random.default_rng(7)
+    d = Domain.from_mask(irregular_mask(7))
+    Q = rng.normal(size=(4, 4))
+    np.testing.assert_allclose(facet_form(d, [(1.0, Q)]).toarray(), dense_form(d, [(1.0, Q)]),
+                               atol=1e-13)
