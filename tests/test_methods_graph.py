@@ -1,0 +1,346 @@
+"""Pixel-graph comparison methods: poisson, alpha_surface, m_estimator, regularization, diffusion.
+
+Tolerances. The edge targets average the two samples of an edge, which is the trapezoid rule:
+exact for quadratics. So on the saddle x^2 - y^2 (and on planes) every method's energy is
+zero at the true surface, and its unique minimiser (up to the constant) is the truth: errors
+are rounding only (observed 1e-14 .. 1e-12 relative), hence 1e-9. The Laplacian prior of
+"regularization" vanishes on the saddle (its discrete Laplacian is exactly 0), and the
+diffusion tensor only reweights residuals that are all zero. With missing samples an edge
+uses its one known sample, an O(h) slope error on that edge (O(h^2) in height), with random
+sign: the observed error is first order, about 1e-2 of the depth range at h = 1/32, so the
+bound is 3e-2 there, and the error must shrink when h halves.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+import facetlift
+from facetlift.methods import _graph as g
+from facetlift.methods import alpha_surface, diffusion, regularization
+
+METHODS = ["poisson", "alpha_surface", "m_estimator", "regularization", "diffusion"]
+N = 64
+H = 2.0 / N
+ORIGIN = (-1.0, 1.0)  # vertex (0, 0) at x = -1, y = 1: the grid covers [-1, 1]^2
+
+
+def saddle_input(saddle, n=N):
+    h = 2.0 / n
+    return saddle.normals((n, n), h, ORIGIN), -saddle.height((n, n), h, ORIGIN), h
+
+
+def ring_mask(n=N):
+    """A disk with a hole, a separate blob, and a block attached only at a corner (pinch)."""
+    r, c = np.indices((n, n))
+    rr = (r - 0.45 * n) ** 2 + (c - 0.45 * n) ** 2
+    mask = (rr < (0.4 * n) ** 2) & (rr > (0.12 * n) ** 2)
+    mask[n - 8 : n - 2, n - 8 : n - 2] = True  # second component
+    mask[n - 12 : n - 9, n - 12 : n - 9] = True  # touches the blob only at a corner
+    return mask
+
+
+def outside_error(depth, truth, region):
+    d = depth - truth
+    d = d - d[~region].mean()
+    return float(np.abs(d[~region]).max() / np.ptp(truth))
+
+
+# --------------------------------------------------------------------------------------------
+# the graph
+
+
+def test_graph_edges_and_pinch():
+    mask = np.zeros((5, 6), bool)
+    mask[0:2, 0:2] = True
+    mask[2:4, 2:4] = True  # touches the first block at a corner only
+    d = facetlift.prepare(np.dstack([np.zeros((5, 6, 2)), np.ones((5, 6))]), mask).domain
+    assert d.n_components == 1
+    gr = g.build(d)
+    assert (gr.kind == g.HORIZONTAL).sum() == 4
+    assert (gr.kind == g.VERTICAL).sum() == 4
+    assert (gr.kind == g.DIAGONAL).sum() == 1
+    assert gr.loops.shape == (2, 4)
+    G = g.difference(gr)
+    assert np.allclose(np.asarray(G.sum(axis=1)).ravel(), 0.0)
+    w = np.random.default_rng(0).random(gr.n_edges)
+    assert np.allclose(g.laplacian(gr, w).toarray(), (G.T @ sp.diags(w) @ G).toarray())
+
+
+def test_targets_exact_on_plane_and_curl(make_plane):
+    mask = ring_mask(32)
+    pl = make_plane(0.3, -0.8, 2.0)
+    h = 0.25
+    pr = facetlift.prepare(pl.normals((32, 32), h), mask, pixel_size=h)
+    gr = g.build(pr.domain)
+    t, has = g.targets(gr, *pr.slopes, h)
+    assert has.all()
+    z = pl.height((32, 32), h)[pr.domain.pixels]
+    assert np.allclose(g.residuals(gr, z, t), 0.0, atol=1e-12)
+    c, valid = g.curl(gr, t, has)
+    assert valid.all() and np.abs(c).max() < 1e-12
+    # a non-integrable perturbation of one sample shows up in the curl of its loops
+    p, q = pr.slopes
+    p = p.copy()
+    p[100] += 1.0
+    c2, _ = g.curl(gr, g.targets(gr, p, q, h)[0], has)
+    assert 0 < (np.abs(c2) > 1e-6).sum() <= 4
+
+
+def test_targets_missing_rule():
+    mask = np.ones((1, 3), bool)
+    n = np.dstack([np.zeros((1, 3, 2)), np.ones((1, 3))])
+    p = np.array([1.0, np.nan, np.nan])
+    q = np.zeros(3)
+    gr = g.build(facetlift.prepare(n, mask).domain)
+    t, has = g.targets(gr, p, q, 2.0)
+    assert np.allclose(t, [2.0, 0.0]) and has.tolist() == [True, False]
+
+
+# --------------------------------------------------------------------------------------------
+# every method
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_saddle_exact(method, saddle, rel_err):
+    normals, truth, h = saddle_input(saddle)
+    s = facetlift.integrate(normals, method=method, pixel_size=h)
+    assert rel_err(s.depth, truth) < 1e-9
+    assert s.info["converged"] and s.info["iterations"] >= 1
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_plane_exact_any_pixel_size(method, make_plane, rel_err):
+    pl = make_plane(-1.7, 0.4, 3.0)
+    h = 0.37
+    s = facetlift.integrate(pl.normals((20, 30), h), method=method, pixel_size=h)
+    assert rel_err(s.depth, -pl.height((20, 30), h)) < 1e-9
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_mask_with_hole_components_and_pinch(method, saddle, rel_err):
+    normals, truth, h = saddle_input(saddle)
+    mask = ring_mask()
+    s = facetlift.integrate(normals, mask, method=method, pixel_size=h)
+    assert np.array_equal(np.isfinite(s.depth), mask)
+    # each component's constant is free: compare component by component
+    lab = facetlift.prepare(normals, mask, pixel_size=h).domain.labels
+    for k in range(1, lab.max() + 1):
+        sel = lab == k
+        assert rel_err(np.where(sel, s.depth, np.nan), np.where(sel, truth, np.nan)) < 1e-9
+
+
+def missing_input(saddle, n, seed):
+    normals, truth, h = saddle_input(saddle, n)
+    mask = ring_mask(n)
+    normals = normals.copy()
+    normals[np.random.default_rng(seed).random((n, n)) < 0.3] = np.nan
+    return normals, mask, np.where(mask, truth, np.nan), h
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_missing_samples_accurate_and_first_order(method, saddle, rel_err):
+    errs = []
+    for n in (N, 2 * N):
+        normals, mask, truth, h = missing_input(saddle, n, 11)
+        s = facetlift.integrate(normals, mask, method=method, pixel_size=h)
+        lab = facetlift.prepare(normals, mask, pixel_size=h).domain.labels
+        big = lab == np.argmax(np.bincount(lab.ravel())[1:]) + 1
+        errs.append(rel_err(np.where(big, s.depth, np.nan), np.where(big, truth, np.nan)))
+    assert errs[0] < 3e-2
+    assert errs[1] < 0.75 * errs[0]
+
+
+def test_block_of_missing_samples_is_filled(saddle, rel_err):
+    normals, truth, h = saddle_input(saddle)
+    normals = normals.copy()
+    normals[20:30, 30:40] = np.nan  # the edges inside this block carry no data
+    for method in METHODS:
+        s = facetlift.integrate(normals, np.ones((N, N), bool), method=method, pixel_size=h)
+        assert np.isfinite(s.depth).all()
+        # x^2 - y^2 is harmonic, which is what the membrane fill reproduces
+        assert rel_err(s.depth, truth) < 2e-3, method
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_deterministic(method, saddle):
+    normals, mask, _, h = missing_input(saddle, N, 5)
+    rng = np.random.default_rng(21)
+    noisy = normals + 0.05 * rng.standard_normal(normals.shape)
+    a = facetlift.integrate(noisy, mask, method=method, pixel_size=h)
+    b = facetlift.integrate(noisy, mask, method=method, pixel_size=h)
+    assert np.array_equal(a.depth, b.depth, equal_nan=True)
+
+
+# --------------------------------------------------------------------------------------------
+# characteristic behaviour
+
+
+@pytest.fixture
+def outlier_input(saddle):
+    """Saddle gradients with an 8x8 patch off by (+5, -5) and mild noise elsewhere."""
+    n = N
+    p, q = saddle.gradients((n, n), H, ORIGIN)
+    rng = np.random.default_rng(3)
+    p = p + 0.02 * rng.standard_normal(p.shape)
+    q = q + 0.02 * rng.standard_normal(q.shape)
+    patch = np.zeros((n, n), bool)
+    patch[20:28, 36:44] = True
+    p[patch] += 5.0
+    q[patch] -= 5.0
+    truth = -saddle.height((n, n), H, ORIGIN)
+    return facetlift.normals_from_gradients(p, q), truth, patch
+
+
+def test_m_estimator_downweights_outliers(outlier_input):
+    normals, truth, patch = outlier_input
+    poisson = outside_error(facetlift.integrate(normals, method="poisson", pixel_size=H).depth,
+                            truth, patch)
+    assert poisson > 0.1
+    for kw, factor in (({}, 0.7), ({"scale": "mad"}, 0.15), ({"weight": "cauchy"}, 0.3)):
+        s = facetlift.integrate(normals, method="m_estimator", pixel_size=H, **kw)
+        assert s.info["converged"] and s.info["iterations"] > 1
+        assert s.info["downweighted"] > 0
+        assert outside_error(s.depth, truth, patch) < factor * poisson, kw
+
+
+def test_m_estimator_warns_without_convergence(outlier_input):
+    normals, _, _ = outlier_input
+    with pytest.warns(UserWarning, match="no convergence in 1 iterations"):
+        s = facetlift.integrate(normals, method="m_estimator", pixel_size=H, max_iter=1)
+    assert s.info["converged"] is False and s.info["iterations"] == 1
+
+
+def test_alpha_surface_confines_outliers(outlier_input):
+    normals, truth, patch = outlier_input
+    poisson = facetlift.integrate(normals, method="poisson", pixel_size=H)
+    s = facetlift.integrate(normals, method="alpha_surface", pixel_size=H)
+    assert outside_error(s.depth, truth, patch) < 0.05 * outside_error(poisson.depth, truth, patch)
+    assert 0.5 < s.info["kept_fraction"] < 1.0
+
+
+def test_alpha_surface_infinite_alpha_is_poisson(outlier_input):
+    normals, _, _ = outlier_input
+    a = facetlift.integrate(normals, method="alpha_surface", pixel_size=H, alpha=np.inf)
+    b = facetlift.integrate(normals, method="poisson", pixel_size=H)
+    assert a.info["kept_fraction"] == 1.0
+    assert np.allclose(a.depth, b.depth, rtol=0, atol=1e-12)
+
+
+def test_alpha_surface_zero_alpha_is_spanning_tree(outlier_input):
+    normals, _, _ = outlier_input
+    s = facetlift.integrate(normals, method="alpha_surface", pixel_size=H, alpha=0.0)
+    assert s.info["edges_kept"] == N * N - 1
+
+
+def test_alpha_surface_connectors_span_components():
+    mask = np.ones((3, 4), bool)
+    gr = g.build(facetlift.prepare(np.dstack([np.zeros((3, 4, 2)), np.ones((3, 4))]), mask).domain)
+    none = np.zeros(gr.n_edges, bool)
+    tree = alpha_surface.connectors(gr, none, ~none, 1.0 + np.arange(gr.n_edges))
+    assert tree.sum() == gr.n - 1
+    a = sp.csr_matrix((np.ones(tree.sum()), (gr.tail[tree], gr.head[tree])), shape=(gr.n, gr.n))
+    assert connected_components(a, directed=False)[0] == 1
+
+
+def test_regularization_small_lambda_is_poisson(outlier_input):
+    normals, _, _ = outlier_input
+    b = facetlift.integrate(normals, method="poisson", pixel_size=H)
+    a = facetlift.integrate(normals, method="regularization", pixel_size=H, lam=1e-9)
+    assert np.abs(a.depth - b.depth).max() < 1e-7 * np.ptp(b.depth)
+    c = facetlift.integrate(normals, method="regularization", pixel_size=H, lam=0.0)
+    assert np.allclose(c.depth, b.depth, rtol=0, atol=1e-10)
+
+
+def test_regularization_smooths_more_with_lambda(wave):
+    n, h = 48, 0.1
+    p, q = wave.gradients((n, n), h, (-2.0, 2.0))
+    rng = np.random.default_rng(8)
+    nrm = facetlift.normals_from_gradients(p + 0.3 * rng.standard_normal(p.shape),
+                                           q + 0.3 * rng.standard_normal(q.shape))
+    pr = facetlift.prepare(nrm, pixel_size=h)
+    R = regularization.laplacian_rows(g.build(pr.domain))
+    rough = []
+    for lam in (0.0, 1.0, 10.0):
+        z = -facetlift.integrate(nrm, method="regularization", pixel_size=h, lam=lam).depth
+        rough.append(np.linalg.norm(R @ z[pr.domain.pixels]))
+    assert rough[0] > rough[1] > rough[2]
+
+
+def test_regularization_edge_preserving_flattens(saddle):
+    normals, truth, h = saddle_input(saddle, 32)
+    s = facetlift.integrate(normals, method="regularization", pixel_size=h,
+                            prior="edge_preserving")
+    assert s.info["lam"] == 10.0 and s.info["iterations"] >= 2
+    assert np.ptp(s.depth) < 0.9 * np.ptp(truth)
+
+
+def test_diffusion_identity_tensor_is_poisson(outlier_input):
+    normals, _, _ = outlier_input
+    a = facetlift.integrate(normals, method="diffusion", pixel_size=H, beta=1.0)
+    b = facetlift.integrate(normals, method="poisson", pixel_size=H)
+    assert a.info["anisotropic_fraction"] == 0.0
+    assert np.allclose(a.depth, b.depth, rtol=0, atol=1e-10)
+    c = facetlift.integrate(normals, method="diffusion", pixel_size=H)
+    assert c.info["anisotropic_fraction"] > 0.1
+    assert np.abs(c.depth - b.depth).max() > 1e-3
+
+
+def test_diffusion_tensor_directions(make_plane):
+    # steep along x: diffusion across the level lines (x) drops to beta, along them (y) stays 1
+    pr = facetlift.prepare(make_plane(3.0, 0.0).normals((6, 6)))
+    d11, d12, d22 = diffusion.tensor(pr, beta=0.02)
+    assert np.allclose(d11, 0.02, atol=1e-3) and np.allclose(d12, 0) and np.allclose(d22, 1)
+    # steep along the diagonal x = y: D = I + (lam1 - 1) v v^T with v = (1, 1) / sqrt(2)
+    pr = facetlift.prepare(make_plane(3.0, 3.0).normals((6, 6)))
+    d11, d12, d22 = diffusion.tensor(pr, beta=0.02)
+    assert np.allclose(d12, (0.02 - 1) / 2, atol=1e-3) and np.allclose(d11, d22)
+    # gentle slopes: nearly isotropic
+    pr = facetlift.prepare(make_plane(0.2, -0.1).normals((6, 6)))
+    d11, d12, d22 = diffusion.tensor(pr)
+    assert np.allclose(d11, 1, atol=1e-6) and np.allclose(d22, 1, atol=1e-6)
+
+
+# --------------------------------------------------------------------------------------------
+# bad options
+
+
+@pytest.mark.parametrize(
+    "method, options, match",
+    [
+        ("poisson", {"backend": "magic"}, "`backend` must be one of"),
+        ("alpha_surface", {"alpha": -1.0}, "`alpha` must be a number >= 0"),
+        ("alpha_surface", {"alpha": "big"}, "`alpha` must be a number >= 0"),
+        ("alpha_surface", {"max_iter": 0}, "`max_iter` must be a positive integer"),
+        ("alpha_surface", {"tol": -1}, "`tol` must be a number >= 0"),
+        ("m_estimator", {"weight": "tukey"}, "`weight` must be one of"),
+        ("m_estimator", {"k": 0.0}, "`k` must be a positive number"),
+        ("m_estimator", {"scale": -2.0}, "`scale` must be a positive number or 'mad'"),
+        ("m_estimator", {"scale": "std"}, "`scale` must be a positive number or 'mad'"),
+        ("m_estimator", {"max_iter": 2.5}, "`max_iter` must be a positive integer"),
+        ("m_estimator", {"tol": -1e-3}, "`tol` must be a number >= 0"),
+        ("regularization", {"lam": -1.0}, "`lam` must be a finite number >= 0"),
+        ("regularization", {"lam": np.inf}, "`lam` must be a finite number >= 0"),
+        ("regularization", {"prior": "tv"}, "`prior` must be one of"),
+        ("regularization", {"max_iter": 0}, "`max_iter` must be a positive integer"),
+        ("diffusion", {"sigma": -0.5}, "`sigma` must be a finite number >= 0"),
+        ("diffusion", {"contrast": 0.0}, "`contrast` must be a finite number > 0"),
+        ("diffusion", {"beta": 0.0}, r"`beta` must be a finite number in \(0, 1\]"),
+        ("diffusion", {"beta": 1.5}, r"`beta` must be a finite number in \(0, 1\]"),
+        ("diffusion", {"backend": None}, "`backend` must be one of"),
+    ],
+)
+def test_bad_options_raise(method, options, match, make_plane):
+    normals = make_plane(0.1, 0.2).normals((8, 8))
+    with pytest.raises(ValueError, match=match):
+        facetlift.integrate(normals, method=method, **options)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_perspective_refused(method, make_plane):
+    K = np.array([[100.0, 0, 4], [0, 100.0, 4], [0, 0, 1]])
+    with pytest.raises(ValueError, match="does not support perspective|orthographic"):
+        facetlift.integrate(make_plane(0.1, 0.2).normals((8, 8)), method=method, K=K)
