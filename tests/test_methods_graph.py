@@ -344,3 +344,31 @@ def test_perspective_refused(method, make_plane):
     K = np.array([[100.0, 0, 4], [0, 100.0, 4], [0, 0, 1]])
     with pytest.raises(ValueError, match="does not support perspective|orthographic"):
         facetlift.integrate(make_plane(0.1, 0.2).normals((8, 8)), method=method, K=K)
+
+
+def test_diffusion_quadrant_energy_matches_direct_sum():
+    """||Q r||^2 equals the per-pixel sum of (s_x r_x, s_y r_y) D (s_x r_x, s_y r_y)^T."""
+    mask = np.ones((3, 4), bool)
+    mask[0, 0] = False
+    d = facetlift.prepare(np.dstack([np.zeros((3, 4, 2)), np.ones((3, 4))]), mask).domain
+    gr = g.build(d)
+    has = np.ones(gr.n_edges, bool)
+    rng = np.random.default_rng(4)
+    a, c = rng.random(gr.n) + 1.0, rng.random(gr.n) + 1.0
+    b = 0.5 * rng.standard_normal(gr.n)  # |b| < sqrt(a c): positive definite
+    r = rng.standard_normal(gr.n_edges)
+    Q = diffusion.quadrant_form(gr, has, a, b, c)
+    direct = 0.0
+    for k in range(gr.n):
+        xs = [e for e in (gr.left[k], gr.right[k]) if e >= 0] or [None]
+        ys = [e for e in (gr.up[k], gr.down[k]) if e >= 0] or [None]
+        sx2 = 1 / (2 * len([e for e in ys if e is not None] or [0]))
+        sy2 = 1 / (2 * len([e for e in xs if e is not None] or [0]))
+        for ex in xs:
+            for ey in ys:
+                if ex is None and ey is None:
+                    continue
+                u = np.sqrt(sx2) * (r[ex] if ex is not None else 0.0)
+                v = -np.sqrt(sy2) * (r[ey] if ey is not None else 0.0)  # y is up
+                direct += a[k] * u * u + 2 * b[k] * u * v + c[k] * v * v
+    assert np.isclose(np.sum((Q @ r) ** 2), direct, rtol=1e-12)
