@@ -131,6 +131,8 @@ def _with(n, idx, value):
          r"mask at 1 pixel\(s\), first at \(row 4, col 1\).*backfacing='outlier'"),
         (_with(up(), (0, 0), [1.0, 0.0, 0.0]), r"back-facing normals"),
         (np.full((3, 3, 3), np.nan), "`normals` has no finite, non-zero normal"),
+        (_with(up(), (1, 1), [0.0, 1e200, 1e200]), r"`normals` has values too large to "
+         r"normalise at 1 pixel\(s\), first at \(row 1, col 1\)"),
     ],
 )
 def test_bad_normals(normals, match):
