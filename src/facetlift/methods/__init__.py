@@ -78,8 +78,8 @@ register(
         "Discrete Geometry Processing, CVPR 2014",
         masks=True,
         missing=True,
-        perspective=False,
-        discontinuities=False,
+        perspective=True,
+        discontinuities=True,
     )
 )
 

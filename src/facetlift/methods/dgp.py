@@ -31,6 +31,21 @@ Fixed point (beyond the paper)
     ``flat_weight`` on their slopes selects the flattest solution, which is also where the loop
     started from a flat mesh ends.
 
+Perspective cameras (``K`` given)
+    The unknown becomes the log-depth ``log Z`` on the pixel grid (vertex spacing one pixel,
+    vertex ``(i, j)`` at pixel coordinates ``(row, col) = (i - 1/2, j - 1/2)``). A normal fixes
+    the derivatives of ``log Z`` along columns and rows exactly
+    (:func:`facetlift.perspective.log_depth_slopes`), which become the facets' target slopes;
+    the same local/global machinery then runs unchanged. Depth is ``exp`` of the result, scaled
+    so that each component's median facet depth is 1 (perspective depth is only defined up to
+    scale). The outlier test uses the cosine between the normal and the direction toward the
+    camera instead of ``n_z``. See docs/perspective.md.
+
+Depth discontinuities (``discontinuities=True``)
+    Every facet keeps its own corner values, glued to the shared vertices by a robust
+    (Cauchy) penalty, so facets can separate where the normals imply a depth jump; see
+    :mod:`facetlift.methods._discontinuity`. Only with ``solver="direct"``.
+
 Options (keyword-only, through :func:`facetlift.integrate`)
     solver : {"direct", "iterative"}, default "direct"
     mean_subtraction : bool, default True (only used by the iterative solver)
@@ -39,9 +54,17 @@ Options (keyword-only, through :func:`facetlift.integrate`)
         Stop when the average angular deviation (degrees, over facets with a target normal)
         changes by less than `tol` between iterations (Sec. 5).
     outlier_eps : float, default 0.0871557 (cos 85 deg)
-    backend : {"auto", "pardiso", "superlu", "amg"}, see :mod:`facetlift.linalg`
+    backend : {"auto", "pcg", "pardiso", "superlu", "amg"}, see :mod:`facetlift.linalg`;
+        "auto" = "pcg": CG preconditioned by the exact spectral solver of the bounding box
+        (:mod:`facetlift.spectral`), exact in one step on full rectangles
     flat_weight : float, default 1e-9
     progress : callable(iteration, deviation_deg), optional
+    discontinuities : bool, default False
+    discontinuity_k : float, default 0.3
+        Corner misfit, in pixel footprints, at which the glue between a facet and a vertex
+        halves (smaller cuts more readily).
+    discontinuity_iter : int, default 20
+        Reweightings after the smooth start.
 
 Reference
     W. Xie, Y. Zhang, C. C. L. Wang, R. C.-K. Chung. Surface-from-Gradients: An Approach Based
@@ -59,6 +82,7 @@ import numpy as np
 from .. import linalg
 from ..conventions import OUTLIER_EPS
 from ..problem import Problem
+from ..spectral import BoxPreconditioner, RectangleSolver
 from ..stencil import (
     E_TWIST,
     E_X,
@@ -69,6 +93,7 @@ from ..stencil import (
     scatter_corners,
 )
 from . import MethodResult
+from ._discontinuity import DEFAULT_ITER, DEFAULT_K, solve_discontinuous
 
 log = logging.getLogger(__name__)
 
@@ -86,6 +111,9 @@ def run(
     backend: str = "auto",
     flat_weight: float = 1e-9,
     progress=None,
+    discontinuities: bool = False,
+    discontinuity_k: float = DEFAULT_K,
+    discontinuity_iter: int = DEFAULT_ITER,
 ) -> MethodResult:
     """Integrate `problem` with the DGP method; returns vertex depths (see module docstring)."""
     if solver not in SOLVERS:
@@ -98,21 +126,106 @@ def run(
         raise ValueError(f"`outlier_eps` must be in [0, 1); got {outlier_eps!r}")
     if not (flat_weight > 0):
         raise ValueError(f"`flat_weight` must be > 0; got {flat_weight!r}")
-    if problem.perspective:
-        raise ValueError("the 'dgp' method takes orthographic input here (`K` must be None)")
-    p, q = problem.slopes
-    target = problem.known & (problem.normals[:, 2] >= outlier_eps)
-    slopes = dgp_slopes(problem.pixel_size, p, q, target)
+    if discontinuities and solver != "direct":
+        raise ValueError(
+            "`discontinuities`=True has its own solver; it cannot be combined with "
+            f"`solver`={solver!r} (use solver='direct')"
+        )
+    if not (np.isfinite(discontinuity_k) and discontinuity_k > 0):
+        raise ValueError(f"`discontinuity_k` must be a positive number; got {discontinuity_k!r}")
+    if int(discontinuity_iter) != discontinuity_iter or discontinuity_iter < 0:
+        raise ValueError(
+            f"`discontinuity_iter` must be a non-negative integer; got {discontinuity_iter!r}"
+        )
+    bx, by, target = targets(problem, outlier_eps)
+    if discontinuities:
+        return _run_discontinuous(
+            problem, bx, by, target, discontinuity_k, int(discontinuity_iter), flat_weight
+        )
     if solver == "direct":  # both loops share this fixed point
-        z, info = solve_direct(problem.domain, *slopes, target, backend, flat_weight)
+        z, info = solve_direct(problem.domain, bx, by, target, backend, flat_weight)
     else:
         z, info = solve_iterative(
-            problem.domain, *slopes, target, problem.pixel_size, mean_subtraction,
-            int(max_iter), tol, backend, progress,
+            problem.domain, bx, by, target, 1.0 if problem.perspective else problem.pixel_size,
+            mean_subtraction, int(max_iter), tol, backend, progress,
         )
     info["outliers"] = int((problem.known & ~target).sum())
     info["missing"] = int((~problem.known).sum())
+    if problem.perspective:
+        info["projection"] = "perspective"
+        return MethodResult(vertex_depth=depth_from_log(problem.domain, z), info=info)
     return MethodResult(vertex_depth=-z, info=info)
+
+
+def _run_discontinuous(problem, bx, by, target, k, max_iter, flat_weight):
+    domain = problem.domain
+    _check_components(domain, target)
+    if problem.perspective:
+        fx, fy = problem.K[0, 0], problem.K[1, 1]
+        scale = 1.0 / np.sqrt(fx * fy)
+    else:
+        scale = problem.pixel_size
+    z, zf, info = solve_discontinuous(
+        domain, bx, by, target, scale=scale, k=k, max_iter=max_iter, flat_weight=flat_weight
+    )
+    info["solver"] = "discontinuous"
+    info["deviation"] = [average_deviation(domain, z, bx, by, target)]
+    info["outliers"] = int((problem.known & ~target).sum())
+    info["missing"] = int((~problem.known).sum())
+    if problem.perspective:
+        info["projection"] = "perspective"
+        shift = _component_medians(domain, zf)
+        return MethodResult(
+            depth=np.exp(zf - shift[domain.facet_component]),
+            vertex_depth=np.exp(z - shift[domain.vertex_component]),
+            info=info,
+        )
+    return MethodResult(depth=-zf, vertex_depth=-z, info=info)
+
+
+def targets(problem: Problem, outlier_eps: float = OUTLIER_EPS):
+    """Per-facet target slopes (bx, by) of the unknown and the facets that have a target.
+
+    Orthographic: the unknown is the height, ``(bx, by) = (h p, h q)``, and a facet is an
+    outlier when ``n_z < outlier_eps``. Perspective: the unknown is the log-depth
+    ``log Z`` on the pixel grid (vertex spacing one pixel), ``bx = d log Z / d col`` and
+    ``by = -d log Z / d row`` (the grid's y axis points up, against the row index), see
+    :mod:`facetlift.perspective`; a facet is an outlier when the cosine between its normal
+    and the direction toward the camera is below `outlier_eps`.
+
+    Returns
+    -------
+    bx, by : (m,) float, zero where there is no target
+    target : (m,) bool
+    """
+    if not problem.perspective:
+        p, q = problem.slopes
+        target = problem.known & (problem.normals[:, 2] >= outlier_eps)
+        bx, by = dgp_slopes(problem.pixel_size, p, q, target)
+        return bx, by, target
+    from ..perspective import log_depth_slopes, view_cosine
+
+    r, c = problem.domain.pixels
+    n = np.where(problem.known[:, None], problem.normals, 0.0)
+    with np.errstate(invalid="ignore"):
+        cos = view_cosine(problem.K, r, c, n)
+    target = problem.known & (cos >= outlier_eps)
+    du, dv = log_depth_slopes(problem.K, r, c, np.where(target[:, None], n, [0.0, 0.0, 1.0]))
+    return np.where(target, du, 0.0), np.where(target, -dv, 0.0), target
+
+
+def depth_from_log(domain, z):
+    """Vertex depths ``exp(z)`` scaled so that each component's median facet depth is 1."""
+    med = _component_medians(domain, domain.facet_centres(z))
+    return np.exp(z - med[domain.vertex_component])
+
+
+def _component_medians(domain, facet_values):
+    from scipy import ndimage
+
+    labels = domain.facet_component + 1
+    index = np.arange(1, domain.n_components + 1)
+    return np.atleast_1d(ndimage.median(facet_values, labels, index))
 
 
 def dgp_slopes(h, p, q, target):
@@ -145,20 +258,33 @@ def solve_direct(domain, bx, by, target, backend="auto", flat_weight=1e-9, weigh
     slope_block = np.outer(E_X, E_X) + np.outer(E_Y, E_Y)
     twist_block = np.outer(E_TWIST, E_TWIST)
     wk = np.where(target, w, flat_weight * w)
-    K = facet_form(domain, [(wk, slope_block), (w, twist_block)])
-    K = pin_components(domain, K)
     rhs = scatter_corners(domain, (w * bx)[:, None] * E_X + (w * by)[:, None] * E_Y)
-    t1 = time.perf_counter()
-    z = linalg.solve(K, rhs, backend)
+    # default route: CG preconditioned by the exact solver of the bounding box (spectral.py)
+    pre = BoxPreconditioner(domain) if backend in ("auto", "pcg") else None
+    if pre is not None and pre.exact and weights is None and target.all():
+        t1 = time.perf_counter()
+        z = pre(rhs)  # the operator is the box operator itself: one exact spectral solve
+        used, cg_its = "spectral", 0
+    else:
+        K = facet_form(domain, [(wk, slope_block), (w, twist_block)])
+        if pre is None:
+            K = pin_components(domain, K)
+        t1 = time.perf_counter()
+        z = linalg.solve(K, rhs, "pcg" if pre is not None else backend, preconditioner=pre)
+        used = "pcg-spectral" if pre is not None else backend
+        cg_its = linalg.pcg.last_iterations if pre is not None else None
     t2 = time.perf_counter()
     dev = average_deviation(domain, z, bx, by, target)
     info = {
         "solver": "direct",
+        "backend": used,
         "iterations": 1,
         "converged": True,
         "deviation": [dev],
         "seconds": {"setup": t1 - t0, "solve": t2 - t1},
     }
+    if cg_its is not None:
+        info["cg_iterations"] = cg_its
     return z, info
 
 
@@ -174,11 +300,10 @@ def average_deviation(domain, z, bx, by, target) -> float:
         return 0.0
     gx, gy = facet_slopes(domain, z)
     gx, gy, bx, by = gx[target], gy[target], bx[target], by[target]
-    # normals (-gx, -gy, h) and (-bx, -by, h) in units of h; h cancels in the angle
-    a = np.stack([-gx, -gy, np.ones_like(gx)], axis=1)
-    b = np.stack([-bx, -by, np.ones_like(bx)], axis=1)
-    cross = np.linalg.norm(np.cross(a, b), axis=1)
-    return float(np.degrees(np.arctan2(cross, np.einsum("ij,ij->i", a, b))).mean())
+    # angle between (-gx, -gy, 1) and (-bx, -by, 1) (units of h; h cancels) as
+    # atan2(|a x b|, a . b), accurate near zero unlike arccos
+    cross = np.sqrt((by - gy) ** 2 + (gx - bx) ** 2 + (gx * by - gy * bx) ** 2)
+    return float(np.degrees(np.arctan2(cross, gx * bx + gy * by + 1.0)).mean())
 
 
 def local_shaping(domain, z, bx, by, target):
@@ -202,13 +327,19 @@ def solve_iterative(
     """The paper's local/global loop from the flat mesh; returns vertex heights and info."""
     t0 = time.perf_counter()
     _check_components(domain, target)
-    if mean_subtraction:
+    rect = backend in ("auto", "pcg") and bool(domain.mask.all())
+    if mean_subtraction and not rect:
         K = pin_components(domain, facet_form(domain, [(1.0, N_MEAN_FREE)]))
-    else:
-        K = None
+    elif not mean_subtraction:
         valence = np.bincount(domain.corners.ravel(), minlength=domain.n_vertices)
     t1 = time.perf_counter()
-    factor = linalg.factorize(K, backend) if mean_subtraction else None
+    if not mean_subtraction:
+        factor = None
+    elif rect:  # A^T A of a full rectangle is diagonalised by the DCT-I: exact, O(n log n)
+        factor = RectangleSolver(*domain.shape)
+    else:
+        pre = BoxPreconditioner(domain) if backend in ("auto", "pcg") else None
+        factor = linalg.factorize(K, backend, preconditioner=pre)
     t2 = time.perf_counter()
     z = np.zeros(domain.n_vertices)
     devs = [average_deviation(domain, z, bx, by, target)]
