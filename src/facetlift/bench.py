@@ -44,8 +44,9 @@ EXPERIMENTS = ("table1", "fig4", "fig5", "maps", "fig9", "fig10", "bear")
 PAPER_TABLE1 = {128: (187, 0.62, 6.21), 256: (905, 3.42, 25.2), 512: (4961, 17.5, 101.8)}
 #: Fig. 5 of the paper: iterations with perturbed samples as inliers / removed as outliers.
 PAPER_FIG5 = {0.15: (5, 18), 0.30: (5, 38), 0.50: (5, 143), 0.55: (5, 195)}
-#: Figs. 6-8: (figure, analytic surface).
-MAP_FIGURES = (("fig6", "saddle"), ("fig7", "pyramid"), ("fig8", "face"))
+#: Figs. 6-8: (figure, analytic surface); two sharp-feature surfaces for Fig. 7: diagonal creases
+#: (pyramid) and creases along pixel edges (ramps).
+MAP_FIGURES = (("fig6", "saddle"), ("fig7", "pyramid"), ("fig7b", "ramps"), ("fig8", "face"))
 #: Analytic surfaces of the Fig. 9 data set.
 FIG9_ANALYTIC = ("saddle", "pyramid", "ramps", "face", "sphere", "vase", "tent")
 #: Views of every mesh in the Fig. 9 data set.
@@ -411,12 +412,15 @@ class Bench:
     def maps(self):
         specs = self.specs(variants=False)
         rows = []
-        for figname, model in _bar(MAP_FIGURES, self.progress, "figs6-8"):
+        jobs = [(f, m, c) for f, m in MAP_FIGURES for c in (0.0, self.s.noise_deg)]
+        for figname, model, sigma in _bar(jobs, self.progress, "figs6-8"):
             gt = synthetic.analytic(model, self.s.maps_size)
+            cond = "noise-free" if sigma == 0 else f"noise {sigma:g}deg"
+            rng = np.random.default_rng([SEED, zlib.crc32(model.encode())])
+            nm = gt.normals if sigma == 0 else synthetic.add_angular_noise(gt.normals, sigma, rng)
             runs = []
             for spec in specs:
-                r = run_method(spec, gt.normals, gt.mask, pixel_size=gt.pixel_size,
-                               status=self.status)
+                r = run_method(spec, nm, gt.mask, pixel_size=gt.pixel_size, status=self.status)
                 err = emap = None
                 if r.status == "ok":
                     try:
@@ -424,17 +428,18 @@ class Bench:
                     except ValueError as e:
                         r.status, r.message = "failed", f"metric: {e}"
                 runs.append((r, emap))
-                rows.append({"figure": figname, "model": model, "method": spec.label,
+                rows.append({"figure": figname, "model": model, "condition": cond,
+                             "case": f"{model}, {cond}", "method": spec.label,
                              "status": r.status, "error_pct": _pct(err),
                              "seconds": r.seconds, "message": r.message})
-            self._map_figure(figname, gt, runs)
+            name = figname if sigma == 0 else f"{figname}_noise"
+            self._map_figure(name, gt, runs, cond)
         write_csv(self.out / "figs6-8.csv", rows)
-        table = self._pivot(rows, "model", "error_pct")
+        table = self._pivot(rows, "case", "error_pct")
         _write_text(self.out / "figs6-8.md", table)
-        self.add("Figs. 6-8: mean normalised error (%) on saddle, pyramid, face (noise-free)",
-                 table)
+        self.add("Figs. 6-8: mean normalised error (%) on saddle, pyramid, ramps, face", table)
 
-    def _map_figure(self, figname, gt, runs):
+    def _map_figure(self, figname, gt, runs, cond=""):
         plt = _plt()
         k = len(runs) + 1
         ncol = min(k, 5)
@@ -442,7 +447,7 @@ class Bench:
         fig, axes = plt.subplots(nrow, ncol, figsize=(2.0 * ncol + 0.6, 2.2 * nrow), dpi=80,
                                  squeeze=False)
         axes[0, 0].imshow(-gt.depth, cmap="gray")
-        axes[0, 0].set_title(f"ground truth: {gt.name}", fontsize=8)
+        axes[0, 0].set_title(f"{gt.name} ({cond})", fontsize=8)
         finite = [e for r, e in runs if e is not None]
         vmax = max([float(np.nanpercentile(e, 99)) for e in finite] + [1e-6]) * 100
         im = None
