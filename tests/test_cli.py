@@ -261,3 +261,21 @@ def test_verbose_logs_to_stderr_for_one_run(tmp_path, capsys):
     assert code == 0 and "facetlift: dgp:" in err and "facetlift: dgp:" not in stdout
     code, _, err = run(capsys, "integrate", npath, "-o", tmp_path / "b")
     assert code == 0 and err == ""
+
+
+def test_console_script_entry_point():
+    from importlib.metadata import entry_points
+
+    (ep,) = [e for e in entry_points(group="console_scripts") if e.name == "facetlift"]
+    assert ep.load() is main
+
+
+def test_runs_as_a_program(tmp_path):
+    import subprocess
+    import sys
+
+    missing = str(tmp_path / "x.png")
+    proc = subprocess.run([sys.executable, "-m", "facetlift.cli", "integrate", missing],
+                          capture_output=True, text=True)
+    assert proc.returncode == 1 and proc.stderr.startswith("facetlift: error:")
+    assert "Traceback" not in proc.stderr
