@@ -612,7 +612,7 @@ class Bench:
 
     def _fig9_plot(self, summary, domains):
         plt = _plt()
-        fig, axes = plt.subplots(1, len(domains), figsize=(6.5 * len(domains), 3.6), dpi=80,
+        fig, axes = plt.subplots(1, len(domains), figsize=(6.5 * len(domains), 3.8), dpi=80,
                                  squeeze=False)
         for ax, dom in zip(axes[0], domains, strict=False):
             sub = [r for r in summary if r["domain"] == dom]
@@ -620,16 +620,27 @@ class Bench:
             labels = list(dict.fromkeys(r["method"] for r in sub))
             x = np.arange(len(labels))
             w = 0.8 / max(len(conds), 1)
+            allv = [r["mean_error_pct"] for r in sub if np.isfinite(r["mean_error_pct"])]
+            top = min(max(allv), 3 * float(np.median(allv))) * 1.15 if allv else 1.0
             for i, c in enumerate(conds):
-                vals = [next((r["mean_error_pct"] for r in sub
-                              if r["method"] == m and r["condition"] == c), np.nan)
-                        for m in labels]
-                ax.bar(x + (i - (len(conds) - 1) / 2) * w, vals, w, label=c)
+                vals = np.array([next((r["mean_error_pct"] for r in sub
+                                       if r["method"] == m and r["condition"] == c), np.nan)
+                                 for m in labels])
+                xs = x + (i - (len(conds) - 1) / 2) * w
+                ax.bar(xs, np.minimum(vals, top), w, label=c)
+                for xi, v in zip(xs, vals, strict=True):
+                    if np.isfinite(v):
+                        ax.text(xi, min(v, top), f"{v:.2g}", ha="center", va="bottom",
+                                fontsize=6, rotation=90)
+                    else:
+                        ax.text(xi, 0, "n/a", ha="center", va="bottom", fontsize=6,
+                                rotation=90)
+            ax.set_ylim(0, top * 1.2)
             ax.set_xticks(x)
             ax.set_xticklabels(labels, rotation=35, ha="right", fontsize=8)
             ax.set_ylabel("mean normalised error (%)")
-            ax.set_yscale("log")
-            ax.set_title(f"Fig. 9 ({dom} rendered domains)", fontsize=9)
+            ax.set_title(f"Fig. 9 ({dom} rendered domains; bars clipped at the top)",
+                         fontsize=9)
             ax.legend(fontsize=8)
         fig.tight_layout()
         _savefig(fig, self.out / "fig9.png")
