@@ -368,13 +368,6 @@ def test_backfacing_outlier_equals_nan(wave):
     np.testing.assert_allclose(a.depth, b.depth, rtol=0, atol=1e-12)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="bug: with the default backend ('auto' -> CG preconditioned by the box solver) a "
-    "component with no usable normal is not flat (ptp ~4e-5 of the depth range): its tilt "
-    "modes have eigenvalue ~flat_weight and CG stops before resolving them; "
-    "backend='superlu' gives exactly flat",
-)
 def test_component_without_usable_normal_warns_and_is_flat(make_plane):
     mask = np.zeros((10, 20), bool)
     mask[1:9, 1:8] = True
@@ -514,7 +507,6 @@ def test_noise_5_degrees(wave):
     assert 1.0 < unit.info["deviation"][-1] < 5.0
 
 
-@pytest.mark.xfail(strict=True, reason="bug: average_deviation ignores pixel_size")
 def test_deviation_independent_of_pixel_size():
     """Scaling the pixel size scales the surface; the angle between its facet normals and
     the input normals, and so the stopping rule, must not change."""
@@ -526,7 +518,6 @@ def test_deviation_independent_of_pixel_size():
     np.testing.assert_allclose([dev[0.05], dev[3.0]], dev[1.0], rtol=1e-9)
 
 
-@pytest.mark.xfail(strict=True, reason="bug: average_deviation ignores pixel_size")
 def test_iterative_stopping_independent_of_pixel_size(wave):
     """The same normals at pixel size h give the surface at h = 1 scaled by h; the paper's
     stopping rule (deviation in degrees) must stop the loop at the same iteration."""
@@ -635,8 +626,6 @@ def test_bad_options(saddle, options, match):
         facetlift.integrate(saddle.normals((6, 7), 0.1), pixel_size=0.1, **options)
 
 
-@pytest.mark.xfail(strict=True, reason="bug: dgp.run compares option values without checking "
-                   "their type: TypeError/OverflowError or an unnamed ValueError")
 @pytest.mark.parametrize(
     "options, match",
     [

@@ -35,7 +35,7 @@ BACKENDS = ("auto", "pardiso", "superlu", "amg", "pcg")
 
 #: Above this many unknowns, ``solve(..., backend="auto")`` prefers multigrid PCG to a
 #: factorization when PARDISO is not installed.
-AMG_THRESHOLD = 60_000
+AMG_THRESHOLD = 250_000
 
 
 class SolverError(RuntimeError):

@@ -118,14 +118,14 @@ def run(
     """Integrate `problem` with the DGP method; returns vertex depths (see module docstring)."""
     if solver not in SOLVERS:
         raise ValueError(f"`solver` must be one of {SOLVERS}; got {solver!r}")
-    if int(max_iter) != max_iter or max_iter < 1:
-        raise ValueError(f"`max_iter` must be a positive integer; got {max_iter!r}")
-    if not (tol >= 0):
-        raise ValueError(f"`tol` must be >= 0; got {tol!r}")
-    if not (0 <= outlier_eps < 1):
-        raise ValueError(f"`outlier_eps` must be in [0, 1); got {outlier_eps!r}")
-    if not (flat_weight > 0):
-        raise ValueError(f"`flat_weight` must be > 0; got {flat_weight!r}")
+    max_iter = _integer(max_iter, "max_iter")
+    tol = _number(tol, "tol", lambda v: v >= 0, ">= 0")
+    outlier_eps = _number(outlier_eps, "outlier_eps", lambda v: 0 <= v < 1, "in [0, 1)")
+    flat_weight = _number(flat_weight, "flat_weight", lambda v: v > 0, "> 0")
+    if not isinstance(mean_subtraction, (bool, np.bool_)):
+        raise ValueError(f"`mean_subtraction` must be True or False; got {mean_subtraction!r}")
+    if progress is not None and not callable(progress):
+        raise ValueError(f"`progress` must be callable(iteration, deviation); got {progress!r}")
     if discontinuities and solver != "direct":
         raise ValueError(
             "`discontinuities`=True has its own solver; it cannot be combined with "
@@ -143,7 +143,10 @@ def run(
             problem, bx, by, target, discontinuity_k, int(discontinuity_iter), flat_weight
         )
     if solver == "direct":  # both loops share this fixed point
-        z, info = solve_direct(problem.domain, bx, by, target, backend, flat_weight)
+        z, info = solve_direct(
+            problem.domain, bx, by, target, backend, flat_weight,
+            h=1.0 if problem.perspective else problem.pixel_size,
+        )
     else:
         z, info = solve_iterative(
             problem.domain, bx, by, target, 1.0 if problem.perspective else problem.pixel_size,
@@ -169,7 +172,7 @@ def _run_discontinuous(problem, bx, by, target, k, max_iter, flat_weight):
         domain, bx, by, target, scale=scale, k=k, max_iter=max_iter, flat_weight=flat_weight
     )
     info["solver"] = "discontinuous"
-    info["deviation"] = [average_deviation(domain, z, bx, by, target)]
+    info["deviation"] = [average_deviation(domain, z, bx, by, target, scale)]
     info["outliers"] = int((problem.known & ~target).sum())
     info["missing"] = int((~problem.known).sum())
     if problem.perspective:
@@ -235,7 +238,28 @@ def dgp_slopes(h, p, q, target):
     return bx, by
 
 
+def _integer(value, name: str) -> int:
+    try:
+        ok = float(value) == int(value) and int(value) >= 1
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok or isinstance(value, bool):
+        raise ValueError(f"`{name}` must be a positive integer; got {value!r}")
+    return int(value)
+
+
+def _number(value, name: str, check, what: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = float("nan")
+    if isinstance(value, bool) or not np.isfinite(v) or not check(v):
+        raise ValueError(f"`{name}` must be {what}; got {value!r} (a finite number)")
+    return v
+
+
 def _check_components(domain, target):
+    """Warn about components without any target normal; returns their indices."""
     have = np.bincount(domain.facet_component[target], minlength=domain.n_components)
     empty = np.nonzero(have == 0)[0]
     if empty.size:
@@ -244,24 +268,43 @@ def _check_components(domain, target):
             f"{empty[0] + 1}); they are reconstructed flat",
             stacklevel=4,
         )
+    return empty
 
 
-def solve_direct(domain, bx, by, target, backend="auto", flat_weight=1e-9, weights=None):
+def _flatten(domain, z, empty):
+    """Components without a target normal are flat (their tilt is only weakly determined)."""
+    if empty.size:
+        z[np.isin(domain.vertex_component, empty)] = 0.0
+    return z
+
+
+def solve_direct(
+    domain, bx, by, target, backend="auto", flat_weight=1e-9, weights=None, *, h=1.0
+):
     """The fixed point of the local/global loop in one sparse solve.
 
     Returns vertex heights (n,) and an info dict. `weights` (m,) optionally scales each
-    facet's terms.
+    facet's terms; `h` is the vertex spacing (for the reported angular deviation).
     """
     t0 = time.perf_counter()
-    _check_components(domain, target)
+    empty = _check_components(domain, target)
     w = np.ones(domain.n_facets) if weights is None else weights
     slope_block = np.outer(E_X, E_X) + np.outer(E_Y, E_Y)
     twist_block = np.outer(E_TWIST, E_TWIST)
     wk = np.where(target, w, flat_weight * w)
     rhs = scatter_corners(domain, (w * bx)[:, None] * E_X + (w * by)[:, None] * E_Y)
-    # default route: CG preconditioned by the exact solver of the bounding box (spectral.py)
-    pre = BoxPreconditioner(domain) if backend in ("auto", "pcg") else None
-    if pre is not None and pre.exact and weights is None and target.all():
+    # Route. With every normal known the operator is close to that of the bounding box, and
+    # CG preconditioned by the box's exact spectral solver converges in ~25-40 iterations at
+    # any resolution (exact at once on a full rectangle). Facets without a target only carry
+    # the twist term plus the tiny `flat_weight`: clusters of them (at silhouettes) create
+    # near-null modes that CG resolves slowly (hundreds of iterations measured on a real
+    # normal map), so then a sparse factorization is used unless the system is too large.
+    simple = weights is None and bool(target.all())
+    use_pcg = backend == "pcg" or (
+        backend == "auto" and (simple or domain.n_vertices > linalg.AMG_THRESHOLD)
+    )
+    pre = BoxPreconditioner(domain) if use_pcg else None
+    if pre is not None and pre.exact and simple:
         t1 = time.perf_counter()
         z = pre(rhs)  # the operator is the box operator itself: one exact spectral solve
         used, cg_its = "spectral", 0
@@ -273,8 +316,9 @@ def solve_direct(domain, bx, by, target, backend="auto", flat_weight=1e-9, weigh
         z = linalg.solve(K, rhs, "pcg" if pre is not None else backend, preconditioner=pre)
         used = "pcg-spectral" if pre is not None else backend
         cg_its = linalg.pcg.last_iterations if pre is not None else None
+    z = _flatten(domain, z, empty)
     t2 = time.perf_counter()
-    dev = average_deviation(domain, z, bx, by, target)
+    dev = average_deviation(domain, z, bx, by, target, h)
     info = {
         "solver": "direct",
         "backend": used,
@@ -294,16 +338,20 @@ def facet_slopes(domain, z):
     return zf @ E_X, zf @ E_Y
 
 
-def average_deviation(domain, z, bx, by, target) -> float:
-    """Mean angle (degrees) between current facet normals and target normals."""
+def average_deviation(domain, z, bx, by, target, h=1.0) -> float:
+    """Mean angle (degrees) between current facet normals and target normals.
+
+    `bx`, `by` and the current facet slopes are height differences across a facet of width
+    `h`, so the normals are ``(-gx, -gy, h)`` and ``(-bx, -by, h)``.
+    """
     if not target.any():
         return 0.0
     gx, gy = facet_slopes(domain, z)
     gx, gy, bx, by = gx[target], gy[target], bx[target], by[target]
-    # angle between (-gx, -gy, 1) and (-bx, -by, 1) (units of h; h cancels) as
     # atan2(|a x b|, a . b), accurate near zero unlike arccos
-    cross = np.sqrt((by - gy) ** 2 + (gx - bx) ** 2 + (gx * by - gy * bx) ** 2)
-    return float(np.degrees(np.arctan2(cross, gx * bx + gy * by + 1.0)).mean())
+    h2 = h * h
+    cross = np.sqrt(h2 * ((by - gy) ** 2 + (gx - bx) ** 2) + (gx * by - gy * bx) ** 2)
+    return float(np.degrees(np.arctan2(cross, gx * bx + gy * by + h2)).mean())
 
 
 def local_shaping(domain, z, bx, by, target):
@@ -342,7 +390,7 @@ def solve_iterative(
         factor = linalg.factorize(K, backend, preconditioner=pre)
     t2 = time.perf_counter()
     z = np.zeros(domain.n_vertices)
-    devs = [average_deviation(domain, z, bx, by, target)]
+    devs = [average_deviation(domain, z, bx, by, target, h)]
     t_local = t_global = 0.0
     converged = False
     for it in range(1, max_iter + 1):
@@ -356,7 +404,7 @@ def solve_iterative(
         tc = time.perf_counter()
         t_local += tb - ta
         t_global += tc - tb
-        devs.append(average_deviation(domain, z, bx, by, target))
+        devs.append(average_deviation(domain, z, bx, by, target, h))
         if progress is not None:
             progress(it, devs[-1])
         if abs(devs[-1] - devs[-2]) < tol:
