@@ -191,3 +191,17 @@ def test_two_components_each_median_one():
     s = facetlift.integrate(n, mask, K=K)
     d = s.depth
     assert abs(np.median(d[:, :50]) - 1) < 1e-3 and abs(np.median(d[:, 55:]) - 1) < 1e-3
+
+
+def test_default_perspective_outliers_only_edge_on():
+    """Perspective default: only normals within half an 8-bit step of edge-on are outliers;
+    the steep rim normals are kept (they carry the depth change across silhouettes)."""
+    n, mask, K, gt = sphere_scene(min_cos=0.0)
+    r, c = np.nonzero(mask)
+    cos = view_cosine(K, r, c, n[mask])
+    s = facetlift.integrate(n, mask, K=K)
+    assert s.info["outliers"] == (cos < 1 / 255).sum()
+    assert ((cos >= 1 / 255) & (cos < 0.0871557)).sum() > 50  # kept, not outliers
+    # orthographic input keeps the paper's n_z threshold
+    o = facetlift.integrate(n, mask)
+    assert o.info["outliers"] == (n[mask][:, 2] < 0.0871557).sum()
