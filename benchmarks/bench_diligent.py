@@ -93,7 +93,7 @@ def write_error_png(path: Path, panels, mask):
     sl = np.s_[max(rows.min() - 5, 0): rows.max() + 6, max(cols.min() - 5, 0): cols.max() + 6]
     fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.6))
     for ax, (title, err) in zip(np.atleast_1d(axes), panels, strict=True):
-        im = ax.imshow(err[sl], cmap="jet", vmin=0, vmax=2.0)
+        im = ax.imshow(err[sl], cmap="jet", vmin=0, vmax=1.0)
         ax.set_title(title, fontsize=10)
         ax.axis("off")
         fig.colorbar(im, ax=ax, fraction=0.046, label="|error| (mm)")
