@@ -52,6 +52,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from .. import linalg
 from ..stencil import E_TWIST, E_X, E_Y, facet_form, scatter_corners
 
 log = logging.getLogger(__name__)
@@ -61,6 +62,12 @@ DEFAULT_K = 0.3
 
 #: Default number of reweightings after the smooth start.
 DEFAULT_ITER = 20
+
+#: Conjugate-gradient steps per reweighting.
+CG_STEPS = 3
+
+#: Multigrid-CG steps allowed for the smooth start before falling back to linalg.solve.
+START_CG = 40
 
 
 def _blas_single_thread():
@@ -193,7 +200,7 @@ def _glue_inverse(A, target, w):
 
 def solve_discontinuous(
     domain, bx, by, target, *, scale: float, k: float = DEFAULT_K, max_iter: int = DEFAULT_ITER,
-    tol: float = 1e-2, flat_weight: float = 1e-9, cg_iter: int = 3, callback=None,
+    tol: float = 1e-2, flat_weight: float = 1e-9, cg_iter: int | None = None, callback=None,
 ):
     """Minimise the robust facet energy of the module docstring.
 
@@ -260,8 +267,16 @@ def solve_discontinuous(
         )
         P = ml.aspreconditioner(cycle="V")
         t1 = time.perf_counter()
-        z, it = _pcg(K0, rhs0, np.zeros(domain.n_vertices), P, 1e-8, 500)
+        z, it = _pcg(K0, rhs0, np.zeros(domain.n_vertices), P, 1e-8, START_CG)
         cg_its = [it]
+        if it >= START_CG:
+            # an ill-conditioned start (bands of facets without a normal leave near-free
+            # modes that multigrid-CG resolves slowly): take the library's solver
+            try:
+                z = linalg.solve(K0, rhs0)
+            except linalg.SolverError:
+                z, it = _pcg(K0, rhs0, z, P, 1e-8, 2000)
+                cg_its.append(it)
         converged = False
         it_irls = 0
         active = np.zeros(m, dtype=bool)  # facets with a yielding corner, now or before
@@ -279,7 +294,7 @@ def solve_discontinuous(
             dQ -= Q0[act]
             K = blocks.assemble_update(K0, act, dQ)
             rhs = rhs0 + scatter_corners_subset(domain, act, wa * Ma[act] - Ma0[act])
-            z_new, it = _pcg(K, rhs, z, P, 1e-10, cg_iter)
+            z_new, it = _pcg(K, rhs, z, P, 1e-10, CG_STEPS if cg_iter is None else cg_iter)
             cg_its.append(it)
             change = np.abs(z_new - z).max()
             z = z_new
