@@ -36,9 +36,20 @@ Solution (iteratively reweighted least squares = majorise-minimise)
     ``A_f = P^T P``) leaves a 9-point system on the vertices with per-facet blocks
     ``W_f - W_f M_f W_f`` and right-hand side ``W_f M_f P^T b_f``. The Cauchy weights make each
     quadratic a majoriser of ``E``, so ``E`` decreases monotonically. The first iterate is the
-    smooth solution; each linear system is solved by conjugate gradients preconditioned with
-    one algebraic-multigrid hierarchy (pyamg) of the smooth system and warm-started from the
-    previous iterate.
+    smooth solution. The smooth solution spreads the non-integrability of a jump over the whole
+    surface, and the cut then "unzips" along the boundary a few pixels per reweighting; so the
+    first reweighting also counts, at each corner, the loop mismatch of the targets around its
+    vertex (:func:`vertex_curl`, the change of the jump per pixel along a boundary) as misfit,
+    which marks the whole boundary at once (later reweightings use the misfit alone, so wrongly
+    seeded corners glue back). Each reweighting is followed by 3 conjugate-gradient steps,
+    preconditioned with one algebraic-multigrid hierarchy (pyamg) of the smooth system and
+    warm-started from the previous iterate (every step lowers the majoriser, so ``E`` still
+    decreases); weights above 0.99 (misfit below ``0.1 k s``) are taken as exactly 1, so only
+    facets near discontinuities are re-assembled. If multigrid-CG stalls on the smooth start
+    (bands of facets without a normal leave nearly free modes), :func:`facetlift.linalg.solve`
+    computes it instead. 20 reweightings (``discontinuity_iter``) are a time budget, not a
+    convergence guarantee: long jumps that grow slowly along their boundary keep improving
+    for ~100.
 
 The returned facet values are the means of the facets' own copies (so depths at facet
 centres stay sharp at a jump); vertex values are the glued ``z``.
@@ -146,6 +157,33 @@ def _facet_system(domain, bx, by, target, flat_weight):
 #: Misfits below this fraction of ``k s`` keep the full glue weight 1 (the Cauchy weight there
 #: is above 0.99); this lets every reweighting touch only the facets near a discontinuity.
 CORE = 0.1
+
+
+def vertex_curl(domain, bx, by, target):
+    """Discrete curl of the target slopes around every vertex.
+
+    The mismatch accumulated by the four facet planes around a vertex along one loop: zero
+    for an integrable field (up to discretisation and noise), the change of the jump per pixel
+    along a depth discontinuity whose size varies. In the units of `bx`, `by` (one pixel).
+
+    Returns
+    -------
+    (n,) float
+        0 where not all four facets around the vertex have a target.
+    """
+    H, W = domain.shape
+    r, c = domain.pixels
+    gx = np.full((H + 2, W + 2), np.nan)
+    gy = np.full((H + 2, W + 2), np.nan)
+    gx[r + 1, c + 1] = np.where(target, bx, np.nan)
+    gy[r + 1, c + 1] = np.where(target, by, np.nan)
+    # vertex (i, j): facets TL=(i-1, j-1), TR=(i-1, j), BL=(i, j-1), BR=(i, j) (padded +1)
+    tl, tr = (gx[:-1, :-1], gy[:-1, :-1]), (gx[:-1, 1:], gy[:-1, 1:])
+    bl, br = (gx[1:, :-1], gy[1:, :-1]), (gx[1:, 1:], gy[1:, 1:])
+    dqdx = (tr[1] + br[1] - tl[1] - bl[1]) / 2
+    dpdy = (tl[0] + tr[0] - bl[0] - br[0]) / 2  # y up: the top row is +y
+    curl = np.nan_to_num(dqdx - dpdy)
+    return curl[domain.vertex_mask]
 
 
 def glue_weight(r: np.ndarray, ks: float) -> np.ndarray:
@@ -279,10 +317,13 @@ def solve_discontinuous(
                 cg_its.append(it)
         converged = False
         it_irls = 0
+        curl = np.abs(vertex_curl(domain, bx, by, target))
         active = np.zeros(m, dtype=bool)  # facets with a yielding corner, now or before
         for it_irls in range(1, max_iter + 1):
             zc = z[corners]
             r = Ma + np.einsum("fab,fb->fa", M, w * zc) - zc
+            if it_irls == 1:  # seed: the loop mismatch of the targets around each vertex
+                r = np.maximum(np.abs(r), curl[corners])
             w = glue_weight(r, ks)
             active |= (w < 1.0).any(axis=1)
             act = np.nonzero(active)[0]
