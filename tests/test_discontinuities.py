@@ -169,3 +169,33 @@ def test_bad_options(options, match):
     n, _, _ = scissor_ortho(H=8, W=8)
     with pytest.raises(ValueError, match=match):
         facetlift.integrate(n, discontinuities=True, **options)
+
+
+def test_vertex_curl():
+    """Zero for an integrable field; the change of the jump per pixel along a seam."""
+    from facetlift.domain import Domain
+
+    H, W = 12, 14
+    d = Domain.from_mask(np.ones((H, W), bool))
+    r, c = d.pixels
+    tg = np.ones(d.n_facets, bool)
+    # gradient of the quadratic 0.3 x^2 - 0.2 x y + 0.1 y^2 at the pixel centres
+    x, y = c + 0.5, -(r + 0.5)
+    curl = disc.vertex_curl(d, 0.6 * x - 0.2 * y, -0.2 * x + 0.2 * y, tg)
+    np.testing.assert_allclose(curl, 0, atol=1e-12)
+    n, _, left = scissor_ortho(H=H, W=W, slopes=((0.0, 1.0), (0.0, -0.8)))
+    pr = prepare(n)
+    bx, by, tg = dgp.targets(pr)
+    curl = pr.domain.to_vertex_image(disc.vertex_curl(pr.domain, bx, by, tg))
+    np.testing.assert_allclose(np.abs(curl[1:-1, W // 2]), 1.8, rtol=1e-12)
+    curl[1:-1, W // 2] = 0
+    np.testing.assert_allclose(curl, 0, atol=1e-12)
+
+
+def test_stalled_start_falls_back_to_the_direct_solver(monkeypatch):
+    n, gt, left = scissor_ortho(H=30, W=36)
+    ref = facetlift.integrate(n, discontinuities=True)
+    monkeypatch.setattr(disc, "START_CG", 1)
+    s = facetlift.integrate(n, discontinuities=True)
+    assert s.info["cg_iterations"][0] == 1
+    np.testing.assert_allclose(s.depth, ref.depth, atol=1e-5)
