@@ -587,6 +587,14 @@ class Bench:
         if bar is not None:
             bar.close()
         write_csv(self.out / "fig9_runs.csv", rows)
+        per_model = []
+        for dom in domains:
+            for cond, _ in conds:
+                sub = [r for r in rows if r["domain"] == dom and r["condition"] == cond]
+                if sub:
+                    per_model.append(f"### {dom} domains, {cond}\n\n"
+                                     + self._pivot(sub, "model", "error_pct"))
+        _write_text(self.out / "fig9_per_model.md", "\n".join(per_model))
         if skipped:
             write_csv(self.out / "fig9_skipped.csv", skipped)
         summary = self._fig9_summary(rows, specs)
