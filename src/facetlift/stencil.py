@@ -90,3 +90,37 @@ def pin_components(domain: Domain, K: sp.csr_matrix, weight: float = 1.0) -> sp.
     d = np.zeros(domain.n_vertices)
     d[first] = weight
     return (K + sp.diags(d, format="csr")).tocsr()
+
+
+def corner_views(Z: np.ndarray):
+    """The four (H, W) corner views of an (H+1, W+1) vertex image, in the conventional order."""
+    return Z[:-1, :-1], Z[:-1, 1:], Z[1:, 1:], Z[1:, :-1]
+
+
+def grid_slopes(Z: np.ndarray):
+    """(e_x . z_f, e_y . z_f) of every facet of an (H+1, W+1) vertex image, as (H, W) images."""
+    z0, z1, z2, z3 = corner_views(Z)
+    s = z1 - z3
+    d = z0 - z2
+    return 0.5 * (s - d), 0.5 * (s + d)
+
+
+def grid_scatter(gx: np.ndarray, gy: np.ndarray, centre: np.ndarray | None = None):
+    """``C^T v`` on the vertex grid for facet vectors ``v_f = gx e_x + gy e_y (+ centre 1)``.
+
+    `gx`, `gy` (and `centre`) are (H, W) facet images, zero outside the domain; returns the
+    (H+1, W+1) vertex image. Equals :func:`scatter_corners` with grid slicing instead of a
+    scattered sum.
+    """
+    H, W = gx.shape
+    a = 0.5 * (gx + gy)
+    b = 0.5 * (gx - gy)
+    R = np.zeros((H + 1, W + 1))
+    R[:-1, :-1] -= b
+    R[:-1, 1:] += a
+    R[1:, 1:] += b
+    R[1:, :-1] -= a
+    if centre is not None:
+        for view in corner_views(R):
+            view += centre
+    return R

@@ -95,7 +95,10 @@ from ..stencil import (
     E_X,
     E_Y,
     N_MEAN_FREE,
+    corner_views,
     facet_form,
+    grid_scatter,
+    grid_slopes,
     pin_components,
     scatter_corners,
 )
@@ -360,6 +363,13 @@ def average_deviation(domain, z, bx, by, target, h=1.0) -> float:
     if not target.any():
         return 0.0
     gx, gy = facet_slopes(domain, z)
+    return _mean_angle(gx, gy, bx, by, target, h)
+
+
+def _mean_angle(gx, gy, bx, by, target, h) -> float:
+    """Mean angle (degrees) between normals (-gx, -gy, h) and (-bx, -by, h) where `target`."""
+    if not target.any():
+        return 0.0
     gx, gy, bx, by = gx[target], gy[target], bx[target], by[target]
     # atan2(|a x b|, a . b), accurate near zero unlike arccos
     h2 = h * h
@@ -402,27 +412,39 @@ def solve_iterative(
         pre = BoxPreconditioner(domain) if backend in ("auto", "pcg") else None
         factor = linalg.factorize(K, backend, preconditioner=pre)
     t2 = time.perf_counter()
-    z = np.zeros(domain.n_vertices)
-    devs = [average_deviation(domain, z, bx, by, target, h)]
+    # The loop runs on facet and vertex images (grid slicing, no scattered gathers): each
+    # step is exactly local_shaping() followed by the scatter C^T of Eq. 8.
+    fmask = domain.mask
+    vm = domain.vertex_mask
+    T = domain.to_image(target.astype(float), fill=0.0) > 0
+    BX = domain.to_image(bx, fill=0.0)
+    BY = domain.to_image(by, fill=0.0)
+    free = fmask & ~T
+    Z = np.zeros(vm.shape)
+    devs = [_mean_angle(*grid_slopes(Z), BX, BY, T, h)]
     t_local = t_global = 0.0
     converged = False
     for it in range(1, max_iter + 1):
         ta = time.perf_counter()
-        projected, centre = local_shaping(domain, z, bx, by, target)
+        # local shaping: target plane (known) or current plane (unknown / outlier) through
+        # the current centre; with mean subtraction the centre drops out (Eq. 5-6)
+        gx, gy = grid_slopes(Z)
+        gx = np.where(T, BX, np.where(free, gx, 0.0))
+        gy = np.where(T, BY, np.where(free, gy, 0.0))
+        centre = None if mean_subtraction else sum(corner_views(Z)) * (0.25 * fmask)
+        rhs = grid_scatter(gx, gy, centre)[vm]
         tb = time.perf_counter()
-        if mean_subtraction:
-            z = factor.solve(scatter_corners(domain, projected - centre[:, None]))
-        else:
-            z = scatter_corners(domain, projected) / valence
+        Z[vm] = factor.solve(rhs) if mean_subtraction else rhs / valence
         tc = time.perf_counter()
         t_local += tb - ta
         t_global += tc - tb
-        devs.append(average_deviation(domain, z, bx, by, target, h))
+        devs.append(_mean_angle(*grid_slopes(Z), BX, BY, T, h))
         if progress is not None:
             progress(it, devs[-1])
         if abs(devs[-1] - devs[-2]) < tol:
             converged = True
             break
+    z = Z[vm]
     if not converged:
         warnings.warn(
             f"dgp: no convergence in {max_iter} iterations (last change of the average "
