@@ -114,7 +114,8 @@ class FacetBlocks:
         keys = rows * n + pattern.indices
         c = domain.corners
         fk = (c[:, :, None] * n + c[:, None, :]).reshape(-1)  # (m*16,) row-major (a, b)
-        self.slot = np.searchsorted(keys, fk)
+        idx_dtype = np.int32 if keys.size < 2**31 else np.int64
+        self.slot = np.searchsorted(keys, fk).astype(idx_dtype).reshape(-1, 16)
         self.nnz = keys.size
         first = np.full(domain.n_components, -1, dtype=np.int64)
         comp = domain.vertex_component
@@ -125,14 +126,17 @@ class FacetBlocks:
 
     def assemble_update(self, K0: sp.csr_matrix, facets: np.ndarray, dQ: np.ndarray):
         """``K0`` plus the blocks `dQ` (k, 4, 4) of the facets `facets` (k,), same pattern."""
-        slot = self.slot.reshape(-1, 16)[facets].reshape(-1)
-        data = K0.data + np.bincount(slot, dQ.reshape(-1), minlength=self.nnz)
-        n = self.domain.n_vertices
-        return sp.csr_matrix((data, self.indices, self.indptr), shape=(n, n))
+        data = K0.data + np.bincount(
+            self.slot[facets].reshape(-1), dQ.reshape(-1), minlength=self.nnz
+        )
+        return self._csr(data)
 
     def assemble(self, Q: np.ndarray) -> sp.csr_matrix:
-        """(n, n) CSR of ``sum_f C_f^T Q_f C_f`` plus the pins; `Q` is (m, 4, 4)."""
-        data = np.bincount(self.slot, Q.reshape(-1), minlength=self.nnz) + self.pin
+        """(n, n) CSR of ``sum_f C_f^T Q_f C_f`` plus the pins; `Q` is (m, 4, 4) or (m, 16)."""
+        data = np.bincount(self.slot.reshape(-1), Q.reshape(-1), minlength=self.nnz)
+        return self._csr(data + self.pin)
+
+    def _csr(self, data):
         n = self.domain.n_vertices
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(n, n))
 
@@ -144,14 +148,16 @@ def scatter_corners_subset(domain, facets, values):
     )
 
 
-def _facet_system(domain, bx, by, target, flat_weight):
-    """Per-facet ``A_f = P^T P`` (m, 4, 4) and ``a_f = P^T b_f`` (m, 4) of the smooth DGP."""
+def _facet_system(bx, by, flat_weight):
+    """``A = P^T P`` (4, 4) of a facet without a target, and ``a_f = P^T b_f`` (m, 4).
+
+    A facet with a target has ``A = I - 11^T / 4`` (slopes and twist, see
+    :func:`_glue_inverse`).
+    """
     slope = np.outer(E_X, E_X) + np.outer(E_Y, E_Y)
-    twist = np.outer(E_TWIST, E_TWIST)
-    ws = np.where(target, 1.0, flat_weight)
-    A = ws[:, None, None] * slope + twist
+    A_other = flat_weight * slope + np.outer(E_TWIST, E_TWIST)
     a = bx[:, None] * E_X + by[:, None] * E_Y
-    return A, a
+    return A_other, a
 
 
 #: Misfits below this fraction of ``k s`` keep the full glue weight 1 (the Cauchy weight there
@@ -217,8 +223,8 @@ def _pcg(K, b, x0, M, rtol, maxiter):
     return x, maxiter
 
 
-def _glue_inverse(A, target, w):
-    """``M_f = (A_f + diag(w_f))^{-1}`` for all facets, (m, 4, 4).
+def _glue_inverse(target, w, A_other):
+    """``M_f = (A_f + diag(w_f))^{-1}`` for the facets with glue weights `w` (k, 4): (k, 4, 4).
 
     For a facet with a target ``A_f = I - 11^T / 4``, so ``A_f + W_f`` is a diagonal minus a
     rank-one matrix and Sherman-Morrison gives the inverse in closed form; the few facets
@@ -232,7 +238,7 @@ def _glue_inverse(A, target, w):
     M[:, idx, idx] += dinv
     other = ~target
     if other.any():
-        M[other] = np.linalg.inv(A[other] + w[other][:, :, None] * np.eye(4))
+        M[other] = np.linalg.inv(A_other + w[other][:, :, None] * np.eye(4))
     return M
 
 
@@ -283,20 +289,19 @@ def solve_discontinuous(
     t0 = time.perf_counter()
     ks = k * scale
     m = domain.n_facets
-    A, a = _facet_system(domain, bx, by, target, flat_weight)
+    A_other, a = _facet_system(bx, by, flat_weight)
     blocks = FacetBlocks(domain)
     corners = domain.corners
     diag = np.arange(4)
+    tgt = target[:, None]
+    all_target = bool(target.all())
     with _blas_single_thread():
-        # smooth start: every corner fully glued (w = 1), the smooth DGP system scaled by 1/2
-        w = np.ones((m, 4))
-        M0 = _glue_inverse(A, target, w)
-        M = M0.copy()
-        Ma0 = np.einsum("fab,fb->fa", M0, a)
-        Ma = Ma0.copy()
-        Q0 = -M0
-        Q0[:, diag, diag] += 1.0
-        K0 = blocks.assemble(Q0)
+        # smooth start: every corner fully glued (w = 1), the smooth DGP system scaled by 1/2;
+        # with w = 1 there are only two kinds of facet blocks (with and without a target)
+        M0 = _glue_inverse(np.array([True, False]), np.ones((2, 4)), A_other)
+        Q0 = np.eye(4) - M0  # (2, 4, 4)
+        Ma0 = a @ M0[0] if all_target else np.where(tgt, a @ M0[0], a @ M0[1])
+        K0 = blocks.assemble(np.where(tgt, Q0[0].ravel(), Q0[1].ravel()))
         rhs0 = scatter_corners(domain, Ma0)
         ml = pyamg.ruge_stuben_solver(
             K0, max_coarse=500, coarse_solver="splu",
@@ -315,26 +320,42 @@ def solve_discontinuous(
             except linalg.SolverError:
                 z, it = _pcg(K0, rhs0, z, P, 1e-8, 2000)
                 cg_its.append(it)
+
+        # the reweighted state: weights w (m, 4); facets with a weight < 1 ("active", a set
+        # that only grows) carry their own M_f and M_f a_f, all others the w = 1 ones
+        w = np.ones((m, 4))
+        active = np.zeros(m, dtype=bool)
+        act = np.zeros(0, dtype=np.int64)
+        M_act = np.zeros((0, 4, 4))
+        Ma_act = np.zeros((0, 4))
+
+        def misfit(z):
+            """Own corner values minus the glued vertex values, (m, 4)."""
+            zc = z[corners]
+            own = zc @ M0[0] if all_target else np.where(tgt, zc @ M0[0], zc @ M0[1])
+            r = Ma0 + own - zc
+            if act.size:
+                r[act] = Ma_act + np.einsum("fab,fb->fa", M_act, w[act] * zc[act]) - zc[act]
+            return r
+
+        curl = np.abs(vertex_curl(domain, bx, by, target))
         converged = False
         it_irls = 0
-        curl = np.abs(vertex_curl(domain, bx, by, target))
-        active = np.zeros(m, dtype=bool)  # facets with a yielding corner, now or before
         for it_irls in range(1, max_iter + 1):
-            zc = z[corners]
-            r = Ma + np.einsum("fab,fb->fa", M, w * zc) - zc
+            r = misfit(z)
             if it_irls == 1:  # seed: the loop mismatch of the targets around each vertex
                 r = np.maximum(np.abs(r), curl[corners])
             w = glue_weight(r, ks)
             active |= (w < 1.0).any(axis=1)
             act = np.nonzero(active)[0]
             wa = w[act]
-            M[act] = _glue_inverse(A[act], target[act], wa)
-            Ma[act] = np.einsum("fab,fb->fa", M[act], a[act])
-            dQ = -(wa[:, :, None] * M[act] * wa[:, None, :])
+            M_act = _glue_inverse(target[act], wa, A_other)
+            Ma_act = np.einsum("fab,fb->fa", M_act, a[act])
+            dQ = -(wa[:, :, None] * M_act * wa[:, None, :])
             dQ[:, diag, diag] += wa
-            dQ -= Q0[act]
+            dQ -= Q0[np.where(target[act], 0, 1)]
             K = blocks.assemble_update(K0, act, dQ)
-            rhs = rhs0 + scatter_corners_subset(domain, act, wa * Ma[act] - Ma0[act])
+            rhs = rhs0 + scatter_corners_subset(domain, act, wa * Ma_act - Ma0[act])
             z_new, it = _pcg(K, rhs, z, P, 1e-10, CG_STEPS if cg_iter is None else cg_iter)
             cg_its.append(it)
             change = np.abs(z_new - z).max()
@@ -344,8 +365,7 @@ def solve_discontinuous(
             if change < tol * scale:
                 converged = True
                 break
-        zc = z[corners]
-        y = Ma + np.einsum("fab,fb->fa", M, w * zc)
+        y = misfit(z) + z[corners]
     t2 = time.perf_counter()
     info = {
         "iterations": it_irls,
