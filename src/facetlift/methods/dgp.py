@@ -43,7 +43,8 @@ Perspective cameras (``K`` given)
     step of an 8-bit normal map, i.e. indistinguishable from edge-on): in log-depth every
     camera-facing normal has finite slopes, and the steep normals at silhouettes are what
     links the depth of an occluding surface to the one behind it (on the DiLiGenT bear,
-    dropping the 32 normals with cosine below cos 85 deg raises the error 7-fold).
+    dropping the 32 normals with cosine below cos 85 deg raises the error of
+    ``discontinuities=True`` six-fold, 0.025 -> 0.15 mm).
     See docs/perspective.md.
 
 Depth discontinuities (``discontinuities=True``)
