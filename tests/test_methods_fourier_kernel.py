@@ -1,0 +1,277 @@
+"""Frankot-Chellappa and the Gaussian-kernel method on analytic surfaces.
+
+Errors are measured at the pixel centres after removing the mean (depth is defined up to a
+constant) and, where a range is used, relative to the true depth range.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import facetlift
+from facetlift.methods import frankot_chellappa, kernel
+from facetlift.problem import normals_from_gradients, prepare
+
+
+def centres(H, W, h, x0=0.0, y0=0.0):
+    """x, y of the pixel centres (x right, y up; row 0 at the top, at y0 - h/2)."""
+    r, c = np.mgrid[0:H, 0:W]
+    return x0 + (c + 0.5) * h, y0 - (r + 0.5) * h
+
+
+def saddle(N):
+    """z = (x^2 - y^2) / 2 on [-1, 1]^2 sampled N x N: depth range 1, |grad z| <= 1."""
+    h = 2.0 / N
+    x, y = centres(N, N, h, -1.0, 1.0)
+    return (x**2 - y**2) / 2, x, -y, h
+
+
+def wavy(N):
+    """A smooth non-periodic surface on [-1, 1]^2 (saddle-like plus a tilted bump)."""
+    h = 2.0 / N
+    x, y = centres(N, N, h, -1.0, 1.0)
+    z = 0.3 * np.sin(2 * x) * np.cos(1.5 * y) + 0.2 * x * y
+    p = 0.6 * np.cos(2 * x) * np.cos(1.5 * y) + 0.2 * y
+    q = -0.45 * np.sin(2 * x) * np.sin(1.5 * y) + 0.2 * x
+    return z, p, q, h
+
+
+def err(surface, z, where=None):
+    """Max and RMS of the height error over `where` (default: the surface mask), mean removed."""
+    where = surface.mask if where is None else where
+    e = (surface.height - z)[where]
+    e = e - e.mean()
+    return np.abs(e).max(), np.sqrt(np.mean(e**2))
+
+
+# --------------------------------------------------------------------------------------------
+# Frankot-Chellappa
+
+
+def test_fc_periodic_surface_exact():
+    # A trigonometric polynomial below Nyquist, periodic on a non-square grid: the spectral
+    # derivative model of FC is exact for it, so the error is round-off, not O(h^2). The
+    # y terms are not even in y, so a wrong sign of q (y is up) would show.
+    H, W, h = 24, 32, 0.05
+    Lx, Ly = W * h, H * h
+    x, y = centres(H, W, h, 0.3, 0.7)
+    kx, ky = 2 * np.pi / Lx, 2 * np.pi / Ly
+    z = np.sin(kx * x + 0.3) * np.cos(2 * ky * y) + 0.5 * np.sin(ky * y + 1.1)
+    p = kx * np.cos(kx * x + 0.3) * np.cos(2 * ky * y)
+    q = -2 * ky * np.sin(kx * x + 0.3) * np.sin(2 * ky * y) + 0.5 * ky * np.cos(ky * y + 1.1)
+    s = facetlift.integrate(
+        normals_from_gradients(p, q), method="frankot_chellappa", pixel_size=h, pad="none"
+    )
+    assert err(s, z)[0] < 1e-12 * np.ptp(z) * 1e3  # ~1e-13: machine precision of the FFT
+    # The mirror padding (default) breaks periodicity's exactness: kinks at the box edges.
+    s2 = facetlift.integrate(normals_from_gradients(p, q), method="frankot_chellappa", pixel_size=h)
+    assert err(s2, z)[0] > 1e-4
+
+
+def test_fc_saddle_first_order_at_edges():
+    # The saddle is not periodic; its even reflection is continuous but its slope jumps by
+    # 2|p| <= 2 at the box edges. A spectral projection of a kinked function converges O(h)
+    # next to the kink and O(h^2) away from it: at 64 x 64 (h = 1/32) we require a max error
+    # below h/4 |grad z|_max (measured 0.18 h) and, on the central half, below h^2/2
+    # (measured 0.29 h^2); halving h must roughly halve the max error.
+    errs = []
+    for N in (32, 64):
+        z, p, q, h = saddle(N)
+        s = facetlift.integrate(normals_from_gradients(p, q), method="frankot_chellappa",
+                                pixel_size=h)
+        errs.append(err(s, z)[0])
+        if N == 64:
+            inner = np.zeros_like(s.mask)
+            inner[16:48, 16:48] = True
+            assert errs[-1] < 0.25 * h * 1.0
+            assert err(s, z, inner)[0] < 0.5 * h**2
+    assert 1.8 < errs[0] / errs[1] < 2.2
+
+
+def test_fc_mirror_padding_on_non_periodic_surface():
+    # exp(x) sin(y + 0.3) on [0, 1] x [-1, 0]: far from periodic. Periodic FC sees a jump of
+    # the surface at the wrap-around and fails; the mirror extension is continuous.
+    N = 48
+    h = 1.0 / N
+    x, y = centres(N, N, h)
+    z = np.exp(x) * np.sin(y + 0.3)
+    n = normals_from_gradients(z, np.exp(x) * np.cos(y + 0.3))
+    mirror = facetlift.integrate(n, method="frankot_chellappa", pixel_size=h)
+    periodic = facetlift.integrate(n, method="frankot_chellappa", pixel_size=h, pad="none")
+    rng_z = np.ptp(z)
+    assert err(mirror, z)[0] < 0.01 * rng_z
+    assert err(periodic, z)[0] > 0.2 * rng_z
+
+
+def test_fc_mask_with_hole():
+    # Annulus: FC works on the bounding box with the outside filled in. The fill is not
+    # integrable, so errors appear near the mask boundary: a few percent of h |grad z| is
+    # expected (measured max 0.0087 for a range ~0.9 with harmonic fill); a zero fill puts
+    # a gradient jump on the boundary and is an order of magnitude worse.
+    z, p, q, h = saddle(64)
+    x, y = centres(64, 64, h, -1.0, 1.0)
+    rad = np.hypot(x, y)
+    mask = (rad < 0.95) & (rad > 0.3)
+    n = normals_from_gradients(p, q)
+    errors = {}
+    for fill in ("harmonic", "nearest", "zero"):
+        s = facetlift.integrate(n, mask, method="frankot_chellappa", pixel_size=h, fill=fill)
+        assert np.isnan(s.depth[~mask]).all() and np.isfinite(s.depth[mask]).all()
+        errors[fill] = err(s, z)[0]
+        rr, cc = np.nonzero(mask)
+        box = mask[rr.min() : rr.max() + 1, cc.min() : cc.max() + 1]
+        assert s.info["filled"] == int((~box).sum()) > 0
+    assert errors["harmonic"] < 0.02
+    assert errors["nearest"] < 0.02
+    assert errors["zero"] > 3 * errors["harmonic"]
+
+
+def test_fc_refuses_missing_samples():
+    z, p, q, h = saddle(16)
+    known = np.random.default_rng(3).random(z.shape) > 0.3
+    n = normals_from_gradients(p, q)
+    with pytest.raises(ValueError, match="'frankot_chellappa' cannot take missing samples"):
+        facetlift.integrate(n, known=known, method="frankot_chellappa", pixel_size=h)
+    # Called directly, the method refuses them too.
+    with pytest.raises(ValueError, match="cannot take missing samples"):
+        frankot_chellappa.run(prepare(n, known=known, pixel_size=h))
+
+
+def test_fc_bad_options():
+    z, p, q, h = saddle(8)
+    n = normals_from_gradients(p, q)
+    with pytest.raises(ValueError, match="`pad` must be one of"):
+        facetlift.integrate(n, method="frankot_chellappa", pad="reflect")
+    with pytest.raises(ValueError, match="`fill` must be one of"):
+        facetlift.integrate(n, method="frankot_chellappa", fill="linear")
+    K = np.array([[10.0, 0, 4], [0, 10, 4], [0, 0, 1]])
+    with pytest.raises(ValueError, match="orthographic"):
+        frankot_chellappa.run(prepare(n, K=K))
+
+
+# --------------------------------------------------------------------------------------------
+# Gaussian kernel
+
+
+def test_kernel_saddle():
+    # sigma = 2 pixels: the Gaussian's approximation error is negligible (exp(-8 pi^2)), so
+    # the interior is exact to the regularisation and tiling (measured 4.9e-6 at 48 x 48);
+    # at the box boundary the fit has data on one side only (measured 3.5e-4, ~0.01 h).
+    z, p, q, h = saddle(48)
+    s = facetlift.integrate(normals_from_gradients(p, q), method="kernel", pixel_size=h)
+    inner = np.zeros_like(s.mask)
+    inner[12:36, 12:36] = True
+    assert err(s, z)[0] < 1e-3
+    assert err(s, z, inner)[0] < 3e-5
+    assert s.info["tiles"] == 9 and s.info["factorizations"] <= 9
+
+
+def test_kernel_missing_samples():
+    # 30 % of the samples missing at random: the kernel fit bridges one- and two-pixel gaps
+    # with sigma = 2 (measured max 9.9e-4 of the range on this surface).
+    z, p, q, h = wavy(48)
+    known = np.random.default_rng(7).random(z.shape) > 0.3
+    s = facetlift.integrate(normals_from_gradients(p, q), known=known, method="kernel",
+                            pixel_size=h)
+    assert np.isfinite(s.depth).all()
+    assert err(s, z)[0] < 2e-3 * np.ptp(z)
+
+
+def test_kernel_fills_missing_block_smoothly():
+    # An 8 x 8 block without samples. A Gaussian fit flattens towards the middle of a gap
+    # wider than about 2 sigma, so with the default sigma = 2 the error in the block is
+    # larger than elsewhere (measured 1.5 % of the range; a flat fill at the rim's mean
+    # height would be off by ~|grad z| * 4 h, 17 % of the range). With sigma = 3, of the
+    # order of the gap as documented for sparse input, the block is filled almost exactly
+    # (measured 2.4e-4 of the range) and without a kink at its rim: the discrete Laplacian
+    # of the result stays within 10 % of the true surface's largest one (measured 5 %).
+    z, p, q, h = wavy(48)
+    known = np.ones(z.shape, dtype=bool)
+    known[20:28, 14:22] = False
+    n = normals_from_gradients(p, q)
+    s2 = facetlift.integrate(n, known=known, method="kernel", pixel_size=h)
+    assert err(s2, z, ~known)[0] < 0.02 * np.ptp(z)
+    assert err(s2, z, known)[0] < 0.002 * np.ptp(z)
+    s3 = facetlift.integrate(n, known=known, method="kernel", pixel_size=h, sigma=3)
+    assert err(s3, z, ~known)[0] < 1e-3 * np.ptp(z)
+
+    def lap(a):
+        return a[:-2, 1:-1] + a[2:, 1:-1] + a[1:-1, :-2] + a[1:-1, 2:] - 4 * a[1:-1, 1:-1]
+
+    d = (lap(s3.height) - lap(z))[18:28, 12:22]
+    assert np.abs(d).max() < 0.1 * np.abs(lap(z)).max()
+
+
+def test_kernel_tiles_agree_with_single_window_fit():
+    # tile >= the image: one window, the exact kernel fit. Small tiles change the interior
+    # by about the exact fit's own interior error (measured 9e-6 of the range), and the
+    # boundary, where both fits are one-sided, by up to that error (measured 4e-4).
+    z, p, q, h = wavy(40)
+    n = normals_from_gradients(p, q)
+    exact = facetlift.integrate(n, method="kernel", pixel_size=h, tile=40)
+    assert exact.info["tiles"] == 1
+    tiled = facetlift.integrate(n, method="kernel", pixel_size=h, tile=8)
+    assert tiled.info["tiles"] == 25
+    d = tiled.height - exact.height
+    d = d - d.mean()
+    assert np.abs(d[6:-6, 6:-6]).max() < 2e-5 * np.ptp(z)
+    assert np.abs(d).max() < 1e-3 * np.ptp(z)
+
+
+def test_kernel_mask_with_hole_and_two_components():
+    # An annulus and a separate blob; a U-turn of the annulus enters some tiles twice, so
+    # each tile piece needs its own constant. Each component is checked on its own
+    # (measured 2.4e-4 and 1.4e-4 of the range).
+    z, p, q, h = wavy(48)
+    x, y = centres(48, 48, h, -1.0, 1.0)
+    rad = np.hypot(x + 0.2, y)
+    ring = (rad < 0.7) & (rad > 0.35)
+    blob = np.hypot(x - 0.8, y - 0.75) < 0.15
+    mask = ring | blob
+    s = facetlift.integrate(normals_from_gradients(p, q), mask, method="kernel", pixel_size=h,
+                            tile=8)
+    for part in (ring, blob):
+        assert err(s, z, part)[0] < 2e-3 * np.ptp(z)
+
+
+def test_deterministic():
+    z, p, q, h = wavy(32)
+    known = np.random.default_rng(11).random(z.shape) > 0.3
+    n = normals_from_gradients(p, q)
+    a = facetlift.integrate(n, known=known, method="kernel", pixel_size=h)
+    b = facetlift.integrate(n, known=known, method="kernel", pixel_size=h)
+    np.testing.assert_array_equal(a.depth, b.depth)
+    a = facetlift.integrate(n, method="frankot_chellappa", pixel_size=h)
+    b = facetlift.integrate(n, method="frankot_chellappa", pixel_size=h)
+    np.testing.assert_array_equal(a.depth, b.depth)
+
+
+@pytest.mark.parametrize(
+    "options, match",
+    [
+        ({"sigma": 0}, "`sigma` must be a positive"),
+        ({"sigma": float("nan")}, "`sigma` must be a positive"),
+        ({"sigma": "wide"}, "`sigma` and `reg` must be numbers"),
+        ({"reg": -1e-3}, "`reg` must be a finite number >= 0"),
+        ({"tile": 3}, "`tile` must be an integer >= 4"),
+        ({"tile": 8.5}, "`tile` must be an integer >= 4"),
+        ({"margin": -1}, "`margin` must be an integer >= 0 or None"),
+        ({"margin": True}, "`margin` must be an integer >= 0 or None"),
+    ],
+)
+def test_kernel_bad_options(options, match):
+    z, p, q, h = saddle(8)
+    with pytest.raises(ValueError, match=match):
+        facetlift.integrate(normals_from_gradients(p, q), method="kernel", **options)
+
+
+def test_kernel_refuses_perspective_and_no_samples():
+    z, p, q, h = saddle(8)
+    n = normals_from_gradients(p, q)
+    K = np.array([[10.0, 0, 4], [0, 10, 4], [0, 0, 1]])
+    with pytest.raises(ValueError, match="orthographic"):
+        kernel.run(prepare(n, K=K))
+    problem = prepare(n, np.ones((8, 8), bool), known=np.zeros((8, 8), bool))
+    with pytest.raises(ValueError, match="at least one known sample"):
+        kernel.run(problem)
