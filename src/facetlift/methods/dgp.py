@@ -158,13 +158,12 @@ def run(
         )
     if solver == "direct":  # both loops share this fixed point
         z, info = solve_direct(
-            problem.domain, bx, by, target, backend, flat_weight,
-            h=1.0 if problem.perspective else problem.pixel_size,
+            problem.domain, bx, by, target, backend, flat_weight, h=footprint(problem)
         )
     else:
         z, info = solve_iterative(
-            problem.domain, bx, by, target, 1.0 if problem.perspective else problem.pixel_size,
-            mean_subtraction, int(max_iter), tol, backend, progress,
+            problem.domain, bx, by, target, footprint(problem), mean_subtraction,
+            int(max_iter), tol, backend, progress,
         )
     info["outliers"] = int((problem.known & ~target).sum())
     info["missing"] = int((~problem.known).sum())
@@ -174,14 +173,19 @@ def run(
     return MethodResult(vertex_depth=-z, info=info)
 
 
+def footprint(problem: Problem) -> float:
+    """Width of a pixel in the unknown's units: the pixel size for heights, ``1/sqrt(fx fy)``
+    for log-depth (a surface at 45 degrees to the ray changes ``log Z`` by about that much per
+    pixel). With it, facet slopes ``(bx, by)`` and ``h`` give angles as for heights."""
+    if problem.perspective:
+        return 1.0 / float(np.sqrt(problem.K[0, 0] * problem.K[1, 1]))
+    return problem.pixel_size
+
+
 def _run_discontinuous(problem, bx, by, target, k, max_iter, flat_weight):
     domain = problem.domain
     _check_components(domain, target)
-    if problem.perspective:
-        fx, fy = problem.K[0, 0], problem.K[1, 1]
-        scale = 1.0 / np.sqrt(fx * fy)
-    else:
-        scale = problem.pixel_size
+    scale = footprint(problem)
     z, zf, info = solve_discontinuous(
         domain, bx, by, target, scale=scale, k=k, max_iter=max_iter, flat_weight=flat_weight
     )
