@@ -64,6 +64,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
+from ..options import number, positive_int
 from ..problem import Problem
 from . import MethodResult
 from . import _graph as g
@@ -136,10 +137,8 @@ def run(
         isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not (alpha >= 0)
     ):
         raise ValueError(f"`alpha` must be a number >= 0 (inf allowed) or None; got {alpha!r}")
-    if isinstance(max_iter, bool) or int(max_iter) != max_iter or max_iter < 1:
-        raise ValueError(f"`max_iter` must be a positive integer; got {max_iter!r}")
-    if not (isinstance(tol, (int, float)) and tol >= 0):
-        raise ValueError(f"`tol` must be a number >= 0; got {tol!r}")
+    max_iter = positive_int(max_iter, "max_iter")
+    tol = number(tol, "tol", lambda v: v >= 0, "a number >= 0")
     g.check_backend(backend)
     g.check_orthographic(problem, "alpha_surface")
 

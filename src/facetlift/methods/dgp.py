@@ -90,6 +90,7 @@ import numpy as np
 
 from .. import linalg
 from ..conventions import OUTLIER_EPS
+from ..options import number, positive_int
 from ..problem import Problem
 from ..spectral import BoxPreconditioner, RectangleSolver
 from ..stencil import (
@@ -130,12 +131,12 @@ def run(
     """Integrate `problem` with the DGP method; returns vertex depths (see module docstring)."""
     if solver not in SOLVERS:
         raise ValueError(f"`solver` must be one of {SOLVERS}; got {solver!r}")
-    max_iter = _integer(max_iter, "max_iter")
-    tol = _number(tol, "tol", lambda v: v >= 0, ">= 0")
+    max_iter = positive_int(max_iter, "max_iter")
+    tol = number(tol, "tol", lambda v: v >= 0, ">= 0")
     if outlier_eps is None:
         outlier_eps = PERSPECTIVE_OUTLIER_EPS if problem.perspective else OUTLIER_EPS
-    outlier_eps = _number(outlier_eps, "outlier_eps", lambda v: 0 <= v < 1, "in [0, 1)")
-    flat_weight = _number(flat_weight, "flat_weight", lambda v: v > 0, "> 0")
+    outlier_eps = number(outlier_eps, "outlier_eps", lambda v: 0 <= v < 1, "in [0, 1)")
+    flat_weight = number(flat_weight, "flat_weight", lambda v: v > 0, "> 0")
     if not isinstance(mean_subtraction, (bool, np.bool_)):
         raise ValueError(f"`mean_subtraction` must be True or False; got {mean_subtraction!r}")
     if progress is not None and not callable(progress):
@@ -258,26 +259,6 @@ def dgp_slopes(h, p, q, target):
     bx = np.where(target, h * np.nan_to_num(p), 0.0)
     by = np.where(target, h * np.nan_to_num(q), 0.0)
     return bx, by
-
-
-def _integer(value, name: str) -> int:
-    try:
-        ok = float(value) == int(value) and int(value) >= 1
-    except (TypeError, ValueError, OverflowError):
-        ok = False
-    if not ok or isinstance(value, bool):
-        raise ValueError(f"`{name}` must be a positive integer; got {value!r}")
-    return int(value)
-
-
-def _number(value, name: str, check, what: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        v = float("nan")
-    if isinstance(value, bool) or not np.isfinite(v) or not check(v):
-        raise ValueError(f"`{name}` must be {what}; got {value!r} (a finite number)")
-    return v
 
 
 def _check_components(domain, target):

@@ -66,6 +66,7 @@ import warnings
 
 import numpy as np
 
+from ..options import number, positive_int
 from ..problem import Problem
 from . import MethodResult
 from . import _graph as g
@@ -108,10 +109,8 @@ def run(
         np.isfinite(scale) and scale > 0
     ):
         raise ValueError(f"`scale` must be a positive number or 'mad'; got {scale!r}")
-    if isinstance(max_iter, bool) or int(max_iter) != max_iter or max_iter < 1:
-        raise ValueError(f"`max_iter` must be a positive integer; got {max_iter!r}")
-    if not (isinstance(tol, (int, float)) and tol >= 0):
-        raise ValueError(f"`tol` must be a number >= 0; got {tol!r}")
+    max_iter = positive_int(max_iter, "max_iter")
+    tol = number(tol, "tol", lambda v: v >= 0, "a number >= 0")
     g.check_backend(backend)
     g.check_orthographic(problem, "m_estimator")
 

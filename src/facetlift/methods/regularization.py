@@ -51,6 +51,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from ..options import number, positive_int
 from ..problem import Problem
 from . import MethodResult
 from . import _graph as g
@@ -94,10 +95,8 @@ def run(
         np.isfinite(lam) and lam >= 0
     ):
         raise ValueError(f"`lam` must be a finite number >= 0; got {lam!r}")
-    if isinstance(max_iter, bool) or int(max_iter) != max_iter or max_iter < 1:
-        raise ValueError(f"`max_iter` must be a positive integer; got {max_iter!r}")
-    if not (isinstance(tol, (int, float)) and tol >= 0):
-        raise ValueError(f"`tol` must be a number >= 0; got {tol!r}")
+    max_iter = positive_int(max_iter, "max_iter")
+    tol = number(tol, "tol", lambda v: v >= 0, "a number >= 0")
     g.check_backend(backend)
     g.check_orthographic(problem, "regularization")
 
