@@ -1,8 +1,12 @@
 """DGP on DiLiGenT-format perspective data (the bear): accuracy (MADE) and time, beside BiNI.
 
-Loads a folder in the BiNI/DiLiGenT layout (``normal_map.png`` RGB uint8 decoded as
-``n = v / 255 * 2 - 1`` and renormalised; R = x right, G = y up, B = z toward the camera;
-``mask.png``; ``K.txt`` in the OpenCV layout; ``depth_gt.npz['depth_gt']`` z-depth in mm),
+Loads a folder in the BiNI/DiLiGenT layout (``normal_map.png`` RGB decoded at its stored bit
+depth as BiNI does with ``cv2.IMREAD_UNCHANGED``: ``n = v / vmax * 2 - 1`` with vmax 255 or
+65535, then renormalised; R = x right, G = y up, B = z toward the camera; ``mask.png``;
+``K.txt`` in the OpenCV layout; ``depth_gt.npz['depth_gt']`` z-depth in mm). The bear's
+``normal_map.png`` is a 16-bit PNG (IHDR bit depth 16), although ../shared/data/SOURCES.md
+calls it 8-bit: PIL (and imageio through it) silently keep only the high byte. The table
+therefore also shows the discontinuity-preserving run on that truncated 8-bit reading.
 runs the perspective DGP method without and with ``discontinuities=True`` and evaluates
 exactly as BiNI's ``evaluation_diligent.py``: ``scale = nanmedian(gt / est)`` over the mask,
 ``MADE = nanmean(|scale * est - gt|)`` over the mask (mm).
@@ -47,15 +51,20 @@ TARGET_SECONDS = 0.75
 BINI = {"made": 0.334, "seconds": 1.5}  # bear, k=2, perspective (BiNI repo, 2-core machine)
 
 
-def load(folder: Path):
-    """(normals (H, W, 3), mask (H, W) bool, K (3, 3), depth_gt (H, W) mm)."""
+def load(folder: Path, *, high_byte: bool = False):
+    """(normals (H, W, 3), mask (H, W) bool, K (3, 3), depth_gt (H, W) mm).
+
+    ``high_byte=True`` reads the normal map as PIL/imageio do (8 bits, the high byte of a
+    16-bit file) instead of at its stored depth.
+    """
+    import imagecodecs
     import imageio.v3 as iio
 
-    rgb = iio.imread(folder / "normal_map.png")
-    if rgb.dtype != np.uint8 or rgb.ndim != 3:
-        raise ValueError(f"{folder / 'normal_map.png'}: expected 8-bit RGB; got {rgb.dtype} "
-                         f"{rgb.shape}")
-    n = rgb[..., :3].astype(np.float64) / 255 * 2 - 1
+    path = folder / "normal_map.png"
+    rgb = iio.imread(path) if high_byte else imagecodecs.png_decode(path.read_bytes())
+    if rgb.dtype not in (np.uint8, np.uint16) or rgb.ndim != 3:
+        raise ValueError(f"{path}: expected 8- or 16-bit RGB; got {rgb.dtype} {rgb.shape}")
+    n = rgb[..., :3].astype(np.float64) / np.iinfo(rgb.dtype).max * 2 - 1
     n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
     mask = iio.imread(folder / "mask.png")
     if mask.ndim == 3:
@@ -180,11 +189,13 @@ def main(argv=None) -> int:
     name = args.data.name
     n, mask, K, gt = load(args.data)
     extra = {} if args.k is None else {"discontinuity_k": args.k}
-    cases = [("dgp perspective", {}),
-             ("dgp perspective + discontinuities", dict(discontinuities=True, **extra))]
+    n8 = load(args.data, high_byte=True)[0]
+    cases = [("dgp perspective", n, {}),
+             ("dgp perspective + discontinuities", n, dict(discontinuities=True, **extra)),
+             ("same, 8-bit (high byte) reading", n8, dict(discontinuities=True, **extra))]
     rows, panels = [], []
-    for label, options in cases:
-        surface, wall, cpu = run_case(n, mask, K, args.repeat, **options)
+    for label, normals, options in cases:
+        surface, wall, cpu = run_case(normals, mask, K, args.repeat, **options)
         m, err = made(surface.depth, gt, mask)
         info = surface.info
         rows.append({
@@ -212,7 +223,7 @@ def main(argv=None) -> int:
     for r in rows:
         ok_m = "yes" if r["made_mm"] <= TARGET_MADE else "NO"
         ok_t = "yes" if r["wall_s"] <= TARGET_SECONDS else "NO"
-        its = r["iterations"] if "discontinuities" in r["case"] else "-"
+        its = r["iterations"] if r["detached"] is not None else "-"
         print(f"| {r['case']} | {r['made_mm']:.3f} | {r['wall_s']:.3f} | {r['cpu_s']:.3f} | "
               f"{its} | {ok_m} | {ok_t} |")
     print(f"| BiNI (k=2), reference | {BINI['made']:.3f} | ~{BINI['seconds']} | | | | |")
