@@ -44,7 +44,7 @@ Perspective cameras (``K`` given)
     camera-facing normal has finite slopes, and the steep normals at silhouettes are what
     links the depth of an occluding surface to the one behind it (on the DiLiGenT bear,
     dropping the 32 normals with cosine below cos 85 deg raises the error of
-    ``discontinuities=True`` six-fold, 0.025 -> 0.15 mm).
+    ``discontinuities=True`` from 0.062 to 0.155 mm).
     See docs/perspective.md.
 
 Depth discontinuities (``discontinuities=True``)
