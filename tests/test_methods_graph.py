@@ -19,8 +19,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 import facetlift
+from facetlift.methods import REGISTRY, alpha_surface, diffusion, regularization
 from facetlift.methods import _graph as g
-from facetlift.methods import alpha_surface, diffusion, regularization
 
 METHODS = ["poisson", "alpha_surface", "m_estimator", "regularization", "diffusion"]
 N = 64
@@ -340,10 +340,18 @@ def test_bad_options_raise(method, options, match, make_plane):
 
 
 @pytest.mark.parametrize("method", METHODS)
-def test_perspective_refused(method, make_plane):
+def test_perspective_refused_or_handled(method, make_plane):
+    """Methods without the capability refuse `K`; the others integrate log-depth
+    (tests/test_perspective_graph.py checks their accuracy)."""
     K = np.array([[100.0, 0, 4], [0, 100.0, 4], [0, 0, 1]])
+    normals = make_plane(0.1, 0.2).normals((8, 8))
+    if REGISTRY[method].perspective:
+        assert np.all(facetlift.integrate(normals, method=method, K=K).depth > 0)
+        return
     with pytest.raises(ValueError, match="does not support perspective|orthographic"):
-        facetlift.integrate(make_plane(0.1, 0.2).normals((8, 8)), method=method, K=K)
+        facetlift.integrate(normals, method=method, K=K)
+    with pytest.raises(ValueError, match="orthographic"):
+        REGISTRY[method].run(facetlift.prepare(normals, K=K))
 
 
 def test_diffusion_quadrant_energy_matches_direct_sum():

@@ -84,6 +84,10 @@ register(
 )
 
 # The paper's seven comparison methods (Sec. 5). Each module documents its energy and defaults.
+# Pixel-graph methods whose energy stays meaningful on log-depth slopes take perspective input
+# (facetlift.methods._graph.field); diffusion's contrast is in height-slope units, and
+# Frankot-Chellappa and the kernel fit stay orthographic.
+_LOG_DEPTH = {"poisson", "alpha_surface", "m_estimator", "regularization"}
 for _name, _summary, _ref, _missing in [
     ("frankot_chellappa", "Projection onto integrable Fourier bases",
      "Frankot & Chellappa, A method for enforcing integrability in shape from shading "
@@ -105,4 +109,4 @@ for _name, _summary, _ref, _missing in [
      "Gaussian kernel approach, PAMI 2010", True),
 ]:
     register(MethodInfo(name=_name, module=_name, summary=_summary, reference=_ref,
-                        masks=True, missing=_missing))
+                        masks=True, missing=_missing, perspective=_name in _LOG_DEPTH))

@@ -301,3 +301,43 @@ def check_backend(backend: str) -> str:
 def check_orthographic(problem, name: str) -> None:
     if problem.perspective:
         raise ValueError(f"the {name!r} method takes orthographic input here (`K` must be None)")
+
+
+#: Perspective normals whose cosine to the viewing direction is below this are treated as
+#: missing: their log-depth slopes diverge as the surface turns edge-on.
+EDGE_ON_COS = 1e-3
+
+
+def field(problem):
+    """The gradient field a pixel-graph method integrates, as ``(p, q, h)`` per pixel.
+
+    Orthographic: the height slopes and the pixel size. Perspective (``problem.K``): the
+    slopes of the log-depth ``log Z`` along columns and (negated, y up) rows per pixel, with
+    ``h = 1`` (:mod:`facetlift.perspective`), so that the graph's unknown is ``log Z`` and
+    :func:`to_depth` exponentiates it. NaN where there is no usable normal.
+    """
+    if not problem.perspective:
+        p, q = problem.slopes
+        return p, q, problem.pixel_size
+    from ..perspective import log_depth_slopes, view_cosine
+
+    r, c = problem.domain.pixels
+    n = np.where(problem.known[:, None], problem.normals, [0.0, 0.0, 1.0])
+    with np.errstate(invalid="ignore"):
+        ok = problem.known & (view_cosine(problem.K, r, c, n) > EDGE_ON_COS)
+    du, dv = log_depth_slopes(problem.K, r, c, n)
+    return np.where(ok, du, np.nan), np.where(ok, -dv, np.nan), 1.0
+
+
+def to_depth(problem, z: np.ndarray) -> np.ndarray:
+    """Depth (m,) from the graph's unknown: ``-z`` (orthographic height) or ``exp(z)`` with each
+    component's median depth 1 (perspective log-depth, defined up to scale)."""
+    if not problem.perspective:
+        return -z
+    from scipy import ndimage
+
+    d = problem.domain
+    med = np.atleast_1d(
+        ndimage.median(z, d.facet_component + 1, np.arange(1, d.n_components + 1))
+    )
+    return np.exp(z - med[d.facet_component])

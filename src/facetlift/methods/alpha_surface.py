@@ -140,13 +140,11 @@ def run(
     max_iter = positive_int(max_iter, "max_iter")
     tol = number(tol, "tol", lambda v: v >= 0, "a number >= 0")
     g.check_backend(backend)
-    g.check_orthographic(problem, "alpha_surface")
 
     t0 = time.perf_counter()
-    h = problem.pixel_size
     domain = problem.domain
     graph = g.build(domain)
-    p, q = problem.slopes
+    p, q, h = g.field(problem)
     t, has = g.targets(graph, p, q, h)
     score, loop_curl = edge_scores(graph, t, has, h)
     if alpha is None:
@@ -196,4 +194,4 @@ def run(
         "kept_fraction": float((kept & has).sum() / n_data) if n_data else 1.0,
         "seconds": {"setup": t1 - t0, "solve": t2 - t1},
     }
-    return MethodResult(depth=-z, info=info)
+    return MethodResult(depth=g.to_depth(problem, z), info=info)

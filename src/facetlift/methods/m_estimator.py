@@ -112,13 +112,11 @@ def run(
     max_iter = positive_int(max_iter, "max_iter")
     tol = number(tol, "tol", lambda v: v >= 0, "a number >= 0")
     g.check_backend(backend)
-    g.check_orthographic(problem, "m_estimator")
 
     t0 = time.perf_counter()
-    h = problem.pixel_size
     domain = problem.domain
     graph = g.build(domain)
-    p, q = problem.slopes
+    p, q, h = g.field(problem)
     t, has = g.targets(graph, p, q, h)
     floor = 1e-12 * max(float(np.median(np.abs(t[has]))) / h if has.any() else 0.0, 1.0)
     z = g.solve_weighted(domain, graph, g.edge_weights(has), t, backend)
@@ -161,4 +159,4 @@ def run(
         "downweighted": int((w[has] < 1.0).sum()),
         "seconds": {"solve": t1 - t0},
     }
-    return MethodResult(depth=-z, info=info)
+    return MethodResult(depth=g.to_depth(problem, z), info=info)

@@ -33,11 +33,10 @@ from . import _graph as g
 def run(problem: Problem, *, backend: str = "auto") -> MethodResult:
     """Integrate `problem` by least squares on the pixel graph; depth (m,) at pixel centres."""
     g.check_backend(backend)
-    g.check_orthographic(problem, "poisson")
     t0 = time.perf_counter()
     graph = g.build(problem.domain)
-    p, q = problem.slopes
-    t, has = g.targets(graph, p, q, problem.pixel_size)
+    p, q, h = g.field(problem)
+    t, has = g.targets(graph, p, q, h)
     t1 = time.perf_counter()
     z = g.solve_weighted(problem.domain, graph, g.edge_weights(has), t, backend)
     t2 = time.perf_counter()
@@ -48,4 +47,4 @@ def run(problem: Problem, *, backend: str = "auto") -> MethodResult:
         "edges_without_data": int((~has).sum()),
         "seconds": {"setup": t1 - t0, "solve": t2 - t1},
     }
-    return MethodResult(depth=-z, info=info)
+    return MethodResult(depth=g.to_depth(problem, z), info=info)

@@ -98,13 +98,11 @@ def run(
     max_iter = positive_int(max_iter, "max_iter")
     tol = number(tol, "tol", lambda v: v >= 0, "a number >= 0")
     g.check_backend(backend)
-    g.check_orthographic(problem, "regularization")
 
     t0 = time.perf_counter()
-    h = problem.pixel_size
     domain = problem.domain
     graph = g.build(domain)
-    p, q = problem.slopes
+    p, q, h = g.field(problem)
     t, has = g.targets(graph, p, q, h)
     w = g.edge_weights(has)
     L = g.laplacian(graph, w)
@@ -137,4 +135,4 @@ def run(
             slope = (z[graph.head] - z[graph.tail]) / h
         info.update(iterations=n_iter, converged=converged, changes=changes)
     info["seconds"] = {"solve": time.perf_counter() - t0}
-    return MethodResult(depth=-z, info=info)
+    return MethodResult(depth=g.to_depth(problem, z), info=info)
