@@ -2,11 +2,10 @@
 
 import numpy as np
 import pytest
+from test_perspective import rel_error, sphere_scene
 
 import facetlift
 from facetlift.methods import REGISTRY
-
-from test_perspective import rel_error, sphere_scene
 
 LOG_DEPTH = [name for name, info in REGISTRY.items() if info.perspective and name != "dgp"]
 
@@ -36,3 +35,28 @@ def test_diffusion_refuses_perspective():
     normals, mask, K, depth = sphere_scene(H=32, W=36, min_cos=0.3)
     with pytest.raises(ValueError, match="perspective"):
         facetlift.integrate(normals, mask, K=K, method="diffusion")
+
+
+def test_backfacing_is_judged_by_the_viewing_ray_in_perspective():
+    """Off-axis, a surface seen by the camera can have n_z < 0; one facing away cannot pass."""
+    K = np.array([[50.0, 0, 0.0], [0, 50.0, 0.0], [0, 0, 1]])  # wide angle, centre at (0, 0)
+    H, W = 6, 8
+    rr, cc = np.mgrid[0:H, 0:W]
+    from facetlift.perspective import rays
+
+    r = rays(K, (rr + 60).ravel(), (cc + 60).ravel())  # pretend far off-axis via big offset
+    K_off = K.copy()
+    K_off[0, 2] = -60.0
+    K_off[1, 2] = -60.0
+    # a normal toward the camera along the ray: OpenCV m = -r, facetlift n = (m_x, -m_y, -m_z)
+    m = -r / np.linalg.norm(r, axis=1, keepdims=True)
+    seen = (m * np.array([1.0, -1.0, -1.0])).reshape(H, W, 3)
+    tilt = seen.copy()
+    tilt[..., 2] -= 0.6  # n_z < 0 but still facing the camera
+    tilt /= np.linalg.norm(tilt, axis=-1, keepdims=True)
+    assert (tilt[..., 2] < 0).all()
+    facetlift.prepare(tilt, K=K_off)  # accepted
+    with pytest.raises(ValueError, match="facing away from the camera ray"):
+        facetlift.prepare(-seen, K=K_off)
+    with pytest.raises(ValueError, match=r"n_z <= 0"):
+        facetlift.prepare(tilt)  # orthographically, the same normals face away

@@ -303,7 +303,15 @@ def integrate(normals, mask, method, pixel_size, y_down, K, orthographic, backfa
                          + ("" if converged else " (not converged)"))
         parts.append(f"{t_integrate:.2f} s")
         click.echo(", ".join(parts))
-    if not converged:
+    if not converged and sinfo.get("solver") == "discontinuous":
+        # a fixed budget of reweightings by design: the surface is usable, say so and go on
+        click.echo(
+            f"note: the discontinuity reweighting used all {sinfo.get('iterations')} "
+            "iterations before its weights settled; more may sharpen long jumps "
+            "(--option discontinuity_iter=N)",
+            err=True,
+        )
+    elif not converged:
         raise SolverFailure(
             f"method {method!r} did not converge in {sinfo.get('iterations')} iterations "
             "(outputs were written); raise --max-iter or --tol"

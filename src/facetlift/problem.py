@@ -201,11 +201,21 @@ def prepare(
             f"`normals` has zero-length normals inside the mask at {_where(zero)}; "
             "use NaN (or the `known` mask) for missing samples"
         )
-    back = kn & (n[..., 2] <= 0)
+    Kmat = None if K is None else _check_K(K)
+    if Kmat is None:
+        back = kn & (n[..., 2] <= 0)
+        what = "n_z <= 0"
+    else:  # in a perspective view, facing away means facing away from the viewing ray
+        from .perspective import view_cosine
+
+        back = np.zeros_like(kn)
+        rr, cc = np.nonzero(kn)
+        back[rr, cc] = view_cosine(Kmat, rr, cc, n[rr, cc]) <= 0
+        what = "facing away from the camera ray"
     if back.any():
         if backfacing == "error":
             raise ValueError(
-                f"`normals` has back-facing normals (n_z <= 0) inside the mask at "
+                f"`normals` has back-facing normals ({what}) inside the mask at "
                 f"{_where(back)}; mask them out or pass backfacing='outlier'"
             )
         kn &= ~back
@@ -219,7 +229,6 @@ def prepare(
             "an isolated pixel has no neighbour to fix its depth: remove it from the mask "
             "(facetlift.clean_mask does this)"
         )
-    Kmat = None if K is None else _check_K(K)
     kf = kn[m]
     nf = n[m]
     with np.errstate(invalid="ignore", divide="ignore"):
