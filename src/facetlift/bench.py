@@ -755,6 +755,8 @@ class Bench:
         write_csv(self.out / "fig10.csv", rows)
         cols = ["data", "size", "pixels", "method", "status", "mean_deg", "max_deg", "seconds"]
         text = md_table([r for r in rows if r.get("method")], cols)
+        if not folders:
+            text = "No normal-map folders found (pass `extra_normal_maps` or a data folder).\n"
         _write_text(self.out / "fig10.md", text)
         for name, runs in panels:
             self._angle_figure(name, runs)
