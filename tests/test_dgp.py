@@ -569,7 +569,9 @@ def test_symmetries_commute_with_integration(op, missing):
     scale = np.nanmax(np.abs(a.depth))
     # missing samples can leave a facet hanging at one vertex, fixed only by flat_weight:
     # round-off there is amplified by ~1/flat_weight
-    tol = 1e-6 if missing else 1e-11
+    # without missing samples the default route is CG to a relative residual of 1e-11,
+    # whose iterates differ between mirrored problems by ~1e-10 of the depth scale
+    tol = 1e-6 if missing else 1e-9
     np.testing.assert_allclose(b.depth, image(a.depth), rtol=0, atol=tol * scale)
     np.testing.assert_allclose(b.vertex_depth, image(a.vertex_depth), rtol=0, atol=tol * scale)
 

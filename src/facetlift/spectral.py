@@ -42,19 +42,18 @@ class RectangleSolver:
         dr[[0, -1]] = 1.0
         dc = np.full(W + 1, 2.0)
         dc[[0, -1]] = 1.0
-        self._d = np.outer(dr, dc)
-        # dct1(dct1(x)) = 2m x along an axis of m+1 points
-        self._norm = 1.0 / (4.0 * H * W)
+        self._inv_d = 1.0 / np.outer(dr, dc)
+        # dct1(dct1(x)) = 2m x along an axis of m+1 points; V^{-1} y = D V D y / (2m) with
+        # dct1(y) = V D y, and V c = dct1(D^{-1} c): the D factors between the two transforms
+        # cancel, leaving one scaled gain
+        self._gain /= 4.0 * H * W
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         H, W = self.H, self.W
-        y = np.asarray(b, dtype=float).reshape(H + 1, W + 1) / self._d
-        # coefficients: V^{-1} y = D V D y / (2m) per axis, with dct1(y) = V D y
-        c = sfft.dctn(y, type=1, workers=self.workers) * self._d * self._norm
+        y = np.asarray(b, dtype=float).reshape(H + 1, W + 1) * self._inv_d
+        c = sfft.dctn(y, type=1, workers=self.workers, overwrite_x=True)
         c *= self._gain
-        # back: V c = dct1(D^{-1} c)
-        x = sfft.dctn(c / self._d, type=1, workers=self.workers)
-        return x.ravel()
+        return sfft.dctn(c, type=1, workers=self.workers, overwrite_x=True).ravel()
 
 
 def rectangle_solver(domain) -> RectangleSolver | None:

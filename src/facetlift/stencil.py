@@ -34,19 +34,25 @@ def facet_form(domain: Domain, terms) -> sp.csr_matrix:
         ``w`` is a scalar or (m,) per-facet weights, ``Q`` a symmetric (4, 4) block.
     """
     H, W = domain.shape
-    r, c = domain.pixels
     st = np.zeros((3, 3, H + 1, W + 1))
     weights = []
     for w, Q in terms:
-        img = np.zeros((H, W))
-        img[r, c] = w
+        if np.isscalar(w):
+            img = domain.mask * float(w)
+        else:
+            img = np.zeros((H, W))
+            img[domain.mask] = w
         weights.append((img, np.asarray(Q, dtype=float)))
+    cache = {}  # blocks like N have few distinct entries: build each coefficient image once
     for a, (ra, ca) in enumerate(CORNER_OFFSETS):
         for b, (rb, cb) in enumerate(CORNER_OFFSETS):
-            coef = sum(Q[a, b] * img for img, Q in weights if Q[a, b] != 0)
-            if np.isscalar(coef):
+            key = tuple(float(Q[a, b]) for _, Q in weights)
+            if not any(key):
                 continue
-            st[rb - ra + 1, cb - ca + 1, ra : ra + H, ca : ca + W] += coef
+            if key not in cache:
+                pairs = zip(key, weights, strict=True)
+                cache[key] = sum(k * img for k, (img, _) in pairs if k != 0)
+            st[rb - ra + 1, cb - ca + 1, ra : ra + H, ca : ca + W] += cache[key]
     return _stencil_to_csr(domain, st)
 
 
@@ -54,23 +60,21 @@ def _stencil_to_csr(domain: Domain, st: np.ndarray) -> sp.csr_matrix:
     vi = domain.vertex_index
     vm = domain.vertex_mask
     n = domain.n_vertices
-    padded = np.pad(vi, 1, constant_values=-1)
     Hv, Wv = vi.shape
-    cols = np.empty((n, 9), dtype=np.int64)
-    vals = np.empty((n, 9))
-    k = 0
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            cols[:, k] = padded[1 + di : 1 + di + Hv, 1 + dj : 1 + dj + Wv][vm]
-            vals[:, k] = st[di + 1, dj + 1][vm]
-            k += 1
-    keep = (cols >= 0) & ((vals != 0) | (np.arange(9) == 4))
+    idx = np.int32 if n < 2**31 - 1 else np.int64
+    padded = np.pad(vi.astype(idx), 1, constant_values=-1)
+    # rows of the 9-point stencil, neighbour offsets in lexicographic order so that the column
+    # indices of each row come out sorted
+    pos = np.flatnonzero(np.pad(vm, 1).ravel()).astype(np.int64)
+    offsets = np.array([di * (Wv + 2) + dj for di in (-1, 0, 1) for dj in (-1, 0, 1)])
+    cols = padded.ravel()[pos[:, None] + offsets]
+    vals = st.reshape(9, -1)[:, np.flatnonzero(vm.ravel())].T
+    keep = cols >= 0
+    keep &= vals != 0
+    keep[:, 4] = True  # the diagonal, even where zero
     indptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(keep.sum(axis=1), out=indptr[1:])
-    idx_dtype = np.int32 if cols.size < 2**31 else np.int64
-    return sp.csr_matrix(
-        (vals[keep], cols[keep].astype(idx_dtype), indptr.astype(idx_dtype)), shape=(n, n)
-    )
+    return sp.csr_matrix((vals[keep], cols[keep], indptr.astype(idx)), shape=(n, n))
 
 
 def scatter_corners(domain: Domain, values: np.ndarray) -> np.ndarray:
