@@ -21,6 +21,7 @@ import numpy as np
 
 from . import __version__
 from . import methods as _methods
+from .bench import bench_command
 from .linalg import SolverError
 
 log = logging.getLogger(__name__)
@@ -59,6 +60,7 @@ def cli(verbose):
       facetlift integrate normal_map.png --mask mask.png
       facetlift integrate data/bear/ -o bear_out --save exr --save ply
       facetlift methods
+      facetlift bench --quick -o bench_out
 
     Run 'facetlift COMMAND --help' for the options of a command.
     """
@@ -361,8 +363,8 @@ def methods(as_json):
 
 
 # --------------------------------------------------------------------------------------------
-# More subcommands: register them here, one line each, e.g.
-#     cli.add_command(bench_command)        # from .bench import bench_command (facetlift.bench)
+# More subcommands: register them here, one line each.
+cli.add_command(bench_command)  # facetlift bench: the paper's experiments (facetlift.bench)
 # --------------------------------------------------------------------------------------------
 
 
