@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .problem import numeric_array
+
 #: Decoded integer pixels whose vector length lies outside this range are not normals (NaN).
 ENCODED_LENGTH_RANGE = (0.5, 1.5)
 
@@ -383,12 +385,7 @@ def _write_png(path: Path, pixels: np.ndarray) -> None:
 
 
 def _image_array(a, name: str, ndim: int) -> np.ndarray:
-    try:
-        arr = np.asarray(a)
-    except Exception as e:
-        raise ValueError(f"`{name}` could not be read as an array: {e}") from None
-    if arr.dtype == object or arr.dtype.kind not in "biuf":
-        raise ValueError(f"`{name}` must be a real numeric array; got dtype {arr.dtype}")
+    arr = numeric_array(a, name)
     if arr.ndim != ndim or min(arr.shape[:2], default=0) < 1:
         want = "(H, W)" if ndim == 2 else "(H, W, 3)"
         raise ValueError(f"`{name}` must have shape {want}; got {arr.shape}")

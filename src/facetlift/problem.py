@@ -95,23 +95,24 @@ def gradients_from_normals(normals) -> tuple[np.ndarray, np.ndarray]:
         return -n[..., 0] / n[..., 2], -n[..., 1] / n[..., 2]
 
 
-def _float_array(a, name: str) -> np.ndarray:
+def numeric_array(a, name: str, what: str = "a real numeric array") -> np.ndarray:
+    """``np.asarray(a)`` if it is a real numeric (or boolean) array, else a ValueError naming
+    `name`. Shared by the input checks here and the writers in :mod:`facetlift.io`."""
     try:
         arr = np.asarray(a)
     except Exception as e:  # ragged lists and the like
         raise ValueError(f"`{name}` could not be read as an array: {e}") from None
     if arr.dtype == object or arr.dtype.kind not in "biuf":
-        raise ValueError(f"`{name}` must be a real numeric array; got dtype {arr.dtype}")
-    return arr.astype(float, copy=True)
+        raise ValueError(f"`{name}` must be {what}; got dtype {arr.dtype}")
+    return arr
+
+
+def _float_array(a, name: str) -> np.ndarray:
+    return numeric_array(a, name).astype(float, copy=True)
 
 
 def _bool_image(a, name: str, shape: tuple[int, int]) -> np.ndarray:
-    try:
-        arr = np.asarray(a)
-    except Exception as e:
-        raise ValueError(f"`{name}` could not be read as an array: {e}") from None
-    if arr.dtype == object or arr.dtype.kind not in "biuf":
-        raise ValueError(f"`{name}` must be a boolean or numeric array; got dtype {arr.dtype}")
+    arr = numeric_array(a, name, "a boolean or numeric array")
     if arr.shape != shape:
         raise ValueError(f"`{name}` must have shape {shape} to match `normals`; got {arr.shape}")
     if arr.dtype.kind == "f" and not np.isfinite(arr).all():
