@@ -329,6 +329,15 @@ def field(problem):
     return np.where(ok, du, np.nan), np.where(ok, -dv, np.nan), 1.0
 
 
+def setup(problem):
+    """The common start of every pixel-graph method: ``(domain, graph, t, has, h)`` with the
+    measured edge differences `t` and the edges `has` that carry data (:func:`targets`)."""
+    graph = build(problem.domain)
+    p, q, h = field(problem)
+    t, has = targets(graph, p, q, h)
+    return problem.domain, graph, t, has, h
+
+
 def to_depth(problem, z: np.ndarray) -> np.ndarray:
     """Depth (m,) from the graph's unknown: ``-z`` (orthographic height) or ``exp(z)`` with each
     component's median depth 1 (perspective log-depth, defined up to scale)."""

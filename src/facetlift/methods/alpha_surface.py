@@ -142,10 +142,7 @@ def run(
     g.check_backend(backend)
 
     t0 = time.perf_counter()
-    domain = problem.domain
-    graph = g.build(domain)
-    p, q, h = g.field(problem)
-    t, has = g.targets(graph, p, q, h)
+    domain, graph, t, has, h = g.setup(problem)
     score, loop_curl = edge_scores(graph, t, has, h)
     if alpha is None:
         alpha = 3.0 * float(np.std(loop_curl)) / 2.0 if loop_curl.size else 0.0

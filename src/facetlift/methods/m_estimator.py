@@ -114,10 +114,7 @@ def run(
     g.check_backend(backend)
 
     t0 = time.perf_counter()
-    domain = problem.domain
-    graph = g.build(domain)
-    p, q, h = g.field(problem)
-    t, has = g.targets(graph, p, q, h)
+    domain, graph, t, has, h = g.setup(problem)
     floor = 1e-12 * max(float(np.median(np.abs(t[has]))) / h if has.any() else 0.0, 1.0)
     z = g.solve_weighted(domain, graph, g.edge_weights(has), t, backend)
     changes = []

@@ -34,9 +34,7 @@ def run(problem: Problem, *, backend: str = "auto") -> MethodResult:
     """Integrate `problem` by least squares on the pixel graph; depth (m,) at pixel centres."""
     g.check_backend(backend)
     t0 = time.perf_counter()
-    graph = g.build(problem.domain)
-    p, q, h = g.field(problem)
-    t, has = g.targets(graph, p, q, h)
+    _, graph, t, has, _ = g.setup(problem)
     t1 = time.perf_counter()
     z = g.solve_weighted(problem.domain, graph, g.edge_weights(has), t, backend)
     t2 = time.perf_counter()

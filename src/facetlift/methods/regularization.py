@@ -100,10 +100,7 @@ def run(
     g.check_backend(backend)
 
     t0 = time.perf_counter()
-    domain = problem.domain
-    graph = g.build(domain)
-    p, q, h = g.field(problem)
-    t, has = g.targets(graph, p, q, h)
+    domain, graph, t, has, h = g.setup(problem)
     w = g.edge_weights(has)
     L = g.laplacian(graph, w)
     rhs = g.divergence(graph, w * t)
