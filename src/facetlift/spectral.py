@@ -56,13 +56,6 @@ class RectangleSolver:
         return sfft.dctn(c, type=1, workers=self.workers, overwrite_x=True).ravel()
 
 
-def rectangle_solver(domain) -> RectangleSolver | None:
-    """A :class:`RectangleSolver` when `domain` is a full rectangle, else None."""
-    if domain.mask.all():
-        return RectangleSolver(*domain.shape)
-    return None
-
-
 class BoxPreconditioner:
     """Preconditioner for facet operators on any mask: the exact rectangle pseudo-inverse on
     the domain's bounding box, restricted to the domain's vertices.
