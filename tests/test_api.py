@@ -177,7 +177,9 @@ def test_surface_from_facet_depths_only(fake_method):
     box["result"] = result
     s = facetlift.integrate(np.dstack([np.zeros((6, 9, 2)), np.ones((6, 9))]), mask,
                             method="fake")
-    d = box["problem"].domain
+    # the method saw the mask's bounding box (api.crop); same facets, same order
+    assert box["problem"].domain.n_facets == int(mask.sum())
+    d = facetlift.prepare(np.dstack([np.zeros((6, 9, 2)), np.ones((6, 9))]), mask).domain
     for k in range(d.n_components):
         part = d.facet_component == k
         np.testing.assert_allclose(s.depth[d.pixels][part],
@@ -221,3 +223,29 @@ def test_perspective_depths_are_not_shifted(fake_method):
                             method="fake")
     assert np.all(s.depth == 7.0) and np.all(s.vertex_depth == 7.0)
     assert s.K is not None and np.allclose(s.K, K)
+
+
+def test_methods_see_the_mask_bounding_box_and_results_land_in_place():
+    """Integration runs on the mask's bounding box; the Surface is full-size and equal to
+    integrating the cropped input, for orthographic and perspective (shifted K) input."""
+    H, W = 40, 50
+    rr, cc = np.mgrid[0:H, 0:W]
+    mask = (rr - 22) ** 2 + (cc - 30) ** 2 < 100
+    p = 0.01 * (cc - 30.0)
+    q = -0.02 * (rr - 22.0)
+    normals = facetlift.normals_from_gradients(p, q)
+    full = facetlift.integrate(normals, mask)
+    r0, c0 = 13, 21
+    sub = facetlift.integrate(normals[r0:32, c0:40], mask[r0:32, c0:40])
+    assert full.depth.shape == (H, W) and np.isnan(full.depth[~mask]).all()
+    np.testing.assert_allclose(full.depth[r0:32, c0:40], sub.depth, atol=1e-10)
+    np.testing.assert_allclose(full.vertex_depth[r0:33, c0:41], sub.vertex_depth, atol=1e-10)
+    K = np.array([[80.0, 0, 24.5], [0, 80.0, 19.5], [0, 0, 1]])
+    Ks = K.copy()
+    Ks[0, 2] -= c0
+    Ks[1, 2] -= r0
+    a = facetlift.integrate(normals, mask, K=K)
+    b = facetlift.integrate(normals[r0:32, c0:40], mask[r0:32, c0:40], K=Ks)
+    np.testing.assert_allclose(a.depth[r0:32, c0:40], b.depth, rtol=1e-10)
+    np.testing.assert_array_equal(a.K, K)
+    np.testing.assert_allclose(a.points(), b.points(), rtol=1e-10)

@@ -8,6 +8,7 @@ import time
 import numpy as np
 
 from . import methods
+from .domain import Domain
 from .problem import Problem, prepare
 from .surface import Surface
 
@@ -86,9 +87,10 @@ def solve(problem: Problem, method: str = "dgp", *, info=None, t0=None, **option
     if problem.perspective and not info.perspective:
         raise ValueError(f"method {method!r} does not support perspective input (`K`)")
     t1 = time.perf_counter()
-    result = info.run(problem, **options)
+    cropped, offset = crop(problem)
+    result = info.run(cropped, **options)
     t2 = time.perf_counter()
-    surface = make_surface(problem, result)
+    surface = uncrop(make_surface(cropped, result), problem, offset)
     out = dict(result.info)
     out["method"] = method
     seconds = dict(out.get("seconds", {}))
@@ -99,6 +101,54 @@ def solve(problem: Problem, method: str = "dgp", *, info=None, t0=None, **option
     surface.info = out
     log.info("%s: %s", method, {k: v for k, v in out.items() if k != "deviation"})
     return surface
+
+
+def crop(problem: Problem) -> tuple[Problem, tuple[int, int]]:
+    """The same problem on the bounding box of its mask, and the box's (row, col) offset.
+
+    Methods then work on arrays the size of the object, not of the image (a small object in
+    a large photo). Facet order (row-major) is unchanged; a perspective ``K`` gets its
+    principal point shifted so that every pixel keeps its viewing ray.
+    """
+    mask = problem.domain.mask
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    if (r1 - r0, c1 - c0) == mask.shape:
+        return problem, (0, 0)
+    K = None
+    if problem.K is not None:
+        K = problem.K.copy()
+        K[0, 2] -= c0
+        K[1, 2] -= r0
+    sub = Problem(
+        domain=Domain.from_mask(mask[r0:r1, c0:c1]),
+        normals=problem.normals,
+        known=problem.known,
+        pixel_size=problem.pixel_size,
+        K=K,
+    )
+    return sub, (int(r0), int(c0))
+
+
+def uncrop(surface: Surface, problem: Problem, offset: tuple[int, int]) -> Surface:
+    """Place a surface computed by :func:`crop`'s sub-problem back into the full image."""
+    if offset == (0, 0) and surface.shape == problem.domain.shape:
+        return surface
+    r0, c0 = offset
+    H, W = problem.domain.shape
+    h, w = surface.shape
+    depth = np.full((H, W), np.nan)
+    depth[r0 : r0 + h, c0 : c0 + w] = surface.depth
+    vdepth = np.full((H + 1, W + 1), np.nan)
+    vdepth[r0 : r0 + h + 1, c0 : c0 + w + 1] = surface.vertex_depth
+    return Surface(
+        depth=depth,
+        vertex_depth=vdepth,
+        mask=problem.domain.mask.copy(),
+        pixel_size=problem.pixel_size,
+        K=problem.K,
+    )
 
 
 def make_surface(problem: Problem, result: methods.MethodResult) -> Surface:
