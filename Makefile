@@ -25,8 +25,8 @@ demo: $(STAMP)
 test: $(TEST_STAMP)
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
-test-slow: $(TEST_STAMP)
-	$(BIN)/python -m pytest -q -m slow
+test-slow: $(TEST_STAMP)  # tests marked slow (none today); pytest exits 5 when none ran
+	$(BIN)/python -m pytest -q -m slow || [ $$? -eq 5 ]
 
 lint: $(TEST_STAMP)
 	$(BIN)/ruff check src tests benchmarks examples
