@@ -60,6 +60,7 @@ import numpy as np
 import scipy.ndimage as ndi
 import scipy.sparse as sp
 
+from ..options import number
 from ..problem import Problem
 from . import MethodResult
 from . import _graph as g
@@ -154,16 +155,9 @@ def run(
     backend: str = "auto",
 ) -> MethodResult:
     """Integrate `problem` with an anisotropic diffusion tensor; depth (m,) at pixel centres."""
-    for name, val, ok in (
-        ("sigma", sigma, lambda v: v >= 0),
-        ("contrast", contrast, lambda v: v > 0),
-        ("beta", beta, lambda v: 0 < v <= 1),
-    ):
-        if isinstance(val, bool) or not isinstance(val, (int, float)) or not (
-            np.isfinite(val) and ok(val)
-        ):
-            want = {"sigma": ">= 0", "contrast": "> 0", "beta": "in (0, 1]"}[name]
-            raise ValueError(f"`{name}` must be a finite number {want}; got {val!r}")
+    sigma = number(sigma, "sigma", lambda v: v >= 0, "a finite number >= 0")
+    contrast = number(contrast, "contrast", lambda v: v > 0, "a finite number > 0")
+    beta = number(beta, "beta", lambda v: 0 < v <= 1, "a finite number in (0, 1]")
     g.check_backend(backend)
     g.check_orthographic(problem, "diffusion")
 

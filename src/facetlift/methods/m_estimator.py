@@ -99,16 +99,9 @@ def run(
     """Integrate `problem` with a robust M-estimator (IRLS); depth (m,) at pixel centres."""
     if weight not in WEIGHTS:
         raise ValueError(f"`weight` must be one of {sorted(WEIGHTS)}; got {weight!r}")
-    k = WEIGHTS[weight] if k is None else k
-    if isinstance(k, bool) or not isinstance(k, (int, float)) or not (np.isfinite(k) and k > 0):
-        raise ValueError(f"`k` must be a positive number; got {k!r}")
-    if isinstance(scale, str):
-        if scale != "mad":
-            raise ValueError(f"`scale` must be a positive number or 'mad'; got {scale!r}")
-    elif isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (
-        np.isfinite(scale) and scale > 0
-    ):
-        raise ValueError(f"`scale` must be a positive number or 'mad'; got {scale!r}")
+    k = number(WEIGHTS[weight] if k is None else k, "k", lambda v: v > 0, "a positive number")
+    if not (isinstance(scale, str) and scale == "mad"):
+        scale = number(scale, "scale", lambda v: v > 0, "a positive number or 'mad'")
     max_iter = positive_int(max_iter, "max_iter")
     tol = number(tol, "tol", lambda v: v >= 0, "a number >= 0")
     g.check_backend(backend)

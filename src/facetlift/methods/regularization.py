@@ -90,11 +90,9 @@ def run(
     """Integrate `problem` with a smoothness prior; depth (m,) at pixel centres."""
     if prior not in PRIORS:
         raise ValueError(f"`prior` must be one of {sorted(PRIORS)}; got {prior!r}")
-    lam = PRIORS[prior] if lam is None else lam
-    if isinstance(lam, bool) or not isinstance(lam, (int, float)) or not (
-        np.isfinite(lam) and lam >= 0
-    ):
-        raise ValueError(f"`lam` must be a finite number >= 0; got {lam!r}")
+    lam = number(
+        PRIORS[prior] if lam is None else lam, "lam", lambda v: v >= 0, "a finite number >= 0"
+    )
     max_iter = positive_int(max_iter, "max_iter")
     tol = number(tol, "tol", lambda v: v >= 0, "a number >= 0")
     g.check_backend(backend)
