@@ -12,6 +12,7 @@ import pytest
 import facetlift
 from facetlift import methods
 from facetlift.methods import MethodInfo, MethodResult
+from facetlift.options import Option
 
 EIGHT = {"dgp", "frankot_chellappa", "poisson", "alpha_surface", "m_estimator",
          "regularization", "diffusion", "kernel"}
@@ -27,10 +28,12 @@ def fake_method(monkeypatch):
         box["calls"] += 1
         box["problem"], box["options"] = problem, {"scale": scale, "flag": flag}
         return box["result"](problem) if callable(box.get("result")) else MethodResult(
-            depth=np.zeros(problem.domain.n_facets), info={"iterations": 0})
+            values=np.zeros(problem.domain.n_facets), info={"iterations": 0})
 
     module = types.ModuleType("facetlift.methods._fake")
     module.run = run
+    module.OPTIONS = (Option("scale", 1.0, "a number", low=0.0),
+                      Option("flag", False, "a switch", kind="bool"))
     monkeypatch.setitem(sys.modules, "facetlift.methods._fake", module)
 
     def register(**caps):
@@ -48,7 +51,8 @@ def test_registry_lists_the_eight_methods():
         assert info.name == name and info.summary and info.reference
     dgp = methods.get("dgp")
     assert dgp.masks and dgp.missing
-    assert {"solver", "tol", "max_iter", "mean_subtraction", "outlier_eps"} <= set(dgp.options())
+    opts = set(dgp.options())
+    assert {"solver", "tol", "max_iter", "mean_subtraction", "discontinuities"} <= opts
     assert dgp.options()["solver"] == "direct"
 
 
@@ -172,7 +176,7 @@ def test_surface_from_facet_depths_only(fake_method):
 
     def result(problem):
         raw["d"] = rng.normal(size=problem.domain.n_facets) + 10 * problem.domain.facet_component
-        return MethodResult(depth=raw["d"].copy())
+        return MethodResult(values=-raw["d"])  # heights
 
     box["result"] = result
     s = facetlift.integrate(np.dstack([np.zeros((6, 9, 2)), np.ones((6, 9))]), mask,
@@ -201,7 +205,7 @@ def test_surface_from_vertex_depths_only(fake_method):
 
     def result(problem):
         raw["v"] = rng.normal(size=problem.domain.n_vertices) + 3.0
-        return MethodResult(vertex_depth=raw["v"].copy())
+        return MethodResult(vertex_values=-raw["v"])  # heights
 
     box["result"] = result
     s = facetlift.integrate(np.dstack([np.zeros((4, 5, 2)), np.ones((4, 5))]), mask,
@@ -213,16 +217,23 @@ def test_surface_from_vertex_depths_only(fake_method):
     np.testing.assert_allclose(s.vertex_depth, v - shift, atol=1e-12)
 
 
-def test_perspective_depths_are_not_shifted(fake_method):
+def test_perspective_values_are_log_depth_with_median_one(fake_method):
     box = fake_method(perspective=True)
-    box["result"] = lambda problem: MethodResult(
-        depth=np.full(problem.domain.n_facets, 7.0),
-        vertex_depth=np.full(problem.domain.n_vertices, 7.0))
+    logd = np.log([1.0, 2.0, 4.0, 8.0, 16.0] * 3 + [1.0])
+    box["result"] = lambda problem: MethodResult(values=logd + 7.0)
     K = [[100.0, 0.0, 2.0], [0.0, 100.0, 2.0], [0.0, 0.0, 1.0]]
     s = facetlift.integrate(np.dstack([np.zeros((4, 4, 2)), np.ones((4, 4))]), K=K,
                             method="fake")
-    assert np.all(s.depth == 7.0) and np.all(s.vertex_depth == 7.0)
+    np.testing.assert_allclose(s.depth.ravel(), np.exp(logd) / 4.0)  # median 4 -> 1
+    assert np.isclose(np.median(s.depth), 1.0)
     assert s.K is not None and np.allclose(s.K, K)
+
+
+def test_non_finite_method_values_are_a_solver_error(fake_method):
+    box = fake_method()
+    box["result"] = lambda problem: MethodResult(values=np.full(problem.domain.n_facets, np.nan))
+    with pytest.raises(facetlift.SolverError, match="non-finite depth at 16 of 16 pixels"):
+        facetlift.integrate(np.dstack([np.zeros((4, 4, 2)), np.ones((4, 4))]), method="fake")
 
 
 def test_methods_see_the_mask_bounding_box_and_results_land_in_place():

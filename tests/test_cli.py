@@ -100,7 +100,8 @@ def test_options_are_forwarded(tmp_path, capsys, monkeypatch):
                        "--option", "name=plain", "--backend", "superlu", "--y-down")
     assert code == 1 and "spy stops here" in err
     np.testing.assert_array_equal(seen.pop("K"), K)
-    assert seen == {"method": "dgp", "pixel_size": 1.0, "backfacing": "error", "max_iter": 7,
+    assert seen == {"method": "dgp", "pixel_size": 1.0, "backfacing": "missing", "max_iter": 7,
+                    "outlier_eps": None,
                     "flat_weight": 1e-6, "mean_subtraction": False, "name": "plain",
                     "backend": "superlu"}
 
@@ -161,7 +162,8 @@ def _one_line_error(err):
         (lambda t, n, m: [n, "--option", "nope=1"], r"unknown option\(s\) \['nope'\]"),
         (lambda t, n, m: [n, "--option", "novalue"], "expected KEY=VALUE"),
         (lambda t, n, m: [n, "--bogus"], "No such option"),
-        (lambda t, n, m: [n, "--solver", "magic"], "Invalid value for '--solver'"),
+        (lambda t, n, m: [n, "--solver", "magic"],
+         "`solver` must be one of 'direct', 'iterative'; got 'magic'"),
         (lambda t, n, m: [n, "--pixel-size", "-1"], "`pixel_size` must be a positive"),
         (lambda t, n, m: [n, "-s", "jpg"], "Invalid value for '-s'"),
     ],
@@ -188,16 +190,17 @@ def test_mask_of_other_size_exits_1(tmp_path, capsys):
     assert not (tmp_path / "normal_map_facetlift").exists()
 
 
-def test_backfacing_exits_1_or_outlier(tmp_path, capsys):
+def test_backfacing_is_a_warning_or_on_request_an_error(tmp_path, capsys):
     n = np.zeros((6, 6, 3))
     n[..., 2] = 1
     n[2, 2] = (0.6, 0, -0.8)
     io.write_normals(tmp_path / "n.npy", n)
     code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "a")
-    assert code == 1 and "back-facing" in err and "--backfacing outlier" in _one_line_error(err)
-    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "b",
-                       "--backfacing", "outlier")
     assert code == 0, err
+    assert "facetlift: warning:" in err and "1 back-facing" in err and "(row 2, col 2)" in err
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "b",
+                       "--backfacing", "error")
+    assert code == 1 and "back-facing" in err and "--backfacing missing" in _one_line_error(err)
 
 
 def test_solver_error_exits_2(tmp_path, capsys, monkeypatch):
@@ -234,7 +237,7 @@ def test_progress_bar_on_stderr(tmp_path, capsys, monkeypatch, flag, solver, sho
 
     @functools.wraps(real)  # keeps the option signature that integrate() checks against
     def spy(problem, **kw):
-        if "progress" in kw:
+        if kw.get("progress") is not None:
             bar_update = kw["progress"]
 
             def progress(it, dev):

@@ -335,9 +335,10 @@ def test_outliers_are_missing_samples(wave, solver):
     bad = missing_mask(shape, 0.1, 4)
     steep = normals.copy()
     steep[bad] = tilted(shape, 87.0, 5)[bad]
-    a = facetlift.integrate(steep, pixel_size=h, solver=solver, tol=1e-8)
+    tol = {"tol": 1e-8} if solver == "iterative" else {}
+    a = facetlift.integrate(steep, pixel_size=h, solver=solver, **tol)
     b = facetlift.integrate(with_missing(normals, bad), np.ones(shape, bool), pixel_size=h,
-                            solver=solver, tol=1e-8)
+                            solver=solver, **tol)
     assert a.info["outliers"] == bad.sum() and a.info["missing"] == 0
     assert b.info["outliers"] == 0 and b.info["missing"] == bad.sum()
     np.testing.assert_allclose(a.depth, b.depth, rtol=0, atol=1e-12)
@@ -597,7 +598,7 @@ def test_linear_in_gradients_and_scales_with_pixel_size():
 def test_backends_agree(wave, backend, solver):
     shape, h, origin = square(24)
     normals = with_missing(wave.normals(shape, h, origin), missing_mask(shape, 0.3, 17))
-    kw = dict(pixel_size=h, solver=solver, tol=1e-9)
+    kw = dict(pixel_size=h, solver=solver, **({"tol": 1e-9} if solver == "iterative" else {}))
     ref = facetlift.integrate(normals, np.ones(shape, bool), backend="superlu", **kw)
     s = facetlift.integrate(normals, np.ones(shape, bool), backend=backend, **kw)
     span = np.nanmax(ref.depth) - np.nanmin(ref.depth)
@@ -612,13 +613,17 @@ def test_backends_agree(wave, backend, solver):
     "options, match",
     [
         ({"solver": "foo"}, r"`solver` must be one of .*'direct'.*got 'foo'"),
-        ({"max_iter": 0}, "`max_iter` must be a positive integer; got 0"),
-        ({"max_iter": 2.5}, "`max_iter` must be a positive integer; got 2.5"),
-        ({"tol": -1}, r"`tol` must be >= 0; got -1"),
-        ({"tol": float("nan")}, r"`tol` must be >= 0; got nan"),
-        ({"outlier_eps": 2}, r"`outlier_eps` must be in \[0, 1\); got 2"),
-        ({"outlier_eps": -0.1}, r"`outlier_eps` must be in \[0, 1\); got -0.1"),
-        ({"flat_weight": 0}, "`flat_weight` must be > 0; got 0"),
+        ({"max_iter": 0, "solver": "iterative"}, "`max_iter` must be an integer >= 1; got 0"),
+        ({"max_iter": 2.5, "solver": "iterative"}, "`max_iter` must be an integer >= 1; got 2.5"),
+        ({"tol": -1, "solver": "iterative"}, r"`tol` must be a number >= 0; got -1"),
+        ({"tol": float("nan"), "solver": "iterative"}, r"`tol` must be a number >= 0; got nan"),
+        ({"tol": 1e-3}, r"`tol` applies only with solver='iterative'"),
+        ({"outlier_eps": 2}, r"`outlier_eps` must be a number >= 0 and < 1; got 2"),
+        ({"outlier_eps": -0.1}, r"`outlier_eps` must be a number >= 0 and < 1; got -0.1"),
+        ({"flat_weight": 0}, "`flat_weight` must be a number > 0; got 0"),
+        ({"discontinuity_k": 0.5}, "`discontinuity_k` applies only with discontinuities=True"),
+        ({"discontinuities": True, "solver": "iterative"},
+         "`discontinuities` applies only with solver='direct'"),
         ({"backend": "foo"}, r"`backend` must be one of .*got 'foo'"),
         ({"backend": "foo", "solver": "iterative"}, r"`backend` must be one of .*got 'foo'"),
     ],
@@ -631,14 +636,14 @@ def test_bad_options(saddle, options, match):
 @pytest.mark.parametrize(
     "options, match",
     [
-        ({"tol": "a"}, "`tol` must be"),
-        ({"tol": None}, "`tol` must be"),
-        ({"max_iter": "a"}, "`max_iter` must be a positive integer"),
-        ({"max_iter": None}, "`max_iter` must be a positive integer"),
-        ({"max_iter": float("inf")}, "`max_iter` must be a positive integer"),
-        ({"outlier_eps": "x"}, "`outlier_eps` must be in"),
-        ({"flat_weight": "x"}, "`flat_weight` must be > 0"),
-        ({"progress": 3, "solver": "iterative"}, "`progress` must be callable"),
+        ({"tol": "a", "solver": "iterative"}, "`tol` must be"),
+        ({"tol": None, "solver": "iterative"}, "`tol` must be"),
+        ({"max_iter": "a", "solver": "iterative"}, "`max_iter` must be an integer >= 1"),
+        ({"max_iter": None, "solver": "iterative"}, "`max_iter` must be an integer >= 1"),
+        ({"max_iter": float("inf"), "solver": "iterative"}, "`max_iter` must be an integer"),
+        ({"outlier_eps": "x"}, "`outlier_eps` must be a number"),
+        ({"flat_weight": "x"}, "`flat_weight` must be a number > 0"),
+        ({"progress": 3, "solver": "iterative"}, "`progress` must be a callable or None"),
     ],
 )
 def test_bad_option_types(saddle, options, match):

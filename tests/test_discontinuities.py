@@ -7,11 +7,11 @@ import pytest
 from test_perspective import rel_error, sphere_scene
 
 import facetlift
-from facetlift.methods import _discontinuity as disc
 from facetlift.methods import dgp
+from facetlift.methods.dgp import discontinuous as disc
+from facetlift.operators.stencil import E_TWIST, E_X, E_Y, facet_form
 from facetlift.perspective import rays
 from facetlift.problem import prepare
-from facetlift.stencil import E_TWIST, E_X, E_Y, facet_form
 
 
 def scissor_ortho(H=64, W=72, slopes=((0.1, 1.0), (-0.15, -0.8))):

@@ -1,4 +1,4 @@
-"""Sparse SPD solver backends agree with each other and fail loudly."""
+"""The solver layer: backends agree, the choice of backend is one policy, CG reports (x, info)."""
 
 import numpy as np
 import pytest
@@ -15,23 +15,28 @@ def _spd(n=400, seed=0):
     return K, rng.standard_normal(n)
 
 
+def _jacobi(K):
+    d = K.diagonal()
+    return lambda r: r / d
+
+
 @pytest.mark.parametrize("backend", linalg.available_backends())
 def test_backends_agree(backend):
     K, b = _spd()
     ref = np.linalg.solve(K.toarray(), b)
-    if backend == "pcg":
-        d = K.diagonal()
-        x = linalg.solve(K, b, backend, preconditioner=lambda r: r / d)
-    else:
-        x = linalg.solve(K, b, backend)
+    pre = _jacobi(K) if backend == "pcg" else None
+    x, info = linalg.solve(K, b, backend, preconditioner=pre)
+    assert info.backend == backend
     assert np.allclose(x, ref, rtol=1e-8, atol=1e-9)
+    if backend in ("pcg", "amg"):
+        assert info.iterations > 0
 
 
 @pytest.mark.parametrize("backend", linalg.available_backends())
 def test_factor_reuse(backend):
     K, b = _spd()
-    d = K.diagonal()
-    f = linalg.factorize(K, backend, preconditioner=lambda r: r / d)
+    f = linalg.factorize(K, backend, preconditioner=_jacobi(K))
+    assert f.backend == backend
     for k in range(3):
         rhs = b * (k + 1)
         assert np.allclose(K @ f.solve(rhs), rhs, atol=1e-7)
@@ -41,6 +46,8 @@ def test_unknown_backend_is_named():
     K, b = _spd(10)
     with pytest.raises(ValueError, match="`backend` must be one of"):
         linalg.solve(K, b, "cholmod-please")
+    with pytest.raises(ValueError, match="`backend` must be one of"):
+        linalg.choose(10, 3)
 
 
 def test_pcg_needs_preconditioner():
@@ -51,13 +58,13 @@ def test_pcg_needs_preconditioner():
         linalg.factorize(K, "pcg")
 
 
-def test_pcg_factor_warm_starts():
+def test_pcg_factor_warm_starts_and_reports_its_own_iterations():
     K, b = _spd()
-    d = K.diagonal()
-    f = linalg.factorize(K, "pcg", preconditioner=lambda r: r / d)
+    f = linalg.factorize(K, "pcg", preconditioner=_jacobi(K))
     x1 = f.solve(b)
+    first = f.info.iterations
     f.solve(b)
-    assert linalg.pcg.last_iterations <= 1
+    assert first > 1 and f.info.iterations <= 1  # state lives in the factor, not a global
     assert np.allclose(K @ x1, b, atol=1e-8)
 
 
@@ -68,6 +75,47 @@ def test_singular_matrix_raises_solver_error():
 
 
 def test_pcg_non_convergence_raises():
-    K, b = _spd(200)
-    with pytest.raises(SolverError, match="did not converge"):
-        linalg.pcg(K, b, lambda r: r, rtol=1e-14, maxiter=1)
+    n = 6000  # a long path Laplacian: plain CG needs ~n iterations, more than the 2000 allowed
+    K = sp.diags([-np.ones(n - 1), np.full(n, 2.0), -np.ones(n - 1)], [-1, 0, 1], format="csr")
+    b = np.random.default_rng(0).standard_normal(n)
+    with pytest.raises(SolverError, match="did not converge in 2000 iterations"):
+        linalg.solve(K, b, "pcg", preconditioner=lambda r: r, rtol=1e-12)
+
+
+def test_cg_returns_x_and_info_with_residual_history():
+    K, b = _spd(300, seed=3)
+    x, info = linalg.cg(K, b, _jacobi(K), rtol=1e-10)
+    assert info.converged and not info.breakdown
+    assert len(info.residuals) == info.iterations + 1
+    assert info.residuals[0] == pytest.approx(1.0)
+    assert info.residuals[-1] <= 1e-10
+    assert np.linalg.norm(K @ x - b) <= 1.01e-10 * np.linalg.norm(b)
+    # the reported residuals are the true ones
+    assert info.relative_residual == pytest.approx(
+        np.linalg.norm(K @ x - b) / np.linalg.norm(b), rel=1e-3, abs=1e-13
+    )
+
+
+def test_cg_stops_at_maxiter_without_raising():
+    K, b = _spd(300, seed=3)
+    x, info = linalg.cg(K, b, maxiter=2, rtol=1e-14)
+    assert info.iterations == 2 and not info.converged and len(info.residuals) == 3
+    x0 = np.ones_like(b)
+    _, info0 = linalg.cg(K, b, x0=x0, maxiter=0)
+    assert info0.residuals[0] == pytest.approx(np.linalg.norm(b - K @ x0) / np.linalg.norm(b))
+    _, z = linalg.cg(K, np.zeros_like(b))
+    assert z.converged and z.iterations == 0
+
+
+def test_choose_is_one_policy():
+    pardiso = linalg.direct.pardiso_available()
+    big = linalg.LARGE + 1
+    # a trusted preconditioner wins at every size; an untrusted one only where factorizing
+    # is too costly and PARDISO is absent
+    assert linalg.choose(10, preconditioner=True, trusted=True) == "pcg"
+    assert linalg.choose(10, preconditioner=True) == ("pardiso" if pardiso else "superlu")
+    assert linalg.choose(big, preconditioner=True) == ("pardiso" if pardiso else "pcg")
+    assert linalg.choose(big) == ("pardiso" if pardiso else "amg")
+    assert linalg.choose(big, multigrid=False) == ("pardiso" if pardiso else "superlu")
+    for name in linalg.available_backends():
+        assert linalg.choose(10, name) == name

@@ -3,8 +3,9 @@
 import numpy as np
 
 from facetlift.domain import Domain
-from facetlift.methods.dgp import facet_slopes, local_shaping
-from facetlift.stencil import grid_scatter, grid_slopes, scatter_corners
+from facetlift.methods.dgp.common import facet_slopes
+from facetlift.methods.dgp.loop import local_shaping
+from facetlift.operators.stencil import grid_scatter, grid_slopes, scatter_corners
 
 
 def _setup(seed=0):

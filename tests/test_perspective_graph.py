@@ -55,8 +55,8 @@ def test_backfacing_is_judged_by_the_viewing_ray_in_perspective():
     tilt[..., 2] -= 0.6  # n_z < 0 but still facing the camera
     tilt /= np.linalg.norm(tilt, axis=-1, keepdims=True)
     assert (tilt[..., 2] < 0).all()
-    facetlift.prepare(tilt, K=K_off)  # accepted
-    with pytest.raises(ValueError, match="facing away from the camera ray"):
-        facetlift.prepare(-seen, K=K_off)
-    with pytest.raises(ValueError, match=r"n_z <= 0"):
-        facetlift.prepare(tilt)  # orthographically, the same normals face away
+    assert facetlift.prepare(tilt, K=K_off).usable.all()  # accepted
+    with pytest.raises(ValueError, match="facing away from the camera"):
+        facetlift.prepare(-seen, K=K_off, backfacing="error")
+    with pytest.raises(ValueError, match="facing away from the camera"):
+        facetlift.prepare(tilt, backfacing="error")  # orthographically the same normals do

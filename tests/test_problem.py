@@ -74,14 +74,51 @@ def test_prepare_missing_samples_and_known():
     assert np.array_equal(prob2.known, prob.known)
 
 
-def test_backfacing_outlier_makes_missing_samples():
+@pytest.mark.parametrize("backfacing", ["missing", "outlier"])
+def test_backfacing_normals_become_missing_samples(backfacing):
     n = up((4, 5))
     n[2, 3] = [0.3, 0.0, -1.0]
     n[1, 1] = [1.0, 0.0, 0.0]  # n_z == 0 is back-facing too
-    prob = facetlift.prepare(n, backfacing="outlier")
-    assert (~prob.known).sum() == 2
+    with pytest.warns(UserWarning, match=r"2 normal\(s\) inside the mask cannot be used .*"
+                      r"2 back-facing.*first at \(row 1, col 1\)"):
+        prob = facetlift.prepare(n, backfacing=backfacing)
+    assert (~prob.known).sum() == 2 and (~prob.usable).sum() == 2
+    assert prob.counts["back-facing"] == 2 and prob.counts["first_unusable"] == [1, 1]
     k = prob.domain.to_image(prob.known.astype(float))
     assert k[2, 3] == 0 and k[1, 1] == 0
+
+
+def test_bad_normals_inside_the_mask_become_missing_samples_counted_once():
+    n = up((6, 7))
+    n[0, 1] = [np.inf, 0.0, 1.0]
+    n[2, 2] = 0.0
+    n[3, 3] = [0.0, 0.999, 0.01]  # grazing: n_z below cos 85 deg
+    n[4, 4] = np.nan  # a deliberately missing sample: no warning for it
+    n[5, 6] = [0.0, 1e200, 1e200]  # huge but a fine normal
+    with pytest.warns(UserWarning) as record:
+        prob = facetlift.prepare(n, np.ones((6, 7), bool))
+    assert len(record) == 1
+    msg = str(record[0].message)
+    assert "3 normal(s)" in msg and "1 non-finite" in msg and "1 zero-length" in msg
+    assert "1 grazing" in msg and "first at (row 0, col 1)" in msg
+    c = prob.counts
+    assert (c["non-finite"], c["zero-length"], c["grazing"], c["missing"]) == (1, 1, 1, 1)
+    assert c["usable"] == 42 - 4 and prob.usable.sum() == 38
+    assert prob.known.sum() == 39  # the grazing normal is known, but not usable
+    np.testing.assert_allclose(prob.normals[-1], [0, 2**-0.5, 2**-0.5])
+
+
+def test_outside_the_mask_anything_goes():
+    n = np.full((5, 6, 3), np.inf)
+    n[1:4, 1:5] = [0.0, 0.0, 1.0]
+    mask = np.zeros((5, 6), bool)
+    mask[1:4, 1:5] = True
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        prob = facetlift.prepare(n, mask)
+    assert prob.usable.all() and prob.counts["usable"] == 12
 
 
 @pytest.mark.parametrize("K", [
@@ -124,15 +161,7 @@ def _with(n, idx, value):
         (np.full((2, 2, 3), 1.0, dtype=object), "`normals` must be a real numeric array"),
         (np.full((2, 2, 3), 1 + 0j), "`normals` must be a real numeric array; got dtype complex"),
         ([[[0, 0, 1], [0, 0]]], "`normals` could not be read as an array"),
-        (_with(up(), (2, 3, 0), np.inf), r"`normals` contains inf at 1 pixel\(s\), first at "
-         r"\(row 2, col 3\)"),
-        (_with(up(), (1, 2, 2), -np.inf), "`normals` contains inf"),
-        (_with(up(), (4, 1), [0.2, 0.1, -1.0]), r"back-facing normals \(n_z <= 0\) inside the "
-         r"mask at 1 pixel\(s\), first at \(row 4, col 1\).*backfacing='outlier'"),
-        (_with(up(), (0, 0), [1.0, 0.0, 0.0]), r"back-facing normals"),
         (np.full((3, 3, 3), np.nan), "`normals` has no finite, non-zero normal"),
-        (_with(up(), (1, 1), [0.0, 1e200, 1e200]), r"`normals` has values too large to "
-         r"normalise at 1 pixel\(s\), first at \(row 1, col 1\)"),
     ],
 )
 def test_bad_normals(normals, match):
@@ -140,12 +169,26 @@ def test_bad_normals(normals, match):
         facetlift.prepare(normals)
 
 
+@pytest.mark.parametrize("bad", [[0.2, 0.1, -1.0], [1.0, 0.0, 0.0]])
+def test_backfacing_error_on_request(bad):
+    with pytest.raises(ValueError, match=r"back-facing normals \(facing away from the camera\) "
+                       r"inside the mask at 1 pixel\(s\), first at \(row 4, col 1\).*"
+                       r"backfacing='missing'"):
+        facetlift.prepare(_with(up(), (4, 1), bad), backfacing="error")
+
+
+def test_no_usable_normal_is_refused():
+    n = np.zeros((3, 3, 3))
+    n[..., 0] = 1.0  # every normal edge-on
+    with pytest.warns(UserWarning), pytest.raises(ValueError, match="no usable normal"):
+        facetlift.prepare(n, np.ones((3, 3), bool))
+
+
 def test_zero_length_normal_inside_mask():
     n = _with(up(), (3, 4), 0.0)
-    with pytest.raises(ValueError, match=r"zero-length normals inside the mask at 1 pixel\(s\), "
-                       r"first at \(row 3, col 4\); use NaN"):
-        facetlift.prepare(n, np.ones((6, 7), bool))
-    # ... but fine where `known` says the sample is missing
+    with pytest.warns(UserWarning, match=r"1 zero-length.*first at \(row 3, col 4\)"):
+        assert (~facetlift.prepare(n, np.ones((6, 7), bool)).known).sum() == 1
+    # ... and silent where `known` says the sample is missing
     known = np.ones((6, 7), bool)
     known[3, 4] = False
     assert (~facetlift.prepare(n, np.ones((6, 7), bool), known=known).known).sum() == 1
@@ -242,7 +285,8 @@ def test_bad_K(K, match):
 
 
 def test_bad_backfacing_option():
-    with pytest.raises(ValueError, match="`backfacing` must be 'error' or 'outlier'; got 'skip'"):
+    with pytest.raises(ValueError, match=r"`backfacing` must be one of \('missing', 'error'\); "
+                       "got 'skip'"):
         facetlift.prepare(up(), backfacing="skip")
 
 

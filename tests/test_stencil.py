@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sp
 
 from facetlift.domain import Domain
-from facetlift.stencil import (
+from facetlift.operators.stencil import (
     E_MEAN,
     E_TWIST,
     E_X,

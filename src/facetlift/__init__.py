@@ -9,6 +9,7 @@ Importing facetlift loads numpy and scipy only; methods and I/O load on first us
 """
 
 from .api import integrate, solve
+from .camera import Orthographic, Pinhole
 from .linalg import SolverError
 from .methods import REGISTRY as METHODS
 from .problem import Problem, clean_mask, gradients_from_normals, normals_from_gradients, prepare
@@ -18,6 +19,8 @@ __version__ = "0.1.0"
 
 __all__ = [
     "METHODS",
+    "Orthographic",
+    "Pinhole",
     "Problem",
     "SolverError",
     "Surface",

@@ -132,15 +132,26 @@ def _read_input(normals: Path, mask: Path | None, K: Path | None, y_down: bool,
 
 
 def _progress_bar(total: int | None):
+    """(bar, update): a tqdm bar on stderr that appears at the first update (a route that
+    never reports progress shows nothing); ``bar.close()`` is safe either way."""
     from tqdm import tqdm
 
-    bar = tqdm(total=total, desc="integrating", unit="it", file=sys.stderr, leave=False)
+    state = {}
 
-    def update(iteration, deviation):
+    class _Bar:
+        def close(self):
+            if "bar" in state:
+                state["bar"].close()
+
+    def update(iteration, value):
+        if "bar" not in state:
+            state["bar"] = tqdm(total=total, desc="integrating", unit="it", file=sys.stderr,
+                                leave=False)
+        bar = state["bar"]
         bar.update(iteration - bar.n)
-        bar.set_postfix_str(f"deviation {deviation:.4f} deg", refresh=False)
+        bar.set_postfix_str(f"{value:.4g}", refresh=False)
 
-    return bar, update
+    return _Bar(), update
 
 
 def _jsonable(obj):
@@ -175,19 +186,21 @@ def _jsonable(obj):
               "folder's K.txt is used automatically.")
 @click.option("--orthographic", is_flag=True,
               help="Ignore K (e.g. a dataset's K.txt) and integrate orthographically.")
-@click.option("--backfacing", type=click.Choice(["error", "outlier"]), default="error",
-              show_default=True,
-              help="Normals facing away (n_z <= 0) inside the mask: stop with an error, or "
-              "treat them as missing samples.")
-@click.option("--solver", type=click.Choice(["direct", "iterative"]),
-              help="dgp: 'direct' solves the fixed point at once (default), 'iterative' runs "
-              "the paper's local/global loop.")
-@click.option("--max-iter", type=click.IntRange(min=1), help="Iteration limit (iterative).")
-@click.option("--tol", type=click.FloatRange(min=0), help="Convergence tolerance (iterative).")
-@click.option("--backend", type=click.Choice(["auto", "pardiso", "superlu", "amg"]),
-              help="Sparse linear solver backend.")
+@click.option("--backfacing", type=click.Choice(["missing", "error", "outlier"]),
+              default="missing", show_default=True,
+              help="Normals facing away from the camera inside the mask: treat them as missing "
+              "samples (counted and reported; 'outlier' is an alias), or stop with an error.")
+@click.option("--outlier-eps", type=float, default=None,
+              help="Grazing threshold on the view cosine below which a normal is a missing "
+              "sample (default: cos 85 deg orthographic, 1/255 perspective).")
+@click.option("--solver", help="The method's solver, where it has one (dgp: 'direct' solves "
+              "the fixed point at once, the default; 'iterative' runs the paper's loop).")
+@click.option("--max-iter", type=int, help="Iteration limit (methods with `max_iter`).")
+@click.option("--tol", type=float, help="Convergence tolerance (methods with `tol`).")
+@click.option("--backend", help="Sparse linear solver backend (methods with `backend`): "
+              "auto, pcg, pardiso, superlu, amg.")
 @click.option("--discontinuities", is_flag=True,
-              help="Allow depth jumps (only for methods that handle discontinuities).")
+              help="Allow depth jumps (methods that handle discontinuities: 'facetlift methods').")
 @click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
               help="Any other method option, repeatable; VALUE is read as JSON when it "
               "parses (1e-4, true, [1,2]) and as a string otherwise.")
@@ -203,9 +216,9 @@ def _jsonable(obj):
 @click.option("--progress/--no-progress", default=None,
               help="Progress bar on stderr for iterative solvers. Default: when stderr is a "
               "terminal.")
-def integrate(normals, mask, method, pixel_size, y_down, K, orthographic, backfacing, solver,
-              max_iter, tol, backend, discontinuities, options, outdir, save, triangles,
-              as_json, progress):
+def integrate(normals, mask, method, pixel_size, y_down, K, orthographic, backfacing,
+              outlier_eps, solver, max_iter, tol, backend, discontinuities, options, outdir,
+              save, triangles, as_json, progress):
     """Integrate a normal map NORMALS into a depth map, a mesh and a preview.
 
     NORMALS is a normal-map file (PNG 8/16 bit, TIFF, EXR or .npy; x right, y up, z toward
@@ -232,20 +245,12 @@ def integrate(normals, mask, method, pixel_size, y_down, K, orthographic, backfa
         if value is not None:
             opts[key] = value
     if discontinuities:
-        if not info.discontinuities:
-            able = sorted(k for k, v in _methods.REGISTRY.items() if v.discontinuities)
-            raise ValueError(
-                f"method {method!r} does not handle depth discontinuities"
-                + (f"; methods that do: {able}" if able else "")
-            )
         opts["discontinuities"] = True
 
-    accepted = info.options()
-    iterative = method != "dgp" or opts.get("solver", accepted.get("solver")) == "iterative"
     show = sys.stderr.isatty() if progress is None else progress
     bar = None
-    if show and iterative and "progress" in accepted and "progress" not in opts:
-        bar, opts["progress"] = _progress_bar(opts.get("max_iter", accepted.get("max_iter")))
+    if show and "progress" in info.options() and "progress" not in opts:
+        bar, opts["progress"] = _progress_bar(opts.get("max_iter"))
 
     t1 = time.perf_counter()
     try:
@@ -253,11 +258,11 @@ def integrate(normals, mask, method, pixel_size, y_down, K, orthographic, backfa
             warnings.simplefilter("always")
             surface = facetlift.integrate(
                 n, m, method=method, pixel_size=pixel_size, K=Kmat, backfacing=backfacing,
-                **opts,
+                outlier_eps=outlier_eps, **opts,
             )
     except ValueError as e:  # name the command-line flag where the library names a keyword
         raise ValueError(
-            str(e).replace("pass backfacing='outlier'", "pass --backfacing outlier")
+            str(e).replace("pass backfacing='missing'", "pass --backfacing missing")
         ) from None
     finally:
         if bar is not None:
@@ -330,21 +335,25 @@ def methods(as_json):
     perspective (a camera K), discontinuities (depth jumps). Options are passed with
     --solver/--max-iter/--tol/--backend or '--option KEY=VALUE'.
     """
-    caps = ("masks", "missing", "perspective", "discontinuities")
+    caps = _methods.CAPABILITIES
     records = []
     for name, info in _methods.REGISTRY.items():
         try:
-            opts = info.options()
+            specs = info.specs()
             available = True
         except ImportError:
-            opts, available = {}, False
+            specs, available = (), False
         records.append({
             "name": name,
             "available": available,
             "summary": info.summary,
             "reference": info.reference,
-            "capabilities": {c: bool(getattr(info, c)) for c in caps},
-            "options": {k: v for k, v in opts.items()},
+            "capabilities": info.capabilities(),
+            "options": {o.name: o.default for o in specs},
+            "option_details": [
+                {"name": o.name, "default": o.default, "values": o.expected, "doc": o.doc,
+                 "applies": o.when} for o in specs
+            ],
         })
     if as_json:
         click.echo(json.dumps(_jsonable(records)))
@@ -355,9 +364,10 @@ def methods(as_json):
         click.echo(f"    {r['summary']}")
         can = [c for c in caps if r["capabilities"][c]]
         click.echo(f"    handles: {', '.join(can) if can else '-'}")
-        if r["options"]:
-            opts = ", ".join(f"{k}={v!r}" for k, v in r["options"].items())
-            click.echo(f"    options: {opts}")
+        for o in r["option_details"]:
+            when = "".join(f", with {k}={v!r}" for k, v in o["applies"].items())
+            click.echo(f"    --option {o['name']}={o['default']!r}  ({o['values']}{when}): "
+                       f"{o['doc']}")
         click.echo(f"    reference: {r['reference']}")
     return EXIT_OK
 

@@ -106,6 +106,16 @@ class Domain:
         return out
 
     @cached_property
+    def first_facets(self) -> np.ndarray:
+        """(n_components,) lowest facet index of each component."""
+        return _first_of(self.facet_component, self.n_components)
+
+    @cached_property
+    def first_vertices(self) -> np.ndarray:
+        """(n_components,) lowest vertex index of each component."""
+        return _first_of(self.vertex_component, self.n_components)
+
+    @cached_property
     def component_sizes(self) -> np.ndarray:
         """(n_components,) number of facets in each component."""
         return np.bincount(self.facet_component, minlength=self.n_components)
@@ -140,3 +150,10 @@ class Domain:
         out = np.full(self.vertex_mask.shape, fill, dtype=np.result_type(vertex_values, float))
         out[self.vertex_mask] = vertex_values
         return out
+
+
+def _first_of(component: np.ndarray, n: int) -> np.ndarray:
+    first = np.full(n, -1, dtype=np.int64)
+    order = np.arange(component.size)[::-1]
+    first[component[order]] = order  # the last write per component is its lowest index
+    return first

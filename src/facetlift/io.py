@@ -258,7 +258,7 @@ def read_K(path) -> np.ndarray:
         Missing or unparsable file, a shape other than 3x3, or a matrix that is not valid
         intrinsics (see :mod:`facetlift.conventions`).
     """
-    from .problem import _check_K
+    from .camera import check_K as _check_K
 
     arg = "K"
     p = _existing(path, arg)

@@ -133,23 +133,7 @@ def made(estimate, truth, mask=None) -> tuple[float, np.ndarray]:
     return float(np.nanmean(err[m])), err
 
 
-def _vertex_points(vertex_depth, pixel_size, K):
-    """(H+1, W+1, 3) vertex positions, x right, y up, z toward the viewer."""
-    vd = np.asarray(vertex_depth, dtype=float)
-    i, j = np.mgrid[0 : vd.shape[0], 0 : vd.shape[1]].astype(float)
-    if K is None:
-        return np.stack([j * pixel_size, -i * pixel_size, -vd], axis=-1)
-    K = np.asarray(K, dtype=float)
-    fx, s, cx = K[0]
-    fy, cy = K[1, 1], K[1, 2]
-    # facet corners lie half a pixel from the pixel centres (pixel centres at integer indices)
-    row, col = i - 0.5, j - 0.5
-    Y = (row - cy) * vd / fy
-    X = ((col - cx) * vd - s * Y) / fx
-    return np.stack([X, -Y, -vd], axis=-1)
-
-
-def facet_normals(vertex_depth, *, pixel_size: float = 1.0, K=None) -> np.ndarray:
+def facet_normals(vertex_depth, *, pixel_size: float = 1.0, K=None, camera=None) -> np.ndarray:
     """Normals of the facets of a vertex depth grid, from the cross product of the diagonals.
 
     For an orthographic grid this is the normal ``(-s_x, -s_y, 1)`` of the facet's least-squares
@@ -162,6 +146,8 @@ def facet_normals(vertex_depth, *, pixel_size: float = 1.0, K=None) -> np.ndarra
     vertex_depth : (H+1, W+1) array_like of float
     pixel_size : float
     K : (3, 3) array_like, optional
+    camera : facetlift.camera.Camera, optional
+        Instead of `pixel_size` and `K`.
 
     Returns
     -------
@@ -171,7 +157,11 @@ def facet_normals(vertex_depth, *, pixel_size: float = 1.0, K=None) -> np.ndarra
     vd = np.asarray(vertex_depth, dtype=float)
     if vd.ndim != 2 or min(vd.shape) < 2:
         raise ValueError(f"`vertex_depth` must be an (H+1, W+1) array; got shape {vd.shape}")
-    P = _vertex_points(vd, float(pixel_size), K)
+    from .camera import make_camera
+
+    cam = make_camera(pixel_size, K) if camera is None else camera
+    i, j = np.mgrid[0 : vd.shape[0], 0 : vd.shape[1]]
+    P = cam.points(i.ravel(), j.ravel(), vd.ravel()).reshape(vd.shape + (3,))
     P0, P1, P2, P3 = P[:-1, :-1], P[:-1, 1:], P[1:, 1:], P[1:, :-1]
     n = np.cross(P3 - P1, P2 - P0)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -184,7 +174,7 @@ def angular_error(surface, normals, mask=None) -> tuple[float, float, np.ndarray
     Parameters
     ----------
     surface : facetlift.Surface
-        Uses ``vertex_depth``, ``pixel_size`` and ``K``.
+        Uses ``vertex_depth`` and ``camera``.
     normals : (H, W, 3) array_like
         The input normals (x right, y up, z toward the viewer); need not be unit.
     mask : (H, W) array_like of bool, optional
@@ -200,7 +190,7 @@ def angular_error(surface, normals, mask=None) -> tuple[float, float, np.ndarray
     H, W = surface.mask.shape
     if nin.shape != (H, W, 3):
         raise ValueError(f"`normals` must have shape {(H, W, 3)}; got {nin.shape}")
-    nrec = facet_normals(surface.vertex_depth, pixel_size=surface.pixel_size, K=surface.K)
+    nrec = facet_normals(surface.vertex_depth, camera=surface.camera)
     m = surface.mask if mask is None else np.asarray(mask, bool) & surface.mask
     with np.errstate(invalid="ignore", divide="ignore"):
         u = nin / np.linalg.norm(nin, axis=-1, keepdims=True)

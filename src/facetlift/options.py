@@ -1,29 +1,172 @@
-"""Checks for method options: each raises ``ValueError`` naming the option and the value."""
+"""Method options, declared once: name, type, range or choices, default, one-line doc.
+
+Every method module declares a tuple ``OPTIONS`` of :class:`Option`. :func:`validate` checks
+the values a caller passed before the method runs, fills in the defaults and refuses options
+that do not apply to the chosen route (``when``), so a method receives only checked values.
+``facetlift methods`` and ``docs/methods.md`` (:func:`markdown`) read the same declarations.
+
+Every refusal is a ``ValueError`` that names the option, the value received and what was
+expected, e.g. ``ValueError("`tol` must be a number >= 0; got 'a'")``.
+"""
 
 from __future__ import annotations
 
-from typing import Callable
+import math
+from dataclasses import dataclass, field
+from typing import Any
 
-import numpy as np
-
-
-def positive_int(value, name: str) -> int:
-    """`value` as an int >= 1 (floats like 5.0 accepted; bools, NaN, inf and text refused)."""
-    try:
-        ok = not isinstance(value, bool) and float(value) == int(value) and int(value) >= 1
-    except (TypeError, ValueError, OverflowError):
-        ok = False
-    if not ok:
-        raise ValueError(f"`{name}` must be a positive integer; got {value!r}")
-    return int(value)
+_KINDS = ("int", "float", "bool", "choice", "callable")
 
 
-def number(value, name: str, check: Callable[[float], bool], what: str) -> float:
-    """`value` as a finite float satisfying `check`; the error says `name` must be `what`."""
+@dataclass(frozen=True)
+class Option:
+    """One keyword option of a method.
+
+    Attributes
+    ----------
+    name : str
+    default : object
+        Value used when the option is not given (``None`` where it means "automatic").
+    doc : str
+        One line: what it does, in which units.
+    kind : {"int", "float", "bool", "choice", "callable"}
+    low, high : float, optional
+        Range of an "int" or "float" option.
+    low_open, high_open : bool
+        Whether `low` / `high` themselves are excluded.
+    inf : bool
+        A "float" option that accepts +inf.
+    choices : tuple
+        The values of a "choice" option, or extra string values a "float" option accepts
+        (e.g. ``scale="mad"``).
+    none : bool
+        None is accepted (the default is computed).
+    when : dict
+        The option applies only where the other options have these values, e.g.
+        ``{"solver": "iterative"}``; given for another route it is refused.
+    """
+
+    name: str
+    default: Any
+    doc: str
+    kind: str = "float"
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+    inf: bool = False
+    choices: tuple = ()
+    none: bool = False
+    when: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.kind not in _KINDS:  # pragma: no cover - a declaration bug
+            raise TypeError(f"option {self.name!r}: unknown kind {self.kind!r}")
+
+    @property
+    def expected(self) -> str:
+        """What a valid value is, in words."""
+        if self.kind == "bool":
+            text = "True or False"
+        elif self.kind == "callable":
+            text = "a callable"
+        elif self.kind == "choice":
+            text = "one of " + ", ".join(repr(c) for c in self.choices)
+        else:
+            text = "an integer" if self.kind == "int" else "a number"
+            bounds = []
+            if self.low is not None:
+                bounds.append(f"{'>' if self.low_open else '>='} {self.low:g}")
+            if self.high is not None:
+                bounds.append(f"{'<' if self.high_open else '<='} {self.high:g}")
+            if bounds:
+                text += " " + " and ".join(bounds)
+            if self.inf:
+                text += " (inf allowed)"
+            if self.choices:
+                text += " or " + " or ".join(repr(c) for c in self.choices)
+        return text + (" or None" if self.none else "")
+
+    def check(self, value):
+        """`value` converted to the option's type, or ``ValueError`` naming the option."""
+        if value is None and self.none:
+            return None
+        ok, out = _convert(self, value)
+        if not ok:
+            raise ValueError(f"`{self.name}` must be {self.expected}; got {value!r}")
+        return out
+
+
+def _number(opt: Option, value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) and not hasattr(
+        value, "__float__"
+    ):
+        return False, None
     try:
         v = float(value)
-    except (TypeError, ValueError):
-        v = float("nan")
-    if isinstance(value, bool) or not np.isfinite(v) or not check(v):
-        raise ValueError(f"`{name}` must be {what}; got {value!r}")
-    return v
+    except (TypeError, ValueError, OverflowError):
+        return False, None
+    if math.isnan(v) or (math.isinf(v) and not (opt.inf and v > 0)):
+        return False, None
+    if opt.kind == "int":
+        if not math.isfinite(v) or v != int(v):
+            return False, None
+        v = int(v)
+    if opt.low is not None and (v < opt.low or (opt.low_open and v == opt.low)):
+        return False, None
+    if opt.high is not None and (v > opt.high or (opt.high_open and v == opt.high)):
+        return False, None
+    return True, v
+
+
+def _convert(opt: Option, value):
+    if opt.kind == "bool":
+        if isinstance(value, bool) or type(value).__name__ == "bool_":
+            return True, bool(value)
+        return False, None
+    if opt.kind == "callable":
+        return callable(value), value
+    if opt.kind == "choice" or (isinstance(value, str) and opt.choices):
+        try:
+            return value in opt.choices, value
+        except TypeError:  # unhashable or incomparable values
+            return False, None
+    return _number(opt, value)
+
+
+def validate(options: tuple[Option, ...], given: dict, method: str) -> dict:
+    """Checked values of every option of `method`: the given ones converted, defaults elsewhere.
+
+    Raises
+    ------
+    ValueError
+        An unknown option name (the message lists the valid ones), a bad value, or an option
+        given for a route it does not apply to.
+    """
+    spec = {o.name: o for o in options}
+    unknown = sorted(set(given) - set(spec))
+    if unknown:
+        raise ValueError(
+            f"unknown option(s) {unknown} for method {method!r}; valid options: {sorted(spec)}"
+        )
+    values = {name: o.default for name, o in spec.items()}
+    for name, value in given.items():
+        values[name] = spec[name].check(value)
+    for name in given:
+        for other, want in spec[name].when.items():
+            if values[other] != want:
+                raise ValueError(
+                    f"`{name}` applies only with {other}={want!r} (method {method!r} has "
+                    f"{other}={values[other]!r}); leave it out or set {other}={want!r}"
+                )
+    return values
+
+
+def markdown(options: tuple[Option, ...]) -> str:
+    """A Markdown table of the options (name, default, values, applies to, doc)."""
+    lines = ["| option | default | values | applies | what it does |", "|---|---|---|---|---|"]
+    for o in options:
+        when = ", ".join(f"{k}={v!r}" for k, v in o.when.items()) or "always"
+        default = "automatic" if o.default is None and o.none else repr(o.default)
+        lines.append(f"| `{o.name}` | {default} | {o.expected} | {when} | {o.doc} |")
+    return "\n".join(lines) + "\n"

@@ -2,6 +2,13 @@
 
 :func:`prepare` is the single public-boundary check: it turns user arrays into a
 :class:`Problem` or raises ``ValueError`` naming the argument and what was wrong.
+
+Bad normals
+    Only pixels inside the mask are inspected. A normal there that cannot be used -- not
+    finite, zero length, facing away from the camera, or grazing (the view cosine below the
+    outlier threshold, Sec. 4.4 of Xie et al.) -- becomes a missing sample: counted in
+    ``Problem.counts``, named in one warning (how many of each kind, where the first is), and
+    integrated like a NaN normal. A job is refused only when no usable normal is left.
 """
 
 from __future__ import annotations
@@ -11,7 +18,12 @@ from functools import cached_property
 
 import numpy as np
 
+from ._warnings import warn
+from .camera import Camera, make_camera
 from .domain import Domain
+
+#: ``backfacing=`` choices: treat such normals as missing samples, or raise.
+BACKFACING = ("missing", "error", "outlier")
 
 
 @dataclass(eq=False)
@@ -22,36 +34,58 @@ class Problem:
     ----------
     domain : Domain
     normals : (m, 3) float
-        Unit normals of the facets (x right, y up, z toward the viewer); NaN where unknown.
+        Unit normals of the facets (x right, y up, z toward the viewer); NaN where not given.
     known : (m,) bool
-        Facets with a given normal.
-    pixel_size : float
-        Width of a pixel in world units (orthographic only).
-    K : (3, 3) float or None
-        Perspective intrinsics (OpenCV layout), or None for an orthographic view.
+        Facets with a given, finite, front-facing normal.
+    camera : Camera
+        :class:`~facetlift.camera.Orthographic` or :class:`~facetlift.camera.Pinhole`.
+    usable : (m,) bool
+        Known facets whose normal is not grazing: the samples the methods integrate.
+    counts : dict
+        How many mask pixels had no usable normal, by reason (see :func:`prepare`).
     """
 
     domain: Domain
     normals: np.ndarray
     known: np.ndarray
-    pixel_size: float = 1.0
-    K: np.ndarray | None = None
+    camera: Camera = field(default_factory=make_camera)
+    usable: np.ndarray | None = None
+    counts: dict = field(default_factory=dict)
     extras: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.usable is None:
+            self.usable = self.known.copy()
 
     @property
     def perspective(self) -> bool:
-        return self.K is not None
+        return self.camera.perspective
+
+    @property
+    def K(self) -> np.ndarray | None:
+        return self.camera.K
+
+    @property
+    def pixel_size(self) -> float:
+        return self.camera.pixel_size
 
     @cached_property
+    def grid_slopes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(gx, gy), each (m,): change of the unknown per pixel step along x (right) and y (up)
+        implied by the usable normals (:meth:`facetlift.camera.Camera.grid_slopes`); NaN at
+        facets without a usable normal."""
+        r, c = self.domain.pixels
+        n = np.where(self.usable[:, None], self.normals, [0.0, 0.0, 1.0])
+        gx, gy = self.camera.grid_slopes(r, c, n)
+        return np.where(self.usable, gx, np.nan), np.where(self.usable, gy, np.nan)
+
+    @property
     def slopes(self) -> tuple[np.ndarray, np.ndarray]:
-        """(p, q), each (m,): p = dz/dx, q = dz/dy of the height; NaN where unknown."""
-        n = self.normals
-        with np.errstate(divide="ignore", invalid="ignore"):
-            p = -n[:, 0] / n[:, 2]
-            q = -n[:, 1] / n[:, 2]
-        p[~self.known] = np.nan
-        q[~self.known] = np.nan
-        return p, q
+        """(p, q), each (m,): grid slopes per footprint; for an orthographic camera the height
+        gradient ``p = dz/dx``, ``q = dz/dy``. NaN where not usable."""
+        gx, gy = self.grid_slopes
+        s = self.camera.footprint()
+        return gx / s, gy / s
 
     def normal_image(self) -> np.ndarray:
         """(H, W, 3) normals with NaN outside the domain and at unknown facets."""
@@ -59,6 +93,14 @@ class Problem:
         out = np.full((H, W, 3), np.nan)
         out[self.domain.pixels] = self.normals
         return out
+
+    def restrict(self, domain: Domain, camera: Camera) -> Problem:
+        """The same samples on `domain`, a crop of this problem's domain with the same facet
+        order (:func:`facetlift.api.crop`), seen by `camera`."""
+        return Problem(
+            domain=domain, normals=self.normals, known=self.known, camera=camera,
+            usable=self.usable, counts=self.counts, extras=self.extras,
+        )
 
 
 def normals_from_gradients(p, q) -> np.ndarray:
@@ -125,6 +167,11 @@ def _where(bad: np.ndarray) -> str:
     return f"{r.size} pixel(s), first at (row {r[0]}, col {c[0]})"
 
 
+def _first(bad: np.ndarray) -> list[int]:
+    r, c = np.nonzero(bad)
+    return [int(r[0]), int(c[0])]
+
+
 def prepare(
     normals,
     mask=None,
@@ -132,15 +179,17 @@ def prepare(
     known=None,
     pixel_size: float = 1.0,
     K=None,
-    backfacing: str = "error",
+    camera: Camera | None = None,
+    backfacing: str = "missing",
+    outlier_eps: float | None = None,
 ) -> Problem:
     """Check user inputs and build a :class:`Problem`.
 
     Parameters
     ----------
     normals : (H, W, 3) array_like of float
-        Normal map (x right, y up, z toward the viewer); need not be unit length.
-        NaN marks a missing sample inside the mask.
+        Normal map (x right, y up, z toward the viewer); need not be unit length. NaN marks a
+        missing sample inside the mask. Pixels outside the mask may hold anything.
     mask : (H, W) array_like of bool, optional
         Integration domain. Default: pixels whose normal is finite and non-zero.
     known : (H, W) array_like of bool, optional
@@ -149,15 +198,22 @@ def prepare(
         Pixel width in world units (orthographic views).
     K : (3, 3) array_like, optional
         Perspective intrinsics, OpenCV layout.
-    backfacing : {"error", "outlier"}
-        What to do with normals whose z-component is <= 0 inside the domain: raise, or treat
-        them as missing samples.
+    camera : facetlift.camera.Camera, optional
+        Instead of `pixel_size` and `K`.
+    backfacing : {"missing", "error"}
+        Normals facing away from the camera inside the domain: treat them as missing samples
+        (default; "outlier" is an alias) or raise.
+    outlier_eps : float in [0, 1), optional
+        Normals whose cosine to the direction toward the camera is below this are grazing and
+        become missing samples (the paper's outlier rule). Default: the camera's
+        (cos 85 deg orthographic, 1/255 perspective; :mod:`facetlift.camera`).
 
     Raises
     ------
     ValueError
-        On a wrong shape or dtype, inf values, zero-length or back-facing normals, an empty
-        mask, a mask of another size, one-pixel components, a bad pixel size or bad `K`.
+        On a wrong shape or dtype, an empty mask, a mask of another size, one-pixel
+        components, a bad pixel size, `K` or `outlier_eps`, no usable normal at all, or
+        back-facing normals with ``backfacing="error"``.
     """
     n = _float_array(normals, "normals")
     if n.ndim != 3 or n.shape[-1] != 3:
@@ -165,63 +221,86 @@ def prepare(
     H, W = n.shape[:2]
     if H < 1 or W < 1:
         raise ValueError(f"`normals` must have at least one pixel; got shape {n.shape}")
-    if backfacing not in ("error", "outlier"):
-        raise ValueError(f"`backfacing` must be 'error' or 'outlier'; got {backfacing!r}")
-    if np.isinf(n).any():
-        raise ValueError(f"`normals` contains inf at {_where(np.isinf(n).any(-1))}")
-    try:
-        h = float(pixel_size)
-    except (TypeError, ValueError):
-        raise ValueError(f"`pixel_size` must be a positive number; got {pixel_size!r}") from None
-    if not (np.isfinite(h) and h > 0):
-        raise ValueError(f"`pixel_size` must be a positive finite number; got {pixel_size!r}")
+    if backfacing not in BACKFACING:
+        raise ValueError(f"`backfacing` must be one of {BACKFACING[:2]}; got {backfacing!r}")
+    cam = make_camera(pixel_size, K) if camera is None else camera
+    eps = cam.grazing if outlier_eps is None else _check_eps(outlier_eps)
 
-    with np.errstate(over="ignore", invalid="ignore"):
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        big = np.abs(n).max(axis=-1)  # scale first: (0, 1e200, 1e200) is a fine normal
+        n = n / np.where(np.isfinite(big) & (big > 0), big, 1.0)[..., None]
         length2 = np.einsum("ijk,ijk->ij", n, n)
-    finite = np.isfinite(length2)
-    if np.isinf(length2).any():
-        raise ValueError(
-            f"`normals` has values too large to normalise at {_where(np.isinf(length2))}"
-        )
-    if mask is None:
-        m = finite & (length2 > 0)
-    else:
-        m = _bool_image(mask, "mask", (H, W))
+    finite = np.isfinite(length2) & (length2 > 0)
+    m = finite if mask is None else _bool_image(mask, "mask", (H, W))
     if not m.any():
         raise ValueError(
             "`mask` is empty: no pixel to integrate"
             if mask is not None
             else "`normals` has no finite, non-zero normal: nothing to integrate"
         )
-    kn = m & finite
-    if known is not None:
-        kn &= _bool_image(known, "known", (H, W))
-    zero = kn & (length2 == 0)
-    if zero.any():
+    given = m if known is None else m & _bool_image(known, "known", (H, W))
+    nan = given & np.isnan(n).any(-1)
+    bad = {
+        "non-finite": given & ~nan & ~np.isfinite(length2),
+        "zero-length": given & (length2 == 0),
+    }
+    ok = given & finite
+    rr, cc = np.nonzero(ok)
+    nf = n[rr, cc] / np.sqrt(length2[rr, cc])[:, None]
+    cos = cam.view_cosine(rr, cc, nf)
+    bad["back-facing"] = _scatter(rr, cc, cos <= 0, (H, W))
+    if backfacing == "error" and bad["back-facing"].any():
         raise ValueError(
-            f"`normals` has zero-length normals inside the mask at {_where(zero)}; "
-            "use NaN (or the `known` mask) for missing samples"
+            f"`normals` has back-facing normals (facing away from the camera) inside the mask "
+            f"at {_where(bad['back-facing'])}; mask them out or pass backfacing='missing'"
         )
-    Kmat = None if K is None else _check_K(K)
-    if Kmat is None:
-        back = kn & (n[..., 2] <= 0)
-        what = "n_z <= 0"
-    else:  # in a perspective view, facing away means facing away from the viewing ray
-        from .perspective import view_cosine
-
-        back = np.zeros_like(kn)
-        rr, cc = np.nonzero(kn)
-        back[rr, cc] = view_cosine(Kmat, rr, cc, n[rr, cc]) <= 0
-        what = "facing away from the camera ray"
-    if back.any():
-        if backfacing == "error":
-            raise ValueError(
-                f"`normals` has back-facing normals ({what}) inside the mask at "
-                f"{_where(back)}; mask them out or pass backfacing='outlier'"
-            )
-        kn &= ~back
+    bad["grazing"] = _scatter(rr, cc, (cos > 0) & (cos < eps), (H, W))
+    front = _scatter(rr, cc, cos > 0, (H, W))
 
     domain = Domain.from_mask(m)
+    _check_components(domain)
+    usable_img = front & ~bad["grazing"]
+    counts = {"pixels": int(m.sum()), "missing": int(((m & ~given) | nan).sum())}
+    counts.update({k: int(v.sum()) for k, v in bad.items()})
+    counts["usable"] = int(usable_img.sum())
+    counts["outlier_eps"] = float(eps)
+    problems = {k: v for k, v in bad.items() if v.any()}
+    if problems:
+        first = _first(np.logical_or.reduce(list(problems.values())))
+        counts["first_unusable"] = first
+        what = ", ".join(f"{int(v.sum())} {k}" for k, v in problems.items())
+        warn(
+            f"{sum(int(v.sum()) for v in problems.values())} normal(s) inside the mask cannot be "
+            f"used and were treated as missing samples ({what}; grazing: view cosine < "
+            f"{eps:.4g}); first at (row {first[0]}, col {first[1]})"
+        )
+    if not usable_img.any():
+        raise ValueError(
+            "`normals` has no usable normal inside the mask (all missing, non-finite, "
+            f"back-facing or grazing: {counts})"
+        )
+    normals_f = np.full((domain.n_facets, 3), np.nan)
+    kf = front[m]
+    normals_f[kf] = (n[m][kf]) / np.sqrt(length2[m][kf])[:, None]
+    return Problem(
+        domain=domain, normals=normals_f, known=kf, camera=cam, usable=usable_img[m],
+        counts=counts,
+    )
+
+
+def _scatter(rr, cc, values, shape) -> np.ndarray:
+    out = np.zeros(shape, dtype=bool)
+    out[rr, cc] = values
+    return out
+
+
+def _check_eps(value) -> float:
+    from .options import Option
+
+    return Option("outlier_eps", None, "", low=0.0, high=1.0, high_open=True).check(value)
+
+
+def _check_components(domain: Domain) -> None:
     small = np.nonzero(domain.component_sizes < 2)[0]
     if small.size:
         rr, cc = np.nonzero(np.isin(domain.labels, small + 1))
@@ -230,28 +309,6 @@ def prepare(
             "an isolated pixel has no neighbour to fix its depth: remove it from the mask "
             "(facetlift.clean_mask does this)"
         )
-    kf = kn[m]
-    nf = n[m]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        nf /= np.sqrt(length2[m])[:, None]
-    nf[~kf] = np.nan
-    return Problem(domain=domain, normals=nf, known=kf, pixel_size=h, K=Kmat)
-
-
-def _check_K(K) -> np.ndarray:
-    Km = _float_array(K, "K")
-    if Km.shape != (3, 3):
-        raise ValueError(f"`K` must be a 3x3 intrinsics matrix; got shape {Km.shape}")
-    if not np.isfinite(Km).all():
-        raise ValueError("`K` contains NaN or inf")
-    if not (Km[0, 0] > 0 and Km[1, 1] > 0):
-        raise ValueError(f"`K` must have positive focal lengths fx=K[0,0], fy=K[1,1]; got {Km}")
-    if not np.allclose(Km[2], [0, 0, 1]) or Km[1, 0] != 0:
-        raise ValueError(
-            "`K` must be upper-triangular with last row [0, 0, 1] (OpenCV layout "
-            f"[[fx, s, cx], [0, fy, cy], [0, 0, 1]]); got {Km.tolist()}"
-        )
-    return Km
 
 
 def clean_mask(mask, min_size: int = 2) -> np.ndarray:

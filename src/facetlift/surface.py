@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from .camera import Camera, make_camera
 from .domain import Domain
 
 
-@dataclass(eq=False)
 class Surface:
     """A reconstructed surface (see :mod:`facetlift.conventions`).
 
@@ -25,19 +24,32 @@ class Surface:
     info : dict
         Method diagnostics: ``method``, ``iterations``, ``converged``, ``deviation`` (average
         angular deviation in degrees per iteration, where the method iterates), ``seconds``
-        per phase, and method-specific entries.
-    pixel_size : float
-        Pixel width in world units (orthographic).
-    K : (3, 3) float or None
-        Intrinsics for a perspective surface.
+        per phase, ``input`` (counts of unusable normals, :func:`facetlift.prepare`), and
+        method-specific entries.
+    camera : facetlift.camera.Camera
+        The camera the depth is measured in; give it, or `pixel_size` and `K` (read back as
+        properties).
     """
 
-    depth: np.ndarray
-    vertex_depth: np.ndarray
-    mask: np.ndarray
-    info: dict = field(default_factory=dict)
-    pixel_size: float = 1.0
-    K: np.ndarray | None = None
+    def __init__(
+        self, depth, vertex_depth, mask, info=None, *, pixel_size: float = 1.0, K=None,
+        camera: Camera | None = None,
+    ):
+        self.depth = depth
+        self.vertex_depth = vertex_depth
+        self.mask = mask
+        self.info = {} if info is None else info
+        self.camera = make_camera(pixel_size, K) if camera is None else camera
+
+    @property
+    def pixel_size(self) -> float:
+        """Pixel width in world units (orthographic; 1.0 for a pinhole camera)."""
+        return self.camera.pixel_size
+
+    @property
+    def K(self) -> np.ndarray | None:
+        """Intrinsics (3, 3) of a perspective surface, None for an orthographic one."""
+        return self.camera.K
 
     @property
     def height(self) -> np.ndarray:
@@ -48,35 +60,21 @@ class Surface:
     def shape(self) -> tuple[int, int]:
         return self.mask.shape
 
-    def _xyz(self, rows, cols, depth) -> np.ndarray:
-        """World coordinates, x right, y up, z toward the viewer (z = -depth)."""
-        if self.K is None:
-            h = self.pixel_size
-            return np.column_stack([cols * h, -rows * h, -depth])
-        fx, s, cx = self.K[0]
-        fy, cy = self.K[1, 1], self.K[1, 2]
-        Y = (rows - cy) * depth / fy
-        X = ((cols - cx) * depth - s * Y) / fx
-        return np.column_stack([X, -Y, -depth])
-
     def points(self, where: str = "facets") -> np.ndarray:
         """(N, 3) points in a right-handed frame: x right, y up, z toward the viewer.
 
         ``where="facets"`` gives one point per domain pixel at its centre (row-major);
-        ``"vertices"`` one per used vertex. Orthographic: ``(x, y) = (col, -row) * pixel_size``
-        with the pixel centre at ``col + 0.5``; perspective: back-projected with `K` (pixel
-        centres at integer indices, so a facet centre is at its pixel's index).
+        ``"vertices"`` one per used vertex (row-major). Orthographic:
+        ``(x, y) = (col, -row) * pixel_size`` on the vertex grid, a pixel centre at
+        ``col + 0.5``; perspective: back-projected with `K` (pixel centres at integer indices),
+        see :mod:`facetlift.camera`.
         """
         if where == "facets":
             r, c = np.nonzero(self.mask)
-            d = self.depth[r, c]
-            off = 0.5 if self.K is None else 0.0
-            return self._xyz(r + off, c + off, d)
+            return self.camera.points(r + 0.5, c + 0.5, self.depth[r, c])
         if where == "vertices":
-            vm = np.isfinite(self.vertex_depth)
-            r, c = np.nonzero(vm)
-            off = 0.0 if self.K is None else -0.5
-            return self._xyz(r + off, c + off, self.vertex_depth[r, c])
+            i, j = np.nonzero(np.isfinite(self.vertex_depth))
+            return self.camera.points(i, j, self.vertex_depth[i, j])
         raise ValueError(f"`where` must be 'facets' or 'vertices'; got {where!r}")
 
     def to_mesh(self, triangles: bool = False) -> tuple[np.ndarray, np.ndarray]:

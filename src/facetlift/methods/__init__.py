@@ -1,31 +1,39 @@
 """Integration methods and their registry.
 
-Every method is a function ``run(problem, **options) -> MethodResult`` registered with its
-capabilities, so that :func:`facetlift.integrate` can refuse inputs a method cannot take.
-Method modules are imported lazily: importing facetlift stays cheap.
+A method is a module with a function ``run(problem, **options) -> MethodResult`` and a tuple
+``OPTIONS`` of :class:`facetlift.options.Option` declarations. One :func:`register` line gives
+its capabilities, so that :func:`facetlift.solve` refuses inputs a method cannot take and
+validates every option before the method runs. Method modules are imported lazily: importing
+facetlift stays cheap. See docs/architecture.md, "Adding a method".
 """
 
 from __future__ import annotations
 
 import importlib
-import inspect
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
+from ..options import Option
+
+#: Capabilities a method may declare (``facetlift methods`` shows them).
+CAPABILITIES = ("masks", "missing", "perspective", "discontinuities")
+
 
 @dataclass
 class MethodResult:
-    """What a method returns: depth at facet centres and/or vertices, plus diagnostics.
+    """What a method returns: values of the camera's unknown, plus diagnostics.
 
-    ``depth`` is (m,) at facet centres and ``vertex_depth`` (n,) at the domain's vertices
-    (see :class:`facetlift.domain.Domain`); a method fills at least one. Orthographic depths
-    may carry any constant per component; perspective depths must be positive.
+    ``values`` is (m,) at facet centres and ``vertex_values`` (n,) at the domain's vertices
+    (see :class:`facetlift.domain.Domain`); a method fills at least one. The unknown is the
+    problem camera's (:mod:`facetlift.camera`: height, or log-depth for a pinhole camera) and
+    may carry any constant per connected component: :func:`facetlift.solve` converts it to
+    depth and fixes the constants.
     """
 
-    depth: np.ndarray | None = None
-    vertex_depth: np.ndarray | None = None
+    values: np.ndarray | None = None
+    vertex_values: np.ndarray | None = None
     info: dict = field(default_factory=dict)
 
 
@@ -42,18 +50,23 @@ class MethodInfo:
     perspective: bool = False
     discontinuities: bool = False
 
+    def _module(self):
+        return importlib.import_module(f"facetlift.methods.{self.module}")
+
     @property
     def run(self) -> Callable:
-        return importlib.import_module(f"facetlift.methods.{self.module}").run
+        return self._module().run
+
+    def specs(self) -> tuple[Option, ...]:
+        """The method's option declarations (:class:`facetlift.options.Option`)."""
+        return tuple(getattr(self._module(), "OPTIONS", ()))
 
     def options(self) -> dict:
         """Method-specific keyword options and their defaults."""
-        sig = inspect.signature(self.run)
-        return {
-            k: p.default
-            for k, p in list(sig.parameters.items())[1:]
-            if p.kind is inspect.Parameter.KEYWORD_ONLY
-        }
+        return {o.name: o.default for o in self.specs()}
+
+    def capabilities(self) -> dict[str, bool]:
+        return {c: bool(getattr(self, c)) for c in CAPABILITIES}
 
 
 REGISTRY: dict[str, MethodInfo] = {}
@@ -84,29 +97,29 @@ register(
 )
 
 # The paper's seven comparison methods (Sec. 5). Each module documents its energy and defaults.
-# Pixel-graph methods whose energy stays meaningful on log-depth slopes take perspective input
-# (facetlift.methods._graph.field); diffusion's contrast is in height-slope units, and
-# Frankot-Chellappa and the kernel fit stay orthographic.
+# Every one takes missing samples. Pixel-graph methods whose energy stays meaningful on
+# log-depth slopes take perspective input (the camera's grid slopes); diffusion's contrast is
+# in height-slope units, and Frankot-Chellappa and the kernel fit stay orthographic.
 _LOG_DEPTH = {"poisson", "alpha_surface", "m_estimator", "regularization"}
-for _name, _summary, _ref, _missing in [
+for _name, _summary, _ref in [
     ("frankot_chellappa", "Projection onto integrable Fourier bases",
      "Frankot & Chellappa, A method for enforcing integrability in shape from shading "
-     "algorithms, PAMI 1988", False),
+     "algorithms, PAMI 1988"),
     ("poisson", "Least squares of the gradient residual on the pixel graph (Poisson)",
      "Agrawal, Raskar & Chellappa, What is the range of surface reconstructions from a "
-     "gradient field?, ECCV 2006", True),
+     "gradient field?, ECCV 2006"),
     ("alpha_surface", "Curl-based removal of unreliable gradient edges, parameter alpha",
      "Agrawal, Chellappa & Raskar, An algebraic approach to surface reconstruction from "
-     "gradient fields, ICCV 2005", True),
+     "gradient fields, ICCV 2005"),
     ("m_estimator", "Robust iteratively reweighted least squares on gradient residuals",
-     "Agrawal, Raskar & Chellappa, ECCV 2006", True),
+     "Agrawal, Raskar & Chellappa, ECCV 2006"),
     ("regularization", "Regularized least squares (smoothness prior), parameter lambda",
-     "Agrawal, Raskar & Chellappa, ECCV 2006", True),
+     "Agrawal, Raskar & Chellappa, ECCV 2006"),
     ("diffusion", "Anisotropic diffusion with a tensor from the gradient field",
-     "Agrawal, Raskar & Chellappa, ECCV 2006", True),
+     "Agrawal, Raskar & Chellappa, ECCV 2006"),
     ("kernel", "Gaussian-kernel fitting of the gradients, no integrability enforcement",
      "Ng, Wu & Tang, Surface-from-gradients without discrete integrability enforcement: a "
-     "Gaussian kernel approach, PAMI 2010", True),
+     "Gaussian kernel approach, PAMI 2010"),
 ]:
     register(MethodInfo(name=_name, module=_name, summary=_summary, reference=_ref,
-                        masks=True, missing=_missing, perspective=_name in _LOG_DEPTH))
+                        masks=True, missing=True, perspective=_name in _LOG_DEPTH))

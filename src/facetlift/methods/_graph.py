@@ -1,226 +1,31 @@
-"""Pixel-graph gradient operators on a masked domain, shared by the graph-based methods.
+"""What the pixel-graph methods share: set-up from a problem, and weighted least squares.
 
-The comparison methods of Agrawal, Raskar & Chellappa (Poisson, alpha-surface, M-estimator,
-regularization, diffusion) work on the graph whose nodes are the domain pixels (in
-``domain.pixels`` order) and whose unknowns are the *heights* at the pixel centres
-(:mod:`facetlift.conventions`: ``p = dz/dx``, ``q = dz/dy`` with ``y`` up).
-
-Edges
-    ``horizontal`` ``(r, c) -> (r, c+1)`` and ``vertical`` ``(r, c) -> (r+1, c)`` between
-    4-neighbours that are both in the mask (the natural, Neumann boundary: no edge leaves the
-    mask). facetlift's :class:`~facetlift.domain.Domain` joins pixels that only touch at a
-    corner (8-connectivity) into one component, but the 4-neighbour graph does not. Every such
-    *pinch* -- two diagonal neighbours in the mask whose two common 4-neighbours are both
-    outside it, and which lie in different 4-connected components -- gets a ``diagonal`` edge
-    ``(r, c) -> (r+1, c+-1)``, so the graph is connected exactly when the domain component is
-    and one constant per domain component fixes the solution. Pinch edges carry the data term
-    of their two samples like any other edge (they are usually bridges, which least squares
-    satisfies exactly).
-
-Edge targets
-    Edge ``e`` from tail ``i`` to head ``j`` with pixel offset ``(dx, dy)`` (``x`` right, ``y``
-    up, in pixels) measures ``z_j - z_i ~ t_e = h (dx p + dy q)`` averaged over the two samples;
-    when one sample is missing the other one is used (a first-order estimate); when both are
-    missing the edge carries no data (``has_data`` False). For the saddle or any quadratic the
-    two-sample average is exact (trapezoid rule), so every method here recovers quadratics to
-    rounding error.
+The operators themselves are in :mod:`facetlift.operators.graph`. The unknown is the camera's
+(:mod:`facetlift.camera`: height, or log-depth for a pinhole camera) at the pixel centres.
 
 Edges without data
-    The methods give them a small weight :data:`FILL_WEIGHT` and target 0: inside a region of
-    missing samples this tends to the harmonic (membrane) fill, and it keeps every system
-    non-singular. The constant of each domain component is fixed by a unit diagonal term at
-    its first pixel (:func:`pin`), which changes nothing else because the right-hand side is
-    orthogonal to the constants.
+    Edges whose two samples are both missing get a small weight :data:`FILL_WEIGHT` and target
+    0: inside a region of missing samples this tends to the harmonic (membrane) fill, and it
+    keeps every system non-singular.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
-import scipy.ndimage as ndi
-import scipy.sparse as sp
 
 from .. import linalg
 from ..domain import Domain
+from ..operators import graph as g
+from ..options import Option
 
 #: Weight of edges without a data term (both samples missing); target 0.
 FILL_WEIGHT = 1e-6
 
-HORIZONTAL, VERTICAL, DIAGONAL = 0, 1, 2
-_FOUR = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=bool)
-
-
-@dataclass(frozen=True, eq=False)
-class PixelGraph:
-    """Edges of the pixel graph of a domain.
-
-    Attributes
-    ----------
-    n : int
-        Number of nodes (domain pixels, ``domain.pixels`` order).
-    tail, head : (E,) int64
-        Node indices of each edge; the edge measures ``z[head] - z[tail]``.
-    dx, dy : (E,) int8
-        Pixel offset from tail to head with ``x`` right and ``y`` up: (1, 0) horizontal,
-        (0, -1) vertical, (+-1, -1) diagonal.
-    kind : (E,) int8
-        ``HORIZONTAL``, ``VERTICAL`` or ``DIAGONAL``.
-    right, down : (n,) int64
-        Index of the horizontal edge to the right of / vertical edge below each pixel, -1 if none.
-    left, up : (n,) int64
-        Index of the horizontal edge to the left of / vertical edge above each pixel, -1 if none.
-    loops : (L, 4) int64
-        The 2x2 pixel blocks inside the mask, as edges (top, right, bottom, left): top and
-        bottom horizontal, left and right vertical.
-    """
-
-    n: int
-    tail: np.ndarray
-    head: np.ndarray
-    dx: np.ndarray
-    dy: np.ndarray
-    kind: np.ndarray
-    right: np.ndarray
-    left: np.ndarray
-    down: np.ndarray
-    up: np.ndarray
-    loops: np.ndarray
-
-    @property
-    def n_edges(self) -> int:
-        return int(self.tail.size)
-
-
-def build(domain: Domain) -> PixelGraph:
-    """The pixel graph of `domain` (vectorised; see the module docstring)."""
-    mask = domain.mask
-    H, W = mask.shape
-    m = domain.n_facets
-    idx = np.full((H, W), -1, dtype=np.int64)
-    idx[domain.pixels] = np.arange(m)
-
-    hmask = mask[:, :-1] & mask[:, 1:]  # edge (r, c) -> (r, c+1)
-    vmask = mask[:-1, :] & mask[1:, :]  # edge (r, c) -> (r+1, c)
-    hr, hc = np.nonzero(hmask)
-    vr, vc = np.nonzero(vmask)
-    nh, nv = hr.size, vr.size
-    tails = [idx[hr, hc], idx[vr, vc]]
-    heads = [idx[hr, hc + 1], idx[vr + 1, vc]]
-    dxs = [np.ones(nh), np.zeros(nv)]
-    dys = [np.zeros(nh), -np.ones(nv)]
-    kinds = [np.full(nh, HORIZONTAL), np.full(nv, VERTICAL)]
-
-    # pinch diagonals between different 4-connected components
-    lab4, _ = ndi.label(mask, structure=_FOUR)
-    a, b = mask[:-1, :-1], mask[1:, 1:]  # (r, c) -> (r+1, c+1)
-    pr, pc = np.nonzero(a & b & ~mask[:-1, 1:] & ~mask[1:, :-1])
-    keep = lab4[pr, pc] != lab4[pr + 1, pc + 1]
-    pr, pc = pr[keep], pc[keep]
-    a, b = mask[:-1, 1:], mask[1:, :-1]  # (r, c+1) -> (r+1, c)
-    qr, qc = np.nonzero(a & b & ~mask[:-1, :-1] & ~mask[1:, 1:])
-    keep = lab4[qr, qc + 1] != lab4[qr + 1, qc]
-    qr, qc = qr[keep], qc[keep]
-    tails += [idx[pr, pc], idx[qr, qc + 1]]
-    heads += [idx[pr + 1, pc + 1], idx[qr + 1, qc]]
-    dxs += [np.ones(pr.size), -np.ones(qr.size)]
-    dys += [-np.ones(pr.size), -np.ones(qr.size)]
-    kinds += [np.full(pr.size + qr.size, DIAGONAL)]
-
-    himg = np.full((H, max(W - 1, 0)), -1, dtype=np.int64)
-    himg[hr, hc] = np.arange(nh)
-    vimg = np.full((max(H - 1, 0), W), -1, dtype=np.int64)
-    vimg[vr, vc] = nh + np.arange(nv)
-    r, c = domain.pixels
-    right = np.full(m, -1, dtype=np.int64)
-    left = np.full(m, -1, dtype=np.int64)
-    down = np.full(m, -1, dtype=np.int64)
-    up = np.full(m, -1, dtype=np.int64)
-    s = c < W - 1
-    right[s] = himg[r[s], c[s]]
-    s = c > 0
-    left[s] = himg[r[s], c[s] - 1]
-    s = r < H - 1
-    down[s] = vimg[r[s], c[s]]
-    s = r > 0
-    up[s] = vimg[r[s] - 1, c[s]]
-
-    block = hmask[:-1, :] & hmask[1:, :] & vmask[:, :-1] & vmask[:, 1:]
-    br, bc = np.nonzero(block)
-    loops = np.stack(
-        [himg[br, bc], vimg[br, bc + 1], himg[br + 1, bc], vimg[br, bc]], axis=1
-    ).astype(np.int64)
-
-    return PixelGraph(
-        n=m,
-        tail=np.concatenate(tails).astype(np.int64),
-        head=np.concatenate(heads).astype(np.int64),
-        dx=np.concatenate(dxs).astype(np.int8),
-        dy=np.concatenate(dys).astype(np.int8),
-        kind=np.concatenate(kinds).astype(np.int8),
-        right=right,
-        left=left,
-        down=down,
-        up=up,
-        loops=loops.reshape(-1, 4),
-    )
-
-
-def targets(graph: PixelGraph, p: np.ndarray, q: np.ndarray, h: float):
-    """Measured height differences of the edges.
-
-    Parameters
-    ----------
-    graph : PixelGraph
-    p, q : (n,) float
-        Slopes per pixel, NaN where unknown.
-    h : float
-        Pixel size.
-
-    Returns
-    -------
-    t : (E,) float
-        ``h (dx p + dy q)`` averaged over the edge's known samples; 0 where it has none.
-    has_data : (E,) bool
-        Whether at least one of the two samples is known.
-    """
-    dx = graph.dx.astype(float)
-    dy = graph.dy.astype(float)
-    si = dx * p[graph.tail] + dy * q[graph.tail]
-    sj = dx * p[graph.head] + dy * q[graph.head]
-    ki, kj = np.isfinite(si), np.isfinite(sj)
-    total = np.where(ki, si, 0.0) + np.where(kj, sj, 0.0)
-    count = ki.astype(float) + kj
-    has = count > 0
-    t = np.zeros(graph.n_edges)
-    t[has] = h * total[has] / count[has]
-    return t, has
-
-
-def difference(graph: PixelGraph) -> sp.csr_matrix:
-    """(E, n) sparse matrix ``G`` with ``(G z)_e = z[head_e] - z[tail_e]``."""
-    E = graph.n_edges
-    rows = np.repeat(np.arange(E), 2)
-    cols = np.stack([graph.tail, graph.head], axis=1).ravel()
-    vals = np.tile([-1.0, 1.0], E)
-    return sp.csr_matrix((vals, (rows, cols)), shape=(E, graph.n))
-
-
-def laplacian(graph: PixelGraph, w: np.ndarray) -> sp.csr_matrix:
-    """(n, n) weighted graph Laplacian ``G^T diag(w) G``."""
-    n = graph.n
-    i, j = graph.tail, graph.head
-    deg = np.bincount(i, w, n) + np.bincount(j, w, n)
-    rows = np.concatenate([i, j, np.arange(n)])
-    cols = np.concatenate([j, i, np.arange(n)])
-    vals = np.concatenate([-w, -w, deg])
-    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
-
-
-def divergence(graph: PixelGraph, wt: np.ndarray) -> np.ndarray:
-    """(n,) ``G^T wt``: the right-hand side of the weighted normal equations."""
-    n = graph.n
-    return np.bincount(graph.head, wt, n) - np.bincount(graph.tail, wt, n)
+#: The ``backend`` option of every pixel-graph method.
+BACKEND = Option(
+    "backend", "auto", "sparse solver: 'auto' picks one (facetlift.linalg.choose)",
+    kind="choice", choices=("auto", "pardiso", "superlu", "amg"),
+)
 
 
 def edge_weights(has_data: np.ndarray, w: np.ndarray | float = 1.0) -> np.ndarray:
@@ -228,125 +33,49 @@ def edge_weights(has_data: np.ndarray, w: np.ndarray | float = 1.0) -> np.ndarra
     return np.where(has_data, w, FILL_WEIGHT)
 
 
-def pin(domain: Domain, K: sp.spmatrix, weight: float = 1.0) -> sp.csr_matrix:
-    """Add `weight` to the diagonal at the first pixel of every domain component."""
-    comp = domain.facet_component
-    first = np.full(domain.n_components, -1, dtype=np.int64)
-    order = np.arange(comp.size)[::-1]
-    first[comp[order]] = order
-    d = np.zeros(comp.size)
-    d[first] = weight
-    return (K + sp.diags(d, format="csr")).tocsr()
+def setup(problem):
+    """The common start of every pixel-graph method: ``(domain, graph, t, has, s)`` with the
+    measured edge differences `t` (:func:`facetlift.operators.graph.targets`), the edges
+    `has` that carry data, and the camera footprint `s` (residual / s is in slope units)."""
+    graph = g.build(problem.domain)
+    gx, gy = problem.grid_slopes
+    t, has = g.targets(graph, gx, gy)
+    return problem.domain, graph, t, has, problem.camera.footprint()
 
 
-#: With ``backend="auto"``, systems up to this many unknowns are factorized (PARDISO if
-#: installed, else SuperLU) rather than handed to :func:`facetlift.linalg.solve`, whose
-#: multigrid route starts at 60,000 unknowns. Measured on the 2-core dev VM for these pixel
-#: Laplacians: 256^2 SuperLU 0.5 s vs multigrid-CG 0.8 s, 512^2 2.6 s vs 1.8 s; for the
-#: anisotropic tensor system of "diffusion" (positive off-diagonals, not an M-matrix)
-#: multigrid-CG took 12.6 s against SuperLU's 1.0 s at 256^2.
-FACTOR_LIMIT = 250_000
-
-
-def spd_solve(K: sp.spmatrix, b: np.ndarray, backend: str = "auto", *, multigrid: bool = True):
-    """Solve the SPD system ``K x = b``; see :data:`FACTOR_LIMIT` for the "auto" policy.
+def spd_solve(K, b: np.ndarray, backend: str = "auto", *, multigrid: bool = True):
+    """Solve the SPD system ``K x = b`` with the solver layer's choice of backend.
 
     ``multigrid=False`` keeps "auto" on a factorization at every size (for systems that are
-    not M-matrices, where classical AMG converges slowly).
+    not M-matrices, where classical AMG converges slowly: the anisotropic tensor system of
+    "diffusion" took 12.6 s with multigrid-CG against SuperLU's 1.0 s at 256^2).
     """
-    if backend == "auto" and (not multigrid or K.shape[0] <= FACTOR_LIMIT):
-        return linalg.factorize(K, "auto").solve(b)
-    return linalg.solve(K, b, backend)
+    return linalg.solve(K, b, backend, multigrid=multigrid)[0]
 
 
 def solve_weighted(
-    domain: Domain, graph: PixelGraph, w: np.ndarray, t: np.ndarray, backend: str = "auto"
+    domain: Domain, graph: g.PixelGraph, w: np.ndarray, t: np.ndarray, backend: str = "auto"
 ) -> np.ndarray:
-    """Heights (n,) minimising ``sum_e w_e (z_head - z_tail - t_e)^2`` (one pin per component).
+    """Unknowns (n,) minimising ``sum_e w_e (z_head - z_tail - t_e)^2`` (one pin per component).
 
     `w` must be positive on a set of edges that connects each domain component.
     """
-    K = pin(domain, laplacian(graph, w))
-    return spd_solve(K, divergence(graph, w * t), backend)
+    K = g.pin(domain, g.laplacian(graph, w))
+    return spd_solve(K, g.divergence(graph, w * t), backend)
 
 
-def residuals(graph: PixelGraph, z: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """(E,) ``z[head] - z[tail] - t``."""
-    return z[graph.head] - z[graph.tail] - t
+def relative_change(z_new: np.ndarray, z: np.ndarray) -> float:
+    """``||d - mean d|| / ||z_new - mean z_new||`` with ``d = z_new - z`` (0 for a flat z_new):
+    the stopping measure of the iterative graph methods, blind to the free constant."""
+    d = z_new - z
+    spread = np.linalg.norm(z_new - z_new.mean())
+    return float(np.linalg.norm(d - d.mean()) / spread) if spread > 0 else 0.0
 
 
-def curl(graph: PixelGraph, t: np.ndarray, has_data: np.ndarray):
-    """Circulation of the measured differences around every 2x2 loop.
-
-    Returns
-    -------
-    c : (L,) float
-        ``t_top + t_right - t_bottom - t_left`` (height units; divide by ``h`` for slope units);
-        the sum of the target differences going round the loop, zero for integrable data.
-    valid : (L,) bool
-        Loops whose four edges all carry data.
-    """
-    L = graph.loops
-    c = t[L[:, 0]] + t[L[:, 1]] - t[L[:, 2]] - t[L[:, 3]]
-    valid = has_data[L].all(axis=1)
-    return np.where(valid, c, 0.0), valid
-
-
-def check_backend(backend: str) -> str:
-    if backend not in linalg.BACKENDS:
-        raise ValueError(f"`backend` must be one of {linalg.BACKENDS}; got {backend!r}")
-    return backend
-
-
-def check_orthographic(problem, name: str) -> None:
-    if problem.perspective:
-        raise ValueError(f"the {name!r} method takes orthographic input here (`K` must be None)")
-
-
-#: Perspective normals whose cosine to the viewing direction is below this are treated as
-#: missing: their log-depth slopes diverge as the surface turns edge-on.
-EDGE_ON_COS = 1e-3
-
-
-def field(problem):
-    """The gradient field a pixel-graph method integrates, as ``(p, q, h)`` per pixel.
-
-    Orthographic: the height slopes and the pixel size. Perspective (``problem.K``): the
-    slopes of the log-depth ``log Z`` along columns and (negated, y up) rows per pixel, with
-    ``h = 1`` (:mod:`facetlift.perspective`), so that the graph's unknown is ``log Z`` and
-    :func:`to_depth` exponentiates it. NaN where there is no usable normal.
-    """
-    if not problem.perspective:
-        p, q = problem.slopes
-        return p, q, problem.pixel_size
-    from ..perspective import log_depth_slopes, view_cosine
-
-    r, c = problem.domain.pixels
-    n = np.where(problem.known[:, None], problem.normals, [0.0, 0.0, 1.0])
-    with np.errstate(invalid="ignore"):
-        ok = problem.known & (view_cosine(problem.K, r, c, n) > EDGE_ON_COS)
-    du, dv = log_depth_slopes(problem.K, r, c, n)
-    return np.where(ok, du, np.nan), np.where(ok, -dv, np.nan), 1.0
-
-
-def setup(problem):
-    """The common start of every pixel-graph method: ``(domain, graph, t, has, h)`` with the
-    measured edge differences `t` and the edges `has` that carry data (:func:`targets`)."""
-    graph = build(problem.domain)
-    p, q, h = field(problem)
-    t, has = targets(graph, p, q, h)
-    return problem.domain, graph, t, has, h
-
-
-def to_depth(problem, z: np.ndarray) -> np.ndarray:
-    """Depth (m,) from the graph's unknown: ``-z`` (orthographic height) or ``exp(z)`` with each
-    component's median depth 1 (perspective log-depth, defined up to scale)."""
-    if not problem.perspective:
-        return -z
-    from scipy import ndimage
-
-    d = problem.domain
-    med = np.atleast_1d(
-        ndimage.median(z, d.facet_component + 1, np.arange(1, d.n_components + 1))
+#: ``max_iter`` and ``tol`` options of the iterative graph methods (defaults differ).
+def iteration_options(max_iter: int, what: str) -> tuple[Option, Option]:
+    return (
+        Option("max_iter", max_iter, f"most {what}", kind="int", low=1),
+        Option("tol", 1e-3, "stop when the relative change of the unknown between "
+               f"{what} is below this", low=0.0),
     )
-    return np.exp(z - med[d.facet_component])

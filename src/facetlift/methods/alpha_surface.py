@@ -42,11 +42,8 @@ Differences from the papers
     samples: edges without data are never kept as data; they get the tiny fill weight of
     :mod:`facetlift.methods._graph` so that regions without samples stay attached.
 
-Options (keyword-only, through :func:`facetlift.integrate`)
-    alpha : float >= 0 or None, default None (3 sigma from the curl)
-    max_iter : int, default 50 (rounds of step 5; the ECCV code's ``nn``)
-    tol : float, default 1e-3 (relative change of the heights between rounds)
-    backend : {"auto", "pardiso", "superlu", "amg"}, default "auto"
+Options
+    Declared in :data:`OPTIONS`.
 
 References
     A. Agrawal, R. Chellappa, R. Raskar. An algebraic approach to surface reconstruction from
@@ -64,7 +61,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
-from ..options import number, positive_int
+from ..operators import graph as pg
+from ..options import Option
 from ..problem import Problem
 from . import MethodResult
 from . import _graph as g
@@ -72,16 +70,24 @@ from . import _graph as g
 log = logging.getLogger(__name__)
 
 
-def edge_scores(graph: g.PixelGraph, t: np.ndarray, has: np.ndarray, h: float):
+OPTIONS = (
+    Option("alpha", None, "slope tolerance of the curl test and the growing step (slope "
+           "units); default 3 sigma from the curl", low=0.0, inf=True, none=True),
+    *g.iteration_options(50, "growing rounds"),
+    g.BACKEND,
+)
+
+
+def edge_scores(graph: pg.PixelGraph, t: np.ndarray, has: np.ndarray, h: float):
     """Per-edge maximum |curl| (slope units) over adjacent valid loops, and the loop curls."""
-    c, valid = g.curl(graph, t, has)
+    c, valid = pg.curl(graph, t, has)
     c = np.abs(c[valid]) / h
     score = np.zeros(graph.n_edges)
     np.maximum.at(score, graph.loops[valid].ravel(), np.repeat(c, 4))
     return score, c
 
 
-def connectors(graph: g.PixelGraph, accepted: np.ndarray, candidate: np.ndarray,
+def connectors(graph: pg.PixelGraph, accepted: np.ndarray, candidate: np.ndarray,
                order: np.ndarray) -> np.ndarray:
     """Edges of a minimum spanning forest joining the components of the `accepted` edges.
 
@@ -132,15 +138,7 @@ def run(
     tol: float = 1e-3,
     backend: str = "auto",
 ) -> MethodResult:
-    """Integrate `problem` as an alpha-surface; depth (m,) at pixel centres."""
-    if alpha is not None and (
-        isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not (alpha >= 0)
-    ):
-        raise ValueError(f"`alpha` must be a number >= 0 (inf allowed) or None; got {alpha!r}")
-    max_iter = positive_int(max_iter, "max_iter")
-    tol = number(tol, "tol", lambda v: v >= 0, "a number >= 0")
-    g.check_backend(backend)
-
+    """Integrate `problem` as an alpha-surface; values (m,) at pixel centres."""
     t0 = time.perf_counter()
     domain, graph, t, has, h = g.setup(problem)
     score, loop_curl = edge_scores(graph, t, has, h)
@@ -164,7 +162,7 @@ def run(
     rounds = 0
     converged = False
     for rounds in range(1, int(max_iter) + 1):
-        res = np.abs(g.residuals(graph, z, t)) / h
+        res = np.abs(pg.residuals(graph, z, t)) / h
         grown = accepted | (has & (res <= alpha))
         if grown.sum() == accepted.sum():
             converged = True
@@ -172,9 +170,7 @@ def run(
         accepted = grown
         kept = accepted | connectors(graph, accepted, has & ~accepted, cost)
         z_new = solve(kept)
-        d = z_new - z
-        spread = np.linalg.norm(z_new - z_new.mean())
-        change = float(np.linalg.norm(d - d.mean()) / spread) if spread > 0 else 0.0
+        change = g.relative_change(z_new, z)
         z = z_new
         log.debug("alpha_surface round %d: %d edges kept, change %.3g", rounds, kept.sum(), change)
         if change < tol:
@@ -191,4 +187,4 @@ def run(
         "kept_fraction": float((kept & has).sum() / n_data) if n_data else 1.0,
         "seconds": {"setup": t1 - t0, "solve": t2 - t1},
     }
-    return MethodResult(depth=g.to_depth(problem, z), info=info)
+    return MethodResult(values=z, info=info)

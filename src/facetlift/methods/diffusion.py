@@ -40,11 +40,8 @@ Masks and missing samples
     As :mod:`facetlift.methods.poisson` for the data term; the tensor is estimated from the
     known samples only.
 
-Options (keyword-only, through :func:`facetlift.integrate`)
-    sigma : float >= 0, default 0.5 (pixels; 0 = no smoothing of the structure tensor)
-    contrast : float > 0, default 1.0 (slope units)
-    beta : float in (0, 1], default 0.02 (1 gives the identity tensor, i.e. Poisson)
-    backend : {"auto", "pardiso", "superlu", "amg"}, default "auto"
+Options
+    Declared in :data:`OPTIONS`.
 
 Reference
     A. Agrawal, R. Raskar, R. Chellappa. What is the range of surface reconstructions from a
@@ -60,7 +57,8 @@ import numpy as np
 import scipy.ndimage as ndi
 import scipy.sparse as sp
 
-from ..options import number
+from ..operators import graph as pg
+from ..options import Option
 from ..problem import Problem
 from . import MethodResult
 from . import _graph as g
@@ -68,12 +66,21 @@ from . import _graph as g
 #: Weickert's constant for the m = 4 edge-enhancing diffusivity.
 C4 = 3.31488
 
+OPTIONS = (
+    Option("sigma", 0.5, "Gaussian of the structure tensor, in pixels", low=0.0),
+    Option("contrast", 1.0, "slope contrast of the edge-enhancing diffusivity",
+           low=0.0, low_open=True),
+    Option("beta", 0.02, "smallest diffusivity across level lines", low=0.0, low_open=True,
+           high=1.0),
+    g.BACKEND,
+)
+
 
 def tensor(problem: Problem, *, sigma: float = 0.5, contrast: float = 1.0, beta: float = 0.02):
     """Diffusion tensor per pixel: (D11, D12, D22), each (m,), in x-right / y-up axes."""
     d = problem.domain
     p, q = problem.slopes
-    known = problem.known & np.isfinite(p) & np.isfinite(q)
+    known = np.isfinite(p) & np.isfinite(q)
     pk = np.where(known, p, 0.0)
     qk = np.where(known, q, 0.0)
     w = d.to_image(known.astype(float), fill=0.0)
@@ -105,7 +112,7 @@ def tensor(problem: Problem, *, sigma: float = 0.5, contrast: float = 1.0, beta:
     return lam2 + a * vx * vx, a * vx * vy, lam2 + a * vy * vy
 
 
-def quadrant_form(graph: g.PixelGraph, has: np.ndarray, D11, D12, D22) -> sp.csr_matrix:
+def quadrant_form(graph: pg.PixelGraph, has: np.ndarray, D11, D12, D22) -> sp.csr_matrix:
     """(R, E) matrix Q with ``energy = ||Q r||^2`` for edge residuals r (module docstring)."""
     n = graph.n
     xs = [np.where((e >= 0) & has[np.maximum(e, 0)], e, -1) for e in (graph.left, graph.right)]
@@ -154,26 +161,17 @@ def run(
     beta: float = 0.02,
     backend: str = "auto",
 ) -> MethodResult:
-    """Integrate `problem` with an anisotropic diffusion tensor; depth (m,) at pixel centres."""
-    sigma = number(sigma, "sigma", lambda v: v >= 0, "a finite number >= 0")
-    contrast = number(contrast, "contrast", lambda v: v > 0, "a finite number > 0")
-    beta = number(beta, "beta", lambda v: 0 < v <= 1, "a finite number in (0, 1]")
-    g.check_backend(backend)
-    g.check_orthographic(problem, "diffusion")
-
+    """Integrate `problem` with an anisotropic diffusion tensor; heights (m,) at pixel centres."""
     t0 = time.perf_counter()
-    domain = problem.domain
-    graph = g.build(domain)
-    p, q = problem.slopes
-    t, has = g.targets(graph, p, q, problem.pixel_size)
+    domain, graph, t, has, _ = g.setup(problem)
     D11, D12, D22 = tensor(problem, sigma=float(sigma), contrast=float(contrast), beta=float(beta))
     Q = quadrant_form(graph, has, D11, D12, D22)
-    G = g.difference(graph)
+    G = pg.difference(graph)
     M = (Q @ G).tocsr()
     # edges outside the tensor form: pinch diagonals (weight 1) and edges without data
-    w_extra = np.where(has, (graph.kind == g.DIAGONAL).astype(float), g.FILL_WEIGHT)
-    K = g.pin(domain, (M.T @ M) + g.laplacian(graph, w_extra))
-    rhs = M.T @ (Q @ t) + g.divergence(graph, w_extra * t)
+    w_extra = np.where(has, (graph.kind == pg.DIAGONAL).astype(float), g.FILL_WEIGHT)
+    K = pg.pin(domain, (M.T @ M) + pg.laplacian(graph, w_extra))
+    rhs = M.T @ (Q @ t) + pg.divergence(graph, w_extra * t)
     t1 = time.perf_counter()
     z = g.spd_solve(K, rhs, backend, multigrid=False)
     t2 = time.perf_counter()
@@ -185,4 +183,4 @@ def run(
         "anisotropic_fraction": float((lam1 < 0.5).mean()),
         "seconds": {"setup": t1 - t0, "solve": t2 - t1},
     }
-    return MethodResult(depth=-z, info=info)
+    return MethodResult(values=z, info=info)

@@ -18,31 +18,30 @@ Axes
     ``-q``. Nyquist terms of even-sized grids carry no derivative information; their
     imaginary part is dropped when the real part of the inverse FFT is taken.
 
-Masks (an extension; FC itself needs a full rectangle)
-    The method works on the bounding box of the mask. Gradients at box pixels outside the
-    mask are filled (option `fill`): ``"harmonic"`` (default) solves Laplace's equation for p
-    and q separately with the mask values as Dirichlet data (a smooth, continuous extension),
-    ``"nearest"`` copies the nearest mask pixel, ``"zero"`` sets them to 0 (a flat
-    surround, which puts a gradient jump on the mask boundary). The filled field is not
-    integrable, so the projection spreads the fill's curl into the mask: errors concentrate
-    within a few pixels of the mask boundary and decay inwards. With ``pad="mirror"``
-    (default) the box is reflected into a 2H x 2W grid (z even, so p is odd across vertical
-    edges and q across horizontal ones) before the FFT; the reflected surface is continuous
-    across the box edges, which removes the wrap-around jump of a non-periodic surface.
-    The reflected gradient still jumps at an edge where the normal slope is non-zero, so a
-    non-periodic surface (e.g. a saddle) is recovered to about O(h) near the box edges and
-    much better inside, with the error of a spectral method applied to a kinked function.
-    ``pad="none"`` is the original method: exact on periodic input, large errors on
-    non-periodic input. The box's constant is arbitrary; :func:`facetlift.integrate`
-    removes the per-component mean.
+Masks and missing samples (an extension; FC itself needs a full rectangle)
+    The method works on the bounding box of the mask. Gradients at box pixels outside the mask,
+    and at mask pixels without a usable normal, are filled (option `fill`): ``"harmonic"``
+    (default) solves Laplace's equation for p and q separately with the mask values as Dirichlet
+    data (a smooth, continuous extension), ``"nearest"`` copies the nearest mask pixel,
+    ``"zero"`` sets them to 0 (a flat surround, which puts a gradient jump on the mask
+    boundary). The filled field is not integrable, so the projection spreads the fill's curl
+    into the mask: errors concentrate within a few pixels of the mask boundary and decay
+    inwards. With ``pad="mirror"`` (default) the box is reflected into a 2H x 2W grid (z even,
+    so p is odd across vertical edges and q across horizontal ones) before the FFT; the
+    reflected surface is continuous across the box edges, which removes the wrap-around jump of
+    a non-periodic surface. The reflected gradient still jumps at an edge where the normal slope
+    is non-zero, so a non-periodic surface (e.g. a saddle) is recovered to about O(h) near the
+    box edges and much better inside, with the error of a spectral method applied to a kinked
+    function. ``pad="none"`` is the original method: exact on periodic input, large errors on
+    non-periodic input. The box's constant is arbitrary; :func:`facetlift.integrate` removes the
+    per-component mean.
 
 Options
-    pad : {"mirror", "none"}, default "mirror"
-    fill : {"harmonic", "nearest", "zero"}, default "harmonic"
+    Declared in :data:`OPTIONS`.
 
 Limits
-    No missing samples inside the mask (the registry marks the method ``missing=False``,
-    so :func:`facetlift.integrate` refuses them); orthographic input only; least squares in
+    Orthographic input only; missing samples are filled like the box around the mask, which
+    works for scattered gaps and poorly for large holes; least squares in
     the Fourier basis smooths sharp features and spreads errors globally (the paper's Sec. 5
     leaves FC out of its error chart for this reason). Memory and time are those of a
     (2H x 2W) FFT: O(HW log HW).
@@ -62,6 +61,7 @@ import scipy.ndimage as ndi
 import scipy.sparse as sp
 
 from .. import linalg
+from ..options import Option
 from ..problem import Problem
 from . import MethodResult
 
@@ -70,57 +70,34 @@ log = logging.getLogger(__name__)
 PADS = ("mirror", "none")
 FILLS = ("harmonic", "nearest", "zero")
 
+OPTIONS = (
+    Option("pad", "mirror", "reflect the box to 2H x 2W before the FFT, or use it periodically",
+           kind="choice", choices=PADS),
+    Option("fill", "harmonic", "how gradients outside the mask and at missing samples are made "
+           "up", kind="choice", choices=FILLS),
+)
+
 
 def run(problem: Problem, *, pad: str = "mirror", fill: str = "harmonic") -> MethodResult:
     """Integrate `problem` by the Frankot-Chellappa projection (see the module docstring).
 
-    Parameters
-    ----------
-    problem : Problem
-        Orthographic problem without missing samples.
-    pad : {"mirror", "none"}
-        Reflect the bounding box to 2H x 2W before the FFT, or use it periodically as is.
-    fill : {"harmonic", "nearest", "zero"}
-        How gradients at bounding-box pixels outside the mask are made up.
-
-    Returns
-    -------
-    MethodResult
-        ``depth`` (m,) at the facet centres (``-height``), ``info`` with the box shape.
-
-    Raises
-    ------
-    ValueError
-        On an unknown `pad` or `fill`, perspective input, or missing samples.
+    Returns heights (m,) at the facet centres and ``info`` with the box shape.
     """
-    if pad not in PADS:
-        raise ValueError(f"`pad` must be one of {PADS}; got {pad!r}")
-    if fill not in FILLS:
-        raise ValueError(f"`fill` must be one of {FILLS}; got {fill!r}")
-    if problem.perspective:
-        raise ValueError(
-            "the 'frankot_chellappa' method takes orthographic input (`K` must be None)"
-        )
-    if not problem.known.all():
-        raise ValueError(
-            f"the 'frankot_chellappa' method cannot take missing samples "
-            f"({int((~problem.known).sum())} facets have no normal)"
-        )
     rows, cols = problem.domain.pixels
     r0, c0 = rows.min(), cols.min()
     H, W = rows.max() - r0 + 1, cols.max() - c0 + 1
-    inside = np.zeros((H, W), dtype=bool)
-    inside[rows - r0, cols - c0] = True
+    have = np.zeros((H, W), dtype=bool)
+    have[rows - r0, cols - c0] = problem.usable
     p, q = problem.slopes
     P = np.zeros((H, W))
     Q = np.zeros((H, W))
-    P[inside] = p
-    Q[inside] = q
-    if not inside.all():
-        P, Q = _fill(P, Q, inside, fill)
+    P[have] = p[problem.usable]
+    Q[have] = q[problem.usable]
+    if not have.all():
+        P, Q = _fill(P, Q, have, fill)
     z = integrate_box(P, Q, problem.pixel_size, pad=pad)
-    info = {"box": (int(H), int(W)), "filled": int((~inside).sum()), "pad": pad, "fill": fill}
-    return MethodResult(depth=-z[rows - r0, cols - c0], info=info)
+    info = {"box": (int(H), int(W)), "filled": int((~have).sum()), "pad": pad, "fill": fill}
+    return MethodResult(values=z[rows - r0, cols - c0], info=info)
 
 
 def integrate_box(
@@ -179,9 +156,9 @@ def _fill(P, Q, inside, fill):
         A = L[o][:, o].tocsc()
         B = L[o][:, ~o]
         rhs = -(B @ np.stack([P[inside], Q[inside]], axis=1))
-        sol = linalg.solve(A.tocsr(), rhs)
-        P[out] = sol[:, 0]
-        Q[out] = sol[:, 1]
+        A = A.tocsr()
+        P[out] = linalg.solve(A, rhs[:, 0])[0]
+        Q[out] = linalg.solve(A, rhs[:, 1])[0]
     return P, Q
 
 

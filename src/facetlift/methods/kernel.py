@@ -96,12 +96,21 @@ import scipy.sparse.linalg as spla
 from threadpoolctl import threadpool_limits
 
 from .. import linalg
+from ..options import Option
 from ..problem import Problem
 from . import MethodResult
 
 log = logging.getLogger(__name__)
 
 _EIGHT = np.ones((3, 3), dtype=bool)
+
+OPTIONS = (
+    Option("sigma", 2.0, "kernel width in pixels", low=0.0, low_open=True),
+    Option("reg", 1e-6, "ridge regularisation, relative to the Gram diagonal", low=0.0),
+    Option("tile", 16, "core size of the local fits in pixels", kind="int", low=4),
+    Option("margin", None, "data border of each local fit in pixels (default ceil(2 sigma))",
+           kind="int", low=0, none=True),
+)
 
 
 def run(
@@ -130,36 +139,16 @@ def run(
     Returns
     -------
     MethodResult
-        ``depth`` (m,) at facet centres (``-height``); ``info`` with the number of tiles,
+        ``values`` (m,): heights at facet centres; ``info`` with the number of tiles,
         distinct factorisations and the seconds spent fitting and blending.
 
     Raises
     ------
-    ValueError
-        On a bad option value, perspective input, or no known sample.
     facetlift.linalg.SolverError
         If a local Gram matrix cannot be factored (raise `reg`).
     """
-    try:
-        sigma = float(sigma)
-        reg = float(reg)
-    except (TypeError, ValueError):
-        raise ValueError(f"`sigma` and `reg` must be numbers; got {sigma!r}, {reg!r}") from None
-    if not (np.isfinite(sigma) and sigma > 0):
-        raise ValueError(f"`sigma` must be a positive number of pixels; got {sigma!r}")
-    if not (np.isfinite(reg) and reg >= 0):
-        raise ValueError(f"`reg` must be a finite number >= 0; got {reg!r}")
-    if isinstance(tile, bool) or int(tile) != tile or tile < 4:
-        raise ValueError(f"`tile` must be an integer >= 4; got {tile!r}")
     if margin is None:
         margin = math.ceil(2 * sigma)
-    if isinstance(margin, bool) or int(margin) != margin or margin < 0:
-        raise ValueError(f"`margin` must be an integer >= 0 or None; got {margin!r}")
-    if problem.perspective:
-        raise ValueError("the 'kernel' method takes orthographic input (`K` must be None)")
-    if not problem.known.any():
-        raise ValueError("the 'kernel' method needs at least one known sample")
-    tile, margin = int(tile), int(margin)
 
     rows, cols = problem.domain.pixels
     r0, c0 = rows.min(), cols.min()
@@ -167,17 +156,16 @@ def run(
     inside = np.zeros(shape, dtype=bool)
     inside[rows - r0, cols - c0] = True
     known = np.zeros(shape, dtype=bool)
-    known[rows - r0, cols - c0] = problem.known
-    h = problem.pixel_size
-    p, q = problem.slopes
+    known[rows - r0, cols - c0] = problem.usable
+    gx, gy = problem.grid_slopes
     gc = np.zeros(shape)
     gr = np.zeros(shape)
-    gc[rows - r0, cols - c0] = np.where(problem.known, h * p, 0.0)  # dz / d col
-    gr[rows - r0, cols - c0] = np.where(problem.known, -h * q, 0.0)  # dz / d row (y is up)
+    gc[rows - r0, cols - c0] = np.where(problem.usable, gx, 0.0)  # dz / d col
+    gr[rows - r0, cols - c0] = np.where(problem.usable, -gy, 0.0)  # dz / d row (y is up)
 
     z, info = fit_tiles(gc, gr, known, inside, sigma=sigma, reg=reg, tile=tile, margin=margin)
     info.update(sigma=sigma, reg=reg, tile=tile, margin=margin)
-    return MethodResult(depth=-z[rows - r0, cols - c0], info=info)
+    return MethodResult(values=z[rows - r0, cols - c0], info=info)
 
 
 def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin):

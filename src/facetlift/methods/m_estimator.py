@@ -45,13 +45,8 @@ Differences from the ECCV 2006 code
     code stops on the relative change of heights ``mean(((z_k - z_{k-1}) / z_k)^2) < 1e-6``;
     we use the norm ratio above, which does not blow up where the height is near zero.
 
-Options (keyword-only, through :func:`facetlift.integrate`)
-    weight : {"huber", "fair", "cauchy"}, default "huber"
-    k : float or None, default None (the weight function's constant above)
-    scale : float or "mad", default 1.0
-    max_iter : int, default 50
-    tol : float, default 1e-3
-    backend : {"auto", "pardiso", "superlu", "amg"}, default "auto"
+Options
+    Declared in :data:`OPTIONS`.
 
 Reference
     A. Agrawal, R. Raskar, R. Chellappa. What is the range of surface reconstructions from a
@@ -62,11 +57,12 @@ from __future__ import annotations
 
 import logging
 import time
-import warnings
 
 import numpy as np
 
-from ..options import number, positive_int
+from .._warnings import warn
+from ..operators import graph as pg
+from ..options import Option
 from ..problem import Problem
 from . import MethodResult
 from . import _graph as g
@@ -74,6 +70,16 @@ from . import _graph as g
 log = logging.getLogger(__name__)
 
 WEIGHTS = {"huber": 1.345, "fair": 1.3998, "cauchy": 2.3849}
+
+OPTIONS = (
+    Option("weight", "huber", "robust weight function", kind="choice", choices=tuple(WEIGHTS)),
+    Option("k", None, "the weight function's constant (default: its 95%-efficiency value)",
+           low=0.0, low_open=True, none=True),
+    Option("scale", 1.0, "residual scale in slope units, or 'mad' (from the Poisson start)",
+           low=0.0, low_open=True, choices=("mad",)),
+    *g.iteration_options(50, "reweightings"),
+    g.BACKEND,
+)
 
 
 def weights(u: np.ndarray, weight: str, k: float) -> np.ndarray:
@@ -96,15 +102,8 @@ def run(
     tol: float = 1e-3,
     backend: str = "auto",
 ) -> MethodResult:
-    """Integrate `problem` with a robust M-estimator (IRLS); depth (m,) at pixel centres."""
-    if weight not in WEIGHTS:
-        raise ValueError(f"`weight` must be one of {sorted(WEIGHTS)}; got {weight!r}")
-    k = number(WEIGHTS[weight] if k is None else k, "k", lambda v: v > 0, "a positive number")
-    if not (isinstance(scale, str) and scale == "mad"):
-        scale = number(scale, "scale", lambda v: v > 0, "a positive number or 'mad'")
-    max_iter = positive_int(max_iter, "max_iter")
-    tol = number(tol, "tol", lambda v: v >= 0, "a number >= 0")
-    g.check_backend(backend)
+    """Integrate `problem` with a robust M-estimator (IRLS); values (m,) at pixel centres."""
+    k = WEIGHTS[weight] if k is None else k
 
     t0 = time.perf_counter()
     domain, graph, t, has, h = g.setup(problem)
@@ -113,19 +112,17 @@ def run(
     changes = []
     converged = False
     if scale == "mad":  # once, from the residuals of the Poisson start
-        r = g.residuals(graph, z, t)[has] / h
+        r = pg.residuals(graph, z, t)[has] / h
         s = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), floor) if r.size else 1.0
     else:
         s = float(scale)
     for it in range(1, int(max_iter) + 1):
-        r = g.residuals(graph, z, t)[has] / h
+        r = pg.residuals(graph, z, t)[has] / h
         w = np.full(graph.n_edges, g.FILL_WEIGHT)
         wd = weights(r / s, weight, k)
         w[has] = np.maximum(wd / wd.max(), g.FILL_WEIGHT) if wd.size else wd
         z_new = g.solve_weighted(domain, graph, w, t, backend)
-        d = z_new - z
-        spread = np.linalg.norm(z_new - z_new.mean())
-        change = float(np.linalg.norm(d - d.mean()) / spread) if spread > 0 else 0.0
+        change = g.relative_change(z_new, z)
         changes.append(change)
         z = z_new
         log.debug("m_estimator iteration %d: relative change %.3g", it, change)
@@ -133,10 +130,9 @@ def run(
             converged = True
             break
     if not converged:
-        warnings.warn(
+        warn(
             f"m_estimator: no convergence in {max_iter} iterations (last relative change "
-            f"{changes[-1]:.3g} > tol={tol}); raise `max_iter`",
-            stacklevel=3,
+            f"{changes[-1]:.3g} > tol={tol}); raise `max_iter`"
         )
     t1 = time.perf_counter()
     info = {
@@ -149,4 +145,4 @@ def run(
         "downweighted": int((w[has] < 1.0).sum()),
         "seconds": {"solve": t1 - t0},
     }
-    return MethodResult(depth=g.to_depth(problem, z), info=info)
+    return MethodResult(values=z, info=info)

@@ -13,8 +13,8 @@ Missing samples
     gets the tiny fill weight of :data:`facetlift.methods._graph.FILL_WEIGHT` toward a zero
     difference (a membrane fill of regions without samples).
 
-Options (keyword-only, through :func:`facetlift.integrate`)
-    backend : {"auto", "pardiso", "superlu", "amg"}, default "auto" (see :mod:`facetlift.linalg`)
+Options
+    Declared in :data:`OPTIONS`: ``backend`` (see :mod:`facetlift.linalg`).
 
 Reference
     A. Agrawal, R. Raskar, R. Chellappa. What is the range of surface reconstructions from a
@@ -29,10 +29,11 @@ from ..problem import Problem
 from . import MethodResult
 from . import _graph as g
 
+OPTIONS = (g.BACKEND,)
+
 
 def run(problem: Problem, *, backend: str = "auto") -> MethodResult:
-    """Integrate `problem` by least squares on the pixel graph; depth (m,) at pixel centres."""
-    g.check_backend(backend)
+    """Integrate `problem` by least squares on the pixel graph; values (m,) at pixel centres."""
     t0 = time.perf_counter()
     _, graph, t, has, _ = g.setup(problem)
     t1 = time.perf_counter()
@@ -45,4 +46,4 @@ def run(problem: Problem, *, backend: str = "auto") -> MethodResult:
         "edges_without_data": int((~has).sum()),
         "seconds": {"setup": t1 - t0, "solve": t2 - t1},
     }
-    return MethodResult(depth=g.to_depth(problem, z), info=info)
+    return MethodResult(values=z, info=info)

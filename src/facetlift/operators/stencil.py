@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .conventions import CORNER_OFFSETS
-from .domain import Domain
+from ..conventions import CORNER_OFFSETS
+from ..domain import Domain
 
 #: Orthonormal basis of facet corner vectors: mean, x-slope, y-slope, twist.
 E_MEAN = np.array([1.0, 1.0, 1.0, 1.0]) / 2
@@ -87,12 +87,8 @@ def scatter_corners(domain: Domain, values: np.ndarray) -> np.ndarray:
 
 def pin_components(domain: Domain, K: sp.csr_matrix, weight: float = 1.0) -> sp.csr_matrix:
     """Add `weight` to the diagonal at one vertex per connected component (fixes the constant)."""
-    first = np.full(domain.n_components, -1, dtype=np.int64)
-    comp = domain.vertex_component
-    order = np.arange(comp.size)[::-1]
-    first[comp[order]] = order  # lowest vertex index of each component
     d = np.zeros(domain.n_vertices)
-    d[first] = weight
+    d[domain.first_vertices] = weight
     return (K + sp.diags(d, format="csr")).tocsr()
 
 

@@ -63,8 +63,9 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from .. import linalg
-from ..stencil import E_TWIST, E_X, E_Y, facet_form, scatter_corners
+from ... import linalg
+from ...linalg.amg import hierarchy
+from ...operators.stencil import E_TWIST, E_X, E_Y, facet_form, scatter_corners
 
 log = logging.getLogger(__name__)
 
@@ -117,10 +118,7 @@ class FacetBlocks:
         idx_dtype = np.int32 if keys.size < 2**31 else np.int64
         self.slot = np.searchsorted(keys, fk).astype(idx_dtype).reshape(-1, 16)
         self.nnz = keys.size
-        first = np.full(domain.n_components, -1, dtype=np.int64)
-        comp = domain.vertex_component
-        order = np.arange(comp.size)[::-1]
-        first[comp[order]] = order
+        first = domain.first_vertices
         diag = np.searchsorted(keys, first * n + first)
         self.pin = np.bincount(diag, np.full(first.size, pin), minlength=self.nnz)
 
@@ -199,28 +197,9 @@ def glue_weight(r: np.ndarray, ks: float) -> np.ndarray:
 
 
 def _pcg(K, b, x0, M, rtol, maxiter):
-    """Conjugate gradients with preconditioner `M` from `x0`; returns (x, iterations)."""
-    x = x0.copy()
-    r = b - K @ x
-    bnorm = np.sqrt(b @ b)
-    if bnorm == 0:
-        return np.zeros_like(b), 0
-    z = M @ r
-    p = z.copy()
-    rz = r @ z
-    for it in range(1, maxiter + 1):
-        Kp = K @ p
-        alpha = rz / (p @ Kp)
-        x += alpha * p
-        r -= alpha * Kp
-        if np.sqrt(r @ r) <= rtol * bnorm:
-            return x, it
-        z = M @ r
-        rz_new = r @ z
-        p *= rz_new / rz
-        p += z
-        rz = rz_new
-    return x, maxiter
+    """A few CG steps from `x0`; returns (x, iterations)."""
+    x, info = linalg.cg(K, b, lambda r: M @ r, x0=x0, rtol=rtol, maxiter=maxiter)
+    return x, info.iterations
 
 
 def _glue_inverse(target, w, A_other):
@@ -284,8 +263,6 @@ def solve_discontinuous(
         ``iterations``, ``converged``, ``cg_iterations`` (list), ``detached`` (fraction of
         facet corners with glue weight < 1/2), ``seconds``.
     """
-    import pyamg
-
     t0 = time.perf_counter()
     ks = k * scale
     m = domain.n_facets
@@ -303,12 +280,7 @@ def solve_discontinuous(
         Ma0 = a @ M0[0] if all_target else np.where(tgt, a @ M0[0], a @ M0[1])
         K0 = blocks.assemble(np.where(tgt, Q0[0].ravel(), Q0[1].ravel()))
         rhs0 = scatter_corners(domain, Ma0)
-        ml = pyamg.ruge_stuben_solver(
-            K0, max_coarse=500, coarse_solver="splu",
-            presmoother=("gauss_seidel", {"sweep": "forward"}),
-            postsmoother=("gauss_seidel", {"sweep": "backward"}),
-        )
-        P = ml.aspreconditioner(cycle="V")
+        P = hierarchy(K0, symmetric_gs=True).aspreconditioner(cycle="V")
         t1 = time.perf_counter()
         z, it = _pcg(K0, rhs0, np.zeros(domain.n_vertices), P, 1e-8, START_CG)
         cg_its = [it]
@@ -316,7 +288,7 @@ def solve_discontinuous(
             # an ill-conditioned start (bands of facets without a normal leave near-free
             # modes that multigrid-CG resolves slowly): take the library's solver
             try:
-                z = linalg.solve(K0, rhs0)
+                z = linalg.solve(K0, rhs0)[0]
             except linalg.SolverError:
                 z, it = _pcg(K0, rhs0, z, P, 1e-8, 2000)
                 cg_its.append(it)

@@ -1,0 +1,302 @@
+"""Camera models: the one place that knows whether a view is orthographic or perspective.
+
+Every method integrates one *unknown* on the image grid, defined up to an additive constant
+per connected component, and a :class:`Camera` says what that unknown is and how it relates
+to the normals, to depth and to 3-D points:
+
+===================  ===================================  ======================================
+                     :class:`Orthographic` (pixel size h)  :class:`Pinhole` (intrinsics K)
+===================  ===================================  ======================================
+unknown              height ``z = -depth``                 log-depth ``log Z``
+grid slopes          ``h (p, q) = h (-n_x, -n_y) / n_z``   exact ``d log Z`` per pixel from ``n``
+footprint            ``h``                                 ``1 / sqrt(fx fy)``
+depth                ``-unknown``                          ``exp(unknown)``
+gauge (no prior)     mean facet depth 0 per component      median facet depth 1 per component
+view cosine          ``n_z``                               ``n . (direction to the camera)``
+===================  ===================================  ======================================
+
+Grid coordinates
+    Positions are given as ``(i, j)`` on the (H+1) x (W+1) vertex grid of
+    :mod:`facetlift.conventions`: vertex ``(i, j)`` is at ``(i, j)``, the centre of pixel
+    ``(r, c)`` at ``(r + 1/2, c + 1/2)``. An orthographic camera places ``(i, j)`` at
+    ``x = j h``, ``y = -i h``; a pinhole camera at image coordinates
+    ``(row, col) = (i - 1/2, j - 1/2)`` (OpenCV: pixel centres at integer indices).
+
+Grid slopes
+    The change of the unknown per pixel step along ``x`` (right, +column) and ``y`` (up,
+    -row) implied by a normal, ``(gx, gy)``. Divided by the footprint they are slopes in the
+    units of a height field seen head-on (for a pinhole camera ``f d log Z / du = dZ/dX`` on
+    the optical axis), so angles and thresholds mean the same for both cameras.
+
+Perspective slopes
+    The surface point of pixel ``(u, v) = (col, row)`` is ``X = Z r`` with the viewing ray
+    ``r = K^{-1} (u, v, 1)`` (OpenCV frame: x right, y down, z forward). A normal ``m`` in that
+    frame (``m = (n_x, -n_y, -n_z)`` for facetlift's x right, y up, z toward the viewer) is
+    orthogonal to ``X_u = Z_u r + Z K^{-1} e_u`` and ``X_v``, so exactly::
+
+        d log Z / du = -(m . K^{-1} e_u) / (m . r),   d log Z / dv = -(m . K^{-1} e_v) / (m . r).
+
+    No small-angle or weak-perspective approximation; the slopes are finite unless the surface
+    is seen edge-on (``m . r = 0``). The grazing test is therefore the cosine between the
+    normal and the direction toward the camera, not ``n_z``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .conventions import OUTLIER_EPS
+
+#: Default grazing threshold on the view cosine for a pinhole camera: half a quantisation step
+#: of an 8-bit normal map (indistinguishable from edge-on). In log-depth every camera-facing
+#: normal has finite slopes, and the steep normals at silhouettes are what links the depth of
+#: an occluding surface to the one behind it (see docs/perspective.md).
+PINHOLE_GRAZING = 1.0 / 255
+
+
+def _unit(normals: np.ndarray) -> np.ndarray:
+    n = np.asarray(normals, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+class Camera:
+    """Interface shared by :class:`Orthographic` and :class:`Pinhole` (see module docstring)."""
+
+    #: True for a perspective camera (the unknown is log-depth, defined up to scale).
+    perspective: bool = False
+    #: Default threshold of :meth:`view_cosine` below which a normal counts as grazing.
+    grazing: float = OUTLIER_EPS
+    #: What the unknown is, for messages and ``info``.
+    unknown: str = "height"
+    #: "orthographic" or "perspective", for ``info``.
+    projection: str = "orthographic"
+
+    def footprint(self) -> float:
+        """Width of one pixel in the unknown's units (see module docstring)."""
+        raise NotImplementedError
+
+    def view_cosine(self, rows, cols, normals) -> np.ndarray:
+        """(m,) cosine between each normal and the direction toward the camera.
+
+        `rows`, `cols` are pixel indices (integer centres); `normals` (m, 3) in the facetlift
+        convention, any length. 1 head-on, 0 edge-on, < 0 back-facing; NaN for NaN normals.
+        """
+        raise NotImplementedError
+
+    def grid_slopes(self, rows, cols, normals) -> tuple[np.ndarray, np.ndarray]:
+        """(gx, gy), each (m,): change of the unknown per pixel step along x (right) and y (up)
+        implied by the normals of pixels (`rows`, `cols`); inf/NaN where edge-on or NaN."""
+        raise NotImplementedError
+
+    def to_depth(self, unknown: np.ndarray) -> np.ndarray:
+        """Depth along the viewing axis from values of the unknown."""
+        raise NotImplementedError
+
+    def from_depth(self, depth: np.ndarray) -> np.ndarray:
+        """Values of the unknown from depth (NaN where `depth` is NaN or not a valid depth)."""
+        raise NotImplementedError
+
+    def gauge(self, facet_values: np.ndarray, component: np.ndarray, n: int) -> np.ndarray:
+        """(n,) per-component constant to subtract from the unknown when nothing else fixes it
+        (orthographic: the mean, so mean depth 0; perspective: the median, so median depth 1)."""
+        raise NotImplementedError
+
+    def points(self, i, j, depth) -> np.ndarray:
+        """(N, 3) points, x right, y up, z toward the viewer, of grid positions (`i`, `j`) at
+        `depth` (see "Grid coordinates")."""
+        raise NotImplementedError
+
+    def cropped(self, r0: int, c0: int) -> Camera:
+        """The same camera for the sub-image whose top-left pixel is (`r0`, `c0`)."""
+        raise NotImplementedError
+
+    def subsampled(self, stride: int) -> Camera:
+        """The camera of the image subsampled with ``img[::stride, ::stride]``."""
+        raise NotImplementedError
+
+    #: Intrinsics (3, 3) of a pinhole camera, None for an orthographic one.
+    K: np.ndarray | None = None
+    #: Pixel width in world units (orthographic); 1.0 for a pinhole camera.
+    pixel_size: float = 1.0
+
+
+def _components_mean(values, component, n):
+    return np.bincount(component, values, n) / np.maximum(np.bincount(component, minlength=n), 1)
+
+
+@dataclass(frozen=True, eq=False)
+class Orthographic(Camera):
+    """Parallel projection along -z with square pixels of width `pixel_size` world units."""
+
+    pixel_size: float = 1.0
+
+    perspective = False
+    grazing = OUTLIER_EPS
+    unknown = "height"
+
+    def footprint(self) -> float:
+        return float(self.pixel_size)
+
+    def view_cosine(self, rows, cols, normals):
+        return _unit(normals)[..., 2]
+
+    def grid_slopes(self, rows, cols, normals):
+        n = np.asarray(normals, dtype=float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            h = self.pixel_size
+            return -h * n[..., 0] / n[..., 2], -h * n[..., 1] / n[..., 2]
+
+    def to_depth(self, unknown):
+        return -np.asarray(unknown, dtype=float)
+
+    def from_depth(self, depth):
+        return -np.asarray(depth, dtype=float)
+
+    def gauge(self, facet_values, component, n):
+        return _components_mean(facet_values, component, n)
+
+    def points(self, i, j, depth):
+        h = self.pixel_size
+        return np.column_stack([np.asarray(j, float) * h, -np.asarray(i, float) * h,
+                                -np.asarray(depth, float)])
+
+    def cropped(self, r0, c0):
+        return self
+
+    def subsampled(self, stride):
+        return Orthographic(self.pixel_size * stride)
+
+    def __repr__(self) -> str:
+        return f"Orthographic(pixel_size={self.pixel_size:g})"
+
+
+@dataclass(frozen=True, eq=False)
+class Pinhole(Camera):
+    """Perspective camera with intrinsics `K` (OpenCV layout, see :mod:`facetlift.conventions`)."""
+
+    K: np.ndarray
+
+    perspective = True
+    grazing = PINHOLE_GRAZING
+    unknown = "log-depth"
+    projection = "perspective"
+    pixel_size = 1.0
+
+    def __post_init__(self):
+        K = np.array(self.K, dtype=float)
+        K.setflags(write=False)
+        object.__setattr__(self, "K", K)
+        object.__setattr__(self, "_Kinv", np.linalg.inv(K))
+
+    def footprint(self) -> float:
+        return 1.0 / float(np.sqrt(self.K[0, 0] * self.K[1, 1]))
+
+    def rays(self, rows, cols) -> np.ndarray:
+        """(m, 3) viewing rays ``K^{-1} (col, row, 1)`` in the OpenCV camera frame (unit z), for
+        image coordinates (pixel centres at integer indices)."""
+        rows = np.asarray(rows, dtype=float)
+        cols = np.asarray(cols, dtype=float)
+        pix = np.stack([cols, rows, np.ones_like(cols)], axis=-1)
+        return pix @ self._Kinv.T
+
+    def view_cosine(self, rows, cols, normals):
+        r = self.rays(rows, cols)
+        m = np.asarray(normals, dtype=float) * np.array([1.0, -1.0, -1.0])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return -np.einsum("...i,...i->...", m, r) / (
+                np.linalg.norm(r, axis=-1) * np.linalg.norm(m, axis=-1)
+            )
+
+    def log_depth_slopes(self, rows, cols, normals):
+        """``(d log Z / d col, d log Z / d row)`` per pixel (see module docstring)."""
+        r = self.rays(rows, cols)
+        m = np.asarray(normals, dtype=float) * np.array([1.0, -1.0, -1.0])
+        mr = np.einsum("...i,...i->...", m, r)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return -(m @ self._Kinv[:, 0]) / mr, -(m @ self._Kinv[:, 1]) / mr
+
+    def grid_slopes(self, rows, cols, normals):
+        du, dv = self.log_depth_slopes(rows, cols, normals)
+        return du, -dv  # the grid's y axis points up, against the row index
+
+    def to_depth(self, unknown):
+        return np.exp(np.asarray(unknown, dtype=float))
+
+    def from_depth(self, depth):
+        d = np.asarray(depth, dtype=float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(d > 0, np.log(np.where(d > 0, d, 1.0)), np.nan)
+
+    def gauge(self, facet_values, component, n):
+        from scipy import ndimage
+
+        return np.atleast_1d(ndimage.median(facet_values, component + 1, np.arange(1, n + 1)))
+
+    def points(self, i, j, depth):
+        K = self.K
+        fx, s, cx = K[0]
+        fy, cy = K[1, 1], K[1, 2]
+        d = np.asarray(depth, float)
+        row = np.asarray(i, float) - 0.5
+        col = np.asarray(j, float) - 0.5
+        Y = (row - cy) * d / fy
+        X = ((col - cx) * d - s * Y) / fx
+        return np.column_stack([X, -Y, -d])
+
+    def cropped(self, r0, c0):
+        if r0 == 0 and c0 == 0:
+            return self
+        K = self.K.copy()
+        K[0, 2] -= c0
+        K[1, 2] -= r0
+        return Pinhole(K)
+
+    def subsampled(self, stride):
+        K = self.K.copy()
+        K[:2] /= stride  # pixel centres at integer indices: index i -> i / stride
+        return Pinhole(K)
+
+    def __repr__(self) -> str:
+        K = self.K
+        return f"Pinhole(fx={K[0, 0]:g}, fy={K[1, 1]:g}, cx={K[0, 2]:g}, cy={K[1, 2]:g})"
+
+
+def make_camera(pixel_size=1.0, K=None) -> Camera:
+    """:class:`Pinhole` for intrinsics `K` (checked), else :class:`Orthographic`.
+
+    Raises
+    ------
+    ValueError
+        A non-positive or non-finite `pixel_size`, or `K` that is not valid intrinsics.
+    """
+    if K is not None:
+        return Pinhole(check_K(K))
+    try:
+        h = float(pixel_size)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"`pixel_size` must be a positive number; got {pixel_size!r}") from None
+    if isinstance(pixel_size, bool) or not (np.isfinite(h) and h > 0):
+        raise ValueError(f"`pixel_size` must be a positive finite number; got {pixel_size!r}")
+    return Orthographic(h)
+
+
+def check_K(K) -> np.ndarray:
+    """`K` as a (3, 3) float array of valid intrinsics, or a ValueError naming what is wrong."""
+    from .problem import numeric_array
+
+    Km = numeric_array(K, "K").astype(float)
+    if Km.shape != (3, 3):
+        raise ValueError(f"`K` must be a 3x3 intrinsics matrix; got shape {Km.shape}")
+    if not np.isfinite(Km).all():
+        raise ValueError("`K` contains NaN or inf")
+    if not (Km[0, 0] > 0 and Km[1, 1] > 0):
+        raise ValueError(f"`K` must have positive focal lengths fx=K[0,0], fy=K[1,1]; got {Km}")
+    if not np.allclose(Km[2], [0, 0, 1]) or Km[1, 0] != 0:
+        raise ValueError(
+            "`K` must be upper-triangular with last row [0, 0, 1] (OpenCV layout "
+            f"[[fx, s, cx], [0, fy, cy], [0, 0, 1]]); got {Km.tolist()}"
+        )
+    return Km

@@ -1,0 +1,212 @@
+"""The linear-solver layer: one backend table, one choice of backend, one CG.
+
+Backends (``backend=`` of the methods that solve sparse SPD systems):
+
+``"pardiso"``
+    Intel MKL PARDISO through ``pypardiso`` (extra ``facetlift[mkl]``, ~1.1 GB, Intel Simplified
+    Software License), SPD matrix type, no iterative refinement.
+``"superlu"``
+    scipy's SuperLU in symmetric mode (minimum degree on A+A', no pivoting). Always available.
+``"amg"``
+    pyamg Ruge-Stueben multigrid as a CG preconditioner: no factorization, the least memory.
+``"pcg"``
+    CG with a preconditioner the caller supplies, e.g. the fictitious-domain spectral
+    preconditioner of :mod:`facetlift.linalg.spectral` for facet operators: no set-up and an
+    O(n log n) cost per iteration.
+
+``"auto"`` is resolved by :func:`choose`, the only place that decides which backend runs.
+:func:`factorize` prepares a matrix for repeated solves (the paper's "prefactored" global
+step); :func:`solve` does one solve and reports what it did.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .cg import CGInfo, cg
+from .direct import Factor, SolverError, pardiso_available
+
+__all__ = [
+    "BACKENDS",
+    "CGInfo",
+    "Factor",
+    "SolveInfo",
+    "SolverError",
+    "available_backends",
+    "cg",
+    "check_backend",
+    "choose",
+    "factorize",
+    "solve",
+]
+
+#: Backend names accepted by ``backend=``.
+BACKENDS = ("auto", "pardiso", "superlu", "amg", "pcg")
+
+#: Above this many unknowns a factorization costs minutes and many GB without PARDISO (SuperLU
+#: at 2048^2: ~100 s and 12 GB extrapolated), so "auto" turns to iterative solvers.
+LARGE = 250_000
+
+
+@dataclass
+class SolveInfo:
+    """What :func:`solve` did: the backend that ran and, for CG backends, its iterations."""
+
+    backend: str
+    iterations: int | None = None
+    residual: float | None = None
+
+
+def available_backends() -> list[str]:
+    """Backends usable in this environment (without ``"auto"``)."""
+    return (["pardiso"] if pardiso_available() else []) + ["superlu", "amg", "pcg"]
+
+
+def check_backend(backend) -> str:
+    """`backend` if it is a known and installed backend, else a ValueError naming it."""
+    if not isinstance(backend, str) or backend not in BACKENDS:
+        raise ValueError(f"`backend` must be one of {BACKENDS}; got {backend!r}")
+    if backend == "pardiso" and not pardiso_available():
+        raise ValueError("`backend`='pardiso' needs Intel MKL: pip install 'facetlift[mkl]'")
+    return backend
+
+
+def choose(
+    n: int,
+    backend: str = "auto",
+    *,
+    preconditioner: bool = False,
+    trusted: bool = False,
+    multigrid: bool = True,
+) -> str:
+    """The backend that solves an SPD system of `n` unknowns.
+
+    Parameters
+    ----------
+    n : int
+    backend : str
+        A name from :data:`BACKENDS`; anything but "auto" is returned as it is (checked).
+    preconditioner : bool
+        The caller has a cheap problem-specific preconditioner ("pcg" is possible).
+    trusted : bool
+        That preconditioner is known to converge in a few dozen iterations on this system
+        (e.g. the spectral box on a facet operator with every normal known): prefer it at
+        every size. An untrusted one is used only where factorizing is too costly.
+    multigrid : bool
+        Classical AMG suits the matrix (an M-matrix such as a graph Laplacian); False keeps
+        "auto" on factorizations.
+
+    Returns
+    -------
+    str
+        "pcg", "pardiso", "superlu" or "amg".
+    """
+    backend = check_backend(backend)
+    if backend != "auto":
+        return backend
+    if preconditioner and (trusted or (n > LARGE and not pardiso_available())):
+        return "pcg"
+    if pardiso_available():
+        return "pardiso"
+    if n <= LARGE or not multigrid:
+        return "superlu"
+    return "amg"
+
+
+def factorize(
+    K,
+    backend: str = "auto",
+    *,
+    preconditioner: Callable[[np.ndarray], np.ndarray] | None = None,
+    trusted: bool = False,
+    rtol: float = 1e-11,
+) -> Factor:
+    """Prepare the SPD matrix `K` (n, n) for repeated solves (``Factor.solve(b)``).
+
+    The backend is :func:`choose`'s; iterative backends start every solve from the previous
+    solution (a loop's consecutive right-hand sides are close).
+    """
+    name = choose(
+        K.shape[0], backend, preconditioner=preconditioner is not None, trusted=trusted
+    )
+    if name == "pcg":
+        if preconditioner is None:
+            raise ValueError("`backend`='pcg' needs a `preconditioner`")
+        return _pcg_factor(K, preconditioner, rtol)
+    if name == "pardiso":
+        from .direct import pardiso
+
+        return pardiso(K)
+    if name == "amg":
+        from .amg import amg
+
+        return amg(K, rtol=rtol)
+    from .direct import superlu
+
+    return superlu(K)
+
+
+def solve(
+    K,
+    b: np.ndarray,
+    backend: str = "auto",
+    *,
+    preconditioner: Callable[[np.ndarray], np.ndarray] | None = None,
+    trusted: bool = False,
+    multigrid: bool = True,
+    rtol: float = 1e-11,
+    x0: np.ndarray | None = None,
+) -> tuple[np.ndarray, SolveInfo]:
+    """Solve ``K x = b`` once for a symmetric positive (semi-)definite `K` (n, n).
+
+    With a `preconditioner` and the "pcg" route, `K` may be singular with `b` in its range.
+
+    Returns
+    -------
+    x : (n,) float
+    info : SolveInfo
+
+    Raises
+    ------
+    SolverError
+        The factorization failed or CG did not converge.
+    """
+    name = choose(
+        K.shape[0], backend, preconditioner=preconditioner is not None, trusted=trusted,
+        multigrid=multigrid,
+    )
+    if name == "pcg":
+        if preconditioner is None:
+            raise ValueError("`backend`='pcg' needs a `preconditioner`")
+        x, cinfo = cg(K, b, preconditioner, x0=x0, rtol=rtol)
+        _raise_unless_converged(cinfo, rtol, "preconditioned CG")
+        return x, SolveInfo("pcg", cinfo.iterations, cinfo.relative_residual)
+    factor = factorize(K, name, rtol=rtol)
+    x = factor.solve(b)
+    it = factor.info.iterations if factor.info is not None else None
+    return x, SolveInfo(name, it)
+
+
+def _raise_unless_converged(info: CGInfo, rtol: float, what: str) -> None:
+    if not info.converged:
+        raise SolverError(
+            f"{what} did not converge in {info.iterations} iterations (relative residual "
+            f"{info.relative_residual:.2e} > rtol={rtol:g})"
+        )
+
+
+def _pcg_factor(K, preconditioner, rtol) -> Factor:
+    state = {"x0": None}
+
+    def _solve(b):
+        x, info = cg(K, b, preconditioner, x0=state["x0"], rtol=rtol)
+        factor.info = info
+        _raise_unless_converged(info, rtol, "preconditioned CG")
+        state["x0"] = x
+        return x
+
+    factor = Factor(_solve, "pcg")
+    return factor

@@ -1,0 +1,145 @@
+"""Surface-from-gradients by discrete geometry processing (Xie et al., CVPR 2014).
+
+Every domain pixel is a quad facet of an (H+1) x (W+1) vertex grid (see
+:mod:`facetlift.conventions`); the unknowns are the vertex heights ``z``. An iteration has two
+steps.
+
+Local shaping (Eq. 1-2)
+    Each facet's four corners are projected along z onto the plane with its target normal
+    through the facet's current centre ``c``: ``p_f[k] = c + p dx_k + q dy_k`` with the corner
+    offsets ``(dx_k, dy_k)`` from the centre and ``(p, q) = (-n_x / n_z, -n_y / n_z)``.
+
+Global blending with mean subtraction (Eq. 5-8)
+    ``min_z sum_f || N z_f - N p_f ||^2`` with ``N = I - 11^T / 4``: ``A^T A z = A^T b`` with
+    ``A = blockdiag(N) C``. ``A^T A`` never changes, so it is factorized once. Without mean
+    subtraction (Eq. 4, ``mean_subtraction=False``) the target is ``z_f ~ p_f`` itself, which
+    converges far more slowly (Fig. 4).
+
+Missing samples and outliers (Sec. 4.4)
+    Facets without a normal, or with a grazing normal (the ``outlier_eps`` rule of
+    :func:`facetlift.prepare`), take their *current* normal each iteration: the least-squares
+    plane of their corners.
+
+Fixed point (beyond the paper)
+    In the basis mean / x-slope / y-slope / twist of a facet's corner vector, ``N p_f`` of a
+    known facet is ``(h p) e_x + (h q) e_y``, independent of the current shape, and that of an
+    unknown facet is the x- and y-slope part of its current ``z_f``. The loop is therefore a
+    preconditioned Richardson iteration whose fixed point solves the single least-squares
+    problem ``min_z sum_known ||N z_f - b_f||^2 + sum_unknown (e_twist . z_f)^2``: at an unknown
+    facet only the non-planar (+-+-) part is penalised. ``solver="direct"`` solves that
+    problem at once; ``solver="iterative"`` runs the paper's loop. Where the unknown facets
+    leave the fixed point undetermined (a band of unknown facets across a component), a tiny
+    ``flat_weight`` on their slopes selects the flattest solution, which is also where the loop
+    started from a flat mesh ends.
+
+Perspective cameras (``K`` given)
+    The unknown becomes the log-depth ``log Z`` on the pixel grid (vertex spacing one pixel,
+    vertex ``(i, j)`` at pixel coordinates ``(row, col) = (i - 1/2, j - 1/2)``). A normal fixes
+    the derivatives of ``log Z`` along columns and rows exactly
+    (:func:`facetlift.perspective.log_depth_slopes`), which become the facets' target slopes;
+    the same local/global machinery then runs unchanged. Depth is ``exp`` of the result, scaled
+    so that each component's median facet depth is 1 (perspective depth is only defined up to
+    scale). The outlier test uses the cosine between the normal and the direction toward the
+    camera instead of ``n_z``, and its default threshold is only ``1/255`` (half a quantisation
+    step of an 8-bit normal map, i.e. indistinguishable from edge-on): in log-depth every
+    camera-facing normal has finite slopes, and the steep normals at silhouettes are what
+    links the depth of an occluding surface to the one behind it (on the DiLiGenT bear,
+    dropping the 32 normals with cosine below cos 85 deg raises the error of
+    ``discontinuities=True`` from 0.062 to 0.155 mm).
+    See docs/perspective.md.
+
+Depth discontinuities (``discontinuities=True``)
+    Every facet keeps its own corner values, glued to the shared vertices by a robust
+    (Cauchy) penalty, so facets can separate where the normals imply a depth jump; see
+    :mod:`facetlift.methods._discontinuity`. Only with ``solver="direct"``; it has its own
+    multigrid-CG solver (``backend`` is not used).
+
+Options
+    Declared in :data:`OPTIONS` (``facetlift methods``, docs/methods.md).
+
+Reference
+    W. Xie, Y. Zhang, C. C. L. Wang, R. C.-K. Chung. Surface-from-Gradients: An Approach Based
+    on Discrete Geometry Processing. CVPR 2014.
+"""
+
+from __future__ import annotations
+
+from ...options import Option
+from .. import MethodResult
+from .common import average_deviation, empty_components, targets
+from .discontinuous import DEFAULT_ITER, DEFAULT_K, solve_discontinuous
+from .fixed_point import solve_direct
+from .loop import local_shaping, solve_iterative
+
+__all__ = ["OPTIONS", "average_deviation", "local_shaping", "run", "solve_direct",
+           "solve_iterative", "targets"]
+
+_ITERATIVE = {"solver": "iterative"}
+_DISC = {"discontinuities": True}
+
+OPTIONS = (
+    Option("solver", "direct", "'direct' solves the loop's fixed point at once; 'iterative' "
+           "runs the paper's local/global loop", kind="choice", choices=("direct", "iterative")),
+    Option("discontinuities", False, "let depth jump where the normals imply it "
+           "(facets with their own corners, robustly glued)", kind="bool",
+           when={"solver": "direct"}),
+    Option("mean_subtraction", True, "global blending with mean subtraction (Eq. 5); "
+           "without it the loop converges far more slowly (Fig. 4)", kind="bool",
+           when=_ITERATIVE),
+    Option("max_iter", 5000, "iteration limit of the loop", kind="int", low=1, when=_ITERATIVE),
+    Option("tol", 1e-3, "stop when the average angular deviation changes by less (degrees)",
+           low=0.0, when=_ITERATIVE),
+    Option("backend", "auto", "sparse solver of the global step (facetlift.linalg)",
+           kind="choice", choices=("auto", "pcg", "pardiso", "superlu", "amg"),
+           when={"discontinuities": False}),
+    Option("flat_weight", 1e-9, "slope weight of facets without a normal (selects the "
+           "flattest of otherwise equal solutions)", low=0.0, low_open=True),
+    Option("progress", None, "callable(iteration, value) called after every iteration of "
+           "the routes that iterate", kind="callable", none=True),
+    Option("discontinuity_k", DEFAULT_K, "corner misfit, in pixel footprints, at which the "
+           "glue between a facet and a vertex halves (smaller cuts more readily)",
+           low=0.0, low_open=True, when=_DISC),
+    Option("discontinuity_iter", DEFAULT_ITER, "reweightings after the smooth start",
+           kind="int", low=0, when=_DISC),
+)
+
+
+def run(
+    problem,
+    *,
+    solver="direct",
+    discontinuities=False,
+    mean_subtraction=True,
+    max_iter=5000,
+    tol=1e-3,
+    backend="auto",
+    flat_weight=1e-9,
+    progress=None,
+    discontinuity_k=DEFAULT_K,
+    discontinuity_iter=DEFAULT_ITER,
+) -> MethodResult:
+    """Integrate `problem` with the DGP method (options checked by facetlift.solve)."""
+    bx, by, target = targets(problem)
+    s = problem.camera.footprint()
+    domain = problem.domain
+    if discontinuities:
+        empty_components(domain, target)
+        z, zf, info = solve_discontinuous(
+            domain, bx, by, target, scale=s, k=discontinuity_k, max_iter=discontinuity_iter,
+            flat_weight=flat_weight,
+            callback=None if progress is None else (lambda it, z, change: progress(it, change)),
+        )
+        info["solver"] = "discontinuous"
+        info["deviation"] = [average_deviation(domain, z, bx, by, target, s)]
+        result = MethodResult(values=zf, vertex_values=z, info=info)
+    elif solver == "direct":  # both loops share this fixed point
+        z, info = solve_direct(domain, bx, by, target, backend, flat_weight, h=s)
+        result = MethodResult(vertex_values=z, info=info)
+    else:
+        z, info = solve_iterative(
+            domain, bx, by, target, s, mean_subtraction, max_iter, tol, backend, progress,
+        )
+        result = MethodResult(vertex_values=z, info=info)
+    info["outliers"] = int((problem.known & ~target).sum())
+    info["missing"] = int((~problem.known).sum())
+    return result
