@@ -11,7 +11,7 @@ masks             PNG, TIFF, ``.npy``                    imagecodecs, tifffile
 intrinsics ``K``  text, 3 x 3                            numpy
 depth maps        ``.npy``, OpenEXR, TIFF, ``.npz``      numpy, OpenEXR, tifffile
 meshes            PLY (binary), OBJ; quads or triangles  meshio
-previews          PNG                                    imagecodecs, matplotlib colormaps
+previews          PNG                                    imagecodecs; matplotlib for colormaps
 ================  =====================================  ======================================
 
 Integer normal maps are decoded per channel as ``n = v / maxval * 2 - 1`` (``maxval`` 255 or
@@ -23,6 +23,9 @@ fill) and decodes as NaN, i.e. a missing sample.
 
 Every writer is atomic: it writes a temporary file in the target directory, flushes it to disk
 and renames it over the target, so a failed write never leaves a partial file behind.
+
+matplotlib is needed only for the colour panel of :func:`write_preview` (``colormap=``) and comes
+with the ``plot`` extra (``pip install 'facetlift[plot]'``); the shaded preview does without it.
 
 Modules: :mod:`~facetlift.io.images` (normal maps, masks, depth maps),
 :mod:`~facetlift.io.dataset` (``K.txt``, dataset folders), :mod:`~facetlift.io.meshes`,

@@ -55,12 +55,18 @@ def write_preview(
         Direction toward the light, x right, y up, z toward the viewer.
     colormap : str, optional
         A matplotlib colormap name; when given, a second panel shows the depth in colour
-        (near = low end of the map).
+        (near = low end of the map). Needs matplotlib (``facetlift[plot]``); the shaded panel
+        alone does not.
     min_size : int
         Small surfaces are enlarged by an integer factor (nearest neighbour) so that the
         shorter side has at least this many pixels.
     background : (3,) int
         RGB colour outside the domain.
+
+    Raises
+    ------
+    ImportError
+        If `colormap` is given and matplotlib is not installed.
     """
     p = Path(path)
     _suffix(p, (".png",), "preview", "path")
@@ -73,7 +79,13 @@ def write_preview(
     img[inside] = np.round(255 * s[inside, None] * tint).astype(np.uint8)
     panels = [img]
     if colormap is not None:
-        import matplotlib
+        try:
+            import matplotlib
+        except ImportError as e:
+            raise ImportError(
+                "write_preview(colormap=...) needs matplotlib, which comes with the plot extra: "
+                "pip install 'facetlift[plot]'"
+            ) from e
 
         d = surface.depth
         lo, hi = np.nanmin(d[inside]), np.nanmax(d[inside])
