@@ -1,5 +1,6 @@
 """Round trips and error paths of facetlift.io."""
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -272,6 +273,15 @@ def test_preview(tmp_path, surface):
         io.write_preview(tmp_path / "q.png", surface, colormap="viridis").read_bytes()
     )
     assert min(big.shape[:2]) >= 256 and big.shape[1] > 2 * big.shape[0]
+
+
+def test_preview_without_matplotlib(tmp_path, surface, monkeypatch):
+    """The shaded preview needs no matplotlib; the colormap panel names the extra to install."""
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # `import matplotlib` now fails
+    assert surface.save(tmp_path / "p.png").is_file()
+    with pytest.raises(ImportError, match=r"matplotlib.*pip install 'facetlift\[plot\]'"):
+        io.write_preview(tmp_path / "q.png", surface, colormap="viridis")
+    assert not (tmp_path / "q.png").exists()
 
 
 def test_shade_flat_plane_is_uniform():

@@ -1,3 +1,5 @@
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -137,6 +139,23 @@ def test_render_errors():
         render_mesh(3.0, 16)
     with pytest.raises(ValueError, match="`resolution`"):
         render_mesh(box, (16, 0))
+
+
+def test_without_trimesh_only_render_mesh_needs_it():
+    """Analytic ground truth works without trimesh; render_mesh names the extra to install."""
+    code = (
+        "import sys\n"
+        "sys.modules['trimesh'] = None  # `import trimesh` now fails\n"
+        "from facetlift import synthetic\n"
+        "assert synthetic.analytic('saddle', 8).normals.shape == (8, 8, 3)\n"
+        "try:\n"
+        "    synthetic.render_mesh('mesh.ply', 8)\n"
+        "except ImportError as e:\n"
+        "    print(e)\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert "needs trimesh" in run.stdout and "pip install 'facetlift[render]'" in run.stdout
 
 
 @pytest.mark.skipif(not (DATA / "meshes" / "spot.ply").is_file(), reason="data absent")

@@ -317,7 +317,13 @@ def _view_frame(view) -> np.ndarray:
 
 
 def _load_mesh(mesh):
-    import trimesh
+    try:
+        import trimesh
+    except ImportError as e:
+        raise ImportError(
+            "facetlift.synthetic.render_mesh needs trimesh, which comes with the render extra: "
+            "pip install 'facetlift[render]'"
+        ) from e
 
     if isinstance(mesh, trimesh.Trimesh):
         return mesh
@@ -387,6 +393,8 @@ def render_mesh(
     ValueError
         Bad `mesh`, `resolution`, `view`, `margin` or `pixel_size`, or a mesh that covers no
         pixel.
+    ImportError
+        If trimesh is not installed (``pip install 'facetlift[render]'``).
     """
     H, W = _size(resolution, "resolution")
     if not (0 <= margin <= 0.45):

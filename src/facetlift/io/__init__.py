@@ -1,0 +1,77 @@
+"""Reading normal maps, masks and intrinsics; writing depth maps, meshes and previews.
+
+Formats and the libraries behind them (imported on first use, so ``import facetlift`` stays
+cheap):
+
+================  =====================================  ======================================
+what              formats                                library
+================  =====================================  ======================================
+normal maps       PNG 8/16 bit, TIFF, OpenEXR, ``.npy``  imagecodecs (libpng), tifffile, OpenEXR
+masks             PNG, TIFF, ``.npy``                    imagecodecs, tifffile
+intrinsics ``K``  text, 3 x 3                            numpy
+depth maps        ``.npy``, OpenEXR, TIFF, ``.npz``      numpy, OpenEXR, tifffile
+meshes            PLY (binary), OBJ; quads or triangles  meshio
+previews          PNG                                    imagecodecs; matplotlib for colormaps
+================  =====================================  ======================================
+
+Integer normal maps are decoded per channel as ``n = v / maxval * 2 - 1`` (``maxval`` 255 or
+65535) with R, G, B = x, y, z in the facetlift convention (x right, y up, z toward the viewer;
+see :mod:`facetlift.conventions`). Pillow is not used for PNG because it silently reduces
+16-bit RGB PNGs to 8 bits. A pixel of an integer map whose decoded vector has a length outside
+:data:`ENCODED_LENGTH_RANGE` does not encode a normal (black, white or mid-grey background
+fill) and decodes as NaN, i.e. a missing sample.
+
+Every writer is atomic: it writes a temporary file in the target directory, flushes it to disk
+and renames it over the target, so a failed write never leaves a partial file behind.
+
+matplotlib is needed only for the colour panel of :func:`write_preview` (``colormap=``) and comes
+with the ``plot`` extra (``pip install 'facetlift[plot]'``); the shaded preview does without it.
+
+Modules: :mod:`~facetlift.io.images` (normal maps, masks, depth maps),
+:mod:`~facetlift.io.dataset` (``K.txt``, dataset folders), :mod:`~facetlift.io.meshes`,
+:mod:`~facetlift.io.preview`, :mod:`~facetlift.io.surface` (:func:`save_surface`) and
+:mod:`~facetlift.io.atomic` (:func:`atomic_path`). Everything public is importable from
+``facetlift.io`` itself.
+"""
+
+from .atomic import atomic_path
+from .dataset import read_dataset, read_K
+from .images import (
+    DEPTH_FORMATS,
+    ENCODED_LENGTH_RANGE,
+    MASK_FORMATS,
+    NORMAL_READ_FORMATS,
+    NORMAL_WRITE_FORMATS,
+    read_depth,
+    read_mask,
+    read_normals,
+    write_depth,
+    write_mask,
+    write_normals,
+)
+from .meshes import MESH_FORMATS, write_mesh
+from .preview import shade, write_preview
+from .surface import SURFACE_FORMATS, save_surface
+
+__all__ = [
+    "DEPTH_FORMATS",
+    "ENCODED_LENGTH_RANGE",
+    "MASK_FORMATS",
+    "MESH_FORMATS",
+    "NORMAL_READ_FORMATS",
+    "NORMAL_WRITE_FORMATS",
+    "SURFACE_FORMATS",
+    "atomic_path",
+    "read_K",
+    "read_dataset",
+    "read_depth",
+    "read_mask",
+    "read_normals",
+    "save_surface",
+    "shade",
+    "write_depth",
+    "write_mask",
+    "write_mesh",
+    "write_normals",
+    "write_preview",
+]

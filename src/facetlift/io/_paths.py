@@ -1,0 +1,24 @@
+"""Path checks shared by the readers and writers: extension allowed, file present."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def _suffix(path: Path, allowed: tuple[str, ...], what: str, arg: str) -> str:
+    ext = path.suffix.lower()
+    if ext not in allowed:
+        raise ValueError(
+            f"`{arg}`: unsupported {what} format {ext or '(no extension)'!r} for {path}; "
+            f"supported: {', '.join(allowed)}"
+        )
+    return ext
+
+
+def _existing(path, arg: str) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise ValueError(f"`{arg}`: file {p} does not exist")
+    if p.is_dir():
+        raise ValueError(f"`{arg}`: {p} is a directory, not a file")
+    return p

@@ -1,0 +1,75 @@
+"""Perspective intrinsics (``K.txt``) and BiNI / DiLiGenT dataset folders."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ._paths import _existing
+from .images import MASK_FORMATS, NORMAL_READ_FORMATS, read_mask, read_normals
+
+
+def read_K(path) -> np.ndarray:
+    """Read 3x3 perspective intrinsics (OpenCV layout) from a text file (``np.loadtxt``).
+
+    Raises
+    ------
+    ValueError
+        Missing or unparsable file, a shape other than 3x3, or a matrix that is not valid
+        intrinsics (see :mod:`facetlift.conventions`).
+    """
+    from ..camera import check_K
+
+    arg = "K"
+    p = _existing(path, arg)
+    try:
+        K = np.loadtxt(p, dtype=float, ndmin=2)
+    except Exception as e:
+        raise ValueError(f"`{arg}`: cannot parse {p} as a 3x3 matrix ({e})") from None
+    try:
+        return check_K(K)
+    except ValueError as e:
+        raise ValueError(f"`{arg}`: {p}: {e}") from None
+
+
+def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
+    for ext in formats:
+        if (folder / f"{stem}{ext}").is_file():
+            return folder / f"{stem}{ext}"
+    return None
+
+
+def read_dataset(folder, *, y_down: bool = False) -> dict:
+    """Read a folder in the BiNI / DiLiGenT layout.
+
+    The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
+    ``mask.png`` (or ``.tif``, ``.tiff``, ``.npy``) and, for a perspective camera, ``K.txt``.
+    Without ``K.txt`` the view is orthographic. Pixels outside the mask may hold anything.
+
+    Returns
+    -------
+    dict
+        ``normals`` (H, W, 3) float64, ``mask`` (H, W) bool (the mask file, else the normal
+        map's alpha channel, else None) and ``K`` (3, 3) or None.
+
+    Raises
+    ------
+    ValueError
+        If the folder or its normal map is missing, or any file is unreadable.
+    """
+    f = Path(folder)
+    if not f.is_dir():
+        raise ValueError(f"`folder`: {f} is not a directory")
+    npath = _find(f, "normal_map", NORMAL_READ_FORMATS)
+    if npath is None:
+        raise ValueError(
+            f"`folder`: {f} has no normal_map file (looked for normal_map with extension "
+            f"{', '.join(NORMAL_READ_FORMATS)})"
+        )
+    normals, alpha = read_normals(npath, y_down=y_down)
+    mpath = _find(f, "mask", MASK_FORMATS)
+    mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
+    kpath = f / "K.txt"
+    K = read_K(kpath) if kpath.is_file() else None
+    return {"normals": normals, "mask": mask, "K": K}

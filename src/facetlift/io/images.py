@@ -1,0 +1,361 @@
+"""Normal maps, masks and depth maps as PNG, TIFF, OpenEXR and ``.npy`` files.
+
+PNG goes through imagecodecs (libpng: 8 and 16 bit kept as stored), TIFF through tifffile and
+OpenEXR through the OpenEXR bindings, each imported on first use. The decoding rule for integer
+normal maps is in :mod:`facetlift.io`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..problem import numeric_array
+from ._paths import _existing, _suffix
+from .atomic import _save_npy, _write_bytes, atomic_path
+
+#: Decoded integer pixels whose vector length lies outside this range are not normals (NaN).
+ENCODED_LENGTH_RANGE = (0.5, 1.5)
+
+NORMAL_READ_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy")
+NORMAL_WRITE_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy")
+MASK_FORMATS = (".png", ".tif", ".tiff", ".npy")
+DEPTH_FORMATS = (".npy", ".exr", ".tif", ".tiff")
+
+
+# --------------------------------------------------------------------------------------------
+# decoding
+
+
+def _decode_image(path: Path, ext: str, arg: str) -> np.ndarray:
+    """Pixels of a PNG or TIFF file as stored (no conversion); ValueError if unreadable."""
+    try:
+        if ext == ".png":
+            import imagecodecs
+
+            data = path.read_bytes()
+            return np.asarray(imagecodecs.png_decode(data))
+        import tifffile
+
+        return np.asarray(tifffile.imread(path))
+    except OSError as e:
+        raise ValueError(f"`{arg}`: cannot read {path}: {e}") from None
+    except Exception as e:  # corrupt or truncated files: each library has its own errors
+        raise ValueError(
+            f"`{arg}`: {path} is not a readable {ext[1:].upper()} image ({type(e).__name__}: {e})"
+        ) from None
+
+
+def _read_exr(path: Path, arg: str) -> dict[str, np.ndarray]:
+    try:
+        import OpenEXR
+
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            return {k: np.asarray(v.pixels) for k, v in f.channels().items()}
+    except Exception as e:
+        raise ValueError(
+            f"`{arg}`: {path} is not a readable OpenEXR image ({type(e).__name__}: {e})"
+        ) from None
+
+
+def _read_npy(path: Path, arg: str) -> np.ndarray:
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except Exception as e:
+        raise ValueError(
+            f"`{arg}`: {path} is not a readable .npy array ({type(e).__name__}: {e})"
+        ) from None
+    if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "biuf":
+        raise ValueError(f"`{arg}`: {path} must hold a numeric array; got {arr.dtype}")
+    return arr
+
+
+def _decode_unit(pixels: np.ndarray, path: Path, arg: str) -> np.ndarray:
+    """uint8/uint16 -> [-1, 1] per channel; float passes through; other dtypes are refused."""
+    if pixels.dtype == np.uint8 or pixels.dtype == np.uint16:
+        maxval = float(np.iinfo(pixels.dtype).max)
+        n = pixels.astype(np.float64) / maxval * 2.0 - 1.0
+        length = np.linalg.norm(n, axis=-1)
+        lo, hi = ENCODED_LENGTH_RANGE
+        n[(length < lo) | (length > hi)] = np.nan
+        return n
+    if pixels.dtype.kind == "f":
+        return pixels.astype(np.float64)
+    raise ValueError(
+        f"`{arg}`: {path} has pixel type {pixels.dtype}; normal maps must be uint8, uint16 "
+        "or floating point"
+    )
+
+
+def _split_alpha(pixels: np.ndarray, path: Path, arg: str):
+    if pixels.ndim != 3 or pixels.shape[-1] not in (3, 4) or min(pixels.shape[:2]) < 1:
+        channels = pixels.shape[-1] if pixels.ndim == 3 else (1 if pixels.ndim == 2 else None)
+        raise ValueError(
+            f"`{arg}`: {path} must be an (H, W, 3) RGB or (H, W, 4) RGBA normal map; got "
+            f"shape {pixels.shape}"
+            + (f" ({channels} channel(s))" if channels is not None else "")
+        )
+    if pixels.shape[-1] == 4:
+        return pixels[..., :3], pixels[..., 3] > 0
+    return pixels, None
+
+
+# --------------------------------------------------------------------------------------------
+# readers
+
+
+def read_normals(path, *, y_down: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """Read a normal map.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.png`` (8 or 16 bit RGB/RGBA), ``.tif``/``.tiff`` (uint8, uint16 or float, 3 or 4
+        channels), ``.exr`` (channels R, G, B or X, Y, Z, optionally A) or ``.npy`` ((H, W, 3)
+        or (H, W, 4)).
+    y_down : bool
+        The file stores y pointing *down* (DirectX / OpenCV style); the y component is negated
+        to give the facetlift convention (y up).
+
+    Returns
+    -------
+    normals : (H, W, 3) float64
+        Normals, x right, y up, z toward the viewer, as decoded (not renormalised: that is
+        done by :func:`facetlift.prepare`); NaN where an integer pixel holds no normal.
+    alpha_mask : (H, W) bool or None
+        ``alpha > 0`` where the file has an alpha channel, else None.
+
+    Raises
+    ------
+    ValueError
+        Missing, corrupt or truncated file, wrong number of channels, unsupported pixel type
+        or extension. The message names the path.
+    """
+    arg = "path"
+    p = _existing(path, arg)
+    ext = _suffix(p, NORMAL_READ_FORMATS, "normal map", arg)
+    if ext in (".png", ".tif", ".tiff"):
+        pixels = _decode_image(p, ext, arg)
+        rgb, alpha = _split_alpha(pixels, p, arg)
+        n = _decode_unit(rgb, p, arg)
+    elif ext == ".exr":
+        ch = _read_exr(p, arg)
+        for names in (("R", "G", "B"), ("X", "Y", "Z")):
+            if all(c in ch for c in names):
+                break
+        else:
+            raise ValueError(
+                f"`{arg}`: {p} must have channels R, G, B or X, Y, Z; got {sorted(ch)}"
+            )
+        n = np.stack([ch[c] for c in names], axis=-1).astype(np.float64)
+        alpha = ch["A"] > 0 if "A" in ch else None
+    else:
+        arr = _read_npy(p, arg)
+        rgb, alpha_v = _split_alpha(arr, p, arg)
+        n = rgb.astype(np.float64)
+        alpha = None if alpha_v is None else alpha_v
+    if y_down:
+        n[..., 1] = -n[..., 1]
+    return n, alpha
+
+
+def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
+    """Read a mask image: nonzero is inside.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.png``, ``.tif``/``.tiff`` or ``.npy``; grey, grey+alpha, RGB or RGBA. A colour pixel
+        is inside when any of its colour channels is nonzero (and its alpha, if any, is > 0).
+    shape : (H, W), optional
+        Required shape (that of the normal map).
+
+    Returns
+    -------
+    (H, W) bool
+
+    Raises
+    ------
+    ValueError
+        Missing or corrupt file, unsupported extension or layout, or a shape other than `shape`.
+    """
+    arg = "mask"
+    p = _existing(path, arg)
+    ext = _suffix(p, MASK_FORMATS, "mask", arg)
+    a = _decode_image(p, ext, arg) if ext != ".npy" else _read_npy(p, arg)
+    if a.ndim == 3 and a.shape[-1] in (1, 2, 3, 4):
+        colour = a[..., :3] if a.shape[-1] >= 3 else a[..., :1]
+        m = (colour != 0).any(-1)
+        if a.shape[-1] in (2, 4):
+            m &= a[..., -1] > 0
+    elif a.ndim == 2:
+        m = a != 0
+    else:
+        raise ValueError(
+            f"`{arg}`: {p} must be an (H, W) image or have 1-4 channels; got shape {a.shape}"
+        )
+    if min(m.shape) < 1:
+        raise ValueError(f"`{arg}`: {p} is empty (shape {a.shape})")
+    if a.dtype.kind == "f" and not np.isfinite(a).all():
+        raise ValueError(f"`{arg}`: {p} contains NaN or inf")
+    if shape is not None and m.shape != tuple(shape):
+        raise ValueError(
+            f"`{arg}`: {p} has size {m.shape[0]}x{m.shape[1]} (HxW) but the normal map is "
+            f"{shape[0]}x{shape[1]}"
+        )
+    return m
+
+
+def read_depth(path) -> np.ndarray:
+    """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF)."""
+    arg = "path"
+    p = _existing(path, arg)
+    ext = _suffix(p, DEPTH_FORMATS, "depth", arg)
+    if ext == ".npy":
+        d = _read_npy(p, arg)
+    elif ext == ".exr":
+        ch = _read_exr(p, arg)
+        if "Z" in ch:
+            d = ch["Z"]
+        elif len(ch) == 1:
+            d = next(iter(ch.values()))
+        else:
+            raise ValueError(f"`{arg}`: {p} has no depth channel Z; channels {sorted(ch)}")
+    else:
+        d = _decode_image(p, ext, arg)
+    if d.ndim != 2:
+        raise ValueError(f"`{arg}`: {p} must hold an (H, W) depth map; got shape {d.shape}")
+    return d.astype(np.float64)
+
+
+# --------------------------------------------------------------------------------------------
+# encoding
+
+
+def _write_exr(path: Path, channels: dict[str, np.ndarray]) -> None:
+    import OpenEXR
+
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    data = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in channels.items()}
+    with atomic_path(path) as tmp:
+        with OpenEXR.File(header, data) as f:
+            f.write(str(tmp))
+
+
+def _write_tiff(path: Path, arr: np.ndarray) -> None:
+    import tifffile
+
+    with atomic_path(path) as tmp:
+        photometric = "rgb" if arr.ndim == 3 and arr.shape[-1] in (3, 4) else "minisblack"
+        extra = "unassalpha" if arr.ndim == 3 and arr.shape[-1] == 4 else None
+        tifffile.imwrite(
+            tmp, arr, photometric=photometric, extrasamples=extra, compression="zlib"
+        )
+
+
+def _write_png(path: Path, pixels: np.ndarray) -> None:
+    import imagecodecs
+
+    _write_bytes(path, imagecodecs.png_encode(np.ascontiguousarray(pixels)))
+
+
+def _image_array(a, name: str, ndim: int) -> np.ndarray:
+    arr = numeric_array(a, name)
+    if arr.ndim != ndim or min(arr.shape[:2], default=0) < 1:
+        want = "(H, W)" if ndim == 2 else "(H, W, 3)"
+        raise ValueError(f"`{name}` must have shape {want}; got {arr.shape}")
+    return arr
+
+
+# --------------------------------------------------------------------------------------------
+# writers
+
+
+def write_depth(path, depth) -> Path:
+    """Write an (H, W) depth map: ``.npy`` (float64), ``.exr`` (float32, channel Z) or
+    ``.tif``/``.tiff`` (float32). NaN (outside the domain) is kept. Returns the path."""
+    p = Path(path)
+    ext = _suffix(p, DEPTH_FORMATS, "depth", "path")
+    d = _image_array(depth, "depth", 2).astype(np.float64)
+    if ext == ".npy":
+        _save_npy(p, d)
+    elif ext == ".exr":
+        _write_exr(p, {"Z": d})
+    else:
+        _write_tiff(p, d.astype(np.float32))
+    return p
+
+
+def write_normals(path, normals, mask=None, *, bits: int = 16, y_down: bool = False) -> Path:
+    """Write a normal map (the inverse of :func:`read_normals`).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.png`` (RGB, or RGBA with the mask as alpha), ``.tif``/``.tiff``, ``.exr`` (R, G, B
+        and A for the mask) or ``.npy`` ((H, W, 3), or (H, W, 4) with the mask).
+    normals : (H, W, 3) float
+        Components in [-1, 1]; NaN is written as 0 (PNG/integer TIFF: decodes as NaN again).
+    mask : (H, W) bool, optional
+        Stored as the alpha channel.
+    bits : {8, 16, 32}
+        PNG: 8 or 16 bit per channel; TIFF: 8, 16 (integer) or 32 (float32). Ignored for EXR
+        (float32) and npy (float64).
+    y_down : bool
+        Store y pointing down (negate the y component).
+    """
+    p = Path(path)
+    ext = _suffix(p, NORMAL_WRITE_FORMATS, "normal map", "path")
+    n = _image_array(normals, "normals", 3).astype(np.float64)
+    if n.shape[-1] != 3:
+        raise ValueError(f"`normals` must have shape (H, W, 3); got {n.shape}")
+    if y_down:
+        n[..., 1] = -n[..., 1]
+    m = None
+    if mask is not None:
+        m = np.asarray(mask) != 0
+        if m.shape != n.shape[:2]:
+            raise ValueError(f"`mask` must have shape {n.shape[:2]}; got {m.shape}")
+    allowed = {".png": (8, 16), ".tif": (8, 16, 32), ".tiff": (8, 16, 32)}
+    if ext in allowed and bits not in allowed[ext]:
+        raise ValueError(f"`bits` must be one of {allowed[ext]} for {ext}; got {bits!r}")
+    if ext == ".exr":
+        ch = {"R": n[..., 0], "G": n[..., 1], "B": n[..., 2]}
+        if m is not None:
+            ch["A"] = m.astype(np.float32)
+        _write_exr(p, ch)
+        return p
+    if ext == ".npy":
+        _save_npy(p, n if m is None else np.dstack([n, m.astype(np.float64)]))
+        return p
+    if bits == 32:
+        px = n.astype(np.float32)
+        alpha = None if m is None else m.astype(np.float32)
+    else:
+        dtype = np.uint8 if bits == 8 else np.uint16
+        maxval = np.iinfo(dtype).max
+        v = np.round((np.clip(np.nan_to_num(n, nan=-1.0), -1, 1) + 1) / 2 * maxval)
+        px = v.astype(dtype)
+        alpha = None if m is None else (m * maxval).astype(dtype)
+    if alpha is not None:
+        px = np.dstack([px, alpha])
+    if ext == ".png":
+        _write_png(p, px)
+    else:
+        _write_tiff(p, px)
+    return p
+
+
+def write_mask(path, mask) -> Path:
+    """Write an (H, W) mask: PNG or TIFF (8-bit, 255 inside) or ``.npy`` (bool)."""
+    p = Path(path)
+    ext = _suffix(p, MASK_FORMATS, "mask", "path")
+    m = _image_array(mask, "mask", 2) != 0
+    if ext == ".npy":
+        _save_npy(p, m)
+    elif ext == ".png":
+        _write_png(p, m.astype(np.uint8) * 255)
+    else:
+        _write_tiff(p, m.astype(np.uint8) * 255)
+    return p

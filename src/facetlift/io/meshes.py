@@ -1,0 +1,57 @@
+"""Facet meshes as binary PLY or OBJ, through meshio (imported on first use)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ._paths import _suffix
+from .atomic import atomic_path
+
+MESH_FORMATS = (".ply", ".obj")
+
+
+def write_mesh(path, vertices, faces) -> Path:
+    """Write a mesh as binary PLY or OBJ.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.ply`` (binary little-endian) or ``.obj``.
+    vertices : (n, 3) float
+    faces : (m, 4) quads or (m, 3) triangles of int vertex indices (0-based)
+
+    Raises
+    ------
+    ValueError
+        Bad shapes, non-finite vertices, indices out of range, unknown extension.
+    """
+    import meshio
+
+    p = Path(path)
+    ext = _suffix(p, MESH_FORMATS, "mesh", "path")
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"`vertices` must have shape (n, 3); got {v.shape}")
+    if not np.isfinite(v).all():
+        raise ValueError("`vertices` contains NaN or inf")
+    if f.ndim != 2 or f.shape[1] not in (3, 4) or f.dtype.kind not in "iu":
+        raise ValueError(
+            f"`faces` must be an integer (m, 3) or (m, 4) array; got {f.shape} {f.dtype}"
+        )
+    if f.size and (f.min() < 0 or f.max() >= len(v)):
+        raise ValueError(
+            f"`faces` index out of range [0, {len(v)}): min {f.min()}, max {f.max()}"
+        )
+    dtype = np.int32 if len(v) < 2**31 else np.int64
+    cell = "quad" if f.shape[1] == 4 else "triangle"
+    mesh = meshio.Mesh(v, [(cell, f.astype(dtype))])
+    fmt = "ply" if ext == ".ply" else "obj"
+    with atomic_path(p) as tmp:
+        if fmt == "ply":
+            meshio.write(tmp, mesh, file_format="ply", binary=True)
+        else:
+            meshio.write(tmp, mesh, file_format="obj")
+    return p

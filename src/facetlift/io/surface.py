@@ -1,0 +1,66 @@
+"""One entry point, :func:`save_surface`, that picks the writer from the file extension."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ._paths import _suffix
+from .atomic import atomic_path
+from .images import DEPTH_FORMATS, write_depth
+from .meshes import MESH_FORMATS, write_mesh
+from .preview import write_preview
+
+SURFACE_FORMATS = DEPTH_FORMATS + (".npz",) + MESH_FORMATS + (".png",)
+
+
+def save_surface(surface, path, **kwargs) -> Path:
+    """Write `surface` in the format given by the extension of `path`.
+
+    ``.npy``, ``.exr``, ``.tif``/``.tiff``: the (H, W) depth map (:func:`write_depth`);
+    ``.npz``: arrays ``depth``, ``vertex_depth``, ``mask``, ``pixel_size`` and ``K`` (NaN-filled
+    3x3 when orthographic); ``.ply``/``.obj``: the facet mesh (:func:`write_mesh`; keyword
+    ``triangles=True`` splits quads); ``.png``: a shaded preview (:func:`write_preview`,
+    keywords forwarded). Returns the path written.
+
+    Raises
+    ------
+    ValueError
+        Unknown extension (the message lists the valid ones) or keywords the format does not
+        take.
+    """
+    p = Path(path)
+    ext = _suffix(p, SURFACE_FORMATS, "surface", "path")
+
+    def no_kwargs():
+        if kwargs:
+            raise ValueError(f"{ext} output takes no options; got {sorted(kwargs)}")
+
+    if ext in DEPTH_FORMATS:
+        no_kwargs()
+        return write_depth(p, surface.depth)
+    if ext == ".npz":
+        no_kwargs()
+        K = np.full((3, 3), np.nan) if surface.K is None else np.asarray(surface.K, float)
+        with atomic_path(p) as tmp, open(tmp, "xb") as fh:
+            np.savez_compressed(
+                fh,
+                depth=surface.depth,
+                vertex_depth=surface.vertex_depth,
+                mask=surface.mask,
+                pixel_size=np.float64(surface.pixel_size),
+                K=K,
+            )
+        return p
+    if ext in MESH_FORMATS:
+        extra = sorted(set(kwargs) - {"triangles"})
+        if extra:
+            raise ValueError(f"{ext} output takes only `triangles`; got {extra}")
+        verts, faces = surface.to_mesh(triangles=bool(kwargs.get("triangles", False)))
+        return write_mesh(p, verts, faces)
+    preview_kw = {"light", "colormap", "min_size", "background"}
+    extra = sorted(set(kwargs) - preview_kw)
+    if extra:
+        raise ValueError(f".png output takes only {sorted(preview_kw)}; got {extra}")
+    return write_preview(p, surface, **kwargs)
