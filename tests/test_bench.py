@@ -1,4 +1,5 @@
 import csv
+import subprocess
 import sys
 import time
 import types
@@ -8,7 +9,8 @@ import pytest
 from click.testing import CliRunner
 
 from facetlift import methods
-from facetlift.bench import EXPERIMENTS, bench_command, run_bench
+from facetlift.bench import EXPERIMENTS, run_bench
+from facetlift.cli import cli
 
 DATA = Path(__file__).parents[1] / ".." / "shared" / "data"
 
@@ -81,10 +83,23 @@ def test_bench_input_errors(tmp_path):
 
 def test_bench_command(tmp_path):
     runner = CliRunner()
-    res = runner.invoke(bench_command, ["-o", str(tmp_path / "o"), "--quick", "--experiments",
-                                        "table1,fig4", "--no-progress"])
+    res = runner.invoke(cli, ["bench", "-o", str(tmp_path / "o"), "--quick", "--experiments",
+                              "table1,fig4", "--no-progress"])
     assert res.exit_code == 0, res.output
     assert (tmp_path / "o" / "table1.md").is_file() and (tmp_path / "o" / "fig4.png").is_file()
     assert not (tmp_path / "o" / "fig9.csv").exists()
-    res = runner.invoke(bench_command, ["-o", str(tmp_path / "o"), "--methods", "nope"])
+    res = runner.invoke(cli, ["bench", "-o", str(tmp_path / "o"), "--methods", "nope"])
     assert res.exit_code == 2 and "unknown" in res.output
+
+
+def test_bench_help_lists_every_experiment():
+    res = CliRunner().invoke(cli, ["bench", "--help"])
+    assert res.exit_code == 0, res.output
+    assert f"subset of: {', '.join(EXPERIMENTS)}." in " ".join(res.output.split())
+
+
+def test_importing_the_bench_loads_neither_click_nor_matplotlib():
+    code = ("import sys, facetlift.bench; "
+            "print(sorted({'click', 'matplotlib'} & set(sys.modules)))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert res.stdout.strip() == "[]"
