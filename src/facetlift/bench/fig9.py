@@ -1,0 +1,161 @@
+"""Fig. 9: mean normalised error of every method over many models, noise-free and with noise.
+
+The models are the analytic surfaces of ``settings.fig9_analytic`` and every mesh of the data
+folder (plus ``extra_meshes``) rendered from every view of ``settings.fig9_views``; with
+``settings.fig9_continuous``, also the largest jump-free region of every rendered mesh.
+"""
+
+from __future__ import annotations
+
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from .. import metrics, synthetic
+from . import plots
+from .core import SEED, Context, pct, run_method
+from .tables import md_table, pivot, write_csv, write_text
+
+
+def models(ctx: Context) -> list:
+    """(name, loader) pairs of the Fig. 9 data set, limited to ``ctx.models`` if given."""
+    s = ctx.settings
+    n = s.fig9_size
+    out = [(name, lambda name=name: synthetic.analytic(name, n)) for name in s.fig9_analytic]
+    meshes = []
+    if ctx.data is not None and (ctx.data / "meshes").is_dir():
+        meshes = sorted((ctx.data / "meshes").glob("*.ply"))
+        if s.fig9_meshes is not None:
+            meshes = meshes[: s.fig9_meshes]
+    meshes += [Path(p) for p in ctx.extra_meshes]
+    for path in meshes:
+        for view in s.fig9_views:
+            out.append((f"{path.stem}@{view}",
+                        lambda path=path, view=view: synthetic.render_mesh(path, n, view=view)))
+    if ctx.models:
+        out = [(nm, f) for nm, f in out if nm in ctx.models or nm.split("@")[0] in ctx.models]
+    return out
+
+
+def fig9(ctx: Context) -> None:
+    """Every method on every model; writes the runs, the per-model tables and the summary."""
+    s = ctx.settings
+    specs = ctx.specs()
+    data = models(ctx)
+    rows, skipped, thumbs = [], [], []
+    conds = [("noise-free", 0.0), (f"noise {s.noise_deg:g}deg", s.noise_deg)]
+    domains = ["full"] + (["continuous"] if s.fig9_continuous else [])
+    total = len(data) * len(conds) * len(domains) * len(specs)
+    bar = None
+    if ctx.progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, desc="fig9", leave=False)
+    for name, load in data:
+        try:
+            gt_full = load()
+            if gt_full.depth_range < gt_full.pixel_size:
+                raise ValueError(f"depth range {gt_full.depth_range:.3g} is less than one "
+                                 "pixel width: nothing to normalise by")
+        except Exception as e:
+            skipped.append({"model": name, "reason": f"{type(e).__name__}: {e}"})
+            if bar is not None:
+                bar.update(len(conds) * len(domains) * len(specs))
+            continue
+        for domain in domains:
+            gt = gt_full
+            if domain == "continuous":
+                reason = None
+                if "@" in name:  # analytic surfaces are continuous already
+                    gt = synthetic.continuous_region(gt_full)
+                    if gt.depth_range < gt.pixel_size:
+                        reason = (f"largest jump-free region is flat (depth range "
+                                  f"{gt.depth_range:.3g})")
+                        skipped.append({"model": name + " (continuous)", "reason": reason})
+                if "@" not in name or reason:
+                    if bar is not None:
+                        bar.update(len(conds) * len(specs))
+                    continue
+            elif domain == "full":
+                thumbs.append(gt)
+            for cond, sigma in conds:
+                rng = np.random.default_rng([SEED, zlib.crc32(name.encode())])
+                nm = gt.normals if sigma == 0 else synthetic.add_angular_noise(
+                    gt.normals, sigma, rng)
+                for spec in specs:
+                    r = run_method(spec, nm, gt.mask, pixel_size=gt.pixel_size,
+                                   status=ctx.status)
+                    err = rm = None
+                    if r.status == "ok":
+                        try:
+                            err, _ = metrics.normalized_error(r.surface.depth, gt.depth,
+                                                              gt.mask)
+                            rm = metrics.rmse(r.surface.depth, gt.depth, gt.mask)
+                        except ValueError as e:
+                            r.status, r.message = "failed", f"metric: {e}"
+                    rows.append({
+                        "domain": domain, "condition": cond, "model": name,
+                        "pixels": int(gt.mask.sum()), "method": spec.label,
+                        "status": r.status, "error_pct": pct(err),
+                        "rmse_px": rm, "seconds": r.seconds,
+                        "warning": "; ".join(r.warnings)[:200], "message": r.message,
+                    })
+                    if bar is not None:
+                        bar.update(1)
+    if bar is not None:
+        bar.close()
+    write_csv(ctx.out / "fig9_runs.csv", rows)
+    per_model = []
+    for dom in domains:
+        for cond, _ in conds:
+            sub = [r for r in rows if r["domain"] == dom and r["condition"] == cond]
+            if sub:
+                per_model.append(f"### {dom} domains, {cond}\n\n"
+                                 + pivot(sub, "model", "error_pct"))
+    write_text(ctx.out / "fig9_per_model.md", "\n".join(per_model))
+    if skipped:
+        write_csv(ctx.out / "fig9_skipped.csv", skipped)
+    table = summary(rows, specs)
+    write_csv(ctx.out / "fig9.csv", table)
+    cols = ["domain", "condition", "method", "models_ok", "failed", "mean_error_pct",
+            "median_error_pct", "mean_error_common_pct", "common_models", "mean_seconds"]
+    text = md_table(table, cols)
+    if skipped:
+        text += "\nSkipped models: " + ", ".join(
+            f"{k['model']} ({k['reason']})" for k in skipped) + "\n"
+    write_text(ctx.out / "fig9.md", text)
+    plots.error_bars(ctx.out / "fig9.png", table, domains)
+    plots.thumbnails(ctx.out / "fig9_models.png", thumbs)
+    ctx.add(f"Fig. 9: mean normalised error over {len(data) - len(skipped)} models "
+            f"({s.fig9_size}x{s.fig9_size})", text)
+
+
+def summary(rows: list[dict], specs) -> list[dict]:
+    """One row per (domain, condition, method): models that ran, mean and median error."""
+    out = []
+    keys = list(dict.fromkeys((r["domain"], r["condition"]) for r in rows))
+    for dom, cond in keys:
+        sub = [r for r in rows if r["domain"] == dom and r["condition"] == cond]
+        names = list(dict.fromkeys(r["model"] for r in sub))
+        # models on which every method that could run succeeded
+        ok_all = [m for m in names if all(
+            r["status"] == "ok" for r in sub
+            if r["model"] == m and r["status"] not in ("unavailable", "unsupported"))]
+        for spec in specs:
+            mine = [r for r in sub if r["method"] == spec.label]
+            errs = [r["error_pct"] for r in mine if r["status"] == "ok"]
+            common = [r["error_pct"] for r in mine if r["model"] in ok_all]
+            secs = [r["seconds"] for r in mine if r["status"] == "ok"]
+            out.append({
+                "domain": dom, "condition": cond, "method": spec.label,
+                "models_ok": len(errs),
+                "failed": sum(r["status"] != "ok" for r in mine),
+                "mean_error_pct": float(np.mean(errs)) if errs else float("nan"),
+                "median_error_pct": float(np.median(errs)) if errs else float("nan"),
+                "mean_error_common_pct": float(np.mean(common)) if common else float("nan"),
+                "common_models": len(ok_all),
+                "mean_seconds": float(np.mean(secs)) if secs else float("nan"),
+                "status": "; ".join(sorted({r["status"] for r in mine})),
+            })
+    return out
