@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from facetlift import methods
-from facetlift.bench import EXPERIMENTS, run_bench
+from facetlift import methods, synthetic
+from facetlift.bench import EXPERIMENTS, Settings, Spec, method_status, run_bench
+from facetlift.bench.core import Context
 from facetlift.cli import main
 
 DATA = Path(__file__).parents[1] / ".." / "shared" / "data"
@@ -99,6 +100,21 @@ def test_missing_and_failing_methods_are_recorded(tmp_path, monkeypatch):
     assert "boom" in next(r["message"] for r in rows if r["method"] == "boom")
     report = (out / "report.md").read_text()
     assert "| ghost | no |" in report
+
+
+def test_measure_records_a_failing_metric_and_skips_it_for_a_failed_run(tmp_path):
+    gt = synthetic.analytic("saddle", 16)
+    ctx = Context(tmp_path, Settings.quick(), status=method_status(["poisson"]))
+
+    def flat(surface):
+        raise ValueError("flat truth")
+
+    r, value = ctx.measure(Spec("poisson", "poisson"), gt.normals, gt.mask, flat)
+    assert value is None and r.status == "failed" and r.message == "metric: flat truth"
+    r, value = ctx.measure(Spec("poisson", "poisson"), gt.normals, gt.mask, lambda s: s.shape)
+    assert r.status == "ok" and value == (16, 16)
+    r, value = ctx.measure(Spec("dgp", "dgp"), gt.normals, gt.mask, flat)  # not in `status`
+    assert value is None and r.status == "unavailable"
 
 
 def test_bench_input_errors(tmp_path):

@@ -10,12 +10,14 @@ import importlib
 import logging
 import time
 import warnings
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .. import methods as _methods
+from .. import synthetic
 
 log = logging.getLogger(__name__)
 
@@ -170,6 +172,14 @@ def pct(x) -> float:
     return 100.0 * x if x is not None and np.isfinite(x) else float("nan")
 
 
+def noisy(normals, sigma: float, name: str):
+    """`normals` with `sigma` degrees of angular noise seeded by `name`; as given for 0."""
+    if sigma == 0:
+        return normals
+    rng = np.random.default_rng([SEED, zlib.crc32(name.encode())])
+    return synthetic.add_angular_noise(normals, sigma, rng)
+
+
 def bar(iterable, progress: bool, desc: str, total=None):
     """`iterable`, behind a tqdm progress bar where `progress` is true."""
     if not progress:
@@ -207,3 +217,18 @@ class Context:
     def add(self, title: str, text: str) -> None:
         """Add a section to ``report.md``."""
         self.sections.append((title, text))
+
+    def measure(self, spec: Spec, normals, mask, metric, **kwargs) -> tuple[Run, object]:
+        """Run `spec` (:func:`run_method` with `kwargs`), then ``metric(surface)`` on its result.
+
+        Returns the run and the metric's value, or None where the run or the metric failed; a
+        metric that raises ValueError marks the run ``failed``.
+        """
+        r = run_method(spec, normals, mask, status=self.status, **kwargs)
+        if r.status != "ok":
+            return r, None
+        try:
+            return r, metric(r.surface)
+        except ValueError as e:
+            r.status, r.message = "failed", f"metric: {e}"
+            return r, None

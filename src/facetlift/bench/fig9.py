@@ -7,14 +7,14 @@ folder (plus ``extra_meshes``) rendered from every view of ``settings.fig9_views
 
 from __future__ import annotations
 
-import zlib
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from .. import metrics, synthetic
 from . import plots
-from .core import SEED, Context, pct, run_method
+from .core import Context, noisy, pct
 from .tables import md_table, pivot, write_csv, write_text
 
 
@@ -80,20 +80,11 @@ def fig9(ctx: Context) -> None:
             elif domain == "full":
                 thumbs.append(gt)
             for cond, sigma in conds:
-                rng = np.random.default_rng([SEED, zlib.crc32(name.encode())])
-                nm = gt.normals if sigma == 0 else synthetic.add_angular_noise(
-                    gt.normals, sigma, rng)
+                nm = noisy(gt.normals, sigma, name)
                 for spec in specs:
-                    r = run_method(spec, nm, gt.mask, pixel_size=gt.pixel_size,
-                                   status=ctx.status)
-                    err = rm = None
-                    if r.status == "ok":
-                        try:
-                            err, _ = metrics.normalized_error(r.surface.depth, gt.depth,
-                                                              gt.mask)
-                            rm = metrics.rmse(r.surface.depth, gt.depth, gt.mask)
-                        except ValueError as e:
-                            r.status, r.message = "failed", f"metric: {e}"
+                    r, res = ctx.measure(spec, nm, gt.mask, partial(_errors, gt=gt),
+                                         pixel_size=gt.pixel_size)
+                    err, rm = res or (None, None)
                     rows.append({
                         "domain": domain, "condition": cond, "model": name,
                         "pixels": int(gt.mask.sum()), "method": spec.label,
@@ -159,3 +150,9 @@ def summary(rows: list[dict], specs) -> list[dict]:
                 "status": "; ".join(sorted({r["status"] for r in mine})),
             })
     return out
+
+
+def _errors(surface, gt) -> tuple[float, float]:
+    """(normalised error, RMSE) of `surface` against the ground truth `gt`."""
+    err, _ = metrics.normalized_error(surface.depth, gt.depth, gt.mask)
+    return err, metrics.rmse(surface.depth, gt.depth, gt.mask)

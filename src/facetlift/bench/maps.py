@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import zlib
-
-import numpy as np
+from functools import partial
 
 from .. import metrics, synthetic
 from . import plots
-from .core import SEED, Context, bar, pct, run_method
+from .core import Context, bar, noisy, pct
 from .tables import pivot, write_csv, write_text
 
 #: (figure, analytic surface); two sharp-feature surfaces for Fig. 7: diagonal creases (pyramid)
@@ -24,17 +22,12 @@ def maps(ctx: Context) -> None:
     for figname, model, sigma in bar(jobs, ctx.progress, "figs6-8"):
         gt = synthetic.analytic(model, ctx.settings.maps_size)
         cond = "noise-free" if sigma == 0 else f"noise {sigma:g}deg"
-        rng = np.random.default_rng([SEED, zlib.crc32(model.encode())])
-        nm = gt.normals if sigma == 0 else synthetic.add_angular_noise(gt.normals, sigma, rng)
+        nm = noisy(gt.normals, sigma, model)
+        error = partial(_error, gt=gt)
         runs = []
         for spec in specs:
-            r = run_method(spec, nm, gt.mask, pixel_size=gt.pixel_size, status=ctx.status)
-            err = emap = None
-            if r.status == "ok":
-                try:
-                    err, emap = metrics.normalized_error(r.surface.depth, gt.depth, gt.mask)
-                except ValueError as e:
-                    r.status, r.message = "failed", f"metric: {e}"
+            r, res = ctx.measure(spec, nm, gt.mask, error, pixel_size=gt.pixel_size)
+            err, emap = res or (None, None)
             runs.append((r, emap))
             rows.append({"figure": figname, "model": model, "condition": cond,
                          "case": f"{model}, {cond}", "method": spec.label,
@@ -46,3 +39,8 @@ def maps(ctx: Context) -> None:
     table = pivot(rows, "case", "error_pct")
     write_text(ctx.out / "figs6-8.md", table)
     ctx.add("Figs. 6-8: mean normalised error (%) on saddle, pyramid, ramps, face", table)
+
+
+def _error(surface, gt):
+    """The paper's normalised error and its map (:func:`facetlift.metrics.normalized_error`)."""
+    return metrics.normalized_error(surface.depth, gt.depth, gt.mask)

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from .. import metrics
 from . import plots
-from .core import Context, bar, disc_spec, run_method
+from .core import Context, bar, disc_spec
 from .tables import md_table, write_csv, write_text
 
 #: Real normal maps (folders of ``normal_maps/`` in the data directory) for Fig. 10.
@@ -66,16 +67,11 @@ def fig10(ctx: Context) -> None:
             rows.append({"data": folder.name, "method": "", "status": "unreadable",
                          "message": str(e)})
             continue
+        angles = partial(metrics.angular_error, normals=n, mask=mask)
         runs = []
         for spec in specs:
-            r = run_method(spec, n, mask, K=K, status=ctx.status)
-            mean = mx = None
-            amap = None
-            if r.status == "ok":
-                try:
-                    mean, mx, amap = metrics.angular_error(r.surface, n, mask)
-                except ValueError as e:
-                    r.status, r.message = "failed", f"metric: {e}"
+            r, res = ctx.measure(spec, n, mask, angles, K=K)
+            mean, mx, amap = res or (None, None, None)
             runs.append((r, amap))
             rows.append({"data": folder.name, "size": f"{mask.shape[0]}x{mask.shape[1]}",
                          "stride": stride, "pixels": int(mask.sum()),
@@ -107,15 +103,11 @@ def bear(ctx: Context) -> None:
         disc = disc_spec()
         if disc is not None:
             specs.append(disc)
+    made = partial(_made, truth=depth_gt, mask=mask)
     rows, runs = [], []
     for spec in bar(specs, ctx.progress, "bear"):
-        r = run_method(spec, n, mask, K=K, status=ctx.status)
-        val = emap = None
-        if r.status == "ok":
-            try:
-                val, emap = metrics.made(r.surface.depth, depth_gt, mask)
-            except ValueError as e:
-                r.status, r.message = "failed", f"metric: {e}"
+        r, res = ctx.measure(spec, n, mask, made, K=K)
+        val, emap = res or (None, None)
         runs.append((r, emap))
         rows.append({"method": spec.label, "status": r.status, "made_mm": val,
                      "seconds": r.seconds, "message": r.message})
@@ -128,3 +120,8 @@ def bear(ctx: Context) -> None:
     write_text(ctx.out / "bear.md", text)
     plots.made_maps(ctx.out / "bear.png", runs)
     ctx.add("DiLiGenT bear (perspective): MADE (mm)", text)
+
+
+def _made(surface, truth, mask):
+    """MADE (mm) and its map (:func:`facetlift.metrics.made`) of `surface` against `truth`."""
+    return metrics.made(surface.depth, truth, mask)
