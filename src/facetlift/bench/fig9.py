@@ -43,83 +43,129 @@ def fig9(ctx: Context) -> None:
     s = ctx.settings
     specs = ctx.specs()
     data = models(ctx)
-    rows, skipped, thumbs = [], [], []
     conds = [("noise-free", 0.0), (f"noise {s.noise_deg:g}deg", s.noise_deg)]
     domains = ["full"] + (["continuous"] if s.fig9_continuous else [])
-    total = len(data) * len(conds) * len(domains) * len(specs)
-    bar = None
-    if ctx.progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=total, desc="fig9", leave=False)
-    for name, load in data:
-        try:
-            gt_full = load()
-            if gt_full.depth_range < gt_full.pixel_size:
-                raise ValueError(f"depth range {gt_full.depth_range:.3g} is less than one "
-                                 "pixel width: nothing to normalise by")
-        except Exception as e:
-            skipped.append({"model": name, "reason": f"{type(e).__name__}: {e}"})
-            if bar is not None:
-                bar.update(len(conds) * len(domains) * len(specs))
-            continue
-        for domain in domains:
-            gt = gt_full
-            if domain == "continuous":
-                reason = None
-                if "@" in name:  # analytic surfaces are continuous already
-                    gt = synthetic.continuous_region(gt_full)
-                    if gt.depth_range < gt.pixel_size:
-                        reason = (f"largest jump-free region is flat (depth range "
-                                  f"{gt.depth_range:.3g})")
-                        skipped.append({"model": name + " (continuous)", "reason": reason})
-                if "@" not in name or reason:
-                    if bar is not None:
-                        bar.update(len(conds) * len(specs))
-                    continue
-            elif domain == "full":
-                thumbs.append(gt)
-            for cond, sigma in conds:
-                nm = noisy(gt.normals, sigma, name)
-                for spec in specs:
-                    r, res = ctx.measure(spec, nm, gt.mask, partial(_errors, gt=gt),
-                                         pixel_size=gt.pixel_size)
-                    err, rm = res or (None, None)
-                    rows.append({
-                        "domain": domain, "condition": cond, "model": name,
-                        "pixels": int(gt.mask.sum()), "method": spec.label,
-                        "status": r.status, "error_pct": pct(err),
-                        "rmse_px": rm, "seconds": r.seconds,
-                        "warning": "; ".join(r.warnings)[:200], "message": r.message,
-                    })
-                    if bar is not None:
-                        bar.update(1)
-    if bar is not None:
-        bar.close()
+    rows, skipped, thumbs = _run_all(ctx, data, specs, conds, domains)
     write_csv(ctx.out / "fig9_runs.csv", rows)
-    per_model = []
-    for dom in domains:
-        for cond, _ in conds:
-            sub = [r for r in rows if r["domain"] == dom and r["condition"] == cond]
-            if sub:
-                per_model.append(f"### {dom} domains, {cond}\n\n"
-                                 + pivot(sub, "model", "error_pct"))
-    write_text(ctx.out / "fig9_per_model.md", "\n".join(per_model))
+    write_text(ctx.out / "fig9_per_model.md", _per_model(rows, domains, conds))
     if skipped:
         write_csv(ctx.out / "fig9_skipped.csv", skipped)
     table = summary(rows, specs)
     write_csv(ctx.out / "fig9.csv", table)
+    text = _summary_text(table, skipped)
+    write_text(ctx.out / "fig9.md", text)
+    plots.error_bars(ctx.out / "fig9.png", table, domains)
+    plots.thumbnails(ctx.out / "fig9_models.png", thumbs)
+    ctx.add(f"Fig. 9: mean normalised error over {len(data) - len(skipped)} models "
+            f"({s.fig9_size}x{s.fig9_size})", text)
+
+
+def _run_all(ctx: Context, data: list, specs, conds: list, domains: list):
+    """Every method on every model, domain and condition.
+
+    Returns the rows of ``fig9_runs.csv``, the skipped models (``{"model", "reason"}``) and the
+    ground truths of the full domains (for the thumbnails).
+    """
+    from tqdm import tqdm
+
+    rows, skipped, thumbs = [], [], []
+    per_domain = len(conds) * len(specs)
+    with tqdm(total=len(data) * len(domains) * per_domain, desc="fig9", leave=False,
+              disable=not ctx.progress) as progress:
+        for name, load in data:
+            gt_full, reason = _load(load)
+            if reason:
+                skipped.append({"model": name, "reason": reason})
+                progress.update(len(domains) * per_domain)
+                continue
+            for domain in domains:
+                gt, reason = _domain(name, gt_full, domain)
+                if reason:
+                    skipped.append({"model": name + " (continuous)", "reason": reason})
+                if gt is None:
+                    progress.update(per_domain)
+                    continue
+                if domain == "full":
+                    thumbs.append(gt)
+                rows += _model_rows(ctx, specs, name, gt, domain, conds, progress)
+    return rows, skipped, thumbs
+
+
+def _load(load):
+    """-> (ground truth, None) from the loader `load`, or (None, why the model is skipped)."""
+    try:
+        gt = load()
+        if gt.depth_range < gt.pixel_size:
+            raise ValueError(f"depth range {gt.depth_range:.3g} is less than one pixel width: "
+                             "nothing to normalise by")
+    except Exception as e:  # a mesh that does not load or render: skipped, the run goes on
+        return None, f"{type(e).__name__}: {e}"
+    return gt, None
+
+
+def _domain(name: str, gt, domain: str):
+    """-> (ground truth on `domain`, None), or (None, why it is skipped or None if it has none).
+
+    ``full`` is the whole rendered mask; ``continuous`` its largest jump-free region, for
+    rendered meshes only (analytic surfaces are continuous already).
+    """
+    if domain == "full":
+        return gt, None
+    if "@" not in name:
+        return None, None
+    part = synthetic.continuous_region(gt)
+    if part.depth_range < part.pixel_size:
+        return None, f"largest jump-free region is flat (depth range {part.depth_range:.3g})"
+    return part, None
+
+
+def _model_rows(ctx: Context, specs, name: str, gt, domain: str, conds: list,
+                progress) -> list[dict]:
+    """One row per condition and method for model `name` (ground truth `gt`) on `domain`."""
+    errors = partial(_errors, gt=gt)
+    rows = []
+    for cond, sigma in conds:
+        nm = noisy(gt.normals, sigma, name)
+        for spec in specs:
+            r, res = ctx.measure(spec, nm, gt.mask, errors, pixel_size=gt.pixel_size)
+            err, rm = res or (None, None)
+            rows.append({
+                "domain": domain, "condition": cond, "model": name,
+                "pixels": int(gt.mask.sum()), "method": spec.label,
+                "status": r.status, "error_pct": pct(err),
+                "rmse_px": rm, "seconds": r.seconds,
+                "warning": "; ".join(r.warnings)[:200], "message": r.message,
+            })
+            progress.update(1)
+    return rows
+
+
+def _errors(surface, gt) -> tuple[float, float]:
+    """(normalised error, RMSE) of `surface` against the ground truth `gt`."""
+    err, _ = metrics.normalized_error(surface.depth, gt.depth, gt.mask)
+    return err, metrics.rmse(surface.depth, gt.depth, gt.mask)
+
+
+def _per_model(rows: list[dict], domains: list, conds: list) -> str:
+    """``fig9_per_model.md``: a model x method table of errors per domain and condition."""
+    parts = []
+    for dom in domains:
+        for cond, _ in conds:
+            sub = [r for r in rows if r["domain"] == dom and r["condition"] == cond]
+            if sub:
+                parts.append(f"### {dom} domains, {cond}\n\n" + pivot(sub, "model", "error_pct"))
+    return "\n".join(parts)
+
+
+def _summary_text(table: list[dict], skipped: list[dict]) -> str:
+    """``fig9.md``: the summary table, then the skipped models and why."""
     cols = ["domain", "condition", "method", "models_ok", "failed", "mean_error_pct",
             "median_error_pct", "mean_error_common_pct", "common_models", "mean_seconds"]
     text = md_table(table, cols)
     if skipped:
         text += "\nSkipped models: " + ", ".join(
             f"{k['model']} ({k['reason']})" for k in skipped) + "\n"
-    write_text(ctx.out / "fig9.md", text)
-    plots.error_bars(ctx.out / "fig9.png", table, domains)
-    plots.thumbnails(ctx.out / "fig9_models.png", thumbs)
-    ctx.add(f"Fig. 9: mean normalised error over {len(data) - len(skipped)} models "
-            f"({s.fig9_size}x{s.fig9_size})", text)
+    return text
 
 
 def summary(rows: list[dict], specs) -> list[dict]:
@@ -151,8 +197,3 @@ def summary(rows: list[dict], specs) -> list[dict]:
             })
     return out
 
-
-def _errors(surface, gt) -> tuple[float, float]:
-    """(normalised error, RMSE) of `surface` against the ground truth `gt`."""
-    err, _ = metrics.normalized_error(surface.depth, gt.depth, gt.mask)
-    return err, metrics.rmse(surface.depth, gt.depth, gt.mask)
