@@ -77,52 +77,52 @@ def perturbation(path: Path, maps: list, rows: list[dict]) -> Path:
 
 
 def error_maps(path: Path, gt, runs: list, cond: str = "") -> Path:
-    """Figs. 6-8: the ground-truth height, then the normalised error map of every run."""
-    plt = _plt()
-    k = len(runs) + 1
-    ncol = min(k, 5)
-    nrow = -(-k // ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(2.0 * ncol + 0.6, 2.2 * nrow), dpi=80,
-                             squeeze=False)
-    axes[0, 0].imshow(-gt.depth, cmap="gray")
-    axes[0, 0].set_title(f"{gt.name} ({cond})", fontsize=8)
+    """Figs. 6-8: the ground-truth height, then the normalised error map (%) of every run."""
     finite = [e for r, e in runs if e is not None]
     vmax = max([float(np.nanpercentile(e, 99)) for e in finite] + [1e-6]) * 100
-    im = None
-    for a, (r, emap) in zip(axes.flat[1:], runs, strict=False):
-        if emap is None:
-            a.text(0.5, 0.5, r.status, ha="center", va="center", fontsize=9)
-            a.set_title(r.label, fontsize=8)
-            continue
-        im = a.imshow(100 * emap, cmap="jet", vmin=0, vmax=vmax)
-        a.set_title(f"{r.label}: {100 * np.nanmean(emap):.2f}%", fontsize=8)
-    for a in axes.flat:
-        a.axis("off")
-    if im is not None:
-        fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label="error % of depth range")
-    return savefig(fig, path)
+    return _map_grid(path, runs, first=(-gt.depth, f"{gt.name} ({cond})"), scale=100, vmax=vmax,
+                     title=lambda r, e: f"{r.label}: {100 * np.nanmean(e):.2f}%", title_size=8,
+                     label="error % of depth range")
 
 
 def angle_maps(path: Path, runs: list) -> Path:
     """Fig. 10: the angular error map (deg) of every run."""
+    return _map_grid(path, runs, vmax=20, title_size=7, label="deg (clipped at 20)",
+                     title=lambda r, a: f"{r.label}: {np.nanmean(a):.2f}°/{np.nanmax(a):.0f}°")
+
+
+def _map_grid(path: Path, runs: list, *, vmax: float, title, title_size: float, label: str,
+              scale: float = 1.0, first=None) -> Path:
+    """A grid of panels, five a row, with one colour bar.
+
+    `first`, an ``(image, title)`` pair, is drawn in grey in the first panel. Then each run
+    shows ``scale * map`` (jet, 0 to `vmax`) titled ``title(run, map)``, or its status where it
+    has no map. The colour bar, labelled `label`, is left out where no run has a map.
+    """
     plt = _plt()
-    k = len(runs)
+    k = len(runs) + (first is not None)
     ncol = min(k, 5)
     nrow = -(-k // ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(2.0 * ncol + 0.6, 2.2 * nrow), dpi=80,
                              squeeze=False)
+    cells = list(axes.flat)
+    if first is not None:
+        image, text = first
+        cells[0].imshow(image, cmap="gray")
+        cells[0].set_title(text, fontsize=8)
+        cells = cells[1:]
     im = None
-    for a, (r, amap) in zip(axes.flat, runs, strict=False):
-        if amap is None:
+    for a, (r, m) in zip(cells, runs, strict=False):
+        if m is None:
             a.text(0.5, 0.5, r.status, ha="center", va="center", fontsize=9)
             a.set_title(r.label, fontsize=8)
             continue
-        im = a.imshow(amap, cmap="jet", vmin=0, vmax=20)
-        a.set_title(f"{r.label}: {np.nanmean(amap):.2f}°/{np.nanmax(amap):.0f}°", fontsize=7)
+        im = a.imshow(scale * m, cmap="jet", vmin=0, vmax=vmax)
+        a.set_title(title(r, m), fontsize=title_size)
     for a in axes.flat:
         a.axis("off")
     if im is not None:
-        fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label="deg (clipped at 20)")
+        fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label=label)
     return savefig(fig, path)
 
 
