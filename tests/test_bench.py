@@ -117,6 +117,20 @@ def test_measure_records_a_failing_metric_and_skips_it_for_a_failed_run(tmp_path
     assert value is None and r.status == "unavailable"
 
 
+def test_a_failing_experiment_is_reported_and_the_others_run(tmp_path, monkeypatch):
+    from facetlift.bench import runner
+
+    def broken(ctx):
+        raise RuntimeError("broken on purpose")
+
+    monkeypatch.setitem(runner.EXPERIMENT_FUNCTIONS, "fig4", broken)
+    out = run_bench(tmp_path, quick=True, experiments=["fig4", "table1"], progress=False)
+    report = (out / "report.md").read_text()
+    assert "## Failed experiments" in report
+    assert "| fig4 | RuntimeError: broken on purpose |" in report
+    assert (out / "table1.csv").is_file() and not (out / "fig4.csv").exists()
+
+
 def test_bench_input_errors(tmp_path):
     with pytest.raises(ValueError, match="`methods`: unknown"):
         run_bench(tmp_path, methods=["nope"], progress=False)

@@ -105,6 +105,30 @@ def run_bench(
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    s = _settings(quick, methods)
+    exps = EXPERIMENTS if experiments is None else tuple(experiments)
+    bad = [e for e in exps if e not in EXPERIMENTS]
+    if bad:
+        raise ValueError(f"`experiments`: unknown {bad}; valid: {list(EXPERIMENTS)}")
+    _check_extras(extra_meshes, extra_normal_maps)
+    data = Path(data_dir) if data_dir is not None else default_data_dir()
+    if data is not None and not data.is_dir():
+        raise ValueError(f"`data_dir`: {data} is not a folder")
+    ctx = Context(out, s, data, progress, method_status(s.methods), models=models,
+                  extra_meshes=tuple(extra_meshes), extra_normal_maps=tuple(extra_normal_maps))
+    t0 = time.perf_counter()
+    failures = []
+    for e in bar(exps, progress, "bench"):
+        error = _run(e, ctx)
+        if error:
+            failures.append((e, error))
+    mode = f"{'quick' if quick else 'full'}; experiments: {', '.join(exps)}"
+    write_text(out / "report.md", _report(ctx, mode, failures, time.perf_counter() - t0))
+    return out
+
+
+def _settings(quick: bool, methods) -> Settings:
+    """The quick or full settings, limited to `methods` (checked) if given."""
     s = Settings.quick() if quick else Settings()
     if methods is not None:
         methods = tuple(methods)
@@ -114,39 +138,40 @@ def run_bench(
         s.methods = methods
     elif s.methods is not None:
         s.methods = tuple(m for m in s.methods if m in _methods.REGISTRY)
-    exps = EXPERIMENTS if experiments is None else tuple(experiments)
-    bad = [e for e in exps if e not in EXPERIMENTS]
-    if bad:
-        raise ValueError(f"`experiments`: unknown {bad}; valid: {list(EXPERIMENTS)}")
+    return s
+
+
+def _check_extras(extra_meshes, extra_normal_maps) -> None:
     for p in extra_meshes:
         if not Path(p).is_file():
             raise ValueError(f"`extra_meshes`: {p} is not a file")
     for p in extra_normal_maps:
         if not Path(p).is_dir():
             raise ValueError(f"`extra_normal_maps`: {p} is not a folder")
-    data = Path(data_dir) if data_dir is not None else default_data_dir()
-    if data is not None and not data.is_dir():
-        raise ValueError(f"`data_dir`: {data} is not a folder")
-    ctx = Context(out, s, data, progress, method_status(s.methods), models=models,
-                  extra_meshes=tuple(extra_meshes), extra_normal_maps=tuple(extra_normal_maps))
+
+
+def _run(name: str, ctx: Context) -> str | None:
+    """Run experiment `name`; None, or the error that stopped it (logged with its traceback)."""
     t0 = time.perf_counter()
-    failures = []
-    for e in bar(exps, progress, "bench"):
-        te = time.perf_counter()
-        try:
-            EXPERIMENT_FUNCTIONS[e](ctx)
-        except Exception as exc:  # one broken experiment must not lose the others
-            log.exception("experiment %s failed", e)
-            failures.append((e, f"{type(exc).__name__}: {exc}"))
-        log.info("%s: %.1f s", e, time.perf_counter() - te)
+    try:
+        EXPERIMENT_FUNCTIONS[name](ctx)
+    except Exception as exc:  # one broken experiment must not lose the others
+        log.exception("experiment %s failed", name)
+        return f"{type(exc).__name__}: {exc}"
+    finally:
+        log.info("%s: %.1f s", name, time.perf_counter() - t0)
+    return None
+
+
+def _report(ctx: Context, mode: str, failures: list, seconds: float) -> str:
+    """``report.md``: machine, mode and data, the methods, failed experiments, every section."""
     avail = [{"method": m, "available": "yes" if not why else "no", "reason": why}
              for m, why in ctx.status.items()]
     head = [
         "# facetlift bench report\n",
         f"Machine: {_machine()}  ",
-        f"Mode: {'quick' if quick else 'full'}; experiments: {', '.join(exps)}; "
-        f"total {time.perf_counter() - t0:.0f} s  ",
-        f"Data: {data}\n",
+        f"Mode: {mode}; total {seconds:.0f} s  ",
+        f"Data: {ctx.data}\n",
         "## Methods\n",
         md_table(avail),
     ]
@@ -154,5 +179,4 @@ def run_bench(
         head += ["## Failed experiments\n",
                  md_table([{"experiment": e, "error": m} for e, m in failures])]
     body = [f"## {title}\n\n{text}" for title, text in ctx.sections]
-    write_text(out / "report.md", "\n".join(head + body))
-    return out
+    return "\n".join(head + body)
