@@ -1,14 +1,17 @@
+import contextlib
 import csv
+import io
+import subprocess
 import sys
-import time
 import types
 from pathlib import Path
 
 import pytest
-from click.testing import CliRunner
 
-from facetlift import methods
-from facetlift.bench import EXPERIMENTS, bench_command, run_bench
+from facetlift import methods, synthetic
+from facetlift.bench import EXPERIMENTS, Settings, Spec, method_status, run_bench
+from facetlift.bench.core import Context
+from facetlift.cli import main
 
 DATA = Path(__file__).parents[1] / ".." / "shared" / "data"
 
@@ -18,10 +21,27 @@ def _rows(path):
         return list(csv.DictReader(fh))
 
 
-def test_quick_bench_writes_every_table_and_figure(tmp_path):
-    t0 = time.perf_counter()
-    out = run_bench(tmp_path / "q", quick=True, progress=False)
-    assert time.perf_counter() - t0 < 120
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    """``facetlift bench --quick`` run once for this module: (exit code, stdout, out folder)."""
+    out = tmp_path_factory.mktemp("bench") / "q"
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        code = main(["bench", "--quick", "-o", str(out), "--no-progress"])
+    assert code == 0, stderr.getvalue()
+    return code, stdout.getvalue(), out
+
+
+def test_quick_bench_through_main(quick):
+    code, stdout, out = quick
+    assert code == 0
+    assert f"wrote {out / 'report.md'}" in stdout
+    for name in ["table1.md", "fig4.png", "fig5.csv", "fig9.md", "report.md"]:
+        assert (out / name).is_file(), name
+
+
+def test_quick_bench_writes_every_table_and_figure(quick):
+    out = quick[2]
     for name in ["table1", "fig4", "fig5", "figs6-8", "fig9"]:
         assert (out / f"{name}.csv").stat().st_size > 0
         assert (out / f"{name}.md").read_text().startswith("|")
@@ -29,21 +49,34 @@ def test_quick_bench_writes_every_table_and_figure(tmp_path):
         assert (out / f"{name}.png").read_bytes()[:4] == b"\x89PNG"
     report = (out / "report.md").read_text()
     assert "Failed experiments" not in report
+
+
+def test_quick_table1_and_fig4(quick):
+    out = quick[2]
     t1 = _rows(out / "table1.csv")
     assert {r["resolution"] for r in t1} == {"32x32", "64x64"}
     assert all(float(r["factorization_ms"]) >= 0 for r in t1)
+    table1 = (out / "table1.md").read_text()
+    assert "factorization_ms" in table1 and "spectral" in table1  # timed rows, not a header
     f4 = _rows(out / "fig4.csv")
     assert {r["mean_subtraction"] for r in f4} == {"True", "False"}
-    f9 = _rows(out / "fig9_runs.csv")
+
+
+def test_quick_fig9(quick):
+    f9 = _rows(quick[2] / "fig9_runs.csv")
     assert {r["condition"] for r in f9} == {"noise-free", "noise 5deg"}
     assert all(r["status"] == "ok" for r in f9 if r["method"] == "dgp")
     # a noise-free analytic surface is reconstructed closely by DGP
     saddle = [r for r in f9 if r["model"] == "saddle" and r["method"] == "dgp"
               and r["condition"] == "noise-free"]
     assert float(saddle[0]["error_pct"]) < 1.0
-    if (DATA / "normal_maps").is_dir():
-        assert (out / "fig10.md").is_file() and (out / "bear.md").is_file()
-        assert any(r["status"] == "ok" for r in _rows(out / "fig10.csv"))
+
+
+@pytest.mark.skipif(not (DATA / "normal_maps").is_dir(), reason="no shared data folder")
+def test_quick_real_normal_maps(quick):
+    out = quick[2]
+    assert (out / "fig10.md").is_file() and (out / "bear.md").is_file()
+    assert any(r["status"] == "ok" for r in _rows(out / "fig10.csv"))
 
 
 def test_missing_and_failing_methods_are_recorded(tmp_path, monkeypatch):
@@ -69,6 +102,35 @@ def test_missing_and_failing_methods_are_recorded(tmp_path, monkeypatch):
     assert "| ghost | no |" in report
 
 
+def test_measure_records_a_failing_metric_and_skips_it_for_a_failed_run(tmp_path):
+    gt = synthetic.analytic("saddle", 16)
+    ctx = Context(tmp_path, Settings.quick(), status=method_status(["poisson"]))
+
+    def flat(surface):
+        raise ValueError("flat truth")
+
+    r, value = ctx.measure(Spec("poisson", "poisson"), gt.normals, gt.mask, flat)
+    assert value is None and r.status == "failed" and r.message == "metric: flat truth"
+    r, value = ctx.measure(Spec("poisson", "poisson"), gt.normals, gt.mask, lambda s: s.shape)
+    assert r.status == "ok" and value == (16, 16)
+    r, value = ctx.measure(Spec("dgp", "dgp"), gt.normals, gt.mask, flat)  # not in `status`
+    assert value is None and r.status == "unavailable"
+
+
+def test_a_failing_experiment_is_reported_and_the_others_run(tmp_path, monkeypatch):
+    from facetlift.bench import runner
+
+    def broken(ctx):
+        raise RuntimeError("broken on purpose")
+
+    monkeypatch.setitem(runner.EXPERIMENT_FUNCTIONS, "fig4", broken)
+    out = run_bench(tmp_path, quick=True, experiments=["fig4", "table1"], progress=False)
+    report = (out / "report.md").read_text()
+    assert "## Failed experiments" in report
+    assert "| fig4 | RuntimeError: broken on purpose |" in report
+    assert (out / "table1.csv").is_file() and not (out / "fig4.csv").exists()
+
+
 def test_bench_input_errors(tmp_path):
     with pytest.raises(ValueError, match="`methods`: unknown"):
         run_bench(tmp_path, methods=["nope"], progress=False)
@@ -79,12 +141,8 @@ def test_bench_input_errors(tmp_path):
     assert "fig9" in EXPERIMENTS
 
 
-def test_bench_command(tmp_path):
-    runner = CliRunner()
-    res = runner.invoke(bench_command, ["-o", str(tmp_path / "o"), "--quick", "--experiments",
-                                        "table1,fig4", "--no-progress"])
-    assert res.exit_code == 0, res.output
-    assert (tmp_path / "o" / "table1.md").is_file() and (tmp_path / "o" / "fig4.png").is_file()
-    assert not (tmp_path / "o" / "fig9.csv").exists()
-    res = runner.invoke(bench_command, ["-o", str(tmp_path / "o"), "--methods", "nope"])
-    assert res.exit_code == 2 and "unknown" in res.output
+def test_importing_the_bench_loads_neither_click_nor_matplotlib():
+    code = ("import sys, facetlift.bench; "
+            "print(sorted({'click', 'matplotlib'} & set(sys.modules)))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert res.stdout.strip() == "[]"

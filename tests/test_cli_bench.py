@@ -1,18 +1,11 @@
-"""`facetlift bench --quick -o DIR` through the real command line entry point."""
+"""`facetlift bench` through the real command line entry point.
 
-from facetlift.cli import main
+The quick bench itself runs once, in tests/test_bench.py (fixture `quick`)."""
 
+from click.testing import CliRunner
 
-def test_bench_quick_through_main(tmp_path, capsys):
-    out = tmp_path / "bench"
-    code = main(["bench", "--quick", "-o", str(out), "--no-progress"])
-    stdout, err = capsys.readouterr()
-    assert code == 0, err
-    assert f"wrote {out / 'report.md'}" in stdout
-    for name in ["table1.md", "fig4.png", "fig5.csv", "fig9.md", "report.md"]:
-        assert (out / name).is_file(), name
-    table1 = (out / "table1.md").read_text()
-    assert "factorization_ms" in table1 and "spectral" in table1  # timed rows, not a header
+from facetlift.bench import EXPERIMENTS
+from facetlift.cli import cli, main
 
 
 def test_bench_bad_method_exits_1(tmp_path, capsys):
@@ -20,3 +13,20 @@ def test_bench_bad_method_exits_1(tmp_path, capsys):
                  "--no-progress"])
     _, err = capsys.readouterr()
     assert code == 1 and "nope" in err
+
+
+def test_bench_command(tmp_path):
+    runner = CliRunner()
+    res = runner.invoke(cli, ["bench", "-o", str(tmp_path / "o"), "--quick", "--experiments",
+                              "table1,fig4", "--no-progress"])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "o" / "table1.md").is_file() and (tmp_path / "o" / "fig4.png").is_file()
+    assert not (tmp_path / "o" / "fig9.csv").exists()
+    res = runner.invoke(cli, ["bench", "-o", str(tmp_path / "o"), "--methods", "nope"])
+    assert res.exit_code == 2 and "unknown" in res.output
+
+
+def test_bench_help_lists_every_experiment():
+    res = CliRunner().invoke(cli, ["bench", "--help"])
+    assert res.exit_code == 0, res.output
+    assert f"subset of: {', '.join(EXPERIMENTS)}." in " ".join(res.output.split())

@@ -21,7 +21,6 @@ import numpy as np
 
 from . import __version__
 from . import methods as _methods
-from .bench import bench_command
 from .linalg import SolverError
 
 log = logging.getLogger(__name__)
@@ -372,10 +371,38 @@ def methods(as_json):
     return EXIT_OK
 
 
-# --------------------------------------------------------------------------------------------
-# More subcommands: register them here, one line each.
-cli.add_command(bench_command)  # facetlift bench: the paper's experiments (facetlift.bench)
-# --------------------------------------------------------------------------------------------
+def _split(text):
+    return None if not text else tuple(t.strip() for t in text.split(",") if t.strip())
+
+
+@cli.command("bench", context_settings=CONTEXT)
+@click.option("-o", "--out", "out", required=True, type=click.Path(file_okay=False),
+              help="Output folder for tables (CSV, Markdown) and figures (PNG).")
+@click.option("--quick", is_flag=True, help="Small sizes and few models (a smoke test).")
+@click.option("--methods", default=None, help="Comma-separated method names.")
+@click.option("--models", default=None, help="Comma-separated Fig. 9 model names.")
+@click.option("--experiments", default=None,  # facetlift.bench.EXPERIMENTS (a test checks)
+              help="Comma-separated subset of: table1, fig4, fig5, maps, fig9, fig10, bear.")
+@click.option("--mesh", "meshes", multiple=True, type=click.Path(exists=True, dir_okay=False),
+              help="Add a mesh to the Fig. 9 models (repeatable).")
+@click.option("--normal-map", "normal_maps", multiple=True,
+              type=click.Path(exists=True, file_okay=False),
+              help="Add a data folder (normal_map.png, mask.png[, K.txt]) to Fig. 10.")
+@click.option("--data", "data_dir", default=None, type=click.Path(exists=True, file_okay=False),
+              help="Data folder with meshes/ and normal_maps/ (default: $FACETLIFT_DATA).")
+@click.option("--no-progress", is_flag=True, help="No progress bars.")
+def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_dir, no_progress):
+    """Reproduce the paper's experiments (Table 1, Figs. 4-10) into a folder."""
+    from .bench import run_bench
+
+    try:
+        path = run_bench(out, quick=quick, methods=_split(methods), models=_split(models),
+                         experiments=_split(experiments), extra_meshes=meshes,
+                         extra_normal_maps=normal_maps, data_dir=data_dir,
+                         progress=not no_progress)
+    except ValueError as e:
+        raise click.UsageError(str(e)) from None
+    click.echo(f"wrote {path / 'report.md'}")
 
 
 def _error(message: str) -> None:

@@ -1,0 +1,182 @@
+"""The experiment registry and :func:`run_bench`, which runs experiments and writes the report."""
+
+from __future__ import annotations
+
+import logging
+import os
+import platform
+import time
+from pathlib import Path
+
+from .. import methods as _methods
+from . import fig9, maps, paper, real
+from .core import Context, Settings, bar, method_status
+from .tables import md_table, write_text
+
+log = logging.getLogger(__name__)
+
+#: Experiment name -> function of the :class:`~facetlift.bench.core.Context`, in run order.
+EXPERIMENT_FUNCTIONS = {
+    "table1": paper.table1,
+    "fig4": paper.fig4,
+    "fig5": paper.fig5,
+    "maps": maps.maps,
+    "fig9": fig9.fig9,
+    "fig10": real.fig10,
+    "bear": real.bear,
+}
+EXPERIMENTS = tuple(EXPERIMENT_FUNCTIONS)
+
+
+def _machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} logical CPUs, Python {platform.python_version()}"
+
+
+def default_data_dir() -> Path | None:
+    """``$FACETLIFT_DATA`` if set, else a ``shared/data`` folder beside the checkout, else None."""
+    env = os.environ.get("FACETLIFT_DATA")
+    if env:
+        return Path(env)
+    here = Path(__file__).resolve()  # <checkout>/src/facetlift/bench/runner.py
+    for p in here.parents[3:5]:  # the checkout and the folder above it
+        cand = p / "shared" / "data"
+        if cand.is_dir():
+            return cand
+        cand = p.parent / "shared" / "data"
+        if cand.is_dir():
+            return cand
+    return None
+
+
+def run_bench(
+    out_dir,
+    *,
+    quick: bool = False,
+    methods=None,
+    models=None,
+    experiments=None,
+    extra_meshes=(),
+    extra_normal_maps=(),
+    data_dir=None,
+    progress: bool = True,
+) -> Path:
+    """Run the experiments and write tables and figures into `out_dir`.
+
+    Parameters
+    ----------
+    out_dir : path
+        Output folder (created).
+    quick : bool
+        Small sizes, few models and three methods: a smoke test of every experiment.
+    methods : iterable of str, optional
+        Registered method names to compare (default: all; with `quick`, dgp, poisson and
+        frankot_chellappa).
+    models : iterable of str, optional
+        Subset of the Fig. 9 models: analytic names or mesh names (``stem`` or ``stem@view``).
+    experiments : iterable of str, optional
+        Subset of :data:`EXPERIMENTS`.
+    extra_meshes : iterable of paths
+        More meshes for Fig. 9 (rendered from every view).
+    extra_normal_maps : iterable of paths
+        More data folders (``normal_map.png`` + ``mask.png`` [+ ``K.txt``]) for Fig. 10.
+    data_dir : path, optional
+        Folder with ``meshes/`` and ``normal_maps/``; default :func:`default_data_dir`.
+    progress : bool
+        Show tqdm progress bars.
+
+    Returns
+    -------
+    Path
+        `out_dir`; ``report.md`` there collects every table.
+
+    Raises
+    ------
+    ValueError
+        Unknown method or experiment names, or a missing extra file.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    s = _settings(quick, methods)
+    exps = EXPERIMENTS if experiments is None else tuple(experiments)
+    bad = [e for e in exps if e not in EXPERIMENTS]
+    if bad:
+        raise ValueError(f"`experiments`: unknown {bad}; valid: {list(EXPERIMENTS)}")
+    _check_extras(extra_meshes, extra_normal_maps)
+    data = Path(data_dir) if data_dir is not None else default_data_dir()
+    if data is not None and not data.is_dir():
+        raise ValueError(f"`data_dir`: {data} is not a folder")
+    ctx = Context(out, s, data, progress, method_status(s.methods), models=models,
+                  extra_meshes=tuple(extra_meshes), extra_normal_maps=tuple(extra_normal_maps))
+    t0 = time.perf_counter()
+    failures = []
+    for e in bar(exps, progress, "bench"):
+        error = _run(e, ctx)
+        if error:
+            failures.append((e, error))
+    mode = f"{'quick' if quick else 'full'}; experiments: {', '.join(exps)}"
+    write_text(out / "report.md", _report(ctx, mode, failures, time.perf_counter() - t0))
+    return out
+
+
+def _settings(quick: bool, methods) -> Settings:
+    """The quick or full settings, limited to `methods` (checked) if given."""
+    s = Settings.quick() if quick else Settings()
+    if methods is not None:
+        methods = tuple(methods)
+        bad = [m for m in methods if m not in _methods.REGISTRY]
+        if bad:
+            raise ValueError(f"`methods`: unknown {bad}; registered: {sorted(_methods.REGISTRY)}")
+        s.methods = methods
+    elif s.methods is not None:
+        s.methods = tuple(m for m in s.methods if m in _methods.REGISTRY)
+    return s
+
+
+def _check_extras(extra_meshes, extra_normal_maps) -> None:
+    for p in extra_meshes:
+        if not Path(p).is_file():
+            raise ValueError(f"`extra_meshes`: {p} is not a file")
+    for p in extra_normal_maps:
+        if not Path(p).is_dir():
+            raise ValueError(f"`extra_normal_maps`: {p} is not a folder")
+
+
+def _run(name: str, ctx: Context) -> str | None:
+    """Run experiment `name`; None, or the error that stopped it (logged with its traceback)."""
+    t0 = time.perf_counter()
+    try:
+        EXPERIMENT_FUNCTIONS[name](ctx)
+    except Exception as exc:  # one broken experiment must not lose the others
+        log.exception("experiment %s failed", name)
+        return f"{type(exc).__name__}: {exc}"
+    finally:
+        log.info("%s: %.1f s", name, time.perf_counter() - t0)
+    return None
+
+
+def _report(ctx: Context, mode: str, failures: list, seconds: float) -> str:
+    """``report.md``: machine, mode and data, the methods, failed experiments, every section."""
+    avail = [{"method": m, "available": "yes" if not why else "no", "reason": why}
+             for m, why in ctx.status.items()]
+    head = [
+        "# facetlift bench report\n",
+        f"Machine: {_machine()}  ",
+        f"Mode: {mode}; total {seconds:.0f} s  ",
+        f"Data: {ctx.data}\n",
+        "## Methods\n",
+        md_table(avail),
+    ]
+    if failures:
+        head += ["## Failed experiments\n",
+                 md_table([{"experiment": e, "error": m} for e, m in failures])]
+    body = [f"## {title}\n\n{text}" for title, text in ctx.sections]
+    return "\n".join(head + body)
