@@ -4,30 +4,46 @@
 >>> surface = facetlift.integrate(normals, mask)          # doctest: +SKIP
 >>> surface.depth, surface.to_mesh(), surface.save("out.ply")  # doctest: +SKIP
 
-Conventions: :mod:`facetlift.conventions`. Methods: ``facetlift.methods.REGISTRY``.
-Importing facetlift loads numpy and scipy only; methods and I/O load on first use.
+Conventions: :mod:`facetlift.conventions`. Methods: ``facetlift.METHODS`` or
+``facetlift methods``. Architecture: docs/architecture.md.
+
+Importing facetlift loads nothing heavy: the names below are imported on first use
+(PEP 562), so ``import facetlift`` and ``facetlift --version`` stay fast.
 """
 
-from .api import integrate, solve
-from .camera import Orthographic, Pinhole
-from .linalg import SolverError
-from .methods import REGISTRY as METHODS
-from .problem import Problem, clean_mask, gradients_from_normals, normals_from_gradients, prepare
-from .surface import Surface
+from __future__ import annotations
+
+import importlib
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "METHODS",
-    "Orthographic",
-    "Pinhole",
-    "Problem",
-    "SolverError",
-    "Surface",
-    "clean_mask",
-    "gradients_from_normals",
-    "integrate",
-    "normals_from_gradients",
-    "prepare",
-    "solve",
-]
+#: public name -> (module, attribute)
+_LAZY = {
+    "integrate": ("api", "integrate"),
+    "solve": ("api", "solve"),
+    "Orthographic": ("camera", "Orthographic"),
+    "Pinhole": ("camera", "Pinhole"),
+    "SolverError": ("errors", "SolverError"),
+    "METHODS": ("methods", "REGISTRY"),
+    "Problem": ("problem", "Problem"),
+    "clean_mask": ("problem", "clean_mask"),
+    "gradients_from_normals": ("problem", "gradients_from_normals"),
+    "normals_from_gradients": ("problem", "normals_from_gradients"),
+    "prepare": ("problem", "prepare"),
+    "Surface": ("surface", "Surface"),
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        module, attr = _LAZY[name]
+        value = getattr(importlib.import_module(f".{module}", __name__), attr)
+        globals()[name] = value  # later look-ups skip this function
+        return value
+    raise AttributeError(f"module 'facetlift' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

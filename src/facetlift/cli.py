@@ -21,7 +21,7 @@ import numpy as np
 
 from . import __version__
 from . import methods as _methods
-from .linalg import SolverError
+from .errors import SolverError
 
 log = logging.getLogger(__name__)
 

@@ -9,8 +9,6 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-import scipy.ndimage as ndi
-import scipy.sparse as sp
 
 from .conventions import CORNER_OFFSETS
 
@@ -80,6 +78,8 @@ class Domain:
 
     @cached_property
     def _labels(self) -> tuple[np.ndarray, int]:
+        import scipy.ndimage as ndi
+
         labels, n = ndi.label(self.mask, structure=_EIGHT)
         return labels, int(n)
 
@@ -121,15 +121,19 @@ class Domain:
         return np.bincount(self.facet_component, minlength=self.n_components)
 
     @cached_property
-    def gather(self) -> sp.csr_matrix:
-        """(4m, n) sparse 0/1 matrix C: row 4k+i picks corner i of facet k."""
+    def gather(self):
+        """(4m, n) sparse 0/1 CSR matrix C: row 4k+i picks corner i of facet k."""
+        import scipy.sparse as sp
+
         m, n = self.n_facets, self.n_vertices
         data = np.ones(4 * m)
         indptr = np.arange(4 * m + 1)
         return sp.csr_matrix((data, self.corners.ravel(), indptr), shape=(4 * m, n))
 
-    def facet_operator(self, weights4: np.ndarray) -> sp.csr_matrix:
-        """(m, n) sparse matrix whose row k is ``weights4 . z[corners[k]]``."""
+    def facet_operator(self, weights4: np.ndarray):
+        """(m, n) sparse CSR matrix whose row k is ``weights4 . z[corners[k]]``."""
+        import scipy.sparse as sp
+
         m, n = self.n_facets, self.n_vertices
         data = np.broadcast_to(np.asarray(weights4, dtype=float), (m, 4)).ravel()
         indptr = np.arange(0, 4 * m + 1, 4)

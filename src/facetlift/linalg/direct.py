@@ -11,9 +11,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-
-class SolverError(RuntimeError):
-    """The linear solver failed (singular matrix, no convergence, backend error)."""
+from ..errors import SolverError
 
 
 class Factor:

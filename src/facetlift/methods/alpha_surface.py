@@ -63,7 +63,6 @@ from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
 from ..operators import graph as pg
 from ..options import Option
-from ..problem import Problem
 from . import MethodResult
 from . import _graph as g
 
@@ -130,14 +129,7 @@ def connectors(graph: pg.PixelGraph, accepted: np.ndarray, candidate: np.ndarray
     return out
 
 
-def run(
-    problem: Problem,
-    *,
-    alpha: float | None = None,
-    max_iter: int = 50,
-    tol: float = 1e-3,
-    backend: str = "auto",
-) -> MethodResult:
+def run(problem, *, alpha, max_iter, tol, backend) -> MethodResult:
     """Integrate `problem` as an alpha-surface; values (m,) at pixel centres."""
     t0 = time.perf_counter()
     domain, graph, t, has, h = g.setup(problem)

@@ -153,14 +153,7 @@ def quadrant_form(graph: pg.PixelGraph, has: np.ndarray, D11, D12, D22) -> sp.cs
     return sp.csr_matrix((vals, (rows, cols)), shape=(nrow, graph.n_edges))
 
 
-def run(
-    problem: Problem,
-    *,
-    sigma: float = 0.5,
-    contrast: float = 1.0,
-    beta: float = 0.02,
-    backend: str = "auto",
-) -> MethodResult:
+def run(problem, *, sigma, contrast, beta, backend) -> MethodResult:
     """Integrate `problem` with an anisotropic diffusion tensor; heights (m,) at pixel centres."""
     t0 = time.perf_counter()
     domain, graph, t, has, _ = g.setup(problem)

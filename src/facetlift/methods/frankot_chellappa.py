@@ -78,7 +78,7 @@ OPTIONS = (
 )
 
 
-def run(problem: Problem, *, pad: str = "mirror", fill: str = "harmonic") -> MethodResult:
+def run(problem: Problem, *, pad: str, fill: str) -> MethodResult:
     """Integrate `problem` by the Frankot-Chellappa projection (see the module docstring).
 
     Returns heights (m,) at the facet centres and ``info`` with the box shape.

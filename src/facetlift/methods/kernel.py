@@ -97,7 +97,6 @@ from threadpoolctl import threadpool_limits
 
 from .. import linalg
 from ..options import Option
-from ..problem import Problem
 from . import MethodResult
 
 log = logging.getLogger(__name__)
@@ -113,14 +112,7 @@ OPTIONS = (
 )
 
 
-def run(
-    problem: Problem,
-    *,
-    sigma: float = 2.0,
-    reg: float = 1e-6,
-    tile: int = 16,
-    margin: int | None = None,
-) -> MethodResult:
+def run(problem, *, sigma, reg, tile, margin) -> MethodResult:
     """Integrate `problem` with the Gaussian-kernel method (see the module docstring).
 
     Parameters

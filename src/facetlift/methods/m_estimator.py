@@ -63,7 +63,6 @@ import numpy as np
 from .._warnings import warn
 from ..operators import graph as pg
 from ..options import Option
-from ..problem import Problem
 from . import MethodResult
 from . import _graph as g
 
@@ -92,16 +91,7 @@ def weights(u: np.ndarray, weight: str, k: float) -> np.ndarray:
     return 1.0 / (1.0 + a**2)
 
 
-def run(
-    problem: Problem,
-    *,
-    weight: str = "huber",
-    k: float | None = None,
-    scale: float | str = 1.0,
-    max_iter: int = 50,
-    tol: float = 1e-3,
-    backend: str = "auto",
-) -> MethodResult:
+def run(problem, *, weight, k, scale, max_iter, tol, backend) -> MethodResult:
     """Integrate `problem` with a robust M-estimator (IRLS); values (m,) at pixel centres."""
     k = WEIGHTS[weight] if k is None else k
 

@@ -32,7 +32,7 @@ from . import _graph as g
 OPTIONS = (g.BACKEND,)
 
 
-def run(problem: Problem, *, backend: str = "auto") -> MethodResult:
+def run(problem: Problem, *, backend: str) -> MethodResult:
     """Integrate `problem` by least squares on the pixel graph; values (m,) at pixel centres."""
     t0 = time.perf_counter()
     _, graph, t, has, _ = g.setup(problem)

@@ -49,7 +49,6 @@ import scipy.sparse as sp
 
 from ..operators import graph as pg
 from ..options import Option
-from ..problem import Problem
 from . import MethodResult
 from . import _graph as g
 
@@ -83,15 +82,7 @@ def laplacian_rows(graph: pg.PixelGraph) -> sp.csr_matrix:
     return sp.csr_matrix((vals, (rows, nb.ravel())), shape=(pix.size, graph.n))
 
 
-def run(
-    problem: Problem,
-    *,
-    lam: float | None = None,
-    prior: str = "laplacian",
-    max_iter: int = 10,
-    tol: float = 1e-3,
-    backend: str = "auto",
-) -> MethodResult:
+def run(problem, *, lam, prior, max_iter, tol, backend) -> MethodResult:
     """Integrate `problem` with a smoothness prior; values (m,) at pixel centres."""
     lam = PRIORS[prior] if lam is None else lam
 

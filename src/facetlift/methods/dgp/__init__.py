@@ -105,18 +105,8 @@ OPTIONS = (
 
 
 def run(
-    problem,
-    *,
-    solver="direct",
-    discontinuities=False,
-    mean_subtraction=True,
-    max_iter=5000,
-    tol=1e-3,
-    backend="auto",
-    flat_weight=1e-9,
-    progress=None,
-    discontinuity_k=DEFAULT_K,
-    discontinuity_iter=DEFAULT_ITER,
+    problem, *, solver, discontinuities, mean_subtraction, max_iter, tol, backend, flat_weight,
+    progress, discontinuity_k, discontinuity_iter,
 ) -> MethodResult:
     """Integrate `problem` with the DGP method (options checked by facetlift.solve)."""
     bx, by, target = targets(problem)

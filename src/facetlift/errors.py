@@ -1,0 +1,11 @@
+"""The exceptions facetlift raises besides ``ValueError`` (bad input, naming the argument).
+
+Kept in a module without heavy imports, so the command line can catch them cheaply.
+"""
+
+from __future__ import annotations
+
+
+class SolverError(RuntimeError):
+    """The solver failed: a singular matrix, no convergence, a backend error, or a result that
+    is not finite inside the mask."""
