@@ -327,13 +327,18 @@ def integrate(normals, mask, method, pixel_size, y_down, K, orthographic, backfa
 
 @cli.command(context_settings=CONTEXT)
 @click.option("--json", "as_json", is_flag=True, help="Print the registry as JSON.")
-def methods(as_json):
+@click.option("--markdown", is_flag=True,
+              help="Print the capability and option tables in Markdown (docs/methods.md).")
+def methods(as_json, markdown):
     """List the integration methods, what they can take, and their options.
 
     Capabilities: masks (any domain shape), missing (NaN normals inside the mask),
     perspective (a camera K), discontinuities (depth jumps). Options are passed with
     --solver/--max-iter/--tol/--backend or '--option KEY=VALUE'.
     """
+    if markdown:
+        click.echo(_methods.markdown(), nl=False)
+        return EXIT_OK
     caps = _methods.CAPABILITIES
     records = []
     for name, info in _methods.REGISTRY.items():

@@ -167,6 +167,7 @@ def markdown(options: tuple[Option, ...]) -> str:
     lines = ["| option | default | values | applies | what it does |", "|---|---|---|---|---|"]
     for o in options:
         when = ", ".join(f"{k}={v!r}" for k, v in o.when.items()) or "always"
-        default = "automatic" if o.default is None and o.none else repr(o.default)
+        auto = o.default is None and o.none and o.kind != "callable"
+        default = "automatic" if auto else repr(o.default)
         lines.append(f"| `{o.name}` | {default} | {o.expected} | {when} | {o.doc} |")
     return "\n".join(lines) + "\n"

@@ -123,3 +123,21 @@ for _name, _summary, _ref in [
 ]:
     register(MethodInfo(name=_name, module=_name, summary=_summary, reference=_ref,
                         masks=True, missing=True, perspective=_name in _LOG_DEPTH))
+
+
+def markdown() -> str:
+    """The capability table and every method's option table, in Markdown, from the registry
+    and the option declarations (``facetlift methods --markdown``; docs/methods.md)."""
+    from ..options import markdown as options_table
+
+    head = "| method | " + " | ".join(CAPABILITIES) + " |"
+    rows = [head, "|---" * (len(CAPABILITIES) + 1) + "|"]
+    for name, info in REGISTRY.items():
+        caps = info.capabilities()
+        rows.append(f"| `{name}` | " + " | ".join("yes" if caps[c] else "no"
+                                                 for c in CAPABILITIES) + " |")
+    parts = ["\n".join(rows) + "\n"]
+    for name, info in REGISTRY.items():
+        table = options_table(info.specs())
+        parts.append(f"### Options of `{name}`\n\n{info.summary}.\n\n{table}")
+    return "\n".join(parts)
