@@ -51,7 +51,7 @@ Perspective cameras (``K`` given)
 Depth discontinuities (``discontinuities=True``)
     Every facet keeps its own corner values, glued to the shared vertices by a robust
     (Cauchy) penalty, so facets can separate where the normals imply a depth jump; see
-    :mod:`facetlift.methods._discontinuity`. Only with ``solver="direct"``; it has its own
+    :mod:`facetlift.methods.dgp.discontinuous`. Only with ``solver="direct"``; it has its own
     multigrid-CG solver (``backend`` is not used).
 
 Options
