@@ -81,11 +81,11 @@ def run_case(s: int, domain: str, kind: str, loop_iters: int) -> dict:
         out["cg_iterations"] = surf.info.get("cg_iterations")
     else:
         problem = facetlift.prepare(normals, mask, pixel_size=1.0 / s)
-        bx, by = dgp.dgp_slopes(problem.pixel_size, *problem.slopes, problem.known)
+        bx, by, target = dgp.targets(problem)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             _, info = dgp.solve_iterative(
-                problem.domain, bx, by, problem.known, problem.pixel_size,
+                problem.domain, bx, by, target, problem.camera.footprint(),
                 max_iter=loop_iters, tol=0.0,
             )
         sec = info["seconds"]

@@ -78,11 +78,12 @@ class Camera:
         """Width of one pixel in the unknown's units (see module docstring)."""
         raise NotImplementedError
 
-    def view_cosine(self, rows, cols, normals) -> np.ndarray:
+    def view_cosine(self, rows, cols, normals, *, unit: bool = False) -> np.ndarray:
         """(m,) cosine between each normal and the direction toward the camera.
 
         `rows`, `cols` are pixel indices (integer centres); `normals` (m, 3) in the facetlift
-        convention, any length. 1 head-on, 0 edge-on, < 0 back-facing; NaN for NaN normals.
+        convention, any length (``unit=True``: already unit length, skips normalising). 1
+        head-on, 0 edge-on, < 0 back-facing; NaN for NaN normals.
         """
         raise NotImplementedError
 
@@ -140,8 +141,9 @@ class Orthographic(Camera):
     def footprint(self) -> float:
         return float(self.pixel_size)
 
-    def view_cosine(self, rows, cols, normals):
-        return _unit(normals)[..., 2]
+    def view_cosine(self, rows, cols, normals, *, unit=False):
+        n = np.asarray(normals, dtype=float)
+        return n[..., 2] if unit else _unit(n)[..., 2]
 
     def grid_slopes(self, rows, cols, normals):
         n = np.asarray(normals, dtype=float)
@@ -202,13 +204,12 @@ class Pinhole(Camera):
         pix = np.stack([cols, rows, np.ones_like(cols)], axis=-1)
         return pix @ self._Kinv.T
 
-    def view_cosine(self, rows, cols, normals):
+    def view_cosine(self, rows, cols, normals, *, unit=False):
         r = self.rays(rows, cols)
         m = np.asarray(normals, dtype=float) * np.array([1.0, -1.0, -1.0])
         with np.errstate(invalid="ignore", divide="ignore"):
-            return -np.einsum("...i,...i->...", m, r) / (
-                np.linalg.norm(r, axis=-1) * np.linalg.norm(m, axis=-1)
-            )
+            cos = -np.einsum("...i,...i->...", m, r) / np.linalg.norm(r, axis=-1)
+            return cos if unit else cos / np.linalg.norm(m, axis=-1)
 
     def log_depth_slopes(self, rows, cols, normals):
         """``(d log Z / d col, d log Z / d row)`` per pixel (see module docstring)."""

@@ -162,16 +162,6 @@ def _bool_image(a, name: str, shape: tuple[int, int]) -> np.ndarray:
     return arr != 0
 
 
-def _where(bad: np.ndarray) -> str:
-    r, c = np.nonzero(bad)
-    return f"{r.size} pixel(s), first at (row {r[0]}, col {c[0]})"
-
-
-def _first(bad: np.ndarray) -> list[int]:
-    r, c = np.nonzero(bad)
-    return [int(r[0]), int(c[0])]
-
-
 def prepare(
     normals,
     mask=None,
@@ -215,7 +205,7 @@ def prepare(
         components, a bad pixel size, `K` or `outlier_eps`, no usable normal at all, or
         back-facing normals with ``backfacing="error"``.
     """
-    n = _float_array(normals, "normals")
+    n = numeric_array(normals, "normals").astype(float, copy=False)
     if n.ndim != 3 or n.shape[-1] != 3:
         raise ValueError(f"`normals` must have shape (H, W, 3); got {n.shape}")
     H, W = n.shape[:2]
@@ -226,72 +216,85 @@ def prepare(
     cam = make_camera(pixel_size, K) if camera is None else camera
     eps = cam.grazing if outlier_eps is None else _check_eps(outlier_eps)
 
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        big = np.abs(n).max(axis=-1)  # scale first: (0, 1e200, 1e200) is a fine normal
-        n = n / np.where(np.isfinite(big) & (big > 0), big, 1.0)[..., None]
-        length2 = np.einsum("ijk,ijk->ij", n, n)
-    finite = np.isfinite(length2) & (length2 > 0)
-    m = finite if mask is None else _bool_image(mask, "mask", (H, W))
-    if not m.any():
-        raise ValueError(
-            "`mask` is empty: no pixel to integrate"
-            if mask is not None
-            else "`normals` has no finite, non-zero normal: nothing to integrate"
-        )
-    given = m if known is None else m & _bool_image(known, "known", (H, W))
-    nan = given & np.isnan(n).any(-1)
-    bad = {
-        "non-finite": given & ~nan & ~np.isfinite(length2),
-        "zero-length": given & (length2 == 0),
-    }
-    ok = given & finite
-    rr, cc = np.nonzero(ok)
-    nf = n[rr, cc] / np.sqrt(length2[rr, cc])[:, None]
-    cos = cam.view_cosine(rr, cc, nf)
-    bad["back-facing"] = _scatter(rr, cc, cos <= 0, (H, W))
-    if backfacing == "error" and bad["back-facing"].any():
-        raise ValueError(
-            f"`normals` has back-facing normals (facing away from the camera) inside the mask "
-            f"at {_where(bad['back-facing'])}; mask them out or pass backfacing='missing'"
-        )
-    bad["grazing"] = _scatter(rr, cc, (cos > 0) & (cos < eps), (H, W))
-    front = _scatter(rr, cc, cos > 0, (H, W))
-
+    if mask is None:
+        with np.errstate(over="ignore", invalid="ignore"):
+            length2 = np.einsum("ijk,ijk->ij", n, n)
+        m = (np.isfinite(length2) & (length2 > 0)) | _huge(n, length2)
+        if not m.any():
+            raise ValueError("`normals` has no finite, non-zero normal: nothing to integrate")
+    else:
+        m = _bool_image(mask, "mask", (H, W))
+        if not m.any():
+            raise ValueError("`mask` is empty: no pixel to integrate")
     domain = Domain.from_mask(m)
     _check_components(domain)
-    usable_img = front & ~bad["grazing"]
-    counts = {"pixels": int(m.sum()), "missing": int(((m & ~given) | nan).sum())}
+    # from here on only the mask's pixels, as (k,) facet arrays in row-major order
+    nf = n[m]
+    given = np.ones(len(nf), bool) if known is None else _bool_image(known, "known", (H, W))[m]
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        length = np.sqrt(np.einsum("ij,ij->i", nf, nf))
+        huge = _huge(nf, length)  # (0, 1e200, 1e200) is a fine normal: scale it first
+        if huge.any():
+            nf[huge] /= np.abs(nf[huge]).max(axis=1, keepdims=True)
+            length[huge] = np.sqrt(np.einsum("ij,ij->i", nf[huge], nf[huge]))
+        nf /= length[:, None]
+    nan = given & np.isnan(length)
+    bad = {
+        "non-finite": given & ~nan & ~np.isfinite(length),
+        "zero-length": given & (length == 0),
+    }
+    ok = given & np.isfinite(length) & (length > 0)
+    r, c = domain.pixels
+    with np.errstate(invalid="ignore"):
+        cos = np.where(ok, cam.view_cosine(r, c, nf, unit=True), 0.0)
+    bad["back-facing"] = ok & (cos <= 0)
+    if backfacing == "error" and bad["back-facing"].any():
+        raise ValueError(
+            "`normals` has back-facing normals (facing away from the camera) inside the mask "
+            f"at {_where_facets(domain, bad['back-facing'])}; mask them out or pass "
+            "backfacing='missing'"
+        )
+    front = ok & (cos > 0)
+    bad["grazing"] = front & (cos < eps)
+    usable = front & ~bad["grazing"]
+
+    counts = {"pixels": int(m.sum()), "missing": int((~given | nan).sum())}
     counts.update({k: int(v.sum()) for k, v in bad.items()})
-    counts["usable"] = int(usable_img.sum())
+    counts["usable"] = int(usable.sum())
     counts["outlier_eps"] = float(eps)
     problems = {k: v for k, v in bad.items() if v.any()}
     if problems:
-        first = _first(np.logical_or.reduce(list(problems.values())))
-        counts["first_unusable"] = first
+        first = int(np.flatnonzero(np.logical_or.reduce(list(problems.values())))[0])
+        counts["first_unusable"] = [int(r[first]), int(c[first])]
         what = ", ".join(f"{int(v.sum())} {k}" for k, v in problems.items())
         warn(
             f"{sum(int(v.sum()) for v in problems.values())} normal(s) inside the mask cannot be "
             f"used and were treated as missing samples ({what}; grazing: view cosine < "
-            f"{eps:.4g}); first at (row {first[0]}, col {first[1]})"
+            f"{eps:.4g}); first at (row {r[first]}, col {c[first]})"
         )
-    if not usable_img.any():
+    if not usable.any():
         raise ValueError(
             "`normals` has no usable normal inside the mask (all missing, non-finite, "
             f"back-facing or grazing: {counts})"
         )
-    normals_f = np.full((domain.n_facets, 3), np.nan)
-    kf = front[m]
-    normals_f[kf] = (n[m][kf]) / np.sqrt(length2[m][kf])[:, None]
+    nf[~front] = np.nan
     return Problem(
-        domain=domain, normals=normals_f, known=kf, camera=cam, usable=usable_img[m],
-        counts=counts,
+        domain=domain, normals=nf, known=front, camera=cam, usable=usable, counts=counts,
     )
 
 
-def _scatter(rr, cc, values, shape) -> np.ndarray:
-    out = np.zeros(shape, dtype=bool)
-    out[rr, cc] = values
-    return out
+def _huge(n, length2) -> np.ndarray:
+    """Pixels whose (squared) length overflows although every component is finite."""
+    over = np.isinf(length2)
+    if over.any():
+        over &= np.isfinite(n).all(-1)
+    return over
+
+
+def _where_facets(domain: Domain, bad: np.ndarray) -> str:
+    r, c = domain.pixels
+    k = np.flatnonzero(bad)
+    return f"{k.size} pixel(s), first at (row {r[k[0]]}, col {c[k[0]]})"
 
 
 def _check_eps(value) -> float:
