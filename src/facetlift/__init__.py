@@ -24,6 +24,7 @@ _LAZY = {
     "Orthographic": ("camera", "Orthographic"),
     "Pinhole": ("camera", "Pinhole"),
     "SolverError": ("errors", "SolverError"),
+    "MemoryLimitError": ("errors", "MemoryLimitError"),
     "METHODS": ("methods", "REGISTRY"),
     "Problem": ("problem", "Problem"),
     "clean_mask": ("problem", "clean_mask"),
