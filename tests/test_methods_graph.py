@@ -378,3 +378,23 @@ def test_diffusion_quadrant_energy_matches_direct_sum():
                 v = -np.sqrt(sy2) * (r[ey] if ey is not None else 0.0)  # y is up
                 direct += a[k] * u * u + 2 * b[k] * u * v + c[k] * v * v
     assert np.isclose(np.sum((Q @ r) ** 2), direct, rtol=1e-12)
+
+
+def test_bini_cuts_a_fold_that_poisson_smears():
+    """A fold: beside a flat plane, a plane tilting away so that the depth jump between them grows
+    from 0 (top row) to 20 (bottom). BiNI (our implementation) keeps much of the jump that
+    Poisson smears over both planes, and its energy rule stops it."""
+    H, W = 40, 40
+    r, c = np.mgrid[0:H, 0:W]
+    step = c >= 20
+    z = 0.1 * (c + 0.5) + np.where(step, 0.5 * (r + 0.5), 0.0)
+    q = np.where(step, -0.5, 0.0)  # y is up: the right plane falls toward the top row
+    n = facetlift.normals_from_gradients(np.full((H, W), 0.1), q)
+    err = {}
+    for method in ("poisson", "bini"):
+        s = facetlift.integrate(n, method=method)
+        e = s.height - z
+        err[method] = np.abs(e - e.mean()).mean()
+        if method == "bini":
+            assert s.info["converged"] and s.info["changes"][-1] < 1e-4
+    assert err["bini"] < 0.6 * err["poisson"]  # measured 2.09 against 5.0

@@ -15,9 +15,11 @@ from facetlift.options import Option
 NAMES = sorted(methods.REGISTRY)
 
 #: Relative error (of the depth range) each method reaches on exact plane / saddle input.
-#: The kernel fit is smooth, not exact; Frankot-Chellappa is spectral with a mirrored box.
-PLANE_TOL = {"kernel": 2e-3, "frankot_chellappa": 1e-2}
-SADDLE_TOL = {"kernel": 5e-3, "frankot_chellappa": 2e-2, "dgp": 1e-9}
+#: The kernel fit is smooth, not exact; Frankot-Chellappa is spectral with a mirrored box;
+#: BiNI solves every system only to its reference CG tolerance (1e-3; measured 2e-4 on the
+#: plane) and its one-sided differences are not exact on quadratics (5e-4 on the saddle).
+PLANE_TOL = {"kernel": 2e-3, "frankot_chellappa": 1e-2, "bini": 1e-3}
+SADDLE_TOL = {"kernel": 5e-3, "frankot_chellappa": 2e-2, "dgp": 1e-9, "bini": 2e-3}
 EXACT = 1e-8
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
+import facetlift
 from facetlift import normals_from_gradients, synthetic
 from facetlift.synthetic import (
     GroundTruth,
@@ -238,3 +239,71 @@ def test_views_are_orthonormal_right_handed():
         F = synthetic._view_frame(view)
         np.testing.assert_allclose(F @ F.T, np.eye(3), atol=1e-12)
         np.testing.assert_allclose(np.cross(F[0], F[1]), F[2], atol=1e-12)
+
+
+# ----------------------------------------------------------------------------------------------
+# perspective rendering, quantisation, ground-truth jumps
+
+
+def _sphere_on_wall():
+    """A sphere in front of a square wall: an occluding contour all around the sphere."""
+    ball = trimesh.creation.icosphere(subdivisions=5, radius=1.0)
+    wall = trimesh.creation.box(extents=(6.0, 6.0, 0.1))
+    wall.apply_translation((0.0, 0.0, -2.0))
+    return trimesh.util.concatenate([ball, wall])
+
+
+def test_render_perspective_depth_normals_and_camera():
+    from facetlift.perspective import normals_from_depth
+
+    K = np.array([[400.0, 0.0, 63.5], [0.0, 400.0, 47.5], [0.0, 0.0, 1.0]])
+    gt = synthetic.render_perspective(trimesh.creation.icosphere(subdivisions=5), K, (96, 128),
+                                      distance=10.0, fill=0.5)
+    assert gt.K is not None and gt.camera.perspective and gt.mask.sum() > 1000
+    # the sphere's nearest point is 1 radius in front of its centre (radius fills 1/4 of 96 rows)
+    radius = 10.0 * np.tan(np.arctan(0.5 * 96 / 800)) / 1.0
+    assert abs(np.nanmin(gt.depth) - (10.0 - radius)) < 0.01 * radius
+    nd = normals_from_depth(gt.depth, K)
+    ok = gt.mask & np.isfinite(nd).all(-1)
+    ang = np.degrees(np.arccos(np.clip((nd[ok] * gt.normals[ok]).sum(-1), -1, 1)))
+    assert np.median(ang) < 1.0  # central differences span several facets: ~0.6 deg
+    # supersampled normals stay close to the centre ray's (faceting of the icosphere: ~0.6 deg;
+    # a frame or sign error would show tens of degrees)
+    gt3 = synthetic.render_perspective(trimesh.creation.icosphere(subdivisions=5), K, (96, 128),
+                                       distance=10.0, fill=0.5, samples=3)
+    both = gt.mask & gt3.mask
+    ang3 = np.degrees(np.arccos(np.clip((gt.normals[both] * gt3.normals[both]).sum(-1), -1, 1)))
+    assert np.median(ang3) < 1.0
+    with pytest.raises(ValueError, match="`samples` must be an integer >= 1"):
+        synthetic.render_perspective(trimesh.creation.icosphere(), K, (8, 8), samples=0)
+    with pytest.raises(ValueError, match="`distance` must be a positive"):
+        synthetic.render_perspective(trimesh.creation.icosphere(), K, (8, 8), distance=-1)
+
+
+def test_jump_edges_find_the_occluding_contour_and_nothing_else():
+    K = np.array([[300.0, 0.0, 47.5], [0.0, 300.0, 47.5], [0.0, 0.0, 1.0]])
+    gt = synthetic.render_perspective(_sphere_on_wall(), K, (96, 96), distance=12.0, fill=0.9)
+    right, down = synthetic.jump_edges(gt)
+    assert right.sum() + down.sum() > 40
+    # the cut edges form a closed loop around the sphere: cutting them separates two pieces
+    pr = facetlift.prepare(gt.normals, gt.mask, K=K)
+    from facetlift.methods.dgp import split as spl
+
+    assert spl.split(pr.domain, right, down).n_pieces >= 2
+    ball = synthetic.render_perspective(trimesh.creation.icosphere(subdivisions=5), K, (96, 96),
+                                        distance=12.0, fill=0.5)
+    r2, d2 = synthetic.jump_edges(ball)
+    assert r2.sum() + d2.sum() == 0  # a smooth sphere alone has no jump
+
+
+def test_quantize():
+    rng = np.random.default_rng(3)
+    n = rng.standard_normal((20, 20, 3))
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    n[0, 0] = np.nan
+    for bits in (8, 16):
+        q = synthetic.quantize(n, bits)
+        assert np.isnan(q[0, 0]).all()
+        assert np.nanmax(np.abs(q - n)) <= 1.0 / (2**bits - 1) + 1e-12
+    with pytest.raises(ValueError, match="`bits` must be 8 or 16"):
+        synthetic.quantize(n, 12)

@@ -42,8 +42,12 @@ __all__ = [
     "analytic",
     "continuous_region",
     "perturb_fraction",
+    "quantize",
     "remove_samples",
     "render_mesh",
+    "render_perspective",
+    "DILIGENT_K",
+    "jump_edges",
 ]
 
 
@@ -60,9 +64,12 @@ class GroundTruth:
     mask : (H, W) bool
         Pixels on the surface.
     pixel_size : float
-        Pixel width in the units of `depth`.
+        Pixel width in the units of `depth` (orthographic).
     name : str
         A label for tables.
+    K : (3, 3) float or None
+        Intrinsics of a perspective rendering (:func:`render_perspective`), None when
+        orthographic.
     """
 
     depth: np.ndarray
@@ -70,6 +77,14 @@ class GroundTruth:
     mask: np.ndarray
     pixel_size: float = 1.0
     name: str = ""
+    K: np.ndarray | None = None
+
+    @property
+    def camera(self):
+        """The :class:`facetlift.camera.Camera` the depth and normals are given in."""
+        from .camera import make_camera
+
+        return make_camera(self.pixel_size, self.K)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -449,6 +464,206 @@ def render_mesh(
     depth[~mask] = np.nan
     normals[~mask] = np.nan
     return GroundTruth(depth=depth, normals=normals, mask=mask, pixel_size=h, name=label)
+
+
+#: Intrinsics of the DiLiGenT camera (OpenCV layout; 512 x 612 images, f ~ 3,770 px).
+DILIGENT_K = np.array([[3772.0775, 0.0, 305.875], [0.0, 3759.0054, 255.125], [0.0, 0.0, 1.0]])
+
+
+def render_perspective(
+    mesh,
+    K=None,
+    resolution=(512, 612),
+    *,
+    view="front",
+    distance: float = 1500.0,
+    fill: float = 0.6,
+    samples: int = 1,
+    name: str | None = None,
+) -> GroundTruth:
+    """Perspective depth and normal maps of a triangle mesh, rays through the pixel centres.
+
+    The camera sits at the origin of an OpenCV frame (x right, y down, z forward) with
+    intrinsics `K` (pixel centres at integer indices, :mod:`facetlift.conventions`). The mesh
+    is turned so that `view` is the viewing direction, scaled so that its bounding sphere
+    spans `fill` of the shorter image side, and centred on the optical axis at `distance`
+    along it. Depth is the z-coordinate of the hit, in float64 from the hit triangle's plane
+    (the ray caster only picks the triangle); the normal is that triangle's face normal turned
+    toward the camera, in the facetlift frame (x right, y up, z toward the viewer). Pixels
+    whose triangle is seen edge-on are left out of the mask, as are isolated pixels. Because
+    the rendered surface is piecewise planar, these normals are exact at every pixel centre.
+    With ``samples=s > 1`` the normal is instead the normalised mean over an ``s x s`` grid
+    of rays across the pixel (what a camera integrates: fine detail is averaged, pixels that
+    straddle an occlusion mix the two surfaces), while depth and mask stay those of the
+    centre ray.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh or path
+    K : (3, 3) array_like, optional
+        Default :data:`DILIGENT_K` (scaled to `resolution` if it differs from 512 x 612).
+    resolution : (H, W) or int
+    view : str or (3,) array_like
+        A name in :data:`VIEWS` or the direction the rays travel, in mesh coordinates.
+    distance : float
+        Distance of the object's centre from the camera, in the output depth units
+        (default 1,500 like DiLiGenT, in mm).
+    fill : float
+        Fraction of the shorter image side the object's bounding sphere spans, in (0, 1].
+    samples : int
+        Rays per pixel side for the normals (1: the centre ray only).
+    name : str, optional
+        Label; default ``"<file stem>@<view>"``.
+
+    Returns
+    -------
+    GroundTruth
+        With ``K`` set; depth is z-depth along the optical axis.
+
+    Raises
+    ------
+    ValueError
+        Bad arguments, or a mesh that covers no pixel.
+    ImportError
+        If trimesh is not installed (``pip install 'facetlift[render]'``).
+    """
+    from .camera import check_K
+
+    H, W = _size(resolution, "resolution")
+    if K is None:
+        K = DILIGENT_K.copy()
+        if (H, W) != (512, 612):
+            K[0] *= W / 612
+            K[1] *= H / 512
+    K = check_K(K)
+    if not (np.isfinite(distance) and distance > 0):
+        raise ValueError(f"`distance` must be a positive number; got {distance!r}")
+    if not (0 < fill <= 1):
+        raise ValueError(f"`fill` must be in (0, 1]; got {fill!r}")
+    if isinstance(samples, bool) or int(samples) != samples or samples < 1:
+        raise ValueError(f"`samples` must be an integer >= 1; got {samples!r}")
+    label = name
+    if label is None:
+        stem = Path(mesh).stem if isinstance(mesh, (str, Path)) else "mesh"
+        label = f"{stem}@{view if isinstance(view, str) else 'custom'}"
+    m = _load_mesh(mesh)
+    frame = _view_frame(view)
+    P = np.asarray(m.vertices, dtype=float) @ frame.T  # x right, y up, z toward the viewer
+    centre = (P.min(axis=0) + P.max(axis=0)) / 2
+    radius = float(np.linalg.norm(P - centre, axis=1).max())
+    f = float(min(K[0, 0], K[1, 1]))
+    half = np.arctan(fill * min(H, W) / (2 * f))
+    scale = distance * np.tan(half) / radius
+    # to the OpenCV camera frame: y down, z forward, centre on the optical axis at `distance`
+    C = (P - centre) * scale * np.array([1.0, -1.0, -1.0]) + np.array([0.0, 0.0, distance])
+    import trimesh
+
+    cam_mesh = trimesh.Trimesh(vertices=C, faces=np.asarray(m.faces), process=False)
+    rows, cols = np.mgrid[0:H, 0:W].astype(float)
+    dirs = np.column_stack([cols.ravel(), rows.ravel(), np.ones(H * W)]) @ np.linalg.inv(K).T
+    tri = _first_hits(cam_mesh, np.zeros_like(dirs), dirs)
+    hit = np.nonzero(tri >= 0)[0]
+    fn = np.asarray(cam_mesh.face_normals, dtype=float)[tri[hit]]
+    d = dirs[hit]
+    dn = np.einsum("ij,ij->i", fn, d)
+    fn[dn > 0] *= -1  # toward the camera
+    dn = -np.abs(dn)
+    ok = np.abs(dn) / np.linalg.norm(d, axis=1) > 1e-6
+    hit, fn, d, dn = hit[ok], fn[ok], d[ok], dn[ok]
+    v0 = C[cam_mesh.faces[tri[hit], 0]]
+    t = np.einsum("ij,ij->i", fn, v0) / dn  # ray point t * d (d has unit z): depth = t
+    depth = np.full(H * W, np.nan)
+    normals = np.full((H * W, 3), np.nan)
+    depth[hit] = t
+    normals[hit] = fn / np.linalg.norm(fn, axis=1, keepdims=True) * np.array([1.0, -1.0, -1.0])
+    depth = depth.reshape(H, W)
+    normals = normals.reshape(H, W, 3)
+    if samples > 1:
+        normals = _supersampled_normals(cam_mesh, K, H, W, int(samples))
+    from .problem import clean_mask
+
+    mask = np.isfinite(depth) & np.isfinite(normals).all(-1)
+    if mask.any():
+        mask = clean_mask(mask, min_size=2)
+    if not mask.any():
+        raise ValueError("`mesh` covers no pixel of the image in this view")
+    depth[~mask] = np.nan
+    normals[~mask] = np.nan
+    return GroundTruth(depth=depth, normals=normals, mask=mask, name=label, K=K)
+
+
+def _supersampled_normals(cam_mesh, K, H, W, s):
+    """Normalised mean camera-facing normal of an s x s ray grid per pixel (facetlift frame)."""
+    acc = np.zeros((H * W, 3))
+    offsets = (np.arange(s) + 0.5) / s - 0.5
+    rows, cols = np.mgrid[0:H, 0:W].astype(float)
+    Kinv = np.linalg.inv(K).T
+    faces_n = np.asarray(cam_mesh.face_normals, dtype=float)
+    for dr in offsets:
+        for dc in offsets:
+            dirs = np.column_stack([cols.ravel() + dc, rows.ravel() + dr, np.ones(H * W)]) @ Kinv
+            tri = _first_hits(cam_mesh, np.zeros_like(dirs), dirs)
+            hit = np.nonzero(tri >= 0)[0]
+            fn = faces_n[tri[hit]]
+            fn[np.einsum("ij,ij->i", fn, dirs[hit]) > 0] *= -1
+            acc[hit] += fn
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = acc / np.linalg.norm(acc, axis=1, keepdims=True)
+    n[~np.isfinite(n).all(1)] = np.nan
+    return (n * np.array([1.0, -1.0, -1.0])).reshape(H, W, 3)
+
+
+def quantize(normals, bits: int) -> np.ndarray:
+    """Normals as stored in an integer image and decoded again: ``round((n + 1) / 2 * max)``,
+    then ``v / max * 2 - 1`` (not renormalised; :func:`facetlift.prepare` does that).
+
+    `bits` is 8 or 16; NaN stays NaN.
+    """
+    if bits not in (8, 16):
+        raise ValueError(f"`bits` must be 8 or 16; got {bits!r}")
+    n = _check_normals(normals)
+    top = 2.0**bits - 1
+    with np.errstate(invalid="ignore"):
+        return np.round((np.clip(n, -1, 1) + 1) / 2 * top) / top * 2 - 1
+
+
+def jump_edges(gt: GroundTruth, *, tol: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """The edges between 4-neighbouring pixels that a depth jump crosses, from ground truth.
+
+    In the camera's unknown (height, or log-depth for a perspective rendering), the difference
+    across an edge is compared with the one the two normals predict (trapezoid rule on their
+    grid slopes); the edge is a jump when they differ by more than
+    ``0.5 |g_a - g_b| + tol`` pixel footprints -- a bound a single crease of a continuous
+    piecewise planar surface never exceeds.
+
+    Returns
+    -------
+    right : (H, W-1) bool
+        Jump between pixel (r, c) and (r, c+1) (both in the mask).
+    down : (H-1, W) bool
+        Jump between pixel (r, c) and (r+1, c).
+    """
+    if not (tol >= 0):
+        raise ValueError(f"`tol` must be >= 0; got {tol!r}")
+    cam = gt.camera
+    H, W = gt.shape
+    rr, cc = np.mgrid[0:H, 0:W]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gx, gy = cam.grid_slopes(rr, cc, gt.normals)
+        u = cam.from_depth(gt.depth)
+    s = cam.footprint()
+    m = gt.mask & np.isfinite(u) & np.isfinite(gx) & np.isfinite(gy)
+
+    def test(a, b, ga, gb):
+        with np.errstate(invalid="ignore"):
+            bad = np.abs(u[b] - u[a] - 0.5 * (ga + gb)) > 0.5 * np.abs(ga - gb) + tol * s
+        return bad & m[a] & m[b]
+
+    a, b = (slice(None), slice(0, W - 1)), (slice(None), slice(1, W))
+    right = test(a, b, gx[a], gx[b])
+    a, b = (slice(0, H - 1), slice(None)), (slice(1, H), slice(None))
+    down = test(a, b, -gy[a], -gy[b])  # one row down is -1 in y
+    return right, down
 
 
 def depth_jumps(gt: GroundTruth, *, tol: float = 0.5) -> np.ndarray:

@@ -35,6 +35,9 @@ class MethodResult:
     values: np.ndarray | None = None
     vertex_values: np.ndarray | None = None
     info: dict = field(default_factory=dict)
+    #: Arrays for the Surface beyond depth (e.g. ``corner_weights`` (m, 4) of the
+    #: discontinuity-preserving route), in the problem's facet order.
+    extras: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -89,6 +92,20 @@ register(
         summary="Discrete geometry processing: local shaping + global blending of quad facets",
         reference="Xie, Zhang, Wang & Chung, Surface-from-Gradients: An Approach Based on "
         "Discrete Geometry Processing, CVPR 2014",
+        masks=True,
+        missing=True,
+        perspective=True,
+        discontinuities=True,
+    )
+)
+
+register(
+    MethodInfo(
+        name="bini",
+        module="bini",
+        summary="Bilateral normal integration: one-sided differences with sigmoid weights "
+        "(facetlift's implementation, for comparison)",
+        reference="Cao, Santo, Shi, Okura & Matsushita, Bilateral Normal Integration, ECCV 2022",
         masks=True,
         missing=True,
         perspective=True,

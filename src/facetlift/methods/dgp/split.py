@@ -1,0 +1,341 @@
+"""The DGP fixed point on a facet mesh split along given edges (vertices duplicated per side).
+
+A depth jump between two neighbouring pixels means their facets must not share the two
+vertices on their common edge. Given the set of *cut* edges (between 4-neighbouring pixels),
+every vertex of the facet grid is split into groups: the facets around it that stay joined by
+uncut edges share one copy of the vertex, the others get their own. On that split mesh the
+smooth DGP fixed point (:mod:`facetlift.methods.dgp.fixed_point`) is solved exactly: every
+piece is the smooth DGP surface of its own facets, with nothing of the jump left in it, and
+without any cut the result is the smooth DGP solution itself.
+
+Offsets of separated pieces
+    A piece that the cuts separate completely from the rest of its mask component has a free
+    constant: normals say nothing about how far a surface lies behind the one occluding it.
+    :func:`piece_offsets` fixes those constants rigidly (without bending any piece): by least
+    squares over the cut edges, so that on average the surface continues across the cut as
+    the normals of the two facets predict (``rule="continue"``), or the vertex copies meet
+    (``rule="meet"``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ... import linalg
+from ...domain import Domain
+from ...operators.stencil import E_X, E_Y
+from .fixed_point import SLOPE_BLOCK, TWIST_BLOCK
+
+#: Slots of the four facets around a vertex: top-left, top-right, bottom-left, bottom-right.
+TL, TR, BL, BR = 0, 1, 2, 3
+#: Which slot a facet occupies at each of its corners 0..3 (conventional corner order).
+CORNER_SLOT = (BR, BL, TL, TR)
+
+
+@dataclass(frozen=True, eq=False)
+class SplitMesh:
+    """A domain's facet mesh with its vertices split along cut edges.
+
+    Attributes
+    ----------
+    domain : Domain
+    corners : (m, 4) int64
+        Split-vertex index of every facet corner (conventional order).
+    n_vertices : int
+    vertex : (n_vertices,) int64
+        The grid vertex (index into ``domain.vertex_index``) each split vertex is a copy of.
+    piece : (n_vertices,) int64
+        Connected piece of the split mesh of each split vertex (facets joined through shared
+        split vertices), 0-based.
+    n_pieces : int
+    facet_piece : (m,) int64
+    cut_pairs : (c, 2) int64
+        Pairs of split vertices that are copies of one grid vertex on the two sides of a cut
+        edge.
+    right, down : bool arrays (H, W-1) and (H-1, W)
+        The cut edges: between pixel (r, c) and (r, c+1), and between (r, c) and (r+1, c).
+    """
+
+    domain: Domain
+    corners: np.ndarray
+    n_vertices: int
+    vertex: np.ndarray
+    piece: np.ndarray
+    n_pieces: int
+    facet_piece: np.ndarray
+    cut_pairs: np.ndarray
+    right: np.ndarray
+    down: np.ndarray
+
+    @property
+    def n_cut_edges(self) -> int:
+        inside_r = self.domain.mask[:, :-1] & self.domain.mask[:, 1:]
+        inside_d = self.domain.mask[:-1] & self.domain.mask[1:]
+        return int((self.right & inside_r).sum() + (self.down & inside_d).sum())
+
+
+def split(domain: Domain, right=None, down=None) -> SplitMesh:
+    """Split the facet mesh of `domain` along the cut edges `right` (H, W-1) and `down`
+    (H-1, W) (see :class:`SplitMesh`); None means no cut in that direction."""
+    mask = domain.mask
+    H, W = mask.shape
+    right = np.zeros((H, W - 1), bool) if right is None else np.asarray(right, bool)
+    down = np.zeros((H - 1, W), bool) if down is None else np.asarray(down, bool)
+    if right.shape != (H, W - 1) or down.shape != (H - 1, W):
+        raise ValueError(
+            f"cut edges must have shapes {(H, W - 1)} and {(H - 1, W)}; got {right.shape} "
+            f"and {down.shape}"
+        )
+    mp = np.pad(mask, 1)
+    rp = np.pad(right, 1)  # rp[r + 1, c + 1] = right[r, c]
+    dp = np.pad(down, 1)
+    # per grid vertex (i, j), i in 0..H, j in 0..W: the four facets around it
+    present = np.stack([mp[:-1, :-1], mp[:-1, 1:], mp[1:, :-1], mp[1:, 1:]], axis=-1)
+    big = np.int64(8)
+    lab = np.where(present, np.arange(4), big)
+    joined = {  # slot pair -> edge between the two facets is in the mask and not cut
+        (TL, TR): ~rp[:-1, :],
+        (BL, BR): ~rp[1:, :],
+        (TL, BL): ~dp[:, :-1],
+        (TR, BR): ~dp[:, 1:],
+    }
+    links = []
+    for (a, b), uncut in joined.items():
+        links.append((a, b, present[..., a] & present[..., b] & uncut))
+    # facets touching only at this corner (a pinch of the mask) stay joined
+    links.append((TL, BR, present[..., TL] & present[..., BR] & ~present[..., TR]
+                  & ~present[..., BL]))
+    links.append((TR, BL, present[..., TR] & present[..., BL] & ~present[..., TL]
+                  & ~present[..., BR]))
+    for _ in range(3):  # a cycle of four slots: three passes reach every slot
+        for a, b, on in links:
+            low = np.minimum(lab[..., a], lab[..., b])
+            lab[..., a] = np.where(on, low, lab[..., a])
+            lab[..., b] = np.where(on, low, lab[..., b])
+    vi = domain.vertex_index
+    key = np.where(present, vi[..., None] * 4 + lab, -1)
+    used = np.unique(key[present])
+    n = used.size
+    sidx = np.full(key.shape, -1, dtype=np.int64)
+    sidx[present] = np.searchsorted(used, key[present])
+    # facet corners: facet (r, c) sits in slot CORNER_SLOT[k] of its corner vertex k
+    r, c = domain.pixels
+    offsets = ((0, 0), (0, 1), (1, 1), (1, 0))
+    corners = np.stack(
+        [sidx[r + dr, c + dc, CORNER_SLOT[k]] for k, (dr, dc) in enumerate(offsets)], axis=1
+    )
+    vertex = used // 4
+    # cut pairs: two present slots around a vertex, joined in the mask but on two sides of a cut
+    pairs = []
+    for (a, b), uncut in joined.items():
+        sel = present[..., a] & present[..., b] & ~uncut & (sidx[..., a] != sidx[..., b])
+        pairs.append(np.stack([sidx[..., a][sel], sidx[..., b][sel]], axis=1))
+    cut_pairs = np.unique(np.sort(np.concatenate(pairs), axis=1), axis=0) if pairs else \
+        np.zeros((0, 2), np.int64)
+    piece, n_pieces = _pieces(corners, n)
+    return SplitMesh(
+        domain=domain, corners=corners, n_vertices=int(n), vertex=vertex, piece=piece,
+        n_pieces=n_pieces, facet_piece=piece[corners[:, 0]], cut_pairs=cut_pairs,
+        right=right, down=down,
+    )
+
+
+def _pieces(corners: np.ndarray, n: int) -> tuple[np.ndarray, int]:
+    """Connected pieces of the split vertices, joined by the facets."""
+    from scipy.sparse.csgraph import connected_components
+
+    m = corners.shape[0]
+    rows = np.repeat(np.arange(m), 4)
+    inc = sp.csr_matrix((np.ones(4 * m), (rows, corners.ravel())), shape=(m, n))
+    count, labels = connected_components(inc.T @ inc, directed=False)
+    return labels.astype(np.int64), int(count)
+
+
+def assemble(mesh: SplitMesh, bx, by, target, *, weights=None, flat_weight=1e-9):
+    """``K`` (n, n) CSR and right-hand side of the DGP fixed point on the split mesh.
+
+    Per facet: ``w (slope + twist)`` with a target, ``w (flat_weight slope + twist)`` without;
+    right-hand side ``C_f^T w (bx e_x + by e_y)`` (see :mod:`facetlift.methods.dgp`).
+    """
+    m = mesh.corners.shape[0]
+    w = np.ones(m) if weights is None else np.asarray(weights, float)
+    blocks = np.where(
+        target[:, None, None], SLOPE_BLOCK + TWIST_BLOCK, flat_weight * SLOPE_BLOCK + TWIST_BLOCK
+    ) * w[:, None, None]
+    c = mesh.corners
+    rows = np.repeat(c, 4, axis=1).ravel()
+    cols = np.tile(c, (1, 4)).ravel()
+    K = sp.csr_matrix((blocks.reshape(m, 16).ravel(), (rows, cols)),
+                      shape=(mesh.n_vertices, mesh.n_vertices))
+    local = (w * bx)[:, None] * E_X + (w * by)[:, None] * E_Y
+    rhs = np.bincount(c.ravel(), local.ravel(), minlength=mesh.n_vertices)
+    return K, rhs
+
+
+def solve_pieces(mesh: SplitMesh, bx, by, target, *, weights=None, flat_weight=1e-9,
+                 backend="auto"):
+    """Split-vertex values (n,) of the DGP fixed point on `mesh`, every piece with an arbitrary
+    constant (its first split vertex pinned), and the solver's info."""
+    K, rhs = assemble(mesh, bx, by, target, weights=weights, flat_weight=flat_weight)
+    first = np.full(mesh.n_pieces, -1, dtype=np.int64)
+    order = np.arange(mesh.n_vertices)[::-1]
+    first[mesh.piece[order]] = order
+    pin = np.zeros(mesh.n_vertices)
+    pin[first] = 1.0
+    K = (K + sp.diags(pin)).tocsr()
+    z, info = linalg.solve(K, rhs, backend)
+    return z, info
+
+
+def piece_offsets(mesh: SplitMesh, z: np.ndarray, bx, by, target, rule: str = "continue",
+                  scale: float | None = None, robust_iter: int = 30):
+    """Constants (n_pieces,) that place the separated pieces of `mesh` relative to each other.
+
+    Pieces are moved rigidly to fit the cut edges: ``rule="continue"`` asks the difference
+    of the two facet centres across a cut edge to equal what their normals predict
+    (trapezoid rule on their grid slopes, as if the surface went on); ``"meet"`` asks the two
+    copies of each cut vertex to coincide. With `scale` (in the unknown's units) the fit is
+    robust (Cauchy weights, iteratively reweighted): the part of a boundary where the two
+    pieces really continue decides, the part with a true jump is ignored. Pieces in different
+    mask components, or joined to nothing, keep their constant (0).
+    """
+    k = max(mesh.n_pieces, 1)
+    if mesh.n_pieces <= 1:
+        return np.zeros(k)
+    if rule == "meet":
+        a, b = mesh.cut_pairs[:, 0], mesh.cut_pairs[:, 1]
+        pa, pb = mesh.piece[a], mesh.piece[b]
+        gap = z[b] - z[a]  # want (z_b + o_B) - (z_a + o_A) = 0
+    else:
+        pa, pb, gap = _continuation(mesh, z, bx, by, target)
+    keep = pa != pb
+    pa, pb, gap = pa[keep], pb[keep], gap[keep]
+    if pa.size == 0:
+        return np.zeros(k)
+    import scipy.sparse.linalg as spla
+    from scipy.sparse.csgraph import connected_components
+
+    rows = np.arange(pa.size)
+    D = sp.csr_matrix(
+        (np.concatenate([-np.ones(pa.size), np.ones(pa.size)]),
+         (np.concatenate([rows, rows]), np.concatenate([pa, pb]))), shape=(pa.size, k))
+    _, grp = connected_components(D.T @ D, directed=False)
+    first = np.full(grp.max() + 1, -1)
+    first[grp[::-1]] = np.arange(k)[::-1]
+    pin = sp.diags(np.bincount(first, minlength=k).astype(float))
+    w = np.ones(pa.size)
+    o = np.zeros(k)
+    for _ in range(robust_iter if scale else 1):
+        L = (D.T @ sp.diags(w) @ D + pin).tocsc()
+        o_new = np.asarray(spla.spsolve(L, D.T @ (-w * gap)))
+        done = np.abs(o_new - o).max() < 1e-3 * (scale or 1.0)
+        o = o_new
+        if scale is None or done:
+            break
+        r = gap + D @ o
+        w = 1.0 / (1.0 + (r / scale) ** 2)
+    return o
+
+
+def occlusion_offsets(mesh: SplitMesh, z, bx, by, target, quantile: float = 0.05):
+    """Constants (n_pieces,) placing separated pieces by the occlusion rule.
+
+    Across the boundary between two pieces one surface lies in front of the other: the jump
+    has one sign along it, and where the boundary ends inside the object (a fold) it fades to
+    zero. So each pair of neighbouring pieces is placed with the smallest jump zero: the
+    `quantile` of the boundary gaps (the continuation residual of :func:`_continuation`), on the
+    side of the jump's majority sign, is set to 0. Pairs are then reconciled by least squares
+    weighted by their boundary length (one constant per group of connected pieces stays free).
+    """
+    k = max(mesh.n_pieces, 1)
+    if mesh.n_pieces <= 1:
+        return np.zeros(k)
+    pa, pb, gap = _continuation(mesh, z, bx, by, target)
+    keep = pa != pb
+    pa, pb, gap = pa[keep], pb[keep], gap[keep]
+    if pa.size == 0:
+        return np.zeros(k)
+    lo, hi = np.minimum(pa, pb), np.maximum(pa, pb)
+    g = np.where(pa == lo, gap, -gap)  # gap from piece lo to piece hi
+    key = lo.astype(np.int64) * k + hi
+    order = np.argsort(key, kind="stable")
+    key, g = key[order], g[order]
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    ends = np.r_[starts[1:], key.size]
+    rows_lo, rows_hi, want, weight = [], [], [], []
+    for s0, s1 in zip(starts, ends, strict=True):
+        gg = g[s0:s1]
+        pos = (gg > 0).mean() >= 0.5
+        q = np.quantile(gg, quantile) if pos else np.quantile(gg, 1.0 - quantile)
+        rows_lo.append(key[s0] // k)
+        rows_hi.append(key[s0] % k)
+        want.append(q)  # (u_hi + o_hi) - (u_lo + o_lo) - t: make this q -> 0: o_hi - o_lo = -q
+        weight.append(s1 - s0)
+    lo = np.asarray(rows_lo)
+    hi = np.asarray(rows_hi)
+    want = -np.asarray(want)
+    w = np.asarray(weight, float)
+    import scipy.sparse.linalg as spla
+    from scipy.sparse.csgraph import connected_components
+
+    rows = np.arange(lo.size)
+    D = sp.csr_matrix((np.r_[-np.ones(lo.size), np.ones(lo.size)], (np.r_[rows, rows],
+                       np.r_[lo, hi])), shape=(lo.size, k))
+    L = D.T @ sp.diags(w) @ D
+    _, grp = connected_components(L, directed=False)
+    first = np.full(grp.max() + 1, -1)
+    first[grp[::-1]] = np.arange(k)[::-1]
+    L = (L + sp.diags(np.bincount(first, minlength=k).astype(float))).tocsc()
+    return np.asarray(spla.spsolve(L, D.T @ (w * want)))
+
+
+def _continuation(mesh: SplitMesh, z, bx, by, target):
+    """For every cut edge with a target on both sides: (piece a, piece b, gap) where gap is the
+    facet-centre difference across the edge minus the difference the normals predict."""
+    d = mesh.domain
+    H, W = d.shape
+    idx = np.full((H, W), -1, dtype=np.int64)
+    idx[d.pixels] = np.arange(d.n_facets)
+    centre = z[mesh.corners].mean(axis=1)
+    out = []
+    for cut, (da, db), along in ((mesh.right, (0, 1), "x"), (mesh.down, (1, 0), "y")):
+        r, c = np.nonzero(cut)
+        fa, fb = idx[r, c], idx[r + da, c + db]
+        ok = (fa >= 0) & (fb >= 0)
+        fa, fb = fa[ok], fb[ok]
+        ok = target[fa] & target[fb]
+        fa, fb = fa[ok], fb[ok]
+        pred = 0.5 * (bx[fa] + bx[fb]) if along == "x" else -0.5 * (by[fa] + by[fb])
+        out.append((mesh.facet_piece[fa], mesh.facet_piece[fb],
+                    centre[fb] - centre[fa] - pred))
+    pa, pb, gap = (np.concatenate(v) for v in zip(*out, strict=True))
+    return pa, pb, gap
+
+
+def solve_split(mesh: SplitMesh, bx, by, target, *, weights=None, flat_weight=1e-9,
+                rule="continue", scale=None, backend="auto", reference=None):
+    """Split-vertex values of the DGP fixed point on `mesh` with the pieces placed by
+    :func:`piece_offsets`, or (``reference`` (m,) facet values, e.g. the smooth solution) each
+    piece moved to the reference's mean over the piece; returns ``(z, facet values, info)``."""
+    z, sinfo = solve_pieces(mesh, bx, by, target, weights=weights, flat_weight=flat_weight,
+                            backend=backend)
+    if reference is not None:
+        zf = z[mesh.corners].mean(axis=1)
+        k = mesh.n_pieces
+        o = np.bincount(mesh.facet_piece, reference - zf, k) / np.bincount(mesh.facet_piece,
+                                                                            minlength=k)
+        if rule == "median":
+            from scipy import ndimage
+
+            o = np.atleast_1d(ndimage.median(reference - zf, mesh.facet_piece + 1,
+                                             np.arange(1, k + 1)))
+    elif rule == "occlusion":
+        o = occlusion_offsets(mesh, z, bx, by, target)
+    else:
+        o = piece_offsets(mesh, z, bx, by, target, rule, scale)
+    z = z + o[mesh.piece]
+    info = {"pieces": mesh.n_pieces, "cut_edges": mesh.n_cut_edges, "backend": sinfo.backend}
+    return z, z[mesh.corners].mean(axis=1), info
