@@ -7,9 +7,10 @@ import time
 
 import numpy as np
 
-from . import methods
+from . import frames, methods
 from .domain import Domain
 from .linalg import SolverError
+from .metrics import diagnose
 from .options import validate
 from .problem import Problem, prepare
 from .surface import Surface
@@ -29,6 +30,7 @@ def integrate(
     solver: str | None = None,
     backfacing: str = "missing",
     outlier_eps: float | None = None,
+    normal_frame: str | None = None,
     **options,
 ) -> Surface:
     """Reconstruct a surface from a normal map.
@@ -62,19 +64,27 @@ def integrate(
         Grazing threshold on the cosine between a normal and the direction toward the camera
         (the paper's outlier rule); below it a normal is a missing sample. Default: the
         camera's (:mod:`facetlift.camera`).
+    normal_frame : str, optional
+        The frame `normals` are given in: ``"opengl"`` (the default, facetlift's own),
+        ``"directx"`` (alias ``"y_down"``), ``"opencv"`` or an axis string such as
+        ``"x,-y,-z"`` (:mod:`facetlift.frames`).
     **options
         Method options (``facetlift methods`` lists them, with types and defaults).
 
     Returns
     -------
     Surface
+        ``info["mean_deviation"]`` is the mean angle (degrees) between the input normals and
+        the result's facets; ``info["integrability"]`` compares the field with flipped ones.
 
     Raises
     ------
     ValueError
         Bad input (the message names the argument), an unknown method or option, a bad
         option value, an option that does not apply to the chosen route, or input the method
-        cannot take (perspective, discontinuities).
+        cannot take (perspective, discontinuities), unsigned integers other than uint8/uint16,
+        or normals that look [0, 1]-encoded or face away from the viewer
+        (:func:`facetlift.frames.checked`).
     facetlift.SolverError
         The solver failed or produced non-finite depth inside the mask.
 
@@ -83,6 +93,8 @@ def integrate(
     UserWarning
         Once, when normals inside the mask cannot be used (non-finite, zero-length,
         back-facing or grazing): they become missing samples (``info["input"]`` counts them).
+        When `normals` is uint8/uint16 (decoded as ``v / max * 2 - 1``). When the field is far
+        more integrable with y or x flipped (:func:`facetlift.frames.flip_check`).
     """
     t0 = time.perf_counter()
     info = methods.get(method)
@@ -90,6 +102,7 @@ def integrate(
         options["discontinuities"] = _check_discontinuities(info, discontinuities)
     if solver is not None:
         options["solver"] = solver
+    normals = frames.checked(normals, mask, frame=normal_frame)
     problem = prepare(
         normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
         outlier_eps=outlier_eps,
@@ -134,8 +147,13 @@ def solve(problem: Problem, method: str = "dgp", *, t0: float | None = None, **o
     cropped, offset = crop(problem)
     result = info.run(cropped, **values)
     t2 = time.perf_counter()
-    surface = uncrop(make_surface(cropped, result, method), problem, offset)
+    surface = make_surface(cropped, result, method)
+    t3 = time.perf_counter()
+    checks = diagnose(cropped, surface)
+    t4 = time.perf_counter()
+    surface = uncrop(surface, problem, offset)
     out = dict(result.info)
+    out.update(checks)
     out["method"] = method
     out["projection"] = problem.camera.projection
     out["input"] = dict(problem.counts)
@@ -143,6 +161,7 @@ def solve(problem: Problem, method: str = "dgp", *, t0: float | None = None, **o
     seconds["prepare"] = t1 - t0
     seconds["total"] = time.perf_counter() - t0
     seconds["method"] = t2 - t1
+    seconds["diagnose"] = t4 - t3
     out["seconds"] = seconds
     surface.info = out
     log.info("%s: %s", method, {k: v for k, v in out.items() if k != "deviation"})

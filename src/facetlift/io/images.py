@@ -11,12 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import frames
+from ..frames import ENCODED_LENGTH_RANGE  # noqa: F401  (re-exported by facetlift.io)
 from ..problem import numeric_array
 from ._paths import _existing, _suffix
 from .atomic import _save_npy, _write_bytes, atomic_path
-
-#: Decoded integer pixels whose vector length lies outside this range are not normals (NaN).
-ENCODED_LENGTH_RANGE = (0.5, 1.5)
 
 NORMAL_READ_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy")
 NORMAL_WRITE_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy")
@@ -71,15 +70,25 @@ def _read_npy(path: Path, arg: str) -> np.ndarray:
     return arr
 
 
+def _check_png_normals(data: bytes, path: Path, arg: str) -> None:
+    """Refuse palette and sub-8-bit PNGs as normal maps, from the IHDR chunk (greyscale ones
+    fail the channel check)."""
+    if len(data) < 26 or data[12:16] != b"IHDR":
+        return  # not a PNG header; the decoder says what is wrong
+    depth, colour = data[24], data[25]
+    if colour == 3 or depth < 8:
+        what = "palette (indexed colour)" if colour == 3 else f"{depth}-bit"
+        raise ValueError(
+            f"`{arg}`: {path} is a {what} PNG ({depth} bit per sample); a normal map must be "
+            "8- or 16-bit RGB or RGBA (R, G, B = x, y, z)"
+        )
+
+
 def _decode_unit(pixels: np.ndarray, path: Path, arg: str) -> np.ndarray:
-    """uint8/uint16 -> [-1, 1] per channel; float passes through; other dtypes are refused."""
-    if pixels.dtype == np.uint8 or pixels.dtype == np.uint16:
-        maxval = float(np.iinfo(pixels.dtype).max)
-        n = pixels.astype(np.float64) / maxval * 2.0 - 1.0
-        length = np.linalg.norm(n, axis=-1)
-        lo, hi = ENCODED_LENGTH_RANGE
-        n[(length < lo) | (length > hi)] = np.nan
-        return n
+    """uint8/uint16 -> [-1, 1] per channel (:func:`facetlift.frames.decode`); float passes
+    through; other dtypes are refused."""
+    if pixels.dtype in frames.ENCODED_DTYPES:
+        return frames.decode(pixels)
     if pixels.dtype.kind == "f":
         return pixels.astype(np.float64)
     raise ValueError(
@@ -105,7 +114,9 @@ def _split_alpha(pixels: np.ndarray, path: Path, arg: str):
 # readers
 
 
-def read_normals(path, *, y_down: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+def read_normals(
+    path, *, frame: str | None = None, y_down: bool = False
+) -> tuple[np.ndarray, np.ndarray | None]:
     """Read a normal map.
 
     Parameters
@@ -130,12 +141,17 @@ def read_normals(path, *, y_down: bool = False) -> tuple[np.ndarray, np.ndarray 
     ------
     ValueError
         Missing, corrupt or truncated file, wrong number of channels, unsupported pixel type
-        or extension. The message names the path.
+        or extension, a bad `frame`. The message names the path.
     """
     arg = "path"
+    frame = frames.resolve(frame, y_down)
+    frames.parse(frame)
     p = _existing(path, arg)
     ext = _suffix(p, NORMAL_READ_FORMATS, "normal map", arg)
     if ext in (".png", ".tif", ".tiff"):
+        if ext == ".png":
+            with open(p, "rb") as fh:
+                _check_png_normals(fh.read(26), p, arg)
         pixels = _decode_image(p, ext, arg)
         rgb, alpha = _split_alpha(pixels, p, arg)
         n = _decode_unit(rgb, p, arg)
@@ -148,6 +164,12 @@ def read_normals(path, *, y_down: bool = False) -> tuple[np.ndarray, np.ndarray 
             raise ValueError(
                 f"`{arg}`: {p} must have channels R, G, B or X, Y, Z; got {sorted(ch)}"
             )
+        ints = [c for c in names if ch[c].dtype.kind in "iu"]
+        if ints:
+            raise ValueError(
+                f"`{arg}`: {p} has integer (UINT) channel(s) {ints}; normal maps in EXR must be "
+                "HALF or FLOAT, holding the components themselves"
+            )
         n = np.stack([ch[c] for c in names], axis=-1).astype(np.float64)
         alpha = ch["A"] > 0 if "A" in ch else None
     else:
@@ -155,9 +177,7 @@ def read_normals(path, *, y_down: bool = False) -> tuple[np.ndarray, np.ndarray 
         rgb, alpha_v = _split_alpha(arr, p, arg)
         n = rgb.astype(np.float64)
         alpha = None if alpha_v is None else alpha_v
-    if y_down:
-        n[..., 1] = -n[..., 1]
-    return n, alpha
+    return frames.to_facetlift(n, frame), alpha
 
 
 def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
@@ -287,7 +307,9 @@ def write_depth(path, depth) -> Path:
     return p
 
 
-def write_normals(path, normals, mask=None, *, bits: int = 16, y_down: bool = False) -> Path:
+def write_normals(
+    path, normals, mask=None, *, bits: int = 16, frame: str | None = None, y_down: bool = False
+) -> Path:
     """Write a normal map (the inverse of :func:`read_normals`).
 
     Parameters
@@ -302,16 +324,17 @@ def write_normals(path, normals, mask=None, *, bits: int = 16, y_down: bool = Fa
     bits : {8, 16, 32}
         PNG: 8 or 16 bit per channel; TIFF: 8, 16 (integer) or 32 (float32). Ignored for EXR
         (float32) and npy (float64).
+    frame : str, optional
+        Store the normals in this frame (:mod:`facetlift.frames`; default facetlift's).
     y_down : bool
-        Store y pointing down (negate the y component).
+        Alias of ``frame="directx"``: store y pointing down.
     """
     p = Path(path)
     ext = _suffix(p, NORMAL_WRITE_FORMATS, "normal map", "path")
     n = _image_array(normals, "normals", 3).astype(np.float64)
     if n.shape[-1] != 3:
         raise ValueError(f"`normals` must have shape (H, W, 3); got {n.shape}")
-    if y_down:
-        n[..., 1] = -n[..., 1]
+    n = frames.from_facetlift(n, frames.resolve(frame, y_down))
     m = None
     if mask is not None:
         m = np.asarray(mask) != 0
