@@ -20,6 +20,8 @@ __version__ = "0.1.0"
 #: public name -> (module, attribute)
 _LAZY = {
     "integrate": ("api", "integrate"),
+    "integrate_gradients": ("api", "integrate_gradients"),
+    "batch": ("batch", "batch"),
     "solve": ("api", "solve"),
     "Orthographic": ("camera", "Orthographic"),
     "Pinhole": ("camera", "Pinhole"),

@@ -12,7 +12,7 @@ from .domain import Domain
 from .linalg import SolverError
 from .metrics import diagnose
 from .options import validate
-from .problem import Problem, prepare
+from .problem import Problem, normals_from_gradients, prepare
 from .surface import Surface
 
 log = logging.getLogger("facetlift")
@@ -108,6 +108,45 @@ def integrate(
         outlier_eps=outlier_eps,
     )
     return solve(problem, method, t0=t0, **options)
+
+
+def integrate_gradients(
+    p, q, mask=None, *, gradient_frame: str = "xy", pixel_size: float = 1.0, **kwargs
+) -> Surface:
+    """Reconstruct a surface from a gradient field of its height.
+
+    Parameters
+    ----------
+    p, q : (H, W) array_like of float
+        The height's slopes, in height units per world unit; NaN marks a missing sample.
+        With ``gradient_frame="xy"`` (default) ``p = dz/dx`` (x right) and ``q = dz/dy``
+        (y up); with ``"rowcol"`` (alias ``"queau"``: Quéau's toolbox, MATLAB code)
+        ``p = dz/d(row)`` downward and ``q = dz/d(col)``.
+    mask : (H, W) array_like of bool, optional
+    gradient_frame : str
+    pixel_size : float
+    **kwargs
+        As for :func:`integrate` (method, known, solver, method options); an orthographic
+        view only.
+
+    Returns
+    -------
+    Surface
+        ``Surface.height`` is the height whose slopes are (p, q), up to a constant per
+        component.
+
+    Raises
+    ------
+    ValueError
+        As :func:`integrate`; also shapes that differ, inf values, a bad `gradient_frame`,
+        or `K` / `normal_frame` (they do not apply to a gradient field).
+    """
+    for key in ("K", "normal_frame"):
+        if kwargs.get(key) is not None:
+            raise ValueError(f"`{key}` does not apply to a gradient field (orthographic slopes)")
+    px, qy = frames.gradients_to_facetlift(p, q, gradient_frame)
+    normals = normals_from_gradients(px, qy)
+    return integrate(normals, mask, pixel_size=pixel_size, **kwargs)
 
 
 def _check_discontinuities(info: methods.MethodInfo, value) -> bool:

@@ -312,3 +312,38 @@ def flip_check(problem) -> dict:
             "inside-out; docs/conventions.md lists the frames of common sources"
         )
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# gradient fields
+
+#: Gradient frames -> what (p, q) hold. "xy" is facetlift's; "rowcol" is the layout of Quéau's
+#: normal_integration toolbox and of most MATLAB code.
+GRADIENT_FRAMES = {
+    "xy": "p = dz/dx (x right), q = dz/dy (y up)",
+    "rowcol": "p = dz/d(row) (down the rows), q = dz/d(col) (along the columns)",
+}
+_GRADIENT_ALIASES = {"queau": "rowcol", "matlab": "rowcol", "facetlift": "xy"}
+
+
+def gradient_frame(name) -> str:
+    """The canonical name of a gradient frame (:data:`GRADIENT_FRAMES`, or an alias: ``queau``,
+    ``matlab`` = ``rowcol``); ValueError otherwise."""
+    key = name.strip().lower() if isinstance(name, str) else name
+    key = _GRADIENT_ALIASES.get(key, key)
+    if key not in GRADIENT_FRAMES:
+        raise ValueError(
+            f"`gradient_frame` must be one of {sorted(GRADIENT_FRAMES)} (aliases "
+            f"{sorted(_GRADIENT_ALIASES)}); got {name!r}"
+        )
+    return key
+
+
+def gradients_to_facetlift(p, q, frame: str = "xy"):
+    """(p, q) in `frame` -> facetlift's ``(dz/dx, dz/dy)`` with x right and y up.
+
+    ``rowcol``: ``dz/dx = q`` and ``dz/dy = -p`` (a row step goes down, against y).
+    """
+    if gradient_frame(frame) == "xy":
+        return p, q
+    return q, -np.asarray(p, dtype=float)

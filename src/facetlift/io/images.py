@@ -259,8 +259,11 @@ def _write_exr(path: Path, channels: dict[str, np.ndarray]) -> None:
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     data = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in channels.items()}
     with atomic_path(path) as tmp:
-        with OpenEXR.File(header, data) as f:
-            f.write(str(tmp))
+        try:
+            with OpenEXR.File(header, data) as f:
+                f.write(str(tmp))
+        except RuntimeError as e:  # the bindings report every write failure this way
+            raise OSError(f"cannot write {path} as OpenEXR: {e}") from None
 
 
 def _write_tiff(path: Path, arr: np.ndarray) -> None:
