@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import logging
 import sys
+import time
 from pathlib import Path
 
 import click
@@ -317,6 +318,115 @@ def integrate(normals, gradients, progress, as_json, **flags):
             "iterations (outputs were written); raise --max-iter or --tol"
         )
     return EXIT_OK
+
+
+@cli.command(context_settings=CONTEXT)
+@click.argument("normals", type=click.Path(exists=True, path_type=Path))
+@click.option("-m", "--mask", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Mask image, as for 'integrate'.")
+@click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Perspective intrinsics, as for 'integrate'.")
+@click.option("--normal-frame", "normal_frame", metavar="FRAME",
+              help="Read the map in this frame (as for 'integrate').")
+@click.option("--mat-keys", metavar="KEYS", help="Variable names in a .mat input.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def info(normals, mask, K, normal_frame, mat_keys, as_json):
+    """Describe an input without integrating it: size, pixel type, detected frame and
+    encoding, mask and components, unusable normals, K, and an estimate of the memory and
+    time the default integration would need.
+
+    \b
+    Examples:
+      facetlift info normal_map.png --mask mask.png
+      facetlift info data/bear/ --json
+    """
+    from .describe import describe
+
+    rec = describe(normals, mask=mask, K=K, normal_frame=normal_frame,
+                   mat_keys=_split(mat_keys))
+    if as_json:
+        click.echo(json.dumps(jsonable(rec)))
+        return EXIT_OK
+    for line in _info_lines(rec):
+        click.echo(line)
+    return EXIT_OK
+
+
+def _info_lines(rec: dict) -> list[str]:
+    H, W = rec["shape"]
+    kind = ", ".join(f"{k} {rec[k]}" for k in ("format", "bit_depth", "channels", "dtype")
+                     if rec.get(k) is not None)
+    lines = [f"{rec['input']}: {H}x{W} pixels ({kind})"]
+    if rec.get("encoding"):
+        lines.append(f"  encoding: {rec['encoding']}")
+    frame = rec.get("frame", {})
+    lines.append(f"  frame: read as {frame.get('as_read')}; likely {frame.get('likely', '?')}")
+    lines.append(f"  camera: {rec['projection']}" + (f", K = {rec['K']}" if rec["K"] else ""))
+    if not rec["usable"]:
+        lines.append(f"  cannot be integrated as read: {rec['problem']}")
+        return lines
+    c = rec["counts"]
+    lines.append(f"  mask: {rec['mask_pixels']} pixels ({rec['mask_source']}), "
+                 f"{rec['components']} component(s)")
+    bad = ", ".join(f"{c[k]} {k}" for k in ("missing", "non-finite", "zero-length",
+                                            "back-facing", "grazing") if c.get(k))
+    first = rec.get("first_unusable")
+    lines.append(f"  unusable normals: {bad or 'none'}"
+                 + (f"; first at (row {first[0]}, col {first[1]})" if first else ""))
+    e = rec["estimate"]
+    lines.append(f"  default integration (estimate): about {e['bytes'] / 2**20:.0f} MiB and "
+                 f"{e['seconds']:.2g} s on 2 cores ({e['route']} route)")
+    return lines
+
+
+@cli.command("batch", context_settings=CONTEXT)
+@click.argument("inputs", nargs=-1)
+@click.option("--list", "list_file", type=click.Path(exists=True, dir_okay=False),
+              help="A text file with more inputs, one path or glob pattern per line.")
+@_job_options
+@click.option("-o", "--out", "outdir", required=True,
+              type=click.Path(file_okay=False, path_type=Path),
+              help="Output folder: one subfolder per item, and the log batch.jsonl.")
+@click.option("--workers", type=int, help="Local worker processes (default: the CPU count; "
+              "1 runs in this process without Dask).")
+@click.option("--scheduler", metavar="ADDRESS",
+              help="Run on a dask.distributed cluster, e.g. tcp://host:8786 (the workers must "
+              "see the input and output paths).")
+@click.option("--resume", is_flag=True, help="Skip items the log says finished.")
+@click.option("--json", "as_json", is_flag=True, help="Print the records as JSON lines.")
+def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_json, **flags):
+    """Integrate many normal maps: files, dataset folders, folders of them, glob patterns
+    (quote them) or a --list file, each into OUT/<name>/. Exit 0 only if every item
+    succeeded, else 1 with the count; the log OUT/batch.jsonl has one record per item.
+
+    \b
+    Examples:
+      facetlift batch 'maps/*.png' -o out --workers 2 --normal-frame opencv
+      facetlift batch data/ -o out --save npy --save report --resume
+      facetlift batch --list maps.txt -o /shared/out --scheduler tcp://head:8786
+    """
+    from .batch import LOG_NAME
+    from .batch import batch as run_batch
+
+    if not inputs and list_file is None:
+        raise click.UsageError("give inputs (files, folders, patterns) or --list FILE")
+    job = _make_job(**flags)
+    t0 = time.perf_counter()
+    records = run_batch(inputs, outdir, job=job, workers=workers, scheduler=scheduler,
+                        resume=resume, progress=_show_progress(progress), list_file=list_file)
+    failed = [r for r in records if r["status"] != "ok"]
+    for r in failed:
+        click.echo(f"facetlift: error: {r['name']}: {r['status']}: {r['error']}", err=True)
+    if as_json:
+        for r in records:
+            click.echo(json.dumps(jsonable(r)))
+    resumed = sum(bool(r.get("resumed")) for r in records)
+    line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
+            + (f" ({resumed} from an earlier run)" if resumed else "")
+            + (f", {len(failed)} failed" if failed else "")
+            + f" (log: {outdir / LOG_NAME}), {time.perf_counter() - t0:.1f} s")
+    click.echo(line, err=as_json)
+    return EXIT_INPUT if failed else EXIT_OK
 
 
 @cli.command(context_settings=CONTEXT)

@@ -97,6 +97,13 @@ def parse(frame) -> tuple[tuple[int, int, int], np.ndarray]:
     return channels, signs
 
 
+def axis_string(frame) -> str:
+    """The axis string of `frame`, e.g. ``"x,-y,-z"`` for ``"opencv"``."""
+    channels, signs = parse(frame)
+    return ",".join(("-" if s < 0 else "") + "xyz"[c]
+                    for c, s in zip(channels, signs, strict=True))
+
+
 def is_identity(frame) -> bool:
     """True when `frame` is the facetlift frame (nothing to convert)."""
     channels, signs = parse(frame)

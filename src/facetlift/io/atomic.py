@@ -119,6 +119,38 @@ def _same_file(a: Path, b: Path) -> bool:
         return a.resolve() == b.resolve()
 
 
+def prepare_folder(folder) -> bool:
+    """Create `folder` if needed, check that files can be written there (a probe file is
+    written and removed) and :func:`sweep` it; returns whether it was created.
+
+    Raises
+    ------
+    ValueError
+        `folder` exists and is not a directory.
+    OSError
+        It cannot be created or written.
+    """
+    f = Path(folder)
+    if f.exists() and not f.is_dir():
+        raise ValueError(f"`out`: {f} exists and is not a directory")
+    created = not f.exists()
+    try:
+        f.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise OSError(f"cannot create the output folder {f}: {e.strerror or e}") from None
+    probe = f / f"{STAGING_PREFIX}{_host()}-{os.getpid()}-{secrets.token_hex(4)}"
+    try:
+        probe.mkdir()
+        probe.rmdir()
+    except OSError as e:
+        if created:
+            with contextlib.suppress(OSError):
+                f.rmdir()
+        raise OSError(f"the output folder {f} is not writable: {e.strerror or e}") from None
+    sweep(f)
+    return created
+
+
 class OutputSet:
     """All outputs of one run, written into a staging folder inside `outdir` and moved into
     place only when every one of them succeeded.
@@ -142,8 +174,6 @@ class OutputSet:
 
     def __init__(self, outdir, names=(), inputs=()):
         self.outdir = Path(outdir)
-        if self.outdir.exists() and not self.outdir.is_dir():
-            raise ValueError(f"`out`: {self.outdir} exists and is not a directory")
         for name in names:
             target = self.outdir / name
             for src in inputs:
@@ -154,14 +184,7 @@ class OutputSet:
                         f"`out`: the output {target} is the input {src}; choose another "
                         "output folder (-o)"
                     )
-        self.created = not self.outdir.exists()
-        try:
-            self.outdir.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise OSError(
-                f"cannot create the output folder {self.outdir}: {e.strerror or e}"
-            ) from None
-        sweep(self.outdir)
+        self.created = prepare_folder(self.outdir)
         token = secrets.token_hex(4)
         self.staging = self.outdir / f"{STAGING_PREFIX}{_host()}-{os.getpid()}-{token}"
         try:
