@@ -23,6 +23,7 @@ import json
 import os
 import sys
 import time
+import types
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -343,3 +344,14 @@ class _Bar:
         if self.bar is not None:
             self.bar.close()
         return False
+
+
+class _CallableModule(types.ModuleType):
+    """``facetlift.batch`` is this module and the function at once: ``facetlift.batch(...)``
+    runs :func:`batch` whichever way the name was first imported."""
+
+    def __call__(self, *args, **kwargs):
+        return batch(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ._paths import _existing, _suffix
-from .images import _decode_image, _read_exr, _read_npy, read_mask
+from .images import read_mask, read_plane
 
 GRADIENT_FORMATS = (".npy", ".exr", ".tif", ".tiff")
 
@@ -27,25 +27,10 @@ def read_gradient(path, arg: str = "p") -> np.ndarray:
         Missing or unreadable file, several channels, not 2-D, or an integer pixel type (a
         gradient has no integer encoding).
     """
-    p = _existing(path, arg)
-    ext = _suffix(p, GRADIENT_FORMATS, "gradient", arg)
-    if ext == ".npy":
-        a = _read_npy(p, arg)
-    elif ext == ".exr":
-        ch = _read_exr(p, arg)
-        if len(ch) != 1:
-            raise ValueError(
-                f"`{arg}`: {p} must hold one channel (one gradient component); got "
-                f"{sorted(ch)}"
-            )
-        a = next(iter(ch.values()))
-    else:
-        a = _decode_image(p, ext, arg)
-    if a.ndim != 2:
-        raise ValueError(f"`{arg}`: {p} must hold an (H, W) array; got shape {a.shape}")
+    a = read_plane(path, GRADIENT_FORMATS, "gradient", arg)
     if a.dtype.kind != "f":
         raise ValueError(
-            f"`{arg}`: {p} has pixel type {a.dtype}; gradients must be floating point"
+            f"`{arg}`: {path} has pixel type {a.dtype}; gradients must be floating point"
         )
     return a.astype(np.float64)
 

@@ -227,26 +227,30 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
     return m
 
 
-def read_depth(path) -> np.ndarray:
-    """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF)."""
-    arg = "path"
+def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = ()) -> np.ndarray:
+    """One (H, W) array as stored: ``.npy``, OpenEXR (its channel named in `prefer`, or its
+    only channel) or TIFF. Shared by :func:`read_depth` and the gradient readers."""
     p = _existing(path, arg)
-    ext = _suffix(p, DEPTH_FORMATS, "depth", arg)
+    ext = _suffix(p, formats, what, arg)
     if ext == ".npy":
-        d = _read_npy(p, arg)
+        a = _read_npy(p, arg)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
-        if "Z" in ch:
-            d = ch["Z"]
-        elif len(ch) == 1:
-            d = next(iter(ch.values()))
-        else:
-            raise ValueError(f"`{arg}`: {p} has no depth channel Z; channels {sorted(ch)}")
+        name = next((c for c in prefer if c in ch), next(iter(ch)) if len(ch) == 1 else None)
+        if name is None:
+            wanted = f"channel {' or '.join(prefer)} or one channel" if prefer else "one channel"
+            raise ValueError(f"`{arg}`: {p} must hold {wanted}; got channels {sorted(ch)}")
+        a = ch[name]
     else:
-        d = _decode_image(p, ext, arg)
-    if d.ndim != 2:
-        raise ValueError(f"`{arg}`: {p} must hold an (H, W) depth map; got shape {d.shape}")
-    return d.astype(np.float64)
+        a = _decode_image(p, ext, arg)
+    if a.ndim != 2:
+        raise ValueError(f"`{arg}`: {p} must hold an (H, W) {what} map; got shape {a.shape}")
+    return a
+
+
+def read_depth(path) -> np.ndarray:
+    """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF)."""
+    return read_plane(path, DEPTH_FORMATS, "depth", "path", prefer=("Z",)).astype(np.float64)
 
 
 # --------------------------------------------------------------------------------------------
