@@ -262,16 +262,18 @@ def make_surface(problem: Problem, result: methods.MethodResult, method: str = "
         vval = np.bincount(d.corners.ravel(), np.repeat(fval, 4), d.n_vertices) / counts
     else:  # pragma: no cover - a method bug
         raise RuntimeError("method returned neither values nor vertex_values")
-    if not (np.isfinite(fval).all() and np.isfinite(vval).all()):
-        bad = int((~np.isfinite(fval)).sum())
+    cam = problem.camera
+    with np.errstate(over="ignore", invalid="ignore"):
+        shift = cam.gauge(fval, d.facet_component, d.n_components)
+        depth = cam.to_depth(fval - shift[d.facet_component])
+        vdepth = cam.to_depth(vval - shift[d.vertex_component])
+    if not (np.isfinite(depth).all() and np.isfinite(vdepth).all()):
+        # a non-finite value, or one whose depth overflows (huge slopes, exp of log-depth)
+        bad = int((~np.isfinite(depth)).sum())
         raise SolverError(
             f"method {method!r} produced non-finite depth at {bad} of {fval.size} pixels inside "
             "the mask"
         )
-    cam = problem.camera
-    shift = cam.gauge(fval, d.facet_component, d.n_components)
-    depth = cam.to_depth(fval - shift[d.facet_component])
-    vdepth = cam.to_depth(vval - shift[d.vertex_component])
     return Surface(
         depth=d.to_image(depth), vertex_depth=d.to_vertex_image(vdepth), mask=d.mask.copy(),
         camera=cam,
