@@ -415,3 +415,18 @@ def test_sigterm_during_the_write_leaves_nothing(dome_png, tmp_path):
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 143 and "terminated (SIGTERM)" in err
     assert not out.exists()  # created by this run, removed with its staging folder
+
+
+def test_a_linalg_error_inside_a_method_is_a_solver_error(monkeypatch):
+    _break_dgp(monkeypatch, np.linalg.LinAlgError("Singular matrix"))
+    with pytest.raises(facetlift.SolverError, match="linear algebra failed .Singular matrix"):
+        facetlift.integrate(dome())
+
+
+def test_discontinuities_show_a_progress_bar(tmp_path, capsys):
+    r, c = np.indices((16, 20))
+    n = facetlift.normals_from_gradients(np.where(c < 10, 0.6, -0.6), 0.1 + 0 * r)
+    path = io.write_normals(tmp_path / "roof.npy", n)
+    code, _, err = run(capsys, "integrate", path, "--discontinuities", "--progress",
+                       "-o", tmp_path / "o")
+    assert code == 0 and "integrating" in err

@@ -184,7 +184,10 @@ def solve(problem: Problem, method: str = "dgp", *, t0: float | None = None, **o
         )
     t1 = time.perf_counter()
     cropped, offset = crop(problem)
-    result = info.run(cropped, **values)
+    try:
+        result = info.run(cropped, **values)
+    except np.linalg.LinAlgError as e:  # a ValueError subclass, but a solver failure
+        raise SolverError(f"method {method!r}: linear algebra failed ({e})") from e
     t2 = time.perf_counter()
     surface = make_surface(cropped, result, method)
     t3 = time.perf_counter()
