@@ -213,3 +213,17 @@ def test_sweep_removes_what_killed_runs_left_and_keeps_live_ones(tmp_path):
     removed = atomic.sweep(tmp_path)
     assert sorted(removed) == sorted([stale_dir, stale_tmp])
     assert live_tmp.exists() and other_host.exists() and user.exists()
+
+
+def test_integer_npy_maps_decode_like_png_or_are_refused(tmp_path):
+    n = np.zeros((4, 5, 3))
+    n[..., 2] = 1.0
+    png_path = io.write_normals(tmp_path / "n.png", n, bits=8)
+    import imagecodecs
+
+    np.save(tmp_path / "u8.npy", imagecodecs.png_decode(png_path.read_bytes()))
+    np.testing.assert_array_equal(io.read_normals(tmp_path / "u8.npy")[0],
+                                  io.read_normals(png_path)[0])
+    np.save(tmp_path / "i64.npy", np.ones((4, 5, 3), np.int64))
+    with pytest.raises(ValueError, match="pixel type int64; normal maps must be uint8, uint16"):
+        io.read_normals(tmp_path / "i64.npy")

@@ -115,16 +115,23 @@ def _is_mask_file(p: Path) -> bool:
     return p.is_file() and (p.stem == "mask" or p.stem.endswith("_mask"))
 
 
-def run_item(job: Job) -> dict:
+def run_item(job: Job, threads: int | None = None) -> dict:
     """Run one job and return its record; never raises (the record's ``status`` says why it
-    failed). Runs in the worker processes."""
+    failed). Runs in the worker processes, where `threads` limits the BLAS threads (one worker
+    process per core: more threads would only compete)."""
     from .errors import MemoryLimitError, SolverError
     from .jobs import run
 
     t0 = time.perf_counter()
     rec = {"status": "ok", "error": None, "exit": 0}
     try:
-        result = run(job)
+        if threads is None:
+            result = run(job)
+        else:
+            from threadpoolctl import threadpool_limits
+
+            with threadpool_limits(threads):
+                result = run(job)
         rec.update(result)
         if not result["converged"] and result["info"].get("solver") != "discontinuous":
             rec.update(status="not_converged", exit=2, error="did not converge")
@@ -204,6 +211,9 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         No items, a bad template or `workers`; per-item failures are records, not raised.
     ImportError
         Dask is needed (workers > 1 or a scheduler) and not installed.
+    RuntimeError
+        The local worker processes died (killed, or started from a script without a
+        ``__main__`` guard); the log keeps what finished, so ``resume=True`` goes on.
     """
     from .io.atomic import prepare_folder
 
@@ -281,7 +291,7 @@ def _on_processes(jobs, n_workers: int, done) -> None:
     keys = {}
     tasks = []
     for it, j in jobs:
-        task = dask.delayed(run_item, pure=False)(j, dask_key_name=f"item-{len(tasks)}")
+        task = dask.delayed(run_item, pure=False)(j, 1, dask_key_name=f"item-{len(tasks)}")
         keys[task.key] = it
         tasks.append(task)
 
@@ -290,8 +300,18 @@ def _on_processes(jobs, n_workers: int, done) -> None:
             if key in keys:
                 done(keys[key], result)
 
-    with _Done():
-        dask.compute(*tasks, scheduler="processes", num_workers=n_workers)
+    from concurrent.futures.process import BrokenProcessPool
+
+    try:
+        with _Done():
+            dask.compute(*tasks, scheduler="processes", num_workers=n_workers)
+    except BrokenProcessPool as e:
+        raise RuntimeError(
+            "the batch's worker processes died before finishing (killed, out of memory, or "
+            "started from a script without `if __name__ == '__main__':`, which worker "
+            "processes need); the log has the items that finished: rerun with resume=True, "
+            "or with workers=1"
+        ) from e
 
 
 def _on_cluster(jobs, scheduler, done) -> None:
@@ -304,7 +324,7 @@ def _on_cluster(jobs, scheduler, done) -> None:
     try:
         futures = {}
         for it, j in jobs:
-            futures[client.submit(run_item, j, pure=False)] = it
+            futures[client.submit(run_item, j, 1, pure=False)] = it
         for fut in as_completed(list(futures)):
             it = futures[fut]
             try:

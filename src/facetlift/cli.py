@@ -282,7 +282,6 @@ def integrate(normals, gradients, progress, as_json, **flags):
     from . import jobs
 
     job = _make_job(normals=normals, gradients=gradients, **flags)
-    job.source  # one input, not both  # noqa: B018
     bar, update = (None, None)
     if _show_progress(progress) and "progress" in _methods.get(job.method).options():
         bar, update = _progress_bar(_progress_total(job))

@@ -123,11 +123,15 @@ def read_normals(
     ----------
     path : str or Path
         ``.png`` (8 or 16 bit RGB/RGBA), ``.tif``/``.tiff`` (uint8, uint16 or float, 3 or 4
-        channels), ``.exr`` (channels R, G, B or X, Y, Z, optionally A) or ``.npy`` ((H, W, 3)
-        or (H, W, 4)).
+        channels), ``.exr`` (HALF or FLOAT channels R, G, B or X, Y, Z, optionally A) or
+        ``.npy`` ((H, W, 3) or (H, W, 4); float, or uint8/uint16 decoded like PNG pixels).
+        Palette and 1/2/4-bit PNGs, UINT EXR channels and other integer types are refused.
+    frame : str, optional
+        The frame the file stores: ``"opengl"`` (default: x right, y up, z toward the
+        viewer), ``"directx"``, ``"opencv"`` or an axis string such as ``"x,-y,-z"``
+        (:mod:`facetlift.frames`); the normals are converted to facetlift's.
     y_down : bool
-        The file stores y pointing *down* (DirectX / OpenCV style); the y component is negated
-        to give the facetlift convention (y up).
+        Alias of ``frame="directx"``: the file stores y pointing *down*.
 
     Returns
     -------
@@ -174,9 +178,8 @@ def read_normals(
         alpha = ch["A"] > 0 if "A" in ch else None
     else:
         arr = _read_npy(p, arg)
-        rgb, alpha_v = _split_alpha(arr, p, arg)
-        n = rgb.astype(np.float64)
-        alpha = None if alpha_v is None else alpha_v
+        rgb, alpha = _split_alpha(arr, p, arg)
+        n = _decode_unit(rgb, p, arg)  # uint8/uint16 arrays decode like PNG pixels
     return frames.to_facetlift(n, frame), alpha
 
 
