@@ -266,12 +266,16 @@ def test_report_adds_a_discontinuity_panel_when_the_surface_has_one(tmp_path, mo
     assert (tmp_path / "b.png").stat().st_size != (tmp_path / "a.png").stat().st_size
 
 
-def test_report_without_matplotlib_names_the_extra(tmp_path, monkeypatch):
+def test_report_without_matplotlib_names_the_extra(tmp_path, monkeypatch, capsys, dome_png):
     from facetlift.io import report
 
     monkeypatch.setitem(sys.modules, "matplotlib.figure", None)
     with pytest.raises(ImportError, match=r"facetlift\[plot\]"):
         report.write_report(tmp_path / "r.png", facetlift.integrate(dome()), dome())
+    code, _, err = run(capsys, "integrate", dome_png, "-s", "npy", "-s", "report", "-o",
+                       tmp_path / "o")
+    assert code == 1 and "pip install 'facetlift[plot]'" in one_line(err)
+    assert not (tmp_path / "o").exists()  # the npy written before the report is not kept
 
 
 # ------------------------------------------------------------------------------ error boundary

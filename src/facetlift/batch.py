@@ -11,7 +11,8 @@ and whose outputs are all there.
 Dask comes with the ``batch`` extra (``pip install 'facetlift[batch]'``) and is imported only
 when more than one worker or a cluster is asked for.
 
-Statuses: ``ok``; ``error`` (bad input, ValueError/OSError, exit 1); ``memory``
+Statuses: ``ok``; ``error`` (bad input or a missing extra: ValueError, OSError, ImportError;
+exit 1); ``memory``
 (MemoryLimitError, exit 1); ``solver`` (SolverError, exit 2); ``not_converged`` (outputs
 written, exit 2); ``bug`` (any other exception, exit 3).
 """
@@ -137,7 +138,7 @@ def run_item(job: Job, threads: int | None = None) -> dict:
             rec.update(status="not_converged", exit=2, error="did not converge")
     except MemoryLimitError as e:
         rec.update(status="memory", error=str(e), exit=1)
-    except (ValueError, OSError) as e:
+    except (ValueError, OSError, ImportError) as e:
         rec.update(status="error", error=str(e), exit=1)
     except SolverError as e:
         rec.update(status="solver", error=str(e), exit=2)

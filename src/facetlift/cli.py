@@ -524,8 +524,8 @@ def _one_line(e: BaseException) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line with `argv` (default ``sys.argv[1:]``); returns the exit code.
 
-    The one error boundary: a ``ValueError`` or ``OSError`` (bad input, unwritable output) is
-    one line and exit 1, a :class:`~facetlift.SolverError` exit 2, a
+    The one error boundary: a ``ValueError`` or ``OSError`` (bad input, unwritable output) or
+    an ``ImportError`` (a missing extra, named in the message) is one line and exit 1, a :class:`~facetlift.SolverError` exit 2, a
     :class:`~facetlift.MemoryLimitError` (or MemoryError) exit 1; anything else is a bug: one
     line asking for a report (the traceback with ``--debug``), exit 3.
     """
@@ -557,6 +557,9 @@ def main(argv: list[str] | None = None) -> int:
         _error(f"out of memory ({_one_line(e)}); try a crop, a smaller map or another method")
         return EXIT_INPUT
     except (ValueError, OSError) as e:
+        _error(_one_line(e))
+        return EXIT_INPUT
+    except ImportError as e:  # an optional extra that is not installed: the message names it
         _error(_one_line(e))
         return EXIT_INPUT
     except SolverError as e:

@@ -190,15 +190,21 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
         )
         n = decode(n)
     n = to_facetlift(n, frame)
-    inside = _inside(n, mask)
-    if inside is not None:
-        _check_encoding(inside, name)
-        _check_facing(inside, name)
+    sample = _inside(n, mask, sample=CHECK_SAMPLE)
+    if sample is not None:
+        _check_facing(sample, name)
+        if len(sample) and sample[:, :2].min() >= 0:  # only then can the whole map be encoded
+            _check_encoding(_inside(n, mask), name)
     return n
 
 
-def _inside(n: np.ndarray, mask) -> np.ndarray | None:
-    """(k, 3) finite normals inside `mask` (None when `mask` cannot be read: prepare refuses)."""
+#: The facing check looks at about this many mask pixels, evenly spaced.
+CHECK_SAMPLE = 2**16
+
+
+def _inside(n: np.ndarray, mask, sample: int | None = None) -> np.ndarray | None:
+    """(k, 3) finite normals inside `mask` (None when `mask` cannot be read: prepare refuses),
+    every pixel or about `sample` of them, evenly spaced."""
     if mask is None:
         m = None
     else:
@@ -210,7 +216,14 @@ def _inside(n: np.ndarray, mask) -> np.ndarray | None:
             return None
         with np.errstate(invalid="ignore"):
             m = np.where(np.isfinite(m), m, 0) != 0 if m.dtype.kind == "f" else m != 0
-    v = n.reshape(-1, 3) if m is None else n[m]
+    flat = n.reshape(-1, 3)
+    if sample is not None and m is None:
+        v = flat[:: max(1, flat.shape[0] // sample)]
+    elif sample is not None:
+        idx = np.flatnonzero(m)
+        v = flat[idx[:: max(1, idx.size // sample)]]
+    else:
+        v = flat if m is None else n[m]
     with np.errstate(invalid="ignore"):
         return v[np.isfinite(v).all(axis=1)]
 
