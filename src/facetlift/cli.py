@@ -2,8 +2,9 @@
 :mod:`facetlift.io`.
 
 ``main(argv)`` returns an exit code: 0 success, 1 bad input (unreadable file, bad option,
-input the method cannot take), 2 solver failure (:class:`facetlift.SolverError` or no
-convergence), 130 interrupted. Errors are one line on stderr, without a traceback.
+input the method cannot take, unwritable output, memory limit), 2 solver failure
+(:class:`facetlift.SolverError` or no convergence), 3 internal error (a bug), 130
+interrupted, 143 terminated. Errors are one line on stderr, without a traceback.
 See ``docs/cli.md``.
 """
 
@@ -525,9 +526,10 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command line with `argv` (default ``sys.argv[1:]``); returns the exit code.
 
     The one error boundary: a ``ValueError`` or ``OSError`` (bad input, unwritable output) or
-    an ``ImportError`` (a missing extra, named in the message) is one line and exit 1, a :class:`~facetlift.SolverError` exit 2, a
-    :class:`~facetlift.MemoryLimitError` (or MemoryError) exit 1; anything else is a bug: one
-    line asking for a report (the traceback with ``--debug``), exit 3.
+    an ``ImportError`` (a missing extra, named in the message) is one line and exit 1; a
+    :class:`~facetlift.SolverError` exit 2; a :class:`~facetlift.MemoryLimitError` (or
+    MemoryError) exit 1; anything else is a bug: one line asking for a report (the traceback
+    with ``--debug``), exit 3.
     """
     from .errors import MemoryLimitError
     from .io.atomic import Terminated
