@@ -127,6 +127,9 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
     assert "facetlift: error: z: error:" in err
     assert callable(fb) and fb.items is fb.__dict__["items"]
     assert [json.loads(line)["name"] for line in out.splitlines()] == ["m0", "m1", "z"]
+    code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "1",
+                 "-s", "npy", "--progress"])
+    assert code == 1 and "batch:" in capsys.readouterr().err  # the bar, on stderr
     code = main(["batch", "-o", str(tmp_path / "o")])
     assert code == 1 and "give inputs" in capsys.readouterr().err
 

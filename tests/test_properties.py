@@ -25,8 +25,10 @@ from facetlift.errors import MemoryLimitError, SolverError
 from facetlift.methods import REGISTRY
 
 DOCUMENTED = (ValueError, SolverError, MemoryLimitError)
-#: Seconds one call may take on a 40 x 40 map (the slowest method there takes ~0.5 s).
-TIME_BOUND = 20.0
+#: Seconds one call may take on a 40 x 40 map: "no hang". Most take < 0.1 s; the slowest seen,
+#: m_estimator with backend="amg" on a fragmented mask, 21 s on the loaded 2-core machine (50
+#: reweightings, each rebuilding the AMG hierarchy: docs/reliability.md).
+TIME_BOUND = 60.0
 
 QUICK = settings(max_examples=40, deadline=None, derandomize=True, database=None,
                  suppress_health_check=list(HealthCheck))

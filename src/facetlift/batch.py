@@ -172,7 +172,7 @@ def _complete(rec: dict) -> bool:
 
 
 def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
-          scheduler=None, resume: bool = False, progress: bool | None = None,
+          scheduler=None, resume: bool = False, progress: bool = False,
           list_file=None, log=None, **job_options) -> list[dict]:
     """Integrate many normal maps, each into ``out/<name>/``.
 
@@ -193,8 +193,9 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         instead. The workers must see the input and output paths.
     resume : bool
         Skip items finished in an earlier run (their log record ``ok``, outputs present).
-    progress : bool, optional
-        A progress bar on stderr (default: when stderr is a terminal).
+    progress : bool
+        A progress bar on stderr (library code is quiet by default; the command line shows
+        it when stderr is a terminal).
     list_file : str or Path, optional
         More inputs, one per line.
     log : str or Path, optional
@@ -237,8 +238,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             j = replace(j, mask=it.mask)
         jobs.append((it, j))
     n_workers = _workers(workers, len(jobs))
-    show = sys.stderr.isatty() if progress is None else bool(progress)
-    with open(log_path, "a", encoding="utf-8") as fh, _Bar(len(found), len(results), show) as bar:
+    with open(log_path, "a", encoding="utf-8") as fh, \
+            _Bar(len(found), len(results), bool(progress)) as bar:
 
         def done(it: Item, rec: dict) -> None:
             rec = dict(rec, item=it.path, name=it.name)
