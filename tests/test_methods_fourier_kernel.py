@@ -253,9 +253,9 @@ def test_deterministic():
 @pytest.mark.parametrize(
     "options, match",
     [
-        ({"sigma": 0}, "`sigma` must be a number > 0; got 0"),
-        ({"sigma": float("nan")}, "`sigma` must be a number > 0; got nan"),
-        ({"sigma": "wide"}, "`sigma` must be a number > 0; got 'wide'"),
+        ({"sigma": 0}, "`sigma` must be a number >= 0.001; got 0"),
+        ({"sigma": float("nan")}, "`sigma` must be a number >= 0.001; got nan"),
+        ({"sigma": "wide"}, "`sigma` must be a number >= 0.001; got 'wide'"),
         ({"reg": -1e-3}, "`reg` must be a number >= 0; got -0.001"),
         ({"tile": 3}, "`tile` must be an integer >= 4"),
         ({"tile": 8.5}, "`tile` must be an integer >= 4"),

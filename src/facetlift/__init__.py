@@ -17,9 +17,11 @@ import importlib
 
 __version__ = "0.1.0"
 
-#: public name -> (module, attribute)
+#: public name -> (module, attribute); attribute None: the module itself
 _LAZY = {
     "integrate": ("api", "integrate"),
+    "integrate_gradients": ("api", "integrate_gradients"),
+    "batch": ("batch", None),  # the module, callable as facetlift.batch(...)
     "solve": ("api", "solve"),
     "Orthographic": ("camera", "Orthographic"),
     "Pinhole": ("camera", "Pinhole"),
@@ -40,7 +42,8 @@ __all__ = sorted(_LAZY)
 def __getattr__(name: str):
     if name in _LAZY:
         module, attr = _LAZY[name]
-        value = getattr(importlib.import_module(f".{module}", __name__), attr)
+        value = importlib.import_module(f".{module}", __name__)
+        value = value if attr is None else getattr(value, attr)
         globals()[name] = value  # later look-ups skip this function
         return value
     raise AttributeError(f"module 'facetlift' has no attribute {name!r}")

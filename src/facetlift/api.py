@@ -7,11 +7,12 @@ import time
 
 import numpy as np
 
-from . import methods
+from . import frames, methods
 from .domain import Domain
 from .linalg import SolverError
+from .metrics import diagnose
 from .options import validate
-from .problem import Problem, prepare
+from .problem import Problem, normals_from_gradients, prepare
 from .surface import Surface
 
 log = logging.getLogger("facetlift")
@@ -29,6 +30,7 @@ def integrate(
     solver: str | None = None,
     backfacing: str = "missing",
     outlier_eps: float | None = None,
+    normal_frame: str | None = None,
     **options,
 ) -> Surface:
     """Reconstruct a surface from a normal map.
@@ -62,19 +64,27 @@ def integrate(
         Grazing threshold on the cosine between a normal and the direction toward the camera
         (the paper's outlier rule); below it a normal is a missing sample. Default: the
         camera's (:mod:`facetlift.camera`).
+    normal_frame : str, optional
+        The frame `normals` are given in: ``"opengl"`` (the default, facetlift's own),
+        ``"directx"`` (alias ``"y_down"``), ``"opencv"`` or an axis string such as
+        ``"x,-y,-z"`` (:mod:`facetlift.frames`).
     **options
         Method options (``facetlift methods`` lists them, with types and defaults).
 
     Returns
     -------
     Surface
+        ``info["mean_deviation"]`` is the mean angle (degrees) between the input normals and
+        the result's facets; ``info["integrability"]`` compares the field with flipped ones.
 
     Raises
     ------
     ValueError
         Bad input (the message names the argument), an unknown method or option, a bad
         option value, an option that does not apply to the chosen route, or input the method
-        cannot take (perspective, discontinuities).
+        cannot take (perspective, discontinuities), unsigned integers other than uint8/uint16,
+        or normals that look [0, 1]-encoded or face away from the viewer
+        (:func:`facetlift.frames.checked`).
     facetlift.SolverError
         The solver failed or produced non-finite depth inside the mask.
 
@@ -83,6 +93,8 @@ def integrate(
     UserWarning
         Once, when normals inside the mask cannot be used (non-finite, zero-length,
         back-facing or grazing): they become missing samples (``info["input"]`` counts them).
+        When `normals` is uint8/uint16 (decoded as ``v / max * 2 - 1``). When the field is far
+        more integrable with y or x flipped (:func:`facetlift.frames.flip_check`).
     """
     t0 = time.perf_counter()
     info = methods.get(method)
@@ -90,11 +102,51 @@ def integrate(
         options["discontinuities"] = _check_discontinuities(info, discontinuities)
     if solver is not None:
         options["solver"] = solver
+    normals = frames.checked(normals, mask, frame=normal_frame)
     problem = prepare(
         normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
         outlier_eps=outlier_eps,
     )
     return solve(problem, method, t0=t0, **options)
+
+
+def integrate_gradients(
+    p, q, mask=None, *, gradient_frame: str = "xy", pixel_size: float = 1.0, **kwargs
+) -> Surface:
+    """Reconstruct a surface from a gradient field of its height.
+
+    Parameters
+    ----------
+    p, q : (H, W) array_like of float
+        The height's slopes, in height units per world unit; NaN marks a missing sample.
+        With ``gradient_frame="xy"`` (default) ``p = dz/dx`` (x right) and ``q = dz/dy``
+        (y up); with ``"rowcol"`` (alias ``"queau"``: Quéau's toolbox, MATLAB code)
+        ``p = dz/d(row)`` downward and ``q = dz/d(col)``.
+    mask : (H, W) array_like of bool, optional
+    gradient_frame : str
+    pixel_size : float
+    **kwargs
+        As for :func:`integrate` (method, known, solver, method options); an orthographic
+        view only.
+
+    Returns
+    -------
+    Surface
+        ``Surface.height`` is the height whose slopes are (p, q), up to a constant per
+        component.
+
+    Raises
+    ------
+    ValueError
+        As :func:`integrate`; also shapes that differ, inf values, a bad `gradient_frame`,
+        or `K` / `normal_frame` (they do not apply to a gradient field).
+    """
+    for key in ("K", "normal_frame"):
+        if kwargs.get(key) is not None:
+            raise ValueError(f"`{key}` does not apply to a gradient field (orthographic slopes)")
+    px, qy = frames.gradients_to_facetlift(p, q, gradient_frame)
+    normals = normals_from_gradients(px, qy)
+    return integrate(normals, mask, pixel_size=pixel_size, **kwargs)
 
 
 def _check_discontinuities(info: methods.MethodInfo, value) -> bool:
@@ -132,10 +184,18 @@ def solve(problem: Problem, method: str = "dgp", *, t0: float | None = None, **o
         )
     t1 = time.perf_counter()
     cropped, offset = crop(problem)
-    result = info.run(cropped, **values)
+    try:
+        result = info.run(cropped, **values)
+    except np.linalg.LinAlgError as e:  # a ValueError subclass, but a solver failure
+        raise SolverError(f"method {method!r}: linear algebra failed ({e})") from e
     t2 = time.perf_counter()
-    surface = uncrop(make_surface(cropped, result, method), problem, offset)
+    surface = make_surface(cropped, result, method)
+    t3 = time.perf_counter()
+    checks = diagnose(cropped, surface)
+    t4 = time.perf_counter()
+    surface = uncrop(surface, problem, offset)
     out = dict(result.info)
+    out.update(checks)
     out["method"] = method
     out["projection"] = problem.camera.projection
     out["input"] = dict(problem.counts)
@@ -143,6 +203,7 @@ def solve(problem: Problem, method: str = "dgp", *, t0: float | None = None, **o
     seconds["prepare"] = t1 - t0
     seconds["total"] = time.perf_counter() - t0
     seconds["method"] = t2 - t1
+    seconds["diagnose"] = t4 - t3
     out["seconds"] = seconds
     surface.info = out
     log.info("%s: %s", method, {k: v for k, v in out.items() if k != "deviation"})
@@ -204,16 +265,18 @@ def make_surface(problem: Problem, result: methods.MethodResult, method: str = "
         vval = np.bincount(d.corners.ravel(), np.repeat(fval, 4), d.n_vertices) / counts
     else:  # pragma: no cover - a method bug
         raise RuntimeError("method returned neither values nor vertex_values")
-    if not (np.isfinite(fval).all() and np.isfinite(vval).all()):
-        bad = int((~np.isfinite(fval)).sum())
+    cam = problem.camera
+    with np.errstate(over="ignore", invalid="ignore"):
+        shift = cam.gauge(fval, d.facet_component, d.n_components)
+        depth = cam.to_depth(fval - shift[d.facet_component])
+        vdepth = cam.to_depth(vval - shift[d.vertex_component])
+    if not (np.isfinite(depth).all() and np.isfinite(vdepth).all()):
+        # a non-finite value, or one whose depth overflows (huge slopes, exp of log-depth)
+        bad = int((~np.isfinite(depth)).sum())
         raise SolverError(
             f"method {method!r} produced non-finite depth at {bad} of {fval.size} pixels inside "
             "the mask"
         )
-    cam = problem.camera
-    shift = cam.gauge(fval, d.facet_component, d.n_components)
-    depth = cam.to_depth(fval - shift[d.facet_component])
-    vdepth = cam.to_depth(vval - shift[d.vertex_component])
     return Surface(
         depth=d.to_image(depth), vertex_depth=d.to_vertex_image(vdepth), mask=d.mask.copy(),
         camera=cam,

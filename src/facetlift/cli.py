@@ -2,8 +2,9 @@
 :mod:`facetlift.io`.
 
 ``main(argv)`` returns an exit code: 0 success, 1 bad input (unreadable file, bad option,
-input the method cannot take), 2 solver failure (:class:`facetlift.SolverError` or no
-convergence), 130 interrupted. Errors are one line on stderr, without a traceback.
+input the method cannot take, unwritable output, memory limit), 2 solver failure
+(:class:`facetlift.SolverError` or no convergence), 3 internal error (a bug), 130
+interrupted, 143 terminated. Errors are one line on stderr, without a traceback.
 See ``docs/cli.md``.
 """
 
@@ -13,31 +14,22 @@ import json
 import logging
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import click
-import numpy as np
 
 from . import __version__
 from . import methods as _methods
 from .errors import SolverError
+from .jobs import DEFAULT_SAVE, OUTPUTS, jsonable
 
 log = logging.getLogger(__name__)
 
-#: ``--save`` choices: extension -> file name written into the output folder.
-OUTPUTS = {
-    "npy": "depth.npy",
-    "exr": "depth.exr",
-    "tif": "depth.tif",
-    "npz": "surface.npz",
-    "ply": "mesh.ply",
-    "obj": "mesh.obj",
-    "png": "preview.png",
-}
-DEFAULT_SAVE = ("npy", "ply", "png")
+EXIT_OK, EXIT_INPUT, EXIT_SOLVER, EXIT_BUG = 0, 1, 2, 3
+EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143
 
-EXIT_OK, EXIT_INPUT, EXIT_SOLVER, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: Set by ``facetlift --debug``: print the traceback of an internal error.
+_STATE = {"debug": False}
 
 
 class SolverFailure(Exception):
@@ -51,7 +43,9 @@ CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 @click.version_option(__version__, "-V", "--version", prog_name="facetlift")
 @click.option("-v", "--verbose", count=True,
               help="Log the library's progress on stderr (-vv for debug detail).")
-def cli(verbose):
+@click.option("--debug", is_flag=True,
+              help="On an internal error (a bug), print the full traceback.")
+def cli(verbose, debug):
     """facetlift: turn a normal map into a depth map and a mesh (normal integration).
 
     \b
@@ -63,6 +57,7 @@ def cli(verbose):
 
     Run 'facetlift COMMAND --help' for the options of a command.
     """
+    _STATE["debug"] = _STATE["debug"] or debug
     if verbose:
         root = logging.getLogger("facetlift")
         handler, level = _StderrHandler(), root.level
@@ -102,34 +97,6 @@ def _parse_option(text: str) -> tuple[str, object]:
         return key, value  # a bare string such as solver=iterative
 
 
-def _default_outdir(src: Path) -> Path:
-    src = src.resolve()
-    return src.parent / f"{src.stem if src.is_file() else src.name}_facetlift"
-
-
-def _read_input(normals: Path, mask: Path | None, K: Path | None, y_down: bool,
-                orthographic: bool):
-    """-> (normals, mask or None, K or None, mask source) from a file or a dataset folder."""
-    from . import io
-
-    if normals.is_dir():
-        ds = io.read_dataset(normals, y_down=y_down)
-        n, m, Kmat = ds["normals"], ds["mask"], ds["K"]
-        source = "dataset mask" if m is not None else "valid normals"
-    else:
-        n, m = io.read_normals(normals, y_down=y_down)
-        Kmat = None
-        source = "alpha channel" if m is not None else "valid normals"
-    if mask is not None:
-        m = io.read_mask(mask, n.shape[:2])
-        source = str(mask)
-    if K is not None:
-        Kmat = io.read_K(K)
-    if orthographic:
-        Kmat = None
-    return n, m, Kmat, source
-
-
 def _progress_bar(total: int | None):
     """(bar, update): a tqdm bar on stderr that appears at the first update (a route that
     never reports progress shows nothing); ``bar.close()`` is safe either way."""
@@ -153,91 +120,84 @@ def _progress_bar(total: int | None):
     return _Bar(), update
 
 
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    if isinstance(obj, (str, int, float, bool)) or obj is None:
-        return obj
-    return repr(obj)
+#: The options ``integrate`` and ``batch`` share: what to read and how to integrate it.
+_JOB_OPTIONS = [
+    click.option("-m", "--mask", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+                 help="Mask image (PNG/TIFF/npy, nonzero = integrate). Default: the dataset's "
+                 "mask.png, else the alpha channel, else every pixel with a valid normal."),
+    click.option("--normal-frame", "normal_frame", metavar="FRAME",
+                 help="Frame of the normal map: opengl (default: x right, y up, z toward the "
+                 "viewer), directx (y down), opencv (y down, z away), or an axis string such "
+                 "as 'x,-y,-z' (docs/conventions.md lists common sources)."),
+    click.option("--y-down", is_flag=True, help="Alias of --normal-frame directx."),
+    click.option("--gradient-frame", default="xy", show_default=True,
+                 help="Layout of a gradient field: xy (p = dz/dx right, q = dz/dy up) or "
+                 "rowcol (alias queau: p = dz/d(row) down, q = dz/d(col))."),
+    click.option("--mat-keys", metavar="P,Q[,MASK] | N[,MASK]",
+                 help="Variable names in a .mat input: a gradient field p,q[,mask] or a "
+                 "normal map N[,mask]. Default: p,q[,mask], else the only HxWx3 variable."),
+    click.option("--method", default="dgp", show_default=True,
+                 help="Integration method; 'facetlift methods' lists them."),
+    click.option("--pixel-size", type=float, default=1.0, show_default=True,
+                 help="Pixel width in world units (orthographic): scales depth with x and y."),
+    click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+                 help="Perspective intrinsics, a 3x3 text file (OpenCV layout). A dataset "
+                 "folder's K.txt is used automatically."),
+    click.option("--orthographic", is_flag=True,
+                 help="Ignore K (e.g. a dataset's K.txt) and integrate orthographically."),
+    click.option("--backfacing", type=click.Choice(["missing", "error", "outlier"]),
+                 default="missing", show_default=True,
+                 help="Normals facing away from the camera inside the mask: treat them as "
+                 "missing samples (counted and reported; 'outlier' is an alias), or stop with "
+                 "an error."),
+    click.option("--outlier-eps", type=float, default=None,
+                 help="Grazing threshold on the view cosine below which a normal is a missing "
+                 "sample (default: cos 85 deg orthographic, 1/255 perspective)."),
+    click.option("--solver", help="The method's solver, where it has one (dgp: 'direct' "
+                 "solves the fixed point at once, the default; 'iterative' runs the paper's "
+                 "loop)."),
+    click.option("--max-iter", type=int, help="Iteration limit (methods with `max_iter`)."),
+    click.option("--tol", type=float, help="Convergence tolerance (methods with `tol`)."),
+    click.option("--backend", help="Sparse linear solver backend (methods with `backend`): "
+                 "auto, pcg, pardiso, superlu, amg."),
+    click.option("--discontinuities", is_flag=True,
+                 help="Allow depth jumps (methods that handle discontinuities: 'facetlift "
+                 "methods')."),
+    click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
+                 help="Any other method option, repeatable; VALUE is read as JSON when it "
+                 "parses (1e-4, true, [1,2]) and as a string otherwise."),
+    click.option("-s", "--save", "--format", "save", multiple=True,
+                 type=click.Choice(list(OUTPUTS)),
+                 help="What to write, repeatable: npy/exr/tif = depth map, npz = depth + "
+                 "vertex depth + mask, ply/obj = mesh, png = shaded preview, report = one PNG "
+                 "with shading, depth, deviation and discontinuity panels (needs "
+                 "facetlift[plot]). Default: npy, ply, png."),
+    click.option("--quads", "mesh_faces", flag_value="quads",
+                 help="Write quad meshes (the PLY default; OBJ defaults to triangles)."),
+    click.option("--triangles", "mesh_faces", flag_value="triangles",
+                 help="Write triangle meshes (the OBJ default)."),
+    click.option("--progress/--no-progress", default=None,
+                 help="Progress bar on stderr for routes that iterate (and for batches). "
+                 "Default: when stderr is a terminal."),
+]
 
 
-@cli.command(context_settings=CONTEXT)
-@click.argument("normals", type=click.Path(exists=True, path_type=Path))
-@click.option("-m", "--mask", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-              help="Mask image (PNG/TIFF/npy, nonzero = integrate). Default: the dataset's "
-              "mask.png, else the alpha channel, else every pixel with a valid normal.")
-@click.option("--method", default="dgp", show_default=True,
-              help="Integration method; 'facetlift methods' lists them.")
-@click.option("--pixel-size", type=float, default=1.0, show_default=True,
-              help="Pixel width in world units (orthographic): scales depth with x and y.")
-@click.option("--y-down", is_flag=True,
-              help="The normal map stores y pointing down (DirectX/OpenCV style).")
-@click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-              help="Perspective intrinsics, a 3x3 text file (OpenCV layout). A dataset "
-              "folder's K.txt is used automatically.")
-@click.option("--orthographic", is_flag=True,
-              help="Ignore K (e.g. a dataset's K.txt) and integrate orthographically.")
-@click.option("--backfacing", type=click.Choice(["missing", "error", "outlier"]),
-              default="missing", show_default=True,
-              help="Normals facing away from the camera inside the mask: treat them as missing "
-              "samples (counted and reported; 'outlier' is an alias), or stop with an error.")
-@click.option("--outlier-eps", type=float, default=None,
-              help="Grazing threshold on the view cosine below which a normal is a missing "
-              "sample (default: cos 85 deg orthographic, 1/255 perspective).")
-@click.option("--solver", help="The method's solver, where it has one (dgp: 'direct' solves "
-              "the fixed point at once, the default; 'iterative' runs the paper's loop).")
-@click.option("--max-iter", type=int, help="Iteration limit (methods with `max_iter`).")
-@click.option("--tol", type=float, help="Convergence tolerance (methods with `tol`).")
-@click.option("--backend", help="Sparse linear solver backend (methods with `backend`): "
-              "auto, pcg, pardiso, superlu, amg.")
-@click.option("--discontinuities", is_flag=True,
-              help="Allow depth jumps (methods that handle discontinuities: 'facetlift methods').")
-@click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
-              help="Any other method option, repeatable; VALUE is read as JSON when it "
-              "parses (1e-4, true, [1,2]) and as a string otherwise.")
-@click.option("-o", "--out", "outdir", type=click.Path(file_okay=False, path_type=Path),
-              help="Output folder. Default: <input>_facetlift/ next to the input.")
-@click.option("-s", "--save", "--format", "save", multiple=True,
-              type=click.Choice(list(OUTPUTS)),
-              help="What to write, repeatable: npy/exr/tif = depth map, npz = depth + vertex "
-              "depth + mask, ply/obj = mesh, png = shaded preview. Default: npy, ply, png.")
-@click.option("--triangles", is_flag=True, help="Write triangle meshes instead of quads.")
-@click.option("--json", "as_json", is_flag=True,
-              help="Print one JSON object (outputs, diagnostics, timings) instead of text.")
-@click.option("--progress/--no-progress", default=None,
-              help="Progress bar on stderr for iterative solvers. Default: when stderr is a "
-              "terminal.")
-def integrate(normals, mask, method, pixel_size, y_down, K, orthographic, backfacing,
-              outlier_eps, solver, max_iter, tol, backend, discontinuities, options, outdir,
-              save, triangles, as_json, progress):
-    """Integrate a normal map NORMALS into a depth map, a mesh and a preview.
+def _job_options(f):
+    for option in reversed(_JOB_OPTIONS):
+        f = option(f)
+    return f
 
-    NORMALS is a normal-map file (PNG 8/16 bit, TIFF, EXR or .npy; x right, y up, z toward
-    the viewer, 8/16-bit values v decoded as v/max*2-1) or a dataset folder holding
-    normal_map.png, mask.png and, for a perspective camera, K.txt.
 
-    \b
-    Examples:
-      facetlift integrate normal_map.png --mask mask.png
-      facetlift integrate scan.exr --pixel-size 0.5 -o out --save exr --save obj
-      facetlift integrate data/tent/ --solver iterative --tol 1e-4 --progress
-      facetlift integrate n.png --solver iterative --option mean_subtraction=false --json
-    """
-    import facetlift
+def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_down=False,
+              gradient_frame="xy", mat_keys=None, method="dgp", pixel_size=1.0, K=None,
+              orthographic=False, backfacing="missing", outlier_eps=None, solver=None,
+              max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
+              save=(), mesh_faces=None, outdir=None):
+    """A :class:`facetlift.jobs.Job` from the parsed flags (ValueError on bad values)."""
+    from . import frames
+    from .jobs import Job
 
-    info = _methods.get(method)
-    t0 = time.perf_counter()
-    n, m, Kmat, mask_source = _read_input(normals, mask, K, y_down, orthographic)
-    t_read = time.perf_counter() - t0
-
+    _methods.get(method)
     opts = dict(_parse_option(o) for o in options)
     for key, value in (("solver", solver), ("max_iter", max_iter), ("tol", tol),
                        ("backend", backend)):
@@ -245,20 +205,89 @@ def integrate(normals, mask, method, pixel_size, y_down, K, orthographic, backfa
             opts[key] = value
     if discontinuities:
         opts["discontinuities"] = True
+    frame = frames.resolve(normal_frame, y_down)
+    if frame is not None:
+        frames.parse(frame)
+    frames.gradient_frame(gradient_frame)
+    return Job(
+        normals=None if normals is None else str(normals),
+        gradients=tuple(str(g) for g in gradients) if gradients else None,
+        mask=None if mask is None else str(mask), K=None if K is None else str(K),
+        orthographic=orthographic, normal_frame=frame, gradient_frame=gradient_frame,
+        mat_keys=_split(mat_keys), method=method, pixel_size=pixel_size,
+        backfacing=backfacing, outlier_eps=outlier_eps, options=opts,
+        save=tuple(save) or DEFAULT_SAVE,
+        triangles=None if mesh_faces is None else mesh_faces == "triangles",
+        outdir=None if outdir is None else str(outdir),
+    )
 
-    show = sys.stderr.isatty() if progress is None else progress
-    bar = None
-    if show and "progress" in info.options() and "progress" not in opts:
-        bar, opts["progress"] = _progress_bar(opts.get("max_iter"))
 
-    t1 = time.perf_counter()
+def _show_progress(flag) -> bool:
+    return sys.stderr.isatty() if flag is None else bool(flag)
+
+
+def _progress_total(job) -> int | None:
+    """The iteration count a progress bar can expect, where the route has one."""
+    specs = {o.name: o.default for o in _methods.get(job.method).specs()}
+    if job.options.get("discontinuities"):
+        return job.options.get("discontinuity_iter", specs.get("discontinuity_iter"))
+    return job.options.get("max_iter")
+
+
+def summary(record: dict) -> str:
+    """The one-line text summary of a job's record."""
+    info = record["info"]
+    H, W = record["shape"]
+    parts = [
+        f"{H}x{W} pixels, {record['facets']} facets (mask: {record['mask_source']})",
+        f"method {info.get('method')}" + (f" ({info['solver']})" if "solver" in info else ""),
+    ]
+    it = info.get("iterations")
+    if it is not None:
+        parts.append(f"{it} iteration{'s' if it != 1 else ''}"
+                     + ("" if record["converged"] else " (not converged)"))
+    dev = record.get("mean_deviation")
+    if dev is not None:
+        parts.append(f"mean deviation {dev:.2f} deg")
+    parts.append(f"{record['timings']['integrate']:.2f} s")
+    return ", ".join(parts)
+
+
+@cli.command(context_settings=CONTEXT)
+@click.argument("normals", required=False, type=click.Path(exists=True, path_type=Path))
+@click.option("--gradients", nargs=2, type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              metavar="P Q", help="Integrate a gradient field instead: two files (npy, EXR, "
+              "TIFF) holding p and q; see --gradient-frame.")
+@_job_options
+@click.option("-o", "--out", "outdir", type=click.Path(file_okay=False, path_type=Path),
+              help="Output folder. Default: <input>_facetlift/ next to the input.")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print one JSON object (outputs, diagnostics, timings) instead of text.")
+def integrate(normals, gradients, progress, as_json, **flags):
+    """Integrate a normal map NORMALS into a depth map, a mesh and a preview.
+
+    NORMALS is a normal-map file (PNG 8/16 bit, TIFF, EXR or .npy; by default x right, y up,
+    z toward the viewer, 8/16-bit values v decoded as v/max*2-1), a dataset folder holding
+    normal_map.png, mask.png and, for a perspective camera, K.txt, or a .mat file holding
+    gradients p, q or a normal map (--mat-keys). A gradient field in two files is given
+    with --gradients P Q instead.
+
+    \b
+    Examples:
+      facetlift integrate normal_map.png --mask mask.png
+      facetlift integrate estimate.png --normal-frame opencv -s report
+      facetlift integrate --gradients p.npy q.npy --gradient-frame rowcol
+      facetlift integrate vase.mat --mat-keys p,q,mask --gradient-frame queau
+      facetlift integrate data/tent/ --solver iterative --tol 1e-4 --progress
+    """
+    from . import jobs
+
+    job = _make_job(normals=normals, gradients=gradients, **flags)
+    bar, update = (None, None)
+    if _show_progress(progress) and "progress" in _methods.get(job.method).options():
+        bar, update = _progress_bar(_progress_total(job))
     try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            surface = facetlift.integrate(
-                n, m, method=method, pixel_size=pixel_size, K=Kmat, backfacing=backfacing,
-                outlier_eps=outlier_eps, **opts,
-            )
+        record = jobs.run(job, progress=update)
     except ValueError as e:  # name the command-line flag where the library names a keyword
         raise ValueError(
             str(e).replace("pass backfacing='missing'", "pass --backfacing missing")
@@ -266,63 +295,138 @@ def integrate(normals, mask, method, pixel_size, y_down, K, orthographic, backfa
     finally:
         if bar is not None:
             bar.close()
-    for w in caught:
-        click.echo(f"facetlift: warning: {w.message}", err=True)
-    t_integrate = time.perf_counter() - t1
-
-    t2 = time.perf_counter()
-    outdir = _default_outdir(normals) if outdir is None else outdir
-    outdir.mkdir(parents=True, exist_ok=True)
-    written = {}
-    for ext in dict.fromkeys(save or DEFAULT_SAVE):  # keep order, drop repeats
-        kw = {"triangles": True} if triangles and ext in ("ply", "obj") else {}
-        written[ext] = str(surface.save(outdir / OUTPUTS[ext], **kw))
-    t_write = time.perf_counter() - t2
-
-    sinfo = surface.info
-    converged = sinfo.get("converged", True)
-    H, W = surface.shape
+    for w in record["warnings"]:
+        click.echo(f"facetlift: warning: {w}", err=True)
     if as_json:
-        record = {
-            "input": str(normals),
-            "outputs": written,
-            "shape": [H, W],
-            "facets": int(surface.mask.sum()),
-            "mask_source": mask_source,
-            "perspective": surface.K is not None,
-            "info": _jsonable(sinfo),
-            "timings": {"read": t_read, "integrate": t_integrate, "write": t_write,
-                        "total": time.perf_counter() - t0},
-        }
-        click.echo(json.dumps(record))
+        click.echo(json.dumps({k: v for k, v in record.items() if k != "warnings"}))
     else:
-        for path in written.values():
+        for path in record["outputs"].values():
             click.echo(f"wrote {path}")
-        it = sinfo.get("iterations")
-        parts = [
-            f"{H}x{W} pixels, {int(surface.mask.sum())} facets (mask: {mask_source})",
-            f"method {sinfo.get('method', method)}"
-            + (f" ({sinfo['solver']})" if "solver" in sinfo else ""),
-        ]
-        if it is not None:
-            parts.append(f"{it} iteration{'s' if it != 1 else ''}"
-                         + ("" if converged else " (not converged)"))
-        parts.append(f"{t_integrate:.2f} s")
-        click.echo(", ".join(parts))
-    if not converged and sinfo.get("solver") == "discontinuous":
+        click.echo(summary(record))
+    info = record["info"]
+    if not record["converged"] and info.get("solver") == "discontinuous":
         # a fixed budget of reweightings by design: the surface is usable, say so and go on
         click.echo(
-            f"note: the discontinuity reweighting used all {sinfo.get('iterations')} "
+            f"note: the discontinuity reweighting used all {info.get('iterations')} "
             "iterations before its weights settled; more may sharpen long jumps "
             "(--option discontinuity_iter=N)",
             err=True,
         )
-    elif not converged:
+    elif not record["converged"]:
         raise SolverFailure(
-            f"method {method!r} did not converge in {sinfo.get('iterations')} iterations "
-            "(outputs were written); raise --max-iter or --tol"
+            f"method {info.get('method')!r} did not converge in {info.get('iterations')} "
+            "iterations (outputs were written); raise --max-iter or --tol"
         )
     return EXIT_OK
+
+
+@cli.command(context_settings=CONTEXT)
+@click.argument("normals", type=click.Path(exists=True, path_type=Path))
+@click.option("-m", "--mask", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Mask image, as for 'integrate'.")
+@click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Perspective intrinsics, as for 'integrate'.")
+@click.option("--normal-frame", "normal_frame", metavar="FRAME",
+              help="Read the map in this frame (as for 'integrate').")
+@click.option("--mat-keys", metavar="KEYS", help="Variable names in a .mat input.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def info(normals, mask, K, normal_frame, mat_keys, as_json):
+    """Describe an input without integrating it: size, pixel type, detected frame and
+    encoding, mask and components, unusable normals, K, and an estimate of the memory and
+    time the default integration would need.
+
+    \b
+    Examples:
+      facetlift info normal_map.png --mask mask.png
+      facetlift info data/bear/ --json
+    """
+    from .describe import describe
+
+    rec = describe(normals, mask=mask, K=K, normal_frame=normal_frame,
+                   mat_keys=_split(mat_keys))
+    if as_json:
+        click.echo(json.dumps(jsonable(rec)))
+        return EXIT_OK
+    for line in _info_lines(rec):
+        click.echo(line)
+    return EXIT_OK
+
+
+def _info_lines(rec: dict) -> list[str]:
+    H, W = rec["shape"]
+    kind = ", ".join(f"{k} {rec[k]}" for k in ("format", "bit_depth", "channels", "dtype")
+                     if rec.get(k) is not None)
+    lines = [f"{rec['input']}: {H}x{W} pixels ({kind})"]
+    if rec.get("encoding"):
+        lines.append(f"  encoding: {rec['encoding']}")
+    frame = rec.get("frame", {})
+    lines.append(f"  frame: read as {frame.get('as_read')}; likely {frame.get('likely', '?')}")
+    lines.append(f"  camera: {rec['projection']}" + (f", K = {rec['K']}" if rec["K"] else ""))
+    if not rec["usable"]:
+        lines.append(f"  cannot be integrated as read: {rec['problem']}")
+        return lines
+    c = rec["counts"]
+    lines.append(f"  mask: {rec['mask_pixels']} pixels ({rec['mask_source']}), "
+                 f"{rec['components']} component(s)")
+    bad = ", ".join(f"{c[k]} {k}" for k in ("missing", "non-finite", "zero-length",
+                                            "back-facing", "grazing") if c.get(k))
+    first = rec.get("first_unusable")
+    lines.append(f"  unusable normals: {bad or 'none'}"
+                 + (f"; first at (row {first[0]}, col {first[1]})" if first else ""))
+    e = rec["estimate"]
+    lines.append(f"  default integration (estimate): about {e['bytes'] / 2**20:.0f} MiB and "
+                 f"{e['seconds']:.2g} s on 2 cores ({e['route']} route)")
+    return lines
+
+
+@cli.command("batch", context_settings=CONTEXT)
+@click.argument("inputs", nargs=-1)
+@click.option("--list", "list_file", type=click.Path(exists=True, dir_okay=False),
+              help="A text file with more inputs, one path or glob pattern per line.")
+@_job_options
+@click.option("-o", "--out", "outdir", required=True,
+              type=click.Path(file_okay=False, path_type=Path),
+              help="Output folder: one subfolder per item, and the log batch.jsonl.")
+@click.option("--workers", type=int, help="Local worker processes (default: the CPU count; "
+              "1 runs in this process without Dask).")
+@click.option("--scheduler", metavar="ADDRESS",
+              help="Run on a dask.distributed cluster, e.g. tcp://host:8786 (the workers must "
+              "see the input and output paths).")
+@click.option("--resume", is_flag=True, help="Skip items the log says finished.")
+@click.option("--json", "as_json", is_flag=True, help="Print the records as JSON lines.")
+def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_json, **flags):
+    """Integrate many normal maps: files, dataset folders, folders of them, glob patterns
+    (quote them) or a --list file, each into OUT/<name>/. Exit 0 only if every item
+    succeeded, else 1 with the count; the log OUT/batch.jsonl has one record per item.
+
+    \b
+    Examples:
+      facetlift batch 'maps/*.png' -o out --workers 2 --normal-frame opencv
+      facetlift batch data/ -o out --save npy --save report --resume
+      facetlift batch --list maps.txt -o /shared/out --scheduler tcp://head:8786
+    """
+    from .batch import LOG_NAME
+    from .batch import batch as run_batch
+
+    if not inputs and list_file is None:
+        raise click.UsageError("give inputs (files, folders, patterns) or --list FILE")
+    job = _make_job(**flags)
+    t0 = time.perf_counter()
+    records = run_batch(inputs, outdir, job=job, workers=workers, scheduler=scheduler,
+                        resume=resume, progress=_show_progress(progress), list_file=list_file)
+    failed = [r for r in records if r["status"] != "ok"]
+    for r in failed:
+        click.echo(f"facetlift: error: {r['name']}: {r['status']}: {r['error']}", err=True)
+    if as_json:
+        for r in records:
+            click.echo(json.dumps(jsonable(r)))
+    resumed = sum(bool(r.get("resumed")) for r in records)
+    line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
+            + (f" ({resumed} from an earlier run)" if resumed else "")
+            + (f", {len(failed)} failed" if failed else "")
+            + f" (log: {outdir / LOG_NAME}), {time.perf_counter() - t0:.1f} s")
+    click.echo(line, err=as_json)
+    return EXIT_INPUT if failed else EXIT_OK
 
 
 @cli.command(context_settings=CONTEXT)
@@ -360,7 +464,7 @@ def methods(as_json, markdown):
             ],
         })
     if as_json:
-        click.echo(json.dumps(_jsonable(records)))
+        click.echo(json.dumps(jsonable(records)))
         return EXIT_OK
     for r in records:
         head = f"{r['name']}" + ("" if r["available"] else "  (not available)")
@@ -414,11 +518,26 @@ def _error(message: str) -> None:
     click.echo(f"facetlift: error: {message}", err=True)
 
 
+def _one_line(e: BaseException) -> str:
+    return " ".join(str(e).split()) or type(e).__name__
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line with `argv` (default ``sys.argv[1:]``); returns the exit code."""
+    """Run the command line with `argv` (default ``sys.argv[1:]``); returns the exit code.
+
+    The one error boundary: a ``ValueError`` or ``OSError`` (bad input, unwritable output) or
+    an ``ImportError`` (a missing extra, named in the message) is one line and exit 1; a
+    :class:`~facetlift.SolverError` exit 2; a :class:`~facetlift.MemoryLimitError` (or
+    MemoryError) exit 1; anything else is a bug: one line asking for a report (the traceback
+    with ``--debug``), exit 3.
+    """
+    from .errors import MemoryLimitError
+    from .io.atomic import Terminated
+
     args = sys.argv[1:] if argv is None else list(argv)
     if not args:
         args = ["--help"]
+    _STATE["debug"] = False
     try:
         rv = cli.main(args=args, prog_name="facetlift", standalone_mode=False)
     except click.exceptions.Exit as e:  # pragma: no cover - returned, not raised, by click 8
@@ -433,11 +552,20 @@ def main(argv: list[str] | None = None) -> int:
             msg += f" (see '{ctx.command_path} --help')"
         _error(msg)
         return EXIT_INPUT
+    except MemoryLimitError as e:
+        _error(_one_line(e))
+        return EXIT_INPUT
+    except MemoryError as e:
+        _error(f"out of memory ({_one_line(e)}); try a crop, a smaller map or another method")
+        return EXIT_INPUT
     except (ValueError, OSError) as e:
-        _error(str(e))
+        _error(_one_line(e))
+        return EXIT_INPUT
+    except ImportError as e:  # an optional extra that is not installed: the message names it
+        _error(_one_line(e))
         return EXIT_INPUT
     except SolverError as e:
-        _error(f"solver failed: {e}")
+        _error(f"solver failed: {_one_line(e)}")
         return EXIT_SOLVER
     except SolverFailure as e:
         _error(str(e))
@@ -445,6 +573,20 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         _error("interrupted")
         return EXIT_INTERRUPTED
+    except Terminated:
+        _error("terminated (SIGTERM); no output was written")
+        return EXIT_TERMINATED
+    except Exception as e:
+        if _STATE["debug"]:
+            import traceback
+
+            traceback.print_exc()
+        _error(
+            f"internal error ({type(e).__name__}: {_one_line(e)}). This is a bug in facetlift "
+            f"{__version__}: please report it with the command line"
+            + ("" if _STATE["debug"] else " (run with 'facetlift --debug ...' for the traceback)")
+        )
+        return EXIT_BUG
     return rv if isinstance(rv, int) else EXIT_OK
 
 

@@ -8,8 +8,9 @@ Arrays
 Normals
     A normal map is an ``(H, W, 3)`` float array. Its components are ``x`` along the columns
     (to the right), ``y`` *up* (against the row index) and ``z`` toward the viewer. This is the
-    usual normal-map convention of DiLiGenT and BiNI. Normal maps stored with ``y`` down
-    (DirectX / OpenCV style) are read with ``y_down=True``.
+    usual normal-map convention of DiLiGenT and BiNI. Normal maps stored in other frames
+    (DirectX: ``y`` down; OpenCV camera frame: ``y`` down and ``z`` away) are read with
+    ``normal_frame=`` (:mod:`facetlift.frames`; ``y_down=True`` is ``"directx"``).
 
 Gradients
     ``p = dz/dx`` and ``q = dz/dy`` are the slopes of the *height* ``z`` (toward the viewer) along

@@ -15,7 +15,9 @@ import numpy as np
 __all__ = [
     "align",
     "angular_error",
+    "diagnose",
     "facet_normals",
+    "input_deviation",
     "made",
     "mae",
     "normalized_error",
@@ -162,10 +164,54 @@ def facet_normals(vertex_depth, *, pixel_size: float = 1.0, K=None, camera=None)
     cam = make_camera(pixel_size, K) if camera is None else camera
     i, j = np.mgrid[0 : vd.shape[0], 0 : vd.shape[1]]
     P = cam.points(i.ravel(), j.ravel(), vd.ravel()).reshape(vd.shape + (3,))
-    P0, P1, P2, P3 = P[:-1, :-1], P[:-1, 1:], P[1:, 1:], P[1:, :-1]
+    return _quad_normals(P[:-1, :-1], P[:-1, 1:], P[1:, 1:], P[1:, :-1])
+
+
+def _quad_normals(P0, P1, P2, P3) -> np.ndarray:
+    """Unit normals of quads with corners P0..P3 (conventional order), toward the viewer."""
     n = np.cross(P3 - P1, P2 - P0)
     with np.errstate(invalid="ignore", divide="ignore"):
         return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+#: :func:`input_deviation` averages over at most this many facets, evenly spaced.
+DEVIATION_SAMPLE = 2**18
+
+
+def input_deviation(problem, surface, *, sample: int = DEVIATION_SAMPLE) -> float:
+    """Mean angle in degrees between the usable input normals and the facet normals of the
+    result, over at most `sample` usable facets evenly spaced in row-major order (exact up to
+    512 x 512); NaN when no facet is usable.
+
+    Parameters
+    ----------
+    problem : facetlift.Problem
+    surface : facetlift.Surface
+        The result on the problem's domain (same shape and camera).
+    """
+    k = np.flatnonzero(problem.usable)
+    if k.size == 0:
+        return float("nan")
+    if k.size > sample:
+        k = k[:: -(-k.size // sample)]
+    r, c = (a[k] for a in problem.domain.pixels)
+    vd = surface.vertex_depth
+    P = [surface.camera.points(r + dr, c + dc, vd[r + dr, c + dc])
+         for dr, dc in ((0, 0), (0, 1), (1, 1), (1, 0))]
+    nrec = _quad_normals(*P)
+    cos = np.clip(np.einsum("ij,ij->i", nrec, problem.normals[k]), -1.0, 1.0)
+    return float(np.degrees(np.arccos(cos)).mean())
+
+
+def diagnose(problem, surface) -> dict:
+    """What :func:`facetlift.solve` adds to ``Surface.info`` about the result and its input:
+    ``mean_deviation`` (:func:`input_deviation`, degrees) and ``integrability``
+    (:func:`facetlift.frames.flip_check`, which warns when a flipped map would be far more
+    integrable)."""
+    from .frames import flip_check
+
+    return {"mean_deviation": input_deviation(problem, surface),
+            "integrability": flip_check(problem)}
 
 
 def angular_error(surface, normals, mask=None) -> tuple[float, float, np.ndarray]:

@@ -24,8 +24,10 @@ class Surface:
     info : dict
         Method diagnostics: ``method``, ``iterations``, ``converged``, ``deviation`` (average
         angular deviation in degrees per iteration, where the method iterates), ``seconds``
-        per phase, ``input`` (counts of unusable normals, :func:`facetlift.prepare`), and
-        method-specific entries.
+        per phase, ``input`` (counts of unusable normals, :func:`facetlift.prepare`),
+        ``mean_deviation`` (mean angle in degrees between the input normals and the result's
+        facets), ``integrability`` (:func:`facetlift.frames.flip_check`), and method-specific
+        entries.
     camera : facetlift.camera.Camera
         The camera the depth is measured in; give it, or `pixel_size` and `K` (read back as
         properties).

@@ -12,6 +12,8 @@ intrinsics ``K``  text, 3 x 3                            numpy
 depth maps        ``.npy``, OpenEXR, TIFF, ``.npz``      numpy, OpenEXR, tifffile
 meshes            PLY (binary), OBJ; quads or triangles  meshio
 previews          PNG                                    imagecodecs; matplotlib for colormaps
+reports           PNG (panels)                           matplotlib
+gradient fields   ``.npy``, OpenEXR, TIFF, ``.mat``      numpy, OpenEXR, tifffile, scipy.io
 ================  =====================================  ======================================
 
 Integer normal maps are decoded per channel as ``n = v / maxval * 2 - 1`` (``maxval`` 255 or
@@ -23,6 +25,8 @@ fill) and decodes as NaN, i.e. a missing sample.
 
 Every writer is atomic: it writes a temporary file in the target directory, flushes it to disk
 and renames it over the target, so a failed write never leaves a partial file behind.
+:class:`OutputSet` does the same for all outputs of one run (a staging folder, moved into place
+when everything succeeded).
 
 matplotlib is needed only for the colour panel of :func:`write_preview` (``colormap=``) and comes
 with the ``plot`` extra (``pip install 'facetlift[plot]'``); the shaded preview does without it.
@@ -34,7 +38,7 @@ Modules: :mod:`~facetlift.io.images` (normal maps, masks, depth maps),
 ``facetlift.io`` itself.
 """
 
-from .atomic import atomic_path
+from .atomic import OutputSet, atomic_path, sweep
 from .dataset import read_dataset, read_K
 from .images import (
     DEPTH_FORMATS,
@@ -51,6 +55,7 @@ from .images import (
 )
 from .meshes import MESH_FORMATS, write_mesh
 from .preview import shade, write_preview
+from .report import write_report
 from .surface import SURFACE_FORMATS, save_surface
 
 __all__ = [
@@ -60,6 +65,7 @@ __all__ = [
     "MESH_FORMATS",
     "NORMAL_READ_FORMATS",
     "NORMAL_WRITE_FORMATS",
+    "OutputSet",
     "SURFACE_FORMATS",
     "atomic_path",
     "read_K",
@@ -69,9 +75,11 @@ __all__ = [
     "read_normals",
     "save_surface",
     "shade",
+    "sweep",
     "write_depth",
     "write_mask",
     "write_mesh",
     "write_normals",
     "write_preview",
+    "write_report",
 ]

@@ -1,14 +1,21 @@
 """Atomic output: write a temporary file next to the target, fsync it, rename it over the target.
 
 A failed or interrupted write never leaves a partial file behind: the target is either untouched
-or complete.
+or complete. :class:`OutputSet` extends the promise to all the outputs of one run: they are
+written into a staging folder and moved into place only when all of them succeeded; SIGTERM
+removes the staging folder, and :func:`sweep` removes what killed runs (SIGKILL) left.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import secrets
+import shutil
+import signal
+import socket
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +29,7 @@ def atomic_path(path):
     removed and the exception re-raised, so `path` is either untouched or complete.
     """
     target = Path(path)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    tmp = target.with_name(f".{target.name}.{_host()}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
     try:
         yield tmp
         fd = os.open(tmp, os.O_RDONLY)
@@ -51,3 +58,187 @@ def _write_bytes(path: Path, data: bytes) -> None:
 def _save_npy(path: Path, arr: np.ndarray) -> None:
     with atomic_path(path) as tmp, open(tmp, "xb") as fh:
         np.save(fh, arr, allow_pickle=False)
+
+
+# --------------------------------------------------------------------------------------------
+# output sets: every file of one run, or none
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived while an :class:`OutputSet` was open (exit code 143)."""
+
+
+#: Name prefix of staging folders, ``<prefix><host>-<pid>-<hex>``; :func:`atomic_path`'s
+#: temporary files are ``.<name>.<host>.<pid>.<hex>.tmp``.
+STAGING_PREFIX = ".facetlift-staging-"
+
+
+def _host() -> str:
+    return "".join(ch if ch.isalnum() else "_" for ch in socket.gethostname())[:40] or "host"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True  # exists, owned by someone else
+    return True
+
+
+def sweep(folder) -> list[Path]:
+    """Remove the staging folders and temporary files that killed runs on this host left in
+    `folder` (their process is gone); returns what was removed."""
+    removed = []
+    host = _host()
+    tmp_file = re.compile(r"^\..+\.([^.]+)\.(\d+)\.[0-9a-f]{8}\.tmp$")
+    staged = re.compile(re.escape(STAGING_PREFIX) + r"(.+)-(\d+)-[0-9a-f]{8}$")
+    try:
+        entries = list(Path(folder).iterdir())
+    except OSError:
+        return removed
+    for p in entries:
+        m = staged.match(p.name)
+        if m and m.group(1) == host and not _alive(int(m.group(2))):
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+            continue
+        m = tmp_file.match(p.name)
+        if m and m.group(1) == host and p.is_file() and not _alive(int(m.group(2))):
+            with contextlib.suppress(OSError):
+                p.unlink()
+                removed.append(p)
+    return removed
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return a.resolve() == b.resolve()
+
+
+def prepare_folder(folder) -> bool:
+    """Create `folder` if needed, check that files can be written there (a probe file is
+    written and removed) and :func:`sweep` it; returns whether it was created.
+
+    Raises
+    ------
+    ValueError
+        `folder` exists and is not a directory.
+    OSError
+        It cannot be created or written.
+    """
+    f = Path(folder)
+    if f.exists() and not f.is_dir():
+        raise ValueError(f"`out`: {f} exists and is not a directory")
+    created = not f.exists()
+    try:
+        f.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise OSError(f"cannot create the output folder {f}: {e.strerror or e}") from None
+    probe = f / f"{STAGING_PREFIX}{_host()}-{os.getpid()}-{secrets.token_hex(4)}"
+    try:
+        probe.mkdir()
+        probe.rmdir()
+    except OSError as e:
+        if created:
+            with contextlib.suppress(OSError):
+                f.rmdir()
+        raise OSError(f"the output folder {f} is not writable: {e.strerror or e}") from None
+    sweep(f)
+    return created
+
+
+class OutputSet:
+    """All outputs of one run, written into a staging folder inside `outdir` and moved into
+    place only when every one of them succeeded.
+
+    Creating it creates `outdir` (and checks that it is writable) *before* any work, refuses
+    a target that is one of `inputs`, and sweeps what killed runs left behind (:func:`sweep`).
+    Used as a context manager it commits on success; on any exception, and on SIGTERM
+    (raised as :class:`Terminated`), it removes the staging folder, and `outdir` too if this
+    run created it and it is still empty, so a failure leaves the folder as it was.
+
+    >>> with OutputSet("out", names=["depth.npy"], inputs=["n.png"]) as out:  # doctest: +SKIP
+    ...     surface.save(out.path("depth.npy"))
+
+    Raises
+    ------
+    ValueError
+        `outdir` exists and is not a directory, or a target is one of `inputs`.
+    OSError
+        `outdir` cannot be created or written.
+    """
+
+    def __init__(self, outdir, names=(), inputs=()):
+        self.outdir = Path(outdir)
+        for name in names:
+            target = self.outdir / name
+            for src in inputs:
+                if src is not None and Path(src).exists() and target.exists() and _same_file(
+                    target, Path(src)
+                ):
+                    raise ValueError(
+                        f"`out`: the output {target} is the input {src}; choose another "
+                        "output folder (-o)"
+                    )
+        self.created = prepare_folder(self.outdir)
+        token = secrets.token_hex(4)
+        self.staging = self.outdir / f"{STAGING_PREFIX}{_host()}-{os.getpid()}-{token}"
+        try:
+            self.staging.mkdir()
+        except OSError as e:
+            self._remove_outdir()
+            raise OSError(
+                f"the output folder {self.outdir} is not writable: {e.strerror or e}"
+            ) from None
+        self.staged: dict[str, Path] = {}
+        self._old_handler = None
+
+    def path(self, name: str) -> Path:
+        """Where to write output `name` now (inside the staging folder)."""
+        p = self.staging / name
+        self.staged[name] = p
+        return p
+
+    def commit(self) -> dict[str, Path]:
+        """Move every staged file into `outdir`; returns name -> final path."""
+        done = {}
+        for name, p in self.staged.items():
+            if p.exists():
+                os.replace(p, self.outdir / name)
+                done[name] = self.outdir / name
+        shutil.rmtree(self.staging, ignore_errors=True)
+        return done
+
+    def abort(self) -> None:
+        """Remove the staging folder (and `outdir`, if this run created it and it is empty)."""
+        shutil.rmtree(self.staging, ignore_errors=True)
+        self._remove_outdir()
+
+    def _remove_outdir(self) -> None:
+        if self.created:
+            with contextlib.suppress(OSError):
+                self.outdir.rmdir()  # only when empty
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            self._old_handler = signal.signal(signal.SIGTERM, _raise_terminated)
+        return self
+
+    def __exit__(self, kind, value, tb):
+        try:
+            if kind is None:
+                self.commit()
+            else:
+                self.abort()
+        finally:
+            if self._old_handler is not None:
+                signal.signal(signal.SIGTERM, self._old_handler)
+        return False
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated(f"terminated by signal {signum}")

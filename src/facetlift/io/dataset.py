@@ -40,12 +40,13 @@ def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
     return None
 
 
-def read_dataset(folder, *, y_down: bool = False) -> dict:
+def read_dataset(folder, *, frame: str | None = None, y_down: bool = False) -> dict:
     """Read a folder in the BiNI / DiLiGenT layout.
 
     The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
     ``mask.png`` (or ``.tif``, ``.tiff``, ``.npy``) and, for a perspective camera, ``K.txt``.
     Without ``K.txt`` the view is orthographic. Pixels outside the mask may hold anything.
+    `frame` and `y_down` are those of :func:`~facetlift.io.read_normals`.
 
     Returns
     -------
@@ -67,7 +68,7 @@ def read_dataset(folder, *, y_down: bool = False) -> dict:
             f"`folder`: {f} has no normal_map file (looked for normal_map with extension "
             f"{', '.join(NORMAL_READ_FORMATS)})"
         )
-    normals, alpha = read_normals(npath, y_down=y_down)
+    normals, alpha = read_normals(npath, frame=frame, y_down=y_down)
     mpath = _find(f, "mask", MASK_FORMATS)
     mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
     kpath = f / "K.txt"

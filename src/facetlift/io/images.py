@@ -11,12 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import frames
+from ..frames import ENCODED_LENGTH_RANGE  # noqa: F401  (re-exported by facetlift.io)
 from ..problem import numeric_array
 from ._paths import _existing, _suffix
 from .atomic import _save_npy, _write_bytes, atomic_path
-
-#: Decoded integer pixels whose vector length lies outside this range are not normals (NaN).
-ENCODED_LENGTH_RANGE = (0.5, 1.5)
 
 NORMAL_READ_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy")
 NORMAL_WRITE_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy")
@@ -71,15 +70,25 @@ def _read_npy(path: Path, arg: str) -> np.ndarray:
     return arr
 
 
+def _check_png_normals(data: bytes, path: Path, arg: str) -> None:
+    """Refuse palette and sub-8-bit PNGs as normal maps, from the IHDR chunk (greyscale ones
+    fail the channel check)."""
+    if len(data) < 26 or data[12:16] != b"IHDR":
+        return  # not a PNG header; the decoder says what is wrong
+    depth, colour = data[24], data[25]
+    if colour == 3 or depth < 8:
+        what = "palette (indexed colour)" if colour == 3 else f"{depth}-bit"
+        raise ValueError(
+            f"`{arg}`: {path} is a {what} PNG ({depth} bit per sample); a normal map must be "
+            "8- or 16-bit RGB or RGBA (R, G, B = x, y, z)"
+        )
+
+
 def _decode_unit(pixels: np.ndarray, path: Path, arg: str) -> np.ndarray:
-    """uint8/uint16 -> [-1, 1] per channel; float passes through; other dtypes are refused."""
-    if pixels.dtype == np.uint8 or pixels.dtype == np.uint16:
-        maxval = float(np.iinfo(pixels.dtype).max)
-        n = pixels.astype(np.float64) / maxval * 2.0 - 1.0
-        length = np.linalg.norm(n, axis=-1)
-        lo, hi = ENCODED_LENGTH_RANGE
-        n[(length < lo) | (length > hi)] = np.nan
-        return n
+    """uint8/uint16 -> [-1, 1] per channel (:func:`facetlift.frames.decode`); float passes
+    through; other dtypes are refused."""
+    if pixels.dtype in frames.ENCODED_DTYPES:
+        return frames.decode(pixels)
     if pixels.dtype.kind == "f":
         return pixels.astype(np.float64)
     raise ValueError(
@@ -105,18 +114,24 @@ def _split_alpha(pixels: np.ndarray, path: Path, arg: str):
 # readers
 
 
-def read_normals(path, *, y_down: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+def read_normals(
+    path, *, frame: str | None = None, y_down: bool = False
+) -> tuple[np.ndarray, np.ndarray | None]:
     """Read a normal map.
 
     Parameters
     ----------
     path : str or Path
         ``.png`` (8 or 16 bit RGB/RGBA), ``.tif``/``.tiff`` (uint8, uint16 or float, 3 or 4
-        channels), ``.exr`` (channels R, G, B or X, Y, Z, optionally A) or ``.npy`` ((H, W, 3)
-        or (H, W, 4)).
+        channels), ``.exr`` (HALF or FLOAT channels R, G, B or X, Y, Z, optionally A) or
+        ``.npy`` ((H, W, 3) or (H, W, 4); float, or uint8/uint16 decoded like PNG pixels).
+        Palette and 1/2/4-bit PNGs, UINT EXR channels and other integer types are refused.
+    frame : str, optional
+        The frame the file stores: ``"opengl"`` (default: x right, y up, z toward the
+        viewer), ``"directx"``, ``"opencv"`` or an axis string such as ``"x,-y,-z"``
+        (:mod:`facetlift.frames`); the normals are converted to facetlift's.
     y_down : bool
-        The file stores y pointing *down* (DirectX / OpenCV style); the y component is negated
-        to give the facetlift convention (y up).
+        Alias of ``frame="directx"``: the file stores y pointing *down*.
 
     Returns
     -------
@@ -130,12 +145,17 @@ def read_normals(path, *, y_down: bool = False) -> tuple[np.ndarray, np.ndarray 
     ------
     ValueError
         Missing, corrupt or truncated file, wrong number of channels, unsupported pixel type
-        or extension. The message names the path.
+        or extension, a bad `frame`. The message names the path.
     """
     arg = "path"
+    frame = frames.resolve(frame, y_down)
+    frames.parse(frame)
     p = _existing(path, arg)
     ext = _suffix(p, NORMAL_READ_FORMATS, "normal map", arg)
     if ext in (".png", ".tif", ".tiff"):
+        if ext == ".png":
+            with open(p, "rb") as fh:
+                _check_png_normals(fh.read(26), p, arg)
         pixels = _decode_image(p, ext, arg)
         rgb, alpha = _split_alpha(pixels, p, arg)
         n = _decode_unit(rgb, p, arg)
@@ -148,16 +168,19 @@ def read_normals(path, *, y_down: bool = False) -> tuple[np.ndarray, np.ndarray 
             raise ValueError(
                 f"`{arg}`: {p} must have channels R, G, B or X, Y, Z; got {sorted(ch)}"
             )
+        ints = [c for c in names if ch[c].dtype.kind in "iu"]
+        if ints:
+            raise ValueError(
+                f"`{arg}`: {p} has integer (UINT) channel(s) {ints}; normal maps in EXR must be "
+                "HALF or FLOAT, holding the components themselves"
+            )
         n = np.stack([ch[c] for c in names], axis=-1).astype(np.float64)
         alpha = ch["A"] > 0 if "A" in ch else None
     else:
         arr = _read_npy(p, arg)
-        rgb, alpha_v = _split_alpha(arr, p, arg)
-        n = rgb.astype(np.float64)
-        alpha = None if alpha_v is None else alpha_v
-    if y_down:
-        n[..., 1] = -n[..., 1]
-    return n, alpha
+        rgb, alpha = _split_alpha(arr, p, arg)
+        n = _decode_unit(rgb, p, arg)  # uint8/uint16 arrays decode like PNG pixels
+    return frames.to_facetlift(n, frame), alpha
 
 
 def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
@@ -207,26 +230,30 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
     return m
 
 
-def read_depth(path) -> np.ndarray:
-    """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF)."""
-    arg = "path"
+def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = ()) -> np.ndarray:
+    """One (H, W) array as stored: ``.npy``, OpenEXR (its channel named in `prefer`, or its
+    only channel) or TIFF. Shared by :func:`read_depth` and the gradient readers."""
     p = _existing(path, arg)
-    ext = _suffix(p, DEPTH_FORMATS, "depth", arg)
+    ext = _suffix(p, formats, what, arg)
     if ext == ".npy":
-        d = _read_npy(p, arg)
+        a = _read_npy(p, arg)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
-        if "Z" in ch:
-            d = ch["Z"]
-        elif len(ch) == 1:
-            d = next(iter(ch.values()))
-        else:
-            raise ValueError(f"`{arg}`: {p} has no depth channel Z; channels {sorted(ch)}")
+        name = next((c for c in prefer if c in ch), next(iter(ch)) if len(ch) == 1 else None)
+        if name is None:
+            wanted = f"channel {' or '.join(prefer)} or one channel" if prefer else "one channel"
+            raise ValueError(f"`{arg}`: {p} must hold {wanted}; got channels {sorted(ch)}")
+        a = ch[name]
     else:
-        d = _decode_image(p, ext, arg)
-    if d.ndim != 2:
-        raise ValueError(f"`{arg}`: {p} must hold an (H, W) depth map; got shape {d.shape}")
-    return d.astype(np.float64)
+        a = _decode_image(p, ext, arg)
+    if a.ndim != 2:
+        raise ValueError(f"`{arg}`: {p} must hold an (H, W) {what} map; got shape {a.shape}")
+    return a
+
+
+def read_depth(path) -> np.ndarray:
+    """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF)."""
+    return read_plane(path, DEPTH_FORMATS, "depth", "path", prefer=("Z",)).astype(np.float64)
 
 
 # --------------------------------------------------------------------------------------------
@@ -239,8 +266,11 @@ def _write_exr(path: Path, channels: dict[str, np.ndarray]) -> None:
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     data = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in channels.items()}
     with atomic_path(path) as tmp:
-        with OpenEXR.File(header, data) as f:
-            f.write(str(tmp))
+        try:
+            with OpenEXR.File(header, data) as f:
+                f.write(str(tmp))
+        except RuntimeError as e:  # the bindings report every write failure this way
+            raise OSError(f"cannot write {path} as OpenEXR: {e}") from None
 
 
 def _write_tiff(path: Path, arr: np.ndarray) -> None:
@@ -287,7 +317,9 @@ def write_depth(path, depth) -> Path:
     return p
 
 
-def write_normals(path, normals, mask=None, *, bits: int = 16, y_down: bool = False) -> Path:
+def write_normals(
+    path, normals, mask=None, *, bits: int = 16, frame: str | None = None, y_down: bool = False
+) -> Path:
     """Write a normal map (the inverse of :func:`read_normals`).
 
     Parameters
@@ -302,16 +334,17 @@ def write_normals(path, normals, mask=None, *, bits: int = 16, y_down: bool = Fa
     bits : {8, 16, 32}
         PNG: 8 or 16 bit per channel; TIFF: 8, 16 (integer) or 32 (float32). Ignored for EXR
         (float32) and npy (float64).
+    frame : str, optional
+        Store the normals in this frame (:mod:`facetlift.frames`; default facetlift's).
     y_down : bool
-        Store y pointing down (negate the y component).
+        Alias of ``frame="directx"``: store y pointing down.
     """
     p = Path(path)
     ext = _suffix(p, NORMAL_WRITE_FORMATS, "normal map", "path")
     n = _image_array(normals, "normals", 3).astype(np.float64)
     if n.shape[-1] != 3:
         raise ValueError(f"`normals` must have shape (H, W, 3); got {n.shape}")
-    if y_down:
-        n[..., 1] = -n[..., 1]
+    n = frames.from_facetlift(n, frames.resolve(frame, y_down))
     m = None
     if mask is not None:
         m = np.asarray(mask) != 0

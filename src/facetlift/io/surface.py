@@ -21,8 +21,9 @@ def save_surface(surface, path, **kwargs) -> Path:
     ``.npy``, ``.exr``, ``.tif``/``.tiff``: the (H, W) depth map (:func:`write_depth`);
     ``.npz``: arrays ``depth``, ``vertex_depth``, ``mask``, ``pixel_size`` and ``K`` (NaN-filled
     3x3 when orthographic); ``.ply``/``.obj``: the facet mesh (:func:`write_mesh`; keyword
-    ``triangles=True`` splits quads); ``.png``: a shaded preview (:func:`write_preview`,
-    keywords forwarded). Returns the path written.
+    ``triangles``: True splits each quad in two, False keeps quads; default quads for PLY and
+    triangles for OBJ, since OBJ readers such as Open3D's take triangles only); ``.png``: a
+    shaded preview (:func:`write_preview`, keywords forwarded). Returns the path written.
 
     Raises
     ------
@@ -57,7 +58,9 @@ def save_surface(surface, path, **kwargs) -> Path:
         extra = sorted(set(kwargs) - {"triangles"})
         if extra:
             raise ValueError(f"{ext} output takes only `triangles`; got {extra}")
-        verts, faces = surface.to_mesh(triangles=bool(kwargs.get("triangles", False)))
+        triangles = kwargs.get("triangles")
+        triangles = ext == ".obj" if triangles is None else bool(triangles)
+        verts, faces = surface.to_mesh(triangles=triangles)
         return write_mesh(p, verts, faces)
     preview_kw = {"light", "colormap", "min_size", "background"}
     extra = sorted(set(kwargs) - preview_kw)

@@ -104,7 +104,8 @@ log = logging.getLogger(__name__)
 _EIGHT = np.ones((3, 3), dtype=bool)
 
 OPTIONS = (
-    Option("sigma", 2.0, "kernel width in pixels", low=0.0, low_open=True),
+    # below a thousandth of a pixel no two samples interact, and sigma**2 underflows to 0
+    Option("sigma", 2.0, "kernel width in pixels", low=1e-3),
     Option("reg", 1e-6, "ridge regularisation, relative to the Gram diagonal", low=0.0),
     Option("tile", 16, "core size of the local fits in pixels", kind="int", low=4),
     Option("margin", None, "data border of each local fit in pixels (default ceil(2 sigma))",

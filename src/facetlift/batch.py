@@ -1,0 +1,379 @@
+"""Many integrations at once, on Dask: ``facetlift batch`` and :func:`facetlift.batch`.
+
+Every item is one :class:`facetlift.jobs.Job` with its own output folder ``OUT/<name>/``.
+Items run on the Dask local scheduler with one process per worker (``workers=N``), or on a
+``dask.distributed`` cluster (``scheduler="tcp://host:8786"`` or a ``Client``). A failing item
+never stops the others: its record says why. Every finished item appends one JSON line to the
+log (``OUT/batch.jsonl``): ``item``, ``name``, ``status``, ``error``, ``exit``, ``outputs``,
+``mean_deviation``, ``seconds``. ``resume=True`` skips the items whose last record is ``ok``
+and whose outputs are all there.
+
+Dask comes with the ``batch`` extra (``pip install 'facetlift[batch]'``) and is imported only
+when more than one worker or a cluster is asked for.
+
+Statuses: ``ok``; ``error`` (bad input or a missing extra: ValueError, OSError, ImportError;
+exit 1); ``memory``
+(MemoryLimitError, exit 1); ``solver`` (SolverError, exit 2); ``not_converged`` (outputs
+written, exit 2); ``bug`` (any other exception, exit 3).
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+import sys
+import time
+import types
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from .jobs import Job
+
+#: Name of the JSON-lines log inside the batch's output folder.
+LOG_NAME = "batch.jsonl"
+
+_GLOB = set("*?[")
+
+
+@dataclass(frozen=True)
+class Item:
+    """One input of a batch and the name of its output folder."""
+
+    path: str
+    name: str
+    mask: str | None = None
+
+
+def items(inputs, *, list_file=None) -> list[Item]:
+    """The batch items of `inputs`: normal-map files, dataset folders (with ``normal_map.*``),
+    folders of either (one level), glob patterns, and the lines of `list_file` (one path or
+    pattern per line; ``#`` starts a comment).
+
+    A file ``<stem>_mask.<ext>`` next to ``<stem>.<ext>`` is its mask, and is not an item.
+    Output names are the file stems or folder names, made unique with ``-2``, ``-3``, ...
+
+    Raises
+    ------
+    ValueError
+        An input that does not exist or a pattern that matches nothing; no item at all.
+    """
+    from .io.images import MASK_FORMATS, NORMAL_READ_FORMATS
+
+    specs = [str(s) for s in inputs]
+    if list_file is not None:
+        try:
+            lines = Path(list_file).read_text().splitlines()
+        except OSError as e:
+            raise ValueError(f"`list_file`: cannot read {list_file}: {e.strerror}") from None
+        base = Path(list_file).parent
+        for line in lines:
+            line = line.split("#", 1)[0].strip()
+            if line:
+                specs.append(line if os.path.isabs(line) else str(base / line))
+    paths: list[Path] = []
+    for spec in specs:
+        if _GLOB & set(spec):
+            found = sorted(glob.glob(spec))
+            if not found:
+                raise ValueError(f"`inputs`: the pattern {spec!r} matches nothing")
+            paths += [Path(f) for f in found]
+            continue
+        p = Path(spec)
+        if not p.exists():
+            raise ValueError(f"`inputs`: {p} does not exist")
+        if p.is_dir() and not _is_dataset(p, NORMAL_READ_FORMATS):
+            kinds = NORMAL_READ_FORMATS + (".mat",)
+            paths += sorted(c for c in p.iterdir()
+                            if (c.is_dir() and _is_dataset(c, NORMAL_READ_FORMATS))
+                            or (c.is_file() and c.suffix.lower() in kinds))
+        else:
+            paths.append(p)
+    out, seen, taken = [], set(), {}
+    for p in paths:
+        key = str(p.resolve())
+        if key in seen or _is_mask_file(p):
+            continue
+        seen.add(key)
+        stem = p.name if p.is_dir() else p.stem
+        taken[stem] = taken.get(stem, 0) + 1
+        name = stem if taken[stem] == 1 else f"{stem}-{taken[stem]}"
+        mask = None
+        if p.is_file():
+            mask = next((str(m) for ext in MASK_FORMATS
+                         if (m := p.with_name(f"{p.stem}_mask{ext}")).is_file()), None)
+        out.append(Item(path=key, name=name, mask=mask))
+    if not out:
+        raise ValueError(f"`inputs`: no normal map found in {specs}")
+    return out
+
+
+def _is_dataset(folder: Path, formats) -> bool:
+    return any((folder / f"normal_map{ext}").is_file() for ext in formats)
+
+
+def _is_mask_file(p: Path) -> bool:
+    return p.is_file() and (p.stem == "mask" or p.stem.endswith("_mask"))
+
+
+def run_item(job: Job, threads: int | None = None) -> dict:
+    """Run one job and return its record; never raises (the record's ``status`` says why it
+    failed). Runs in the worker processes, where `threads` limits the BLAS threads (one worker
+    process per core: more threads would only compete)."""
+    from .errors import MemoryLimitError, SolverError
+    from .jobs import run
+
+    t0 = time.perf_counter()
+    rec = {"status": "ok", "error": None, "exit": 0}
+    try:
+        if threads is None:
+            result = run(job)
+        else:
+            from threadpoolctl import threadpool_limits
+
+            with threadpool_limits(threads):
+                result = run(job)
+        rec.update(result)
+        if not result["converged"] and result["info"].get("solver") != "discontinuous":
+            rec.update(status="not_converged", exit=2, error="did not converge")
+    except MemoryLimitError as e:
+        rec.update(status="memory", error=str(e), exit=1)
+    except (ValueError, OSError, ImportError) as e:
+        rec.update(status="error", error=str(e), exit=1)
+    except SolverError as e:
+        rec.update(status="solver", error=str(e), exit=2)
+    except MemoryError as e:
+        rec.update(status="memory", error=f"out of memory ({e})", exit=1)
+    except Exception as e:
+        rec.update(status="bug", error=f"{type(e).__name__}: {e}", exit=3)
+    rec["seconds"] = time.perf_counter() - t0
+    rec.setdefault("mean_deviation", None)
+    rec.setdefault("outputs", {})
+    return rec
+
+
+def _finished(log: Path) -> dict[str, dict]:
+    """item -> its last record in an existing log (unreadable lines are skipped)."""
+    done = {}
+    if log.is_file():
+        for line in log.read_text().splitlines():
+            try:
+                rec = json.loads(line)
+            except json.JSONDecodeError:
+                continue  # a line cut by a killed run
+            if isinstance(rec, dict) and "item" in rec:
+                done[rec["item"]] = rec
+    return done
+
+
+def _complete(rec: dict) -> bool:
+    return rec.get("status") == "ok" and all(Path(p).is_file()
+                                             for p in rec.get("outputs", {}).values())
+
+
+def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
+          scheduler=None, resume: bool = False, progress: bool = False,
+          list_file=None, log=None, **job_options) -> list[dict]:
+    """Integrate many normal maps, each into ``out/<name>/``.
+
+    Parameters
+    ----------
+    inputs : sequence of str or Path
+        Files, dataset folders, folders of them, glob patterns (see :func:`items`).
+    out : str or Path
+        The batch's output folder.
+    job : facetlift.jobs.Job, optional
+        The template for every item (method, options, outputs, frame ...); or give its fields
+        as keywords (``method="dgp"``, ``save=("npy",)``, ``options={...}``).
+    workers : int, optional
+        Local worker processes (default: the CPU count, at most the item count); 1 runs the
+        items one after another in this process, without Dask.
+    scheduler : str or dask.distributed.Client, optional
+        A ``dask.distributed`` scheduler address (``"tcp://host:8786"``) or client: run there
+        instead. The workers must see the input and output paths.
+    resume : bool
+        Skip items finished in an earlier run (their log record ``ok``, outputs present).
+    progress : bool
+        A progress bar on stderr (library code is quiet by default; the command line shows
+        it when stderr is a terminal).
+    list_file : str or Path, optional
+        More inputs, one per line.
+    log : str or Path, optional
+        The JSON-lines log; default ``out/batch.jsonl``.
+
+    Returns
+    -------
+    list of dict
+        One record per item, in item order (skipped items: their earlier record, with
+        ``"resumed": True``).
+
+    Raises
+    ------
+    ValueError
+        No items, a bad template or `workers`; per-item failures are records, not raised.
+    ImportError
+        Dask is needed (workers > 1 or a scheduler) and not installed.
+    RuntimeError
+        The local worker processes died (killed, or started from a script without a
+        ``__main__`` guard); the log keeps what finished, so ``resume=True`` goes on.
+    """
+    from .io.atomic import prepare_folder
+
+    template = job if job is not None else Job(**job_options)
+    if job is not None and job_options:
+        raise ValueError(f"give `job` or job options, not both; got {sorted(job_options)}")
+    found = items(inputs, list_file=list_file)
+    root = Path(out).resolve()
+    prepare_folder(root)  # created and checked before any work
+    log_path = root / LOG_NAME if log is None else Path(log)
+    earlier = _finished(log_path) if resume else {}
+    jobs, results = [], {}
+    for it in found:
+        rec = earlier.get(it.path)
+        if rec is not None and _complete(rec):
+            results[it.path] = dict(rec, resumed=True)
+            continue
+        j = template.with_input(it.path, root / it.name)
+        if it.mask is not None and template.mask is None:
+            j = replace(j, mask=it.mask)
+        jobs.append((it, j))
+    n_workers = _workers(workers, len(jobs))
+    with open(log_path, "a", encoding="utf-8") as fh, \
+            _Bar(len(found), len(results), bool(progress)) as bar:
+
+        def done(it: Item, rec: dict) -> None:
+            rec = dict(rec, item=it.path, name=it.name)
+            results[it.path] = rec
+            fh.write(json.dumps(_json(rec)) + "\n")
+            fh.flush()
+            bar.update(rec["status"])
+
+        if jobs and scheduler is not None:
+            _on_cluster(jobs, scheduler, done)
+        elif jobs and n_workers > 1:
+            _on_processes(jobs, n_workers, done)
+        else:
+            for it, j in jobs:
+                done(it, run_item(j))
+    return [results[it.path] for it in found]
+
+
+def _workers(workers, n_jobs: int) -> int:
+    if workers is None:
+        return max(1, min(os.cpu_count() or 1, n_jobs))
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"`workers` must be a positive integer; got {workers!r}")
+    return workers
+
+
+def _json(rec: dict) -> dict:
+    from .jobs import jsonable
+
+    keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
+            "shape", "facets", "converged", "warnings", "resumed")
+    return jsonable({k: rec[k] for k in keep if k in rec})
+
+
+def _dask():
+    try:
+        import dask
+    except ImportError as e:
+        raise ImportError(
+            "facetlift batch with several workers or a cluster needs Dask, which comes with "
+            "the batch extra: pip install 'facetlift[batch]' (or run with --workers 1)"
+        ) from e
+    return dask
+
+
+def _on_processes(jobs, n_workers: int, done) -> None:
+    """The Dask local scheduler, one process per worker; `done` runs here as items finish."""
+    dask = _dask()
+    from dask.callbacks import Callback
+
+    keys = {}
+    tasks = []
+    for it, j in jobs:
+        task = dask.delayed(run_item, pure=False)(j, 1, dask_key_name=f"item-{len(tasks)}")
+        keys[task.key] = it
+        tasks.append(task)
+
+    class _Done(Callback):
+        def _posttask(self, key, result, dsk, state, worker_id):
+            if key in keys:
+                done(keys[key], result)
+
+    from concurrent.futures.process import BrokenProcessPool
+
+    try:
+        with _Done():
+            dask.compute(*tasks, scheduler="processes", num_workers=n_workers)
+    except BrokenProcessPool as e:
+        raise RuntimeError(
+            "the batch's worker processes died before finishing (killed, out of memory, or "
+            "started from a script without `if __name__ == '__main__':`, which worker "
+            "processes need); the log has the items that finished: rerun with resume=True, "
+            "or with workers=1"
+        ) from e
+
+
+def _on_cluster(jobs, scheduler, done) -> None:
+    """A ``dask.distributed`` scheduler (address or Client); `done` runs as futures finish."""
+    _dask()
+    from distributed import Client, as_completed
+
+    own = not isinstance(scheduler, Client)
+    client = Client(scheduler) if own else scheduler
+    try:
+        futures = {}
+        for it, j in jobs:
+            futures[client.submit(run_item, j, 1, pure=False)] = it
+        for fut in as_completed(list(futures)):
+            it = futures[fut]
+            try:
+                rec = fut.result()
+            except Exception as e:  # a worker died or the task could not run at all
+                rec = {"status": "bug", "error": f"{type(e).__name__}: {e}", "exit": 3,
+                       "outputs": {}, "mean_deviation": None, "seconds": None}
+            done(it, rec)
+    finally:
+        if own:
+            client.close()
+
+
+class _Bar:
+    """A tqdm bar over the batch's items (nothing when not shown)."""
+
+    def __init__(self, total: int, initial: int, show: bool):
+        self.total, self.initial, self.show, self.failed = total, initial, show, 0
+        self.bar = None
+
+    def __enter__(self):
+        if self.show:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=self.total, initial=self.initial, desc="batch", unit="map",
+                            file=sys.stderr, leave=False)
+        return self
+
+    def update(self, status: str) -> None:
+        self.failed += status != "ok"
+        if self.bar is not None:
+            self.bar.update(1)
+            if self.failed:
+                self.bar.set_postfix_str(f"{self.failed} failed", refresh=False)
+
+    def __exit__(self, *exc):
+        if self.bar is not None:
+            self.bar.close()
+        return False
+
+
+class _CallableModule(types.ModuleType):
+    """``facetlift.batch`` is this module and the function at once: ``facetlift.batch(...)``
+    runs :func:`batch` whichever way the name was first imported."""
+
+    def __call__(self, *args, **kwargs):
+        return batch(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

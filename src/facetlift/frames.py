@@ -1,0 +1,369 @@
+"""Normal-map frames and encodings: what the numbers in a normal map mean, and the checks that
+catch a map whose meaning was guessed wrong.
+
+facetlift's own frame is x right, y up, z toward the viewer (:mod:`facetlift.conventions`).
+Other sources store normals in other frames; a *frame* names the source's axes in facetlift
+terms, either by one of the names in :data:`FRAMES` or as an axis string:
+
+``"x,-y,-z"``
+    facetlift x = the source's x, facetlift y = minus the source's y, facetlift z = minus the
+    source's z, where the source's x, y, z are its first, second and third channels (R, G, B)
+    after decoding. A string may also permute the channels (``"y,-x,z"``: facetlift x is the
+    source's second channel). Every axis appears once.
+
+=====================  ============  ===============================================
+name                   axis string   the source stores
+=====================  ============  ===============================================
+``opengl`` (default)   ``x,y,z``     x right, y up, z toward the viewer (DiLiGenT, BiNI)
+``directx``/``y_down`` ``x,-y,z``    x right, y down, z toward the viewer
+``opencv``             ``x,-y,-z``   x right, y down, z away from the viewer (camera frame)
+=====================  ============  ===============================================
+
+docs/conventions.md maps common sources (Blender, Unreal, DSINE, Omnidata, Marigold, ...) to
+these flags.
+
+Encodings
+    Integer normal maps (uint8, uint16) store ``v = (n + 1) / 2 * max``; :func:`decode` inverts
+    that (``n = v / max * 2 - 1``) and marks pixels whose decoded length lies outside
+    :data:`ENCODED_LENGTH_RANGE` (background fill) as NaN. :func:`checked` does the same for
+    arrays handed to :func:`facetlift.integrate`, with a warning, and refuses float maps that
+    look [0, 1]-encoded (every component in [0, 1] and lengths that are not 1) or that face away
+    from the viewer, naming the fix. Only pixels inside the mask are inspected.
+
+After a solve, :func:`flip_check` compares how integrable the field is as given and with y or x
+flipped, and warns when a flip is far more consistent.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from ._warnings import warn
+
+#: Named frames -> axis strings (see the module docstring).
+FRAMES = {
+    "opengl": "x,y,z",
+    "directx": "x,-y,z",
+    "y_down": "x,-y,z",
+    "y-down": "x,-y,z",
+    "opencv": "x,-y,-z",
+}
+
+#: Decoded integer pixels whose vector length lies outside this range are not normals (NaN).
+ENCODED_LENGTH_RANGE = (0.5, 1.5)
+
+#: Integer pixel types decoded as ``v / max * 2 - 1``.
+ENCODED_DTYPES = (np.uint8, np.uint16)
+
+#: A float map with at least this many pixels in the mask is checked for a [0, 1] encoding.
+ENCODING_CHECK_PIXELS = 64
+
+#: A far more integrable flipped field: its relative curl below this fraction of the field's.
+FLIP_RATIO = 0.5
+#: ... and the field's own relative curl above this (a clean field is left alone).
+FLIP_MIN_CURL = 0.4
+
+_AXIS = re.compile(r"^\s*([+-]?)\s*([xyz])\s*$")
+
+
+def parse(frame) -> tuple[tuple[int, int, int], np.ndarray]:
+    """``(channels, signs)`` of a frame: facetlift axis ``i`` = ``signs[i] * source[channels[i]]``.
+
+    Parameters
+    ----------
+    frame : str or None
+        A name in :data:`FRAMES` (case-insensitive), an axis string such as ``"x,-y,-z"``, or
+        None for the facetlift frame.
+
+    Raises
+    ------
+    ValueError
+        Neither a known name nor three comma-separated axes using each of x, y, z once.
+    """
+    text = "x,y,z" if frame is None else frame
+    if not isinstance(text, str):
+        raise ValueError(f"`normal_frame` must be a frame name or an axis string; got {frame!r}")
+    text = FRAMES.get(text.strip().lower(), text)
+    parts = [_AXIS.match(t) for t in text.lower().split(",")]
+    if len(parts) != 3 or not all(parts) or {p.group(2) for p in parts} != {"x", "y", "z"}:
+        raise ValueError(
+            f"`normal_frame` must be one of {sorted(FRAMES)} or an axis string such as "
+            f"'x,-y,-z' (each of x, y, z once, optionally negated); got {frame!r}"
+        )
+    channels = tuple("xyz".index(p.group(2)) for p in parts)
+    signs = np.array([-1.0 if p.group(1) == "-" else 1.0 for p in parts])
+    return channels, signs
+
+
+def axis_string(frame) -> str:
+    """The axis string of `frame`, e.g. ``"x,-y,-z"`` for ``"opencv"``."""
+    channels, signs = parse(frame)
+    return ",".join(("-" if s < 0 else "") + "xyz"[c]
+                    for c, s in zip(channels, signs, strict=True))
+
+
+def is_identity(frame) -> bool:
+    """True when `frame` is the facetlift frame (nothing to convert)."""
+    channels, signs = parse(frame)
+    return channels == (0, 1, 2) and bool((signs > 0).all())
+
+
+def to_facetlift(normals: np.ndarray, frame) -> np.ndarray:
+    """(..., 3) normals in `frame` -> the facetlift frame (a new array unless the identity)."""
+    if is_identity(frame):
+        return normals
+    channels, signs = parse(frame)
+    return normals[..., list(channels)] * signs
+
+
+def from_facetlift(normals: np.ndarray, frame) -> np.ndarray:
+    """(..., 3) facetlift normals -> `frame`: the inverse of :func:`to_facetlift`."""
+    if is_identity(frame):
+        return normals
+    channels, signs = parse(frame)
+    out = np.empty_like(normals, dtype=np.result_type(normals, float))
+    out[..., list(channels)] = normals * signs
+    return out
+
+
+def resolve(frame, y_down: bool) -> str | None:
+    """One frame from a `frame` argument and the older ``y_down`` flag (its alias)."""
+    if not y_down or frame is None:
+        return "directx" if y_down else frame
+    (ch, sg), (ch_dx, sg_dx) = parse(frame), parse("directx")
+    if ch == ch_dx and (sg == sg_dx).all():
+        return frame
+    raise ValueError(
+        f"`y_down=True` is the frame 'directx'; it conflicts with frame {frame!r}: give one "
+        "of them"
+    )
+
+
+def decode(pixels: np.ndarray) -> np.ndarray:
+    """uint8/uint16 pixels -> float64 normals ``v / max * 2 - 1``; NaN where the decoded
+    length is outside :data:`ENCODED_LENGTH_RANGE` (background fill, not a normal)."""
+    maxval = float(np.iinfo(pixels.dtype).max)
+    n = pixels.astype(np.float64) / maxval * 2.0 - 1.0
+    length = np.sqrt(np.einsum("...i,...i->...", n, n))
+    lo, hi = ENCODED_LENGTH_RANGE
+    n[(length < lo) | (length > hi)] = np.nan
+    return n
+
+
+def checked(normals, mask=None, *, frame=None, name: str = "normals"):
+    """Normals as :func:`facetlift.integrate` receives them -> float normals in the facetlift
+    frame, after the safety nets (see the module docstring).
+
+    Arrays that are not (H, W, 3) numbers pass through unchanged, for
+    :func:`facetlift.prepare` to refuse with its own message.
+
+    Warns
+    -----
+    UserWarning
+        uint8/uint16 input, decoded as ``v / max * 2 - 1``.
+
+    Raises
+    ------
+    ValueError
+        Other unsigned integer types; a float map that looks [0, 1]-encoded; a map whose
+        normals mostly face away from the viewer (a camera frame with z pointing away); a bad
+        `frame`.
+    """
+    parse(frame)
+    try:
+        n = np.asarray(normals)
+    except Exception:
+        return normals  # prepare() says what is wrong with it
+    if n.ndim != 3 or n.shape[-1] != 3 or n.dtype.kind not in "uif":
+        return normals
+    if n.dtype.kind == "u":
+        if n.dtype not in ENCODED_DTYPES:
+            raise ValueError(
+                f"`{name}` has integer type {n.dtype}; integer normal maps must be uint8 or "
+                "uint16 (decoded as v / max * 2 - 1): decode it yourself and pass floats"
+            )
+        warn(
+            f"`{name}` is {n.dtype}: decoded as v / {np.iinfo(n.dtype).max} * 2 - 1 (the PNG "
+            "encoding); pass float normals to silence this"
+        )
+        n = decode(n)
+    n = to_facetlift(n, frame)
+    sample = _inside(n, mask, sample=CHECK_SAMPLE)
+    if sample is not None:
+        _check_facing(sample, name)
+        if len(sample) and sample[:, :2].min() >= 0:  # only then can the whole map be encoded
+            _check_encoding(_inside(n, mask), name)
+    return n
+
+
+#: The facing check looks at about this many mask pixels, evenly spaced.
+CHECK_SAMPLE = 2**16
+
+
+def _inside(n: np.ndarray, mask, sample: int | None = None) -> np.ndarray | None:
+    """(k, 3) finite normals inside `mask` (None when `mask` cannot be read: prepare refuses),
+    every pixel or about `sample` of them, evenly spaced."""
+    if mask is None:
+        m = None
+    else:
+        try:
+            m = np.asarray(mask)
+        except Exception:
+            return None
+        if m.shape != n.shape[:2] or m.dtype.kind not in "biuf":
+            return None
+        with np.errstate(invalid="ignore"):
+            m = np.where(np.isfinite(m), m, 0) != 0 if m.dtype.kind == "f" else m != 0
+    flat = n.reshape(-1, 3)
+    if sample is not None and m is None:
+        v = flat[:: max(1, flat.shape[0] // sample)]
+    elif sample is not None:
+        idx = np.flatnonzero(m)
+        v = flat[idx[:: max(1, idx.size // sample)]]
+    else:
+        v = flat if m is None else n[m]
+    with np.errstate(invalid="ignore"):
+        return v[np.isfinite(v).all(axis=1)]
+
+
+def _check_encoding(v: np.ndarray, name: str) -> None:
+    if len(v) < ENCODING_CHECK_PIXELS or v.min() < 0 or v.max() > 1:
+        return
+    with np.errstate(over="ignore", invalid="ignore"):
+        length = np.sqrt(np.einsum("ij,ij->i", v, v))
+    if np.mean(np.abs(length - 1) > 0.05) < 0.5:
+        return  # unit normals that all face up and right: a tilted plane, say
+    raise ValueError(
+        f"`{name}` looks [0, 1]-encoded: every component inside the mask lies in [0, 1] (no "
+        "normal faces left or down) and the vectors are not unit length; decode it first "
+        "with n = 2 * v - 1 (or pass the 8/16-bit integer image itself). If these really are "
+        "normals, normalise them to unit length"
+    )
+
+
+def _check_facing(v: np.ndarray, name: str) -> None:
+    if len(v) < ENCODING_CHECK_PIXELS:
+        return
+    if np.mean(v[:, 2] < 0) <= 0.5:
+        return
+    raise ValueError(
+        f"`{name}`: {np.mean(v[:, 2] < 0):.0%} of the normals inside the mask face away from "
+        "the viewer (z < 0): the map is probably in a camera frame with z pointing away "
+        "(OpenCV, Omnidata, Metric3D): pass normal_frame='opencv' (--normal-frame opencv), or "
+        "see docs/conventions.md for the frame of your source"
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# after the solve: would a flipped field be more integrable?
+
+
+#: :func:`relative_curl` looks at about this many pixels, in strips of two rows.
+CURL_SAMPLE = 2**18
+
+
+def relative_curl(problem, flip=(1.0, 1.0, 1.0), *, sample: int = CURL_SAMPLE) -> float:
+    """Mean |curl| of the grid slopes over 2x2 blocks of usable pixels, relative to the mean
+    size of the two cross derivatives: 0 for an integrable field, about 1 for noise; NaN
+    without such a block.
+
+    The normals are multiplied by `flip` first. Large maps are sampled: pairs of adjacent
+    rows, evenly spaced, about `sample` pixels in all (every row pair up to 512 x 512).
+    """
+    d = problem.domain
+    H, W = d.shape
+    step = 1 if H * W <= sample else max(2, H // max(1, sample // (2 * W)))
+    keep_row = np.zeros(H, bool)
+    tops = np.arange(0, H - 1, step)
+    keep_row[tops] = True
+    keep_row[tops + 1] = True  # strips (i, i + 1); every row when step == 1
+    r, c = d.pixels
+    k = np.flatnonzero(keep_row[r] & problem.usable)
+    n = problem.normals[k] * np.asarray(flip, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gx, gy = problem.camera.grid_slopes(r[k], c[k], n)
+    # strip images: row i of the image -> slot, so that rows i and i + 1 stay adjacent
+    slot = np.cumsum(keep_row) - 1
+    GX = np.full((int(keep_row.sum()), W), np.nan)
+    GY = np.full_like(GX, np.nan)
+    GX[slot[r[k]], c[k]] = gx
+    GY[slot[r[k]], c[k]] = gy
+    if step > 1:  # only (top, bottom) pairs of one strip are neighbours
+        GX, GY = (np.stack([A[0::2], A[1::2]], axis=1).reshape(-1, 2, W) for A in (GX, GY))
+    else:
+        GX, GY = (np.stack([A[:-1], A[1:]], axis=1) for A in (GX, GY))
+    # at the vertex between four pixels; y points up (toward row 0)
+    dgx_dy = (GX[:, 0, :-1] + GX[:, 0, 1:] - GX[:, 1, :-1] - GX[:, 1, 1:]) / 2
+    dgy_dx = (GY[:, 0, 1:] + GY[:, 1, 1:] - GY[:, 0, :-1] - GY[:, 1, :-1]) / 2
+    curl = dgx_dy - dgy_dx
+    good = np.isfinite(curl)
+    if not good.any():
+        return float("nan")
+    total = (np.abs(dgx_dy[good]) + np.abs(dgy_dx[good])).sum()
+    return float(np.abs(curl[good]).sum() / total) if total > 0 else 0.0
+
+
+def flip_check(problem) -> dict:
+    """Relative curl (:func:`relative_curl`) of the field as given and with y and x flipped;
+    warns, naming the flag to try, when a flip is far more integrable.
+
+    Flipping x or y turns the surface inside out relative to the other flip, so the two are
+    (almost) equally integrable: the warning names both.
+
+    Returns
+    -------
+    dict
+        ``{"curl": ..., "curl_y_flipped": ..., "curl_x_flipped": ...}``.
+    """
+    out = {
+        "curl": relative_curl(problem),
+        "curl_y_flipped": relative_curl(problem, (1.0, -1.0, 1.0)),
+        "curl_x_flipped": relative_curl(problem, (-1.0, 1.0, 1.0)),
+    }
+    own, best = out["curl"], min(out["curl_y_flipped"], out["curl_x_flipped"])
+    if own > FLIP_MIN_CURL and best < FLIP_RATIO * own:
+        warn(
+            f"the normals are far more integrable with y flipped (relative curl {own:.2f} as "
+            f"given, {out['curl_y_flipped']:.2f} with y flipped): its frame is probably wrong "
+            "in y. For a map read in the default frame try --normal-frame directx "
+            "(normal_frame='directx'), or --normal-frame=-x,y,z if the surface then comes out "
+            "inside-out; docs/conventions.md lists the frames of common sources"
+        )
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# gradient fields
+
+#: Gradient frames -> what (p, q) hold. "xy" is facetlift's; "rowcol" is the layout of Quéau's
+#: normal_integration toolbox and of most MATLAB code.
+GRADIENT_FRAMES = {
+    "xy": "p = dz/dx (x right), q = dz/dy (y up)",
+    "rowcol": "p = dz/d(row) (down the rows), q = dz/d(col) (along the columns)",
+}
+_GRADIENT_ALIASES = {"queau": "rowcol", "matlab": "rowcol", "facetlift": "xy"}
+
+
+def gradient_frame(name) -> str:
+    """The canonical name of a gradient frame (:data:`GRADIENT_FRAMES`, or an alias: ``queau``,
+    ``matlab`` = ``rowcol``); ValueError otherwise."""
+    key = name.strip().lower() if isinstance(name, str) else name
+    key = _GRADIENT_ALIASES.get(key, key)
+    if key not in GRADIENT_FRAMES:
+        raise ValueError(
+            f"`gradient_frame` must be one of {sorted(GRADIENT_FRAMES)} (aliases "
+            f"{sorted(_GRADIENT_ALIASES)}); got {name!r}"
+        )
+    return key
+
+
+def gradients_to_facetlift(p, q, frame: str = "xy"):
+    """(p, q) in `frame` -> facetlift's ``(dz/dx, dz/dy)`` with x right and y up.
+
+    ``rowcol``: ``dz/dx = q`` and ``dz/dy = -p`` (a row step goes down, against y).
+    """
+    if gradient_frame(frame) == "xy":
+        return p, q
+    return q, -np.asarray(p, dtype=float)

@@ -1,0 +1,143 @@
+"""Gradient fields (p, q) as ``.npy``, OpenEXR or TIFF files, and MATLAB ``.mat`` files holding
+gradients or normals by variable name (scipy.io, imported on first use).
+
+The layout of (p, q) (which axis each one differentiates along, and which way) is a *gradient
+frame*, converted by :func:`facetlift.frames.gradients_to_facetlift`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ._paths import _existing, _suffix
+from .images import read_mask, read_plane
+
+GRADIENT_FORMATS = (".npy", ".exr", ".tif", ".tiff")
+
+
+def read_gradient(path, arg: str = "p") -> np.ndarray:
+    """One (H, W) float component of a gradient field: ``.npy``, a one-channel (or channel
+    ``Y``/``Z``/``R``) OpenEXR file, or a float TIFF.
+
+    Raises
+    ------
+    ValueError
+        Missing or unreadable file, several channels, not 2-D, or an integer pixel type (a
+        gradient has no integer encoding).
+    """
+    a = read_plane(path, GRADIENT_FORMATS, "gradient", arg)
+    if a.dtype.kind != "f":
+        raise ValueError(
+            f"`{arg}`: {path} has pixel type {a.dtype}; gradients must be floating point"
+        )
+    return a.astype(np.float64)
+
+
+def read_gradients(p_path, q_path, mask_path=None) -> dict:
+    """``{"p", "q", "mask"}`` from two gradient files (:func:`read_gradient`) and an optional
+    mask image; the arrays are as stored (see :func:`facetlift.integrate_gradients` for their
+    frame)."""
+    p = read_gradient(p_path, "p")
+    q = read_gradient(q_path, "q")
+    if q.shape != p.shape:
+        raise ValueError(f"`q`: {q_path} has shape {q.shape}, but `p` has {p.shape}")
+    mask = None if mask_path is None else read_mask(mask_path, p.shape)
+    return {"p": p, "q": q, "mask": mask}
+
+
+def read_mat(path, keys=None) -> dict:
+    """Read gradients or normals from a MATLAB ``.mat`` file (v4 to v7; v7.3 is HDF5).
+
+    Parameters
+    ----------
+    path : str or Path
+    keys : sequence of str, optional
+        Variable names: ``(p, q)`` or ``(p, q, mask)`` for a gradient field, ``(normals,)`` or
+        ``(normals, mask)`` for a normal map (an (H, W, 3) variable). Default: ``p`` and
+        ``q`` (and ``mask`` when present) if the file has them, else its only (H, W, 3)
+        variable (and ``mask``).
+
+    Returns
+    -------
+    dict
+        ``{"p", "q", "mask"}`` or ``{"normals", "mask"}``, float64 arrays as stored (mask
+        bool or None).
+
+    Raises
+    ------
+    ValueError
+        Unreadable or v7.3 file, a missing variable (the message lists those present), or
+        arrays of the wrong shape.
+    """
+    from scipy import io as sio
+
+    arg = "path"
+    f = _existing(path, arg)
+    _suffix(f, (".mat",), "MATLAB", arg)
+    try:
+        data = sio.loadmat(f)
+    except NotImplementedError:
+        raise ValueError(
+            f"`{arg}`: {f} is a MATLAB v7.3 (HDF5) file, which scipy cannot read; save it "
+            "with save(..., '-v7') in MATLAB, or read it with h5py and pass the arrays to "
+            "facetlift.integrate_gradients"
+        ) from None
+    except Exception as e:
+        raise ValueError(
+            f"`{arg}`: {f} is not a readable .mat file ({type(e).__name__}: {e})"
+        ) from None
+    names = sorted(k for k in data if not k.startswith("__"))
+    keys = _default_keys(data, names) if keys is None else list(keys)
+    missing = [k for k in keys if k not in data]
+    if missing or not 1 <= len(keys) <= 3:
+        raise ValueError(
+            f"`mat_keys`: {f} has variables {names}; asked for {keys} (give p,q[,mask] or "
+            "normals[,mask])"
+        )
+    arrays = [np.asarray(data[k]) for k in keys]
+    for k, a in zip(keys, arrays, strict=True):
+        if a.dtype.kind not in "biuf":
+            raise ValueError(f"`mat_keys`: variable {k!r} of {f} is not numeric ({a.dtype})")
+    if arrays[0].ndim == 3:
+        if len(keys) > 2 or arrays[0].shape[-1] != 3:
+            raise ValueError(
+                f"`mat_keys`: variable {keys[0]!r} of {f} has shape {arrays[0].shape}; a "
+                "normal map is (H, W, 3), followed by at most a mask"
+            )
+        out = {"normals": arrays[0].astype(np.float64)}
+        rest = arrays[1:]
+    else:
+        if len(keys) < 2:
+            raise ValueError(f"`mat_keys`: a gradient field needs p and q; got {keys}")
+        p, q = (a.astype(np.float64) for a in arrays[:2])
+        if p.ndim != 2 or q.shape != p.shape:
+            raise ValueError(
+                f"`mat_keys`: {keys[0]!r} and {keys[1]!r} of {f} must be (H, W) arrays of one "
+                f"shape; got {p.shape} and {q.shape}"
+            )
+        out = {"p": p, "q": q}
+        rest = arrays[2:]
+    shape = next(iter(out.values())).shape[:2]
+    out["mask"] = None
+    if rest:
+        m = rest[0]
+        if m.shape != shape:
+            raise ValueError(f"`mat_keys`: the mask of {f} has shape {m.shape}; expected {shape}")
+        out["mask"] = m != 0
+    return out
+
+
+def _default_keys(data: dict, names: list[str]) -> list[str]:
+    mask = ["mask"] if "mask" in data else []
+    if "p" in data and "q" in data:
+        return ["p", "q"] + mask
+    maps = [k for k in names if np.ndim(data[k]) == 3 and np.shape(data[k])[-1] == 3]
+    if len(maps) == 1:
+        return maps + mask
+    return ["p", "q"]  # reported as missing, with the variables present
+
+
+def is_mat(path) -> bool:
+    return Path(path).suffix.lower() == ".mat"

@@ -1,0 +1,252 @@
+"""One integration job from files to files: read the input, integrate, write every output as one
+set. ``facetlift integrate`` runs one :class:`Job`; ``facetlift batch`` (:mod:`facetlift.batch`)
+runs many, on Dask. No click here: the command line only parses flags into a :class:`Job`.
+
+The steps, in order: the output folder is created and checked for writability and no output may
+overwrite an input (:class:`facetlift.io.OutputSet`); the input is read (a normal map, a
+dataset folder, a gradient field, or a ``.mat`` file); :func:`facetlift.integrate` runs; every
+output is written into the set's staging folder and the set is moved into place only when all
+of them succeeded.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+#: Output kinds (``--save``) -> file names written into the output folder.
+OUTPUTS = {
+    "npy": "depth.npy",
+    "exr": "depth.exr",
+    "tif": "depth.tif",
+    "npz": "surface.npz",
+    "ply": "mesh.ply",
+    "obj": "mesh.obj",
+    "png": "preview.png",
+    "report": "report.png",
+}
+DEFAULT_SAVE = ("npy", "ply", "png")
+
+
+@dataclass(frozen=True)
+class Job:
+    """What to integrate, how, and where to write it.
+
+    Give `normals` (a normal-map file, a dataset folder, or a ``.mat`` file) or `gradients`
+    (two files p, q). `options` are method options; `save` the output kinds of
+    :data:`OUTPUTS`; `triangles` None keeps each format's default (PLY quads, OBJ triangles).
+    """
+
+    normals: str | None = None
+    gradients: tuple | None = None
+    mask: str | None = None
+    K: str | None = None
+    orthographic: bool = False
+    normal_frame: str | None = None
+    gradient_frame: str = "xy"
+    mat_keys: tuple | None = None
+    method: str = "dgp"
+    pixel_size: float = 1.0
+    backfacing: str = "missing"
+    outlier_eps: float | None = None
+    options: dict = field(default_factory=dict)
+    save: tuple = DEFAULT_SAVE
+    triangles: bool | None = None
+    outdir: str | None = None
+
+    def with_input(self, path, outdir) -> Job:
+        """The same job on another normal-map input (a batch item)."""
+        return replace(self, normals=str(path), gradients=None, outdir=str(outdir))
+
+    @property
+    def source(self) -> Path:
+        """The main input path (the normal map, dataset folder, .mat file, or p)."""
+        if self.normals is None and not self.gradients:
+            raise ValueError("give a normal map (NORMALS) or a gradient field (--gradients P Q)")
+        if self.normals is not None and self.gradients:
+            raise ValueError("give either a normal map (NORMALS) or --gradients P Q, not both")
+        return Path(self.normals if self.normals is not None else self.gradients[0])
+
+
+@dataclass
+class Input:
+    """What :func:`read` returns."""
+
+    normals: np.ndarray
+    mask: np.ndarray | None
+    K: np.ndarray | None
+    mask_source: str
+
+
+def default_outdir(src: Path) -> Path:
+    """``<input>_facetlift/`` next to the input."""
+    src = Path(src).resolve()
+    return src.parent / f"{src.stem if src.is_file() else src.name}_facetlift"
+
+
+def input_paths(job: Job) -> list[Path]:
+    """Every file the job reads (a dataset folder's files too): outputs must not be these."""
+    paths = [job.source] if job.normals is not None else [Path(p) for p in job.gradients]
+    if paths[0].is_dir():
+        paths = [p for p in paths[0].iterdir() if p.is_file()]
+    paths += [Path(p) for p in (job.mask, job.K) if p is not None]
+    return paths
+
+
+def read(job: Job) -> Input:
+    """Read the job's input into facetlift-frame normals, mask and K.
+
+    Raises
+    ------
+    ValueError
+        Unreadable or inconsistent input (the message names the file and the argument).
+    """
+    from . import frames, io
+    from .io.gradients import is_mat, read_gradients, read_mat
+
+    src = job.source
+    K = None
+    field_input = bool(job.gradients)
+    if job.gradients:
+        g = read_gradients(*job.gradients)
+        n, m, source = _normals_from_field(g, job), g["mask"], "valid gradients"
+    elif is_mat(src):
+        g = read_mat(src, job.mat_keys)
+        field_input = "p" in g
+        if field_input:
+            n = _normals_from_field(g, job)
+        else:
+            n = frames.to_facetlift(g["normals"], job.normal_frame)
+        m = g["mask"]
+        source = f"{src.name} mask" if m is not None else "valid normals"
+    elif src.is_dir():
+        ds = io.read_dataset(src, frame=job.normal_frame)
+        n, m, K = ds["normals"], ds["mask"], ds["K"]
+        source = "dataset mask" if m is not None else "valid normals"
+    else:
+        n, m = io.read_normals(src, frame=job.normal_frame)
+        source = "alpha channel" if m is not None else "valid normals"
+    if field_input and job.K is not None:
+        raise ValueError("`K`: a gradient field is orthographic; --K does not apply")
+    if job.mask is not None:
+        m = io.read_mask(job.mask, n.shape[:2])
+        source = str(job.mask)
+    if job.K is not None:
+        K = io.read_K(job.K)
+    if job.orthographic:
+        K = None
+    return Input(normals=n, mask=m, K=K, mask_source=source)
+
+
+def _normals_from_field(g: dict, job: Job) -> np.ndarray:
+    from . import frames
+    from .problem import normals_from_gradients
+
+    if job.normal_frame is not None:
+        raise ValueError("`normal_frame` does not apply to a gradient field; use --gradient-frame")
+    return normals_from_gradients(*frames.gradients_to_facetlift(g["p"], g["q"],
+                                                                 job.gradient_frame))
+
+
+def run(job: Job, *, progress=None) -> dict:
+    """Run `job`: outputs written as one set; returns its record.
+
+    Parameters
+    ----------
+    job : Job
+    progress : callable(iteration, value), optional
+        Passed to methods that report progress.
+
+    Returns
+    -------
+    dict
+        ``input``, ``outputs`` (kind -> path), ``shape``, ``facets``, ``mask_source``,
+        ``perspective``, ``mean_deviation`` (degrees), ``converged``, ``warnings`` (messages),
+        ``info`` (JSON-ready ``Surface.info``) and ``timings`` (seconds per phase).
+
+    Raises
+    ------
+    ValueError, OSError
+        Bad input, or an output folder that cannot be written.
+    facetlift.SolverError, facetlift.MemoryLimitError
+        As :func:`facetlift.integrate`.
+    """
+    import facetlift
+
+    from . import io, methods
+
+    t0 = time.perf_counter()
+    info = methods.get(job.method)
+    save = tuple(dict.fromkeys(job.save or DEFAULT_SAVE))
+    unknown = [s for s in save if s not in OUTPUTS]
+    if unknown:
+        raise ValueError(f"`save`: unknown output(s) {unknown}; valid: {sorted(OUTPUTS)}")
+    src = job.source
+    outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)
+    names = [OUTPUTS[s] for s in save]
+    with io.OutputSet(outdir, names, inputs=input_paths(job)) as out:
+        inp = read(job)
+        t_read = time.perf_counter() - t0
+        opts = dict(job.options)
+        if progress is not None and "progress" in info.options() and "progress" not in opts:
+            opts["progress"] = progress
+        t1 = time.perf_counter()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            surface = facetlift.integrate(
+                inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size, K=inp.K,
+                backfacing=job.backfacing, outlier_eps=job.outlier_eps, **opts,
+            )
+        t_integrate = time.perf_counter() - t1
+        t2 = time.perf_counter()
+        for kind, name in zip(save, names, strict=True):
+            _write(surface, kind, out.path(name), inp.normals, job.triangles)
+    written = {kind: str(outdir / name) for kind, name in zip(save, names, strict=True)}
+    sinfo = surface.info
+    H, W = surface.shape
+    return {
+        "input": str(src),
+        "outputs": written,
+        "shape": [H, W],
+        "facets": int(surface.mask.sum()),
+        "mask_source": inp.mask_source,
+        "perspective": surface.K is not None,
+        "mean_deviation": jsonable(sinfo.get("mean_deviation")),
+        "converged": bool(sinfo.get("converged", True)),
+        "warnings": [str(w.message) for w in caught],
+        "info": jsonable(sinfo),
+        "timings": {"read": t_read, "integrate": t_integrate,
+                    "write": time.perf_counter() - t2, "total": time.perf_counter() - t0},
+    }
+
+
+def _write(surface, kind: str, path: Path, normals, triangles) -> None:
+    from . import io
+
+    if kind == "report":
+        io.write_report(path, surface, normals)
+    elif kind in ("ply", "obj") and triangles is not None:
+        surface.save(path, triangles=triangles)
+    else:
+        surface.save(path)
+
+
+def jsonable(obj):
+    """`obj` with numpy values, tuples and non-finite floats turned into JSON (None for NaN)."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return jsonable(obj.item())
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    if isinstance(obj, (str, int, float, bool)) or obj is None:
+        return obj
+    return repr(obj)

@@ -1,0 +1,167 @@
+"""facetlift.batch and 'facetlift batch': items, isolated failures, the log, resume, and the
+same results on the Dask local scheduler and on a real dask.distributed LocalCluster as in
+this process."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import facetlift
+from facetlift import batch as fb
+from facetlift import io
+from facetlift.cli import main
+from facetlift.jobs import Job
+
+
+def maps(folder, n=4, H=16, W=18):
+    """`n` normal maps of tilted waves as 16-bit PNGs, and their in-process depths."""
+    folder.mkdir(parents=True, exist_ok=True)
+    depths = {}
+    for i in range(n):
+        r, c = np.indices((H, W)) + 0.5
+        p = 0.3 * np.cos(c / 3 + i)
+        q = 0.2 * np.sin(r / 4 - i)
+        path = io.write_normals(folder / f"m{i}.png", facetlift.normals_from_gradients(p, q))
+        decoded, _ = io.read_normals(path)
+        depths[f"m{i}"] = facetlift.integrate(decoded).depth
+    return depths
+
+
+def test_items_from_globs_folders_lists_and_masks(tmp_path):
+    maps(tmp_path / "a", n=2)
+    maps(tmp_path / "b", n=1)
+    io.write_mask(tmp_path / "a" / "m0_mask.png", np.ones((16, 18)))
+    ds = tmp_path / "ds" / "bear"
+    ds.mkdir(parents=True)
+    (ds / "normal_map.png").write_bytes((tmp_path / "b" / "m0.png").read_bytes())
+    (tmp_path / "list.txt").write_text("# one per line\nb/m0.png\n\nds/bear  # a dataset\n")
+    found = fb.items([tmp_path / "a", str(tmp_path / "b" / "*.png")],
+                     list_file=tmp_path / "list.txt")
+    assert [it.name for it in found] == ["m0", "m1", "m0-2", "bear"]
+    assert found[0].mask.endswith("m0_mask.png") and found[1].mask is None
+    assert [it.name for it in fb.items([tmp_path / "ds"])] == ["bear"]
+
+
+@pytest.mark.parametrize("inputs, message", [
+    (["nothing/*.png"], "matches nothing"), (["missing.png"], "does not exist"),
+])
+def test_items_refusals(tmp_path, inputs, message):
+    with pytest.raises(ValueError, match=message):
+        fb.items([str(tmp_path / i) for i in inputs])
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ValueError, match="no normal map found"):
+        fb.items([tmp_path / "empty"])
+
+
+def test_in_process_batch_isolates_failures_and_logs_each_item(tmp_path):
+    depths = maps(tmp_path / "in", n=3)
+    (tmp_path / "in" / "broken.png").write_bytes(b"\x89PNG\r\n\x1a\n cut")
+    out = tmp_path / "out"
+    recs = facetlift.batch([tmp_path / "in"], out, workers=1, save=("npy",), progress=False)
+    status = {r["name"]: r["status"] for r in recs}
+    assert status == {"broken": "error", "m0": "ok", "m1": "ok", "m2": "ok"}
+    assert "not a readable PNG" in recs[0]["error"] and recs[0]["exit"] == 1
+    for name, depth in depths.items():
+        np.testing.assert_allclose(np.load(out / name / "depth.npy"), depth, atol=1e-12)
+    log = [json.loads(line) for line in (out / fb.LOG_NAME).read_text().splitlines()]
+    assert sorted(r["name"] for r in log) == sorted(status)
+    assert all(r["mean_deviation"] is not None and r["seconds"] > 0
+               for r in log if r["status"] == "ok")
+    assert not (out / "broken").exists()
+
+
+def test_resume_skips_finished_items_and_retries_failed_ones(tmp_path, monkeypatch):
+    maps(tmp_path / "in", n=3)
+    out = tmp_path / "out"
+    facetlift.batch([tmp_path / "in"], out, workers=1, save=("npy",))
+    (out / "m1" / "depth.npy").unlink()  # an output lost since
+    ran = []
+    real = fb.run_item
+    monkeypatch.setattr(fb, "run_item", lambda job: ran.append(job.normals) or real(job))
+    recs = facetlift.batch([tmp_path / "in"], out, workers=1, save=("npy",), resume=True)
+    assert [r.get("resumed", False) for r in recs] == [True, False, True]
+    assert len(ran) == 1 and ran[0].endswith("m1.png")
+    assert (out / "m1" / "depth.npy").is_file()
+
+
+def test_every_kind_of_failure_is_a_record(tmp_path, monkeypatch):
+    import importlib
+
+    from facetlift.errors import MemoryLimitError, SolverError
+
+    maps(tmp_path / "in", n=1)
+    dgp = importlib.import_module("facetlift.methods.dgp")
+    for exc, status, code in ((SolverError("singular"), "solver", 2),
+                              (MemoryLimitError("needs 9 GiB"), "memory", 1),
+                              (KeyError("x"), "bug", 3)):
+        def fail(*a, _exc=exc, **k):
+            raise _exc
+
+        monkeypatch.setattr(dgp, "run", fail)
+        (rec,) = facetlift.batch([tmp_path / "in"], tmp_path / status, workers=1)
+        assert (rec["status"], rec["exit"]) == (status, code)
+
+
+def test_bad_arguments(tmp_path):
+    maps(tmp_path / "in", n=1)
+    with pytest.raises(ValueError, match="`workers` must be a positive integer"):
+        facetlift.batch([tmp_path / "in"], tmp_path / "o", workers=0)
+    with pytest.raises(ValueError, match="give `job` or job options"):
+        facetlift.batch([tmp_path / "in"], tmp_path / "o", job=Job(), method="dgp")
+
+
+def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
+    maps(tmp_path / "in", n=2)
+    code = main(["batch", str(tmp_path / "in" / "*.png"), "-o", str(tmp_path / "o"),
+                 "--workers", "1", "--save", "npy", "--no-progress"])
+    out, _ = capsys.readouterr()
+    assert code == 0 and "batch: 2 of 2 succeeded" in out
+    (tmp_path / "in" / "z.png").write_bytes(b"bad")
+    code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "o"), "--workers", "1",
+                 "--resume", "--save", "npy", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 1 and "batch: 2 of 3 succeeded (2 from an earlier run), 1 failed" in err
+    assert "facetlift: error: z: error:" in err
+    assert callable(fb) and fb.items is fb.__dict__["items"]
+    assert [json.loads(line)["name"] for line in out.splitlines()] == ["m0", "m1", "z"]
+    code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "1",
+                 "-s", "npy", "--progress"])
+    assert code == 1 and "batch:" in capsys.readouterr().err  # the bar, on stderr
+    code = main(["batch", "-o", str(tmp_path / "o")])
+    assert code == 1 and "give inputs" in capsys.readouterr().err
+
+
+def test_dask_local_processes_equal_in_process(tmp_path):
+    pytest.importorskip("dask")
+    depths = maps(tmp_path / "in", n=4)
+    recs = facetlift.batch([tmp_path / "in"], tmp_path / "o", workers=2, save=("npy",))
+    assert [r["status"] for r in recs] == ["ok"] * 4
+    for name, depth in depths.items():
+        np.testing.assert_allclose(np.load(tmp_path / "o" / name / "depth.npy"), depth,
+                                   atol=1e-12)
+
+
+def test_distributed_local_cluster_with_two_workers_equals_in_process(tmp_path, capsys):
+    distributed = pytest.importorskip("distributed")
+    depths = maps(tmp_path / "in", n=4)
+    (tmp_path / "in" / "bad.png").write_bytes(b"bad")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        assert len(cluster.workers) == 2
+        code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "o"),
+                     "--scheduler", cluster.scheduler_address, "--save", "npy"])
+        with distributed.Client(cluster) as client:  # the API with a Client
+            recs = facetlift.batch([tmp_path / "in" / "m0.png"], tmp_path / "api",
+                                   scheduler=client, save=("npy",))
+    out, err = capsys.readouterr()
+    assert code == 1 and "batch: 4 of 5 succeeded, 1 failed" in out
+    assert "facetlift: error: bad: error:" in err
+    for name, depth in depths.items():
+        np.testing.assert_allclose(np.load(tmp_path / "o" / name / "depth.npy"), depth,
+                                   atol=1e-12)
+    assert recs[0]["status"] == "ok"
+    np.testing.assert_allclose(np.load(tmp_path / "api" / "m0" / "depth.npy"), depths["m0"],
+                               atol=1e-12)

@@ -1,0 +1,436 @@
+"""The command line for real users' inputs (issue 11) and its error boundary and output sets
+(issue 12), through main([...])."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from scipy import io as sio
+
+import facetlift
+from facetlift import frames, io
+from facetlift.cli import main
+from facetlift.errors import MemoryLimitError
+
+BEAR = "../shared/data/normal_maps/diligent_bear"
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def one_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("facetlift: error:"), err
+    assert "Traceback" not in err
+    return lines[0]
+
+
+def dome(H=20, W=24):
+    """Normals of a Gaussian dome z = 4 exp(-d^2 / s) (x = col, y = -row, unit pixels)."""
+    r, c = np.indices((H, W)) + 0.5
+    s = 0.1 * H * W
+    z = 4 * np.exp(-((c - W / 2) ** 2 + (r - H / 2) ** 2) / s)
+    p = -2 * (c - W / 2) / s * z  # dz/dx
+    q = 2 * (r - H / 2) / s * z  # dz/dy, y up = against the rows
+    return facetlift.normals_from_gradients(p, q)
+
+
+@pytest.fixture
+def dome_png(tmp_path):
+    return io.write_normals(tmp_path / "n.png", dome())
+
+
+# ------------------------------------------------------------------------------ frames
+
+
+@pytest.mark.parametrize("flags, frame", [
+    (["--normal-frame", "opencv"], "opencv"), (["--y-down"], "directx"),
+    (["--normal-frame", "y,-x,z"], "y,-x,z"), (["--normal-frame=-x,y,z"], "-x,y,z"),
+])
+def test_normal_frame_flag_reads_the_map_in_that_frame(tmp_path, capsys, flags, frame):
+    n = dome()
+    stored = io.write_normals(tmp_path / "s.npy", frames.from_facetlift(n, frame))
+    code, _, err = run(capsys, "integrate", stored, *flags, "-o", tmp_path / "o", "-s", "npy")
+    assert code == 0, err
+    expected = facetlift.integrate(n)
+    np.testing.assert_allclose(np.load(tmp_path / "o" / "depth.npy"), expected.depth,
+                               atol=1e-12)
+
+
+def test_conflicting_frame_flags_and_bad_frames_exit_1(dome_png, capsys):
+    code, _, err = run(capsys, "integrate", dome_png, "--y-down", "--normal-frame", "opencv")
+    assert code == 1 and "conflicts with frame 'opencv'" in one_line(err)
+    code, _, err = run(capsys, "integrate", dome_png, "--normal-frame", "up")
+    assert code == 1 and "`normal_frame` must be one of" in one_line(err)
+
+
+def test_opencv_map_read_as_opengl_names_the_flag(tmp_path, capsys):
+    stored = io.write_normals(tmp_path / "cv.npy", frames.from_facetlift(dome(), "opencv"))
+    code, _, err = run(capsys, "integrate", stored, "-o", tmp_path / "o")
+    assert code == 1 and "--normal-frame opencv" in one_line(err)
+    assert not (tmp_path / "o").exists()
+
+
+def test_summary_and_json_show_the_mean_deviation(dome_png, tmp_path, capsys):
+    code, out, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "a")
+    assert code == 0, err
+    dev = float(re.search(r"mean deviation ([0-9.]+) deg", out).group(1))
+    code, out, _ = run(capsys, "integrate", dome_png, "-o", tmp_path / "b", "--json")
+    rec = json.loads(out)
+    assert abs(rec["mean_deviation"] - dev) < 0.01
+    assert rec["info"]["mean_deviation"] == rec["mean_deviation"]
+    assert set(rec["info"]["integrability"]) == {"curl", "curl_y_flipped", "curl_x_flipped"}
+
+
+def test_y_flipped_map_warns_on_the_cli(tmp_path, capsys):
+    stored = io.write_normals(tmp_path / "f.png", dome(40, 48) * [1, -1, 1])
+    code, _, err = run(capsys, "integrate", stored, "-o", tmp_path / "o")
+    assert code == 0
+    assert "facetlift: warning: the normals are far more integrable with y flipped" in err
+
+
+# ------------------------------------------------------------------------------ gradients
+
+
+def test_gradients_flag_and_gradient_frame(tmp_path, capsys):
+    n = dome()
+    p, q = facetlift.gradients_from_normals(n)
+    np.save(tmp_path / "p.npy", p)
+    np.save(tmp_path / "q.npy", q)
+    np.save(tmp_path / "prow.npy", -q)  # rowcol: p = dz/d(row) = -dz/dy, q = dz/dx
+    np.save(tmp_path / "qcol.npy", p)
+    expected = facetlift.integrate(n).depth
+    code, out, err = run(capsys, "integrate", "--gradients", tmp_path / "p.npy",
+                         tmp_path / "q.npy", "-o", tmp_path / "a", "-s", "npy")
+    assert code == 0, err
+    np.testing.assert_allclose(np.load(tmp_path / "a" / "depth.npy"), expected, atol=1e-10)
+    code, _, err = run(capsys, "integrate", "--gradients", tmp_path / "prow.npy",
+                       tmp_path / "qcol.npy", "--gradient-frame", "queau", "-o",
+                       tmp_path / "b", "-s", "npy")
+    assert code == 0, err
+    np.testing.assert_allclose(np.load(tmp_path / "b" / "depth.npy"), expected, atol=1e-10)
+    assert (tmp_path / "a_facetlift").exists() is False
+
+
+def test_gradient_input_refusals(tmp_path, capsys, dome_png):
+    np.save(tmp_path / "p.npy", np.zeros((4, 4)))
+    code, _, err = run(capsys, "integrate", dome_png, "--gradients", tmp_path / "p.npy",
+                       tmp_path / "p.npy")
+    assert code == 1 and "not both" in one_line(err)
+    code, _, err = run(capsys, "integrate")
+    assert code == 1 and "give a normal map (NORMALS) or a gradient field" in one_line(err)
+    code, _, err = run(capsys, "integrate", "--gradients", tmp_path / "p.npy",
+                       tmp_path / "p.npy", "--normal-frame", "opencv", "-o", tmp_path / "o")
+    assert code == 1 and "use --gradient-frame" in one_line(err)
+    code, _, err = run(capsys, "integrate", "--gradients", tmp_path / "p.npy",
+                       tmp_path / "p.npy", "--gradient-frame", "colrow")
+    assert code == 1 and "`gradient_frame` must be one of" in one_line(err)
+
+
+def test_mat_input_in_queau_layout_with_keys(tmp_path, capsys):
+    n = dome()
+    p, q = facetlift.gradients_from_normals(n)
+    mask = np.ones(p.shape)
+    mask[:2, :2] = 0
+    sio.savemat(tmp_path / "vase.mat", {"gu": -q, "gv": p, "m": mask})
+    code, out, err = run(capsys, "integrate", tmp_path / "vase.mat", "--mat-keys", "gu,gv,m",
+                         "--gradient-frame", "queau", "-o", tmp_path / "o", "-s", "npy")
+    assert code == 0, err
+    assert "mask: vase.mat mask" in out
+    expected = facetlift.integrate(n, mask != 0).depth
+    np.testing.assert_allclose(np.load(tmp_path / "o" / "depth.npy"), expected, atol=1e-10)
+    code, _, err = run(capsys, "integrate", tmp_path / "vase.mat", "-o", tmp_path / "x")
+    assert code == 1 and "has variables ['gu', 'gv', 'm']" in one_line(err)
+
+
+# ------------------------------------------------------------------------------ info
+
+
+def test_info_on_the_bear(capsys):
+    code, out, err = run(capsys, "info", BEAR)
+    assert code == 0, err
+    assert "512x612 pixels (format png, bit_depth 16, channels RGB)" in out
+    assert "encoding: v / 65535 * 2 - 1" in out and "perspective, K = [[3772" in out
+    assert "likely as read (consistent)" in out and "1 component(s)" in out
+    assert re.search(r"default integration \(estimate\): about \d+ MiB", out)
+    code, out, _ = run(capsys, "info", BEAR, "--json")
+    rec = json.loads(out)
+    assert rec["mask_pixels"] == int(io.read_dataset(BEAR)["mask"].sum())
+    assert rec["estimate"]["estimate"] is True and rec["estimate"]["bytes"] > 0
+
+
+def test_info_detects_flips_encodings_and_counts(tmp_path, capsys):
+    n = dome(40, 48)
+    n[3, 5] = [0.0, 0.0, -1.0]
+    n[7, 1] = np.nan
+    io.write_normals(tmp_path / "f.npy", n * [1, -1, 1])
+    code, out, _ = run(capsys, "info", tmp_path / "f.npy", "--json")
+    rec = json.loads(out)
+    assert code == 0 and rec["frame"]["likely"].startswith("y flipped")
+    assert rec["counts"]["back-facing"] == 1 and rec["first_unusable"] == [3, 5]
+    assert rec["mask_pixels"] == 40 * 48 - 1  # the NaN pixel is not in the default mask
+    io.write_normals(tmp_path / "cv.npy", frames.from_facetlift(dome(), "opencv"))
+    code, out, _ = run(capsys, "info", tmp_path / "cv.npy")
+    assert code == 0 and "z flipped" in out and "cannot be integrated as read" in out
+
+
+def test_estimate_scales_with_the_box_and_route():
+    from facetlift.describe import estimate
+
+    full = estimate((1024, 1024))
+    assert full["route"] == "spectral"
+    assert estimate((2048, 2048))["bytes"] > 3.5 * (full["bytes"] - 70 * 2**20)
+    mask = np.zeros((1024, 1024), bool)
+    mask[100:300, 100:300] = True
+    mask[150, 150] = False
+    small = estimate((1024, 1024), mask=mask)
+    base = 70 * 2**20
+    assert small["route"] == "pcg-spectral"
+    assert small["bytes"] - base < (full["bytes"] - base) / 10
+
+
+# ------------------------------------------------------------------------------ outputs
+
+
+def test_obj_is_triangles_by_default_and_quads_on_request(dome_png, tmp_path, capsys):
+    trimesh = pytest.importorskip("trimesh")
+    code, _, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "t", "-s", "obj",
+                       "-s", "ply")
+    assert code == 0, err
+    faces = [ln for ln in (tmp_path / "t" / "mesh.obj").read_text().splitlines()
+             if ln.startswith("f ")]
+    assert all(len(f.split()) == 4 for f in faces)  # "f a b c"
+    n_facets = 20 * 24
+    tri = trimesh.load(tmp_path / "t" / "mesh.obj", process=False)
+    assert len(tri.faces) == 2 * n_facets
+    code, _, _ = run(capsys, "integrate", dome_png, "-o", tmp_path / "q", "-s", "obj", "--quads")
+    quads = [ln for ln in (tmp_path / "q" / "mesh.obj").read_text().splitlines()
+             if ln.startswith("f ")]
+    assert len(quads) == n_facets and all(len(f.split()) == 5 for f in quads)
+    quad_mesh = trimesh.load(tmp_path / "q" / "mesh.obj", process=False)
+    assert len(quad_mesh.faces) == 2 * n_facets  # trimesh splits the quads itself
+    np.testing.assert_allclose(np.sort(quad_mesh.vertices, axis=0),
+                               np.sort(tri.vertices, axis=0))
+    ply = trimesh.load(tmp_path / "t" / "mesh.ply", process=False)
+    assert len(ply.vertices) == len(tri.vertices)
+
+
+def test_open3d_reads_both_meshes(dome_png, tmp_path, capsys):
+    try:
+        import open3d
+    except ImportError:
+        pytest.skip("open3d is not installed: it is not in the test extra (a 1.2 GB install "
+                    "that also needs the system library libusb-1.0); see docs/reliability.md")
+    code, _, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "t", "-s", "obj",
+                       "-s", "ply")
+    assert code == 0, err
+    for name in ("mesh.obj", "mesh.ply"):
+        m = open3d.io.read_triangle_mesh(str(tmp_path / "t" / name))
+        assert len(m.vertices) == 21 * 25 and len(m.triangles) == 2 * 20 * 24, name
+
+
+def test_report_png_has_the_panels(dome_png, tmp_path, capsys):
+    code, out, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "r", "-s", "report")
+    assert code == 0, err
+    import imagecodecs
+
+    img = imagecodecs.png_decode((tmp_path / "r" / "report.png").read_bytes())
+    assert img.ndim == 3 and img.shape[0] > 300 and img.shape[1] > 600
+    assert len(np.unique(img.reshape(-1, img.shape[-1]), axis=0)) > 50  # not blank
+
+
+def test_report_adds_a_discontinuity_panel_when_the_surface_has_one(tmp_path, monkeypatch):
+    from facetlift.io import report
+
+    s = facetlift.integrate(dome())
+    seen = []
+    real = report.discontinuity_map
+    monkeypatch.setattr(report, "discontinuity_map", lambda surf: seen.append(real(surf))
+                        or seen[-1])
+    report.write_report(tmp_path / "a.png", s, dome())
+    s.info["discontinuities"] = np.zeros(s.shape)
+    report.write_report(tmp_path / "b.png", s, dome())
+    assert seen[0] is None and seen[1].shape == s.shape
+    assert (tmp_path / "b.png").stat().st_size != (tmp_path / "a.png").stat().st_size
+
+
+def test_report_without_matplotlib_names_the_extra(tmp_path, monkeypatch, capsys, dome_png):
+    from facetlift.io import report
+
+    monkeypatch.setitem(sys.modules, "matplotlib.figure", None)
+    with pytest.raises(ImportError, match=r"facetlift\[plot\]"):
+        report.write_report(tmp_path / "r.png", facetlift.integrate(dome()), dome())
+    code, _, err = run(capsys, "integrate", dome_png, "-s", "npy", "-s", "report", "-o",
+                       tmp_path / "o")
+    assert code == 1 and "pip install 'facetlift[plot]'" in one_line(err)
+    assert not (tmp_path / "o").exists()  # the npy written before the report is not kept
+
+
+# ------------------------------------------------------------------------------ error boundary
+
+
+def _break_dgp(monkeypatch, exc):
+    def fail(*a, **k):
+        raise exc
+
+    monkeypatch.setattr(importlib.import_module("facetlift.methods.dgp"), "run", fail)
+
+
+def test_internal_error_is_a_bug_report_line_and_debug_shows_the_traceback(
+        dome_png, tmp_path, capsys, monkeypatch):
+    _break_dgp(monkeypatch, TypeError("unsupported operand"))
+    code, _, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "o")
+    line = one_line(err)
+    assert code == 3 and "internal error (TypeError: unsupported operand)" in line
+    assert "please report it" in line and "--debug" in line
+    code, _, err = run(capsys, "--debug", "integrate", dome_png, "-o", tmp_path / "o")
+    assert code == 3 and "Traceback (most recent call last)" in err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("exc, code, text", [
+    (MemoryLimitError("needs 9.1 GiB, limit 4.0 GiB: crop it or pass --max-memory"), 1,
+     "needs 9.1 GiB"),
+    (MemoryError(), 1, "out of memory"),
+    (facetlift.SolverError("matrix is singular"), 2, "solver failed: matrix is singular"),
+    (OverflowError("math range error"), 3, "internal error (OverflowError"),
+    (ZeroDivisionError("division by zero"), 3, "internal error (ZeroDivisionError"),
+])
+def test_every_exception_is_one_line(dome_png, tmp_path, capsys, monkeypatch, exc, code,
+                                     text):
+    _break_dgp(monkeypatch, exc)
+    got, _, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "o")
+    assert got == code and text in one_line(err)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("option", [
+    'discontinuity_k="a"', "tol=null", "max_iter=1e400", "flat_weight=[1]", "solver=1",
+])
+def test_bad_option_values_are_one_line_exit_1(dome_png, tmp_path, capsys, option):
+    code, _, err = run(capsys, "integrate", dome_png, "--option", option, "-o", tmp_path / "o")
+    assert code == 1
+    one_line(err)
+
+
+# ------------------------------------------------------------------------------ faults
+
+
+def test_output_equal_to_an_input_is_refused_before_the_solve(tmp_path, capsys, monkeypatch):
+    n = dome()
+    np.save(tmp_path / "depth.npy", n)
+    _break_dgp(monkeypatch, AssertionError("the solve must not run"))
+    code, _, err = run(capsys, "integrate", tmp_path / "depth.npy", "-o", tmp_path)
+    assert code == 1 and "is the input" in one_line(err)
+    np.testing.assert_array_equal(np.load(tmp_path / "depth.npy"), n)
+
+
+def test_unwritable_output_is_refused_before_the_solve(dome_png, tmp_path, capsys,
+                                                       monkeypatch):
+    (tmp_path / "file").write_text("x")
+    _break_dgp(monkeypatch, AssertionError("the solve must not run"))
+    code, _, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "file" / "out")
+    assert code == 1 and "cannot create the output folder" in one_line(err)
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def test_read_only_output_folder(dome_png, tmp_path, capsys):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        code, _, err = run(capsys, "integrate", dome_png, "-o", ro)
+        assert code == 1 and "not writable" in one_line(err)
+    finally:
+        ro.chmod(0o700)
+
+
+def test_disk_full_on_the_last_output_leaves_the_folder_as_it_was(dome_png, tmp_path, capsys,
+                                                                  monkeypatch):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "depth.npy").write_bytes(b"earlier result")
+    from facetlift.io import preview
+
+    def full(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(preview, "_write_png", full)
+    code, _, err = run(capsys, "integrate", dome_png, "-o", out)
+    assert code == 1 and "No space left on device" in one_line(err)
+    assert sorted(p.name for p in out.iterdir()) == ["depth.npy"]
+    assert (out / "depth.npy").read_bytes() == b"earlier result"
+
+
+def test_stale_files_of_a_killed_run_are_swept_by_the_next(dome_png, tmp_path, capsys):
+    from facetlift.io import atomic
+
+    out = tmp_path / "o"
+    out.mkdir()
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    stale = out / f"{atomic.STAGING_PREFIX}{atomic._host()}-{proc.pid}-deadbeef"
+    stale.mkdir()
+    (stale / "mesh.ply").write_bytes(b"0" * 1000)
+    code, _, err = run(capsys, "integrate", dome_png, "-o", out)
+    assert code == 0, err
+    assert sorted(p.name for p in out.iterdir()) == ["depth.npy", "mesh.ply", "preview.png"]
+
+
+SLOW_WRITE = """
+import sys, time
+from pathlib import Path
+from facetlift.io import meshes
+real = meshes.write_mesh
+def slow(path, *a, **k):
+    out = real(path, *a, **k)
+    Path(sys.argv[1]).write_text("writing")
+    time.sleep(30)
+    return out
+meshes.write_mesh = slow
+import facetlift.io.surface as s
+s.write_mesh = slow
+from facetlift.cli import main
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def test_sigterm_during_the_write_leaves_nothing(dome_png, tmp_path):
+    out, flag = tmp_path / "o", tmp_path / "flag"
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_WRITE, str(flag), "integrate",
+                             str(dome_png), "-o", str(out)], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not flag.exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    assert flag.exists(), proc.stderr.read() if proc.poll() is not None else "no write"
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143 and "terminated (SIGTERM)" in err
+    assert not out.exists()  # created by this run, removed with its staging folder
+
+
+def test_a_linalg_error_inside_a_method_is_a_solver_error(monkeypatch):
+    _break_dgp(monkeypatch, np.linalg.LinAlgError("Singular matrix"))
+    with pytest.raises(facetlift.SolverError, match="linear algebra failed .Singular matrix"):
+        facetlift.integrate(dome())
+
+
+def test_discontinuities_show_a_progress_bar(tmp_path, capsys):
+    r, c = np.indices((16, 20))
+    n = facetlift.normals_from_gradients(np.where(c < 10, 0.6, -0.6), 0.1 + 0 * r)
+    path = io.write_normals(tmp_path / "roof.npy", n)
+    code, _, err = run(capsys, "integrate", path, "--discontinuities", "--progress",
+                       "-o", tmp_path / "o")
+    assert code == 0 and "integrating" in err

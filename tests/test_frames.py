@@ -1,0 +1,191 @@
+"""facetlift.frames: named frames and axis strings, decoding, the safety nets, the flip check;
+integrate(normal_frame=...) and integrate_gradients."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import facetlift
+from facetlift import frames, io
+from facetlift.problem import prepare
+
+BEAR = "../shared/data/normal_maps/diligent_bear"
+
+
+def bump(shape=(24, 30), h=0.1):
+    """Unit normals (facetlift frame) of a smooth bump and its height."""
+    r, c = np.indices(shape)
+    x, y = (c + 0.5) * h, -(r + 0.5) * h
+    x0, y0 = x.mean(), y.mean()
+    z = np.exp(-((x - x0) ** 2 + (y - y0) ** 2) / 0.5)
+    p = -2 * (x - x0) / 0.5 * z
+    q = -2 * (y - y0) / 0.5 * z
+    return facetlift.normals_from_gradients(p, q), z
+
+
+@pytest.mark.parametrize("frame, string", [
+    ("opengl", "x,y,z"), ("directx", "x,-y,z"), ("y_down", "x,-y,z"), ("Y-Down", "x,-y,z"),
+    ("opencv", "x,-y,-z"), (None, "x,y,z"), (" -x , y , z ", "-x,y,z"), ("y,-x,z", "y,-x,z"),
+])
+def test_names_and_axis_strings(frame, string):
+    assert frames.axis_string(frame) == string
+
+
+@pytest.mark.parametrize("frame", ["x,y", "x,x,z", "a,b,c", "x,y,z,w", "", "--x,y,z", 3])
+def test_bad_frames_are_refused(frame):
+    with pytest.raises(ValueError, match="`normal_frame` must be (one of|a frame name)"):
+        frames.parse(frame)
+
+
+@pytest.mark.parametrize("frame", ["opencv", "directx", "y,-x,z", "-z,x,-y"])
+def test_conversion_round_trips_and_is_a_rotation_or_reflection(frame):
+    n = np.random.default_rng(1).normal(size=(5, 7, 3))
+    out = frames.to_facetlift(n, frame)
+    np.testing.assert_allclose(frames.from_facetlift(out, frame), n)
+    np.testing.assert_allclose(np.linalg.norm(out, axis=-1), np.linalg.norm(n, axis=-1))
+
+
+def test_opencv_frame_means_y_down_and_z_away():
+    # a surface facing up-right-toward the viewer, written in the OpenCV camera frame
+    cv = np.array([0.3, -0.4, -np.sqrt(1 - 0.25)])
+    np.testing.assert_allclose(frames.to_facetlift(cv, "opencv"), [0.3, 0.4, np.sqrt(0.75)])
+
+
+def test_y_down_is_an_alias_and_conflicts_are_refused():
+    assert frames.resolve(None, True) == "directx"
+    assert frames.resolve("x,-y,z", True) == "x,-y,z"
+    assert frames.resolve("opencv", False) == "opencv"
+    with pytest.raises(ValueError, match="conflicts with frame 'opencv'"):
+        frames.resolve("opencv", True)
+
+
+def test_integrate_in_another_frame_equals_integrate_of_the_converted_map():
+    n, _ = bump()
+    cv = frames.from_facetlift(n, "opencv")
+    a = facetlift.integrate(n)
+    b = facetlift.integrate(cv, normal_frame="opencv")
+    np.testing.assert_allclose(a.depth, b.depth, atol=1e-12)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_integer_arrays_are_decoded_with_a_warning(tmp_path, dtype):
+    n, _ = bump()
+    bits = 8 if dtype == np.uint8 else 16
+    path = io.write_normals(tmp_path / "n.png", n, bits=bits)
+    import imagecodecs
+
+    raw = imagecodecs.png_decode(path.read_bytes())
+    assert raw.dtype == dtype
+    with pytest.warns(UserWarning, match=rf"is {np.dtype(dtype).name}: decoded as v / "):
+        a = facetlift.integrate(raw)
+    decoded, _ = io.read_normals(path)
+    b = facetlift.integrate(decoded)
+    np.testing.assert_allclose(a.depth, b.depth, atol=1e-12)
+
+
+def test_other_unsigned_integers_are_refused():
+    with pytest.raises(ValueError, match="integer type uint32; integer normal maps must be"):
+        facetlift.integrate(np.zeros((4, 4, 3), np.uint32))
+
+
+def test_zero_one_encoded_floats_are_refused_with_the_fix():
+    n, _ = bump()
+    with pytest.raises(ValueError, match=r"looks \[0, 1\]-encoded.*n = 2 \* v - 1"):
+        facetlift.integrate((n + 1) / 2)
+    facetlift.integrate(2 * ((n + 1) / 2) - 1)  # the fix works
+
+
+def test_unit_normals_facing_up_and_right_are_not_taken_for_an_encoding():
+    plane = facetlift.normals_from_gradients(np.full((12, 12), -0.3), np.full((12, 12), -0.2))
+    assert (plane >= 0).all()
+    s = facetlift.integrate(plane)
+    assert np.isfinite(s.depth).all()
+
+
+def test_encoding_check_looks_only_inside_the_mask():
+    n, _ = bump()
+    enc = (n + 1) / 2
+    mask = np.zeros(n.shape[:2], bool)
+    mask[:6, :6] = True  # 36 pixels: too few to judge
+    enc[~mask] = -5.0  # outside the mask: anything, never looked at
+    assert frames.checked(enc, mask) is not None
+    big = np.ones(n.shape[:2], bool)
+    with pytest.raises(ValueError, match="looks"):
+        frames.checked((n + 1) / 2, big)
+
+
+def test_normals_facing_away_name_the_opencv_frame():
+    n, _ = bump()
+    with pytest.raises(ValueError, match=r"face away from the viewer.*--normal-frame opencv"):
+        facetlift.integrate(frames.from_facetlift(n, "opencv"))
+
+
+def test_flip_check_warns_on_a_y_flipped_map_and_names_the_flag():
+    n, _ = bump((40, 48))
+    flipped = n * [1, -1, 1]
+    with pytest.warns(UserWarning, match=r"more integrable with y flipped.*--normal-frame "
+                      r"directx.*-x,y,z"):
+        s = facetlift.integrate(flipped)
+    ic = s.info["integrability"]
+    assert ic["curl_y_flipped"] < frames.FLIP_RATIO * ic["curl"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        good = facetlift.integrate(n)
+    assert good.info["integrability"]["curl"] < 0.05
+    assert good.info["mean_deviation"] < s.info["mean_deviation"]
+
+
+def test_flip_check_on_the_real_bear_as_read_and_flipped():
+    data = io.read_dataset(BEAR)
+    ok = frames.flip_check(prepare(data["normals"], data["mask"], K=data["K"]))
+    assert ok["curl"] < frames.FLIP_MIN_CURL
+    with pytest.warns(UserWarning, match="with y flipped"):
+        frames.flip_check(prepare(data["normals"] * [1, -1, 1], data["mask"], K=data["K"]))
+
+
+def test_relative_curl_sampling_agrees_with_the_full_field():
+    n, _ = bump((96, 96))
+    noisy = n + np.random.default_rng(3).normal(scale=0.05, size=n.shape)
+    pr = prepare(noisy)
+    full = frames.relative_curl(pr)
+    sampled = frames.relative_curl(pr, sample=96 * 20)
+    assert abs(full - sampled) < 0.1 * full
+    assert frames.relative_curl(prepare(n)) < 0.02
+
+
+def test_mean_deviation_is_reported_and_rises_with_noise():
+    n, _ = bump()
+    rng = np.random.default_rng(4)
+    noisy = n + rng.normal(scale=0.2, size=n.shape)
+    a, b = facetlift.integrate(n), facetlift.integrate(noisy)
+    assert 0 <= a.info["mean_deviation"] < 0.5 < b.info["mean_deviation"]
+    assert "diagnose" in b.info["seconds"]
+
+
+@pytest.mark.parametrize("frame", ["xy", "rowcol", "queau", "MATLAB"])
+def test_integrate_gradients_in_both_layouts(frame, rel_err):
+    r, c = np.indices((24, 30))
+    z = 3 * np.exp(-((r - 11.5) ** 2 + (c - 14.5) ** 2) / 40)
+    zr = np.pad(z, 1, mode="edge")  # central differences at the pixel centres
+    dz_dcol = (zr[1:-1, 2:] - zr[1:-1, :-2]) / 2
+    dz_drow = (zr[2:, 1:-1] - zr[:-2, 1:-1]) / 2
+    if frames.gradient_frame(frame) == "xy":
+        p, q = dz_dcol, -dz_drow  # y up
+    else:
+        p, q = dz_drow, dz_dcol
+    s = facetlift.integrate_gradients(p, q, gradient_frame=frame)
+    inner = (slice(2, -2), slice(2, -2))
+    assert rel_err(s.height[inner], z[inner]) < 0.05
+
+
+def test_integrate_gradients_refusals():
+    p = np.zeros((5, 5))
+    with pytest.raises(ValueError, match="`gradient_frame` must be one of"):
+        facetlift.integrate_gradients(p, p, gradient_frame="yx")
+    with pytest.raises(ValueError, match="`K` does not apply to a gradient field"):
+        facetlift.integrate_gradients(p, p, K=np.eye(3))
+    with pytest.raises(ValueError, match="`q` must have the shape of `p`"):
+        facetlift.integrate_gradients(p, np.zeros((4, 5)))
