@@ -260,3 +260,46 @@ def test_methods_see_the_mask_bounding_box_and_results_land_in_place():
     np.testing.assert_allclose(a.depth[r0:32, c0:40], b.depth, rtol=1e-10)
     np.testing.assert_array_equal(a.K, K)
     np.testing.assert_allclose(a.points(), b.points(), rtol=1e-10)
+
+
+def test_corner_copies_give_a_mesh_split_at_the_jumps(fake_method, tmp_path):
+    """A method that returns per-facet corner values (a discontinuity-preserving route): the
+    Surface is cut where neighbouring facets' copies part, its mesh is split there (vertices
+    duplicated, no face across the jump) and depth is the mean of each facet's mesh corners."""
+    H, W = 6, 8
+    box = fake_method()
+    step = 5.0
+
+    def result(problem):
+        r, c = problem.domain.pixels
+        # heights at the four corners of every facet: plane 0.1 x, plus `step` for columns >= 4
+        x = np.stack([c, c + 1, c + 1, c], axis=1).astype(float)
+        y = np.stack([r, r, r + 1, r + 1], axis=1) * 0.0
+        copies = 0.1 * x + y + np.where(c >= 4, step, 0.0)[:, None]
+        return MethodResult(values=copies.mean(axis=1), extras={"corner_values": copies})
+
+    box["result"] = result
+    mask = np.ones((H, W), bool)
+    s = facetlift.integrate(np.dstack([np.zeros((H, W, 2)), np.ones((H, W))]), mask,
+                            method="fake")
+    right, down = s.cuts
+    assert right[:, 3].all() and right.sum() == H and not down.any()
+    assert np.allclose(s.discontinuities[:, 3:5], step) and np.all(s.discontinuities[:, :3] == 0)
+    assert np.all(s.discontinuities[:, 5:] == 0)
+    verts, quads = s.to_mesh()
+    assert len(verts) == (H + 1) * (W + 1) + (H + 1)  # the column of vertices on the cut, twice
+    z = verts[:, 2]  # height = -depth
+    assert np.ptp(z[quads], axis=1).max() < 0.2 + 1e-9  # no face spans the jump
+    np.testing.assert_allclose((-z[quads]).mean(axis=1), s.depth[mask], atol=1e-12)
+    s.save(tmp_path / "m.ply")
+    s.save(tmp_path / "s.npz")
+    with np.load(tmp_path / "s.npz") as f:
+        assert f["cuts_right"].sum() == H and "discontinuities" in f
+    out = s.save(tmp_path / "d.png")
+    assert out.read_bytes()[:4] == b"\x89PNG"
+    from facetlift import io
+
+    io.write_discontinuities(tmp_path / "j.png", s)
+    plain = facetlift.integrate(np.dstack([np.zeros((H, W, 2)), np.ones((H, W))]))
+    with pytest.raises(ValueError, match="no discontinuity map"):
+        io.write_discontinuities(tmp_path / "k.png", plain)

@@ -240,8 +240,20 @@ def uncrop(surface: Surface, problem: Problem, offset: tuple[int, int]) -> Surfa
     depth[r0 : r0 + h, c0 : c0 + w] = surface.depth
     vdepth = np.full((H + 1, W + 1), np.nan)
     vdepth[r0 : r0 + h + 1, c0 : c0 + w + 1] = surface.vertex_depth
+    cuts = disc = split = None
+    if surface.cuts is not None:
+        right = np.zeros((H, W - 1), bool)
+        down = np.zeros((H - 1, W), bool)
+        right[r0 : r0 + h, c0 : c0 + w - 1] = surface.cuts[0]
+        down[r0 : r0 + h - 1, c0 : c0 + w] = surface.cuts[1]
+        cuts = (right, down)
+        disc = np.full((H, W), np.nan)
+        disc[r0 : r0 + h, c0 : c0 + w] = surface.discontinuities
+        corners, i, j, sdepth = surface.split
+        split = (corners, i + r0, j + c0, sdepth)
     return Surface(
-        depth=depth, vertex_depth=vdepth, mask=problem.domain.mask.copy(), camera=problem.camera
+        depth=depth, vertex_depth=vdepth, mask=problem.domain.mask.copy(), camera=problem.camera,
+        cuts=cuts, discontinuities=disc, split=split,
     )
 
 
@@ -256,6 +268,17 @@ def make_surface(problem: Problem, result: methods.MethodResult, method: str = "
         If a value inside the domain is not finite.
     """
     d = problem.domain
+    copies = result.extras.get("corner_values")
+    mesh = None
+    if copies is not None:  # a discontinuity-preserving result: split the mesh at its jumps
+        from .operators.split import GAP, from_copies
+
+        mesh, svals = from_copies(d, copies, GAP * problem.camera.footprint())
+        # vertex grid values: the mean of a grid vertex's copies (the mesh uses the copies)
+        counts = np.bincount(mesh.vertex, minlength=d.n_vertices)
+        grid = np.bincount(mesh.vertex, svals, d.n_vertices) / np.maximum(counts, 1)
+        result = methods.MethodResult(values=svals[mesh.corners].mean(axis=1),
+                                      vertex_values=grid, info=result.info)
     if result.vertex_values is not None:
         vval = np.asarray(result.vertex_values, dtype=float)
         fval = d.facet_centres(vval) if result.values is None else np.asarray(result.values, float)
@@ -277,7 +300,44 @@ def make_surface(problem: Problem, result: methods.MethodResult, method: str = "
             f"method {method!r} produced non-finite depth at {bad} of {fval.size} pixels inside "
             "the mask"
         )
-    return Surface(
+    surface = Surface(
         depth=d.to_image(depth), vertex_depth=d.to_vertex_image(vdepth), mask=d.mask.copy(),
         camera=cam,
     )
+    if mesh is not None:
+        _attach_split(surface, d, mesh, cam.to_depth(svals - shift[_split_component(d, mesh)]))
+    return surface
+
+
+def _split_component(d: Domain, mesh) -> np.ndarray:
+    comp = np.empty(mesh.n_vertices, dtype=np.int64)
+    comp[mesh.corners.ravel()] = np.repeat(d.facet_component, 4)
+    return comp
+
+
+def _attach_split(surface: Surface, d: Domain, mesh, sdepth: np.ndarray) -> None:
+    """Give `surface` its cut edges, jump map and split mesh; depth is the mean of each facet's
+    mesh corners already (see make_surface)."""
+    H, W = d.shape
+    inside_r = d.mask[:, :-1] & d.mask[:, 1:]
+    inside_d = d.mask[:-1] & d.mask[1:]
+    right, down = mesh.right & inside_r, mesh.down & inside_d
+    corner = np.full((H, W, 4), np.nan)
+    corner[d.pixels] = sdepth[mesh.corners]  # depth of every facet's own corners
+    with np.errstate(invalid="ignore"):
+        # the jump at a cut edge: the two facets' corner depths on it, averaged over its ends
+        jr = 0.5 * (np.abs(corner[:, :-1, 1] - corner[:, 1:, 0])
+                    + np.abs(corner[:, :-1, 2] - corner[:, 1:, 3]))
+        jd = 0.5 * (np.abs(corner[:-1, :, 3] - corner[1:, :, 0])
+                    + np.abs(corner[:-1, :, 2] - corner[1:, :, 1]))
+    jr = np.where(right, jr, 0.0)
+    jd = np.where(down, jd, 0.0)
+    jump = np.zeros(d.shape)
+    jump[:, :-1] = np.maximum(jump[:, :-1], jr)
+    jump[:, 1:] = np.maximum(jump[:, 1:], jr)
+    jump[:-1] = np.maximum(jump[:-1], jd)
+    jump[1:] = np.maximum(jump[1:], jd)
+    vi, vj = np.nonzero(d.vertex_mask)
+    surface.cuts = (right, down)
+    surface.discontinuities = np.where(d.mask, jump, np.nan)
+    surface.split = (mesh.corners, vi[mesh.vertex], vj[mesh.vertex], sdepth)

@@ -171,7 +171,8 @@ _JOB_OPTIONS = [
                  help="What to write, repeatable: npy/exr/tif = depth map, npz = depth + "
                  "vertex depth + mask, ply/obj = mesh, png = shaded preview, report = one PNG "
                  "with shading, depth, deviation and discontinuity panels (needs "
-                 "facetlift[plot]). Default: npy, ply, png."),
+                 "facetlift[plot]), discontinuities = where the surface is cut by depth jumps "
+                 "(with --discontinuities). Default: npy, ply, png."),
     click.option("--quads", "mesh_faces", flag_value="quads",
                  help="Write quad meshes (the PLY default; OBJ defaults to triangles)."),
     click.option("--triangles", "mesh_faces", flag_value="triangles",

@@ -28,6 +28,7 @@ OUTPUTS = {
     "obj": "mesh.obj",
     "png": "preview.png",
     "report": "report.png",
+    "discontinuities": "discontinuities.png",
 }
 DEFAULT_SAVE = ("npy", "ply", "png")
 
@@ -229,6 +230,8 @@ def _write(surface, kind: str, path: Path, normals, triangles) -> None:
 
     if kind == "report":
         io.write_report(path, surface, normals)
+    elif kind == "discontinuities":
+        io.write_discontinuities(path, surface)
     elif kind in ("ply", "obj") and triangles is not None:
         surface.save(path, triangles=triangles)
     else:

@@ -31,17 +31,30 @@ class Surface:
     camera : facetlift.camera.Camera
         The camera the depth is measured in; give it, or `pixel_size` and `K` (read back as
         properties).
+    cuts : (right, down) or None
+        Where the surface is cut by a depth jump (discontinuity-preserving methods): ``right``
+        (H, W-1) bool between pixel (r, c) and (r, c+1), ``down`` (H-1, W) between (r, c) and
+        (r+1, c). :meth:`to_mesh` splits the mesh there; ``depth`` is the mean of each facet's
+        four mesh corners, so the two agree everywhere.
+    discontinuities : (H, W) float or None
+        Per pixel, the largest depth jump across its cut edges (0 where none, NaN outside).
+    split : (corners, i, j, depth) or None
+        The split mesh behind `cuts`: facet corners (m, 4) into split vertices, their grid
+        positions (i, j) and depths (each (n,)); :meth:`to_mesh` uses it.
     """
 
     def __init__(
         self, depth, vertex_depth, mask, info=None, *, pixel_size: float = 1.0, K=None,
-        camera: Camera | None = None,
+        camera: Camera | None = None, cuts=None, discontinuities=None, split=None,
     ):
         self.depth = depth
         self.vertex_depth = vertex_depth
         self.mask = mask
         self.info = {} if info is None else info
         self.camera = make_camera(pixel_size, K) if camera is None else camera
+        self.cuts = cuts
+        self.discontinuities = discontinuities
+        self.split = split
 
     @property
     def pixel_size(self) -> float:
@@ -82,14 +95,20 @@ class Surface:
     def to_mesh(self, triangles: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """The facet mesh: vertices (n, 3) and faces (m, 4) quads or (2m, 3) triangles.
 
-        Vertices are those of ``points("vertices")``; faces list corners counter-clockwise
-        seen from the viewer, so face normals point toward the viewer.
+        Vertices are those of ``points("vertices")``, or, where the surface has depth jumps
+        (:attr:`cuts`), the split vertices: one copy per side of a jump, so that no face is
+        stretched across it. Faces list corners counter-clockwise seen from the viewer, so face
+        normals point toward the viewer; facets in row-major pixel order.
         """
-        domain = Domain.from_mask(self.mask)
-        verts = self.points("vertices")
+        if self.split is not None:
+            corners, i, j, depth = self.split
+            verts = self.camera.points(i, j, depth)
+        else:
+            corners = Domain.from_mask(self.mask).corners
+            verts = self.points("vertices")
         # conventional corner order (r,c),(r,c+1),(r+1,c+1),(r+1,c) is clockwise seen from the
         # viewer (y up); reverse it for outward (viewer-facing) normals
-        quads = domain.corners[:, ::-1]
+        quads = corners[:, ::-1]
         if not triangles:
             return verts, quads
         a, b, c, d = quads.T

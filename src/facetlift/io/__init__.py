@@ -54,7 +54,7 @@ from .images import (
     write_normals,
 )
 from .meshes import MESH_FORMATS, write_mesh
-from .preview import shade, write_preview
+from .preview import shade, write_discontinuities, write_preview
 from .report import write_report
 from .surface import SURFACE_FORMATS, save_surface
 
@@ -80,6 +80,7 @@ __all__ = [
     "write_mask",
     "write_mesh",
     "write_normals",
+    "write_discontinuities",
     "write_preview",
     "write_report",
 ]

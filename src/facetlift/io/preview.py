@@ -103,3 +103,41 @@ def write_preview(
         out = np.repeat(np.repeat(out, k, axis=0), k, axis=1)
     _write_png(p, out)
     return p
+
+
+def write_discontinuities(path, surface, *, min_size: int = 256) -> Path:
+    """Write a PNG of where the surface is cut by depth jumps.
+
+    The surface is shaded in grey (:func:`shade`) and every pixel next to a cut edge
+    (:attr:`facetlift.Surface.cuts`) is drawn in red, brighter for a larger jump (relative to
+    the largest); white outside the mask. No matplotlib needed.
+
+    Raises
+    ------
+    ValueError
+        If the surface has no discontinuity map (a method without ``discontinuities=True``).
+    """
+    p = Path(path)
+    _suffix(p, (".png",), "discontinuity map", "path")
+    jumps = getattr(surface, "discontinuities", None)
+    if jumps is None:
+        raise ValueError(
+            "the surface has no discontinuity map: integrate with discontinuities=True "
+            "(--discontinuities) to get one"
+        )
+    s = shade(surface)
+    img = np.full(s.shape + (3,), 255, dtype=np.uint8)
+    inside = surface.mask
+    grey = np.round(200 * np.nan_to_num(s[inside]) + 30).astype(np.uint8)
+    img[inside] = grey[:, None]
+    cut = inside & (np.nan_to_num(jumps) > 0)
+    if cut.any():
+        rel = jumps[cut] / np.nanmax(jumps[cut])
+        img[cut] = np.column_stack([
+            np.round(150 + 105 * rel), np.round(40 * (1 - rel)), np.round(40 * (1 - rel))
+        ]).astype(np.uint8)
+    k = max(1, int(np.ceil(min_size / max(1, min(inside.shape)))))
+    if k > 1:
+        img = np.repeat(np.repeat(img, k, axis=0), k, axis=1)
+    _write_png(p, img)
+    return p

@@ -19,11 +19,13 @@ def save_surface(surface, path, **kwargs) -> Path:
     """Write `surface` in the format given by the extension of `path`.
 
     ``.npy``, ``.exr``, ``.tif``/``.tiff``: the (H, W) depth map (:func:`write_depth`);
-    ``.npz``: arrays ``depth``, ``vertex_depth``, ``mask``, ``pixel_size`` and ``K`` (NaN-filled
-    3x3 when orthographic); ``.ply``/``.obj``: the facet mesh (:func:`write_mesh`; keyword
-    ``triangles``: True splits each quad in two, False keeps quads; default quads for PLY and
-    triangles for OBJ, since OBJ readers such as Open3D's take triangles only); ``.png``: a
-    shaded preview (:func:`write_preview`, keywords forwarded). Returns the path written.
+    ``.npz``: arrays ``depth``, ``vertex_depth``, ``mask``, ``pixel_size`` and ``K``
+    (NaN-filled 3x3 when orthographic), and where the surface has depth jumps ``cuts_right``,
+    ``cuts_down`` and ``discontinuities``; ``.ply``/``.obj``: the facet mesh
+    (:func:`write_mesh`, split at the jumps where there are any; keyword ``triangles``: True
+    splits each quad in two, False keeps quads; default quads for PLY and triangles for OBJ,
+    since OBJ readers such as Open3D's take triangles only); ``.png``: a shaded preview
+    (:func:`write_preview`, keywords forwarded). Returns the path written.
 
     Raises
     ------
@@ -52,6 +54,7 @@ def save_surface(surface, path, **kwargs) -> Path:
                 mask=surface.mask,
                 pixel_size=np.float64(surface.pixel_size),
                 K=K,
+                **_cut_arrays(surface),
             )
         return p
     if ext in MESH_FORMATS:
@@ -67,3 +70,11 @@ def save_surface(surface, path, **kwargs) -> Path:
     if extra:
         raise ValueError(f".png output takes only {sorted(preview_kw)}; got {extra}")
     return write_preview(p, surface, **kwargs)
+
+
+def _cut_arrays(surface) -> dict:
+    """``cuts_right``, ``cuts_down`` and ``discontinuities`` where the surface has jumps."""
+    if getattr(surface, "cuts", None) is None:
+        return {}
+    return {"cuts_right": surface.cuts[0], "cuts_down": surface.cuts[1],
+            "discontinuities": surface.discontinuities}

@@ -64,15 +64,17 @@ Reference
 
 from __future__ import annotations
 
+import numpy as np
+
 from ...options import Option
 from .. import MethodResult
 from .common import average_deviation, empty_components, targets
-from .discontinuous import DEFAULT_ITER, DEFAULT_K, solve_discontinuous
+from .discontinuous import DEFAULT_ITER, DEFAULT_K, DEFAULT_TOL, solve_discontinuous
 from .fixed_point import solve_direct
 from .loop import local_shaping, solve_iterative
 
-__all__ = ["OPTIONS", "average_deviation", "local_shaping", "run", "solve_direct",
-           "solve_iterative", "targets"]
+__all__ = ["OPTIONS", "average_deviation", "local_shaping", "normal_scale", "run",
+           "solve_direct", "solve_iterative", "targets"]
 
 _ITERATIVE = {"solver": "iterative"}
 _DISC = {"discontinuities": True}
@@ -81,7 +83,7 @@ OPTIONS = (
     Option("solver", "direct", "'direct' solves the loop's fixed point at once; 'iterative' "
            "runs the paper's local/global loop", kind="choice", choices=("direct", "iterative")),
     Option("discontinuities", False, "let depth jump where the normals imply it "
-           "(facets with their own corners, robustly glued)", kind="bool",
+           "(facets with their own corners, glued by bilateral weights)", kind="bool",
            when={"solver": "direct"}),
     Option("mean_subtraction", True, "global blending with mean subtraction (Eq. 5); "
            "without it the loop converges far more slowly (Fig. 4)", kind="bool",
@@ -96,17 +98,18 @@ OPTIONS = (
            "flattest of otherwise equal solutions)", low=0.0, low_open=True),
     Option("progress", None, "callable(iteration, value) called after every iteration of "
            "the routes that iterate", kind="callable", none=True),
-    Option("discontinuity_k", DEFAULT_K, "corner misfit, in pixel footprints, at which the "
-           "glue between a facet and a vertex halves (smaller cuts more readily)",
-           low=0.0, low_open=True, when=_DISC),
-    Option("discontinuity_iter", DEFAULT_ITER, "reweightings after the smooth start",
-           kind="int", low=0, when=_DISC),
+    Option("discontinuity_k", DEFAULT_K, "sharpness of the bilateral weights, in squared pixel "
+           "footprints (larger cuts more readily)", low=0.0, low_open=True, when=_DISC),
+    Option("discontinuity_iter", DEFAULT_ITER, "cap on the reweightings (the energy rule "
+           "normally stops first)", kind="int", low=0, when=_DISC),
+    Option("discontinuity_tol", DEFAULT_TOL, "stop when the energy changes by less than this "
+           "fraction", low=0.0, when=_DISC),
 )
 
 
 def run(
     problem, *, solver, discontinuities, mean_subtraction, max_iter, tol, backend, flat_weight,
-    progress, discontinuity_k, discontinuity_iter,
+    progress, discontinuity_k, discontinuity_iter, discontinuity_tol,
 ) -> MethodResult:
     """Integrate `problem` with the DGP method (options checked by facetlift.solve)."""
     bx, by, target = targets(problem)
@@ -114,14 +117,17 @@ def run(
     domain = problem.domain
     if discontinuities:
         empty_components(domain, target)
-        z, zf, info = solve_discontinuous(
-            domain, bx, by, target, scale=s, k=discontinuity_k, max_iter=discontinuity_iter,
-            flat_weight=flat_weight,
-            callback=None if progress is None else (lambda it, z, change: progress(it, change)),
+        z, y, w, info = solve_discontinuous(
+            domain, bx, by, target, normal_scale=normal_scale(problem), k=discontinuity_k,
+            max_iter=discontinuity_iter, tol=discontinuity_tol, flat_weight=flat_weight,
+            callback=progress,
         )
+        copies, pinfo = place_pieces(domain, y, bx, by, target, s)
+        info.update(pinfo)
         info["solver"] = "discontinuous"
         info["deviation"] = [average_deviation(domain, z, bx, by, target, s)]
-        result = MethodResult(values=zf, vertex_values=z, info=info)
+        result = MethodResult(values=copies.mean(axis=1), info=info,
+                              extras={"corner_values": copies})
     elif solver == "direct":  # both loops share this fixed point
         z, info = solve_direct(domain, bx, by, target, backend, flat_weight, h=s)
         result = MethodResult(vertex_values=z, info=info)
@@ -133,3 +139,28 @@ def run(
     info["outliers"] = int((problem.known & ~target).sum())
     info["missing"] = int((~problem.known).sum())
     return result
+
+
+def normal_scale(problem):
+    """(m,) ``c_f``: each usable normal's cosine to the viewing ray per pixel footprint (the
+    factor BiNI calls ``n~_z``), 0 where a facet has no usable normal."""
+    r, c = problem.domain.pixels
+    n = np.where(problem.usable[:, None], problem.normals, [0.0, 0.0, 1.0])
+    cos = problem.camera.view_cosine(r, c, n, unit=True)
+    return np.where(problem.usable, cos, 0.0) / problem.camera.footprint()
+
+
+def place_pieces(domain, copies, bx, by, target, footprint):
+    """The facets' corner copies (m, 4) with the pieces the jumps separate placed by the
+    occlusion rule (:func:`facetlift.methods.dgp.split.occlusion_offsets`): the mesh is split
+    where neighbouring copies part by more than :data:`facetlift.operators.split.GAP`
+    footprints, and each separated piece moved rigidly so that the smallest jump on its boundary
+    is zero. Returns the copies (split vertices averaged) and ``{"pieces", "moved_pieces"}``."""
+    from ...operators.split import GAP, from_copies
+    from .split import occlusion_offsets
+
+    mesh, values = from_copies(domain, copies, GAP * footprint)
+    offsets = occlusion_offsets(mesh, values, bx, by, target, scale=footprint)
+    moved = int((np.abs(offsets) > GAP * footprint).sum())
+    return (values + offsets[mesh.piece])[mesh.corners], {"pieces": mesh.n_pieces,
+                                                         "moved_pieces": moved}

@@ -1,12 +1,10 @@
 """The DGP fixed point on a facet mesh split along given edges (vertices duplicated per side).
 
-A depth jump between two neighbouring pixels means their facets must not share the two
-vertices on their common edge. Given the set of *cut* edges (between 4-neighbouring pixels),
-every vertex of the facet grid is split into groups: the facets around it that stay joined by
-uncut edges share one copy of the vertex, the others get their own. On that split mesh the
-smooth DGP fixed point (:mod:`facetlift.methods.dgp.fixed_point`) is solved exactly: every
-piece is the smooth DGP surface of its own facets, with nothing of the jump left in it, and
-without any cut the result is the smooth DGP solution itself.
+Given the set of *cut* edges between 4-neighbouring pixels, the facet mesh is split
+(:mod:`facetlift.operators.split`); on that split mesh the smooth DGP fixed point
+(:mod:`facetlift.methods.dgp.fixed_point`) is solved exactly: every piece is the smooth DGP
+surface of its own facets, with nothing of the jump left in it, and without any cut the
+result is the smooth DGP solution itself.
 
 Offsets of separated pieces
     A piece that the cuts separate completely from the rest of its mask component has a free
@@ -14,145 +12,22 @@ Offsets of separated pieces
     :func:`piece_offsets` fixes those constants rigidly (without bending any piece): by least
     squares over the cut edges, so that on average the surface continues across the cut as
     the normals of the two facets predict (``rule="continue"``), or the vertex copies meet
-    (``rule="meet"``).
+    (``rule="meet"``); :func:`occlusion_offsets` sets the smallest jump of every boundary
+    to zero (``rule="occlusion"``).
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
 from ... import linalg
-from ...domain import Domain
+from ...operators.split import SplitMesh, split
 from ...operators.stencil import E_X, E_Y
 from .fixed_point import SLOPE_BLOCK, TWIST_BLOCK
 
-#: Slots of the four facets around a vertex: top-left, top-right, bottom-left, bottom-right.
-TL, TR, BL, BR = 0, 1, 2, 3
-#: Which slot a facet occupies at each of its corners 0..3 (conventional corner order).
-CORNER_SLOT = (BR, BL, TL, TR)
-
-
-@dataclass(frozen=True, eq=False)
-class SplitMesh:
-    """A domain's facet mesh with its vertices split along cut edges.
-
-    Attributes
-    ----------
-    domain : Domain
-    corners : (m, 4) int64
-        Split-vertex index of every facet corner (conventional order).
-    n_vertices : int
-    vertex : (n_vertices,) int64
-        The grid vertex (index into ``domain.vertex_index``) each split vertex is a copy of.
-    piece : (n_vertices,) int64
-        Connected piece of the split mesh of each split vertex (facets joined through shared
-        split vertices), 0-based.
-    n_pieces : int
-    facet_piece : (m,) int64
-    cut_pairs : (c, 2) int64
-        Pairs of split vertices that are copies of one grid vertex on the two sides of a cut
-        edge.
-    right, down : bool arrays (H, W-1) and (H-1, W)
-        The cut edges: between pixel (r, c) and (r, c+1), and between (r, c) and (r+1, c).
-    """
-
-    domain: Domain
-    corners: np.ndarray
-    n_vertices: int
-    vertex: np.ndarray
-    piece: np.ndarray
-    n_pieces: int
-    facet_piece: np.ndarray
-    cut_pairs: np.ndarray
-    right: np.ndarray
-    down: np.ndarray
-
-    @property
-    def n_cut_edges(self) -> int:
-        inside_r = self.domain.mask[:, :-1] & self.domain.mask[:, 1:]
-        inside_d = self.domain.mask[:-1] & self.domain.mask[1:]
-        return int((self.right & inside_r).sum() + (self.down & inside_d).sum())
-
-
-def split(domain: Domain, right=None, down=None) -> SplitMesh:
-    """Split the facet mesh of `domain` along the cut edges `right` (H, W-1) and `down`
-    (H-1, W) (see :class:`SplitMesh`); None means no cut in that direction."""
-    mask = domain.mask
-    H, W = mask.shape
-    right = np.zeros((H, W - 1), bool) if right is None else np.asarray(right, bool)
-    down = np.zeros((H - 1, W), bool) if down is None else np.asarray(down, bool)
-    if right.shape != (H, W - 1) or down.shape != (H - 1, W):
-        raise ValueError(
-            f"cut edges must have shapes {(H, W - 1)} and {(H - 1, W)}; got {right.shape} "
-            f"and {down.shape}"
-        )
-    mp = np.pad(mask, 1)
-    rp = np.pad(right, 1)  # rp[r + 1, c + 1] = right[r, c]
-    dp = np.pad(down, 1)
-    # per grid vertex (i, j), i in 0..H, j in 0..W: the four facets around it
-    present = np.stack([mp[:-1, :-1], mp[:-1, 1:], mp[1:, :-1], mp[1:, 1:]], axis=-1)
-    big = np.int64(8)
-    lab = np.where(present, np.arange(4), big)
-    joined = {  # slot pair -> edge between the two facets is in the mask and not cut
-        (TL, TR): ~rp[:-1, :],
-        (BL, BR): ~rp[1:, :],
-        (TL, BL): ~dp[:, :-1],
-        (TR, BR): ~dp[:, 1:],
-    }
-    links = []
-    for (a, b), uncut in joined.items():
-        links.append((a, b, present[..., a] & present[..., b] & uncut))
-    # facets touching only at this corner (a pinch of the mask) stay joined
-    links.append((TL, BR, present[..., TL] & present[..., BR] & ~present[..., TR]
-                  & ~present[..., BL]))
-    links.append((TR, BL, present[..., TR] & present[..., BL] & ~present[..., TL]
-                  & ~present[..., BR]))
-    for _ in range(3):  # a cycle of four slots: three passes reach every slot
-        for a, b, on in links:
-            low = np.minimum(lab[..., a], lab[..., b])
-            lab[..., a] = np.where(on, low, lab[..., a])
-            lab[..., b] = np.where(on, low, lab[..., b])
-    vi = domain.vertex_index
-    key = np.where(present, vi[..., None] * 4 + lab, -1)
-    used = np.unique(key[present])
-    n = used.size
-    sidx = np.full(key.shape, -1, dtype=np.int64)
-    sidx[present] = np.searchsorted(used, key[present])
-    # facet corners: facet (r, c) sits in slot CORNER_SLOT[k] of its corner vertex k
-    r, c = domain.pixels
-    offsets = ((0, 0), (0, 1), (1, 1), (1, 0))
-    corners = np.stack(
-        [sidx[r + dr, c + dc, CORNER_SLOT[k]] for k, (dr, dc) in enumerate(offsets)], axis=1
-    )
-    vertex = used // 4
-    # cut pairs: two present slots around a vertex, joined in the mask but on two sides of a cut
-    pairs = []
-    for (a, b), uncut in joined.items():
-        sel = present[..., a] & present[..., b] & ~uncut & (sidx[..., a] != sidx[..., b])
-        pairs.append(np.stack([sidx[..., a][sel], sidx[..., b][sel]], axis=1))
-    cut_pairs = np.unique(np.sort(np.concatenate(pairs), axis=1), axis=0) if pairs else \
-        np.zeros((0, 2), np.int64)
-    piece, n_pieces = _pieces(corners, n)
-    return SplitMesh(
-        domain=domain, corners=corners, n_vertices=int(n), vertex=vertex, piece=piece,
-        n_pieces=n_pieces, facet_piece=piece[corners[:, 0]], cut_pairs=cut_pairs,
-        right=right, down=down,
-    )
-
-
-def _pieces(corners: np.ndarray, n: int) -> tuple[np.ndarray, int]:
-    """Connected pieces of the split vertices, joined by the facets."""
-    from scipy.sparse.csgraph import connected_components
-
-    m = corners.shape[0]
-    rows = np.repeat(np.arange(m), 4)
-    inc = sp.csr_matrix((np.ones(4 * m), (rows, corners.ravel())), shape=(m, n))
-    count, labels = connected_components(inc.T @ inc, directed=False)
-    return labels.astype(np.int64), int(count)
-
+__all__ = ["SplitMesh", "assemble", "occlusion_offsets", "piece_offsets", "solve_pieces",
+           "solve_split", "split"]
 
 def assemble(mesh: SplitMesh, bx, by, target, *, weights=None, flat_weight=1e-9):
     """``K`` (n, n) CSR and right-hand side of the DGP fixed point on the split mesh.
@@ -240,15 +115,23 @@ def piece_offsets(mesh: SplitMesh, z: np.ndarray, bx, by, target, rule: str = "c
     return o
 
 
-def occlusion_offsets(mesh: SplitMesh, z, bx, by, target, quantile: float = 0.05):
+#: A boundary whose jumps take each sign on more than this share of its edges has no single
+#: occluding side; its two pieces are then placed by the median jump instead.
+MIXED = 0.2
+
+
+def occlusion_offsets(mesh: SplitMesh, z, bx, by, target, quantile: float = 0.05,
+                      scale: float = 0.0):
     """Constants (n_pieces,) placing separated pieces by the occlusion rule.
 
     Across the boundary between two pieces one surface lies in front of the other: the jump
     has one sign along it, and where the boundary ends inside the object (a fold) it fades to
     zero. So each pair of neighbouring pieces is placed with the smallest jump zero: the
     `quantile` of the boundary gaps (the continuation residual of :func:`_continuation`), on the
-    side of the jump's majority sign, is set to 0. Pairs are then reconciled by least squares
-    weighted by their boundary length (one constant per group of connected pieces stays free).
+    side of the jump's majority sign, is set to 0 (where both signs are common among the jumps
+    larger than `scale`, see :data:`MIXED`, the median instead). Pairs are then reconciled by
+    least squares weighted by their boundary length (one constant per group of connected
+    pieces stays free).
     """
     k = max(mesh.n_pieces, 1)
     if mesh.n_pieces <= 1:
@@ -268,8 +151,12 @@ def occlusion_offsets(mesh: SplitMesh, z, bx, by, target, quantile: float = 0.05
     rows_lo, rows_hi, want, weight = [], [], [], []
     for s0, s1 in zip(starts, ends, strict=True):
         gg = g[s0:s1]
-        pos = (gg > 0).mean() >= 0.5
-        q = np.quantile(gg, quantile) if pos else np.quantile(gg, 1.0 - quantile)
+        big = gg[np.abs(gg) > scale]
+        share = (big > 0).mean() if big.size else 0.5
+        if MIXED < share < 1.0 - MIXED:
+            q = np.median(gg)  # both pieces in front somewhere: no occlusion order to use
+        else:
+            q = np.quantile(gg, quantile) if share >= 0.5 else np.quantile(gg, 1.0 - quantile)
         rows_lo.append(key[s0] // k)
         rows_hi.append(key[s0] % k)
         want.append(q)  # (u_hi + o_hi) - (u_lo + o_lo) - t: make this q -> 0: o_hi - o_lo = -q
@@ -333,7 +220,7 @@ def solve_split(mesh: SplitMesh, bx, by, target, *, weights=None, flat_weight=1e
             o = np.atleast_1d(ndimage.median(reference - zf, mesh.facet_piece + 1,
                                              np.arange(1, k + 1)))
     elif rule == "occlusion":
-        o = occlusion_offsets(mesh, z, bx, by, target)
+        o = occlusion_offsets(mesh, z, bx, by, target, scale=scale or 0.0)
     else:
         o = piece_offsets(mesh, z, bx, by, target, rule, scale)
     z = z + o[mesh.piece]
