@@ -31,6 +31,7 @@ from .direct import Factor, SolverError, pardiso_available
 
 __all__ = [
     "BACKENDS",
+    "KINDS",
     "CGInfo",
     "Factor",
     "SolveInfo",
@@ -74,45 +75,62 @@ def check_backend(backend) -> str:
     return backend
 
 
+#: What kind of SPD system is solved (``kind=`` of :func:`choose`):
+#: ``"facet"``: a DGP facet system on a domain (:mod:`facetlift.linalg.facet` preconditions it
+#: on any mask, with missing normals and grazing rims); ``"graph"``: an M-matrix such as a
+#: weighted graph Laplacian (classical multigrid suits it); ``"spd"``: any other SPD matrix
+#: (smoothed-aggregation multigrid above :data:`LARGE`).
+KINDS = ("facet", "graph", "spd")
+
+
 def choose(
     n: int,
     backend: str = "auto",
     *,
+    kind: str = "graph",
     preconditioner: bool = False,
     trusted: bool = False,
-    multigrid: bool = True,
 ) -> str:
-    """The backend that solves an SPD system of `n` unknowns.
+    """The backend that solves an SPD system of `n` unknowns: the one policy.
 
     Parameters
     ----------
     n : int
     backend : str
         A name from :data:`BACKENDS`; anything but "auto" is returned as it is (checked).
+    kind : {"facet", "graph", "spd"}
+        What the matrix is (:data:`KINDS`). Facet systems always take "pcg" with
+        :class:`~facetlift.linalg.facet.FacetPreconditioner` (20-60 iterations at every size
+        and on every mask, no factorization: docs/benchmarks.md).
     preconditioner : bool
-        The caller has a cheap problem-specific preconditioner ("pcg" is possible).
+        The caller has another cheap problem-specific preconditioner ("pcg" is possible).
     trusted : bool
-        That preconditioner is known to converge in a few dozen iterations on this system
-        (e.g. the spectral box on a facet operator with every normal known): prefer it at
+        That preconditioner converges in a few dozen iterations on this system: prefer it at
         every size. An untrusted one is used only where factorizing is too costly.
-    multigrid : bool
-        Classical AMG suits the matrix (an M-matrix such as a graph Laplacian); False keeps
-        "auto" on factorizations.
 
     Returns
     -------
     str
         "pcg", "pardiso", "superlu" or "amg".
+
+    Notes
+    -----
+    Up to :data:`LARGE` unknowns a factorization (PARDISO where installed, else SuperLU) is
+    the fastest for graph and general systems; above it the factorization grows
+    superlinearly in time and memory (PARDISO 14.7 s and 5 GB at 2048^2) and multigrid-CG,
+    linear in both, takes over (also with PARDISO installed).
     """
     backend = check_backend(backend)
+    if kind not in KINDS:
+        raise ValueError(f"`kind` must be one of {KINDS}; got {kind!r}")
     if backend != "auto":
         return backend
-    if preconditioner and (trusted or (n > LARGE and not pardiso_available())):
+    if kind == "facet" or (preconditioner and trusted):
         return "pcg"
-    if pardiso_available():
-        return "pardiso"
-    if n <= LARGE or not multigrid:
-        return "superlu"
+    if n <= LARGE:
+        return "pardiso" if pardiso_available() else "superlu"
+    if preconditioner and not pardiso_available():
+        return "pcg"
     return "amg"
 
 
@@ -120,6 +138,7 @@ def factorize(
     K,
     backend: str = "auto",
     *,
+    kind: str = "graph",
     preconditioner: Callable[[np.ndarray], np.ndarray] | None = None,
     trusted: bool = False,
     rtol: float = 1e-11,
@@ -130,7 +149,8 @@ def factorize(
     solution (a loop's consecutive right-hand sides are close).
     """
     name = choose(
-        K.shape[0], backend, preconditioner=preconditioner is not None, trusted=trusted
+        K.shape[0], backend, kind=kind, preconditioner=preconditioner is not None,
+        trusted=trusted,
     )
     if name == "pcg":
         if preconditioner is None:
@@ -143,7 +163,7 @@ def factorize(
     if name == "amg":
         from .amg import amg
 
-        return amg(K, rtol=rtol)
+        return amg(K, rtol=rtol, method="sa" if kind == "spd" else "rs")
     from .direct import superlu
 
     return superlu(K)
@@ -154,15 +174,18 @@ def solve(
     b: np.ndarray,
     backend: str = "auto",
     *,
+    kind: str = "graph",
     preconditioner: Callable[[np.ndarray], np.ndarray] | None = None,
     trusted: bool = False,
-    multigrid: bool = True,
     rtol: float = 1e-11,
     x0: np.ndarray | None = None,
+    flexible: bool = False,
 ) -> tuple[np.ndarray, SolveInfo]:
     """Solve ``K x = b`` once for a symmetric positive (semi-)definite `K` (n, n).
 
-    With a `preconditioner` and the "pcg" route, `K` may be singular with `b` in its range.
+    With a `preconditioner` and the "pcg" route, `K` may be singular with `b` in its range;
+    `flexible` selects CG's Polak-Ribiere update there (for preconditioners that are SPD only
+    up to rounding, such as float32 transforms). `kind` is :func:`choose`'s.
 
     Returns
     -------
@@ -175,16 +198,16 @@ def solve(
         The factorization failed or CG did not converge.
     """
     name = choose(
-        K.shape[0], backend, preconditioner=preconditioner is not None, trusted=trusted,
-        multigrid=multigrid,
+        K.shape[0], backend, kind=kind, preconditioner=preconditioner is not None,
+        trusted=trusted,
     )
     if name == "pcg":
         if preconditioner is None:
             raise ValueError("`backend`='pcg' needs a `preconditioner`")
-        x, cinfo = cg(K, b, preconditioner, x0=x0, rtol=rtol)
+        x, cinfo = cg(K, b, preconditioner, x0=x0, rtol=rtol, flexible=flexible)
         _raise_unless_converged(cinfo, rtol, "preconditioned CG")
         return x, SolveInfo("pcg", cinfo.iterations, cinfo.relative_residual)
-    factor = factorize(K, name, rtol=rtol)
+    factor = factorize(K, name, kind=kind, rtol=rtol)
     x = factor.solve(b)
     it = factor.info.iterations if factor.info is not None else None
     return x, SolveInfo(name, it)
@@ -202,7 +225,7 @@ def _pcg_factor(K, preconditioner, rtol) -> Factor:
     state = {"x0": None}
 
     def _solve(b):
-        x, info = cg(K, b, preconditioner, x0=state["x0"], rtol=rtol)
+        x, info = cg(K, b, preconditioner, x0=state["x0"], rtol=rtol, flexible=True)
         factor.info = info
         _raise_unless_converged(info, rtol, "preconditioned CG")
         state["x0"] = x

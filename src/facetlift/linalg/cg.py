@@ -54,6 +54,7 @@ def cg(
     rtol: float = 1e-10,
     maxiter: int = 2000,
     callback: Callable[[np.ndarray], None] | None = None,
+    flexible: bool = False,
 ) -> tuple[np.ndarray, CGInfo]:
     """Solve ``A x = b`` for a symmetric positive (semi-)definite `A` by preconditioned CG.
 
@@ -71,6 +72,10 @@ def cg(
         Most iterations; the result after them is returned with ``converged=False``.
     callback : callable(x), optional
         Called after every iteration with the current iterate.
+    flexible : bool
+        Polak-Ribiere update ``beta = r_k . (z_k - z_{k-1}) / r_{k-1} . z_{k-1}``: robust to a
+        preconditioner that is SPD only up to rounding (e.g. float32 transforms), at the cost
+        of one more vector and inner product.
 
     Returns
     -------
@@ -112,9 +117,11 @@ def cg(
         if rnorm <= stop:
             info.converged = bool(np.all(np.isfinite(x)))
             break
+        z_old = z if flexible else None
         z = r.copy() if M is None else M(r)
         rz_new = _dot(r, z)
-        d *= rz_new / rz
+        beta = (rz_new - _dot(r, z_old)) / rz if flexible else rz_new / rz
+        d *= beta
         d += z
         rz = rz_new
     return x, info

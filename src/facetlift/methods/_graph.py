@@ -43,14 +43,14 @@ def setup(problem):
     return problem.domain, graph, t, has, problem.camera.footprint()
 
 
-def spd_solve(K, b: np.ndarray, backend: str = "auto", *, multigrid: bool = True):
+def spd_solve(K, b: np.ndarray, backend: str = "auto", *, kind: str = "graph"):
     """Solve the SPD system ``K x = b`` with the solver layer's choice of backend.
 
-    ``multigrid=False`` keeps "auto" on a factorization at every size (for systems that are
-    not M-matrices, where classical AMG converges slowly: the anisotropic tensor system of
-    "diffusion" took 12.6 s with multigrid-CG against SuperLU's 1.0 s at 256^2).
+    ``kind="spd"`` for systems that are not M-matrices (the prior of "regularization", the
+    tensor of "diffusion"), where classical AMG converges slowly (diffusion: 12.6 s with
+    Ruge-Stueben CG against SuperLU's 1.0 s at 256^2); see :func:`facetlift.linalg.choose`.
     """
-    return linalg.solve(K, b, backend, multigrid=multigrid)[0]
+    return linalg.solve(K, b, backend, kind=kind)[0]
 
 
 def solve_weighted(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..._warnings import warn
-from ...operators.stencil import E_X, E_Y
+from ...operators.stencil import E_X, E_Y, grid_slopes
 
 
 def targets(problem):
@@ -54,8 +54,9 @@ def average_deviation(domain, z, bx, by, target, h=1.0) -> float:
     """
     if not target.any():
         return 0.0
-    gx, gy = facet_slopes(domain, z)
-    return mean_angle(gx, gy, bx, by, target, h)
+    # on the vertex image (grid slicing), not through the (m, 4) corner gather
+    gx, gy = grid_slopes(domain.to_vertex_image(z, fill=0.0))
+    return mean_angle(gx[domain.mask], gy[domain.mask], bx, by, target, h)
 
 
 def mean_angle(gx, gy, bx, by, target, h) -> float:
