@@ -109,3 +109,29 @@ def test_float32_box_converges_like_float64_with_flexible_cg():
         assert info.converged
         its[dt] = info.iterations
     assert its[np.float32] <= its[np.float64] + 3
+
+
+def test_thin_domain_switches_to_multigrid_and_converges():
+    """A spiral 4 pixels wide: the box's fictitious material glues neighbouring arms, so its
+    rate is poor; solve() measures that and switches to multigrid."""
+    from facetlift.linalg.facet import solve
+
+    s = 256
+    r, c = np.mgrid[0:s, 0:s]
+    x, y = c - s / 2 + 0.5, r - s / 2 + 0.5
+    rad, ang = np.hypot(x, y), np.arctan2(y, x)
+    mask = ((rad - 16 * ang / (2 * np.pi)) % 16 < 4) & (rad < 0.48 * s) & (rad > 8)
+    d = Domain.from_mask(mask)
+    strong = np.ones(d.n_facets, bool)
+    K = facet_form(d, [(1.0, SLOPE_BLOCK), (1.0, TWIST_BLOCK)])
+    b = K @ np.random.default_rng(5).standard_normal(d.n_vertices)
+    pre = FacetPreconditioner(d, K, strong)
+    x, info = solve(K, b, pre, rtol=1e-10)
+    assert info.converged and pre.coarse == "amg"
+    assert np.linalg.norm(K @ x - b) <= 1e-9 * np.linalg.norm(b)
+    assert info.iterations <= 80
+    # a fat domain keeps the box
+    d2, strong2, K2, b2 = _rim_system(64)
+    pre2 = FacetPreconditioner(d2, K2, strong2)
+    _, info2 = solve(K2, b2, pre2, rtol=1e-10)
+    assert info2.converged and pre2.coarse == "box"

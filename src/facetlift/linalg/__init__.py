@@ -204,13 +204,23 @@ def solve(
     if name == "pcg":
         if preconditioner is None:
             raise ValueError("`backend`='pcg' needs a `preconditioner`")
-        x, cinfo = cg(K, b, preconditioner, x0=x0, rtol=rtol, flexible=flexible)
+        x, cinfo = _cg(K, b, preconditioner, x0, rtol, flexible)
         _raise_unless_converged(cinfo, rtol, "preconditioned CG")
         return x, SolveInfo("pcg", cinfo.iterations, cinfo.relative_residual)
     factor = factorize(K, name, kind=kind, rtol=rtol)
     x = factor.solve(b)
     it = factor.info.iterations if factor.info is not None else None
     return x, SolveInfo(name, it)
+
+
+def _cg(K, b, preconditioner, x0, rtol, flexible):
+    """CG with `preconditioner`; a facet preconditioner brings its own policy (box or
+    multigrid, :func:`facetlift.linalg.facet.solve`)."""
+    from .facet import FacetPreconditioner, solve
+
+    if isinstance(preconditioner, FacetPreconditioner):
+        return solve(K, b, preconditioner, x0=x0, rtol=rtol)
+    return cg(K, b, preconditioner, x0=x0, rtol=rtol, flexible=flexible)
 
 
 def _raise_unless_converged(info: CGInfo, rtol: float, what: str) -> None:
@@ -225,7 +235,7 @@ def _pcg_factor(K, preconditioner, rtol) -> Factor:
     state = {"x0": None}
 
     def _solve(b):
-        x, info = cg(K, b, preconditioner, x0=state["x0"], rtol=rtol, flexible=True)
+        x, info = _cg(K, b, preconditioner, state["x0"], rtol, True)
         factor.info = info
         _raise_unless_converged(info, rtol, "preconditioned CG")
         state["x0"] = x

@@ -8,14 +8,19 @@ from .cg import cg
 from .direct import Factor, SolverError
 
 
-def hierarchy(K, *, max_coarse: int = 500, symmetric_gs: bool = False, method: str = "rs"):
+def hierarchy(
+    K, *, max_coarse: int = 500, symmetric_gs: bool = False, method: str = "rs",
+    coarse_solver: str = "splu",
+):
     """A multigrid hierarchy of the SPD matrix `K` (pyamg), built once.
 
     ``method="rs"`` is Ruge-Stueben (classical AMG, for M-matrices such as graph Laplacians),
     ``"sa"`` smoothed aggregation (for other SPD matrices: the biharmonic-like system of
     ``regularization``, the anisotropic one of ``diffusion``). ``symmetric_gs`` uses a
     forward Gauss-Seidel sweep before and a backward one after the coarse correction, which
-    keeps the V-cycle symmetric (required for CG) with one sweep each.
+    keeps the V-cycle symmetric (required for CG) with one sweep each; ``coarse_solver``
+    ("splu", or "pinv" for a singular matrix such as an unpinned facet operator) is then the
+    coarsest level's.
     """
     import pyamg
 
@@ -26,7 +31,7 @@ def hierarchy(K, *, max_coarse: int = 500, symmetric_gs: bool = False, method: s
         kw = {
             "presmoother": ("gauss_seidel", {"sweep": "forward"}),
             "postsmoother": ("gauss_seidel", {"sweep": "backward"}),
-            "coarse_solver": "splu",
+            "coarse_solver": coarse_solver,
         }
     return pyamg.ruge_stuben_solver(sp.csr_matrix(K), max_coarse=max_coarse, **kw)
 
