@@ -273,7 +273,8 @@ def main(argv=None) -> int:
     ap.add_argument("--sizes", default="512,1024,2048")
     ap.add_argument("--shapes", default=",".join(SHAPES))
     ap.add_argument("--routes", default="smooth,missing,perspective")
-    ap.add_argument("--no-baseline", action="store_true", help="skip the scipy + pyamg solve")
+    ap.add_argument("--baseline-routes", default="smooth,missing,perspective",
+                    help="routes that also run the scipy + pyamg Poisson baseline ('' for none)")
     ap.add_argument("--repeat", type=int, default=1, help="runs per case (median time)")
     ap.add_argument("--timeout", type=float, default=900.0, help="seconds per case")
     ap.add_argument("--json", help="append the raw results to this file (one JSON per line)")
@@ -287,8 +288,8 @@ def main(argv=None) -> int:
     for s in (int(x) for x in args.sizes.split(",")):
         for shape in args.shapes.split(","):
             for route in args.routes.split(","):
-                runs = [spawn(shape, s, route, not args.no_baseline, args.timeout)
-                        for _ in range(args.repeat)]
+                base = route in args.baseline_routes.split(",")
+                runs = [spawn(shape, s, route, base, args.timeout) for _ in range(args.repeat)]
                 ok = [r for r in runs if "error" not in r]
                 r = dict(ok[0]) if ok else runs[0]
                 for key in ("total_s", "baseline_s"):

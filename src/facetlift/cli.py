@@ -215,9 +215,12 @@ def _jsonable(obj):
 @click.option("--progress/--no-progress", default=None,
               help="Progress bar on stderr for iterative solvers. Default: when stderr is a "
               "terminal.")
+@click.option("--max-memory", default=None, metavar="SIZE",
+              help="Refuse the job if its estimated peak memory exceeds SIZE (bytes, or 8G, "
+              "512M). Default: the available memory minus a margin, ulimit -v honoured.")
 def integrate(normals, mask, method, pixel_size, y_down, K, orthographic, backfacing,
               outlier_eps, solver, max_iter, tol, backend, discontinuities, options, outdir,
-              save, triangles, as_json, progress):
+              save, triangles, as_json, progress, max_memory):
     """Integrate a normal map NORMALS into a depth map, a mesh and a preview.
 
     NORMALS is a normal-map file (PNG 8/16 bit, TIFF, EXR or .npy; x right, y up, z toward
@@ -240,7 +243,7 @@ def integrate(normals, mask, method, pixel_size, y_down, K, orthographic, backfa
 
     opts = dict(_parse_option(o) for o in options)
     for key, value in (("solver", solver), ("max_iter", max_iter), ("tol", tol),
-                       ("backend", backend)):
+                       ("backend", backend), ("max_memory", max_memory)):
         if value is not None:
             opts[key] = value
     if discontinuities:

@@ -148,28 +148,52 @@ class FacetPreconditioner:
         if coarse == "amg":
             self.use_multigrid()
 
-    def use_multigrid(self) -> FacetPreconditioner:
-        """Replace the box by one V-cycle of a Ruge-Stueben hierarchy of the all-strong facet
-        operator ``sum_f C_f^T N C_f`` of the domain (an M-matrix: classical AMG suits it, and
-        it does not depend on the facet weights, so it is built once per domain). For thin
-        domains (a spiral 4 pixels wide: 1183 box iterations, 20 with multigrid at 512^2),
-        where the box's fictitious material glues neighbouring arms together."""
-        if self.coarse != "amg":
-            from ..operators.stencil import N_MEAN_FREE, facet_form, pin_components
-            from .amg import hierarchy
+    def use_multigrid(self, weights=None) -> FacetPreconditioner:
+        """Replace the box by one V-cycle of a Ruge-Stueben hierarchy of the facet operator
+        ``sum_f w_f C_f^T N C_f`` of the domain (`weights` ``w`` (m,), default 1), pinned at
+        one vertex per component. It is an M-matrix, so classical AMG suits it; with unit
+        weights it does not depend on the system's facet weights and is built once per
+        domain. For thin domains (a spiral 4 pixels wide: 1183 box iterations, 46 after the
+        switch at 512^2), where the box's fictitious material glues neighbouring arms
+        together; and, with weights, for systems whose facets are cut apart (a depth
+        discontinuity), where a unit operator glues what the system separates."""
+        from .amg import hierarchy
 
-            # pinned (one vertex per component): a singular hierarchy breaks down on domains
-            # of many small components (their coarse blocks are singular up to rounding)
-            KN = pin_components(self.domain, facet_form(self.domain, [(1.0, N_MEAN_FREE)]))
-            ml = hierarchy(KN, symmetric_gs=True)
-            V = ml.aspreconditioner(cycle="V")
-            self._global = lambda r: V @ r
-            self.coarse = "amg"
-            self.exact = False
+        ml = hierarchy(self._operator(weights), symmetric_gs=True)
+        V = ml.aspreconditioner(cycle="V")
+        self._ml = ml
+        self._global = lambda r: V @ r
+        self.coarse = "amg"
+        self.exact = False
         return self
 
-    def refresh(self, K, strong: np.ndarray) -> FacetPreconditioner:
-        """Use a new matrix (same domain) and weak set; keeps the box part. Returns self."""
+    def _operator(self, weights):
+        from ..operators.stencil import N_MEAN_FREE, facet_form, pin_components
+
+        w = 1.0 if weights is None else np.asarray(weights, dtype=float)
+        # pinned: a singular hierarchy breaks down on domains of many small components
+        # (their coarse blocks are singular up to rounding)
+        return pin_components(self.domain, facet_form(self.domain, [(w, N_MEAN_FREE)]))
+
+    def _regalerkin(self, weights) -> None:
+        """New facet weights for the multigrid part: the same coarsening and interpolation,
+        the coarse operators recomputed (``A_{l+1} = R A_l P``, no new setup)."""
+        import pyamg
+
+        levels = self._ml.levels
+        levels[0].A = self._operator(weights)
+        for fine, coarse in zip(levels[:-1], levels[1:], strict=True):
+            coarse.A = (fine.R @ fine.A @ fine.P).tocsr()
+        self._ml.coarse_solver = pyamg.multilevel.coarse_grid_solver("splu")
+
+    def refresh(self, K, strong: np.ndarray, weights=None) -> FacetPreconditioner:
+        """Use a new matrix (same domain) and weak set. The global part is kept: the box
+        (it depends on the domain only), or the multigrid hierarchy, whose coarse operators
+        are recomputed for new facet `weights` when given (:meth:`use_multigrid`; the
+        coarsening and interpolation stay). The local factorization is redone. Returns
+        self."""
+        if weights is not None and self.coarse == "amg":
+            self._regalerkin(weights)
         self.K = K
         E = np.flatnonzero(weak_vertices(self.domain, strong))
         self.exact = self.coarse == "box" and self.box.exact and E.size == 0
