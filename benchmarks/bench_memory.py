@@ -76,9 +76,10 @@ def run_case(case: str, s: int) -> dict:
         surf = facetlift.solve(problem, method, **opts)
     seconds = time.perf_counter() - t0
     peak = _status("VmHWM") - before
+    from facetlift import methods as _m
     from facetlift.options import validate
 
-    values = validate(facetlift.methods.get(method).specs(), opts, method)
+    values = validate(_m.get(method).specs(), opts, method)
     est, which = memory.estimate(problem, method, values)
     d = problem.domain
     return {"case": case, "size": s, "m": d.n_facets, "n": d.n_vertices, "seconds": seconds,

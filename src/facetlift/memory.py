@@ -43,23 +43,28 @@ GiB = 2**30
 #: Share of the physical memory kept free by the default limit.
 MARGIN = 0.05
 
-#: Bytes per facet (m) and per bounding-box cell (B) of each route, and a fixed part:
-#: peak resident memory above the input, measured with benchmarks/bench_memory.py on
-#: rect and disk domains at 256^2-2048^2 (docs/benchmarks.md, "Memory planning").
+#: Peak resident memory above the prepared problem, per route: bytes per facet (mask pixel)
+#: ``m``, per cell ``B`` of the mask's bounding box, a fixed part, and bytes per
+#: ``n log2 n`` where the route factorizes ``n`` unknowns (SuperLU / PARDISO, up to
+#: :data:`facetlift.linalg.LARGE`). Fitted to benchmarks/bench_memory.py on rect and disk
+#: domains at 512^2-1536^2, checked at 256^2-2048^2 (docs/benchmarks.md,
+#: "Memory planning").
 COEFFICIENTS = {
-    # route: (per facet, per box cell, fixed bytes)
-    "dgp-spectral": (0.0, 150.0, 12 * MiB),
-    "dgp-pcg": (420.0, 150.0, 12 * MiB),
-    "dgp-loop": (300.0, 200.0, 12 * MiB),
-    "dgp-discontinuous": (1400.0, 100.0, 20 * MiB),
-    "graph": (420.0, 40.0, 12 * MiB),
-    "graph-spd": (700.0, 40.0, 12 * MiB),
-    "frankot_chellappa": (40.0, 450.0, 12 * MiB),
-    "kernel": (60.0, 120.0, 12 * MiB),
+    "dgp-spectral": (0.0, 85.0, 8 * MiB, 0.0),
+    "dgp-pcg": (164.0, 68.0, 12 * MiB, 0.0),
+    "dgp-factor": (164.0, 68.0, 12 * MiB, 110.0),
+    "dgp-loop-spectral": (0.0, 125.0, 5 * MiB, 0.0),
+    "dgp-loop-pcg": (197.0, 68.0, 20 * MiB, 0.0),
+    "dgp-loop-factor": (197.0, 68.0, 20 * MiB, 110.0),
+    "dgp-discontinuous": (800.0, 0.0, 18 * MiB, 0.0),
+    "poisson": (607.0, 0.0, 0.0, 45.0),
+    "m_estimator": (894.0, 0.0, 0.0, 31.0),
+    "alpha_surface": (934.0, 0.0, 0.0, 27.0),
+    "regularization": (1242.0, 0.0, 0.0, 130.0),
+    "diffusion": (1330.0, 0.0, 0.0, 60.0),
+    "frankot_chellappa": (0.0, 500.0, 0.0, 0.0),
+    "kernel": (390.0, 0.0, 0.0, 0.0),
 }
-
-#: Sparse factorization (SuperLU / PARDISO), bytes per ``n log2 n``.
-FACTOR_BYTES = 30.0
 
 
 @dataclass(frozen=True)
@@ -192,13 +197,12 @@ def _box(domain) -> tuple[int, int]:
     return int(rows[-1] - rows[0] + 1), int(cols[-1] - cols[0] + 1)
 
 
-def _linear(route: str, m: int, B: int) -> float:
-    a, b, c = COEFFICIENTS[route]
-    return a * m + b * B + c
-
-
-def _factor(n: int) -> float:
-    return FACTOR_BYTES * n * math.log2(max(n, 2))
+def _cost(route: str, m: int, B: int, factorized: int = 0) -> float:
+    a, b, c, f = COEFFICIENTS[route]
+    out = a * m + b * B + c
+    if factorized:
+        out += f * factorized * math.log2(max(factorized, 2))
+    return out
 
 
 def _gaussian(sigma: float, B: int) -> float:
@@ -222,7 +226,7 @@ def _kernel_tiles(options: dict, shape) -> float:
     k = side_r * side_c
     ev = min(tile + 2 * o, shape[0]) * min(tile + 2 * o, shape[1])
     workers = min(os.cpu_count() or 1, 8)
-    return workers * (8.0 * 9 * k * k + 8.0 * 5 * ev * k)
+    return workers * (8.0 * 6 * k * k + 8.0 * 5 * ev * k)
 
 
 def estimate(problem, method: str, options: dict) -> tuple[float, str]:
@@ -235,34 +239,32 @@ def estimate(problem, method: str, options: dict) -> tuple[float, str]:
     options : dict
         The validated options (:func:`facetlift.options.validate`).
     """
-    from .linalg import LARGE, choose
+    from .linalg import choose
 
     d = problem.domain
     m = d.n_facets
     hb, wb = _box(d)
     B = (hb + 1) * (wb + 1)
+    backend = options.get("backend", "auto")
     if method == "dgp":
         if options.get("discontinuities"):
-            return _linear("dgp-discontinuous", m, B), "dgp-discontinuous"
-        loop = options.get("solver") == "iterative"
-        backend = options.get("backend", "auto")
+            return _cost("dgp-discontinuous", m, B), "dgp-discontinuous"
+        loop = "dgp-loop" if options.get("solver") == "iterative" else "dgp"
         route = choose(d.n_vertices, backend, kind="facet")
-        extra = 0.0 if route == "pcg" else _factor(d.n_vertices)
-        if loop:
-            return _linear("dgp-loop", m, B) + extra, f"dgp-loop-{route}"
-        full = route == "pcg" and bool(problem.usable.all()) and m == hb * wb
-        name = "dgp-spectral" if full else "dgp-pcg"
-        return _linear(name, m, B) + extra, name if route == "pcg" else f"dgp-{route}"
+        full = m == hb * wb and (loop == "dgp-loop" or bool(problem.usable.all()))
+        if route != "pcg":
+            return _cost(f"{loop}-factor", m, B, d.n_vertices), f"{loop}-{route}"
+        name = f"{loop}-spectral" if full else f"{loop}-pcg"
+        return _cost(name, m, B), name
     if method == "frankot_chellappa":
-        return _linear("frankot_chellappa", m, B), method
+        return _cost(method, m, B), method
     if method == "kernel":
-        return _linear("kernel", m, B) + _kernel_tiles(options, (hb, wb)), method
+        return _cost(method, m, B) + _kernel_tiles(options, (hb, wb)), method
+    if method not in COEFFICIENTS:  # a method registered elsewhere: plan it like Poisson
+        return _cost("poisson", m, B), f"{method}-unplanned"
     spd = method in ("regularization", "diffusion")
-    name = "graph-spd" if spd else "graph"
-    route = choose(m, options.get("backend", "auto"), kind="spd" if spd else "graph")
-    out = _linear(name, m, B)
-    if route in ("superlu", "pardiso") or (route == "amg" and m <= LARGE):
-        out += _factor(m) * (3.0 if spd else 1.0)
+    route = choose(m, backend, kind="spd" if spd else "graph")
+    out = _cost(method, m, B, m if route in ("superlu", "pardiso") else 0)
     if method == "diffusion":
         out += _gaussian(options.get("sigma", 0.5), B)
     return out, f"{method}-{route}"

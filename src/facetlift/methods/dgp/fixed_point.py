@@ -75,6 +75,8 @@ def solve_direct(
             z, sinfo = linalg.solve(K, rhs, route, kind="spd")
             used = sinfo.backend
         cg_its = sinfo.iterations
+        del K  # and the preconditioner: free them before the diagnostics
+        pre = None
     z = flatten(domain, z, empty)
     t2 = time.perf_counter()
     dev = average_deviation(domain, z, bx, by, target, h)
