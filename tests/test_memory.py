@@ -124,3 +124,43 @@ def test_estimate_within_30_percent_of_the_measured_peak(case):
                                   "frankot_chellappa:disk:smooth", "kernel:disk:smooth"])
 def test_estimate_within_30_percent_at_large_sizes(case):
     _check_within_30_percent(case, [768, 1536, 2048])
+
+
+_HUGE = """
+import json, resource, sys
+import numpy as np
+import facetlift
+from facetlift import memory
+from facetlift.errors import MemoryLimitError
+s = 8192
+limit = memory.default_limit()
+r = (np.arange(s, dtype=np.float32) / s)[:, None]
+n = np.empty((s, s, 3))
+n[..., 0] = -0.2
+n[..., 1] = -0.1 * np.cos(3 * r)
+n[..., 2] = 1.0
+del r
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+try:
+    surf = facetlift.integrate(n, np.ones((s, s), bool))
+    out = {"finished": True, "finite": bool(np.isfinite(surf.depth).all())}
+except MemoryLimitError as e:
+    out = {"finished": False, "message": str(e)}
+out["limit"] = limit
+out["input"] = before
+out["peak"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+print(json.dumps(out))
+"""
+
+
+@pytest.mark.slow
+def test_8192_map_under_the_default_limit_refuses_cleanly_or_finishes_within_it():
+    res = subprocess.run([sys.executable, "-c", _HUGE], capture_output=True, text=True,
+                         timeout=1200)
+    assert res.returncode == 0, res.stderr[-2000:]
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    if out["finished"]:
+        assert out["finite"]
+        assert out["peak"] - out["input"] <= out["limit"]
+    else:
+        assert "would need about" in out["message"] and "allowed" in out["message"]

@@ -34,6 +34,7 @@ __all__ = [
     "KINDS",
     "CGInfo",
     "Factor",
+    "Series",
     "SolveInfo",
     "SolverError",
     "available_backends",
@@ -211,6 +212,62 @@ def solve(
     x = factor.solve(b)
     it = factor.info.iterations if factor.info is not None else None
     return x, SolveInfo(name, it)
+
+
+class Series:
+    """Solve a sequence of nearby SPD systems ``K_k x = b_k`` (the rounds of a reweighting:
+    IRLS, growing edge sets), each with :func:`choose`'s backend for the first.
+
+    Multigrid keeps the first matrix's hierarchy as the preconditioner of the later ones
+    (still SPD and close; rebuilt when CG needs more than `rebuild_after` iterations) and
+    starts each CG from the previous solution; factorizations refactorize every matrix.
+
+    Attributes
+    ----------
+    backend : str
+    iterations : list of int
+        CG iterations per solve (multigrid).
+    setups : int
+        Hierarchies built.
+    """
+
+    def __init__(self, backend: str = "auto", *, kind: str = "graph", rtol: float = 1e-11,
+                 rebuild_after: int = 60):
+        self._backend, self._kind, self._rtol = backend, kind, rtol
+        self._rebuild_after = rebuild_after
+        self.backend = None
+        self._M = None
+        self._x = None
+        self.iterations = []
+        self.setups = 0
+
+    def _hierarchy(self, K):
+        from .amg import preconditioner
+
+        self.setups += 1
+        return preconditioner(K, method="sa" if self._kind == "spd" else "rs")
+
+    def solve(self, K, b: np.ndarray) -> np.ndarray:
+        if self.backend is None:
+            self.backend = choose(K.shape[0], self._backend, kind=self._kind)
+        if self.backend != "amg":
+            return factorize(K, self.backend, kind=self._kind).solve(b)
+        import scipy.sparse as sp
+
+        K = sp.csr_matrix(K)
+        if self._M is None:
+            self._M = self._hierarchy(K)
+        x0 = self._x
+        x, info = cg(K, b, self._M, x0=x0, rtol=self._rtol, maxiter=self._rebuild_after)
+        its = info.iterations
+        if not info.converged:
+            self._M = self._hierarchy(K)
+            x, info = cg(K, b, self._M, x0=x, rtol=self._rtol, maxiter=500)
+            its += info.iterations
+            _raise_unless_converged(info, self._rtol, "multigrid-preconditioned CG")
+        self.iterations.append(its)
+        self._x = x
+        return x
 
 
 def _cg(K, b, preconditioner, x0, rtol, flexible):

@@ -54,14 +54,20 @@ def spd_solve(K, b: np.ndarray, backend: str = "auto", *, kind: str = "graph"):
 
 
 def solve_weighted(
-    domain: Domain, graph: g.PixelGraph, w: np.ndarray, t: np.ndarray, backend: str = "auto"
+    domain: Domain, graph: g.PixelGraph, w: np.ndarray, t: np.ndarray, backend: str = "auto",
+    *, series: linalg.Series | None = None,
 ) -> np.ndarray:
     """Unknowns (n,) minimising ``sum_e w_e (z_head - z_tail - t_e)^2`` (one pin per component).
 
-    `w` must be positive on a set of edges that connects each domain component.
+    `w` must be positive on a set of edges that connects each domain component. Rounds of a
+    reweighting pass the same :class:`facetlift.linalg.Series` as `series` (one multigrid
+    hierarchy for all rounds, warm starts); then `backend` is the series'.
     """
     K = g.pin(domain, g.laplacian(graph, w))
-    return spd_solve(K, g.divergence(graph, w * t), backend)
+    b = g.divergence(graph, w * t)
+    if series is not None:
+        return series.solve(K, b)
+    return spd_solve(K, b, backend)
 
 
 def relative_change(z_new: np.ndarray, z: np.ndarray) -> float:
