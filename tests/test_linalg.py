@@ -114,6 +114,7 @@ def test_choose_is_one_policy():
     # facet systems take CG with the facet preconditioner at every size
     assert linalg.choose(10, kind="facet") == "pcg"
     assert linalg.choose(big, kind="facet") == "pcg"
+    assert linalg.choose(big, kind="facet", thin=True) == direct  # strips factorize cheaply
     # a trusted preconditioner wins at every size; an untrusted one only where factorizing
     # is too costly and PARDISO is absent
     assert linalg.choose(10, preconditioner=True, trusted=True) == "pcg"

@@ -24,6 +24,10 @@ Counts
     :data:`facetlift.linalg.LARGE` unknowns) and the local dense fits of "kernel" and the
     Gaussian of "diffusion", whose size follows their options (an absurd ``sigma`` or
     ``tile`` is refused here, before it allocates).
+
+Size limits
+    :data:`SIZE_LIMITS` caps methods whose time, not memory, gets out of hand on large
+    domains; it applies under the default limit, and an explicit ``max_memory`` lifts it.
 """
 
 from __future__ import annotations
@@ -65,6 +69,13 @@ COEFFICIENTS = {
     "frankot_chellappa": (0.0, 500.0, 0.0, 0.0),
     "kernel": (390.0, 0.0, 0.0, 0.0),
 }
+
+
+#: Mask pixels above which a method is refused by default although it would fit in memory:
+#: its time grows past a minute on this project's 2-core machine ("regularization" with the
+#: Laplacian prior: smoothed-aggregation CG on the biharmonic-like system, 48 s at 1.43 M and
+#: 85 s at 2.54 M mask pixels; docs/benchmarks.md). An explicit ``max_memory`` lifts it.
+SIZE_LIMITS = {"regularization": 1_600_000}
 
 
 @dataclass(frozen=True)
@@ -250,7 +261,9 @@ def estimate(problem, method: str, options: dict) -> tuple[float, str]:
         if options.get("discontinuities"):
             return _cost("dgp-discontinuous", m, B), "dgp-discontinuous"
         loop = "dgp-loop" if options.get("solver") == "iterative" else "dgp"
-        route = choose(d.n_vertices, backend, kind="facet")
+        from .linalg.facet import thin
+
+        route = choose(d.n_vertices, backend, kind="facet", thin=thin(d))
         full = m == hb * wb and (loop == "dgp-loop" or bool(problem.usable.all()))
         if route != "pcg":
             return _cost(f"{loop}-factor", m, B, d.n_vertices), f"{loop}-{route}"
@@ -276,12 +289,22 @@ def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
     Raises
     ------
     facetlift.errors.MemoryLimitError
-        The estimate exceeds `max_memory` (default :func:`default_limit`); the message names
-        both and what to do.
+        The estimate exceeds `max_memory` (default :func:`default_limit`), or the domain is
+        larger than the method's :data:`SIZE_LIMITS` entry under the default limit; the
+        message names the figures and what to do.
     ValueError
         A bad `max_memory`.
     """
     lim = limit(max_memory)
+    m = problem.domain.n_facets
+    cap = SIZE_LIMITS.get(method)
+    if cap is not None and m > cap and max_memory is None:
+        raise MemoryLimitError(
+            f"method {method!r} is limited to {cap:,} mask pixels by default (beyond that it "
+            f"takes minutes on a 2-core machine); this job has {m:,}: crop or downsample the "
+            "input, use method='poisson' or 'dgp', or pass max_memory= / --max-memory to run "
+            "it anyway"
+        )
     est, route = estimate(problem, method, options)
     p = Plan(int(min(est, 2**62)), lim, route)
     if est > lim:

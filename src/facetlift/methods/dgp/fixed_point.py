@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from ... import linalg
-from ...linalg.facet import FacetPreconditioner
+from ...linalg.facet import FacetPreconditioner, thin
 from ...linalg.spectral import RectangleSolver
 from ...operators.stencil import E_TWIST, E_X, E_Y, facet_form, grid_scatter, pin_components
 from .common import average_deviation, empty_components, flatten
@@ -54,8 +54,10 @@ def solve_direct(
     # exact solve on the vertices that only facets without a target touch (the near-null
     # modes of grazing rims and gaps): CG then converges in 20-60 iterations on any mask and
     # with any share of missing normals (linalg.facet); on a full rectangle with every normal
-    # known the box solver is the exact inverse (one spectral solve, no matrix).
-    route = linalg.choose(n, backend, kind="facet")
+    # known the box solver is the exact inverse (one spectral solve, no matrix). Thin domains
+    # (strips a few pixels wide) are factorized: little fill, and no preconditioner of ours
+    # sees their structure.
+    route = linalg.choose(n, backend, kind="facet", thin=thin(domain))
     cg_its = None
     if route == "pcg" and weights is None and bool(strong.all()) and domain.mask.all():
         t1 = time.perf_counter()

@@ -14,7 +14,7 @@ import numpy as np
 
 from ... import linalg
 from ..._warnings import warn
-from ...linalg.facet import FacetPreconditioner
+from ...linalg.facet import FacetPreconditioner, thin
 from ...linalg.spectral import RectangleSolver
 from ...operators.stencil import (
     E_X,
@@ -55,7 +55,7 @@ def solve_iterative(
         # on a full rectangle A^T A is diagonalised by the DCT-I: the spectral box solver is
         # exact, O(n log n), and needs no matrix; on other masks it preconditions CG (every
         # facet carries the full block N here, so no facet is weak), warm-started each step
-        route = linalg.choose(domain.n_vertices, backend, kind="facet")
+        route = linalg.choose(domain.n_vertices, backend, kind="facet", thin=thin(domain))
         exact = bool(domain.mask.all()) and route == "pcg"
         if not exact:
             K = pin_components(domain, facet_form(domain, [(1.0, N_MEAN_FREE)]))
