@@ -64,11 +64,18 @@ from .cg import CGInfo, cg
 from .spectral import BoxPreconditioner
 
 #: Weak facets in 8-connected clusters of at least this many facets (a band along a rim, a
-#: hole in the data) hand all their vertices to the local solve; smaller clusters (scattered
-#: missing samples) only the vertices they alone touch. Measured on a torus at 2048^2: 39 CG
-#: iterations with the exclusive vertices only, 27 with the clusters' vertices; on 30 %
-#: random missing samples no cluster is that large.
+#: hole in the data) hand all their vertices to the local solve; smaller clusters only the
+#: vertices they alone touch. Measured on a torus at 2048^2: 39 CG iterations with the
+#: exclusive vertices only, 27 with the clusters' vertices. Lower thresholds resolve rarer
+#: near-free modes too (1024 small disks with 30 % missing samples at 512^2: one disk whose
+#: bottom row hangs on a row of 8 missing samples is 3.7e-3 of the range off a factorization
+#: at 256, 2.4e-7 at 8), but with 30 % random missing samples clusters of 8 are everywhere:
+#: 2.5x the memory and 3x the time at 1024^2. 256 keeps random gaps cheap.
 CLUSTER = 256
+
+#: Clusters larger than this many facets give only their exclusive vertices (one giant gap
+#: would make the local block a 2-D factorization of its own).
+MAX_LOCAL = 250_000
 
 #: CG iterations with the box before :func:`solve` judges its rate, and the most it lets the
 #: box take (predicted from that rate) before switching to multigrid. A multigrid iteration
@@ -83,11 +90,6 @@ BOX_LIMIT = 150
 
 #: Problems with at least this many vertices run the box transform in float32.
 FLOAT32_FROM = 65_536
-
-#: Most vertices the local solve takes from clusters (a sparse factorization of a banded or
-#: small block; above this only the exclusive vertices are used).
-MAX_LOCAL = 250_000
-
 
 def _touched(domain, facets: np.ndarray) -> np.ndarray:
     """(H+1, W+1) bool: vertices that are a corner of at least one of the `facets` (m,)."""
@@ -122,9 +124,10 @@ def weak_vertices(domain, strong: np.ndarray, *, every: bool = False) -> np.ndar
     """(n,) bool: the vertices of the local solve.
 
     Vertices all of whose facets are weak (``strong`` False), and every vertex of a weak
-    facet in an 8-connected cluster of at least :data:`CLUSTER` weak facets (unless that
-    adds more than :data:`MAX_LOCAL` vertices); with `every`, every vertex of a weak facet
-    (for thin domains, whose blocks factorize with little fill).
+    facet in an 8-connected cluster of :data:`CLUSTER` to :data:`MAX_LOCAL` weak facets
+    (separate clusters: the local block stays block-diagonal, its factorization linear in
+    size); with `every`, every vertex of a weak facet (for thin domains, whose blocks
+    factorize with little fill).
 
     Parameters
     ----------
@@ -142,11 +145,10 @@ def weak_vertices(domain, strong: np.ndarray, *, every: bool = False) -> np.ndar
     if weak.sum() >= CLUSTER:
         img = domain.to_image(weak, fill=False).astype(bool)
         labels, _ = ndi.label(img, structure=np.ones((3, 3), dtype=bool))
-        big = np.bincount(labels.ravel()) >= CLUSTER
+        sizes = np.bincount(labels.ravel())
+        big = (sizes >= CLUSTER) & (sizes <= MAX_LOCAL)
         big[0] = False
-        band = _touched(domain, big[labels[domain.pixels]])[vm]
-        if band.sum() <= MAX_LOCAL:
-            out |= band
+        out |= _touched(domain, big[labels[domain.pixels]])[vm]
     return out
 
 

@@ -21,6 +21,21 @@ import numpy as np
 import scipy.fft as sfft
 
 
+def fft_workers() -> int:
+    """Threads for the transforms: every core, unless the machine is busy (load average
+    at least the number of cores minus one half), where a second thread only waits for a
+    core: measured at 2048^2 under a load of 2.5 on 2 cores, 2 threads 4.05 s against 1
+    thread 3.84 s for a disk, 3.77 against 3.67 s for the torus."""
+    import os
+
+    n = os.cpu_count() or 1
+    try:
+        busy = os.getloadavg()[0] >= n - 0.5
+    except OSError:  # pragma: no cover - no load average on this platform
+        busy = False
+    return 1 if busy or n == 1 else -1
+
+
 class RectangleSolver:
     """Pseudo-inverse of the mean-subtracted facet operator on an H x W facet rectangle.
 
@@ -32,7 +47,7 @@ class RectangleSolver:
 
     def __init__(self, H: int, W: int, workers: int | None = None, dtype=np.float64):
         self.H, self.W = H, W
-        self.workers = workers if workers is not None else -1
+        self.workers = workers if workers is not None else fft_workers()
         self.dtype = np.dtype(dtype)
         lr = 1.0 + np.cos(np.pi * np.arange(H + 1) / H)
         lc = 1.0 + np.cos(np.pi * np.arange(W + 1) / W)
