@@ -66,7 +66,7 @@ from __future__ import annotations
 
 from ...options import Option
 from .. import MethodResult
-from .common import average_deviation, empty_components, facet_centres, targets
+from .common import average_deviation, empty_components, targets
 from .discontinuous import DEFAULT_ITER, DEFAULT_K, solve_discontinuous
 from .fixed_point import solve_direct
 from .loop import local_shaping, solve_iterative
@@ -124,7 +124,7 @@ def run(
         result = MethodResult(values=zf, vertex_values=z, info=info)
     elif solver == "direct":  # both loops share this fixed point
         z, info = solve_direct(domain, bx, by, target, backend, flat_weight, h=s)
-        result = MethodResult(values=facet_centres(domain, z), vertex_values=z, info=info)
+        result = MethodResult(vertex_values=z, info=info)
     else:
         z, info = solve_iterative(
             domain, bx, by, target, s, mean_subtraction, max_iter, tol, backend, progress,

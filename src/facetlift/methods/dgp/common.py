@@ -39,15 +39,6 @@ def flatten(domain, z, empty):
     return z
 
 
-def facet_centres(domain, z) -> np.ndarray:
-    """(m,) mean of each facet's corner values, on the vertex image (no (m, 4) gather)."""
-    Z = domain.to_vertex_image(z, fill=0.0)
-    out = Z[:-1, :-1] + Z[:-1, 1:]
-    out += Z[1:, 1:]
-    out += Z[1:, :-1]
-    return out[domain.mask] * 0.25
-
-
 def facet_slopes(domain, z):
     """Current (e_x . z_f, e_y . z_f) of every facet: h times its least-squares slopes."""
     zf = z[domain.corners]
