@@ -109,13 +109,58 @@ def test_cg_stops_at_maxiter_without_raising():
 
 def test_choose_is_one_policy():
     pardiso = linalg.direct.pardiso_available()
+    direct = "pardiso" if pardiso else "superlu"
     big = linalg.LARGE + 1
+    # facet systems take CG with the facet preconditioner at every size
+    assert linalg.choose(10, kind="facet") == "pcg"
+    assert linalg.choose(big, kind="facet") == "pcg"
+    assert linalg.choose(big, kind="facet", thin=True) == direct  # strips factorize cheaply
     # a trusted preconditioner wins at every size; an untrusted one only where factorizing
     # is too costly and PARDISO is absent
     assert linalg.choose(10, preconditioner=True, trusted=True) == "pcg"
-    assert linalg.choose(10, preconditioner=True) == ("pardiso" if pardiso else "superlu")
-    assert linalg.choose(big, preconditioner=True) == ("pardiso" if pardiso else "pcg")
-    assert linalg.choose(big) == ("pardiso" if pardiso else "amg")
-    assert linalg.choose(big, multigrid=False) == ("pardiso" if pardiso else "superlu")
+    assert linalg.choose(10, preconditioner=True) == direct
+    assert linalg.choose(big, preconditioner=True) == ("amg" if pardiso else "pcg")
+    # small systems are factorized, large ones go to multigrid-CG (linear in time and memory)
+    for kind in ("graph", "spd"):
+        assert linalg.choose(10, kind=kind) == direct
+        assert linalg.choose(big, kind=kind) == "amg"
     for name in linalg.available_backends():
         assert linalg.choose(10, name) == name
+    with pytest.raises(ValueError, match="`kind` must be one of"):
+        linalg.choose(10, kind="dense")
+
+
+def test_flexible_cg_equals_cg_with_an_exact_spd_preconditioner():
+    K, b = _spd(300, seed=4)
+    x1, i1 = linalg.cg(K, b, _jacobi(K), rtol=1e-10)
+    x2, i2 = linalg.cg(K, b, _jacobi(K), rtol=1e-10, flexible=True)
+    assert i2.converged and abs(i1.iterations - i2.iterations) <= 1
+    assert np.allclose(x1, x2, atol=1e-8)
+
+
+@pytest.mark.skipif(not linalg.direct.pardiso_available(), reason="needs facetlift[mkl]")
+def test_pardiso_adapter_is_spd_upper_triangle_without_refinement():
+    import pypardiso
+
+    K, b = _spd()
+    made = []
+    real = pypardiso.PyPardisoSolver
+
+    class Spy(real):
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            made.append(self)
+
+    pypardiso.PyPardisoSolver = Spy
+    try:
+        f = linalg.factorize(K, "pardiso")
+    finally:
+        pypardiso.PyPardisoSolver = real
+    x = f.solve(b)
+    assert np.allclose(x, np.linalg.solve(K.toarray(), b), rtol=1e-9, atol=1e-10)
+    ps = made[0]
+    assert ps.mtype == 2  # real SPD: PARDISO reads the upper triangle only
+    stored = ps.factorized_A  # pypardiso keeps what it factorized (or its hash when huge)
+    assert sp.tril(stored, k=-1).nnz == 0 and stored.nnz == sp.triu(K).nnz
+    assert ps.get_iparm(8) == 0 and ps.get_iparm(7) == 0  # no refinement asked, none done
+    assert hasattr(ps, "free_memory")

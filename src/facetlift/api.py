@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from . import frames, methods
+from . import frames, memory, methods
 from .domain import Domain
 from .linalg import SolverError
 from .metrics import diagnose
@@ -31,6 +31,7 @@ def integrate(
     backfacing: str = "missing",
     outlier_eps: float | None = None,
     normal_frame: str | None = None,
+    max_memory=None,
     **options,
 ) -> Surface:
     """Reconstruct a surface from a normal map.
@@ -68,6 +69,10 @@ def integrate(
         The frame `normals` are given in: ``"opengl"`` (the default, facetlift's own),
         ``"directx"`` (alias ``"y_down"``), ``"opencv"`` or an axis string such as
         ``"x,-y,-z"`` (:mod:`facetlift.frames`).
+    max_memory : int, float or str, optional
+        Refuse the job (MemoryLimitError) if its estimated peak memory exceeds this many bytes
+        (or a size such as ``"8G"``). Default: the available physical memory minus a margin,
+        and the process's address-space limit (:mod:`facetlift.memory`).
     **options
         Method options (``facetlift methods`` lists them, with types and defaults).
 
@@ -87,6 +92,8 @@ def integrate(
         (:func:`facetlift.frames.checked`).
     facetlift.SolverError
         The solver failed or produced non-finite depth inside the mask.
+    facetlift.errors.MemoryLimitError
+        The job's estimated peak memory exceeds `max_memory`.
 
     Warns
     -----
@@ -107,7 +114,7 @@ def integrate(
         normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
         outlier_eps=outlier_eps,
     )
-    return solve(problem, method, t0=t0, **options)
+    return solve(problem, method, t0=t0, max_memory=max_memory, **options)
 
 
 def integrate_gradients(
@@ -161,11 +168,15 @@ def _check_discontinuities(info: methods.MethodInfo, value) -> bool:
     return True
 
 
-def solve(problem: Problem, method: str = "dgp", *, t0: float | None = None, **options):
+def solve(
+    problem: Problem, method: str = "dgp", *, t0: float | None = None, max_memory=None,
+    **options,
+):
     """Run `method` on a prepared :class:`~facetlift.problem.Problem`.
 
     Every option is validated against the method's declarations before it runs
-    (:func:`facetlift.options.validate`); see :func:`integrate` for what is raised.
+    (:func:`facetlift.options.validate`), and the job's peak memory is planned against
+    `max_memory` (:func:`facetlift.memory.plan`); see :func:`integrate` for what is raised.
     """
     t0 = time.perf_counter() if t0 is None else t0
     info = methods.get(method)
@@ -182,6 +193,7 @@ def solve(problem: Problem, method: str = "dgp", *, t0: float | None = None, **o
             "pixels in the mask have no usable normal); fill them or use a method that can, "
             "e.g. 'dgp'"
         )
+    plan = memory.plan(problem, method, values, max_memory)
     t1 = time.perf_counter()
     cropped, offset = crop(problem)
     try:
@@ -199,6 +211,7 @@ def solve(problem: Problem, method: str = "dgp", *, t0: float | None = None, **o
     out["method"] = method
     out["projection"] = problem.camera.projection
     out["input"] = dict(problem.counts)
+    out["memory_estimate"] = plan.estimate
     seconds = dict(out.get("seconds", {}))
     seconds["prepare"] = t1 - t0
     seconds["total"] = time.perf_counter() - t0

@@ -177,6 +177,10 @@ _JOB_OPTIONS = [
                  help="Write quad meshes (the PLY default; OBJ defaults to triangles)."),
     click.option("--triangles", "mesh_faces", flag_value="triangles",
                  help="Write triangle meshes (the OBJ default)."),
+    click.option("--max-memory", default=None, metavar="SIZE",
+                 help="Refuse the job if its estimated peak memory exceeds SIZE (bytes, or "
+                 "8G, 512M). Default: the available memory minus a margin, ulimit -v "
+                 "honoured."),
     click.option("--progress/--no-progress", default=None,
                  help="Progress bar on stderr for routes that iterate (and for batches). "
                  "Default: when stderr is a terminal."),
@@ -193,7 +197,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               gradient_frame="xy", mat_keys=None, method="dgp", pixel_size=1.0, K=None,
               orthographic=False, backfacing="missing", outlier_eps=None, solver=None,
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
-              save=(), mesh_faces=None, outdir=None):
+              save=(), mesh_faces=None, outdir=None, max_memory=None):
     """A :class:`facetlift.jobs.Job` from the parsed flags (ValueError on bad values)."""
     from . import frames
     from .jobs import Job
@@ -201,7 +205,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
     _methods.get(method)
     opts = dict(_parse_option(o) for o in options)
     for key, value in (("solver", solver), ("max_iter", max_iter), ("tol", tol),
-                       ("backend", backend)):
+                       ("backend", backend), ("max_memory", max_memory)):
         if value is not None:
             opts[key] = value
     if discontinuities:

@@ -14,9 +14,15 @@ Backends (``backend=`` of the methods that solve sparse SPD systems):
     preconditioner of :mod:`facetlift.linalg.spectral` for facet operators: no set-up and an
     O(n log n) cost per iteration.
 
-``"auto"`` is resolved by :func:`choose`, the only place that decides which backend runs.
-:func:`factorize` prepares a matrix for repeated solves (the paper's "prefactored" global
-step); :func:`solve` does one solve and reports what it did.
+``"auto"`` is resolved by :func:`choose`, the only place that decides which backend runs,
+from the size and the ``kind`` of system: DGP facet systems always take "pcg" with
+:class:`facetlift.linalg.facet.FacetPreconditioner` (the box spectral solve plus an exact
+solve on the vertices of facets without a target; multigrid where the box is poor, chosen by
+measurement in :func:`facetlift.linalg.facet.solve`), except on thin domains, which
+factorize; graph Laplacians and other SPD systems factorize up to :data:`LARGE` unknowns and
+take multigrid-CG above. :func:`factorize` prepares a matrix for repeated solves (the paper's
+"prefactored" global step); :func:`solve` does one solve and reports what it did;
+:class:`Series` solves the nearby systems of a reweighting with one multigrid hierarchy.
 """
 
 from __future__ import annotations
@@ -31,8 +37,10 @@ from .direct import Factor, SolverError, pardiso_available
 
 __all__ = [
     "BACKENDS",
+    "KINDS",
     "CGInfo",
     "Factor",
+    "Series",
     "SolveInfo",
     "SolverError",
     "available_backends",
@@ -74,45 +82,70 @@ def check_backend(backend) -> str:
     return backend
 
 
+#: What kind of SPD system is solved (``kind=`` of :func:`choose`):
+#: ``"facet"``: a DGP facet system on a domain (:mod:`facetlift.linalg.facet` preconditions it
+#: on any mask, with missing normals and grazing rims); ``"graph"``: an M-matrix such as a
+#: weighted graph Laplacian (classical multigrid suits it); ``"spd"``: any other SPD matrix
+#: (smoothed-aggregation multigrid above :data:`LARGE`).
+KINDS = ("facet", "graph", "spd")
+
+
 def choose(
     n: int,
     backend: str = "auto",
     *,
+    kind: str = "graph",
     preconditioner: bool = False,
     trusted: bool = False,
-    multigrid: bool = True,
+    thin: bool = False,
 ) -> str:
-    """The backend that solves an SPD system of `n` unknowns.
+    """The backend that solves an SPD system of `n` unknowns: the one policy.
 
     Parameters
     ----------
     n : int
     backend : str
         A name from :data:`BACKENDS`; anything but "auto" is returned as it is (checked).
+    kind : {"facet", "graph", "spd"}
+        What the matrix is (:data:`KINDS`). Facet systems always take "pcg" with
+        :class:`~facetlift.linalg.facet.FacetPreconditioner` (20-60 iterations at every size
+        and on every mask, no factorization: docs/benchmarks.md).
     preconditioner : bool
-        The caller has a cheap problem-specific preconditioner ("pcg" is possible).
+        The caller has another cheap problem-specific preconditioner ("pcg" is possible).
     trusted : bool
-        That preconditioner is known to converge in a few dozen iterations on this system
-        (e.g. the spectral box on a facet operator with every normal known): prefer it at
+        That preconditioner converges in a few dozen iterations on this system: prefer it at
         every size. An untrusted one is used only where factorizing is too costly.
-    multigrid : bool
-        Classical AMG suits the matrix (an M-matrix such as a graph Laplacian); False keeps
-        "auto" on factorizations.
+    thin : bool
+        A facet system on a thin domain (:func:`facetlift.linalg.facet.thin`, a strip a few
+        pixels wide): it factorizes with little fill, faster than any preconditioner helps
+        CG there (a spiral 4 pixels wide with 30 % missing normals, 250k vertices: SuperLU
+        0.65 s, multigrid-CG 254 iterations and 35 s), so it is factorized at every size.
 
     Returns
     -------
     str
         "pcg", "pardiso", "superlu" or "amg".
+
+    Notes
+    -----
+    Up to :data:`LARGE` unknowns a factorization (PARDISO where installed, else SuperLU) is
+    the fastest for graph and general systems; above it the factorization grows
+    superlinearly in time and memory (PARDISO 14.7 s and 5 GB at 2048^2) and multigrid-CG,
+    linear in both, takes over (also with PARDISO installed).
     """
     backend = check_backend(backend)
+    if kind not in KINDS:
+        raise ValueError(f"`kind` must be one of {KINDS}; got {kind!r}")
     if backend != "auto":
         return backend
-    if preconditioner and (trusted or (n > LARGE and not pardiso_available())):
+    if kind == "facet" and thin:
+        return "pardiso" if pardiso_available() else "superlu"
+    if kind == "facet" or (preconditioner and trusted):
         return "pcg"
-    if pardiso_available():
-        return "pardiso"
-    if n <= LARGE or not multigrid:
-        return "superlu"
+    if n <= LARGE:
+        return "pardiso" if pardiso_available() else "superlu"
+    if preconditioner and not pardiso_available():
+        return "pcg"
     return "amg"
 
 
@@ -120,6 +153,7 @@ def factorize(
     K,
     backend: str = "auto",
     *,
+    kind: str = "graph",
     preconditioner: Callable[[np.ndarray], np.ndarray] | None = None,
     trusted: bool = False,
     rtol: float = 1e-11,
@@ -130,7 +164,8 @@ def factorize(
     solution (a loop's consecutive right-hand sides are close).
     """
     name = choose(
-        K.shape[0], backend, preconditioner=preconditioner is not None, trusted=trusted
+        K.shape[0], backend, kind=kind, preconditioner=preconditioner is not None,
+        trusted=trusted,
     )
     if name == "pcg":
         if preconditioner is None:
@@ -143,7 +178,7 @@ def factorize(
     if name == "amg":
         from .amg import amg
 
-        return amg(K, rtol=rtol)
+        return amg(K, rtol=rtol, method="sa" if kind == "spd" else "rs")
     from .direct import superlu
 
     return superlu(K)
@@ -154,15 +189,18 @@ def solve(
     b: np.ndarray,
     backend: str = "auto",
     *,
+    kind: str = "graph",
     preconditioner: Callable[[np.ndarray], np.ndarray] | None = None,
     trusted: bool = False,
-    multigrid: bool = True,
     rtol: float = 1e-11,
     x0: np.ndarray | None = None,
+    flexible: bool = False,
 ) -> tuple[np.ndarray, SolveInfo]:
     """Solve ``K x = b`` once for a symmetric positive (semi-)definite `K` (n, n).
 
-    With a `preconditioner` and the "pcg" route, `K` may be singular with `b` in its range.
+    With a `preconditioner` and the "pcg" route, `K` may be singular with `b` in its range;
+    `flexible` selects CG's Polak-Ribiere update there (for preconditioners that are SPD only
+    up to rounding, such as float32 transforms). `kind` is :func:`choose`'s.
 
     Returns
     -------
@@ -175,19 +213,85 @@ def solve(
         The factorization failed or CG did not converge.
     """
     name = choose(
-        K.shape[0], backend, preconditioner=preconditioner is not None, trusted=trusted,
-        multigrid=multigrid,
+        K.shape[0], backend, kind=kind, preconditioner=preconditioner is not None,
+        trusted=trusted,
     )
     if name == "pcg":
         if preconditioner is None:
             raise ValueError("`backend`='pcg' needs a `preconditioner`")
-        x, cinfo = cg(K, b, preconditioner, x0=x0, rtol=rtol)
+        x, cinfo = _cg(K, b, preconditioner, x0, rtol, flexible)
         _raise_unless_converged(cinfo, rtol, "preconditioned CG")
         return x, SolveInfo("pcg", cinfo.iterations, cinfo.relative_residual)
-    factor = factorize(K, name, rtol=rtol)
+    factor = factorize(K, name, kind=kind, rtol=rtol)
     x = factor.solve(b)
     it = factor.info.iterations if factor.info is not None else None
     return x, SolveInfo(name, it)
+
+
+class Series:
+    """Solve a sequence of nearby SPD systems ``K_k x = b_k`` (the rounds of a reweighting:
+    IRLS, growing edge sets), each with :func:`choose`'s backend for the first.
+
+    Multigrid keeps the first matrix's hierarchy as the preconditioner of the later ones
+    (still SPD and close; rebuilt when CG needs more than `rebuild_after` iterations) and
+    starts each CG from the previous solution; factorizations refactorize every matrix.
+
+    Attributes
+    ----------
+    backend : str
+    iterations : list of int
+        CG iterations per solve (multigrid).
+    setups : int
+        Hierarchies built.
+    """
+
+    def __init__(self, backend: str = "auto", *, kind: str = "graph", rtol: float = 1e-11,
+                 rebuild_after: int = 60):
+        self._backend, self._kind, self._rtol = backend, kind, rtol
+        self._rebuild_after = rebuild_after
+        self.backend = None
+        self._M = None
+        self._x = None
+        self.iterations = []
+        self.setups = 0
+
+    def _hierarchy(self, K):
+        from .amg import preconditioner
+
+        self.setups += 1
+        return preconditioner(K, method="sa" if self._kind == "spd" else "rs")
+
+    def solve(self, K, b: np.ndarray) -> np.ndarray:
+        if self.backend is None:
+            self.backend = choose(K.shape[0], self._backend, kind=self._kind)
+        if self.backend != "amg":
+            return factorize(K, self.backend, kind=self._kind).solve(b)
+        import scipy.sparse as sp
+
+        K = sp.csr_matrix(K)
+        if self._M is None:
+            self._M = self._hierarchy(K)
+        x0 = self._x
+        x, info = cg(K, b, self._M, x0=x0, rtol=self._rtol, maxiter=self._rebuild_after)
+        its = info.iterations
+        if not info.converged:
+            self._M = self._hierarchy(K)
+            x, info = cg(K, b, self._M, x0=x, rtol=self._rtol, maxiter=500)
+            its += info.iterations
+            _raise_unless_converged(info, self._rtol, "multigrid-preconditioned CG")
+        self.iterations.append(its)
+        self._x = x
+        return x
+
+
+def _cg(K, b, preconditioner, x0, rtol, flexible):
+    """CG with `preconditioner`; a facet preconditioner brings its own policy (box or
+    multigrid, :func:`facetlift.linalg.facet.solve`)."""
+    from .facet import FacetPreconditioner, solve
+
+    if isinstance(preconditioner, FacetPreconditioner):
+        return solve(K, b, preconditioner, x0=x0, rtol=rtol)
+    return cg(K, b, preconditioner, x0=x0, rtol=rtol, flexible=flexible)
 
 
 def _raise_unless_converged(info: CGInfo, rtol: float, what: str) -> None:
@@ -202,7 +306,7 @@ def _pcg_factor(K, preconditioner, rtol) -> Factor:
     state = {"x0": None}
 
     def _solve(b):
-        x, info = cg(K, b, preconditioner, x0=state["x0"], rtol=rtol)
+        x, info = _cg(K, b, preconditioner, state["x0"], rtol, True)
         factor.info = info
         _raise_unless_converged(info, rtol, "preconditioned CG")
         state["x0"] = x

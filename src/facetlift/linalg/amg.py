@@ -8,20 +8,30 @@ from .cg import cg
 from .direct import Factor, SolverError
 
 
-def hierarchy(K, *, max_coarse: int = 500, symmetric_gs: bool = False):
-    """A Ruge-Stueben hierarchy of the SPD matrix `K` (pyamg), built once.
+def hierarchy(
+    K, *, max_coarse: int = 500, symmetric_gs: bool = False, method: str = "rs",
+    coarse_solver: str = "splu",
+):
+    """A multigrid hierarchy of the SPD matrix `K` (pyamg), built once.
 
-    ``symmetric_gs`` uses a forward Gauss-Seidel sweep before and a backward one after the
-    coarse correction, which keeps the V-cycle symmetric (required for CG) with one sweep each.
+    ``method="rs"`` is Ruge-Stueben (classical AMG, for M-matrices such as graph Laplacians),
+    ``"sa"`` smoothed aggregation (for other SPD matrices: the biharmonic-like system of
+    ``regularization``, the anisotropic one of ``diffusion``). ``symmetric_gs`` uses a
+    forward Gauss-Seidel sweep before and a backward one after the coarse correction, which
+    keeps the V-cycle symmetric (required for CG) with one sweep each; ``coarse_solver``
+    ("splu", or "pinv" for a singular matrix such as an unpinned facet operator) is then the
+    coarsest level's.
     """
     import pyamg
 
+    if method == "sa":
+        return pyamg.smoothed_aggregation_solver(sp.csr_matrix(K), max_coarse=max_coarse)
     kw = {}
     if symmetric_gs:
         kw = {
             "presmoother": ("gauss_seidel", {"sweep": "forward"}),
             "postsmoother": ("gauss_seidel", {"sweep": "backward"}),
-            "coarse_solver": "splu",
+            "coarse_solver": coarse_solver,
         }
     return pyamg.ruge_stuben_solver(sp.csr_matrix(K), max_coarse=max_coarse, **kw)
 
@@ -32,11 +42,11 @@ def preconditioner(K, **kw):
     return lambda r: M @ r
 
 
-def amg(K, *, rtol: float = 1e-10, maxiter: int = 500) -> Factor:
+def amg(K, *, rtol: float = 1e-10, maxiter: int = 500, method: str = "rs") -> Factor:
     """Multigrid-preconditioned CG, warm-started from the previous solution (a loop's
-    consecutive right-hand sides are close)."""
+    consecutive right-hand sides are close). `method` as in :func:`hierarchy`."""
     K = sp.csr_matrix(K)
-    M = preconditioner(K)
+    M = preconditioner(K, method=method)
     state = {"x0": None}
 
     def _solve(b):

@@ -43,25 +43,31 @@ def setup(problem):
     return problem.domain, graph, t, has, problem.camera.footprint()
 
 
-def spd_solve(K, b: np.ndarray, backend: str = "auto", *, multigrid: bool = True):
+def spd_solve(K, b: np.ndarray, backend: str = "auto", *, kind: str = "graph"):
     """Solve the SPD system ``K x = b`` with the solver layer's choice of backend.
 
-    ``multigrid=False`` keeps "auto" on a factorization at every size (for systems that are
-    not M-matrices, where classical AMG converges slowly: the anisotropic tensor system of
-    "diffusion" took 12.6 s with multigrid-CG against SuperLU's 1.0 s at 256^2).
+    ``kind="spd"`` for systems that are not M-matrices (the prior of "regularization", the
+    tensor of "diffusion"), where classical AMG converges slowly (diffusion: 12.6 s with
+    Ruge-Stueben CG against SuperLU's 1.0 s at 256^2); see :func:`facetlift.linalg.choose`.
     """
-    return linalg.solve(K, b, backend, multigrid=multigrid)[0]
+    return linalg.solve(K, b, backend, kind=kind)[0]
 
 
 def solve_weighted(
-    domain: Domain, graph: g.PixelGraph, w: np.ndarray, t: np.ndarray, backend: str = "auto"
+    domain: Domain, graph: g.PixelGraph, w: np.ndarray, t: np.ndarray, backend: str = "auto",
+    *, series: linalg.Series | None = None,
 ) -> np.ndarray:
     """Unknowns (n,) minimising ``sum_e w_e (z_head - z_tail - t_e)^2`` (one pin per component).
 
-    `w` must be positive on a set of edges that connects each domain component.
+    `w` must be positive on a set of edges that connects each domain component. Rounds of a
+    reweighting pass the same :class:`facetlift.linalg.Series` as `series` (one multigrid
+    hierarchy for all rounds, warm starts); then `backend` is the series'.
     """
     K = g.pin(domain, g.laplacian(graph, w))
-    return spd_solve(K, g.divergence(graph, w * t), backend)
+    b = g.divergence(graph, w * t)
+    if series is not None:
+        return series.solve(K, b)
+    return spd_solve(K, b, backend)
 
 
 def relative_change(z_new: np.ndarray, z: np.ndarray) -> float:

@@ -61,6 +61,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
+from .. import linalg
 from ..operators import graph as pg
 from ..options import Option
 from . import MethodResult
@@ -146,9 +147,11 @@ def run(problem, *, alpha, max_iter, tol, backend) -> MethodResult:
     kept = accepted | connectors(graph, accepted, has & ~accepted, cost)
     t1 = time.perf_counter()
 
+    series = linalg.Series(backend)  # one multigrid hierarchy for every round
+
     def solve(kept):
         w = np.where(has, kept.astype(float), g.FILL_WEIGHT)
-        return g.solve_weighted(domain, graph, w, t, backend)
+        return g.solve_weighted(domain, graph, w, t, series=series)
 
     z = solve(kept)
     rounds = 0

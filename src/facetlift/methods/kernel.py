@@ -208,13 +208,25 @@ def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin):
         _, _, (fr, fc) = specs[members[0]]
         kn = known[fr, fc]
         fac = _factor(kn, sigma, reg)
-        for i in members:
+        # one triangular solve for the coefficients of all the group's tiles (BLAS-3), and
+        # one evaluation matrix per distinct (blend pattern, offset): interior tiles share it
+        rhs = np.empty((2 * int(kn.sum()), len(members)))
+        for col, i in enumerate(members):
+            _, _, (fr, fc) = specs[i]
+            rhs[:, col] = np.concatenate([gc[fr, fc][kn], gr[fr, fc][kn]])
+        coef = sla.cho_solve(fac, rhs, check_finite=False)
+        layouts: dict = {}
+        for col, i in enumerate(members):
             _, (er, ec), (fr, fc) = specs[i]
             ev = inside[er, ec]
-            fits[i][ev] = _evaluate(
-                gc[fr, fc], gr[fr, fc], kn, fac, ev, (er.start - fr.start, ec.start - fc.start),
-                sigma,
-            )
+            offset = (er.start - fr.start, ec.start - fc.start)
+            layouts.setdefault((ev.shape, ev.tobytes(), offset), []).append(col)
+        for (_, _, offset), cols in layouts.items():
+            _, (er, ec), _ = specs[members[cols[0]]]
+            ev = inside[er, ec]
+            values = _evaluation(kn, ev, offset, sigma) @ coef[:, cols]
+            for j, col in enumerate(cols):
+                fits[members[col]][ev] = values[:, j]
 
     workers = max(1, min(len(groups), os.cpu_count() or 1, 8))
     with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(workers) as pool:
@@ -260,17 +272,16 @@ def _factor(known, sigma, reg):
         ) from None
 
 
-def _evaluate(gc, gr, known, fac, ev, offset, sigma):
-    """Solve for one window's coefficients; return the height at its `ev` blend pixels."""
+def _evaluation(known, ev, offset, sigma):
+    """(|ev|, 2n) matrix taking a window's coefficients (cols then rows) to the height at its
+    `ev` blend pixels: ``f(x) = sum_j a_j dk(x, x_j)/dx'_c + b_j dk(x, x_j)/dx'_r``, with
+    ``dk/dx' = (d / sigma^2) k``."""
     kr, kc = np.nonzero(known)
-    n = kr.size
-    coef = sla.cho_solve(fac, np.concatenate([gc[known], gr[known]]), check_finite=False)
     er, ec = np.nonzero(ev)
     dr = (er + offset[0])[:, None] - kr[None, :]
     dc = (ec + offset[1])[:, None] - kc[None, :]
-    # f(x) = sum_j a_j dk(x, x_j)/dx'_c + b_j dk(x, x_j)/dx'_r, with dk/dx' = (d / sigma^2) k.
     k = np.exp(-(dr * dr + dc * dc) / (2 * sigma**2)) / sigma**2
-    return (k * dc) @ coef[:n] + (k * dr) @ coef[n:]
+    return np.concatenate([k * dc, k * dr], axis=1)
 
 
 def _ramp(sl, lo, hi, o, n):
@@ -323,8 +334,7 @@ def _blend(pieces, n_nodes, shape):
             rows += [na, nb, na, nb]
             cols += [na, nb, nb, na]
             vals += [ww, ww, -ww, -ww]
-            np.add.at(rhs, na, -ww * d)
-            np.add.at(rhs, nb, ww * d)
+            rhs += np.bincount(nb, ww * d, n_nodes) - np.bincount(na, ww * d, n_nodes)
     c = np.zeros(n_nodes)
     if rows:
         L = sp.csr_matrix(

@@ -60,6 +60,7 @@ import time
 
 import numpy as np
 
+from .. import linalg
 from .._warnings import warn
 from ..operators import graph as pg
 from ..options import Option
@@ -98,7 +99,8 @@ def run(problem, *, weight, k, scale, max_iter, tol, backend) -> MethodResult:
     t0 = time.perf_counter()
     domain, graph, t, has, h = g.setup(problem)
     floor = 1e-12 * max(float(np.median(np.abs(t[has]))) / h if has.any() else 0.0, 1.0)
-    z = g.solve_weighted(domain, graph, g.edge_weights(has), t, backend)
+    series = linalg.Series(backend)  # one multigrid hierarchy for every reweighting
+    z = g.solve_weighted(domain, graph, g.edge_weights(has), t, series=series)
     changes = []
     converged = False
     if scale == "mad":  # once, from the residuals of the Poisson start
@@ -111,7 +113,7 @@ def run(problem, *, weight, k, scale, max_iter, tol, backend) -> MethodResult:
         w = np.full(graph.n_edges, g.FILL_WEIGHT)
         wd = weights(r / s, weight, k)
         w[has] = np.maximum(wd / wd.max(), g.FILL_WEIGHT) if wd.size else wd
-        z_new = g.solve_weighted(domain, graph, w, t, backend)
+        z_new = g.solve_weighted(domain, graph, w, t, series=series)
         change = g.relative_change(z_new, z)
         changes.append(change)
         z = z_new

@@ -47,6 +47,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from .. import linalg
 from ..operators import graph as pg
 from ..options import Option
 from . import MethodResult
@@ -95,10 +96,11 @@ def run(problem, *, lam, prior, max_iter, tol, backend) -> MethodResult:
     if prior == "laplacian":
         R = laplacian_rows(graph)
         K = pg.pin(domain, L + float(lam) * (R.T @ R))
-        z = g.spd_solve(K, rhs, backend, multigrid=False)
+        z = g.spd_solve(K, rhs, backend, kind="spd")
         info.update(iterations=1, converged=True, prior_rows=int(R.shape[0]))
     else:
         slope = np.where(has, t / h, 0.0)  # measured slopes for the first round
+        series = linalg.Series(backend, kind="spd")  # one hierarchy for every round
         z = None
         converged = False
         changes = []
@@ -107,7 +109,7 @@ def run(problem, *, lam, prior, max_iter, tol, backend) -> MethodResult:
             n_iter += 1
             b = 1.0 / np.sqrt(1.0 + slope**2)
             K = pg.pin(domain, L + (float(lam) / 4.0) * pg.laplacian(graph, b))
-            z_new = g.spd_solve(K, rhs, backend, multigrid=False)
+            z_new = series.solve(K, rhs)
             if z is not None:
                 changes.append(g.relative_change(z_new, z))
             z = z_new

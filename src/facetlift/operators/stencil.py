@@ -32,9 +32,16 @@ def facet_form(domain: Domain, terms) -> sp.csr_matrix:
     domain : Domain
     terms : iterable of (w, Q)
         ``w`` is a scalar or (m,) per-facet weights, ``Q`` a symmetric (4, 4) block.
+
+    Notes
+    -----
+    One stencil offset at a time: the coefficient image of an offset is the sum, over the
+    corner pairs ``(a, b)`` at that offset, of ``sum_t Q_t[a, b] w_t`` shifted to corner
+    ``a``; it is gathered at the domain's vertices into column ``k`` of an (n, 9) table and
+    dropped, so that the peak is the table plus one image (not nine), and the table is
+    compacted into CSR in row blocks.
     """
     H, W = domain.shape
-    st = np.zeros((3, 3, H + 1, W + 1))
     weights = []
     for w, Q in terms:
         if np.isscalar(w):
@@ -43,38 +50,69 @@ def facet_form(domain: Domain, terms) -> sp.csr_matrix:
             img = np.zeros((H, W))
             img[domain.mask] = w
         weights.append((img, np.asarray(Q, dtype=float)))
+    vm = domain.vertex_mask
+    n = domain.n_vertices
+    vals = np.empty((n, 9))
+    acc = np.empty((H + 1, W + 1))
     cache = {}  # blocks like N have few distinct entries: build each coefficient image once
-    for a, (ra, ca) in enumerate(CORNER_OFFSETS):
-        for b, (rb, cb) in enumerate(CORNER_OFFSETS):
-            key = tuple(float(Q[a, b]) for _, Q in weights)
-            if not any(key):
-                continue
-            if key not in cache:
-                pairs = zip(key, weights, strict=True)
-                cache[key] = sum(k * img for k, (img, _) in pairs if k != 0)
-            st[rb - ra + 1, cb - ca + 1, ra : ra + H, ca : ca + W] += cache[key]
-    return _stencil_to_csr(domain, st)
+    for k, (dr, dc) in enumerate((di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1)):
+        acc[:] = 0.0
+        for a, (ra, ca) in enumerate(CORNER_OFFSETS):
+            for b, (rb, cb) in enumerate(CORNER_OFFSETS):
+                if (rb - ra, cb - ca) != (dr, dc):
+                    continue
+                key = tuple(float(Q[a, b]) for _, Q in weights)
+                if not any(key):
+                    continue
+                if key not in cache:
+                    pairs = zip(key, weights, strict=True)
+                    cache[key] = sum(c * img for c, (img, _) in pairs if c != 0)
+                acc[ra : ra + H, ca : ca + W] += cache[key]
+        vals[:, k] = acc[vm]
+    del acc, cache, weights
+    return _table_to_csr(domain, vals)
 
 
-def _stencil_to_csr(domain: Domain, st: np.ndarray) -> sp.csr_matrix:
+#: Rows per block when the (n, 9) stencil table is compacted into CSR.
+_BLOCK = 1 << 16
+
+
+def _table_to_csr(domain: Domain, vals: np.ndarray) -> sp.csr_matrix:
+    """CSR from an (n, 9) table of the 9-point stencil at each vertex (row-major offsets, so
+    each row's columns come out sorted); zeros are dropped except on the diagonal."""
     vi = domain.vertex_index
     vm = domain.vertex_mask
     n = domain.n_vertices
     Hv, Wv = vi.shape
-    idx = np.int32 if n < 2**31 - 1 else np.int64
-    padded = np.pad(vi.astype(idx), 1, constant_values=-1)
-    # rows of the 9-point stencil, neighbour offsets in lexicographic order so that the column
-    # indices of each row come out sorted
-    pos = np.flatnonzero(np.pad(vm, 1).ravel()).astype(np.int64)
-    offsets = np.array([di * (Wv + 2) + dj for di in (-1, 0, 1) for dj in (-1, 0, 1)])
-    cols = padded.ravel()[pos[:, None] + offsets]
-    vals = st.reshape(9, -1)[:, np.flatnonzero(vm.ravel())].T
-    keep = cols >= 0
-    keep &= vals != 0
-    keep[:, 4] = True  # the diagonal, even where zero
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(keep.sum(axis=1), out=indptr[1:])
-    return sp.csr_matrix((vals[keep], cols[keep], indptr.astype(idx)), shape=(n, n))
+    idx = np.int32 if (Hv + 2) * (Wv + 2) < 2**31 - 1 else np.int64
+    padded = np.pad(vi.astype(idx), 1, constant_values=-1).ravel()
+    pos = np.flatnonzero(np.pad(vm, 1).ravel()).astype(idx)
+    offsets = np.array([di * (Wv + 2) + dj for di in (-1, 0, 1) for dj in (-1, 0, 1)], dtype=idx)
+    def block(lo, hi):
+        cols = padded[pos[lo:hi, None] + offsets]
+        keep = (cols >= 0) & (vals[lo:hi] != 0)
+        keep[:, 4] = True  # the diagonal, even where zero
+        return cols, keep
+
+    # two passes over row blocks (count, then fill): no full-size temporaries besides the
+    # table and the result
+    counts = np.empty(n, dtype=np.int64)
+    for lo in range(0, n, _BLOCK):
+        counts[lo : lo + _BLOCK] = block(lo, min(lo + _BLOCK, n))[1].sum(axis=1)
+    nnz = int(counts.sum())
+    cidx = np.int32 if n < 2**31 - 1 and nnz < 2**31 - 1 else np.int64
+    indptr = np.zeros(n + 1, dtype=cidx)
+    np.cumsum(counts, out=indptr[1:])
+    del counts
+    data = np.empty(nnz)
+    indices = np.empty(nnz, dtype=cidx)
+    for lo in range(0, n, _BLOCK):
+        hi = min(lo + _BLOCK, n)
+        cols, keep = block(lo, hi)
+        a, b = int(indptr[lo]), int(indptr[hi])
+        data[a:b] = vals[lo:hi][keep]
+        indices[a:b] = cols[keep]
+    return sp.csr_matrix((data, indices, indptr), shape=(n, n))
 
 
 def scatter_corners(domain: Domain, values: np.ndarray) -> np.ndarray:

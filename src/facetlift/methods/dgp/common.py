@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..._warnings import warn
-from ...operators.stencil import E_X, E_Y
+from ...operators.stencil import E_X, E_Y, grid_slopes
 
 
 def targets(problem):
@@ -54,16 +54,27 @@ def average_deviation(domain, z, bx, by, target, h=1.0) -> float:
     """
     if not target.any():
         return 0.0
-    gx, gy = facet_slopes(domain, z)
-    return mean_angle(gx, gy, bx, by, target, h)
+    # on the vertex image (grid slicing), not through the (m, 4) corner gather
+    gx, gy = grid_slopes(domain.to_vertex_image(z, fill=0.0))
+    return mean_angle(gx[domain.mask], gy[domain.mask], bx, by, target, h)
 
 
 def mean_angle(gx, gy, bx, by, target, h) -> float:
     """Mean angle (degrees) between normals (-gx, -gy, h) and (-bx, -by, h) where `target`."""
     if not target.any():
         return 0.0
-    gx, gy, bx, by = gx[target], gy[target], bx[target], by[target]
-    # atan2(|a x b|, a . b), accurate near zero unlike arccos
+    gx, gy, bx, by = (np.ravel(a) for a in (gx, gy, bx, by))
+    idx = np.flatnonzero(target)
+    total = 0.0
     h2 = h * h
-    cross = np.sqrt(h2 * ((by - gy) ** 2 + (gx - bx) ** 2) + (gx * by - gy * bx) ** 2)
-    return float(np.degrees(np.arctan2(cross, gx * bx + gy * by + h2)).mean())
+    for a in range(0, idx.size, _CHUNK):  # in chunks: no full-size temporaries
+        k = idx[a : a + _CHUNK]
+        gxk, gyk, bxk, byk = gx[k], gy[k], bx[k], by[k]
+        # atan2(|a x b|, a . b), accurate near zero unlike arccos
+        cross = np.sqrt(h2 * ((byk - gyk) ** 2 + (gxk - bxk) ** 2) + (gxk * byk - gyk * bxk) ** 2)
+        total += float(np.arctan2(cross, gxk * bxk + gyk * byk + h2).sum())
+    return float(np.degrees(total / idx.size))
+
+
+#: Facets per chunk of :func:`mean_angle`.
+_CHUNK = 1 << 20

@@ -14,7 +14,8 @@ import numpy as np
 
 from ... import linalg
 from ..._warnings import warn
-from ...linalg.spectral import BoxPreconditioner, RectangleSolver
+from ...linalg.facet import FacetPreconditioner, thin
+from ...linalg.spectral import RectangleSolver
 from ...operators.stencil import (
     E_X,
     E_Y,
@@ -52,10 +53,10 @@ def solve_iterative(
     factor = valence = None
     if mean_subtraction:
         # on a full rectangle A^T A is diagonalised by the DCT-I: the spectral box solver is
-        # exact, O(n log n), and needs no matrix
-        rect = bool(domain.mask.all())
-        route = linalg.choose(domain.n_vertices, backend, preconditioner=True, trusted=rect)
-        exact = rect and route == "pcg"
+        # exact, O(n log n), and needs no matrix; on other masks it preconditions CG (every
+        # facet carries the full block N here, so no facet is weak), warm-started each step
+        route = linalg.choose(domain.n_vertices, backend, kind="facet", thin=thin(domain))
+        exact = bool(domain.mask.all()) and route == "pcg"
         if not exact:
             K = pin_components(domain, facet_form(domain, [(1.0, N_MEAN_FREE)]))
     else:
@@ -64,8 +65,9 @@ def solve_iterative(
     if mean_subtraction and exact:
         factor = linalg.Factor(RectangleSolver(*domain.shape).solve, "spectral")
     elif mean_subtraction:
-        pre = BoxPreconditioner(domain) if route == "pcg" else None
-        factor = linalg.factorize(K, route, preconditioner=pre)
+        strong = np.ones(domain.n_facets, dtype=bool)
+        pre = FacetPreconditioner(domain, K, strong) if route == "pcg" else None
+        factor = linalg.factorize(K, route, kind="facet", preconditioner=pre)
     t2 = time.perf_counter()
     # The loop runs on facet and vertex images (grid slicing, no scattered gathers): each
     # step is exactly local_shaping() followed by the scatter C^T of Eq. 8.

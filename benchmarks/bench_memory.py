@@ -1,0 +1,128 @@
+"""Peak memory of every method and route against facetlift.memory's estimate.
+
+Each case runs in its own subprocess: the input is built, the peak-RSS counter is reset
+(``/proc/self/clear_refs``), ``facetlift.integrate`` runs, and the job's own peak is
+``VmHWM - VmRSS before``, the quantity :func:`facetlift.memory.estimate` predicts. The
+coefficients of :data:`facetlift.memory.COEFFICIENTS` were fitted to this script's output
+(docs/benchmarks.md, "Memory planning").
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_memory.py --sizes 256,512,1024 --json mem.jsonl
+    .venv/bin/python benchmarks/bench_memory.py --cases dgp:disk:smooth --sizes 2048
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+#: method:shape:route[:option=value,...]
+CASES = (
+    "dgp:rect:smooth", "dgp:disk:smooth", "dgp:disk:missing", "dgp:rect:missing",
+    "dgp:disk:smooth:solver=iterative,max_iter=3", "dgp:rect:smooth:solver=iterative,max_iter=3",
+    "poisson:disk:smooth", "m_estimator:disk:smooth:max_iter=2", "alpha_surface:disk:smooth",
+    "regularization:disk:smooth", "diffusion:disk:smooth", "frankot_chellappa:disk:smooth",
+    "kernel:disk:smooth",
+)
+
+
+def _status(key: str) -> int:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith(key + ":"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+def _value(text: str):
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def run_case(case: str, s: int) -> dict:
+    import gc
+
+    import facetlift
+    from facetlift import memory
+
+    sys.path.insert(0, str(HERE))
+    from bench_masks import inputs
+
+    method, shape, route, *rest = case.split(":")
+    opts = dict((kv.split("=", 1)[0], _value(kv.split("=", 1)[1]))
+                for kv in (rest[0].split(",") if rest else []))
+    normals, mask, K = inputs(shape, s, route)
+    if route == "discontinuities":
+        opts["discontinuities"] = True
+    problem = facetlift.prepare(normals, mask, pixel_size=1.0 / s, K=K)
+    del normals
+    gc.collect()
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")  # reset VmHWM to the current RSS
+    before = _status("VmRSS")
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        # an explicit limit: measure every route, also beyond a method's size limit
+        surf = facetlift.solve(problem, method, max_memory=memory.default_limit(), **opts)
+    seconds = time.perf_counter() - t0
+    peak = _status("VmHWM") - before
+    from facetlift import methods as _m
+    from facetlift.options import validate
+
+    values = validate(_m.get(method).specs(), opts, method)
+    est, which = memory.estimate(problem, method, values)
+    d = problem.domain
+    return {"case": case, "size": s, "m": d.n_facets, "n": d.n_vertices, "seconds": seconds,
+            "peak_mib": peak / 2**20, "estimate_mib": est / 2**20, "route": which,
+            "ratio": est / peak if peak else None, "backend": surf.info.get("backend")}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--sizes", default="256,512,1024")
+    ap.add_argument("--cases", default=";".join(CASES),
+                    help="';'-separated method:shape:route[:opt=val,...]")
+    ap.add_argument("--json", help="append results here (one JSON per line)")
+    ap.add_argument("--timeout", type=float, default=900.0)
+    ap.add_argument("--case", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.case:
+        case, s = args.case.rsplit("@", 1)
+        print(json.dumps(run_case(case, int(s))))
+        return 0
+    print("| case | size | mask px | peak MiB | estimate MiB | estimate / peak | route | s |")
+    print("|---|---|---|---|---|---|---|---|")
+    for s in (int(x) for x in args.sizes.split(",")):
+        for case in args.cases.split(";"):
+            cmd = [sys.executable, __file__, "--case", f"{case}@{s}"]
+            try:
+                res = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout)
+                r = json.loads(res.stdout.strip().splitlines()[-1]) if res.returncode == 0 \
+                    else {"case": case, "size": s, "error": res.stderr.strip()[-200:]}
+            except subprocess.TimeoutExpired:
+                r = {"case": case, "size": s, "error": "timeout"}
+            if args.json:
+                with open(args.json, "a") as f:
+                    f.write(json.dumps(r) + "\n")
+            if "error" in r:
+                print(f"| {case} | {s}² | failed: {r['error'][-100:]} |", flush=True)
+                continue
+            print(f"| {case} | {s}² | {r['m']:,} | {r['peak_mib']:,.0f} | "
+                  f"{r['estimate_mib']:,.0f} | {r['ratio']:.2f} | {r['route']} | "
+                  f"{r['seconds']:.1f} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

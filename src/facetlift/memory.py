@@ -1,0 +1,320 @@
+"""Memory planning: the peak memory of a job, estimated before anything that grows with the
+input is allocated, and refused when it does not fit.
+
+:func:`plan` is called once by :func:`facetlift.solve` (so by :func:`facetlift.integrate`
+too), after the options are checked and before the method runs. It estimates the peak
+*additional* resident memory of the method and route that will run (the input arrays and the
+checked problem already exist) from per-pixel coefficients measured on this project's
+machine (``benchmarks/bench_memory.py``, docs/benchmarks.md "Memory planning"), and raises
+:class:`facetlift.errors.MemoryLimitError` naming the estimate, the limit and what to do when
+it exceeds the limit.
+
+The limit (``max_memory=``, ``--max-memory``) defaults to the smallest of
+
+* the available physical memory (``MemAvailable``) minus a margin (:data:`MARGIN` of the
+  total, at least 256 MiB),
+* what the address-space limit (``RLIMIT_AS``, ``ulimit -v``) leaves above the process's
+  current virtual size,
+* what a cgroup memory limit (a container's) leaves above its current usage.
+
+Counts
+    ``m`` facets (mask pixels), ``n`` vertices, ``B`` cells of the mask's bounding box (what
+    the methods work on, :func:`facetlift.api.crop`). Estimates are linear in them, except the
+    sparse factorizations (SuperLU, PARDISO: ``n log2 n``, used up to
+    :data:`facetlift.linalg.LARGE` unknowns) and the local dense fits of "kernel" and the
+    Gaussian of "diffusion", whose size follows their options (an absurd ``sigma`` or
+    ``tile`` is refused here, before it allocates).
+
+Size limits
+    :data:`SIZE_LIMITS` caps methods whose time, not memory, gets out of hand on large
+    domains; it applies under the default limit, and an explicit ``max_memory`` lifts it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import MemoryLimitError
+
+MiB = 2**20
+GiB = 2**30
+
+#: Share of the physical memory kept free by the default limit.
+MARGIN = 0.05
+
+#: Peak resident memory above the prepared problem, per route: bytes per facet (mask pixel)
+#: ``m``, per cell ``B`` of the mask's bounding box, a fixed part, and bytes per
+#: ``n log2 n`` where the route factorizes ``n`` unknowns (SuperLU / PARDISO, up to
+#: :data:`facetlift.linalg.LARGE`). Fitted to benchmarks/bench_memory.py on rect and disk
+#: domains at 512^2-1536^2, checked at 256^2-2048^2 (docs/benchmarks.md,
+#: "Memory planning").
+COEFFICIENTS = {
+    "dgp-spectral": (0.0, 85.0, 8 * MiB, 0.0),
+    "dgp-pcg": (164.0, 68.0, 12 * MiB, 0.0),
+    "dgp-factor": (164.0, 68.0, 12 * MiB, 110.0),
+    "dgp-loop-spectral": (0.0, 125.0, 5 * MiB, 0.0),
+    "dgp-loop-pcg": (197.0, 68.0, 20 * MiB, 0.0),
+    "dgp-loop-factor": (197.0, 68.0, 20 * MiB, 110.0),
+    "dgp-discontinuous": (800.0, 0.0, 18 * MiB, 0.0),
+    "poisson": (607.0, 0.0, 0.0, 45.0),
+    "m_estimator": (894.0, 0.0, 0.0, 31.0),
+    "alpha_surface": (934.0, 0.0, 0.0, 27.0),
+    "regularization": (1242.0, 0.0, 0.0, 130.0),
+    "diffusion": (1330.0, 0.0, 0.0, 60.0),
+    "frankot_chellappa": (0.0, 500.0, 0.0, 0.0),
+    "kernel": (390.0, 0.0, 0.0, 0.0),
+}
+
+
+#: Mask pixels above which a method is refused by default although it would fit in memory:
+#: its time grows past a minute on this project's 2-core machine ("regularization" with the
+#: Laplacian prior: smoothed-aggregation CG on the biharmonic-like system, 48 s at 1.43 M and
+#: 85 s at 2.54 M mask pixels; docs/benchmarks.md). An explicit ``max_memory`` lifts it.
+SIZE_LIMITS = {"regularization": 1_600_000}
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A job's estimated peak (bytes, above what is allocated when it is planned), the limit
+    it was checked against, and the route the estimate is for."""
+
+    estimate: int
+    limit: int
+    route: str
+
+    def __str__(self) -> str:
+        return f"{_size(self.estimate)} ({self.route}) of {_size(self.limit)} allowed"
+
+
+def _size(b: float) -> str:
+    return f"{b / GiB:.2f} GiB" if b >= GiB else f"{b / MiB:.0f} MiB"
+
+
+_UNITS = {"": 1, "b": 1, "k": 2**10, "m": MiB, "g": GiB, "t": 2**40}
+
+
+def parse_size(value) -> int:
+    """Bytes from a number or a string such as ``"8G"``, ``"512 MiB"``, ``"1.5GB"``.
+
+    Raises
+    ------
+    ValueError
+        Naming `max_memory`, for anything else or a non-positive size.
+    """
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
+        out = float(value)
+    elif isinstance(value, str):
+        hit = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:e[+-]?[0-9]+)?)\s*([kmgt]?)(?:i?b)?\s*",
+                           value.lower())
+        if hit is None:
+            raise ValueError(
+                f"`max_memory` must be a number of bytes or a size such as '8G' or '512M'; "
+                f"got {value!r}"
+            )
+        out = float(hit.group(1)) * _UNITS[hit.group(2)]
+    else:
+        raise ValueError(f"`max_memory` must be a number of bytes or a size such as '8G'; got "
+                         f"{value!r}")
+    if not (math.isfinite(out) and out > 0):
+        raise ValueError(f"`max_memory` must be positive; got {value!r}")
+    return int(out)
+
+
+def _meminfo() -> dict:
+    out = {}
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                key, val = line.split(":", 1)
+                out[key] = int(val.split()[0]) * 1024
+    except (OSError, ValueError):
+        pass
+    return out
+
+
+def _read_int(path: str) -> int | None:
+    try:
+        with open(path) as f:
+            text = f.read().strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None
+
+
+def _cgroup_headroom() -> int | None:
+    """What a cgroup memory limit leaves (v2 memory.max, v1 limit_in_bytes), or None."""
+    for limit, usage in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+                         ("/sys/fs/cgroup/memory/memory.limit_in_bytes",
+                          "/sys/fs/cgroup/memory/memory.usage_in_bytes")):
+        lim, use = _read_int(limit), _read_int(usage)
+        if lim is not None and use is not None and lim < 2**60:
+            return lim - use
+    return None
+
+
+def _vm_size() -> int:
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmSize:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError):
+        pass
+    return 0
+
+
+def default_limit() -> int:
+    """The default ``max_memory`` in bytes (module docstring)."""
+    info = _meminfo()
+    total = info.get("MemTotal")
+    avail = info.get("MemAvailable")
+    if avail is None:
+        try:
+            page = os.sysconf("SC_PAGE_SIZE")
+            avail = os.sysconf("SC_AVPHYS_PAGES") * page
+            total = os.sysconf("SC_PHYS_PAGES") * page
+        except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
+            avail = total = 2**62
+    limits = [avail - max(256 * MiB, int(MARGIN * (total or avail)))]
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft != resource.RLIM_INFINITY:
+            limits.append(soft - _vm_size())
+    except (ImportError, ValueError, OSError):  # pragma: no cover - not POSIX
+        pass
+    cg = _cgroup_headroom()
+    if cg is not None:
+        limits.append(cg)
+    return max(int(min(limits)), 0)
+
+
+def limit(max_memory=None) -> int:
+    """`max_memory` in bytes (checked), or :func:`default_limit` when None."""
+    return default_limit() if max_memory is None else parse_size(max_memory)
+
+
+def _box(domain) -> tuple[int, int]:
+    """Facet rows and columns of the mask's bounding box."""
+    mask = domain.mask
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    return int(rows[-1] - rows[0] + 1), int(cols[-1] - cols[0] + 1)
+
+
+def _cost(route: str, m: int, B: int, factorized: int = 0) -> float:
+    a, b, c, f = COEFFICIENTS[route]
+    out = a * m + b * B + c
+    if factorized:
+        out += f * factorized * math.log2(max(factorized, 2))
+    return out
+
+
+def _gaussian(sigma: float, B: int) -> float:
+    """scipy's Gaussian filter: a kernel of 2 * int(4 sigma + 0.5) + 1 taps, an image-sized
+    output per pass."""
+    taps = 2 * int(min(4.0 * float(sigma) + 0.5, 1e300)) + 1
+    return 8.0 * taps + 16.0 * B
+
+
+def _kernel_tiles(options: dict, shape) -> float:
+    """The dense local fits of "kernel": per worker a (2k, 2k) Gram matrix and its (k, k)
+    distance and kernel tables, k the samples of one fit window; plus the evaluation."""
+    sigma = float(options.get("sigma", 2.0))
+    tile = float(options.get("tile", 16))
+    margin = options.get("margin")
+    margin = math.ceil(2 * sigma) if margin is None else float(margin)
+    o = math.ceil(sigma)
+    tile = max(tile, 2 * o)
+    side_r = min(tile + 2 * o + 2 * margin, shape[0])
+    side_c = min(tile + 2 * o + 2 * margin, shape[1])
+    k = side_r * side_c
+    ev = min(tile + 2 * o, shape[0]) * min(tile + 2 * o, shape[1])
+    workers = min(os.cpu_count() or 1, 8)
+    return workers * (8.0 * 6 * k * k + 8.0 * 5 * ev * k)
+
+
+def estimate(problem, method: str, options: dict) -> tuple[float, str]:
+    """Estimated peak bytes of `method` with checked `options` on `problem`, and its route.
+
+    Parameters
+    ----------
+    problem : Problem
+    method : str
+    options : dict
+        The validated options (:func:`facetlift.options.validate`).
+    """
+    from .linalg import choose
+
+    d = problem.domain
+    m = d.n_facets
+    hb, wb = _box(d)
+    B = (hb + 1) * (wb + 1)
+    backend = options.get("backend", "auto")
+    if method == "dgp":
+        if options.get("discontinuities"):
+            return _cost("dgp-discontinuous", m, B), "dgp-discontinuous"
+        loop = "dgp-loop" if options.get("solver") == "iterative" else "dgp"
+        from .linalg.facet import thin
+
+        route = choose(d.n_vertices, backend, kind="facet", thin=thin(d))
+        full = m == hb * wb and (loop == "dgp-loop" or bool(problem.usable.all()))
+        if route != "pcg":
+            return _cost(f"{loop}-factor", m, B, d.n_vertices), f"{loop}-{route}"
+        name = f"{loop}-spectral" if full else f"{loop}-pcg"
+        return _cost(name, m, B), name
+    if method == "frankot_chellappa":
+        return _cost(method, m, B), method
+    if method == "kernel":
+        return _cost(method, m, B) + _kernel_tiles(options, (hb, wb)), method
+    if method not in COEFFICIENTS:  # a method registered elsewhere: plan it like Poisson
+        return _cost("poisson", m, B), f"{method}-unplanned"
+    spd = method in ("regularization", "diffusion")
+    route = choose(m, backend, kind="spd" if spd else "graph")
+    out = _cost(method, m, B, m if route in ("superlu", "pardiso") else 0)
+    if method == "diffusion":
+        out += _gaussian(options.get("sigma", 0.5), B)
+    return out, f"{method}-{route}"
+
+
+def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
+    """Estimate the job's peak and refuse it when it exceeds the limit.
+
+    Raises
+    ------
+    facetlift.errors.MemoryLimitError
+        The estimate exceeds `max_memory` (default :func:`default_limit`), or the domain is
+        larger than the method's :data:`SIZE_LIMITS` entry under the default limit; the
+        message names the figures and what to do.
+    ValueError
+        A bad `max_memory`.
+    """
+    lim = limit(max_memory)
+    m = problem.domain.n_facets
+    cap = SIZE_LIMITS.get(method)
+    if cap is not None and m > cap and max_memory is None:
+        raise MemoryLimitError(
+            f"method {method!r} is limited to {cap:,} mask pixels by default (beyond that it "
+            f"takes minutes on a 2-core machine); this job has {m:,}: crop or downsample the "
+            "input, use method='poisson' or 'dgp', or pass max_memory= / --max-memory to run "
+            "it anyway"
+        )
+    est, route = estimate(problem, method, options)
+    p = Plan(int(min(est, 2**62)), lim, route)
+    if est > lim:
+        source = "max_memory" if max_memory is not None else "the available memory"
+        raise MemoryLimitError(
+            f"method {method!r} would need about {_size(est)} at its peak ({route}, "
+            f"{problem.domain.n_facets:,} mask pixels), more than the "
+            f"{_size(lim)} allowed ({source}); "
+            "crop the input or lower its resolution, use a route that needs less (the "
+            "default method='dgp' is the leanest), or raise the limit with max_memory= / "
+            "--max-memory if the memory is there"
+        )
+    return p

@@ -1,0 +1,149 @@
+"""The facet-system preconditioner: box spectral solve plus an exact solve on weak vertices."""
+
+import numpy as np
+import pytest
+import scipy.sparse.linalg as spla
+
+from facetlift.domain import Domain
+from facetlift.linalg import cg
+from facetlift.linalg.facet import CLUSTER, FacetPreconditioner, thin, weak_vertices
+from facetlift.linalg.spectral import BoxPreconditioner
+from facetlift.methods.dgp.fixed_point import SLOPE_BLOCK, TWIST_BLOCK
+from facetlift.operators.stencil import facet_form, pin_components
+
+
+def _disk(s):
+    r, c = np.mgrid[0:s, 0:s]
+    return (r - s / 2 + 0.5) ** 2 + (c - s / 2 + 0.5) ** 2 < (0.45 * s) ** 2
+
+
+def _rim_system(s, width=1, seed=0):
+    """A disk whose outer `width` pixels have no target (a grazing rim), random targets."""
+    import scipy.ndimage as ndi
+
+    mask = _disk(s)
+    inner = ndi.binary_erosion(mask, iterations=width)
+    d = Domain.from_mask(mask)
+    strong = inner[d.pixels]
+    wk = np.where(strong, 1.0, 1e-9)
+    K = facet_form(d, [(wk, SLOPE_BLOCK), (1.0, TWIST_BLOCK)])
+    rng = np.random.default_rng(seed)
+    b = K @ rng.standard_normal(d.n_vertices)
+    return d, strong, K, b
+
+
+def test_weak_vertices_are_those_only_weak_facets_touch():
+    mask = np.ones((4, 5), bool)
+    d = Domain.from_mask(mask)
+    strong = np.ones(d.n_facets, bool)
+    assert not weak_vertices(d, strong).any()
+    strong[int(d.to_image(np.arange(d.n_facets), fill=-1)[0, 0])] = False  # corner facet
+    weak = d.to_vertex_image(weak_vertices(d, strong).astype(float), fill=0)
+    assert weak.sum() == 1 and weak[0, 0] == 1  # only the outer corner vertex
+    assert not weak_vertices(d, np.ones(d.n_facets, bool)).any()
+
+
+def test_large_weak_clusters_give_all_their_vertices():
+    s = 64
+    d = Domain.from_mask(np.ones((s, s), bool))
+    img = np.zeros((s, s), bool)
+    img[:, :5] = True  # a 320-facet band: a cluster
+    assert img.sum() >= CLUSTER
+    strong = ~img[d.pixels]
+    weak = d.to_vertex_image(weak_vertices(d, strong).astype(float), fill=0) > 0
+    assert weak[:, :6].all() and not weak[:, 6:].any()
+    img[:] = False
+    img[1::4, 1::4] = True  # scattered single facets: no vertex is theirs alone
+    assert not weak_vertices(d, ~img[d.pixels]).any()
+
+
+def test_preconditioner_is_symmetric_positive_semidefinite():
+    d, strong, K, _ = _rim_system(14)
+    M = FacetPreconditioner(d, K, strong, dtype=np.float64)
+    assert M.n_weak > 0
+    P = np.column_stack([M(e) for e in np.eye(d.n_vertices)])
+    scale = np.abs(P).max()  # ~1 / flat_weight on the rim's near-null mode: symmetric up to
+    assert np.abs(P - P.T).max() <= 1e-6 * scale  # rounding amplified by that
+    assert np.linalg.eigvalsh(0.5 * (P + P.T)).min() > -1e-6 * scale
+
+
+@pytest.mark.parametrize("width", [1, 2])
+def test_grazing_rim_needs_few_iterations_and_matches_a_factorization(width):
+    d, strong, K, b = _rim_system(96, width)
+    x, info = cg(K, b, FacetPreconditioner(d, K, strong), rtol=1e-11, flexible=True)
+    assert info.converged and info.iterations <= 40
+    y = spla.spsolve(pin_components(d, K).tocsc(), b)
+    diff = (x - x.mean()) - (y - y.mean())
+    assert np.abs(diff).max() <= 1e-6 * np.ptp(y)
+    # the box alone needs many more iterations on the same system
+    _, box = cg(K, b, BoxPreconditioner(d), rtol=1e-11, maxiter=4 * info.iterations)
+    assert box.iterations > 2 * info.iterations
+
+
+def test_exact_on_full_rectangle_without_weak_facets():
+    d = Domain.from_mask(np.ones((9, 12), bool))
+    K = facet_form(d, [(1.0, SLOPE_BLOCK), (1.0, TWIST_BLOCK)])
+    M = FacetPreconditioner(d, K, np.ones(d.n_facets, bool))
+    assert M.exact and M.n_weak == 0
+    b = K @ np.random.default_rng(1).standard_normal(d.n_vertices)
+    assert np.abs(K @ M(b) - b).max() < 1e-10
+
+
+def test_refresh_keeps_the_box_and_takes_the_new_weak_set():
+    d, strong, K, b = _rim_system(40)
+    M = FacetPreconditioner(d, K, np.ones(d.n_facets, bool))
+    box = M.box
+    assert M.n_weak == 0
+    M.refresh(K, strong)
+    assert M.box is box and M.n_weak > 0
+    x, info = cg(K, b, M, rtol=1e-10, flexible=True)
+    assert info.converged and info.iterations <= 40
+
+
+def test_float32_box_converges_like_float64_with_flexible_cg():
+    d, strong, K, b = _rim_system(64)
+    its = {}
+    for dt in (np.float32, np.float64):
+        x, info = cg(K, b, FacetPreconditioner(d, K, strong, dtype=dt), rtol=1e-10,
+                     flexible=True)
+        assert info.converged
+        its[dt] = info.iterations
+    assert its[np.float32] <= its[np.float64] + 3
+
+
+def _spiral(s):
+    r, c = np.mgrid[0:s, 0:s]
+    x, y = c - s / 2 + 0.5, r - s / 2 + 0.5
+    rad, ang = np.hypot(x, y), np.arctan2(y, x)
+    mask = ((rad - 16 * ang / (2 * np.pi)) % 16 < 4) & (rad < 0.48 * s) & (rad > 8)
+    d = Domain.from_mask(mask)
+    K = facet_form(d, [(1.0, SLOPE_BLOCK), (1.0, TWIST_BLOCK)])
+    b = K @ np.random.default_rng(5).standard_normal(d.n_vertices)
+    return d, np.ones(d.n_facets, bool), K, b
+
+
+def test_thin_domain_takes_multigrid_and_converges():
+    """A spiral 4 pixels wide: the box's fictitious material glues neighbouring arms, so
+    multigrid is chosen up front (thin()); a fat domain keeps the box."""
+    from facetlift.linalg.facet import solve
+
+    d, strong, K, b = _spiral(256)
+    pre = FacetPreconditioner(d, K, strong)
+    assert thin(d) and pre.coarse == "amg"
+    x, info = solve(K, b, pre, rtol=1e-10)
+    assert info.converged and info.iterations <= 40
+    assert np.linalg.norm(K @ x - b) <= 1e-9 * np.linalg.norm(b)
+    d2, strong2, K2, b2 = _rim_system(64)
+    pre2 = FacetPreconditioner(d2, K2, strong2)
+    assert not thin(d2)
+    _, info2 = solve(K2, b2, pre2, rtol=1e-10)
+    assert info2.converged and pre2.coarse == "box"
+
+
+def test_a_box_that_would_need_hundreds_of_iterations_is_replaced_by_measurement():
+    from facetlift.linalg.facet import BOX_LIMIT, solve
+
+    d, strong, K, b = _spiral(512)
+    pre = FacetPreconditioner(d, K, strong, coarse="box")
+    x, info = solve(K, b, pre, rtol=1e-10)
+    assert info.converged and pre.coarse == "amg" and info.iterations <= BOX_LIMIT + 40

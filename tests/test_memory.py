@@ -1,0 +1,175 @@
+"""Memory planning: the limit, the estimate, refusals before allocating."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import facetlift
+from facetlift import memory
+from facetlift.errors import MemoryLimitError
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_memory.py"
+
+
+def _disk_normals(s=64):
+    r, c = np.mgrid[0:s, 0:s]
+    mask = (r - s / 2) ** 2 + (c - s / 2) ** 2 < (0.4 * s) ** 2
+    p = 0.1 * np.cos(c / 9.0)
+    q = 0.1 * np.sin(r / 7.0)
+    return facetlift.normals_from_gradients(p, q), mask
+
+
+@pytest.mark.parametrize(
+    "text, expected",
+    [("8G", 8 * 2**30), ("512M", 512 * 2**20), ("1.5GB", int(1.5 * 2**30)), ("2 GiB", 2 * 2**30),
+     ("1000", 1000), (4096, 4096), (1e9, 10**9), ("64k", 65536)],
+)
+def test_parse_size(text, expected):
+    assert memory.parse_size(text) == expected
+
+
+@pytest.mark.parametrize("bad", ["lots", "-1G", "0", 0, -5, float("nan"), "8X", None, True, [1]])
+def test_parse_size_refuses_nonsense(bad):
+    with pytest.raises(ValueError, match="`max_memory` must"):
+        memory.parse_size(bad)
+
+
+def test_default_limit_is_positive_and_below_physical_memory():
+    lim = memory.default_limit()
+    total = memory._meminfo().get("MemTotal")
+    assert lim > 0
+    if total:
+        assert lim < total
+
+
+def test_default_limit_honours_rlimit_as():
+    code = (
+        "import resource; from facetlift import memory\n"
+        "resource.setrlimit(resource.RLIMIT_AS, (8 * 2**30, resource.RLIM_INFINITY))\n"
+        "print(memory.default_limit(), memory._vm_size())"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()
+    lim, vm = int(out[0]), int(out[1])
+    assert lim <= 8 * 2**30 - vm + 2**20
+
+
+def test_refuses_with_the_estimate_the_limit_and_what_to_do():
+    n, m = _disk_normals()
+    with pytest.raises(MemoryLimitError, match=r"would need about .* MiB at its peak .*more "
+                       r"than the 1 MiB allowed \(max_memory\).*crop the input"):
+        facetlift.integrate(n, m, max_memory="1M")
+    with pytest.raises(MemoryLimitError):
+        facetlift.integrate(n, m, method="poisson", max_memory=2**20)
+    with pytest.raises(ValueError, match="`max_memory` must"):
+        facetlift.integrate(n, m, max_memory="much")
+
+
+def test_a_job_that_fits_runs_and_reports_its_estimate():
+    n, m = _disk_normals()
+    s = facetlift.integrate(n, m, max_memory="4G")
+    assert 0 < s.info["memory_estimate"] < 4 * 2**30
+
+
+@pytest.mark.parametrize(
+    "method, options",
+    [("diffusion", {"sigma": 3e16}), ("kernel", {"tile": 10**6}), ("kernel", {"sigma": 1e5}),
+     ("kernel", {"margin": 10**7})],
+)
+def test_absurd_options_are_refused_before_they_allocate(method, options):
+    n, m = _disk_normals(96)
+    with pytest.raises(MemoryLimitError, match="would need about"):
+        facetlift.integrate(n, m, method=method, max_memory="2G", **options)
+
+
+def test_estimate_grows_with_the_domain_and_names_the_route():
+    small = facetlift.prepare(*_disk_normals(128))
+    large = facetlift.prepare(*_disk_normals(512))
+    a, route = memory.estimate(small, "dgp", {"solver": "direct", "backend": "auto"})
+    b, _ = memory.estimate(large, "dgp", {"solver": "direct", "backend": "auto"})
+    assert route == "dgp-pcg" and b > 3 * a > 0
+
+
+def _measured(case, sizes):
+    out = subprocess.run(
+        [sys.executable, str(BENCH), "--cases", case, "--sizes", ",".join(map(str, sizes)),
+         "--json", "/dev/stdout"],
+        capture_output=True, text=True, check=True,
+    ).stdout
+    return [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+
+
+def _check_within_30_percent(case, sizes):
+    rows = _measured(case, sizes)
+    assert len(rows) == len(sizes), rows
+    for r in rows:
+        assert 0.7 <= r["ratio"] <= 1.3, r
+
+
+@pytest.mark.parametrize("case", ["dgp:disk:smooth", "dgp:rect:missing"])
+def test_estimate_within_30_percent_of_the_measured_peak(case):
+    """The planner's estimate against the job's measured peak (VmHWM above the RSS before the
+    call, benchmarks/bench_memory.py) at three sizes."""
+    _check_within_30_percent(case, [256, 384, 512])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["dgp:disk:smooth", "dgp:rect:smooth", "dgp:disk:missing",
+                                  "dgp:disk:smooth:solver=iterative,max_iter=3",
+                                  "poisson:disk:smooth", "regularization:disk:smooth",
+                                  "frankot_chellappa:disk:smooth", "kernel:disk:smooth"])
+def test_estimate_within_30_percent_at_large_sizes(case):
+    _check_within_30_percent(case, [768, 1536, 2048])
+
+
+_HUGE = """
+import json, resource, sys
+import numpy as np
+import facetlift
+from facetlift import memory
+from facetlift.errors import MemoryLimitError
+s = 8192
+limit = memory.default_limit()
+r = (np.arange(s, dtype=np.float32) / s)[:, None]
+n = np.empty((s, s, 3))
+n[..., 0] = -0.2
+n[..., 1] = -0.1 * np.cos(3 * r)
+n[..., 2] = 1.0
+del r
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+try:
+    surf = facetlift.integrate(n, np.ones((s, s), bool))
+    out = {"finished": True, "finite": bool(np.isfinite(surf.depth).all())}
+except MemoryLimitError as e:
+    out = {"finished": False, "message": str(e)}
+out["limit"] = limit
+out["input"] = before
+out["peak"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+print(json.dumps(out))
+"""
+
+
+@pytest.mark.slow
+def test_8192_map_under_the_default_limit_refuses_cleanly_or_finishes_within_it():
+    res = subprocess.run([sys.executable, "-c", _HUGE], capture_output=True, text=True,
+                         timeout=1200)
+    assert res.returncode == 0, res.stderr[-2000:]
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    if out["finished"]:
+        assert out["finite"]
+        assert out["peak"] - out["input"] <= out["limit"]
+    else:
+        assert "would need about" in out["message"] and "allowed" in out["message"]
+
+
+def test_size_limit_of_regularization_is_enforced_and_lifted_by_max_memory(monkeypatch):
+    monkeypatch.setitem(memory.SIZE_LIMITS, "regularization", 1000)
+    n, m = _disk_normals(64)
+    with pytest.raises(MemoryLimitError, match="limited to 1,000 mask pixels by default"):
+        facetlift.integrate(n, m, method="regularization")
+    s = facetlift.integrate(n, m, method="regularization", max_memory="4G")
+    assert np.isfinite(s.depth[m]).all()
