@@ -180,7 +180,7 @@ DEVIATION_SAMPLE = 2**18
 
 def input_deviation(problem, surface, *, sample: int = DEVIATION_SAMPLE) -> float:
     """Mean angle in degrees between the usable input normals and the facet normals of the
-    result, over at most `sample` usable facets evenly spaced in row-major order (exact up to
+    result (from each facet's own corners where the surface is split at jumps), over at most `sample` usable facets evenly spaced in row-major order (exact up to
     512 x 512); NaN when no facet is usable.
 
     Parameters
@@ -195,9 +195,14 @@ def input_deviation(problem, surface, *, sample: int = DEVIATION_SAMPLE) -> floa
     if k.size > sample:
         k = k[:: -(-k.size // sample)]
     r, c = (a[k] for a in problem.domain.pixels)
-    vd = surface.vertex_depth
-    P = [surface.camera.points(r + dr, c + dc, vd[r + dr, c + dc])
-         for dr, dc in ((0, 0), (0, 1), (1, 1), (1, 0))]
+    corners = ((0, 0), (0, 1), (1, 1), (1, 0))
+    if surface.split is not None:  # a surface cut at jumps: every facet's own corners
+        sc, _, _, sdepth = surface.split
+        P = [surface.camera.points(r + dr, c + dc, sdepth[sc[k, j]])
+             for j, (dr, dc) in enumerate(corners)]
+    else:
+        vd = surface.vertex_depth
+        P = [surface.camera.points(r + dr, c + dc, vd[r + dr, c + dc]) for dr, dc in corners]
     nrec = _quad_normals(*P)
     cos = np.clip(np.einsum("ij,ij->i", nrec, problem.normals[k]), -1.0, 1.0)
     return float(np.degrees(np.arccos(cos)).mean())

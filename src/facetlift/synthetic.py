@@ -47,6 +47,7 @@ __all__ = [
     "render_mesh",
     "render_perspective",
     "DILIGENT_K",
+    "WITH_JUMPS",
     "jump_edges",
 ]
 
@@ -196,6 +197,56 @@ def _plane(u, v):
     return 0.3 * u - 0.2 * v, np.full(u.shape, 0.3), np.full(u.shape, -0.2), np.ones(u.shape, bool)
 
 
+# surfaces with depth jumps (the discontinuity benchmark): the height is the front-most layer,
+# the gradient that layer's; a jump is where two layers meet without a surface between them
+
+
+def _steps(u, v):
+    # three tilted terraces separated by vertical cliffs along v (closed cuts: the regions'
+    # relative heights are not in the normals)
+    k = np.digitize(u, [-0.3, 0.35])
+    f = 0.2 * u + 0.15 * v + np.array([0.0, 0.35, 0.1])[k]
+    return f, np.full(u.shape, 0.2), np.full(u.shape, 0.15), np.ones(u.shape, bool)
+
+
+def _plateau(u, v):
+    # a tilted disc-shaped table top standing above a sloped floor (a closed jump loop)
+    top = (u - 0.1) ** 2 + (v + 0.05) ** 2 < 0.42**2
+    f = np.where(top, 0.45 + 0.25 * u - 0.1 * v, 0.1 * v)
+    return f, np.where(top, 0.25, 0.0), np.where(top, -0.1, 0.1), np.ones(u.shape, bool)
+
+
+def _helix(u, v):
+    # a spiral ramp around a hole: one turn rises by 0.6, so a cliff runs along the negative
+    # u-axis, but the two sides are connected around the turn (their offset is in the normals)
+    rr = u**2 + v**2
+    inside = (rr > 0.2**2) & (rr < 0.95**2)
+    c = 0.6 / (2 * np.pi)
+    theta = np.arctan2(v, u)
+    rr = np.where(inside, rr, 1.0)
+    return c * theta + 0.1 * u, -c * v / rr + 0.1, c * u / rr, inside
+
+
+def _occluder(u, v):
+    # a ball in front of a tilted wall: the ball's rim (grazing normals) meets the wall
+    R, u0, v0, h = 0.45, 0.15, 0.1, 0.55
+    rr = (u - u0) ** 2 + (v - v0) ** 2
+    ball = rr < (0.97 * R) ** 2
+    s = np.sqrt(np.where(ball, R**2 - rr, 1.0))
+    f = np.where(ball, h + s, -0.2 * u + 0.1 * v)
+    return (f, np.where(ball, -(u - u0) / s, -0.2), np.where(ball, -(v - v0) / s, 0.1),
+            np.ones(u.shape, bool))
+
+
+def _fold(u, v):
+    # a sheet lying over another: the cliff along u = 0.1 grows from nothing at v = -0.5 to
+    # 0.375 at the top edge (a jump that fades out inside the image)
+    upper = u > 0.1
+    lift = 0.25 * np.maximum(v + 0.5, 0.0)
+    f = 0.3 * u + np.where(upper, lift, 0.0)
+    return f, np.full(u.shape, 0.3), np.where(upper, 0.25 * (v > -0.5), 0.0), np.ones(u.shape, bool)
+
+
 _SURFACES = {
     "saddle": _saddle,
     "pyramid": _pyramid,
@@ -205,10 +256,19 @@ _SURFACES = {
     "vase": _vase,
     "tent": _tent,
     "plane": _plane,
+    "steps": _steps,
+    "plateau": _plateau,
+    "helix": _helix,
+    "occluder": _occluder,
+    "fold": _fold,
 }
 
 #: Names accepted by :func:`analytic`.
 ANALYTIC = tuple(_SURFACES)
+
+#: The analytic surfaces with depth jumps (the orthographic scenes of the discontinuity
+#: benchmark); the others are continuous.
+WITH_JUMPS = ("steps", "plateau", "helix", "occluder", "fold")
 
 
 def _size(size, name: str = "size") -> tuple[int, int]:

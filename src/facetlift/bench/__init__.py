@@ -12,6 +12,9 @@ and Markdown tables and PNG figures into one output folder:
             noise; also on the largest jump-free region of every rendered mesh (``continuous``)
 ``fig10``   angular error of every method on real normal maps without ground truth
 ``bear``    MADE on the perspective DiLiGenT bear for the methods that take perspective input
+``discontinuities``  the discontinuity development benchmark (:mod:`.discontinuities`):
+            pinhole, wide-angle and orthographic scenes with jumps x 4 normal conditions,
+            against BiNI and the oracle with the true jumps cut; and the real normal maps
 
 A method whose module is missing or that raises is recorded as ``unavailable`` / ``failed`` in
 the tables; the run goes on. Every file is written atomically.

@@ -50,6 +50,20 @@ class Settings:
     real_stride: dict = field(default_factory=dict)  # data folder name -> subsampling stride
     bear_stride: int = 1
     methods: tuple | None = None  # None: the whole registry
+    # the discontinuity benchmark (facetlift.bench.discontinuities)
+    disc_resolution: tuple = (512, 612)
+    disc_views: tuple = ("front", "oblique", "left")
+    disc_wide_views: tuple = ("front",)
+    disc_ortho_views: tuple = ("front",)
+    disc_ortho_size: int = 256
+    disc_analytic: tuple = ("steps", "plateau", "occluder", "fold")
+    disc_conditions: tuple = ("exact", "16bit", "8bit", "noise3")
+    disc_k_sweep: tuple = (2.0, 8.0)
+    disc_sweep_conditions: tuple = ("exact", "8bit")
+    disc_meshes: int | None = None  # None: every mesh of the data folder
+    disc_samples: int = 3
+    disc_real_stride: int = 1
+    disc_min_pixels: int = 200
 
     @classmethod
     def quick(cls) -> Settings:
@@ -69,6 +83,17 @@ class Settings:
             real_stride={"bini_human_ortho_real": 8, "bini_supp_tent_ortho": 2},
             bear_stride=8,
             methods=("dgp", "poisson", "frankot_chellappa"),
+            disc_resolution=(64, 76),
+            disc_views=("front",),
+            disc_wide_views=(),
+            disc_ortho_size=48,
+            disc_analytic=("occluder", "fold"),
+            disc_conditions=("exact", "8bit"),
+            disc_k_sweep=(),
+            disc_meshes=2,
+            disc_samples=1,
+            disc_real_stride=8,
+            disc_min_pixels=50,
         )
 
 

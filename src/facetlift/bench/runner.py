@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from .. import methods as _methods
-from . import fig9, maps, paper, real
+from . import discontinuities, fig9, maps, paper, real
 from .core import Context, Settings, bar, method_status
 from .tables import md_table, write_text
 
@@ -24,6 +24,7 @@ EXPERIMENT_FUNCTIONS = {
     "fig9": fig9.fig9,
     "fig10": real.fig10,
     "bear": real.bear,
+    "discontinuities": discontinuities.discontinuities,
 }
 EXPERIMENTS = tuple(EXPERIMENT_FUNCTIONS)
 

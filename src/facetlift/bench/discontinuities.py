@@ -1,0 +1,394 @@
+"""The discontinuity development benchmark (``facetlift bench --experiments discontinuities``).
+
+Built so that no single object can steer it: every mesh of the data folder rendered with a
+DiLiGenT-like pinhole camera (512 x 612, f = 3,700 px, about 1.5 m away) from several views and
+with a wide-angle camera (f = 600 px), rendered orthographically, plus the analytic surfaces
+with jumps (:data:`facetlift.synthetic.WITH_JUMPS`), each as exact, 16-bit and 8-bit quantised
+normals and with angular noise; and the real normal maps of the data folder with the defaults.
+
+Every scene is integrated by the smooth DGP, the discontinuity-preserving DGP (defaults and a
+sweep of ``discontinuity_k``), BiNI, and the **oracle**: the same facet integration with the
+true jump edges cut (:func:`facetlift.synthetic.jump_edges` of the ground truth) and the same
+rule for the separated pieces' offsets (:func:`facetlift.methods.dgp.split.solve_split`,
+``rule="occlusion"``). Reported per run: MADE (median scale, as BiNI evaluates, for pinhole
+scenes) or the paper's normalised error in % (orthographic scenes), the mean angle between the
+result and its input normals, the time, the reweightings and whether they converged.
+
+Meshes made of flat CAD patches (most adjacent faces coplanar) are rendered as they are; the
+others are loop-subdivided to at least 100k faces first, and the normals are averaged over
+``disc_samples`` x ``disc_samples`` rays per pixel, so that they resemble real photometric
+stereo normals rather than a faceted low-poly model. Rendered scenes are cached as ``.npz``
+in ``<out>/cache`` (or ``$FACETLIFT_BENCH_CACHE``).
+
+The spiral ramp (``helix``) is left out: its cliff can run along any radius, all equally
+consistent with the normals, so its error measures where a method happens to put the cut.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import time
+import warnings
+import zlib
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from .. import metrics, synthetic
+from .core import SEED, Context, Spec, bar, method_status, run_method
+from .tables import md_table, write_csv, write_text
+
+log = logging.getLogger(__name__)
+
+#: Condition name -> ("quantize", bits) or ("noise", degrees) or None.
+CONDITIONS = {"exact": None, "16bit": ("quantize", 16), "8bit": ("quantize", 8),
+              "noise3": ("noise", 3.0)}
+#: Analytic jump scenes of the benchmark (see the module docstring for ``helix``).
+ANALYTIC = tuple(n for n in synthetic.WITH_JUMPS if n != "helix")
+#: Focal length (px) of the wide-angle camera and its distance to the object.
+WIDE_F, WIDE_DISTANCE = 600.0, 300.0
+#: Fewest faces of an organic mesh after loop subdivision.
+MIN_FACES = 100_000
+#: A mesh whose adjacent faces are coplanar (< 1 degree) at least this often is a CAD model.
+CAD_FLAT = 0.4
+
+
+def specs(ctx: Context) -> list[Spec]:
+    """Columns: smooth DGP, discontinuity DGP (defaults, then the k sweep), BiNI."""
+    out = [Spec("dgp", "dgp"), Spec("dgp-disc", "dgp", (("discontinuities", True),))]
+    out += [Spec(f"dgp-disc k={k:g}", "dgp", (("discontinuities", True),
+                                               ("discontinuity_k", float(k))))
+            for k in ctx.settings.disc_k_sweep]
+    if not method_status(["bini"]).get("bini", "missing"):
+        out.append(Spec("bini", "bini"))
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# scenes
+
+
+def load_mesh(path: Path):
+    """The mesh at `path`, loop-subdivided to >= :data:`MIN_FACES` unless it is a CAD model."""
+    import trimesh
+
+    m = trimesh.load(path, force="mesh")
+    flat = float(np.mean(m.face_adjacency_angles < np.radians(1.0))) if len(m.faces) > 1 else 1
+    if flat < CAD_FLAT and len(m.faces) < MIN_FACES:
+        m = m.subdivide_loop(iterations=math.ceil(math.log(MIN_FACES / len(m.faces), 4)))
+    return m
+
+
+def _cache_dir(ctx: Context) -> Path:
+    d = Path(os.environ.get("FACETLIFT_BENCH_CACHE") or ctx.out / "cache")
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+def _cached(ctx: Context, key: str, make) -> synthetic.GroundTruth:
+    path = _cache_dir(ctx) / f"{key}.npz"
+    if path.is_file():
+        with np.load(path) as z:
+            K = z["K"] if z["K"].size else None
+            return synthetic.GroundTruth(z["depth"], z["normals"], z["mask"],
+                                         float(z["pixel_size"]), str(z["name"]), K)
+    gt = make()
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, depth=gt.depth, normals=gt.normals, mask=gt.mask,
+                        pixel_size=gt.pixel_size, name=gt.name,
+                        K=np.zeros(0) if gt.K is None else gt.K)
+    os.replace(tmp, path)
+    return gt
+
+
+def _pinhole(resolution, f=None):
+    H, W = resolution
+    if f is None:  # DiLiGenT's intrinsics, scaled to the resolution
+        K = np.array(synthetic.DILIGENT_K, float)
+        s = W / 612.0
+        K[:2] *= s
+        return K
+    return np.array([[f, 0, (W - 1) / 2], [0, f, (H - 1) / 2], [0, 0, 1.0]])
+
+
+def scenes(ctx: Context) -> list[tuple[str, str, object]]:
+    """(group, name, loader) of every synthetic scene; groups ``perspective``, ``wide``, ``ortho``."""
+    s = ctx.settings
+    meshes = []
+    if ctx.data is not None and (ctx.data / "meshes").is_dir():
+        meshes = sorted((ctx.data / "meshes").glob("*.ply"))
+        if s.disc_meshes is not None:
+            meshes = meshes[: s.disc_meshes]
+    meshes += [Path(p) for p in ctx.extra_meshes]
+    res = tuple(s.disc_resolution)
+    f_wide = WIDE_F * res[1] / 612.0
+    out = []
+
+    def add(group, name, key, make):
+        out.append((group, name, lambda: _cached(ctx, key, make)))
+
+    tag = f"{res[0]}x{res[1]}_s{s.disc_samples}"
+    for path in meshes:
+        for view in s.disc_views:
+            add("perspective", f"{path.stem}@{view}", f"pin_{path.stem}_{view}_{tag}",
+                lambda p=path, v=view: synthetic.render_perspective(
+                    load_mesh(p), _pinhole(res), res, view=v, samples=s.disc_samples,
+                    name=f"{p.stem}@{v}"))
+        for view in s.disc_wide_views:
+            add("wide", f"{path.stem}@{view}", f"wide_{path.stem}_{view}_{tag}",
+                lambda p=path, v=view: synthetic.render_perspective(
+                    load_mesh(p), _pinhole(res, f_wide), res, view=v, distance=WIDE_DISTANCE,
+                    samples=s.disc_samples, name=f"{p.stem}@{v}"))
+        for view in s.disc_ortho_views:
+            n = s.disc_ortho_size
+            add("ortho", f"{path.stem}@{view}", f"ortho_{path.stem}_{view}_{n}",
+                lambda p=path, v=view, n=n: synthetic.render_mesh(load_mesh(p), n, view=v,
+                                                                   name=f"{p.stem}@{v}"))
+    for name in s.disc_analytic:
+        n = s.disc_ortho_size
+        out.append(("ortho", name, lambda name=name, n=n: synthetic.analytic(name, n)))
+    if ctx.models:
+        out = [t for t in out if t[1] in ctx.models or t[1].split("@")[0] in ctx.models]
+    return out
+
+
+def _flat(gt) -> float:
+    """Depth range below which a scene is a flat view (its normalised error is undefined)."""
+    if gt.K is None:
+        return 2.0 * gt.pixel_size
+    return 2.0 * float(np.nanmedian(gt.depth)) / gt.K[0, 0]
+
+
+def condition(gt, cond: str, name: str):
+    """The normals of `gt` under condition `cond` (seeded by the scene `name`)."""
+    how = CONDITIONS[cond]
+    if how is None:
+        return gt.normals
+    if how[0] == "quantize":
+        return synthetic.quantize(gt.normals, how[1])
+    rng = np.random.default_rng([SEED, zlib.crc32(name.encode())])
+    return synthetic.add_angular_noise(gt.normals, how[1], rng)
+
+
+# ----------------------------------------------------------------------------------------------
+# runs
+
+
+def error_of(gt, depth) -> float:
+    """MADE for a pinhole scene, the paper's normalised error in % for an orthographic one."""
+    if gt.K is not None:
+        return metrics.made(depth, gt.depth, gt.mask)[0]
+    return 100.0 * metrics.normalized_error(depth, gt.depth, gt.mask)[0]
+
+
+def oracle(gt, normals) -> tuple[float, float, float]:
+    """(error, deviation, seconds) of the facet integration with the true jumps cut."""
+    from ..api import make_surface, prepare
+    from ..methods import MethodResult
+    from ..methods.dgp import targets
+    from ..methods.dgp.split import solve_split, split
+
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        problem = prepare(normals, gt.mask, pixel_size=gt.pixel_size, K=gt.K)
+        bx, by, target = targets(problem)
+        right, down = synthetic.jump_edges(gt)
+        mesh = split(problem.domain, right, down)
+        z, _, _ = solve_split(mesh, bx, by, target, rule="occlusion",
+                              scale=problem.camera.footprint())
+        surface = make_surface(problem, MethodResult(values=z[mesh.corners].mean(axis=1),
+                                                     extras={"corner_values": z[mesh.corners]}))
+    dev = metrics.input_deviation(problem, surface)
+    return error_of(gt, surface.depth), dev, time.perf_counter() - t0
+
+
+def run_scene(ctx: Context, group: str, name: str, gt, cols) -> list[dict]:
+    """Every column and the oracle on one scene under every condition: table rows."""
+    right, down = synthetic.jump_edges(gt)
+    jumps = int(right.sum() + down.sum())
+    rows = []
+    status = method_status({c.method for c in cols})
+    for cond in ctx.settings.disc_conditions:
+        n = condition(gt, cond, f"{group}:{name}")
+        base = {"group": group, "scene": name, "condition": cond, "pixels": int(gt.mask.sum()),
+                "jump_edges": jumps}
+        for spec in cols:
+            if spec.label.startswith("dgp-disc k=") and cond not in ctx.settings.disc_sweep_conditions:
+                continue
+            r = run_method(spec, n, gt.mask, pixel_size=gt.pixel_size, K=gt.K, status=status)
+            err = error_of(gt, r.surface.depth) if r.status == "ok" else None
+            info = r.surface.info if r.surface is not None else {}
+            rows.append({**base, "method": spec.label, "status": r.status, "error": err,
+                         "deviation": info.get("mean_deviation"), "seconds": r.seconds,
+                         "iterations": info.get("iterations"),
+                         "converged": info.get("converged"), "message": r.message})
+        try:
+            err, dev, sec = oracle(gt, n)
+            rows.append({**base, "method": "oracle", "status": "ok", "error": err,
+                         "deviation": dev, "seconds": sec})
+        except Exception as e:  # recorded, the run goes on
+            log.info("oracle failed on %s: %s", name, e)
+            rows.append({**base, "method": "oracle", "status": "failed",
+                         "message": f"{type(e).__name__}: {e}"[:300]})
+    return rows
+
+
+def real_maps(ctx: Context, cols) -> list[dict]:
+    """The columns on every real normal map of the data folder, read and run as a user would
+    (``facetlift.io.read_dataset``, defaults): deviation from the input, time, MADE where the
+    folder has ground-truth depth."""
+    from ..api import integrate
+    from ..camera import Pinhole
+    from ..io import read_dataset
+
+    if ctx.data is None or not (ctx.data / "normal_maps").is_dir():
+        return []
+    rows = []
+    folders = sorted(p for p in (ctx.data / "normal_maps").iterdir() if p.is_dir())
+    folders += [Path(p) for p in ctx.extra_normal_maps]
+    for folder in folders:
+        ds = read_dataset(folder)
+        n, mask, K = ds["normals"], ds["mask"], ds["K"]
+        truth = None
+        if (folder / "depth_gt.npz").is_file():
+            with np.load(folder / "depth_gt.npz") as z:
+                truth = np.asarray(z["depth_gt"], float)
+        st = int(ctx.settings.disc_real_stride)
+        if st > 1:
+            n, mask = n[::st, ::st], None if mask is None else mask[::st, ::st]
+            truth = None if truth is None else truth[::st, ::st]
+            K = None if K is None else Pinhole(K).subsampled(st).K
+        for spec in cols:
+            t0 = time.perf_counter()
+            row = {"data": folder.name, "size": f"{n.shape[0]}x{n.shape[1]}",
+                   "method": spec.label}
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    s = integrate(n, mask, K=K, method=spec.method, **dict(spec.options))
+            except Exception as e:
+                rows.append({**row, "status": "failed", "message": f"{type(e).__name__}: {e}"})
+                continue
+            made = None
+            if truth is not None:
+                m = s.mask & np.isfinite(truth)
+                made = metrics.made(s.depth, truth, m)[0]
+            rows.append({**row, "status": "ok", "pixels": int(s.mask.sum()),
+                         "missing": s.info.get("missing"),
+                         "deviation": s.info.get("mean_deviation"), "made_mm": made,
+                         "seconds": time.perf_counter() - t0,
+                         "iterations": s.info.get("iterations"),
+                         "converged": s.info.get("converged")})
+    return rows
+
+
+# ----------------------------------------------------------------------------------------------
+# summary
+
+
+def summary(rows: list[dict], labels: list[str]) -> list[dict]:
+    """Per group and condition: mean and median error of every method, its ratio to the
+    oracle's mean, wins and losses against BiNI (1 % margin), converged fraction, time."""
+    out = []
+    keys = dict.fromkeys((r["group"], r["condition"]) for r in rows)
+    for group, cond in keys:
+        sub = [r for r in rows if r["group"] == group and r["condition"] == cond]
+        by = {}
+        for r in sub:
+            if r["status"] == "ok" and r.get("error") is not None:
+                by.setdefault(r["method"], {})[r["scene"]] = r
+        ora = by.get("oracle", {})
+        bini = by.get("bini", {})
+        for label in labels + ["oracle"]:
+            runs = by.get(label, {})
+            common = [sc for sc in runs if sc in ora]
+            if not common:
+                continue
+            e = np.array([runs[sc]["error"] for sc in common])
+            o = np.array([ora[sc]["error"] for sc in common])
+            row = {"group": group, "condition": cond, "method": label, "scenes": len(common),
+                   "mean_error": float(e.mean()), "median_error": float(np.median(e)),
+                   "vs_oracle": float(e.mean() / o.mean()) if o.mean() > 0 else float("nan"),
+                   "mean_deviation": float(np.nanmean([runs[sc]["deviation"] or np.nan
+                                                       for sc in common])),
+                   "seconds": float(np.mean([runs[sc]["seconds"] for sc in common]))}
+            both = [sc for sc in common if sc in bini]
+            if label != "bini" and both:
+                a = np.array([runs[sc]["error"] for sc in both])
+                b = np.array([bini[sc]["error"] for sc in both])
+                row["wins_vs_bini"] = int((a < 0.99 * b).sum())
+                row["losses_vs_bini"] = int((a > 1.01 * b).sum())
+            conv = [runs[sc].get("converged") for sc in common]
+            conv = [c for c in conv if c is not None]
+            if conv:
+                row["converged"] = float(np.mean(conv))
+            out.append(row)
+    return out
+
+
+def jump_free(rows: list[dict], label: str = "dgp-disc") -> list[dict]:
+    """Scenes without a ground-truth jump: the discontinuity DGP's error over the smooth one."""
+    out = []
+    smooth = {(r["group"], r["scene"], r["condition"]): r for r in rows
+              if r["method"] == "dgp" and r["status"] == "ok" and r["jump_edges"] == 0}
+    for r in rows:
+        key = (r["group"], r["scene"], r["condition"])
+        if r["method"] == label and r["status"] == "ok" and key in smooth:
+            e0 = smooth[key]["error"]
+            out.append({"group": key[0], "scene": key[1], "condition": key[2],
+                        "smooth_error": e0, "disc_error": r["error"],
+                        "ratio": r["error"] / e0 if e0 > 0 else 1.0 + r["error"]})
+    return out
+
+
+def discontinuities(ctx: Context) -> None:
+    """Run the benchmark; writes ``discontinuities_runs.csv``, ``discontinuities.csv`` (the
+    summary), ``discontinuities_real.csv`` and ``discontinuities.md``."""
+    cols = specs(ctx)
+    rows = []
+    data = scenes(ctx)
+    for group, name, load in bar(data, ctx.progress, "discontinuities"):
+        try:
+            gt = load()
+        except Exception as e:
+            log.warning("scene %s unavailable: %s", name, e)
+            continue
+        if gt.mask.sum() < ctx.settings.disc_min_pixels or gt.depth_range < _flat(gt):
+            log.info("scene %s skipped: %d pixels, depth range %g", name, gt.mask.sum(),
+                     gt.depth_range)
+            continue
+        gt = replace(gt, name=name)
+        rows += run_scene(ctx, group, name, gt, cols)
+        write_csv(ctx.out / "discontinuities_runs.csv", rows)  # partial results survive
+    labels = [c.label for c in cols]
+    table = summary(rows, labels)
+    free = jump_free(rows)
+    real = real_maps(ctx, [c for c in cols if c.label in ("dgp", "dgp-disc", "bini")])
+    write_csv(ctx.out / "discontinuities_runs.csv", rows)
+    write_csv(ctx.out / "discontinuities.csv", table)
+    if real:
+        write_csv(ctx.out / "discontinuities_real.csv", real)
+    n_scenes = len({(r["group"], r["scene"]) for r in rows})
+    text = [f"{n_scenes} synthetic scenes x {len(ctx.settings.disc_conditions)} conditions; "
+            "error = MADE for the pinhole groups (perspective, wide), the paper's normalised error "
+            "in % for ortho; vs_oracle = mean error / the oracle's mean error.\n",
+            md_table(table, ["group", "condition", "method", "scenes", "mean_error",
+                             "median_error", "vs_oracle", "wins_vs_bini", "losses_vs_bini",
+                             "converged", "mean_deviation", "seconds"])]
+    if free:
+        worst = max(free, key=lambda r: r["ratio"])
+        text.append(f"\nJump-free scene-conditions: {len(free)}; largest error ratio of "
+                    f"dgp-disc over dgp: {worst['ratio']:.4f} ({worst['scene']}, "
+                    f"{worst['condition']}).\n")
+    if real:
+        text += ["\nReal normal maps (defaults):\n",
+                 md_table(real, ["data", "size", "method", "status", "pixels", "missing",
+                                 "deviation", "made_mm", "seconds", "iterations",
+                                 "converged"])]
+    text = "\n".join(text)
+    write_text(ctx.out / "discontinuities.md", text)
+    ctx.add("Discontinuities: development benchmark", text)
