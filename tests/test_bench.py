@@ -6,6 +6,7 @@ import sys
 import types
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from facetlift import methods, synthetic
@@ -77,6 +78,27 @@ def test_quick_real_normal_maps(quick):
     out = quick[2]
     assert (out / "fig10.md").is_file() and (out / "bear.md").is_file()
     assert any(r["status"] == "ok" for r in _rows(out / "fig10.csv"))
+
+
+def test_quick_discontinuities(quick):
+    """Every scene and condition has its oracle (true jumps cut) and a converged dgp-disc run;
+    the oracle floor lies below the smooth DGP in every group: a broken oracle (no cuts, wrong
+    edges) would not."""
+    out = quick[2]
+    runs = _rows(out / "discontinuities_runs.csv")
+    keys = {(r["group"], r["scene"], r["condition"]) for r in runs}
+    assert len(keys) >= 4 and {k[0] for k in keys} == {"perspective", "ortho"}
+    by = {(r["group"], r["scene"], r["condition"], r["method"]): r for r in runs}
+    for key in keys:
+        assert by[key + ("oracle",)]["status"] == "ok"
+        assert by[key + ("dgp-disc",)]["converged"] == "True"
+    for group in ("perspective", "ortho"):
+        err = {m: np.mean([float(by[k + (m,)]["error"]) for k in keys if k[0] == group])
+               for m in ("dgp", "oracle")}
+        assert err["oracle"] < err["dgp"], group
+    real = _rows(out / "discontinuities_real.csv")
+    assert {r["data"] for r in real} >= {"diligent_bear"}
+    assert all(r["status"] == "ok" for r in real if r["method"].startswith("dgp"))
 
 
 def test_missing_and_failing_methods_are_recorded(tmp_path, monkeypatch):
