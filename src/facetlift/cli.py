@@ -496,7 +496,8 @@ def _split(text):
 @click.option("--methods", default=None, help="Comma-separated method names.")
 @click.option("--models", default=None, help="Comma-separated Fig. 9 model names.")
 @click.option("--experiments", default=None,  # facetlift.bench.EXPERIMENTS (a test checks)
-              help="Comma-separated subset of: table1, fig4, fig5, maps, fig9, fig10, bear.")
+              help="Comma-separated subset of: table1, fig4, fig5, maps, fig9, fig10, bear, "
+                   "discontinuities.")
 @click.option("--mesh", "meshes", multiple=True, type=click.Path(exists=True, dir_okay=False),
               help="Add a mesh to the Fig. 9 models (repeatable).")
 @click.option("--normal-map", "normal_maps", multiple=True,
