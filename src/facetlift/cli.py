@@ -337,8 +337,9 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def info(normals, mask, K, normal_frame, mat_keys, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
-    encoding, mask and components, unusable normals, K, and an estimate of the memory and
-    time the default integration would need.
+    encoding, mask and components, unusable normals, K, and the memory planner's estimate of
+    the peak memory the default integration would need (the figure --max-memory is checked
+    against), with a time range from the benchmarks.
 
     \b
     Examples:
@@ -379,9 +380,18 @@ def _info_lines(rec: dict) -> list[str]:
     lines.append(f"  unusable normals: {bad or 'none'}"
                  + (f"; first at (row {first[0]}, col {first[1]})" if first else ""))
     e = rec["estimate"]
-    lines.append(f"  default integration (estimate): about {e['bytes'] / 2**20:.0f} MiB and "
-                 f"{e['seconds']:.2g} s on 2 cores ({e['route']} route)")
+    fits = "within" if e["fits"] else "more than"
+    line = (f"  default integration (estimate): peak about {_mib(e['bytes'])} above the input "
+            f"({e['route']} route; {fits} the {_mib(e['limit'])} allowed here)")
+    if e["seconds"] is not None:
+        lo, hi = e["seconds"]
+        line += f", {lo:.2g}-{hi:.2g} s on the 2-core benchmark machine"
+    lines.append(line)
     return lines
+
+
+def _mib(b: float) -> str:
+    return f"{b / 2**30:.1f} GiB" if b >= 2**30 else f"{b / 2**20:.0f} MiB"
 
 
 @cli.command("batch", context_settings=CONTEXT)
