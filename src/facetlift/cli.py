@@ -543,10 +543,11 @@ def main(argv: list[str] | None = None) -> int:
     The one error boundary: a ``ValueError`` or ``OSError`` (bad input, unwritable output) or
     an ``ImportError`` (a missing extra, named in the message) is one line and exit 1; a
     :class:`~facetlift.SolverError` exit 2; a :class:`~facetlift.MemoryLimitError` (or
-    MemoryError) exit 1; anything else is a bug: one line asking for a report (the traceback
+    MemoryError) or a batch's dead workers (:class:`facetlift.errors.WorkersDied`) exit 1;
+    anything else is a bug: one line asking for a report (the traceback
     with ``--debug``), exit 3.
     """
-    from .errors import MemoryLimitError
+    from .errors import MemoryLimitError, WorkersDied
     from .io.atomic import Terminated
 
     args = sys.argv[1:] if argv is None else list(argv)
@@ -569,6 +570,10 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INPUT
     except MemoryLimitError as e:
         _error(_one_line(e))
+        return EXIT_INPUT
+    except WorkersDied as e:  # a batch's local workers: not a bug in facetlift
+        _error(_one_line(e).replace("resume=True", "--resume").replace("workers=1",
+                                                                        "--workers 1"))
         return EXIT_INPUT
     except MemoryError as e:
         _error(f"out of memory ({_one_line(e)}); try a crop, a smaller map or another method")
