@@ -455,6 +455,23 @@ def test_sigterm_during_the_write_leaves_nothing(dome_png, tmp_path):
     assert not out.exists()  # created by this run, removed with its staging folder
 
 
+def test_sigint_during_the_write_leaves_nothing(dome_png, tmp_path):
+    """Ctrl-C (KeyboardInterrupt) in the write phase: exit 130, the staging folder and the
+    output folder this run created are gone."""
+    out, flag = tmp_path / "o", tmp_path / "flag"
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_WRITE, str(flag), "integrate",
+                             str(dome_png), "-o", str(out)], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not flag.exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    assert flag.exists(), proc.stderr.read() if proc.poll() is not None else "no write"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130 and "interrupted" in err, err
+    assert "Traceback" not in err
+    assert not out.exists()
+
+
 def test_a_linalg_error_inside_a_method_is_a_solver_error(monkeypatch):
     _break_dgp(monkeypatch, np.linalg.LinAlgError("Singular matrix"))
     with pytest.raises(facetlift.SolverError, match="linear algebra failed .Singular matrix"):

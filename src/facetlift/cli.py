@@ -558,8 +558,8 @@ def main(argv: list[str] | None = None) -> int:
         rv = cli.main(args=args, prog_name="facetlift", standalone_mode=False)
     except click.exceptions.Exit as e:  # pragma: no cover - returned, not raised, by click 8
         return e.exit_code
-    except click.exceptions.Abort:
-        _error("aborted")
+    except click.exceptions.Abort as e:  # click turns Ctrl-C (KeyboardInterrupt) into Abort
+        _error("interrupted" if isinstance(e.__cause__, KeyboardInterrupt) else "aborted")
         return EXIT_INTERRUPTED
     except click.ClickException as e:  # usage errors, bad parameters, unreadable files
         msg = e.format_message()
