@@ -113,6 +113,61 @@ def test_bad_arguments(tmp_path):
         facetlift.batch([tmp_path / "in"], tmp_path / "o", job=Job(), method="dgp")
 
 
+@pytest.mark.parametrize("template, message", [
+    ({"normal_frame": "bogus"}, "`normal_frame` must be one of"),
+    ({"method": "nope"}, "`method` must be one of"),
+    ({"save": ("npy", "xyz")}, r"`save`: unknown output\(s\) \['xyz'\]"),
+    ({"options": {"foo": 1}}, r"unknown option\(s\) \['foo'\] for method 'dgp'"),
+    ({"options": {"solver": "iterative", "tol": "x"}}, "`tol` must be a number"),
+    ({"options": {"max_iter": 5}}, "`max_iter` applies only with solver='iterative'"),
+    ({"options": {"max_memory": "lots"}}, "`max_memory` must be a number of bytes"),
+    ({"gradient_frame": "zz"}, "`gradient_frame` must be one of"),
+])
+def test_a_bad_template_is_refused_once_before_any_item(tmp_path, template, message):
+    """As the docstring says: a ValueError, not one error record per item; nothing is
+    created or logged."""
+    maps(tmp_path / "in", n=2)
+    with pytest.raises(ValueError, match=message):
+        facetlift.batch([tmp_path / "in"], tmp_path / "o", workers=1, **template)
+    with pytest.raises(ValueError, match=message):
+        facetlift.batch([tmp_path / "in"], tmp_path / "o", workers=1, job=Job(**template))
+    assert not (tmp_path / "o").exists()
+
+
+def test_cli_batch_with_a_bad_template_is_one_line(tmp_path, capsys):
+    maps(tmp_path / "in", n=2)
+    code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "o"), "--workers", "1",
+                 "--option", "foo=1"])
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1 and "unknown option(s) ['foo']" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_dead_worker_processes_are_a_documented_error(tmp_path, capsys, monkeypatch):
+    """The local pool breaking (a worker killed or out of memory) is WorkersDied (a
+    RuntimeError) in the API and one line with exit 1 on the command line, not a bug."""
+    dask = pytest.importorskip("dask")
+    from concurrent.futures.process import BrokenProcessPool
+
+    from facetlift.errors import WorkersDied
+
+    def broken(*a, **k):
+        raise BrokenProcessPool("A process in the process pool was terminated abruptly")
+
+    monkeypatch.setattr(dask, "compute", broken)
+    maps(tmp_path / "in", n=2)
+    with pytest.raises(WorkersDied, match="worker processes died before finishing"):
+        facetlift.batch([tmp_path / "in"], tmp_path / "o", workers=2, save=("npy",))
+    assert issubclass(WorkersDied, RuntimeError)
+    code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "2",
+                 "-s", "npy", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 1, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("facetlift: error: the batch's worker")
+    assert "--resume" in lines[0] and "--workers 1" in lines[0] and "bug" not in lines[0]
+
+
 def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
     maps(tmp_path / "in", n=2)
     code = main(["batch", str(tmp_path / "in" / "*.png"), "-o", str(tmp_path / "o"),

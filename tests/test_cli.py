@@ -228,9 +228,11 @@ def test_no_convergence_exits_2_after_writing(tmp_path, capsys):
 
 @pytest.mark.parametrize("flag, solver, shown", [
     ("--progress", "iterative", True), ("--no-progress", "iterative", False),
-    ("--progress", "direct", False),
+    ("--progress", "direct", True), ("--no-progress", "direct", False),
 ])
 def test_progress_bar_on_stderr(tmp_path, capsys, monkeypatch, flag, solver, shown):
+    """The paper's loop reports its iterations, the direct route its CG iterations (the mask
+    has a hole: the facet-CG route)."""
     npath, mpath, _ = write_input(tmp_path)
     dgp = importlib.import_module("facetlift.methods.dgp")
     real, calls = dgp.run, []
@@ -255,7 +257,10 @@ def test_progress_bar_on_stderr(tmp_path, capsys, monkeypatch, flag, solver, sho
     assert ("integrating" in err) == shown
     assert bool(calls) == shown
     if shown:
-        assert calls[0][0] == 1 and calls[-1][0] == json.loads(stdout)["info"]["iterations"]
+        info = json.loads(stdout)["info"]
+        its = info["iterations"] if solver == "iterative" else info["cg_iterations"]
+        assert calls[0][0] == 1 and calls[-1][0] == its
+        assert [it for it, _ in calls] == list(range(1, its + 1))
 
 
 def test_verbose_logs_to_stderr_for_one_run(tmp_path, capsys):
@@ -282,3 +287,19 @@ def test_runs_as_a_program(tmp_path):
                           capture_output=True, text=True)
     assert proc.returncode == 1 and proc.stderr.startswith("facetlift: error:")
     assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("method, extra", [
+    ("m_estimator", ()), ("alpha_surface", ()), ("kernel", ()),
+    ("regularization", ("--option", "prior=edge_preserving")),
+    ("diffusion", ("--backend", "amg")), ("poisson", ("--backend", "amg")),
+])
+def test_comparison_methods_show_progress(tmp_path, capsys, method, extra):
+    """Reweightings, growing rounds, tile groups and multigrid-CG iterations reach the bar;
+    --no-progress keeps stderr quiet."""
+    npath, mpath, _ = write_input(tmp_path)
+    for flag, shown in (("--progress", True), ("--no-progress", False)):
+        code, _, err = run(capsys, "integrate", npath, "-m", mpath, "-o", tmp_path / flag,
+                           "--method", method, *extra, flag, "-s", "npy")
+        assert code == 0, err
+        assert ("integrating" in err) == shown, err

@@ -164,7 +164,9 @@ def test_info_on_the_bear(capsys):
     assert "512x612 pixels (format png, bit_depth 16, channels RGB)" in out
     assert "encoding: v / 65535 * 2 - 1" in out and "perspective, K = [[3772" in out
     assert "likely as read (consistent)" in out and "1 component(s)" in out
-    assert re.search(r"default integration \(estimate\): about \d+ MiB", out)
+    assert re.search(r"default integration \(estimate\): peak about \d+ MiB above the input "
+                     r"\(dgp-pcg route; within the [0-9.]+ [MG]iB allowed here\), "
+                     r"[0-9.]+-[0-9.]+ s", out)
     code, out, _ = run(capsys, "info", BEAR, "--json")
     rec = json.loads(out)
     assert rec["mask_pixels"] == int(io.read_dataset(BEAR)["mask"].sum())
@@ -186,19 +188,51 @@ def test_info_detects_flips_encodings_and_counts(tmp_path, capsys):
     assert code == 0 and "z flipped" in out and "cannot be integrated as read" in out
 
 
-def test_estimate_scales_with_the_box_and_route():
-    from facetlift.describe import estimate
+def _disk(size):
+    yy, xx = np.mgrid[:size, :size]
+    mask = (yy - size / 2) ** 2 + (xx - size / 2) ** 2 < (0.45 * size) ** 2
+    from facetlift import synthetic
 
-    full = estimate((1024, 1024))
-    assert full["route"] == "spectral"
-    assert estimate((2048, 2048))["bytes"] > 3.5 * (full["bytes"] - 70 * 2**20)
-    mask = np.zeros((1024, 1024), bool)
-    mask[100:300, 100:300] = True
-    mask[150, 150] = False
-    small = estimate((1024, 1024), mask=mask)
-    base = 70 * 2**20
-    assert small["route"] == "pcg-spectral"
-    assert small["bytes"] - base < (full["bytes"] - base) / 10
+    n = np.where(mask[..., None], synthetic.analytic("sphere", size).normals, np.nan)
+    return n, mask
+
+
+@pytest.mark.parametrize("case", ["sphere48", "disk1024", "rect256", "missing64"])
+def test_info_memory_is_the_planners_figure(tmp_path, capsys, case):
+    """info reports what facetlift.integrate plans (and checks max_memory against), with the
+    planner's route name: one source of truth."""
+    if case == "sphere48":
+        from facetlift import synthetic
+
+        gt = synthetic.analytic("sphere", 48)
+        n, mask = gt.normals, gt.mask
+    elif case == "disk1024":
+        n, mask = _disk(1024)
+    elif case == "rect256":
+        n, mask = dome(256, 256), np.ones((256, 256), bool)
+    else:
+        n, mask = dome(64, 64), np.ones((64, 64), bool)
+        n[np.random.default_rng(11).random((64, 64)) < 0.3] = np.nan
+    np.save(tmp_path / "n.npy", n)
+    np.save(tmp_path / "m.npy", mask)
+    code, out, err = run(capsys, "info", tmp_path / "n.npy", "--mask", tmp_path / "m.npy",
+                         "--json")
+    assert code == 0, err
+    e = json.loads(out)["estimate"]
+    from facetlift import memory, methods, options, problem
+
+    checked = problem.prepare(n, mask)
+    planned, route = memory.estimate(
+        checked, "dgp", options.validate(methods.get("dgp").specs(), {}, "dgp"))
+    assert e["bytes"] == int(planned) and e["route"] == route
+    if case != "disk1024":  # the solve itself reports the same figure
+        assert facetlift.integrate(n, mask).info["memory_estimate"] == e["bytes"]
+    assert route == {"sphere48": "dgp-pcg", "disk1024": "dgp-pcg", "rect256": "dgp-spectral",
+                     "missing64": "dgp-pcg"}[case]
+    lo, hi = e["seconds"]
+    assert 0 < lo < hi and e["fits"] is True
+    code, out, _ = run(capsys, "info", tmp_path / "n.npy", "--mask", tmp_path / "m.npy")
+    assert f"peak about {e['bytes'] / 2**20:.0f} MiB above the input ({route} route" in out
 
 
 # ------------------------------------------------------------------------------ outputs
@@ -419,6 +453,23 @@ def test_sigterm_during_the_write_leaves_nothing(dome_png, tmp_path):
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 143 and "terminated (SIGTERM)" in err
     assert not out.exists()  # created by this run, removed with its staging folder
+
+
+def test_sigint_during_the_write_leaves_nothing(dome_png, tmp_path):
+    """Ctrl-C (KeyboardInterrupt) in the write phase: exit 130, the staging folder and the
+    output folder this run created are gone."""
+    out, flag = tmp_path / "o", tmp_path / "flag"
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_WRITE, str(flag), "integrate",
+                             str(dome_png), "-o", str(out)], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not flag.exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    assert flag.exists(), proc.stderr.read() if proc.poll() is not None else "no write"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130 and "interrupted" in err, err
+    assert "Traceback" not in err
+    assert not out.exists()
 
 
 def test_a_linalg_error_inside_a_method_is_a_solver_error(monkeypatch):

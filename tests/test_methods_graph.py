@@ -207,6 +207,23 @@ def test_m_estimator_downweights_outliers(outlier_input):
         assert outside_error(s.depth, truth, patch) < factor * poisson, kw
 
 
+def test_reweightings_report_progress(outlier_input):
+    """`progress` sees every reweighting (m_estimator) or round (alpha_surface), in order,
+    with its relative change; the multigrid route of a single solve reports its CG."""
+    normals, _, _ = outlier_input
+    for method in ("m_estimator", "alpha_surface"):
+        seen = []
+        s = facetlift.integrate(normals, method=method, pixel_size=H,
+                                progress=lambda it, v, seen=seen: seen.append((it, v)))
+        assert [it for it, _ in seen] == list(range(1, s.info["iterations"] + 1)), method
+    seen = []
+    facetlift.integrate(normals, method="poisson", pixel_size=H, backend="amg",
+                        progress=lambda it, v: seen.append((it, v)))
+    assert len(seen) > 1 and seen[-1][1] < 1e-10  # relative residuals down to rtol
+    with pytest.raises(ValueError, match="`progress` must be a callable or None"):
+        facetlift.integrate(normals, method="m_estimator", progress=3)
+
+
 def test_m_estimator_warns_without_convergence(outlier_input):
     normals, _, _ = outlier_input
     with pytest.warns(UserWarning, match="no convergence in 1 iterations"):

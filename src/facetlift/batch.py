@@ -210,18 +210,21 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     Raises
     ------
     ValueError
-        No items, a bad template or `workers`; per-item failures are records, not raised.
+        No items, a bad template (:func:`check_template`: method, options, frames, save) or
+        `workers`, before any item runs; per-item failures are records, not raised.
     ImportError
         Dask is needed (workers > 1 or a scheduler) and not installed.
-    RuntimeError
-        The local worker processes died (killed, or started from a script without a
-        ``__main__`` guard); the log keeps what finished, so ``resume=True`` goes on.
+    facetlift.errors.WorkersDied
+        A RuntimeError: the local worker processes died (killed, or started from a script
+        without a ``__main__`` guard); the log keeps what finished, so ``resume=True`` goes
+        on.
     """
     from .io.atomic import prepare_folder
 
-    template = job if job is not None else Job(**job_options)
     if job is not None and job_options:
         raise ValueError(f"give `job` or job options, not both; got {sorted(job_options)}")
+    template = job if job is not None else Job(**job_options)
+    check_template(template)  # once, before any item: a bad template is no per-item failure
     found = items(inputs, list_file=list_file)
     root = Path(out).resolve()
     prepare_folder(root)  # created and checked before any work
@@ -256,6 +259,37 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             for it, j in jobs:
                 done(it, run_item(j))
     return [results[it.path] for it in found]
+
+
+def check_template(job: Job) -> None:
+    """Refuse a batch template that would fail every item: its method, method options,
+    ``max_memory``, normal and gradient frames and output kinds are checked as
+    :func:`facetlift.jobs.run` and :func:`facetlift.integrate` would check them.
+
+    Raises
+    ------
+    ValueError
+        Naming the field and what was received.
+    """
+    from . import frames, memory, methods
+    from .jobs import OUTPUTS
+    from .options import validate
+
+    info = methods.get(job.method)
+    if not isinstance(job.options, dict):
+        raise ValueError(f"`options` must be a dict of method options; got {job.options!r}")
+    opts = dict(job.options)
+    if opts.get("max_memory") is not None:
+        memory.parse_size(opts["max_memory"])
+    opts.pop("max_memory", None)
+    validate(info.specs(), opts, job.method)
+    if job.normal_frame is not None:
+        frames.parse(job.normal_frame)
+    frames.gradient_frame(job.gradient_frame)
+    save = (job.save,) if isinstance(job.save, str) else tuple(job.save or ())
+    unknown = [s for s in save if s not in OUTPUTS]
+    if unknown:
+        raise ValueError(f"`save`: unknown output(s) {unknown}; valid: {sorted(OUTPUTS)}")
 
 
 def _workers(workers, n_jobs: int) -> int:
@@ -304,11 +338,13 @@ def _on_processes(jobs, n_workers: int, done) -> None:
 
     from concurrent.futures.process import BrokenProcessPool
 
+    from .errors import WorkersDied
+
     try:
         with _Done():
             dask.compute(*tasks, scheduler="processes", num_workers=n_workers)
     except BrokenProcessPool as e:
-        raise RuntimeError(
+        raise WorkersDied(
             "the batch's worker processes died before finishing (killed, out of memory, or "
             "started from a script without `if __name__ == '__main__':`, which worker "
             "processes need); the log has the items that finished: rerun with resume=True, "

@@ -337,8 +337,9 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def info(normals, mask, K, normal_frame, mat_keys, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
-    encoding, mask and components, unusable normals, K, and an estimate of the memory and
-    time the default integration would need.
+    encoding, mask and components, unusable normals, K, and the memory planner's estimate of
+    the peak memory the default integration would need (the figure --max-memory is checked
+    against), with a time range from the benchmarks.
 
     \b
     Examples:
@@ -379,9 +380,18 @@ def _info_lines(rec: dict) -> list[str]:
     lines.append(f"  unusable normals: {bad or 'none'}"
                  + (f"; first at (row {first[0]}, col {first[1]})" if first else ""))
     e = rec["estimate"]
-    lines.append(f"  default integration (estimate): about {e['bytes'] / 2**20:.0f} MiB and "
-                 f"{e['seconds']:.2g} s on 2 cores ({e['route']} route)")
+    fits = "within" if e["fits"] else "more than"
+    line = (f"  default integration (estimate): peak about {_mib(e['bytes'])} above the input "
+            f"({e['route']} route; {fits} the {_mib(e['limit'])} allowed here)")
+    if e["seconds"] is not None:
+        lo, hi = e["seconds"]
+        line += f", {lo:.2g}-{hi:.2g} s on the 2-core benchmark machine"
+    lines.append(line)
     return lines
+
+
+def _mib(b: float) -> str:
+    return f"{b / 2**30:.1f} GiB" if b >= 2**30 else f"{b / 2**20:.0f} MiB"
 
 
 @cli.command("batch", context_settings=CONTEXT)
@@ -534,10 +544,11 @@ def main(argv: list[str] | None = None) -> int:
     The one error boundary: a ``ValueError`` or ``OSError`` (bad input, unwritable output) or
     an ``ImportError`` (a missing extra, named in the message) is one line and exit 1; a
     :class:`~facetlift.SolverError` exit 2; a :class:`~facetlift.MemoryLimitError` (or
-    MemoryError) exit 1; anything else is a bug: one line asking for a report (the traceback
+    MemoryError) or a batch's dead workers (:class:`facetlift.errors.WorkersDied`) exit 1;
+    anything else is a bug: one line asking for a report (the traceback
     with ``--debug``), exit 3.
     """
-    from .errors import MemoryLimitError
+    from .errors import MemoryLimitError, WorkersDied
     from .io.atomic import Terminated
 
     args = sys.argv[1:] if argv is None else list(argv)
@@ -548,8 +559,8 @@ def main(argv: list[str] | None = None) -> int:
         rv = cli.main(args=args, prog_name="facetlift", standalone_mode=False)
     except click.exceptions.Exit as e:  # pragma: no cover - returned, not raised, by click 8
         return e.exit_code
-    except click.exceptions.Abort:
-        _error("aborted")
+    except click.exceptions.Abort as e:  # click turns Ctrl-C (KeyboardInterrupt) into Abort
+        _error("interrupted" if isinstance(e.__cause__, KeyboardInterrupt) else "aborted")
         return EXIT_INTERRUPTED
     except click.ClickException as e:  # usage errors, bad parameters, unreadable files
         msg = e.format_message()
@@ -560,6 +571,10 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INPUT
     except MemoryLimitError as e:
         _error(_one_line(e))
+        return EXIT_INPUT
+    except WorkersDied as e:  # a batch's local workers: not a bug in facetlift
+        _error(_one_line(e).replace("resume=True", "--resume").replace("workers=1",
+                                                                        "--workers 1"))
         return EXIT_INPUT
     except MemoryError as e:
         _error(f"out of memory ({_one_line(e)}); try a crop, a smaller map or another method")

@@ -1,9 +1,9 @@
 """What an input holds, before integrating it: ``facetlift info`` and :func:`describe`.
 
-:func:`estimate` gives the memory and time the default integration would need from a simple
-per-pixel model (:data:`COST`, measured for ``dgp`` at 2048² on the project's 2-core machine,
-docs/benchmarks.md). It is an estimate, not a plan: the memory planner of :mod:`facetlift.linalg`
-is the authority where it exists.
+:func:`estimate` reports the memory the default integration would need from the memory
+planner itself (:func:`facetlift.memory.estimate`, the figure :func:`facetlift.integrate`
+checks against ``max_memory``), with the planner's route name, and a time range from the
+mask-shape benchmark (:data:`SECONDS_PER_PIXEL`).
 """
 
 from __future__ import annotations
@@ -13,55 +13,63 @@ from pathlib import Path
 
 import numpy as np
 
-#: route -> (bytes per pixel of the mask's bounding box, seconds per mask pixel), from the
-#: default dgp solve at 2048² (docs/benchmarks.md: 1,218 MiB / 2.6 s on the full square,
-#: 1,780 MiB / 9.3 s on a masked disk covering 64 % of it); plus :data:`BASE_BYTES`.
-COST = {"spectral": (287.0, 6.3e-7), "pcg-spectral": (427.0, 3.5e-6)}
-#: The interpreter with numpy and scipy loaded.
-BASE_BYTES = 70 * 2**20
+#: Planner route -> (fastest, slowest) seconds per mask pixel of the default dgp solve, over
+#: the mask shapes of docs/benchmarks.md ("Mask-shape suite", the 2048² rows: orthographic and
+#: perspective, bear / disk / human / many / torus masks; "spectral" from the full rectangle)
+#: on the project's 2-core machine under load 2.3-6.4. ``"dgp-pcg"`` with missing normals
+#: takes the ``"dgp-pcg-missing"`` row (the 30 %-missing tables); factorized routes take the
+#: thin-spiral figures (4.0-4.3 s for 759k pixels). Routes not listed get no time.
+SECONDS_PER_PIXEL = {
+    "dgp-spectral": (6.9e-7, 1.25e-6),
+    "dgp-pcg": (1.8e-6, 1.2e-5),
+    "dgp-pcg-missing": (3.8e-6, 1.6e-5),
+    "dgp-superlu": (5.3e-6, 5.7e-6),
+}
 
 
-def estimate(shape, method: str = "dgp", *, mask=None) -> dict:
-    """Memory (bytes) and time (seconds) the default integration of a map would need.
+def estimate(problem, method: str = "dgp", **options) -> dict:
+    """Peak memory (the planner's) and a time range for integrating a prepared problem.
 
     Parameters
     ----------
-    shape : (H, W) or a Problem
-        The map's size (or a prepared problem: its domain's mask is used).
+    problem : Problem
+        A checked problem (:func:`facetlift.prepare`).
     method : str
-        Only ``"dgp"`` has measured coefficients; other methods get dgp's, marked
-        ``"basis": "dgp coefficients"``.
-    mask : (H, W) bool, optional
-        The domain; default the full rectangle.
+    **options
+        The method's options, as for :func:`facetlift.integrate` (validated).
 
     Returns
     -------
     dict
-        ``bytes``, ``seconds``, ``route`` (``spectral`` on a full rectangle, else
-        ``pcg-spectral``), ``basis`` and ``estimate: True``.
+        ``bytes``: :func:`facetlift.memory.estimate`'s peak above the prepared problem (what
+        ``max_memory`` is compared with); ``route``: the planner's route name;
+        ``limit``: the default ``max_memory`` on this machine and ``fits``; ``seconds``:
+        ``[fastest, slowest]`` from :data:`SECONDS_PER_PIXEL`, or None where no route was
+        measured; ``estimate: True``.
+
+    Raises
+    ------
+    ValueError
+        An unknown method or a bad option value.
     """
-    if hasattr(shape, "domain"):
-        mask = shape.domain.mask
-        shape = mask.shape
-    H, W = (int(v) for v in shape)
-    if mask is None:
-        box, pixels, full = H * W, H * W, True
-    else:
-        m = np.asarray(mask, bool)
-        rows, cols = np.flatnonzero(m.any(1)), np.flatnonzero(m.any(0))
-        if rows.size == 0:
-            box = pixels = 0
-        else:
-            box = (rows[-1] - rows[0] + 1) * (cols[-1] - cols[0] + 1)
-            pixels = int(m.sum())
-        full = pixels == box
-    route = "spectral" if full else "pcg-spectral"
-    per_byte, per_second = COST[route]
+    from . import memory, methods
+    from .options import validate
+
+    values = validate(methods.get(method).specs(), dict(options), method)
+    est, route = memory.estimate(problem, method, values)
+    peak = int(min(est, 2**62))
+    lim = memory.default_limit()
+    key = route
+    if route == "dgp-pcg" and not bool(problem.usable.all()):
+        key = "dgp-pcg-missing"
+    rate = SECONDS_PER_PIXEL.get(key) if method == "dgp" else None
+    m = problem.domain.n_facets
     return {
-        "bytes": int(BASE_BYTES + per_byte * box),
-        "seconds": float(per_second * pixels),
+        "bytes": peak,
         "route": route,
-        "basis": "measured" if method == "dgp" else "dgp coefficients",
+        "limit": lim,
+        "fits": peak <= lim,
+        "seconds": None if rate is None else [rate[0] * m, rate[1] * m],
         "estimate": True,
     }
 
@@ -69,7 +77,7 @@ def estimate(shape, method: str = "dgp", *, mask=None) -> dict:
 def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None) -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
     encoding, mask and components, unusable normals (with the first one's location), K, and
-    :func:`estimate`.
+    :func:`estimate` for the default method.
 
     Parameters
     ----------

@@ -157,11 +157,14 @@ def factorize(
     preconditioner: Callable[[np.ndarray], np.ndarray] | None = None,
     trusted: bool = False,
     rtol: float = 1e-11,
+    progress: Callable[[int, float], None] | None = None,
 ) -> Factor:
     """Prepare the SPD matrix `K` (n, n) for repeated solves (``Factor.solve(b)``).
 
     The backend is :func:`choose`'s; iterative backends start every solve from the previous
-    solution (a loop's consecutive right-hand sides are close).
+    solution (a loop's consecutive right-hand sides are close) and call `progress`
+    (iteration, relative residual) after every CG iteration; a factorization is one library
+    call and reports nothing.
     """
     name = choose(
         K.shape[0], backend, kind=kind, preconditioner=preconditioner is not None,
@@ -170,7 +173,7 @@ def factorize(
     if name == "pcg":
         if preconditioner is None:
             raise ValueError("`backend`='pcg' needs a `preconditioner`")
-        return _pcg_factor(K, preconditioner, rtol)
+        return _pcg_factor(K, preconditioner, rtol, progress)
     if name == "pardiso":
         from .direct import pardiso
 
@@ -178,7 +181,7 @@ def factorize(
     if name == "amg":
         from .amg import amg
 
-        return amg(K, rtol=rtol, method="sa" if kind == "spd" else "rs")
+        return amg(K, rtol=rtol, method="sa" if kind == "spd" else "rs", progress=progress)
     from .direct import superlu
 
     return superlu(K)
@@ -195,12 +198,16 @@ def solve(
     rtol: float = 1e-11,
     x0: np.ndarray | None = None,
     flexible: bool = False,
+    progress: Callable[[int, float], None] | None = None,
 ) -> tuple[np.ndarray, SolveInfo]:
     """Solve ``K x = b`` once for a symmetric positive (semi-)definite `K` (n, n).
 
     With a `preconditioner` and the "pcg" route, `K` may be singular with `b` in its range;
     `flexible` selects CG's Polak-Ribiere update there (for preconditioners that are SPD only
-    up to rounding, such as float32 transforms). `kind` is :func:`choose`'s.
+    up to rounding, such as float32 transforms). `kind` is :func:`choose`'s. `progress`
+    (iteration, relative residual) is called after every CG iteration of the "pcg" and "amg"
+    routes (the methods' ``progress=`` option); factorizations are one library call without
+    an iteration to report.
 
     Returns
     -------
@@ -219,10 +226,10 @@ def solve(
     if name == "pcg":
         if preconditioner is None:
             raise ValueError("`backend`='pcg' needs a `preconditioner`")
-        x, cinfo = _cg(K, b, preconditioner, x0, rtol, flexible)
+        x, cinfo = _cg(K, b, preconditioner, x0, rtol, flexible, progress)
         _raise_unless_converged(cinfo, rtol, "preconditioned CG")
         return x, SolveInfo("pcg", cinfo.iterations, cinfo.relative_residual)
-    factor = factorize(K, name, kind=kind, rtol=rtol)
+    factor = factorize(K, name, kind=kind, rtol=rtol, progress=progress)
     x = factor.solve(b)
     it = factor.info.iterations if factor.info is not None else None
     return x, SolveInfo(name, it)
@@ -284,14 +291,14 @@ class Series:
         return x
 
 
-def _cg(K, b, preconditioner, x0, rtol, flexible):
+def _cg(K, b, preconditioner, x0, rtol, flexible, progress=None):
     """CG with `preconditioner`; a facet preconditioner brings its own policy (box or
     multigrid, :func:`facetlift.linalg.facet.solve`)."""
     from .facet import FacetPreconditioner, solve
 
     if isinstance(preconditioner, FacetPreconditioner):
-        return solve(K, b, preconditioner, x0=x0, rtol=rtol)
-    return cg(K, b, preconditioner, x0=x0, rtol=rtol, flexible=flexible)
+        return solve(K, b, preconditioner, x0=x0, rtol=rtol, progress=progress)
+    return cg(K, b, preconditioner, x0=x0, rtol=rtol, flexible=flexible, progress=progress)
 
 
 def _raise_unless_converged(info: CGInfo, rtol: float, what: str) -> None:
@@ -302,11 +309,11 @@ def _raise_unless_converged(info: CGInfo, rtol: float, what: str) -> None:
         )
 
 
-def _pcg_factor(K, preconditioner, rtol) -> Factor:
+def _pcg_factor(K, preconditioner, rtol, progress=None) -> Factor:
     state = {"x0": None}
 
     def _solve(b):
-        x, info = _cg(K, b, preconditioner, state["x0"], rtol, True)
+        x, info = _cg(K, b, preconditioner, state["x0"], rtol, True, progress)
         factor.info = info
         _raise_unless_converged(info, rtol, "preconditioned CG")
         state["x0"] = x

@@ -42,15 +42,17 @@ def preconditioner(K, **kw):
     return lambda r: M @ r
 
 
-def amg(K, *, rtol: float = 1e-10, maxiter: int = 500, method: str = "rs") -> Factor:
+def amg(K, *, rtol: float = 1e-10, maxiter: int = 500, method: str = "rs",
+        progress=None) -> Factor:
     """Multigrid-preconditioned CG, warm-started from the previous solution (a loop's
-    consecutive right-hand sides are close). `method` as in :func:`hierarchy`."""
+    consecutive right-hand sides are close). `method` as in :func:`hierarchy`; `progress`
+    as in :func:`facetlift.linalg.cg`."""
     K = sp.csr_matrix(K)
     M = preconditioner(K, method=method)
     state = {"x0": None}
 
     def _solve(b):
-        x, info = cg(K, b, M, x0=state["x0"], rtol=rtol, maxiter=maxiter)
+        x, info = cg(K, b, M, x0=state["x0"], rtol=rtol, maxiter=maxiter, progress=progress)
         factor.info = info
         if not info.converged:
             raise SolverError(

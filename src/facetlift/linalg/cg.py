@@ -56,6 +56,7 @@ def cg(
     maxiter: int = 2000,
     callback: Callable[[np.ndarray], None] | None = None,
     flexible: bool = False,
+    progress: Callable[[int, float], None] | None = None,
 ) -> tuple[np.ndarray, CGInfo]:
     """Solve ``A x = b`` for a symmetric positive (semi-)definite `A` by preconditioned CG.
 
@@ -77,6 +78,9 @@ def cg(
         Polak-Ribiere update ``beta = r_k . (z_k - z_{k-1}) / r_{k-1} . z_{k-1}``: robust to a
         preconditioner that is SPD only up to rounding (e.g. float32 transforms), at the cost
         of one more vector and inner product.
+    progress : callable(iteration, relative residual), optional
+        Called after every iteration with the iteration count and ``|r| / |b|`` (the
+        progress-bar hook of the methods, ``progress=``).
 
     Returns
     -------
@@ -116,6 +120,8 @@ def cg(
         info.residuals.append(rnorm / bnorm)
         if callback is not None:
             callback(x)
+        if progress is not None:
+            progress(it, info.residuals[-1])
         if rnorm <= stop:
             # the recursive residual can drift from the true one (rounding in an
             # ill-conditioned system, a preconditioner SPD only up to rounding): check it once

@@ -286,7 +286,8 @@ class FacetPreconditioner:
 
 
 def solve(
-    K, b: np.ndarray, pre: FacetPreconditioner, *, rtol: float, x0=None, maxiter: int = 2000
+    K, b: np.ndarray, pre: FacetPreconditioner, *, rtol: float, x0=None, maxiter: int = 2000,
+    progress=None,
 ) -> tuple[np.ndarray, CGInfo]:
     """Flexible CG on the facet system `K` with `pre`, choosing its global part by measurement.
 
@@ -294,11 +295,13 @@ def solve(
     half predicts more than :data:`BOX_BUDGET` iterations in all, or if it has not converged
     after :data:`BOX_LIMIT`, `pre` switches to multigrid
     (:meth:`FacetPreconditioner.use_multigrid`, kept for later solves) and CG restarts from
-    the current iterate. The returned info counts the iterations of both phases.
+    the current iterate. The returned info counts the iterations of both phases, and so does
+    `progress` (callable(iteration, relative residual), called after every iteration).
     """
     if pre.coarse != "box" or pre.exact:
-        return cg(K, b, pre, x0=x0, rtol=rtol, maxiter=maxiter, flexible=True)
-    x, info = cg(K, b, pre, x0=x0, rtol=rtol, maxiter=min(PROBE, maxiter), flexible=True)
+        return cg(K, b, pre, x0=x0, rtol=rtol, maxiter=maxiter, flexible=True, progress=progress)
+    x, info = cg(K, b, pre, x0=x0, rtol=rtol, maxiter=min(PROBE, maxiter), flexible=True,
+                 progress=progress)
     if info.converged or info.breakdown or info.iterations >= maxiter:
         return x, info
     # the rate of the probe's second half (the first drops fast on the high frequencies)
@@ -309,7 +312,7 @@ def solve(
     predicted = info.iterations + max(left, 0.0)
     if predicted <= BOX_BUDGET:  # keep the box, but not beyond BOX_LIMIT iterations
         x, more = cg(K, b, pre, x0=x, rtol=rtol, maxiter=min(BOX_LIMIT, maxiter) - PROBE,
-                     flexible=True)
+                     flexible=True, progress=_after(progress, info.iterations))
         info.iterations += more.iterations
         info.residuals += more.residuals[1:]
         info.converged, info.breakdown = more.converged, more.breakdown
@@ -317,8 +320,16 @@ def solve(
             return x, info
     pre.use_multigrid()
     # restart from the current iterate (residuals stay relative to |b|)
-    x, more = cg(K, b, pre, x0=x, rtol=rtol, maxiter=maxiter - info.iterations, flexible=True)
+    x, more = cg(K, b, pre, x0=x, rtol=rtol, maxiter=maxiter - info.iterations, flexible=True,
+                 progress=_after(progress, info.iterations))
     info.iterations += more.iterations
     info.residuals += more.residuals[1:]
     info.converged, info.breakdown = more.converged, more.breakdown
     return x, info
+
+
+def _after(progress, done: int):
+    """`progress` counting on from `done` iterations (a restarted CG), or None."""
+    if progress is None:
+        return None
+    return lambda it, value: progress(done + it, value)

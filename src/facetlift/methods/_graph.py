@@ -21,6 +21,13 @@ from ..options import Option
 #: Weight of edges without a data term (both samples missing); target 0.
 FILL_WEIGHT = 1e-6
 
+#: The ``progress`` option of the pixel-graph methods that iterate or run CG.
+PROGRESS = Option(
+    "progress", None, "callable(iteration, value) called after every reweighting or round "
+    "(value: relative change) or, for a single solve, every CG iteration (value: relative "
+    "residual; a factorization reports nothing)", kind="callable", none=True,
+)
+
 #: The ``backend`` option of every pixel-graph method.
 BACKEND = Option(
     "backend", "auto", "sparse solver: 'auto' picks one (facetlift.linalg.choose)",
@@ -43,31 +50,33 @@ def setup(problem):
     return problem.domain, graph, t, has, problem.camera.footprint()
 
 
-def spd_solve(K, b: np.ndarray, backend: str = "auto", *, kind: str = "graph"):
+def spd_solve(K, b: np.ndarray, backend: str = "auto", *, kind: str = "graph", progress=None):
     """Solve the SPD system ``K x = b`` with the solver layer's choice of backend.
 
     ``kind="spd"`` for systems that are not M-matrices (the prior of "regularization", the
     tensor of "diffusion"), where classical AMG converges slowly (diffusion: 12.6 s with
     Ruge-Stueben CG against SuperLU's 1.0 s at 256^2); see :func:`facetlift.linalg.choose`.
+    `progress` is called after every CG iteration of a multigrid route.
     """
-    return linalg.solve(K, b, backend, kind=kind)[0]
+    return linalg.solve(K, b, backend, kind=kind, progress=progress)[0]
 
 
 def solve_weighted(
     domain: Domain, graph: g.PixelGraph, w: np.ndarray, t: np.ndarray, backend: str = "auto",
-    *, series: linalg.Series | None = None,
+    *, series: linalg.Series | None = None, progress=None,
 ) -> np.ndarray:
     """Unknowns (n,) minimising ``sum_e w_e (z_head - z_tail - t_e)^2`` (one pin per component).
 
     `w` must be positive on a set of edges that connects each domain component. Rounds of a
     reweighting pass the same :class:`facetlift.linalg.Series` as `series` (one multigrid
-    hierarchy for all rounds, warm starts); then `backend` is the series'.
+    hierarchy for all rounds, warm starts); then `backend` is the series'. `progress` as in
+    :func:`spd_solve` (not with `series`: the rounds report instead).
     """
     K = g.pin(domain, g.laplacian(graph, w))
     b = g.divergence(graph, w * t)
     if series is not None:
         return series.solve(K, b)
-    return spd_solve(K, b, backend)
+    return spd_solve(K, b, backend, progress=progress)
 
 
 def relative_change(z_new: np.ndarray, z: np.ndarray) -> float:

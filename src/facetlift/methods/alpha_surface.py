@@ -75,6 +75,7 @@ OPTIONS = (
            "units); default 3 sigma from the curl", low=0.0, inf=True, none=True),
     *g.iteration_options(50, "growing rounds"),
     g.BACKEND,
+    g.PROGRESS,
 )
 
 
@@ -130,7 +131,7 @@ def connectors(graph: pg.PixelGraph, accepted: np.ndarray, candidate: np.ndarray
     return out
 
 
-def run(problem, *, alpha, max_iter, tol, backend) -> MethodResult:
+def run(problem, *, alpha, max_iter, tol, backend, progress) -> MethodResult:
     """Integrate `problem` as an alpha-surface; values (m,) at pixel centres."""
     t0 = time.perf_counter()
     domain, graph, t, has, h = g.setup(problem)
@@ -161,6 +162,8 @@ def run(problem, *, alpha, max_iter, tol, backend) -> MethodResult:
         grown = accepted | (has & (res <= alpha))
         if grown.sum() == accepted.sum():
             converged = True
+            if progress is not None:
+                progress(rounds, 0.0)
             break
         accepted = grown
         kept = accepted | connectors(graph, accepted, has & ~accepted, cost)
@@ -168,6 +171,8 @@ def run(problem, *, alpha, max_iter, tol, backend) -> MethodResult:
         change = g.relative_change(z_new, z)
         z = z_new
         log.debug("alpha_surface round %d: %d edges kept, change %.3g", rounds, kept.sum(), change)
+        if progress is not None:
+            progress(rounds, change)
         if change < tol:
             converged = True
             break

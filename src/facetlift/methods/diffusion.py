@@ -73,6 +73,7 @@ OPTIONS = (
     Option("beta", 0.02, "smallest diffusivity across level lines", low=0.0, low_open=True,
            high=1.0),
     g.BACKEND,
+    g.PROGRESS,
 )
 
 
@@ -153,7 +154,7 @@ def quadrant_form(graph: pg.PixelGraph, has: np.ndarray, D11, D12, D22) -> sp.cs
     return sp.csr_matrix((vals, (rows, cols)), shape=(nrow, graph.n_edges))
 
 
-def run(problem, *, sigma, contrast, beta, backend) -> MethodResult:
+def run(problem, *, sigma, contrast, beta, backend, progress) -> MethodResult:
     """Integrate `problem` with an anisotropic diffusion tensor; heights (m,) at pixel centres."""
     t0 = time.perf_counter()
     domain, graph, t, has, _ = g.setup(problem)
@@ -166,7 +167,7 @@ def run(problem, *, sigma, contrast, beta, backend) -> MethodResult:
     K = pg.pin(domain, (M.T @ M) + pg.laplacian(graph, w_extra))
     rhs = M.T @ (Q @ t) + pg.divergence(graph, w_extra * t)
     t1 = time.perf_counter()
-    z = g.spd_solve(K, rhs, backend, kind="spd")
+    z = g.spd_solve(K, rhs, backend, kind="spd", progress=progress)
     t2 = time.perf_counter()
     lam1 = D11 + D22 - 1.0  # trace = lam1 + lam2, lam2 = 1
     info = {

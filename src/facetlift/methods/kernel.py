@@ -110,10 +110,13 @@ OPTIONS = (
     Option("tile", 16, "core size of the local fits in pixels", kind="int", low=4),
     Option("margin", None, "data border of each local fit in pixels (default ceil(2 sigma))",
            kind="int", low=0, none=True),
+    Option("progress", None, "callable(groups done, share of the tiles fitted) called after "
+           "every group of tiles with one sample pattern (a dense interior is one group)",
+           kind="callable", none=True),
 )
 
 
-def run(problem, *, sigma, reg, tile, margin) -> MethodResult:
+def run(problem, *, sigma, reg, tile, margin, progress) -> MethodResult:
     """Integrate `problem` with the Gaussian-kernel method (see the module docstring).
 
     Parameters
@@ -128,6 +131,7 @@ def run(problem, *, sigma, reg, tile, margin) -> MethodResult:
         Core size of the local fits in pixels, >= 4.
     margin : int or None
         Data border of each local fit in pixels (>= 0); None means ``ceil(2 sigma)``.
+    progress : callable(groups done, share of the tiles fitted) or None
 
     Returns
     -------
@@ -156,12 +160,13 @@ def run(problem, *, sigma, reg, tile, margin) -> MethodResult:
     gc[rows - r0, cols - c0] = np.where(problem.usable, gx, 0.0)  # dz / d col
     gr[rows - r0, cols - c0] = np.where(problem.usable, -gy, 0.0)  # dz / d row (y is up)
 
-    z, info = fit_tiles(gc, gr, known, inside, sigma=sigma, reg=reg, tile=tile, margin=margin)
+    z, info = fit_tiles(gc, gr, known, inside, sigma=sigma, reg=reg, tile=tile, margin=margin,
+                        progress=progress)
     info.update(sigma=sigma, reg=reg, tile=tile, margin=margin)
     return MethodResult(values=z[rows - r0, cols - c0], info=info)
 
 
-def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin):
+def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin, progress=None):
     """Tiled Gaussian-kernel fit on a box (see the module docstring).
 
     Parameters
@@ -170,6 +175,8 @@ def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin):
         Height derivatives along columns and rows (pixel units) at the known pixels.
     known, inside : (H, W) bool
         Pixels with a sample, and pixels where the height is wanted.
+    progress : callable(groups done, share of the tiles fitted), optional
+        Called in the calling thread as each group of tiles is fitted.
 
     Returns
     -------
@@ -227,10 +234,15 @@ def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin):
             values = _evaluation(kn, ev, offset, sigma) @ coef[:, cols]
             for j, col in enumerate(cols):
                 fits[members[col]][ev] = values[:, j]
+        return len(members)
 
     workers = max(1, min(len(groups), os.cpu_count() or 1, 8))
     with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(workers) as pool:
-        list(pool.map(fit_group, groups.values()))
+        done, total = 0, max(sum(len(m) for m in groups.values()), 1)
+        for k, count in enumerate(pool.map(fit_group, groups.values()), 1):
+            done += count
+            if progress is not None:
+                progress(k, done / total)
     pieces = []  # per tile: (slices of its blend region, piece node ids, f, weights)
     n_nodes = 0
     for ((lo_r, hi_r, lo_c, hi_c), (er, ec), _), f in zip(specs, fits, strict=True):

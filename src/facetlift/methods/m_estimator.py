@@ -79,6 +79,7 @@ OPTIONS = (
            low=0.0, low_open=True, choices=("mad",)),
     *g.iteration_options(50, "reweightings"),
     g.BACKEND,
+    g.PROGRESS,
 )
 
 
@@ -92,7 +93,7 @@ def weights(u: np.ndarray, weight: str, k: float) -> np.ndarray:
     return 1.0 / (1.0 + a**2)
 
 
-def run(problem, *, weight, k, scale, max_iter, tol, backend) -> MethodResult:
+def run(problem, *, weight, k, scale, max_iter, tol, backend, progress) -> MethodResult:
     """Integrate `problem` with a robust M-estimator (IRLS); values (m,) at pixel centres."""
     k = WEIGHTS[weight] if k is None else k
 
@@ -118,6 +119,8 @@ def run(problem, *, weight, k, scale, max_iter, tol, backend) -> MethodResult:
         changes.append(change)
         z = z_new
         log.debug("m_estimator iteration %d: relative change %.3g", it, change)
+        if progress is not None:
+            progress(it, change)
         if change < tol:
             converged = True
             break

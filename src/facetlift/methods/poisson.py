@@ -29,15 +29,16 @@ from ..problem import Problem
 from . import MethodResult
 from . import _graph as g
 
-OPTIONS = (g.BACKEND,)
+OPTIONS = (g.BACKEND, g.PROGRESS)
 
 
-def run(problem: Problem, *, backend: str) -> MethodResult:
+def run(problem: Problem, *, backend: str, progress) -> MethodResult:
     """Integrate `problem` by least squares on the pixel graph; values (m,) at pixel centres."""
     t0 = time.perf_counter()
     _, graph, t, has, _ = g.setup(problem)
     t1 = time.perf_counter()
-    z = g.solve_weighted(problem.domain, graph, g.edge_weights(has), t, backend)
+    z = g.solve_weighted(problem.domain, graph, g.edge_weights(has), t, backend,
+                         progress=progress)
     t2 = time.perf_counter()
     info = {
         "iterations": 1,

@@ -61,6 +61,7 @@ OPTIONS = (
     Option("prior", "laplacian", "smoothness prior", kind="choice", choices=tuple(PRIORS)),
     *g.iteration_options(10, "rounds (edge_preserving)"),
     g.BACKEND,
+    g.PROGRESS,
 )
 
 
@@ -83,7 +84,7 @@ def laplacian_rows(graph: pg.PixelGraph) -> sp.csr_matrix:
     return sp.csr_matrix((vals, (rows, nb.ravel())), shape=(pix.size, graph.n))
 
 
-def run(problem, *, lam, prior, max_iter, tol, backend) -> MethodResult:
+def run(problem, *, lam, prior, max_iter, tol, backend, progress) -> MethodResult:
     """Integrate `problem` with a smoothness prior; values (m,) at pixel centres."""
     lam = PRIORS[prior] if lam is None else lam
 
@@ -96,7 +97,7 @@ def run(problem, *, lam, prior, max_iter, tol, backend) -> MethodResult:
     if prior == "laplacian":
         R = laplacian_rows(graph)
         K = pg.pin(domain, L + float(lam) * (R.T @ R))
-        z = g.spd_solve(K, rhs, backend, kind="spd")
+        z = g.spd_solve(K, rhs, backend, kind="spd", progress=progress)
         info.update(iterations=1, converged=True, prior_rows=int(R.shape[0]))
     else:
         slope = np.where(has, t / h, 0.0)  # measured slopes for the first round
@@ -112,6 +113,8 @@ def run(problem, *, lam, prior, max_iter, tol, backend) -> MethodResult:
             z_new = series.solve(K, rhs)
             if z is not None:
                 changes.append(g.relative_change(z_new, z))
+            if progress is not None:  # no change to report after the first round
+                progress(n_iter, changes[-1] if changes else float("nan"))
             z = z_new
             if changes and changes[-1] < tol:
                 converged = True

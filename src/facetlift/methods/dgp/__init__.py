@@ -98,7 +98,8 @@ OPTIONS = (
     Option("flat_weight", 1e-9, "slope weight of facets without a normal (selects the "
            "flattest of otherwise equal solutions)", low=0.0, low_open=True),
     Option("progress", None, "callable(iteration, value) called after every iteration of "
-           "the routes that iterate", kind="callable", none=True),
+           "the routes that iterate: the loop (value: deviation), the reweightings, the CG "
+           "of the direct route (value: relative residual)", kind="callable", none=True),
     Option("discontinuity_k", DEFAULT_K, "sharpness of the bilateral weights, in squared pixel "
            "footprints (larger cuts more readily)", low=0.0, low_open=True, when=_DISC),
     Option("discontinuity_iter", DEFAULT_ITER, "cap on the reweightings (a safety net: "
@@ -130,7 +131,8 @@ def run(
         result = MethodResult(values=copies.mean(axis=1), info=info,
                               extras={"corner_values": copies})
     elif solver == "direct":  # both loops share this fixed point
-        z, info = solve_direct(domain, bx, by, target, backend, flat_weight, h=s)
+        z, info = solve_direct(domain, bx, by, target, backend, flat_weight, h=s,
+                               progress=progress)
         result = MethodResult(vertex_values=z, info=info)
     else:
         z, info = solve_iterative(

@@ -34,12 +34,15 @@ RTOL = 1e-11
 
 
 def solve_direct(
-    domain, bx, by, target, backend="auto", flat_weight=1e-9, weights=None, *, h=1.0
+    domain, bx, by, target, backend="auto", flat_weight=1e-9, weights=None, *, h=1.0,
+    progress=None,
 ):
     """The fixed point of the local/global loop in one sparse solve.
 
     Returns vertex values (n,) and an info dict. `weights` (m,) optionally scales each
     facet's terms; `h` is the camera footprint (for the reported angular deviation).
+    `progress` (iteration, relative residual) is called after every CG iteration of the
+    facet-CG route; the spectral solve and the factorizations have no iterations to report.
     """
     t0 = time.perf_counter()
     empty = empty_components(domain, target)
@@ -69,7 +72,8 @@ def solve_direct(
         if route == "pcg":
             pre = FacetPreconditioner(domain, K, strong)
             t1 = time.perf_counter()
-            z, sinfo = linalg.solve(K, rhs, "pcg", preconditioner=pre, rtol=RTOL, flexible=True)
+            z, sinfo = linalg.solve(K, rhs, "pcg", preconditioner=pre, rtol=RTOL, flexible=True,
+                                    progress=progress)
             used = "pcg-facet"
         else:
             K = pin_components(domain, K)
