@@ -168,3 +168,18 @@ def test_importing_the_bench_loads_neither_click_nor_matplotlib():
             "print(sorted({'click', 'matplotlib'} & set(sys.modules)))")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert res.stdout.strip() == "[]"
+
+
+def test_quick_fusion_bench(quick):
+    """The fusion experiment ran in the quick bench: its tables, and confidence 0 on the
+    corrupted normals gives exactly the error of those normals missing."""
+    out = quick[2]
+    assert "| group | method | condition |" in (out / "fusion.md").read_text()
+    rows = [r for r in _rows(out / "fusion_runs.csv") if r["status"] == "ok"]
+    assert {r["condition"] for r in rows} >= {"normals only", "sparse 1%", "noisy 1%", "coarse",
+                                             "corrupt conf0", "corrupt missing"}
+    by = {(r["scene"], r["method"], r["condition"]): float(r["error"]) for r in rows
+          if r["condition"].startswith("corrupt ")}
+    for (scene, method, cond), err in by.items():
+        if cond == "corrupt conf0":
+            assert err == pytest.approx(by[(scene, method, "corrupt missing")], rel=1e-6)

@@ -32,6 +32,9 @@ def integrate(
     outlier_eps: float | None = None,
     normal_frame: str | None = None,
     max_memory=None,
+    prior=None,
+    prior_weight=1.0,
+    confidence=None,
     **options,
 ) -> Surface:
     """Reconstruct a surface from a normal map.
@@ -73,6 +76,26 @@ def integrate(
         Refuse the job (MemoryLimitError) if its estimated peak memory exceeds this many bytes
         (or a size such as ``"8G"``). Default: the available physical memory minus a margin,
         and the process's address-space limit (:mod:`facetlift.memory`).
+    prior : (H, W) array_like of float or (rows, cols, depths), optional
+        Depth known besides the normals, in the output's depth convention (orthographic:
+        depth along the viewing axis in world units; perspective: metric z-depth > 0), NaN
+        where unknown: a dense map, a sparse one or a few points; or three arrays of pixel
+        rows, columns (rounded to the nearest pixel) and depths. Every connected component
+        with a sample gets its constant (and, for a perspective camera, its scale) from the
+        prior: depth is then absolute (metric for a pinhole camera); components without a
+        sample keep the usual convention, and ``info["prior"]["gauged_components"]`` names
+        them. See docs/fusion.md. (A string is the option ``prior`` of a method that has one,
+        e.g. regularization's smoothness prior.)
+    prior_weight : float or (H, W) array_like of float
+        Weight (>= 0) of the prior term ``w (u - u_prior)^2`` of each sample, relative to the
+        normal term of one pixel: 1.0 makes one prior sample count as much as one pixel's
+        normal (a depth error at a sample costs as much as the same change of depth across
+        one pixel against the normals). Dimensionless: independent of image size and depth
+        units (for a perspective camera both terms are in log-depth). Large values fit the
+        prior exactly where given.
+    confidence : (H, W) array_like of float, optional
+        Weight (>= 0) of each pixel's normal term; 0 is the same as a missing normal, 1 the
+        default everywhere. For methods with the ``confidence`` capability.
     **options
         Method options (``facetlift methods`` lists them, with types and defaults).
 
@@ -89,7 +112,9 @@ def integrate(
         option value, an option that does not apply to the chosen route, or input the method
         cannot take (perspective, discontinuities), unsigned integers other than uint8/uint16,
         or normals that look [0, 1]-encoded or face away from the viewer
-        (:func:`facetlift.frames.checked`).
+        (:func:`facetlift.frames.checked`); a `prior` or `confidence` of the wrong shape,
+        negative weights, a prior without a finite sample in the mask, non-positive
+        perspective prior depth, or a prior / confidence for a method without the capability.
     facetlift.SolverError
         The solver failed or produced non-finite depth inside the mask.
     facetlift.errors.MemoryLimitError
@@ -105,6 +130,9 @@ def integrate(
     """
     t0 = time.perf_counter()
     info = methods.get(method)
+    if isinstance(prior, str):  # a method option named "prior" (regularization's smoothness
+        options["prior"] = prior  # prior, a string), not a depth prior
+        prior = None
     if discontinuities:
         options["discontinuities"] = _check_discontinuities(info, discontinuities)
     if solver is not None:
@@ -112,7 +140,7 @@ def integrate(
     normals = frames.checked(normals, mask, frame=normal_frame)
     problem = prepare(
         normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
-        outlier_eps=outlier_eps,
+        outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight, confidence=confidence,
     )
     return solve(problem, method, t0=t0, max_memory=max_memory, **options)
 
@@ -187,6 +215,14 @@ def solve(
             f"method {method!r} does not support perspective input (`K`); methods that do: "
             f"{able}"
         )
+    for what, given in (("prior", problem.prior is not None),
+                        ("confidence", problem.confidence is not None)):
+        if given and not getattr(info, what):
+            able = sorted(k for k, v in methods.REGISTRY.items() if getattr(v, what))
+            raise ValueError(
+                f"method {method!r} does not take a `{what}` (its energy has no such term); "
+                f"methods that do: {able}"
+            )
     if not problem.usable.all() and not info.missing:
         raise ValueError(
             f"method {method!r} cannot take missing samples ({int((~problem.usable).sum())} "
@@ -212,6 +248,8 @@ def solve(
     out["projection"] = problem.camera.projection
     out["input"] = dict(problem.counts)
     out["memory_estimate"] = plan.estimate
+    if problem.prior is not None:
+        out["prior"] = prior_info(problem, surface)
     seconds = dict(out.get("seconds", {}))
     seconds["prepare"] = t1 - t0
     seconds["total"] = time.perf_counter() - t0
@@ -221,6 +259,29 @@ def solve(
     surface.info = out
     log.info("%s: %s", method, {k: v for k, v in out.items() if k != "deviation"})
     return surface
+
+
+def prior_info(problem: Problem, surface: Surface) -> dict:
+    """``info["prior"]``: samples used, components whose constant the prior fixed, those that
+    kept the camera's gauge (1-based labels of ``Domain.labels``), and the fit at the samples
+    (mean and largest absolute depth difference)."""
+    d = problem.domain
+    w = problem.prior_weight
+    used = w > 0
+    fixed = problem.prior_components
+    depth = surface.depth[d.mask]
+    target = problem.camera.to_depth(np.where(used, problem.prior, 0.0))
+    diff = np.abs(depth - target)[used]
+    gauge = "mean depth 0" if not problem.perspective else "median depth 1"
+    return {
+        "samples": int(used.sum()),
+        "components": int(d.n_components),
+        "prior_components": [int(k) + 1 for k in np.flatnonzero(fixed)],
+        "gauged_components": [int(k) + 1 for k in np.flatnonzero(~fixed)],
+        "gauge": gauge,
+        "mean_abs_residual": float(diff.mean()) if diff.size else 0.0,
+        "max_abs_residual": float(diff.max()) if diff.size else 0.0,
+    }
 
 
 def crop(problem: Problem) -> tuple[Problem, tuple[int, int]]:
@@ -304,6 +365,8 @@ def make_surface(problem: Problem, result: methods.MethodResult, method: str = "
     cam = problem.camera
     with np.errstate(over="ignore", invalid="ignore"):
         shift = cam.gauge(fval, d.facet_component, d.n_components)
+        if problem.has_prior:  # the prior fixed these components' constants
+            shift = np.where(problem.prior_components, 0.0, shift)
         depth = cam.to_depth(fval - shift[d.facet_component])
         vdepth = cam.to_depth(vval - shift[d.vertex_component])
     if not (np.isfinite(depth).all() and np.isfinite(vdepth).all()):

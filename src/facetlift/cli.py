@@ -163,6 +163,19 @@ _JOB_OPTIONS = [
     click.option("--discontinuities", is_flag=True,
                  help="Allow depth jumps (methods that handle discontinuities: 'facetlift "
                  "methods')."),
+    click.option("--prior", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+                 help="Depth prior (npy, EXR, TIFF, or 16-bit PNG with --prior-scale), NaN or "
+                 "0 where unknown, in the output's depth convention (metric z-depth with K). "
+                 "A dataset folder's prior_depth.* is used automatically. docs/fusion.md."),
+    click.option("--prior-scale", type=float, default=None, metavar="S",
+                 help="Depth units per count of a 16-bit PNG prior (e.g. 0.001)."),
+    click.option("--prior-weight", type=float, default=1.0, show_default=True, metavar="W",
+                 help="Weight of each prior sample relative to one pixel's normal."),
+    click.option("--prior-weight-map", type=click.Path(exists=True, dir_okay=False,
+                 path_type=Path), help="Per-pixel prior weights (npy, EXR, TIFF, PNG = v/max)."),
+    click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+                 help="Per-pixel weights >= 0 of the normals (npy, EXR, TIFF, PNG = v/max); "
+                 "0 = missing normal. A dataset folder's confidence.* is used automatically."),
     click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
                  help="Any other method option, repeatable; VALUE is read as JSON when it "
                  "parses (1e-4, true, [1,2]) and as a string otherwise."),
@@ -197,7 +210,8 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               gradient_frame="xy", mat_keys=None, method="dgp", pixel_size=1.0, K=None,
               orthographic=False, backfacing="missing", outlier_eps=None, solver=None,
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
-              save=(), mesh_faces=None, outdir=None, max_memory=None):
+              save=(), mesh_faces=None, outdir=None, max_memory=None, prior=None,
+              prior_scale=None, prior_weight=1.0, prior_weight_map=None, confidence=None):
     """A :class:`facetlift.jobs.Job` from the parsed flags (ValueError on bad values)."""
     from . import frames
     from .jobs import Job
@@ -224,6 +238,10 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         save=tuple(save) or DEFAULT_SAVE,
         triangles=None if mesh_faces is None else mesh_faces == "triangles",
         outdir=None if outdir is None else str(outdir),
+        prior=None if prior is None else str(prior), prior_scale=prior_scale,
+        prior_weight=prior_weight,
+        prior_weight_map=None if prior_weight_map is None else str(prior_weight_map),
+        confidence=None if confidence is None else str(confidence),
     )
 
 
@@ -507,7 +525,7 @@ def _split(text):
 @click.option("--models", default=None, help="Comma-separated Fig. 9 model names.")
 @click.option("--experiments", default=None,  # facetlift.bench.EXPERIMENTS (a test checks)
               help="Comma-separated subset of: table1, fig4, fig5, maps, fig9, fig10, bear, "
-                   "discontinuities.")
+                   "discontinuities, fusion.")
 @click.option("--mesh", "meshes", multiple=True, type=click.Path(exists=True, dir_okay=False),
               help="Add a mesh to the Fig. 9 models (repeatable).")
 @click.option("--normal-map", "normal_maps", multiple=True,

@@ -58,6 +58,14 @@ class Job:
     save: tuple = DEFAULT_SAVE
     triangles: bool | None = None
     outdir: str | None = None
+    #: Depth prior file (docs/fusion.md), its scale (16-bit PNG), weight or weight map file,
+    #: and the normals' confidence file; a dataset folder's prior_depth.* / confidence.* are
+    #: used when these are not given.
+    prior: str | None = None
+    prior_scale: float | None = None
+    prior_weight: float = 1.0
+    prior_weight_map: str | None = None
+    confidence: str | None = None
 
     def with_input(self, path, outdir) -> Job:
         """The same job on another normal-map input (a batch item)."""
@@ -81,6 +89,9 @@ class Input:
     mask: np.ndarray | None
     K: np.ndarray | None
     mask_source: str
+    prior: np.ndarray | None = None
+    prior_weight: object = 1.0
+    confidence: np.ndarray | None = None
 
 
 def default_outdir(src: Path) -> Path:
@@ -94,7 +105,8 @@ def input_paths(job: Job) -> list[Path]:
     paths = [job.source] if job.normals is not None else [Path(p) for p in job.gradients]
     if paths[0].is_dir():
         paths = [p for p in paths[0].iterdir() if p.is_file()]
-    paths += [Path(p) for p in (job.mask, job.K) if p is not None]
+    paths += [Path(p) for p in (job.mask, job.K, job.prior, job.prior_weight_map,
+                                job.confidence) if p is not None]
     return paths
 
 
@@ -110,7 +122,7 @@ def read(job: Job) -> Input:
     from .io.gradients import is_mat, read_gradients, read_mat
 
     src = job.source
-    K = None
+    K = prior = conf = None
     field_input = bool(job.gradients)
     if job.gradients:
         g = read_gradients(*job.gradients)
@@ -125,8 +137,10 @@ def read(job: Job) -> Input:
         m = g["mask"]
         source = f"{src.name} mask" if m is not None else "valid normals"
     elif src.is_dir():
-        ds = io.read_dataset(src, frame=job.normal_frame)
+        ds = io.read_dataset(src, frame=job.normal_frame,
+                             prior_scale=None if job.prior else job.prior_scale)
         n, m, K = ds["normals"], ds["mask"], ds["K"]
+        prior, conf = ds["prior"], ds["confidence"]
         source = "dataset mask" if m is not None else "valid normals"
     else:
         n, m = io.read_normals(src, frame=job.normal_frame)
@@ -140,7 +154,28 @@ def read(job: Job) -> Input:
         K = io.read_K(job.K)
     if job.orthographic:
         K = None
-    return Input(normals=n, mask=m, K=K, mask_source=source)
+    if job.prior is not None:
+        prior = io.read_prior(job.prior, job.prior_scale)
+    elif job.prior_scale is not None and prior is None:
+        raise ValueError("`prior_scale` applies only with a prior (--prior or a dataset's "
+                         "prior_depth file)")
+    if job.confidence is not None:
+        conf = io.read_weights(job.confidence, arg="confidence")
+    weight = job.prior_weight
+    if job.prior_weight_map is not None:
+        if job.prior_weight != 1.0:
+            raise ValueError("give --prior-weight or --prior-weight-map, not both; got "
+                             f"--prior-weight {job.prior_weight!r}")
+        weight = io.read_weights(job.prior_weight_map, arg="prior_weight_map")
+    if prior is None and (job.prior_weight_map is not None or job.prior_weight != 1.0):
+        raise ValueError("`prior_weight` applies only with a prior (--prior or a dataset's "
+                         "prior_depth file)")
+    for name, arr in (("prior", prior), ("confidence", conf), ("prior_weight_map", weight)):
+        if isinstance(arr, np.ndarray) and arr.shape != n.shape[:2]:
+            raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW) but the normal "
+                             f"map is {n.shape[0]}x{n.shape[1]}")
+    return Input(normals=n, mask=m, K=K, mask_source=source, prior=prior, prior_weight=weight,
+                 confidence=conf)
 
 
 def _normals_from_field(g: dict, job: Job) -> np.ndarray:
@@ -195,12 +230,18 @@ def run(job: Job, *, progress=None) -> dict:
         opts = dict(job.options)
         if progress is not None and "progress" in info.options() and "progress" not in opts:
             opts["progress"] = progress
+        if isinstance(opts.get("prior"), str) and inp.prior is not None:
+            raise ValueError("`prior`: a depth prior (--prior or prior_depth file) and the "
+                             f"method option prior={opts['prior']!r} were both given")
+        depth_prior = opts.pop("prior", None) if inp.prior is None else inp.prior
         t1 = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             surface = facetlift.integrate(
                 inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size, K=inp.K,
-                backfacing=job.backfacing, outlier_eps=job.outlier_eps, **opts,
+                backfacing=job.backfacing, outlier_eps=job.outlier_eps, prior=depth_prior,
+                prior_weight=inp.prior_weight if inp.prior is not None else 1.0,
+                confidence=inp.confidence, **opts,
             )
         t_integrate = time.perf_counter() - t1
         t2 = time.perf_counter()

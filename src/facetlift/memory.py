@@ -257,18 +257,25 @@ def estimate(problem, method: str, options: dict) -> tuple[float, str]:
     hb, wb = _box(d)
     B = (hb + 1) * (wb + 1)
     backend = options.get("backend", "auto")
+    # a depth prior (docs/fusion.md): its (m,) values and weights, and for the facet routes
+    # its 9-point matrix and the sum with the normal matrix (int32 indices, float64 values)
+    fused = problem.prior is not None or problem.confidence is not None
+    prior_bytes = 3 * 8 * m if fused else 0
     if method == "dgp":
+        if problem.prior is not None:
+            prior_bytes += 2 * 9 * 12 * d.n_vertices
         if options.get("discontinuities"):
-            return _cost("dgp-discontinuous", m, B), "dgp-discontinuous"
+            return _cost("dgp-discontinuous", m, B) + prior_bytes, "dgp-discontinuous"
         loop = "dgp-loop" if options.get("solver") == "iterative" else "dgp"
         from .linalg.facet import thin
 
         route = choose(d.n_vertices, backend, kind="facet", thin=thin(d))
-        full = m == hb * wb and (loop == "dgp-loop" or bool(problem.usable.all()))
+        full = m == hb * wb and (loop == "dgp-loop" or bool(problem.usable.all())) and not fused
         if route != "pcg":
-            return _cost(f"{loop}-factor", m, B, d.n_vertices), f"{loop}-{route}"
+            return (_cost(f"{loop}-factor", m, B, d.n_vertices) + prior_bytes,
+                    f"{loop}-{route}")
         name = f"{loop}-spectral" if full else f"{loop}-pcg"
-        return _cost(name, m, B), name
+        return _cost(name, m, B) + prior_bytes, name
     if method == "frankot_chellappa":
         return _cost(method, m, B), method
     if method == "kernel":
@@ -277,7 +284,7 @@ def estimate(problem, method: str, options: dict) -> tuple[float, str]:
         return _cost("poisson", m, B), f"{method}-unplanned"
     spd = method in ("regularization", "diffusion")
     route = choose(m, backend, kind="spd" if spd else "graph")
-    out = _cost(method, m, B, m if route in ("superlu", "pardiso") else 0)
+    out = _cost(method, m, B, m if route in ("superlu", "pardiso") else 0) + prior_bytes
     if method == "diffusion":
         out += _gaussian(options.get("sigma", 0.5), B)
     return out, f"{method}-{route}"

@@ -180,8 +180,9 @@ DEVIATION_SAMPLE = 2**18
 
 def input_deviation(problem, surface, *, sample: int = DEVIATION_SAMPLE) -> float:
     """Mean angle in degrees between the usable input normals and the facet normals of the
-    result (from each facet's own corners where the surface is split at jumps), over at most `sample` usable facets evenly spaced in row-major order (exact up to
-    512 x 512); NaN when no facet is usable.
+    result (from each facet's own corners where the surface is split at jumps), over at most
+    `sample` usable facets evenly spaced in row-major order (exact up to 512 x 512); NaN when
+    no facet is usable.
 
     Parameters
     ----------

@@ -43,6 +43,15 @@ class Problem:
         Known facets whose normal is not grazing: the samples the methods integrate.
     counts : dict
         How many mask pixels had no usable normal, by reason (see :func:`prepare`).
+    prior : (m,) float, optional
+        Depth prior as values of the camera's unknown (height, or log-depth), NaN where a
+        facet has none (:func:`check_prior`); None without a prior.
+    prior_weight : (m,) float, optional
+        Weight of each facet's prior term, 0 where it has none (docs/fusion.md: 1 counts one
+        prior sample as much as one pixel's normal).
+    confidence : (m,) float, optional
+        Weight of each facet's normal term (> 0 at usable facets; a confidence of 0 made the
+        facet a missing sample); None: all 1.
     """
 
     domain: Domain
@@ -52,6 +61,9 @@ class Problem:
     usable: np.ndarray | None = None
     counts: dict = field(default_factory=dict)
     extras: dict = field(default_factory=dict)
+    prior: np.ndarray | None = None
+    prior_weight: np.ndarray | None = None
+    confidence: np.ndarray | None = None
 
     def __post_init__(self):
         if self.usable is None:
@@ -87,6 +99,36 @@ class Problem:
         s = self.camera.footprint()
         return gx / s, gy / s
 
+    @property
+    def has_prior(self) -> bool:
+        """Whether some facet carries a prior term with a positive weight."""
+        return self.prior_weight is not None and bool((self.prior_weight > 0).any())
+
+    @cached_property
+    def prior_components(self) -> np.ndarray:
+        """(n_components,) bool: components with at least one weighted prior sample (their
+        constant is fixed by the prior, not by the camera's gauge)."""
+        d = self.domain
+        if not self.has_prior:
+            return np.zeros(d.n_components, dtype=bool)
+        return np.bincount(d.facet_component[self.prior_weight > 0],
+                           minlength=d.n_components) > 0
+
+    def prior_terms(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(weight, target)``, each (m,): the prior term ``weight (u_f - target)^2`` of every
+        facet's centre value ``u_f`` (weight 0 and target 0 where a facet has none)."""
+        m = self.domain.n_facets
+        if not self.has_prior:
+            return np.zeros(m), np.zeros(m)
+        w = self.prior_weight
+        return w, np.where(w > 0, np.nan_to_num(self.prior), 0.0)
+
+    def normal_weight(self) -> np.ndarray:
+        """(m,) weight of every facet's normal term: the confidence, 1 without one."""
+        if self.confidence is None:
+            return np.ones(self.domain.n_facets)
+        return self.confidence
+
     def normal_image(self) -> np.ndarray:
         """(H, W, 3) normals with NaN outside the domain and at unknown facets."""
         H, W = self.domain.shape
@@ -99,7 +141,8 @@ class Problem:
         order (:func:`facetlift.api.crop`), seen by `camera`."""
         return Problem(
             domain=domain, normals=self.normals, known=self.known, camera=camera,
-            usable=self.usable, counts=self.counts, extras=self.extras,
+            usable=self.usable, counts=self.counts, extras=self.extras, prior=self.prior,
+            prior_weight=self.prior_weight, confidence=self.confidence,
         )
 
 
@@ -172,6 +215,9 @@ def prepare(
     camera: Camera | None = None,
     backfacing: str = "missing",
     outlier_eps: float | None = None,
+    prior=None,
+    prior_weight=1.0,
+    confidence=None,
 ) -> Problem:
     """Check user inputs and build a :class:`Problem`.
 
@@ -197,13 +243,17 @@ def prepare(
         Normals whose cosine to the direction toward the camera is below this are grazing and
         become missing samples (the paper's outlier rule). Default: the camera's
         (cos 85 deg orthographic, 1/255 perspective; :mod:`facetlift.camera`).
+    prior, prior_weight, confidence
+        Depth prior and weights (:func:`check_prior`, :func:`check_confidence`; see
+        docs/fusion.md). A pixel with confidence 0 becomes a missing sample.
 
     Raises
     ------
     ValueError
         On a wrong shape or dtype, an empty mask, a mask of another size, one-pixel
-        components, a bad pixel size, `K` or `outlier_eps`, no usable normal at all, or
-        back-facing normals with ``backfacing="error"``.
+        components, a bad pixel size, `K` or `outlier_eps`, no usable normal at all,
+        back-facing normals with ``backfacing="error"``, or a bad prior, prior weight or
+        confidence (see :func:`check_prior`).
     """
     n = numeric_array(normals, "normals").astype(float, copy=False)
     if n.ndim != 3 or n.shape[-1] != 3:
@@ -257,9 +307,17 @@ def prepare(
     front = ok & (cos > 0)
     bad["grazing"] = front & (cos < eps)
     usable = front & ~bad["grazing"]
+    conf = None
+    if confidence is not None:
+        conf = check_confidence(confidence, (H, W))[m]
+        counts_zero = usable & (conf == 0)
+        usable = usable & (conf > 0)
+        conf = np.where(usable, conf, 1.0)
 
     counts = {"pixels": int(m.sum()), "missing": int((~given | nan).sum())}
     counts.update({k: int(v.sum()) for k, v in bad.items()})
+    if conf is not None:
+        counts["zero_confidence"] = int(counts_zero.sum())
     counts["usable"] = int(usable.sum())
     counts["outlier_eps"] = float(eps)
     problems = {k: v for k, v in bad.items() if v.any()}
@@ -278,9 +336,136 @@ def prepare(
             f"back-facing or grazing: {counts})"
         )
     nf[~front] = np.nan
+    pv = pw = None
+    if prior is not None:
+        pv, pw = check_prior(prior, prior_weight, (H, W), m, cam)
+        counts["prior_samples"] = int((pw > 0).sum())
+    elif not _is_default_weight(prior_weight):
+        raise ValueError(f"`prior_weight` applies only with a `prior`; got {_short(prior_weight)} "
+                         "and prior=None")
     return Problem(
         domain=domain, normals=nf, known=front, camera=cam, usable=usable, counts=counts,
+        prior=pv, prior_weight=pw, confidence=conf,
     )
+
+
+def _short(value) -> str:
+    if isinstance(value, np.ndarray):
+        return f"an array of shape {value.shape}"
+    text = repr(value)
+    return text if len(text) < 60 else text[:57] + "..."
+
+
+def _is_default_weight(w) -> bool:
+    return isinstance(w, (int, float)) and not isinstance(w, bool) and w == 1.0
+
+
+def _weight_image(a, name: str, shape: tuple[int, int]) -> np.ndarray:
+    """A scalar or (H, W) map of weights >= 0 (finite) as a float array broadcast to `shape`."""
+    if isinstance(a, bool):
+        raise ValueError(f"`{name}` must be a number >= 0 or an {shape} array; got {a!r}")
+    arr = numeric_array(a, name, "a number >= 0 or an (H, W) array of them").astype(float)
+    if arr.ndim == 0:
+        if not (np.isfinite(arr) and arr >= 0):
+            raise ValueError(f"`{name}` must be a finite number >= 0; got {a!r}")
+        return np.full(shape, float(arr))
+    if arr.shape != shape:
+        raise ValueError(f"`{name}` must be a number or have shape {shape} to match `normals`; "
+                         f"got shape {arr.shape}")
+    return arr
+
+
+def check_confidence(confidence, shape: tuple[int, int]) -> np.ndarray:
+    """(H, W) float confidence of the normals: finite and >= 0 at every pixel (0 is a missing
+    normal), or a ValueError naming `confidence`, the value and what was expected."""
+    c = _weight_image(confidence, "confidence", shape)
+    bad = ~(np.isfinite(c) & (c >= 0))
+    if bad.any():
+        r, col = np.argwhere(bad)[0]
+        raise ValueError(f"`confidence` must be finite and >= 0 everywhere; got "
+                         f"{float(c[r, col])!r} at (row {r}, col {col}) ({int(bad.sum())} such "
+                         "pixel(s))")
+    return c
+
+
+def prior_image(prior, shape: tuple[int, int]) -> np.ndarray:
+    """The prior as an (H, W) depth image, NaN where unknown: from an (H, W) array or a
+    ``(rows, cols, depths)`` triple (pixel indices, rounded to the nearest pixel; depths of the
+    same pixel averaged). Raises ValueError naming `prior`."""
+    H, W = shape
+    if isinstance(prior, (tuple, list)) and len(prior) == 3 and not np.isscalar(prior[0]):
+        rows, cols, depths = (numeric_array(v, f"prior[{k}]").astype(float).ravel()
+                              for k, v in enumerate(prior))
+        if not rows.size == cols.size == depths.size:
+            raise ValueError(f"`prior` as (rows, cols, depths) needs three arrays of one length; "
+                             f"got lengths {rows.size}, {cols.size}, {depths.size}")
+        if not (np.isfinite(rows).all() and np.isfinite(cols).all()):
+            raise ValueError("`prior` (rows, cols, depths): rows and cols must be finite")
+        r = np.rint(rows).astype(np.int64)
+        c = np.rint(cols).astype(np.int64)
+        out = (r < 0) | (r >= H) | (c < 0) | (c >= W)
+        if out.any():
+            k = int(np.flatnonzero(out)[0])
+            raise ValueError(f"`prior` (rows, cols, depths): pixel (row {rows[k]:g}, col "
+                             f"{cols[k]:g}) is outside the {H} x {W} image ({int(out.sum())} "
+                             "such sample(s))")
+        keep = np.isfinite(depths)
+        idx = r[keep] * W + c[keep]
+        count = np.bincount(idx, minlength=H * W)
+        total = np.bincount(idx, depths[keep], minlength=H * W)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            img = np.where(count > 0, total / np.maximum(count, 1), np.nan)
+        return img.reshape(H, W)
+    arr = numeric_array(prior, "prior", "an (H, W) depth map or a (rows, cols, depths) triple")
+    if arr.shape != shape:
+        raise ValueError(f"`prior` must be an (H, W) depth map of shape {shape} to match "
+                         f"`normals` (NaN where unknown) or a (rows, cols, depths) triple; got "
+                         f"shape {arr.shape}")
+    arr = arr.astype(float)
+    if np.isinf(arr).any():
+        raise ValueError("`prior` must not contain inf (use NaN where the depth is unknown)")
+    return arr
+
+
+def check_prior(prior, prior_weight, shape, mask, camera):
+    """Checked prior: ``(values, weights)``, each (m,) on the facets of `mask`, the values in
+    the camera's unknown (:meth:`facetlift.camera.Camera.from_depth`), NaN and weight 0 where
+    there is no sample.
+
+    Raises
+    ------
+    ValueError
+        A prior of another shape, with no finite sample inside the mask, with non-positive
+        depth for a perspective camera; a weight that is negative, not finite or of another
+        shape (the message names the argument, the value and what was expected).
+    """
+    img = prior_image(prior, shape)
+    weight = _weight_image(prior_weight, "prior_weight", shape)
+    depth = img[mask]
+    w = weight[mask]
+    have = np.isfinite(depth)
+    if not have.any():
+        outside = int(np.isfinite(img).sum())
+        raise ValueError(
+            "`prior` has no finite depth sample inside the mask"
+            + (f" ({outside} outside it)" if outside else "")
+            + "; give depths where the normals are, NaN elsewhere"
+        )
+    wbad = have & ~(np.isfinite(w) & (w >= 0))
+    if wbad.any():
+        k = int(np.flatnonzero(wbad)[0])
+        raise ValueError(f"`prior_weight` must be finite and >= 0 where the prior has a sample; "
+                         f"got {float(w[k])!r} ({int(wbad.sum())} such pixel(s))")
+    if camera.perspective:
+        neg = have & (depth <= 0)
+        if neg.any():
+            k = int(np.flatnonzero(neg)[0])
+            raise ValueError(
+                "`prior` must hold positive z-depths for a perspective camera (`K`); got "
+                f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s))"
+            )
+    values = np.where(have, camera.from_depth(np.where(have, depth, 1.0)), np.nan)
+    return values, np.where(have, w, 0.0)
 
 
 def _huge(n, length2) -> np.ndarray:

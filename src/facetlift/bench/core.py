@@ -64,6 +64,10 @@ class Settings:
     disc_samples: int = 3
     disc_real_stride: int = 1
     disc_min_pixels: int = 200
+    # the fusion benchmark (facetlift.bench.fusion), on the discontinuity scenes
+    fusion_groups: tuple = ("perspective", "ortho")
+    fusion_fractions: tuple = (0.001, 0.01, 0.05)
+    fusion_columns: tuple = ("dgp", "dgp-disc", "poisson")
 
     @classmethod
     def quick(cls) -> Settings:
@@ -94,6 +98,8 @@ class Settings:
             disc_samples=1,
             disc_real_stride=8,
             disc_min_pixels=50,
+            fusion_fractions=(0.01,),
+            fusion_columns=("dgp", "dgp-disc"),
         )
 
 

@@ -115,7 +115,8 @@ def _pinhole(resolution, f=None):
 
 
 def scenes(ctx: Context) -> list[tuple[str, str, object]]:
-    """(group, name, loader) of every synthetic scene; groups ``perspective``, ``wide``, ``ortho``."""
+    """(group, name, loader) of every synthetic scene; groups ``perspective``, ``wide`` and
+    ``ortho``."""
     s = ctx.settings
     meshes = []
     if ctx.data is not None and (ctx.data / "meshes").is_dir():
@@ -217,7 +218,8 @@ def run_scene(ctx: Context, group: str, name: str, gt, cols) -> list[dict]:
         base = {"group": group, "scene": name, "condition": cond, "pixels": int(gt.mask.sum()),
                 "jump_edges": jumps}
         for spec in cols:
-            if spec.label.startswith("dgp-disc k=") and cond not in ctx.settings.disc_sweep_conditions:
+            sweep = spec.label.startswith("dgp-disc k=")
+            if sweep and cond not in ctx.settings.disc_sweep_conditions:
                 continue
             r = run_method(spec, n, gt.mask, pixel_size=gt.pixel_size, K=gt.K, status=status)
             err = error_of(gt, r.surface.depth) if r.status == "ok" else None

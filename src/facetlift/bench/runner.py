@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from .. import methods as _methods
-from . import discontinuities, fig9, maps, paper, real
+from . import discontinuities, fig9, fusion, maps, paper, real
 from .core import Context, Settings, bar, method_status
 from .tables import md_table, write_text
 
@@ -25,6 +25,7 @@ EXPERIMENT_FUNCTIONS = {
     "fig10": real.fig10,
     "bear": real.bear,
     "discontinuities": discontinuities.discontinuities,
+    "fusion": fusion.fusion,
 }
 EXPERIMENTS = tuple(EXPERIMENT_FUNCTIONS)
 

@@ -40,13 +40,17 @@ def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
     return None
 
 
-def read_dataset(folder, *, frame: str | None = None, y_down: bool = False) -> dict:
+def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
+                 prior_scale: float | None = None) -> dict:
     """Read a folder in the BiNI / DiLiGenT layout.
 
     The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
     ``mask.png`` (or ``.tif``, ``.tiff``, ``.npy``) and, for a perspective camera, ``K.txt``.
     Without ``K.txt`` the view is orthographic. Pixels outside the mask may hold anything.
-    `frame` and `y_down` are those of :func:`~facetlift.io.read_normals`.
+    `frame` and `y_down` are those of :func:`~facetlift.io.read_normals`. A depth prior
+    ``prior_depth.*`` and a normal confidence ``confidence.*`` (``.npy``, ``.exr``, ``.tif``,
+    ``.png``; docs/fusion.md) are picked up like ``K.txt``; `prior_scale` is that of
+    :func:`~facetlift.io.read_prior` (required for a 16-bit PNG prior).
 
     Returns
     -------
@@ -73,4 +77,10 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False) -> d
     mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
     kpath = f / "K.txt"
     K = read_K(kpath) if kpath.is_file() else None
-    return {"normals": normals, "mask": mask, "K": K}
+    from .images import PRIOR_FORMATS, read_prior, read_weights
+
+    ppath = _find(f, "prior_depth", PRIOR_FORMATS)
+    prior = read_prior(ppath, prior_scale, arg="prior") if ppath is not None else None
+    cpath = _find(f, "confidence", PRIOR_FORMATS)
+    conf = read_weights(cpath, arg="confidence") if cpath is not None else None
+    return {"normals": normals, "mask": mask, "K": K, "prior": prior, "confidence": conf}

@@ -392,3 +392,59 @@ def write_mask(path, mask) -> Path:
     else:
         _write_tiff(p, m.astype(np.uint8) * 255)
     return p
+
+
+# --------------------------------------------------------------------------------------------
+# fusion inputs: depth priors and weight maps (docs/fusion.md)
+
+#: Formats of a depth prior (16-bit PNG needs a scale) and of weight maps.
+PRIOR_FORMATS = (".npy", ".exr", ".tif", ".tiff", ".png")
+
+
+def read_prior(path, scale: float | None = None, *, arg: str = "prior") -> np.ndarray:
+    """An (H, W) depth prior, NaN where unknown.
+
+    ``.npy``, OpenEXR (channel Z or the only one) and TIFF hold depth as stored (NaN, or 0 in
+    an integer TIFF, where unknown); a 16-bit PNG holds ``depth / scale`` (`scale` in depth
+    units per count, e.g. 0.001 for millimetres stored as metres; 0 = unknown), and `scale`
+    is required for it. A given `scale` multiplies the other formats too.
+
+    Raises
+    ------
+    ValueError
+        An unreadable file, a PNG that is not 16-bit or without `scale`, or a bad `scale`.
+    """
+    p = _existing(path, arg)
+    ext = _suffix(p, PRIOR_FORMATS, "depth prior", arg)
+    if scale is not None and not (np.isfinite(scale) and scale > 0):
+        raise ValueError(f"`prior_scale` must be a positive number; got {scale!r}")
+    if ext == ".png":
+        a = _decode_image(p, ext, arg)
+        if a.dtype != np.uint16 or a.ndim != 2:
+            raise ValueError(f"`{arg}`: {p} must be a single-channel 16-bit PNG (depth / scale); "
+                             f"got dtype {a.dtype}, shape {a.shape}")
+        if scale is None:
+            raise ValueError(f"`{arg}`: {p} is a 16-bit PNG: give its depth units per count "
+                             "with --prior-scale (e.g. 0.001 for millimetres in metres)")
+        return np.where(a > 0, a * float(scale), np.nan)
+    a = read_plane(p, PRIOR_FORMATS, "depth prior", arg, prefer=("Z",))
+    zero_unknown = a.dtype.kind in "ui"
+    a = a.astype(np.float64)
+    if zero_unknown:
+        a[a == 0] = np.nan
+    return a if scale is None else a * float(scale)
+
+
+def read_weights(path, *, arg: str) -> np.ndarray:
+    """An (H, W) map of weights >= 0 (``--confidence``, ``--prior-weight-map``): ``.npy``,
+    EXR or TIFF as stored; an 8- or 16-bit PNG as ``value / 255`` or ``value / 65535``."""
+    p = _existing(path, arg)
+    ext = _suffix(p, PRIOR_FORMATS, "weight", arg)
+    if ext == ".png":
+        a = _decode_image(p, ext, arg)
+        if a.ndim == 3:
+            a = a[..., 0]
+        if a.dtype not in (np.uint8, np.uint16):
+            raise ValueError(f"`{arg}`: {p} must be an 8- or 16-bit PNG; got dtype {a.dtype}")
+        return a.astype(np.float64) / np.iinfo(a.dtype).max
+    return read_plane(p, PRIOR_FORMATS, "weight", arg).astype(np.float64)

@@ -140,6 +140,10 @@ def cg(
         z_old = z if flexible else None
         z = r.copy() if M is None else M(r)
         rz_new = _dot(r, z)
+        if rz == 0:  # a residual the (float32) preconditioner rounds to zero: stop here
+            info.converged = bool(rnorm <= 10 * stop and np.all(np.isfinite(x)))
+            info.breakdown = not info.converged
+            break
         beta = (rz_new - _dot(r, z_old)) / rz if flexible else rz_new / rz
         d *= beta
         d += z

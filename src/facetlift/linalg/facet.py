@@ -172,6 +172,14 @@ class FacetPreconditioner:
         Precision of the box transform. Default: float32 from :data:`FLOAT32_FROM` vertices
         on (twice as fast, and enough for a preconditioner), float64 below (where speed does
         not matter, so small problems iterate exactly as with the float64 box).
+    prior : (mass, fixed), optional
+        A depth prior in `K` (docs/fusion.md): its lumped diagonal ``mass`` (n,) and the
+        components it fixes, ``fixed`` (n_components,) bool. The box and the mean-free
+        multigrid do not see a component's constant, which the prior makes a mode of `K`:
+        one application is then wrapped in a symmetric coarse correction on those constants
+        (``x = Pc r; x += M (r - K x); x += Pc (r - K x)`` with ``Pc = P (P^T K P)^{-1} P^T``,
+        P the components' indicators), and the multigrid operator carries ``mass`` instead of
+        the pins of the fixed components.
 
     Attributes
     ----------
@@ -183,11 +191,21 @@ class FacetPreconditioner:
     """
 
     def __init__(
-        self, domain, K, strong: np.ndarray, *, coarse: str = "auto", dtype=None, workers=None
+        self, domain, K, strong: np.ndarray, *, coarse: str = "auto", dtype=None, workers=None,
+        prior=None,
     ):
         if dtype is None:
             dtype = np.float32 if domain.n_vertices >= FLOAT32_FROM else np.float64
         self.domain = domain
+        self._prior = prior
+        self._P = None
+        if prior is not None:
+            fixed = np.asarray(prior[1], dtype=bool)
+            comp = domain.vertex_component
+            sel = np.flatnonzero(fixed[comp])
+            new = np.cumsum(fixed) - 1
+            self._P = sp.csr_matrix((np.ones(sel.size), (sel, new[comp[sel]])),
+                                    shape=(domain.n_vertices, int(fixed.sum())))
         self.box = BoxPreconditioner(domain, workers=workers, dtype=dtype)
         self.coarse = "box"
         self._global = self.box
@@ -221,7 +239,11 @@ class FacetPreconditioner:
         w = 1.0 if weights is None else np.asarray(weights, dtype=float)
         # pinned: a singular hierarchy breaks down on domains of many small components
         # (their coarse blocks are singular up to rounding)
-        return pin_components(self.domain, facet_form(self.domain, [(w, N_MEAN_FREE)]))
+        A = facet_form(self.domain, [(w, N_MEAN_FREE)])
+        if self._prior is None:
+            return pin_components(self.domain, A)
+        mass, fixed = self._prior
+        return pin_components(self.domain, A + sp.diags(mass, format="csr"), skip=fixed)
 
     def _regalerkin(self, weights) -> None:
         """New facet weights for the multigrid part: the same coarsening and interpolation,
@@ -247,7 +269,10 @@ class FacetPreconditioner:
         # with little fill however many there are: take them all (thin spiral with 30 %
         # missing normals at 2048^2: 643 CG iterations, 88 s with the clusters only)
         E = np.flatnonzero(weak_vertices(self.domain, strong, every=self._thin))
-        self.exact = self.coarse == "box" and self.box.exact and E.size == 0
+        self.exact = self.coarse == "box" and self.box.exact and E.size == 0 and self._P is None
+        if self._P is not None:
+            kc = np.asarray((self._P.T @ (K @ self._P)).diagonal()).ravel()
+            self._kc_inv = 1.0 / np.maximum(kc, 1e-300)
         self.n_weak = int(E.size)
         self._E = E
         self._lu = None
@@ -272,7 +297,19 @@ class FacetPreconditioner:
             )
         return self
 
+    def _coarse(self, r: np.ndarray) -> np.ndarray:
+        return self._P @ (self._kc_inv * (self._P.T @ r))
+
     def __call__(self, r: np.ndarray) -> np.ndarray:
+        if self._P is None:
+            return self._apply(r)
+        # components do not couple, so P^T K P is diagonal; symmetric multiplicative sweep
+        x = self._coarse(r)
+        x += self._apply(r - self.K @ x)
+        x += self._coarse(r - self.K @ x)
+        return x
+
+    def _apply(self, r: np.ndarray) -> np.ndarray:
         if self._lu is None:
             return self._global(r)
         E, lu = self._E, self._lu

@@ -18,7 +18,7 @@ import numpy as np
 from ..options import Option
 
 #: Capabilities a method may declare (``facetlift methods`` shows them).
-CAPABILITIES = ("masks", "missing", "perspective", "discontinuities")
+CAPABILITIES = ("masks", "missing", "perspective", "discontinuities", "prior", "confidence")
 
 
 @dataclass
@@ -52,6 +52,10 @@ class MethodInfo:
     missing: bool = False
     perspective: bool = False
     discontinuities: bool = False
+    #: Takes a depth prior (``prior=``, docs/fusion.md).
+    prior: bool = False
+    #: Takes per-pixel weights of the normal term (``confidence=``).
+    confidence: bool = False
 
     def _module(self):
         return importlib.import_module(f"facetlift.methods.{self.module}")
@@ -96,6 +100,8 @@ register(
         missing=True,
         perspective=True,
         discontinuities=True,
+        prior=True,
+        confidence=True,
     )
 )
 
@@ -118,6 +124,11 @@ register(
 # log-depth slopes take perspective input (the camera's grid slopes); diffusion's contrast is
 # in height-slope units, and Frankot-Chellappa and the kernel fit stay orthographic.
 _LOG_DEPTH = {"poisson", "alpha_surface", "m_estimator", "regularization"}
+# A depth prior and confidences are terms of a least-squares energy on the pixel graph: the
+# methods that solve one (weighted) Poisson system per round take them. Regularization and
+# diffusion change the operator itself, Frankot-Chellappa and the kernel fit have no per-pixel
+# terms to weight.
+_FUSION = {"poisson", "alpha_surface", "m_estimator"}
 for _name, _summary, _ref in [
     ("frankot_chellappa", "Projection onto integrable Fourier bases",
      "Frankot & Chellappa, A method for enforcing integrability in shape from shading "
@@ -139,7 +150,8 @@ for _name, _summary, _ref in [
      "Gaussian kernel approach, PAMI 2010"),
 ]:
     register(MethodInfo(name=_name, module=_name, summary=_summary, reference=_ref,
-                        masks=True, missing=True, perspective=_name in _LOG_DEPTH))
+                        masks=True, missing=True, perspective=_name in _LOG_DEPTH,
+                        prior=_name in _FUSION, confidence=_name in _FUSION))
 
 
 def markdown() -> str:

@@ -61,19 +61,48 @@ def spd_solve(K, b: np.ndarray, backend: str = "auto", *, kind: str = "graph", p
     return linalg.solve(K, b, backend, kind=kind, progress=progress)[0]
 
 
+def edge_confidence(problem, graph: g.PixelGraph) -> np.ndarray:
+    """(E,) weight of each edge's data term from the normals' confidence: the mean confidence
+    of the usable samples the edge's target is averaged over (1 without a confidence)."""
+    if problem.confidence is None:
+        return np.ones(graph.n_edges)
+    c = np.where(problem.usable, problem.confidence, 0.0)
+    u = problem.usable.astype(float)
+    count = u[graph.tail] + u[graph.head]
+    return np.where(count > 0, (c[graph.tail] + c[graph.head]) / np.maximum(count, 1), 1.0)
+
+
+def prior_terms(problem):
+    """``(weight, target, fixed)`` of the problem's prior at the pixels (the unknown's values,
+    weight 0 without a sample) and the components it fixes; None without a prior."""
+    if not problem.has_prior:
+        return None
+    w, t = problem.prior_terms()
+    return w, t, problem.prior_components
+
+
 def solve_weighted(
     domain: Domain, graph: g.PixelGraph, w: np.ndarray, t: np.ndarray, backend: str = "auto",
-    *, series: linalg.Series | None = None, progress=None,
+    *, series: linalg.Series | None = None, progress=None, prior=None,
 ) -> np.ndarray:
-    """Unknowns (n,) minimising ``sum_e w_e (z_head - z_tail - t_e)^2`` (one pin per component).
+    """Unknowns (n,) minimising ``sum_e w_e (z_head - z_tail - t_e)^2`` (one pin per component),
+    plus ``sum_p wp_p (z_p - tp_p)^2`` with ``prior = (wp, tp, fixed)`` (:func:`prior_terms`;
+    the components it fixes are not pinned).
 
     `w` must be positive on a set of edges that connects each domain component. Rounds of a
     reweighting pass the same :class:`facetlift.linalg.Series` as `series` (one multigrid
     hierarchy for all rounds, warm starts); then `backend` is the series'. `progress` as in
     :func:`spd_solve` (not with `series`: the rounds report instead).
     """
-    K = g.pin(domain, g.laplacian(graph, w))
-    b = g.divergence(graph, w * t)
+    if prior is None:
+        K = g.pin(domain, g.laplacian(graph, w))
+        b = g.divergence(graph, w * t)
+    else:
+        import scipy.sparse as sp
+
+        wp, tp, fixed = prior
+        K = g.pin(domain, g.laplacian(graph, w) + sp.diags(wp, format="csr"), skip=fixed)
+        b = g.divergence(graph, w * t) + wp * tp
     if series is not None:
         return series.solve(K, b)
     return spd_solve(K, b, backend, progress=progress)

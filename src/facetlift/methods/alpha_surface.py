@@ -149,10 +149,12 @@ def run(problem, *, alpha, max_iter, tol, backend, progress) -> MethodResult:
     t1 = time.perf_counter()
 
     series = linalg.Series(backend)  # one multigrid hierarchy for every round
+    conf = g.edge_confidence(problem, graph)
+    prior = g.prior_terms(problem)
 
     def solve(kept):
-        w = np.where(has, kept.astype(float), g.FILL_WEIGHT)
-        return g.solve_weighted(domain, graph, w, t, series=series)
+        w = np.where(has, kept * conf, g.FILL_WEIGHT)
+        return g.solve_weighted(domain, graph, w, t, series=series, prior=prior)
 
     z = solve(kept)
     rounds = 0

@@ -101,7 +101,9 @@ def run(problem, *, weight, k, scale, max_iter, tol, backend, progress) -> Metho
     domain, graph, t, has, h = g.setup(problem)
     floor = 1e-12 * max(float(np.median(np.abs(t[has]))) / h if has.any() else 0.0, 1.0)
     series = linalg.Series(backend)  # one multigrid hierarchy for every reweighting
-    z = g.solve_weighted(domain, graph, g.edge_weights(has), t, series=series)
+    conf = g.edge_confidence(problem, graph)
+    prior = g.prior_terms(problem)
+    z = g.solve_weighted(domain, graph, g.edge_weights(has, conf), t, series=series, prior=prior)
     changes = []
     converged = False
     if scale == "mad":  # once, from the residuals of the Poisson start
@@ -114,7 +116,8 @@ def run(problem, *, weight, k, scale, max_iter, tol, backend, progress) -> Metho
         w = np.full(graph.n_edges, g.FILL_WEIGHT)
         wd = weights(r / s, weight, k)
         w[has] = np.maximum(wd / wd.max(), g.FILL_WEIGHT) if wd.size else wd
-        z_new = g.solve_weighted(domain, graph, w, t, series=series)
+        w[has] *= conf[has]
+        z_new = g.solve_weighted(domain, graph, w, t, series=series, prior=prior)
         change = g.relative_change(z_new, z)
         changes.append(change)
         z = z_new

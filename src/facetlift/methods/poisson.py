@@ -13,6 +13,11 @@ Missing samples
     gets the tiny fill weight of :data:`facetlift.methods._graph.FILL_WEIGHT` toward a zero
     difference (a membrane fill of regions without samples).
 
+Depth prior and confidence (docs/fusion.md)
+    ``prior`` adds ``sum_p w_p (z_p - z_prior_p)^2`` at the pixels with a sample (a component
+    with a sample is not pinned: the prior fixes its constant); ``confidence`` scales each
+    edge's data term by the mean confidence of the samples its target comes from.
+
 Options
     Declared in :data:`OPTIONS`: ``backend`` (see :mod:`facetlift.linalg`).
 
@@ -37,7 +42,8 @@ def run(problem: Problem, *, backend: str, progress) -> MethodResult:
     t0 = time.perf_counter()
     _, graph, t, has, _ = g.setup(problem)
     t1 = time.perf_counter()
-    z = g.solve_weighted(problem.domain, graph, g.edge_weights(has), t, backend,
+    w = g.edge_weights(has, g.edge_confidence(problem, graph))
+    z = g.solve_weighted(problem.domain, graph, w, t, backend, prior=g.prior_terms(problem),
                          progress=progress)
     t2 = time.perf_counter()
     info = {

@@ -217,10 +217,12 @@ def divergence(graph: PixelGraph, wt: np.ndarray) -> np.ndarray:
     return np.bincount(graph.head, wt, n) - np.bincount(graph.tail, wt, n)
 
 
-def pin(domain: Domain, K: sp.spmatrix, weight: float = 1.0) -> sp.csr_matrix:
-    """Add `weight` to the diagonal at the first pixel of every domain component."""
+def pin(domain: Domain, K: sp.spmatrix, weight: float = 1.0, skip=None) -> sp.csr_matrix:
+    """Add `weight` to the diagonal at the first pixel of every domain component (but those
+    where `skip` (n_components,) bool is True: a prior fixes their constant)."""
     d = np.zeros(domain.n_facets)
-    d[domain.first_facets] = weight
+    first = domain.first_facets if skip is None else domain.first_facets[~np.asarray(skip)]
+    d[first] = weight
     return (K + sp.diags(d, format="csr")).tocsr()
 
 

@@ -123,10 +123,13 @@ def scatter_corners(domain: Domain, values: np.ndarray) -> np.ndarray:
     )
 
 
-def pin_components(domain: Domain, K: sp.csr_matrix, weight: float = 1.0) -> sp.csr_matrix:
-    """Add `weight` to the diagonal at one vertex per connected component (fixes the constant)."""
+def pin_components(domain: Domain, K: sp.csr_matrix, weight: float = 1.0,
+                   skip=None) -> sp.csr_matrix:
+    """Add `weight` to the diagonal at one vertex per connected component (fixes the constant),
+    except the components where `skip` (n_components,) bool is True (a prior fixes them)."""
     d = np.zeros(domain.n_vertices)
-    d[domain.first_vertices] = weight
+    first = domain.first_vertices if skip is None else domain.first_vertices[~np.asarray(skip)]
+    d[first] = weight
     return (K + sp.diags(d, format="csr")).tocsr()
 
 
@@ -162,3 +165,15 @@ def grid_scatter(gx: np.ndarray, gy: np.ndarray, centre: np.ndarray | None = Non
         for view in corner_views(R):
             view += centre
     return R
+
+
+#: Facet block of a prior on the facet centre: ``(mean z_f)^2 = z_f^T (11^T / 16) z_f``.
+CENTRE_BLOCK = np.full((4, 4), 1.0 / 16.0)
+
+
+def prior_form(domain: Domain, weight: np.ndarray, target: np.ndarray):
+    """The prior term ``sum_f w_f (mean z_f - t_f)^2`` on the vertices: its matrix (n, n) CSR
+    (``facet_form`` of :data:`CENTRE_BLOCK`) and right-hand side ``C^T (w t / 4)`` (n,)."""
+    K = facet_form(domain, [(weight, CENTRE_BLOCK)])
+    rhs = scatter_corners(domain, np.repeat((0.25 * weight * target)[:, None], 4, axis=1))
+    return K, rhs

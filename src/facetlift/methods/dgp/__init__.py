@@ -117,31 +117,44 @@ def run(
     bx, by, target = targets(problem)
     s = problem.camera.footprint()
     domain = problem.domain
+    prior = fusion_terms(problem)
+    weights = problem.confidence  # None: every normal term weighs 1
     if discontinuities:
         empty_components(domain, target)
         z, y, w, info = solve_discontinuous(
             domain, bx, by, target, normal_scale=normal_scale(problem), k=discontinuity_k,
             max_iter=discontinuity_iter, tol=discontinuity_tol, flat_weight=flat_weight,
-            callback=progress,
+            callback=progress, prior=prior, weights=weights,
         )
-        copies, pinfo = place_pieces(domain, y, bx, by, target, s)
+        copies, pinfo = place_pieces(domain, y, bx, by, target, s,
+                                     anchored=None if prior is None else prior[0] > 0)
         info.update(pinfo)
         info["solver"] = "discontinuous"
         info["deviation"] = [average_deviation(domain, z, bx, by, target, s)]
         result = MethodResult(values=copies.mean(axis=1), info=info,
                               extras={"corner_values": copies})
     elif solver == "direct":  # both loops share this fixed point
-        z, info = solve_direct(domain, bx, by, target, backend, flat_weight, h=s,
-                               progress=progress)
+        z, info = solve_direct(domain, bx, by, target, backend, flat_weight, weights, h=s,
+                               prior=prior, progress=progress)
         result = MethodResult(vertex_values=z, info=info)
     else:
         z, info = solve_iterative(
             domain, bx, by, target, s, mean_subtraction, max_iter, tol, backend, progress,
+            weights=weights, prior=prior,
         )
         result = MethodResult(vertex_values=z, info=info)
     info["outliers"] = int((problem.known & ~target).sum())
     info["missing"] = int((~problem.known).sum())
     return result
+
+
+def fusion_terms(problem):
+    """``(weight, target, fixed)`` of the problem's depth prior on the facet centres (values of
+    the camera's unknown) and the components it fixes; None without a prior."""
+    if not problem.has_prior:
+        return None
+    w, t = problem.prior_terms()
+    return w, t, problem.prior_components
 
 
 def normal_scale(problem):
@@ -153,17 +166,22 @@ def normal_scale(problem):
     return np.where(problem.usable, cos, 0.0) / problem.camera.footprint()
 
 
-def place_pieces(domain, copies, bx, by, target, footprint):
+def place_pieces(domain, copies, bx, by, target, footprint, anchored=None):
     """The facets' corner copies (m, 4) with the pieces the jumps separate placed by the
     occlusion rule (:func:`facetlift.methods.dgp.split.occlusion_offsets`): the mesh is split
     where neighbouring copies part by more than :data:`facetlift.operators.split.GAP`
     footprints, and each separated piece moved rigidly so that the smallest jump on its boundary
-    is zero. Returns the copies (split vertices averaged) and ``{"pieces", "moved_pieces"}``."""
+    is zero. Pieces holding a facet of `anchored` (m,) bool (prior samples) stay where the
+    solve put them: the prior decided their offset; the others are placed relative to them.
+    Returns the copies (split vertices averaged) and ``{"pieces", "moved_pieces"}``."""
     from ...operators.split import GAP, from_copies
     from .split import occlusion_offsets
 
     mesh, values = from_copies(domain, copies, GAP * footprint)
-    offsets = occlusion_offsets(mesh, values, bx, by, target, scale=footprint)
+    fixed = None
+    if anchored is not None:
+        fixed = np.bincount(mesh.facet_piece[anchored], minlength=mesh.n_pieces) > 0
+    offsets = occlusion_offsets(mesh, values, bx, by, target, scale=footprint, fixed=fixed)
     moved = int((np.abs(offsets) > GAP * footprint).sum())
     return (values + offsets[mesh.piece])[mesh.corners], {"pieces": mesh.n_pieces,
                                                          "moved_pieces": moved}

@@ -65,7 +65,7 @@ from threadpoolctl import threadpool_limits
 
 from ... import linalg
 from ...linalg.amg import hierarchy
-from ...operators.stencil import E_TWIST, E_X, E_Y, facet_form, scatter_corners
+from ...operators.stencil import E_TWIST, E_X, E_Y, facet_form, prior_form, scatter_corners
 
 #: Default for ``discontinuity_k`` (squared pixel footprints; see the module docstring).
 DEFAULT_K = 4.0
@@ -108,6 +108,12 @@ REUSE_STEP = 0.5
 #: -27 %, orthographic renders 3-5x faster.
 LOOSE_RTOL = 1e-4
 
+#: Share of a depth prior's weight on the facets' own copies ``y``; the rest is on the glued
+#: vertices ``z`` (docs/fusion.md). On ``z`` a sample moves the piece it lies on; on ``y``
+#: alone every sample that disagrees with the normals tears its facet loose (rings of cuts
+#: around the samples); on ``y`` too a huge weight makes the output meet the prior.
+PRIOR_OWN = 0.5
+
 #: (x side, y side) of facet corners 0..3 (top-left, top-right, bottom-right, bottom-left):
 #: +1 for the +x (right) / +y (up) side.
 CORNER_SIDES = ((-1, 1), (1, 1), (1, -1), (-1, -1))
@@ -123,7 +129,7 @@ class FacetBlocks:
         Diagonal weight added at one vertex per connected component (fixes the constant).
     """
 
-    def __init__(self, domain, pin: float = 1.0):
+    def __init__(self, domain, pin: float = 1.0, skip=None):
         self.domain = domain
         pattern = facet_form(domain, [(1.0, np.ones((4, 4)))])
         pattern.sort_indices()
@@ -137,7 +143,7 @@ class FacetBlocks:
         idx_dtype = np.int32 if keys.size < 2**31 else np.int64
         self.slot = np.searchsorted(keys, fk).astype(idx_dtype).reshape(-1, 16)
         self.nnz = keys.size
-        first = domain.first_vertices
+        first = domain.first_vertices if skip is None else domain.first_vertices[~skip]
         diag = np.searchsorted(keys, first * n + first)
         self.pin = np.bincount(diag, np.full(first.size, pin), minlength=self.nnz)
 
@@ -148,34 +154,43 @@ class FacetBlocks:
         return sp.csr_matrix((data + self.pin, self.indices, self.indptr), shape=(n, n))
 
 
-def _facet_system(bx, by, flat_weight):
+def _facet_system(bx, by, flat_weight, fusion=None):
     """``A = P^T P`` (4, 4) of a facet without a target, and ``a_f = P^T b_f`` (m, 4).
 
     A facet with a target has ``A = I - 11^T / 4`` (slopes and twist, see
-    :func:`_glue_inverse`).
+    :func:`_glue_inverse`). With `fusion` ``(c, lam, t)`` (normal weights, prior weights and
+    targets, each (m,); docs/fusion.md) every facet's normal term is scaled by ``c_f`` and
+    ``lam_f (mean y_f - t_f)^2`` is added: ``A_other`` is then (m, 4, 4).
     """
     slope = np.outer(E_X, E_X) + np.outer(E_Y, E_Y)
     A_other = flat_weight * slope + np.outer(E_TWIST, E_TWIST)
     a = bx[:, None] * E_X + by[:, None] * E_Y
+    if fusion is not None:
+        c, lam, t = fusion
+        A_other = c[:, None, None] * A_other + lam[:, None, None] / 16.0
+        a = c[:, None] * a + (0.25 * lam * t)[:, None]
     return A_other, a
 
 
-def _glue_inverse(target, w, A_other):
+def _glue_inverse(target, w, A_other, fusion=None):
     """``M_f = (A_f + diag(w_f))^{-1}`` for the facets with glue weights `w` (k, 4): (k, 4, 4).
 
     For a facet with a target ``A_f = I - 11^T / 4``, so ``A_f + W_f`` is a diagonal minus a
     rank-one matrix and Sherman-Morrison gives the inverse in closed form; the few facets
-    without a target are inverted directly.
+    without a target are inverted directly. With `fusion` (:func:`_facet_system`)
+    ``A_f = c_f I - (c_f / 4 - lam_f / 16) 11^T``: still a diagonal minus a rank-one matrix.
     """
-    dinv = 1.0 / (1.0 + w)  # (m, 4)
-    d = 0.5 * dinv
-    c = 1.0 / (1.0 - 0.25 * dinv.sum(axis=1))
-    M = c[:, None, None] * d[:, :, None] * d[:, None, :]
+    c_f, alpha = (1.0, 0.25) if fusion is None else (fusion[0][:, None],
+                                                     (0.25 * fusion[0] - fusion[1] / 16.0))
+    dinv = 1.0 / (c_f + w)  # (m, 4)
+    c = np.asarray(alpha / (1.0 - alpha * dinv.sum(axis=1)))
+    M = (c * np.ones(len(w)))[:, None, None] * dinv[:, :, None] * dinv[:, None, :]
     idx = np.arange(4)
     M[:, idx, idx] += dinv
     other = ~target
     if other.any():
-        M[other] = np.linalg.inv(A_other + w[other][:, :, None] * np.eye(4))
+        Ao = A_other if fusion is None else A_other[other]
+        M[other] = np.linalg.inv(Ao + w[other][:, :, None] * np.eye(4))
     return M
 
 
@@ -228,7 +243,7 @@ def changes_big(step) -> bool:
 def solve_discontinuous(
     domain, bx, by, target, *, normal_scale, k: float = DEFAULT_K,
     max_iter: int = DEFAULT_ITER, tol: float = DEFAULT_TOL, flat_weight: float = 1e-9,
-    cg_rtol: float = 1e-6, callback=None,
+    cg_rtol: float = 1e-6, callback=None, prior=None, weights=None,
 ):
     """Minimise the glued facet energy with bilateral weights (see the module docstring).
 
@@ -252,6 +267,12 @@ def solve_discontinuous(
     cg_rtol : float
         Relative residual of every CG solve.
     callback : callable(iteration, relative energy change), optional
+    prior : (w, t, fixed), optional
+        Depth prior on the facet centres of the glued vertices ``z``: weights and targets
+        (m,) and the components it fixes (not pinned); it decides the offsets of pieces the
+        cuts separate (docs/fusion.md).
+    weights : (m,) float, optional
+        Weight of every facet's normal term (the normals' confidence).
 
     Returns
     -------
@@ -271,26 +292,40 @@ def solve_discontinuous(
     # each one costs milliseconds (measured: 13 of 20 s on the bear), single-threaded microseconds
     with threadpool_limits(limits=1, user_api="blas"):
         return _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight,
-                      cg_rtol, callback)
+                      cg_rtol, callback, prior, weights)
 
 
 def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, cg_rtol,
-           callback):
+           callback, prior=None, weights=None):
     t0 = time.perf_counter()
     m = domain.n_facets
-    A_other, a = _facet_system(bx, by, flat_weight)
-    blocks = FacetBlocks(domain)
+    fusion = None
+    if weights is not None or prior is not None:  # docs/fusion.md
+        c = np.ones(m) if weights is None else np.asarray(weights, float)
+        lam, t_prior = (np.zeros(m), np.zeros(m)) if prior is None else prior[:2]
+        fusion = (c, PRIOR_OWN * lam, t_prior)
+    A_other, a = _facet_system(bx, by, flat_weight, fusion)
+    blocks = FacetBlocks(domain, skip=None if prior is None else prior[2])
+    KP = rP = None
+    if prior is not None:
+        # on the shared (glued) vertices, not on the facets' own copies: a sample then moves
+        # the piece it lies on instead of tearing its own facet loose (a ring of cuts around
+        # every sample), and decides the offsets the cuts leave free
+        KP, rP = prior_form(domain, (1.0 - PRIOR_OWN) * prior[0], prior[1])
     corners = domain.corners
     nb = neighbours(domain)
     diag = np.arange(4)
     eye_rows = np.stack([E_X, E_Y], axis=1)  # (4, 2): corner vector -> (x-slope, y-slope)
 
     def state(w):
-        M = _glue_inverse(target, w, A_other)
+        M = _glue_inverse(target, w, A_other, fusion)
         Q = -(w[:, :, None] * M * w[:, None, :])
         Q[:, diag, diag] += w
         Ma = np.einsum("fab,fb->fa", M, a)
-        return M, Ma, blocks.assemble(Q), scatter_corners(domain, w * Ma)
+        K, rhs = blocks.assemble(Q), scatter_corners(domain, w * Ma)
+        if KP is not None:
+            K, rhs = (K + KP).tocsr(), rhs + rP
+        return M, Ma, K, rhs
 
     def copies(M, Ma, w, z):
         return Ma + np.einsum("fab,fb->fa", M, w * z[corners])
@@ -299,7 +334,13 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         slopes = y @ eye_rows - np.stack([bx, by], axis=1)
         fit = np.where(target, np.einsum("fa,fa->f", slopes, slopes), 0.0)
         twist = (y @ E_TWIST) ** 2
-        return float(fit.sum() + twist.sum() + (w * (y - z[corners]) ** 2).sum())
+        glue = (w * (y - z[corners]) ** 2).sum()
+        if fusion is None and prior is None:
+            return float(fit.sum() + twist.sum() + glue)
+        c = 1.0 if fusion is None else fusion[0]
+        fit_prior = 0.0 if prior is None else fusion[1] * (y.mean(axis=1) - prior[1]) ** 2 + (
+            (1.0 - PRIOR_OWN) * prior[0] * (z[corners].mean(axis=1) - prior[1]) ** 2)
+        return float((c * (fit + twist)).sum() + np.sum(fit_prior) + glue)
 
     slopes = (bx, by) if EVIDENCE == "residual" else None
     w = np.ones((m, 4))

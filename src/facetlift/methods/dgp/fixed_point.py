@@ -19,7 +19,15 @@ import numpy as np
 from ... import linalg
 from ...linalg.facet import FacetPreconditioner, thin
 from ...linalg.spectral import RectangleSolver
-from ...operators.stencil import E_TWIST, E_X, E_Y, facet_form, grid_scatter, pin_components
+from ...operators.stencil import (
+    E_TWIST,
+    E_X,
+    E_Y,
+    facet_form,
+    grid_scatter,
+    pin_components,
+    prior_form,
+)
 from .common import average_deviation, empty_components, flatten
 
 #: Facet blocks of the fixed point: slopes (known facets) and twist (every facet).
@@ -35,20 +43,30 @@ RTOL = 1e-11
 
 def solve_direct(
     domain, bx, by, target, backend="auto", flat_weight=1e-9, weights=None, *, h=1.0,
-    progress=None,
+    prior=None, progress=None,
 ):
     """The fixed point of the local/global loop in one sparse solve.
 
     Returns vertex values (n,) and an info dict. `weights` (m,) optionally scales each
-    facet's terms; `h` is the camera footprint (for the reported angular deviation).
-    `progress` (iteration, relative residual) is called after every CG iteration of the
-    facet-CG route; the spectral solve and the factorizations have no iterations to report.
+    facet's terms (the normals' confidence); `h` is the camera footprint (for the reported
+    angular deviation). `prior` ``(w, t, fixed)`` adds ``sum_f w_f (mean z_f - t_f)^2``
+    (:func:`facetlift.operators.stencil.prior_form`); the components it fixes (``fixed``,
+    (n_components,) bool) are neither pinned nor flattened. `progress` (iteration, relative
+    residual) is called after every CG iteration of the facet-CG route; the spectral solve
+    and the factorizations have no iterations to report.
     """
     t0 = time.perf_counter()
     empty = empty_components(domain, target)
+    fixed = None
+    if prior is not None:
+        pw, pt, fixed = prior
+        empty = empty[~fixed[empty]]  # a prior shapes a component without normals
     w = np.ones(domain.n_facets) if weights is None else weights
     rhs = grid_scatter(domain.to_image(w * bx, fill=0.0), domain.to_image(w * by, fill=0.0))
     rhs = rhs[domain.vertex_mask]
+    if prior is not None:
+        KP, rP = prior_form(domain, pw, pt)
+        rhs = rhs + rP
     n = domain.n_vertices
     strong = target  # components without a target come out flat (flatten below): give
     if empty.size:  # them a well-posed, trivial block
@@ -62,21 +80,25 @@ def solve_direct(
     # sees their structure.
     route = linalg.choose(n, backend, kind="facet", thin=thin(domain))
     cg_its = None
-    if route == "pcg" and weights is None and bool(strong.all()) and domain.mask.all():
+    plain = weights is None and prior is None
+    if route == "pcg" and plain and bool(strong.all()) and domain.mask.all():
         t1 = time.perf_counter()
         z = RectangleSolver(*domain.shape).solve(rhs)
         used = "spectral"
     else:
         wk = np.where(strong, w, flat_weight * w)
         K = facet_form(domain, [(wk, SLOPE_BLOCK), (w, TWIST_BLOCK)])
+        if prior is not None:
+            K = (K + KP).tocsr()
+            del KP
         if route == "pcg":
-            pre = FacetPreconditioner(domain, K, strong)
+            pre = FacetPreconditioner(domain, K, strong, prior=_lumped(domain, prior))
             t1 = time.perf_counter()
             z, sinfo = linalg.solve(K, rhs, "pcg", preconditioner=pre, rtol=RTOL, flexible=True,
                                     progress=progress)
             used = "pcg-facet"
         else:
-            K = pin_components(domain, K)
+            K = pin_components(domain, K, skip=fixed)
             t1 = time.perf_counter()
             z, sinfo = linalg.solve(K, rhs, route, kind="spd")
             used = sinfo.backend
@@ -97,3 +119,15 @@ def solve_direct(
     if cg_its is not None:
         info["cg_iterations"] = cg_its
     return z, info
+
+
+def _lumped(domain, prior):
+    """``(mass, fixed)`` for :class:`~facetlift.linalg.facet.FacetPreconditioner`: the prior
+    term's row sums per vertex (``w_f / 4`` at each corner) and the components it fixes; None
+    without a prior."""
+    if prior is None:
+        return None
+    from ...operators.stencil import scatter_corners
+
+    pw, _, fixed = prior
+    return scatter_corners(domain, np.repeat((0.25 * pw)[:, None], 4, axis=1)), fixed

@@ -25,6 +25,7 @@ from ...operators.stencil import (
     grid_scatter,
     grid_slopes,
     pin_components,
+    prior_form,
 )
 from .common import empty_components, mean_angle
 
@@ -45,20 +46,38 @@ def local_shaping(domain, z, bx, by, target):
 
 def solve_iterative(
     domain, bx, by, target, h, mean_subtraction=True, max_iter=5000, tol=1e-3,
-    backend="auto", progress=None,
+    backend="auto", progress=None, *, weights=None, prior=None,
 ):
-    """The paper's local/global loop from the flat mesh; returns vertex values and info."""
+    """The paper's local/global loop from the flat mesh; returns vertex values and info.
+
+    `weights` (m,) scale every facet's term of the global step (the normals' confidence);
+    `prior` ``(w, t, fixed)`` adds ``sum_f w_f (mean z_f - t_f)^2`` to it (docs/fusion.md).
+    Either needs the mean-subtracted global step.
+    """
     t0 = time.perf_counter()
     empty_components(domain, target)
     factor = valence = None
+    fused = weights is not None or prior is not None
+    if fused and not mean_subtraction:
+        raise ValueError("a `prior` or `confidence` needs mean_subtraction=True with "
+                         "solver='iterative' (the averaging step has no weighted form)")
+    fixed = None if prior is None else prior[2]
+    wimg = 1.0 if weights is None else domain.to_image(weights, fill=0.0)
+    prhs = None
     if mean_subtraction:
         # on a full rectangle A^T A is diagonalised by the DCT-I: the spectral box solver is
         # exact, O(n log n), and needs no matrix; on other masks it preconditions CG (every
         # facet carries the full block N here, so no facet is weak), warm-started each step
         route = linalg.choose(domain.n_vertices, backend, kind="facet", thin=thin(domain))
-        exact = bool(domain.mask.all()) and route == "pcg"
+        exact = bool(domain.mask.all()) and route == "pcg" and not fused
         if not exact:
-            K = pin_components(domain, facet_form(domain, [(1.0, N_MEAN_FREE)]))
+            w = 1.0 if weights is None else weights
+            K = facet_form(domain, [(w, N_MEAN_FREE)])
+            if prior is not None:
+                KP, prhs = prior_form(domain, prior[0], prior[1])
+                K = K + KP
+            if not (fused and route == "pcg"):  # CG needs no pin (rhs in the range);
+                K = pin_components(domain, K, skip=fixed)  # the box cannot see one
     else:
         valence = np.bincount(domain.corners.ravel(), minlength=domain.n_vertices)
     t1 = time.perf_counter()
@@ -66,7 +85,12 @@ def solve_iterative(
         factor = linalg.Factor(RectangleSolver(*domain.shape).solve, "spectral")
     elif mean_subtraction:
         strong = np.ones(domain.n_facets, dtype=bool)
-        pre = FacetPreconditioner(domain, K, strong) if route == "pcg" else None
+        lumped = None
+        if prior is not None:
+            from .fixed_point import _lumped
+
+            lumped = _lumped(domain, prior)
+        pre = FacetPreconditioner(domain, K, strong, prior=lumped) if route == "pcg" else None
         factor = linalg.factorize(K, route, kind="facet", preconditioner=pre)
     t2 = time.perf_counter()
     # The loop runs on facet and vertex images (grid slicing, no scattered gathers): each
@@ -89,7 +113,9 @@ def solve_iterative(
         gx = np.where(T, BX, np.where(free, gx, 0.0))
         gy = np.where(T, BY, np.where(free, gy, 0.0))
         centre = None if mean_subtraction else sum(corner_views(Z)) * (0.25 * fmask)
-        rhs = grid_scatter(gx, gy, centre)[vm]
+        rhs = grid_scatter(gx * wimg, gy * wimg, centre)[vm]
+        if prhs is not None:
+            rhs += prhs
         tb = time.perf_counter()
         Z[vm] = factor.solve(rhs) if mean_subtraction else rhs / valence
         tc = time.perf_counter()

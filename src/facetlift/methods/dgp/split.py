@@ -121,7 +121,7 @@ MIXED = 0.2
 
 
 def occlusion_offsets(mesh: SplitMesh, z, bx, by, target, quantile: float = 0.05,
-                      scale: float = 0.0):
+                      scale: float = 0.0, fixed=None):
     """Constants (n_pieces,) placing separated pieces by the occlusion rule.
 
     Across the boundary between two pieces one surface lies in front of the other: the jump
@@ -131,10 +131,11 @@ def occlusion_offsets(mesh: SplitMesh, z, bx, by, target, quantile: float = 0.05
     side of the jump's majority sign, is set to 0 (where both signs are common among the jumps
     larger than `scale`, see :data:`MIXED`, the median instead). Pairs are then reconciled by
     least squares weighted by their boundary length (one constant per group of connected
-    pieces stays free).
+    pieces stays free). Pieces where `fixed` (n_pieces,) bool is True keep offset 0 (their
+    place is known, e.g. from a depth prior); a group with a fixed piece has no free constant.
     """
     k = max(mesh.n_pieces, 1)
-    if mesh.n_pieces <= 1:
+    if mesh.n_pieces <= 1 or (fixed is not None and fixed.all()):
         return np.zeros(k)
     pa, pb, gap = _continuation(mesh, z, bx, by, target)
     keep = pa != pb
@@ -173,6 +174,22 @@ def occlusion_offsets(mesh: SplitMesh, z, bx, by, target, quantile: float = 0.05
                        np.r_[lo, hi])), shape=(lo.size, k))
     L = D.T @ sp.diags(w) @ D
     _, grp = connected_components(L, directed=False)
+    if fixed is not None and fixed.any():
+        # fixed pieces are removed from the unknowns (offset 0); groups without one get a pin
+        free = ~np.asarray(fixed, bool)
+        has_fixed = np.bincount(grp[~free], minlength=grp.max() + 1) > 0
+        pin = np.zeros(k)
+        cand = free & ~has_fixed[grp]
+        first = np.full(grp.max() + 1, -1)
+        first[grp[::-1][cand[::-1]]] = np.arange(k)[::-1][cand[::-1]]
+        pin[first[first >= 0]] = 1.0
+        b = D.T @ (w * want)
+        o = np.zeros(k)
+        idx = np.flatnonzero(free)
+        if idx.size:
+            Lf = (L + sp.diags(pin)).tocsc()[idx][:, idx]
+            o[idx] = np.atleast_1d(spla.spsolve(Lf.tocsc(), b[idx]))
+        return o
     first = np.full(grp.max() + 1, -1)
     first[grp[::-1]] = np.arange(k)[::-1]
     L = (L + sp.diags(np.bincount(first, minlength=k).astype(float))).tocsc()

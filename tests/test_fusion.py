@@ -1,0 +1,292 @@
+"""Depth priors and normal confidences (docs/fusion.md): limits, identities, every error path."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import facetlift
+from facetlift import methods
+from facetlift.cli import main
+
+FUSING = [name for name, info in methods.REGISTRY.items() if info.prior]
+ROUTES = [("dgp", {}), ("dgp", {"solver": "iterative", "tol": 1e-7, "max_iter": 20000}),
+          ("dgp", {"discontinuities": True}), ("poisson", {}), ("m_estimator", {}),
+          ("alpha_surface", {})]
+
+
+def wave(shape=(24, 28)):
+    """A smooth height field: normals, its depth (height = -depth), full mask."""
+    H, W = shape
+    r, c = np.indices(shape)
+    x, y = c + 0.5, -(r + 0.5)
+    z = 2.0 * np.sin(x / 7.0) * np.cos(y / 9.0)
+    p = 2.0 / 7.0 * np.cos(x / 7.0) * np.cos(y / 9.0)
+    q = -2.0 / 9.0 * np.sin(x / 7.0) * np.sin(y / 9.0)
+    return facetlift.normals_from_gradients(p, q), -z
+
+
+def sparse(depth, fraction=0.05, seed=0):
+    rng = np.random.default_rng(seed)
+    sel = rng.random(depth.shape) < fraction
+    return np.where(sel, depth, np.nan), sel
+
+
+def run(normals, mask=None, method="dgp", options=None, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return facetlift.integrate(normals, mask, method=method, **(options or {}), **kw)
+
+
+def test_registry_declares_prior_and_confidence():
+    assert "prior" in methods.CAPABILITIES and "confidence" in methods.CAPABILITIES
+    assert {"dgp", "poisson"} <= set(FUSING)
+    assert not methods.REGISTRY["frankot_chellappa"].prior
+
+
+@pytest.mark.parametrize("method,options", ROUTES)
+def test_huge_weight_returns_the_prior_where_given(method, options):
+    n, depth = wave()
+    # a prior that disagrees with the normals; the discontinuity route's output mesh merges
+    # facet copies closer than GAP footprints (operators.split), so there the samples agree
+    # with the normals up to a constant the normals cannot see
+    rng = np.random.default_rng(5)
+    noise = 0.0 if options.get("discontinuities") else rng.normal(0, 0.3, depth.shape)
+    prior, sel = sparse(depth + 0.3 + noise, 0.05)
+    s = run(n, method=method, options=options, prior=prior, prior_weight=1e8)
+    # the discontinuity route's output merges facet copies that part by less than GAP
+    # footprints: there the samples are met to within that merging (a known limit)
+    tol = 0.1 * np.ptp(depth) if options.get("discontinuities") else 1e-3
+    assert np.abs(s.depth[sel] - prior[sel]).max() < tol
+    assert s.info["prior"]["samples"] == int(sel.sum())
+    assert s.info["prior"]["gauged_components"] == []
+
+
+@pytest.mark.parametrize("method,options", ROUTES)
+def test_tiny_weight_returns_the_normals_only_result(method, options):
+    n, depth = wave()
+    prior, sel = sparse(depth + 5.0, 0.05)
+    s0 = run(n, method=method, options=options)
+    s = run(n, method=method, options=options, prior=prior, prior_weight=1e-9)
+    d = s.depth - s0.depth
+    assert np.nanstd(d) < 1e-4 * np.ptp(depth)
+    # and the constant is the prior's, not today's mean 0
+    assert np.nanmean(d) == pytest.approx(np.mean(prior[sel] - s0.depth[sel]), abs=1e-3)
+
+
+def test_shifting_the_prior_shifts_the_result():
+    n, depth = wave()
+    prior, _ = sparse(depth, 0.1)
+    a = run(n, prior=prior)
+    b = run(n, prior=prior + 3.25)
+    np.testing.assert_allclose(b.depth - a.depth, 3.25, atol=1e-7)
+
+
+def test_exact_samples_recover_every_step_height_with_discontinuities():
+    H, W = 48, 60
+    r, c = np.indices((H, W))
+    step = np.digitize(c, [20, 40])
+    height = 0.1 * (c + 0.5) + 0.05 * (r + 0.5) + np.array([0.0, 6.0, 15.0])[step]
+    n = facetlift.normals_from_gradients(np.full((H, W), 0.1), np.full((H, W), -0.05))
+    n[:, [19, 20, 39, 40]] = np.nan  # the risers: no normal says how high a step is
+    depth = -height
+    prior, sel = sparse(depth, 0.01, seed=3)
+    assert all((sel & (step == k)).any() for k in range(3))
+    s = run(n, discontinuities=True, prior=prior, prior_weight=100.0)
+    for k in range(3):
+        inner = (step == k) & ~np.isin(c, [19, 20, 39, 40])
+        assert np.nanmedian(np.abs(s.depth - depth)[inner]) < 1e-2, k
+    # without the prior the steps' heights are unknowable: far off
+    s0 = run(n, discontinuities=True)
+    assert np.nanmedian(np.abs(s0.depth - depth - np.nanmean(s0.depth - depth))) > 1.0
+
+
+def test_perspective_prior_returns_metric_depth():
+    H, W = 30, 40
+    K = np.array([[500.0, 0, W / 2], [0, 500.0, H / 2], [0, 0, 1]])
+    n = np.zeros((H, W, 3))
+    n[..., 2] = 1.0  # a fronto-parallel plane
+    prior = np.full((H, W), np.nan)
+    prior[5, 7] = prior[20, 30] = 2.5
+    s0 = run(n, K=K)
+    assert np.nanmedian(s0.depth) == pytest.approx(1.0)
+    for method in ("dgp", "poisson"):
+        s = run(n, K=K, method=method, prior=prior)
+        np.testing.assert_allclose(s.depth, 2.5, rtol=1e-6)
+    s = run(n, K=K, prior=(np.array([5, 20]), np.array([7, 30]), np.array([2.5, 2.5])))
+    np.testing.assert_allclose(s.depth, 2.5, rtol=1e-6)
+
+
+def test_components_without_samples_keep_the_gauge_and_info_names_them():
+    n, depth = wave((20, 30))
+    mask = np.ones((20, 30), bool)
+    mask[:, 14:16] = False
+    prior = np.full(mask.shape, np.nan)
+    prior[3, 3] = 42.0
+    s = run(n, mask, prior=prior, prior_weight=1e6)
+    assert s.info["prior"]["prior_components"] == [1]
+    assert s.info["prior"]["gauged_components"] == [2]
+    assert s.depth[3, 3] == pytest.approx(42.0, abs=1e-4)
+    assert np.nanmean(s.depth[:, 16:]) == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("method,options", ROUTES)
+def test_confidence_zero_equals_a_missing_normal(method, options):
+    n, depth = wave()
+    conf = np.ones(depth.shape)
+    conf[5:12, 6:15] = 0.0
+    conf[15:20, 2:8] = 0.5
+    missing = n.copy()
+    missing[5:12, 6:15] = np.nan
+    c_half = np.where(conf == 0, 1.0, conf)
+    full = np.ones(depth.shape, bool)
+    a = run(n, full, method=method, options=options, confidence=conf)
+    b = run(missing, full, method=method, options=options, confidence=c_half)
+    np.testing.assert_allclose(a.depth, b.depth, atol=1e-7 * np.ptp(depth))
+    assert a.info["input"]["zero_confidence"] == 63
+
+
+def test_confidence_lowers_the_weight_of_bad_normals():
+    n, depth = wave()
+    bad = n.copy()
+    bad[5:12, 6:15] = [0.5, 0.0, np.sqrt(0.75)]
+    conf = np.ones(depth.shape)
+    conf[5:12, 6:15] = 1e-3
+    e = [np.abs(run(bad, confidence=c).depth - depth - np.mean(run(bad, confidence=c).depth
+                                                               - depth)).mean()
+         for c in (None, conf)]
+    assert e[1] < 0.2 * e[0]
+
+
+# ------------------------------------------------------------------------------------------
+# error paths
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"prior": np.zeros((5, 5))}, r"`prior` must be an \(H, W\) depth map of shape \(24, 28\)"),
+    ({"prior": np.full((24, 28), np.nan)}, "`prior` has no finite depth sample inside the mask"),
+    ({"prior": np.full((24, 28), np.inf)}, "`prior` must not contain inf"),
+    ({"prior": np.ones((24, 28)), "prior_weight": -1.0}, "`prior_weight` must be a finite "
+     "number >= 0; got -1.0"),
+    ({"prior": np.ones((24, 28)), "prior_weight": np.full((3, 3), 1.0)},
+     r"`prior_weight` must be a number or have shape \(24, 28\)"),
+    ({"prior": np.ones((24, 28)), "prior_weight": -np.ones((24, 28))},
+     "`prior_weight` must be finite and >= 0 where the prior has a sample; got -1.0"),
+    ({"prior_weight": 3.0}, "`prior_weight` applies only with a `prior`"),
+    ({"confidence": np.ones((2, 2))}, r"`confidence` must be a number or have shape"),
+    ({"confidence": -np.ones((24, 28))}, "`confidence` must be finite and >= 0 everywhere; "
+     "got -1.0"),
+    ({"prior": ([1, 2], [3, 99], [1.0, 2.0])}, "outside the 24 x 28 image"),
+    ({"prior": ([1, 2], [3], [1.0, 2.0])}, "three arrays of one length"),
+    ({"prior": np.ones((24, 28)), "method": "frankot_chellappa"},
+     "method 'frankot_chellappa' does not take a `prior`"),
+    ({"confidence": np.ones((24, 28)), "method": "kernel"},
+     "method 'kernel' does not take a `confidence`"),
+])
+def test_errors_name_the_argument(kwargs, match):
+    n, _ = wave()
+    with pytest.raises(ValueError, match=match):
+        facetlift.integrate(n, **kwargs)
+
+
+def test_perspective_prior_must_be_positive():
+    n, _ = wave()
+    K = np.array([[100.0, 0, 14], [0, 100.0, 12], [0, 0, 1]])
+    prior = np.full((24, 28), np.nan)
+    prior[3, 4] = -2.0
+    with pytest.raises(ValueError, match="`prior` must hold positive z-depths .* got -2.0"):
+        facetlift.integrate(n, K=K, prior=prior)
+
+
+def test_iterative_without_mean_subtraction_refuses_a_prior():
+    n, depth = wave()
+    with pytest.raises(ValueError, match="needs mean_subtraction=True"):
+        facetlift.integrate(n, solver="iterative", mean_subtraction=False, prior=depth)
+
+
+def test_regularization_keeps_its_prior_option():
+    n, _ = wave()
+    s = run(n, method="regularization", prior="laplacian")
+    assert s.info["prior"] == "laplacian"
+
+
+# ------------------------------------------------------------------------------------------
+# command line and files
+
+
+def _write_inputs(tmp_path):
+    n, depth = wave()
+    np.save(tmp_path / "n.npy", n)
+    prior, sel = sparse(depth, 0.05)
+    np.save(tmp_path / "prior.npy", prior)
+    return n, depth, prior, sel
+
+
+def test_cli_prior_and_confidence(tmp_path, capsys):
+    n, depth, prior, sel = _write_inputs(tmp_path)
+    np.save(tmp_path / "conf.npy", np.ones(depth.shape))
+    np.save(tmp_path / "w.npy", np.full(depth.shape, 1e6))
+    code = main(["integrate", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "prior.npy"),
+                 "--prior-weight-map", str(tmp_path / "w.npy"), "--confidence",
+                 str(tmp_path / "conf.npy"), "-s", "npy", "-o", str(tmp_path / "o")])
+    assert code == 0, capsys.readouterr().err
+    out = np.load(tmp_path / "o" / "depth.npy")
+    assert np.abs(out[sel] - prior[sel]).max() < 1e-3
+
+
+def test_cli_16bit_png_prior_needs_a_scale(tmp_path, capsys):
+    import imagecodecs
+
+    n, depth, _, sel = _write_inputs(tmp_path)
+    counts = np.where(sel, np.rint((depth + 10.0) * 1000), 0).astype(np.uint16)
+    (tmp_path / "p.png").write_bytes(imagecodecs.png_encode(counts))
+    argv = ["integrate", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "p.png"), "-s",
+            "npy", "--prior-weight", "1e6"]
+    assert main(argv + ["-o", str(tmp_path / "a")]) == 1
+    err = capsys.readouterr().err
+    assert "--prior-scale" in err and "Traceback" not in err
+    assert main(argv + ["--prior-scale", "0.001", "-o", str(tmp_path / "b")]) == 0
+    out = np.load(tmp_path / "b" / "depth.npy")
+    assert np.abs(out[sel] - (depth[sel] + 10.0)).max() < 1e-3
+
+
+def test_dataset_folder_picks_up_prior_and_confidence(tmp_path, capsys):
+    n, depth, prior, sel = _write_inputs(tmp_path)
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", n)
+    np.save(folder / "prior_depth.npy", prior)
+    conf = np.ones(depth.shape)
+    conf[2:5, 2:5] = 0
+    np.save(folder / "confidence.npy", conf)
+    code = main(["integrate", str(folder), "-s", "npy", "--prior-weight", "1e6", "--json",
+                 "-o", str(tmp_path / "o")])
+    assert code == 0, capsys.readouterr().err
+    import json
+
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["info"]["prior"]["samples"] == int(sel.sum())
+    assert rec["info"]["input"]["zero_confidence"] == 9
+    out = np.load(tmp_path / "o" / "depth.npy")
+    assert np.abs(out[sel] - prior[sel]).max() < 1e-3
+
+
+@pytest.mark.parametrize("extra,match", [
+    (["--prior", "bad.npy"], "`prior`: size 3x3"),
+    (["--prior", "prior.npy", "--prior-weight", "-2"], "`prior_weight` must be a finite number"),
+    (["--confidence", "bad.npy"], "`confidence`: size 3x3"),
+    (["--prior-weight", "5"], "`prior_weight` applies only with a prior"),
+    (["--prior", "nan.npy"], "no finite depth sample"),
+    (["--prior", "prior.npy", "--method", "frankot_chellappa"], "does not take a `prior`"),
+])
+def test_cli_errors_exit_1_without_traceback(tmp_path, capsys, extra, match):
+    _write_inputs(tmp_path)
+    np.save(tmp_path / "bad.npy", np.ones((3, 3)))
+    np.save(tmp_path / "nan.npy", np.full((24, 28), np.nan))
+    extra = [str(tmp_path / a) if a.endswith(".npy") else a for a in extra]
+    code = main(["integrate", str(tmp_path / "n.npy"), *extra, "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert match in err and "Traceback" not in err
