@@ -110,7 +110,8 @@ def _check_within_30_percent(case, sizes):
         assert 0.7 <= r["ratio"] <= 1.3, r
 
 
-@pytest.mark.parametrize("case", ["dgp:disk:smooth", "dgp:rect:missing"])
+@pytest.mark.parametrize("case", ["dgp:disk:smooth", "dgp:rect:missing",
+                                  "dgp:disk:discontinuities"])
 def test_estimate_within_30_percent_of_the_measured_peak(case):
     """The planner's estimate against the job's measured peak (VmHWM above the RSS before the
     call, benchmarks/bench_memory.py) at three sizes."""
