@@ -426,6 +426,18 @@ def _first_hits(mesh, origins, direction):
         return RayMeshIntersector(mesh).intersects_first(origins, dirs)
 
 
+def _mesh_in_view(mesh, view, name):
+    """(label, trimesh mesh, the view's frame (3, 3), the vertices (n, 3) in it: x right, y up,
+    z toward the viewer) of a mesh to render; the label is `name` or ``"<stem>@<view>"``."""
+    label = name
+    if label is None:
+        stem = Path(mesh).stem if isinstance(mesh, (str, Path)) else "mesh"
+        label = f"{stem}@{view if isinstance(view, str) else 'custom'}"
+    m = _load_mesh(mesh)
+    frame = _view_frame(view)
+    return label, m, frame, np.asarray(m.vertices, dtype=float) @ frame.T
+
+
 def render_mesh(
     mesh,
     resolution=128,
@@ -477,14 +489,7 @@ def render_mesh(
     h = float(pixel_size)
     if not (np.isfinite(h) and h > 0):
         raise ValueError(f"`pixel_size` must be a positive number; got {pixel_size!r}")
-    label = name
-    if label is None:
-        stem = Path(mesh).stem if isinstance(mesh, (str, Path)) else "mesh"
-        label = f"{stem}@{view if isinstance(view, str) else 'custom'}"
-    m = _load_mesh(mesh)
-    frame = _view_frame(view)
-    V = np.asarray(m.vertices, dtype=float)
-    P = V @ frame.T  # image-frame coordinates of the vertices
+    label, m, frame, P = _mesh_in_view(mesh, view, name)
     lo, hi = P.min(axis=0), P.max(axis=0)
     ext = hi - lo
     if ext[0] <= 0 and ext[1] <= 0:
@@ -602,13 +607,7 @@ def render_perspective(
         raise ValueError(f"`fill` must be in (0, 1]; got {fill!r}")
     if isinstance(samples, bool) or int(samples) != samples or samples < 1:
         raise ValueError(f"`samples` must be an integer >= 1; got {samples!r}")
-    label = name
-    if label is None:
-        stem = Path(mesh).stem if isinstance(mesh, (str, Path)) else "mesh"
-        label = f"{stem}@{view if isinstance(view, str) else 'custom'}"
-    m = _load_mesh(mesh)
-    frame = _view_frame(view)
-    P = np.asarray(m.vertices, dtype=float) @ frame.T  # x right, y up, z toward the viewer
+    label, m, frame, P = _mesh_in_view(mesh, view, name)
     centre = (P.min(axis=0) + P.max(axis=0)) / 2
     radius = float(np.linalg.norm(P - centre, axis=1).max())
     f = float(min(K[0, 0], K[1, 1]))

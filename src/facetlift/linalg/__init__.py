@@ -166,13 +166,8 @@ def factorize(
     (iteration, relative residual) after every CG iteration; a factorization is one library
     call and reports nothing.
     """
-    name = choose(
-        K.shape[0], backend, kind=kind, preconditioner=preconditioner is not None,
-        trusted=trusted,
-    )
+    name = _route(K, backend, kind, preconditioner, trusted)
     if name == "pcg":
-        if preconditioner is None:
-            raise ValueError("`backend`='pcg' needs a `preconditioner`")
         return _pcg_factor(K, preconditioner, rtol, progress)
     if name == "pardiso":
         from .direct import pardiso
@@ -219,13 +214,8 @@ def solve(
     SolverError
         The factorization failed or CG did not converge.
     """
-    name = choose(
-        K.shape[0], backend, kind=kind, preconditioner=preconditioner is not None,
-        trusted=trusted,
-    )
+    name = _route(K, backend, kind, preconditioner, trusted)
     if name == "pcg":
-        if preconditioner is None:
-            raise ValueError("`backend`='pcg' needs a `preconditioner`")
         x, cinfo = _cg(K, b, preconditioner, x0, rtol, flexible, progress)
         _raise_unless_converged(cinfo, rtol, "preconditioned CG")
         return x, SolveInfo("pcg", cinfo.iterations, cinfo.relative_residual)
@@ -289,6 +279,15 @@ class Series:
         self.iterations.append(its)
         self._x = x
         return x
+
+
+def _route(K, backend, kind, preconditioner, trusted) -> str:
+    """:func:`choose` for `K`; the CG route needs the caller's preconditioner."""
+    name = choose(K.shape[0], backend, kind=kind, preconditioner=preconditioner is not None,
+                  trusted=trusted)
+    if name == "pcg" and preconditioner is None:
+        raise ValueError("`backend`='pcg' needs a `preconditioner`")
+    return name
 
 
 def _cg(K, b, preconditioner, x0, rtol, flexible, progress=None):
