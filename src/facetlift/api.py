@@ -272,7 +272,7 @@ def prior_info(problem: Problem, surface: Surface) -> dict:
     depth = surface.depth[d.mask]
     target = problem.camera.to_depth(np.where(used, problem.prior, 0.0))
     diff = np.abs(depth - target)[used]
-    gauge = "mean depth 0" if not problem.perspective else "median depth 1"
+    gauge = problem.camera.gauge_name
     return {
         "samples": int(used.sum()),
         "components": int(d.n_components),

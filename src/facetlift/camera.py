@@ -73,6 +73,10 @@ class Camera:
     unknown: str = "height"
     #: "orthographic" or "perspective", for ``info``.
     projection: str = "orthographic"
+    #: Each component's free constant as :meth:`gauge` fixes it, for ``info``.
+    gauge_name: str = "mean depth 0"
+    #: Whether depth must be positive (the unknown is its logarithm).
+    positive_depth: bool = False
 
     def footprint(self) -> float:
         """Width of one pixel in the unknown's units (see module docstring)."""
@@ -185,6 +189,8 @@ class Pinhole(Camera):
     grazing = PINHOLE_GRAZING
     unknown = "log-depth"
     projection = "perspective"
+    gauge_name = "median depth 1"
+    positive_depth = True
     pixel_size = 1.0
 
     def __post_init__(self):

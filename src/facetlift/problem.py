@@ -456,7 +456,7 @@ def check_prior(prior, prior_weight, shape, mask, camera):
         k = int(np.flatnonzero(wbad)[0])
         raise ValueError(f"`prior_weight` must be finite and >= 0 where the prior has a sample; "
                          f"got {float(w[k])!r} ({int(wbad.sum())} such pixel(s))")
-    if camera.perspective:
+    if camera.positive_depth:
         neg = have & (depth <= 0)
         if neg.any():
             k = int(np.flatnonzero(neg)[0])
