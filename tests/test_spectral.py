@@ -20,6 +20,17 @@ def test_rectangle_solver_inverts_operator_on_mean_free_rhs(H, W):
     assert np.abs(K @ x - b).max() < 1e-12 * max(1, np.abs(b).max()) * 10
 
 
+@pytest.mark.parametrize("H,W", [(1, 1), (4, 3), (17, 9)])
+def test_shifted_rectangle_solver_inverts_operator_plus_shift_times_facet_counts(H, W):
+    # K + c D, D the facets per vertex: a uniform lumped prior mass (linalg.facet)
+    d = Domain.from_mask(np.ones((H, W), bool))
+    K = facet_form(d, [(1.0, N_MEAN_FREE)])
+    D = np.outer(np.r_[1, np.full(H - 1, 2), 1][: H + 1], np.r_[1, np.full(W - 1, 2), 1][: W + 1])
+    b = np.random.default_rng(4).standard_normal(d.n_vertices)  # constants included
+    x = RectangleSolver(H, W, shift=0.3).solve(b)
+    assert np.abs(K @ x + 0.3 * D.ravel() * x - b).max() < 1e-11
+
+
 def test_box_preconditioner_exact_only_for_full_masks():
     m = np.ones((5, 5), bool)
     assert BoxPreconditioner(Domain.from_mask(m)).exact

@@ -68,6 +68,7 @@ class Settings:
     fusion_groups: tuple = ("perspective", "ortho")
     fusion_fractions: tuple = (0.001, 0.01, 0.05)
     fusion_columns: tuple = ("dgp", "dgp-disc", "poisson")
+    fusion_coarse_weights: tuple = (3e-4, 1e-3, 3e-3, 1e-2, 0.05)  # the dense-prior sweep
 
     @classmethod
     def quick(cls) -> Settings:
@@ -100,6 +101,7 @@ class Settings:
             disc_min_pixels=50,
             fusion_fractions=(0.01,),
             fusion_columns=("dgp", "dgp-disc"),
+            fusion_coarse_weights=(),
         )
 
 

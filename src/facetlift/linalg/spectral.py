@@ -45,14 +45,18 @@ class RectangleSolver:
 
     backend = "spectral"
 
-    def __init__(self, H: int, W: int, workers: int | None = None, dtype=np.float64):
+    def __init__(self, H: int, W: int, workers: int | None = None, dtype=np.float64,
+                 shift: float = 0.0):
         self.H, self.W = H, W
         self.workers = workers if workers is not None else fft_workers()
         self.dtype = np.dtype(dtype)
         lr = 1.0 + np.cos(np.pi * np.arange(H + 1) / H)
         lc = 1.0 + np.cos(np.pi * np.arange(W + 1) / W)
-        denom = 1.0 - 0.25 * np.outer(lr, lc)
-        denom[0, 0] = np.inf  # the constant mode
+        # the operator is D V diag(denom) V^-1 (D: facets per vertex); `shift` c adds c D,
+        # which moves every eigenvalue by c (a uniform lumped prior mass, docs/fusion.md)
+        denom = 1.0 - 0.25 * np.outer(lr, lc) + shift
+        if shift <= 0:
+            denom[0, 0] = np.inf  # the constant mode
         self._gain = 1.0 / denom
         dr = np.full(H + 1, 2.0)
         dr[[0, -1]] = 1.0
@@ -87,7 +91,8 @@ class BoxPreconditioner:
     the domain is the full box and every normal is known.
     """
 
-    def __init__(self, domain, workers: int | None = None, dtype=np.float64):
+    def __init__(self, domain, workers: int | None = None, dtype=np.float64,
+                 shift: float = 0.0):
         self.domain = domain
         vm = domain.vertex_mask
         rows = np.nonzero(vm.any(axis=1))[0]
@@ -101,7 +106,10 @@ class BoxPreconditioner:
             wb = sfft.next_fast_len(box.shape[1] - 1, real=True)
             box = np.pad(box, ((0, hb + 1 - box.shape[0]), (0, wb + 1 - box.shape[1])))
         self._inside = box.ravel()
-        self._solver = RectangleSolver(box.shape[0] - 1, box.shape[1] - 1, workers, dtype)
+        if shift > 0:
+            self.exact = False
+        self._solver = RectangleSolver(box.shape[0] - 1, box.shape[1] - 1, workers, dtype,
+                                       shift)
         self._size = box.size
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
