@@ -178,6 +178,12 @@ def test_bilateral_weights():
     assert np.all(w[left][:, [1, 2]] <= disc.FLOOR) and np.allclose(w[left][:, [0, 3]], 2.0)
     right = inner & (c == 4)
     assert np.all(w[right][:, [0, 3]] <= disc.FLOOR)
+    # a neighbour without a normal (scale 0: missing or an outlier) is no evidence, whatever
+    # value it holds: its neighbours keep their glue (a prior sample in a hole of missing
+    # normals once tore rings of cuts around the hole)
+    scale = np.where(c >= 4, 0.0, 1.0)
+    w = disc.bilateral_weights(step, nb, scale, 8.0)
+    np.testing.assert_allclose(w[inner & (c < 4)], 1.0)
 
 
 def test_occlusion_places_a_separated_piece_by_its_smallest_jump():

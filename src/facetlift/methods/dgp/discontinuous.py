@@ -28,8 +28,8 @@ Bilateral weights (after BiNI, Cao et al., ECCV 2022, transposed to facets)
     and the same along y: the side with the larger difference is taken as discontinuous. A
     corner lies on one x-side and one y-side of its facet; its glue weight is
     ``w = 4 omega_x omega_y`` (1 where both sides agree). A missing neighbour (mask border,
-    facet without a normal) gives no evidence: its difference is taken equal to the other
-    side's. ``k`` (``discontinuity_k``) is in squared pixel footprints, the same for
+    facet without a usable normal) gives no evidence: its difference counts as zero, as the
+    empty rows of BiNI's one-sided differences do at the mask border. ``k`` (``discontinuity_k``) is in squared pixel footprints, the same for
     orthographic and perspective input. Its default and the evidence compared (plain
     differences, :data:`EVIDENCE`) were chosen on the discontinuity benchmark as a whole
     (``facetlift bench --experiments discontinuities``; docs/results.md, "Discontinuities").
@@ -244,8 +244,8 @@ def bilateral_weights(u, nb, scale, k, slopes=None):
     sq = {}
     for key, q in nb.items():
         sign = 1.0 if key[0] == "+" else -1.0
-        has = q >= 0
         qq = np.maximum(q, 0)
+        has = (q >= 0) & (scale[qq] > 0)  # a neighbour without a normal gives no evidence
         d = sign * (u[qq] - u)
         if slopes is not None:
             g = slopes[0] if key[1] == "x" else slopes[1]
