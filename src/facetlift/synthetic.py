@@ -426,6 +426,20 @@ def _first_hits(mesh, origins, direction):
         return RayMeshIntersector(mesh).intersects_first(origins, dirs)
 
 
+def _hits(depth, normals, mask, **kw) -> GroundTruth:
+    """The ground truth of a render: the pixels whose ray hit (`mask`), without lone pixels;
+    NaN elsewhere. Refuses a view that covers no pixel."""
+    from .problem import clean_mask
+
+    if mask.any():
+        mask = clean_mask(mask, min_size=2)
+    if not mask.any():
+        raise ValueError("`mesh` covers no pixel of the image in this view")
+    depth[~mask] = np.nan
+    normals[~mask] = np.nan
+    return GroundTruth(depth=depth, normals=normals, mask=mask, **kw)
+
+
 def _mesh_in_view(mesh, view, name):
     """(label, trimesh mesh, the view's frame (3, 3), the vertices (n, 3) in it: x right, y up,
     z toward the viewer) of a mesh to render; the label is `name` or ``"<stem>@<view>"``."""
@@ -519,16 +533,7 @@ def render_mesh(
     normals[idx] = fn / np.linalg.norm(fn, axis=1, keepdims=True)
     depth = depth.reshape(H, W)
     normals = normals.reshape(H, W, 3)
-    from .problem import clean_mask
-
-    mask = np.isfinite(depth)
-    if mask.any():
-        mask = clean_mask(mask, min_size=2)
-    if not mask.any():
-        raise ValueError("`mesh` covers no pixel of the image in this view")
-    depth[~mask] = np.nan
-    normals[~mask] = np.nan
-    return GroundTruth(depth=depth, normals=normals, mask=mask, pixel_size=h, name=label)
+    return _hits(depth, normals, np.isfinite(depth), pixel_size=h, name=label)
 
 
 #: Intrinsics of the DiLiGenT camera (OpenCV layout; 512 x 612 images, f ~ 3,770 px).
@@ -639,16 +644,8 @@ def render_perspective(
     normals = normals.reshape(H, W, 3)
     if samples > 1:
         normals = _supersampled_normals(cam_mesh, K, H, W, int(samples))
-    from .problem import clean_mask
-
-    mask = np.isfinite(depth) & np.isfinite(normals).all(-1)
-    if mask.any():
-        mask = clean_mask(mask, min_size=2)
-    if not mask.any():
-        raise ValueError("`mesh` covers no pixel of the image in this view")
-    depth[~mask] = np.nan
-    normals[~mask] = np.nan
-    return GroundTruth(depth=depth, normals=normals, mask=mask, name=label, K=K)
+    return _hits(depth, normals, np.isfinite(depth) & np.isfinite(normals).all(-1), name=label,
+                 K=K)
 
 
 def _supersampled_normals(cam_mesh, K, H, W, s):

@@ -347,13 +347,10 @@ def jump_free(rows: list[dict], label: str = "dgp-disc") -> list[dict]:
     return out
 
 
-def discontinuities(ctx: Context) -> None:
-    """Run the benchmark; writes ``discontinuities_runs.csv``, ``discontinuities.csv`` (the
-    summary), ``discontinuities_real.csv`` and ``discontinuities.md``."""
-    cols = specs(ctx)
-    rows = []
-    data = scenes(ctx)
-    for group, name, load in bar(data, ctx.progress, "discontinuities"):
+def usable(ctx: Context, data, label: str):
+    """(group, name, ground truth) of the scenes of `data` (:func:`scenes`) that load and are
+    neither too small nor flat, with a progress bar called `label`; the others are logged."""
+    for group, name, load in bar(data, ctx.progress, label):
         try:
             gt = load()
         except Exception as e:
@@ -363,7 +360,15 @@ def discontinuities(ctx: Context) -> None:
             log.info("scene %s skipped: %d pixels, depth range %g", name, gt.mask.sum(),
                      gt.depth_range)
             continue
-        gt = replace(gt, name=name)
+        yield group, name, replace(gt, name=name)
+
+
+def discontinuities(ctx: Context) -> None:
+    """Run the benchmark; writes ``discontinuities_runs.csv``, ``discontinuities.csv`` (the
+    summary), ``discontinuities_real.csv`` and ``discontinuities.md``."""
+    cols = specs(ctx)
+    rows = []
+    for group, name, gt in usable(ctx, scenes(ctx), "discontinuities"):
         rows += run_scene(ctx, group, name, gt, cols)
         write_csv(ctx.out / "discontinuities_runs.csv", rows)  # partial results survive
     labels = [c.label for c in cols]

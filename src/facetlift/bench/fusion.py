@@ -35,12 +35,11 @@ import logging
 import time
 import warnings
 import zlib
-from dataclasses import replace
 
 import numpy as np
 
 from . import discontinuities as disc
-from .core import SEED, Context, bar
+from .core import SEED, Context
 from .tables import md_table, write_csv, write_text
 
 log = logging.getLogger(__name__)
@@ -134,15 +133,23 @@ def coarse_prior(gt, block: int = BLOCK) -> np.ndarray:
     lo, hi = ndimage.minimum_filter(big, 5), ndimage.maximum_filter(top, 5)
     with np.errstate(invalid="ignore"):
         low = np.clip(low, lo - 0.5 * (hi - lo), hi + 0.5 * (hi - lo))
+    return _upsampled(low, gt.mask, block)
+
+
+def _upsampled(low, mask, block):
+    """Block values `low` (NaN where a block has none: filled from the nearest) bilinearly
+    upsampled to the pixels (block centres at ``(k + 1/2) block - 1/2``), NaN off `mask`."""
+    from scipy import ndimage
+
     if np.isnan(low).any():
         _, (ii, jj) = ndimage.distance_transform_edt(np.isnan(low), return_indices=True)
         low = low[ii, jj]
-    # bilinear upsampling with block centres at (k + 1/2) block - 1/2
+    H, W = mask.shape
     r = (np.arange(H) + 0.5) / block - 0.5
     col = (np.arange(W) + 0.5) / block - 0.5
     up = ndimage.map_coordinates(low, np.meshgrid(r, col, indexing="ij"), order=1,
                                  mode="nearest")
-    return np.where(gt.mask, up, np.nan)
+    return np.where(mask, up, np.nan)
 
 
 def _coarse_prior_mean(gt, block: int = BLOCK) -> np.ndarray:
@@ -160,14 +167,7 @@ def _coarse_prior_mean(gt, block: int = BLOCK) -> np.ndarray:
     c = ndimage.gaussian_filter(m.reshape(hb, block, wb, block).sum(axis=(1, 3)), 1.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         low = np.where(c > 1e-3, s / c, np.nan)
-    if np.isnan(low).any():
-        _, (ii, jj) = ndimage.distance_transform_edt(np.isnan(low), return_indices=True)
-        low = low[ii, jj]
-    r = (np.arange(H) + 0.5) / block - 0.5
-    col = (np.arange(W) + 0.5) / block - 0.5
-    up = ndimage.map_coordinates(low, np.meshgrid(r, col, indexing="ij"), order=1,
-                                 mode="nearest")
-    return np.where(gt.mask, up, np.nan)
+    return _upsampled(low, gt.mask, block)
 
 
 def interpolate(prior: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -359,15 +359,7 @@ def fusion(ctx: Context) -> None:
     """Run the benchmark; writes ``fusion_runs.csv``, ``fusion.csv`` and ``fusion.md``."""
     rows = []
     data = [t for t in disc.scenes(ctx) if t[0] in ctx.settings.fusion_groups]
-    for group, name, load in bar(data, ctx.progress, "fusion"):
-        try:
-            gt = load()
-        except Exception as e:
-            log.warning("scene %s unavailable: %s", name, e)
-            continue
-        if gt.mask.sum() < ctx.settings.disc_min_pixels or gt.depth_range < disc._flat(gt):
-            continue
-        gt = replace(gt, name=name)
+    for group, name, gt in disc.usable(ctx, data, "fusion"):
         rows += run_scene(ctx, group, name, gt)
         write_csv(ctx.out / "fusion_runs.csv", rows)
     table = summary(rows)

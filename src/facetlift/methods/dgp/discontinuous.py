@@ -29,8 +29,9 @@ Bilateral weights (after BiNI, Cao et al., ECCV 2022, transposed to facets)
     corner lies on one x-side and one y-side of its facet; its glue weight is
     ``w = 4 omega_x omega_y`` (1 where both sides agree). A missing neighbour (mask border,
     facet without a usable normal) gives no evidence: its difference counts as zero, as the
-    empty rows of BiNI's one-sided differences do at the mask border. ``k`` (``discontinuity_k``) is in squared pixel footprints, the same for
-    orthographic and perspective input. Its default and the evidence compared (plain
+    empty rows of BiNI's one-sided differences do at the mask border. ``k``
+    (``discontinuity_k``) is in squared pixel footprints, the same for orthographic and
+    perspective input. Its default and the evidence compared (plain
     differences, :data:`EVIDENCE`) were chosen on the discontinuity benchmark as a whole
     (``facetlift bench --experiments discontinuities``; docs/results.md, "Discontinuities").
 
