@@ -121,10 +121,18 @@ def run(
     weights = problem.confidence  # None: every normal term weighs 1
     if discontinuities:
         empty_components(domain, target)
+        z0 = None
+        if prior is not None and not target.all():
+            # facets without a normal leave near-null modes (the flattest fill of a hole) that
+            # the prior's samples excite and multigrid-CG does not resolve (a hole of missing
+            # normals came out hundreds of mm off): start from the smooth fixed point, whose
+            # solver resolves them exactly
+            z0, _ = solve_direct(domain, bx, by, target, backend, flat_weight, weights, h=s,
+                                 prior=prior)
         z, y, w, info = solve_discontinuous(
             domain, bx, by, target, normal_scale=normal_scale(problem), k=discontinuity_k,
             max_iter=discontinuity_iter, tol=discontinuity_tol, flat_weight=flat_weight,
-            callback=progress, prior=prior, weights=weights,
+            callback=progress, prior=prior, weights=weights, x0=z0,
         )
         copies, pinfo = place_pieces(domain, y, bx, by, target, s,
                                      anchored=None if prior is None else prior[0] > 0)

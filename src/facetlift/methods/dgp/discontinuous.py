@@ -269,7 +269,7 @@ def changes_big(step) -> bool:
 def solve_discontinuous(
     domain, bx, by, target, *, normal_scale, k: float = DEFAULT_K,
     max_iter: int = DEFAULT_ITER, tol: float = DEFAULT_TOL, flat_weight: float = 1e-9,
-    cg_rtol: float = 1e-6, callback=None, prior=None, weights=None,
+    cg_rtol: float = 1e-6, callback=None, prior=None, weights=None, x0=None,
 ):
     """Minimise the glued facet energy with bilateral weights (see the module docstring).
 
@@ -299,6 +299,8 @@ def solve_discontinuous(
         cuts separate (docs/fusion.md).
     weights : (m,) float, optional
         Weight of every facet's normal term (the normals' confidence).
+    x0 : (n,) float, optional
+        Start of the first solve (default zeros).
 
     Returns
     -------
@@ -318,11 +320,11 @@ def solve_discontinuous(
     # each one costs milliseconds (measured: 13 of 20 s on the bear), single-threaded microseconds
     with threadpool_limits(limits=1, user_api="blas"):
         return _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight,
-                      cg_rtol, callback, prior, weights)
+                      cg_rtol, callback, prior, weights, x0)
 
 
 def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, cg_rtol,
-           callback, prior=None, weights=None):
+           callback, prior=None, weights=None, x0=None):
     t0 = time.perf_counter()
     m = domain.n_facets
     fusion = None
@@ -385,7 +387,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             z = linalg.solve(K, rhs)[0]
         return z, info.iterations
 
-    z, its = solve(K, rhs, np.zeros(domain.n_vertices))
+    z, its = solve(K, rhs, np.zeros(domain.n_vertices) if x0 is None else x0)
     cg_its = [its]
     y = copies(M, Ma, w, z)
     energies = [energy(y, w, z)]
