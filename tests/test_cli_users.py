@@ -441,7 +441,9 @@ sys.exit(main(sys.argv[2:]))
 """
 
 
-def test_sigterm_during_the_write_leaves_nothing(dome_png, tmp_path):
+def _signal_during_the_write(dome_png, tmp_path, sig):
+    """Run `integrate` whose mesh writer stalls, send `sig` in the write phase: (returncode,
+    stderr, the output folder)."""
     out, flag = tmp_path / "o", tmp_path / "flag"
     proc = subprocess.Popen([sys.executable, "-c", SLOW_WRITE, str(flag), "integrate",
                              str(dome_png), "-o", str(out)], stderr=subprocess.PIPE, text=True)
@@ -449,25 +451,22 @@ def test_sigterm_during_the_write_leaves_nothing(dome_png, tmp_path):
     while not flag.exists() and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.05)
     assert flag.exists(), proc.stderr.read() if proc.poll() is not None else "no write"
-    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(sig)
     _, err = proc.communicate(timeout=30)
-    assert proc.returncode == 143 and "terminated (SIGTERM)" in err
+    return proc.returncode, err, out
+
+
+def test_sigterm_during_the_write_leaves_nothing(dome_png, tmp_path):
+    code, err, out = _signal_during_the_write(dome_png, tmp_path, signal.SIGTERM)
+    assert code == 143 and "terminated (SIGTERM)" in err
     assert not out.exists()  # created by this run, removed with its staging folder
 
 
 def test_sigint_during_the_write_leaves_nothing(dome_png, tmp_path):
     """Ctrl-C (KeyboardInterrupt) in the write phase: exit 130, the staging folder and the
     output folder this run created are gone."""
-    out, flag = tmp_path / "o", tmp_path / "flag"
-    proc = subprocess.Popen([sys.executable, "-c", SLOW_WRITE, str(flag), "integrate",
-                             str(dome_png), "-o", str(out)], stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 60
-    while not flag.exists() and time.monotonic() < deadline and proc.poll() is None:
-        time.sleep(0.05)
-    assert flag.exists(), proc.stderr.read() if proc.poll() is not None else "no write"
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=30)
-    assert proc.returncode == 130 and "interrupted" in err, err
+    code, err, out = _signal_during_the_write(dome_png, tmp_path, signal.SIGINT)
+    assert code == 130 and "interrupted" in err, err
     assert "Traceback" not in err
     assert not out.exists()
 
