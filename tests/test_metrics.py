@@ -120,3 +120,15 @@ def test_angular_error_of_exact_reconstruction():
     assert mx < 1e-6
     with pytest.raises(ValueError, match="`normals` must have shape"):
         angular_error(s, gt.normals[:-1])
+
+
+def test_angular_error_of_a_surface_split_at_jumps_uses_each_facets_own_corners():
+    """On a surface cut at its jumps the facets next to a cut keep their own plane; measured
+    on the glued vertex grid instead they spanned the jump (the report showed 2.1 deg where
+    the result's own deviation was 0.05 deg)."""
+    g = analytic("occluder", 64)
+    s = integrate(g.normals, g.mask, discontinuities=True)
+    assert s.split is not None
+    mean = angular_error(s, g.normals)[0]
+    assert mean == pytest.approx(s.info["mean_deviation"], rel=1e-6)
+    assert mean < 0.5 * angular_error(integrate(g.normals, g.mask), g.normals)[0]

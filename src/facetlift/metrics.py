@@ -178,6 +178,21 @@ def _quad_normals(P0, P1, P2, P3) -> np.ndarray:
 DEVIATION_SAMPLE = 2**18
 
 
+def _own_normals(surface, r, c, k) -> np.ndarray:
+    """Unit normals (n, 3) of the facets at pixels (`r`, `c`), number `k` in the surface's facet
+    order (row-major over its mask): from each facet's own corners where the surface is split at
+    jumps (a facet next to a cut keeps its plane), else from the vertex grid."""
+    corners = ((0, 0), (0, 1), (1, 1), (1, 0))
+    if surface.split is not None:
+        sc, _, _, sdepth = surface.split
+        P = [surface.camera.points(r + dr, c + dc, sdepth[sc[k, j]])
+             for j, (dr, dc) in enumerate(corners)]
+    else:
+        vd = surface.vertex_depth
+        P = [surface.camera.points(r + dr, c + dc, vd[r + dr, c + dc]) for dr, dc in corners]
+    return _quad_normals(*P)
+
+
 def input_deviation(problem, surface, *, sample: int = DEVIATION_SAMPLE) -> float:
     """Mean angle in degrees between the usable input normals and the facet normals of the
     result (from each facet's own corners where the surface is split at jumps), over at most
@@ -196,15 +211,7 @@ def input_deviation(problem, surface, *, sample: int = DEVIATION_SAMPLE) -> floa
     if k.size > sample:
         k = k[:: -(-k.size // sample)]
     r, c = (a[k] for a in problem.domain.pixels)
-    corners = ((0, 0), (0, 1), (1, 1), (1, 0))
-    if surface.split is not None:  # a surface cut at jumps: every facet's own corners
-        sc, _, _, sdepth = surface.split
-        P = [surface.camera.points(r + dr, c + dc, sdepth[sc[k, j]])
-             for j, (dr, dc) in enumerate(corners)]
-    else:
-        vd = surface.vertex_depth
-        P = [surface.camera.points(r + dr, c + dc, vd[r + dr, c + dc]) for dr, dc in corners]
-    nrec = _quad_normals(*P)
+    nrec = _own_normals(surface, r, c, k)
     cos = np.clip(np.einsum("ij,ij->i", nrec, problem.normals[k]), -1.0, 1.0)
     return float(np.degrees(np.arccos(cos)).mean())
 
@@ -226,7 +233,8 @@ def angular_error(surface, normals, mask=None) -> tuple[float, float, np.ndarray
     Parameters
     ----------
     surface : facetlift.Surface
-        Uses ``vertex_depth`` and ``camera``.
+        Uses ``vertex_depth`` and ``camera``, or each facet's own corners where the surface is
+        split at jumps (``discontinuities=True``).
     normals : (H, W, 3) array_like
         The input normals (x right, y up, z toward the viewer); need not be unit.
     mask : (H, W) array_like of bool, optional
@@ -242,7 +250,12 @@ def angular_error(surface, normals, mask=None) -> tuple[float, float, np.ndarray
     H, W = surface.mask.shape
     if nin.shape != (H, W, 3):
         raise ValueError(f"`normals` must have shape {(H, W, 3)}; got {nin.shape}")
-    nrec = facet_normals(surface.vertex_depth, camera=surface.camera)
+    if getattr(surface, "split", None) is not None:  # cut at jumps: each facet's own corners
+        r, c = np.nonzero(surface.mask)
+        nrec = np.full((H, W, 3), np.nan)
+        nrec[r, c] = _own_normals(surface, r, c, np.arange(r.size))
+    else:
+        nrec = facet_normals(surface.vertex_depth, camera=surface.camera)
     m = surface.mask if mask is None else np.asarray(mask, bool) & surface.mask
     with np.errstate(invalid="ignore", divide="ignore"):
         u = nin / np.linalg.norm(nin, axis=-1, keepdims=True)
