@@ -423,3 +423,19 @@ def test_writer_argument_errors(tmp_path, surface):
     with pytest.raises(ValueError, match=r"takes no options"):
         surface.save(tmp_path / "d.npy", triangles=True)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_shading_of_a_surface_split_at_jumps_uses_each_facets_own_corners():
+    """Facets next to a cut keep their own plane in the preview and the report (shaded from
+    the glued vertex grid they spanned the jump: a speckled rim)."""
+    from facetlift import integrate
+    from facetlift.io import shade
+    from facetlift.synthetic import analytic
+
+    g = analytic("occluder", 64)
+    s = integrate(g.normals, g.mask, discontinuities=True)
+    L = np.array([-1.0, 1.0, 2.0]) / np.sqrt(6.0)
+    truth = 0.15 + 0.85 * np.clip(g.normals @ L, 0, 1)
+    err = np.abs(shade(s) - truth)[g.mask]
+    # measured: 99th percentile 0.038, max 0.10 (one rim facet); on the vertex grid 0.21 / 0.58
+    assert np.percentile(err, 99) < 0.08 and err.max() < 0.2

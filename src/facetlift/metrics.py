@@ -178,6 +178,18 @@ def _quad_normals(P0, P1, P2, P3) -> np.ndarray:
 DEVIATION_SAMPLE = 2**18
 
 
+def surface_normals(surface) -> np.ndarray:
+    """(H, W, 3) unit facet normals of a result, toward the viewer, NaN outside its mask: from
+    each facet's own corners where the surface is split at jumps (``discontinuities=True``),
+    else from the vertex grid (:func:`facet_normals`)."""
+    if getattr(surface, "split", None) is None:
+        return facet_normals(surface.vertex_depth, camera=surface.camera)
+    r, c = np.nonzero(surface.mask)
+    out = np.full((*surface.mask.shape, 3), np.nan)
+    out[r, c] = _own_normals(surface, r, c, np.arange(r.size))
+    return out
+
+
 def _own_normals(surface, r, c, k) -> np.ndarray:
     """Unit normals (n, 3) of the facets at pixels (`r`, `c`), number `k` in the surface's facet
     order (row-major over its mask): from each facet's own corners where the surface is split at
@@ -250,12 +262,7 @@ def angular_error(surface, normals, mask=None) -> tuple[float, float, np.ndarray
     H, W = surface.mask.shape
     if nin.shape != (H, W, 3):
         raise ValueError(f"`normals` must have shape {(H, W, 3)}; got {nin.shape}")
-    if getattr(surface, "split", None) is not None:  # cut at jumps: each facet's own corners
-        r, c = np.nonzero(surface.mask)
-        nrec = np.full((H, W, 3), np.nan)
-        nrec[r, c] = _own_normals(surface, r, c, np.arange(r.size))
-    else:
-        nrec = facet_normals(surface.vertex_depth, camera=surface.camera)
+    nrec = surface_normals(surface)
     m = surface.mask if mask is None else np.asarray(mask, bool) & surface.mask
     with np.errstate(invalid="ignore", divide="ignore"):
         u = nin / np.linalg.norm(nin, axis=-1, keepdims=True)

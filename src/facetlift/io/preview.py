@@ -14,20 +14,14 @@ def shade(surface, *, light=(-1.0, 1.0, 2.0), ambient: float = 0.15) -> np.ndarr
     """Lambertian shading of a surface's facets, (H, W) in [0, 1], NaN outside the domain.
 
     Facet normals come from the reconstructed geometry: the cross product of the two
-    diagonals of each quad (its corner vertices in 3-D, x right, y up, z toward the viewer),
-    so perspective surfaces shade correctly too. `light` points from the surface toward the
-    light (default: upper left, in front).
+    diagonals of each quad (its corner vertices in 3-D, x right, y up, z toward the viewer;
+    each facet's own corners where the surface is split at jumps), so perspective surfaces
+    and cut ones shade correctly too (:func:`facetlift.metrics.surface_normals`). `light`
+    points from the surface toward the light (default: upper left, in front).
     """
-    H, W = surface.shape
-    vd = surface.vertex_depth
-    vm = np.isfinite(vd)
-    P = np.full((H + 1, W + 1, 3), np.nan)
-    P[vm] = surface.points("vertices")
-    d1 = P[1:, 1:] - P[:-1, :-1]  # (r,c) -> (r+1,c+1)
-    d2 = P[:-1, 1:] - P[1:, :-1]  # (r+1,c) -> (r,c+1)
-    n = np.cross(d1, d2)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    from ..metrics import surface_normals
+
+    n = surface_normals(surface)
     L = np.asarray(light, dtype=float)
     L = L / np.linalg.norm(L)
     s = ambient + (1.0 - ambient) * np.clip(n @ L, 0.0, 1.0)
