@@ -122,7 +122,8 @@ def test_estimate_within_30_percent_of_the_measured_peak(case):
 @pytest.mark.parametrize("case", ["dgp:disk:smooth", "dgp:rect:smooth", "dgp:disk:missing",
                                   "dgp:disk:smooth:solver=iterative,max_iter=3",
                                   "poisson:disk:smooth", "regularization:disk:smooth",
-                                  "frankot_chellappa:disk:smooth", "kernel:disk:smooth"])
+                                  "frankot_chellappa:disk:smooth", "kernel:disk:smooth",
+                                  "dgp:disk:discontinuities"])
 def test_estimate_within_30_percent_at_large_sizes(case):
     _check_within_30_percent(case, [768, 1536, 2048])
 
