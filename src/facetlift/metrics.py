@@ -182,7 +182,7 @@ def surface_normals(surface) -> np.ndarray:
     """(H, W, 3) unit facet normals of a result, toward the viewer, NaN outside its mask: from
     each facet's own corners where the surface is split at jumps (``discontinuities=True``),
     else from the vertex grid (:func:`facet_normals`)."""
-    if getattr(surface, "split", None) is None:
+    if surface.split is None:
         return facet_normals(surface.vertex_depth, camera=surface.camera)
     r, c = np.nonzero(surface.mask)
     out = np.full((*surface.mask.shape, 3), np.nan)

@@ -247,6 +247,14 @@ class Context:
         """The table columns of this run (see :func:`default_specs`)."""
         return default_specs(self.settings.methods, variants=variants)
 
+    def meshes(self, limit: int | None = None) -> list[Path]:
+        """The data folder's ``meshes/*.ply`` (sorted, the first `limit` of them) and then the
+        extra meshes of this run."""
+        found = []
+        if self.data is not None and (self.data / "meshes").is_dir():
+            found = sorted((self.data / "meshes").glob("*.ply"))[:limit]
+        return found + [Path(p) for p in self.extra_meshes]
+
     def add(self, title: str, text: str) -> None:
         """Add a section to ``report.md``."""
         self.sections.append((title, text))

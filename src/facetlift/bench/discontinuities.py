@@ -118,12 +118,7 @@ def scenes(ctx: Context) -> list[tuple[str, str, object]]:
     """(group, name, loader) of every synthetic scene; groups ``perspective``, ``wide`` and
     ``ortho``."""
     s = ctx.settings
-    meshes = []
-    if ctx.data is not None and (ctx.data / "meshes").is_dir():
-        meshes = sorted((ctx.data / "meshes").glob("*.ply"))
-        if s.disc_meshes is not None:
-            meshes = meshes[: s.disc_meshes]
-    meshes += [Path(p) for p in ctx.extra_meshes]
+    meshes = ctx.meshes(s.disc_meshes)
     res = tuple(s.disc_resolution)
     f_wide = WIDE_F * res[1] / 612.0
     out = []

@@ -8,7 +8,6 @@ folder (plus ``extra_meshes``) rendered from every view of ``settings.fig9_views
 from __future__ import annotations
 
 from functools import partial
-from pathlib import Path
 
 import numpy as np
 
@@ -23,13 +22,7 @@ def models(ctx: Context) -> list:
     s = ctx.settings
     n = s.fig9_size
     out = [(name, lambda name=name: synthetic.analytic(name, n)) for name in s.fig9_analytic]
-    meshes = []
-    if ctx.data is not None and (ctx.data / "meshes").is_dir():
-        meshes = sorted((ctx.data / "meshes").glob("*.ply"))
-        if s.fig9_meshes is not None:
-            meshes = meshes[: s.fig9_meshes]
-    meshes += [Path(p) for p in ctx.extra_meshes]
-    for path in meshes:
+    for path in ctx.meshes(s.fig9_meshes):
         for view in s.fig9_views:
             out.append((f"{path.stem}@{view}",
                         lambda path=path, view=view: synthetic.render_mesh(path, n, view=view)))

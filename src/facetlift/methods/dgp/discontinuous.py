@@ -295,7 +295,7 @@ def solve_discontinuous(
         Slope weight of facets without a target (see dgp).
     cg_rtol : float
         Relative residual of every CG solve.
-    callback : callable(iteration, relative energy change), optional
+    callback : callable(iteration, largest corner-weight change), optional
     prior : (w, t, fixed), optional
         Depth prior on the facet centres of the glued vertices ``z``: weights and targets
         (m,) and the components it fixes (not pinned); it decides the offsets of pieces the
