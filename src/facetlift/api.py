@@ -67,7 +67,9 @@ def integrate(
     outlier_eps : float, optional
         Grazing threshold on the cosine between a normal and the direction toward the camera
         (the paper's outlier rule); below it a normal is a missing sample. Default: the
-        camera's (:mod:`facetlift.camera`).
+        camera's (:mod:`facetlift.camera`), except with ``discontinuities=True`` for "dgp":
+        the paper's 0.0871557 (cos 85 deg) for every camera (docs/results.md,
+        "Discontinuities: the grazing rule").
     normal_frame : str, optional
         The frame `normals` are given in: ``"opengl"`` (the default, facetlift's own),
         ``"directx"`` (alias ``"y_down"``), ``"opencv"`` or an axis string such as
@@ -135,6 +137,8 @@ def integrate(
         prior = None
     if discontinuities:
         options["discontinuities"] = _check_discontinuities(info, discontinuities)
+        if outlier_eps is None and info.jump_grazing is not None:
+            outlier_eps = info.jump_grazing
     if solver is not None:
         options["solver"] = solver
     normals = frames.checked(normals, mask, frame=normal_frame)

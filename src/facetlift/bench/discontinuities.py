@@ -182,6 +182,7 @@ def error_of(gt, depth) -> float:
 
 def oracle(gt, normals) -> tuple[float, float, float]:
     """(error, deviation, seconds) of the facet integration with the true jumps cut."""
+    from .. import methods
     from ..api import make_surface, prepare
     from ..methods import MethodResult
     from ..methods.dgp import targets
@@ -190,7 +191,9 @@ def oracle(gt, normals) -> tuple[float, float, float]:
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        problem = prepare(normals, gt.mask, pixel_size=gt.pixel_size, K=gt.K)
+        # the grazing rule of the discontinuity route (methods.REGISTRY["dgp"].jump_grazing)
+        eps = methods.get("dgp").jump_grazing
+        problem = prepare(normals, gt.mask, pixel_size=gt.pixel_size, K=gt.K, outlier_eps=eps)
         bx, by, target = targets(problem)
         right, down = synthetic.jump_edges(gt)
         mesh = split(problem.domain, right, down)

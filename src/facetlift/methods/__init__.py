@@ -15,6 +15,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..conventions import OUTLIER_EPS
 from ..options import Option
 
 #: Capabilities a method may declare (``facetlift methods`` shows them).
@@ -56,6 +57,9 @@ class MethodInfo:
     prior: bool = False
     #: Takes per-pixel weights of the normal term (``confidence=``).
     confidence: bool = False
+    #: Grazing threshold (view cosine) that ``discontinuities=True`` uses for every camera
+    #: when the caller gives no ``outlier_eps``; None: the camera's own default.
+    jump_grazing: float | None = None
 
     def _module(self):
         return importlib.import_module(f"facetlift.methods.{self.module}")
@@ -102,6 +106,10 @@ register(
         discontinuities=True,
         prior=True,
         confidence=True,
+        # the paper's epsilon (cos 85 deg) on both cameras: a jump that fades out ends in a
+        # line of near-edge-on normals whose huge, unreliable slopes would bridge it
+        # (docs/results.md, "Discontinuities: the grazing rule")
+        jump_grazing=OUTLIER_EPS,
     )
 )
 
