@@ -397,6 +397,10 @@ def _info_lines(rec: dict) -> list[str]:
     first = rec.get("first_unusable")
     lines.append(f"  unusable normals: {bad or 'none'}"
                  + (f"; first at (row {first[0]}, col {first[1]})" if first else ""))
+    jg = rec.get("discontinuity_grazing") or {}
+    if jg.get("more_grazing"):
+        lines.append(f"  with --discontinuities: {jg['more_grazing']} more grazing (view cosine "
+                     f"< {jg['outlier_eps']:.4g}), treated as missing")
     e = rec["estimate"]
     fits = "within" if e["fits"] else "more than"
     line = (f"  default integration (estimate): peak about {_mib(e['bytes'])} above the input "

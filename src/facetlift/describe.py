@@ -129,8 +129,21 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None) -> di
         warnings=[str(w.message) for w in caught],
         frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame),
         estimate=estimate(problem),
+        discontinuity_grazing=_jump_grazing(problem),
     )
     return out
+
+
+def _jump_grazing(problem) -> dict:
+    """How many more normals `--discontinuities` (dgp) treats as grazing: that route uses
+    ``MethodInfo.jump_grazing`` on every camera instead of the camera's default."""
+    from . import methods
+
+    eps = methods.get("dgp").jump_grazing
+    r, c = problem.domain.pixels
+    use = problem.usable
+    cos = problem.camera.view_cosine(r[use], c[use], problem.normals[use], unit=True)
+    return {"outlier_eps": float(eps), "more_grazing": int((cos < eps).sum())}
 
 
 def _file_facts(src: Path) -> dict:
