@@ -248,7 +248,7 @@ DILIGENT = Path(__file__).parents[1] / ".." / "shared" / "data" / "normal_maps" 
 @pytest.mark.skipif(not (DILIGENT / "depth_gt.npz").is_file(), reason="no DiLiGenT bear data")
 def test_diligent_bear_made():
     """Regression check on the one real map with ground truth (docs/perspective.md: smooth
-    0.468 mm, discontinuities 0.053 mm with the benchmark-chosen defaults, BiNI's reference
+    0.468 mm, discontinuities 0.050 mm with the benchmark-chosen defaults, BiNI's reference
     0.334 mm). The discontinuity route's grazing rule (cos 85 deg) decides it: with the
     pinhole default 1/255 the neck's fading ends stay bridged and it was 0.382 mm."""
     from facetlift.io import read_dataset
