@@ -48,6 +48,12 @@ Iteration and stopping rule
     :data:`CUT` (the ambiguous edges the settling decided). Each reweighting is one
     preconditioned CG solve warm-started from the previous vertex values.
 
+Grazing normals
+    The route is run (``facetlift.integrate``) with the paper's grazing threshold, cos 85 deg,
+    on every camera (``MethodInfo.jump_grazing``): a jump that fades out ends in nearly
+    edge-on normals, whose slopes would bridge it; as missing samples they give no evidence
+    and no target, and the cut can close (docs/results.md, "Discontinuities: the grazing rule").
+
 Pieces without glue
     A region whose every boundary corner is cut loose would be free to float; a tiny floor on
     the weights (``FLOOR``) keeps it attached where its copies meet the vertices best.
