@@ -313,3 +313,19 @@ def test_discontinuities_with_a_prior_fill_a_hole_of_missing_normals_like_the_sm
                                 discontinuities=disc)
         err[disc] = np.abs(s.depth - depth)[hole].mean()
     assert err[True] < 2 * err[False] + 1e-3 * np.nanmedian(depth)
+
+
+def test_bench_prior_alone_with_collinear_samples():
+    """The benchmark's 'prior only' column: samples on one line (a thin scene, 0.1 %) cannot be
+    triangulated; the nearest sample fills the mask (the full run stopped there once)."""
+    from facetlift.bench.fusion import interpolate
+
+    mask = np.zeros((20, 30), bool)
+    mask[5:15, 3:27] = True
+    prior = np.full(mask.shape, np.nan)
+    prior[[6, 9, 12, 14], 10] = [1.0, 2.0, 3.0, 4.0]  # one column: collinear
+    alone = interpolate(prior, mask)
+    assert np.isfinite(alone[mask]).all() and np.isnan(alone[~mask]).all()
+    assert alone[6, 20] == 1.0 and alone[14, 3] == 4.0
+    prior[8, 20] = 5.0  # spans the plane: linear inside the hull
+    assert interpolate(prior, mask)[9, 12] not in (1.0, 2.0, 3.0, 4.0, 5.0)

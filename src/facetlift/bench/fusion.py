@@ -182,7 +182,11 @@ def interpolate(prior: np.ndarray, mask: np.ndarray) -> np.ndarray:
     vals = prior[have]
     q = np.argwhere(mask)
     out = np.full(mask.shape, np.nan)
-    lin = griddata(pts, vals, q, method="linear") if len(pts) >= 4 else np.full(len(q), np.nan)
+    lin = np.full(len(q), np.nan)
+    # a triangulation needs samples that span the plane (a thin scene's few samples can lie
+    # on one line: then the nearest sample everywhere)
+    if len(pts) >= 4 and np.linalg.matrix_rank(pts - pts.mean(axis=0)) == 2:
+        lin = griddata(pts, vals, q, method="linear")
     near = griddata(pts, vals, q, method="nearest")
     out[mask] = np.where(np.isfinite(lin), lin, near)
     return out
