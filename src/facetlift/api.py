@@ -135,16 +135,20 @@ def integrate(
     if isinstance(prior, str):  # a method option named "prior" (regularization's smoothness
         options["prior"] = prior  # prior, a string), not a depth prior
         prior = None
+    note = None
     if discontinuities:
         options["discontinuities"] = _check_discontinuities(info, discontinuities)
         if outlier_eps is None and info.jump_grazing is not None:
             outlier_eps = info.jump_grazing
+            note = (f"the rule of {method!r} with discontinuities=True, cos 85 deg; "
+                    "outlier_eps sets another")
     if solver is not None:
         options["solver"] = solver
     normals = frames.checked(normals, mask, frame=normal_frame)
     problem = prepare(
         normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
         outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight, confidence=confidence,
+        grazing_note=note,
     )
     return solve(problem, method, t0=t0, max_memory=max_memory, **options)
 
@@ -209,6 +213,9 @@ def solve(
     Every option is validated against the method's declarations before it runs
     (:func:`facetlift.options.validate`), and the job's peak memory is planned against
     `max_memory` (:func:`facetlift.memory.plan`); see :func:`integrate` for what is raised.
+    The normals `problem` treats as grazing were decided when it was prepared: the
+    discontinuity route's own threshold (``MethodInfo.jump_grazing``, cos 85 deg for "dgp")
+    is applied by :func:`integrate`, so prepare with ``outlier_eps=`` to match it here.
     """
     t0 = time.perf_counter() if t0 is None else t0
     info = methods.get(method)

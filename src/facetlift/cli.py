@@ -152,7 +152,8 @@ _JOB_OPTIONS = [
                  "an error."),
     click.option("--outlier-eps", type=float, default=None,
                  help="Grazing threshold on the view cosine below which a normal is a missing "
-                 "sample (default: cos 85 deg orthographic, 1/255 perspective)."),
+                 "sample (default: cos 85 deg orthographic, 1/255 perspective; cos 85 deg for "
+                 "both with dgp --discontinuities)."),
     click.option("--solver", help="The method's solver, where it has one (dgp: 'direct' "
                  "solves the fixed point at once, the default; 'iterative' runs the paper's "
                  "loop)."),
@@ -399,8 +400,9 @@ def _info_lines(rec: dict) -> list[str]:
                  + (f"; first at (row {first[0]}, col {first[1]})" if first else ""))
     jg = rec.get("discontinuity_grazing") or {}
     if jg.get("more_grazing"):
-        lines.append(f"  with --discontinuities: {jg['more_grazing']} more grazing (view cosine "
-                     f"< {jg['outlier_eps']:.4g}), treated as missing")
+        lines.append(f"  with --discontinuities (dgp): {jg['more_grazing']} more grazing (view "
+                     f"cosine < {jg['outlier_eps']:.4g}), treated as missing unless "
+                     "--outlier-eps says otherwise")
     e = rec["estimate"]
     fits = "within" if e["fits"] else "more than"
     line = (f"  default integration (estimate): peak about {_mib(e['bytes'])} above the input "

@@ -140,6 +140,8 @@ def _jump_grazing(problem) -> dict:
     from . import methods
 
     eps = methods.get("dgp").jump_grazing
+    if eps is None:
+        return {}
     r, c = problem.domain.pixels
     use = problem.usable
     cos = problem.camera.view_cosine(r[use], c[use], problem.normals[use], unit=True)

@@ -218,6 +218,7 @@ def prepare(
     prior=None,
     prior_weight=1.0,
     confidence=None,
+    grazing_note: str | None = None,
 ) -> Problem:
     """Check user inputs and build a :class:`Problem`.
 
@@ -243,9 +244,14 @@ def prepare(
         Normals whose cosine to the direction toward the camera is below this are grazing and
         become missing samples (the paper's outlier rule). Default: the camera's
         (cos 85 deg orthographic, 1/255 perspective; :mod:`facetlift.camera`).
+        :func:`facetlift.integrate` passes the discontinuity route's own rule
+        (``MethodInfo.jump_grazing``); a Problem prepared here for :func:`facetlift.solve`
+        keeps what it is given.
     prior, prior_weight, confidence
         Depth prior and weights (:func:`check_prior`, :func:`check_confidence`; see
         docs/fusion.md). A pixel with confidence 0 becomes a missing sample.
+    grazing_note : str, optional
+        Where the grazing threshold comes from, for the warning.
 
     Raises
     ------
@@ -328,7 +334,8 @@ def prepare(
         warn(
             f"{sum(int(v.sum()) for v in problems.values())} normal(s) inside the mask cannot be "
             f"used and were treated as missing samples ({what}; grazing: view cosine < "
-            f"{eps:.4g}); first at (row {r[first]}, col {c[first]})"
+            f"{eps:.4g}{'' if grazing_note is None else ', ' + grazing_note}); first at "
+            f"(row {r[first]}, col {c[first]})"
         )
     if not usable.any():
         raise ValueError(

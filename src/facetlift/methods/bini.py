@@ -8,9 +8,10 @@ Energy
     footprint, or log-depth) at the pixel centres. Every pixel ``p`` with a usable normal has
     four one-sided terms, forward and backward along x and along y, each with its own normal:
     ``w (c_p (u_q - u_p) - c_p g_p)^2`` where ``g_p`` is the grid slope the normal implies along
-    that axis and ``c_p`` the normal's scale (``n_z / h`` orthographically, BiNI's
-    ``n~_z = (u - c_u) n_x + (v - c_v) n_y + f n_z`` in perspective: here the cosine to the
-    viewing ray times ``|r| / footprint``). A missing neighbour drops the term.
+    that axis and ``c_p`` the normal's scale (``n_z / h`` orthographically; in perspective
+    BiNI's ``n~_z = (u - c_u) n_x + (v - c_v) n_y + f n_z`` per axis, with ``f_x`` for the
+    column and ``f_y`` for the row differences, as its reference code writes it, and the
+    normal's components as targets: see :func:`_scales`). A missing neighbour drops the term.
 
 Bilateral weights
     Along each axis ``w_+ = sigmoid(k ((A_- u)^2 - (A_+ u)^2))`` and ``w_- = 1 - w_+``, with
@@ -111,11 +112,14 @@ def _scales(cam, r, c, nrm, usable, gx, gy):
     geometric-mean focal length for both axes the bear's MADE is 0.376 mm instead of 0.334 mm.
     The slopes are then BiNI's ``n_x / c_x`` and ``n_y / c_y`` (its targets are the normal's
     components), not the exact log-depth slopes of :meth:`facetlift.camera.Pinhole.grid_slopes`.
+    A skewed ``K`` (BiNI has no skew term) takes the exact cosine and slopes instead.
     """
-    if not cam.perspective:
+    K = getattr(cam, "K", None)
+    if not cam.perspective or K[0, 1] != 0:
+        # orthographic, or a skewed pinhole (BiNI's n~_z has no skew term): the exact ray
+        # cosine per footprint and the camera's exact slopes
         s = np.where(usable, cam.view_cosine(r, c, nrm, unit=True) / cam.footprint(), 0.0)
         return (s, s), (gx, gy)
-    K = cam.K
     off = -(K[1, 2] - r) * nrm[:, 1] - (c - K[0, 2]) * nrm[:, 0]
     sx = np.where(usable, K[0, 0] * nrm[:, 2] + off, 0.0)
     sy = np.where(usable, K[1, 1] * nrm[:, 2] + off, 0.0)
