@@ -62,9 +62,13 @@ def run_case(case: str, s: int) -> dict:
     opts = dict((kv.split("=", 1)[0], _value(kv.split("=", 1)[1]))
                 for kv in (rest[0].split(",") if rest else []))
     normals, mask, K = inputs(shape, s, route)
+    eps = None
     if route == "discontinuities":
         opts["discontinuities"] = True
-    problem = facetlift.prepare(normals, mask, pixel_size=1.0 / s, K=K)
+        from facetlift.methods import get as method_info
+
+        eps = method_info(method).jump_grazing  # as facetlift.integrate applies it
+    problem = facetlift.prepare(normals, mask, pixel_size=1.0 / s, K=K, outlier_eps=eps)
     del normals
     gc.collect()
     with open("/proc/self/clear_refs", "w") as f:
