@@ -141,7 +141,7 @@ def integrate(
         if outlier_eps is None and info.jump_grazing is not None:
             outlier_eps = info.jump_grazing
             note = (f"the rule of {method!r} with discontinuities=True, cos 85 deg; "
-                    "outlier_eps sets another")
+                    "outlier_eps / --outlier-eps sets another")
     if solver is not None:
         options["solver"] = solver
     normals = frames.checked(normals, mask, frame=normal_frame)
