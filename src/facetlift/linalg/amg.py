@@ -10,7 +10,7 @@ from .direct import Factor, SolverError
 
 def hierarchy(
     K, *, max_coarse: int = 500, symmetric_gs: bool = False, method: str = "rs",
-    coarse_solver: str = "splu",
+    coarse_solver: str = "splu", interpolation: str = "classical",
 ):
     """A multigrid hierarchy of the SPD matrix `K` (pyamg), built once.
 
@@ -20,7 +20,8 @@ def hierarchy(
     forward Gauss-Seidel sweep before and a backward one after the coarse correction, which
     keeps the V-cycle symmetric (required for CG) with one sweep each; ``coarse_solver``
     ("splu", or "pinv" for a singular matrix such as an unpinned facet operator) is then the
-    coarsest level's.
+    coarsest level's. ``interpolation`` is Ruge-Stueben's ("classical" or the cheaper
+    "direct").
     """
     import pyamg
 
@@ -33,7 +34,8 @@ def hierarchy(
             "postsmoother": ("gauss_seidel", {"sweep": "backward"}),
             "coarse_solver": coarse_solver,
         }
-    return pyamg.ruge_stuben_solver(sp.csr_matrix(K), max_coarse=max_coarse, **kw)
+    return pyamg.ruge_stuben_solver(sp.csr_matrix(K), max_coarse=max_coarse,
+                                    interpolation=interpolation, **kw)
 
 
 def preconditioner(K, **kw):
