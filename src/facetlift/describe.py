@@ -142,9 +142,7 @@ def _jump_grazing(problem) -> dict:
     eps = methods.get("dgp").jump_grazing
     if eps is None:
         return {}
-    r, c = problem.domain.pixels
-    use = problem.usable
-    cos = problem.camera.view_cosine(r[use], c[use], problem.normals[use], unit=True)
+    cos = problem.view_cosines[problem.usable]
     return {"outlier_eps": float(eps), "more_grazing": int((cos < eps).sum())}
 
 

@@ -91,6 +91,14 @@ class Problem:
         gx, gy = self.camera.grid_slopes(r, c, n)
         return np.where(self.usable, gx, np.nan), np.where(self.usable, gy, np.nan)
 
+    @cached_property
+    def view_cosines(self) -> np.ndarray:
+        """(m,) cosine between each usable normal and the direction toward the camera
+        (:meth:`facetlift.camera.Camera.view_cosine`); 0 at facets without a usable normal."""
+        r, c = self.domain.pixels
+        n = np.where(self.usable[:, None], self.normals, [0.0, 0.0, 1.0])
+        return np.where(self.usable, self.camera.view_cosine(r, c, n, unit=True), 0.0)
+
     @property
     def slopes(self) -> tuple[np.ndarray, np.ndarray]:
         """(p, q), each (m,): grid slopes per footprint; for an orthographic camera the height

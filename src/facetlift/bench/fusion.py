@@ -267,6 +267,12 @@ def run_scene(ctx: Context, group: str, name: str, gt) -> list[dict]:
     """Every column under every prior of one scene, and the confidence check."""
     rows = []
     base = {"group": group, "scene": name, "pixels": int(gt.mask.sum())}
+    # the priors and the prior-alone errors are the same for every column
+    inputs = []
+    for cond, kind, prior, kw in priors(gt, name, ctx.settings):
+        alone = interpolate(prior, gt.mask)
+        inputs.append((cond, prior, kw.get("prior_weight", WEIGHTS[kind]),
+                       abs_errors(gt, alone)[0], aligned_error(gt, alone)))
     for label, method, options in COLUMNS:
         if label not in ctx.settings.fusion_columns:
             continue
@@ -280,8 +286,7 @@ def run_scene(ctx: Context, group: str, name: str, gt) -> list[dict]:
         rows.append({**base, "method": label, "condition": "normals only", "status": "ok",
                      "normals_error": plain, "seconds": t_plain, "cg_iterations": _cg(s0.info),
                      "backend": s0.info.get("backend")})
-        for cond, kind, prior, kw in priors(gt, name, ctx.settings):
-            weight = kw.get("prior_weight", WEIGHTS[kind])
+        for cond, prior, weight, perr, palign in inputs:
             row = {**base, "method": label, "condition": cond, "normals_error": plain,
                    "plain_seconds": t_plain,
                    "samples": int((np.isfinite(prior) & gt.mask).sum()),
@@ -294,11 +299,9 @@ def run_scene(ctx: Context, group: str, name: str, gt) -> list[dict]:
                              "message": f"{type(e).__name__}: {e}"[:200]})
                 continue
             err, made = abs_errors(gt, s.depth)
-            alone = interpolate(prior, gt.mask)
-            perr, _ = abs_errors(gt, alone)
             rows.append({**row, "status": "ok", "error": err, "made": made,
                          "prior_error": perr, "aligned_error": aligned_error(gt, s.depth),
-                         "prior_aligned": aligned_error(gt, alone), "seconds": sec,
+                         "prior_aligned": palign, "seconds": sec,
                          "cg_iterations": _cg(s.info),
                          "time_ratio": sec / t_plain if t_plain > 0 else None})
         rows += confidence_rows(ctx, base, label, method, options, gt, name)

@@ -77,11 +77,7 @@ def operators(problem):
     """
     graph = pg.build(problem.domain)
     n = graph.n
-    gx, gy = problem.grid_slopes
-    r, c = problem.domain.pixels
-    cam = problem.camera
-    nrm = np.where(problem.usable[:, None], problem.normals, [0.0, 0.0, 1.0])
-    scales, (gx, gy) = _scales(cam, r, c, nrm, problem.usable, gx, gy)
+    scales, (gx, gy) = _scales(problem)
     G = pg.difference(graph).tocsr()  # (E, n): u[head] - u[tail]
     out_A, out_b = [], []
     # (edge index per pixel, sign of head - tail along +axis, target slope)
@@ -100,7 +96,7 @@ def operators(problem):
     return out_A, out_b
 
 
-def _scales(cam, r, c, nrm, usable, gx, gy):
+def _scales(problem):
     """``(c_x, c_y), (g_x, g_y)`` (m,): the scale of the one-sided differences along x and
     along y, and the slopes they are compared with.
 
@@ -114,12 +110,15 @@ def _scales(cam, r, c, nrm, usable, gx, gy):
     components), not the exact log-depth slopes of :meth:`facetlift.camera.Pinhole.grid_slopes`.
     A skewed ``K`` (BiNI has no skew term) takes the exact cosine and slopes instead.
     """
+    cam, usable = problem.camera, problem.usable
     K = getattr(cam, "K", None)
     if not cam.perspective or K[0, 1] != 0:
         # orthographic, or a skewed pinhole (BiNI's n~_z has no skew term): the exact ray
         # cosine per footprint and the camera's exact slopes
-        s = np.where(usable, cam.view_cosine(r, c, nrm, unit=True) / cam.footprint(), 0.0)
-        return (s, s), (gx, gy)
+        s = problem.view_cosines / cam.footprint()
+        return (s, s), problem.grid_slopes
+    r, c = problem.domain.pixels
+    nrm = np.where(usable[:, None], problem.normals, [0.0, 0.0, 1.0])
     off = -(K[1, 2] - r) * nrm[:, 1] - (c - K[0, 2]) * nrm[:, 0]
     sx = np.where(usable, K[0, 0] * nrm[:, 2] + off, 0.0)
     sy = np.where(usable, K[1, 1] * nrm[:, 2] + off, 0.0)

@@ -168,10 +168,7 @@ def fusion_terms(problem):
 def normal_scale(problem):
     """(m,) ``c_f``: each usable normal's cosine to the viewing ray per pixel footprint (the
     factor BiNI calls ``n~_z``), 0 where a facet has no usable normal."""
-    r, c = problem.domain.pixels
-    n = np.where(problem.usable[:, None], problem.normals, [0.0, 0.0, 1.0])
-    cos = problem.camera.view_cosine(r, c, n, unit=True)
-    return np.where(problem.usable, cos, 0.0) / problem.camera.footprint()
+    return problem.view_cosines / problem.camera.footprint()
 
 
 def place_pieces(domain, copies, bx, by, target, footprint, anchored=None):

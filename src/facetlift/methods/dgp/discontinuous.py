@@ -379,7 +379,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         fit = np.where(target, np.einsum("fa,fa->f", slopes, slopes), 0.0)
         twist = (y @ E_TWIST) ** 2
         glue = (w * (y - z[corners]) ** 2).sum()
-        if fusion is None and prior is None:
+        if fusion is None:  # (no prior either)
             return float(fit.sum() + twist.sum() + glue)
         c = 1.0 if fusion is None else fusion[0]
         fit_prior = 0.0 if prior is None else fusion[1] * (y.mean(axis=1) - prior[1]) ** 2 + (
