@@ -259,12 +259,11 @@ class FacetPreconditioner:
         switch at 512^2), where the box's fictitious material glues neighbouring arms
         together; and, with weights, for systems whose facets are cut apart (a depth
         discontinuity), where a unit operator glues what the system separates."""
-        from .amg import hierarchy
+        from .amg import hierarchy, vcycle
 
         ml = hierarchy(self._operator(weights), symmetric_gs=True)
-        V = ml.aspreconditioner(cycle="V")
         self._ml = ml
-        self._global = lambda r: V @ r
+        self._global = vcycle(ml)
         self.coarse = "amg"
         self.exact = False
         return self

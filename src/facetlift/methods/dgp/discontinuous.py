@@ -71,7 +71,7 @@ import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from ... import linalg
-from ...linalg.amg import hierarchy
+from ...linalg.amg import hierarchy, vcycle
 from ...operators.stencil import E_TWIST, E_X, E_Y, facet_form, prior_form, scatter_corners
 
 #: Default for ``discontinuity_k`` (squared pixel footprints; see the module docstring).
@@ -398,11 +398,10 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         # current system keeps CG at ~5-15 iterations where one of the smooth system needs
         # hundreds; once the weights settle, the last hierarchy serves until CG slows down
         if rebuild or amg["pre"] is None:
-            amg["pre"] = hierarchy(K, symmetric_gs=True, interpolation=INTERPOLATION
-                                   ).aspreconditioner(cycle="V")
+            amg["pre"] = vcycle(hierarchy(K, symmetric_gs=True, interpolation=INTERPOLATION))
             amg["builds"] += 1
         pre = amg["pre"]
-        z, info = linalg.cg(K, rhs, lambda r: pre @ r, x0=z0, rtol=rtol, maxiter=500)
+        z, info = linalg.cg(K, rhs, pre, x0=z0, rtol=rtol, maxiter=500)
         if not info.converged:  # an ill-conditioned system: take the solver layer's route
             z = linalg.solve(K, rhs)[0]
         return z, info.iterations
