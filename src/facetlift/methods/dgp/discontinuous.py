@@ -161,14 +161,19 @@ class FacetBlocks:
         c = domain.corners
         fk = (c[:, :, None] * n + c[:, None, :]).reshape(-1)  # (m*16,) row-major (a, b)
         idx_dtype = np.int32 if keys.size < 2**31 else np.int64
-        self.slot = np.searchsorted(keys, fk).astype(idx_dtype).reshape(-1, 16)
+        # (16, m): entry-major, the layout GlueInverse.eliminated() builds its blocks in
+        self.slot = np.ascontiguousarray(
+            np.searchsorted(keys, fk).astype(idx_dtype).reshape(-1, 16).T)
         self.nnz = keys.size
         first = domain.first_vertices if skip is None else domain.first_vertices[~skip]
         diag = np.searchsorted(keys, first * n + first)
         self.pin = np.bincount(diag, np.full(first.size, pin), minlength=self.nnz)
 
-    def assemble(self, Q: np.ndarray) -> sp.csr_matrix:
-        """(n, n) CSR of ``sum_f C_f^T Q_f C_f`` plus the pins; `Q` is (m, 4, 4) or (m, 16)."""
+    def assemble(self, Q: np.ndarray, entry_major: bool = False) -> sp.csr_matrix:
+        """(n, n) CSR of ``sum_f C_f^T Q_f C_f`` plus the pins; `Q` is (m, 4, 4) or (m, 16),
+        or with `entry_major` (16, m) (entry ``4 a + b`` of every facet's block in a row)."""
+        if not entry_major:
+            Q = np.reshape(Q, (-1, 16)).T
         data = np.bincount(self.slot.reshape(-1), Q.reshape(-1), minlength=self.nnz)
         n = self.domain.n_vertices
         return sp.csr_matrix((data + self.pin, self.indices, self.indptr), shape=(n, n))
@@ -224,18 +229,24 @@ class GlueInverse:
         return out
 
     def eliminated(self):
-        """``Q_f = W_f - W_f M_f W_f`` (m, 4, 4): the facet blocks once the copies are
-        eliminated."""
+        """``Q_f = W_f - W_f M_f W_f``: the facet blocks once the copies are eliminated, entry
+        major (16, m) (row ``4 a + b`` holds entry (a, b) of every block: rows of m numbers
+        are ten times faster to form than m blocks of 4 x 4)."""
         w = self.w
         g = w * self.d
-        Q = -(self.c[:, None, None] * g[:, :, None] * g[:, None, :])
-        idx = np.arange(4)
-        Q[:, idx, idx] += w - w * g
+        m = len(w)
+        gt = np.ascontiguousarray(g.T)
+        cgt = np.ascontiguousarray((-self.c[:, None] * g).T)
+        Q = np.empty((16, m))
+        for a in range(4):
+            np.multiply(gt[a], cgt, out=Q[4 * a:4 * a + 4])
+        Q[::5] += (w - w * g).T  # the diagonal entries (0, 5, 10, 15)
         if self.other.size:
+            idx = np.arange(4)
             wo = w[self.other]
             Qo = -(wo[:, :, None] * self.M_other * wo[:, None, :])
             Qo[:, idx, idx] += wo
-            Q[self.other] = Qo
+            Q[:, self.other] = Qo.reshape(-1, 16).T
         return Q
 
 
@@ -366,7 +377,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     def state(w):
         M = GlueInverse(target, w, A_other, fusion)
         Ma = M.apply(a)
-        K, rhs = blocks.assemble(M.eliminated()), scatter_corners(domain, w * Ma)
+        K = blocks.assemble(M.eliminated(), entry_major=True)
+        rhs = scatter_corners(domain, w * Ma)
         if KP is not None:
             K, rhs = (K + KP).tocsr(), rhs + rP
         return M, Ma, K, rhs
