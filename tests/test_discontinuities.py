@@ -291,7 +291,25 @@ def test_unconverged_cg_falls_back_to_the_solver_layer(monkeypatch):
 
     monkeypatch.setattr(disc.linalg, "cg", stalled)
     s = facetlift.integrate(n, discontinuities=True)
-    np.testing.assert_allclose(s.depth, ref.depth, atol=1e-5 * np.ptp(ref.depth[ref.mask]))
+    # the fallback solves exactly where the reference's reweightings stop CG at a relative
+    # residual of 1e-4 (LOOSE_RTOL): the two paths differ by 1.7e-5 of the depth range
+    np.testing.assert_allclose(s.depth, ref.depth, atol=1e-4 * np.ptp(ref.depth[ref.mask]))
+    assert s.info["iterations"] == ref.info["iterations"]
+
+
+def test_multigrid_policy_refresh_rebuild_and_block_coarse_space(monkeypatch):
+    """The reweightings refresh their hierarchy when weights move much, rebuild it after a slow
+    solve and then add the block coarse space; every policy reaches the same surface."""
+    n, gt, left = scissor_ortho()
+    ref = facetlift.integrate(n, discontinuities=True)
+    assert ref.info["multigrid_refreshes"] > 0 and ref.info["multigrid_builds"] == 1
+    assert not ref.info["block_coarse_space"]
+    monkeypatch.setattr(disc, "REUSE_ITS", 0)  # every solve counts as slow
+    s = facetlift.integrate(n, discontinuities=True)
+    assert s.info["block_coarse_space"] and s.info["multigrid_builds"] > 1
+    assert s.info["converged"]
+    # measured 1.6e-6 of the depth range apart (the loose solves differ, 1e-4 residual)
+    np.testing.assert_allclose(s.depth, ref.depth, atol=1e-4 * np.ptp(ref.depth[ref.mask]))
 
 
 _MAPS = Path(__file__).parents[1] / ".." / "shared" / "data" / "normal_maps"

@@ -164,3 +164,58 @@ def test_pardiso_adapter_is_spd_upper_triangle_without_refinement():
     assert sp.tril(stored, k=-1).nnz == 0 and stored.nnz == sp.triu(K).nnz
     assert ps.get_iparm(8) == 0 and ps.get_iparm(7) == 0  # no refinement asked, none done
     assert hasattr(ps, "free_memory")
+
+
+def _graph_system(n=40, seed=3):
+    """A 2-D grid Laplacian with one pinned vertex and a weak seam (an SPD M-matrix)."""
+    import pyamg
+
+    A = pyamg.gallery.poisson((n, n), format="csr").astype(float)
+    rng = np.random.default_rng(seed)
+    return (A + sp.diags(np.r_[1.0, np.zeros(n * n - 1)])).tocsr(), rng.standard_normal(n * n)
+
+
+def test_vcycle_equals_pyamgs_preconditioner():
+    from facetlift.linalg.amg import hierarchy, vcycle
+
+    A, r = _graph_system()
+    ml = hierarchy(A, symmetric_gs=True, interpolation="direct")
+    assert len(ml.levels) > 2
+    np.testing.assert_allclose(vcycle(ml)(r), ml.aspreconditioner(cycle="V") @ r, rtol=0,
+                               atol=1e-13 * np.abs(r).max())
+
+
+def test_refresh_gives_the_galerkin_operators_of_the_new_matrix():
+    from facetlift.linalg.amg import hierarchy, refresh, vcycle
+
+    A, r = _graph_system()
+    ml = hierarchy(A, symmetric_gs=True)
+    V = vcycle(ml)
+    B = (A + sp.diags(np.linspace(0.0, 2.0, A.shape[0]))).tocsr()
+    refresh(ml, B)
+    lv = ml.levels
+    np.testing.assert_allclose(lv[1].A.toarray(), (lv[0].R @ B @ lv[0].P).toarray(), atol=1e-12)
+    x, info = linalg.cg(B, r, V, rtol=1e-10, maxiter=200)  # the old callable, new operators
+    assert info.converged
+    np.testing.assert_allclose(B @ x, r, atol=1e-8 * np.abs(r).max())
+
+
+def test_balanced_two_level_is_spd_and_catches_piecewise_constant_error():
+    from facetlift.linalg.amg import balanced, block_aggregates
+
+    n = 30
+    A, r = _graph_system(n)
+    rows, cols = np.divmod(np.arange(n * n), n)
+    Z = block_aggregates(rows, cols, 8)
+    assert Z.shape == (n * n, 16) and np.all(Z.sum(axis=1) == 1)
+    jacobi = 1.0 / A.diagonal()
+    M = balanced(A, lambda v: jacobi * v, Z)
+    full = np.column_stack([M(e) for e in np.eye(n * n)])
+    np.testing.assert_allclose(full, full.T, atol=1e-10)
+    assert np.linalg.eigvalsh(0.5 * (full + full.T)).min() > 0
+    plain = linalg.cg(A, r, lambda v: jacobi * v, rtol=1e-8, maxiter=2000)[1].iterations
+    two = linalg.cg(A, r, M, rtol=1e-8, maxiter=2000)[1].iterations
+    assert two < 0.7 * plain
+    groups = (cols >= n // 2).astype(int)  # two groups: no block joins them
+    Zg = block_aggregates(rows, cols, 64, groups)
+    assert Zg.shape[1] == 2

@@ -283,13 +283,9 @@ class FacetPreconditioner:
     def _regalerkin(self, weights) -> None:
         """New facet weights for the multigrid part: the same coarsening and interpolation,
         the coarse operators recomputed (``A_{l+1} = R A_l P``, no new setup)."""
-        import pyamg
+        from .amg import refresh
 
-        levels = self._ml.levels
-        levels[0].A = self._operator(weights)
-        for fine, coarse in zip(levels[:-1], levels[1:], strict=True):
-            coarse.A = (fine.R @ fine.A @ fine.P).tocsr()
-        self._ml.coarse_solver = pyamg.multilevel.coarse_grid_solver("splu")
+        refresh(self._ml, self._operator(weights))
 
     def refresh(self, K, strong: np.ndarray, weights=None) -> FacetPreconditioner:
         """Use a new matrix (same domain) and weak set. The global part is kept: the box

@@ -64,6 +64,7 @@ values are the glued ``z``; the per-corner weights tell where the mesh is cut.
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
@@ -71,7 +72,7 @@ import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from ... import linalg
-from ...linalg.amg import hierarchy, vcycle
+from ...linalg.amg import balanced, block_aggregates, hierarchy, refresh, vcycle
 from ...operators.stencil import E_TWIST, E_X, E_Y, facet_form, prior_form, scatter_corners
 
 #: Default for ``discontinuity_k`` (squared pixel footprints; see the module docstring).
@@ -117,10 +118,23 @@ SETTLE_AFTER = 10
 #: below 1 % of their size about 28 reweightings later).
 DECAY = 0.85
 
-#: The multigrid hierarchy of the previous reweighting is reused while its CG solve took at
-#: most this many iterations and no corner weight moves by more than :data:`REUSE_STEP`.
+#: Multigrid policy of the reweightings' solves. The hierarchy of the previous reweighting is
+#: reused as it is while no corner weight moves by more than :data:`REUSE_STEP`; when one
+#: does, its coarse operators are recomputed for the new system (a Galerkin refresh, about a
+#: fifth of a build: the bear 8 builds -> 1); a new hierarchy is built after a CG solve that
+#: took more than :data:`REUSE_ITS` iterations, and from then on the block coarse space of
+#: :data:`COARSE_BLOCK` is added (below).
 REUSE_ITS = 20
 REUSE_STEP = 0.5
+
+#: Side (vertices) of the square blocks whose piecewise constants are solved exactly in every
+#: preconditioning step once CG has been slow (:func:`facetlift.linalg.amg.balanced`). The
+#: Ruge-Stueben hierarchy resolves the smooth error of these glued systems slowly: whole
+#: regions' offsets behind rim facets without a normal (CG 821 -> 389 iterations on the
+#: benchmark's spot@front, 375 -> 239 on max_planck@left), and at the reweightings' loose
+#: tolerance that error steered the weights (max_planck@oblique with noise: 0.54 mm with the
+#: refreshed hierarchy alone, 0.28 with the blocks, 0.29 with every solve to 1e-5).
+COARSE_BLOCK = 8
 
 #: Relative CG residual of the reweightings' solves (the weights move on anyway); the final
 #: weights are solved once more to ``cg_rtol``. Against 1e-6 throughout, on 72 runs of the
@@ -342,9 +356,11 @@ def solve_discontinuous(
         Final corner glue weights.
     info : dict
         ``iterations``, ``converged``, ``energy`` (per reweighting), ``weight_change`` (largest
-        corner-weight step per reweighting), ``cg_iterations`` (list), ``cut_corners``
-        (fraction of corners with weight below :data:`CUT`), ``unsettled_corners``,
-        ``seconds``.
+        corner-weight step per reweighting), ``cg_iterations`` (list), ``multigrid_builds``
+        and ``multigrid_refreshes`` (new and Galerkin-refreshed hierarchies),
+        ``block_coarse_space`` (whether the block coarse space of :data:`COARSE_BLOCK` was
+        turned on), ``cut_corners`` (fraction of corners with weight below :data:`CUT`),
+        ``unsettled_corners``, ``seconds``.
     """
     # pyamg's V-cycle takes a vector norm per call: with multi-threaded BLAS on a busy machine
     # each one costs milliseconds (measured: 13 of 20 s on the bear), single-threaded microseconds
@@ -403,22 +419,39 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     M, Ma, K, rhs = state(w)
     t1 = time.perf_counter()
 
-    amg = {"pre": None, "builds": 0}
+    @functools.cache
+    def blocks_Z():
+        vr, vc = np.nonzero(domain.vertex_mask)
+        return block_aggregates(vr, vc, COARSE_BLOCK, domain.vertex_component)
+
+    amg = {"ml": None, "pre": None, "builds": 0, "refreshes": 0, "last_its": 0, "slow": False}
 
     def solve(K, rhs, z0, rebuild=True, rtol=cg_rtol):
         # the weights change the system's near-null modes (cut corners): a hierarchy of the
         # current system keeps CG at ~5-15 iterations where one of the smooth system needs
-        # hundreds; once the weights settle, the last hierarchy serves until CG slows down
-        if rebuild or amg["pre"] is None:
-            amg["pre"] = vcycle(hierarchy(K, symmetric_gs=True, interpolation=INTERPOLATION))
+        # hundreds. A new one is built when the last solve was slow; when the weights moved
+        # much, the old one's coarse operators are recomputed for the new system (Galerkin
+        # refresh, a fraction of a build); once the weights settle, it serves as it is
+        if amg["ml"] is None or amg["last_its"] > REUSE_ITS:
+            amg["ml"] = hierarchy(K, symmetric_gs=True, interpolation=INTERPOLATION)
+            amg["pre"] = vcycle(amg["ml"])
             amg["builds"] += 1
+        elif rebuild:
+            refresh(amg["ml"], K)
+            amg["refreshes"] += 1
         pre = amg["pre"]
+        if amg["slow"]:  # regions' offsets converge slowly: add the block coarse space
+            pre = balanced(K, pre, blocks_Z())
         z, info = linalg.cg(K, rhs, pre, x0=z0, rtol=rtol, maxiter=500)
+        amg["last_its"] = info.iterations
+        amg["slow"] = amg["slow"] or info.iterations > REUSE_ITS
         if not info.converged:  # an ill-conditioned system: take the solver layer's route
             z = linalg.solve(K, rhs)[0]
         return z, info.iterations
 
-    z, its = solve(K, rhs, np.zeros(domain.n_vertices) if x0 is None else x0)
+    # the first (smooth) solution only starts the reweightings: as loose as theirs
+    z, its = solve(K, rhs, np.zeros(domain.n_vertices) if x0 is None else x0,
+                   rtol=max(cg_rtol, LOOSE_RTOL) if max_iter > 0 else cg_rtol)
     cg_its = [its]
     y = copies(M, Ma, w, z)
     energies = [energy(y, w, z)]
@@ -431,7 +464,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             step *= DECAY ** (it - SETTLE_AFTER)
         w = w + step
         M, Ma, K, rhs = state(w)
-        z, its = solve(K, rhs, z, rebuild=cg_its[-1] > REUSE_ITS or changes_big(step),
+        z, its = solve(K, rhs, z, rebuild=changes_big(step),
                        rtol=max(cg_rtol, LOOSE_RTOL))
         cg_its.append(its)
         y = copies(M, Ma, w, z)
@@ -456,6 +489,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         "cg_iterations": cg_its,
         "cut_corners": float((w < CUT).mean()),
         "multigrid_builds": amg["builds"],
+        "multigrid_refreshes": amg["refreshes"],
+        "block_coarse_space": amg["slow"],
         "unsettled_corners": float((np.abs(own - w) > CUT).mean()),
         "discontinuity_k": float(k),
         "seconds": {"setup": t1 - t0, "solve": t2 - t1},
