@@ -152,6 +152,11 @@ PRIOR_OWN = 0.5
 #: +1 for the +x (right) / +y (up) side.
 CORNER_SIDES = ((-1, 1), (1, 1), (1, -1), (-1, -1))
 
+# sums and means over a facet's four corners as products: numpy's reductions over an axis of
+# length 4 are five times slower
+_ONES = np.ones(4)
+_QUARTER = np.full(4, 0.25)
+
 
 class FacetBlocks:
     """Assemble per-facet 4x4 blocks (each its own values) into a fixed 9-point CSR pattern.
@@ -227,7 +232,7 @@ class GlueInverse:
             fusion[0][:, None], 0.25 * fusion[0] - fusion[1] / 16.0)
         self.w = w
         self.d = 1.0 / (scale + w)  # (m, 4)
-        self.c = np.broadcast_to(alpha / (1.0 - alpha * self.d.sum(axis=1)), (len(w),))
+        self.c = np.broadcast_to(alpha / (1.0 - alpha * (self.d @ _ONES)), (len(w),))
         self.other = np.flatnonzero(~target)
         self.M_other = None
         if self.other.size:
@@ -237,7 +242,8 @@ class GlueInverse:
     def apply(self, v):
         """``M_f v_f`` for every facet: (m, 4)."""
         d = self.d
-        out = d * v + (self.c * (d * v).sum(axis=1))[:, None] * d
+        dv = d * v
+        out = dv + (self.c * (dv @ _ONES))[:, None] * d
         if self.other.size:
             out[self.other] = np.einsum("fab,fb->fa", self.M_other, v[self.other])
         return out
@@ -459,7 +465,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     converged = max_iter == 0
     it = 0
     for it in range(1, max_iter + 1):
-        step = bilateral_weights(y.mean(axis=1), nb, normal_scale, k, slopes) - w
+        step = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes) - w
         if it > SETTLE_AFTER:
             step *= DECAY ** (it - SETTLE_AFTER)
         w = w + step
@@ -479,7 +485,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         z, its = solve(K, rhs, z, rebuild=False)
         cg_its.append(its)
         y = copies(M, Ma, w, z)
-    own = bilateral_weights(y.mean(axis=1), nb, normal_scale, k, slopes)
+    own = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
     t2 = time.perf_counter()
     info = {
         "iterations": it,
