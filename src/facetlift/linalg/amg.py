@@ -164,22 +164,20 @@ def balanced(K, V, Z):
     resolves their smooth, piecewise-constant error (the offsets of whole regions, a whole
     component with one pinned vertex) slowly; blocks of 8 x 8 vertices catch it and halve
     the CG iterations on objects with a rim of missing normals (docs/benchmarks.md). Costs
-    per application: `V`, two products with `K` and two sparse coarse solves.
+    per application: `V`, one product with `K`, one with ``K Z`` and two coarse solves.
     """
     import scipy.sparse.linalg as spla
 
     Z = sp.csr_matrix(Z)
     ZT = Z.T.tocsr()
-    E = (ZT @ (K @ Z)).tocsc()
-    lu = spla.splu(E)
-
-    def coarse(r):
-        return Z @ lu.solve(ZT @ r)
+    KZ = sp.csr_matrix(K @ Z)  # a few entries a row where K has nine
+    lu = spla.splu((ZT @ KZ).tocsc())
 
     def apply(r):
-        x = coarse(r)
-        x += V(r - K @ x)
-        x += coarse(r - K @ x)
-        return x
+        c = lu.solve(ZT @ r)
+        t = r - KZ @ c  # r - K x for x = Z c
+        y = V(t)
+        t -= K @ y
+        return Z @ (c + lu.solve(ZT @ t)) + y
 
     return apply
