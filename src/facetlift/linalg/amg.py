@@ -55,8 +55,8 @@ def vcycle(ml):
 
     The same arithmetic as pyamg's ``aspreconditioner(cycle="V")``, without the two residual
     norms (two more fine-level products) that pyamg's ``solve`` takes around every cycle to
-    test a tolerance a single preconditioning cycle never uses: on the discontinuity route's
-    systems one cycle costs about a third less (docs/benchmarks.md).
+    test a tolerance a single preconditioning cycle never uses (a 300^2 Poisson cycle: 10.9 ->
+    8.7 ms), and with the coarsest level factorized once per matrix (docs/benchmarks.md).
     """
     from pyamg.amg_core import gauss_seidel
     from scipy.sparse.linalg import splu
