@@ -157,6 +157,37 @@ def test_facet_blocks_match_facet_form():
     np.testing.assert_allclose(Kb.toarray(), Kf.toarray(), atol=1e-12)
 
 
+@pytest.mark.parametrize("fused", [False, True])
+def test_eliminated_blocks_equal_the_dense_schur_complement(fused):
+    """``W - W (A + W)^-1 W`` per facet, entry-major, for facets with and without a target and
+    with the fusion terms (per-facet normal weights and prior weights)."""
+    from facetlift.domain import Domain
+
+    rng = np.random.default_rng(5)
+    d = Domain.from_mask(rng.random((12, 13)) < 0.8)
+    m = d.n_facets
+    bx, by = rng.standard_normal(m), rng.standard_normal(m)
+    target = rng.random(m) < 0.7
+    w = rng.random((m, 4)) * 3 + 1e-6
+    fusion = None
+    c, lam = np.ones(m), np.zeros(m)
+    if fused:
+        c, lam = rng.random(m) + 0.1, rng.random(m) * (rng.random(m) < 0.5)
+        fusion = (c, lam, rng.standard_normal(m))
+    A_other, _ = disc._facet_system(bx, by, 1e-9, fusion)
+    Q = disc.GlueInverse(target, w, A_other, fusion).eliminated()
+    assert Q.shape == (16, m)
+    A = np.where(target[:, None, None],
+                 c[:, None, None] * np.eye(4) - (c / 4 - lam / 16)[:, None, None] * np.ones((4, 4)),
+                 A_other if A_other.ndim == 3 else A_other[None])
+    W = w[:, :, None] * np.eye(4)
+    ref = W - W @ np.linalg.inv(A + W) @ W
+    np.testing.assert_allclose(Q, ref.reshape(m, 16).T, atol=1e-12)
+    blocks = disc.FacetBlocks(d, pin=0.0)  # the (m, 4, 4) layout: test_facet_blocks_match...
+    np.testing.assert_allclose(blocks.assemble(Q, entry_major=True).toarray(),
+                               blocks.assemble(ref).toarray(), atol=1e-12)
+
+
 def test_bilateral_weights():
     """Uniform on a plane; on a step the corners on the jump side of the facets next to it are
     cut loose, the other corners take the glue (4 w_x w_y, 1 where both sides agree)."""
@@ -305,9 +336,18 @@ def test_multigrid_policy_refresh_rebuild_and_block_coarse_space(monkeypatch):
     # one build for the reweightings, one for the final polish
     assert ref.info["multigrid_refreshes"] > 0 and ref.info["multigrid_builds"] == 2
     assert not ref.info["block_coarse_space"]
+    calls = []
+    real = disc.balanced
+
+    def spy(*a):
+        calls.append(1)
+        return real(*a)
+
+    monkeypatch.setattr(disc, "balanced", spy)
     monkeypatch.setattr(disc, "REUSE_ITS", 0)  # every solve counts as slow
     s = facetlift.integrate(n, discontinuities=True)
-    assert s.info["block_coarse_space"] and s.info["multigrid_builds"] > 1
+    assert s.info["block_coarse_space"] and s.info["multigrid_builds"] > 2
+    assert len(calls) == len(s.info["cg_iterations"]) - 1  # every solve after the first
     assert s.info["converged"]
     # measured 1.6e-6 of the depth range apart (the loose solves differ, 1e-4 residual)
     np.testing.assert_allclose(s.depth, ref.depth, atol=1e-4 * np.ptp(ref.depth[ref.mask]))

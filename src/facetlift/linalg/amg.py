@@ -42,7 +42,7 @@ def hierarchy(
 def preconditioner(K, **kw):
     """One V-cycle of :func:`hierarchy` as a callable ``z = M(r)``."""
     ml = hierarchy(K, **kw)
-    if kw.get("symmetric_gs"):
+    if kw.get("symmetric_gs") and kw.get("coarse_solver", "splu") == "splu":
         return vcycle(ml)
     M = ml.aspreconditioner(cycle="V")
     return lambda r: M @ r
@@ -53,13 +53,22 @@ def vcycle(ml):
     callable ``z = M(r)``: a forward Gauss-Seidel sweep down, the coarse solve, a backward
     sweep up, from a zero start.
 
-    The same arithmetic as pyamg's ``aspreconditioner(cycle="V")``, without the two residual
+    The same arithmetic as pyamg's ``aspreconditioner(cycle="V")`` with the "splu" coarse
+    solver (a singular coarsest matrix, for which :func:`hierarchy` offers "pinv", is not
+    supported: pass such hierarchies to pyamg), without the two residual
     norms (two more fine-level products) that pyamg's ``solve`` takes around every cycle to
     test a tolerance a single preconditioning cycle never uses (a 300^2 Poisson cycle: 10.9 ->
     8.7 ms), and with the coarsest level factorized once per matrix (docs/benchmarks.md).
     """
     from pyamg.amg_core import gauss_seidel
     from scipy.sparse.linalg import splu
+
+    for lv in ml.levels[:-1]:
+        sweeps = (getattr(lv.presmoother, "keywords", {}).get("sweep"),
+                  getattr(lv.postsmoother, "keywords", {}).get("sweep"))
+        if sweeps != ("forward", "backward"):
+            raise ValueError("vcycle needs a hierarchy built with symmetric_gs=True "
+                             f"(one forward and one backward Gauss-Seidel sweep), not {sweeps}")
 
     def sweep(A, x, b, n, forward):
         if forward:
@@ -122,18 +131,20 @@ def amg(K, *, rtol: float = 1e-10, maxiter: int = 500, method: str = "rs",
     return factor
 
 
-def refresh(ml, K) -> None:
+def refresh(ml, K, coarse_solver: str = "splu") -> None:
     """Give the hierarchy `ml` a new finest matrix `K` (same pattern of unknowns): the
     coarsening and the interpolation are kept, the coarse operators recomputed
-    (``A_{l+1} = R A_l P``, Galerkin) and the coarsest one factorized again; a fraction of
-    the cost of a new hierarchy. The callables of :func:`vcycle` see the new operators."""
+    (``A_{l+1} = R A_l P``, Galerkin) and pyamg's coarse solver replaced by a new one of
+    kind `coarse_solver` (it factorizes at its first use); a fraction of the cost of a new
+    hierarchy. The callables of :func:`vcycle` see the new operators (their coarsest factor
+    is redone at the next call)."""
     import pyamg
 
     levels = ml.levels
     levels[0].A = sp.csr_matrix(K)
     for fine, coarse in zip(levels[:-1], levels[1:], strict=True):
         coarse.A = (fine.R @ fine.A @ fine.P).tocsr()
-    ml.coarse_solver = pyamg.multilevel.coarse_grid_solver("splu")
+    ml.coarse_solver = pyamg.multilevel.coarse_grid_solver(coarse_solver)
 
 
 def block_aggregates(rows, cols, size: int, groups=None) -> sp.csr_matrix:
@@ -146,11 +157,16 @@ def block_aggregates(rows, cols, size: int, groups=None) -> sp.csr_matrix:
     """
     rows = np.asarray(rows, dtype=np.int64)
     cols = np.asarray(cols, dtype=np.int64)
+    n = rows.size
+    if n == 0:
+        return sp.csr_matrix((0, 0))
+    rows, cols = rows - rows.min(), cols - cols.min()
     key = (rows // size) * (int(cols.max()) // size + 1) + cols // size
     if groups is not None:
-        key = key * (int(np.max(groups)) + 1) + np.asarray(groups, dtype=np.int64)
+        g = np.asarray(groups, dtype=np.int64)
+        g = g - g.min()
+        key = key * (int(g.max()) + 1) + g
     _, agg = np.unique(key, return_inverse=True)
-    n = rows.size
     return sp.csr_matrix((np.ones(n), (np.arange(n), agg.ravel())), shape=(n, int(agg.max()) + 1))
 
 
@@ -158,7 +174,9 @@ def balanced(K, V, Z):
     """Two-level preconditioner: the coarse space spanned by the columns of `Z` (n, k) solved
     exactly, the smoother/preconditioner `V` (a callable, symmetric positive definite) for the
     rest, in the symmetric "balancing" form ``M = C + (I - C K) V (I - K C)`` with
-    ``C = Z (Z^T K Z)^{-1} Z^T``; SPD for any SPD `V`.
+    ``C = Z (Z^T K Z)^{-1} Z^T``; SPD for any SPD `V` where ``Z^T K Z`` is nonsingular.
+    Blocks on which `K` vanishes (rows of zeros, nothing to correct) are dropped; if the
+    coarse matrix is still singular, `V` is returned alone.
 
     Multigrid built by Ruge-Stueben coarsening on the discontinuity route's glued systems
     resolves their smooth, piecewise-constant error (the offsets of whole regions, a whole
@@ -169,9 +187,19 @@ def balanced(K, V, Z):
     import scipy.sparse.linalg as spla
 
     Z = sp.csr_matrix(Z)
-    ZT = Z.T.tocsr()
     KZ = sp.csr_matrix(K @ Z)  # a few entries a row where K has nine
-    lu = spla.splu((ZT @ KZ).tocsc())
+    E = (Z.T @ KZ).tocsc()
+    d = E.diagonal()
+    live = d > 1e-12 * max(float(d.max(initial=0.0)), np.finfo(float).tiny)
+    if not live.all():
+        Z, KZ, E = Z[:, live], KZ[:, live].tocsr(), E[live][:, live].tocsc()
+    if E.shape[0] == 0:
+        return V
+    try:
+        lu = spla.splu(E)
+    except RuntimeError:  # an exactly singular coarse matrix: no coarse space
+        return V
+    ZT = Z.T.tocsr()
 
     def apply(r):
         c = lu.solve(ZT @ r)

@@ -368,8 +368,9 @@ def solve_discontinuous(
         turned on), ``cut_corners`` (fraction of corners with weight below :data:`CUT`),
         ``unsettled_corners``, ``seconds``.
     """
-    # pyamg's V-cycle takes a vector norm per call: with multi-threaded BLAS on a busy machine
-    # each one costs milliseconds (measured: 13 of 20 s on the bear), single-threaded microseconds
+    # the solves take vector norms and products (CG, the coarse solves): with multi-threaded
+    # BLAS on a busy machine each one costs milliseconds (measured with pyamg's V-cycle: 13 of
+    # 20 s on the bear), single-threaded microseconds
     with threadpool_limits(limits=1, user_api="blas"):
         return _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight,
                       cg_rtol, callback, prior, weights, x0)
@@ -430,7 +431,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         vr, vc = np.nonzero(domain.vertex_mask)
         return block_aggregates(vr, vc, COARSE_BLOCK, domain.vertex_component)
 
-    amg = {"ml": None, "pre": None, "builds": 0, "refreshes": 0, "last_its": 0, "slow": False}
+    amg = {"ml": None, "pre": None, "for": None, "builds": 0, "refreshes": 0, "last_its": 0,
+           "slow": False}
 
     def solve(K, rhs, z0, rebuild=True, rtol=cg_rtol, fresh=False):
         # the weights change the system's near-null modes (cut corners): a hierarchy of the
@@ -438,18 +440,22 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         # hundreds. A new one is built when the last solve was slow; when the weights moved
         # much, the old one's coarse operators are recomputed for the new system (Galerkin
         # refresh, a fraction of a build); once the weights settle, it serves as it is
-        if amg["ml"] is None or amg["last_its"] > REUSE_ITS or fresh:
+        if amg["ml"] is None or amg["last_its"] > REUSE_ITS or (fresh and amg["for"] is not K):
             amg["ml"] = hierarchy(K, symmetric_gs=True, interpolation=INTERPOLATION)
             amg["pre"] = vcycle(amg["ml"])
             amg["builds"] += 1
+            amg["for"] = K
         elif rebuild:
             refresh(amg["ml"], K)
             amg["refreshes"] += 1
+            amg["for"] = None  # refreshed, not built, for K
         pre = amg["pre"]
         if amg["slow"]:  # regions' offsets converge slowly: add the block coarse space
             pre = balanced(K, pre, blocks_Z())
         z, info = linalg.cg(K, rhs, pre, x0=z0, rtol=rtol, maxiter=500)
         amg["last_its"] = info.iterations
+        # (the first, cold-started solve counts too: an object with a rim of facets without a
+        # normal shows it there, e.g. 89 iterations on the benchmark's spot@front)
         amg["slow"] = amg["slow"] or info.iterations > REUSE_ITS
         if not info.converged:  # an ill-conditioned system: take the solver layer's route
             z = linalg.solve(K, rhs)[0]
