@@ -49,6 +49,13 @@ def _value(text: str):
         return text
 
 
+def _as_list(v) -> list:
+    """CG iterations as a list: routes report one count, a list, or none."""
+    if v is None:
+        return []
+    return list(v) if isinstance(v, (list, tuple)) else [v]
+
+
 def run_case(case: str, s: int) -> dict:
     import gc
 
@@ -89,7 +96,10 @@ def run_case(case: str, s: int) -> dict:
     d = problem.domain
     return {"case": case, "size": s, "m": d.n_facets, "n": d.n_vertices, "seconds": seconds,
             "peak_mib": peak / 2**20, "estimate_mib": est / 2**20, "route": which,
-            "ratio": est / peak if peak else None, "backend": surf.info.get("backend")}
+            "ratio": est / peak if peak else None, "backend": surf.info.get("backend"),
+            # the iterating routes (the discontinuity reweightings): count and CG iterations
+            "iterations": surf.info.get("iterations"),
+            "cg_iterations": int(sum(_as_list(surf.info.get("cg_iterations"))))}
 
 
 def main(argv=None) -> int:
@@ -105,8 +115,9 @@ def main(argv=None) -> int:
         case, s = args.case.rsplit("@", 1)
         print(json.dumps(run_case(case, int(s))))
         return 0
-    print("| case | size | mask px | peak MiB | estimate MiB | estimate / peak | route | s |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| case | size | mask px | peak MiB | estimate MiB | estimate / peak | route | s | "
+          "iterations (CG) |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for s in (int(x) for x in args.sizes.split(",")):
         for case in args.cases.split(";"):
             cmd = [sys.executable, __file__, "--case", f"{case}@{s}"]
@@ -124,7 +135,8 @@ def main(argv=None) -> int:
                 continue
             print(f"| {case} | {s}² | {r['m']:,} | {r['peak_mib']:,.0f} | "
                   f"{r['estimate_mib']:,.0f} | {r['ratio']:.2f} | {r['route']} | "
-                  f"{r['seconds']:.1f} |", flush=True)
+                  f"{r['seconds']:.1f} | {r.get('iterations')} ({r.get('cg_iterations')}) |",
+                  flush=True)
     return 0
 
 

@@ -109,11 +109,15 @@ def split(domain: Domain, right=None, down=None) -> SplitMesh:
             lab[..., a] = np.where(on, low, lab[..., a])
             lab[..., b] = np.where(on, low, lab[..., b])
     vi = domain.vertex_index
-    key = np.where(present, vi[..., None] * 4 + lab, -1)
-    used = np.unique(key[present])
+    key = (vi[..., None] * 4 + lab)[present]  # < 4 n_vertices
+    # the used keys, sorted, and every key's rank among them: a mark-and-count pass over the
+    # key range (np.unique + searchsorted took 2.5 s per call at 1024^2)
+    mark = np.zeros(4 * domain.n_vertices, dtype=bool)
+    mark[key] = True
+    used = np.flatnonzero(mark)
     n = used.size
-    sidx = np.full(key.shape, -1, dtype=np.int64)
-    sidx[present] = np.searchsorted(used, key[present])
+    sidx = np.full(present.shape, -1, dtype=np.int64)
+    sidx[present] = (np.cumsum(mark) - 1)[key]
     # facet corners: facet (r, c) sits in slot CORNER_SLOT[k] of its corner vertex k
     r, c = domain.pixels
     offsets = ((0, 0), (0, 1), (1, 1), (1, 0))

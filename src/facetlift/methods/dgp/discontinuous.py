@@ -72,6 +72,7 @@ import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
 from ... import linalg
+from ...conventions import CORNER_OFFSETS
 from ...linalg.amg import balanced, block_aggregates, hierarchy, refresh, vcycle
 from ...operators.stencil import E_TWIST, E_X, E_Y, facet_form, prior_form, scatter_corners
 
@@ -172,20 +173,23 @@ class FacetBlocks:
         self.domain = domain
         pattern = facet_form(domain, [(1.0, np.ones((4, 4)))])
         pattern.sort_indices()
-        n = domain.n_vertices
         self.indptr = pattern.indptr
         self.indices = pattern.indices
-        rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr))
-        keys = rows * n + pattern.indices
+        self.nnz = int(pattern.indptr[-1])
+        rank = neighbour_ranks(domain)  # (n, 9)
         c = domain.corners
-        fk = (c[:, :, None] * n + c[:, None, :]).reshape(-1)  # (m*16,) row-major (a, b)
-        idx_dtype = np.int32 if keys.size < 2**31 else np.int64
-        # (16, m): entry-major, the layout GlueInverse.eliminated() builds its blocks in
-        self.slot = np.ascontiguousarray(
-            np.searchsorted(keys, fk).astype(idx_dtype).reshape(-1, 16).T)
-        self.nnz = keys.size
+        idx_dtype = np.int32 if self.nnz < 2**31 else np.int64
+        # (16, m): entry-major, the layout GlueInverse.eliminated() builds its blocks in. Entry
+        # (a, b) of facet f sits in row c_a at the rank of the neighbour c_b among the row's
+        # (sorted) columns: no search over the nonzeros
+        self.slot = np.empty((16, c.shape[0]), dtype=idx_dtype)
+        for a, (ra, ca) in enumerate(CORNER_OFFSETS):
+            start = pattern.indptr[c[:, a]]
+            for b, (rb, cb) in enumerate(CORNER_OFFSETS):
+                t = 3 * (rb - ra + 1) + (cb - ca + 1)
+                self.slot[4 * a + b] = start + rank[c[:, a], t]
         first = domain.first_vertices if skip is None else domain.first_vertices[~skip]
-        diag = np.searchsorted(keys, first * n + first)
+        diag = pattern.indptr[first] + rank[first, 4]
         self.pin = np.bincount(diag, np.full(first.size, pin), minlength=self.nnz)
 
     def assemble(self, Q: np.ndarray, entry_major: bool = False) -> sp.csr_matrix:
@@ -196,6 +200,29 @@ class FacetBlocks:
         data = np.bincount(self.slot.reshape(-1), Q.reshape(-1), minlength=self.nnz)
         n = self.domain.n_vertices
         return sp.csr_matrix((data + self.pin, self.indices, self.indptr), shape=(n, n))
+
+
+def neighbour_ranks(domain) -> np.ndarray:
+    """(n, 9) int: for every vertex, the position among its row's columns of the facet-form
+    pattern (vertices that share a facet with it, in increasing index order) of its neighbour
+    at offset ``(dr, dc)``, column ``3 (dr + 1) + (dc + 1)``; meaningless where that neighbour
+    shares no facet with it. Vertex indices run row-major over the grid, so the nine offsets in
+    (dr, dc) order are the columns in increasing order."""
+    H, W = domain.shape
+    mp = np.pad(domain.mask, 1)  # facet (r, c) at mp[r + 1, c + 1]
+    vm = domain.vertex_mask
+    present = []
+    for dr in (-1, 0, 1):
+        rows = (-1, 0) if dr == 0 else ((-1,) if dr < 0 else (0,))  # facet rows vr + k
+        for dc in (-1, 0, 1):
+            cols = (-1, 0) if dc == 0 else ((-1,) if dc < 0 else (0,))
+            shared = np.zeros((H + 1, W + 1), bool)
+            for kr in rows:
+                for kc in cols:
+                    shared |= mp[1 + kr:H + 2 + kr, 1 + kc:W + 2 + kc]
+            present.append(shared[vm])
+    present = np.stack(present, axis=1)
+    return np.cumsum(present, axis=1) - present
 
 
 def _facet_system(bx, by, flat_weight, fusion=None):
