@@ -159,8 +159,8 @@ def test_facet_blocks_match_facet_form():
 
 @pytest.mark.parametrize("fused", [False, True])
 def test_eliminated_blocks_equal_the_dense_schur_complement(fused):
-    """``W - W (A + W)^-1 W`` per facet, entry-major, for facets with and without a target and
-    with the fusion terms (per-facet normal weights and prior weights)."""
+    """``W - W (A + W)^-1 W`` per facet, in the upper layout, for facets with and without a
+    target and with the fusion terms (per-facet normal weights and prior weights)."""
     from facetlift.domain import Domain
 
     rng = np.random.default_rng(5)
@@ -176,15 +176,17 @@ def test_eliminated_blocks_equal_the_dense_schur_complement(fused):
         fusion = (c, lam, rng.standard_normal(m))
     A_other, _ = disc._facet_system(bx, by, 1e-9, fusion)
     Q = disc.GlueInverse(target, w, A_other, fusion).eliminated()
-    assert Q.shape == (16, m)
+    assert Q.shape == (10, m)
     A = np.where(target[:, None, None],
                  c[:, None, None] * np.eye(4) - (c / 4 - lam / 16)[:, None, None] * np.ones((4, 4)),
                  A_other if A_other.ndim == 3 else A_other[None])
     W = w[:, :, None] * np.eye(4)
     ref = W - W @ np.linalg.inv(A + W) @ W
-    np.testing.assert_allclose(Q, ref.reshape(m, 16).T, atol=1e-12)
+    np.testing.assert_allclose(ref, np.swapaxes(ref, 1, 2), atol=1e-12)  # symmetric blocks
+    upper = np.stack([ref[:, a, b] for a, b in disc.UPPER])
+    np.testing.assert_allclose(Q, upper, atol=1e-12)
     blocks = disc.FacetBlocks(d, pin=0.0)  # the (m, 4, 4) layout: test_facet_blocks_match...
-    np.testing.assert_allclose(blocks.assemble(Q, entry_major=True).toarray(),
+    np.testing.assert_allclose(blocks.assemble(Q, upper=True).toarray(),
                                blocks.assemble(ref).toarray(), atol=1e-12)
 
 

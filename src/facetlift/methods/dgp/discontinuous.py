@@ -159,8 +159,18 @@ _ONES = np.ones(4)
 _QUARTER = np.full(4, 0.25)
 
 
+#: The (a, b) entries, a <= b, that hold a symmetric 4 x 4 block: the rows of the upper layout.
+UPPER = tuple((a, b) for a in range(4) for b in range(a, 4))
+
+
 class FacetBlocks:
-    """Assemble per-facet 4x4 blocks (each its own values) into a fixed 9-point CSR pattern.
+    """Assemble symmetric per-facet 4x4 blocks (each its own values) into the fixed 9-point
+    CSR pattern of the vertex grid.
+
+    The blocks are taken in the *upper* layout, (10, m): row ``i`` holds entry
+    ``UPPER[i] = (a, b)``, a <= b, of every facet's block. Each is added at ``(c_a, c_b)``;
+    the matrix is then completed by its transpose (one gather over the nonzeros), which does
+    6/16 less scattering than the full blocks.
 
     Parameters
     ----------
@@ -179,27 +189,35 @@ class FacetBlocks:
         rank = neighbour_ranks(domain)  # (n, 9)
         c = domain.corners
         idx_dtype = np.int32 if self.nnz < 2**31 else np.int64
-        # (16, m): entry-major, the layout GlueInverse.eliminated() builds its blocks in. Entry
-        # (a, b) of facet f sits in row c_a at the rank of the neighbour c_b among the row's
-        # (sorted) columns: no search over the nonzeros
-        self.slot = np.empty((16, c.shape[0]), dtype=idx_dtype)
-        for a, (ra, ca) in enumerate(CORNER_OFFSETS):
-            start = pattern.indptr[c[:, a]]
-            for b, (rb, cb) in enumerate(CORNER_OFFSETS):
-                t = 3 * (rb - ra + 1) + (cb - ca + 1)
-                self.slot[4 * a + b] = start + rank[c[:, a], t]
+
+        def slot(a, b):  # entry (a, b) of facet f: row c_a, at the rank of neighbour c_b
+            (ra, ca), (rb, cb) = CORNER_OFFSETS[a], CORNER_OFFSETS[b]
+            return (pattern.indptr[c[:, a]] + rank[c[:, a], 3 * (rb - ra + 1) + (cb - ca + 1)]
+                    ).astype(idx_dtype)
+
+        self.slot = np.stack([slot(a, b) for a, b in UPPER])  # (10, m)
+        # the transposed entry of every off-diagonal nonzero (each is some facet's (a, b))
+        transpose = np.full(self.nnz, -1, dtype=idx_dtype)
+        for i, (a, b) in enumerate(UPPER):
+            if a != b:
+                transpose[self.slot[i]] = slot(b, a)
+                transpose[slot(b, a)] = self.slot[i]
+        self.offdiag = np.flatnonzero(transpose >= 0).astype(idx_dtype)
+        self.transpose = transpose[self.offdiag]
         first = domain.first_vertices if skip is None else domain.first_vertices[~skip]
         diag = pattern.indptr[first] + rank[first, 4]
         self.pin = np.bincount(diag, np.full(first.size, pin), minlength=self.nnz)
 
-    def assemble(self, Q: np.ndarray, entry_major: bool = False) -> sp.csr_matrix:
-        """(n, n) CSR of ``sum_f C_f^T Q_f C_f`` plus the pins; `Q` is (m, 4, 4) or (m, 16),
-        or with `entry_major` (16, m) (entry ``4 a + b`` of every facet's block in a row)."""
-        if not entry_major:
-            Q = np.reshape(Q, (-1, 16)).T
+    def assemble(self, Q: np.ndarray, upper: bool = False) -> sp.csr_matrix:
+        """(n, n) CSR of ``sum_f C_f^T Q_f C_f`` plus the pins. `Q`: symmetric blocks, (m, 4,
+        4) or (m, 16), or with `upper` the upper layout (10, m) (see the class)."""
+        if not upper:
+            Q = np.reshape(Q, (-1, 16)).T[[4 * a + b for a, b in UPPER]]
         data = np.bincount(self.slot.reshape(-1), Q.reshape(-1), minlength=self.nnz)
+        data[self.offdiag] += data[self.transpose]  # (the right side is gathered first)
+        data += self.pin
         n = self.domain.n_vertices
-        return sp.csr_matrix((data + self.pin, self.indices, self.indptr), shape=(n, n))
+        return sp.csr_matrix((data, self.indices, self.indptr), shape=(n, n))
 
 
 def neighbour_ranks(domain) -> np.ndarray:
@@ -276,24 +294,26 @@ class GlueInverse:
         return out
 
     def eliminated(self):
-        """``Q_f = W_f - W_f M_f W_f``: the facet blocks once the copies are eliminated, entry
-        major (16, m) (row ``4 a + b`` holds entry (a, b) of every block: rows of m numbers
-        are ten times faster to form than m blocks of 4 x 4)."""
+        """``Q_f = W_f - W_f M_f W_f``: the facet blocks once the copies are eliminated, in the
+        upper layout (10, m) of :class:`FacetBlocks` (rows of m numbers are ten times faster
+        to form than m blocks of 4 x 4, and the blocks are symmetric)."""
         w = self.w
         g = w * self.d
-        m = len(w)
         gt = np.ascontiguousarray(g.T)
         cgt = np.ascontiguousarray((-self.c[:, None] * g).T)
-        Q = np.empty((16, m))
-        for a in range(4):
-            np.multiply(gt[a], cgt, out=Q[4 * a:4 * a + 4])
-        Q[::5] += (w - w * g).T  # the diagonal entries (0, 5, 10, 15)
+        diag = (w - w * g).T
+        Q = np.empty((len(UPPER), len(w)))
+        for i, (a, b) in enumerate(UPPER):
+            np.multiply(gt[a], cgt[b], out=Q[i])
+            if a == b:
+                Q[i] += diag[a]
         if self.other.size:
             idx = np.arange(4)
             wo = w[self.other]
             Qo = -(wo[:, :, None] * self.M_other * wo[:, None, :])
             Qo[:, idx, idx] += wo
-            Q[:, self.other] = Qo.reshape(-1, 16).T
+            for i, (a, b) in enumerate(UPPER):
+                Q[i, self.other] = Qo[:, a, b]
         return Q
 
 
@@ -427,7 +447,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     def state(w):
         M = GlueInverse(target, w, A_other, fusion)
         Ma = M.apply(a)
-        K = blocks.assemble(M.eliminated(), entry_major=True)
+        K = blocks.assemble(M.eliminated(), upper=True)
         rhs = scatter_corners(domain, w * Ma)
         if KP is not None:
             K, rhs = (K + KP).tocsr(), rhs + rP
