@@ -508,9 +508,12 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             z = linalg.solve(K, rhs)[0]
         return z, info.iterations
 
-    # the first (smooth) solution only starts the reweightings: as loose as theirs
+    # the first (smooth) solution only starts the reweightings: as loose as theirs. Not with
+    # a prior: its samples dominate the right-hand side, and a loose relative residual then
+    # stops CG before it starts (docs/fusion.md, "Known problem")
+    loose_start = max_iter > 0 and prior is None
     z, its = solve(K, rhs, np.zeros(domain.n_vertices) if x0 is None else x0,
-                   rtol=max(cg_rtol, LOOSE_RTOL) if max_iter > 0 else cg_rtol)
+                   rtol=max(cg_rtol, LOOSE_RTOL) if loose_start else cg_rtol)
     cg_its = [its]
     y = copies(M, Ma, w, z)
     energies = [energy(y, w, z)]
