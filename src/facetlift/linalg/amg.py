@@ -41,10 +41,7 @@ def hierarchy(
 
 def preconditioner(K, **kw):
     """One V-cycle of :func:`hierarchy` as a callable ``z = M(r)``."""
-    ml = hierarchy(K, **kw)
-    if kw.get("symmetric_gs") and kw.get("coarse_solver", "splu") == "splu":
-        return vcycle(ml)
-    M = ml.aspreconditioner(cycle="V")
+    M = hierarchy(K, **kw).aspreconditioner(cycle="V")
     return lambda r: M @ r
 
 

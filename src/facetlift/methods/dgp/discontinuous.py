@@ -200,8 +200,9 @@ class FacetBlocks:
         transpose = np.full(self.nnz, -1, dtype=idx_dtype)
         for i, (a, b) in enumerate(UPPER):
             if a != b:
-                transpose[self.slot[i]] = slot(b, a)
-                transpose[slot(b, a)] = self.slot[i]
+                mirror = slot(b, a)
+                transpose[self.slot[i]] = mirror
+                transpose[mirror] = self.slot[i]
         self.offdiag = np.flatnonzero(transpose >= 0).astype(idx_dtype)
         self.transpose = transpose[self.offdiag]
         first = domain.first_vertices if skip is None else domain.first_vertices[~skip]
