@@ -103,6 +103,21 @@ def test_exact_samples_recover_every_step_height_with_discontinuities():
     assert np.nanmedian(np.abs(s0.depth - depth - np.nanmean(s0.depth - depth))) > 1.0
 
 
+def test_discontinuities_solve_each_reweighting_whatever_the_prior_offset():
+    """A prior far from zero dominates the right-hand side; the reweightings' CG tolerance is
+    relative to the normals' part, so the surface does not depend on where depth zero is (a
+    tolerance relative to the whole right-hand side stopped every reweighting's CG at 0
+    iterations: 1.1 depth units apart here)."""
+    n, depth = wave((40, 44))
+    depth = depth + 3.0 * (np.indices(depth.shape)[1] >= 22)  # a jump the normals do not show
+    prior, _ = sparse(depth, 0.02, seed=1)
+    near = run(n, discontinuities=True, prior=prior, prior_weight=100.0)
+    far = run(n, discontinuities=True, prior=prior + 1e4, prior_weight=100.0)
+    assert sum(far.info["cg_iterations"][1:-1]) > len(far.info["cg_iterations"])
+    # measured 1.1e-5 apart (1.6e-6 of the depth range)
+    np.testing.assert_allclose(far.depth - 1e4, near.depth, atol=1e-4 * np.ptp(depth))
+
+
 def test_perspective_prior_returns_metric_depth():
     H, W = 30, 40
     K = np.array([[500.0, 0, W / 2], [0, 500.0, H / 2], [0, 0, 1]])

@@ -143,6 +143,10 @@ COARSE_BLOCK = 8
 #: -27 %, orthographic renders 3-5x faster.
 LOOSE_RTOL = 1e-4
 
+#: Smallest tolerance factor of :func:`_rhs_scale` (a residual of 1e-6 * 1e-6 of the whole
+#: right-hand side is still well above rounding).
+RHS_SCALE_FLOOR = 1e-6
+
 #: Share of a depth prior's weight on the facets' own copies ``y``; the rest is on the glued
 #: vertices ``z`` (docs/fusion.md). On ``z`` a sample moves the piece it lies on; on ``y``
 #: alone every sample that disagrees with the normals tears its facet loose (rings of cuts
@@ -242,6 +246,22 @@ def neighbour_ranks(domain) -> np.ndarray:
             present.append(shared[vm])
     present = np.stack(present, axis=1)
     return np.cumsum(present, axis=1) - present
+
+
+def _rhs_scale(rhs, normals_part):
+    """CG tolerance factor with a depth prior: ``|normals' part| / |rhs|``, floored.
+
+    A prior's samples enter the right-hand side with their absolute depths (log-depths for a
+    perspective camera) times their weight, and can outweigh the normals' part by orders of
+    magnitude; a residual relative to the whole right-hand side then stops CG before it moves
+    the surface (0 iterations per reweighting at prior weight 100, docs/fusion.md). Measured
+    against the normals' part instead, the solves are as exact as without a prior. The floor
+    keeps the tolerance above rounding when the normals' part vanishes (a plane seen head-on).
+    """
+    whole = float(np.linalg.norm(rhs))
+    if whole == 0.0:
+        return 1.0
+    return min(1.0, max(float(np.linalg.norm(normals_part)) / whole, RHS_SCALE_FLOOR))
 
 
 def _facet_system(bx, by, flat_weight, fusion=None):
@@ -445,14 +465,19 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     nb = neighbours(domain)
     eye_rows = np.stack([E_X, E_Y], axis=1)  # (4, 2): corner vector -> (x-slope, y-slope)
 
+    a_normals = None if prior is None else _facet_system(bx, by, flat_weight, fusion[:2] + (
+        np.zeros(m),))[1]
+
     def state(w):
         M = GlueInverse(target, w, A_other, fusion)
         Ma = M.apply(a)
         K = blocks.assemble(M.eliminated(), upper=True)
         rhs = scatter_corners(domain, w * Ma)
+        scale = None
         if KP is not None:
             K, rhs = (K + KP).tocsr(), rhs + rP
-        return M, Ma, K, rhs
+            scale = _rhs_scale(rhs, scatter_corners(domain, w * M.apply(a_normals)))
+        return M, Ma, K, rhs, scale
 
     def copies(M, Ma, w, z):
         return Ma + M.apply(w * z[corners])
@@ -471,7 +496,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
 
     slopes = (bx, by) if EVIDENCE == "residual" else None
     w = np.ones((m, 4))
-    M, Ma, K, rhs = state(w)
+    M, Ma, K, rhs, scale = state(w)
     t1 = time.perf_counter()
 
     @functools.cache
@@ -482,7 +507,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     amg = {"ml": None, "pre": None, "for": None, "builds": 0, "refreshes": 0, "last_its": 0,
            "slow": False}
 
-    def solve(K, rhs, z0, rebuild=True, rtol=cg_rtol, fresh=False):
+    def solve(K, rhs, z0, rebuild=True, rtol=cg_rtol, fresh=False, scale=None):
         # the weights change the system's near-null modes (cut corners): a hierarchy of the
         # current system keeps CG at ~5-15 iterations where one of the smooth system needs
         # hundreds. A new one is built when the last solve was slow; when the weights moved
@@ -500,6 +525,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         pre = amg["pre"]
         if amg["slow"]:  # regions' offsets converge slowly: add the block coarse space
             pre = balanced(K, pre, blocks_Z())
+        if scale is not None:  # a prior: the tolerance is relative to the normals' part
+            rtol = rtol * scale
         z, info = linalg.cg(K, rhs, pre, x0=z0, rtol=rtol, maxiter=500)
         amg["last_its"] = info.iterations
         # (the first, cold-started solve counts too: an object with a rim of facets without a
@@ -509,12 +536,9 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             z = linalg.solve(K, rhs)[0]
         return z, info.iterations
 
-    # the first (smooth) solution only starts the reweightings: as loose as theirs. Not with
-    # a prior: its samples dominate the right-hand side, and a loose relative residual then
-    # stops CG before it starts (docs/fusion.md, "Known problem")
-    loose_start = max_iter > 0 and prior is None
-    z, its = solve(K, rhs, np.zeros(domain.n_vertices) if x0 is None else x0,
-                   rtol=max(cg_rtol, LOOSE_RTOL) if loose_start else cg_rtol)
+    # the first (smooth) solution only starts the reweightings: as loose as theirs
+    z, its = solve(K, rhs, np.zeros(domain.n_vertices) if x0 is None else x0, scale=scale,
+                   rtol=max(cg_rtol, LOOSE_RTOL) if max_iter > 0 else cg_rtol)
     cg_its = [its]
     y = copies(M, Ma, w, z)
     energies = [energy(y, w, z)]
@@ -526,8 +550,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         if it > SETTLE_AFTER:
             step *= DECAY ** (it - SETTLE_AFTER)
         w = w + step
-        M, Ma, K, rhs = state(w)
-        z, its = solve(K, rhs, z, rebuild=changes_big(step),
+        M, Ma, K, rhs, scale = state(w)
+        z, its = solve(K, rhs, z, rebuild=changes_big(step), scale=scale,
                        rtol=max(cg_rtol, LOOSE_RTOL))
         cg_its.append(its)
         y = copies(M, Ma, w, z)
@@ -541,7 +565,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     if it > 0 and LOOSE_RTOL > cg_rtol:  # the reweightings solved loosely: polish the last one
         # on a hierarchy of the final system: the stale one took 71-210 CG iterations to get
         # from 1e-4 to 1e-6 on the 50-70k pixel renders, a new one 27-55
-        z, its = solve(K, rhs, z, fresh=True)
+        z, its = solve(K, rhs, z, fresh=True, scale=scale)
         cg_its.append(its)
         y = copies(M, Ma, w, z)
     own = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
