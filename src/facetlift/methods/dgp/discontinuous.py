@@ -74,7 +74,7 @@ from threadpoolctl import threadpool_limits
 from ... import linalg
 from ...conventions import CORNER_OFFSETS
 from ...linalg.amg import balanced, block_aggregates, hierarchy, refresh, vcycle
-from ...operators.stencil import E_TWIST, E_X, E_Y, facet_form, prior_form, scatter_corners
+from ...operators.stencil import E_TWIST, E_X, E_Y, prior_form, scatter_corners
 
 #: Default for ``discontinuity_k`` (squared pixel footprints; see the module docstring).
 DEFAULT_K = 4.0
@@ -172,65 +172,81 @@ class FacetBlocks:
     CSR pattern of the vertex grid.
 
     The blocks are taken in the *upper* layout, (10, m): row ``i`` holds entry
-    ``UPPER[i] = (a, b)``, a <= b, of every facet's block. Each is added at ``(c_a, c_b)``;
-    the matrix is then completed by its transpose (one gather over the nonzeros), which does
-    6/16 less scattering than the full blocks.
+    ``UPPER[i] = (a, b)``, a <= b, of every facet's block. The assembly works on the grid: each
+    row is laid on the facet grid and added, as a shifted slice, to the stencil planes of the
+    vertex grid, (9, H + 1, W + 1), plane ``3 (dr + 1) + (dc + 1)`` holding every vertex's
+    coupling to its neighbour at offset ``(dr, dc)`` (an off-diagonal entry to both of its
+    vertices' planes). The CSR data are the planes' present entries in row order: vertex
+    indices run row-major, so a row's columns are its neighbours in plane order. Contiguous
+    slice additions instead of a scatter over 10 m indices: 1024^2 0.35 -> 0.09 s per
+    assembly, and no (10, m) index arrays to keep.
 
     Parameters
     ----------
     domain : Domain
     pin : float
         Diagonal weight added at one vertex per connected component (fixes the constant).
+    skip : (n,) bool, optional
+        Components (by their first vertex) that get no pin.
     """
 
     def __init__(self, domain, pin: float = 1.0, skip=None):
         self.domain = domain
-        pattern = facet_form(domain, [(1.0, np.ones((4, 4)))])
-        pattern.sort_indices()
-        self.indptr = pattern.indptr
-        self.indices = pattern.indices
-        self.nnz = int(pattern.indptr[-1])
-        rank = neighbour_ranks(domain)  # (n, 9)
-        c = domain.corners
-        idx_dtype = np.int32 if self.nnz < 2**31 else np.int64
-
-        def slot(a, b):  # entry (a, b) of facet f: row c_a, at the rank of neighbour c_b
-            (ra, ca), (rb, cb) = CORNER_OFFSETS[a], CORNER_OFFSETS[b]
-            return (pattern.indptr[c[:, a]] + rank[c[:, a], 3 * (rb - ra + 1) + (cb - ca + 1)]
-                    ).astype(idx_dtype)
-
-        self.slot = np.stack([slot(a, b) for a, b in UPPER])  # (10, m)
-        # the transposed entry of every off-diagonal nonzero (each is some facet's (a, b))
-        transpose = np.full(self.nnz, -1, dtype=idx_dtype)
-        for i, (a, b) in enumerate(UPPER):
-            if a != b:
-                mirror = slot(b, a)
-                transpose[self.slot[i]] = mirror
-                transpose[mirror] = self.slot[i]
-        self.offdiag = np.flatnonzero(transpose >= 0).astype(idx_dtype)
-        self.transpose = transpose[self.offdiag]
+        H, W = domain.shape
+        present = _shared_neighbours(domain)  # (n, 9)
+        counts = present.sum(axis=1)
+        self.indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        self.nnz = int(self.indptr[-1])
+        idx_dtype = np.int32 if self.nnz < 2**31 and domain.n_vertices < 2**31 else np.int64
+        self.indptr = self.indptr.astype(idx_dtype)
+        vflat = np.flatnonzero(domain.vertex_mask)
+        # column of each present neighbour: the vertex index at the offset, in plane order
+        vindex = np.full((H + 3) * (W + 3), -1, np.int64)  # padded by one all round
+        vr, vc = np.divmod(vflat, W + 1)
+        vindex[(vr + 1) * (W + 3) + vc + 1] = np.arange(vflat.size)
+        cols = np.stack([vindex[(vr + 1 + dr) * (W + 3) + vc + 1 + dc]
+                         for dr in (-1, 0, 1) for dc in (-1, 0, 1)], axis=1)
+        self.indices = cols[present].astype(idx_dtype)
+        # where each nonzero lies in the stencil planes (9, (H + 1) (W + 1)), in CSR order
+        plane = (H + 1) * (W + 1)
+        pos_dtype = np.int32 if 9 * plane < 2**31 else np.int64
+        k = np.broadcast_to(np.arange(9, dtype=pos_dtype) * plane, present.shape)[present]
+        self.position = k + np.repeat(vflat.astype(pos_dtype), counts)
+        pr, pc = domain.pixels
+        self.fflat = None if domain.n_facets == H * W else (pr * W + pc)
         first = domain.first_vertices if skip is None else domain.first_vertices[~skip]
-        diag = pattern.indptr[first] + rank[first, 4]
+        diag = self.indptr[first] + (np.cumsum(present, axis=1) - present)[first, 4]
         self.pin = np.bincount(diag, np.full(first.size, pin), minlength=self.nnz)
 
-    def assemble(self, Q: np.ndarray, upper: bool = False) -> sp.csr_matrix:
+    def assemble(self, Q, upper: bool = False) -> sp.csr_matrix:
         """(n, n) CSR of ``sum_f C_f^T Q_f C_f`` plus the pins. `Q`: symmetric blocks, (m, 4,
-        4) or (m, 16), or with `upper` the upper layout (10, m) (see the class)."""
+        4) or (m, 16), or with `upper` the upper layout: (10, m), or any iterable of its ten
+        rows in order (each is used before the next is taken, so an iterator may reuse one
+        buffer: :meth:`GlueInverse.eliminated_rows`)."""
         if not upper:
             Q = np.reshape(Q, (-1, 16)).T[[4 * a + b for a, b in UPPER]]
-        data = np.bincount(self.slot.reshape(-1), Q.reshape(-1), minlength=self.nnz)
-        data[self.offdiag] += data[self.transpose]  # (the right side is gathered first)
+        H, W = self.domain.shape
+        grid = None if self.fflat is None else np.zeros(H * W)
+        planes = np.zeros((9, H + 1, W + 1))
+        for (a, b), row in zip(UPPER, Q, strict=True):
+            if grid is None:
+                facet = row.reshape(H, W)
+            else:  # (the other cells stay zero)
+                grid[self.fflat] = row
+                facet = grid.reshape(H, W)
+            (ra, ca), (rb, cb) = CORNER_OFFSETS[a], CORNER_OFFSETS[b]
+            planes[3 * (rb - ra + 1) + (cb - ca + 1), ra:ra + H, ca:ca + W] += facet
+            if a != b:
+                planes[3 * (ra - rb + 1) + (ca - cb + 1), rb:rb + H, cb:cb + W] += facet
+        data = planes.reshape(-1)[self.position]
         data += self.pin
         n = self.domain.n_vertices
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(n, n))
 
 
-def neighbour_ranks(domain) -> np.ndarray:
-    """(n, 9) int: for every vertex, the position among its row's columns of the facet-form
-    pattern (vertices that share a facet with it, in increasing index order) of its neighbour
-    at offset ``(dr, dc)``, column ``3 (dr + 1) + (dc + 1)``; meaningless where that neighbour
-    shares no facet with it. Vertex indices run row-major over the grid, so the nine offsets in
-    (dr, dc) order are the columns in increasing order."""
+def _shared_neighbours(domain) -> np.ndarray:
+    """(n, 9) bool: whether every vertex shares a facet with its neighbour at offset
+    ``(dr, dc)``, column ``3 (dr + 1) + (dc + 1)`` (itself in column 4)."""
     H, W = domain.shape
     mp = np.pad(domain.mask, 1)  # facet (r, c) at mp[r + 1, c + 1]
     vm = domain.vertex_mask
@@ -244,8 +260,7 @@ def neighbour_ranks(domain) -> np.ndarray:
                 for kc in cols:
                     shared |= mp[1 + kr:H + 2 + kr, 1 + kc:W + 2 + kc]
             present.append(shared[vm])
-    present = np.stack(present, axis=1)
-    return np.cumsum(present, axis=1) - present
+    return np.stack(present, axis=1)
 
 
 def _rhs_scale(rhs, normals_part):
@@ -316,26 +331,32 @@ class GlueInverse:
 
     def eliminated(self):
         """``Q_f = W_f - W_f M_f W_f``: the facet blocks once the copies are eliminated, in the
-        upper layout (10, m) of :class:`FacetBlocks` (rows of m numbers are ten times faster
-        to form than m blocks of 4 x 4, and the blocks are symmetric)."""
-        w = self.w
-        g = w * self.d
-        gt = np.ascontiguousarray(g.T)
-        cgt = np.ascontiguousarray((-self.c[:, None] * g).T)
-        diag = (w - w * g).T
-        Q = np.empty((len(UPPER), len(w)))
-        for i, (a, b) in enumerate(UPPER):
-            np.multiply(gt[a], cgt[b], out=Q[i])
-            if a == b:
-                Q[i] += diag[a]
+        upper layout (10, m) of :class:`FacetBlocks`."""
+        return np.stack([row.copy() for row in self.eliminated_rows()])
+
+    def eliminated_rows(self):
+        """The rows of :meth:`eliminated` one by one, in one reused buffer (each is valid until
+        the next is taken): the assembly consumes them so, and the (10, m) array is never
+        held (320 MB at 2048^2). Rows of m numbers are ten times faster to form than m blocks
+        of 4 x 4."""
+        w, m = self.w, len(self.w)
+        gt = np.multiply(w.T, self.d.T, out=np.empty((4, m)))
+        cgt = gt * -self.c
+        diag = w.T * (1.0 - gt)
+        other = None
         if self.other.size:
             idx = np.arange(4)
             wo = w[self.other]
-            Qo = -(wo[:, :, None] * self.M_other * wo[:, None, :])
-            Qo[:, idx, idx] += wo
-            for i, (a, b) in enumerate(UPPER):
-                Q[i, self.other] = Qo[:, a, b]
-        return Q
+            other = -(wo[:, :, None] * self.M_other * wo[:, None, :])
+            other[:, idx, idx] += wo
+        row = np.empty(m)
+        for a, b in UPPER:
+            np.multiply(gt[a], cgt[b], out=row)
+            if a == b:
+                row += diag[a]
+            if other is not None:
+                row[self.other] = other[:, a, b]
+            yield row
 
 
 def neighbours(domain) -> dict[str, np.ndarray]:
@@ -352,31 +373,45 @@ def _sigmoid(x):
     return 0.5 * (1.0 + np.tanh(0.5 * x))
 
 
+def evidence(nb, scale) -> list[tuple[str, float, np.ndarray, np.ndarray]]:
+    """``(side, sign, neighbour, weight)`` per side for :func:`bilateral_weights`: the
+    neighbour's facet index (0 where there is none) and the facet's normal scale where the
+    pair gives evidence (0 where the neighbour is missing or has no normal). Depends on the
+    domain and the normals only: computed once per solve."""
+    out = []
+    for key, q in nb.items():
+        qq = np.maximum(q, 0)
+        has = (q >= 0) & (scale[qq] > 0)  # a neighbour without a normal gives no evidence
+        out.append((key, 1.0 if key[0] == "+" else -1.0, qq, np.where(has, scale, 0.0)))
+    return out
+
+
 def bilateral_weights(u, nb, scale, k, slopes=None):
     """Corner glue weights (m, 4) from facet values `u` (m,) (see the module docstring).
 
-    `nb` is :func:`neighbours`; `scale` (m,) the normal scale ``c_f`` (0 where a facet has no
-    target: no evidence). With `slopes` ``(bx, by)`` the compared quantities are the
-    differences minus what the two facets' normals predict (trapezoid rule), otherwise the
-    plain differences (BiNI's choice). A missing neighbour counts as a zero difference.
+    `nb` is :func:`neighbours` (or :func:`evidence` of it and `scale`, computed once); `scale`
+    (m,) the normal scale ``c_f`` (0 where a facet has no target: no evidence). With `slopes`
+    ``(bx, by)`` the compared quantities are the differences minus what the two facets'
+    normals predict (trapezoid rule), otherwise the plain differences (BiNI's choice). A
+    missing neighbour counts as a zero difference.
     """
+    sides = nb if isinstance(nb, list) else evidence(nb, scale)
     sq = {}
-    for key, q in nb.items():
-        sign = 1.0 if key[0] == "+" else -1.0
-        qq = np.maximum(q, 0)
-        has = (q >= 0) & (scale[qq] > 0)  # a neighbour without a normal gives no evidence
-        d = sign * (u[qq] - u)
+    for key, sign, qq, hs in sides:
+        d = u[qq] - u
         if slopes is not None:
             g = slopes[0] if key[1] == "x" else slopes[1]
-            d = d - 0.5 * (g + g[qq])
-        sq[key] = np.where(has, (scale * d) ** 2, 0.0)
+            d = sign * d - 0.5 * (g + g[qq])
+        d *= hs
+        sq[key] = np.square(d, out=d)
     omega = {a: _sigmoid(k * (sq["-" + a] - sq["+" + a])) for a in ("x", "y")}  # + side weight
-    cols = []
-    for sx, sy in CORNER_SIDES:
+    out = np.empty((len(u), 4))
+    for i, (sx, sy) in enumerate(CORNER_SIDES):
         wx = omega["x"] if sx > 0 else 1.0 - omega["x"]
         wy = omega["y"] if sy > 0 else 1.0 - omega["y"]
-        cols.append(4.0 * wx * wy)
-    return np.maximum(np.stack(cols, axis=1), FLOOR)
+        np.multiply(wx, wy, out=out[:, i])
+    out *= 4.0
+    return np.maximum(out, FLOOR, out=out)
 
 
 def changes_big(step) -> bool:
@@ -462,7 +497,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         # every sample), and decides the offsets the cuts leave free
         KP, rP = prior_form(domain, (1.0 - PRIOR_OWN) * prior[0], prior[1])
     corners = domain.corners
-    nb = neighbours(domain)
+    nb = evidence(neighbours(domain), normal_scale)
     eye_rows = np.stack([E_X, E_Y], axis=1)  # (4, 2): corner vector -> (x-slope, y-slope)
 
     a_normals = None if prior is None else _facet_system(bx, by, flat_weight, fusion[:2] + (
@@ -471,7 +506,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     def state(w):
         M = GlueInverse(target, w, A_other, fusion)
         Ma = M.apply(a)
-        K = blocks.assemble(M.eliminated(), upper=True)
+        K = blocks.assemble(M.eliminated_rows(), upper=True)
         rhs = scatter_corners(domain, w * Ma)
         scale = None
         if KP is not None:
