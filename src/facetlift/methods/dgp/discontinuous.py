@@ -143,6 +143,10 @@ COARSE_BLOCK = 8
 #: -27 %, orthographic renders 3-5x faster.
 LOOSE_RTOL = 1e-4
 
+#: CG iterations the final polish (to ``cg_rtol``) may take on the reweightings' hierarchy
+#: before it is continued on a new one of the final system.
+POLISH_TRIAL = 10
+
 #: Smallest tolerance factor of :func:`_rhs_scale` (a residual of 1e-6 * 1e-6 of the whole
 #: right-hand side is still well above rounding).
 RHS_SCALE_FLOOR = 1e-6
@@ -542,7 +546,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     amg = {"ml": None, "pre": None, "for": None, "builds": 0, "refreshes": 0, "last_its": 0,
            "slow": False}
 
-    def solve(K, rhs, z0, rebuild=True, rtol=cg_rtol, fresh=False, scale=None):
+    def solve(K, rhs, z0, rebuild=True, rtol=cg_rtol, fresh=False, scale=None, trial=False):
         # the weights change the system's near-null modes (cut corners): a hierarchy of the
         # current system keeps CG at ~5-15 iterations where one of the smooth system needs
         # hundreds. A new one is built when the last solve was slow; when the weights moved
@@ -562,7 +566,10 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             pre = balanced(K, pre, blocks_Z())
         if scale is not None:  # a prior: the tolerance is relative to the normals' part
             rtol = rtol * scale
-        z, info = linalg.cg(K, rhs, pre, x0=z0, rtol=rtol, maxiter=500)
+        z, info = linalg.cg(K, rhs, pre, x0=z0, rtol=rtol,
+                            maxiter=POLISH_TRIAL if trial else 500)
+        if trial:  # (an unconverged trial is continued on a new hierarchy)
+            return z, info.iterations, info.converged
         amg["last_its"] = info.iterations
         # (the first, cold-started solve counts too: an object with a rim of facets without a
         # normal shows it there, e.g. 89 iterations on the benchmark's spot@front)
@@ -598,9 +605,14 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             converged = True
             break
     if it > 0 and LOOSE_RTOL > cg_rtol:  # the reweightings solved loosely: polish the last one
-        # on a hierarchy of the final system: the stale one took 71-210 CG iterations to get
-        # from 1e-4 to 1e-6 on the 50-70k pixel renders, a new one 27-55
-        z, its = solve(K, rhs, z, fresh=True, scale=scale)
+        # on the hierarchy at hand when it does so quickly (large smooth maps: 2-3 CG
+        # iterations, where a new hierarchy costs seconds), else on one of the final system:
+        # the stale one took 71-210 CG iterations to get from 1e-4 to 1e-6 on the 50-70k
+        # pixel renders, a new one 27-55
+        z, its, done = solve(K, rhs, z, rebuild=False, scale=scale, trial=True)
+        if not done:
+            z, more = solve(K, rhs, z, fresh=True, scale=scale)
+            its += more
         cg_its.append(its)
         y = copies(M, Ma, w, z)
     own = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
