@@ -219,8 +219,9 @@ class FacetBlocks:
         pr, pc = domain.pixels
         self.fflat = None if domain.n_facets == H * W else (pr * W + pc)
         first = domain.first_vertices if skip is None else domain.first_vertices[~skip]
-        diag = self.indptr[first] + (np.cumsum(present, axis=1) - present)[first, 4]
-        self.pin = np.bincount(diag, np.full(first.size, pin), minlength=self.nnz)
+        # (a sparse addition: a dense (nnz,) array of pins would be 72 bytes per pixel)
+        self.pin_at = self.indptr[first] + present[first, :4].sum(axis=1)
+        self.pin = float(pin)
 
     def assemble(self, Q, upper: bool = False) -> sp.csr_matrix:
         """(n, n) CSR of ``sum_f C_f^T Q_f C_f`` plus the pins. `Q`: symmetric blocks, (m, 4,
@@ -243,7 +244,8 @@ class FacetBlocks:
             if a != b:
                 planes[3 * (ra - rb + 1) + (ca - cb + 1), rb:rb + H, cb:cb + W] += facet
         data = planes.reshape(-1)[self.position]
-        data += self.pin
+        del planes
+        data[self.pin_at] += self.pin
         n = self.domain.n_vertices
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(n, n))
 
@@ -345,8 +347,7 @@ class GlueInverse:
         of 4 x 4."""
         w, m = self.w, len(self.w)
         gt = np.multiply(w.T, self.d.T, out=np.empty((4, m)))
-        cgt = gt * -self.c
-        diag = w.T * (1.0 - gt)
+        negc = -self.c
         other = None
         if self.other.size:
             idx = np.arange(4)
@@ -354,10 +355,11 @@ class GlueInverse:
             other = -(wo[:, :, None] * self.M_other * wo[:, None, :])
             other[:, idx, idx] += wo
         row = np.empty(m)
-        for a, b in UPPER:
-            np.multiply(gt[a], cgt[b], out=row)
+        for a, b in UPPER:  # (formed row by row: no (4, m) temporary but g)
+            np.multiply(gt[a], gt[b], out=row)
+            row *= negc
             if a == b:
-                row += diag[a]
+                row += w[:, a] * (1.0 - gt[a])
             if other is not None:
                 row[self.other] = other[:, a, b]
             yield row
@@ -384,7 +386,7 @@ def evidence(nb, scale) -> list[tuple[str, float, np.ndarray, np.ndarray]]:
     domain and the normals only: computed once per solve."""
     out = []
     for key, q in nb.items():
-        qq = np.maximum(q, 0)
+        qq = np.maximum(q, 0).astype(np.int32 if q.size < 2**31 else np.int64)
         has = (q >= 0) & (scale[qq] > 0)  # a neighbour without a normal gives no evidence
         out.append((key, 1.0 if key[0] == "+" else -1.0, qq, np.where(has, scale, 0.0)))
     return out
@@ -592,6 +594,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         if it > SETTLE_AFTER:
             step *= DECAY ** (it - SETTLE_AFTER)
         w = w + step
+        M = Ma = rhs = None  # (freed before the next state is formed)
         M, Ma, K, rhs, scale = state(w)
         z, its = solve(K, rhs, z, rebuild=changes_big(step), scale=scale,
                        rtol=max(cg_rtol, LOOSE_RTOL))
