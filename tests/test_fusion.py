@@ -118,6 +118,29 @@ def test_discontinuities_solve_each_reweighting_whatever_the_prior_offset():
     np.testing.assert_allclose(far.depth - 1e4, near.depth, atol=1e-4 * np.ptp(depth))
 
 
+def test_sparse_prior_takes_the_multigrid_trial_and_its_fallback(monkeypatch):
+    """Sparse samples: the smooth route solves with a Ruge-Stueben hierarchy first; the facet
+    preconditioner's route (forced, or after a failed trial) reaches the same surface."""
+    from facetlift.methods.dgp import fixed_point
+
+    n, depth = wave((40, 44))
+    prior, _ = sparse(depth, 0.02, seed=2)
+    s = run(n, prior=prior, prior_weight=100.0)
+    assert s.info["backend"] == "pcg-amg"
+    monkeypatch.setattr(fixed_point, "SPARSE_PRIOR", 0.0)  # never tried
+    ref = run(n, prior=prior, prior_weight=100.0)
+    assert ref.info["backend"] == "pcg-facet"
+    np.testing.assert_allclose(s.depth, ref.depth, atol=1e-8 * np.ptp(depth))
+    monkeypatch.setattr(fixed_point, "SPARSE_PRIOR", 0.25)
+    monkeypatch.setattr(fixed_point, "AMG_TRIAL", 2)  # the trial fails: the facet route goes on
+    on = run(n, prior=prior, prior_weight=100.0)
+    assert on.info["backend"] == "pcg-facet" and on.info["cg_iterations"] > 2
+    np.testing.assert_allclose(on.depth, ref.depth, atol=1e-8 * np.ptp(depth))
+    # a dense prior, or a component without samples: the facet route directly
+    dense = run(n, prior=depth + 0.1, prior_weight=0.01)
+    assert dense.info["backend"] == "pcg-facet"
+
+
 def test_perspective_prior_returns_metric_depth():
     H, W = 30, 40
     K = np.array([[500.0, 0, W / 2], [0, 500.0, H / 2], [0, 0, 1]])
