@@ -7,7 +7,8 @@ development renders, perspective and orthographic, and the analytic jump scenes)
 runs ``--repeat`` times and the best time counts; the ratio is to the same scene without a
 prior, measured in this process. Routes: ``amg`` (the default: a Ruge-Stueben trial for sparse
 samples, :data:`facetlift.methods.dgp.fixed_point.SPARSE_PRIOR`) and ``facet`` (the facet
-preconditioner alone, the trial turned off). Renders are cached where
+preconditioner alone, the trial turned off). With ``--discontinuities`` the same for
+``discontinuities=True`` (one route, the default). Renders are cached where
 ``FACETLIFT_BENCH_CACHE`` points (built on first use, minutes).
 
 Usage::
@@ -50,33 +51,38 @@ def main(argv=None) -> int:
     ap.add_argument("--step", type=int, default=3, help="every step-th scene")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--data", type=Path, default=DATA)
+    ap.add_argument("--discontinuities", action="store_true",
+                    help="time discontinuities=True instead of the smooth routes")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     ctx = Context(out=Path("/tmp/facetlift-bench-prior-time"), settings=Settings(),
                   data=args.data)
     scenes = [s for s in bd.scenes(ctx) if s[0] in ("perspective", "ortho")][::args.step]
-    ratios = {"amg": [], "facet": []}
-    print("| scene | plain s | prior | amg: ratio (route, CG) | facet: ratio (route, CG) |")
-    print("|---|---|---|---|---|")
+    routes = ("default",) if args.discontinuities else ("amg", "facet")
+    ratios = {r: [] for r in routes}
+    print("| scene | plain s | prior | " + " | ".join(f"{r}: ratio (route, CG)" for r in routes)
+          + " |")
+    print("|---|---|---|" + "---|" * len(routes))
     default = fixed_point.SPARSE_PRIOR
     try:
         for group, name, load in scenes:
             gt = load()
             if gt.mask.sum() < 500:
                 continue
-            kw = dict(pixel_size=gt.pixel_size, K=gt.K)
+            kw = dict(pixel_size=gt.pixel_size, K=gt.K, discontinuities=args.discontinuities)
             t0, _ = best(args.repeat, gt.normals, gt.mask, **kw)
             for cond, noise, weight in (("sparse 1%", 0.0, 100.0), ("noisy 1%", 0.01, 1.0)):
                 prior = bf.sparse_prior(gt, 0.01, bf._rng(name, cond), noise)
                 cells = []
-                for route in ("amg", "facet"):
-                    fixed_point.SPARSE_PRIOR = default if route == "amg" else 0.0
+                for route in routes:
+                    fixed_point.SPARSE_PRIOR = 0.0 if route == "facet" else default
                     t, s = best(args.repeat, gt.normals, gt.mask, prior=prior,
                                 prior_weight=weight, **kw)
                     ratios[route].append(t / t0)
-                    cells.append(f"{t / t0:.2f} ({s.info['backend']}, "
-                                 f"{s.info.get('cg_iterations')})")
-                print(f"| {group}:{name} | {t0:.3f} | {cond} | {cells[0]} | {cells[1]} |",
+                    its = s.info.get("cg_iterations")
+                    its = sum(its) if isinstance(its, list) else its
+                    cells.append(f"{t / t0:.2f} ({s.info.get('backend', 'reweighted')}, {its})")
+                print(f"| {group}:{name} | {t0:.3f} | {cond} | " + " | ".join(cells) + " |",
                       flush=True)
     finally:
         fixed_point.SPARSE_PRIOR = default
