@@ -175,3 +175,20 @@ def test_size_limit_of_regularization_is_enforced_and_lifted_by_max_memory(monke
         facetlift.integrate(n, m, method="regularization")
     s = facetlift.integrate(n, m, method="regularization", max_memory="4G")
     assert np.isfinite(s.depth[m]).all()
+
+
+def test_estimate_counts_the_multigrid_of_a_sparse_prior(monkeypatch):
+    """Sparse samples take the smooth route's Ruge-Stueben trial: its hierarchy is planned."""
+    from facetlift.methods.dgp import fixed_point
+
+    n = np.zeros((40, 50, 3))
+    n[..., 2] = 1.0
+    prior = np.full((40, 50), np.nan)
+    prior[::9, ::9] = 2.0
+    problem = facetlift.prepare(n, prior=prior, prior_weight=100.0)
+    with_trial, route = memory.estimate(problem, "dgp", {})
+    monkeypatch.setattr(fixed_point, "SPARSE_PRIOR", 0.0)
+    without, _ = memory.estimate(problem, "dgp", {})
+    assert route == "dgp-pcg"
+    assert with_trial - without == 180 * problem.domain.n_vertices
+    assert facetlift.solve(problem, "dgp").info["backend"] == "pcg-facet"  # (trial off)
