@@ -133,8 +133,10 @@ def test_sparse_prior_takes_the_multigrid_trial_and_its_fallback(monkeypatch):
     np.testing.assert_allclose(s.depth, ref.depth, atol=1e-8 * np.ptp(depth))
     monkeypatch.setattr(fixed_point, "SPARSE_PRIOR", 0.25)
     monkeypatch.setattr(fixed_point, "AMG_TRIAL", 2)  # the trial fails: the facet route goes on
-    on = run(n, prior=prior, prior_weight=100.0)
+    seen = []
+    on = run(n, prior=prior, prior_weight=100.0, progress=lambda it, res: seen.append(it))
     assert on.info["backend"] == "pcg-facet" and on.info["cg_iterations"] > 2
+    assert seen == list(range(1, on.info["cg_iterations"] + 1))  # counted on, not restarted
     np.testing.assert_allclose(on.depth, ref.depth, atol=1e-8 * np.ptp(depth))
     # a dense prior, or a component without samples: the facet route directly
     dense = run(n, prior=depth + 0.1, prior_weight=0.01)

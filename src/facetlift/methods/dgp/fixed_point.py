@@ -127,8 +127,12 @@ def solve_direct(
             pre = FacetPreconditioner(domain, K, strong, prior=_lumped(domain, prior))
             if not tried:
                 t1 = time.perf_counter()
+            report = progress
+            if tried and progress is not None:  # (counting on from the trial's iterations)
+                def report(it, res, _p=progress, _n=tried):
+                    return _p(it + _n, res)
             z, sinfo = linalg.solve(K, rhs, "pcg", preconditioner=pre, rtol=RTOL, flexible=True,
-                                    progress=progress, x0=z0)
+                                    progress=report, x0=z0)
             used = "pcg-facet"
         else:
             K = pin_components(domain, K, skip=fixed)
