@@ -87,8 +87,8 @@ def split(domain: Domain, right=None, down=None) -> SplitMesh:
     dp = np.pad(down, 1)
     # per grid vertex (i, j), i in 0..H, j in 0..W: the four facets around it
     present = np.stack([mp[:-1, :-1], mp[:-1, 1:], mp[1:, :-1], mp[1:, 1:]], axis=-1)
-    big = np.int64(8)
-    lab = np.where(present, np.arange(4), big)
+    big = np.int8(8)
+    lab = np.where(present, np.arange(4, dtype=np.int8), big)  # (int8: 8x less traffic)
     joined = {  # slot pair -> edge between the two facets is in the mask and not cut
         (TL, TR): ~rp[:-1, :],
         (BL, BR): ~rp[1:, :],
@@ -109,7 +109,7 @@ def split(domain: Domain, right=None, down=None) -> SplitMesh:
             lab[..., a] = np.where(on, low, lab[..., a])
             lab[..., b] = np.where(on, low, lab[..., b])
     vi = domain.vertex_index
-    key = (vi[..., None] * 4 + lab)[present]  # < 4 n_vertices
+    key = (vi[..., None] * 4 + lab.astype(np.int64))[present]  # < 4 n_vertices
     # the used keys, sorted, and every key's rank among them: a mark-and-count pass over the
     # key range (np.unique + searchsorted took 2.5 s per call at 1024^2)
     mark = np.zeros(4 * domain.n_vertices, dtype=bool)
