@@ -369,3 +369,18 @@ def test_bench_prior_alone_with_collinear_samples():
     assert alone[6, 20] == 1.0 and alone[14, 3] == 4.0
     prior[8, 20] = 5.0  # spans the plane: linear inside the hull
     assert interpolate(prior, mask)[9, 12] not in (1.0, 2.0, 3.0, 4.0, 5.0)
+
+
+def test_an_error_raised_by_progress_is_not_swallowed_by_the_multigrid_trial():
+    n, depth = wave((40, 44))
+    prior, _ = sparse(depth, 0.02, seed=2)
+
+    class Stop(RuntimeError):
+        pass
+
+    def progress(it, res):
+        if it == 3:
+            raise Stop
+
+    with pytest.raises(Stop):
+        run(n, prior=prior, prior_weight=100.0, progress=progress)

@@ -114,11 +114,13 @@ def solve_direct(
             t1 = time.perf_counter()
             try:
                 pre = vcycle(hierarchy(K, symmetric_gs=True, interpolation="direct"))
+                pre(np.zeros(K.shape[0]))  # (factorizes the coarsest level now)
+            except RuntimeError:  # a singular coarsest level (splu): not for this system
+                pre = None
+            if pre is not None:
                 z0, sinfo = linalg.cg(K, rhs, pre, rtol=RTOL, maxiter=AMG_TRIAL,
                                       progress=progress)
                 tried, used = sinfo.iterations, "pcg-amg"
-            except RuntimeError:  # a singular coarsest level (splu): not for this system
-                z0 = None
             if used == "pcg-amg" and not sinfo.converged:
                 z0, used = (z0 if np.all(np.isfinite(z0)) else None), None
         if used == "pcg-amg":
