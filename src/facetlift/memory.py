@@ -242,12 +242,9 @@ def _kernel_tiles(options: dict, shape) -> float:
 
 def _sparse_prior(problem) -> bool:
     """Whether the smooth DGP route will try its multigrid for a sparse prior."""
-    from .methods.dgp.fixed_point import SPARSE_PRIOR
+    from .methods.dgp.fixed_point import sparse_prior
 
-    if not problem.has_prior:
-        return False
-    return bool(problem.prior_components.all()) and float(
-        np.mean(problem.prior_weight > 0)) <= SPARSE_PRIOR
+    return problem.has_prior and sparse_prior(problem.prior_weight, problem.prior_components)
 
 
 def estimate(problem, method: str, options: dict) -> tuple[float, str]:

@@ -53,6 +53,26 @@ SPARSE_PRIOR = 0.25
 AMG_TRIAL = 60
 
 
+def sparse_prior(weight, fixed) -> bool:
+    """Whether a prior of facet weights `weight` (m,) that fixes the components `fixed`
+    (n_components,) bool takes the multigrid trial (:data:`SPARSE_PRIOR`): samples on at most
+    that share of the facets, and one in every component (the system is then definite)."""
+    return bool(np.all(fixed)) and float(np.mean(weight > 0)) <= SPARSE_PRIOR
+
+
+def _multigrid_trial(K, rhs, progress):
+    """CG on `K` preconditioned by a Ruge-Stueben V-cycle, at most :data:`AMG_TRIAL`
+    iterations: ``(x, CGInfo)``, or ``(None, None)`` where the hierarchy cannot be built
+    (a singular coarsest level). Isolated stiff samples: the box preconditioner does not see
+    the smooth modes between them (2-5x the prior-free CG iterations); the hierarchy does."""
+    try:
+        pre = vcycle(hierarchy(K, symmetric_gs=True, interpolation="direct"))
+        pre(np.zeros(K.shape[0]))  # (factorizes the coarsest level now, inside the guard)
+    except RuntimeError:
+        return None, None
+    return linalg.cg(K, rhs, pre, rtol=RTOL, maxiter=AMG_TRIAL, progress=progress)
+
+
 def solve_direct(
     domain, bx, by, target, backend="auto", flat_weight=1e-9, weights=None, *, h=1.0,
     prior=None, progress=None,
@@ -105,24 +125,14 @@ def solve_direct(
             K = (K + KP).tocsr()
             del KP
         z0, tried = None, 0
-        if (route == "pcg" and prior is not None and bool(fixed.all())
-                and np.mean(pw > 0) <= SPARSE_PRIOR):
-            # isolated stiff samples: the box preconditioner does not see the smooth modes
-            # between them (2-5x the prior-free CG iterations); a Ruge-Stueben hierarchy of
-            # K does (K is definite: every component holds a sample). Where it stalls (rims
-            # and holes without normals), the facet preconditioner goes on from its iterate
+        if route == "pcg" and prior is not None and sparse_prior(pw, fixed):
             t1 = time.perf_counter()
-            try:
-                pre = vcycle(hierarchy(K, symmetric_gs=True, interpolation="direct"))
-                pre(np.zeros(K.shape[0]))  # (factorizes the coarsest level now)
-            except RuntimeError:  # a singular coarsest level (splu): not for this system
-                pre = None
-            if pre is not None:
-                z0, sinfo = linalg.cg(K, rhs, pre, rtol=RTOL, maxiter=AMG_TRIAL,
-                                      progress=progress)
-                tried, used = sinfo.iterations, "pcg-amg"
-            if used == "pcg-amg" and not sinfo.converged:
-                z0, used = (z0 if np.all(np.isfinite(z0)) else None), None
+            z0, trial = _multigrid_trial(K, rhs, progress)
+            if trial is not None and trial.converged:
+                sinfo, used = trial, "pcg-amg"
+            elif trial is not None:  # the facet preconditioner goes on from its iterate
+                tried = trial.iterations
+                z0 = z0 if np.all(np.isfinite(z0)) else None
         if used == "pcg-amg":
             z = z0
         elif route == "pcg":
