@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import subprocess
 import sys
 import time
@@ -81,12 +82,14 @@ def run_case(case: str, s: int) -> dict:
     with open("/proc/self/clear_refs", "w") as f:
         f.write("5")  # reset VmHWM to the current RSS
     before = _status("VmRSS")
+    cpu0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         # an explicit limit: measure every route, also beyond a method's size limit
         surf = facetlift.solve(problem, method, max_memory=memory.default_limit(), **opts)
     seconds = time.perf_counter() - t0
+    cpu1 = resource.getrusage(resource.RUSAGE_SELF)
     peak = _status("VmHWM") - before
     from facetlift import methods as _m
     from facetlift.options import validate
@@ -97,6 +100,9 @@ def run_case(case: str, s: int) -> dict:
     return {"case": case, "size": s, "m": d.n_facets, "n": d.n_vertices, "seconds": seconds,
             "peak_mib": peak / 2**20, "estimate_mib": est / 2**20, "route": which,
             "ratio": est / peak if peak else None, "backend": surf.info.get("backend"),
+            # CPU time in the process and in the kernel on its behalf (page faults: on a VM
+            # whose host reclaims free memory, first-touching 1 GiB costs seconds here)
+            "user_s": cpu1.ru_utime - cpu0.ru_utime, "sys_s": cpu1.ru_stime - cpu0.ru_stime,
             # the iterating routes (the discontinuity reweightings): count and CG iterations
             "iterations": surf.info.get("iterations"),
             "cg_iterations": int(sum(_as_list(surf.info.get("cg_iterations"))))}
@@ -116,8 +122,8 @@ def main(argv=None) -> int:
         print(json.dumps(run_case(case, int(s))))
         return 0
     print("| case | size | mask px | peak MiB | estimate MiB | estimate / peak | route | s | "
-          "iterations (CG) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "user / sys s | iterations (CG) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for s in (int(x) for x in args.sizes.split(",")):
         for case in args.cases.split(";"):
             cmd = [sys.executable, __file__, "--case", f"{case}@{s}"]
@@ -135,7 +141,8 @@ def main(argv=None) -> int:
                 continue
             print(f"| {case} | {s}² | {r['m']:,} | {r['peak_mib']:,.0f} | "
                   f"{r['estimate_mib']:,.0f} | {r['ratio']:.2f} | {r['route']} | "
-                  f"{r['seconds']:.1f} | {r.get('iterations')} ({r.get('cg_iterations')}) |",
+                  f"{r['seconds']:.1f} | {r['user_s']:.1f} / {r['sys_s']:.1f} | "
+                  f"{r.get('iterations')} ({r.get('cg_iterations')}) |",
                   flush=True)
     return 0
 
