@@ -162,7 +162,7 @@ RHS_SCALE_FLOOR = 1e-6
 
 #: Forcing term of the reweightings' solves: each stops once its residual is below this
 #: fraction of the residual it started from (the previous vertex values in the new system),
-#: if that comes before :data:`LOOSE_RTOL` (None: :data:`LOOSE_RTOL` alone). The weights move
+#: if that comes before ``max(cg_rtol, LOOSE_RTOL)`` (None: that tolerance alone). The weights move
 #: on after every solve, so an early one need not be tight; the warm starts carry the rest
 #: into the later ones and the polish. On the benchmark's 48 pinhole scenes (exact and 3-deg
 #: noise, 96 runs, one interleaved run): CG iterations 24,096 -> 16,270, median time ratio
@@ -649,6 +649,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     changes = []
     converged = max_iter == 0
     it = 0
+    forced = FORCING is not None and prior is None  # (the forcing term: not with a prior)
     for it in range(1, max_iter + 1):
         step = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes) - w
         if it > SETTLE_AFTER:
@@ -657,7 +658,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         M = Ma = rhs = None  # (freed before the next state is formed)
         M, Ma, K, rhs, scale = state(w)
         z, its = solve(K, rhs, z, rebuild=changes_big(step), scale=scale,
-                       rtol=max(cg_rtol, LOOSE_RTOL), forcing=prior is None)
+                       rtol=max(cg_rtol, LOOSE_RTOL), forcing=forced)
         cg_its.append(its)
         y = copies(M, Ma, w, z)
         energies.append(energy(y, w, z))
@@ -667,7 +668,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         if changes[-1] <= tol:
             converged = True
             break
-    if it > 0 and LOOSE_RTOL > cg_rtol:  # the reweightings solved loosely: polish the last one
+    if it > 0 and (LOOSE_RTOL > cg_rtol or forced):  # the reweightings solved loosely: polish
         # on the hierarchy at hand when it does so quickly (large smooth maps: 2-3 CG
         # iterations, where a new hierarchy costs seconds), else on one of the final system:
         # the stale one took 71-210 CG iterations to get from 1e-4 to 1e-6 on the 50-70k
