@@ -10,6 +10,7 @@ Usage::
 
     .venv/bin/python benchmarks/bench_memory.py --sizes 256,512,1024 --json mem.jsonl
     .venv/bin/python benchmarks/bench_memory.py --cases dgp:disk:smooth --sizes 2048
+    .venv/bin/python benchmarks/bench_memory.py --cases dgp:rect:missing --sizes 4096 --retain
 """
 
 from __future__ import annotations
@@ -115,9 +116,17 @@ def main(argv=None) -> int:
                     help="';'-separated method:shape:route[:opt=val,...]")
     ap.add_argument("--json", help="append results here (one JSON per line)")
     ap.add_argument("--timeout", type=float, default=900.0)
+    ap.add_argument("--retain", action="store_true",
+                    help="keep freed memory in each case's process, as the facetlift command "
+                    "does (facetlift.memory.retain_freed_memory)")
     ap.add_argument("--case", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.case:
+        if args.retain:
+            from facetlift.memory import retain_freed_memory
+
+            if not retain_freed_memory():
+                print("--retain: not applied (not glibc, or MALLOC_* set)", file=sys.stderr)
         case, s = args.case.rsplit("@", 1)
         print(json.dumps(run_case(case, int(s))))
         return 0
@@ -126,7 +135,8 @@ def main(argv=None) -> int:
     print("|---|---|---|---|---|---|---|---|---|---|")
     for s in (int(x) for x in args.sizes.split(",")):
         for case in args.cases.split(";"):
-            cmd = [sys.executable, __file__, "--case", f"{case}@{s}"]
+            cmd = [sys.executable, __file__, "--case", f"{case}@{s}"] + (
+                ["--retain"] if args.retain else [])
             try:
                 res = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout)
                 r = json.loads(res.stdout.strip().splitlines()[-1]) if res.returncode == 0 \

@@ -192,3 +192,56 @@ def test_estimate_counts_the_multigrid_of_a_sparse_prior(monkeypatch):
     assert route == "dgp-pcg"
     assert with_trial - without == 180 * problem.domain.n_vertices
     assert facetlift.solve(problem, "dgp").info["backend"] == "pcg-facet"  # (trial off)
+
+
+_RETAIN = """
+import ctypes, json, os, sys
+import numpy as np
+from facetlift.memory import retain_freed_memory
+applied = retain_freed_memory()
+# after it, a freed large array's memory stays in the process: RSS does not fall back
+def rss():
+    with open("/proc/self/status") as f:
+        return next(int(l.split()[1]) for l in f if l.startswith("VmRSS:")) * 1024
+a = np.ones(64 * 2**20 // 8)
+before = rss()
+del a
+print(json.dumps({"applied": applied, "released": before - rss()}))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's allocator")
+def test_retain_freed_memory_keeps_freed_blocks_unless_the_user_set_malloc():
+    """The command line's allocator setting (facetlift.memory.retain_freed_memory): a freed
+    64 MiB array is handed back to the system by default and kept with the setting; a user's
+    MALLOC_* variable wins."""
+    import os
+    import platform
+
+    if platform.libc_ver()[0] != "glibc":
+        pytest.skip("not glibc")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+
+    def run(code, **extra):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             env={**env, **extra}, check=True).stdout
+        return json.loads(out.strip().splitlines()[-1])
+
+    kept = run(_RETAIN)
+    assert kept["applied"] and kept["released"] < 8 * 2**20
+    plain = run(_RETAIN.replace("applied = retain_freed_memory()", "applied = False"))
+    assert plain["released"] > 48 * 2**20  # (a separate mapping, unmapped when freed)
+    assert not run(_RETAIN, MALLOC_MMAP_MAX_="65536")["applied"]
+
+
+def test_the_command_line_retains_freed_memory_unless_turned_off(monkeypatch):
+    from facetlift import cli
+
+    calls = []
+    monkeypatch.setattr(memory, "retain_freed_memory", lambda: calls.append(1) or True)
+    monkeypatch.setattr(sys, "argv", ["facetlift", "--version"])
+    monkeypatch.delenv("FACETLIFT_RETAIN_MEMORY", raising=False)
+    assert cli.main() == 0 and calls == [1]
+    monkeypatch.setenv("FACETLIFT_RETAIN_MEMORY", "0")
+    assert cli.main() == 0 and calls == [1]
+    assert cli.main(["--version"]) == 0 and calls == [1]  # in-process callers: never

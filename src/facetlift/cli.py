@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import sys
 import time
 from pathlib import Path
@@ -575,6 +576,12 @@ def main(argv: list[str] | None = None) -> int:
     from .errors import MemoryLimitError, WorkersDied
     from .io.atomic import Terminated
 
+    if argv is None and os.environ.get("FACETLIFT_RETAIN_MEMORY", "1") != "0":
+        # a command-line process: keep freed memory warm (facetlift.memory.retain_freed_memory;
+        # not for in-process callers such as the tests, whose allocator stays as it was)
+        from .memory import retain_freed_memory
+
+        retain_freed_memory()
     args = sys.argv[1:] if argv is None else list(argv)
     if not args:
         args = ["--help"]
