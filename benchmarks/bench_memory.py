@@ -126,7 +126,8 @@ def main(argv=None) -> int:
             from facetlift.memory import retain_freed_memory
 
             if not retain_freed_memory():
-                print("--retain: not applied (not glibc, or MALLOC_* set)", file=sys.stderr)
+                print("--retain: not applied (not Linux/glibc, MALLOC_* or LD_PRELOAD set, or "
+                      "refused)", file=sys.stderr)
         case, s = args.case.rsplit("@", 1)
         print(json.dumps(run_case(case, int(s))))
         return 0

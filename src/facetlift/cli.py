@@ -576,7 +576,8 @@ def main(argv: list[str] | None = None) -> int:
     from .errors import MemoryLimitError, WorkersDied
     from .io.atomic import Terminated
 
-    if argv is None and os.environ.get("FACETLIFT_RETAIN_MEMORY", "1") != "0":
+    if argv is None and os.environ.get("FACETLIFT_RETAIN_MEMORY", "1").strip().lower() not in (
+            "0", "false", "no", "off"):
         # a command-line process: keep freed memory warm (facetlift.memory.retain_freed_memory;
         # not for in-process callers such as the tests, whose allocator stays as it was)
         from .memory import retain_freed_memory

@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -98,41 +99,67 @@ _M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_MAX = -1, -2, -4
 _MALLOC_ENV = ("MALLOC_MMAP_MAX_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_TOP_PAD_",
                "MALLOC_MMAP_THRESHOLD_")
 
+#: glibc's C library once :func:`retain_freed_memory` has applied its setting (else None).
+_RETAINED = None
+
 
 def retain_freed_memory() -> bool:
-    """Make the C allocator keep the memory the process frees, for the rest of its life
-    (glibc on Linux; elsewhere nothing happens).
+    """Make the C allocator keep the memory the process frees for reuse (glibc on Linux;
+    elsewhere nothing happens).
 
-    By default every large array is mapped fresh from the system and handed back when it is
-    freed. Each first touch of fresh memory is a page fault, and on a virtual machine whose
-    host reclaims free memory it faults to the host: 5-9 s per GiB on the project's VM
-    (docs/benchmarks.md, "Fresh memory is slow on this VM"). Kept in the process, freed
-    blocks serve the next arrays while they are still warm: measured there, 4096^2 with 30 %
-    missing normals 97.3 -> 48.7 s, the 2048^2 discontinuity square 55.4 -> 39.6 s, for up to
-    12 % more peak memory (the blocks fragment).
+    By default every array above glibc's mapping threshold (at most 32 MiB) is mapped fresh
+    from the system and unmapped when freed. Each first touch of fresh memory is a page fault,
+    and on a virtual machine whose host reclaims free memory it faults to the host: 5-9 s per
+    GiB on the project's VM (docs/benchmarks.md, "Fresh memory is slow on this VM"). Kept in
+    the process, freed blocks serve the next arrays while they are still warm: measured there
+    with runs started cold, 4096^2 with 30 % missing normals 85.5 -> 58.8 s, the 2048^2
+    discontinuity square 62-69 -> 45-50 s, for up to 12 % more peak memory (the blocks
+    fragment). It applies to the main thread's heap (other threads' large blocks keep their
+    own mappings).
 
-    The setting is process-wide and permanent (it also ends glibc's adaptive thresholds),
-    which is right for a command-line run and wrong for a library to impose on its host: the
-    ``facetlift`` command calls this at start-up (``FACETLIFT_RETAIN_MEMORY=0`` turns it
-    off); the library never does. Returns whether it was applied: False off glibc, or when
-    one of the ``MALLOC_*_`` variables of :data:`_MALLOC_ENV` is set (the user's settings
-    stand).
+    The setting is process-wide and lasts as long as the process (it also ends glibc's
+    adaptive thresholds): right for a command-line run, wrong for a library to impose on its
+    host. The ``facetlift`` command calls this at start-up (``FACETLIFT_RETAIN_MEMORY=0``
+    turns it off); the library never does, but :func:`plan` hands the kept memory back to the
+    system before it measures what is available, so a later job in the same process is
+    planned as before (the reuse that saves the time is within one solve). Returns whether
+    the setting was applied: False off Linux and glibc, under a preloaded allocator
+    (``LD_PRELOAD``), when one of :data:`_MALLOC_ENV` or a malloc entry of
+    ``GLIBC_TUNABLES`` is set (the user's settings stand), or when glibc refuses it.
     """
-    import ctypes
-    import platform
-
-    if any(k in os.environ for k in _MALLOC_ENV) or platform.libc_ver()[0] != "glibc":
+    global _RETAINED
+    if not sys.platform.startswith("linux") or any(k in os.environ for k in _MALLOC_ENV):
+        return False
+    if "malloc" in os.environ.get("GLIBC_TUNABLES", "") or os.environ.get("LD_PRELOAD"):
         return False
     try:
-        mallopt = ctypes.CDLL("libc.so.6").mallopt
-    except (OSError, AttributeError):
+        import ctypes
+        import platform
+
+        if platform.libc_ver()[0] != "glibc":
+            return False
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
+        libc.mallopt.restype = ctypes.c_int
+        # large blocks from the heap, not separate mappings; the heap's top never handed back
+        # (-1: no trimming); the heap grown in steps of 256 MiB of address space
+        if not (libc.mallopt(_M_MMAP_MAX, 0) and libc.mallopt(_M_TRIM_THRESHOLD, -1)
+                and libc.mallopt(_M_TOP_PAD, 256 * 2**20)):
+            return False
+    except Exception:  # (no C library to load, an unexpected platform: leave it alone)
         return False
-    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
-    mallopt.restype = ctypes.c_int
-    ok = mallopt(_M_MMAP_MAX, 0)  # large blocks from the heap, not separate mappings
-    ok &= mallopt(_M_TRIM_THRESHOLD, -1)  # never hand the heap's top back (-1: no trimming)
-    ok &= mallopt(_M_TOP_PAD, 256 * 2**20)  # grow the heap in steps of 256 MiB (address space)
-    return bool(ok)
+    _RETAINED = libc
+    return True
+
+
+def _release_retained() -> None:
+    """Hand the memory that :func:`retain_freed_memory` keeps back to the system (before the
+    available memory is measured), if it was applied."""
+    if _RETAINED is not None:
+        try:
+            _RETAINED.malloc_trim(0)
+        except Exception:  # pragma: no cover - (glibc has it since 2.0)
+            pass
 
 
 def _size(b: float) -> str:
@@ -359,6 +386,7 @@ def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
     ValueError
         A bad `max_memory`.
     """
+    _release_retained()  # (the memory a previous job left in the process counts as free)
     lim = limit(max_memory)
     m = problem.domain.n_facets
     cap = SIZE_LIMITS.get(method)
