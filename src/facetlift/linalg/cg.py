@@ -57,6 +57,7 @@ def cg(
     callback: Callable[[np.ndarray], None] | None = None,
     flexible: bool = False,
     progress: Callable[[int, float], None] | None = None,
+    reduction: float | None = None,
 ) -> tuple[np.ndarray, CGInfo]:
     """Solve ``A x = b`` for a symmetric positive (semi-)definite `A` by preconditioned CG.
 
@@ -81,6 +82,9 @@ def cg(
     progress : callable(iteration, relative residual), optional
         Called after every iteration with the iteration count and ``|r| / |b|`` (the
         progress-bar hook of the methods, ``progress=``).
+    reduction : float, optional
+        Also stop at ``|r| <= reduction |r_0|``, the residual of the start, if that comes
+        first (a forcing term for a warm-started solve inside an outer iteration).
 
     Returns
     -------
@@ -96,8 +100,8 @@ def cg(
         info.converged = True
         info.residuals.append(0.0)
         return np.zeros_like(b), info
-    stop = rtol * bnorm
     rnorm = np.sqrt(_dot(r, r))
+    stop = rtol * bnorm if reduction is None else max(rtol * bnorm, reduction * rnorm)
     info.residuals.append(rnorm / bnorm)
     if rnorm <= stop:
         info.converged = True

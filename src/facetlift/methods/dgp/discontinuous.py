@@ -598,7 +598,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
            "slow": False}
 
     def solve(K, rhs, z0, rebuild=True, rtol=cg_rtol, fresh=False, scale=None, trial=False,
-              forcing=False):
+              reduction=None):
         # the weights change the system's near-null modes (cut corners): a hierarchy of the
         # current system keeps CG at ~5-15 iterations where one of the smooth system needs
         # hundreds. A new one is built when the last solve was slow; when the weights moved
@@ -619,11 +619,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         plain = rtol
         if scale is not None:  # a prior: the tolerance is relative to the normals' part
             rtol = rtol * scale
-        if forcing and FORCING is not None:
-            bn = float(np.linalg.norm(rhs))
-            if bn > 0:
-                rtol = max(rtol, FORCING * float(np.linalg.norm(rhs - K @ z0)) / bn)
-        z, info = linalg.cg(K, rhs, pre, x0=z0, rtol=rtol,
+        z, info = linalg.cg(K, rhs, pre, x0=z0, rtol=rtol, reduction=reduction,
                             maxiter=POLISH_TRIAL if trial else 500)
         if trial:  # (an unconverged trial is continued on a new hierarchy)
             return z, info.iterations, info.converged
@@ -658,7 +654,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         M = Ma = rhs = None  # (freed before the next state is formed)
         M, Ma, K, rhs, scale = state(w)
         z, its = solve(K, rhs, z, rebuild=changes_big(step), scale=scale,
-                       rtol=max(cg_rtol, LOOSE_RTOL), forcing=forced)
+                       rtol=max(cg_rtol, LOOSE_RTOL), reduction=FORCING if forced else None)
         cg_its.append(its)
         y = copies(M, Ma, w, z)
         energies.append(energy(y, w, z))
