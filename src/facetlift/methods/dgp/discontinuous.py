@@ -54,8 +54,9 @@ Iteration and stopping rule
     than ``tol`` is set to it, nothing else moves, and the system is solved again; it stops
     when no such corner is left. Weights only fall, so it ends (a corner can fall by more than
     ``tol`` at most ``4 / tol`` times); its reweightings count in ``iterations`` and against
-    the cap, ``info["grown"]`` says how many there were. ``info["unsettled_corners"]`` is the fraction of corners
-    whose own bilateral weight still differs from the settled one by more than
+    the cap, ``info["grown"]`` says how many there were.
+
+    ``info["unsettled_corners"]`` is the fraction of corners whose own bilateral weight still differs from the settled one by more than
     :data:`CUT` (the ambiguous edges the settling decided). Each reweighting is one
     preconditioned CG solve warm-started from the previous vertex values.
 
@@ -135,10 +136,10 @@ DECAY = 0.85
 #: than 1 % on 20 runs, worse on 5 (perspective exact 2.505 -> 2.482 mm, 8 / 0; 3-deg noise
 #: 2.447 -> 2.450 mm, 5 / 5; wide 1.725 -> 1.722 and 1.703 -> 1.693 mm; orthographic 5.422
 #: -> 5.415 % and 5.630 -> 5.632 %); a median of 4 growth reweightings (0 on 23 runs, at
-#: most 45, featuretype@left), median time ratio 1.01-1.10. BiNI's tent (a jump fading to zero along the
-#: tent's sides, 128^2): mean deviation from the input normals 6.57 -> 2.61 deg in 45
-#: growth reweightings (BiNI 2.34); the human map 2.84 -> 2.76 deg; the DiLiGenT bear
-#: unchanged (one growth reweighting).
+#: most 45, featuretype@left), median time ratio 1.01-1.10. BiNI's tent (a jump fading to
+#: zero along the tent's sides, 128^2): mean deviation from the input normals 6.57 -> 2.61
+#: deg in 45 growth reweightings (BiNI 2.34); the human map 2.84 -> 2.76 deg; the DiLiGenT
+#: bear unchanged (one growth reweighting).
 GROW = True
 
 #: Multigrid policy of the reweightings' solves. The hierarchy of the previous reweighting is
