@@ -56,9 +56,10 @@ Iteration and stopping rule
     ``tol`` at most ``4 / tol`` times); its reweightings count in ``iterations`` and against
     the cap, ``info["grown"]`` says how many there were.
 
-    ``info["unsettled_corners"]`` is the fraction of corners whose own bilateral weight still differs from the settled one by more than
-    :data:`CUT` (the ambiguous edges the settling decided). Each reweighting is one
-    preconditioned CG solve warm-started from the previous vertex values.
+    ``info["unsettled_corners"]`` is the fraction of corners whose own bilateral weight still
+    differs from the settled one by more than :data:`CUT` (the ambiguous edges the settling
+    decided). Each reweighting is one preconditioned CG solve warm-started from the previous
+    vertex values.
 
 Grazing normals
     The route is run (``facetlift.integrate``) with the paper's grazing threshold, cos 85 deg,
