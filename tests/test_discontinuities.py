@@ -369,6 +369,11 @@ def test_crack_growth_cuts_a_fading_jump(monkeypatch):
     capped = facetlift.integrate(n, discontinuities=True, discontinuity_iter=cap)
     assert capped.info["iterations"] == cap and not capped.info["converged"]
     assert capped.info["grown"] == s.info["grown"] - 1
+    # not with a depth prior: it decides the jump heights
+    prior = np.full(height.shape, np.nan)
+    prior[::7, ::7] = -height[::7, ::7]
+    fused = facetlift.integrate(n, discontinuities=True, prior=prior)
+    assert fused.info["grown"] == 0 and fused.info["converged"]
 
 
 def test_unconverged_cg_falls_back_to_the_solver_layer(monkeypatch):
