@@ -699,12 +699,16 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         # crack growth (module docstring): weights only fall, at corners on or next to a cut
         sides = [(np.maximum(q, 0), q >= 0) for q in neighbours(domain).values()]
         while it < max_iter:
-            own = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
             cut = (w < CUT) @ _ONES > 0  # facets with a cut corner
+            if not cut.any():
+                break
             near = cut.copy()
             for q, has in sides:
                 near |= cut[q] & has
-            step = np.where(near[:, None] & (own < w - tol), own - w, 0.0)
+            # (formed in place: one (m, 4) array, 134 MB at 2048^2)
+            step = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
+            step -= w
+            step[(step >= -tol) | ~near[:, None]] = 0.0
             if not step.any():
                 break
             it += 1
