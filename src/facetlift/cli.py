@@ -333,7 +333,8 @@ def integrate(normals, gradients, progress, as_json, **flags):
         # a fixed budget of reweightings by design: the surface is usable, say so and go on
         click.echo(
             f"note: the discontinuity reweighting used all {info.get('iterations')} "
-            "iterations before its weights settled; more may sharpen long jumps "
+            "iterations before its weights settled or its cuts stopped growing; more may "
+            "sharpen long jumps "
             "(--option discontinuity_iter=N)",
             err=True,
         )

@@ -224,7 +224,7 @@ def run_scene(ctx: Context, group: str, name: str, gt, cols) -> list[dict]:
             info = r.surface.info if r.surface is not None else {}
             rows.append({**base, "method": spec.label, "status": r.status, "error": err,
                          "deviation": info.get("mean_deviation"), "seconds": r.seconds,
-                         "iterations": info.get("iterations"),
+                         "iterations": info.get("iterations"), "grown": info.get("grown"),
                          "converged": info.get("converged"), "message": r.message})
         try:
             err, dev, sec = oracle(gt, n)
@@ -282,6 +282,7 @@ def real_maps(ctx: Context, cols) -> list[dict]:
                          "deviation": s.info.get("mean_deviation"), "made_mm": made,
                          "seconds": time.perf_counter() - t0,
                          "iterations": s.info.get("iterations"),
+                         "grown": s.info.get("grown"),
                          "converged": s.info.get("converged")})
     return rows
 
@@ -393,7 +394,7 @@ def discontinuities(ctx: Context) -> None:
         text += ["\nReal normal maps (defaults):\n",
                  md_table(real, ["data", "size", "method", "status", "pixels", "missing",
                                  "deviation", "made_mm", "seconds", "iterations",
-                                 "converged"])]
+                                 "grown", "converged"])]
     text = "\n".join(text)
     write_text(ctx.out / "discontinuities.md", text)
     ctx.add("Discontinuities: development benchmark", text)

@@ -102,10 +102,11 @@ OPTIONS = (
            "of the direct route (value: relative residual)", kind="callable", none=True),
     Option("discontinuity_k", DEFAULT_K, "sharpness of the bilateral weights, in squared pixel "
            "footprints (larger cuts more readily)", low=0.0, low_open=True, when=_DISC),
-    Option("discontinuity_iter", DEFAULT_ITER, "cap on the reweightings (a safety net: "
-           "the weights settle first)", kind="int", low=0, when=_DISC),
+    Option("discontinuity_iter", DEFAULT_ITER, "cap on the reweightings, the growth phase's "
+           "included (a safety net: the weights settle and the cuts stop growing first)",
+           kind="int", low=0, when=_DISC),
     Option("discontinuity_tol", DEFAULT_TOL, "stop when no corner weight (0..4) changes "
-           "by more than this", low=0.0, when=_DISC),
+           "by more than this (and grow cuts only by larger steps)", low=0.0, when=_DISC),
 )
 
 

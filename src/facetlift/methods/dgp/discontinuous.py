@@ -93,7 +93,8 @@ from ...operators.stencil import E_TWIST, E_X, E_Y, prior_form, scatter_corners
 #: Default for ``discontinuity_k`` (squared pixel footprints; see the module docstring).
 DEFAULT_K = 4.0
 
-#: Default cap on the reweightings (a safety net; the energy rule normally stops first).
+#: Default cap on the reweightings, the growth phase's included (a safety net: the
+#: weight-change rule and the end of the growth phase normally come first).
 DEFAULT_ITER = 200
 
 #: Ruge-Stueben interpolation of the reweightings' multigrid hierarchies. "direct" builds
@@ -106,7 +107,7 @@ INTERPOLATION = "direct"
 #: in [0, 4]). Chosen on the benchmark's perspective scenes (exact and 3-deg noise, 72 runs):
 #: against 0.01, 0.05 changed one error by more than 1 % (fandisk@oblique with noise, +6.7 %;
 #: means +0.04 % / +0.2 %), with 26 reweightings (median) instead of 35-36; 0.2 changed 15 of
-#: 72 (12 for the worse) with 18.
+#: 72 (12 for the worse) with 18 (all before the growth phase, which takes steps above it).
 DEFAULT_TOL = 0.05
 
 #: Smallest glue weight: keeps pieces whose boundary is cut everywhere attached.
@@ -140,7 +141,7 @@ DECAY = 0.85
 #: -> 5.415 % and 5.630 -> 5.632 %); a median of 4 growth reweightings (0 on 23 runs, at
 #: most 45, featuretype@left), median time ratio 1.01-1.10. BiNI's tent (a jump fading to
 #: zero along the tent's sides, 128^2): mean deviation from the input normals 6.57 -> 2.61
-#: deg in 45 growth reweightings (BiNI 2.34); the human map 2.84 -> 2.76 deg; the DiLiGenT
+#: deg in 48 growth reweightings (BiNI 2.34); the human map 2.84 -> 2.76 deg; the DiLiGenT
 #: bear unchanged (one growth reweighting). Not with a depth prior (it decides the jump
 #: heights): on every 2nd cached render with 1 % exact or noisy samples and the coarse prior
 #: (72 runs) no error moved by more than 1 %, and the time rose (median ratios 1.06, 1.12 and
@@ -519,7 +520,8 @@ def solve_discontinuous(
     max_iter : int
         Most reweightings after the smooth solution (0 returns the smooth solution).
     tol : float
-        Stop when no corner weight changes by more than this between reweightings.
+        Stop when no corner weight changes by more than this between reweightings; the
+        growth phase then lowers only weights whose own bilateral weight is lower by more.
     flat_weight : float
         Slope weight of facets without a target (see dgp).
     cg_rtol : float
@@ -695,21 +697,26 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             converged = True
             break
     grown = 0
-    if GROW and converged and it < max_iter and prior is None:
+    if GROW and converged and max_iter > 0 and prior is None:
         # crack growth (module docstring): weights only fall, at corners on or next to a cut
-        sides = [(np.maximum(q, 0), q >= 0) for q in neighbours(domain).values()]
-        while it < max_iter:
-            cut = (w < CUT) @ _ONES > 0  # facets with a cut corner
+        pr, pc = domain.pixels
+        grid = np.zeros((domain.shape[0] + 2, domain.shape[1] + 2), bool)
+        step = None
+        while True:
+            cut = (w < CUT).any(axis=1)  # facets with a cut corner
             if not cut.any():
                 break
-            near = cut.copy()
-            for q, has in sides:
-                near |= cut[q] & has
+            grid[pr + 1, pc + 1] = cut  # ... and their 4-neighbours
+            near = (cut | grid[pr, pc + 1] | grid[pr + 2, pc + 1] | grid[pr + 1, pc]
+                    | grid[pr + 1, pc + 2])
             # (formed in place: one (m, 4) array, 134 MB at 2048^2)
             step = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
             step -= w
             step[(step >= -tol) | ~near[:, None]] = 0.0
             if not step.any():
+                break
+            if it >= max_iter:  # (the cap counts the growth too)
+                converged = False
                 break
             it += 1
             grown += 1
@@ -722,10 +729,10 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             y = copies(M, Ma, w, z)
             energies.append(energy(y, w, z))
             changes.append(float(-step.min()))
+            step = None
             if callback is not None:
                 callback(it, changes[-1])
-        else:
-            converged = False  # (the cap counts the growth too)
+        del grid, step
     if it > 0 and (LOOSE_RTOL > cg_rtol or forced):  # the reweightings solved loosely: polish
         # on the hierarchy at hand when it does so quickly (large smooth maps: 2-3 CG
         # iterations, where a new hierarchy costs seconds), else on one of the final system:
