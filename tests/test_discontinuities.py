@@ -189,12 +189,16 @@ def test_eliminated_blocks_equal_the_dense_schur_complement(fused):
     if fused:
         c, lam = rng.random(m) + 0.1, rng.random(m) * (rng.random(m) < 0.5)
         fusion = (c, lam, rng.standard_normal(m))
-    A_other, _ = disc._facet_system(bx, by, 1e-9, fusion)
+    A_other, _ = disc._facet_system(bx, by, 1e-9, fusion, target)
     Q = disc.GlueInverse(target, w, A_other, fusion).eliminated()
     assert Q.shape == (10, m)
+    other = np.zeros((m, 4, 4)) + (A_other if A_other.ndim == 2 else 0.0)
+    if A_other.ndim == 3:  # (one block per facet without a target)
+        assert A_other.shape == ((~target).sum(), 4, 4)
+        other[~target] = A_other
     A = np.where(target[:, None, None],
                  c[:, None, None] * np.eye(4) - (c / 4 - lam / 16)[:, None, None] * np.ones((4, 4)),
-                 A_other if A_other.ndim == 3 else A_other[None])
+                 other)
     W = w[:, :, None] * np.eye(4)
     ref = W - W @ np.linalg.inv(A + W) @ W
     np.testing.assert_allclose(ref, np.swapaxes(ref, 1, 2), atol=1e-12)  # symmetric blocks

@@ -69,6 +69,7 @@ import numpy as np
 
 from ...options import Option
 from .. import MethodResult
+from . import discontinuous
 from .common import average_deviation, empty_components, targets
 from .discontinuous import DEFAULT_ITER, DEFAULT_K, DEFAULT_TOL, solve_discontinuous
 from .fixed_point import solve_direct
@@ -130,10 +131,15 @@ def run(
             # solver resolves them exactly
             z0, _ = solve_direct(domain, bx, by, target, backend, flat_weight, weights, h=s,
                                  prior=prior)
+        final = None
+        power = discontinuous.FINAL_COS_POWER  # (docs/perspective.md, "Final weights")
+        if prior is None and power:
+            final = np.where(target, problem.view_cosines, 1.0) ** power
+            final = final if weights is None else final * weights
         z, y, w, info = solve_discontinuous(
             domain, bx, by, target, normal_scale=normal_scale(problem), k=discontinuity_k,
             max_iter=discontinuity_iter, tol=discontinuity_tol, flat_weight=flat_weight,
-            callback=progress, prior=prior, weights=weights, x0=z0,
+            callback=progress, prior=prior, weights=weights, x0=z0, final_weights=final,
         )
         copies, pinfo = place_pieces(domain, y, bx, by, target, s,
                                      anchored=None if prior is None else prior[0] > 0)

@@ -148,6 +148,26 @@ DECAY = 0.85
 #: 1.91 with the coarse prior).
 GROW = True
 
+#: Power of the view cosine that weighs each facet's normal term in the final solve, once the
+#: cuts are settled (0: uniform, the paper's DGP energy). The residual of BiNI's equations is
+#: the slope residual times the normal's z component, so BiNI weighs a slope by ``cos^2``; a
+#: normal's angular error grows its slope's error by ``1 / cos^2``, and a steep facet's plane
+#: fits a curved surface worst. Uniformly weighted, those steep rim facets bend whole smooth
+#: regions: an analytic sphere (r 60 mm at 1.5 m, DiLiGenT camera) came out at 0.016 mm MADE
+#: (BiNI 0.008, with a four-fold pattern over the whole disc), 0.011 mm with ``cos^2``.
+#: Only the final solve: weighting the reweightings too moved the cuts (perspective mean
+#: 2.482 -> 2.606 mm, 19 wins / 13 losses against BiNI instead of 22 / 10). Measured on the
+#: benchmark's 59 cached renders at exact and 3-deg-noise normals (one interleaved A/B, 120
+#: runs), against uniform: wins / losses against BiNI perspective 22 / 10 -> 26 / 6 (exact),
+#: 20 / 13 -> 26 / 7 (noise), wide 4 / 7 -> 7 / 4 and 5 / 6 -> 9 / 3, orthographic 7 / 3 -> 8 /
+#: 2; means perspective 2.482 -> 2.488 and 2.450 -> 2.462 mm, wide 1.722 -> 1.719 and 1.693 ->
+#: 1.610 mm, orthographic 5.415 -> 5.286 and 5.632 -> 5.250 %; on the 12 nearly jump-free
+#: perspective scenes (BiNI below 0.3 mm) 0.098 -> 0.067 mm exact (BiNI 0.100; 11 wins / 1
+#: loss) and 0.124 -> 0.087 mm with noise (BiNI 0.125; 8 / 2). Power 1: means 2.470 / 2.361
+#: mm but 24 / 9 and 22 / 10 wins, nearly jump-free 0.082 mm. Median time +8 %. Not with a
+#: depth prior (its weight's units are relative to a normal term of weight 1, docs/fusion.md).
+FINAL_COS_POWER = 2
+
 #: Multigrid policy of the reweightings' solves. The hierarchy of the previous reweighting is
 #: reused as it is while no corner weight moves by more than :data:`REUSE_STEP`; when one
 #: does, its coarse operators are recomputed for the new system (a Galerkin refresh, about a
@@ -359,20 +379,22 @@ def _rhs_scale(rhs, normals_part, centred):
     return min(1.0, max(ref / whole, RHS_SCALE_FLOOR))
 
 
-def _facet_system(bx, by, flat_weight, fusion=None):
+def _facet_system(bx, by, flat_weight, fusion=None, target=None):
     """``A = P^T P`` (4, 4) of a facet without a target, and ``a_f = P^T b_f`` (m, 4).
 
     A facet with a target has ``A = I - 11^T / 4`` (slopes and twist, see
     :class:`GlueInverse`). With `fusion` ``(c, lam, t)`` (normal weights, prior weights and
     targets, each (m,); docs/fusion.md) every facet's normal term is scaled by ``c_f`` and
-    ``lam_f (mean y_f - t_f)^2`` is added: ``A_other`` is then (m, 4, 4).
+    ``lam_f (mean y_f - t_f)^2`` is added: ``A_other`` is then (k, 4, 4), one per facet
+    without a `target` (m,) bool, in facet order.
     """
     slope = np.outer(E_X, E_X) + np.outer(E_Y, E_Y)
     A_other = flat_weight * slope + np.outer(E_TWIST, E_TWIST)
     a = bx[:, None] * E_X + by[:, None] * E_Y
     if fusion is not None:
         c, lam, t = fusion
-        A_other = c[:, None, None] * A_other + lam[:, None, None] / 16.0
+        other = np.flatnonzero(~target)
+        A_other = c[other, None, None] * A_other + lam[other, None, None] / 16.0
         a = c[:, None] * a + (0.25 * lam * t)[:, None]
     return A_other, a
 
@@ -397,8 +419,7 @@ class GlueInverse:
         self.other = np.flatnonzero(~target)
         self.M_other = None
         if self.other.size:
-            Ao = A_other if fusion is None else A_other[self.other]
-            self.M_other = np.linalg.inv(Ao + w[self.other][:, :, None] * np.eye(4))
+            self.M_other = np.linalg.inv(A_other + w[self.other][:, :, None] * np.eye(4))
 
     def apply(self, v):
         """``M_f v_f`` for every facet: (m, 4)."""
@@ -503,6 +524,7 @@ def solve_discontinuous(
     domain, bx, by, target, *, normal_scale, k: float = DEFAULT_K,
     max_iter: int = DEFAULT_ITER, tol: float = DEFAULT_TOL, flat_weight: float = 1e-9,
     cg_rtol: float = 1e-6, callback=None, prior=None, weights=None, x0=None,
+    final_weights=None,
 ):
     """Minimise the glued facet energy with bilateral weights (see the module docstring).
 
@@ -535,6 +557,10 @@ def solve_discontinuous(
         Weight of every facet's normal term (the normals' confidence).
     x0 : (n,) float, optional
         Start of the first solve (default zeros).
+    final_weights : (m,) float, optional
+        Weight of every facet's normal term in the final solve, once the cuts are settled
+        (instead of `weights`; the route passes the view cosine squared,
+        :data:`FINAL_COS_POWER`); not with a `prior`.
 
     Returns
     -------
@@ -558,11 +584,11 @@ def solve_discontinuous(
     # 20 s on the bear), single-threaded microseconds
     with threadpool_limits(limits=1, user_api="blas"):
         return _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight,
-                      cg_rtol, callback, prior, weights, x0)
+                      cg_rtol, callback, prior, weights, x0, final_weights)
 
 
 def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, cg_rtol,
-           callback, prior=None, weights=None, x0=None):
+           callback, prior=None, weights=None, x0=None, final_weights=None):
     t0 = time.perf_counter()
     m = domain.n_facets
     fusion = None
@@ -570,7 +596,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         c = np.ones(m) if weights is None else np.asarray(weights, float)
         lam, t_prior = (np.zeros(m), np.zeros(m)) if prior is None else prior[:2]
         fusion = (c, PRIOR_OWN * lam, t_prior)
-    A_other, a = _facet_system(bx, by, flat_weight, fusion)
+    A_other, a = _facet_system(bx, by, flat_weight, fusion, target)
     blocks = FacetBlocks(domain, skip=None if prior is None else prior[2])
     KP = rP = None
     if prior is not None:
@@ -584,7 +610,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
 
     a_normals = centre = None
     if prior is not None:  # (for the CG tolerance: _rhs_scale)
-        a_normals = _facet_system(bx, by, flat_weight, fusion[:2] + (np.zeros(m),))[1]
+        a_normals = _facet_system(bx, by, flat_weight, fusion[:2] + (np.zeros(m),), target)[1]
         centre = float(np.sum(prior[0] * prior[1]) / np.sum(prior[0]))
 
     def state(w):
@@ -733,7 +759,13 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             if callback is not None:
                 callback(it, changes[-1])
         del grid, step
-    if it > 0 and (LOOSE_RTOL > cg_rtol or forced):  # the reweightings solved loosely: polish
+    final = final_weights is not None and it > 0 and prior is None
+    if final:  # the final solve's own normal weights (FINAL_COS_POWER), on the settled cuts
+        fusion = (np.asarray(final_weights, dtype=float), np.zeros(m), np.zeros(m))
+        A_other, a = _facet_system(bx, by, flat_weight, fusion, target)
+        M = Ma = rhs = None
+        M, Ma, K, rhs, scale = state(w)
+    if it > 0 and (LOOSE_RTOL > cg_rtol or forced or final):  # solved loosely: polish
         # on the hierarchy at hand when it does so quickly (large smooth maps: 2-3 CG
         # iterations, where a new hierarchy costs seconds), else on one of the final system:
         # the stale one took 71-210 CG iterations to get from 1e-4 to 1e-6 on the 50-70k
@@ -759,6 +791,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         "block_coarse_space": amg["slow"],
         "unsettled_corners": float((np.abs(own - w) > CUT).mean()),
         "discontinuity_k": float(k),
+        "final_weights": bool(final),
         "seconds": {"setup": t1 - t0, "solve": t2 - t1},
     }
     return z, y, w, info
