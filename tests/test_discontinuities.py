@@ -121,11 +121,10 @@ def test_smooth_noisy_hemisphere_is_the_smooth_solution_orthographic():
     height = -z + np.mean(z[mask])
     ea = np.abs(a.depth - height)[mask].mean()
     eb = np.abs(b.depth - height)[mask].mean()
-    # the issue asks for 1 %; measured with the benchmark's default k = 4 over noise seeds 0-4:
-    # +9 to +20 % (seed 4, this one: +20 %; the steep noisy rim is read as small jumps; k = 2
-    # gives +1 to +4 %, k = 8 +45 to +92 %). The bound catches a regression; the miss is in
-    # docs/results.md.
-    assert eb < 1.3 * ea
+    # the issue asks for no more than 1 % above the smooth DGP; measured over noise seeds 0-4
+    # with the final view-cosine weights: 0.87 to 0.97 x (seed 4, this one: 0.93); before
+    # them +9 to +20 % (the steep noisy rim read as small jumps bent the disc)
+    assert eb < ea
 
 
 def test_no_reweighting_is_the_smooth_solution():
@@ -382,6 +381,45 @@ def test_crack_growth_cuts_a_fading_jump(monkeypatch):
     prior[::7, ::7] = -height[::7, ::7]
     fused = facetlift.integrate(n, discontinuities=True, prior=prior)
     assert fused.info["grown"] == 0 and fused.info["converged"]
+
+
+def perspective_sphere(H=96, W=112, f=600.0, R=60.0, dist=900.0):
+    """Exact normals, mask, K and z-depth of a sphere seen by a pinhole camera (no jumps)."""
+    K = np.array([[f, 0, W / 2 - 0.5], [0, f, H / 2 - 0.5], [0, 0, 1.0]])
+    r, c = np.mgrid[0:H, 0:W].astype(float)
+    ray = np.stack([(c - K[0, 2]) / f, (r - K[1, 2]) / f, np.ones_like(r)], -1)
+    centre = np.array([0.0, 0.0, dist])
+    a, b = (ray**2).sum(-1), -2 * (ray @ centre)
+    disc = b * b - 4 * a * (centre @ centre - R**2)
+    hit = disc > 0
+    t = (-b - np.sqrt(np.where(hit, disc, 0))) / (2 * a)
+    P = t[..., None] * ray
+    n = np.where(hit[..., None], (P - centre) / R * np.array([1, -1, -1]), np.nan)
+    return n, hit, K, np.where(hit, P[..., 2], np.nan)
+
+
+def test_final_solve_weighs_normals_by_the_view_cosine(monkeypatch):
+    """The final solve weighs each normal term by cos^2 (steep rim facets no longer bend the
+    smooth interior); not with a depth prior, nor without reweightings."""
+    n, mask, K, depth = perspective_sphere()
+
+    def made(s):
+        d = s.depth
+        return np.abs(d * np.median(depth[mask] / d[mask]) - depth)[mask].mean()
+
+    s = facetlift.integrate(n, mask, K=K, discontinuities=True)
+    monkeypatch.setattr(disc, "FINAL_COS_POWER", 0)
+    uniform = facetlift.integrate(n, mask, K=K, discontinuities=True)
+    monkeypatch.undo()
+    smooth = facetlift.integrate(n, mask, K=K)
+    # measured: 0.061 mm weighted, 0.074 uniform, smooth DGP 0.167 (BiNI 0.064)
+    assert s.info["final_weights"] and not uniform.info["final_weights"]
+    assert made(s) < 0.9 * made(uniform) < 0.5 * made(smooth)
+    prior = np.full(depth.shape, np.nan)
+    prior[::9, ::9] = depth[::9, ::9]
+    fused = facetlift.integrate(n, mask, K=K, discontinuities=True, prior=prior)
+    none = facetlift.integrate(n, mask, K=K, discontinuities=True, discontinuity_iter=0)
+    assert not fused.info["final_weights"] and not none.info["final_weights"]
 
 
 def test_unconverged_cg_falls_back_to_the_solver_layer(monkeypatch):
