@@ -62,6 +62,12 @@ Iteration and stopping rule
     decided). Each reweighting is one preconditioned CG solve warm-started from the previous
     vertex values.
 
+Final weights
+    Once the cuts are settled, the last solve weighs every facet's normal term by its view
+    cosine squared (:data:`FINAL_COS_POWER`, BiNI's weighting of the slopes): steep facets,
+    whose slopes are least reliable and whose planes fit a curved surface worst, no longer
+    bend whole smooth regions. Not with a depth prior.
+
 Grazing normals
     The route is run (``facetlift.integrate``) with the paper's grazing threshold, cos 85 deg,
     on every camera (``MethodInfo.jump_grazing``): a jump that fades out ends in nearly
