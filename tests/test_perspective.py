@@ -248,9 +248,10 @@ DILIGENT = Path(__file__).parents[1] / ".." / "shared" / "data" / "normal_maps" 
 @pytest.mark.skipif(not (DILIGENT / "depth_gt.npz").is_file(), reason="no DiLiGenT bear data")
 def test_diligent_bear_made():
     """Regression check on the one real map with ground truth (docs/perspective.md: smooth
-    0.468 mm, discontinuities 0.050 mm with the benchmark-chosen defaults, BiNI's reference
-    0.334 mm). The discontinuity route's grazing rule (cos 85 deg) decides it: with the
-    pinhole default 1/255 the neck's fading ends stay bridged and it was 0.382 mm."""
+    0.468 mm, discontinuities 0.026 mm with the benchmark-chosen defaults (0.050 before the
+    final view-cosine weights), BiNI's reference 0.334 mm). The discontinuity route's grazing
+    rule (cos 85 deg) decides most of it: with the pinhole default 1/255 the neck's fading
+    ends stay bridged and it was 0.382 mm."""
     from facetlift.io import read_dataset
 
     data = read_dataset(DILIGENT)  # the PNG is 16-bit; read_normals keeps all 16
@@ -268,7 +269,7 @@ def test_diligent_bear_made():
     bridged = made(facetlift.integrate(n, mask, K=K, discontinuities=True,
                                        outlier_eps=1 / 255))
     assert smooth < 0.5
-    assert made(jumps) < 0.1 < bridged
+    assert made(jumps) < 0.04 and 0.1 < bridged
 
 
 def test_iterative_loop_stops_on_angles_in_perspective():

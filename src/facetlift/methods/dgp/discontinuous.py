@@ -63,10 +63,12 @@ Iteration and stopping rule
     vertex values.
 
 Final weights
-    Once the cuts are settled, the last solve weighs every facet's normal term by its view
-    cosine squared (:data:`FINAL_COS_POWER`, BiNI's weighting of the slopes): steep facets,
-    whose slopes are least reliable and whose planes fit a curved surface worst, no longer
-    bend whole smooth regions. Not with a depth prior.
+    After the reweightings (settled, or stopped by the cap), the last solve weighs every
+    facet's normal term by its view cosine squared (:data:`FINAL_COS_POWER`, BiNI's
+    weighting of the slopes; times the confidence, if any): steep facets, whose slopes are
+    least reliable and whose planes fit a curved surface worst, no longer bend whole smooth
+    regions. The ``energy`` trace is the reweightings' (uniform weights). Not with a depth
+    prior.
 
 Grazing normals
     The route is run (``facetlift.integrate``) with the paper's grazing threshold, cos 85 deg,
@@ -398,6 +400,8 @@ def _facet_system(bx, by, flat_weight, fusion=None, target=None):
     A_other = flat_weight * slope + np.outer(E_TWIST, E_TWIST)
     a = bx[:, None] * E_X + by[:, None] * E_Y
     if fusion is not None:
+        if target is None:
+            raise ValueError("_facet_system: `target` is required with `fusion`")
         c, lam, t = fusion
         other = np.flatnonzero(~target)
         A_other = c[other, None, None] * A_other + lam[other, None, None] / 16.0
@@ -564,9 +568,10 @@ def solve_discontinuous(
     x0 : (n,) float, optional
         Start of the first solve (default zeros).
     final_weights : (m,) float, optional
-        Weight of every facet's normal term in the final solve, once the cuts are settled
-        (instead of `weights`; the route passes the view cosine squared,
-        :data:`FINAL_COS_POWER`); not with a `prior`.
+        Weight of every facet's normal term in the final solve, after the reweightings (also
+        when the cap stopped them; instead of `weights`: the route passes the view cosine
+        squared, :data:`FINAL_COS_POWER`, times the confidence); not with a `prior`, nor with
+        ``max_iter = 0``.
 
     Returns
     -------
@@ -582,7 +587,8 @@ def solve_discontinuous(
         corner-weight step per reweighting), ``cg_iterations`` (list), ``multigrid_builds``
         and ``multigrid_refreshes`` (new and Galerkin-refreshed hierarchies),
         ``block_coarse_space`` (whether the block coarse space of :data:`COARSE_BLOCK` was
-        turned on), ``cut_corners`` (fraction of corners with weight below :data:`CUT`),
+        turned on by the reweightings), ``cut_corners`` (fraction of corners with weight
+        below :data:`CUT`), ``final_weights`` (whether the final solve used them),
         ``unsettled_corners``, ``seconds``.
     """
     # the solves take vector norms and products (CG, the coarse solves): with multi-threaded
@@ -765,6 +771,9 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             if callback is not None:
                 callback(it, changes[-1])
         del grid, step
+    # (the settled weights' own diagnostics, before the final solve changes the energy)
+    own = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
+    slow = amg["slow"]
     final = final_weights is not None and it > 0 and prior is None
     if final:  # the final solve's own normal weights (FINAL_COS_POWER), on the settled cuts
         fusion = (np.asarray(final_weights, dtype=float), np.zeros(m), np.zeros(m))
@@ -782,7 +791,6 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             its += more
         cg_its.append(its)
         y = copies(M, Ma, w, z)
-    own = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
     t2 = time.perf_counter()
     info = {
         "iterations": it,
@@ -794,7 +802,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         "cut_corners": float((w < CUT).mean()),
         "multigrid_builds": amg["builds"],
         "multigrid_refreshes": amg["refreshes"],
-        "block_coarse_space": amg["slow"],
+        "block_coarse_space": slow,
         "unsettled_corners": float((np.abs(own - w) > CUT).mean()),
         "discontinuity_k": float(k),
         "final_weights": bool(final),
