@@ -773,7 +773,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         del grid, step
     # (the settled weights' own diagnostics, before the final solve changes the energy)
     own = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
-    slow = amg["slow"]
+    unsettled = float((np.abs(own - w) > CUT).mean())
+    slow, own = amg["slow"], None  # (freed before the final solve)
     final = final_weights is not None and it > 0 and prior is None
     if final:  # the final solve's own normal weights (FINAL_COS_POWER), on the settled cuts
         fusion = (np.asarray(final_weights, dtype=float), np.zeros(m), np.zeros(m))
@@ -803,7 +804,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         "multigrid_builds": amg["builds"],
         "multigrid_refreshes": amg["refreshes"],
         "block_coarse_space": slow,
-        "unsettled_corners": float((np.abs(own - w) > CUT).mean()),
+        "unsettled_corners": unsettled,
         "discontinuity_k": float(k),
         "final_weights": bool(final),
         "seconds": {"setup": t1 - t0, "solve": t2 - t1},
