@@ -675,6 +675,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         # much, the old one's coarse operators are recomputed for the new system (Galerkin
         # refresh, a fraction of a build); once the weights settle, it serves as it is
         if amg["ml"] is None or amg["last_its"] > REUSE_ITS or (fresh and amg["for"] is not K):
+            amg["ml"] = amg["pre"] = None  # (the old one freed before the new one is built)
             amg["ml"] = hierarchy(K, symmetric_gs=True, interpolation=INTERPOLATION)
             amg["pre"] = vcycle(amg["ml"])
             amg["builds"] += 1
