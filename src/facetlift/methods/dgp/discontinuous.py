@@ -717,18 +717,25 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     converged = max_iter == 0
     it = 0
     forced = FORCING is not None and prior is None  # (the forcing term: not with a prior)
-    for it in range(1, max_iter + 1):
-        step = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes) - w
-        if it > SETTLE_AFTER:
-            step *= DECAY ** (it - SETTLE_AFTER)
-        w = w + step
-        M = Ma = rhs = None  # (freed before the next state is formed)
+
+    def reweighted(w, step, z):
+        """The system of weights `w` (after `step`), its loose solve from `z`, the copies and
+        the energy trace's entry."""
         M, Ma, K, rhs, scale = state(w)
         z, its = solve(K, rhs, z, rebuild=changes_big(step), scale=scale,
                        rtol=max(cg_rtol, LOOSE_RTOL), reduction=FORCING if forced else None)
         cg_its.append(its)
         y = copies(M, Ma, w, z)
         energies.append(energy(y, w, z))
+        return M, Ma, K, rhs, scale, z, y
+
+    for it in range(1, max_iter + 1):
+        step = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes) - w
+        if it > SETTLE_AFTER:
+            step *= DECAY ** (it - SETTLE_AFTER)
+        w = w + step
+        M = Ma = rhs = None  # (freed before the next state is formed)
+        M, Ma, K, rhs, scale, z, y = reweighted(w, step, z)
         changes.append(float(np.abs(step).max()))
         if callback is not None:
             callback(it, changes[-1])
@@ -761,12 +768,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             grown += 1
             w = w + step
             M = Ma = rhs = None
-            M, Ma, K, rhs, scale = state(w)
-            z, its = solve(K, rhs, z, rebuild=changes_big(step), scale=scale,
-                           rtol=max(cg_rtol, LOOSE_RTOL), reduction=FORCING if forced else None)
-            cg_its.append(its)
-            y = copies(M, Ma, w, z)
-            energies.append(energy(y, w, z))
+            M, Ma, K, rhs, scale, z, y = reweighted(w, step, z)
             changes.append(float(-step.min()))
             step = None
             if callback is not None:
