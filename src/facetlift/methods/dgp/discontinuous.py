@@ -743,6 +743,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             converged = True
             break
     grown = 0
+    unsettled = None  # (the settled weights' diagnostic, for the current y; below)
     if GROW and converged and max_iter > 0 and prior is None:
         # crack growth (module docstring): weights only fall, at corners on or next to a cut
         pr, pc = domain.pixels
@@ -758,6 +759,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             # (formed in place: one (m, 4) array, 134 MB at 2048^2)
             step = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
             step -= w
+            unsettled = float((np.abs(step) > CUT).mean())  # (own weight - w, for this y)
             step[(step >= -tol) | ~near[:, None]] = 0.0
             if not step.any():
                 break
@@ -770,14 +772,17 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             M = Ma = rhs = None
             M, Ma, K, rhs, scale, z, y = reweighted(w, step, z)
             changes.append(float(-step.min()))
-            step = None
+            step = unsettled = None
             if callback is not None:
                 callback(it, changes[-1])
         del grid, step
-    # (the settled weights' own diagnostics, before the final solve changes the energy)
-    own = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
-    unsettled = float((np.abs(own - w) > CUT).mean())
-    slow, own = amg["slow"], None  # (freed before the final solve)
+    # (the settled weights' own diagnostics, before the final solve changes the energy; the
+    # growth phase's last check has them when it ended on a look at this y)
+    if unsettled is None:
+        own = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
+        unsettled = float((np.abs(own - w) > CUT).mean())
+        del own  # (freed before the final solve)
+    slow = amg["slow"]
     final = final_weights is not None and it > 0 and prior is None
     if final:  # the final solve's own normal weights (FINAL_COS_POWER), on the settled cuts
         fusion = (np.asarray(final_weights, dtype=float), np.zeros(m), np.zeros(m))
