@@ -266,6 +266,13 @@ def default_limit() -> int:
     return max(int(min(limits)), 0)
 
 
+def factorization_fits(n: int) -> bool:
+    """Whether factorizing a 9-point system of `n` unknowns (the "dgp-factor" route's bytes per
+    ``n log2 n``) takes at most half of :func:`default_limit` now: for a factorization a
+    method takes only as a faster alternative to CG, outside its plan."""
+    return _cost("dgp-factor", 0, 0, n) - COEFFICIENTS["dgp-factor"][2] <= default_limit() / 2
+
+
 def limit(max_memory=None) -> int:
     """`max_memory` in bytes (checked), or :func:`default_limit` when None."""
     return default_limit() if max_memory is None else parse_size(max_memory)

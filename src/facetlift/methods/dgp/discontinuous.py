@@ -95,6 +95,7 @@ from threadpoolctl import threadpool_limits
 
 from ... import linalg
 from ...conventions import CORNER_OFFSETS
+from ...errors import SolverError
 from ...linalg.amg import balanced, block_aggregates, hierarchy, refresh, vcycle
 from ...operators.stencil import E_TWIST, E_X, E_Y, prior_form, scatter_corners
 
@@ -203,6 +204,20 @@ LOOSE_RTOL = 1e-4
 #: CG iterations the final polish (to ``cg_rtol``) may take on the reweightings' hierarchy
 #: before it is continued on a new one of the final system.
 POLISH_TRIAL = 10
+
+#: Most vertices for which a system CG does not solve in time, above all the final polish when
+#: the trial above does not converge, is factorized (:func:`_factorized`, where it fits in
+#: memory: :func:`_affordable`) instead of solved by CG on a new hierarchy. The final systems,
+#: with their cuts and rim weights, are the hardest of the loop (a handful of near-null modes:
+#: the offsets and tilts of regions that cuts nearly separate): on the 41-64k pixel timing
+#: objects CG on a new Ruge-Stueben hierarchy took 99-122 iterations from 5e-3 (0.4-0.8 s with
+#: the build) against a 0.26-0.40 s factorization; on a 1024 x 1224 render of the bunny (258k
+#: vertices) 699 iterations (12 s; the block coarse space or classical interpolation changed
+#: that by 10 %) against SuperLU's 2.5 s; on a 2048 x 2448 one (1.03 M vertices) 1,956
+#: iterations (170 s) against 21 s, with 1.5 GB more at the peak. Above this size CG's
+#: iterate after its iteration cap is kept (``info["unsolved"]``); before, a solve CG could
+#: not finish there raised an error (docs/benchmarks.md).
+DIRECT_POLISH = 1_000_000
 
 #: Least share of the centred right-hand side in the CG tolerance's reference with a prior
 #: (:func:`_rhs_scale`). Measured on 7 scenes of the fusion benchmark (1 % samples, exact at
@@ -599,6 +614,23 @@ def solve_discontinuous(
                       cg_rtol, callback, prior, weights, x0, final_weights)
 
 
+def _affordable(n: int) -> bool:
+    """Whether a system of `n` unknowns is factorized when CG on it is slow: up to
+    :data:`DIRECT_POLISH`, and where the factorization fits in half the free memory (it is
+    not in the job's memory plan, whose route is CG's)."""
+    from ...memory import factorization_fits
+
+    return n <= DIRECT_POLISH and factorization_fits(n)
+
+
+def _factorized(K, rhs, amg):
+    """``K^{-1} rhs`` by the factorization the solver layer takes below its size limit
+    (PARDISO where installed, else SuperLU), whatever the size: exact where CG on these
+    systems is slow (:data:`DIRECT_POLISH`). The multigrid hierarchy is freed first."""
+    amg["ml"] = amg["pre"] = amg["for"] = None
+    return linalg.solve(K, rhs, linalg.choose(min(K.shape[0], linalg.LARGE)))[0]
+
+
 def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, cg_rtol,
            callback, prior=None, weights=None, x0=None, final_weights=None):
     t0 = time.perf_counter()
@@ -665,7 +697,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         return block_aggregates(vr, vc, COARSE_BLOCK, domain.vertex_component)
 
     amg = {"ml": None, "pre": None, "for": None, "builds": 0, "refreshes": 0, "last_its": 0,
-           "slow": False}
+           "slow": False, "unsolved": []}
 
     def solve(K, rhs, z0, rebuild=True, rtol=cg_rtol, fresh=False, scale=None, trial=False,
               reduction=None):
@@ -700,11 +732,19 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         amg["slow"] = amg["slow"] or info.iterations > REUSE_ITS
         if not info.converged and not (scale is not None and np.isfinite(z).all()
                                        and info.relative_residual <= plain):
-            # an ill-conditioned system: take the solver layer's route. (With a prior that
-            # disagrees with the normals CG may stall above the scaled tolerance; a residual
-            # below the unscaled one, the criterion before the scaling, is kept: the
-            # fallback's own tolerance then failed above 250k vertices)
-            z = linalg.solve(K, rhs)[0]
+            # an ill-conditioned system: factorized where that is affordable, else CG's
+            # iterate is kept when it is finite and better than the start (its residual in
+            # info["unsolved"]). (With a prior that disagrees with the normals CG may stall
+            # above the scaled tolerance; a residual below the unscaled one, the criterion
+            # before the scaling, is kept as it is)
+            if _affordable(K.shape[0]):
+                z = _factorized(K, rhs, amg)
+            elif np.isfinite(z).all() and info.relative_residual < info.residuals[0]:
+                amg["unsolved"].append(float(info.relative_residual))
+            else:
+                raise SolverError(
+                    f"discontinuities: multigrid-preconditioned CG did not converge on "
+                    f"{K.shape[0]} unknowns (relative residual {info.relative_residual:.2e})")
         return z, info.iterations
 
     # the first (smooth) solution only starts the reweightings: as loose as theirs
@@ -789,15 +829,20 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         A_other, a = _facet_system(bx, by, flat_weight, fusion, target)
         M = Ma = rhs = None
         M, Ma, K, rhs, scale = state(w)
+    polish = None  # (how the final system was solved to cg_rtol: info["polish"])
     if it > 0 and (LOOSE_RTOL > cg_rtol or forced or final):  # solved loosely: polish
         # on the hierarchy at hand when it does so quickly (large smooth maps: 2-3 CG
-        # iterations, where a new hierarchy costs seconds), else on one of the final system:
-        # the stale one took 71-210 CG iterations to get from 1e-4 to 1e-6 on the 50-70k
-        # pixel renders, a new one 27-55
+        # iterations, where a new hierarchy costs seconds), else by a factorization where
+        # affordable (DIRECT_POLISH), else by CG on a new hierarchy of the final system
         z, its, done = solve(K, rhs, z, rebuild=False, scale=scale, trial=True)
-        if not done:
+        polish = "trial"
+        if not done and _affordable(K.shape[0]):
+            z = _factorized(K, rhs, amg)
+            polish = "direct"
+        elif not done:
             z, more = solve(K, rhs, z, fresh=True, scale=scale)
             its += more
+            polish = "multigrid"
         cg_its.append(its)
         y = copies(M, Ma, w, z)
     t2 = time.perf_counter()
@@ -815,6 +860,10 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         "unsettled_corners": unsettled,
         "discontinuity_k": float(k),
         "final_weights": bool(final),
+        "polish": polish,
+        # relative residuals of the solves whose unconverged CG iterate was kept (too large
+        # to factorize: DIRECT_POLISH)
+        "unsolved": amg["unsolved"],
         "seconds": {"setup": t1 - t0, "solve": t2 - t1},
     }
     return z, y, w, info
