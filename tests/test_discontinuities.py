@@ -4,6 +4,8 @@ Measured values are in the comments; the bounds leave a margin."""
 
 from __future__ import annotations
 
+import gc
+import weakref
 from contextlib import nullcontext
 from pathlib import Path
 
@@ -12,6 +14,8 @@ import pytest
 from test_perspective import rel_error, sphere_scene
 
 import facetlift
+from facetlift import memory
+from facetlift.errors import SolverError
 from facetlift.methods import dgp
 from facetlift.methods.dgp import discontinuous as disc
 from facetlift.operators.stencil import E_TWIST, E_X, E_Y, facet_form
@@ -520,9 +524,10 @@ def test_multigrid_policy_refresh_rebuild_and_block_coarse_space(monkeypatch):
     # (every reweighting solved to LOOSE_RTOL: with the forcing term the policies' different
     # preconditioners stop the early solves at different points and the paths part a little)
     monkeypatch.setattr(disc, "FORCING", None)
-    # one build for the reweightings; the final polish (without the growth phase: after its
-    # few-corner steps the polish here finishes on the refreshed hierarchy) factorizes at this
-    # size, and above DIRECT_POLISH builds a hierarchy of the final system: the same surface
+    # without the growth phase (whose few-corner steps leave a hierarchy the polish's trial
+    # finishes on): one build for the reweightings, and the final polish, which the trial
+    # does not finish here, factorizes at this size; above DIRECT_POLISH it builds a
+    # hierarchy of the final system instead: the same surface
     monkeypatch.setattr(disc, "GROW", False)
     direct = facetlift.integrate(n, discontinuities=True)
     assert direct.info["multigrid_refreshes"] > 0 and direct.info["multigrid_builds"] == 1
@@ -552,11 +557,11 @@ def test_multigrid_policy_refresh_rebuild_and_block_coarse_space(monkeypatch):
     np.testing.assert_allclose(s.depth, ref.depth, atol=1e-4 * np.ptp(ref.depth[ref.mask]))
 
 
-
 def test_a_final_solve_cg_cannot_finish_is_factorized_or_its_iterate_kept(monkeypatch):
     """The final polish CG does not finish (a 1024 x 1224 render of the bunny: 699 iterations
     needed, and a SolverError before): up to DIRECT_POLISH it is factorized (the same surface),
-    above it CG's improved iterate is kept and its residual reported in info["unsolved"]."""
+    above it, or short of memory, CG's improved iterate is kept, its residual reported in
+    info["unsolved"] and a warning given."""
     n, gt, left = scissor_ortho()
     ref = facetlift.integrate(n, discontinuities=True)
     assert ref.info["unsolved"] == []
@@ -572,11 +577,76 @@ def test_a_final_solve_cg_cannot_finish_is_factorized_or_its_iterate_kept(monkey
     assert direct.info["polish"] == "direct" and direct.info["unsolved"] == []
     np.testing.assert_allclose(direct.depth, ref.depth, atol=1e-9 * np.ptp(ref.depth))
     monkeypatch.setattr(disc, "DIRECT_POLISH", 0)
-    kept = facetlift.integrate(n, discontinuities=True)
+    with pytest.warns(UserWarning, match=r"1 linear solve\(s\) of .* stopped at the CG"):
+        kept = facetlift.integrate(n, discontinuities=True)
     assert kept.info["polish"] == "multigrid" and len(kept.info["unsolved"]) == 1
     assert 1e-6 < kept.info["unsolved"][0] < 1e-3  # above cg_rtol, below the start
     # (measured 1.2e-6 of the depth range apart)
     np.testing.assert_allclose(kept.depth, ref.depth, atol=1e-4 * np.ptp(ref.depth))
+
+
+def test_the_factorization_keeps_to_the_memory_the_job_may_take(monkeypatch):
+    """The polish factorizes only within half the free memory and within what the plan leaves
+    of an explicit max_memory: it is not in the plan."""
+    n, gt, left = scissor_ortho()
+    real = disc.linalg.cg
+
+    def capped(*a, **kw):
+        if kw.get("rtol", 1.0) <= 1e-6:
+            kw["maxiter"] = min(kw.get("maxiter", 500), 2)
+        return real(*a, **kw)
+
+    monkeypatch.setattr(disc.linalg, "cg", capped)
+    s = facetlift.integrate(n, discontinuities=True, max_memory="64G")
+    assert s.info["polish"] == "direct"
+    tight = s.info["memory_estimate"] + 2**14  # (the factorization needs a few MB)
+    with pytest.warns(UserWarning, match="too large to factorize"):
+        s = facetlift.integrate(n, discontinuities=True, max_memory=tight)
+    assert s.info["polish"] == "multigrid"
+    monkeypatch.setattr(memory, "default_limit", lambda: 0)  # no free memory left
+    with pytest.warns(UserWarning, match="too large to factorize"):
+        s = facetlift.integrate(n, discontinuities=True, max_memory="64G")
+    assert s.info["polish"] == "multigrid"
+    assert not memory.factorization_fits(10)
+    monkeypatch.undo()
+    assert memory.factorization_fits(10)
+    with memory.headroom(memory.Plan(estimate=100, limit=100, route="x")):
+        assert not memory.factorization_fits(10)
+    assert memory.factorization_fits(10)
+
+
+def test_every_solve_cg_cannot_finish_is_factorized(monkeypatch):
+    """A reweighting's CG that stops at its cap is factorized too (the fallback inside the
+    loop), freeing the hierarchy first; and where nothing finite is left, a clear error."""
+    n, gt, left = scissor_ortho()
+    real = disc.linalg.cg
+    monkeypatch.setattr(disc.linalg, "cg", lambda *a, **kw: real(*a, **{**kw, "maxiter": 2}))
+    calls = []
+    real_f = disc._factorized
+
+    def spy(K, rhs, amg):
+        held = None if amg["ml"] is None else weakref.ref(amg["ml"])
+        calls.append(held)
+        out = real_f(K, rhs, amg)
+        gc.collect()
+        assert held is None or held() is None  # the hierarchy was freed, the solve's own too
+        return out
+
+    monkeypatch.setattr(disc, "_factorized", spy)
+    s = facetlift.integrate(n, discontinuities=True)
+    assert len(calls) > 2 and any(calls) and s.info["converged"] and s.info["unsolved"] == []
+    assert np.isfinite(s.depth[s.mask]).all()
+
+    def broken(K, b, M=None, **kw):  # a CG that breaks down into NaN
+        info = disc.linalg.CGInfo()
+        info.residuals.append(float("nan"))
+        return np.full(b.shape, np.nan), info
+
+    monkeypatch.setattr(disc.linalg, "cg", broken)
+    monkeypatch.setattr(disc, "DIRECT_POLISH", 0)
+    with pytest.raises(SolverError, match="non-finite iterate.*too many to factorize"):
+        facetlift.integrate(n, discontinuities=True)
+
 
 _MAPS = Path(__file__).parents[1] / ".." / "shared" / "data" / "normal_maps"
 

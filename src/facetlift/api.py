@@ -244,7 +244,8 @@ def solve(
     t1 = time.perf_counter()
     cropped, offset = crop(problem)
     try:
-        result = info.run(cropped, **values)
+        with memory.headroom(plan):
+            result = info.run(cropped, **values)
     except np.linalg.LinAlgError as e:  # a ValueError subclass, but a solver failure
         raise SolverError(f"method {method!r}: linear algebra failed ({e})") from e
     t2 = time.perf_counter()

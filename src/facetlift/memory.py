@@ -25,6 +25,12 @@ Counts
     Gaussian of "diffusion", whose size follows their options (an absurd ``sigma`` or
     ``tile`` is refused here, before it allocates).
 
+Factorizations outside the plan
+    The discontinuity route factorizes its final system where CG on it is slow (up to 1 M
+    vertices, ``facetlift.methods.dgp.discontinuous.DIRECT_POLISH``) only when
+    :func:`factorization_fits`: within half the free memory and within what the plan leaves
+    of the limit (:func:`headroom`), else it keeps to CG, the route its plan is for.
+
 Size limits
     :data:`SIZE_LIMITS` caps methods whose time, not memory, gets out of hand on large
     domains; it applies under the default limit, and an explicit ``max_memory`` lifts it.
@@ -32,6 +38,8 @@ Size limits
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
 import os
 import re
@@ -266,11 +274,31 @@ def default_limit() -> int:
     return max(int(min(limits)), 0)
 
 
+#: Bytes the running job may take beyond its plan's estimate (its limit minus the estimate),
+#: set by :func:`facetlift.api.solve` for the method's run; None outside a job.
+_headroom: contextvars.ContextVar[int | None] = contextvars.ContextVar("headroom", default=None)
+
+
+@contextlib.contextmanager
+def headroom(plan: Plan):
+    """Within the block, :func:`factorization_fits` also keeps to what `plan` leaves of its
+    limit (an explicit ``max_memory`` included)."""
+    token = _headroom.set(max(plan.limit - plan.estimate, 0))
+    try:
+        yield
+    finally:
+        _headroom.reset(token)
+
+
 def factorization_fits(n: int) -> bool:
-    """Whether factorizing a 9-point system of `n` unknowns (the "dgp-factor" route's bytes per
-    ``n log2 n``) takes at most half of :func:`default_limit` now: for a factorization a
-    method takes only as a faster alternative to CG, outside its plan."""
-    return _cost("dgp-factor", 0, 0, n) - COEFFICIENTS["dgp-factor"][2] <= default_limit() / 2
+    """Whether factorizing a 9-point system of `n` unknowns fits: the "dgp-factor" route's
+    bytes per ``n log2 n`` (110: about 2.2 GB at 1 M unknowns, where SuperLU measured 1.5 GB
+    on the discontinuity route's final system) within half of :func:`default_limit` now and
+    within the running job's :func:`headroom`. For a factorization a method takes only as a
+    faster alternative to CG, outside its plan (whose route is CG's)."""
+    need = COEFFICIENTS["dgp-factor"][3] * n * math.log2(max(n, 2))
+    room = _headroom.get()
+    return need <= default_limit() / 2 and (room is None or need <= room)
 
 
 def limit(max_memory=None) -> int:

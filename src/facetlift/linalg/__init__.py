@@ -48,6 +48,7 @@ __all__ = [
     "check_backend",
     "choose",
     "factorize",
+    "factorizer",
     "solve",
 ]
 
@@ -88,6 +89,12 @@ def check_backend(backend) -> str:
 #: weighted graph Laplacian (classical multigrid suits it); ``"spd"``: any other SPD matrix
 #: (smoothed-aggregation multigrid above :data:`LARGE`).
 KINDS = ("facet", "graph", "spd")
+
+
+def factorizer() -> str:
+    """The factorization backend: "pardiso" where installed, else "superlu" (for a caller
+    that has decided to factorize whatever the size, e.g. a system CG solves slowly)."""
+    return "pardiso" if pardiso_available() else "superlu"
 
 
 def choose(
@@ -139,11 +146,11 @@ def choose(
     if backend != "auto":
         return backend
     if kind == "facet" and thin:
-        return "pardiso" if pardiso_available() else "superlu"
+        return factorizer()
     if kind == "facet" or (preconditioner and trusted):
         return "pcg"
     if n <= LARGE:
-        return "pardiso" if pardiso_available() else "superlu"
+        return factorizer()
     if preconditioner and not pardiso_available():
         return "pcg"
     return "amg"

@@ -97,6 +97,7 @@ HEAVY, HEAVY_SHARE, HEAVY_DIAGONAL = 1.0, 0.2, 0.25
 #: Problems with at least this many vertices run the box transform in float32.
 FLOAT32_FROM = 65_536
 
+
 def _touched(domain, facets: np.ndarray) -> np.ndarray:
     """(H+1, W+1) bool: vertices that are a corner of at least one of the `facets` (m,)."""
     H, W = domain.shape

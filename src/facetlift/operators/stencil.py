@@ -88,6 +88,7 @@ def _table_to_csr(domain: Domain, vals: np.ndarray) -> sp.csr_matrix:
     padded = np.pad(vi.astype(idx), 1, constant_values=-1).ravel()
     pos = np.flatnonzero(np.pad(vm, 1).ravel()).astype(idx)
     offsets = np.array([di * (Wv + 2) + dj for di in (-1, 0, 1) for dj in (-1, 0, 1)], dtype=idx)
+
     def block(lo, hi):
         cols = padded[pos[lo:hi, None] + offsets]
         keep = (cols >= 0) & (vals[lo:hi] != 0)

@@ -67,6 +67,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..._warnings import warn
 from ...options import Option
 from .. import MethodResult
 from . import discontinuous
@@ -141,6 +142,12 @@ def run(
             max_iter=discontinuity_iter, tol=discontinuity_tol, flat_weight=flat_weight,
             callback=progress, prior=prior, weights=weights, x0=z0, final_weights=final,
         )
+        if info["unsolved"]:
+            warn(f"discontinuities: {len(info['unsolved'])} linear solve(s) of "
+                 f"{domain.n_vertices:,} vertices stopped at the CG iteration cap (relative "
+                 f"residual up to {max(info['unsolved']):.1e}), too large to factorize here "
+                 "(more than 1 M vertices, or short of memory): the surface is usable but "
+                 "less exact (info['unsolved'])")
         copies, pinfo = place_pieces(domain, y, bx, by, target, s,
                                      anchored=None if prior is None else prior[0] > 0)
         info.update(pinfo)

@@ -97,6 +97,7 @@ from ... import linalg
 from ...conventions import CORNER_OFFSETS
 from ...errors import SolverError
 from ...linalg.amg import balanced, block_aggregates, hierarchy, refresh, vcycle
+from ...memory import factorization_fits
 from ...operators.stencil import E_TWIST, E_X, E_Y, prior_form, scatter_corners
 
 #: Default for ``discontinuity_k`` (squared pixel footprints; see the module docstring).
@@ -206,17 +207,18 @@ LOOSE_RTOL = 1e-4
 POLISH_TRIAL = 10
 
 #: Most vertices for which a system CG does not solve in time, above all the final polish when
-#: the trial above does not converge, is factorized (:func:`_factorized`, where it fits in
-#: memory: :func:`_affordable`) instead of solved by CG on a new hierarchy. The final systems,
-#: with their cuts and rim weights, are the hardest of the loop (a handful of near-null modes:
-#: the offsets and tilts of regions that cuts nearly separate): on the 41-64k pixel timing
-#: objects CG on a new Ruge-Stueben hierarchy took 99-122 iterations from 5e-3 (0.4-0.8 s with
-#: the build) against a 0.26-0.40 s factorization; on a 1024 x 1224 render of the bunny (258k
-#: vertices) 699 iterations (12 s; the block coarse space or classical interpolation changed
-#: that by 10 %) against SuperLU's 2.5 s; on a 2048 x 2448 one (1.03 M vertices) 1,956
-#: iterations (170 s) against 21 s, with 1.5 GB more at the peak. Above this size CG's
-#: iterate after its iteration cap is kept (``info["unsolved"]``); before, a solve CG could
-#: not finish there raised an error (docs/benchmarks.md).
+#: the trial above does not converge, is factorized (:func:`_factorized`) instead of solved by
+#: CG on a new hierarchy, where the factorization fits in memory (:func:`_affordable`). The
+#: final systems, with their cuts and rim weights, are the hardest of the loop (a handful of
+#: near-null modes: the offsets and tilts of regions that cuts nearly separate): on the 41-64k
+#: pixel timing objects CG on a new Ruge-Stueben hierarchy took 99-122 iterations from 5e-3
+#: (0.4-0.8 s with the build) against a 0.26-0.40 s factorization; on a 1024 x 1224 render of
+#: the bunny (258k vertices) 699 iterations (12 s; the block coarse space or classical
+#: interpolation changed that by 10 %) against SuperLU's 2.5 s; on a 2048 x 2448 one (1.03 M
+#: vertices) 1,956 iterations (170 s) against 21 s, with 1.5 GB more at the peak. Where it is
+#: not factorized and CG on a new hierarchy stops at its iteration cap, the better of its
+#: iterate and its start is kept (``info["unsolved"]``, and a warning); before, a solve CG could
+#: not finish above 250k vertices raised an error (docs/benchmarks.md).
 DIRECT_POLISH = 1_000_000
 
 #: Least share of the centred right-hand side in the CG tolerance's reference with a prior
@@ -604,7 +606,10 @@ def solve_discontinuous(
         ``block_coarse_space`` (whether the block coarse space of :data:`COARSE_BLOCK` was
         turned on by the reweightings), ``cut_corners`` (fraction of corners with weight
         below :data:`CUT`), ``final_weights`` (whether the final solve used them),
-        ``unsettled_corners``, ``seconds``.
+        ``polish`` (how the last system was solved to `cg_rtol`: "trial" on the loop's
+        hierarchy, "direct" or "multigrid", :data:`DIRECT_POLISH`; None without a polish),
+        ``unsolved`` (the relative residuals of the solves whose unfinished CG iterate was kept,
+        too large to factorize), ``unsettled_corners``, ``seconds``.
     """
     # the solves take vector norms and products (CG, the coarse solves): with multi-threaded
     # BLAS on a busy machine each one costs milliseconds (measured with pyamg's V-cycle: 13 of
@@ -616,19 +621,18 @@ def solve_discontinuous(
 
 def _affordable(n: int) -> bool:
     """Whether a system of `n` unknowns is factorized when CG on it is slow: up to
-    :data:`DIRECT_POLISH`, and where the factorization fits in half the free memory (it is
-    not in the job's memory plan, whose route is CG's)."""
-    from ...memory import factorization_fits
-
+    :data:`DIRECT_POLISH`, and where the factorization fits in half the free memory and in
+    what the job's plan leaves of its limit (:func:`facetlift.memory.factorization_fits`: it
+    is not in the plan, whose route is CG's)."""
     return n <= DIRECT_POLISH and factorization_fits(n)
 
 
 def _factorized(K, rhs, amg):
-    """``K^{-1} rhs`` by the factorization the solver layer takes below its size limit
-    (PARDISO where installed, else SuperLU), whatever the size: exact where CG on these
-    systems is slow (:data:`DIRECT_POLISH`). The multigrid hierarchy is freed first."""
+    """``K^{-1} rhs`` by a factorization (:func:`facetlift.linalg.factorizer`), whatever the
+    size: exact where CG on these systems is slow (:data:`DIRECT_POLISH`). The multigrid
+    hierarchy is dropped first (the caller drops its own references to it)."""
     amg["ml"] = amg["pre"] = amg["for"] = None
-    return linalg.solve(K, rhs, linalg.choose(min(K.shape[0], linalg.LARGE)))[0]
+    return linalg.solve(K, rhs, linalg.factorizer())[0]
 
 
 def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, cg_rtol,
@@ -738,14 +742,26 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             # above the scaled tolerance; a residual below the unscaled one, the criterion
             # before the scaling, is kept as it is)
             if _affordable(K.shape[0]):
+                pre = None  # (its closure holds the hierarchy: freed before the factorization)
                 z = _factorized(K, rhs, amg)
-            elif np.isfinite(z).all() and info.relative_residual < info.residuals[0]:
-                amg["unsolved"].append(float(info.relative_residual))
             else:
-                raise SolverError(
-                    f"discontinuities: multigrid-preconditioned CG did not converge on "
-                    f"{K.shape[0]} unknowns (relative residual {info.relative_residual:.2e})")
+                z = _kept(K, rhs, z, z0, info.residuals[0])
         return z, info.iterations
+
+    def _kept(K, rhs, z, z0, start):
+        """Of CG's unfinished iterate `z` and its start `z0` (relative residual `start`), the
+        finite one with the smaller true residual, recorded in ``amg["unsolved"]``."""
+        bn = float(np.linalg.norm(rhs)) or 1.0
+        r = float(np.linalg.norm(rhs - K @ z)) / bn if np.isfinite(z).all() else np.inf
+        if not r <= start and np.isfinite(z0).all() and np.isfinite(start):
+            z, r = z0, start
+        if not np.isfinite(r):
+            raise SolverError(
+                f"discontinuities: multigrid-preconditioned CG failed on {K.shape[0]:,} "
+                f"unknowns (a non-finite iterate), which are too many to factorize here "
+                f"(more than {DIRECT_POLISH:,}, or more than the free memory allows)")
+        amg["unsolved"].append(r)
+        return z
 
     # the first (smooth) solution only starts the reweightings: as loose as theirs
     z, its = solve(K, rhs, np.zeros(domain.n_vertices) if x0 is None else x0, scale=scale,
@@ -861,8 +877,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         "discontinuity_k": float(k),
         "final_weights": bool(final),
         "polish": polish,
-        # relative residuals of the solves whose unconverged CG iterate was kept (too large
-        # to factorize: DIRECT_POLISH)
+        # relative residuals of the solves whose unfinished CG iterate was kept (too large to
+        # factorize: DIRECT_POLISH, or short of memory)
         "unsolved": amg["unsolved"],
         "seconds": {"setup": t1 - t0, "solve": t2 - t1},
     }

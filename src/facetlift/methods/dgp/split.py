@@ -29,6 +29,7 @@ from .fixed_point import SLOPE_BLOCK, TWIST_BLOCK
 __all__ = ["SplitMesh", "assemble", "occlusion_offsets", "piece_offsets", "solve_pieces",
            "solve_split", "split"]
 
+
 def assemble(mesh: SplitMesh, bx, by, target, *, weights=None, flat_weight=1e-9):
     """``K`` (n, n) CSR and right-hand side of the DGP fixed point on the split mesh.
 
