@@ -736,11 +736,11 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         amg["slow"] = amg["slow"] or info.iterations > REUSE_ITS
         if not info.converged and not (scale is not None and np.isfinite(z).all()
                                        and info.relative_residual <= plain):
-            # an ill-conditioned system: factorized where that is affordable, else CG's
-            # iterate is kept when it is finite and better than the start (its residual in
-            # info["unsolved"]). (With a prior that disagrees with the normals CG may stall
-            # above the scaled tolerance; a residual below the unscaled one, the criterion
-            # before the scaling, is kept as it is)
+            # an ill-conditioned system: factorized where that is affordable, else the better
+            # of CG's iterate and its start is kept (its residual in info["unsolved"]). (With
+            # a prior that disagrees with the normals CG may stall above the scaled
+            # tolerance; a residual below the unscaled one, the criterion before the scaling,
+            # is kept as it is)
             if _affordable(K.shape[0]):
                 pre = None  # (its closure holds the hierarchy: freed before the factorization)
                 z = _factorized(K, rhs, amg)
