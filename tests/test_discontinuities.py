@@ -531,11 +531,23 @@ def test_multigrid_policy_refresh_rebuild_and_block_coarse_space(monkeypatch):
     monkeypatch.setattr(disc, "GROW", False)
     # the trial's 10 iterations leave it short, at a rate that says as many again finish it:
     # they go on on the same hierarchy (no new one, no factorization)
+    maxiters = []
+    real_cg = disc.linalg.cg
+
+    def cg_spy(*a, **kw):
+        maxiters.append(kw.get("maxiter"))
+        return real_cg(*a, **kw)
+
+    monkeypatch.setattr(disc.linalg, "cg", cg_spy)
     going_on = facetlift.integrate(n, discontinuities=True)
     assert going_on.info["polish"] == "trial" and going_on.info["multigrid_builds"] == 1
     assert going_on.info["cg_iterations"][-1] > disc.POLISH_TRIAL
+    assert maxiters[-2:] == [disc.POLISH_TRIAL, 2 * disc.POLISH_TRIAL]  # trial, going on
     monkeypatch.setattr(disc, "POLISH_TRIAL", 2)  # (a 2-iteration trial does not say so)
+    maxiters.clear()
     direct = facetlift.integrate(n, discontinuities=True)
+    assert maxiters[-1] == 2  # the trial, then no CG: the factorization
+    monkeypatch.setattr(disc.linalg, "cg", real_cg)
     assert direct.info["multigrid_refreshes"] > 0 and direct.info["multigrid_builds"] == 1
     assert direct.info["polish"] == "direct"
     monkeypatch.setattr(disc, "DIRECT_POLISH", 0)
@@ -586,7 +598,7 @@ def test_a_final_solve_cg_cannot_finish_is_factorized_or_its_iterate_kept(monkey
     # (measured 3.5e-8 of the depth range apart: the reference's polish is CG's, to 1e-6)
     np.testing.assert_allclose(direct.depth, ref.depth, atol=1e-6 * np.ptp(ref.depth))
     monkeypatch.setattr(disc, "DIRECT_POLISH", 0)
-    with pytest.warns(UserWarning, match=r"1 linear solve\(s\) of .* stopped at the CG"):
+    with pytest.warns(UserWarning, match=r"1 linear solve\(s\) of .* did not converge in CG"):
         kept = facetlift.integrate(n, discontinuities=True)
     assert kept.info["polish"] == "multigrid" and len(kept.info["unsolved"]) == 1
     assert 1e-6 < kept.info["unsolved"][0] < 1e-3  # above cg_rtol, below the start
@@ -609,11 +621,11 @@ def test_the_factorization_keeps_to_the_memory_the_job_may_take(monkeypatch):
     s = facetlift.integrate(n, discontinuities=True, max_memory="64G")
     assert s.info["polish"] == "direct"
     tight = s.info["memory_estimate"] + 2**14  # (the factorization needs a few MB)
-    with pytest.warns(UserWarning, match="too large to factorize"):
+    with pytest.warns(UserWarning, match="were too large to factorize"):
         s = facetlift.integrate(n, discontinuities=True, max_memory=tight)
     assert s.info["polish"] == "multigrid"
     monkeypatch.setattr(memory, "default_limit", lambda: 0)  # no free memory left
-    with pytest.warns(UserWarning, match="too large to factorize"):
+    with pytest.warns(UserWarning, match="were too large to factorize"):
         s = facetlift.integrate(n, discontinuities=True, max_memory="64G")
     assert s.info["polish"] == "multigrid"
     assert not memory.factorization_fits(10)

@@ -144,10 +144,10 @@ def run(
         )
         if info["unsolved"]:
             warn(f"discontinuities: {len(info['unsolved'])} linear solve(s) of "
-                 f"{domain.n_vertices:,} vertices stopped at the CG iteration cap (relative "
-                 f"residual up to {max(info['unsolved']):.1e}), too large to factorize here "
-                 "(more than 1 M vertices, or short of memory): the surface is usable but "
-                 "less exact (info['unsolved'])")
+                 f"{domain.n_vertices:,} vertices did not converge in CG (relative residual "
+                 f"up to {max(info['unsolved']):.1e}) and were too large to factorize here "
+                 f"(more than {discontinuous.DIRECT_POLISH:,} vertices, or short of memory): "
+                 "the surface is usable but less exact (info['unsolved'])")
         copies, pinfo = place_pieces(domain, y, bx, by, target, s,
                                      anchored=None if prior is None else prior[0] > 0)
         info.update(pinfo)

@@ -204,9 +204,9 @@ COARSE_BLOCK = 8
 LOOSE_RTOL = 1e-4
 
 #: CG iterations the final polish (to ``cg_rtol``) may take on the reweightings' hierarchy
-#: before it is continued by a factorization or on a new hierarchy of the final system; as
-#: many again (at most twice as many) where the rate of the first ones says that finishes
-#: it (the 2048^2 disk: 10 + 1 iterations, where the new hierarchy cost 3 s).
+#: before it is continued by a factorization or on a new hierarchy of the final system; where
+#: the average rate of these says that as many again finish it, CG goes on there (at most
+#: twice as many; the 2048^2 disk: 10 + 3 iterations, where a new hierarchy cost 3 s).
 POLISH_TRIAL = 10
 
 #: Most vertices for which a system CG does not solve in time, above all the final polish when
@@ -734,13 +734,15 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         if trial:
             its = info.iterations
             r = info.residuals
-            if not info.converged and its and 0.0 < r[-1] < r[0]:
-                # at the rate of its iterations, would as many again finish it? Then go on
-                # here (the 2048^2 disk ended at 10 of the 11 it needed, and a new hierarchy
-                # costs seconds there); else a factorization or a new hierarchy goes on
+            if not info.converged and its and 0.0 < rtol < r[-1] < r[0] < math.inf:
+                # at the average rate of its iterations, would as many again finish it? Then
+                # go on here, with twice as many allowed (the rate is optimistic: the first
+                # iteration gains most, and the restart loses the Krylov space; the 2048^2
+                # disk needed 3 more, a new hierarchy costs seconds there); else a
+                # factorization or a new hierarchy goes on
                 more = math.log(rtol / r[-1]) / math.log(r[-1] / r[0]) * its
                 if more <= POLISH_TRIAL:
-                    z, info = linalg.cg(K, rhs, pre, x0=z, rtol=rtol,
+                    z, info = linalg.cg(K, rhs, pre, x0=z, rtol=rtol, reduction=reduction,
                                         maxiter=2 * POLISH_TRIAL)
                     its += info.iterations
             return z, its, info.converged
