@@ -865,14 +865,13 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     if it > 0 and (LOOSE_RTOL > cg_rtol or forced or final):  # solved loosely: polish
         # on the hierarchy at hand when it does so quickly (large smooth maps: 2-3 CG
         # iterations, where a new hierarchy costs seconds), else by a factorization where
-        # affordable (DIRECT_POLISH), else by CG on a new hierarchy of the final system.
-        # (Where the loop's last solve was factorized there is no hierarchy to try)
-        hierarchy_at_hand = amg["ml"] is not None or not _affordable(K.shape[0])
+        # affordable (DIRECT_POLISH), else by CG on a new hierarchy of the final system
+        affordable = _affordable(K.shape[0])  # (reads the free memory: once)
         its, done = 0, False
-        if hierarchy_at_hand:
+        if amg["ml"] is not None or not affordable:  # (none where the last solve factorized)
             z, its, done = solve(K, rhs, z, rebuild=False, scale=scale, trial=True)
             polish = "trial"
-        if not done and _affordable(K.shape[0]):
+        if not done and affordable:
             z = _factorized(K, rhs, amg)
             polish = "direct"
         elif not done:
