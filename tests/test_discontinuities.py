@@ -649,10 +649,10 @@ def test_every_solve_cg_cannot_finish_is_factorized(monkeypatch):
     calls = []
     real_f = disc._factorized
 
-    def spy(K, rhs, amg):
+    def spy(K, rhs, amg, grid):
         held = None if amg["ml"] is None else weakref.ref(amg["ml"])
         calls.append(held)
-        out = real_f(K, rhs, amg)
+        out = real_f(K, rhs, amg, grid)
         gc.collect()
         assert held is None or held() is None  # the hierarchy was freed, the solve's own too
         return out

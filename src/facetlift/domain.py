@@ -56,6 +56,12 @@ class Domain:
         return vm
 
     @cached_property
+    def vertices(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of the used vertices on the (H+1, W+1) grid, each (n,), in vertex-index
+        order (row-major)."""
+        return np.nonzero(self.vertex_mask)
+
+    @cached_property
     def vertex_index(self) -> np.ndarray:
         """(H+1, W+1) int64: index of each used vertex, -1 elsewhere."""
         vi = np.full(self.vertex_mask.shape, -1, dtype=np.int64)

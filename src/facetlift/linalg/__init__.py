@@ -6,7 +6,9 @@ Backends (``backend=`` of the methods that solve sparse SPD systems):
     Intel MKL PARDISO through ``pypardiso`` (extra ``facetlift[mkl]``, ~1.1 GB, Intel Simplified
     Software License), SPD matrix type, no iterative refinement.
 ``"superlu"``
-    scipy's SuperLU in symmetric mode (minimum degree on A+A', no pivoting). Always available.
+    scipy's SuperLU in symmetric mode (no pivoting), ordered by nested dissection on the grid
+    where the caller gives the unknowns' grid positions (:mod:`facetlift.linalg.ordering`),
+    else by minimum degree on A+A'. Always available.
 ``"amg"``
     pyamg Ruge-Stueben multigrid as a CG preconditioner: no factorization, the least memory.
 ``"pcg"``
@@ -165,13 +167,16 @@ def factorize(
     trusted: bool = False,
     rtol: float = 1e-11,
     progress: Callable[[int, float], None] | None = None,
+    grid: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Factor:
     """Prepare the SPD matrix `K` (n, n) for repeated solves (``Factor.solve(b)``).
 
     The backend is :func:`choose`'s; iterative backends start every solve from the previous
     solution (a loop's consecutive right-hand sides are close) and call `progress`
     (iteration, relative residual) after every CG iteration; a factorization is one library
-    call and reports nothing.
+    call and reports nothing. `grid` (rows, cols) (each (n,)): the unknowns' positions on the
+    pixel or vertex grid, for SuperLU's nested-dissection ordering
+    (:mod:`facetlift.linalg.ordering`; PARDISO orders its own).
     """
     name = _route(K, backend, kind, preconditioner, trusted)
     if name == "pcg":
@@ -186,7 +191,7 @@ def factorize(
         return amg(K, rtol=rtol, method="sa" if kind == "spd" else "rs", progress=progress)
     from .direct import superlu
 
-    return superlu(K)
+    return superlu(K, grid)
 
 
 def solve(
@@ -201,6 +206,7 @@ def solve(
     x0: np.ndarray | None = None,
     flexible: bool = False,
     progress: Callable[[int, float], None] | None = None,
+    grid: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, SolveInfo]:
     """Solve ``K x = b`` once for a symmetric positive (semi-)definite `K` (n, n).
 
@@ -209,7 +215,7 @@ def solve(
     up to rounding, such as float32 transforms). `kind` is :func:`choose`'s. `progress`
     (iteration, relative residual) is called after every CG iteration of the "pcg" and "amg"
     routes (the methods' ``progress=`` option); factorizations are one library call without
-    an iteration to report.
+    an iteration to report. `grid`: the unknowns' grid positions, as for :func:`factorize`.
 
     Returns
     -------
@@ -226,7 +232,7 @@ def solve(
         x, cinfo = _cg(K, b, preconditioner, x0, rtol, flexible, progress)
         _raise_unless_converged(cinfo, rtol, "preconditioned CG")
         return x, SolveInfo("pcg", cinfo.iterations, cinfo.relative_residual)
-    factor = factorize(K, name, kind=kind, rtol=rtol, progress=progress)
+    factor = factorize(K, name, kind=kind, rtol=rtol, progress=progress, grid=grid)
     x = factor.solve(b)
     it = factor.info.iterations if factor.info is not None else None
     return x, SolveInfo(name, it)
@@ -238,7 +244,8 @@ class Series:
 
     Multigrid keeps the first matrix's hierarchy as the preconditioner of the later ones
     (still SPD and close; rebuilt when CG needs more than `rebuild_after` iterations) and
-    starts each CG from the previous solution; factorizations refactorize every matrix.
+    starts each CG from the previous solution; factorizations refactorize every matrix
+    (ordered on `grid`, the unknowns' grid positions, as for :func:`factorize`).
 
     Attributes
     ----------
@@ -250,8 +257,8 @@ class Series:
     """
 
     def __init__(self, backend: str = "auto", *, kind: str = "graph", rtol: float = 1e-11,
-                 rebuild_after: int = 60):
-        self._backend, self._kind, self._rtol = backend, kind, rtol
+                 rebuild_after: int = 60, grid=None):
+        self._backend, self._kind, self._rtol, self._grid = backend, kind, rtol, grid
         self._rebuild_after = rebuild_after
         self.backend = None
         self._M = None
@@ -269,7 +276,7 @@ class Series:
         if self.backend is None:
             self.backend = choose(K.shape[0], self._backend, kind=self._kind)
         if self.backend != "amg":
-            return factorize(K, self.backend, kind=self._kind).solve(b)
+            return factorize(K, self.backend, kind=self._kind, grid=self._grid).solve(b)
         import scipy.sparse as sp
 
         K = sp.csr_matrix(K)

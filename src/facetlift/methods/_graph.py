@@ -50,15 +50,18 @@ def setup(problem):
     return problem.domain, graph, t, has, problem.camera.footprint()
 
 
-def spd_solve(K, b: np.ndarray, backend: str = "auto", *, kind: str = "graph", progress=None):
+def spd_solve(K, b: np.ndarray, backend: str = "auto", *, kind: str = "graph", progress=None,
+              grid=None):
     """Solve the SPD system ``K x = b`` with the solver layer's choice of backend.
 
     ``kind="spd"`` for systems that are not M-matrices (the prior of "regularization", the
     tensor of "diffusion"), where classical AMG converges slowly (diffusion: 12.6 s with
     Ruge-Stueben CG against SuperLU's 1.0 s at 256^2); see :func:`facetlift.linalg.choose`.
-    `progress` is called after every CG iteration of a multigrid route.
+    `progress` is called after every CG iteration of a multigrid route. `grid`: the unknowns'
+    grid positions (``domain.pixels``) for a factorization's ordering (:func:`facetlift.linalg.
+    factorize`).
     """
-    return linalg.solve(K, b, backend, kind=kind, progress=progress)[0]
+    return linalg.solve(K, b, backend, kind=kind, progress=progress, grid=grid)[0]
 
 
 def edge_confidence(problem, graph: g.PixelGraph) -> np.ndarray:
@@ -105,7 +108,7 @@ def solve_weighted(
         b = g.divergence(graph, w * t) + wp * tp
     if series is not None:
         return series.solve(K, b)
-    return spd_solve(K, b, backend, progress=progress)
+    return spd_solve(K, b, backend, progress=progress, grid=domain.pixels)
 
 
 def relative_change(z_new: np.ndarray, z: np.ndarray) -> float:

@@ -148,7 +148,7 @@ def run(problem, *, alpha, max_iter, tol, backend, progress) -> MethodResult:
     kept = accepted | connectors(graph, accepted, has & ~accepted, cost)
     t1 = time.perf_counter()
 
-    series = linalg.Series(backend)  # one multigrid hierarchy for every round
+    series = linalg.Series(backend, grid=domain.pixels)  # one multigrid hierarchy for every round
     conf = g.edge_confidence(problem, graph)
     prior = g.prior_terms(problem)
 

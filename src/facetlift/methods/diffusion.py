@@ -167,7 +167,7 @@ def run(problem, *, sigma, contrast, beta, backend, progress) -> MethodResult:
     K = pg.pin(domain, (M.T @ M) + pg.laplacian(graph, w_extra))
     rhs = M.T @ (Q @ t) + pg.divergence(graph, w_extra * t)
     t1 = time.perf_counter()
-    z = g.spd_solve(K, rhs, backend, kind="spd", progress=progress)
+    z = g.spd_solve(K, rhs, backend, kind="spd", progress=progress, grid=domain.pixels)
     t2 = time.perf_counter()
     lam1 = D11 + D22 - 1.0  # trace = lam1 + lam2, lam2 = 1
     info = {

@@ -100,7 +100,8 @@ def run(problem, *, weight, k, scale, max_iter, tol, backend, progress) -> Metho
     t0 = time.perf_counter()
     domain, graph, t, has, h = g.setup(problem)
     floor = 1e-12 * max(float(np.median(np.abs(t[has]))) / h if has.any() else 0.0, 1.0)
-    series = linalg.Series(backend)  # one multigrid hierarchy for every reweighting
+    # one multigrid hierarchy for every reweighting
+    series = linalg.Series(backend, grid=domain.pixels)
     conf = g.edge_confidence(problem, graph)
     prior = g.prior_terms(problem)
     z = g.solve_weighted(domain, graph, g.edge_weights(has, conf), t, series=series, prior=prior)

@@ -97,11 +97,13 @@ def run(problem, *, lam, prior, max_iter, tol, backend, progress) -> MethodResul
     if prior == "laplacian":
         R = laplacian_rows(graph)
         K = pg.pin(domain, L + float(lam) * (R.T @ R))
-        z = g.spd_solve(K, rhs, backend, kind="spd", progress=progress)
+        pr, pc = domain.pixels  # (R^T R couples pixels two apart: separators two lines wide)
+        z = g.spd_solve(K, rhs, backend, kind="spd", progress=progress, grid=(pr // 2, pc // 2))
         info.update(iterations=1, converged=True, prior_rows=int(R.shape[0]))
     else:
         slope = np.where(has, t / h, 0.0)  # measured slopes for the first round
-        series = linalg.Series(backend, kind="spd")  # one hierarchy for every round
+        # one hierarchy for every round
+        series = linalg.Series(backend, kind="spd", grid=domain.pixels)
         z = None
         converged = False
         changes = []

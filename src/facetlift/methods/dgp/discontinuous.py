@@ -630,12 +630,13 @@ def _affordable(n: int) -> bool:
     return n <= DIRECT_POLISH and factorization_fits(n)
 
 
-def _factorized(K, rhs, amg):
+def _factorized(K, rhs, amg, grid):
     """``K^{-1} rhs`` by a factorization (:func:`facetlift.linalg.factorizer`), whatever the
     size: exact where CG on these systems is slow (:data:`DIRECT_POLISH`). The multigrid
-    hierarchy is dropped first (the caller drops its own references to it)."""
+    hierarchy is dropped first (the caller drops its own references to it). `grid`: the
+    vertices' grid positions (SuperLU's nested-dissection ordering)."""
     amg["ml"] = amg["pre"] = amg["for"] = None
-    return linalg.solve(K, rhs, linalg.factorizer())[0]
+    return linalg.solve(K, rhs, linalg.factorizer(), grid=grid)[0]
 
 
 def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, cg_rtol,
@@ -759,7 +760,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             # is kept as it is)
             if _affordable(K.shape[0]):
                 pre = None  # (its closure holds the hierarchy: freed before the factorization)
-                z = _factorized(K, rhs, amg)
+                z = _factorized(K, rhs, amg, domain.vertices)
             else:
                 z = _kept(K, rhs, z, z0, info.residuals[0])
         return z, info.iterations
@@ -872,7 +873,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             z, its, done = solve(K, rhs, z, rebuild=False, scale=scale, trial=True)
             polish = "trial"
         if not done and affordable:
-            z = _factorized(K, rhs, amg)
+            z = _factorized(K, rhs, amg, domain.vertices)
             polish = "direct"
         elif not done:
             z, more = solve(K, rhs, z, fresh=True, scale=scale)

@@ -149,7 +149,7 @@ def solve_direct(
         else:
             K = pin_components(domain, K, skip=fixed)
             t1 = time.perf_counter()
-            z, sinfo = linalg.solve(K, rhs, route, kind="spd")
+            z, sinfo = linalg.solve(K, rhs, route, kind="spd", grid=domain.vertices)
             used = sinfo.backend
         cg_its = sinfo.iterations
         if tried and used == "pcg-facet":  # (the multigrid trial's iterations count too)

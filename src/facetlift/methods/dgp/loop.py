@@ -91,7 +91,8 @@ def solve_iterative(
 
             lumped = _lumped(domain, prior)
         pre = FacetPreconditioner(domain, K, strong, prior=lumped) if route == "pcg" else None
-        factor = linalg.factorize(K, route, kind="facet", preconditioner=pre)
+        factor = linalg.factorize(K, route, kind="facet", preconditioner=pre,
+                                  grid=domain.vertices)
     t2 = time.perf_counter()
     # The loop runs on facet and vertex images (grid slicing, no scattered gathers): each
     # step is exactly local_shaping() followed by the scatter C^T of Eq. 8.

@@ -62,7 +62,8 @@ def solve_pieces(mesh: SplitMesh, bx, by, target, *, weights=None, flat_weight=1
     pin = np.zeros(mesh.n_vertices)
     pin[first] = 1.0
     K = (K + sp.diags(pin)).tocsr()
-    z, info = linalg.solve(K, rhs, backend)
+    vr, vc = mesh.domain.vertices  # (the copies of a vertex share its grid position)
+    z, info = linalg.solve(K, rhs, backend, grid=(vr[mesh.vertex], vc[mesh.vertex]))
     return z, info
 
 
