@@ -6,8 +6,9 @@ copies of one vertex). Such a matrix is cut in two by any straight grid line: ne
 dissection on the grid (George, 1973) orders each half recursively and the line last, so its
 factor grows by O(n log n) with O(n^1.5) work. SuperLU's own minimum-degree ordering has no
 such bound and does worse on these systems as they grow (measured on a masked disk, 9-point
-facet systems: 42k unknowns 0.52 -> 0.31 s, 168k 3.7 -> 1.5 s, 669k 25.4 -> 10.0 s with 23 %
-less fill; docs/benchmarks.md). The ordering needs no graph: only the grid positions.
+facet systems, factorization and solve: 42k unknowns 0.63 -> 0.32 s, 168k 3.5 -> 1.3 s with
+a fifth less fill, 669k 25.4 -> 7.3 s; docs/benchmarks.md). The ordering needs no graph: only
+the grid positions.
 """
 
 from __future__ import annotations
@@ -16,10 +17,11 @@ import numpy as np
 
 __all__ = ["LEAF", "nested_dissection"]
 
-#: Parts of at most this many unknowns are not split further (kept in row-major order). 16
-#: gives the least fill but costs more to order than it saves; 256 more fill (measured on the
-#: disks above: 64 was the fastest overall at 669k unknowns, within 2 % of 256 at 168k).
-LEAF = 64
+#: Boxes of at most this many positions are not split further (kept in row-major order).
+#: Measured on the masked disks (9-point facet systems): the time is flat from 16 to 64
+#: (1024^2: 7.2-7.6 s both), the fill falls with the size (16: 74 M non-zeros, 64: 80 M,
+#: 256 at 512^2: 1.27x 16's), so the smallest measured.
+LEAF = 16
 
 
 def nested_dissection(rows, cols, leaf: int = LEAF) -> np.ndarray:
