@@ -26,7 +26,7 @@ Counts
     ``tile`` is refused here, before it allocates).
 
 Factorizations outside the plan
-    The discontinuity route factorizes its final system where CG on it is slow (up to 1 M
+    The discontinuity route factorizes its final system where CG on it is slow (up to 2 M
     vertices, ``facetlift.methods.dgp.discontinuous.DIRECT_POLISH``) only when
     :func:`factorization_fits`: within half the free memory and within what the plan leaves
     of the limit (:func:`headroom`), else it keeps to CG, the route its plan is for.

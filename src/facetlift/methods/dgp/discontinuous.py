@@ -218,11 +218,15 @@ POLISH_TRIAL = 10
 #: (0.4-0.8 s with the build) against a 0.26-0.40 s factorization; on a 1024 x 1224 render of
 #: the bunny (258k vertices) 699 iterations (12 s; the block coarse space or classical
 #: interpolation changed that by 10 %) against SuperLU's 2.5 s; on a 2048 x 2448 one (1.03 M
-#: vertices) 1,956 iterations (170 s) against 21 s, with 1.5 GB more at the peak. Where it is
-#: not factorized and CG on a new hierarchy stops at its iteration cap, the better of its
-#: iterate and its start is kept (``info["unsolved"]``, and a warning); before, a solve CG could
-#: not finish above 250k vertices raised an error (docs/benchmarks.md).
-DIRECT_POLISH = 1_000_000
+#: vertices) 1,956 iterations (170 s) against 21 s, with 1.5 GB more at the peak (minimum-
+#: degree order; nested dissection on the grid, :mod:`facetlift.linalg.ordering`, made such
+#: factorizations 2.5-3.5x faster since). On the DiLiGenT bear upsampled 6x (1.43 M pixels;
+#: the limit was 1 M then) the whole job took 226 s with CG on a new hierarchy (152
+#: iterations, converged) and 182 s factorized, the peak 2.1 -> 3.7 GB. Where it is not
+#: factorized and CG on a new hierarchy stops at its iteration cap, the better of its iterate
+#: and its start is kept (``info["unsolved"]``, and a warning); before, a solve CG could not
+#: finish above 250k vertices raised an error (docs/benchmarks.md).
+DIRECT_POLISH = 2_000_000
 
 #: Least share of the centred right-hand side in the CG tolerance's reference with a prior
 #: (:func:`_rhs_scale`). Measured on 7 scenes of the fusion benchmark (1 % samples, exact at
