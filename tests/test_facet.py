@@ -140,10 +140,87 @@ def test_thin_domain_takes_multigrid_and_converges():
     assert info2.converged and pre2.coarse == "box"
 
 
-def test_a_box_that_would_need_hundreds_of_iterations_is_replaced_by_measurement():
+def test_a_box_that_would_need_hundreds_of_iterations_is_replaced_by_measurement(monkeypatch):
+    from facetlift.linalg import facet
     from facetlift.linalg.facet import BOX_LIMIT, solve
 
     d, strong, K, b = _spiral(512)
+    # where a factorization is predicted to be faster it is taken (the thin spiral factorizes
+    # cheaply) ...
+    pre = FacetPreconditioner(d, K, strong, coarse="box")
+    x, info = solve(K, b, pre, rtol=1e-10)
+    assert info.converged and pre.direct is not None and info.iterations == facet.PROBE
+    # ... else the box is replaced by multigrid
+    monkeypatch.setattr(facet, "FACTOR_PER_UNKNOWN", 1e6)
     pre = FacetPreconditioner(d, K, strong, coarse="box")
     x, info = solve(K, b, pre, rtol=1e-10)
     assert info.converged and pre.coarse == "amg" and info.iterations <= BOX_LIMIT + 40
+
+
+def _many_disks_with_gaps(s=160, seed=3):
+    """Small disks (radius 6 every 16 pixels) with 30 % of the facets without a target: the
+    box needs ~100 iterations there, a factorization is cheap (issue 13)."""
+    r, c = np.mgrid[0:s, 0:s]
+    mask = ((r % 16 - 7.5) ** 2 + (c % 16 - 7.5) ** 2) < 36
+    d = Domain.from_mask(mask)
+    rng = np.random.default_rng(seed)
+    strong = rng.random(d.n_facets) >= 0.3
+    K = facet_form(d, [(np.where(strong, 1.0, 1e-9), SLOPE_BLOCK), (1.0, TWIST_BLOCK)])
+    b = K @ rng.standard_normal(d.n_vertices)
+    return d, strong, K, b
+
+
+def test_a_slow_box_is_replaced_by_a_factorization_where_that_is_predicted_faster(monkeypatch):
+    """After the probe, CG's predicted remaining time is compared with the factorization's
+    model (FACTOR_PER_UNKNOWN, FACTOR_PER_WORK): a model that says "free" factorizes (pinned
+    per component, kept for the next solve with the same K), one that says "costly" does not;
+    both solve the system."""
+    from facetlift.linalg import facet
+
+    d, strong, K, b = _many_disks_with_gaps()
+    monkeypatch.setattr(facet, "FACTOR_PER_UNKNOWN", 1e6)  # "costly": CG goes on
+    pre = FacetPreconditioner(d, K, strong, coarse="box")
+    x_cg, info_cg = facet.solve(K, b, pre, rtol=1e-10)
+    assert info_cg.converged and pre.direct is None and info_cg.iterations > facet.PROBE
+
+    monkeypatch.setattr(facet, "FACTOR_PER_UNKNOWN", 0.0)
+    monkeypatch.setattr(facet, "FACTOR_PER_WORK", 0.0)
+    pre = FacetPreconditioner(d, K, strong, coarse="box")
+    x, info = facet.solve(K, b, pre, rtol=1e-10)
+    assert info.converged and info.iterations == facet.PROBE and pre.direct is not None
+    assert info.relative_residual < 1e-10
+    # the same up to each component's constant (CG and the pins fix it differently)
+    comp = d.vertex_component
+    diff = x - x_cg
+    diff -= (np.bincount(comp, diff) / np.bincount(comp))[comp]
+    assert np.abs(diff).max() < 1e-6 * np.abs(x_cg).max()
+    kept = pre.direct[1]
+    x2, info2 = facet.solve(K, 2 * b, pre, rtol=1e-10)  # the same K: no iteration, same factor
+    assert info2.iterations == 0 and pre.direct[1] is kept and np.allclose(x2, 2 * x)
+    pre.refresh(K.copy(), strong)  # a new matrix: the factor is dropped
+    assert pre.direct is None
+
+    monkeypatch.undo()  # the model as it is: this system is cheap to factorize
+    pre = FacetPreconditioner(d, K, strong, coarse="box")
+    x3, info3 = facet.solve(K, b, pre, rtol=1e-10)
+    assert pre.direct is not None and info3.iterations == facet.PROBE
+
+
+def test_the_route_reports_the_factorization_and_matches_the_pinned_direct_solve(monkeypatch):
+    """Through facetlift.integrate: the smooth DGP route says "pcg-facet+superlu" and its
+    surface is the factorized route's (backend="superlu")."""
+    import facetlift
+    from facetlift.linalg import facet
+
+    r, c = np.mgrid[0:96, 0:96]
+    mask = ((r % 16 - 7.5) ** 2 + (c % 16 - 7.5) ** 2) < 36
+    rng = np.random.default_rng(5)
+    n = np.dstack([0.3 * np.sin(c / 9.0), 0.2 * np.cos(r / 7.0), np.ones_like(r, float)])
+    n[rng.random(mask.shape) < 0.3] = np.nan
+    monkeypatch.setattr(facet, "FACTOR_PER_UNKNOWN", 0.0)
+    monkeypatch.setattr(facet, "FACTOR_PER_WORK", 0.0)
+    monkeypatch.setattr(facet, "PROBE", 3)  # (so that the probe does not already converge)
+    s = facetlift.integrate(n, mask)
+    ref = facetlift.integrate(n, mask, backend="superlu")
+    assert s.info["backend"] == "pcg-facet+superlu"
+    assert np.nanmax(np.abs(s.depth - ref.depth)) < 1e-8

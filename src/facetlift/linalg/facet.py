@@ -57,6 +57,8 @@ Reuse (a solver that changes facet weights, e.g. the discontinuity reweighting)
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -244,6 +246,9 @@ class FacetPreconditioner:
             self._heavy = heavy_vertices(K, prior[0])
             shift = float(np.sum(prior[0][~self._heavy])) / (4.0 * domain.n_facets)
         self.box = BoxPreconditioner(domain, workers=workers, dtype=dtype, shift=shift)
+        #: (K, Factor) once :func:`solve` factorized K instead of iterating (kept for more
+        #: solves with the same K), else None
+        self.direct = None
         self.coarse = "box"
         self._global = self.box
         self._thin = thin(domain)
@@ -297,6 +302,7 @@ class FacetPreconditioner:
         if weights is not None and self.coarse == "amg":
             self._regalerkin(weights)
         self.K = K
+        self.direct = None
         # on a thin domain (a strip a few pixels wide) the weak vertices' block factorizes
         # with little fill however many there are: take them all (thin spiral with 30 %
         # missing normals at 2048^2: 643 CG iterations, 88 s with the clusters only)
@@ -370,8 +376,11 @@ def solve(
     the current iterate. The returned info counts the iterations of both phases, and so does
     `progress` (callable(iteration, relative residual), called after every iteration).
     """
+    if pre.direct is not None and pre.direct[0] is K:  # (factorized by an earlier solve)
+        return _direct(K, b, pre, CGInfo(converged=True, residuals=[1.0]))
     if pre.coarse != "box" or pre.exact:
         return cg(K, b, pre, x0=x0, rtol=rtol, maxiter=maxiter, flexible=True, progress=progress)
+    t0 = time.perf_counter()
     x, info = cg(K, b, pre, x0=x0, rtol=rtol, maxiter=min(PROBE, maxiter), flexible=True,
                  progress=progress)
     if info.converged or info.breakdown or info.iterations >= maxiter:
@@ -382,6 +391,9 @@ def solve(
     rate = (res[-1] / res[half]) ** (1.0 / (len(res) - 1 - half))
     left = np.log(rtol / res[-1]) / np.log(rate) if 0 < rate < 1 else np.inf
     predicted = info.iterations + max(left, 0.0)
+    per_iteration = (time.perf_counter() - t0) / max(info.iterations, 1)
+    if _factorize_instead(K, pre, max(left, 0.0) * per_iteration):
+        return _direct(K, b, pre, info)
     if predicted <= BOX_BUDGET:  # keep the box, but not beyond BOX_LIMIT iterations
         x, more = cg(K, b, pre, x0=x, rtol=rtol, maxiter=min(BOX_LIMIT, maxiter) - PROBE,
                      flexible=True, progress=_after(progress, info.iterations))
@@ -397,6 +409,54 @@ def solve(
     info.iterations += more.iterations
     info.residuals += more.residuals[1:]
     info.converged, info.breakdown = more.converged, more.breakdown
+    return x, info
+
+
+#: The factorization time model of :func:`_factorize_instead`: seconds per unknown and per
+#: unit of :func:`facetlift.linalg.ordering.factorization_work` (SuperLU in nested-dissection
+#: order, pinned facet systems with 30 % missing normals on the mask-shape suite's rect, disk,
+#: torus, many components, bear, human and thin masks at 512^2 and 1024^2, 29k-1.05M
+#: unknowns: measured 0.16-14.5 s; this model is within -30 / +20 % of each on this machine,
+#: low on the torus-like shapes; docs/benchmarks.md). The per-iteration time it is compared
+#: with is measured on the same machine, so the two scale together.
+FACTOR_PER_UNKNOWN, FACTOR_PER_WORK = 3.5e-6, 4.5e-9
+
+
+def _factorize_instead(K, pre, remaining: float) -> bool:
+    """Whether factorizing `K` (SuperLU in nested-dissection order) is predicted to take less
+    time than the `remaining` seconds CG is predicted to need, and fits in memory
+    (:func:`facetlift.memory.factorization_fits`). Not with PARDISO's own ordering, whose time
+    this model does not describe, nor above :data:`facetlift.linalg.LARGE` x 8 unknowns."""
+    from ..memory import factorization_fits
+    from . import LARGE, factorizer
+    from .ordering import factorization_work
+
+    n = K.shape[0]
+    if not remaining > 0:  # (inf: CG is not predicted to converge at all)
+        return False
+    if factorizer() != "superlu" or n > 8 * LARGE or not factorization_fits(n):
+        return False
+    estimate = FACTOR_PER_UNKNOWN * n + FACTOR_PER_WORK * factorization_work(
+        *pre.domain.vertices)
+    return estimate < remaining
+
+
+def _direct(K, b, pre, info: CGInfo):
+    """``K x = b`` by a factorization of `K` pinned at one vertex per component (a prior's
+    fixed components are not pinned; :func:`facetlift.operators.stencil.pin_components`),
+    kept on `pre` for the next solve with the same `K`; `info` (the iterations so far) is
+    marked converged with the factorized solution's true relative residual."""
+    from ..operators.stencil import pin_components
+    from .direct import superlu
+
+    if pre.direct is None or pre.direct[0] is not K:
+        fixed = None if pre._prior is None else np.asarray(pre._prior[1], dtype=bool)
+        pinned = pin_components(pre.domain, K, skip=fixed)
+        pre.direct = (K, superlu(pinned, pre.domain.vertices))
+    x = pre.direct[1].solve(b)
+    bn = float(np.linalg.norm(b)) or 1.0
+    info.residuals.append(float(np.linalg.norm(b - K @ x)) / bn)
+    info.converged = True
     return x, info
 
 

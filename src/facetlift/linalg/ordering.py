@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["LEAF", "nested_dissection"]
+__all__ = ["LEAF", "factorization_work", "nested_dissection"]
 
 #: Boxes of at most this many positions are not split further (kept in row-major order).
 #: Measured on the masked disks (9-point facet systems): the time is flat from 16 to 64
@@ -40,13 +40,45 @@ def nested_dissection(rows, cols, leaf: int = LEAF) -> np.ndarray:
     positions, e.g. ``rows // 2`` for second differences); any other matrix is still
     factorized correctly in this order, only with more fill.
     """
+    key, _, _, _, _ = _paths(rows, cols, leaf)
+    return np.argsort(key, kind="stable")
+
+
+def factorization_work(rows, cols, leaf: int = LEAF) -> float:
+    """An estimate of the work of factorizing a grid system in :func:`nested_dissection`'s
+    order: the sum of the cubes of its separators' lengths, each separator counted as the
+    runs of consecutive positions along its line (parts of a mask that a line crosses
+    separately do not fill each other in). Dense fronts dominate a nested-dissection
+    factorization, so its time is about linear in this sum plus a part linear in the
+    unknowns (fitted in :mod:`facetlift.linalg.facet`)."""
+    key, stop, schedule, r, c = _paths(rows, cols, leaf)
+    if key.size == 0 or not schedule:
+        return 0.0
+    total = len(schedule)
+    digit = (key // 3 ** (total - stop)) % 3  # the last digit of each path
+    sep = np.flatnonzero(digit == 2)
+    if sep.size == 0:
+        return 0.0
+    axis = np.asarray(schedule)[stop[sep] - 1]  # 0: a line across the rows (a row)
+    along = np.where(axis == 0, c[sep], r[sep])
+    order = np.lexsort((along, key[sep]))
+    k, a = key[sep][order], along[order]
+    new = np.r_[True, (k[1:] != k[:-1]) | (np.diff(a) != 1)]
+    runs = np.diff(np.r_[np.flatnonzero(new), k.size]).astype(float)
+    return float(np.sum(runs ** 3))
+
+
+def _paths(rows, cols, leaf):
+    """(key, stop, schedule, rows, cols) of :func:`nested_dissection`: each position's path as
+    a base-3 number, the level it ends at, the split axes, and the positions from the box's
+    corner."""
     r = np.asarray(rows, dtype=np.int64)
     c = np.asarray(cols, dtype=np.int64)
     if r.shape != c.shape or r.ndim != 1:
         raise ValueError(f"nested_dissection: `rows` and `cols` must be (n,) arrays of one "
                          f"length; got shapes {r.shape} and {c.shape}")
     if r.size == 0:
-        return np.zeros(0, dtype=np.int64)
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), [], r, c
     r = r - r.min()
     c = c - c.min()
     H, W = int(r.max()) + 1, int(c.max()) + 1
@@ -96,4 +128,4 @@ def nested_dissection(rows, cols, leaf: int = LEAF) -> np.ndarray:
     (pr, er), (pc, ec) = parts
     stop = np.minimum(er[r], ec[c])
     key = pr[stop, r] + pc[stop, c]
-    return np.argsort(key, kind="stable")
+    return key, stop, schedule, r, c

@@ -145,7 +145,8 @@ def solve_direct(
                     return _p(it + _n, res)
             z, sinfo = linalg.solve(K, rhs, "pcg", preconditioner=pre, rtol=RTOL, flexible=True,
                                     progress=report, x0=z0)
-            used = "pcg-facet"
+            # (the facet solve factorizes instead where that is predicted to be faster)
+            used = "pcg-facet" if pre.direct is None else "pcg-facet+superlu"
         else:
             K = pin_components(domain, K, skip=fixed)
             t1 = time.perf_counter()
