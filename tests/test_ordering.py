@@ -86,3 +86,64 @@ def test_superlu_on_the_grid_solves_the_same_system():
     assert np.allclose(f.solve(two)[:, 1], 2 * x_nd)
     with pytest.raises(ValueError, match="grid"):
         linalg.solve(K, b, "superlu", grid=(d.vertices[0][1:], d.vertices[1][1:]))
+
+
+def _paths_of(r, c, leaf):
+    """Each position's path of halves and lines, decoded from the order's sort key."""
+    from facetlift.linalg.ordering import _paths
+
+    key, stop, schedule, _, _ = _paths(r, c, leaf)
+    total = len(schedule)
+    digits = np.stack([(key // 3 ** (total - 1 - level)) % 3 for level in range(total)], axis=1)
+    return digits, stop
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_no_coupling_crosses_a_separator(seed):
+    """The defining property of the order: two positions that couple (at most one row and one
+    column apart) never lie in the two different halves of a box, i.e. their paths never first
+    differ as 0 (lower half) against 1 (upper half); and every path is zero after its end."""
+    rng = np.random.default_rng(seed)
+    H, W = rng.integers(5, 70, size=2)
+    mask = rng.random((H, W)) < rng.uniform(0.3, 1.0)
+    r, c = np.nonzero(mask)
+    off = rng.integers(-1000, 1000, size=2)
+    digits, stop = _paths_of(r + off[0], c + off[1], leaf=int(rng.choice([1, 4, 16])))
+    idx = np.full((H + 2, W + 2), -1)
+    idx[r + 1, c + 1] = np.arange(r.size)
+    for dr, dc in ((0, 1), (1, -1), (1, 0), (1, 1)):
+        other = idx[r + 1 + dr, c + 1 + dc]
+        a, b = np.flatnonzero(other >= 0), other[other >= 0]
+        if a.size == 0:
+            continue
+        da, db = digits[a], digits[b]
+        differ = da != db
+        first = np.argmax(differ, axis=1)
+        some = differ.any(axis=1)
+        pair = np.sort(np.stack([da[np.arange(a.size), first], db[np.arange(a.size), first]]), 0)
+        assert not np.any(some & (pair[0] == 0) & (pair[1] == 1))
+    levels = np.arange(digits.shape[1])[None, :]
+    assert np.all(digits[levels >= stop[:, None]] == 0)
+
+
+def test_superlu_factorizes_in_the_grid_order(monkeypatch):
+    """With `grid` SuperLU is given the nested-dissection order (natural column order)."""
+    from facetlift.linalg import direct
+
+    d, K = _facet_system(_disk(40))
+    K = (K + sp.eye(K.shape[0]) * 1e-3).tocsr()
+    seen = []
+    real = spla.splu
+
+    def spy(A, permc_spec=None, **kw):
+        seen.append(permc_spec)
+        return real(A, permc_spec=permc_spec, **kw)
+
+    monkeypatch.setattr(spla, "splu", spy)
+    direct.superlu(K)
+    f = direct.superlu(K, d.vertices)
+    assert seen == ["MMD_AT_PLUS_A", "NATURAL"]
+    x = np.random.default_rng(0).standard_normal(K.shape[0])
+    assert np.allclose(K @ f.solve(x), x)
+    order = nested_dissection(*d.vertices)
+    assert not np.array_equal(order, np.arange(order.size))  # (a real reordering)

@@ -21,8 +21,9 @@ from the size and the ``kind`` of system: DGP facet systems always take "pcg" wi
 :class:`facetlift.linalg.facet.FacetPreconditioner` (the box spectral solve plus an exact
 solve on the vertices of facets without a target; multigrid where the box is poor, or a
 factorization where a model of its time beats CG's predicted remainder, chosen by measurement
-in :func:`facetlift.linalg.facet.solve`), except on thin domains, which factorize; graph Laplacians and other SPD systems factorize up to :data:`LARGE` unknowns and
-take multigrid-CG above. :func:`factorize` prepares a matrix for repeated solves (the paper's
+in :func:`facetlift.linalg.facet.solve`), except on thin domains, which factorize; graph
+Laplacians and other SPD systems factorize up to :data:`LARGE` unknowns and take
+multigrid-CG above. :func:`factorize` prepares a matrix for repeated solves (the paper's
 "prefactored" global step); :func:`solve` does one solve and reports what it did;
 :class:`Series` solves the nearby systems of a reweighting with one multigrid hierarchy.
 """

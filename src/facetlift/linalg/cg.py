@@ -26,7 +26,9 @@ class CGInfo:
         ``|r| <= rtol |b|`` was reached (or `b` is zero), confirmed on the true residual
         ``b - A x`` to within a factor 10 (CG restarts from it, at most 3 times, otherwise).
     residuals : list of float
-        ``|r_k| / |b|`` before the first and after every iteration.
+        ``|r_k| / |b|`` before the first and after every iteration; a solve that a
+        factorization finished (:func:`facetlift.linalg.facet.solve`) appends that solution's
+        true residual, without counting an iteration.
     breakdown : bool
         The search direction lost positive curvature (``d^T K d <= 0``): a singular system
         whose right-hand side is not in its range, or a preconditioner that is not SPD.

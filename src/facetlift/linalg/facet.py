@@ -57,8 +57,6 @@ Reuse (a solver that changes facet weights, e.g. the discontinuity reweighting)
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import scipy.sparse as sp
 
@@ -247,8 +245,10 @@ class FacetPreconditioner:
             shift = float(np.sum(prior[0][~self._heavy])) / (4.0 * domain.n_facets)
         self.box = BoxPreconditioner(domain, workers=workers, dtype=dtype, shift=shift)
         #: (K, Factor) once :func:`solve` factorized K instead of iterating (kept for more
-        #: solves with the same K), else None
+        #: solves with the same K), else None; and whether it may (False: the caller asked
+        #: for CG itself, ``backend="pcg"``)
         self.direct = None
+        self.may_factorize = True
         self.coarse = "box"
         self._global = self.box
         self._thin = thin(domain)
@@ -377,10 +377,14 @@ def solve(
     `progress` (callable(iteration, relative residual), called after every iteration).
     """
     if pre.direct is not None and pre.direct[0] is K:  # (factorized by an earlier solve)
-        return _direct(K, b, pre, CGInfo(converged=True, residuals=[1.0]))
+        bn = float(np.linalg.norm(b)) or 1.0
+        start = 1.0 if x0 is None else float(np.linalg.norm(b - K @ x0)) / bn
+        done = _direct(K, b, pre, CGInfo(residuals=[start]), rtol)
+        if done is not None and done[1].converged:
+            return done
+        x0 = x0 if done is None else done[0]
     if pre.coarse != "box" or pre.exact:
         return cg(K, b, pre, x0=x0, rtol=rtol, maxiter=maxiter, flexible=True, progress=progress)
-    t0 = time.perf_counter()
     x, info = cg(K, b, pre, x0=x0, rtol=rtol, maxiter=min(PROBE, maxiter), flexible=True,
                  progress=progress)
     if info.converged or info.breakdown or info.iterations >= maxiter:
@@ -391,9 +395,13 @@ def solve(
     rate = (res[-1] / res[half]) ** (1.0 / (len(res) - 1 - half))
     left = np.log(rtol / res[-1]) / np.log(rate) if 0 < rate < 1 else np.inf
     predicted = info.iterations + max(left, 0.0)
-    per_iteration = (time.perf_counter() - t0) / max(info.iterations, 1)
-    if _factorize_instead(K, pre, max(left, 0.0) * per_iteration):
-        return _direct(K, b, pre, info)
+    if _factorize_instead(K, pre, max(left, 0.0)):
+        done = _direct(K, b, pre, info, rtol)
+        if done is not None and done[1].converged:
+            return done
+        if done is not None:  # (not to rtol: CG goes on from the factorized solution)
+            x = done[0]
+            info.residuals.pop()
     if predicted <= BOX_BUDGET:  # keep the box, but not beyond BOX_LIMIT iterations
         x, more = cg(K, b, pre, x0=x, rtol=rtol, maxiter=min(BOX_LIMIT, maxiter) - PROBE,
                      flexible=True, progress=_after(progress, info.iterations))
@@ -412,51 +420,75 @@ def solve(
     return x, info
 
 
-#: The factorization time model of :func:`_factorize_instead`: seconds per unknown and per
-#: unit of :func:`facetlift.linalg.ordering.factorization_work` (SuperLU in nested-dissection
-#: order, pinned facet systems with 30 % missing normals on the mask-shape suite's rect, disk,
-#: torus, many components, bear, human and thin masks at 512^2 and 1024^2, 29k-1.05M
-#: unknowns: measured 0.16-14.5 s; this model is within -30 / +20 % of each on this machine,
-#: low on the torus-like shapes; docs/benchmarks.md). The per-iteration time it is compared
-#: with is measured on the same machine, so the two scale together.
+#: The cost model of :func:`_factorize_instead`, in seconds on the AMD EPYC VM of
+#: docs/benchmarks.md (only their ratio matters: both sides are memory-bound sparse work, and
+#: the decision must not depend on the machine's load, or two runs of one job could take
+#: different routes). The factorization (SuperLU in nested-dissection order): per unknown and
+#: per unit of :func:`facetlift.linalg.ordering.factorization_work`, fitted on pinned facet
+#: systems with 30 % missing normals on the mask-shape suite's rect, disk, torus, many
+#: components, bear, human and thin masks at 512^2 and 1024^2 (29k-1.05M unknowns: measured
+#: 0.16-14.5 s, the model within -30 / +20 % of each, low on the torus-like shapes).
 FACTOR_PER_UNKNOWN, FACTOR_PER_WORK = 3.5e-6, 4.5e-9
+
+#: ... and one iteration of CG with the box: per unknown and per vertex cell of the box (its
+#: spectral solve), fitted on the same systems' probes (2.6-66 ms, the model within -30 / +15
+#: % of each).
+ITERATION_PER_UNKNOWN, ITERATION_PER_CELL = 25e-9, 30e-9
+
+#: The factorization is taken only where its modelled time is below this share of CG's
+#: modelled remaining time (the models' errors are +-30 %): the human mask with 30 % missing
+#: normals at 1024^2 sits at 0.82 and measured 2.42-3.37 s factorized against 2.80-2.90 s
+#: with CG (interleaved runs), a tie the margin leaves to CG; many small components at 0.57
+#: gain 0.63x.
+SWITCH_MARGIN = 0.7
 
 
 def _factorize_instead(K, pre, remaining: float) -> bool:
     """Whether factorizing `K` (SuperLU in nested-dissection order) is predicted to take less
-    time than the `remaining` seconds CG is predicted to need, and fits in memory
-    (:func:`facetlift.memory.factorization_fits`). Not with PARDISO's own ordering, whose time
-    this model does not describe, nor above :data:`facetlift.linalg.LARGE` x 8 unknowns."""
+    time than the `remaining` CG iterations (a model, :data:`FACTOR_PER_UNKNOWN` ...
+    :data:`ITERATION_PER_CELL`, not a clock: the same job takes the same route), and fits in
+    memory (:func:`facetlift.memory.factorization_fits`). Not where the caller asked for CG itself
+    (``pre.may_factorize`` False), not with PARDISO's own ordering, whose time this model
+    does not describe, nor above :data:`facetlift.linalg.LARGE` x 8 unknowns."""
     from ..memory import factorization_fits
     from . import LARGE, factorizer
     from .ordering import factorization_work
 
     n = K.shape[0]
-    if not remaining > 0:  # (inf: CG is not predicted to converge at all)
+    if not remaining > 0 or not pre.may_factorize:  # (inf: CG is not predicted to converge)
         return False
     if factorizer() != "superlu" or n > 8 * LARGE or not factorization_fits(n):
         return False
+    H, W = pre.domain.shape
+    iteration = ITERATION_PER_UNKNOWN * n + ITERATION_PER_CELL * (H + 1) * (W + 1)
     estimate = FACTOR_PER_UNKNOWN * n + FACTOR_PER_WORK * factorization_work(
         *pre.domain.vertices)
-    return estimate < remaining
+    return estimate < SWITCH_MARGIN * remaining * iteration
 
 
-def _direct(K, b, pre, info: CGInfo):
+def _direct(K, b, pre, info: CGInfo, rtol: float):
     """``K x = b`` by a factorization of `K` pinned at one vertex per component (a prior's
     fixed components are not pinned; :func:`facetlift.operators.stencil.pin_components`),
-    kept on `pre` for the next solve with the same `K`; `info` (the iterations so far) is
-    marked converged with the factorized solution's true relative residual."""
+    kept on `pre` for the next solve with the same `K`; the factorized solution's true
+    relative residual is appended to `info` (the iterations so far: the factorization is not
+    one) and decides ``converged``. None where the factorization failed (singular, out of
+    memory): `pre` then keeps to CG."""
     from ..operators.stencil import pin_components
-    from .direct import superlu
+    from .direct import SolverError, superlu
 
-    if pre.direct is None or pre.direct[0] is not K:
-        fixed = None if pre._prior is None else np.asarray(pre._prior[1], dtype=bool)
-        pinned = pin_components(pre.domain, K, skip=fixed)
-        pre.direct = (K, superlu(pinned, pre.domain.vertices))
-    x = pre.direct[1].solve(b)
+    try:
+        if pre.direct is None or pre.direct[0] is not K:
+            fixed = None if pre._prior is None else np.asarray(pre._prior[1], dtype=bool)
+            pinned = pin_components(pre.domain, K, skip=fixed)
+            pre.direct = (K, superlu(pinned, pre.domain.vertices))
+        x = pre.direct[1].solve(b)
+    except (SolverError, MemoryError):  # (CG goes on from where it was: the caller)
+        pre.direct = None
+        pre.may_factorize = False
+        return None
     bn = float(np.linalg.norm(b)) or 1.0
     info.residuals.append(float(np.linalg.norm(b - K @ x)) / bn)
-    info.converged = True
+    info.converged = info.residuals[-1] <= rtol
     return x, info
 
 

@@ -32,8 +32,8 @@ def nested_dissection(rows, cols, leaf: int = LEAF) -> np.ndarray:
 
     Every box of one level has the same size to within a line, so one schedule of splits
     serves them all and the order factors into a bisection of the rows and one of the
-    columns: a few array operations on the positions, whatever their number (1M in about
-    0.1 s). On a masked grid the lines through empty parts of a box are empty and cost nothing.
+    columns: a few array operations on the positions and one sort (1M in 0.2-0.3 s). On a
+    masked grid the lines through empty parts of a box are empty and cost nothing.
 
     A valid separator only where every coupling is between positions at most one row and one
     column apart (the facet and pixel-graph stencils; for wider couplings pass coarser

@@ -137,6 +137,7 @@ def solve_direct(
             z = z0
         elif route == "pcg":
             pre = FacetPreconditioner(domain, K, strong, prior=_lumped(domain, prior))
+            pre.may_factorize = backend == "auto"  # (backend="pcg": CG, as asked)
             if not tried:
                 t1 = time.perf_counter()
             report = progress
@@ -153,7 +154,7 @@ def solve_direct(
             z, sinfo = linalg.solve(K, rhs, route, kind="spd", grid=domain.vertices)
             used = sinfo.backend
         cg_its = sinfo.iterations
-        if tried and used == "pcg-facet":  # (the multigrid trial's iterations count too)
+        if tried and used.startswith("pcg-facet"):  # (the multigrid trial's iterations count too)
             cg_its += tried
         del K  # and the preconditioner: free them before the diagnostics
         pre = None

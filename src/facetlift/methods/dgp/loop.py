@@ -81,6 +81,7 @@ def solve_iterative(
     else:
         valence = np.bincount(domain.corners.ravel(), minlength=domain.n_vertices)
     t1 = time.perf_counter()
+    pre = None
     if mean_subtraction and exact:
         factor = linalg.Factor(RectangleSolver(*domain.shape).solve, "spectral")
     elif mean_subtraction:
@@ -91,6 +92,8 @@ def solve_iterative(
 
             lumped = _lumped(domain, prior)
         pre = FacetPreconditioner(domain, K, strong, prior=lumped) if route == "pcg" else None
+        if pre is not None:
+            pre.may_factorize = backend == "auto"  # (backend="pcg": CG, as asked)
         factor = linalg.factorize(K, route, kind="facet", preconditioner=pre,
                                   grid=domain.vertices)
     t2 = time.perf_counter()
@@ -148,4 +151,6 @@ def solve_iterative(
         },
         "backend": factor.backend if factor is not None else "diagonal",
     }
+    if factor is not None and pre is not None and pre.direct is not None:
+        info["backend"] += "+superlu"  # (the facet solve factorized: linalg.facet.solve)
     return z, info
