@@ -245,10 +245,11 @@ class FacetPreconditioner:
             shift = float(np.sum(prior[0][~self._heavy])) / (4.0 * domain.n_facets)
         self.box = BoxPreconditioner(domain, workers=workers, dtype=dtype, shift=shift)
         #: (K, Factor) once :func:`solve` factorized K instead of iterating (kept for more
-        #: solves with the same K), else None; and whether it may (False: the caller asked
-        #: for CG itself, ``backend="pcg"``)
+        #: solves with the same K), else None; whether it may (False: the caller asked for
+        #: CG itself, ``backend="pcg"``); and whether a factorization of this K failed
         self.direct = None
         self.may_factorize = True
+        self.direct_failed = False
         self.coarse = "box"
         self._global = self.box
         self._thin = thin(domain)
@@ -303,6 +304,7 @@ class FacetPreconditioner:
             self._regalerkin(weights)
         self.K = K
         self.direct = None
+        self.direct_failed = False
         # on a thin domain (a strip a few pixels wide) the weak vertices' block factorizes
         # with little fill however many there are: take them all (thin spiral with 30 %
         # missing normals at 2048^2: 643 CG iterations, 88 s with the clusters only)
@@ -374,15 +376,21 @@ def solve(
     after :data:`BOX_LIMIT`, `pre` switches to multigrid
     (:meth:`FacetPreconditioner.use_multigrid`, kept for later solves) and CG restarts from
     the current iterate. The returned info counts the iterations of both phases, and so does
-    `progress` (callable(iteration, relative residual), called after every iteration).
+    `progress` (callable(iteration, relative residual), called after every iteration). After
+    the probe a factorization is taken instead where :func:`_factorize_instead` predicts it
+    faster (kept on `pre` for later solves with the same `K`; its true residual is appended to
+    the info's residuals, and a failed one leaves CG to go on).
     """
     if pre.direct is not None and pre.direct[0] is K:  # (factorized by an earlier solve)
         bn = float(np.linalg.norm(b)) or 1.0
         start = 1.0 if x0 is None else float(np.linalg.norm(b - K @ x0)) / bn
+        if start <= rtol:
+            return x0, CGInfo(converged=True, residuals=[start])
         done = _direct(K, b, pre, CGInfo(residuals=[start]), rtol)
         if done is not None and done[1].converged:
             return done
-        x0 = x0 if done is None else done[0]
+        if done is not None and done[1].residuals[-1] < start:  # (CG goes on from the better)
+            x0 = done[0]
     if pre.coarse != "box" or pre.exact:
         return cg(K, b, pre, x0=x0, rtol=rtol, maxiter=maxiter, flexible=True, progress=progress)
     x, info = cg(K, b, pre, x0=x0, rtol=rtol, maxiter=min(PROBE, maxiter), flexible=True,
@@ -395,13 +403,14 @@ def solve(
     rate = (res[-1] / res[half]) ** (1.0 / (len(res) - 1 - half))
     left = np.log(rtol / res[-1]) / np.log(rate) if 0 < rate < 1 else np.inf
     predicted = info.iterations + max(left, 0.0)
-    if _factorize_instead(K, pre, max(left, 0.0)):
+    fresh = pre.direct is None or pre.direct[0] is not K  # (else its factor was just tried)
+    if fresh and _factorize_instead(K, pre, max(left, 0.0)):
         done = _direct(K, b, pre, info, rtol)
         if done is not None and done[1].converged:
             return done
-        if done is not None:  # (not to rtol: CG goes on from the factorized solution)
-            x = done[0]
-            info.residuals.pop()
+        if done is not None:  # (not to rtol: CG goes on from the better of the two)
+            if info.residuals.pop() < info.residuals[-1]:
+                x = done[0]
     if predicted <= BOX_BUDGET:  # keep the box, but not beyond BOX_LIMIT iterations
         x, more = cg(K, b, pre, x0=x, rtol=rtol, maxiter=min(BOX_LIMIT, maxiter) - PROBE,
                      flexible=True, progress=_after(progress, info.iterations))
@@ -446,8 +455,9 @@ SWITCH_MARGIN = 0.7
 def _factorize_instead(K, pre, remaining: float) -> bool:
     """Whether factorizing `K` (SuperLU in nested-dissection order) is predicted to take less
     time than the `remaining` CG iterations (a model, :data:`FACTOR_PER_UNKNOWN` ...
-    :data:`ITERATION_PER_CELL`, not a clock: the same job takes the same route), and fits in
-    memory (:func:`facetlift.memory.factorization_fits`). Not where the caller asked for CG itself
+    :data:`ITERATION_PER_CELL`, not a clock: the same job takes the same route where the
+    memory allows), and fits in memory (:func:`facetlift.memory.factorization_fits`, which
+    reads the free memory). Not where the caller asked for CG itself
     (``pre.may_factorize`` False), not with PARDISO's own ordering, whose time this model
     does not describe, nor above :data:`facetlift.linalg.LARGE` x 8 unknowns."""
     from ..memory import factorization_fits
@@ -455,7 +465,8 @@ def _factorize_instead(K, pre, remaining: float) -> bool:
     from .ordering import factorization_work
 
     n = K.shape[0]
-    if not remaining > 0 or not pre.may_factorize:  # (inf: CG is not predicted to converge)
+    # (remaining may be inf, CG not predicted to converge at all: then factorize if it fits)
+    if not remaining > 0 or not pre.may_factorize or pre.direct_failed:
         return False
     if factorizer() != "superlu" or n > 8 * LARGE or not factorization_fits(n):
         return False
@@ -484,7 +495,7 @@ def _direct(K, b, pre, info: CGInfo, rtol: float):
         x = pre.direct[1].solve(b)
     except (SolverError, MemoryError):  # (CG goes on from where it was: the caller)
         pre.direct = None
-        pre.may_factorize = False
+        pre.direct_failed = True  # (not again for this matrix: refresh() clears it)
         return None
     bn = float(np.linalg.norm(b)) or 1.0
     info.residuals.append(float(np.linalg.norm(b - K @ x)) / bn)
