@@ -62,6 +62,14 @@ BACKENDS = ("auto", "pardiso", "superlu", "amg", "pcg")
 #: at 2048^2: ~100 s and 12 GB extrapolated), so "auto" turns to iterative solvers.
 LARGE = 250_000
 
+#: ... and for graph Laplacians (kind "graph") with SuperLU, where Ruge-Stueben multigrid-CG
+#: catches up sooner: measured with SuperLU in nested-dissection order (interleaved, best of
+#: 2), ``poisson`` on a disk 0.20 vs 0.23 s at 40k pixels and on the human mask 0.29 vs 0.39 s
+#: at 56k (factorization faster), 0.54 vs 0.44 s at 89k, 0.91 vs 0.73 s at 159k, 1.33 vs
+#: 1.07 s at 218k (multigrid faster); ``m_estimator`` (one hierarchy for every reweighting)
+#: 1.82 vs 0.91 s at 159k; ``alpha_surface`` 1.82 s both at 159k (docs/benchmarks.md).
+GRAPH_LARGE = 80_000
+
 
 @dataclass
 class SolveInfo:
@@ -139,7 +147,8 @@ def choose(
     Notes
     -----
     Up to :data:`LARGE` unknowns a factorization (PARDISO where installed, else SuperLU) is
-    the fastest for graph and general systems; above it the factorization grows
+    the fastest for general systems, and for graph Laplacians with SuperLU up to
+    :data:`GRAPH_LARGE`; above it the factorization grows
     superlinearly in time and memory (PARDISO 14.7 s and 5 GB at 2048^2) and multigrid-CG,
     linear in both, takes over (also with PARDISO installed).
     """
@@ -152,7 +161,7 @@ def choose(
         return factorizer()
     if kind == "facet" or (preconditioner and trusted):
         return "pcg"
-    if n <= LARGE:
+    if n <= (GRAPH_LARGE if kind == "graph" and not pardiso_available() else LARGE):
         return factorizer()
     if preconditioner and not pardiso_available():
         return "pcg"
