@@ -103,17 +103,14 @@ def _paths(rows, cols, leaf):
     # where the first of the two paths ends
     parts = []
     for axis, size in ((0, H), (1, W)):
-        levels = [i for i, a in enumerate(schedule) if a == axis]
         prefix = np.zeros((total + 1, size), dtype=np.int64)  # the part up to each level
         end = np.full(size, total, dtype=np.int64)  # the level (1-based) its path ends at
         x = np.arange(size)
         lo, hi = np.zeros(size, dtype=np.int64), np.full(size, size, dtype=np.int64)
         acc = np.zeros(size, dtype=np.int64)
         done = np.zeros(size, dtype=bool)
-        at = 0
-        for level in range(total):
-            if at < len(levels) and levels[at] == level:
-                at += 1
+        for level, split in enumerate(schedule):
+            if split == axis:
                 mid = (lo + hi) // 2
                 digit = np.where(x < mid, 0, np.where(x == mid, 2, 1))
                 digit[done] = 0
