@@ -35,6 +35,7 @@ def integrate(
     prior=None,
     prior_weight=1.0,
     confidence=None,
+    prior_blur=None,
     **options,
 ) -> Surface:
     """Reconstruct a surface from a normal map.
@@ -98,6 +99,14 @@ def integrate(
     confidence : (H, W) array_like of float, optional
         Weight (>= 0) of each pixel's normal term; 0 is the same as a missing normal, 1 the
         default everywhere. For methods with the ``confidence`` capability.
+    prior_blur : float, optional
+        A coarse or blurred prior (a monocular network's depth, a low-resolution sensor, a
+        depth map upsampled from a coarse grid): the standard deviation, in pixels, of the
+        Gaussian blur it is seen through. The prior is then compared with the result blurred
+        alike, so it fixes the low frequencies and offsets while the normals keep the detail
+        (docs/fusion.md, "Blurred priors"); about 1.1 times the factor of a depth map
+        upsampled from a coarser grid. None or 0: compared pixel by pixel. For methods with
+        the ``prior_blur`` capability ("dgp" with ``solver="direct"``).
     **options
         Method options (``facetlift methods`` lists them, with types and defaults).
 
@@ -148,7 +157,7 @@ def integrate(
     problem = prepare(
         normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
         outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight, confidence=confidence,
-        grazing_note=note,
+        grazing_note=note, prior_blur=prior_blur,
     )
     return solve(problem, method, t0=t0, max_memory=max_memory, **options)
 
@@ -227,7 +236,8 @@ def solve(
             f"{able}"
         )
     for what, given in (("prior", problem.prior is not None),
-                        ("confidence", problem.confidence is not None)):
+                        ("confidence", problem.confidence is not None),
+                        ("prior_blur", problem.prior_blur > 0)):
         if given and not getattr(info, what):
             able = sorted(k for k, v in methods.REGISTRY.items() if getattr(v, what))
             raise ValueError(

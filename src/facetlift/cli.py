@@ -175,6 +175,11 @@ _JOB_OPTIONS = [
                  help="Weight of each prior sample relative to one pixel's normal."),
     click.option("--prior-weight-map", type=click.Path(exists=True, dir_okay=False,
                  path_type=Path), help="Per-pixel prior weights (npy, EXR, TIFF, PNG = v/max)."),
+    click.option("--prior-blur", type=float, default=None, metavar="SIGMA",
+                 help="The prior is coarse or blurred (a monocular network, a low-resolution "
+                 "sensor): the standard deviation in pixels of its blur; it is then compared "
+                 "with the result blurred alike (about 1.1x the upsampling factor; "
+                 "docs/fusion.md, 'Blurred priors')."),
     click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Per-pixel weights >= 0 of the normals (npy, EXR, TIFF, PNG = v/max); "
                  "0 = missing normal. A dataset folder's confidence.* is used automatically."),
@@ -213,7 +218,8 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               orthographic=False, backfacing="missing", outlier_eps=None, solver=None,
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
               save=(), mesh_faces=None, outdir=None, max_memory=None, prior=None,
-              prior_scale=None, prior_weight=1.0, prior_weight_map=None, confidence=None):
+              prior_scale=None, prior_weight=1.0, prior_weight_map=None, confidence=None,
+              prior_blur=None):
     """A :class:`facetlift.jobs.Job` from the parsed flags (ValueError on bad values)."""
     from . import frames
     from .jobs import Job
@@ -243,7 +249,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         prior=None if prior is None else str(prior), prior_scale=prior_scale,
         prior_weight=prior_weight,
         prior_weight_map=None if prior_weight_map is None else str(prior_weight_map),
-        confidence=None if confidence is None else str(confidence),
+        confidence=None if confidence is None else str(confidence), prior_blur=prior_blur,
     )
 
 

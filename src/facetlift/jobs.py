@@ -66,6 +66,8 @@ class Job:
     prior_weight: float = 1.0
     prior_weight_map: str | None = None
     confidence: str | None = None
+    #: Standard deviation (pixels) of the prior's blur (``prior_blur``, docs/fusion.md).
+    prior_blur: float | None = None
 
     def with_input(self, path, outdir) -> Job:
         """The same job on another normal-map input (a batch item)."""
@@ -241,7 +243,7 @@ def run(job: Job, *, progress=None) -> dict:
                 inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size, K=inp.K,
                 backfacing=job.backfacing, outlier_eps=job.outlier_eps, prior=depth_prior,
                 prior_weight=inp.prior_weight if inp.prior is not None else 1.0,
-                confidence=inp.confidence, **opts,
+                confidence=inp.confidence, prior_blur=job.prior_blur, **opts,
             )
         t_integrate = time.perf_counter() - t1
         t2 = time.perf_counter()

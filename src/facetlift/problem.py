@@ -52,6 +52,10 @@ class Problem:
     confidence : (m,) float, optional
         Weight of each facet's normal term (> 0 at usable facets; a confidence of 0 made the
         facet a missing sample); None: all 1.
+    prior_blur : float
+        Standard deviation (pixels) of the blur the prior is seen through: the prior is
+        compared with the result blurred alike (:class:`facetlift.operators.blur.PlaneBlur`,
+        docs/fusion.md); 0 compares them pixel by pixel.
     """
 
     domain: Domain
@@ -64,6 +68,7 @@ class Problem:
     prior: np.ndarray | None = None
     prior_weight: np.ndarray | None = None
     confidence: np.ndarray | None = None
+    prior_blur: float = 0.0
 
     def __post_init__(self):
         if self.usable is None:
@@ -151,6 +156,7 @@ class Problem:
             domain=domain, normals=self.normals, known=self.known, camera=camera,
             usable=self.usable, counts=self.counts, extras=self.extras, prior=self.prior,
             prior_weight=self.prior_weight, confidence=self.confidence,
+            prior_blur=self.prior_blur,
         )
 
 
@@ -227,6 +233,7 @@ def prepare(
     prior_weight=1.0,
     confidence=None,
     grazing_note: str | None = None,
+    prior_blur=None,
 ) -> Problem:
     """Check user inputs and build a :class:`Problem`.
 
@@ -260,6 +267,9 @@ def prepare(
         docs/fusion.md). A pixel with confidence 0 becomes a missing sample.
     grazing_note : str, optional
         Where the grazing threshold comes from, for the warning.
+    prior_blur : float, optional
+        Standard deviation in pixels of the blur the prior is seen through
+        (:func:`check_prior_blur`, docs/fusion.md); None or 0: none.
 
     Raises
     ------
@@ -358,10 +368,28 @@ def prepare(
     elif not _is_default_weight(prior_weight):
         raise ValueError(f"`prior_weight` applies only with a `prior`; got {_short(prior_weight)} "
                          "and prior=None")
+    blur = check_prior_blur(prior_blur, prior is not None)
     return Problem(
         domain=domain, normals=nf, known=front, camera=cam, usable=usable, counts=counts,
-        prior=pv, prior_weight=pw, confidence=conf,
+        prior=pv, prior_weight=pw, confidence=conf, prior_blur=blur,
     )
+
+
+def check_prior_blur(prior_blur, has_prior: bool) -> float:
+    """`prior_blur` as a float >= 0 (None is 0); raises ValueError naming it for another
+    value, or for a positive blur without a prior."""
+    if prior_blur is None:
+        return 0.0
+    try:
+        blur = float(prior_blur)
+    except (TypeError, ValueError):
+        raise ValueError(f"`prior_blur` must be a number of pixels >= 0; got {_short(prior_blur)}"
+                         ) from None
+    if not (np.isfinite(blur) and blur >= 0):
+        raise ValueError(f"`prior_blur` must be a finite number of pixels >= 0; got {blur!r}")
+    if blur > 0 and not has_prior:
+        raise ValueError(f"`prior_blur` applies only with a `prior`; got {blur!r} and prior=None")
+    return blur
 
 
 def _short(value) -> str:

@@ -19,7 +19,8 @@ from ..conventions import OUTLIER_EPS
 from ..options import Option
 
 #: Capabilities a method may declare (``facetlift methods`` shows them).
-CAPABILITIES = ("masks", "missing", "perspective", "discontinuities", "prior", "confidence")
+CAPABILITIES = ("masks", "missing", "perspective", "discontinuities", "prior", "confidence",
+                "prior_blur")
 
 
 @dataclass
@@ -57,6 +58,8 @@ class MethodInfo:
     prior: bool = False
     #: Takes per-pixel weights of the normal term (``confidence=``).
     confidence: bool = False
+    #: Compares a blurred prior with the result blurred alike (``prior_blur=``).
+    prior_blur: bool = False
     #: Grazing threshold (view cosine) that ``discontinuities=True`` uses for every camera
     #: when the caller gives no ``outlier_eps``; None: the camera's own default.
     jump_grazing: float | None = None
@@ -106,6 +109,7 @@ register(
         discontinuities=True,
         prior=True,
         confidence=True,
+        prior_blur=True,
         # the paper's epsilon (cos 85 deg) on both cameras: a jump that fades out ends in a
         # line of near-edge-on normals whose huge, unreliable slopes would bridge it
         # (docs/results.md, "Discontinuities: the grazing rule")

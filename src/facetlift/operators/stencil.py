@@ -172,9 +172,11 @@ def grid_scatter(gx: np.ndarray, gy: np.ndarray, centre: np.ndarray | None = Non
 CENTRE_BLOCK = np.full((4, 4), 1.0 / 16.0)
 
 
-def prior_form(domain: Domain, weight: np.ndarray, target: np.ndarray):
+def prior_form(domain: Domain, weight: np.ndarray, target: np.ndarray, matrix: bool = True):
     """The prior term ``sum_f w_f (mean z_f - t_f)^2`` on the vertices: its matrix (n, n) CSR
-    (``facet_form`` of :data:`CENTRE_BLOCK`) and right-hand side ``C^T (w t / 4)`` (n,)."""
-    K = facet_form(domain, [(weight, CENTRE_BLOCK)])
+    (``facet_form`` of :data:`CENTRE_BLOCK`) and right-hand side ``C^T (w t / 4)`` (n,); with
+    ``matrix=False`` the right-hand side alone."""
     rhs = scatter_corners(domain, np.repeat((0.25 * weight * target)[:, None], 4, axis=1))
-    return K, rhs
+    if not matrix:
+        return rhs
+    return facet_form(domain, [(weight, CENTRE_BLOCK)]), rhs

@@ -71,7 +71,7 @@ from ..._warnings import warn
 from ...options import Option
 from .. import MethodResult
 from . import discontinuous
-from .common import average_deviation, empty_components, targets
+from .common import BlurredPrior, average_deviation, empty_components, targets
 from .discontinuous import DEFAULT_ITER, DEFAULT_K, DEFAULT_TOL, solve_discontinuous
 from .fixed_point import solve_direct
 from .loop import local_shaping, solve_iterative
@@ -122,6 +122,13 @@ def run(
     domain = problem.domain
     prior = fusion_terms(problem)
     weights = problem.confidence  # None: every normal term weighs 1
+    blur = None
+    if prior is not None and problem.prior_blur > 0:  # docs/fusion.md, "Blurred priors"
+        if solver != "direct":
+            raise ValueError("`prior_blur` needs solver='direct' for method 'dgp' (the paper's "
+                             f"loop has no blurred prior term); got solver={solver!r}")
+        blur = BlurredPrior(domain, prior[0], prior[1], problem.prior_blur)
+        prior = (blur.weight,) + prior[1:]
     if discontinuities:
         empty_components(domain, target)
         z0 = None
@@ -134,13 +141,14 @@ def run(
                                  prior=prior)
         final = None
         power = discontinuous.FINAL_COS_POWER  # (docs/perspective.md, "Final weights")
-        if prior is None and power:
+        if (prior is None or blur is not None) and power:
             final = np.where(target, problem.view_cosines, 1.0) ** power
             final = final if weights is None else final * weights
         z, y, w, info = solve_discontinuous(
             domain, bx, by, target, normal_scale=normal_scale(problem), k=discontinuity_k,
             max_iter=discontinuity_iter, tol=discontinuity_tol, flat_weight=flat_weight,
             callback=progress, prior=prior, weights=weights, x0=z0, final_weights=final,
+            blur=blur,
         )
         if info["unsolved"]:
             warn(f"discontinuities: {len(info['unsolved'])} linear solve(s) of "
@@ -157,7 +165,7 @@ def run(
                               extras={"corner_values": copies})
     elif solver == "direct":  # both loops share this fixed point
         z, info = solve_direct(domain, bx, by, target, backend, flat_weight, weights, h=s,
-                               prior=prior, progress=progress)
+                               prior=prior, progress=progress, blur=blur)
         result = MethodResult(vertex_values=z, info=info)
     else:
         z, info = solve_iterative(
@@ -165,6 +173,9 @@ def run(
             weights=weights, prior=prior,
         )
         result = MethodResult(vertex_values=z, info=info)
+    if blur is not None:
+        info["prior_blur"] = blur.info()
+        info["converged"] = bool(info.get("converged", True)) and blur.converged
     info["outliers"] = int((problem.known & ~target).sum())
     info["missing"] = int((~problem.known).sum())
     return result

@@ -558,7 +558,7 @@ def solve_discontinuous(
     domain, bx, by, target, *, normal_scale, k: float = DEFAULT_K,
     max_iter: int = DEFAULT_ITER, tol: float = DEFAULT_TOL, flat_weight: float = 1e-9,
     cg_rtol: float = 1e-6, callback=None, prior=None, weights=None, x0=None,
-    final_weights=None,
+    final_weights=None, blur=None,
 ):
     """Minimise the glued facet energy with bilateral weights (see the module docstring).
 
@@ -596,6 +596,12 @@ def solve_discontinuous(
         when the cap stopped them; instead of `weights`: the route passes the view cosine
         squared, :data:`FINAL_COS_POWER`, times the confidence); not with a `prior`, nor with
         ``max_iter = 0``.
+    blur : BlurredPrior, optional
+        The `prior` seen through a blur (``prior_blur``,
+        :class:`~facetlift.methods.dgp.common.BlurredPrior`): its target is corrected after
+        every reweighting's solve (from the facets' own centre values), and the reweightings
+        go on, even with settled weights, until it stops; the last system is then formed with
+        the last target.
 
     Returns
     -------
@@ -623,7 +629,7 @@ def solve_discontinuous(
     # 20 s on the bear), single-threaded microseconds
     with threadpool_limits(limits=1, user_api="blas"):
         return _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight,
-                      cg_rtol, callback, prior, weights, x0, final_weights)
+                      cg_rtol, callback, prior, weights, x0, final_weights, blur)
 
 
 def _affordable(n: int) -> bool:
@@ -644,7 +650,7 @@ def _factorized(K, rhs, amg, grid):
 
 
 def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, cg_rtol,
-           callback, prior=None, weights=None, x0=None, final_weights=None):
+           callback, prior=None, weights=None, x0=None, final_weights=None, blur=None):
     t0 = time.perf_counter()
     m = domain.n_facets
     fusion = None
@@ -668,6 +674,14 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     if prior is not None:  # (for the CG tolerance: _rhs_scale)
         a_normals = _facet_system(bx, by, flat_weight, fusion[:2] + (np.zeros(m),), target)[1]
         centre = float(np.sum(prior[0] * prior[1]) / np.sum(prior[0]))
+
+    def retarget(t_new):
+        """A blurred prior's corrected target: the prior's terms (not its matrix) anew."""
+        nonlocal prior, fusion, A_other, a, rP
+        prior = (prior[0], t_new, prior[2])
+        fusion = (fusion[0], fusion[1], t_new)
+        A_other, a = _facet_system(bx, by, flat_weight, fusion, target)
+        rP = prior_form(domain, (1.0 - PRIOR_OWN) * prior[0], t_new, matrix=False)
 
     def state(w):
         M = GlueInverse(target, w, A_other, fusion)
@@ -806,6 +820,9 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         energies.append(energy(y, w, z))
         return M, Ma, K, rhs, scale, z, y
 
+    moving = blur is not None and max_iter > 0 and blur.update(y.mean(axis=1), settled=False)
+    if moving:
+        retarget(blur.target)
     for it in range(1, max_iter + 1):
         step = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes) - w
         if it > SETTLE_AFTER:
@@ -816,7 +833,11 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         changes.append(float(np.abs(step).max()))
         if callback is not None:
             callback(it, changes[-1])
-        if changes[-1] <= tol:
+        if moving:  # a blurred prior: its target corrected for this solve's surface
+            moving = blur.update(y.mean(axis=1), settled=changes[-1] <= tol)
+            if moving:
+                retarget(blur.target)
+        if changes[-1] <= tol and not moving:
             converged = True
             break
     grown = 0
@@ -860,7 +881,10 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         unsettled = float((np.abs(own - w) > CUT).mean())
         del own  # (freed before the final solve)
     slow = amg["slow"]
-    final = final_weights is not None and it > 0 and prior is None
+    final = final_weights is not None and it > 0 and (prior is None or blur is not None)
+    if moving:  # (the cap stopped the reweightings: the last target's system)
+        M = Ma = rhs = None
+        M, Ma, K, rhs, scale = state(w)
     if final:  # the final solve's own normal weights (FINAL_COS_POWER), on the settled cuts
         fusion = (np.asarray(final_weights, dtype=float), np.zeros(m), np.zeros(m))
         A_other, a = _facet_system(bx, by, flat_weight, fusion, target)

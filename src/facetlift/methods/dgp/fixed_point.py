@@ -75,7 +75,7 @@ def _multigrid_trial(K, rhs, progress):
 
 def solve_direct(
     domain, bx, by, target, backend="auto", flat_weight=1e-9, weights=None, *, h=1.0,
-    prior=None, progress=None,
+    prior=None, progress=None, blur=None,
 ):
     """The fixed point of the local/global loop in one sparse solve.
 
@@ -85,7 +85,10 @@ def solve_direct(
     (:func:`facetlift.operators.stencil.prior_form`); the components it fixes (``fixed``,
     (n_components,) bool) are neither pinned nor flattened. `progress` (iteration, relative
     residual) is called after every CG iteration of the facet-CG route; the spectral solve
-    and the factorizations have no iterations to report.
+    and the factorizations have no iterations to report. `blur`: a
+    :class:`~facetlift.methods.dgp.common.BlurredPrior` of the prior (``prior_blur``): after
+    the solve its target is corrected and the same system solved again (the matrix and its
+    preconditioner or factorization kept, from the last solution) until it stops.
     """
     t0 = time.perf_counter()
     empty = empty_components(domain, target)
@@ -96,6 +99,7 @@ def solve_direct(
     w = np.ones(domain.n_facets) if weights is None else weights
     rhs = grid_scatter(domain.to_image(w * bx, fill=0.0), domain.to_image(w * by, fill=0.0))
     rhs = rhs[domain.vertex_mask]
+    rhs_normals = rhs
     if prior is not None:
         KP, rP = prior_form(domain, pw, pt)
         rhs = rhs + rP
@@ -125,7 +129,8 @@ def solve_direct(
             K = (K + KP).tocsr()
             del KP
         z0, tried = None, 0
-        if route == "pcg" and prior is not None and sparse_prior(pw, fixed):
+        resolve = None  # (x0, rhs) -> x: the same system again (a blurred prior's updates)
+        if route == "pcg" and prior is not None and blur is None and sparse_prior(pw, fixed):
             t1 = time.perf_counter()
             z0, trial = _multigrid_trial(K, rhs, progress)
             if trial is not None and trial.converged:
@@ -144,16 +149,38 @@ def solve_direct(
             if tried and progress is not None:  # (counting on from the trial's iterations)
                 def report(it, res, _p=progress, _n=tried):
                     return _p(it + _n, res)
-            z, sinfo = linalg.solve(K, rhs, "pcg", preconditioner=pre, rtol=RTOL, flexible=True,
+            z, sinfo = linalg.solve(K, rhs, "pcg", preconditioner=pre, flexible=True,
+                                    rtol=RTOL if blur is None else blur.RTOL,
                                     progress=report, x0=z0)
             # (the facet solve factorizes instead where that is predicted to be faster)
             used = "pcg-facet" if pre.direct is None else "pcg-facet+superlu"
+
+            def resolve(x0, b):
+                x, more = linalg.solve(K, b, "pcg", preconditioner=pre, rtol=blur.RTOL,
+                                       flexible=True, x0=x0)
+                return x, more.iterations
         else:
             K = pin_components(domain, K, skip=fixed)
             t1 = time.perf_counter()
-            z, sinfo = linalg.solve(K, rhs, route, kind="spd", grid=domain.vertices)
+            if blur is None:
+                z, sinfo = linalg.solve(K, rhs, route, kind="spd", grid=domain.vertices)
+            else:  # (kept for the updates)
+                factor = linalg.factorize(K, route, kind="spd", grid=domain.vertices)
+                z = factor.solve(rhs)
+                sinfo = linalg.SolveInfo(route, factor.info.iterations
+                                         if factor.info is not None else None)
+
+                def resolve(x0, b):
+                    return factor.solve(b), None
             used = sinfo.backend
         cg_its = sinfo.iterations
+        if blur is not None:  # a blurred prior: correct its target, solve again
+            pw = prior[0]
+            while blur.update(z[domain.corners].mean(axis=1)):
+                b = rhs_normals + prior_form(domain, pw, blur.target, matrix=False)
+                z, more = resolve(z, b)
+                if more is not None and cg_its is not None:
+                    cg_its += more
         if tried and used.startswith("pcg-facet"):  # (the multigrid trial's iterations count too)
             cg_its += tried
         del K  # and the preconditioner: free them before the diagnostics
