@@ -69,6 +69,7 @@ class Settings:
     fusion_fractions: tuple = (0.001, 0.01, 0.05)
     fusion_columns: tuple = ("dgp", "dgp-disc", "poisson")
     fusion_coarse_weights: tuple = (3e-4, 1e-3, 3e-3, 1e-2, 0.05)  # the dense-prior sweep
+    fusion_blur_weights: tuple = (1e-3, 3e-3, 1e-2, 3e-2)  # ... and with prior_blur
 
     @classmethod
     def quick(cls) -> Settings:
@@ -102,6 +103,7 @@ class Settings:
             fusion_fractions=(0.01,),
             fusion_columns=("dgp", "dgp-disc"),
             fusion_coarse_weights=(),
+            fusion_blur_weights=(),
         )
 
 

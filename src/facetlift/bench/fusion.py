@@ -12,6 +12,10 @@ analytic jump scenes), exact normals. Every scene is integrated with each prior 
 ``coarse``
     A monocular-network-like dense prior: the true depth averaged over 8 x 8 blocks, blurred
     by a Gaussian of one block and upsampled bilinearly.
+``coarse blur``
+    The same coarse prior given as what it is, a blurred one (``prior_blur`` =
+    :data:`BLUR_SIGMA`, docs/fusion.md, "Blurred priors"): compared with the result blurred
+    alike. Only for the columns whose method has the ``prior_blur`` capability.
 ``conf``
     A planted disk of corrupted normals (rotated by 30 degrees about a random axis) with the
     1 % exact samples, three ways: the corrupted normals as they are, the same with confidence
@@ -38,6 +42,7 @@ import zlib
 
 import numpy as np
 
+from .. import methods
 from . import discontinuities as disc
 from .core import SEED, Context
 from .tables import md_table, write_csv, write_text
@@ -52,10 +57,16 @@ COLUMNS = (("dgp", "dgp", {}), ("dgp-disc", "dgp", {"discontinuities": True}),
 #: are trusted far more than one pixel's normal; noisy and coarse priors less). The coarse
 #: prior's weight was chosen on the whole benchmark (every scene, both dgp routes) from the
 #: sweep of ``fusion_coarse_weights``, not on one scene: docs/fusion.md, "Dense priors".
-WEIGHTS = {"sparse": 100.0, "noisy": 1.0, "coarse": 1e-2, "conf": 100.0}
+WEIGHTS = {"sparse": 100.0, "noisy": 1.0, "coarse": 1e-2, "conf": 100.0, "blur": 1e-2}
 
 #: Noise of the ``noisy`` priors, as a share of the depth range; block size of ``coarse``.
 NOISE, BLOCK = 0.01, 8
+
+#: The coarse prior's blur as one Gaussian (``prior_blur`` of the ``coarse blur`` rows): the
+#: standard deviations of its three stages added in quadrature, block means (``BLOCK^2 /
+#: 12``), the Gaussian of one block (``BLOCK^2``) and the bilinear upsampling (``BLOCK^2 / 6``):
+#: 8.94 px for blocks of 8. What a user knows of a depth map upsampled from a coarse grid.
+BLUR_SIGMA = BLOCK * float(np.sqrt(1 / 12 + 1 + 1 / 6))
 
 #: Corruption of the ``conf`` scenes: disk radius (share of the mask's extent), rotation.
 CORRUPT_RADIUS, CORRUPT_DEG = 0.15, 30.0
@@ -222,6 +233,11 @@ def priors(gt, name: str, settings) -> list[tuple[str, str, np.ndarray, dict]]:
                     sparse_prior(gt, f, _rng(name, f"s{f}"), noise=NOISE), {}))
     coarse = coarse_prior(gt)
     out.append(("coarse", "coarse", coarse, {}))
+    out.append(("coarse blur", "blur", coarse, {"prior_blur": BLUR_SIGMA}))
+    for w in settings.fusion_blur_weights:
+        if w != WEIGHTS["blur"]:
+            out.append((f"coarse blur w={w:g}", "blur", coarse,
+                        {"prior_weight": w, "prior_blur": BLUR_SIGMA}))
     for w in settings.fusion_coarse_weights:
         if w != WEIGHTS["coarse"]:
             out.append((f"coarse w={w:g}", "coarse", coarse, {"prior_weight": w}))
@@ -272,7 +288,8 @@ def run_scene(ctx: Context, group: str, name: str, gt) -> list[dict]:
     for cond, kind, prior, kw in priors(gt, name, ctx.settings):
         alone = interpolate(prior, gt.mask)
         inputs.append((cond, prior, kw.get("prior_weight", WEIGHTS[kind]),
-                       abs_errors(gt, alone)[0], aligned_error(gt, alone)))
+                       abs_errors(gt, alone)[0], aligned_error(gt, alone),
+                       {k: v for k, v in kw.items() if k != "prior_weight"}))
     for label, method, options in COLUMNS:
         if label not in ctx.settings.fusion_columns:
             continue
@@ -286,14 +303,16 @@ def run_scene(ctx: Context, group: str, name: str, gt) -> list[dict]:
         rows.append({**base, "method": label, "condition": "normals only", "status": "ok",
                      "normals_error": plain, "seconds": t_plain, "cg_iterations": _cg(s0.info),
                      "backend": s0.info.get("backend")})
-        for cond, prior, weight, perr, palign in inputs:
+        for cond, prior, weight, perr, palign, extra in inputs:
+            if "prior_blur" in extra and not methods.get(method).prior_blur:
+                continue  # (the method compares a prior pixel by pixel only)
             row = {**base, "method": label, "condition": cond, "normals_error": plain,
                    "plain_seconds": t_plain,
                    "samples": int((np.isfinite(prior) & gt.mask).sum()),
                    "prior_weight": weight}
             try:
                 s, sec = _integrate(gt, gt.normals, method, options, prior=prior,
-                                    prior_weight=weight)
+                                    prior_weight=weight, **extra)
             except Exception as e:
                 rows.append({**row, "status": "failed",
                              "message": f"{type(e).__name__}: {e}"[:200]})

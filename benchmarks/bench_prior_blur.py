@@ -1,0 +1,100 @@
+"""A coarse depth prior given as blurred (``prior_blur``) against the same prior pixel by pixel.
+
+Scenes of the fusion benchmark (``facetlift bench --experiments fusion``: the discontinuity
+development renders, perspective and orthographic, and the analytic jump scenes), every
+``--step``-th of them, exact normals. The prior is the benchmark's ``coarse`` one (the true depth
+averaged over 8 x 8 blocks, blurred by a Gaussian of one block, upsampled bilinearly:
+:func:`facetlift.bench.fusion.coarse_prior`), given either pixel by pixel at the benchmark's
+weight (0.01, ``pointwise``) or with ``prior_blur`` = :data:`facetlift.bench.fusion.BLUR_SIGMA`
+(8.94 px) at each of ``--weights``. Errors after the alignment every input gets alike
+(:func:`facetlift.bench.fusion.aligned_error`: orthographic % of the depth range with the best
+offset per component, perspective MADE in mm after the median scale), beside the normals-only
+result of the same column and the prior alone. Per column and prior: the scenes where the
+fusion beats both inputs, the geometric mean of its error over the better input's, and the
+median time over the normals-only time (measured in this process, one run each). Renders are
+cached where ``FACETLIFT_BENCH_CACHE`` points (built on first use, minutes).
+
+Usage::
+
+    FACETLIFT_BENCH_CACHE=/tmp/bcache .venv/bin/python benchmarks/bench_prior_blur.py --step 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+DATA = HERE.parent.parent / "shared" / "data"
+COLUMNS = {"dgp": {}, "dgp-disc": {"discontinuities": True}}
+
+
+def main(argv=None) -> int:
+    import facetlift
+    from facetlift.bench import discontinuities as bd
+    from facetlift.bench import fusion as bf
+    from facetlift.bench.core import Context, Settings
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--step", type=int, default=2, help="every step-th scene")
+    ap.add_argument("--weights", default="0.001,0.003,0.01", help="prior weights with the blur")
+    ap.add_argument("--columns", default="dgp,dgp-disc")
+    ap.add_argument("--data", type=Path, default=DATA)
+    args = ap.parse_args(argv)
+    warnings.simplefilter("ignore")
+    weights = [float(w) for w in args.weights.split(",")]
+    columns = args.columns.split(",")
+    ctx = Context(out=Path("/tmp/facetlift-bench-prior-blur"), settings=Settings(),
+                  data=args.data)
+    scenes = [s for s in bd.scenes(ctx) if s[0] in ctx.settings.fusion_groups][::args.step]
+    labels = ["pointwise"] + [f"blur w={w:g}" for w in weights]
+    stats = {(c, lab): {"ratio": [], "wins": 0, "n": 0, "time": []} for c in columns
+             for lab in labels}
+    print("| scene | prior | " + " | ".join(
+        f"{c} normals | " + " | ".join(f"{c} {lab}" for lab in labels) for c in columns) + " |")
+    print("|---|---|" + "---|" * (len(columns) * (1 + len(labels))))
+    for group, name, gt in bd.usable(ctx, scenes, "prior-blur"):  # (the fusion bench's set)
+        prior = bf.coarse_prior(gt)
+        e_prior = bf.aligned_error(gt, prior)
+        cells = [f"{group[:5]} {name}", f"{e_prior:.3f}"]
+        for col in columns:
+            def run(_col=col, gt=gt, **kw):
+                t = time.perf_counter()
+                s = facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size,
+                                        K=gt.K, **COLUMNS[_col], **kw)
+                return bf.aligned_error(gt, s.depth), time.perf_counter() - t, s.info
+
+            e_n, t_n, _ = run()
+            cells.append(f"{e_n:.3f}")
+            for lab in labels:
+                if lab == "pointwise":
+                    e, t, info = run(prior=prior, prior_weight=bf.WEIGHTS["coarse"])
+                else:
+                    w = float(lab.split("=")[1])
+                    e, t, info = run(prior=prior, prior_weight=w, prior_blur=bf.BLUR_SIGMA)
+                st = stats[(col, lab)]
+                best = min(e_n, e_prior)
+                st["n"] += 1
+                st["wins"] += e < best
+                st["ratio"].append(math.log(max(e, 1e-12) / max(best, 1e-12)))
+                st["time"].append(t / t_n)
+                mark = "**" if e < best else ""
+                cells.append(f"{mark}{e:.3f}{mark} ({t:.2f} s)")
+        print("| " + " | ".join(cells) + " |", flush=True)
+    print("\n| column | prior | beats both | geometric-mean ratio to the better input | "
+          "median time / normals-only |")
+    print("|---|---|---|---|---|")
+    for (col, lab), st in stats.items():
+        if st["n"]:
+            print(f"| {col} | {lab} | {st['wins']}/{st['n']} | "
+                  f"{math.exp(np.mean(st['ratio'])):.3f} | {np.median(st['time']):.2f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
