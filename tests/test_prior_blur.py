@@ -93,6 +93,39 @@ def test_plane_blur_is_linear_and_smooths():
         PlaneBlur(mask, 0.0)
 
 
+def test_plane_blur_is_the_weighted_plane_fit():
+    # brute force at a few pixels: the plane fitted by weighted least squares (the sampled,
+    # normalised Gaussian scipy uses, the same ridge on the slopes), its value at the centre
+    from facetlift.operators import blur as mod
+
+    rng = np.random.default_rng(2)
+    mask = ndimage.binary_opening(rng.random((30, 34)) < 0.75)
+    f = rng.normal(size=mask.shape)
+    sigma = 2.5
+    out = PlaneBlur(mask, sigma)(f)
+    radius = int(mod.TRUNCATE * sigma + 0.5)
+    k = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
+    k /= k.sum()
+    for r, c in zip(*np.nonzero(mask)[:2], strict=True):
+        if (r * 7 + c) % 23:
+            continue
+        A = np.zeros((3, 3))
+        b = np.zeros(3)
+        s0 = 0.0
+        for dr in range(-radius, radius + 1):
+            for dc in range(-radius, radius + 1):
+                rr, cc = r + dr, c + dc
+                if 0 <= rr < mask.shape[0] and 0 <= cc < mask.shape[1] and mask[rr, cc]:
+                    g = k[dr + radius] * k[dc + radius]
+                    phi = np.array([1.0, dc, dr])
+                    A += g * np.outer(phi, phi)
+                    b += g * phi * f[rr, cc]
+                    s0 += g
+        A[1, 1] += mod.RIDGE * sigma**2 * s0
+        A[2, 2] += mod.RIDGE * sigma**2 * s0
+        assert abs(np.linalg.solve(A, b)[0] - out[r, c]) < 1e-9
+
+
 # ------------------------------------------------------------------------------------------
 # the fusion
 
@@ -129,18 +162,52 @@ def test_zero_blur_is_the_pointwise_prior():
 def test_blurred_prior_is_metric_in_perspective():
     n, depth, mask = two_bumps()
     H, W = mask.shape
-    K = np.array([[300.0, 0, W / 2], [0, 300.0, H / 2], [0, 0, 1]])
-    # the bumps' normals as seen by a far camera: close to orthographic, metric depth ~ 100
-    z = 100.0 + depth
+    K = np.array([[3000.0, 0, W / 2], [0, 3000.0, H / 2], [0, 0, 1]])
+    # the bumps' normals seen by a far camera (f 3000 px, 1000 units away: about
+    # orthographic with pixels of 1/3 unit); metric depth from the prior
+    z = 1000.0 + depth / 3.0
     prior, sigma = coarse(z, mask)
     s = run(n, mask, K=K, prior=prior, prior_weight=0.01, prior_blur=sigma)
-    assert abs(np.nanmedian(s.depth[mask]) - np.nanmedian(z[mask])) < 1.0
+    point = run(n, mask, K=K, prior=prior, prior_weight=0.01)
+    e, e_point = mae(s.depth, z, mask), mae(point.depth, z, mask)
+    assert abs(np.nanmedian(s.depth[mask]) - 1000.0) < 5.0  # metric, not median-1
+    assert e < 0.5 * e_point, (e, e_point)
+
+
+def test_a_component_without_samples_does_not_leak_into_the_blur():
+    # two planes 4 px apart, the prior only on the first: the second's level is its gauge,
+    # arbitrary, and must not move the first through the blur
+    H, W = 40, 60
+    r, c = np.indices((H, W))
+    mask = (c < 28) | (c >= 32)
+    n = facetlift.normals_from_gradients(np.full((H, W), 0.2), np.full((H, W), 0.1))
+    height = 0.2 * (c + 0.5) - 0.1 * (r + 0.5) + np.where(c < 28, 0.0, 40.0)
+    prior = np.where(c < 28, -height, np.nan)
+    for options in ({}, {"backend": "superlu"}, {"discontinuities": True}):
+        s = run(n, mask, prior=prior, prior_weight=0.01, prior_blur=4.0, **options)
+        left = mask & (c < 28)
+        assert np.abs(s.depth - (-height))[left].max() < 0.02, options
+        assert s.info["prior"]["gauged_components"] == [2]
+
+
+def test_factorized_and_cg_routes_agree():
+    n, depth, mask = two_bumps((48, 64))
+    prior, sigma = coarse(depth, mask)
+    a = run(n, mask, prior=prior, prior_weight=0.01, prior_blur=sigma)
+    b = run(n, mask, prior=prior, prior_weight=0.01, prior_blur=sigma, backend="superlu")
+    assert a.info["prior_blur"]["updates"] == b.info["prior_blur"]["updates"]
+    assert np.nanmax(np.abs(a.depth - b.depth)) < 1e-4 * np.nanmax(np.abs(depth))
 
 
 @pytest.mark.parametrize("kwargs, match", [
     ({"prior_blur": -1.0}, "`prior_blur` must be a finite number of pixels >= 0"),
     ({"prior_blur": float("nan")}, "`prior_blur` must be a finite number"),
     ({"prior_blur": "wide"}, "`prior_blur` must be a number of pixels"),
+    ({"prior_blur": "3"}, "`prior_blur` must be a number of pixels"),
+    ({"prior_blur": True}, "`prior_blur` must be a number of pixels"),
+    ({"prior_blur": 1e4}, "`prior_blur` must be at most the image's larger side"),
+    ({"prior_blur": 2.0, "discontinuities": True, "discontinuity_iter": 0},
+     "`prior_blur` needs discontinuity_iter >= 1"),
     ({"prior_blur": 2.0, "prior": None}, "`prior_blur` applies only with a `prior`"),
     ({"prior_blur": 2.0, "method": "poisson"}, "does not take a `prior_blur`"),
     ({"prior_blur": 2.0, "solver": "iterative"}, "`prior_blur` needs solver='direct'"),
@@ -175,3 +242,14 @@ def test_cli_prior_blur(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "`prior_blur` must be a finite number of pixels >= 0" in err
     assert "Traceback" not in err
+
+
+def test_batch_template_refuses_prior_blur_for_a_method_without_it():
+    from facetlift.batch import check_template
+    from facetlift.jobs import Job
+
+    with pytest.raises(ValueError, match="does not take a `prior_blur`"):
+        check_template(Job(normals="x.npy", method="poisson", prior_blur=3.0))
+    with pytest.raises(ValueError, match="`prior_blur` must be a finite number"):
+        check_template(Job(normals="x.npy", prior_blur=-1.0))
+    check_template(Job(normals="x.npy", prior_blur=3.0))

@@ -264,7 +264,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
 def check_template(job: Job) -> None:
     """Refuse a batch template that would fail every item: its method, method options,
     ``max_memory``, normal and gradient frames and output kinds are checked as
-    :func:`facetlift.jobs.run` and :func:`facetlift.integrate` would check them.
+    :func:`facetlift.jobs.run` and :func:`facetlift.integrate` would check them, and
+    ``prior_blur``'s value and the method's capability for it.
 
     Raises
     ------
@@ -286,6 +287,13 @@ def check_template(job: Job) -> None:
     if job.normal_frame is not None:
         frames.parse(job.normal_frame)
     frames.gradient_frame(job.gradient_frame)
+    if job.prior_blur is not None:  # (whether an item has a prior is the item's own)
+        from .problem import prior_blur_value
+
+        if prior_blur_value(job.prior_blur) > 0 and not info.prior_blur:
+            able = sorted(k for k, v in methods.REGISTRY.items() if v.prior_blur)
+            raise ValueError(f"method {job.method!r} does not take a `prior_blur`; methods "
+                             f"that do: {able}")
     save = (job.save,) if isinstance(job.save, str) else tuple(job.save or ())
     unknown = [s for s in save if s not in OUTPUTS]
     if unknown:

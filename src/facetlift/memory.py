@@ -350,7 +350,8 @@ def _sparse_prior(problem) -> bool:
     """Whether the smooth DGP route will try its multigrid for a sparse prior."""
     from .methods.dgp.fixed_point import sparse_prior
 
-    return problem.has_prior and sparse_prior(problem.prior_weight, problem.prior_components)
+    return (problem.has_prior and problem.prior_blur == 0  # (a blurred prior skips it)
+            and sparse_prior(problem.prior_weight, problem.prior_components))
 
 
 def estimate(problem, method: str, options: dict) -> tuple[float, str]:
@@ -377,6 +378,8 @@ def estimate(problem, method: str, options: dict) -> tuple[float, str]:
     if method == "dgp":
         if problem.prior is not None:
             prior_bytes += 2 * 9 * 12 * d.n_vertices
+        if problem.prior_blur > 0:  # PlaneBlur's kept maps (32 B per box cell) and one
+            prior_bytes += 80 * B  # update's filtered images (the review's count, 2026-12)
         if options.get("discontinuities"):
             if problem.prior is not None:  # the prior's own matrix, sum and normals' part:
                 prior_bytes += 330 * m  # measured 0.79-0.82 of the peak without this

@@ -368,18 +368,21 @@ def prepare(
     elif not _is_default_weight(prior_weight):
         raise ValueError(f"`prior_weight` applies only with a `prior`; got {_short(prior_weight)} "
                          "and prior=None")
-    blur = check_prior_blur(prior_blur, prior is not None)
+    blur = check_prior_blur(prior_blur, prior is not None, (H, W))
     return Problem(
         domain=domain, normals=nf, known=front, camera=cam, usable=usable, counts=counts,
         prior=pv, prior_weight=pw, confidence=conf, prior_blur=blur,
     )
 
 
-def check_prior_blur(prior_blur, has_prior: bool) -> float:
-    """`prior_blur` as a float >= 0 (None is 0); raises ValueError naming it for another
-    value, or for a positive blur without a prior."""
+def prior_blur_value(prior_blur) -> float:
+    """`prior_blur` as a float >= 0 (None is 0); raises ValueError naming it for a bool, a
+    string or another non-number, NaN, inf or a negative value."""
     if prior_blur is None:
         return 0.0
+    if isinstance(prior_blur, (bool, np.bool_, str, bytes)) or not hasattr(prior_blur,
+                                                                           "__float__"):
+        raise ValueError(f"`prior_blur` must be a number of pixels >= 0; got {_short(prior_blur)}")
     try:
         blur = float(prior_blur)
     except (TypeError, ValueError):
@@ -387,8 +390,19 @@ def check_prior_blur(prior_blur, has_prior: bool) -> float:
                          ) from None
     if not (np.isfinite(blur) and blur >= 0):
         raise ValueError(f"`prior_blur` must be a finite number of pixels >= 0; got {blur!r}")
+    return blur
+
+
+def check_prior_blur(prior_blur, has_prior: bool, shape=None) -> float:
+    """`prior_blur` checked (:func:`prior_blur_value`); also refused without a prior and
+    above the image's larger side `shape` (a blur wider than the image fits one plane to
+    everything: no coarse map is that coarse)."""
+    blur = prior_blur_value(prior_blur)
     if blur > 0 and not has_prior:
         raise ValueError(f"`prior_blur` applies only with a `prior`; got {blur!r} and prior=None")
+    if shape is not None and blur > max(shape):
+        raise ValueError(f"`prior_blur` must be at most the image's larger side ({max(shape)} "
+                         f"px); got {blur!r}")
     return blur
 
 

@@ -127,6 +127,10 @@ def run(
         if solver != "direct":
             raise ValueError("`prior_blur` needs solver='direct' for method 'dgp' (the paper's "
                              f"loop has no blurred prior term); got solver={solver!r}")
+        if discontinuities and discontinuity_iter == 0:
+            raise ValueError("`prior_blur` needs discontinuity_iter >= 1 with "
+                             "discontinuities=True (the blurred prior's target is corrected "
+                             "between reweightings); got discontinuity_iter=0")
         blur = BlurredPrior(domain, prior[0], prior[1], problem.prior_blur)
         prior = (blur.weight,) + prior[1:]
     if discontinuities:

@@ -94,7 +94,11 @@ class BlurredPrior:
 
     Stopping: when the weighted RMS mismatch at the samples falls by less than :data:`TOL`
     of itself in one update (it levels off at what the blur model cannot explain), or grows,
-    or after :data:`MAX_UPDATES` (a safety net; ``converged`` is False then).
+    or after :data:`MAX_UPDATES` updates of a settled surface (a safety net; ``converged`` is
+    False then; the discontinuity route's updates while its weights still move do not count).
+
+    The blur sees only the components the prior fixes (those with a sample). A surface whose
+    mismatch grew is not kept by the direct route (the previous one is returned).
     """
 
     #: Relaxation of the target's correction. The blurred result responds to a change of the
@@ -125,15 +129,31 @@ class BlurredPrior:
         from ...operators.blur import PlaneBlur
 
         self.domain = domain
-        self.blur = PlaneBlur(domain.mask, sigma)
-        # the prior's weights, tapered toward the mask's edge (TAPER)
-        self.weight = np.asarray(weight, float) * self.blur.support[domain.pixels] ** self.TAPER
+        weight = np.asarray(weight, float)
+        comp = domain.facet_component
+        n = domain.n_components
+        # the blur sees the components the prior fixes, nothing else: a component without a
+        # sample has an arbitrary level (its gauge) that must not leak into its neighbours'
+        fixed = (np.bincount(comp[weight > 0], minlength=n) > 0)[comp]
+        seen = np.zeros(domain.shape, bool)
+        seen[domain.pixels] = fixed
+        self.blur = PlaneBlur(seen, sigma)
+        # the prior's weights, tapered toward the mask's edge (TAPER), the share of the blur's
+        # mass relative to its largest in each component (a part narrower than the blur keeps
+        # its weight where it is widest)
+        support = self.blur.support[domain.pixels]
+        peak = np.zeros(n)
+        np.maximum.at(peak, comp, support)
+        share = np.divide(support, peak[comp], out=np.zeros_like(support), where=fixed)
+        self.weight = weight * share**self.TAPER
         self.samples = self.weight > 0
         self.prior = np.where(self.samples, prior, 0.0)
         self.target = self.prior.copy()
         self.sigma = float(sigma)
         self.residuals: list[float] = []
+        self.returned: float | None = None  # (the mismatch of the surface returned)
         self.converged = False
+        self.grew = False  # (stopped because the mismatch grew: the caller may keep the last)
         self.done = False
         self.updates = 0
         self._capped = 0  # (updates counted toward MAX_UPDATES)
@@ -145,11 +165,18 @@ class BlurredPrior:
         seen = self.blur(d.to_image(centres, fill=0.0))[d.pixels]
         return np.where(self.samples, self.prior - np.nan_to_num(seen), 0.0)
 
+    def rms(self, centres) -> float:
+        """The weighted RMS of :meth:`mismatch` (in the unknown's units)."""
+        r = self.mismatch(centres)
+        return float(np.sqrt(np.sum(self.weight * r * r) / max(float(np.sum(self.weight)),
+                                                                1e-300)))
+
     def update(self, centres, settled: bool = True) -> bool:
         """Correct the target for the result's facet-centre values `centres` (m,); returns
         whether it changed (False once stopped: converged, levelled off or at the cap).
         While not `settled` (the discontinuity route's weights still move the surface) the
-        target is corrected without the stopping test and without counting toward the cap."""
+        target is corrected without the stopping test and without counting toward the cap.
+        Where the mismatch grew, :attr:`grew` is set (the previous surface was closer)."""
         if self.done:
             return False
         r = self.mismatch(centres)
@@ -160,6 +187,7 @@ class BlurredPrior:
         self._settled = settled
         if settled and (rms == 0.0 or rms > (1.0 - self.TOL) * last):
             self.done = self.converged = True
+            self.grew = rms > last
             return False
         if settled and self._capped >= self.MAX_UPDATES:
             self.done = True
@@ -171,7 +199,9 @@ class BlurredPrior:
 
     def info(self) -> dict:
         """``info["prior_blur"]``: sigma, target updates, the mismatch (RMS in the unknown's
-        units) before the first and after the last, and whether it levelled off."""
+        units) of the first surface and of the one returned, and whether it levelled off."""
+        last = self.returned if self.returned is not None else (
+            self.residuals[-1] if self.residuals else None)
         return {"sigma": self.sigma, "updates": self.updates,
-                "mismatch": [self.residuals[0], self.residuals[-1]] if self.residuals else [],
+                "mismatch": [self.residuals[0], last] if self.residuals else [],
                 "converged": self.converged}

@@ -171,16 +171,23 @@ def solve_direct(
                                          if factor.info is not None else None)
 
                 def resolve(x0, b):
-                    return factor.solve(b), None
+                    x = factor.solve(b)
+                    return x, factor.info.iterations if factor.info is not None else None
             used = sinfo.backend
         cg_its = sinfo.iterations
         if blur is not None:  # a blurred prior: correct its target, solve again
             pw = prior[0]
+            last = z
             while blur.update(z[domain.corners].mean(axis=1)):
                 b = rhs_normals + prior_form(domain, pw, blur.target, matrix=False)
+                last = z
                 z, more = resolve(z, b)
                 if more is not None and cg_its is not None:
                     cg_its += more
+            if blur.grew:  # (the last update made it worse: the surface before it)
+                z = last
+            blur.returned = blur.rms(z[domain.corners].mean(axis=1))
+            resolve = factor = None
         if tried and used.startswith("pcg-facet"):  # (the multigrid trial's iterations count too)
             cg_its += tried
         del K  # and the preconditioner: free them before the diagnostics
