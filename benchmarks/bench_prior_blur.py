@@ -2,17 +2,18 @@
 
 Scenes of the fusion benchmark (``facetlift bench --experiments fusion``: the discontinuity
 development renders, perspective and orthographic, and the analytic jump scenes), every
-``--step``-th of them, exact normals. The prior is the benchmark's ``coarse`` one (the true depth
-averaged over 8 x 8 blocks, blurred by a Gaussian of one block, upsampled bilinearly:
+``--step``-th of them, exact normals. The prior is the benchmark's ``coarse`` one (the true
+depth averaged over 8 x 8 blocks, blurred by a Gaussian of one block, upsampled bilinearly:
 :func:`facetlift.bench.fusion.coarse_prior`), given either pixel by pixel at the benchmark's
 weight (0.01, ``pointwise``) or with ``prior_blur`` = :data:`facetlift.bench.fusion.BLUR_SIGMA`
-(8.94 px) at each of ``--weights``. Errors after the alignment every input gets alike
-(:func:`facetlift.bench.fusion.aligned_error`: orthographic % of the depth range with the best
-offset per component, perspective MADE in mm after the median scale), beside the normals-only
-result of the same column and the prior alone. Per column and prior: the scenes where the
-fusion beats both inputs, the geometric mean of its error over the better input's, and the
-median time over the normals-only time (measured in this process, one run each). Renders are
-cached where ``FACETLIFT_BENCH_CACHE`` points (built on first use, minutes).
+(8.94 px; ``--sigma`` gives another, to measure a misjudged blur) at each of ``--weights``.
+Errors after the alignment every input gets alike (:func:`facetlift.bench.fusion.
+aligned_error`: orthographic % of the depth range with the best offset per component,
+perspective MADE in mm after the median scale), beside the normals-only result of the same
+column and the prior alone. Per column and prior: the scenes where the fusion beats both
+inputs, the geometric mean of its error over the better input's, and the median time over the
+normals-only time (measured in this process, one run each). Renders are cached where
+``FACETLIFT_BENCH_CACHE`` points (built on first use, minutes).
 
 Usage::
 
@@ -44,10 +45,14 @@ def main(argv=None) -> int:
     ap.add_argument("--step", type=int, default=2, help="every step-th scene")
     ap.add_argument("--weights", default="0.001,0.003,0.01", help="prior weights with the blur")
     ap.add_argument("--columns", default="dgp,dgp-disc")
+    ap.add_argument("--sigma", type=float, default=None,
+                    help="prior_blur given (default: the prior's own, BLUR_SIGMA; another "
+                    "value measures a misjudged blur)")
     ap.add_argument("--data", type=Path, default=DATA)
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     weights = [float(w) for w in args.weights.split(",")]
+    sigma = bf.BLUR_SIGMA if args.sigma is None else args.sigma
     columns = args.columns.split(",")
     ctx = Context(out=Path("/tmp/facetlift-bench-prior-blur"), settings=Settings(),
                   data=args.data)
@@ -76,7 +81,7 @@ def main(argv=None) -> int:
                     e, t, info = run(prior=prior, prior_weight=bf.WEIGHTS["coarse"])
                 else:
                     w = float(lab.split("=")[1])
-                    e, t, info = run(prior=prior, prior_weight=w, prior_blur=bf.BLUR_SIGMA)
+                    e, t, info = run(prior=prior, prior_weight=w, prior_blur=sigma)
                 st = stats[(col, lab)]
                 best = min(e_n, e_prior)
                 st["n"] += 1

@@ -104,8 +104,9 @@ def integrate(
         depth map upsampled from a coarse grid): the standard deviation, in pixels, of the
         Gaussian blur it is seen through. The prior is then compared with the result blurred
         alike, so it fixes the low frequencies and offsets while the normals keep the detail
-        (docs/fusion.md, "Blurred priors"); about 1.1 times the factor of a depth map
-        upsampled from a coarser grid. None or 0: compared pixel by pixel. For methods with
+        (docs/fusion.md, "Blurred priors"): for a map of block means upsampled bilinearly by a
+        factor f, 0.5 f; blurred besides by one coarse pixel, 1.1 f. None or 0: compared pixel
+        by pixel. For methods with
         the ``prior_blur`` capability ("dgp" with ``solver="direct"``).
     **options
         Method options (``facetlift methods`` lists them, with types and defaults).

@@ -178,8 +178,8 @@ _JOB_OPTIONS = [
     click.option("--prior-blur", type=float, default=None, metavar="SIGMA",
                  help="The prior is coarse or blurred (a monocular network, a low-resolution "
                  "sensor): the standard deviation in pixels of its blur; it is then compared "
-                 "with the result blurred alike (about 1.1x the upsampling factor; "
-                 "docs/fusion.md, 'Blurred priors')."),
+                 "with the result blurred alike (0.5x the factor of block means upsampled "
+                 "bilinearly; docs/fusion.md, 'Blurred priors')."),
     click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Per-pixel weights >= 0 of the normals (npy, EXR, TIFF, PNG = v/max); "
                  "0 = missing normal. A dataset folder's confidence.* is used automatically."),

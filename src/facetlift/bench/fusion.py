@@ -56,8 +56,9 @@ COLUMNS = (("dgp", "dgp", {}), ("dgp-disc", "dgp", {"discontinuities": True}),
 #: Prior weight of the benchmark's runs, per kind of prior (docs/fusion.md: exact samples
 #: are trusted far more than one pixel's normal; noisy and coarse priors less). The coarse
 #: prior's weight was chosen on the whole benchmark (every scene, both dgp routes) from the
-#: sweep of ``fusion_coarse_weights``, not on one scene: docs/fusion.md, "Dense priors".
-WEIGHTS = {"sparse": 100.0, "noisy": 1.0, "coarse": 1e-2, "conf": 100.0, "blur": 1e-2}
+#: sweep of ``fusion_coarse_weights``, not on one scene: docs/fusion.md, "Dense priors"; the
+#: blurred one's likewise from ``fusion_blur_weights`` (docs/fusion.md, "Blurred priors").
+WEIGHTS = {"sparse": 100.0, "noisy": 1.0, "coarse": 1e-2, "conf": 100.0, "blur": 3e-3}
 
 #: Noise of the ``noisy`` priors, as a share of the depth range; block size of ``coarse``.
 NOISE, BLOCK = 0.01, 8
