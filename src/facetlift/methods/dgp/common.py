@@ -98,7 +98,10 @@ class BlurredPrior:
     False then; the discontinuity route's updates while its weights still move do not count).
 
     The blur sees only the components the prior fixes (those with a sample). A surface whose
-    mismatch grew is not kept by the direct route (the previous one is returned).
+    mismatch grew is not kept by the direct route (the previous one is returned). The direct
+    route's steps are mixed (Anderson, :data:`ANDERSON`; ``accelerate``): on every second
+    scene of the fusion benchmark that lowered the geometric-mean ratio to the better input
+    from 0.763 to 0.668 (better on 24 of 26), at 1.2x the time.
     """
 
     #: Relaxation of the target's correction. The blurred result responds to a change of the
@@ -118,6 +121,11 @@ class BlurredPrior:
     #: gave dgp-disc at 0.003 16 / 20 / 20 scenes better than both inputs, geometric-mean
     #: ratio to the better input 0.70 (2) / 0.66 (4); dgp 23 / 23 / 21, 0.70 / 0.73.
     TAPER = 4
+
+    #: Depth of the Anderson mixing of the direct route's target updates (its fixed-point map
+    #: does not change between updates; the discontinuity route's does while its weights
+    #: move, and it takes the plain relaxed steps).
+    ANDERSON = 3
 
     #: Relative residual of the direct route's solves with a blurred prior (the fixed point
     #: is only reached to :data:`TOL` of the mismatch; the route's 1e-11 would be wasted: on
@@ -157,6 +165,10 @@ class BlurredPrior:
         self.done = False
         self.updates = 0
         self._capped = 0  # (updates counted toward MAX_UPDATES)
+        self.accelerate = False  # (Anderson mixing: the direct route turns it on)
+        self._hist: list = []
+        self._dx: list = []
+        self._df: list = []
         self._settled = False  # (whether the last mismatch was of a settled surface)
 
     def mismatch(self, centres):
@@ -192,7 +204,22 @@ class BlurredPrior:
         if settled and self._capped >= self.MAX_UPDATES:
             self.done = True
             return False
-        self.target = self.target + self.OMEGA * r
+        f = self.OMEGA * r
+        step = f
+        if self.accelerate:  # Anderson mixing (ANDERSON): the step the last ones predict
+            hist = self._hist
+            if hist:
+                t0, f0 = hist[-1]
+                self._dx.append(self.target - t0)
+                self._df.append(f - f0)
+                del self._dx[:-self.ANDERSON], self._df[:-self.ANDERSON]
+                sw = np.sqrt(self.weight)
+                F = np.stack([d * sw for d in self._df], axis=1)
+                gamma = np.linalg.lstsq(F, f * sw, rcond=None)[0]
+                step = f - sum(g * (dx + df) for g, dx, df in
+                               zip(gamma, self._dx, self._df, strict=True))
+            hist[:] = [(self.target, f)]
+        self.target = self.target + step
         self.updates += 1
         self._capped += settled
         return True

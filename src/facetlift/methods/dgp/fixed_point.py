@@ -178,6 +178,7 @@ def solve_direct(
         if blur is not None:  # a blurred prior: correct its target, solve again
             pw = prior[0]
             last = z
+            blur.accelerate = True
             while blur.update(z[domain.corners].mean(axis=1)):
                 b = rhs_normals + prior_form(domain, pw, blur.target, matrix=False)
                 last = z
