@@ -146,7 +146,7 @@ def test_blurred_prior_beats_both_inputs_and_the_pointwise_fusion(options):
                                                                              e_plain, e_point)
     info = s.info["prior_blur"]
     assert info["sigma"] == sigma and info["updates"] >= 2 and info["converged"]
-    assert info["mismatch"][1] < 0.5 * info["mismatch"][0]
+    assert info["mismatch"] < 0.5 * info["mismatch_first"]
     assert s.info["converged"]
 
 
@@ -206,6 +206,7 @@ def test_factorized_and_cg_routes_agree():
     ({"prior_blur": "3"}, "`prior_blur` must be a number of pixels"),
     ({"prior_blur": True}, "`prior_blur` must be a number of pixels"),
     ({"prior_blur": 1e4}, "`prior_blur` must be at most the image's larger side"),
+    ({"prior_blur": 0.2}, "`prior_blur` below half a pixel is no blur"),
     ({"prior_blur": 2.0, "discontinuities": True, "discontinuity_iter": 0},
      "`prior_blur` needs discontinuity_iter >= 1"),
     ({"prior_blur": 2.0, "prior": None}, "`prior_blur` applies only with a `prior`"),
@@ -253,3 +254,59 @@ def test_batch_template_refuses_prior_blur_for_a_method_without_it():
     with pytest.raises(ValueError, match="`prior_blur` must be a finite number"):
         check_template(Job(normals="x.npy", prior_blur=-1.0))
     check_template(Job(normals="x.npy", prior_blur=3.0))
+
+
+def test_an_update_that_made_it_worse_is_undone(monkeypatch):
+    # a relaxation far above 2 overshoots at once: the direct route returns the first
+    # surface, counts no update, and says so
+    from facetlift.methods.dgp.common import BlurredPrior
+
+    n, depth, mask = two_bumps((48, 64))
+    prior, sigma = coarse(depth, mask)
+    first = run(n, mask, prior=prior, prior_weight=0.01, prior_blur=sigma)
+    monkeypatch.setattr(BlurredPrior, "OMEGA", 6.0)
+    s = run(n, mask, prior=prior, prior_weight=0.01, prior_blur=sigma)
+    info = s.info["prior_blur"]
+    assert info["updates"] == 0 and info["mismatch"] == pytest.approx(info["mismatch_first"])
+    monkeypatch.setattr(BlurredPrior, "MAX_UPDATES", 0)
+    s0 = run(n, mask, prior=prior, prior_weight=0.01, prior_blur=sigma)
+    assert np.allclose(s.depth, s0.depth, equal_nan=True, atol=1e-9)
+    assert not np.allclose(s.depth, first.depth, equal_nan=True, atol=1e-6)
+
+
+@pytest.mark.parametrize("options", [{}, {"discontinuities": True}], ids=["dgp", "dgp-disc"])
+def test_the_cap_is_reported_as_not_converged(monkeypatch, options):
+    from facetlift.methods.dgp.common import BlurredPrior
+
+    monkeypatch.setattr(BlurredPrior, "MAX_UPDATES", 1)
+    n, depth, mask = two_bumps((48, 64))
+    prior, sigma = coarse(depth, mask)
+    s = run(n, mask, prior=prior, prior_weight=0.01, prior_blur=sigma, **options)
+    assert not s.info["prior_blur"]["converged"] and not s.info["converged"]
+
+
+def test_holes_sparse_samples_weight_maps_and_confidence_with_a_blur():
+    n, depth, mask = two_bumps((48, 64))
+    prior, sigma = coarse(depth, mask)
+    rng = np.random.default_rng(3)
+    holes = np.where(rng.random(mask.shape) < 0.3, np.nan, prior)
+    weights = np.where(rng.random(mask.shape) < 0.2, 0.0, 0.01)
+    conf = np.where(rng.random(mask.shape) < 0.1, 0.0, 1.0)
+    for options in ({}, {"discontinuities": True}):
+        s = run(n, mask, prior=holes, prior_weight=weights, confidence=conf, prior_blur=sigma,
+                **options)
+        assert np.isfinite(s.depth[mask]).all() and s.info["prior_blur"]["converged"]
+        assert mae(s.depth, depth, mask) < mae(prior, depth, mask)
+
+
+def test_memory_plan_counts_the_blur():
+    from facetlift import memory
+    from facetlift.problem import prepare
+
+    n, depth, mask = two_bumps((48, 64))
+    prior, sigma = coarse(depth, mask)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        a = prepare(n, mask, prior=prior, prior_weight=0.01)
+        b = prepare(n, mask, prior=prior, prior_weight=0.01, prior_blur=sigma)
+    assert memory.estimate(b, "dgp", {})[0] > memory.estimate(a, "dgp", {})[0]

@@ -398,6 +398,9 @@ def check_prior_blur(prior_blur, has_prior: bool, shape=None) -> float:
     above the image's larger side `shape` (a blur wider than the image fits one plane to
     everything: no coarse map is that coarse)."""
     blur = prior_blur_value(prior_blur)
+    if 0 < blur < 0.5:
+        raise ValueError(f"`prior_blur` below half a pixel is no blur: give 0 to compare the "
+                         f"prior pixel by pixel, or at least 0.5; got {blur!r}")
     if blur > 0 and not has_prior:
         raise ValueError(f"`prior_blur` applies only with a `prior`; got {blur!r} and prior=None")
     if shape is not None and blur > max(shape):

@@ -165,7 +165,9 @@ class BlurredPrior:
         self.done = False
         self.updates = 0
         self._capped = 0  # (updates counted toward MAX_UPDATES)
-        self.accelerate = False  # (Anderson mixing: the direct route turns it on)
+        self.accelerate = False  # (Anderson mixing and reverts: the direct route's)
+        self._mixed = False  # (whether the last step was a mixed one)
+        self._previous = self.target
         self._hist: list = []
         self._dx: list = []
         self._df: list = []
@@ -186,9 +188,13 @@ class BlurredPrior:
     def update(self, centres, settled: bool = True) -> bool:
         """Correct the target for the result's facet-centre values `centres` (m,); returns
         whether it changed (False once stopped: converged, levelled off or at the cap).
+
         While not `settled` (the discontinuity route's weights still move the surface) the
         target is corrected without the stopping test and without counting toward the cap.
-        Where the mismatch grew, :attr:`grew` is set (the previous surface was closer)."""
+        With :attr:`accelerate` (the direct route) the steps are mixed; a mixed step that made
+        the mismatch grow is followed by a plain one from the history's start, and a plain
+        one that did stops the updates with :attr:`grew` set and the target put back: the
+        caller then returns the surface before it (the update is not counted)."""
         if self.done:
             return False
         r = self.mismatch(centres)
@@ -197,17 +203,25 @@ class BlurredPrior:
         last = self.residuals[-1] if self.residuals and self._settled else np.inf
         self.residuals.append(rms)
         self._settled = settled
-        if settled and (rms == 0.0 or rms > (1.0 - self.TOL) * last):
+        mixed, self._mixed = self._mixed, False
+        if settled and rms > last and mixed:  # (a mixed step overshot: start the mixing anew)
+            self._hist.clear()
+            self._dx.clear()
+            self._df.clear()
+        elif settled and (rms == 0.0 or rms > (1.0 - self.TOL) * last):
             self.done = self.converged = True
-            self.grew = rms > last
+            if rms > last and self.accelerate:
+                self.grew = True
+                self.target = self._previous
+                self.updates -= 1
             return False
         if settled and self._capped >= self.MAX_UPDATES:
             self.done = True
             return False
         f = self.OMEGA * r
         step = f
-        if self.accelerate:  # Anderson mixing (ANDERSON): the step the last ones predict
-            hist = self._hist
+        if self.accelerate and self.ANDERSON > 0:  # Anderson mixing: the step the last ones
+            hist = self._hist  # predict
             if hist:
                 t0, f0 = hist[-1]
                 self._dx.append(self.target - t0)
@@ -218,17 +232,25 @@ class BlurredPrior:
                 gamma = np.linalg.lstsq(F, f * sw, rcond=None)[0]
                 step = f - sum(g * (dx + df) for g, dx, df in
                                zip(gamma, self._dx, self._df, strict=True))
+                self._mixed = True
             hist[:] = [(self.target, f)]
+        self._previous = self.target
         self.target = self.target + step
         self.updates += 1
         self._capped += settled
         return True
 
     def info(self) -> dict:
-        """``info["prior_blur"]``: sigma, target updates, the mismatch (RMS in the unknown's
-        units) of the first surface and of the one returned, and whether it levelled off."""
-        last = self.returned if self.returned is not None else (
-            self.residuals[-1] if self.residuals else None)
+        """``info["prior_blur"]``: sigma, target updates, the mismatch (weighted RMS at the
+        samples, in the camera's unknown: height, or log-depth for a perspective camera) of
+        the surface returned, of the first solve's (``mismatch_first``) and of the last
+        surface the updates saw (``mismatch_last``: the discontinuity route's final solve,
+        with its own weights, comes after it), and whether the updates levelled off."""
+        first = self.residuals[0] if self.residuals else None
+        last = self.residuals[-1] if self.residuals else None
+        if self.grew and len(self.residuals) > 1:
+            last = self.residuals[-2]
         return {"sigma": self.sigma, "updates": self.updates,
-                "mismatch": [self.residuals[0], last] if self.residuals else [],
+                "mismatch": self.returned if self.returned is not None else last,
+                "mismatch_first": first, "mismatch_last": last,
                 "converged": self.converged}

@@ -165,7 +165,8 @@ def solve_direct(
             if blur is None:
                 z, sinfo = linalg.solve(K, rhs, route, kind="spd", grid=domain.vertices)
             else:  # (kept for the updates)
-                factor = linalg.factorize(K, route, kind="spd", grid=domain.vertices)
+                factor = linalg.factorize(K, route, kind="spd", grid=domain.vertices,
+                                          rtol=blur.RTOL)
                 z = factor.solve(rhs)
                 sinfo = linalg.SolveInfo(route, factor.info.iterations
                                          if factor.info is not None else None)
