@@ -2,7 +2,8 @@
 
 Scenes of the fusion benchmark (``facetlift bench --experiments fusion``: the discontinuity
 development renders, perspective and orthographic, and the analytic jump scenes), every
-``--step``-th of them, exact normals. The prior is the benchmark's ``coarse`` one (the true
+``--step``-th of them, exact normals (``--normals`` 8bit, 16bit or noise3: the discontinuity
+benchmark's conditions). The prior is the benchmark's ``coarse`` one (the true
 depth averaged over 8 x 8 blocks, blurred by a Gaussian of one block, upsampled bilinearly:
 :func:`facetlift.bench.fusion.coarse_prior`), given either pixel by pixel at the benchmark's
 weight (0.01, ``pointwise``) or with ``prior_blur`` = :data:`facetlift.bench.fusion.BLUR_SIGMA`
@@ -53,6 +54,9 @@ def main(argv=None) -> int:
                     help="prior_blur given (default: the prior's own, BLUR_SIGMA; another "
                     "value measures a misjudged blur)")
     ap.add_argument("--data", type=Path, default=DATA)
+    ap.add_argument("--normals", default="exact", choices=("exact", "16bit", "8bit", "noise3"),
+                    help="the normals' condition (the discontinuity benchmark's: quantised or "
+                    "with 3 degrees of noise)")
     ap.add_argument("--real", action="store_true",
                     help="instead: the real normal maps with ground-truth depth (the DiLiGenT "
                     "bear), the coarse prior made from their ground truth")
@@ -73,13 +77,14 @@ def main(argv=None) -> int:
         f"{c} normals | " + " | ".join(f"{c} {lab}" for lab in labels) for c in columns) + " |")
     print("|---|---|" + "---|" * (len(columns) * (1 + len(labels))))
     for group, name, gt in bd.usable(ctx, scenes, "prior-blur"):  # (the fusion bench's set)
+        normals = bd.condition(gt, args.normals, name)
         prior = bf.coarse_prior(gt)
         e_prior = bf.aligned_error(gt, prior)
         cells = [f"{group[:5]} {name}", f"{e_prior:.3f}"]
         for col in columns:
-            def run(_col=col, gt=gt, **kw):
+            def run(_col=col, gt=gt, normals=normals, **kw):
                 t = time.perf_counter()
-                s = facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size,
+                s = facetlift.integrate(normals, gt.mask, pixel_size=gt.pixel_size,
                                         K=gt.K, **COLUMNS[_col], **kw)
                 return bf.aligned_error(gt, s.depth), time.perf_counter() - t, s.info
 
