@@ -154,12 +154,15 @@ class BlurredPrior:
         np.maximum.at(peak, comp, support)
         share = np.divide(support, peak[comp], out=np.zeros_like(support), where=fixed)
         self.weight = weight * share**self.TAPER
+        self._root = np.sqrt(self.weight)  # (the mixing's row weights)
         self.samples = self.weight > 0
         self.prior = np.where(self.samples, prior, 0.0)
         self.target = self.prior.copy()
         self.sigma = float(sigma)
         self.residuals: list[float] = []
-        self.returned: float | None = None  # (the mismatch of the surface returned)
+        # (the mismatch of the surface returned where the updates did not see it: the
+        # discontinuity route's last solve comes after them)
+        self.returned: float | None = None
         self.converged = False
         self.grew = False  # (stopped because the mismatch grew: the caller may keep the last)
         self.done = False
@@ -168,7 +171,7 @@ class BlurredPrior:
         self.accelerate = False  # (Anderson mixing and reverts: the direct route's)
         self._mixed = False  # (whether the last step was a mixed one)
         self._previous = self.target
-        self._hist: list = []
+        self._last_step = None  # (target, relaxed mismatch) of the last update, for mixing
         self._dx: list = []
         self._df: list = []
         self._settled = False  # (whether the last mismatch was of a settled surface)
@@ -181,9 +184,11 @@ class BlurredPrior:
 
     def rms(self, centres) -> float:
         """The weighted RMS of :meth:`mismatch` (in the unknown's units)."""
-        r = self.mismatch(centres)
-        return float(np.sqrt(np.sum(self.weight * r * r) / max(float(np.sum(self.weight)),
-                                                                1e-300)))
+        return self._rms(self.mismatch(centres))
+
+    def _rms(self, r) -> float:
+        w = self.weight
+        return float(np.sqrt(np.sum(w * r * r) / max(float(np.sum(w)), 1e-300)))
 
     def update(self, centres, settled: bool = True) -> bool:
         """Correct the target for the result's facet-centre values `centres` (m,); returns
@@ -198,14 +203,13 @@ class BlurredPrior:
         if self.done:
             return False
         r = self.mismatch(centres)
-        w = self.weight
-        rms = float(np.sqrt(np.sum(w * r * r) / max(float(np.sum(w)), 1e-300)))
+        rms = self._rms(r)
         last = self.residuals[-1] if self.residuals and self._settled else np.inf
         self.residuals.append(rms)
         self._settled = settled
         mixed, self._mixed = self._mixed, False
         if settled and rms > last and mixed:  # (a mixed step overshot: start the mixing anew)
-            self._hist.clear()
+            self._last_step = None
             self._dx.clear()
             self._df.clear()
         elif settled and (rms == 0.0 or rms > (1.0 - self.TOL) * last):
@@ -221,19 +225,17 @@ class BlurredPrior:
         f = self.OMEGA * r
         step = f
         if self.accelerate and self.ANDERSON > 0:  # Anderson mixing: the step the last ones
-            hist = self._hist  # predict
-            if hist:
-                t0, f0 = hist[-1]
+            if self._last_step is not None:  # predict
+                t0, f0 = self._last_step
                 self._dx.append(self.target - t0)
                 self._df.append(f - f0)
                 del self._dx[:-self.ANDERSON], self._df[:-self.ANDERSON]
-                sw = np.sqrt(self.weight)
-                F = np.stack([d * sw for d in self._df], axis=1)
-                gamma = np.linalg.lstsq(F, f * sw, rcond=None)[0]
+                F = np.stack([d * self._root for d in self._df], axis=1)
+                gamma = np.linalg.lstsq(F, f * self._root, rcond=None)[0]
                 step = f - sum(g * (dx + df) for g, dx, df in
                                zip(gamma, self._dx, self._df, strict=True))
                 self._mixed = True
-            hist[:] = [(self.target, f)]
+            self._last_step = (self.target, f)
         self._previous = self.target
         self.target = self.target + step
         self.updates += 1

@@ -129,7 +129,7 @@ def solve_direct(
             K = (K + KP).tocsr()
             del KP
         z0, tried = None, 0
-        resolve = None  # (x0, rhs) -> x: the same system again (a blurred prior's updates)
+        resolve = factor = None  # (x0, rhs) -> (x, its): the same system again (the updates)
         if route == "pcg" and prior is not None and blur is None and sparse_prior(pw, fixed):
             t1 = time.perf_counter()
             z0, trial = _multigrid_trial(K, rhs, progress)
@@ -162,22 +162,18 @@ def solve_direct(
         else:
             K = pin_components(domain, K, skip=fixed)
             t1 = time.perf_counter()
-            if blur is None:
-                z, sinfo = linalg.solve(K, rhs, route, kind="spd", grid=domain.vertices)
-            else:  # (kept for the updates)
-                factor = linalg.factorize(K, route, kind="spd", grid=domain.vertices,
-                                          rtol=blur.RTOL)
-                z = factor.solve(rhs)
-                sinfo = linalg.SolveInfo(route, factor.info.iterations
-                                         if factor.info is not None else None)
+            factor = linalg.factorize(K, route, kind="spd", grid=domain.vertices,
+                                      rtol=RTOL if blur is None else blur.RTOL)
 
-                def resolve(x0, b):
-                    x = factor.solve(b)
-                    return x, factor.info.iterations if factor.info is not None else None
+            def resolve(x0, b):  # (x0: a factorization needs no start)
+                x = factor.solve(b)
+                return x, factor.info.iterations if factor.info is not None else None
+
+            z, its = resolve(None, rhs)
+            sinfo = linalg.SolveInfo(route, its)
             used = sinfo.backend
         cg_its = sinfo.iterations
         if blur is not None:  # a blurred prior: correct its target, solve again
-            pw = prior[0]
             last = z
             blur.accelerate = True
             while blur.update(z[domain.corners].mean(axis=1)):
@@ -188,8 +184,7 @@ def solve_direct(
                     cg_its += more
             if blur.grew:  # (the last update made it worse: the surface before it)
                 z = last
-            blur.returned = blur.rms(z[domain.corners].mean(axis=1))
-            resolve = factor = None
+        resolve = factor = None
         if tried and used.startswith("pcg-facet"):  # (the multigrid trial's iterations count too)
             cg_its += tried
         del K  # and the preconditioner: free them before the diagnostics
