@@ -5,6 +5,7 @@ Measured values are in the comments; the bounds leave a margin."""
 from __future__ import annotations
 
 import gc
+import math
 import weakref
 from contextlib import nullcontext
 from pathlib import Path
@@ -575,6 +576,25 @@ def test_multigrid_policy_refresh_rebuild_and_block_coarse_space(monkeypatch):
     assert s.info["converged"]
     # measured 1.6e-6 of the depth range apart (the loose solves differ, 1e-4 residual)
     np.testing.assert_allclose(s.depth, ref.depth, atol=1e-4 * np.ptp(ref.depth[ref.mask]))
+
+
+def test_a_slow_solve_on_a_stale_hierarchy_refreshes_it(monkeypatch):
+    """Small weight steps do not refresh the hierarchy, but a solve that needed more than
+    REFRESH_ITS CG iterations on it does, for the next system; the surface is the same."""
+    n, gt, left = scissor_ortho()
+    monkeypatch.setattr(disc, "FORCING", None)  # (as above: comparable paths)
+    monkeypatch.setattr(disc, "REUSE_STEP", math.inf)  # no refresh for a large weight step
+    monkeypatch.setattr(disc, "REFRESH_ITS", math.inf)
+    stale = facetlift.integrate(n, discontinuities=True)
+    assert stale.info["multigrid_refreshes"] == 0
+    monkeypatch.setattr(disc, "REFRESH_ITS", 0)  # any solve with an iteration is slow
+    fresh = facetlift.integrate(n, discontinuities=True)
+    its = fresh.info["cg_iterations"]
+    assert fresh.info["multigrid_refreshes"] > 0
+    # (at most one per solve after the first, the polish's trial included)
+    assert fresh.info["multigrid_refreshes"] <= len(its) - 1
+    assert fresh.info["converged"] and stale.info["converged"]
+    np.testing.assert_allclose(fresh.depth, stale.depth, atol=1e-4 * np.ptp(stale.depth))
 
 
 def test_a_final_solve_cg_cannot_finish_is_factorized_or_its_iterate_kept(monkeypatch):

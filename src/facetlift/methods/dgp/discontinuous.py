@@ -188,11 +188,21 @@ FINAL_COS_POWER = 2
 #: Multigrid policy of the reweightings' solves. The hierarchy of the previous reweighting is
 #: reused as it is while no corner weight moves by more than :data:`REUSE_STEP`; when one
 #: does, its coarse operators are recomputed for the new system (a Galerkin refresh, about a
-#: fifth of a build: the bear 8 builds -> 1); a new hierarchy is built after a CG solve that
-#: took more than :data:`REUSE_ITS` iterations, and from then on the block coarse space of
-#: :data:`COARSE_BLOCK` is added (below).
+#: fifth of a build: the bear 8 builds -> 1), and also after a solve that took more than
+#: :data:`REFRESH_ITS` CG iterations (small steps add up: a hierarchy several reweightings old
+#: took 12-30 iterations where a refreshed one takes 1-5); a new hierarchy is built after a
+#: CG solve that took more than :data:`REUSE_ITS` iterations, and from then on the block
+#: coarse space of :data:`COARSE_BLOCK` is added (below).
 REUSE_ITS = 20
 REUSE_STEP = 0.5
+
+#: Refresh after a solve slower than this (above). On the benchmark's 64 renders at exact,
+#: 8-bit and 3-deg-noise normals (192 runs, one interleaved A/B against no such refresh):
+#: 3 errors moved by more than 1 % (one 11 % better, two 1.4 % worse; every group mean within
+#: 0.1 %), 192 / 192 converged, CG iterations fewer, median time ratio 0.98 (the sum 155.6 ->
+#: 151.0 s); the timing object armadillo@front (49k pixels) 2.7 -> 1.7 s: without it three
+#: builds and the block coarse space, with it one build and no block space (docs/benchmarks.md).
+REFRESH_ITS = 8
 
 #: Side (vertices) of the square blocks whose piecewise constants are solved exactly in every
 #: preconditioning step once CG has been slow (:func:`facetlift.linalg.amg.balanced`). The
@@ -736,15 +746,16 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         # the weights change the system's near-null modes (cut corners): a hierarchy of the
         # current system keeps CG at ~5-15 iterations where one of the smooth system needs
         # hundreds. A new one is built when the last solve was slow; when the weights moved
-        # much, the old one's coarse operators are recomputed for the new system (Galerkin
-        # refresh, a fraction of a build); once the weights settle, it serves as it is
+        # much, or the last solve needed more than REFRESH_ITS iterations on it, the old one's
+        # coarse operators are recomputed for the new system (Galerkin refresh, a fraction of
+        # a build); once the weights settle, it serves as it is
         if amg["ml"] is None or amg["last_its"] > REUSE_ITS or (fresh and amg["for"] is not K):
             amg["ml"] = amg["pre"] = None  # (the old one freed before the new one is built)
             amg["ml"] = hierarchy(K, symmetric_gs=True, interpolation=INTERPOLATION)
             amg["pre"] = vcycle(amg["ml"])
             amg["builds"] += 1
             amg["for"] = K
-        elif rebuild:
+        elif rebuild or amg["last_its"] > REFRESH_ITS:
             refresh(amg["ml"], K)
             amg["refreshes"] += 1
             amg["for"] = None  # refreshed, not built, for K
