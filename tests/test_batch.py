@@ -189,11 +189,22 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
     assert code == 1 and "give inputs" in capsys.readouterr().err
 
 
-def test_dask_local_processes_equal_in_process(tmp_path):
-    pytest.importorskip("dask")
+def test_dask_local_processes_equal_in_process(tmp_path, monkeypatch):
+    dask = pytest.importorskip("dask")
     depths = maps(tmp_path / "in", n=4)
+    asked = []
+    real = dask.compute
+
+    def spy(*a, **k):
+        asked.append(k)
+        return real(*a, **k)
+
+    monkeypatch.setattr(dask, "compute", spy)
     recs = facetlift.batch([tmp_path / "in"], tmp_path / "o", workers=2, save=("npy",))
     assert [r["status"] for r in recs] == ["ok"] * 4
+    # every item dispatched alone (Dask's default chunk of 6 ran these 4 in one worker, one
+    # after another, and logged none of them before all had finished)
+    assert [k.get("chunksize") for k in asked] == [1]
     for name, depth in depths.items():
         np.testing.assert_allclose(np.load(tmp_path / "o" / name / "depth.npy"), depth,
                                    atol=1e-12)

@@ -350,7 +350,10 @@ def _on_processes(jobs, n_workers: int, done) -> None:
 
     try:
         with _Done():
-            dask.compute(*tasks, scheduler="processes", num_workers=n_workers)
+            # one item per dispatch: Dask's default hands ready tasks out in chunks of 6, so a
+            # batch of up to 6 items ran one after another in one worker, and every chunk's
+            # records (the log, the bar) came only when all of it had finished
+            dask.compute(*tasks, scheduler="processes", num_workers=n_workers, chunksize=1)
     except BrokenProcessPool as e:
         raise WorkersDied(
             "the batch's worker processes died before finishing (killed, out of memory, or "
