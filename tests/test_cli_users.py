@@ -196,6 +196,16 @@ def test_info_detects_flips_encodings_and_counts(tmp_path, capsys):
     assert code == 0 and "z flipped" in out and "cannot be integrated as read" in out
 
 
+def test_info_on_a_folder_without_a_normal_map_is_a_clear_error(tmp_path, capsys):
+    """As integrate says it (it was an internal error, exit 3)."""
+    (tmp_path / "maps").mkdir()
+    io.write_normals(tmp_path / "maps" / "bear.png", dome())
+    for folder in (tmp_path / "maps", tmp_path / "maps2"):
+        folder.mkdir(exist_ok=True)
+        code, _, err = run(capsys, "info", folder)
+        assert code == 1 and "has no normal_map file" in err and "internal" not in err
+
+
 def _disk(size):
     yy, xx = np.mgrid[:size, :size]
     mask = (yy - size / 2) ** 2 + (xx - size / 2) ** 2 < (0.45 * size) ** 2

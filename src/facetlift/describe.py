@@ -101,8 +101,8 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None) -> di
               K=None if K is None else str(K), normal_frame=normal_frame,
               mat_keys=None if mat_keys is None else tuple(mat_keys))
     src = job.source
+    inp = read(job)  # (first: a folder without a normal map is the reader's clear error)
     out = {"input": str(src), **_file_facts(src)}
-    inp = read(job)
     n = inp.normals
     H, W = n.shape[:2]
     out.update(shape=[H, W], mask_source=inp.mask_source,
