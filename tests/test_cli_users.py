@@ -83,6 +83,17 @@ def test_opencv_map_read_as_opengl_names_the_flag(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+def test_an_opengl_map_read_as_opencv_is_told_to_drop_the_flag(tmp_path, capsys):
+    """The hint is relative to the frame given (it named the very flag given before)."""
+    stored = io.write_normals(tmp_path / "gl.npy", dome())
+    for cmd in ("integrate", "info"):
+        code, out, err = run(capsys, cmd, stored, "--normal-frame", "opencv")
+        text = one_line(err) if cmd == "integrate" else out
+        assert "face away" in text and "try the default frame" in text, text
+        assert "try --normal-frame opencv" not in text
+        assert code == (1 if cmd == "integrate" else 0)
+
+
 def test_summary_and_json_show_the_mean_deviation(dome_png, tmp_path, capsys):
     code, out, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "a")
     assert code == 0, err

@@ -123,6 +123,35 @@ def test_normals_facing_away_name_the_opencv_frame():
         facetlift.integrate(frames.from_facetlift(n, "opencv"))
 
 
+@pytest.mark.parametrize("stored, given, hint", [
+    ("opengl", "opencv", "the default frame (no --normal-frame"),  # the flag was the mistake
+    ("x,y,-z", "directx", "--normal-frame x,y,-z"),
+    ("opencv", "directx", "--normal-frame opencv (normal_frame='opencv') (z alone)"),
+    ("opengl", "x,-y,-z", "the default frame"),
+])
+def test_the_facing_hint_is_relative_to_the_frame_given(stored, given, hint):
+    """A map read in a frame that makes it face away: the hint names the frame that undoes
+    the camera flips relative to the one given, not the flag the user already gave."""
+    n, _ = bump()
+    with pytest.raises(ValueError, match="face away") as e:
+        facetlift.integrate(frames.from_facetlift(n, stored), normal_frame=given)
+    assert hint in str(e.value) and f"as read in the frame {frames.axis_string(given)}" in str(
+        e.value)
+    # the hint is right: one of the two frames it names reads the map as it was stored
+    devs = [facetlift.integrate(frames.from_facetlift(n, stored), normal_frame=fixed)
+            .info["mean_deviation"] for fixed in (frames.negated(given, a) for a in ("yz", "z"))
+]
+    assert min(devs) == pytest.approx(facetlift.integrate(n).info["mean_deviation"], abs=1e-9)
+
+
+def test_negated_frames_and_their_flags():
+    assert frames.negated(None, "yz") == "opencv" and frames.negated("opencv", "yz") == "opengl"
+    assert frames.negated("directx", "y") == "opengl" and frames.negated(None, "y") == "directx"
+    assert frames.negated("y,-x,z", "x") == "-y,-x,z"
+    assert frames.flag("-y,-x,z") == "--normal-frame=-y,-x,z (normal_frame='-y,-x,z')"
+    assert frames.flag("opengl").startswith("the default frame")
+
+
 def test_flip_check_warns_on_a_y_flipped_map_and_names_the_flag():
     n, _ = bump((40, 48))
     flipped = n * [1, -1, 1]

@@ -111,7 +111,8 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None) -> di
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            checked = frames.checked(n, inp.mask, frame=None)
+            with frames.read_in(normal_frame):  # (read in it already: hints relative to it)
+                checked = frames.checked(n, inp.mask, frame=None)
             problem = prepare(checked, inp.mask, K=inp.K)
         except ValueError as e:
             out["usable"] = False
@@ -199,7 +200,7 @@ def _frame_guess(n, mask, K, problem=None, *, frame=None) -> dict:
         guess["facing_away"] = away
         if away > 0.5:
             guess["likely"] = ("z flipped: the normals face away from the viewer as read "
-                               "(read as opengl, that is --normal-frame opencv)")
+                               f"({frames.facing_hint(frame)})")
             return guess
         lo = inside[:, :2].min()
         if lo >= 0:
@@ -219,8 +220,9 @@ def _frame_guess(n, mask, K, problem=None, *, frame=None) -> dict:
     guess.update(curls)
     own, flipped = curls["curl"], curls["curl_y_flipped"]
     if own > frames.FLIP_MIN_CURL and flipped < frames.FLIP_RATIO * own:
-        guess["likely"] = ("y flipped: far more integrable with y negated (read as opengl, "
-                           "that is --normal-frame directx, or -x,y,z if inside-out)")
+        guess["likely"] = ("y flipped: far more integrable with y negated (try "
+                           f"{frames.flag(frames.negated(frame, 'y'))}, or "
+                           f"{frames.flag(frames.negated(frame, 'x'))} if inside-out)")
     else:
         guess["likely"] = "as read (consistent)"
     return guess

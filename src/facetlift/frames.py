@@ -36,6 +36,8 @@ flipped, and warns when a flip is far more consistent.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import re
 
 import numpy as np
@@ -108,6 +110,49 @@ def is_identity(frame) -> bool:
     """True when `frame` is the facetlift frame (nothing to convert)."""
     channels, signs = parse(frame)
     return channels == (0, 1, 2) and bool((signs > 0).all())
+
+
+def negated(frame, axes: str) -> str:
+    """The frame that reads a source as `frame` does and then negates the facetlift `axes`
+    (e.g. ``"yz"``): its name where one has that axis string, else the axis string. What to
+    suggest when a map read in `frame` comes out flipped."""
+    channels, signs = parse(frame)
+    signs = signs.copy()
+    for a in axes:
+        signs["xyz".index(a)] *= -1
+    text = ",".join(("-" if s < 0 else "") + "xyz"[c] for c, s in zip(channels, signs,
+                                                                          strict=True))
+    for name in ("opengl", "directx", "opencv"):
+        if FRAMES[name] == text:
+            return name
+    return text
+
+
+def flag(frame) -> str:
+    """How to ask for `frame` on the command line and in the API, for a message: the default
+    frame is asked for by giving none."""
+    if is_identity(frame):
+        return "the default frame (no --normal-frame, normal_frame=None)"
+    text = frame if frame in FRAMES else axis_string(frame)
+    sep = "=" if text.startswith("-") else " "
+    return f"--normal-frame{sep}{text} (normal_frame='{text}')"
+
+
+#: The frame normals handed to :func:`checked` in facetlift's frame were read from
+#: (:func:`read_in`): only for the hints of its messages.
+_READ_IN: contextvars.ContextVar = contextvars.ContextVar("facetlift_read_in", default=None)
+
+
+@contextlib.contextmanager
+def read_in(frame):
+    """Within it, normals given to :func:`checked` were converted already from a source in
+    `frame` (e.g. by a reader): a map that faces away gets a hint relative to `frame`, not a
+    suggestion of the frame the user already gave."""
+    token = _READ_IN.set(frame)
+    try:
+        yield
+    finally:
+        _READ_IN.reset(token)
 
 
 def to_facetlift(normals: np.ndarray, frame) -> np.ndarray:
@@ -192,7 +237,7 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
     n = to_facetlift(n, frame)
     sample = _inside(n, mask, sample=CHECK_SAMPLE)
     if sample is not None:
-        _check_facing(sample, name)
+        _check_facing(sample, name, _READ_IN.get() if is_identity(frame) else frame)
         if len(sample) and sample[:, :2].min() >= 0:  # only then can the whole map be encoded
             _check_encoding(_inside(n, mask), name)
     return n
@@ -243,17 +288,28 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
     )
 
 
-def _check_facing(v: np.ndarray, name: str) -> None:
+def _check_facing(v: np.ndarray, name: str, frame=None) -> None:
     if len(v) < ENCODING_CHECK_PIXELS:
         return
     if np.mean(v[:, 2] < 0) <= 0.5:
         return
     raise ValueError(
         f"`{name}`: {np.mean(v[:, 2] < 0):.0%} of the normals inside the mask face away from "
-        "the viewer (z < 0): the map is probably in a camera frame with z pointing away "
-        "(OpenCV, Omnidata, Metric3D): pass normal_frame='opencv' (--normal-frame opencv), or "
-        "see docs/conventions.md for the frame of your source"
+        f"the viewer (z < 0), {facing_hint(frame)}, or see docs/conventions.md for the frame "
+        "of your source"
     )
+
+
+def facing_hint(frame) -> str:
+    """What to try for a map that faces away from the viewer when read in `frame`: relative
+    to the frame given (the flag the user gave is never the suggestion)."""
+    if is_identity(frame):
+        return ("the map is probably in a camera frame with z pointing away (OpenCV, "
+                f"Omnidata, Metric3D): try {flag('opencv')}")
+    # the camera frame's y and z flips, or z alone (the facing says only that z is wrong)
+    return (f"as read in the frame {axis_string(frame)}; try {flag(negated(frame, 'yz'))} "
+            f"(its y and z negated, as a camera frame has them) or "
+            f"{flag(negated(frame, 'z'))} (z alone)")
 
 
 # --------------------------------------------------------------------------------------------
@@ -327,9 +383,11 @@ def flip_check(problem) -> dict:
         warn(
             f"the normals are far more integrable with y flipped (relative curl {own:.2f} as "
             f"given, {out['curl_y_flipped']:.2f} with y flipped): its frame is probably wrong "
-            "in y. For a map read in the default frame try --normal-frame directx "
-            "(normal_frame='directx'), or --normal-frame=-x,y,z if the surface then comes out "
-            "inside-out; docs/conventions.md lists the frames of common sources"
+            "in y: negate the y axis of the frame it was read in (read in the default "
+            "frame: try --normal-frame directx, normal_frame='directx'; read as directx: the "
+            "default frame), or its x axis if the surface then comes out inside-out (from the "
+            "default: --normal-frame=-x,y,z); docs/conventions.md lists the frames of common "
+            "sources"
         )
     return out
 

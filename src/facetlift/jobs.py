@@ -215,7 +215,7 @@ def run(job: Job, *, progress=None) -> dict:
     """
     import facetlift
 
-    from . import io, methods
+    from . import frames, io, methods
 
     t0 = time.perf_counter()
     info = methods.get(job.method)
@@ -237,7 +237,8 @@ def run(job: Job, *, progress=None) -> dict:
                              f"method option prior={opts['prior']!r} were both given")
         depth_prior = opts.pop("prior", None) if inp.prior is None else inp.prior
         t1 = time.perf_counter()
-        with warnings.catch_warnings(record=True) as caught:
+        with warnings.catch_warnings(record=True) as caught, frames.read_in(
+                job.normal_frame):
             warnings.simplefilter("always")
             surface = facetlift.integrate(
                 inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size, K=inp.K,
