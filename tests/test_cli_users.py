@@ -329,6 +329,48 @@ def test_report_adds_a_discontinuity_panel_when_the_surface_has_one(tmp_path, mo
     assert (tmp_path / "b.png").stat().st_size != (tmp_path / "a.png").stat().st_size
 
 
+def test_report_deviation_is_the_solves_and_its_scale_is_robust(tmp_path, monkeypatch):
+    """The deviation panel's mean is info['mean_deviation'] (over the normals used: a few
+    dropped grazing ones no longer raise it), its colour scale ends at the 99th percentile
+    (those normals' large angles blackened the rest), and panels are cropped to the object."""
+    pytest.importorskip("matplotlib")
+    from matplotlib.axes import Axes
+
+    from facetlift.io import report
+
+    n = dome(40, 48)
+    mask = np.zeros((60, 90), bool)
+    mask[10:50, 20:68] = True
+    full = np.full((60, 90, 3), np.nan)
+    full[mask] = n.reshape(-1, 3)
+    full[12, 30] = [0.999, 0.0, 0.0447]  # grazing: a missing sample (about 87 degrees)
+    full[12, 30] /= np.linalg.norm(full[12, 30])
+    s = facetlift.integrate(full, mask)
+    assert s.info["input"]["grazing"] == 1
+    titles, shapes, tops = [], [], []
+    real_title, real_imshow = Axes.set_title, Axes.imshow
+
+    def title(self, text, *a, **k):
+        titles.append(text)
+        return real_title(self, text, *a, **k)
+
+    def imshow(self, img, *a, **k):
+        shapes.append(img.shape[:2])
+        tops.append(k.get("vmax"))
+        return real_imshow(self, img, *a, **k)
+
+    monkeypatch.setattr(Axes, "set_title", title)
+    monkeypatch.setattr(Axes, "imshow", imshow)
+    report.write_report(tmp_path / "r.png", s, full)
+    dev = [t for t in titles if t.startswith("deviation")]
+    assert dev == [f"deviation from input (mean {s.info['mean_deviation']:.2f} deg)"]
+    _, _, err = facetlift.metrics.angular_error(s, full)
+    assert tops[titles.index(dev[0])] == pytest.approx(np.nanpercentile(err, 99))
+    assert np.nanmax(err) > 80 > 2 * tops[titles.index(dev[0])]
+    # cropped to the mask's box (40 x 48) with a 3 % margin (1 row, 2 columns each side)
+    assert set(shapes) == {(40 + 2 * 1, 48 + 2 * 2)}
+
+
 def test_report_without_matplotlib_names_the_extra(tmp_path, monkeypatch, capsys, dome_png):
     from facetlift.io import report
 

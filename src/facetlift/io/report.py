@@ -3,7 +3,11 @@
 Panels: the surface shaded by two lights (upper left and lower right, so a bent or inside-out
 result shows), the depth colour-mapped with a colour bar, the angular deviation between the
 input normals and the result's facets, and the depth discontinuities where the result has them
-(``Surface.discontinuities`` or ``Surface.info["discontinuities"]``, an (H, W) map).
+(``Surface.discontinuities`` or ``Surface.info["discontinuities"]``, an (H, W) map), each
+cropped to the mask's bounding box. The deviation panel's mean is the solve's
+(``info["mean_deviation"]``, over the normals it used); its colour scale, and the jump map's,
+end at the 99th percentile (larger values saturate), and the jump map's one-pixel lines are
+widened to stay visible in a small panel.
 """
 
 from __future__ import annotations
@@ -60,26 +64,36 @@ def write_report(path, surface, normals=None, *, dpi: int = 100) -> Path:
         ) from e
     from ..metrics import angular_error
 
-    panels = [(f"shaded, light {i + 1}", shade(surface, light=L), "gray", None)
+    panels = [(f"shaded, light {i + 1}", shade(surface, light=L), "gray", None, 1.0)
               for i, L in enumerate(LIGHTS)]
-    panels.append(("depth", np.where(surface.mask, surface.depth, np.nan), "viridis", "depth"))
+    panels.append(("depth", np.where(surface.mask, surface.depth, np.nan), "viridis", "depth",
+                   None))
+    info = surface.info if isinstance(surface.info, dict) else {}
     if normals is not None:
         mean, _, err = angular_error(surface, normals)
-        panels.append((f"deviation from input (mean {mean:.2f} deg)", err, "magma", "degrees"))
+        # the solve's own figure where it has one: over the normals it used (grazing and
+        # back-facing ones are missing samples; their large angles show in the map, bright)
+        mean = info.get("mean_deviation", mean)
+        panels.append((f"deviation from input (mean {mean:.2f} deg)", err, "magma",
+                       "degrees", _robust_max(err)))
     jumps = discontinuity_map(surface)
     if jumps is not None:
-        panels.append(("discontinuities", np.where(surface.mask, jumps, np.nan), "inferno",
-                       None))
+        box = _bbox(surface.mask)
+        shown = _thickened(np.where(surface.mask, jumps, 0.0),
+                           (box[0].stop - box[0].start, box[1].stop - box[1].start))
+        panels.append(("discontinuities (jump height)", np.where(surface.mask, shown, np.nan),
+                       "inferno", "depth", _robust_max(np.where(shown > 0, shown, np.nan))))
     H, W = surface.shape
+    box = _bbox(surface.mask)  # (every panel cropped to the object, with a small margin)
+    panels = [(t, img[box], c, lab, top) for t, img, c, lab, top in panels]
     cols = 2 if len(panels) <= 4 else 3
     rows = -(-len(panels) // cols)
-    aspect = H / max(W, 1)
+    aspect = (box[0].stop - box[0].start) / max(box[1].stop - box[1].start, 1)
     fig = Figure(figsize=(4.2 * cols, 4.2 * rows * min(max(aspect, 0.3), 3.0) + 0.6))
-    info = surface.info if isinstance(surface.info, dict) else {}
     fig.suptitle(f"{H}x{W}, {int(surface.mask.sum())} facets, method {info.get('method', '?')}")
-    for k, (title, img, cmap, label) in enumerate(panels):
+    for k, (title, img, cmap, label, top) in enumerate(panels):
         ax = fig.add_subplot(rows, cols, k + 1)
-        kw = {"vmin": 0.0, "vmax": 1.0} if cmap == "gray" else {}
+        kw = {} if top is None else {"vmin": 0.0, "vmax": top}
         im = ax.imshow(np.ma.masked_invalid(img), cmap=cmap, interpolation="nearest", **kw)
         ax.set_title(title, fontsize=9)
         ax.set_axis_off()
@@ -89,3 +103,46 @@ def write_report(path, surface, normals=None, *, dpi: int = 100) -> Path:
     fig.savefig(buf, format="png", dpi=dpi)
     _write_bytes(p, buf.getvalue())
     return p
+
+
+#: Colour scales end at this percentile (a few huge values, e.g. the angles of grazing normals
+#: that were left out, would leave the rest of the panel black); larger values saturate.
+PERCENTILE = 99.0
+
+#: Thin features are widened to about this many image pixels per panel pixel's worth: a
+#: one-pixel cut line of a 600-pixel map vanishes in a 300-pixel panel.
+PANEL_PIXELS = 250
+
+
+def _robust_max(img) -> float | None:
+    """The colour scale's top for `img`: its :data:`PERCENTILE` (None when nothing is finite
+    or it is 0: matplotlib's own scale)."""
+    v = np.asarray(img, float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return None
+    top = float(np.percentile(v, PERCENTILE))
+    return top if top > 0 else None
+
+
+def _thickened(img: np.ndarray, shape) -> np.ndarray:
+    """`img` (0 where nothing) with each value spread to its neighbours by a maximum filter
+    sized to the map, so that one-pixel lines stay visible in a small panel."""
+    from scipy.ndimage import maximum_filter
+
+    k = max(1, -(-max(shape) // PANEL_PIXELS))
+    return maximum_filter(img, size=2 * (k // 2) + 1) if k > 1 else img
+
+
+def _bbox(mask) -> tuple[slice, slice]:
+    """Rows and columns of the mask's bounding box, widened by 3 % of each side (the whole
+    image when the mask is empty)."""
+    m = np.asarray(mask, bool)
+    if not m.any():
+        return slice(0, m.shape[0]), slice(0, m.shape[1])
+    out = []
+    for axis in (1, 0):
+        idx = np.flatnonzero(m.any(axis=axis))
+        pad = max(1, int(0.03 * m.shape[1 - axis]))
+        out.append(slice(max(0, idx[0] - pad), min(m.shape[1 - axis], idx[-1] + 1 + pad)))
+    return out[0], out[1]
