@@ -194,6 +194,19 @@ def test_zero_length_normal_inside_mask():
     assert (~facetlift.prepare(n, np.ones((6, 7), bool), known=known).known).sum() == 1
 
 
+def test_a_vanishingly_short_normal_is_zero_length_but_a_scaled_map_is_not():
+    """(1e-12, 0, 0) has no direction, only rounding: it was renormalised to (1, 0, 0), an
+    edge-on normal taken as usable in perspective; it is a missing sample now. The rule is
+    relative to the map's median length, so a map scaled as a whole keeps every normal."""
+    n = up()
+    n[3, 4] = [1e-12, 0.0, 0.0]
+    with pytest.warns(UserWarning, match=r"1 zero-length.*first at \(row 3, col 4\)"):
+        p = facetlift.prepare(n, np.ones((6, 7), bool))
+    assert p.counts["zero-length"] == 1 and (~p.known).sum() == 1
+    scaled = facetlift.prepare(up() * 1e-9, np.ones((6, 7), bool))
+    assert scaled.counts["zero-length"] == 0 and scaled.known.all()
+
+
 @pytest.mark.parametrize(
     "mask, match",
     [

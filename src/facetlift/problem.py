@@ -25,6 +25,11 @@ from .domain import Domain
 #: ``backfacing=`` choices: treat such normals as missing samples, or raise.
 BACKFACING = ("missing", "error", "outlier")
 
+#: A normal shorter than this fraction of the map's median normal length counts as
+#: zero-length (no direction, only rounding: a (1e-12, 0, 0) was renormalised to (1, 0, 0));
+#: relative, so that a map scaled as a whole keeps every normal.
+ZERO_LENGTH = 1e-6
+
 
 @dataclass(eq=False)
 class Problem:
@@ -311,13 +316,16 @@ def prepare(
         if huge.any():
             nf[huge] /= np.abs(nf[huge]).max(axis=1, keepdims=True)
             length[huge] = np.sqrt(np.einsum("ij,ij->i", nf[huge], nf[huge]))
+        typical = length[given & np.isfinite(length) & (length > 0)]
+        tiny = ZERO_LENGTH * float(np.median(typical)) if typical.size else 0.0
+        short = np.isfinite(length) & (length <= tiny)  # (tiny >= 0: zero counts)
         nf /= length[:, None]
     nan = given & np.isnan(length)
     bad = {
         "non-finite": given & ~nan & ~np.isfinite(length),
-        "zero-length": given & (length == 0),
+        "zero-length": given & short,
     }
-    ok = given & np.isfinite(length) & (length > 0)
+    ok = given & np.isfinite(length) & ~short
     r, c = domain.pixels
     with np.errstate(invalid="ignore"):
         cos = np.where(ok, cam.view_cosine(r, c, nf, unit=True), 0.0)
