@@ -20,6 +20,7 @@ import facetlift
 from facetlift import frames, io
 from facetlift.cli import main
 from facetlift.errors import MemoryLimitError
+from facetlift.jobs import Job
 
 BEAR = "../shared/data/normal_maps/diligent_bear"
 
@@ -369,6 +370,27 @@ def test_report_deviation_is_the_solves_and_its_scale_is_robust(tmp_path, monkey
     assert np.nanmax(err) > 80 > 2 * tops[titles.index(dev[0])]
     # cropped to the mask's box (40 x 48) with a 3 % margin (1 row, 2 columns each side)
     assert set(shapes) == {(40 + 2 * 1, 48 + 2 * 2)}
+
+
+def test_an_output_the_job_cannot_make_is_refused_before_it_runs(tmp_path, capsys, dome_png,
+                                                                   monkeypatch):
+    """The discontinuity map without discontinuities, or from a method that makes none:
+    refused before reading the input (it was refused after the whole integration)."""
+    import facetlift.jobs as fj
+
+    reads = []
+    monkeypatch.setattr(fj, "read", lambda job: reads.append(job) or (_ for _ in ()).throw(
+        AssertionError("read")))
+    code, _, err = run(capsys, "integrate", dome_png, "-s", "discontinuities", "-o",
+                       tmp_path / "o")
+    assert code == 1 and "add --discontinuities" in one_line(err) and reads == []
+    assert not (tmp_path / "o").exists()
+    code, _, err = run(capsys, "batch", dome_png, "-s", "discontinuities", "-o", tmp_path / "b",
+                       "--workers", "1")
+    assert code == 1 and "add --discontinuities" in one_line(err)
+    fj._check_outputs(("discontinuities",), Job(normals="x", options={"discontinuities": True}))
+    with pytest.raises(ValueError, match=r"comes only from \['dgp'\]"):  # (bini has no map)
+        fj._check_outputs(("discontinuities",), Job(normals="x", method="bini"))
 
 
 def test_report_without_matplotlib_names_the_extra(tmp_path, monkeypatch, capsys, dome_png):

@@ -298,6 +298,9 @@ def check_template(job: Job) -> None:
     unknown = [s for s in save if s not in OUTPUTS]
     if unknown:
         raise ValueError(f"`save`: unknown output(s) {unknown}; valid: {sorted(OUTPUTS)}")
+    from .jobs import _check_outputs
+
+    _check_outputs(save, job)
 
 
 def _workers(workers, n_jobs: int) -> int:

@@ -190,6 +190,42 @@ def _normals_from_field(g: dict, job: Job) -> np.ndarray:
                                                                  job.gradient_frame))
 
 
+def _check_outputs(save, job: Job) -> None:
+    """Refuse outputs the job cannot produce before it runs: the report without matplotlib,
+    the discontinuity map without ``discontinuities`` (the method's value, given or default).
+
+    Raises
+    ------
+    ImportError, ValueError
+    """
+    if "report" in save:
+        try:
+            import matplotlib.figure  # noqa: F401
+        except ImportError as e:
+            raise ImportError(
+                "the report (--save report) needs matplotlib, which comes with the plot "
+                "extra: pip install 'facetlift[plot]'"
+            ) from e
+    if "discontinuities" in save:
+        from . import methods
+        from .options import validate
+
+        info = methods.get(job.method)
+        if not info.jump_map:
+            able = sorted(k for k, v in methods.REGISTRY.items() if v.jump_map)
+            raise ValueError(
+                "`save`: 'discontinuities' (discontinuities.png, the map of depth jumps) comes "
+                f"only from {able} with --discontinuities; method {job.method!r} gives none"
+            )
+        spec = {o.name for o in info.specs()}
+        opts = {k: v for k, v in dict(job.options).items() if k in spec}
+        if not validate(info.specs(), opts, job.method)["discontinuities"]:
+            raise ValueError(
+                "`save`: 'discontinuities' (discontinuities.png, the map of depth jumps) needs "
+                "a surface with jumps: add --discontinuities (discontinuities=True)"
+            )
+
+
 def run(job: Job, *, progress=None) -> dict:
     """Run `job`: outputs written as one set; returns its record.
 
@@ -223,6 +259,7 @@ def run(job: Job, *, progress=None) -> dict:
     unknown = [s for s in save if s not in OUTPUTS]
     if unknown:
         raise ValueError(f"`save`: unknown output(s) {unknown}; valid: {sorted(OUTPUTS)}")
+    _check_outputs(save, job)  # (before any reading or solving: not after the whole job)
     src = job.source
     outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)
     names = [OUTPUTS[s] for s in save]

@@ -63,6 +63,9 @@ class MethodInfo:
     #: Grazing threshold (view cosine) that ``discontinuities=True`` uses for every camera
     #: when the caller gives no ``outlier_eps``; None: the camera's own default.
     jump_grazing: float | None = None
+    #: With ``discontinuities=True`` the surface carries its cut edges and jump map
+    #: (``Surface.discontinuities``, ``--save discontinuities``) and a mesh split at them.
+    jump_map: bool = False
 
     def _module(self):
         return importlib.import_module(f"facetlift.methods.{self.module}")
@@ -114,6 +117,7 @@ register(
         # line of near-edge-on normals whose huge, unreliable slopes would bridge it
         # (docs/results.md, "Discontinuities: the grazing rule")
         jump_grazing=OUTLIER_EPS,
+        jump_map=True,
     )
 )
 
