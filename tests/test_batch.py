@@ -189,6 +189,26 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
     assert code == 1 and "give inputs" in capsys.readouterr().err
 
 
+def test_the_default_workers_without_dask_run_in_this_process(tmp_path, monkeypatch):
+    """Without the batch extra the default is one worker (it was the CPU count, which then
+    failed for want of Dask); an explicit workers=2 still names the extra."""
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_dask(name, *a, **k):
+        if name == "dask" or name.startswith("dask."):
+            raise ImportError("No module named 'dask'")
+        return real_import(name, *a, **k)
+
+    monkeypatch.setattr(builtins, "__import__", no_dask)
+    maps(tmp_path / "in", n=2)
+    recs = facetlift.batch([tmp_path / "in"], tmp_path / "o", save=("npy",))
+    assert [r["status"] for r in recs] == ["ok", "ok"]
+    with pytest.raises(ImportError, match=r"facetlift\[batch\]"):
+        facetlift.batch([tmp_path / "in"], tmp_path / "p", workers=2, save=("npy",))
+
+
 def test_dask_local_processes_equal_in_process(tmp_path, monkeypatch):
     dask = pytest.importorskip("dask")
     depths = maps(tmp_path / "in", n=4)

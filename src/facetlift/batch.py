@@ -186,8 +186,9 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         The template for every item (method, options, outputs, frame ...); or give its fields
         as keywords (``method="dgp"``, ``save=("npy",)``, ``options={...}``).
     workers : int, optional
-        Local worker processes (default: the CPU count, at most the item count); 1 runs the
-        items one after another in this process, without Dask.
+        Local worker processes (default: the CPU count, at most the item count, where Dask is
+        installed, else 1); 1 runs the items one after another in this process, without
+        Dask.
     scheduler : str or dask.distributed.Client, optional
         A ``dask.distributed`` scheduler address (``"tcp://host:8786"``) or client: run there
         instead. The workers must see the input and output paths.
@@ -304,7 +305,11 @@ def check_template(job: Job) -> None:
 
 
 def _workers(workers, n_jobs: int) -> int:
-    if workers is None:
+    if workers is None:  # the default: every core, where Dask (the batch extra) is there
+        try:
+            import dask  # noqa: F401
+        except ImportError:
+            return 1
         return max(1, min(os.cpu_count() or 1, n_jobs))
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"`workers` must be a positive integer; got {workers!r}")

@@ -434,8 +434,9 @@ def _mib(b: float) -> str:
 @click.option("-o", "--out", "outdir", required=True,
               type=click.Path(file_okay=False, path_type=Path),
               help="Output folder: one subfolder per item, and the log batch.jsonl.")
-@click.option("--workers", type=int, help="Local worker processes (default: the CPU count; "
-              "1 runs in this process without Dask).")
+@click.option("--workers", type=int, help="Local worker processes (default: the CPU count "
+              "where Dask, the batch extra, is installed, else 1; 1 runs in this process "
+              "without Dask).")
 @click.option("--scheduler", metavar="ADDRESS",
               help="Run on a dask.distributed cluster, e.g. tcp://host:8786 (the workers must "
               "see the input and output paths).")
