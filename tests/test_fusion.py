@@ -311,6 +311,13 @@ def test_dataset_folder_picks_up_prior_and_confidence(tmp_path, capsys):
     assert rec["info"]["input"]["zero_confidence"] == 9
     out = np.load(tmp_path / "o" / "depth.npy")
     assert np.abs(out[sel] - prior[sel]).max() < 1e-3
+    assert rec["info"]["prior"]["gauge"] is None  # (every component fixed: no gauge applied)
+    # the text summary says that a prior and a confidence map were used (read silently)
+    code = main(["integrate", str(folder), "-s", "npy", "--prior-weight", "1e6",
+                 "-o", str(tmp_path / "t")])
+    out = capsys.readouterr().out
+    assert code == 0 and f"depth prior: {int(sel.sum())} samples fixing 1 of 1" in out
+    assert "confidence map" in out
 
 
 @pytest.mark.parametrize("extra,match", [

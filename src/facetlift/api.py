@@ -286,8 +286,9 @@ def solve(
 
 def prior_info(problem: Problem, surface: Surface) -> dict:
     """``info["prior"]``: samples used, components whose constant the prior fixed, those that
-    kept the camera's gauge (1-based labels of ``Domain.labels``), and the fit at the samples
-    (mean and largest absolute depth difference)."""
+    kept the camera's gauge (1-based labels of ``Domain.labels``) and that gauge (None when
+    the prior fixed every component), and the fit at the samples (mean and largest absolute
+    depth difference)."""
     d = problem.domain
     w = problem.prior_weight
     used = w > 0
@@ -295,7 +296,8 @@ def prior_info(problem: Problem, surface: Surface) -> dict:
     depth = surface.depth[d.mask]
     target = problem.camera.to_depth(np.where(used, problem.prior, 0.0))
     diff = np.abs(depth - target)[used]
-    gauge = problem.camera.gauge_name
+    # (the camera's gauge applies only to the components without a sample)
+    gauge = problem.camera.gauge_name if (~fixed).any() else None
     return {
         "samples": int(used.sum()),
         "components": int(d.n_components),

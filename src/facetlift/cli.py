@@ -279,6 +279,13 @@ def summary(record: dict) -> str:
     if it is not None:
         parts.append(f"{it} iteration{'s' if it != 1 else ''}"
                      + ("" if record["converged"] else " (not converged)"))
+    prior = info.get("prior")
+    if isinstance(prior, dict):  # (also a dataset folder's prior_depth file, read silently)
+        parts.append(f"depth prior: {prior.get('samples')} samples fixing "
+                     f"{len(prior.get('prior_components', []))} of "
+                     f"{prior.get('components')} components")
+    if "zero_confidence" in (info.get("input") or {}):
+        parts.append("confidence map")
     dev = record.get("mean_deviation")
     if dev is not None:
         parts.append(f"mean deviation {dev:.2f} deg")
