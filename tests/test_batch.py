@@ -209,6 +209,40 @@ def test_the_default_workers_without_dask_run_in_this_process(tmp_path, monkeypa
         facetlift.batch([tmp_path / "in"], tmp_path / "p", workers=2, save=("npy",))
 
 
+def _sleep_forever():  # (a worker task that never ends by itself)
+    import time
+
+    time.sleep(600)
+
+
+def test_an_interrupted_pool_is_stopped_at_once():
+    """_stop terminates the pool's workers (a Ctrl-C used to wait for the running items, or
+    hang at exit), and leaves the host's own child processes alone."""
+    import multiprocessing
+    import time
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = multiprocessing.get_context("spawn")
+    host = ctx.Process(target=_sleep_forever, daemon=True)  # a process of the caller's
+    host.start()
+    try:
+        before = {p.pid for p in multiprocessing.active_children()}
+        pool = ProcessPoolExecutor(2, mp_context=ctx, initializer=fb._worker_start)
+        futures = [pool.submit(_sleep_forever) for _ in range(2)]
+        deadline = time.monotonic() + 60
+        while len(pool._processes) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        workers = list(pool._processes.values())
+        t0 = time.monotonic()
+        fb._stop(pool, before)
+        assert time.monotonic() - t0 < fb.STOP_GRACE + 1
+        assert workers and not any(p.is_alive() for p in workers)
+        assert all(f.cancelled() or f.done() for f in futures)
+        assert host.is_alive()  # not ours
+    finally:
+        host.kill()
+
+
 def test_dask_local_processes_equal_in_process(tmp_path, monkeypatch):
     dask = pytest.importorskip("dask")
     depths = maps(tmp_path / "in", n=4)

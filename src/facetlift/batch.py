@@ -352,23 +352,79 @@ def _on_processes(jobs, n_workers: int, done) -> None:
             if key in keys:
                 done(keys[key], result)
 
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
+
+    from dask.multiprocessing import get_context
 
     from .errors import WorkersDied
 
+    # our own pool, so that an interrupt stops its workers: Dask's own waits for the running
+    # items at shutdown, and an interrupt during a worker's start could leave the process
+    # waiting for it at exit (a Ctrl-C hang, 2 of 2 tries at 3 s into a 3-map batch)
+    before = {p.pid for p in multiprocessing.active_children()}  # (the host's own: not ours)
+    pool = ProcessPoolExecutor(n_workers, mp_context=get_context(), initializer=_worker_start)
     try:
         with _Done():
             # one item per dispatch: Dask's default hands ready tasks out in chunks of 6, so a
             # batch of up to 6 items ran one after another in one worker, and every chunk's
             # records (the log, the bar) came only when all of it had finished
-            dask.compute(*tasks, scheduler="processes", num_workers=n_workers, chunksize=1)
-    except BrokenProcessPool as e:
-        raise WorkersDied(
-            "the batch's worker processes died before finishing (killed, out of memory, or "
-            "started from a script without `if __name__ == '__main__':`, which worker "
-            "processes need); the log has the items that finished: rerun with resume=True, "
-            "or with workers=1"
-        ) from e
+            dask.compute(*tasks, scheduler="processes", num_workers=n_workers, chunksize=1,
+                         pool=pool)
+    except BaseException as e:  # (an interrupt too: the running items are abandoned)
+        _stop(pool, before)
+        if isinstance(e, BrokenProcessPool):
+            raise WorkersDied(
+                "the batch's worker processes died before finishing (killed, out of memory, "
+                "or started from a script without `if __name__ == '__main__':`, which worker "
+                "processes need); the log has the items that finished: rerun with "
+                "resume=True, or with workers=1"
+            ) from e
+        raise
+    pool.shutdown(wait=True)
+
+
+def _worker_start() -> None:
+    """A batch worker process leaves Ctrl-C to the parent, which stops it (:func:`_stop`)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+#: Seconds :func:`_stop` waits for terminated workers before it kills them.
+STOP_GRACE = 5.0
+
+
+def _stop(pool, before=frozenset()) -> None:
+    """Terminate a process pool's workers at once (their items are abandoned: every item's
+    outputs are written as one set, so nothing partial is left) and release it.
+
+    Every child process started since `before` (pids) counts: an interrupt during a worker's
+    start can leave it outside the pool's own table, and the pool's manager thread then waits
+    for it at exit (a hang that a Ctrl-C caused). Terminated, then killed after
+    :data:`STOP_GRACE` seconds."""
+    import multiprocessing
+
+    def ours():
+        procs = {p.pid: p for p in multiprocessing.active_children() if p.pid not in before}
+        procs.update(dict(getattr(pool, "_processes", None) or {}))
+        return [p for p in procs.values() if p.is_alive()]
+
+    def signal_all(procs, kill=False):
+        for proc in procs:
+            try:
+                proc.kill() if kill else proc.terminate()
+            except Exception:  # pragma: no cover - (gone meanwhile)
+                pass
+
+    signal_all(ours())
+    pool.shutdown(wait=False, cancel_futures=True)
+    deadline = time.monotonic() + STOP_GRACE
+    while (alive := ours()) and time.monotonic() < deadline:
+        signal_all(alive)
+        time.sleep(0.05)
+    signal_all(ours(), kill=True)
 
 
 def _on_cluster(jobs, scheduler, done) -> None:
