@@ -205,6 +205,11 @@ def test_a_vanishingly_short_normal_is_zero_length_but_a_scaled_map_is_not():
     assert p.counts["zero-length"] == 1 and (~p.known).sum() == 1
     scaled = facetlift.prepare(up() * 1e-9, np.ones((6, 7), bool))
     assert scaled.counts["zero-length"] == 0 and scaled.known.all()
+    # huge normals, some of whose squared lengths overflow (those are rescaled to about 1)
+    rng = np.random.default_rng(3)
+    huge = up() * rng.uniform(0.98, 1.02, (6, 7, 1)) * 1.32e154
+    p = facetlift.prepare(huge, np.ones((6, 7), bool))
+    assert p.counts["zero-length"] == 0 and p.known.all()
 
 
 @pytest.mark.parametrize(

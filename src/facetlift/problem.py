@@ -316,9 +316,12 @@ def prepare(
         if huge.any():
             nf[huge] /= np.abs(nf[huge]).max(axis=1, keepdims=True)
             length[huge] = np.sqrt(np.einsum("ij,ij->i", nf[huge], nf[huge]))
-        typical = length[given & np.isfinite(length) & (length > 0)]
+        # (the median of at most ~65k of them: a 1e-6 threshold needs no exact one; the
+        # huge ones rescaled above are lengths about 1 beside ~1e154: not short)
+        typical = length[given & np.isfinite(length) & (length > 0) & ~huge]
+        typical = typical[:: max(1, typical.size // 65536)]
         tiny = ZERO_LENGTH * float(np.median(typical)) if typical.size else 0.0
-        short = np.isfinite(length) & (length <= tiny)  # (tiny >= 0: zero counts)
+        short = np.isfinite(length) & (length <= tiny) & ~huge  # (tiny >= 0: zero counts)
         nf /= length[:, None]
     nan = given & np.isnan(length)
     bad = {
