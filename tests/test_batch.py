@@ -202,6 +202,7 @@ def test_the_default_workers_without_dask_run_in_this_process(tmp_path, monkeypa
         return real_import(name, *a, **k)
 
     monkeypatch.setattr(builtins, "__import__", no_dask)
+    monkeypatch.setattr(fb.os, "cpu_count", lambda: 4)  # (on one CPU the default was 1 anyway)
     maps(tmp_path / "in", n=2)
     recs = facetlift.batch([tmp_path / "in"], tmp_path / "o", save=("npy",))
     assert [r["status"] for r in recs] == ["ok", "ok"]

@@ -126,7 +126,7 @@ def test_normals_facing_away_name_the_opencv_frame():
 @pytest.mark.parametrize("stored, given, hint", [
     ("opengl", "opencv", "the default frame (no --normal-frame"),  # the flag was the mistake
     ("x,y,-z", "directx", "--normal-frame x,y,-z"),
-    ("opencv", "directx", "--normal-frame opencv (normal_frame='opencv') (z alone)"),
+    ("opencv", "directx", "z alone negated: --normal-frame opencv"),
     ("opengl", "x,-y,-z", "the default frame"),
 ])
 def test_the_facing_hint_is_relative_to_the_frame_given(stored, given, hint):
@@ -160,6 +160,11 @@ def test_flip_check_warns_on_a_y_flipped_map_and_names_the_flag():
         s = facetlift.integrate(flipped)
     ic = s.info["integrability"]
     assert ic["curl_y_flipped"] < frames.FLIP_RATIO * ic["curl"]
+    # read in another frame, the hint is relative to it (not the flag given)
+    with pytest.warns(UserWarning, match=r"frame \(read in the frame x,-y,z\) is probably "
+                      r"wrong in y: try the default frame") as rec:
+        facetlift.integrate(frames.from_facetlift(flipped, "directx"), normal_frame="directx")
+    assert "try --normal-frame directx" not in str(rec[0].message)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         good = facetlift.integrate(n)

@@ -160,7 +160,10 @@ def integrate(
         outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight, confidence=confidence,
         grazing_note=note, prior_blur=prior_blur,
     )
-    return solve(problem, method, t0=t0, max_memory=max_memory, **options)
+    if frames.is_identity(normal_frame):
+        return solve(problem, method, t0=t0, max_memory=max_memory, **options)
+    with frames.read_in(normal_frame):  # (the flip check's hint is relative to it)
+        return solve(problem, method, t0=t0, max_memory=max_memory, **options)
 
 
 def integrate_gradients(

@@ -225,7 +225,9 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     if job is not None and job_options:
         raise ValueError(f"give `job` or job options, not both; got {sorted(job_options)}")
     template = job if job is not None else Job(**job_options)
-    check_template(template)  # once, before any item: a bad template is no per-item failure
+    # once, before any item: a bad template is no per-item failure (a report's matplotlib is
+    # the workers' affair on a cluster)
+    check_template(template, local=scheduler is None)
     found = items(inputs, list_file=list_file)
     root = Path(out).resolve()
     prepare_folder(root)  # created and checked before any work
@@ -262,16 +264,20 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     return [results[it.path] for it in found]
 
 
-def check_template(job: Job) -> None:
+def check_template(job: Job, local: bool = True) -> None:
     """Refuse a batch template that would fail every item: its method, method options,
     ``max_memory``, normal and gradient frames and output kinds are checked as
     :func:`facetlift.jobs.run` and :func:`facetlift.integrate` would check them, and
-    ``prior_blur``'s value and the method's capability for it.
+    ``prior_blur``'s value and the method's capability for it, and outputs the items could
+    not make (:func:`facetlift.jobs._check_outputs`; the report's matplotlib only where the
+    items run in this process or its workers: `local`).
 
     Raises
     ------
     ValueError
         Naming the field and what was received.
+    ImportError
+        ``save`` asks for the report and matplotlib is missing (with `local`).
     """
     from . import frames, memory, methods
     from .jobs import OUTPUTS
@@ -301,7 +307,7 @@ def check_template(job: Job) -> None:
         raise ValueError(f"`save`: unknown output(s) {unknown}; valid: {sorted(OUTPUTS)}")
     from .jobs import _check_outputs
 
-    _check_outputs(save, job)
+    _check_outputs(save, job, local=local)
 
 
 def _workers(workers, n_jobs: int) -> int:

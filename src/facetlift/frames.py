@@ -307,9 +307,9 @@ def facing_hint(frame) -> str:
         return ("the map is probably in a camera frame with z pointing away (OpenCV, "
                 f"Omnidata, Metric3D): try {flag('opencv')}")
     # the camera frame's y and z flips, or z alone (the facing says only that z is wrong)
-    return (f"as read in the frame {axis_string(frame)}; try {flag(negated(frame, 'yz'))} "
-            f"(its y and z negated, as a camera frame has them) or "
-            f"{flag(negated(frame, 'z'))} (z alone)")
+    return (f"as read in the frame {axis_string(frame)}; try that frame with y and z negated, "
+            f"as a camera frame has them: {flag(negated(frame, 'yz'))}; or with z alone "
+            f"negated: {flag(negated(frame, 'z'))}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -380,14 +380,14 @@ def flip_check(problem) -> dict:
     }
     own, best = out["curl"], min(out["curl_y_flipped"], out["curl_x_flipped"])
     if own > FLIP_MIN_CURL and best < FLIP_RATIO * own:
+        frame = _READ_IN.get()  # (the frame the map was read in: the hint is relative to it)
+        read = "" if is_identity(frame) else f" (read in the frame {axis_string(frame)})"
         warn(
             f"the normals are far more integrable with y flipped (relative curl {own:.2f} as "
-            f"given, {out['curl_y_flipped']:.2f} with y flipped): its frame is probably wrong "
-            "in y: negate the y axis of the frame it was read in (read in the default "
-            "frame: try --normal-frame directx, normal_frame='directx'; read as directx: the "
-            "default frame), or its x axis if the surface then comes out inside-out (from the "
-            "default: --normal-frame=-x,y,z); docs/conventions.md lists the frames of common "
-            "sources"
+            f"given, {out['curl_y_flipped']:.2f} with y flipped): its frame{read} is probably "
+            f"wrong in y: try {flag(negated(frame, 'y'))}, or {flag(negated(frame, 'x'))} if "
+            "the surface then comes out inside-out; docs/conventions.md lists the frames of "
+            "common sources"
         )
     return out
 

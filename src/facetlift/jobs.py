@@ -190,15 +190,16 @@ def _normals_from_field(g: dict, job: Job) -> np.ndarray:
                                                                  job.gradient_frame))
 
 
-def _check_outputs(save, job: Job) -> None:
-    """Refuse outputs the job cannot produce before it runs: the report without matplotlib,
-    the discontinuity map without ``discontinuities`` (the method's value, given or default).
+def _check_outputs(save, job: Job, local: bool = True) -> None:
+    """Refuse outputs the job cannot produce before it runs: the report without matplotlib
+    (where it is drawn here: `local`), the discontinuity map without ``discontinuities`` (the
+    method's value, given or default) or from a method that makes none.
 
     Raises
     ------
     ImportError, ValueError
     """
-    if "report" in save:
+    if "report" in save and local:
         try:
             import matplotlib.figure  # noqa: F401
         except ImportError as e:
@@ -217,8 +218,8 @@ def _check_outputs(save, job: Job) -> None:
                 "`save`: 'discontinuities' (discontinuities.png, the map of depth jumps) comes "
                 f"only from {able} with --discontinuities; method {job.method!r} gives none"
             )
-        spec = {o.name for o in info.specs()}
-        opts = {k: v for k, v in dict(job.options).items() if k in spec}
+        opts = {k: v for k, v in dict(job.options).items() if k != "max_memory"}
+        # (every option checked: a misspelt one is named as such, not taken as absent)
         if not validate(info.specs(), opts, job.method)["discontinuities"]:
             raise ValueError(
                 "`save`: 'discontinuities' (discontinuities.png, the map of depth jumps) needs "
@@ -310,7 +311,8 @@ def _write(surface, kind: str, path: Path, normals, triangles) -> None:
     from . import io
 
     if kind == "report":
-        io.write_report(path, surface, normals)
+        io.write_report(path, surface, normals,
+                        mean_deviation=surface.info.get("mean_deviation"))
     elif kind == "discontinuities":
         io.write_discontinuities(path, surface)
     elif kind in ("ply", "obj") and triangles is not None:

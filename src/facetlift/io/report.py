@@ -4,8 +4,8 @@ Panels: the surface shaded by two lights (upper left and lower right, so a bent 
 result shows), the depth colour-mapped with a colour bar, the angular deviation between the
 input normals and the result's facets, and the depth discontinuities where the result has them
 (``Surface.discontinuities`` or ``Surface.info["discontinuities"]``, an (H, W) map), each
-cropped to the mask's bounding box. The deviation panel's mean is the solve's
-(``info["mean_deviation"]``, over the normals it used); its colour scale, and the jump map's,
+cropped to the mask's bounding box. The deviation panel's mean is the one given (the command
+line gives the solve's, over the normals it used); its colour scale, and the jump map's,
 end at the 99th percentile (larger values saturate), and the jump map's one-pixel lines are
 widened to stay visible in a small panel.
 """
@@ -36,7 +36,8 @@ def discontinuity_map(surface) -> np.ndarray | None:
     return d if d.shape == surface.shape and d.dtype.kind in "biuf" else None
 
 
-def write_report(path, surface, normals=None, *, dpi: int = 100) -> Path:
+def write_report(path, surface, normals=None, *, dpi: int = 100,
+                 mean_deviation: float | None = None) -> Path:
     """Write the report PNG (see the module docstring).
 
     Parameters
@@ -47,6 +48,10 @@ def write_report(path, surface, normals=None, *, dpi: int = 100) -> Path:
     normals : (H, W, 3) array_like, optional
         The input normals (facetlift frame); without them the deviation panel is left out.
     dpi : int
+    mean_deviation : float, optional
+        The mean deviation to title that panel with (the command line passes the solve's,
+        ``info["mean_deviation"]``, over the normals it used); default: the mean over every
+        finite normal given.
 
     Raises
     ------
@@ -71,9 +76,10 @@ def write_report(path, surface, normals=None, *, dpi: int = 100) -> Path:
     info = surface.info if isinstance(surface.info, dict) else {}
     if normals is not None:
         mean, _, err = angular_error(surface, normals)
-        # the solve's own figure where it has one: over the normals it used (grazing and
-        # back-facing ones are missing samples; their large angles show in the map, bright)
-        mean = info.get("mean_deviation", mean)
+        # (the solve's figure is over the normals it used: grazing and back-facing ones are
+        # missing samples, whose large angles show in the map, bright)
+        if mean_deviation is not None and np.isfinite(mean_deviation):
+            mean = float(mean_deviation)
         panels.append((f"deviation from input (mean {mean:.2f} deg)", err, "magma",
                        "degrees", _robust_max(err)))
     jumps = discontinuity_map(surface)
