@@ -134,6 +134,10 @@ def test_gradients_flag_and_gradient_frame(tmp_path, capsys):
     assert code == 0, err
     np.testing.assert_allclose(np.load(tmp_path / "b" / "depth.npy"), expected, atol=1e-10)
     assert (tmp_path / "a_facetlift").exists() is False
+    # the row/column field without --gradient-frame: the warning names the flag
+    code, _, err = run(capsys, "integrate", "--gradients", tmp_path / "prow.npy",
+                       tmp_path / "qcol.npy", "-o", tmp_path / "c", "-s", "npy")
+    assert code == 0 and "--gradient-frame rowcol" in err, err
 
 
 def test_gradient_input_refusals(tmp_path, capsys, dome_png):

@@ -215,6 +215,26 @@ def test_integrate_gradients_in_both_layouts(frame, rel_err):
     assert rel_err(s.height[inner], z[inner]) < 0.05
 
 
+def test_a_gradient_field_in_the_other_layout_is_named():
+    """p = dz/d(row) read as dz/dx turns the field by 90 degrees (no flip of the normals
+    undoes it, and the surface came out with no warning): the layout check names the flag;
+    the right layout is silent."""
+    r, c = np.indices((24, 30))
+    z = 3 * np.exp(-((r - 11.5) ** 2 + (c - 14.5) ** 2) / 40)
+    zr = np.pad(z, 1, mode="edge")
+    dz_dcol = (zr[1:-1, 2:] - zr[1:-1, :-2]) / 2
+    dz_drow = (zr[2:, 1:-1] - zr[:-2, 1:-1]) / 2
+    with pytest.warns(UserWarning, match=r"other layout.*--gradient-frame rowcol"):
+        facetlift.integrate_gradients(dz_drow, dz_dcol)  # a row/column field read as xy
+    with pytest.warns(UserWarning, match=r"other layout.*--gradient-frame xy"):
+        facetlift.integrate_gradients(dz_dcol, -dz_drow, gradient_frame="queau")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = frames.layout_check(dz_drow, dz_dcol, "rowcol")
+    assert out["curl"] < 0.05 < 0.5 < out["curl_other_layout"]
+    assert np.isnan(frames.field_curl(np.full((4, 4), np.nan), np.zeros((4, 4))))
+
+
 def test_integrate_gradients_refusals():
     p = np.zeros((5, 5))
     with pytest.raises(ValueError, match="`gradient_frame` must be one of"):

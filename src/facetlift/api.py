@@ -201,6 +201,7 @@ def integrate_gradients(
         if kwargs.get(key) is not None:
             raise ValueError(f"`{key}` does not apply to a gradient field (orthographic slopes)")
     px, qy = frames.gradients_to_facetlift(p, q, gradient_frame)
+    frames.layout_check(p, q, gradient_frame, mask)  # (warns when the other layout fits)
     normals = normals_from_gradients(px, qy)
     return integrate(normals, mask, pixel_size=pixel_size, **kwargs)
 

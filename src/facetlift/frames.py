@@ -417,6 +417,63 @@ def gradient_frame(name) -> str:
     return key
 
 
+def field_curl(gx, gy, mask=None, *, sample: int = CURL_SAMPLE) -> float:
+    """:func:`relative_curl` of a gradient field in facetlift's frame (``gx = dz/dx``,
+    ``gy = dz/dy``, y up), over the 2 x 2 blocks inside `mask` whose slopes are finite and not
+    grazing (the paper's rule, cos 85 deg: such huge slopes dominate the sums); NaN without
+    one. Large fields are sampled in strips of two rows (about `sample` pixels)."""
+    from .conventions import OUTLIER_EPS
+
+    gx = np.asarray(gx, dtype=float)
+    gy = np.asarray(gy, dtype=float)
+    if gx.ndim != 2 or gx.shape != gy.shape or min(gx.shape) < 2:
+        return float("nan")
+    H, W = gx.shape
+    step = 1 if H * W <= sample else max(2, H // max(1, sample // (2 * W)))
+    tops = np.arange(0, H - 1, step)
+    with np.errstate(invalid="ignore", over="ignore"):
+        ok = gx * gx + gy * gy < 1.0 / OUTLIER_EPS**2 - 1.0  # (False for NaN and inf)
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.shape == gx.shape:
+            ok &= m != 0
+    a, b = tops, tops + 1  # (row a above row b: y up)
+    with np.errstate(invalid="ignore"):
+        dgx_dy = (gx[a, :-1] + gx[a, 1:] - gx[b, :-1] - gx[b, 1:]) / 2
+        dgy_dx = (gy[a, 1:] + gy[b, 1:] - gy[a, :-1] - gy[b, :-1]) / 2
+    good = ok[a, :-1] & ok[a, 1:] & ok[b, :-1] & ok[b, 1:]
+    if not good.any():
+        return float("nan")
+    total = (np.abs(dgx_dy[good]) + np.abs(dgy_dx[good])).sum()
+    return float(np.abs((dgx_dy - dgy_dx)[good]).sum() / total) if total > 0 else 0.0
+
+
+def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
+    """Relative curl (:func:`field_curl`) of the gradient field (p, q) read in `frame` and in
+    the other layout; warns, naming ``--gradient-frame``, when the other is far more
+    integrable (the thresholds of :func:`flip_check`): ``p = dz/d(row)`` read as ``dz/dx``
+    turns the field by 90 degrees, which no flip of the normals undoes.
+
+    Returns
+    -------
+    dict
+        ``{"curl": ..., "curl_other_layout": ...}``.
+    """
+    given = gradient_frame(frame)
+    other = "rowcol" if given == "xy" else "xy"
+    out = {"curl": field_curl(*gradients_to_facetlift(p, q, given), mask),
+           "curl_other_layout": field_curl(*gradients_to_facetlift(p, q, other), mask)}
+    own, alt = out["curl"], out["curl_other_layout"]
+    if own > FLIP_MIN_CURL and alt < FLIP_RATIO * own:
+        meaning = GRADIENT_FRAMES[other]
+        warn(
+            f"the gradient field is far more integrable in the other layout (relative curl "
+            f"{own:.2f} read as {given!r}, {alt:.2f} as {other!r}: {meaning}): try "
+            f"--gradient-frame {other} (gradient_frame='{other}')"
+        )
+    return out
+
+
 def gradients_to_facetlift(p, q, frame: str = "xy"):
     """(p, q) in `frame` -> facetlift's ``(dz/dx, dz/dy)`` with x right and y up.
 

@@ -186,6 +186,7 @@ def _normals_from_field(g: dict, job: Job) -> np.ndarray:
 
     if job.normal_frame is not None:
         raise ValueError("`normal_frame` does not apply to a gradient field; use --gradient-frame")
+    frames.layout_check(g["p"], g["q"], job.gradient_frame, g.get("mask"))
     return normals_from_gradients(*frames.gradients_to_facetlift(g["p"], g["q"],
                                                                  job.gradient_frame))
 
@@ -265,7 +266,9 @@ def run(job: Job, *, progress=None) -> dict:
     outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)
     names = [OUTPUTS[s] for s in save]
     with io.OutputSet(outdir, names, inputs=input_paths(job)) as out:
-        inp = read(job)
+        with warnings.catch_warnings(record=True) as read_caught:  # (the gradient layout's)
+            warnings.simplefilter("always")
+            inp = read(job)
         t_read = time.perf_counter() - t0
         opts = dict(job.options)
         if progress is not None and "progress" in info.options() and "progress" not in opts:
@@ -300,7 +303,7 @@ def run(job: Job, *, progress=None) -> dict:
         "perspective": surface.K is not None,
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),
         "converged": bool(sinfo.get("converged", True)),
-        "warnings": [str(w.message) for w in caught],
+        "warnings": [str(w.message) for w in (*read_caught, *caught)],
         "info": jsonable(sinfo),
         "timings": {"read": t_read, "integrate": t_integrate,
                     "write": time.perf_counter() - t2, "total": time.perf_counter() - t0},
