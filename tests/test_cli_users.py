@@ -222,6 +222,23 @@ def test_info_on_a_folder_without_a_normal_map_is_a_clear_error(tmp_path, capsys
         assert code == 1 and "has no normal_map file" in err and "internal" not in err
 
 
+def test_info_takes_the_gradient_layout_and_y_down_and_shows_warnings(tmp_path, capsys):
+    """A row/column gradient field read as xy: info shows the layout warning (it said only
+    'consistent'); --gradient-frame rowcol silences it; --y-down is accepted as by
+    integrate, and the hint is relative to it."""
+    n = dome()
+    p, q = facetlift.gradients_from_normals(n)
+    sio.savemat(tmp_path / "g.mat", {"p": -q, "q": p})  # rowcol: dz/d(row), dz/d(col)
+    code, out, _ = run(capsys, "info", tmp_path / "g.mat")
+    assert code == 0 and "warning: the gradient field is far more integrable in the other " \
+        "layout" in out and "--gradient-frame rowcol" in out
+    code, out, _ = run(capsys, "info", tmp_path / "g.mat", "--gradient-frame", "rowcol")
+    assert code == 0 and "warning:" not in out
+    stored = io.write_normals(tmp_path / "n.npy", n)
+    code, out, _ = run(capsys, "info", stored, "--y-down")
+    assert code == 0 and "read as directx" in out and "try the default frame" in out
+
+
 def _disk(size):
     yy, xx = np.mgrid[:size, :size]
     mask = (yy - size / 2) ** 2 + (xx - size / 2) ** 2 < (0.45 * size) ** 2

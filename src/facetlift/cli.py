@@ -369,9 +369,12 @@ def integrate(normals, gradients, progress, as_json, **flags):
               help="Perspective intrinsics, as for 'integrate'.")
 @click.option("--normal-frame", "normal_frame", metavar="FRAME",
               help="Read the map in this frame (as for 'integrate').")
+@click.option("--y-down", is_flag=True, help="Alias of --normal-frame directx.")
+@click.option("--gradient-frame", "gradient_frame", default="xy", show_default=True,
+              help="Layout of a gradient field in a .mat input (as for 'integrate').")
 @click.option("--mat-keys", metavar="KEYS", help="Variable names in a .mat input.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def info(normals, mask, K, normal_frame, mat_keys, as_json):
+def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
     encoding, mask and components, unusable normals, K, and the memory planner's estimate of
     the peak memory the default integration would need (the figure --max-memory is checked
@@ -382,10 +385,11 @@ def info(normals, mask, K, normal_frame, mat_keys, as_json):
       facetlift info normal_map.png --mask mask.png
       facetlift info data/bear/ --json
     """
+    from . import frames
     from .describe import describe
 
-    rec = describe(normals, mask=mask, K=K, normal_frame=normal_frame,
-                   mat_keys=_split(mat_keys))
+    rec = describe(normals, mask=mask, K=K, normal_frame=frames.resolve(normal_frame, y_down),
+                   mat_keys=_split(mat_keys), gradient_frame=gradient_frame)
     if as_json:
         click.echo(json.dumps(jsonable(rec)))
         return EXIT_OK
@@ -404,6 +408,7 @@ def _info_lines(rec: dict) -> list[str]:
     frame = rec.get("frame", {})
     lines.append(f"  frame: read as {frame.get('as_read')}; likely {frame.get('likely', '?')}")
     lines.append(f"  camera: {rec['projection']}" + (f", K = {rec['K']}" if rec["K"] else ""))
+    lines += [f"  warning: {w}" for w in rec.get("warnings", [])]
     if not rec["usable"]:
         lines.append(f"  cannot be integrated as read: {rec['problem']}")
         return lines

@@ -74,7 +74,8 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
     }
 
 
-def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None) -> dict:
+def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
+             gradient_frame: str = "xy") -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
     encoding, mask and components, unusable normals (with the first one's location), K, and
     :func:`estimate` for the default method.
@@ -87,6 +88,8 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None) -> di
         As for ``facetlift integrate``.
     normal_frame : str, optional
         The frame to read it in (default facetlift's).
+    gradient_frame : str
+        The layout of a gradient field in a ``.mat`` input (as for ``integrate``).
 
     Raises
     ------
@@ -99,10 +102,14 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None) -> di
 
     job = Job(normals=str(path), mask=None if mask is None else str(mask),
               K=None if K is None else str(K), normal_frame=normal_frame,
-              mat_keys=None if mat_keys is None else tuple(mat_keys))
+              mat_keys=None if mat_keys is None else tuple(mat_keys),
+              gradient_frame=gradient_frame)
     src = job.source
-    inp = read(job)  # (first: a folder without a normal map is the reader's clear error)
-    out = {"input": str(src), **_file_facts(src)}
+    with warnings.catch_warnings(record=True) as read_caught:  # (a gradient layout's, ...)
+        warnings.simplefilter("always")
+        inp = read(job)  # (first: a folder without a normal map is the reader's clear error)
+    out = {"input": str(src), **_file_facts(src),
+           "warnings": [str(w.message) for w in read_caught]}
     n = inp.normals
     H, W = n.shape[:2]
     out.update(shape=[H, W], mask_source=inp.mask_source,
@@ -127,7 +134,7 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None) -> di
         components=int(d.n_components),
         counts=counts,
         first_unusable=counts.pop("first_unusable", None),
-        warnings=[str(w.message) for w in caught],
+        warnings=out["warnings"] + [str(w.message) for w in caught],
         frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame),
         estimate=estimate(problem),
         discontinuity_grazing=_jump_grazing(problem),
