@@ -179,7 +179,7 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
                  "--resume", "--save", "npy", "--json"])
     out, err = capsys.readouterr()
     assert code == 1 and "batch: 2 of 3 succeeded (2 from an earlier run), 1 failed" in err
-    assert "facetlift: error: z: error:" in err
+    assert "facetlift: error: z (error):" in err
     assert callable(fb) and fb.items is fb.__dict__["items"]
     assert [json.loads(line)["name"] for line in out.splitlines()] == ["m0", "m1", "z"]
     code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "1",
@@ -244,6 +244,22 @@ def test_an_interrupted_pool_is_stopped_at_once():
         host.kill()
 
 
+def test_cli_batch_shows_each_items_warnings(tmp_path, capsys):
+    """A warning of one item (here: a y-flipped map) is shown on stderr with the item's name,
+    as integrate shows it; it was only in the log."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    r, c = np.indices((30, 36)) + 0.5  # z = 4 sin(c / 4) cos(r / 5): y up is minus the row
+    n = facetlift.normals_from_gradients(np.cos(c / 4) * np.cos(r / 5),
+                                         0.8 * np.sin(c / 4) * np.sin(r / 5))
+    io.write_normals(folder / "flipped.png", n * [1, -1, 1])
+    code = main(["batch", str(folder), "-o", str(tmp_path / "o"), "--workers", "1", "-s", "npy",
+                 "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 0 and "facetlift: warning: flipped: the normals are far more integrable " \
+        "with y flipped" in err
+
+
 def test_dask_local_processes_equal_in_process(tmp_path, monkeypatch):
     dask = pytest.importorskip("dask")
     depths = maps(tmp_path / "in", n=4)
@@ -279,7 +295,7 @@ def test_distributed_local_cluster_with_two_workers_equals_in_process(tmp_path, 
                                    scheduler=client, save=("npy",))
     out, err = capsys.readouterr()
     assert code == 1 and "batch: 4 of 5 succeeded, 1 failed" in out
-    assert "facetlift: error: bad: error:" in err
+    assert "facetlift: error: bad (error):" in err
     for name, depth in depths.items():
         np.testing.assert_allclose(np.load(tmp_path / "o" / name / "depth.npy"), depth,
                                    atol=1e-12)

@@ -477,8 +477,12 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     records = run_batch(inputs, outdir, job=job, workers=workers, scheduler=scheduler,
                         resume=resume, progress=_show_progress(progress), list_file=list_file)
     failed = [r for r in records if r["status"] != "ok"]
+    for r in records:  # (as integrate shows them; a resumed item's were shown before)
+        if not r.get("resumed"):
+            for w in r.get("warnings") or ():
+                click.echo(f"facetlift: warning: {r['name']}: {w}", err=True)
     for r in failed:
-        click.echo(f"facetlift: error: {r['name']}: {r['status']}: {r['error']}", err=True)
+        click.echo(f"facetlift: error: {r['name']} ({r['status']}): {r['error']}", err=True)
     if as_json:
         for r in records:
             click.echo(json.dumps(jsonable(r)))
