@@ -150,6 +150,26 @@ def test_blurred_prior_beats_both_inputs_and_the_pointwise_fusion(options):
     assert s.info["converged"]
 
 
+def test_a_heavy_weight_with_a_blurred_prior_is_warned_about():
+    """With prior_blur the prior is met by undoing its blur; a weight above BLUR_WEIGHT_WARN
+    amplifies the prior's errors (on the bear, weight 1: worse than the prior alone), so it
+    gets a warning naming the measured range; the benchmark's 0.003 is silent."""
+    from facetlift import problem as fp
+
+    n, depth, mask = two_bumps((48, 64))
+    prior, sigma = coarse(depth, mask)
+    with pytest.warns(UserWarning, match=r"`prior_weight` 1 with `prior_blur`.*deconvolution"):
+        facetlift.prepare(n, mask, prior=prior, prior_blur=sigma)
+    weights = np.full(mask.shape, 0.003)
+    weights[:3] = 5.0  # (a few heavy samples: the median decides)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        facetlift.prepare(n, mask, prior=prior, prior_weight=0.003, prior_blur=sigma)
+        facetlift.prepare(n, mask, prior=prior, prior_weight=weights, prior_blur=sigma)
+        facetlift.prepare(n, mask, prior=prior, prior_weight=1.0)  # (pointwise: no blur)
+    assert fp.BLUR_WEIGHT_WARN == 0.03
+
+
 def test_zero_blur_is_the_pointwise_prior():
     n, depth, mask = two_bumps((48, 64))
     prior, _ = coarse(depth, mask)
