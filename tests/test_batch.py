@@ -223,19 +223,20 @@ def test_an_interrupted_pool_is_stopped_at_once():
     import time
     from concurrent.futures import ProcessPoolExecutor
 
-    ctx = multiprocessing.get_context("spawn")
-    host = ctx.Process(target=_sleep_forever, daemon=True)  # a process of the caller's
-    host.start()
+    base = multiprocessing.get_context("spawn")
+    host = base.Process(target=_sleep_forever, daemon=True)  # a process of the caller's
+    ctx = fb._Recording(base)
+    pool = ProcessPoolExecutor(2, mp_context=ctx, initializer=fb._worker_start)
     try:
-        before = {p.pid for p in multiprocessing.active_children()}
-        pool = ProcessPoolExecutor(2, mp_context=ctx, initializer=fb._worker_start)
         futures = [pool.submit(_sleep_forever) for _ in range(2)]
+        host.start()  # (started while the batch runs: still not ours)
         deadline = time.monotonic() + 60
         while len(pool._processes) < 2 and time.monotonic() < deadline:
             time.sleep(0.05)
         workers = list(pool._processes.values())
+        assert sorted(p.pid for p in workers) == sorted(p.pid for p in ctx.started)
         t0 = time.monotonic()
-        fb._stop(pool, before)
+        fb._stop(pool, ctx.started)
         assert time.monotonic() - t0 < fb.STOP_GRACE + 1
         assert workers and not any(p.is_alive() for p in workers)
         assert all(f.cancelled() or f.done() for f in futures)

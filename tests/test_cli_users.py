@@ -138,6 +138,14 @@ def test_gradients_flag_and_gradient_frame(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", "--gradients", tmp_path / "prow.npy",
                        tmp_path / "qcol.npy", "-o", tmp_path / "c", "-s", "npy")
     assert code == 0 and "--gradient-frame rowcol" in err, err
+    # a slope of the wrong sign: the hint names the slope, not a --normal-frame it refuses
+    r, c = np.indices((30, 36)) + 0.5
+    np.save(tmp_path / "p2.npy", np.cos(c / 4) * np.cos(r / 5))
+    np.save(tmp_path / "q2.npy", -0.8 * np.sin(c / 4) * np.sin(r / 5))
+    code, _, err = run(capsys, "integrate", "--gradients", tmp_path / "p2.npy",
+                       tmp_path / "q2.npy", "-o", tmp_path / "d", "-s", "npy")
+    assert code == 0 and "negate q" in err and "--normal-frame" not in err, err
+    assert "other layout" not in err
 
 
 def test_gradient_input_refusals(tmp_path, capsys, dome_png):

@@ -231,8 +231,26 @@ def test_a_gradient_field_in_the_other_layout_is_named():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         out = frames.layout_check(dz_drow, dz_dcol, "rowcol")
-    assert out["curl"] < 0.05 < 0.5 < out["curl_other_layout"]
-    assert np.isnan(frames.field_curl(np.full((4, 4), np.nan), np.zeros((4, 4))))
+    assert out["curl"] < 0.05 < 0.3 < out["curl_other_layout"]
+    assert np.isnan(frames.layout_curls(np.full((4, 4), np.nan), np.zeros((4, 4)))).all()
+    r, c = np.indices((30, 36)) + 0.5  # a slope of the wrong sign is not taken for a layout
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        frames.layout_check(np.cos(c / 4) * np.cos(r / 5), -0.8 * np.sin(c / 4) * np.sin(r / 5))
+    # fields integrable in both layouts are silent: a saddle (no divergence either), a
+    # paraboloid read right, both with a little noise (a saddle's noise-over-noise curl of
+    # 0.71 warned before), and a plane
+    y, x = np.indices((96, 128)) * [[[-1]], [[1]]]
+    rng = np.random.default_rng(0)
+    noise = [1e-3 * rng.standard_normal(x.shape) for _ in range(2)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for k in (0.3, 1.0):
+            frames.layout_check(k * x + noise[0], -k * y + noise[1])  # z = k/2 (x^2 - y^2)
+            frames.layout_check(k * x + noise[0], k * y + noise[1])  # z = k/2 (x^2 + y^2)
+        frames.layout_check(np.full(x.shape, 0.2), np.full(x.shape, -0.1))
+    with pytest.warns(UserWarning, match="--gradient-frame rowcol"):  # (the paraboloid turned)
+        frames.layout_check(-(0.3 * y), 0.3 * x)
 
 
 def test_integrate_gradients_refusals():

@@ -203,7 +203,8 @@ def integrate_gradients(
     px, qy = frames.gradients_to_facetlift(p, q, gradient_frame)
     frames.layout_check(p, q, gradient_frame, mask)  # (warns when the other layout fits)
     normals = normals_from_gradients(px, qy)
-    return integrate(normals, mask, pixel_size=pixel_size, **kwargs)
+    with frames.read_in(frames.GRADIENT_FIELD):  # (hints speak of p and q)
+        return integrate(normals, mask, pixel_size=pixel_size, **kwargs)
 
 
 def _check_discontinuities(info: methods.MethodInfo, value) -> bool:

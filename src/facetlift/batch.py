@@ -358,7 +358,6 @@ def _on_processes(jobs, n_workers: int, done) -> None:
             if key in keys:
                 done(keys[key], result)
 
-    import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
@@ -369,8 +368,8 @@ def _on_processes(jobs, n_workers: int, done) -> None:
     # our own pool, so that an interrupt stops its workers: Dask's own waits for the running
     # items at shutdown, and an interrupt during a worker's start could leave the process
     # waiting for it at exit (a Ctrl-C hang, 2 of 2 tries at 3 s into a 3-map batch)
-    before = {p.pid for p in multiprocessing.active_children()}  # (the host's own: not ours)
-    pool = ProcessPoolExecutor(n_workers, mp_context=get_context(), initializer=_worker_start)
+    ctx = _Recording(get_context())  # (every worker it starts: what _stop stops)
+    pool = ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_worker_start)
     try:
         with _Done():
             # one item per dispatch: Dask's default hands ready tasks out in chunks of 6, so a
@@ -379,7 +378,7 @@ def _on_processes(jobs, n_workers: int, done) -> None:
             dask.compute(*tasks, scheduler="processes", num_workers=n_workers, chunksize=1,
                          pool=pool)
     except BaseException as e:  # (an interrupt too: the running items are abandoned)
-        _stop(pool, before)
+        _stop(pool, ctx.started)
         if isinstance(e, BrokenProcessPool):
             raise WorkersDied(
                 "the batch's worker processes died before finishing (killed, out of memory, "
@@ -402,35 +401,50 @@ def _worker_start() -> None:
 STOP_GRACE = 5.0
 
 
-def _stop(pool, before=frozenset()) -> None:
-    """Terminate a process pool's workers at once (their items are abandoned: every item's
-    outputs are written as one set, so nothing partial is left) and release it.
+class _Recording:
+    """A multiprocessing context that records every process made through it (the pool's
+    workers, recorded before they start: an interrupt during a start still finds them), and is
+    the given context in everything else. (The processes themselves are the context's own:
+    a spawned one is pickled, which a class of ours defined here could not be.)"""
 
-    Every child process started since `before` (pids) counts: an interrupt during a worker's
-    start can leave it outside the pool's own table, and the pool's manager thread then waits
-    for it at exit (a hang that a Ctrl-C caused). Terminated, then killed after
-    :data:`STOP_GRACE` seconds."""
-    import multiprocessing
+    def __init__(self, base):
+        self._base = base
+        self.started: list = []
 
-    def ours():
-        procs = {p.pid: p for p in multiprocessing.active_children() if p.pid not in before}
-        procs.update(dict(getattr(pool, "_processes", None) or {}))
-        return [p for p in procs.values() if p.is_alive()]
+    def Process(self, *args, **kwargs):  # noqa: N802 - (the context's own name)
+        proc = self._base.Process(*args, **kwargs)
+        self.started.append(proc)
+        return proc
 
-    def signal_all(procs, kill=False):
-        for proc in procs:
+    def __getattr__(self, name):
+        return getattr(self._base, name)
+
+
+def _stop(pool, procs) -> None:
+    """Terminate a process pool's workers `procs` at once (their items are abandoned: every
+    item's outputs are written as one set, so nothing partial is left) and release the pool;
+    one still alive after :data:`STOP_GRACE` seconds, or when a second interrupt cuts the
+    wait short, is killed. Only these: the host's own processes are left alone."""
+
+    def alive():
+        return [p for p in list(procs) if p.pid is not None and p.is_alive()]
+
+    def signal_all(ps, kill=False):
+        for proc in ps:
             try:
                 proc.kill() if kill else proc.terminate()
             except Exception:  # pragma: no cover - (gone meanwhile)
                 pass
 
-    signal_all(ours())
-    pool.shutdown(wait=False, cancel_futures=True)
-    deadline = time.monotonic() + STOP_GRACE
-    while (alive := ours()) and time.monotonic() < deadline:
-        signal_all(alive)
-        time.sleep(0.05)
-    signal_all(ours(), kill=True)
+    try:
+        signal_all(alive())
+        pool.shutdown(wait=False, cancel_futures=True)
+        deadline = time.monotonic() + STOP_GRACE
+        while (left := alive()) and time.monotonic() < deadline:
+            signal_all(left)
+            time.sleep(0.05)
+    finally:
+        signal_all(alive(), kill=True)
 
 
 def _on_cluster(jobs, scheduler, done) -> None:

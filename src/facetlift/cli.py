@@ -388,6 +388,7 @@ def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, as_js
     from . import frames
     from .describe import describe
 
+    frames.gradient_frame(gradient_frame)  # (refused as integrate refuses it, on any input)
     rec = describe(normals, mask=mask, K=K, normal_frame=frames.resolve(normal_frame, y_down),
                    mat_keys=_split(mat_keys), gradient_frame=gradient_frame)
     if as_json:
@@ -480,9 +481,11 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     for r in records:  # (as integrate shows them; a resumed item's were shown before)
         if not r.get("resumed"):
             for w in r.get("warnings") or ():
-                click.echo(f"facetlift: warning: {r['name']}: {w}", err=True)
+                click.echo(f"facetlift: warning: {r['name']}: {' '.join(str(w).split())}",
+                           err=True)
     for r in failed:
-        click.echo(f"facetlift: error: {r['name']} ({r['status']}): {r['error']}", err=True)
+        msg = " ".join(str(r["error"]).split())  # (one line each, as the docs say)
+        click.echo(f"facetlift: error: {r['name']} ({r['status']}): {msg}", err=True)
     if as_json:
         for r in records:
             click.echo(json.dumps(jsonable(r)))

@@ -139,8 +139,14 @@ def flag(frame) -> str:
 
 
 #: The frame normals handed to :func:`checked` in facetlift's frame were read from
-#: (:func:`read_in`): only for the hints of its messages.
+#: (:func:`read_in`): only for the hints of its messages; :data:`GRADIENT_FIELD` when they
+#: were made from a gradient field.
 _READ_IN: contextvars.ContextVar = contextvars.ContextVar("facetlift_read_in", default=None)
+
+
+#: :func:`read_in`'s mark for normals made from a gradient field (p, q): no normal frame
+#: applies, the hints name the slopes instead.
+GRADIENT_FIELD = "gradient field"
 
 
 @contextlib.contextmanager
@@ -237,7 +243,9 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
     n = to_facetlift(n, frame)
     sample = _inside(n, mask, sample=CHECK_SAMPLE)
     if sample is not None:
-        _check_facing(sample, name, _READ_IN.get() if is_identity(frame) else frame)
+        read = _READ_IN.get()
+        read = None if read == GRADIENT_FIELD else read  # (such normals never face away)
+        _check_facing(sample, name, read if is_identity(frame) else frame)
         if len(sample) and sample[:, :2].min() >= 0:  # only then can the whole map be encoded
             _check_encoding(_inside(n, mask), name)
     return n
@@ -381,14 +389,18 @@ def flip_check(problem) -> dict:
     own, best = out["curl"], min(out["curl_y_flipped"], out["curl_x_flipped"])
     if own > FLIP_MIN_CURL and best < FLIP_RATIO * own:
         frame = _READ_IN.get()  # (the frame the map was read in: the hint is relative to it)
-        read = "" if is_identity(frame) else f" (read in the frame {axis_string(frame)})"
-        warn(
-            f"the normals are far more integrable with y flipped (relative curl {own:.2f} as "
-            f"given, {out['curl_y_flipped']:.2f} with y flipped): its frame{read} is probably "
-            f"wrong in y: try {flag(negated(frame, 'y'))}, or {flag(negated(frame, 'x'))} if "
-            "the surface then comes out inside-out; docs/conventions.md lists the frames of "
-            "common sources"
-        )
+        head = (f"the normals are far more integrable with y flipped (relative curl {own:.2f} "
+                f"as given, {out['curl_y_flipped']:.2f} with y flipped)")
+        if frame == GRADIENT_FIELD:
+            warn(f"{head}: the field's y slope probably has the wrong sign: negate q (p with "
+                 "--gradient-frame rowcol), or the x slope instead if the surface then comes "
+                 "out inside-out")
+        else:
+            read = "" if is_identity(frame) else f" (read in the frame {axis_string(frame)})"
+            warn(f"{head}: its frame{read} is probably wrong in y: try "
+                 f"{flag(negated(frame, 'y'))}, or {flag(negated(frame, 'x'))} if the surface "
+                 "then comes out inside-out; docs/conventions.md lists the frames of common "
+                 "sources")
     return out
 
 
@@ -417,42 +429,73 @@ def gradient_frame(name) -> str:
     return key
 
 
-def field_curl(gx, gy, mask=None, *, sample: int = CURL_SAMPLE) -> float:
-    """:func:`relative_curl` of a gradient field in facetlift's frame (``gx = dz/dx``,
-    ``gy = dz/dy``, y up), over the 2 x 2 blocks inside `mask` whose slopes are finite and not
-    grazing (the paper's rule, cos 85 deg: such huge slopes dominate the sums); NaN without
-    one. Large fields are sampled in strips of two rows (about `sample` pixels)."""
+#: A gradient field's curl relative to all its first derivatives above which, with the other
+#: layout's below :data:`FLIP_RATIO` of it, :func:`layout_check` warns (measured: a smooth bump
+#: 0.46 in the wrong layout and 0.005 in the right one, the BiNI human map's field 0.56 and
+#: 0.16; a saddle's field is about equal in both, noise or not).
+LAYOUT_MIN_CURL = 0.3
+
+
+def layout_curls(gx, gy, mask=None, *, gy_sign: float = 1.0,
+                 sample: int = CURL_SAMPLE) -> tuple[float, float, float]:
+    """``(curl, curl of the other layout, curl with y flipped)`` of a gradient field in
+    facetlift's frame
+    (``gx = dz/dx``, ``gy = dz/dy``, y up), each relative to the sum of all four first
+    derivatives' magnitudes (a denominator both layouts share), over the 2 x 2 blocks inside
+    `mask` whose slopes are finite and not grazing (the paper's rule, cos 85 deg: such huge
+    slopes dominate the sums); NaNs without such a block.
+
+    The other layout (``p = dz/d(row)`` read as ``dz/dx``, or the reverse) turns the field by
+    90 degrees, whose curl is the field's divergence: a smooth surface's field has curl 0 and
+    a divergence that is not, the turned one the reverse; a saddle's field has neither (no
+    layout preferred). `gy` is taken times `gy_sign`. Large fields are sampled in strips of
+    two rows (about `sample` pixels), taken before any conversion."""
     from .conventions import OUTLIER_EPS
 
-    gx = np.asarray(gx, dtype=float)
-    gy = np.asarray(gy, dtype=float)
+    nan = (float("nan"),) * 3
+    try:
+        gx, gy = np.asarray(gx), np.asarray(gy)
+    except Exception:
+        return nan
     if gx.ndim != 2 or gx.shape != gy.shape or min(gx.shape) < 2:
-        return float("nan")
+        return nan
     H, W = gx.shape
     step = 1 if H * W <= sample else max(2, H // max(1, sample // (2 * W)))
-    tops = np.arange(0, H - 1, step)
-    with np.errstate(invalid="ignore", over="ignore"):
-        ok = gx * gx + gy * gy < 1.0 / OUTLIER_EPS**2 - 1.0  # (False for NaN and inf)
-    if mask is not None:
-        m = np.asarray(mask)
-        if m.shape == gx.shape:
-            ok &= m != 0
-    a, b = tops, tops + 1  # (row a above row b: y up)
-    with np.errstate(invalid="ignore"):
-        dgx_dy = (gx[a, :-1] + gx[a, 1:] - gx[b, :-1] - gx[b, 1:]) / 2
-        dgy_dx = (gy[a, 1:] + gy[b, 1:] - gy[a, :-1] - gy[b, :-1]) / 2
-    good = ok[a, :-1] & ok[a, 1:] & ok[b, :-1] & ok[b, 1:]
-    if not good.any():
-        return float("nan")
-    total = (np.abs(dgx_dy[good]) + np.abs(dgy_dx[good])).sum()
-    return float(np.abs((dgx_dy - dgy_dx)[good]).sum() / total) if total > 0 else 0.0
+    a = np.arange(0, H - 1, step)
+    b = a + 1  # (row a above row b: y up)
+    m = None if mask is None else np.asarray(mask)
+    with np.errstate(all="ignore"):
+        try:
+            X = [gx[r].astype(float) for r in (a, b)]
+            Y = [gy_sign * gy[r].astype(float) for r in (a, b)]
+        except (TypeError, ValueError):
+            return nan
+        ok = [x * x + y * y < 1.0 / OUTLIER_EPS**2 - 1.0 for x, y in zip(X, Y, strict=True)]
+        if m is not None and m.shape == gx.shape:
+            ok = [o & (m[r] != 0) for o, r in zip(ok, (a, b), strict=True)]
+        good = ok[0][:, :-1] & ok[0][:, 1:] & ok[1][:, :-1] & ok[1][:, 1:]
+        if not good.any():
+            return nan
+        # (differences first: a sum of the four values rounds exact zeros to ~1e-17)
+        dgx_dy = ((X[0][:, :-1] - X[1][:, :-1]) + (X[0][:, 1:] - X[1][:, 1:])) / 2
+        dgy_dx = ((Y[0][:, 1:] - Y[0][:, :-1]) + (Y[1][:, 1:] - Y[1][:, :-1])) / 2
+        dgx_dx = ((X[0][:, 1:] - X[0][:, :-1]) + (X[1][:, 1:] - X[1][:, :-1])) / 2
+        dgy_dy = ((Y[0][:, :-1] - Y[1][:, :-1]) + (Y[0][:, 1:] - Y[1][:, 1:])) / 2
+        curl = np.abs(dgx_dy - dgy_dx)[good].sum()
+        div = np.abs(dgx_dx + dgy_dy)[good].sum()
+        flipped = np.abs(dgx_dy + dgy_dx)[good].sum()  # (the field with gy negated)
+        total = (np.abs(dgx_dy) + np.abs(dgy_dx) + np.abs(dgx_dx) + np.abs(dgy_dy))[good].sum()
+    if not np.isfinite(total) or total <= 0:
+        return (0.0, 0.0, 0.0) if total == 0 else nan
+    return float(curl / total), float(div / total), float(flipped / total)
 
 
 def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
-    """Relative curl (:func:`field_curl`) of the gradient field (p, q) read in `frame` and in
-    the other layout; warns, naming ``--gradient-frame``, when the other is far more
-    integrable (the thresholds of :func:`flip_check`): ``p = dz/d(row)`` read as ``dz/dx``
-    turns the field by 90 degrees, which no flip of the normals undoes.
+    """Relative curl (:func:`layout_curls`) of the gradient field (p, q) read in `frame` and
+    in the other layout; warns, naming ``--gradient-frame``, when the field as read has a
+    clear curl (above :data:`LAYOUT_MIN_CURL`) and the other layout less than
+    :data:`FLIP_RATIO` of it: ``p = dz/d(row)`` read as ``dz/dx`` turns the field by 90
+    degrees, which no flip of the normals undoes.
 
     Returns
     -------
@@ -461,10 +504,12 @@ def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
     """
     given = gradient_frame(frame)
     other = "rowcol" if given == "xy" else "xy"
-    out = {"curl": field_curl(*gradients_to_facetlift(p, q, given), mask),
-           "curl_other_layout": field_curl(*gradients_to_facetlift(p, q, other), mask)}
-    own, alt = out["curl"], out["curl_other_layout"]
-    if own > FLIP_MIN_CURL and alt < FLIP_RATIO * own:
+    # (rowcol: dz/dx = q, dz/dy = -p; no converted copy of the whole field is made)
+    gx, gy, sign = (p, q, 1.0) if given == "xy" else (q, p, -1.0)
+    own, alt, flip = layout_curls(gx, gy, mask, gy_sign=sign)
+    out = {"curl": own, "curl_other_layout": alt, "curl_y_flipped": flip}
+    # (not where a slope's sign explains it better: flip_check names that after the solve)
+    if own > LAYOUT_MIN_CURL and alt < FLIP_RATIO * own and alt < flip:
         meaning = GRADIENT_FRAMES[other]
         warn(
             f"the gradient field is far more integrable in the other layout (relative curl "

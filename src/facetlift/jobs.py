@@ -94,6 +94,8 @@ class Input:
     prior: np.ndarray | None = None
     prior_weight: object = 1.0
     confidence: np.ndarray | None = None
+    #: The normals were made from a gradient field (its hints speak of p and q).
+    field: bool = False
 
 
 def default_outdir(src: Path) -> Path:
@@ -177,7 +179,7 @@ def read(job: Job) -> Input:
             raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW) but the normal "
                              f"map is {n.shape[0]}x{n.shape[1]}")
     return Input(normals=n, mask=m, K=K, mask_source=source, prior=prior, prior_weight=weight,
-                 confidence=conf)
+                 confidence=conf, field=bool(field_input))
 
 
 def _normals_from_field(g: dict, job: Job) -> np.ndarray:
@@ -279,7 +281,7 @@ def run(job: Job, *, progress=None) -> dict:
         depth_prior = opts.pop("prior", None) if inp.prior is None else inp.prior
         t1 = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught, frames.read_in(
-                job.normal_frame):
+                frames.GRADIENT_FIELD if inp.field else job.normal_frame):
             warnings.simplefilter("always")
             surface = facetlift.integrate(
                 inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size, K=inp.K,
