@@ -95,6 +95,16 @@ def test_an_opengl_map_read_as_opencv_is_told_to_drop_the_flag(tmp_path, capsys)
         assert code == (1 if cmd == "integrate" else 0)
 
 
+def test_an_empty_output_folder_is_refused(dome_png, tmp_path, capsys, monkeypatch):
+    """-o '' was read as the current folder, and every output written there."""
+    monkeypatch.chdir(tmp_path)
+    for cmd in ("integrate", "batch"):
+        code, _, err = run(capsys, cmd, dome_png, "-o", "", "-s", "npy")
+        assert code == 1 and "'-o' / '--out': is empty" in one_line(err)
+    assert not (tmp_path / "depth.npy").exists()
+    assert not (tmp_path / "batch.jsonl").exists()
+
+
 def test_summary_and_json_show_the_mean_deviation(dome_png, tmp_path, capsys):
     code, out, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "a")
     assert code == 0, err

@@ -98,6 +98,16 @@ def _parse_option(text: str) -> tuple[str, object]:
         return key, value  # a bare string such as solver=iterative
 
 
+def _out_dir(ctx, param, value):
+    """``-o``/``--out`` as a Path; an empty one is refused (click would read it as the
+    current folder, and write every output there)."""
+    if value is None:
+        return None
+    if not str(value).strip():
+        raise click.BadParameter("is empty: give a folder")
+    return Path(value)
+
+
 def _progress_bar(total: int | None):
     """(bar, update): a tqdm bar on stderr that appears at the first update (a route that
     never reports progress shows nothing); ``bar.close()`` is safe either way."""
@@ -299,7 +309,7 @@ def summary(record: dict) -> str:
               metavar="P Q", help="Integrate a gradient field instead: two files (npy, EXR, "
               "TIFF) holding p and q; see --gradient-frame.")
 @_job_options
-@click.option("-o", "--out", "outdir", type=click.Path(file_okay=False, path_type=Path),
+@click.option("-o", "--out", "outdir", type=click.Path(file_okay=False), callback=_out_dir,
               help="Output folder. Default: <input>_facetlift/ next to the input.")
 @click.option("--json", "as_json", is_flag=True,
               help="Print one JSON object (outputs, diagnostics, timings) instead of text.")
@@ -447,7 +457,7 @@ def _mib(b: float) -> str:
               help="A text file with more inputs, one path or glob pattern per line.")
 @_job_options
 @click.option("-o", "--out", "outdir", required=True,
-              type=click.Path(file_okay=False, path_type=Path),
+              type=click.Path(file_okay=False), callback=_out_dir,
               help="Output folder: one subfolder per item, and the log batch.jsonl.")
 @click.option("--workers", type=int, help="Local worker processes (default: the CPU count "
               "where Dask, the batch extra, is installed, else 1; 1 runs in this process "
