@@ -103,6 +103,16 @@ def test_every_kind_of_failure_is_a_record(tmp_path, monkeypatch):
         monkeypatch.setattr(dgp, "run", fail)
         (rec,) = facetlift.batch([tmp_path / "in"], tmp_path / status, workers=1)
         assert (rec["status"], rec["exit"]) == (status, code)
+    # a failed item keeps the warnings it gave before failing (they may say why)
+    import warnings
+
+    def warn_then_fail(*a, **k):
+        warnings.warn("a hint about the input", UserWarning, stacklevel=1)
+        raise SolverError("singular")
+
+    monkeypatch.setattr(dgp, "run", warn_then_fail)
+    (rec,) = facetlift.batch([tmp_path / "in"], tmp_path / "w", workers=1)
+    assert rec["status"] == "solver" and rec["warnings"] == ["a hint about the input"]
 
 
 def test_bad_arguments(tmp_path):

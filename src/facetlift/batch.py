@@ -120,19 +120,24 @@ def run_item(job: Job, threads: int | None = None) -> dict:
     """Run one job and return its record; never raises (the record's ``status`` says why it
     failed). Runs in the worker processes, where `threads` limits the BLAS threads (one worker
     process per core: more threads would only compete)."""
+    import warnings
+
     from .errors import MemoryLimitError, SolverError
     from .jobs import run
 
     t0 = time.perf_counter()
     rec = {"status": "ok", "error": None, "exit": 0}
+    caught = []  # (a failed item's warnings too: e.g. a gradient layout's, which may say why)
     try:
-        if threads is None:
-            result = run(job)
-        else:
-            from threadpoolctl import threadpool_limits
-
-            with threadpool_limits(threads):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            if threads is None:
                 result = run(job)
+            else:
+                from threadpoolctl import threadpool_limits
+
+                with threadpool_limits(threads):
+                    result = run(job)
         rec.update(result)
         if not result["converged"] and result["info"].get("solver") != "discontinuous":
             rec.update(status="not_converged", exit=2, error="did not converge")
@@ -147,6 +152,8 @@ def run_item(job: Job, threads: int | None = None) -> dict:
     except Exception as e:
         rec.update(status="bug", error=f"{type(e).__name__}: {e}", exit=3)
     rec["seconds"] = time.perf_counter() - t0
+    if "warnings" not in rec:  # (a successful run's record has its own, in order)
+        rec["warnings"] = list(dict.fromkeys(str(w.message) for w in caught))
     rec.setdefault("mean_deviation", None)
     rec.setdefault("outputs", {})
     return rec

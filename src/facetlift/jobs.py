@@ -11,6 +11,7 @@ of them succeeded.
 
 from __future__ import annotations
 
+import contextlib
 import time
 import warnings
 from dataclasses import dataclass, field, replace
@@ -193,6 +194,23 @@ def _normals_from_field(g: dict, job: Job) -> np.ndarray:
                                                                  job.gradient_frame))
 
 
+@contextlib.contextmanager
+def _recorded():
+    """The warnings of its block, recorded (for the job's record); if the block raises, they
+    are given again on the way out, so that a caller's own record (a failed batch item's)
+    keeps them: they may say why it failed."""
+    kept: list = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            kept = caught
+            yield caught
+    except BaseException:
+        for w in kept:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        raise
+
+
 def _check_outputs(save, job: Job, local: bool = True) -> None:
     """Refuse outputs the job cannot produce before it runs: the report without matplotlib
     (where it is drawn here: `local`), the discontinuity map without ``discontinuities`` (the
@@ -268,8 +286,7 @@ def run(job: Job, *, progress=None) -> dict:
     outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)
     names = [OUTPUTS[s] for s in save]
     with io.OutputSet(outdir, names, inputs=input_paths(job)) as out:
-        with warnings.catch_warnings(record=True) as read_caught:  # (the gradient layout's)
-            warnings.simplefilter("always")
+        with _recorded() as read_caught:  # (the gradient layout's, ...)
             inp = read(job)
         t_read = time.perf_counter() - t0
         opts = dict(job.options)
@@ -280,9 +297,8 @@ def run(job: Job, *, progress=None) -> dict:
                              f"method option prior={opts['prior']!r} were both given")
         depth_prior = opts.pop("prior", None) if inp.prior is None else inp.prior
         t1 = time.perf_counter()
-        with warnings.catch_warnings(record=True) as caught, frames.read_in(
+        with _recorded() as caught, frames.read_in(
                 frames.GRADIENT_FIELD if inp.field else job.normal_frame):
-            warnings.simplefilter("always")
             surface = facetlift.integrate(
                 inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size, K=inp.K,
                 backfacing=job.backfacing, outlier_eps=job.outlier_eps, prior=depth_prior,
