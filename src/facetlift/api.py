@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 
@@ -160,9 +161,10 @@ def integrate(
         outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight, confidence=confidence,
         grazing_note=note, prior_blur=prior_blur,
     )
-    if frames.is_identity(normal_frame):
-        return solve(problem, method, t0=t0, max_memory=max_memory, **options)
-    with frames.read_in(normal_frame):  # (the flip check's hint is relative to it)
+    # (the flip check's hint is relative to the frame given; none given: the caller's, e.g.
+    # a reader's, stays)
+    with (contextlib.nullcontext() if frames.is_identity(normal_frame)
+          else frames.read_in(normal_frame)):
         return solve(problem, method, t0=t0, max_memory=max_memory, **options)
 
 

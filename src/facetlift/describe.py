@@ -97,7 +97,7 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         As the readers (unreadable file, bad frame).
     """
     from . import frames
-    from .jobs import Job, read
+    from .jobs import Job, read, recorded_warnings
     from .problem import prepare
 
     job = Job(normals=str(path), mask=None if mask is None else str(mask),
@@ -105,8 +105,7 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
               mat_keys=None if mat_keys is None else tuple(mat_keys),
               gradient_frame=gradient_frame)
     src = job.source
-    with warnings.catch_warnings(record=True) as read_caught:  # (a gradient layout's, ...)
-        warnings.simplefilter("always")
+    with recorded_warnings() as read_caught:  # (a gradient layout's, ...)
         inp = read(job)  # (first: a folder without a normal map is the reader's clear error)
     out = {"input": str(src), **_file_facts(src),
            "warnings": [str(w.message) for w in read_caught]}

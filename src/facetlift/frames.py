@@ -101,7 +101,11 @@ def parse(frame) -> tuple[tuple[int, int, int], np.ndarray]:
 
 def axis_string(frame) -> str:
     """The axis string of `frame`, e.g. ``"x,-y,-z"`` for ``"opencv"``."""
-    channels, signs = parse(frame)
+    return _axes(*parse(frame))
+
+
+def _axes(channels, signs) -> str:
+    """The axis string of a parsed frame (:func:`parse`)."""
     return ",".join(("-" if s < 0 else "") + "xyz"[c]
                     for c, s in zip(channels, signs, strict=True))
 
@@ -117,11 +121,9 @@ def negated(frame, axes: str) -> str:
     (e.g. ``"yz"``): its name where one has that axis string, else the axis string. What to
     suggest when a map read in `frame` comes out flipped."""
     channels, signs = parse(frame)
-    signs = signs.copy()
-    for a in axes:
+    for a in axes:  # (parse returns a new array)
         signs["xyz".index(a)] *= -1
-    text = ",".join(("-" if s < 0 else "") + "xyz"[c] for c, s in zip(channels, signs,
-                                                                          strict=True))
+    text = _axes(channels, signs)
     for name in ("opengl", "directx", "opencv"):
         if FRAMES[name] == text:
             return name
@@ -439,11 +441,10 @@ LAYOUT_MIN_CURL = 0.3
 def layout_curls(gx, gy, mask=None, *, gy_sign: float = 1.0,
                  sample: int = CURL_SAMPLE) -> tuple[float, float, float]:
     """``(curl, curl of the other layout, curl with y flipped)`` of a gradient field in
-    facetlift's frame
-    (``gx = dz/dx``, ``gy = dz/dy``, y up), each relative to the sum of all four first
-    derivatives' magnitudes (a denominator both layouts share), over the 2 x 2 blocks inside
-    `mask` whose slopes are finite and not grazing (the paper's rule, cos 85 deg: such huge
-    slopes dominate the sums); NaNs without such a block.
+    facetlift's frame (``gx = dz/dx``, ``gy = dz/dy``, y up), each relative to the sum of all
+    four first derivatives' magnitudes (a denominator both layouts share), over the 2 x 2
+    blocks inside `mask` whose slopes are finite and not grazing (the paper's rule, cos 85
+    deg: such huge slopes dominate the sums); NaNs without such a block.
 
     The other layout (``p = dz/d(row)`` read as ``dz/dx``, or the reverse) turns the field by
     90 degrees, whose curl is the field's divergence: a smooth surface's field has curl 0 and
@@ -500,7 +501,8 @@ def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
     Returns
     -------
     dict
-        ``{"curl": ..., "curl_other_layout": ...}``.
+        ``{"curl": ..., "curl_other_layout": ..., "curl_y_flipped": ...}`` (the last: with
+        one slope's sign flipped; a layout is not suggested where that explains it better).
     """
     given = gradient_frame(frame)
     other = "rowcol" if given == "xy" else "xy"

@@ -195,7 +195,7 @@ def _normals_from_field(g: dict, job: Job) -> np.ndarray:
 
 
 @contextlib.contextmanager
-def _recorded():
+def recorded_warnings():
     """The warnings of its block, recorded (for the job's record); if the block raises, they
     are given again on the way out, so that a caller's own record (a failed batch item's)
     keeps them: they may say why it failed."""
@@ -286,7 +286,7 @@ def run(job: Job, *, progress=None) -> dict:
     outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)
     names = [OUTPUTS[s] for s in save]
     with io.OutputSet(outdir, names, inputs=input_paths(job)) as out:
-        with _recorded() as read_caught:  # (the gradient layout's, ...)
+        with recorded_warnings() as read_caught:  # (the gradient layout's, ...)
             inp = read(job)
         t_read = time.perf_counter() - t0
         opts = dict(job.options)
@@ -297,7 +297,7 @@ def run(job: Job, *, progress=None) -> dict:
                              f"method option prior={opts['prior']!r} were both given")
         depth_prior = opts.pop("prior", None) if inp.prior is None else inp.prior
         t1 = time.perf_counter()
-        with _recorded() as caught, frames.read_in(
+        with recorded_warnings() as caught, frames.read_in(
                 frames.GRADIENT_FIELD if inp.field else job.normal_frame):
             surface = facetlift.integrate(
                 inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size, K=inp.K,

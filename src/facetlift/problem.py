@@ -386,9 +386,10 @@ def prepare(
     blur = check_prior_blur(prior_blur, prior is not None, (H, W))
     if blur > 0 and pw is not None:
         used = pw[pw > 0]
-        if used.size and float(np.median(used)) > BLUR_WEIGHT_WARN:
+        typical = float(np.median(used)) if used.size else 0.0
+        if typical > BLUR_WEIGHT_WARN:
             warn(
-                f"`prior_weight` {float(np.median(used)):.3g} with `prior_blur`: a blurred prior "
+                f"`prior_weight` {typical:.3g} with `prior_blur`: a blurred prior "
                 "is met by undoing its blur (a deconvolution), and weights above "
                 f"{BLUR_WEIGHT_WARN:g} amplify the prior's own errors: on the DiLiGenT bear "
                 "with 8 x 8 block means of its depth, weight 1 gave 0.85 mm against 0.44 for "

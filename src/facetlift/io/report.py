@@ -74,6 +74,8 @@ def write_report(path, surface, normals=None, *, dpi: int = 100,
     panels.append(("depth", np.where(surface.mask, surface.depth, np.nan), "viridis", "depth",
                    None))
     info = surface.info if isinstance(surface.info, dict) else {}
+    box = _bbox(surface.mask)  # (every panel cropped to the object, with a small margin)
+    crop = (box[0].stop - box[0].start, box[1].stop - box[1].start)
     if normals is not None:
         mean, _, err = angular_error(surface, normals)
         # (the solve's figure is over the normals it used: grazing and back-facing ones are
@@ -84,17 +86,14 @@ def write_report(path, surface, normals=None, *, dpi: int = 100,
                        "degrees", _robust_max(err)))
     jumps = discontinuity_map(surface)
     if jumps is not None:
-        box = _bbox(surface.mask)
-        shown = _thickened(np.where(surface.mask, jumps, 0.0),
-                           (box[0].stop - box[0].start, box[1].stop - box[1].start))
+        shown = _thickened(np.where(surface.mask, jumps, 0.0), crop)
         panels.append(("discontinuities (jump height)", np.where(surface.mask, shown, np.nan),
                        "inferno", "depth", _robust_max(np.where(shown > 0, shown, np.nan))))
     H, W = surface.shape
-    box = _bbox(surface.mask)  # (every panel cropped to the object, with a small margin)
     panels = [(t, img[box], c, lab, top) for t, img, c, lab, top in panels]
     cols = 2 if len(panels) <= 4 else 3
     rows = -(-len(panels) // cols)
-    aspect = (box[0].stop - box[0].start) / max(box[1].stop - box[1].start, 1)
+    aspect = crop[0] / max(crop[1], 1)
     fig = Figure(figsize=(4.2 * cols, 4.2 * rows * min(max(aspect, 0.3), 3.0) + 0.6))
     fig.suptitle(f"{H}x{W}, {int(surface.mask.sum())} facets, method {info.get('method', '?')}")
     for k, (title, img, cmap, label, top) in enumerate(panels):
