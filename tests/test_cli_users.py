@@ -105,6 +105,28 @@ def test_an_empty_output_folder_is_refused(dome_png, tmp_path, capsys, monkeypat
     assert not (tmp_path / "batch.jsonl").exists()
 
 
+def test_contradicting_flags_are_refused(dome_png, tmp_path, capsys):
+    """--quads with --triangles (the last one won) and --K with --orthographic (K was
+    ignored silently) are refused before anything is read or written."""
+    K = tmp_path / "K.txt"
+    np.savetxt(K, [[100.0, 0, 12], [0, 100.0, 10], [0, 0, 1]])
+    for cmd in ("integrate", "batch"):
+        code, _, err = run(capsys, cmd, dome_png, "-o", tmp_path / cmd, "-s", "obj",
+                           "--quads", "--triangles")
+        assert code == 1 and "--quads or --triangles, not both" in one_line(err)
+        code, _, err = run(capsys, cmd, dome_png, "-o", tmp_path / cmd, "--K", K,
+                           "--orthographic")
+        assert code == 1 and "--orthographic contradict" in one_line(err)
+    assert not (tmp_path / "integrate").exists() and not (tmp_path / "batch").exists()
+    for flag, face in (("--quads", 4), ("--triangles", 3)):
+        out = tmp_path / flag.strip("-")
+        code, _, err = run(capsys, "integrate", dome_png, "-o", out, "-s", "obj", flag)
+        assert code == 0, err
+        faces = [ln.split() for ln in (out / "mesh.obj").read_text().splitlines()
+                 if ln.startswith("f ")]
+        assert faces and all(len(f) == face + 1 for f in faces)
+
+
 def test_summary_and_json_show_the_mean_deviation(dome_png, tmp_path, capsys):
     code, out, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "a")
     assert code == 0, err

@@ -203,9 +203,9 @@ _JOB_OPTIONS = [
                  "with shading, depth, deviation and discontinuity panels (needs "
                  "facetlift[plot]), discontinuities = where the surface is cut by depth jumps "
                  "(with --discontinuities). Default: npy, ply, png."),
-    click.option("--quads", "mesh_faces", flag_value="quads",
+    click.option("--quads", is_flag=True,
                  help="Write quad meshes (the PLY default; OBJ defaults to triangles)."),
-    click.option("--triangles", "mesh_faces", flag_value="triangles",
+    click.option("--triangles", is_flag=True,
                  help="Write triangle meshes (the OBJ default)."),
     click.option("--max-memory", default=None, metavar="SIZE",
                  help="Refuse the job if its estimated peak memory exceeds SIZE (bytes, or "
@@ -227,7 +227,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               gradient_frame="xy", mat_keys=None, method="dgp", pixel_size=1.0, K=None,
               orthographic=False, backfacing="missing", outlier_eps=None, solver=None,
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
-              save=(), mesh_faces=None, outdir=None, max_memory=None, prior=None,
+              save=(), quads=False, triangles=False, outdir=None, max_memory=None, prior=None,
               prior_scale=None, prior_weight=1.0, prior_weight_map=None, confidence=None,
               prior_blur=None):
     """A :class:`facetlift.jobs.Job` from the parsed flags (ValueError on bad values)."""
@@ -235,6 +235,11 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
     from .jobs import Job
 
     _methods.get(method)
+    if quads and triangles:
+        raise ValueError("give --quads or --triangles, not both")
+    if K is not None and orthographic:
+        raise ValueError(f"--K {K} and --orthographic contradict each other: --orthographic "
+                         "ignores a camera (e.g. a dataset folder's K.txt); give one of them")
     opts = dict(_parse_option(o) for o in options)
     for key, value in (("solver", solver), ("max_iter", max_iter), ("tol", tol),
                        ("backend", backend), ("max_memory", max_memory)):
@@ -254,7 +259,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         mat_keys=_split(mat_keys), method=method, pixel_size=pixel_size,
         backfacing=backfacing, outlier_eps=outlier_eps, options=opts,
         save=tuple(save) or DEFAULT_SAVE,
-        triangles=None if mesh_faces is None else mesh_faces == "triangles",
+        triangles=True if triangles else (False if quads else None),
         outdir=None if outdir is None else str(outdir),
         prior=None if prior is None else str(prior), prior_scale=prior_scale,
         prior_weight=prior_weight,
