@@ -268,6 +268,9 @@ def test_verbose_logs_to_stderr_for_one_run(tmp_path, capsys):
     npath, _, _ = write_input(tmp_path)
     code, stdout, err = run(capsys, "-v", "integrate", npath, "-o", tmp_path / "a")
     assert code == 0 and "facetlift: dgp:" in err and "facetlift: dgp:" not in stdout
+    # readable key=value pairs, not a raw dict
+    line = next(ln for ln in err.splitlines() if "facetlift: dgp:" in ln)
+    assert "{" not in line and " iterations=" in line and "seconds.total=" in line
     code, _, err = run(capsys, "integrate", npath, "-o", tmp_path / "b")
     assert code == 0 and err == ""
 

@@ -287,8 +287,36 @@ def solve(
     seconds["diagnose"] = t4 - t3
     out["seconds"] = seconds
     surface.info = out
-    log.info("%s: %s", method, {k: v for k, v in out.items() if k != "deviation"})
+    if log.isEnabledFor(logging.INFO):
+        log.info("%s: %s", method, info_text({k: v for k, v in out.items() if k != "deviation"}))
     return surface
+
+
+def info_text(info: dict, prefix: str = "") -> str:
+    """``surface.info`` as one readable line for the log (``facetlift -v``): ``key=value``
+    pairs, nested dicts as dotted keys, floats to 4 significant digits, long lists
+    summarised by their length and ends."""
+
+    def value(v):
+        if isinstance(v, (bool, np.bool_)) or v is None or isinstance(v, str):
+            return str(v)
+        if isinstance(v, (float, np.floating)):
+            return f"{float(v):.4g}"
+        if isinstance(v, (list, tuple, np.ndarray)):
+            items = [value(x) for x in (v.ravel().tolist() if isinstance(v, np.ndarray) else v)]
+            if len(items) > 6:
+                return f"[{len(items)}: {', '.join(items[:2])} ... {items[-1]}]"
+            return f"[{', '.join(items)}]"
+        return str(v)
+
+    parts = []
+    for k, v in info.items():
+        if isinstance(v, dict):
+            if v:
+                parts.append(info_text(v, f"{prefix}{k}."))
+        else:
+            parts.append(f"{prefix}{k}={value(v)}")
+    return " ".join(parts)
 
 
 def prior_info(problem: Problem, surface: Surface) -> dict:
