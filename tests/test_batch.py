@@ -191,7 +191,14 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
     assert code == 1 and "batch: 2 of 3 succeeded (2 from an earlier run), 1 failed" in err
     assert "facetlift: error: z (error):" in err
     assert callable(fb) and fb.items is fb.__dict__["items"]
-    assert [json.loads(line)["name"] for line in out.splitlines()] == ["m0", "m1", "z"]
+    recs = [json.loads(line) for line in out.splitlines()]
+    assert [r["name"] for r in recs] == ["m0", "m1", "z"]
+    # one record shape, the log's, for resumed and new items alike (the new ones printed
+    # their whole record, info included)
+    assert [r.get("resumed", False) for r in recs] == [True, True, False]
+    assert "info" not in recs[2] and {"status", "error", "exit", "warnings"} <= set(recs[2])
+    assert set(recs[0]) - {"resumed"} <= set(recs[2]) | {"outputs", "mean_deviation",
+                                                         "shape", "facets", "converged"}
     code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "1",
                  "-s", "npy", "--progress"])
     assert code == 1 and "batch:" in capsys.readouterr().err  # the bar, on stderr

@@ -257,7 +257,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         def done(it: Item, rec: dict) -> None:
             rec = dict(rec, item=it.path, name=it.name)
             results[it.path] = rec
-            fh.write(json.dumps(_json(rec)) + "\n")
+            fh.write(json.dumps(log_record(rec)) + "\n")
             fh.flush()
             bar.update(rec["status"])
 
@@ -329,7 +329,9 @@ def _workers(workers, n_jobs: int) -> int:
     return workers
 
 
-def _json(rec: dict) -> dict:
+def log_record(rec: dict) -> dict:
+    """The JSON-ready record that the log keeps of an item (and ``facetlift batch --json``
+    prints for every item, resumed or not)."""
     from .jobs import jsonable
 
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",

@@ -483,7 +483,7 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
       facetlift batch data/ -o out --save npy --save report --resume
       facetlift batch --list maps.txt -o /shared/out --scheduler tcp://head:8786
     """
-    from .batch import LOG_NAME
+    from .batch import LOG_NAME, log_record
     from .batch import batch as run_batch
 
     if not inputs and list_file is None:
@@ -501,9 +501,9 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     for r in failed:
         msg = " ".join(str(r["error"]).split())  # (one line each, as the docs say)
         click.echo(f"facetlift: error: {r['name']} ({r['status']}): {msg}", err=True)
-    if as_json:
+    if as_json:  # (the log's record for every item: a resumed one has no more)
         for r in records:
-            click.echo(json.dumps(jsonable(r)))
+            click.echo(json.dumps(log_record(r)))
     resumed = sum(bool(r.get("resumed")) for r in records)
     line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
             + (f" ({resumed} from an earlier run)" if resumed else "")
