@@ -272,8 +272,10 @@ def test_info_takes_the_gradient_layout_and_y_down_and_shows_warnings(tmp_path, 
     code, out, _ = run(capsys, "info", tmp_path / "g.mat")
     assert code == 0 and "warning: the gradient field is far more integrable in the other " \
         "layout" in out and "--gradient-frame rowcol" in out
+    # the frame line agrees with the warning (it said 'as read (consistent)' beside it)
+    assert "consistent" not in out and "likely the other gradient layout: --gradient-frame" in out
     code, out, _ = run(capsys, "info", tmp_path / "g.mat", "--gradient-frame", "rowcol")
-    assert code == 0 and "warning:" not in out
+    assert code == 0 and "warning:" not in out and "consistent" in out
     stored = io.write_normals(tmp_path / "n.npy", n)
     code, out, _ = run(capsys, "info", stored, "--y-down")
     assert code == 0 and "read as directx" in out and "try the default frame" in out

@@ -109,6 +109,9 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         inp = read(job)  # (first: a folder without a normal map is the reader's clear error)
     out = {"input": str(src), **_file_facts(src),
            "warnings": [str(w.message) for w in read_caught]}
+    # (a gradient field in the other layout: no frame of the normals made from it is right)
+    layout = next((str(w.message) for w in read_caught
+                   if issubclass(w.category, frames.LayoutWarning)), None)
     n = inp.normals
     H, W = n.shape[:2]
     out.update(shape=[H, W], mask_source=inp.mask_source,
@@ -123,7 +126,8 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         except ValueError as e:
             out["usable"] = False
             out["problem"] = str(e)
-            out["frame"] = _frame_guess(n, inp.mask, inp.K, frame=normal_frame)
+            out["frame"] = _frame_guess(n, inp.mask, inp.K, frame=normal_frame,
+                                        layout=layout)
             return out
     d = problem.domain
     counts = dict(problem.counts)
@@ -134,7 +138,7 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         counts=counts,
         first_unusable=counts.pop("first_unusable", None),
         warnings=out["warnings"] + [str(w.message) for w in caught],
-        frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame),
+        frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame, layout=layout),
         estimate=estimate(problem),
         discontinuity_grazing=_jump_grazing(problem),
     )
@@ -192,9 +196,19 @@ def _file_facts(src: Path) -> dict:
     return facts
 
 
-def _frame_guess(n, mask, K, problem=None, *, frame=None) -> dict:
+def _frame_guess(n, mask, K, problem=None, *, frame=None, layout=None) -> dict:
     """Whether the frame the map was read in looks right, from the view direction and the
-    integrability; ``likely`` says what to change."""
+    integrability; ``likely`` says what to change. `layout`: the warning of a gradient field
+    read in the wrong layout (:class:`facetlift.frames.LayoutWarning`), which ``likely`` then
+    repeats: its normals are in no frame that a flip would fix."""
+    guess = _frame_evidence(n, mask, K, problem, frame=frame)
+    if layout is not None:
+        guess["likely"] = "the other gradient layout: " + layout.split(": try ", 1)[-1]
+    return guess
+
+
+def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
+    """:func:`_frame_guess` from the normals alone."""
     from . import frames
     from .problem import prepare
 

@@ -438,6 +438,10 @@ def gradient_frame(name) -> str:
 LAYOUT_MIN_CURL = 0.3
 
 
+class LayoutWarning(UserWarning):
+    """A gradient field far more integrable in the other layout (:func:`layout_check`)."""
+
+
 def layout_curls(gx, gy, mask=None, *, gy_sign: float = 1.0,
                  sample: int = CURL_SAMPLE) -> tuple[float, float, float]:
     """``(curl, curl of the other layout, curl with y flipped)`` of a gradient field in
@@ -516,7 +520,7 @@ def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
         warn(
             f"the gradient field is far more integrable in the other layout (relative curl "
             f"{own:.2f} read as {given!r}, {alt:.2f} as {other!r}: {meaning}): try "
-            f"--gradient-frame {other} (gradient_frame='{other}')"
+            f"--gradient-frame {other} (gradient_frame='{other}')", LayoutWarning
         )
     return out
 
