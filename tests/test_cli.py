@@ -59,6 +59,23 @@ def test_default_outdir_and_alpha_mask(tmp_path, capsys):
         np.testing.assert_array_equal(z["mask"], mask)
 
 
+def test_default_outdir_is_beside_a_link_not_its_target(tmp_path, capsys):
+    """The default <input>_facetlift/ was made beside a symbolic link's target (a shared
+    dataset's folder) instead of beside the name the user gave."""
+    real, view = tmp_path / "real", tmp_path / "view"
+    real.mkdir()
+    view.mkdir()
+    npath, _, _ = write_input(real)
+    (view / "data").symlink_to(real, target_is_directory=True)
+    (view / "n.png").symlink_to(npath)
+    for given, out in ((view / "data", view / "data_facetlift"),
+                       (view / "n.png", view / "n_facetlift")):
+        code, _, err = run(capsys, "integrate", given, "-s", "npy")
+        assert code == 0, err
+        assert (out / "depth.npy").is_file()
+    assert not list(tmp_path.glob("*_facetlift")) and not list(real.glob("*_facetlift"))
+
+
 def test_dataset_folder_and_formats(tmp_path, capsys):
     write_input(tmp_path)
     out = tmp_path / "o"

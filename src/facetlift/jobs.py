@@ -12,6 +12,7 @@ of them succeeded.
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 import warnings
 from dataclasses import dataclass, field, replace
@@ -100,8 +101,9 @@ class Input:
 
 
 def default_outdir(src: Path) -> Path:
-    """``<input>_facetlift/`` next to the input."""
-    src = Path(src).resolve()
+    """``<input>_facetlift/`` next to the input as the user named it: beside a symbolic link,
+    not beside its target (which may be a shared or read-only dataset)."""
+    src = Path(os.path.abspath(src))  # (absolute, ".." folded, links kept)
     return src.parent / f"{src.stem if src.is_file() else src.name}_facetlift"
 
 
