@@ -85,6 +85,18 @@ def test_resume_skips_finished_items_and_retries_failed_ones(tmp_path, monkeypat
     assert [r.get("resumed", False) for r in recs] == [True, False, True]
     assert len(ran) == 1 and ran[0].endswith("m1.png")
     assert (out / "m1" / "depth.npy").is_file()
+    # other outputs, or another method, asked for now: every item runs again (they were all
+    # skipped, and the batch reported success without the outputs asked for)
+    for change in ({"save": ("npy", "obj")}, {"save": ("npy",), "method": "poisson"}):
+        ran.clear()
+        recs = facetlift.batch([tmp_path / "in"], out, workers=1, resume=True, **change)
+        assert not any(r.get("resumed") for r in recs) and len(ran) == 3
+        assert all(r["status"] == "ok" for r in recs)
+    assert all((out / f"m{i}" / "mesh.obj").is_file() for i in range(3))
+    ran.clear()  # (the same as the last run: nothing to do)
+    recs = facetlift.batch([tmp_path / "in"], out, workers=1, resume=True, save=("npy",),
+                           method="poisson")
+    assert all(r.get("resumed") for r in recs) and not ran
 
 
 def test_every_kind_of_failure_is_a_record(tmp_path, monkeypatch):

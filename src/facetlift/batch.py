@@ -173,9 +173,23 @@ def _finished(log: Path) -> dict[str, dict]:
     return done
 
 
-def _complete(rec: dict) -> bool:
-    return rec.get("status") == "ok" and all(Path(p).is_file()
-                                             for p in rec.get("outputs", {}).values())
+def settings(job: Job) -> dict:
+    """What a batch's template asks of every item (all but the item's input and output
+    folder), as the log records it: ``--resume`` skips only items finished with the same."""
+    from dataclasses import asdict
+
+    from .jobs import jsonable
+
+    return jsonable({k: v for k, v in asdict(job).items()
+                     if k not in ("normals", "gradients", "outdir")})
+
+
+def _complete(rec: dict, asked: dict) -> bool:
+    """Whether an earlier record finished what is asked now: ``ok``, with the same settings
+    (outputs, method, options, frames ...; a record without them, from an older log, does
+    not count) and every output it wrote still there."""
+    return (rec.get("status") == "ok" and rec.get("settings") == asked
+            and all(Path(p).is_file() for p in rec.get("outputs", {}).values()))
 
 
 def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
@@ -200,7 +214,9 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         A ``dask.distributed`` scheduler address (``"tcp://host:8786"``) or client: run there
         instead. The workers must see the input and output paths.
     resume : bool
-        Skip items finished in an earlier run (their log record ``ok``, outputs present).
+        Skip items finished in an earlier run with the same settings (their log record
+        ``ok``, with this template's outputs, method, options and frames, and its outputs
+        still present); the others run again.
     progress : bool
         A progress bar on stderr (library code is quiet by default; the command line shows
         it when stderr is a terminal).
@@ -240,10 +256,11 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     prepare_folder(root)  # created and checked before any work
     log_path = root / LOG_NAME if log is None else Path(log)
     earlier = _finished(log_path) if resume else {}
+    asked = settings(template)
     jobs, results = [], {}
     for it in found:
         rec = earlier.get(it.path)
-        if rec is not None and _complete(rec):
+        if rec is not None and _complete(rec, asked):
             results[it.path] = dict(rec, resumed=True)
             continue
         j = template.with_input(it.path, root / it.name)
@@ -255,7 +272,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             _Bar(len(found), len(results), bool(progress)) as bar:
 
         def done(it: Item, rec: dict) -> None:
-            rec = dict(rec, item=it.path, name=it.name)
+            rec = dict(rec, item=it.path, name=it.name, settings=asked)
             results[it.path] = rec
             fh.write(json.dumps(log_record(rec)) + "\n")
             fh.flush()
@@ -335,7 +352,7 @@ def log_record(rec: dict) -> dict:
     from .jobs import jsonable
 
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
-            "shape", "facets", "converged", "warnings", "resumed")
+            "shape", "facets", "converged", "warnings", "resumed", "settings")
     return jsonable({k: rec[k] for k in keep if k in rec})
 
 
