@@ -292,6 +292,22 @@ def test_cli_16bit_png_prior_needs_a_scale(tmp_path, capsys):
     assert np.abs(out[sel] - (depth[sel] + 10.0)).max() < 1e-3
 
 
+def test_info_reads_a_dataset_with_a_16bit_png_prior_given_its_scale(tmp_path, capsys):
+    """info refused such a folder and named --prior-scale, which it did not take."""
+    import imagecodecs
+
+    n, depth, _, sel = _write_inputs(tmp_path)
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", n)
+    counts = np.where(sel, np.rint((depth + 10.0) * 1000), 0).astype(np.uint16)
+    (folder / "prior_depth.png").write_bytes(imagecodecs.png_encode(counts))
+    assert main(["info", str(folder)]) == 1
+    assert "--prior-scale" in capsys.readouterr().err
+    assert main(["info", str(folder), "--prior-scale", "0.001"]) == 0
+    assert f"{n.shape[0]}x{n.shape[1]} pixels" in capsys.readouterr().out
+
+
 def test_dataset_folder_picks_up_prior_and_confidence(tmp_path, capsys):
     n, depth, prior, sel = _write_inputs(tmp_path)
     folder = tmp_path / "ds"

@@ -388,8 +388,12 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--gradient-frame", "gradient_frame", default="xy", show_default=True,
               help="Layout of a gradient field in a .mat input (as for 'integrate').")
 @click.option("--mat-keys", metavar="KEYS", help="Variable names in a .mat input.")
+@click.option("--prior-scale", type=float, default=None, metavar="S",
+              help="Depth units per count of a dataset folder's 16-bit PNG prior_depth (as for "
+              "'integrate').")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, as_json):
+def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, prior_scale,
+         as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
     encoding, mask and components, unusable normals, K, and the memory planner's estimate of
     the peak memory the default integration would need (the figure --max-memory is checked
@@ -405,7 +409,8 @@ def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, as_js
 
     frames.gradient_frame(gradient_frame)  # (refused as integrate refuses it, on any input)
     rec = describe(normals, mask=mask, K=K, normal_frame=frames.resolve(normal_frame, y_down),
-                   mat_keys=_split(mat_keys), gradient_frame=gradient_frame)
+                   mat_keys=_split(mat_keys), gradient_frame=gradient_frame,
+                   prior_scale=prior_scale)
     if as_json:
         click.echo(json.dumps(jsonable(rec)))
         return EXIT_OK

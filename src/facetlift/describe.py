@@ -75,7 +75,7 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
 
 
 def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
-             gradient_frame: str = "xy") -> dict:
+             gradient_frame: str = "xy", prior_scale=None) -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
     encoding, mask and components, unusable normals (with the first one's location), K, and
     :func:`estimate` for the default method.
@@ -90,6 +90,9 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         The frame to read it in (default facetlift's).
     gradient_frame : str
         The layout of a gradient field in a ``.mat`` input (as for ``integrate``).
+    prior_scale : float, optional
+        Depth units per count of a dataset folder's 16-bit PNG ``prior_depth`` (as for
+        ``integrate``: such a prior is refused without it).
 
     Raises
     ------
@@ -103,7 +106,7 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
     job = Job(normals=str(path), mask=None if mask is None else str(mask),
               K=None if K is None else str(K), normal_frame=normal_frame,
               mat_keys=None if mat_keys is None else tuple(mat_keys),
-              gradient_frame=gradient_frame)
+              gradient_frame=gradient_frame, prior_scale=prior_scale)
     src = job.source
     with recorded_warnings() as read_caught:  # (a gradient layout's, ...)
         inp = read(job)  # (first: a folder without a normal map is the reader's clear error)
