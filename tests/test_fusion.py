@@ -276,6 +276,41 @@ def test_cli_prior_and_confidence(tmp_path, capsys):
     assert np.abs(out[sel] - prior[sel]).max() < 1e-3
 
 
+def test_weight_maps_read_alike_from_png_and_tiff_and_scale_with_the_weight(tmp_path):
+    """An 8-bit TIFF mask of 255s was read as 255 where the same PNG gave 1; a PNG weight map
+    could not exceed 1 and was refused beside --prior-weight; an RGB map used its red
+    channel only."""
+    import imagecodecs
+    import tifffile
+
+    from facetlift import io
+    from facetlift.jobs import Job, read
+
+    m = np.zeros((6, 7), np.uint8)
+    m[1:4, 2:6] = 255
+    (tmp_path / "c.png").write_bytes(imagecodecs.png_encode(m))
+    tifffile.imwrite(tmp_path / "c.tif", m)
+    tifffile.imwrite(tmp_path / "f.tif", m.astype(np.float32))
+    png, tif = (io.read_weights(tmp_path / f, arg="confidence") for f in ("c.png", "c.tif"))
+    np.testing.assert_array_equal(png, tif)
+    assert png.max() == 1.0
+    assert io.read_weights(tmp_path / "f.tif", arg="confidence").max() == 255.0  # (as stored)
+    grey = np.repeat(m[..., None], 3, axis=2)
+    (tmp_path / "g.png").write_bytes(imagecodecs.png_encode(grey))
+    np.testing.assert_array_equal(io.read_weights(tmp_path / "g.png", arg="confidence"), png)
+    grey[0, 0, 1] = 7
+    (tmp_path / "rgb.png").write_bytes(imagecodecs.png_encode(grey))
+    with pytest.raises(ValueError, match="`confidence`: .* colour channels that differ"):
+        io.read_weights(tmp_path / "rgb.png", arg="confidence")
+    n = np.dstack([np.zeros((6, 7, 2)), np.ones((6, 7))])
+    np.save(tmp_path / "n.npy", n)
+    np.save(tmp_path / "p.npy", np.full((6, 7), 2.0))
+    job = Job(normals=str(tmp_path / "n.npy"), prior=str(tmp_path / "p.npy"),
+              prior_weight=100.0, prior_weight_map=str(tmp_path / "c.png"))
+    w = read(job).prior_weight
+    assert w.max() == 100.0 and w.min() == 0.0
+
+
 def test_cli_16bit_png_prior_needs_a_scale(tmp_path, capsys):
     import imagecodecs
 

@@ -184,14 +184,16 @@ _JOB_OPTIONS = [
     click.option("--prior-weight", type=float, default=1.0, show_default=True, metavar="W",
                  help="Weight of each prior sample relative to one pixel's normal."),
     click.option("--prior-weight-map", type=click.Path(exists=True, dir_okay=False,
-                 path_type=Path), help="Per-pixel prior weights (npy, EXR, TIFF, PNG = v/max)."),
+                 path_type=Path), help="Per-pixel prior weights, times --prior-weight (npy, "
+                 "EXR, float TIFF as stored; 8/16-bit PNG or TIFF = v/max)."),
     click.option("--prior-blur", type=float, default=None, metavar="SIGMA",
                  help="The prior is coarse or blurred (a monocular network, a low-resolution "
                  "sensor): the standard deviation in pixels of its blur; it is then compared "
                  "with the result blurred alike (0.5x the factor of block means upsampled "
                  "bilinearly; docs/fusion.md, 'Blurred priors')."),
     click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-                 help="Per-pixel weights >= 0 of the normals (npy, EXR, TIFF, PNG = v/max); "
+                 help="Per-pixel weights >= 0 of the normals (npy, EXR, float TIFF as stored; "
+                 "8/16-bit PNG or TIFF = v/max); "
                  "0 = missing normal. A dataset folder's confidence.* is used automatically."),
     click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
                  help="Any other method option, repeatable; VALUE is read as JSON when it "

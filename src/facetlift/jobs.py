@@ -169,11 +169,8 @@ def read(job: Job) -> Input:
     if job.confidence is not None:
         conf = io.read_weights(job.confidence, arg="confidence")
     weight = job.prior_weight
-    if job.prior_weight_map is not None:
-        if job.prior_weight != 1.0:
-            raise ValueError("give --prior-weight or --prior-weight-map, not both; got "
-                             f"--prior-weight {job.prior_weight!r}")
-        weight = io.read_weights(job.prior_weight_map, arg="prior_weight_map")
+    if job.prior_weight_map is not None:  # (times --prior-weight: an 8-bit map reaches 100)
+        weight = job.prior_weight * io.read_weights(job.prior_weight_map, arg="prior_weight_map")
     if prior is None and (job.prior_weight_map is not None or job.prior_weight != 1.0):
         raise ValueError("`prior_weight` applies only with a prior (--prior or a dataset's "
                          "prior_depth file)")

@@ -437,14 +437,26 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior") -> np.nd
 
 def read_weights(path, *, arg: str) -> np.ndarray:
     """An (H, W) map of weights >= 0 (``--confidence``, ``--prior-weight-map``): ``.npy``,
-    EXR or TIFF as stored; an 8- or 16-bit PNG as ``value / 255`` or ``value / 65535``."""
+    EXR and floating-point TIFF as stored; an 8- or 16-bit image (PNG or TIFF) as ``value /
+    255`` or ``value / 65535`` (the same mask gives the same weights in either format; a TIFF
+    of 255s was read as 255). A grey image stored as RGB(A) is read as its grey level; colour
+    channels that differ are refused (only the first was read)."""
     p = _existing(path, arg)
     ext = _suffix(p, PRIOR_FORMATS, "weight", arg)
-    if ext == ".png":
+    if ext in (".png", ".tif", ".tiff"):
         a = _decode_image(p, ext, arg)
-        if a.ndim == 3:
+        if a.ndim == 3 and a.shape[-1] in (3, 4):
+            rgb = a[..., :3]
+            if not (rgb == rgb[..., :1]).all():
+                raise ValueError(f"`{arg}`: {p} has colour channels that differ; give a "
+                                 "single-channel (grey) image of the weights")
             a = a[..., 0]
-        if a.dtype not in (np.uint8, np.uint16):
+        if a.ndim != 2:
+            raise ValueError(f"`{arg}`: {p} must hold an (H, W) weight map; got shape "
+                             f"{a.shape}")
+        if a.dtype in (np.uint8, np.uint16):
+            return a.astype(np.float64) / np.iinfo(a.dtype).max
+        if ext == ".png":
             raise ValueError(f"`{arg}`: {p} must be an 8- or 16-bit PNG; got dtype {a.dtype}")
-        return a.astype(np.float64) / np.iinfo(a.dtype).max
+        return a.astype(np.float64)
     return read_plane(p, PRIOR_FORMATS, "weight", arg).astype(np.float64)
