@@ -26,8 +26,8 @@ from ...operators.split import SplitMesh, split
 from ...operators.stencil import E_X, E_Y
 from .fixed_point import SLOPE_BLOCK, TWIST_BLOCK
 
-__all__ = ["SplitMesh", "assemble", "occlusion_offsets", "piece_offsets", "solve_pieces",
-           "solve_split", "split"]
+__all__ = ["SplitMesh", "absorb_small_pieces", "assemble", "occlusion_offsets",
+           "piece_offsets", "solve_pieces", "solve_split", "split"]
 
 
 def assemble(mesh: SplitMesh, bx, by, target, *, weights=None, flat_weight=1e-9):
@@ -120,6 +120,77 @@ def piece_offsets(mesh: SplitMesh, z: np.ndarray, bx, by, target, rule: str = "c
 #: A boundary whose jumps take each sign on more than this share of its edges has no single
 #: occluding side; its two pieces are then placed by the median jump instead.
 MIXED = 0.2
+
+
+#: For each side of a facet: (the facet's two corners on it, the neighbour's two facing them,
+#: row and column step to the neighbour); corners 0..3 top-left, top-right, bottom-right,
+#: bottom-left.
+_EDGES = (((1, 2), (0, 3), 0, 1), ((0, 3), (1, 2), 0, -1), ((3, 2), (0, 1), 1, 0),
+          ((0, 1), (3, 2), -1, 0))
+
+
+def absorb_small_pieces(mesh: SplitMesh, copies, size: int, anchored=None):
+    """The facets' corner copies (m, 4) with every piece of at most `size` facets hung on its
+    best edge to a larger piece; None where there is nothing to join.
+
+    A piece this small is no separated surface but a few facets that fit neither side of a
+    jump: steep rim facets (whose planes part from their neighbours' by more than the split's
+    gap on a curved surface) and mixed pixels along the jump line. Left alone they float as
+    loose quads in the mesh. The edge is the one, of all the piece's edges to a facet of a
+    larger piece, whose two corner copies differ least from the neighbour's; the piece is
+    moved rigidly by the mean difference there and the two copies on the edge take the
+    neighbour's values: joined along that edge, its other edges cut where they part (no face is
+    stretched across a jump). Pieces holding a facet of `anchored` (m,) bool (prior samples)
+    and pieces next to no larger piece are left as they are.
+    """
+    d = mesh.domain
+    k = mesh.n_pieces
+    fp = mesh.facet_piece
+    small = np.bincount(fp, minlength=k) <= size
+    if anchored is not None:
+        small &= ~(np.bincount(fp[np.asarray(anchored, bool)], minlength=k) > 0)
+    if not small.any() or small.all():
+        return None
+    H, W = d.shape
+    index = np.full((H + 2, W + 2), -1, dtype=np.int64)  # facet index, padded by one
+    r, c = d.pixels
+    index[r + 1, c + 1] = np.arange(d.n_facets)
+    f = np.flatnonzero(small[fp])  # the small pieces' facets
+    best_gap = np.full(k, np.inf)
+    best = np.zeros((k, 3), dtype=np.int64)  # facet, neighbour, side
+    for side, (own, theirs, dr, dc) in enumerate(_EDGES):
+        g = index[r[f] + 1 + dr, c[f] + 1 + dc]
+        ok = g >= 0
+        ok[ok] = ~small[fp[g[ok]]]
+        ff, gg = f[ok], g[ok]
+        gap = np.maximum(np.abs(copies[ff, own[0]] - copies[gg, theirs[0]]),
+                         np.abs(copies[ff, own[1]] - copies[gg, theirs[1]]))
+        # the smallest per piece: sorted by gap, the first of each piece
+        order = np.argsort(gap, kind="stable")
+        pc = fp[ff[order]]
+        first = np.unique(pc, return_index=True)[1]
+        sel = order[first]
+        better = gap[sel] < best_gap[fp[ff[sel]]]
+        sel = sel[better]
+        best_gap[fp[ff[sel]]] = gap[sel]
+        best[fp[ff[sel]]] = np.stack([ff[sel], gg[sel], np.full(sel.size, side)], axis=1)
+    hung = np.flatnonzero(np.isfinite(best_gap))
+    if hung.size == 0:
+        return None
+    out = np.array(copies, dtype=float, copy=True)
+    shift = np.zeros(k)
+    edges = []
+    for side, (own, theirs, _, _) in enumerate(_EDGES):
+        p = hung[best[hung, 2] == side]
+        ff, gg = best[p, 0], best[p, 1]
+        want = copies[np.ix_(gg, theirs)]
+        shift[p] = (want - copies[np.ix_(ff, own)]).mean(axis=1)
+        edges.append((ff, own, want))
+    moved = np.isin(fp, hung)
+    out[moved] += shift[fp[moved]][:, None]
+    for ff, own, want in edges:
+        out[np.ix_(ff, own)] = want
+    return out
 
 
 def occlusion_offsets(mesh: SplitMesh, z, bx, by, target, quantile: float = 0.05,
