@@ -262,6 +262,24 @@ def test_info_on_a_folder_without_a_normal_map_is_a_clear_error(tmp_path, capsys
         assert code == 1 and "has no normal_map file" in err and "internal" not in err
 
 
+def test_info_lines_say_each_thing_once_and_guess_the_encoding_right(tmp_path, capsys):
+    """info showed the unusable normals twice (a past-tense warning beside their own line),
+    the warning named the grazing rule without a grazing normal, and a flat view (x and y all
+    0) was called '[0, 1]-encoded'."""
+    n = np.dstack([np.zeros((10, 12, 2)), np.ones((10, 12))])
+    n[4, 4] = [0, 0, -1]
+    np.save(tmp_path / "flat.npy", n)
+    code, out, _ = run(capsys, "info", tmp_path / "flat.npy")
+    assert code == 0 and "unusable normals: 1 back-facing" in out
+    assert "warning:" not in out and "[0, 1]" not in out and "likely as read" in out
+    with pytest.warns(UserWarning, match=r"\(1 back-facing\); first at") as rec:
+        facetlift.prepare(n)
+    assert "grazing" not in str(rec[0].message)
+    np.save(tmp_path / "enc.npy", 0.5 * dome() + 0.5)  # a [0, 1]-encoded float map
+    code, out, _ = run(capsys, "info", tmp_path / "enc.npy")
+    assert code == 0 and "[0, 1]-encoded floats" in out
+
+
 def test_info_takes_the_gradient_layout_and_y_down_and_shows_warnings(tmp_path, capsys):
     """A row/column gradient field read as xy: info shows the layout warning (it said only
     'consistent'); --gradient-frame rowcol silences it; --y-down is accepted as by

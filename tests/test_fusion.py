@@ -170,6 +170,14 @@ def test_components_without_samples_keep_the_gauge_and_info_names_them():
     assert s.info["prior"]["gauged_components"] == [2]
     assert s.depth[3, 3] == pytest.approx(42.0, abs=1e-4)
     assert np.nanmean(s.depth[:, 16:]) == pytest.approx(0.0, abs=1e-9)
+    # said in a warning too (only info said so: a fresh user's unfixed part sat at the gauge)
+    with pytest.warns(UserWarning, match=r"prior: 1 of 2 mask components \(280 of 560 "
+                                         r"pixels\) hold no prior sample.*mean height of 0"):
+        facetlift.prepare(n, mask, prior=prior)
+    prior[3, 20] = 40.0  # (a sample in each: silent)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        facetlift.prepare(n, mask, prior=prior)
 
 
 @pytest.mark.parametrize("method,options", ROUTES)

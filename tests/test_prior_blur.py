@@ -256,7 +256,7 @@ def test_factorized_and_cg_routes_agree():
     ({"prior_blur": 0.2}, "`prior_blur` below half a pixel is no blur"),
     ({"prior_blur": 2.0, "discontinuities": True, "discontinuity_iter": 0},
      "`prior_blur` needs discontinuity_iter >= 1"),
-    ({"prior_blur": 2.0, "prior": None}, "`prior_blur` applies only with a `prior`"),
+    ({"prior_blur": 2.0, "prior": None}, "`prior_blur` 2 applies only with a prior"),
     ({"prior_blur": 2.0, "method": "poisson"}, "does not take a `prior_blur`"),
     ({"prior_blur": 2.0, "solver": "iterative"}, "`prior_blur` needs solver='direct'"),
 ])

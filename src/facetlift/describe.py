@@ -101,7 +101,7 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
     """
     from . import frames
     from .jobs import Job, read, recorded_warnings
-    from .problem import prepare
+    from .problem import UnusableNormalsWarning, prepare
 
     job = Job(normals=str(path), mask=None if mask is None else str(mask),
               K=None if K is None else str(K), normal_frame=normal_frame,
@@ -140,7 +140,9 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         components=int(d.n_components),
         counts=counts,
         first_unusable=counts.pop("first_unusable", None),
-        warnings=out["warnings"] + [str(w.message) for w in caught],
+        # (the unusable normals have their own line: not again as a warning)
+        warnings=out["warnings"] + [str(w.message) for w in caught if not issubclass(
+            w.category, UnusableNormalsWarning)],
         frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame, layout=layout),
         estimate=estimate(problem),
         discontinuity_grazing=_jump_grazing(problem),
@@ -226,7 +228,8 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
                                f"({frames.facing_hint(frame)})")
             return guess
         lo = inside[:, :2].min()
-        if lo >= 0:
+        # (all of x and y >= 0, around the encoding's 0.5: a flat view has them all near 0)
+        if lo >= 0 and float(np.median(inside[:, :2])) > 0.25:
             guess["likely"] = "[0, 1]-encoded floats: decode with 2 * v - 1"
             return guess
     if problem is None:

@@ -25,6 +25,11 @@ from .domain import Domain
 #: ``backfacing=`` choices: treat such normals as missing samples, or raise.
 BACKFACING = ("missing", "error", "outlier")
 
+class UnusableNormalsWarning(UserWarning):
+    """Normals inside the mask that were treated as missing samples (non-finite, zero-length,
+    back-facing, grazing), with their counts and the first one's place."""
+
+
 #: A blurred prior (``prior_blur``) with a median sample weight above this gets a warning
 #: (docs/fusion.md, "Blurred priors": the benchmark's range is 0.001-0.01).
 BLUR_WEIGHT_WARN = 0.03
@@ -364,11 +369,14 @@ def prepare(
         first = int(np.flatnonzero(np.logical_or.reduce(list(problems.values())))[0])
         counts["first_unusable"] = [int(r[first]), int(c[first])]
         what = ", ".join(f"{int(v.sum())} {k}" for k, v in problems.items())
+        rule = ""  # (the grazing rule, where it took some)
+        if "grazing" in problems:
+            rule = (f"; grazing: view cosine < {eps:.4g}"
+                    f"{'' if grazing_note is None else ', ' + grazing_note}")
         warn(
             f"{sum(int(v.sum()) for v in problems.values())} normal(s) inside the mask cannot be "
-            f"used and were treated as missing samples ({what}; grazing: view cosine < "
-            f"{eps:.4g}{'' if grazing_note is None else ', ' + grazing_note}); first at "
-            f"(row {r[first]}, col {c[first]})"
+            f"used and were treated as missing samples ({what}{rule}); first at "
+            f"(row {r[first]}, col {c[first]})", UnusableNormalsWarning
         )
     if not usable.any():
         raise ValueError(
@@ -396,10 +404,28 @@ def prepare(
                 "the prior alone; 0.001-0.01 is the measured range (docs/fusion.md, 'Blurred "
                 "priors')"
             )
-    return Problem(
+    problem = Problem(
         domain=domain, normals=nf, known=front, camera=cam, usable=usable, counts=counts,
         prior=pv, prior_weight=pw, confidence=conf, prior_blur=blur,
     )
+    if problem.has_prior and not problem.prior_components.all():
+        _warn_unfixed(problem)
+    return problem
+
+
+def _warn_unfixed(problem: Problem) -> None:
+    """A prior that fixes some components but not others: the others keep the camera's gauge
+    (mean 0, or a median depth of 1 with a perspective camera), far from the prior's depths
+    (a fresh user's part of the bear sat about 1 mm from the camera beside the metric rest)."""
+    d = problem.domain
+    free = ~problem.prior_components
+    pixels = int(free[d.facet_component].sum())
+    gauge = ("a median depth of 1, not metric" if problem.camera.projection == "perspective"
+             else "a mean height of 0")
+    warn(f"prior: {int(free.sum())} of {d.n_components} mask components ({pixels:,} of "
+         f"{d.n_facets:,} pixels) hold no prior sample: their depth keeps the default "
+         f"convention ({gauge}), not the prior's; info['prior']['gauged_components'] names "
+         "them (give them a sample, or mask them out)")
 
 
 def prior_blur_value(prior_blur) -> float:
@@ -429,7 +455,8 @@ def check_prior_blur(prior_blur, has_prior: bool, shape=None) -> float:
         raise ValueError(f"`prior_blur` below half a pixel is no blur: give 0 to compare the "
                          f"prior pixel by pixel, or at least 0.5; got {blur!r}")
     if blur > 0 and not has_prior:
-        raise ValueError(f"`prior_blur` applies only with a `prior`; got {blur!r} and prior=None")
+        raise ValueError(f"`prior_blur` {blur:g} applies only with a prior (`prior`, --prior, "
+                         "or a dataset folder's prior_depth file)")
     if shape is not None and blur > max(shape):
         raise ValueError(f"`prior_blur` must be at most the image's larger side ({max(shape)} "
                          f"px); got {blur!r}")
