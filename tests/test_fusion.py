@@ -377,6 +377,22 @@ def test_dataset_folder_picks_up_prior_and_confidence(tmp_path, capsys):
     out = capsys.readouterr().out
     assert code == 0 and f"depth prior: {int(sel.sum())} samples fixing 1 of 1" in out
     assert "confidence map" in out
+    # --no-prior / --no-confidence leave the folder's files unused (there was no way to)
+    code = main(["integrate", str(folder), "-s", "npy", "--no-prior", "--no-confidence",
+                 "--json", "-o", str(tmp_path / "n")])
+    assert code == 0, capsys.readouterr().err
+    rec = json.loads(capsys.readouterr().out)
+    assert "prior" not in rec["info"] and "zero_confidence" not in rec["info"]["input"]
+    code = main(["integrate", str(folder), "-s", "npy", "--no-confidence", "--json", "-o",
+                 str(tmp_path / "c")])
+    rec = json.loads(capsys.readouterr().out)
+    assert code == 0 and "prior" in rec["info"] and "zero_confidence" not in rec["info"]["input"]
+    for flags in (["--no-prior", "--prior", str(folder / "prior_depth.npy")],
+                  ["--no-confidence", "--confidence", str(folder / "confidence.npy")]):
+        assert main(["integrate", str(folder), "-o", str(tmp_path / "x"), *flags]) == 1
+        assert "contradict" in capsys.readouterr().err
+    data = facetlift.io.read_dataset(folder, with_prior=False, with_confidence=False)
+    assert data["prior"] is None and data["confidence"] is None
 
 
 @pytest.mark.parametrize("extra,match", [

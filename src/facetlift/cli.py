@@ -195,6 +195,10 @@ _JOB_OPTIONS = [
                  help="Per-pixel weights >= 0 of the normals (npy, EXR, float TIFF as stored; "
                  "8/16-bit PNG or TIFF = v/max); "
                  "0 = missing normal. A dataset folder's confidence.* is used automatically."),
+    click.option("--no-prior", "no_prior", is_flag=True,
+                 help="Leave a dataset folder's prior_depth.* file unused (normals only)."),
+    click.option("--no-confidence", "no_confidence", is_flag=True,
+                 help="Leave a dataset folder's confidence.* file unused."),
     click.option("--option", "options", multiple=True, metavar="KEY=VALUE",
                  help="Any other method option, repeatable; VALUE is read as JSON when it "
                  "parses (1e-4, true, [1,2]) and as a string otherwise."),
@@ -231,7 +235,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
               save=(), quads=False, triangles=False, outdir=None, max_memory=None, prior=None,
               prior_scale=None, prior_weight=1.0, prior_weight_map=None, confidence=None,
-              prior_blur=None):
+              prior_blur=None, no_prior=False, no_confidence=False):
     """A :class:`facetlift.jobs.Job` from the parsed flags (ValueError on bad values)."""
     from . import frames
     from .jobs import Job
@@ -239,6 +243,11 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
     _methods.get(method)
     if quads and triangles:
         raise ValueError("give --quads or --triangles, not both")
+    if no_prior and prior is not None:
+        raise ValueError(f"--no-prior and --prior {prior} contradict each other; give one")
+    if no_confidence and confidence is not None:
+        raise ValueError(f"--no-confidence and --confidence {confidence} contradict each "
+                         "other; give one")
     if K is not None and orthographic:
         raise ValueError(f"--K {K} and --orthographic contradict each other: --orthographic "
                          "ignores a camera (e.g. a dataset folder's K.txt); give one of them")
@@ -267,6 +276,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         prior_weight=prior_weight,
         prior_weight_map=None if prior_weight_map is None else str(prior_weight_map),
         confidence=None if confidence is None else str(confidence), prior_blur=prior_blur,
+        dataset_prior=not no_prior, dataset_confidence=not no_confidence,
     )
 
 

@@ -70,6 +70,9 @@ class Job:
     confidence: str | None = None
     #: Standard deviation (pixels) of the prior's blur (``prior_blur``, docs/fusion.md).
     prior_blur: float | None = None
+    #: Whether a dataset folder's prior_depth.* and confidence.* files are used.
+    dataset_prior: bool = True
+    dataset_confidence: bool = True
 
     def with_input(self, path, outdir) -> Job:
         """The same job on another normal-map input (a batch item)."""
@@ -145,7 +148,9 @@ def read(job: Job) -> Input:
         source = f"{src.name} mask" if m is not None else "valid normals"
     elif src.is_dir():
         ds = io.read_dataset(src, frame=job.normal_frame,
-                             prior_scale=None if job.prior else job.prior_scale)
+                             prior_scale=None if job.prior else job.prior_scale,
+                             with_prior=job.dataset_prior and job.prior is None,
+                             with_confidence=job.dataset_confidence and job.confidence is None)
         n, m, K = ds["normals"], ds["mask"], ds["K"]
         prior, conf = ds["prior"], ds["confidence"]
         source = "dataset mask" if m is not None else "valid normals"

@@ -41,7 +41,8 @@ def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
 
 
 def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
-                 prior_scale: float | None = None) -> dict:
+                 prior_scale: float | None = None, with_prior: bool = True,
+                 with_confidence: bool = True) -> dict:
     """Read a folder in the BiNI / DiLiGenT layout.
 
     The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
@@ -50,13 +51,17 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     `frame` and `y_down` are those of :func:`~facetlift.io.read_normals`. A depth prior
     ``prior_depth.*`` and a normal confidence ``confidence.*`` (``.npy``, ``.exr``, ``.tif``,
     ``.png``; docs/fusion.md) are picked up like ``K.txt``; `prior_scale` is that of
-    :func:`~facetlift.io.read_prior` (required for a 16-bit PNG prior).
+    :func:`~facetlift.io.read_prior` (required for a 16-bit PNG prior); `with_prior` and
+    `with_confidence` False leave those files unread (``None``).
 
     Returns
     -------
     dict
         ``normals`` (H, W, 3) float64, ``mask`` (H, W) bool (the mask file, else the normal
-        map's alpha channel, else None) and ``K`` (3, 3) or None.
+        map's alpha channel, else None), ``K`` (3, 3) or None, ``prior`` (H, W) depth with
+        NaN where unknown, or None, and ``confidence`` (H, W) or None. The command line uses
+        the last two (``facetlift integrate FOLDER``); pass them to
+        :func:`facetlift.integrate` as ``prior=`` and ``confidence=`` to do the same.
 
     Raises
     ------
@@ -79,8 +84,8 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     K = read_K(kpath) if kpath.is_file() else None
     from .images import PRIOR_FORMATS, read_prior, read_weights
 
-    ppath = _find(f, "prior_depth", PRIOR_FORMATS)
+    ppath = _find(f, "prior_depth", PRIOR_FORMATS) if with_prior else None
     prior = read_prior(ppath, prior_scale, arg="prior") if ppath is not None else None
-    cpath = _find(f, "confidence", PRIOR_FORMATS)
+    cpath = _find(f, "confidence", PRIOR_FORMATS) if with_confidence else None
     conf = read_weights(cpath, arg="confidence") if cpath is not None else None
     return {"normals": normals, "mask": mask, "K": K, "prior": prior, "confidence": conf}

@@ -425,7 +425,8 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior") -> np.nd
                              f"got dtype {a.dtype}, shape {a.shape}")
         if scale is None:
             raise ValueError(f"`{arg}`: {p} is a 16-bit PNG: give its depth units per count "
-                             "with --prior-scale (e.g. 0.001 for millimetres in metres)")
+                             "with --prior-scale (prior_scale= in Python; e.g. 0.001 for "
+                             "millimetres in metres)")
         return np.where(a > 0, a * float(scale), np.nan)
     a = read_plane(p, PRIOR_FORMATS, "depth prior", arg, prefer=("Z",))
     zero_unknown = a.dtype.kind in "ui"
