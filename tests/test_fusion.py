@@ -170,6 +170,10 @@ def test_components_without_samples_keep_the_gauge_and_info_names_them():
     assert s.info["prior"]["gauged_components"] == [2]
     assert s.depth[3, 3] == pytest.approx(42.0, abs=1e-4)
     assert np.nanmean(s.depth[:, 16:]) == pytest.approx(0.0, abs=1e-9)
+    assert s.info["prior"]["outside_mask"] == 0
+    prior[5, 14] = prior[6, 15] = 7.0  # (in the gap: no normal there, dropped and counted)
+    assert run(n, mask, prior=prior).info["prior"]["outside_mask"] == 2
+    prior[5, 14] = prior[6, 15] = np.nan
     # said in a warning too (only info said so: a fresh user's unfixed part sat at the gauge)
     with pytest.warns(UserWarning, match=r"prior: 1 of 2 mask components \(280 of 560 "
                                          r"pixels\) hold no prior sample.*mean height of 0"):

@@ -320,7 +320,8 @@ def info_text(info: dict, prefix: str = "") -> str:
 
 
 def prior_info(problem: Problem, surface: Surface) -> dict:
-    """``info["prior"]``: samples used, components whose constant the prior fixed, those that
+    """``info["prior"]``: samples used (and ``outside_mask``: samples where there is no normal,
+    dropped), components whose constant the prior fixed, those that
     kept the camera's gauge (1-based labels of ``Domain.labels``) and that gauge (None when
     the prior fixed every component), and the fit at the samples (mean and largest absolute
     depth difference)."""
@@ -335,6 +336,7 @@ def prior_info(problem: Problem, surface: Surface) -> dict:
     gauge = problem.camera.gauge_name if (~fixed).any() else None
     return {
         "samples": int(used.sum()),
+        "outside_mask": int(problem.counts.get("prior_outside_mask", 0)),
         "components": int(d.n_components),
         "prior_components": [int(k) + 1 for k in np.flatnonzero(fixed)],
         "gauged_components": [int(k) + 1 for k in np.flatnonzero(~fixed)],

@@ -308,9 +308,11 @@ def summary(record: dict) -> str:
                      + ("" if record["converged"] else " (not converged)"))
     prior = info.get("prior")
     if isinstance(prior, dict):  # (also a dataset folder's prior_depth file, read silently)
+        outside = prior.get("outside_mask") or 0
         parts.append(f"depth prior: {prior.get('samples')} samples fixing "
                      f"{len(prior.get('prior_components', []))} of "
-                     f"{prior.get('components')} components")
+                     f"{prior.get('components')} components"
+                     + (f" ({outside} outside the mask, unused)" if outside else ""))
     if "zero_confidence" in (info.get("input") or {}):
         parts.append("confidence map")
     dev = record.get("mean_deviation")

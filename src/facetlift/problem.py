@@ -386,8 +386,9 @@ def prepare(
     nf[~front] = np.nan
     pv = pw = None
     if prior is not None:
-        pv, pw = check_prior(prior, prior_weight, (H, W), m, cam)
+        pv, pw, outside = check_prior(prior, prior_weight, (H, W), m, cam)
         counts["prior_samples"] = int((pw > 0).sum())
+        counts["prior_outside_mask"] = outside  # (dropped: counted, not silently)
     elif not _is_default_weight(prior_weight):
         raise ValueError(f"`prior_weight` applies only with a `prior`; got {_short(prior_weight)} "
                          "and prior=None")
@@ -542,9 +543,10 @@ def prior_image(prior, shape: tuple[int, int]) -> np.ndarray:
 
 
 def check_prior(prior, prior_weight, shape, mask, camera):
-    """Checked prior: ``(values, weights)``, each (m,) on the facets of `mask`, the values in
-    the camera's unknown (:meth:`facetlift.camera.Camera.from_depth`), NaN and weight 0 where
-    there is no sample.
+    """Checked prior: ``(values, weights, outside)``, the first two (m,) on the facets of
+    `mask`, the values in the camera's unknown (:meth:`facetlift.camera.Camera.from_depth`),
+    NaN and weight 0 where there is no sample; `outside` the number of samples outside the
+    mask (no normal to integrate there: dropped).
 
     Raises
     ------
@@ -579,7 +581,7 @@ def check_prior(prior, prior_weight, shape, mask, camera):
                 f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s))"
             )
     values = np.where(have, camera.from_depth(np.where(have, depth, 1.0)), np.nan)
-    return values, np.where(have, w, 0.0)
+    return values, np.where(have, w, 0.0), int(np.isfinite(img[~mask]).sum())
 
 
 def _huge(n, length2) -> np.ndarray:
