@@ -605,6 +605,25 @@ def test_the_block_coarse_space_is_formed_once_per_hierarchy(monkeypatch):
     assert len(calls) < solves  # (measured: 23 formations for 37 solves)
     assert len({id(K) for K in calls}) == len(calls)  # each for another hierarchy matrix
     np.testing.assert_allclose(s.depth, ref.depth, atol=1e-4 * np.ptp(ref.depth[ref.mask]))
+    # a new hierarchy is built after the old one (and the block space holding it) is freed:
+    # the kept block space held the old hierarchy alive through every rebuild (review)
+    import gc
+    import weakref
+
+    made, alive = [], []
+    real_hierarchy = disc.hierarchy
+
+    def counting(*a, **kw):
+        gc.collect()
+        alive.append(sum(r() is not None for r in made))
+        ml = real_hierarchy(*a, **kw)
+        made.append(weakref.ref(ml))
+        return ml
+
+    monkeypatch.setattr(disc, "hierarchy", counting)
+    monkeypatch.setattr(disc, "REUSE_ITS", 0)
+    s = facetlift.integrate(n, discontinuities=True)
+    assert s.info["block_coarse_space"] and len(alive) > 3 and max(alive) == 0, alive
 
 
 def test_a_slow_solve_on_a_stale_hierarchy_refreshes_it(monkeypatch):

@@ -759,12 +759,14 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         # coarse operators are recomputed for the new system (Galerkin refresh, a fraction of
         # a build); once the weights settle, it serves as it is
         if amg["ml"] is None or amg["last_its"] > REUSE_ITS or (fresh and amg["for"] is not K):
-            amg["ml"] = amg["pre"] = None  # (the old one freed before the new one is built)
+            # (the old one freed before the new one is built: the block space's closure too)
+            amg["ml"] = amg["pre"] = amg["bal"] = amg["bal_for"] = amg["bal_pre"] = None
             amg["ml"] = hierarchy(K, symmetric_gs=True, interpolation=INTERPOLATION)
             amg["pre"] = vcycle(amg["ml"])
             amg["builds"] += 1
             amg["for"] = K
         elif rebuild or (amg["last_its"] > REFRESH_ITS and not trial):
+            amg["bal"] = amg["bal_for"] = amg["bal_pre"] = None  # (formed anew below)
             refresh(amg["ml"], K)
             amg["refreshes"] += 1
             amg["for"] = None  # refreshed, not built, for K
