@@ -250,12 +250,12 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None):
     placed = (values + offsets[mesh.piece])[mesh.corners]
     # then the small pieces hung on their larger neighbours (after the placement: hung before,
     # one can bridge two pieces the placement moves apart, e.g. the DiLiGenT bear's arm)
-    small = 0
+    before = placed
     for _ in range(SMALL_PASSES):  # (a piece hung on a small one may make it large enough)
         after, _ = from_copies(domain, placed, GAP * footprint)
-        hung = absorb_small_pieces(after, placed, SMALL_PIECE, anchored)
+        hung = absorb_small_pieces(after, placed, SMALL_PIECE, GAP * footprint, anchored)
         if hung is None:
             break
-        small += int(np.any(hung != placed, axis=1).sum())
         placed = hung
-    return placed, {"pieces": mesh.n_pieces, "moved_pieces": moved, "hung_facets": small}
+    return placed, {"pieces": mesh.n_pieces, "moved_pieces": moved,
+                    "hung_facets": int(np.any(placed != before, axis=1).sum())}

@@ -122,65 +122,66 @@ def piece_offsets(mesh: SplitMesh, z: np.ndarray, bx, by, target, rule: str = "c
 MIXED = 0.2
 
 
-#: For each side of a facet: (the facet's two corners on it, the neighbour's two facing them,
-#: row and column step to the neighbour); corners 0..3 top-left, top-right, bottom-right,
-#: bottom-left.
-_EDGES = (((1, 2), (0, 3), 0, 1), ((0, 3), (1, 2), 0, -1), ((3, 2), (0, 1), 1, 0),
-          ((0, 1), (3, 2), -1, 0))
+#: For each side of a facet: (its neighbour's key in
+#: :func:`facetlift.methods.dgp.discontinuous.neighbours`, the facet's two corners on it, the
+#: neighbour's two facing them); corners 0..3 top-left, top-right, bottom-right, bottom-left.
+_EDGES = (("+x", (1, 2), (0, 3)), ("-x", (0, 3), (1, 2)), ("-y", (3, 2), (0, 1)),
+          ("+y", (0, 1), (3, 2)))
 
 
-def absorb_small_pieces(mesh: SplitMesh, copies, size: int, anchored=None):
+def absorb_small_pieces(mesh: SplitMesh, copies, size: int, gap: float, anchored=None):
     """The facets' corner copies (m, 4) with every piece of at most `size` facets hung on its
-    best edge to a larger piece; None where there is nothing to join.
+    best edge to a larger piece; None where there is nothing to hang.
 
     A piece this small is no separated surface but a few facets that fit neither side of a
     jump: steep rim facets (whose planes part from their neighbours' by more than the split's
     gap on a curved surface) and mixed pixels along the jump line. Left alone they float as
     loose quads in the mesh. The edge is the one, of all the piece's edges to a facet of a
-    larger piece, whose two corner copies differ least from the neighbour's; the piece is
-    moved rigidly by the mean difference there and the two copies on the edge take the
-    neighbour's values: joined along that edge, its other edges cut where they part (no face is
-    stretched across a jump). Pieces holding a facet of `anchored` (m,) bool (prior samples)
-    and pieces next to no larger piece are left as they are.
+    piece of more than `size` facets, whose two corner copies differ least from the
+    neighbour's; the piece is moved rigidly by the mean difference there and the two copies on
+    the edge take the neighbour's values: joined along that edge, its other edges cut where
+    they part by more than `gap` (the split's, :func:`facetlift.operators.split.from_copies`).
+    A hang that would join two larger pieces (an edge that lands within `gap` of the far side
+    of a jump: a face stretched across it) is undone. Pieces holding a facet of `anchored`
+    (m,) bool (prior samples) are not moved, and pieces next to no larger piece stay as
+    they are.
     """
+    from ...operators.split import from_copies
+    from .discontinuous import neighbours
+
     d = mesh.domain
     k = mesh.n_pieces
     fp = mesh.facet_piece
-    small = np.bincount(fp, minlength=k) <= size
+    large = np.bincount(fp, minlength=k) > size
+    movable = ~large
     if anchored is not None:
-        small &= ~(np.bincount(fp[np.asarray(anchored, bool)], minlength=k) > 0)
-    if not small.any() or small.all():
+        movable &= ~(np.bincount(fp[np.asarray(anchored, bool)], minlength=k) > 0)
+    if not movable.any() or not large.any():
         return None
-    H, W = d.shape
-    index = np.full((H + 2, W + 2), -1, dtype=np.int64)  # facet index, padded by one
-    r, c = d.pixels
-    index[r + 1, c + 1] = np.arange(d.n_facets)
-    f = np.flatnonzero(small[fp])  # the small pieces' facets
+    nb = neighbours(d)
+    f = np.flatnonzero(movable[fp])  # the small pieces' facets
     best_gap = np.full(k, np.inf)
     best = np.zeros((k, 3), dtype=np.int64)  # facet, neighbour, side
-    for side, (own, theirs, dr, dc) in enumerate(_EDGES):
-        g = index[r[f] + 1 + dr, c[f] + 1 + dc]
+    for side, (key, own, theirs) in enumerate(_EDGES):
+        g = nb[key][f]
         ok = g >= 0
-        ok[ok] = ~small[fp[g[ok]]]
+        ok[ok] = large[fp[g[ok]]]
         ff, gg = f[ok], g[ok]
-        gap = np.maximum(np.abs(copies[ff, own[0]] - copies[gg, theirs[0]]),
-                         np.abs(copies[ff, own[1]] - copies[gg, theirs[1]]))
-        # the smallest per piece: sorted by gap, the first of each piece
-        order = np.argsort(gap, kind="stable")
-        pc = fp[ff[order]]
-        first = np.unique(pc, return_index=True)[1]
-        sel = order[first]
-        better = gap[sel] < best_gap[fp[ff[sel]]]
-        sel = sel[better]
-        best_gap[fp[ff[sel]]] = gap[sel]
-        best[fp[ff[sel]]] = np.stack([ff[sel], gg[sel], np.full(sel.size, side)], axis=1)
+        diff = np.maximum(np.abs(copies[ff, own[0]] - copies[gg, theirs[0]]),
+                          np.abs(copies[ff, own[1]] - copies[gg, theirs[1]]))
+        order = np.argsort(diff, kind="stable")  # the smallest per piece: its first
+        first = order[np.unique(fp[ff[order]], return_index=True)[1]]
+        better = diff[first] < best_gap[fp[ff[first]]]
+        first = first[better]
+        best_gap[fp[ff[first]]] = diff[first]
+        best[fp[ff[first]]] = np.stack([ff[first], gg[first], np.full(first.size, side)], 1)
     hung = np.flatnonzero(np.isfinite(best_gap))
     if hung.size == 0:
         return None
     out = np.array(copies, dtype=float, copy=True)
     shift = np.zeros(k)
     edges = []
-    for side, (own, theirs, _, _) in enumerate(_EDGES):
+    for side, (_, own, theirs) in enumerate(_EDGES):
         p = hung[best[hung, 2] == side]
         ff, gg = best[p, 0], best[p, 1]
         want = copies[np.ix_(gg, theirs)]
@@ -190,7 +191,19 @@ def absorb_small_pieces(mesh: SplitMesh, copies, size: int, anchored=None):
     out[moved] += shift[fp[moved]][:, None]
     for ff, own, want in edges:
         out[np.ix_(ff, own)] = want
-    return out
+    # undo the hangs that joined two larger pieces (into one piece of the new split)
+    lf = np.flatnonzero(large[fp])
+    while True:
+        after, _ = from_copies(d, out, gap)
+        # (new pieces holding facets of more than one larger piece)
+        pairs = np.unique(np.stack([after.facet_piece[lf], fp[lf]], axis=1), axis=0)
+        bridged = np.bincount(pairs[:, 0], minlength=after.n_pieces) > 1
+        undo = moved & bridged[after.facet_piece]
+        if not undo.any():
+            break
+        out[undo] = copies[undo]
+        moved &= ~undo
+    return out if moved.any() else None
 
 
 def occlusion_offsets(mesh: SplitMesh, z, bx, by, target, quantile: float = 0.05,
