@@ -173,15 +173,23 @@ def _finished(log: Path) -> dict[str, dict]:
     return done
 
 
+#: Method options that do not change an item's result (a memory limit: retrying the items
+#: that failed for memory with a larger one must not run the others again).
+NEUTRAL_OPTIONS = ("max_memory",)
+
+
 def settings(job: Job) -> dict:
-    """What a batch's template asks of every item (all but the item's input and output
-    folder), as the log records it: ``--resume`` skips only items finished with the same."""
+    """What a batch's template asks of every item that shapes its result (all but the
+    item's input and output folder and :data:`NEUTRAL_OPTIONS`; the outputs as a sorted set),
+    as the log records it: ``--resume`` skips only items finished with the same."""
     from dataclasses import asdict
 
     from .jobs import jsonable
 
-    return jsonable({k: v for k, v in asdict(job).items()
-                     if k not in ("normals", "gradients", "outdir")})
+    out = {k: v for k, v in asdict(job).items() if k not in ("normals", "gradients", "outdir")}
+    out["options"] = {k: v for k, v in job.options.items() if k not in NEUTRAL_OPTIONS}
+    out["save"] = sorted(set(job.save))
+    return jsonable(out)
 
 
 def _complete(rec: dict, asked: dict) -> bool:
