@@ -310,6 +310,12 @@ def test_weight_maps_read_alike_from_png_and_tiff_and_scale_with_the_weight(tmp_
     grey = np.repeat(m[..., None], 3, axis=2)
     (tmp_path / "g.png").write_bytes(imagecodecs.png_encode(grey))
     np.testing.assert_array_equal(io.read_weights(tmp_path / "g.png", arg="confidence"), png)
+    ga = np.dstack([m, np.full_like(m, 255)])  # grey + alpha (was read before: still is)
+    (tmp_path / "ga.png").write_bytes(imagecodecs.png_encode(ga))
+    np.testing.assert_array_equal(io.read_weights(tmp_path / "ga.png", arg="confidence"), png)
+    tifffile.imwrite(tmp_path / "01.tif", (m > 0).astype(np.uint8))  # 0/1 as uint8: 1/255
+    with pytest.warns(UserWarning, match=r"`confidence`: .* only 0 and 1 .* store 255"):
+        io.read_weights(tmp_path / "01.tif", arg="confidence")
     grey[0, 0, 1] = 7
     (tmp_path / "rgb.png").write_bytes(imagecodecs.png_encode(grey))
     with pytest.raises(ValueError, match="`confidence`: .* colour channels that differ"):

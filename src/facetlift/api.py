@@ -298,7 +298,9 @@ def info_text(info: dict, prefix: str = "") -> str:
     summarised by their length and ends."""
 
     def value(v):
-        if isinstance(v, (bool, np.bool_)) or v is None or isinstance(v, str):
+        if isinstance(v, str):  # (quoted where a space would split the pair)
+            return repr(v) if (" " in v or not v) else v
+        if isinstance(v, (bool, np.bool_)) or v is None:
             return str(v)
         if isinstance(v, (float, np.floating)):
             return f"{float(v):.4g}"

@@ -169,8 +169,8 @@ def read(job: Job) -> Input:
     if job.prior is not None:
         prior = io.read_prior(job.prior, job.prior_scale)
     elif job.prior_scale is not None and prior is None:
-        raise ValueError("`prior_scale` applies only with a prior (--prior or a dataset's "
-                         "prior_depth file)")
+        raise ValueError("`prior_scale` applies only with a prior (a dataset folder's "
+                         "prior_depth file, or integrate's --prior)")
     if job.confidence is not None:
         conf = io.read_weights(job.confidence, arg="confidence")
     weight = job.prior_weight

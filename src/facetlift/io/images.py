@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import frames
+from .._warnings import warn
 from ..frames import ENCODED_LENGTH_RANGE  # noqa: F401  (re-exported by facetlift.io)
 from ..problem import numeric_array
 from ._paths import _existing, _suffix
@@ -446,9 +447,9 @@ def read_weights(path, *, arg: str) -> np.ndarray:
     ext = _suffix(p, PRIOR_FORMATS, "weight", arg)
     if ext in (".png", ".tif", ".tiff"):
         a = _decode_image(p, ext, arg)
-        if a.ndim == 3 and a.shape[-1] in (3, 4):
-            rgb = a[..., :3]
-            if not (rgb == rgb[..., :1]).all():
+        if a.ndim == 3 and a.shape[-1] in (2, 3, 4):  # (grey + alpha, RGB, RGBA)
+            grey = a[..., :3] if a.shape[-1] >= 3 else a[..., :1]
+            if not (grey == grey[..., :1]).all():
                 raise ValueError(f"`{arg}`: {p} has colour channels that differ; give a "
                                  "single-channel (grey) image of the weights")
             a = a[..., 0]
@@ -456,7 +457,12 @@ def read_weights(path, *, arg: str) -> np.ndarray:
             raise ValueError(f"`{arg}`: {p} must hold an (H, W) weight map; got shape "
                              f"{a.shape}")
         if a.dtype in (np.uint8, np.uint16):
-            return a.astype(np.float64) / np.iinfo(a.dtype).max
+            top = np.iinfo(a.dtype).max
+            if 0 < int(a.max()) <= 1:
+                warn(f"`{arg}`: {p} holds only 0 and 1 as {a.dtype} values, read as 0 and "
+                     f"1/{top} (value / {top}, as every 8/16-bit image): for weights of 1, "
+                     f"store {top} (or give a float TIFF, EXR or .npy)")
+            return a.astype(np.float64) / top
         if ext == ".png":
             raise ValueError(f"`{arg}`: {p} must be an 8- or 16-bit PNG; got dtype {a.dtype}")
         return a.astype(np.float64)
