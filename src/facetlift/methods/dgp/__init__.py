@@ -224,7 +224,7 @@ def normal_scale(problem):
 #: Pieces of at most this many facets are hung on their best edge to a larger piece once the
 #: pieces are placed (:func:`facetlift.methods.dgp.split.absorb_small_pieces`; in at most
 #: SMALL_PASSES passes): no loose quads in the mesh. Measured on the benchmark's 192 runs
-#: against none: 10 errors better by 1.1-1.9 %, none worse by 1 % (docs/perspective.md).
+#: against none: 9 errors better by 1.1-1.9 %, none worse by 1 % (docs/perspective.md).
 SMALL_PIECE = 4
 SMALL_PASSES = 3
 
