@@ -479,13 +479,17 @@ class GlueInverse:
         if self.other.size:
             self.M_other = np.linalg.inv(A_other + w[self.other][:, :, None] * np.eye(4))
 
-    def apply(self, v):
-        """``M_f v_f`` for every facet: (m, 4)."""
-        d = self.d
-        dv = d * v
-        out = dv + (self.c * (dv @ _ONES))[:, None] * d
+    def apply(self, v, plus=None):
+        """``M_f v_f`` for every facet, plus `plus` (m, 4) where given: (m, 4)."""
+        d = self.d  # (M v = d * (v + c (d . v)): one new (m, 4) array, no temporaries)
+        s = np.einsum("fa,fa->f", d, v)
+        s *= self.c
+        out = np.add(v, s[:, None])
+        out *= d
         if self.other.size:
             out[self.other] = np.einsum("fab,fb->fa", self.M_other, v[self.other])
+        if plus is not None:
+            out += plus
         return out
 
     def eliminated(self):
@@ -722,19 +726,24 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
                                rhs - shift)
         return M, Ma, K, rhs, scale
 
-    def copies(M, Ma, w, z):
-        return Ma + M.apply(w * z[corners])
+    def copies(M, Ma, w, zc):
+        """Every facet's own corner values, for the vertex values at its corners `zc`."""
+        return M.apply(np.multiply(w, zc, out=np.empty_like(zc)), plus=Ma)
 
-    def energy(y, w, z):
-        slopes = y @ eye_rows - np.stack([bx, by], axis=1)
+    def energy(y, w, zc):
+        slopes = y @ eye_rows
+        slopes[:, 0] -= bx
+        slopes[:, 1] -= by
         fit = np.where(target, np.einsum("fa,fa->f", slopes, slopes), 0.0)
         twist = (y @ E_TWIST) ** 2
-        glue = (w * (y - z[corners]) ** 2).sum()
+        gap = np.subtract(y, zc)
+        glue = float(np.einsum("fa,fa,fa->", w, gap, gap))
+        del gap
         if fusion is None:  # (no prior either)
             return float(fit.sum() + twist.sum() + glue)
         c = 1.0 if fusion is None else fusion[0]
         fit_prior = 0.0 if prior is None else fusion[1] * (y.mean(axis=1) - prior[1]) ** 2 + (
-            (1.0 - PRIOR_OWN) * prior[0] * (z[corners].mean(axis=1) - prior[1]) ** 2)
+            (1.0 - PRIOR_OWN) * prior[0] * (zc.mean(axis=1) - prior[1]) ** 2)
         return float((c * (fit + twist)).sum() + np.sum(fit_prior) + glue)
 
     slopes = (bx, by) if EVIDENCE == "residual" else None
@@ -838,8 +847,10 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     z, its = solve(K, rhs, np.zeros(domain.n_vertices) if x0 is None else x0, scale=scale,
                    rtol=max(cg_rtol, LOOSE_RTOL) if max_iter > 0 else cg_rtol)
     cg_its = [its]
-    y = copies(M, Ma, w, z)
-    energies = [energy(y, w, z)]
+    zc = z[corners]
+    y = copies(M, Ma, w, zc)
+    energies = [energy(y, w, zc)]
+    del zc
     changes = []
     converged = max_iter == 0
     it = 0
@@ -852,8 +863,9 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         z, its = solve(K, rhs, z, rebuild=changes_big(step), scale=scale,
                        rtol=max(cg_rtol, LOOSE_RTOL), reduction=FORCING if forced else None)
         cg_its.append(its)
-        y = copies(M, Ma, w, z)
-        energies.append(energy(y, w, z))
+        zc = z[corners]
+        y = copies(M, Ma, w, zc)
+        energies.append(energy(y, w, zc))
         return M, Ma, K, rhs, scale, z, y
 
     moving = blur is not None and max_iter > 0 and blur.update(y.mean(axis=1), settled=False)
@@ -944,7 +956,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             its += more
             polish = "multigrid"
         cg_its.append(its)
-        y = copies(M, Ma, w, z)
+        y = copies(M, Ma, w, z[corners])
     if blur is not None:  # (the mismatch of the surface returned)
         blur.returned = blur.rms(y.mean(axis=1))
     t2 = time.perf_counter()
