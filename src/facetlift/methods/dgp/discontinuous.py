@@ -472,7 +472,8 @@ class GlueInverse:
         scale, alpha = (1.0, 0.25) if fusion is None else (
             fusion[0][:, None], 0.25 * fusion[0] - fusion[1] / 16.0)
         self.w = w
-        self.d = 1.0 / (scale + w)  # (m, 4)
+        self.d = np.add(w, scale)  # (m, 4): 1 / (scale + w), in one array
+        np.reciprocal(self.d, out=self.d)
         self.c = np.broadcast_to(alpha / (1.0 - alpha * (self.d @ _ONES)), (len(w),))
         self.other = np.flatnonzero(~target)
         self.M_other = None
@@ -512,11 +513,14 @@ class GlueInverse:
             other = -(wo[:, :, None] * self.M_other * wo[:, None, :])
             other[:, idx, idx] += wo
         row = np.empty(m)
+        diag = np.empty(m)
         for a, b in UPPER:  # (formed row by row: no (4, m) temporary but g)
             np.multiply(gt[a], gt[b], out=row)
             row *= negc
-            if a == b:
-                row += w[:, a] * (1.0 - gt[a])
+            if a == b:  # (+ w_a (1 - g_a))
+                np.subtract(1.0, gt[a], out=diag)
+                diag *= w[:, a]
+                row += diag
             if other is not None:
                 row[self.other] = other[:, a, b]
             yield row
@@ -532,8 +536,13 @@ def neighbours(domain) -> dict[str, np.ndarray]:
             "-y": idx[r + 2, c + 1]}
 
 
-def _sigmoid(x):
-    return 0.5 * (1.0 + np.tanh(0.5 * x))
+def _sigmoid(x, k=1.0):
+    """``sigmoid(k x)``, formed in `x` (as ``(1 + tanh(k x / 2)) / 2``)."""
+    x *= 0.5 * k
+    np.tanh(x, out=x)
+    x += 1.0
+    x *= 0.5
+    return x
 
 
 def evidence(nb, scale) -> list[tuple[str, float, np.ndarray, np.ndarray]]:
@@ -567,12 +576,14 @@ def bilateral_weights(u, nb, scale, k, slopes=None):
             d = sign * d - 0.5 * (g + g[qq])
         d *= hs
         sq[key] = np.square(d, out=d)
-    omega = {a: _sigmoid(k * (sq["-" + a] - sq["+" + a])) for a in ("x", "y")}  # + side weight
+    # the + side's weight and the - side's, per axis (formed in the squares' own arrays)
+    omega = {}
+    for a in ("x", "y"):
+        plus = _sigmoid(np.subtract(sq["-" + a], sq["+" + a], out=sq["-" + a]), k)
+        omega[a] = {1: plus, -1: np.subtract(1.0, plus, out=sq["+" + a])}
     out = np.empty((len(u), 4))
     for i, (sx, sy) in enumerate(CORNER_SIDES):
-        wx = omega["x"] if sx > 0 else 1.0 - omega["x"]
-        wy = omega["y"] if sy > 0 else 1.0 - omega["y"]
-        np.multiply(wx, wy, out=out[:, i])
+        np.multiply(omega["x"][sx], omega["y"][sy], out=out[:, i])
     out *= 4.0
     return np.maximum(out, FLOOR, out=out)
 
