@@ -415,3 +415,11 @@ def test_bini_cuts_a_fold_that_poisson_smears():
         if method == "bini":
             assert s.info["converged"] and s.info["changes"][-1] < 1e-4
     assert err["bini"] < 0.6 * err["poisson"]  # measured 2.09 against 5.0
+    # discontinuities=False turns the bilateral weights off (integrate and the command line
+    # passed on only True: bini kept its default; found by a fresh-user check)
+    off = facetlift.integrate(n, method="bini", discontinuities=False)
+    e = off.height - z
+    assert off.info["iterations"] == 1 and np.abs(e - e.mean()).mean() > err["bini"] + 1.0
+    default = facetlift.integrate(n, method="bini", discontinuities=None)
+    assert default.info["iterations"] > 1
+    assert facetlift.integrate(n, method="poisson", discontinuities=False).info  # (a no-op)

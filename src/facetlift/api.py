@@ -27,7 +27,7 @@ def integrate(
     pixel_size: float = 1.0,
     K=None,
     known=None,
-    discontinuities: bool = False,
+    discontinuities: bool | None = None,
     solver: str | None = None,
     backfacing: str = "missing",
     outlier_eps: float | None = None,
@@ -58,9 +58,11 @@ def integrate(
         Perspective intrinsics (OpenCV layout); None for an orthographic view.
     known : (H, W) array_like of bool, optional
         Pixels whose normal is given; the other mask pixels are missing samples.
-    discontinuities : bool
+    discontinuities : bool, optional
         Let the depth jump where the normals imply it (methods that declare the capability,
-        e.g. "dgp").
+        e.g. "dgp"). None keeps the method's default (False for "dgp", True for "bini");
+        False turns it off where the method has the option (it was ignored: "bini" kept its
+        bilateral weights).
     solver : str, optional
         The method's solver, for methods that have the option (``"direct"`` or
         ``"iterative"`` for "dgp").
@@ -147,8 +149,11 @@ def integrate(
         options["prior"] = prior  # prior, a string), not a depth prior
         prior = None
     note = None
-    if discontinuities:
-        options["discontinuities"] = _check_discontinuities(info, discontinuities)
+    if discontinuities is not None and not _check_discontinuities(info, discontinuities):
+        if "discontinuities" in info.options():  # (an explicit False, e.g. for "bini")
+            options["discontinuities"] = False
+    elif discontinuities:
+        options["discontinuities"] = True
         if outlier_eps is None and info.jump_grazing is not None:
             outlier_eps = info.jump_grazing
             note = (f"the rule of {method!r} with discontinuities=True, cos 85 deg; "
@@ -210,8 +215,11 @@ def integrate_gradients(
 
 
 def _check_discontinuities(info: methods.MethodInfo, value) -> bool:
+    """`value` as a bool; True only for a method with the capability (else ValueError)."""
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"`discontinuities` must be True or False; got {value!r}")
+    if not value:
+        return False
     if not info.discontinuities:
         able = sorted(k for k, v in methods.REGISTRY.items() if v.discontinuities)
         raise ValueError(
