@@ -127,6 +127,25 @@ def test_contradicting_flags_are_refused(dome_png, tmp_path, capsys):
         assert faces and all(len(f) == face + 1 for f in faces)
 
 
+def test_option_cannot_carry_integrates_own_arguments_or_contradict_a_flag(dome_png,
+                                                                           tmp_path, capsys):
+    """--option pixel_size=3 reached integrate twice (an internal error, exit 3), and
+    --option solver=iterative beside --solver direct lost silently (found by a fresh-user
+    check)."""
+    for key, flag in (("pixel_size", "--pixel-size"), ("method", "--method"),
+                      ("K", "--K"), ("outlier_eps", "--outlier-eps")):
+        code, _, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "a",
+                           "--option", f"{key}=3")
+        assert code == 1 and f"'{key}' is not a method option: give {flag}" in one_line(err)
+    code, _, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "b", "--option",
+                       "solver=iterative", "--solver", "direct")
+    assert code == 1 and "contradict" in one_line(err)
+    code, _, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "c", "--option",
+                       "solver=direct", "--solver", "direct", "-s", "npy")
+    assert code == 0, err
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
 def test_summary_and_json_show_the_mean_deviation(dome_png, tmp_path, capsys):
     code, out, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "a")
     assert code == 0, err

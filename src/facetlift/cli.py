@@ -85,6 +85,17 @@ class _StderrHandler(logging.StreamHandler):
         pass
 
 
+#: integrate's own arguments, which --option cannot carry: the flag that does (they reached
+#: integrate twice, an internal error). ("prior" stays: regularization's option of that name.)
+RESERVED_OPTIONS = {
+    "normals": "the NORMALS argument", "gradients": "--gradients", "mask": "--mask",
+    "method": "--method", "pixel_size": "--pixel-size", "K": "--K", "known": "--mask",
+    "backfacing": "--backfacing", "outlier_eps": "--outlier-eps",
+    "normal_frame": "--normal-frame", "prior_weight": "--prior-weight",
+    "confidence": "--confidence", "prior_blur": "--prior-blur", "progress": "--progress",
+}
+
+
 def _parse_option(text: str) -> tuple[str, object]:
     if "=" not in text:
         raise click.BadParameter(f"expected KEY=VALUE; got {text!r}", param_hint="--option")
@@ -92,6 +103,9 @@ def _parse_option(text: str) -> tuple[str, object]:
     key = key.strip().replace("-", "_")
     if not key.isidentifier():
         raise click.BadParameter(f"{key!r} is not an option name", param_hint="--option")
+    if key in RESERVED_OPTIONS:
+        raise click.BadParameter(f"{key!r} is not a method option: give "
+                                 f"{RESERVED_OPTIONS[key]}", param_hint="--option")
     try:
         return key, json.loads(value)
     except json.JSONDecodeError:
@@ -253,11 +267,14 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
                          "ignores a camera (e.g. a dataset folder's K.txt); give one of them")
     opts = dict(_parse_option(o) for o in options)
     for key, value in (("solver", solver), ("max_iter", max_iter), ("tol", tol),
-                       ("backend", backend), ("max_memory", max_memory)):
-        if value is not None:
-            opts[key] = value
-    if discontinuities:
-        opts["discontinuities"] = True
+                       ("backend", backend), ("max_memory", max_memory),
+                       ("discontinuities", True if discontinuities else None)):
+        if value is None:
+            continue
+        if key in opts and opts[key] != value:  # (the flag won silently)
+            raise ValueError(f"--option {key}={json.dumps(opts[key])} and "
+                             f"--{key.replace('_', '-')} contradict each other; give one")
+        opts[key] = value
     frame = frames.resolve(normal_frame, y_down)
     if frame is not None:
         frames.parse(frame)
