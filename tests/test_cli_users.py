@@ -146,6 +146,22 @@ def test_option_cannot_carry_integrates_own_arguments_or_contradict_a_flag(dome_
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 
+def test_a_failed_jobs_warnings_are_shown_as_the_commands_own(tmp_path, capsys):
+    """A job refused after its reading printed its warnings through Python's display (a
+    line of click's source beside them); the memory refusal said '0 MiB' for 1K and offered
+    dgp to a dgp job (found by a fresh-user check)."""
+    n = dome()
+    n[3, 4] = [0.0, 0.0, -1.0]  # (a back-facing normal: a warning)
+    np.save(tmp_path / "n.npy", n)
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "o",
+                       "--max-memory", "1K")
+    lines = err.strip().splitlines()
+    assert code == 1 and lines[-1].startswith("facetlift: error:"), err
+    assert all(ln.startswith("facetlift: ") for ln in lines), err
+    assert any("warning: 1 normal(s) inside the mask" in ln for ln in lines)
+    assert "1 KiB allowed" in lines[-1] and "is the leanest" not in lines[-1]
+
+
 def test_summary_and_json_show_the_mean_deviation(dome_png, tmp_path, capsys):
     code, out, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "a")
     assert code == 0, err

@@ -15,6 +15,7 @@ import logging
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import click
@@ -643,6 +644,14 @@ def _one_line(e: BaseException) -> str:
     return " ".join(str(e).split()) or type(e).__name__
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    """Every warning the commands do not print themselves (those of a job that failed after
+    its reading, numpy's), as ``facetlift: warning: ...`` on stderr: Python's display named
+    a line of click's or numpy's source."""
+    text = " ".join(str(message).split())
+    print(f"facetlift: warning: {text}", file=sys.stderr if file is None else file)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line with `argv` (default ``sys.argv[1:]``); returns the exit code.
 
@@ -668,7 +677,9 @@ def main(argv: list[str] | None = None) -> int:
         args = ["--help"]
     _STATE["debug"] = False
     try:
-        rv = cli.main(args=args, prog_name="facetlift", standalone_mode=False)
+        with warnings.catch_warnings():  # (restores Python's own display afterwards)
+            warnings.showwarning = _show_warning
+            rv = cli.main(args=args, prog_name="facetlift", standalone_mode=False)
     except click.exceptions.Exit as e:  # pragma: no cover - returned, not raised, by click 8
         return e.exit_code
     except click.exceptions.Abort as e:  # click turns Ctrl-C (KeyboardInterrupt) into Abort

@@ -171,7 +171,9 @@ def _release_retained() -> None:
 
 
 def _size(b: float) -> str:
-    return f"{b / GiB:.2f} GiB" if b >= GiB else f"{b / MiB:.0f} MiB"
+    if b >= GiB:
+        return f"{b / GiB:.2f} GiB"
+    return f"{b / MiB:.0f} MiB" if b >= MiB else f"{b / 1024:.0f} KiB"  # (1K read "0 MiB")
 
 
 _UNITS = {"": 1, "b": 1, "k": 2**10, "m": MiB, "g": GiB, "t": 2**40}
@@ -443,8 +445,9 @@ def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
             f"method {method!r} would need about {_size(est)} at its peak ({route}, "
             f"{problem.domain.n_facets:,} mask pixels), more than the "
             f"{_size(lim)} allowed ({source}); "
-            "crop the input or lower its resolution, use a route that needs less (the "
-            "default method='dgp' is the leanest), or raise the limit with max_memory= / "
-            "--max-memory if the memory is there"
+            "crop the input or lower its resolution, "
+            + ("use a route that needs less (the default method='dgp' is the leanest), "
+               if method != "dgp" else "")
+            + "or raise the limit with max_memory= / --max-memory if the memory is there"
         )
     return p
