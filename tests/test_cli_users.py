@@ -118,6 +118,13 @@ def test_contradicting_flags_are_refused(dome_png, tmp_path, capsys):
                            "--orthographic")
         assert code == 1 and "--orthographic contradict" in one_line(err)
     assert not (tmp_path / "integrate").exists() and not (tmp_path / "batch").exists()
+    # --pixel-size with a camera was ignored silently (a fresh-user check)
+    code, _, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "p", "--K", K,
+                       "--pixel-size", "2")
+    assert code == 1 and "`pixel_size` 2 applies to orthographic input" in one_line(err)
+    code, _, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "p", "--K", K,
+                       "--pixel-size", "1", "-s", "npy")
+    assert code == 0, err
     for flag, face in (("--quads", 4), ("--triangles", 3)):
         out = tmp_path / flag.strip("-")
         code, _, err = run(capsys, "integrate", dome_png, "-o", out, "-s", "obj", flag)
