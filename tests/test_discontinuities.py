@@ -776,3 +776,23 @@ def test_real_maps_run_with_the_defaults_and_agree_better_with_their_input(name)
         assert jumps.info["missing"] > 100  # the map's back-facing normals, counted
     assert jumps.info["mean_deviation"] < smooth.info["mean_deviation"]
     assert K is None or isinstance(jumps.camera, Pinhole)
+
+
+def test_prepare_and_solve_are_told_of_the_routes_grazing_rule():
+    """prepare + solve with discontinuities=True took the camera's grazing threshold, where
+    integrate takes the route's own (cos 85 deg): 10x the bear's MADE, silently (found by a
+    fresh-user check). A warning says so; a threshold given to prepare is left alone."""
+    import warnings
+
+    from test_perspective import _K
+
+    n, mask, K, _ = sphere_scene(H=24, W=28, K=_K(H=24, W=28, f=60.0), min_cos=0.3)
+    p = facetlift.prepare(n, mask, K=K)
+    with pytest.warns(UserWarning, match="camera's grazing threshold .* outlier_eps="):
+        facetlift.solve(p, "dgp", discontinuities=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        q = facetlift.prepare(n, mask, K=K, outlier_eps=0.01)
+        facetlift.solve(q, "dgp", discontinuities=True)
+        facetlift.integrate(n, mask, K=K, discontinuities=True)
+        facetlift.solve(p, "dgp")

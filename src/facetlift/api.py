@@ -9,6 +9,7 @@ import time
 import numpy as np
 
 from . import frames, memory, methods
+from ._warnings import warn
 from .domain import Domain
 from .linalg import SolverError
 from .metrics import diagnose
@@ -240,11 +241,20 @@ def solve(
     `max_memory` (:func:`facetlift.memory.plan`); see :func:`integrate` for what is raised.
     The normals `problem` treats as grazing were decided when it was prepared: the
     discontinuity route's own threshold (``MethodInfo.jump_grazing``, cos 85 deg for "dgp")
-    is applied by :func:`integrate`, so prepare with ``outlier_eps=`` to match it here.
+    is applied by :func:`integrate`, so prepare with ``outlier_eps=`` to match it here (a
+    problem prepared with the camera's own threshold, below the route's, gets a warning).
     """
     t0 = time.perf_counter() if t0 is None else t0
     info = methods.get(method)
     values = validate(info.specs(), options, method)
+    eps = problem.counts.get("outlier_eps")
+    if (values.get("discontinuities") and info.jump_grazing is not None and eps is not None
+            and eps < info.jump_grazing and not problem.extras.get("outlier_eps_given", True)):
+        # (integrate applies the route's own threshold; prepare + solve took the camera's)
+        warn(f"discontinuities=True on a problem prepared with the camera's grazing threshold "
+             f"(view cosine {eps:.4g}): integrate uses {method!r}'s own for this route, cos 85 "
+             f"deg (the DiLiGenT bear: 0.025 mm MADE against 0.28); prepare(..., outlier_eps="
+             f"facetlift.methods.get({method!r}).jump_grazing) to match it")
     if problem.perspective and not info.perspective:
         able = sorted(k for k, v in methods.REGISTRY.items() if v.perspective)
         raise ValueError(

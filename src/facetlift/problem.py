@@ -408,6 +408,8 @@ def prepare(
     problem = Problem(
         domain=domain, normals=nf, known=front, camera=cam, usable=usable, counts=counts,
         prior=pv, prior_weight=pw, confidence=conf, prior_blur=blur,
+        # (whether the grazing threshold was chosen, or the camera's: facetlift.api.solve)
+        extras={"outlier_eps_given": outlier_eps is not None},
     )
     if problem.has_prior and not problem.prior_components.all():
         _warn_unfixed(problem)
