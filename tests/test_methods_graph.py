@@ -423,3 +423,26 @@ def test_bini_cuts_a_fold_that_poisson_smears():
     default = facetlift.integrate(n, method="bini", discontinuities=None)
     assert default.info["iterations"] > 1
     assert facetlift.integrate(n, method="poisson", discontinuities=False).info  # (a no-op)
+
+
+def test_bini_fills_a_hole_of_missing_normals():
+    """Inside a hole of missing normals no BiNI term reaches a pixel: they were left at CG's
+    start, a step at the hole's edge (22 % of the range on a sphere; found by a fresh-user
+    check). They are the harmonic fill of the pixels around now, as close as poisson's."""
+    H = W = 64
+    r, c = np.mgrid[0:H, 0:W] + 0.5
+    z = 30.0 - ((c - W / 2) ** 2 + (r - H / 2) ** 2) / 60.0  # a dome (x = col, y = -row)
+    n = facetlift.normals_from_gradients(-(c - W / 2) / 30.0, (r - H / 2) / 30.0)
+    known = np.ones((H, W), bool)
+    known[24:40, 20:44] = False
+    err = {}
+    for method in ("bini", "poisson"):
+        s = facetlift.integrate(n, known=known, method=method)
+        e = s.height - z
+        e -= np.median(e[known])
+        err[method] = np.abs(e[~known]).max() / np.ptp(z)
+        if method == "bini":
+            assert s.info["filled"] == int((~known).sum()) - 2 * (16 + 24) + 4  # (the rim's
+            # pixels are reached by their neighbours' terms)
+    # measured 0.0455 of the range against poisson's 0.0454 (0.324 unfilled)
+    assert err["bini"] < 1.2 * err["poisson"], err
