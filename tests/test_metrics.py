@@ -72,7 +72,12 @@ def test_metric_errors():
     with pytest.raises(ValueError, match="no pixel"):
         normalized_error(a, np.full((4, 4), np.nan))
     with pytest.raises(ValueError, match="no finite scale"):
+        made(np.full((4, 4), 1e-310), np.full((4, 4), 1e300))  # (an overflowing scale)
+    # an orthographic depth (mean 0) gave a number without meaning (a fresh-user check)
+    with pytest.raises(ValueError, match="`estimate` has depths <= 0 .* rmse or mae"):
         made(a, np.ones((4, 4)))
+    with pytest.raises(ValueError, match="`truth` has depths <= 0"):
+        made(np.ones((4, 4)), np.ones((4, 4)) - 2.0)
     with pytest.raises(ValueError, match="`vertex_depth`"):
         facet_normals(np.zeros(5))
 

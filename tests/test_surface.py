@@ -161,3 +161,13 @@ def test_repr(plane_surface):
     text = repr(s)
     assert text.startswith(f"Surface(12x15, {int(s.mask.sum())} facets, method='dgp'")
     assert "iterations=1" in text
+
+
+def test_save_into_a_missing_folder_names_the_target(tmp_path):
+    """The error named the temporary file (.x.npy.host.pid.hex.tmp), not the path given (a
+    fresh-user check)."""
+    s = facetlift.integrate(np.dstack([np.zeros((5, 6, 2)), np.ones((5, 6))]))
+    target = tmp_path / "nope" / "x.npy"
+    with pytest.raises(FileNotFoundError, match=r"cannot write .*nope/x\.npy: its folder"):
+        s.save(target)
+    assert not (tmp_path / "nope").exists()

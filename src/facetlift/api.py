@@ -259,7 +259,8 @@ def solve(
         able = sorted(k for k, v in methods.REGISTRY.items() if v.perspective)
         raise ValueError(
             f"method {method!r} does not support perspective input (`K`); methods that do: "
-            f"{able}"
+            f"{able}; or integrate orthographically (K=None; --orthographic ignores a "
+            "dataset folder's K.txt)"
         )
     for what, given in (("prior", problem.prior is not None),
                         ("confidence", problem.confidence is not None),

@@ -29,6 +29,9 @@ def atomic_path(path):
     removed and the exception re-raised, so `path` is either untouched or complete.
     """
     target = Path(path)
+    if not target.parent.is_dir():  # (the error named the temporary file, not the target)
+        raise FileNotFoundError(f"cannot write {target}: its folder {target.parent} does not "
+                                "exist")
     tmp = target.with_name(f".{target.name}.{_host()}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
     try:
         yield tmp
