@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -119,9 +120,19 @@ def test_contradicting_flags_are_refused(dome_png, tmp_path, capsys):
         assert code == 1 and "--orthographic contradict" in one_line(err)
     assert not (tmp_path / "integrate").exists() and not (tmp_path / "batch").exists()
     # --pixel-size with a camera was ignored silently (a fresh-user check)
-    code, _, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "p", "--K", K,
-                       "--pixel-size", "2")
-    assert code == 1 and "`pixel_size` 2 applies to orthographic input" in one_line(err)
+    for cmd in ("integrate", "batch"):  # (the batch up front, not failing every item)
+        code, _, err = run(capsys, cmd, dome_png, "-o", tmp_path / "p", "--K", K,
+                           "--pixel-size", "2")
+        assert code == 1 and "`pixel_size` 2.0 applies to orthographic input" in one_line(err)
+    folder = tmp_path / "ds"  # (a dataset folder's K.txt: refused when it is read)
+    folder.mkdir()
+    (folder / "normal_map.png").write_bytes(Path(dome_png).read_bytes())
+    np.savetxt(folder / "K.txt", np.loadtxt(K))
+    code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "q", "--pixel-size", "2")
+    assert code == 1 and "`pixel_size` 2.0 applies to orthographic input" in one_line(err)
+    code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "q", "--pixel-size", "2",
+                       "--orthographic", "-s", "npy")
+    assert code == 0, err
     code, _, err = run(capsys, "integrate", dome_png, "-o", tmp_path / "p", "--K", K,
                        "--pixel-size", "1", "-s", "npy")
     assert code == 0, err
@@ -167,6 +178,37 @@ def test_a_failed_jobs_warnings_are_shown_as_the_commands_own(tmp_path, capsys):
     assert all(ln.startswith("facetlift: ") for ln in lines), err
     assert any("warning: 1 normal(s) inside the mask" in ln for ln in lines)
     assert "1 KiB allowed" in lines[-1] and "is the leanest" not in lines[-1]
+
+
+def test_second_review_fixes(tmp_path, capsys, monkeypatch):
+    """A failed write gave the job's warnings to no one; the same memory limit in two
+    spellings was a contradiction; --max-memory 500 read '0 KiB'; batch refused
+    --option discontinuities=false for poisson, which integrate takes as a no-op."""
+    from facetlift import jobs
+
+    n = dome()
+    n[3, 4] = [0.0, 0.0, -1.0]  # (a back-facing normal: a warning)
+    np.save(tmp_path / "n.npy", n)
+
+    def fail(*a, **k):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(jobs, "_write", fail)
+    with pytest.warns(UserWarning, match="1 normal"), pytest.raises(OSError, match="disk"):
+        jobs.run(Job(normals=str(tmp_path / "n.npy"), outdir=str(tmp_path / "w"),
+                     save=("npy",)))
+    monkeypatch.undo()
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "a", "-s",
+                       "npy", "--option", "max_memory=1073741824", "--max-memory", "1G")
+    assert code == 0, err
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "b",
+                       "--max-memory", "500")
+    assert code == 1 and "500 bytes allowed" in err
+    for cmd in ("integrate", "batch"):
+        code, _, err = run(capsys, cmd, tmp_path / "n.npy", "-o", tmp_path / f"c{cmd}",
+                           "--method", "poisson", "--option", "discontinuities=false",
+                           "-s", "npy")
+        assert code == 0, err
 
 
 def test_summary_and_json_show_the_mean_deviation(dome_png, tmp_path, capsys):

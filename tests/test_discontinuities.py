@@ -786,13 +786,23 @@ def test_prepare_and_solve_are_told_of_the_routes_grazing_rule():
 
     from test_perspective import _K
 
-    n, mask, K, _ = sphere_scene(H=24, W=28, K=_K(H=24, W=28, f=60.0), min_cos=0.3)
+    n, mask, K, _ = sphere_scene(H=24, W=28, K=_K(H=24, W=28, f=60.0), min_cos=0.02)
     p = facetlift.prepare(n, mask, K=K)
-    with pytest.warns(UserWarning, match="camera's grazing threshold .* outlier_eps="):
+    between = p.usable & (p.view_cosines < facetlift.METHODS["dgp"].jump_grazing)
+    assert between.any()  # (normals between the camera's threshold and the route's)
+    with pytest.warns(UserWarning, match=f"camera's grazing threshold .* {int(between.sum())} "
+                                         r"more normal\(s\) .* outlier_eps="):
         facetlift.solve(p, "dgp", discontinuities=True)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")
+        warnings.filterwarnings("error", message="discontinuities=True on a problem")
         q = facetlift.prepare(n, mask, K=K, outlier_eps=0.01)
         facetlift.solve(q, "dgp", discontinuities=True)
         facetlift.integrate(n, mask, K=K, discontinuities=True)
         facetlift.solve(p, "dgp")
+        # none between the two: nothing would differ, nothing said (review)
+        n2, mask2, K2, _ = sphere_scene(H=24, W=28, K=_K(H=24, W=28, f=60.0), min_cos=0.3)
+        facetlift.solve(facetlift.prepare(n2, mask2, K=K2), "dgp", discontinuities=True)
+    # solve's own arguments are not options a caller can pass twice (review: exit 3)
+    for name in ("t0", "problem"):
+        with pytest.raises(ValueError, match=name):
+            facetlift.integrate(n, mask, K=K, **{name: 1})

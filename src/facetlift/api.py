@@ -171,7 +171,7 @@ def integrate(
     # a reader's, stays)
     with (contextlib.nullcontext() if frames.is_identity(normal_frame)
           else frames.read_in(normal_frame)):
-        return solve(problem, method, t0=t0, max_memory=max_memory, **options)
+        return _solve(problem, method, t0, max_memory, options)
 
 
 def integrate_gradients(
@@ -230,10 +230,7 @@ def _check_discontinuities(info: methods.MethodInfo, value) -> bool:
     return True
 
 
-def solve(
-    problem: Problem, method: str = "dgp", *, t0: float | None = None, max_memory=None,
-    **options,
-):
+def solve(problem: Problem, method: str = "dgp", /, *, max_memory=None, **options):
     """Run `method` on a prepared :class:`~facetlift.problem.Problem`.
 
     Every option is validated against the method's declarations before it runs
@@ -244,17 +241,27 @@ def solve(
     is applied by :func:`integrate`, so prepare with ``outlier_eps=`` to match it here (a
     problem prepared with the camera's own threshold, below the route's, gets a warning).
     """
+    return _solve(problem, method, None, max_memory, options)
+
+
+def _solve(problem, method, t0, max_memory, options):
+    """:func:`solve`, timed from `t0` (integrate's start; None: now). (Its own arguments are
+    positional here: an option named ``t0`` or ``problem`` is the method's, refused as such.)"""
     t0 = time.perf_counter() if t0 is None else t0
     info = methods.get(method)
     values = validate(info.specs(), options, method)
     eps = problem.counts.get("outlier_eps")
     if (values.get("discontinuities") and info.jump_grazing is not None and eps is not None
             and eps < info.jump_grazing and not problem.extras.get("outlier_eps_given", True)):
-        # (integrate applies the route's own threshold; prepare + solve took the camera's)
-        warn(f"discontinuities=True on a problem prepared with the camera's grazing threshold "
-             f"(view cosine {eps:.4g}): integrate uses {method!r}'s own for this route, cos 85 "
-             f"deg (the DiLiGenT bear: 0.025 mm MADE against 0.28); prepare(..., outlier_eps="
-             f"facetlift.methods.get({method!r}).jump_grazing) to match it")
+        # (integrate applies the route's own threshold; prepare + solve took the camera's:
+        # told where some normal lies between the two)
+        between = int(np.sum(problem.usable & (problem.view_cosines < info.jump_grazing)))
+        if between:
+            warn(f"discontinuities=True on a problem prepared with the camera's grazing "
+                 f"threshold (view cosine {eps:.4g}): integrate uses the route's own, cos 85 "
+                 f"deg, which would treat {between} more normal(s) as missing here (the "
+                 "DiLiGenT bear: 0.025 mm MADE against 0.28); prepare(..., outlier_eps="
+                 f"facetlift.METHODS[{method!r}].jump_grazing) to match")
     if problem.perspective and not info.perspective:
         able = sorted(k for k, v in methods.REGISTRY.items() if v.perspective)
         raise ValueError(

@@ -322,6 +322,12 @@ def check_template(job: Job, local: bool = True) -> None:
     if opts.get("max_memory") is not None:
         memory.parse_size(opts["max_memory"])
     opts.pop("max_memory", None)
+    if "discontinuities" in opts and "discontinuities" not in info.options():
+        # (integrate's own argument: True needs the capability, False is no-op where the
+        # method has no such option, as integrate takes it)
+        from .api import _check_discontinuities
+
+        _check_discontinuities(info, opts.pop("discontinuities"))
     validate(info.specs(), opts, job.method)
     if job.normal_frame is not None:
         frames.parse(job.normal_frame)

@@ -90,11 +90,24 @@ class _StderrHandler(logging.StreamHandler):
 #: integrate twice, an internal error). ("prior" stays: regularization's option of that name.)
 RESERVED_OPTIONS = {
     "normals": "the NORMALS argument", "gradients": "--gradients", "mask": "--mask",
-    "method": "--method", "pixel_size": "--pixel-size", "K": "--K", "known": "--mask",
+    "method": "--method", "pixel_size": "--pixel-size", "K": "--K",
+    "known": "NaN normals in the map (missing samples; the command line has no `known`)",
     "backfacing": "--backfacing", "outlier_eps": "--outlier-eps",
     "normal_frame": "--normal-frame", "prior_weight": "--prior-weight",
     "confidence": "--confidence", "prior_blur": "--prior-blur", "progress": "--progress",
 }
+
+
+def _same_option(key: str, a, b) -> bool:
+    """Whether an --option value and a flag's say the same (a memory size in any spelling)."""
+    if key == "max_memory":
+        from .memory import parse_size
+
+        try:
+            return parse_size(a) == parse_size(b)
+        except ValueError:
+            return False
+    return a == b
 
 
 def _parse_option(text: str) -> tuple[str, object]:
@@ -263,6 +276,10 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
     if no_confidence and confidence is not None:
         raise ValueError(f"--no-confidence and --confidence {confidence} contradict each "
                          "other; give one")
+    if K is not None and not orthographic and pixel_size != 1.0:  # (also for a batch)
+        raise ValueError(f"`pixel_size` {pixel_size!r} applies to orthographic input; --K "
+                         f"{K} gives a camera (its scale comes from K): drop --pixel-size, or "
+                         "give --orthographic without --K")
     if K is not None and orthographic:
         raise ValueError(f"--K {K} and --orthographic contradict each other: --orthographic "
                          "ignores a camera (e.g. a dataset folder's K.txt); give one of them")
@@ -272,7 +289,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
                        ("discontinuities", True if discontinuities else None)):
         if value is None:
             continue
-        if key in opts and opts[key] != value:  # (the flag won silently)
+        if key in opts and not _same_option(key, opts[key], value):  # (the flag won silently)
             raise ValueError(f"--option {key}={json.dumps(opts[key])} and "
                              f"--{key.replace('_', '-')} contradict each other; give one")
         opts[key] = value

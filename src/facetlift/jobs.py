@@ -167,7 +167,7 @@ def read(job: Job) -> Input:
     if job.orthographic:
         K = None
     if K is not None and job.pixel_size != 1.0:  # (ignored silently before)
-        raise ValueError(f"`pixel_size` {job.pixel_size:g} applies to orthographic input; this "
+        raise ValueError(f"`pixel_size` {job.pixel_size!r} applies to orthographic input; this "
                          "input has a camera K (its scale comes from K): drop --pixel-size, "
                          "or give --orthographic to ignore K")
     if job.prior is not None:
@@ -279,9 +279,7 @@ def run(job: Job, *, progress=None) -> dict:
     facetlift.SolverError, facetlift.MemoryLimitError
         As :func:`facetlift.integrate`.
     """
-    import facetlift
-
-    from . import frames, io, methods
+    from . import methods
 
     t0 = time.perf_counter()
     info = methods.get(job.method)
@@ -293,9 +291,24 @@ def run(job: Job, *, progress=None) -> dict:
     src = job.source
     outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)
     names = [OUTPUTS[s] for s in save]
+    shown: list = []  # (the recorded warnings of the phases that finished: given again below
+    try:  # if a later one fails, e.g. a write; a failing phase gives its own)
+        return _run(job, info, save, names, src, outdir, progress, shown, t0)
+    except BaseException:
+        for w in shown:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        raise
+
+
+def _run(job, info, save, names, src, outdir, progress, shown, t0) -> dict:
+    import facetlift
+
+    from . import frames, io
+
     with io.OutputSet(outdir, names, inputs=input_paths(job)) as out:
         with recorded_warnings() as read_caught:  # (the gradient layout's, ...)
             inp = read(job)
+        shown.extend(read_caught)
         t_read = time.perf_counter() - t0
         opts = dict(job.options)
         if progress is not None and "progress" in info.options() and "progress" not in opts:
@@ -313,6 +326,7 @@ def run(job: Job, *, progress=None) -> dict:
                 prior_weight=inp.prior_weight if inp.prior is not None else 1.0,
                 confidence=inp.confidence, prior_blur=job.prior_blur, **opts,
             )
+        shown.extend(caught)
         t_integrate = time.perf_counter() - t1
         t2 = time.perf_counter()
         for kind, name in zip(save, names, strict=True):

@@ -173,7 +173,9 @@ def _release_retained() -> None:
 def _size(b: float) -> str:
     if b >= GiB:
         return f"{b / GiB:.2f} GiB"
-    return f"{b / MiB:.0f} MiB" if b >= MiB else f"{b / 1024:.0f} KiB"  # (1K read "0 MiB")
+    if b >= MiB:
+        return f"{b / MiB:.0f} MiB"
+    return f"{b / 1024:.0f} KiB" if b >= 1024 else f"{b:.0f} bytes"  # (1K read "0 MiB")
 
 
 _UNITS = {"": 1, "b": 1, "k": 2**10, "m": MiB, "g": GiB, "t": 2**40}

@@ -44,7 +44,6 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg  # noqa: F401  (sp.linalg)
 
 from .. import linalg
 from .._warnings import warn
@@ -195,6 +194,8 @@ def fill_unreached(problem, A, u):
     left them at its start, a step at the hole's edge (the DiLiGenT bear with a 40 x 80 hole:
     10 mm inside it where dgp is 0.25; found by a fresh-user check). A region that touches no
     reached pixel keeps its values."""
+    from scipy.sparse.csgraph import connected_components
+
     n = u.size
     reached = np.zeros(n, bool)
     for Ai in A:
@@ -205,8 +206,18 @@ def fill_unreached(problem, A, u):
     G = pg.difference(pg.build(problem.domain)).tocsr()
     L = (G.T @ G).tocsr()  # the pixel graph's Laplacian
     fixed = np.flatnonzero(reached)
-    LFF = L[free][:, free] + sp.identity(free.size) * 1e-12 * float(L.diagonal().max())
-    rhs = -(L[free][:, fixed] @ u[fixed])
+    LF = L[free]
+    # only the free regions next to a reached pixel (a region without one keeps its values)
+    count, label = connected_components(LF[:, free], directed=False)
+    touching = np.zeros(count, bool)
+    touching[label[np.diff(LF[:, fixed].tocsr().indptr) > 0]] = True
+    keep = touching[label]
+    if not keep.any():
+        return u, 0
+    free, LF = free[keep], LF[keep]
+    rhs = -(LF[:, fixed] @ u[fixed])
+    # (an M-matrix, solved by multigrid-preconditioned CG: no factorization of a big hole)
+    x, _ = linalg.solve(LF[:, free].tocsr(), rhs, "amg", rtol=1e-10)
     out = u.copy()
-    out[free] = sp.linalg.spsolve(LFF.tocsc(), rhs)
+    out[free] = x
     return out, int(free.size)
