@@ -160,6 +160,18 @@ def test_a_hang_that_would_bridge_a_jump_is_undone():
         assert after.n_pieces >= 2  # the two sides stay apart
         left, right = (np.flatnonzero((r == 5) & (c == cc))[0] for cc in (5, 7))
         assert after.facet_piece[left] != after.facet_piece[right]
+    # a harmless island elsewhere is still hung: only the bridging hang is undone (final
+    # read: every hang in the merged piece was undone with it)
+    g = np.flatnonzero((r == 2) & (c == 2))[0]
+    copies = np.where((c >= 7)[:, None], 1.0, 0.0) * np.ones((1, 4))
+    copies[f] = [0.6, 1.6, 1.6, 0.6]
+    copies[g] += 0.8
+    mesh, _ = from_copies(d, copies, 0.5)
+    out = spl.absorb_small_pieces(mesh, copies, 4, 0.5)
+    after, _ = from_copies(d, out, 0.5)
+    np.testing.assert_allclose(out[g], 0.0)  # (hung: the flat left side's values)
+    np.testing.assert_array_equal(out[f], copies[f])  # (left loose)
+    assert after.n_pieces == 3
     # a one-facet piece with a prior sample beside a one-facet piece: neither is hung on it
     copies = np.zeros((d.n_facets, 4))
     a, b = (np.flatnonzero((r == 5) & (c == cc))[0] for cc in (6, 7))

@@ -191,18 +191,36 @@ def absorb_small_pieces(mesh: SplitMesh, copies, size: int, gap: float, anchored
     out[moved] += shift[fp[moved]][:, None]
     for ff, own, want in edges:
         out[np.ix_(ff, own)] = want
-    # undo the hangs that joined two larger pieces (into one piece of the new split)
+    # undo the hangs that join two larger pieces: first those that do so themselves (an uncut
+    # edge to each), then, where a chain of small pieces still does, every hang in the piece
+    # the chain made
+    after, _ = from_copies(d, out, gap)
+    r, c = d.pixels
+    rp = np.pad(after.right, 1, constant_values=True)  # rp[r + 1, c + 1] = right[r, c]
+    dp = np.pad(after.down, 1, constant_values=True)
+    uncut = {"+x": ~rp[r + 1, c + 1], "-x": ~rp[r + 1, c], "-y": ~dp[r + 1, c + 1],
+             "+y": ~dp[r, c + 1]}
+    joined = []  # (small piece, larger piece) pairs across an uncut edge
+    for key, _, _ in _EDGES:
+        g = nb[key]
+        sel = moved & (g >= 0) & uncut[key]
+        sel[sel] = large[fp[g[sel]]]
+        joined.append(np.stack([fp[sel], fp[g[sel]]], axis=1))
+    pairs = np.unique(np.concatenate(joined), axis=0)
+    bridging = np.bincount(pairs[:, 0], minlength=k) > 1
+    undo = moved & bridging[fp]
     lf = np.flatnonzero(large[fp])
     while True:
-        after, _ = from_copies(d, out, gap)
+        if undo.any():
+            out[undo] = copies[undo]
+            moved &= ~undo
+            after, _ = from_copies(d, out, gap)
         # (new pieces holding facets of more than one larger piece)
-        pairs = np.unique(np.stack([after.facet_piece[lf], fp[lf]], axis=1), axis=0)
-        bridged = np.bincount(pairs[:, 0], minlength=after.n_pieces) > 1
+        both = np.unique(np.stack([after.facet_piece[lf], fp[lf]], axis=1), axis=0)
+        bridged = np.bincount(both[:, 0], minlength=after.n_pieces) > 1
         undo = moved & bridged[after.facet_piece]
         if not undo.any():
             break
-        out[undo] = copies[undo]
-        moved &= ~undo
     return out if moved.any() else None
 
 
