@@ -193,7 +193,7 @@ def test_a_prior_that_is_not_blurred_as_said_is_warned_about():
     K[1, 2] -= rows.start
     prior = np.where(mask, gt[rows, cols], np.nan)
     with pytest.warns(UserWarning, match=r"prior_blur: the surface returned meets the blurred "
-                                         r"prior worse .* not blurred by sigma 4 px"):
+                                         r"prior worse .* not be blurred by sigma 4 px"):
         s = facetlift.integrate(data["normals"][rows, cols], mask, K=K, prior=prior,
                                 prior_blur=4, prior_weight=0.003, discontinuities=True)
     assert s.info["prior_blur"]["mismatch"] > s.info["prior_blur"]["mismatch_first"]

@@ -199,11 +199,18 @@ def _blur_check(pb: dict, prior) -> None:
         return
     floor = 1e-9 * (1.0 + float(np.max(np.abs(prior), initial=0.0)))
     if last > floor:
+        seen = pb.get("mismatch_last")
+        # (the discontinuity route's last solve, with its own normal weights, comes after the
+        # updates: where they had lowered the mismatch, that solve raised it, not the sigma)
+        why = (f"the prior may not be blurred by sigma {pb['sigma']:g} px" if seen is None
+               or seen >= first else
+               f"the updates had lowered it to {seen:.3g}, and the discontinuity route's last "
+               "solve (its own normal weights) raised it again, or the prior may not be "
+               f"blurred by sigma {pb['sigma']:g} px")
         warn(f"prior_blur: the surface returned meets the blurred prior worse (weighted RMS "
-             f"mismatch {last:.3g}) than the first solve did ({first:.3g}): the prior is "
-             f"likely not blurred by sigma {pb['sigma']:g} px; give a smaller `prior_blur` "
-             "(--prior-blur), or none for a pointwise prior (docs/fusion.md, 'Blurred "
-             "priors')")
+             f"mismatch {last:.3g}) than the first solve did ({first:.3g}): {why}; compare "
+             "with a smaller `prior_blur` (--prior-blur) or none (a pointwise prior), and "
+             "without discontinuities (docs/fusion.md, 'Blurred priors')")
 
 
 def fusion_terms(problem):
