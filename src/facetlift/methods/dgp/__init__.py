@@ -161,7 +161,8 @@ def run(
                  f"(more than {discontinuous.DIRECT_POLISH:,} vertices, or short of memory): "
                  "the surface is usable but less exact (info['unsolved'])")
         copies, pinfo = place_pieces(domain, y, bx, by, target, s,
-                                     anchored=None if prior is None else prior[0] > 0)
+                                     anchored=None if prior is None else prior[0] > 0,
+                                     hang_anchored=blur is not None)
         info.update(pinfo)
         info["solver"] = "discontinuous"
         info["deviation"] = [average_deviation(domain, z, bx, by, target, s)]
@@ -236,7 +237,8 @@ SMALL_PIECE = 4
 SMALL_PASSES = 3
 
 
-def place_pieces(domain, copies, bx, by, target, footprint, anchored=None):
+def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
+                 hang_anchored=False):
     """The facets' corner copies (m, 4) with the pieces the jumps separate placed by the
     occlusion rule (:func:`facetlift.methods.dgp.split.occlusion_offsets`): the mesh is split
     where neighbouring copies part by more than :data:`facetlift.operators.split.GAP`
@@ -244,7 +246,10 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None):
     is zero. Pieces holding a facet of `anchored` (m,) bool (prior samples) stay where the
     solve put them: the prior decided their offset; the others are placed relative to them.
     Then the pieces of at most :data:`SMALL_PIECE` facets are hung on their larger
-    neighbours. Returns the copies and ``{"pieces", "moved_pieces", "hung_facets"}``."""
+    neighbours: those holding a facet of `anchored` only with `hang_anchored` (a blurred
+    prior, whose samples are no pointwise values: a huge pointwise weight must return the
+    prior where given). Returns the copies and ``{"pieces", "moved_pieces",
+    "hung_facets"}``."""
     from ...operators.split import GAP, from_copies
     from .split import absorb_small_pieces, occlusion_offsets
 
@@ -263,7 +268,11 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None):
     passes = SMALL_PASSES if np.bincount(mesh.facet_piece).min() <= SMALL_PIECE else 0
     for _ in range(passes):  # (a piece hung on a small one may make it large enough)
         after, _ = from_copies(domain, placed, GAP * footprint)
-        hung = absorb_small_pieces(after, placed, SMALL_PIECE, GAP * footprint, anchored)
+        # (a blurred prior's samples hold every facet, and nothing was hung: the bear with its
+        # own depth blurred by 4 px, 547 pieces, MADE 0.853 mm; hung 99 pieces, 0.727; on 9
+        # coarse blurred priors better or within 0.5 %)
+        hung = absorb_small_pieces(after, placed, SMALL_PIECE, GAP * footprint,
+                                   None if hang_anchored else anchored)
         if hung is None:
             break
         placed = hung
