@@ -486,9 +486,15 @@ def _attach_split(surface: Surface, d: Domain, mesh, sdepth: np.ndarray) -> None
     """Give `surface` its cut edges, jump map and split mesh; depth is the mean of each facet's
     mesh corners already (see make_surface)."""
     H, W = d.shape
+    # the cut edges are those the mesh splits: two facets on an edge with a corner apart (an
+    # edge whose copies parted, but whose ends stay joined around it, is no cut: the map and
+    # the cut arrays marked it, the mesh did not; found by a fresh-user check)
+    sv = np.full((H, W, 4), -1, dtype=np.int64)
+    sv[d.pixels] = mesh.corners
     inside_r = d.mask[:, :-1] & d.mask[:, 1:]
     inside_d = d.mask[:-1] & d.mask[1:]
-    right, down = mesh.right & inside_r, mesh.down & inside_d
+    right = inside_r & ((sv[:, :-1, 1] != sv[:, 1:, 0]) | (sv[:, :-1, 2] != sv[:, 1:, 3]))
+    down = inside_d & ((sv[:-1, :, 3] != sv[1:, :, 0]) | (sv[:-1, :, 2] != sv[1:, :, 1]))
     corner = np.full((H, W, 4), np.nan)
     corner[d.pixels] = sdepth[mesh.corners]  # depth of every facet's own corners
     with np.errstate(invalid="ignore"):
