@@ -129,9 +129,12 @@ _EDGES = (("+x", (1, 2), (0, 3)), ("-x", (0, 3), (1, 2)), ("-y", (3, 2), (0, 1))
           ("+y", (0, 1), (3, 2)))
 
 
-def absorb_small_pieces(mesh: SplitMesh, copies, size: int, gap: float, anchored=None):
+def absorb_small_pieces(mesh: SplitMesh, copies, size: int, gap: float, anchored=None, *,
+                        with_mesh: bool = False):
     """The facets' corner copies (m, 4) with every piece of at most `size` facets hung on its
-    best edge to a larger piece; None where there is nothing to hang.
+    best edge to a larger piece; None where there is nothing to hang. With `with_mesh`, the
+    pair ``(copies, their split)`` (the split is made here anyway: a caller's next pass takes
+    it instead of splitting again).
 
     A piece this small is no separated surface but a few facets that fit neither side of a
     jump: steep rim facets (whose planes part from their neighbours' by more than the split's
@@ -221,7 +224,9 @@ def absorb_small_pieces(mesh: SplitMesh, copies, size: int, gap: float, anchored
         undo = moved & bridged[after.facet_piece]
         if not undo.any():
             break
-    return out if moved.any() else None
+    if not moved.any():
+        return None
+    return (out, after) if with_mesh else out
 
 
 def occlusion_offsets(mesh: SplitMesh, z, bx, by, target, quantile: float = 0.05,
