@@ -5,6 +5,7 @@ this process."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -339,3 +340,25 @@ def test_distributed_local_cluster_with_two_workers_equals_in_process(tmp_path, 
     assert recs[0]["status"] == "ok"
     np.testing.assert_allclose(np.load(tmp_path / "api" / "m0" / "depth.npy"), depths["m0"],
                                atol=1e-12)
+
+
+def test_an_interrupted_batch_leaves_no_empty_folder_of_an_abandoned_item(tmp_path,
+                                                                          monkeypatch):
+    """A worker stopped mid-item cannot clean up: an interrupted batch left an empty folder
+    for each running item (a fresh-user check). Folders that were there before stay."""
+    maps(tmp_path / "in", n=3)
+    out = tmp_path / "out"
+    (out / "m2").mkdir(parents=True)  # (there before the batch: kept)
+    real = fb.run_item
+
+    def interrupted(job, threads=None):
+        if job.normals.endswith("m1.png"):
+            Path(job.outdir).mkdir(parents=True)  # (as OutputSet does first)
+            raise KeyboardInterrupt
+        return real(job)
+
+    monkeypatch.setattr(fb, "run_item", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        facetlift.batch([tmp_path / "in"], out, workers=1, save=("npy",))
+    assert (out / "m0" / "depth.npy").is_file()  # (finished before the interrupt)
+    assert not (out / "m1").exists() and (out / "m2").is_dir()

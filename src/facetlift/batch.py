@@ -19,6 +19,7 @@ written, exit 2); ``bug`` (any other exception, exit 3).
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import json
 import os
@@ -286,14 +287,33 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             fh.flush()
             bar.update(rec["status"])
 
-        if jobs and scheduler is not None:
-            _on_cluster(jobs, scheduler, done)
-        elif jobs and n_workers > 1:
-            _on_processes(jobs, n_workers, done)
-        else:
-            for it, j in jobs:
-                done(it, run_item(j))
+        existed = {j.outdir for _, j in jobs if Path(j.outdir).exists()}
+        try:
+            if jobs and scheduler is not None:
+                _on_cluster(jobs, scheduler, done)
+            elif jobs and n_workers > 1:
+                _on_processes(jobs, n_workers, done)
+            else:
+                for it, j in jobs:
+                    done(it, run_item(j))
+        except BaseException:  # (an interrupt: the abandoned items leave no folder behind)
+            _clean_abandoned([j.outdir for it, j in jobs if it.path not in results
+                              and j.outdir not in existed])
+            raise
     return [results[it.path] for it in found]
+
+
+def _clean_abandoned(folders) -> None:
+    """Remove the output folders that abandoned items created (a killed worker cannot): what
+    killed runs left in them (:func:`facetlift.io.atomic.sweep`), then the folder if that
+    left it empty (an interrupted batch left an empty folder per running item)."""
+    from .io.atomic import sweep
+
+    for folder in map(Path, folders):
+        if folder.is_dir():
+            sweep(folder)
+            with contextlib.suppress(OSError):
+                folder.rmdir()  # (only if empty)
 
 
 def check_template(job: Job, local: bool = True) -> None:
