@@ -507,7 +507,11 @@ def _info_lines(rec: dict) -> list[str]:
 
 
 def _mib(b: float) -> str:
-    return f"{b / 2**30:.1f} GiB" if b >= 2**30 else f"{b / 2**20:.0f} MiB"
+    if b >= 2**30:
+        return f"{b / 2**30:.1f} GiB"
+    if b >= 2**20:
+        return f"{b / 2**20:.0f} MiB"
+    return f"{b / 1024:.0f} KiB" if b >= 1024 else f"{b:.0f} bytes"  # (not "0 MiB")
 
 
 @cli.command("batch", context_settings=CONTEXT)
