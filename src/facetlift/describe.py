@@ -113,8 +113,8 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
     out = {"input": str(src), **_file_facts(src),
            "warnings": [str(w.message) for w in read_caught]}
     # (a gradient field in the other layout: no frame of the normals made from it is right)
-    layout = next((str(w.message) for w in read_caught
-                   if issubclass(w.category, frames.LayoutWarning)), None)
+    layout = next((w.message.other for w in read_caught
+                   if isinstance(w.message, frames.LayoutWarning)), None)
     n = inp.normals
     H, W = n.shape[:2]
     out.update(shape=[H, W], mask_source=inp.mask_source,
@@ -203,12 +203,13 @@ def _file_facts(src: Path) -> dict:
 
 def _frame_guess(n, mask, K, problem=None, *, frame=None, layout=None) -> dict:
     """Whether the frame the map was read in looks right, from the view direction and the
-    integrability; ``likely`` says what to change. `layout`: the warning of a gradient field
-    read in the wrong layout (:class:`facetlift.frames.LayoutWarning`), which ``likely`` then
-    repeats: its normals are in no frame that a flip would fix."""
+    integrability; ``likely`` says what to change. `layout`: the other gradient layout, where
+    the field was read in the wrong one (:class:`facetlift.frames.LayoutWarning`), which
+    ``likely`` then names: its normals are in no frame that a flip would fix."""
     guess = _frame_evidence(n, mask, K, problem, frame=frame)
     if layout is not None:
-        guess["likely"] = "the other gradient layout: " + layout.split(": try ", 1)[-1]
+        guess["likely"] = (f"the other gradient layout: --gradient-frame {layout} "
+                           f"(gradient_frame='{layout}')")
     return guess
 
 

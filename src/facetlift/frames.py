@@ -439,7 +439,12 @@ LAYOUT_MIN_CURL = 0.3
 
 
 class LayoutWarning(UserWarning):
-    """A gradient field far more integrable in the other layout (:func:`layout_check`)."""
+    """A gradient field far more integrable in the other layout (:func:`layout_check`);
+    `other` names that layout."""
+
+    def __init__(self, message: str, other: str | None = None):
+        super().__init__(message)
+        self.other = other
 
 
 def layout_curls(gx, gy, mask=None, *, gy_sign: float = 1.0,
@@ -520,7 +525,7 @@ def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
         warn(
             f"the gradient field is far more integrable in the other layout (relative curl "
             f"{own:.2f} read as {given!r}, {alt:.2f} as {other!r}: {meaning}): try "
-            f"--gradient-frame {other} (gradient_frame='{other}')", LayoutWarning
+            f"--gradient-frame {other} (gradient_frame='{other}')", LayoutWarning, other=other
         )
     return out
 

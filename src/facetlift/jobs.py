@@ -279,7 +279,9 @@ def run(job: Job, *, progress=None) -> dict:
     facetlift.SolverError, facetlift.MemoryLimitError
         As :func:`facetlift.integrate`.
     """
-    from . import methods
+    import facetlift
+
+    from . import frames, io, methods
 
     t0 = time.perf_counter()
     info = methods.get(job.method)
@@ -291,24 +293,11 @@ def run(job: Job, *, progress=None) -> dict:
     src = job.source
     outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)
     names = [OUTPUTS[s] for s in save]
-    shown: list = []  # (the recorded warnings of the phases that finished: given again below
-    try:  # if a later one fails, e.g. a write; a failing phase gives its own)
-        return _run(job, info, save, names, src, outdir, progress, shown, t0)
-    except BaseException:
-        for w in shown:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        raise
-
-
-def _run(job, info, save, names, src, outdir, progress, shown, t0) -> dict:
-    import facetlift
-
-    from . import frames, io
-
-    with io.OutputSet(outdir, names, inputs=input_paths(job)) as out:
-        with recorded_warnings() as read_caught:  # (the gradient layout's, ...)
-            inp = read(job)
-        shown.extend(read_caught)
+    # (one record of the whole job's warnings, the gradient layout's, ...: given again if any
+    # phase fails, a write or the outputs' commit too)
+    with recorded_warnings() as caught, \
+            io.OutputSet(outdir, names, inputs=input_paths(job)) as out:
+        inp = read(job)
         t_read = time.perf_counter() - t0
         opts = dict(job.options)
         if progress is not None and "progress" in info.options() and "progress" not in opts:
@@ -318,15 +307,13 @@ def _run(job, info, save, names, src, outdir, progress, shown, t0) -> dict:
                              f"method option prior={opts['prior']!r} were both given")
         depth_prior = opts.pop("prior", None) if inp.prior is None else inp.prior
         t1 = time.perf_counter()
-        with recorded_warnings() as caught, frames.read_in(
-                frames.GRADIENT_FIELD if inp.field else job.normal_frame):
+        with frames.read_in(frames.GRADIENT_FIELD if inp.field else job.normal_frame):
             surface = facetlift.integrate(
                 inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size, K=inp.K,
                 backfacing=job.backfacing, outlier_eps=job.outlier_eps, prior=depth_prior,
                 prior_weight=inp.prior_weight if inp.prior is not None else 1.0,
                 confidence=inp.confidence, prior_blur=job.prior_blur, **opts,
             )
-        shown.extend(caught)
         t_integrate = time.perf_counter() - t1
         t2 = time.perf_counter()
         for kind, name in zip(save, names, strict=True):
@@ -343,7 +330,7 @@ def _run(job, info, save, names, src, outdir, progress, shown, t0) -> dict:
         "perspective": surface.K is not None,
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),
         "converged": bool(sinfo.get("converged", True)),
-        "warnings": [str(w.message) for w in (*read_caught, *caught)],
+        "warnings": [str(w.message) for w in caught],
         "info": jsonable(sinfo),
         "timings": {"read": t_read, "integrate": t_integrate,
                     "write": time.perf_counter() - t2, "total": time.perf_counter() - t0},

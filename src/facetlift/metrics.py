@@ -126,11 +126,11 @@ def made(estimate, truth, mask=None) -> tuple[float, np.ndarray]:
         ``|scale * estimate - truth|``, NaN outside the mask.
     """
     est, gt, m = _pair(estimate, truth, mask)
-    if np.any(est[m] <= 0) or np.any(gt[m] <= 0):  # (an orthographic depth has mean 0)
-        which = "`estimate`" if np.any(est[m] <= 0) else "`truth`"
-        raise ValueError(f"made: {which} has depths <= 0 inside the mask; MADE compares "
-                         "perspective z-depths (> 0) after a median scale: for orthographic "
-                         "depth use rmse or mae (aligned by the best offset)")
+    for which, a in (("`estimate`", est), ("`truth`", gt)):
+        if np.any(a[m] <= 0):  # (an orthographic depth has mean 0)
+            raise ValueError(f"made: {which} has depths <= 0 inside the mask; MADE compares "
+                             "perspective z-depths (> 0) after a median scale: for "
+                             "orthographic depth use rmse or mae (aligned by the best offset)")
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = float(np.nanmedian(gt[m] / est[m]))
     if not np.isfinite(scale):

@@ -207,17 +207,18 @@ def fill_unreached(problem, A, u):
     L = (G.T @ G).tocsr()  # the pixel graph's Laplacian
     fixed = np.flatnonzero(reached)
     LF = L[free]
+    LFF, LFD = LF[:, free].tocsr(), LF[:, fixed].tocsr()  # (free-free, free-reached)
     # only the free regions next to a reached pixel (a region without one keeps its values)
-    count, label = connected_components(LF[:, free], directed=False)
+    count, label = connected_components(LFF, directed=False)
     touching = np.zeros(count, bool)
-    touching[label[np.diff(LF[:, fixed].tocsr().indptr) > 0]] = True
+    touching[label[np.diff(LFD.indptr) > 0]] = True
     keep = touching[label]
     if not keep.any():
         return u, 0
-    free, LF = free[keep], LF[keep]
-    rhs = -(LF[:, fixed] @ u[fixed])
+    rhs = -(LFD[keep] @ u[fixed])
     # (an M-matrix, solved by multigrid-preconditioned CG: no factorization of a big hole)
-    x, _ = linalg.solve(LF[:, free].tocsr(), rhs, "amg", rtol=1e-10)
+    x, _ = linalg.solve(LFF[keep][:, keep].tocsr(), rhs, "amg", rtol=1e-10)
+    free = free[keep]
     out = u.copy()
     out[free] = x
     return out, int(free.size)

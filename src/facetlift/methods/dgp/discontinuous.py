@@ -684,8 +684,7 @@ def _factorized(K, rhs, amg, grid):
     size: exact where CG on these systems is slow (:data:`DIRECT_POLISH`). The multigrid
     hierarchy is dropped first (the caller drops its own references to it). `grid`: the
     vertices' grid positions (SuperLU's nested-dissection ordering)."""
-    amg["ml"] = amg["pre"] = amg["for"] = None
-    amg["bal"] = amg["bal_for"] = amg["bal_pre"] = None
+    amg["ml"] = amg["pre"] = amg["for"] = amg["bal"] = None
     return linalg.solve(K, rhs, linalg.factorizer(), grid=grid)[0]
 
 
@@ -752,7 +751,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         del gap
         if fusion is None:  # (no prior either)
             return float(fit.sum() + twist.sum() + glue)
-        c = 1.0 if fusion is None else fusion[0]
+        c = fusion[0]
         fit_prior = 0.0 if prior is None else fusion[1] * (y.mean(axis=1) - prior[1]) ** 2 + (
             (1.0 - PRIOR_OWN) * prior[0] * (zc.mean(axis=1) - prior[1]) ** 2)
         return float((c * (fit + twist)).sum() + np.sum(fit_prior) + glue)
@@ -768,7 +767,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         return block_aggregates(vr, vc, COARSE_BLOCK, domain.vertex_component)
 
     amg = {"ml": None, "pre": None, "for": None, "builds": 0, "refreshes": 0, "last_its": 0,
-           "slow": False, "unsolved": [], "bal": None, "bal_for": None, "bal_pre": None}
+           "slow": False, "unsolved": [], "bal": None}
 
     def solve(K, rhs, z0, rebuild=True, rtol=cg_rtol, fresh=False, scale=None, trial=False,
               reduction=None):
@@ -780,26 +779,23 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         # a build); once the weights settle, it serves as it is
         if amg["ml"] is None or amg["last_its"] > REUSE_ITS or (fresh and amg["for"] is not K):
             # (the old one freed before the new one is built: the block space's closure too)
-            amg["ml"] = amg["pre"] = amg["bal"] = amg["bal_for"] = amg["bal_pre"] = None
+            amg["ml"] = amg["pre"] = amg["bal"] = None
             amg["ml"] = hierarchy(K, symmetric_gs=True, interpolation=INTERPOLATION)
             amg["pre"] = vcycle(amg["ml"])
             amg["builds"] += 1
             amg["for"] = K
         elif rebuild or (amg["last_its"] > REFRESH_ITS and not trial):
-            amg["bal"] = amg["bal_for"] = amg["bal_pre"] = None  # (formed anew below)
+            amg["bal"] = None  # (formed anew below)
             refresh(amg["ml"], K)
             amg["refreshes"] += 1
             amg["for"] = None  # refreshed, not built, for K
         pre = amg["pre"]
         if amg["slow"]:  # regions' offsets converge slowly: add the block coarse space
             # formed with the hierarchy's own finest matrix, and kept until the hierarchy is
-            # refreshed or rebuilt: between those the V-cycle smooths with that matrix too,
-            # and the balanced form is SPD for any (COARSE_BLOCK)
-            Kh = amg["ml"].levels[0].A
-            if amg["bal_for"] is not Kh or amg["bal_pre"] is not pre:
-                amg["bal"] = None
-                amg["bal"] = balanced(Kh, pre, blocks_Z())
-                amg["bal_for"], amg["bal_pre"] = Kh, pre
+            # refreshed or rebuilt (which drop it): between those the V-cycle smooths with
+            # that matrix too, and the balanced form is SPD for any (COARSE_BLOCK)
+            if amg["bal"] is None:
+                amg["bal"] = balanced(amg["ml"].levels[0].A, pre, blocks_Z())
             pre = amg["bal"]
         plain = rtol
         if scale is not None:  # a prior: the tolerance is relative to the normals' part
