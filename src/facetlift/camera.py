@@ -207,8 +207,11 @@ class Pinhole(Camera):
         image coordinates (pixel centres at integer indices)."""
         rows = np.asarray(rows, dtype=float)
         cols = np.asarray(cols, dtype=float)
-        pix = np.stack([cols, rows, np.ones_like(cols)], axis=-1)
-        return pix @ self._Kinv.T
+        Ki = self._Kinv  # (per component: no (m, 3) stack of the coordinates)
+        out = np.empty(np.broadcast_shapes(rows.shape, cols.shape) + (3,))
+        for i in range(3):
+            out[..., i] = Ki[i, 0] * cols + Ki[i, 1] * rows + Ki[i, 2]
+        return out
 
     def view_cosine(self, rows, cols, normals, *, unit=False):
         r = self.rays(rows, cols)

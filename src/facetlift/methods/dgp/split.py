@@ -209,8 +209,9 @@ def absorb_small_pieces(mesh: SplitMesh, copies, size: int, gap: float, anchored
         sel = moved & (g >= 0) & uncut[key]
         sel[sel] = large[fp[g[sel]]]
         joined.append(np.stack([fp[sel], fp[g[sel]]], axis=1))
-    pairs = np.unique(np.concatenate(joined), axis=0)
-    bridging = np.bincount(pairs[:, 0], minlength=k) > 1
+    pairs = np.concatenate(joined).astype(np.int64)
+    pairs = np.unique(pairs[:, 0] * k + pairs[:, 1])  # (1-d keys: a row-wise unique sorts slowly)
+    bridging = np.bincount(pairs // k, minlength=k) > 1
     undo = moved & bridging[fp]
     lf = np.flatnonzero(large[fp])
     while True:
@@ -219,8 +220,8 @@ def absorb_small_pieces(mesh: SplitMesh, copies, size: int, gap: float, anchored
             moved &= ~undo
             after, _ = from_copies(d, out, gap)
         # (new pieces holding facets of more than one larger piece)
-        both = np.unique(np.stack([after.facet_piece[lf], fp[lf]], axis=1), axis=0)
-        bridged = np.bincount(both[:, 0], minlength=after.n_pieces) > 1
+        both = np.unique(after.facet_piece[lf].astype(np.int64) * k + fp[lf])
+        bridged = np.bincount(both // k, minlength=after.n_pieces) > 1
         undo = moved & bridged[after.facet_piece]
         if not undo.any():
             break
