@@ -176,13 +176,13 @@ def _one_line_error(err):
     "make_args, message",
     [
         (lambda t, n, m: [t / "missing.png"], "does not exist"),
-        (lambda t, n, m: [n, "--method", "nope"], r"`method` must be one of"),
+        (lambda t, n, m: [n, "--method", "nope"], r"--method must be one of"),
         (lambda t, n, m: [n, "--option", "nope=1"], r"unknown option\(s\) \['nope'\]"),
         (lambda t, n, m: [n, "--option", "novalue"], "expected KEY=VALUE"),
         (lambda t, n, m: [n, "--bogus"], "No such option"),
         (lambda t, n, m: [n, "--solver", "magic"],
-         "`solver` must be one of 'direct', 'iterative'; got 'magic'"),
-        (lambda t, n, m: [n, "--pixel-size", "-1"], "`pixel_size` must be a positive"),
+         "--solver must be one of 'direct', 'iterative'; got 'magic'"),
+        (lambda t, n, m: [n, "--pixel-size", "-1"], "--pixel-size must be a positive"),
         (lambda t, n, m: [n, "-s", "jpg"], "Invalid value for '-s'"),
     ],
 )

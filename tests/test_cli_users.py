@@ -75,7 +75,7 @@ def test_conflicting_frame_flags_and_bad_frames_exit_1(dome_png, capsys):
     code, _, err = run(capsys, "integrate", dome_png, "--y-down", "--normal-frame", "opencv")
     assert code == 1 and "conflicts with frame 'opencv'" in one_line(err)
     code, _, err = run(capsys, "integrate", dome_png, "--normal-frame", "up")
-    assert code == 1 and "`normal_frame` must be one of" in one_line(err)
+    assert code == 1 and "--normal-frame must be one of" in one_line(err)
 
 
 def test_opencv_map_read_as_opengl_names_the_flag(tmp_path, capsys):
@@ -123,13 +123,13 @@ def test_contradicting_flags_are_refused(dome_png, tmp_path, capsys):
     for cmd in ("integrate", "batch"):  # (the batch up front, not failing every item)
         code, _, err = run(capsys, cmd, dome_png, "-o", tmp_path / "p", "--K", K,
                            "--pixel-size", "2")
-        assert code == 1 and "`pixel_size` 2.0 applies to orthographic input" in one_line(err)
+        assert code == 1 and "--pixel-size 2.0 applies to orthographic input" in one_line(err)
     folder = tmp_path / "ds"  # (a dataset folder's K.txt: refused when it is read)
     folder.mkdir()
     (folder / "normal_map.png").write_bytes(Path(dome_png).read_bytes())
     np.savetxt(folder / "K.txt", np.loadtxt(K))
     code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "q", "--pixel-size", "2")
-    assert code == 1 and "`pixel_size` 2.0 applies to orthographic input" in one_line(err)
+    assert code == 1 and "--pixel-size 2.0 applies to orthographic input" in one_line(err)
     code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "q", "--pixel-size", "2",
                        "--orthographic", "-s", "npy")
     assert code == 0, err
@@ -276,7 +276,7 @@ def test_gradient_input_refusals(tmp_path, capsys, dome_png):
     assert code == 1 and "use --gradient-frame" in one_line(err)
     code, _, err = run(capsys, "integrate", "--gradients", tmp_path / "p.npy",
                        tmp_path / "p.npy", "--gradient-frame", "colrow")
-    assert code == 1 and "`gradient_frame` must be one of" in one_line(err)
+    assert code == 1 and "--gradient-frame must be one of" in one_line(err)
 
 
 def test_mat_input_in_queau_layout_with_keys(tmp_path, capsys):
@@ -746,3 +746,18 @@ def test_discontinuities_show_a_progress_bar(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", path, "--discontinuities", "--progress",
                        "-o", tmp_path / "o")
     assert code == 0 and "integrating" in err
+
+
+def test_json_failure_prints_one_object(tmp_path, capsys):
+    """A script reading --json gets a JSON object on stdout for a failure too, naming the flag."""
+    np.save(tmp_path / "grey.npy", np.ones((8, 8)))
+    code, out, err = run(capsys, "integrate", str(tmp_path / "grey.npy"), "--json",
+                         "-o", str(tmp_path / "o"))
+    rec = json.loads(out)
+    assert code == 1 and rec["status"] == "error" and rec["exit_code"] == 1
+    assert rec["error"].startswith("NORMALS: ") and "NORMALS: " in err
+    code, out, _ = run(capsys, "integrate", str(tmp_path / "missing.npy"), "--json")
+    assert code == 1 and "does not exist" in json.loads(out)["error"]
+    # without --json nothing goes to stdout
+    code, out, _ = run(capsys, "integrate", str(tmp_path / "grey.npy"), "-o", str(tmp_path / "o"))
+    assert code == 1 and out == ""

@@ -406,12 +406,12 @@ def test_dataset_folder_picks_up_prior_and_confidence(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("extra,match", [
-    (["--prior", "bad.npy"], "`prior`: size 3x3"),
-    (["--prior", "prior.npy", "--prior-weight", "-2"], "`prior_weight` must be a finite number"),
-    (["--confidence", "bad.npy"], "`confidence`: size 3x3"),
-    (["--prior-weight", "5"], "`prior_weight` applies only with a prior"),
+    (["--prior", "bad.npy"], "--prior: size 3x3"),
+    (["--prior", "prior.npy", "--prior-weight", "-2"], "--prior-weight must be a finite number"),
+    (["--confidence", "bad.npy"], "--confidence: size 3x3"),
+    (["--prior-weight", "5"], "--prior-weight applies only with a prior"),
     (["--prior", "nan.npy"], "no finite depth sample"),
-    (["--prior", "prior.npy", "--method", "frankot_chellappa"], "does not take a `prior`"),
+    (["--prior", "prior.npy", "--method", "frankot_chellappa"], "does not take a --prior"),
 ])
 def test_cli_errors_exit_1_without_traceback(tmp_path, capsys, extra, match):
     _write_inputs(tmp_path)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import re
 import sys
 import time
 import warnings
@@ -403,6 +404,7 @@ def integrate(normals, gradients, progress, as_json, **flags):
         click.echo(f"facetlift: warning: {w}", err=True)
     if as_json:
         click.echo(json.dumps({k: v for k, v in record.items() if k != "warnings"}))
+        _STATE["printed_json"] = True
     else:
         for path in record["outputs"].values():
             click.echo(f"wrote {path}")
@@ -562,6 +564,7 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     if as_json:  # (the log's record for every item: a resumed one has no more)
         for r in records:
             click.echo(json.dumps(log_record(r)))
+        _STATE["printed_json"] = True
     resumed = sum(bool(r.get("resumed")) for r in records)
     line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
             + (f" ({resumed} from an earlier run)" if resumed else "")
@@ -659,6 +662,20 @@ def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_di
 
 def _error(message: str) -> None:
     click.echo(f"facetlift: error: {message}", err=True)
+    _STATE.setdefault("errors", []).append(message)
+
+
+def _as_flags(message: str) -> str:
+    """The library's messages name Python arguments (`` `prior_weight` must be ...``); on the
+    command line those that are flags are named as the flags (``--prior-weight must be ...``).
+    """
+    names = {"path": "NORMALS", "p": "--gradients P", "q": "--gradients Q"}
+    for command in cli.commands.values():
+        for param in command.params:
+            if param.name not in names:
+                names[param.name] = (param.name.upper() if param.param_type_name == "argument"
+                                     else max(param.opts, key=len))
+    return re.sub(r"`(\w+)`", lambda m: names.get(m.group(1), m.group(0)), message)
 
 
 def _one_line(e: BaseException) -> str:
@@ -682,10 +699,10 @@ def main(argv: list[str] | None = None) -> int:
     MemoryError) or a batch's dead workers (:class:`facetlift.errors.WorkersDied`) exit 1;
     anything else is a bug: one line asking for a report (the traceback
     with ``--debug``), exit 3.
-    """
-    from .errors import MemoryLimitError, WorkersDied
-    from .io.atomic import Terminated
 
+    With ``--json``, a command that fails before printing its object prints
+    ``{"status", "exit_code", "error"}`` on stdout instead (the message stays on stderr too).
+    """
     if argv is None and os.environ.get("FACETLIFT_RETAIN_MEMORY", "1").strip().lower() not in (
             "0", "false", "no", "off"):
         # a command-line process: keep freed memory warm (facetlift.memory.retain_freed_memory;
@@ -696,7 +713,24 @@ def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else list(argv)
     if not args:
         args = ["--help"]
-    _STATE["debug"] = False
+    _STATE.update(debug=False, errors=[], printed_json=False)
+    code = _main(args)
+    if code != EXIT_OK and "--json" in args and not _STATE["printed_json"]:
+        # a script reading --json gets one object on stdout for a failure too
+        click.echo(json.dumps({"status": _STATUS.get(code, "error"), "exit_code": code,
+                               "error": "; ".join(_STATE["errors"]) or None}))
+    return code
+
+
+#: The "status" of the JSON object a failed command prints with --json, by exit code.
+_STATUS = {EXIT_INPUT: "error", EXIT_SOLVER: "solver_error", EXIT_BUG: "internal_error",
+           EXIT_INTERRUPTED: "interrupted", EXIT_TERMINATED: "terminated"}
+
+
+def _main(args: list[str]) -> int:
+    from .errors import MemoryLimitError, WorkersDied
+    from .io.atomic import Terminated
+
     try:
         with warnings.catch_warnings():  # (restores Python's own display afterwards)
             warnings.showwarning = _show_warning
@@ -724,7 +758,7 @@ def main(argv: list[str] | None = None) -> int:
         _error(f"out of memory ({_one_line(e)}); try a crop, a smaller map or another method")
         return EXIT_INPUT
     except (ValueError, OSError) as e:
-        _error(_one_line(e))
+        _error(_as_flags(_one_line(e)))
         return EXIT_INPUT
     except ImportError as e:  # an optional extra that is not installed: the message names it
         _error(_one_line(e))
