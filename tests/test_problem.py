@@ -78,14 +78,17 @@ def test_prepare_missing_samples_and_known():
 def test_backfacing_normals_become_missing_samples(backfacing):
     n = up((4, 5))
     n[2, 3] = [0.3, 0.0, -1.0]
-    n[1, 1] = [1.0, 0.0, 0.0]  # n_z == 0 is back-facing too
+    n[1, 1] = [1.0, 0.0, 0.0]  # n_z == 0: edge-on, grazing (not facing away)
     with pytest.warns(UserWarning, match=r"2 normal\(s\) inside the mask cannot be used .*"
-                      r"2 back-facing.*first at \(row 1, col 1\)"):
+                      r"1 back-facing, 1 grazing.*first at \(row 1, col 1\)"):
         prob = facetlift.prepare(n, backfacing=backfacing)
-    assert (~prob.known).sum() == 2 and (~prob.usable).sum() == 2
-    assert prob.counts["back-facing"] == 2 and prob.counts["first_unusable"] == [1, 1]
+    # (a back-facing normal is dropped, a grazing one kept without a target: the paper's rule)
+    assert (~prob.known).sum() == 1 and (~prob.usable).sum() == 2
+    assert prob.counts["back-facing"] == 1 and prob.counts["grazing"] == 1
+    assert prob.counts["first_unusable"] == [1, 1]
     k = prob.domain.to_image(prob.known.astype(float))
-    assert k[2, 3] == 0 and k[1, 1] == 0
+    u = prob.domain.to_image(prob.usable.astype(float))
+    assert k[2, 3] == 0 and k[1, 1] == 1 and u[1, 1] == 0
 
 
 def test_bad_normals_inside_the_mask_become_missing_samples_counted_once():
@@ -169,7 +172,7 @@ def test_bad_normals(normals, match):
         facetlift.prepare(normals)
 
 
-@pytest.mark.parametrize("bad", [[0.2, 0.1, -1.0], [1.0, 0.0, 0.0]])
+@pytest.mark.parametrize("bad", [[0.2, 0.1, -1.0], [1.0, 0.0, -1e-9]])
 def test_backfacing_error_on_request(bad):
     with pytest.raises(ValueError, match=r"back-facing normals \(facing away from the camera\) "
                        r"inside the mask at 1 pixel\(s\), first at \(row 4, col 1\).*"
@@ -342,14 +345,24 @@ def test_gradient_sign_convention():
     np.testing.assert_allclose(n_int[0, 0], np.array([-1.0, 0.0, 1.0]) / np.sqrt(2))
 
 
+def test_infinite_slopes_are_edge_on_normals_counted_as_grazing():
+    """A few infinite slopes (a vertical facet) never refuse the job: their normal is the
+    limit, edge-on, which the grazing rule turns into a counted missing sample."""
+    p, q = np.zeros((5, 6)), np.zeros((5, 6))
+    p[1, 2], q[3, 4] = np.inf, -np.inf
+    n = facetlift.normals_from_gradients(p, q)
+    assert np.allclose(n[1, 2], [-1, 0, 0]) and np.allclose(n[3, 4], [0, 1, 0])
+    with pytest.warns(UserWarning, match=r"2 normal\(s\).*2 grazing.*first at \(row 1, col 2\)"):
+        prob = facetlift.prepare(n, np.ones((5, 6), bool))
+    assert prob.counts["grazing"] == 2 and prob.usable.sum() == 28
+
+
 @pytest.mark.parametrize(
     "p, q, match",
     [
         (np.ones(5), np.ones(5), r"`p` must be a 2-D \(H, W\) array; got shape \(5,\)"),
         (np.ones((3, 4)), np.ones((4, 3)),
          r"`q` must have the shape of `p` \(3, 4\); got \(4, 3\)"),
-        (np.full((3, 4), np.inf), np.ones((3, 4)), "`p` and `q` must not contain inf"),
-        (np.ones((3, 4)), np.full((3, 4), -np.inf), "`p` and `q` must not contain inf"),
         (np.full((3, 4), "1"), np.ones((3, 4)), "`p` must be a real numeric array"),
         (np.ones((3, 4)), np.ones((3, 4), complex), "`q` must be a real numeric array"),
     ],

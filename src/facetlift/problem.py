@@ -193,9 +193,12 @@ def normals_from_gradients(p, q) -> np.ndarray:
         raise ValueError(f"`p` must be a 2-D (H, W) array; got shape {p.shape}")
     if q.shape != p.shape:
         raise ValueError(f"`q` must have the shape of `p` {p.shape}; got {q.shape}")
-    if np.isinf(p).any() or np.isinf(q).any():
-        raise ValueError("`p` and `q` must not contain inf (use NaN for missing samples)")
     n = np.stack([-p, -q, np.ones_like(p)], axis=-1)
+    inf = np.isinf(p) | np.isinf(q)
+    if inf.any():  # an infinite slope is a vertical facet: its normal's limit, z = 0 (a
+        # grazing normal, which the grazing rule then counts as a missing sample)
+        n[inf] = np.stack([-np.sign(p[inf]) * np.isinf(p[inf]),
+                           -np.sign(q[inf]) * np.isinf(q[inf]), np.zeros(int(inf.sum()))], -1)
     return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
 
@@ -341,15 +344,15 @@ def prepare(
     r, c = domain.pixels
     with np.errstate(invalid="ignore"):
         cos = np.where(ok, cam.view_cosine(r, c, nf, unit=True), 0.0)
-    bad["back-facing"] = ok & (cos <= 0)
+    bad["back-facing"] = ok & (cos < 0)  # (exactly edge-on is grazing, e.g. an inf slope)
     if backfacing == "error" and bad["back-facing"].any():
         raise ValueError(
             "`normals` has back-facing normals (facing away from the camera) inside the mask "
             f"at {_where_facets(domain, bad['back-facing'])}; mask them out or pass "
             "backfacing='missing'"
         )
-    front = ok & (cos > 0)
-    bad["grazing"] = front & (cos < eps)
+    front = ok & (cos >= 0)
+    bad["grazing"] = front & ((cos < eps) | (cos == 0))
     usable = front & ~bad["grazing"]
     conf = None
     if confidence is not None:
