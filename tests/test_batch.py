@@ -362,3 +362,18 @@ def test_an_interrupted_batch_leaves_no_empty_folder_of_an_abandoned_item(tmp_pa
         facetlift.batch([tmp_path / "in"], out, workers=1, save=("npy",))
     assert (out / "m0" / "depth.npy").is_file()  # (finished before the interrupt)
     assert not (out / "m1").exists() and (out / "m2").is_dir()
+
+
+def test_on_record_gets_each_record_as_it_is_known(tmp_path):
+    maps(tmp_path / "in", n=2)
+    seen = []
+    recs = fb.batch([str(tmp_path / "in")], tmp_path / "o", workers=1, save=("npy",),
+                    on_record=lambda r: seen.append((r["name"], r["status"],
+                                                     (tmp_path / "o" / fb.LOG_NAME).read_text()
+                                                     .count("\n"))))
+    # each after its log line, so an interrupt loses nothing a caller was shown
+    assert [s[:2] for s in seen] == [("m0", "ok"), ("m1", "ok")] and [s[2] for s in seen] == [1, 2]
+    seen.clear()
+    fb.batch([str(tmp_path / "in")], tmp_path / "o", workers=1, save=("npy",), resume=True,
+             on_record=lambda r: seen.append((r["name"], r.get("resumed"))))
+    assert seen == [("m0", True), ("m1", True)] and len(recs) == 2

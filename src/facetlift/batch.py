@@ -203,7 +203,7 @@ def _complete(rec: dict, asked: dict) -> bool:
 
 def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
           scheduler=None, resume: bool = False, progress: bool = False,
-          list_file=None, log=None, **job_options) -> list[dict]:
+          list_file=None, log=None, on_record=None, **job_options) -> list[dict]:
     """Integrate many normal maps, each into ``out/<name>/``.
 
     Parameters
@@ -233,6 +233,9 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         More inputs, one per line.
     log : str or Path, optional
         The JSON-lines log; default ``out/batch.jsonl``.
+    on_record : callable, optional
+        Called with each item's record as soon as it is known: the resumed ones first, then
+        each finished one as it finishes (in the order they finish), after its log line.
 
     Returns
     -------
@@ -277,6 +280,10 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             j = replace(j, mask=it.mask)
         jobs.append((it, j))
     n_workers = _workers(workers, len(jobs))
+    if on_record is not None:
+        for it in found:
+            if it.path in results:
+                on_record(results[it.path])
     with open(log_path, "a", encoding="utf-8") as fh, \
             _Bar(len(found), len(results), bool(progress)) as bar:
 
@@ -286,6 +293,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             fh.write(json.dumps(log_record(rec)) + "\n")
             fh.flush()
             bar.update(rec["status"])
+            if on_record is not None:
+                on_record(rec)
 
         existed = {j.outdir for _, j in jobs if Path(j.outdir).exists()}
         try:

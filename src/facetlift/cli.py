@@ -550,8 +550,12 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
         raise click.UsageError("give inputs (files, folders, patterns) or --list FILE")
     job = _make_job(**flags)
     t0 = time.perf_counter()
+    def stream(r):  # (each record as it is known: an interrupted batch has shown its part)
+        click.echo(json.dumps(log_record(r)))
+
     records = run_batch(inputs, outdir, job=job, workers=workers, scheduler=scheduler,
-                        resume=resume, progress=_show_progress(progress), list_file=list_file)
+                        resume=resume, progress=_show_progress(progress), list_file=list_file,
+                        on_record=stream if as_json else None)
     failed = [r for r in records if r["status"] != "ok"]
     for r in records:  # (as integrate shows them; a resumed item's were shown before)
         if not r.get("resumed"):
@@ -561,9 +565,7 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     for r in failed:
         msg = " ".join(str(r["error"]).split())  # (one line each, as the docs say)
         click.echo(f"facetlift: error: {r['name']} ({r['status']}): {msg}", err=True)
-    if as_json:  # (the log's record for every item: a resumed one has no more)
-        for r in records:
-            click.echo(json.dumps(log_record(r)))
+    if as_json:  # (every item's record was printed as it was known)
         _STATE["printed_json"] = True
     resumed = sum(bool(r.get("resumed")) for r in records)
     line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
