@@ -98,6 +98,21 @@ def test_zero_one_encoded_floats_are_refused_with_the_fix():
     facetlift.integrate(2 * ((n + 1) / 2) - 1)  # the fix works
 
 
+@pytest.mark.parametrize("scale, bits", [(255, 8), (65535, 16)])
+def test_undecoded_integer_images_as_floats_are_refused_with_the_fix(scale, bits):
+    """An 8/16-bit image read into floats and passed on: every normal would be nearly the
+    same tilted vector, a silent plane."""
+    n, _ = bump()
+    with pytest.raises(ValueError, match=rf"undecoded {bits}-bit normal map.*"
+                       rf"n = v / {scale} \* 2 - 1"):
+        facetlift.integrate(np.round((n + 1) / 2 * scale))
+    facetlift.integrate(np.round((n + 1) / 2 * scale) / scale * 2 - 1)  # the fix works
+    facetlift.integrate(n * 100.0)  # unnormalised normals of any length are fine
+    plane = 50.0 * facetlift.normals_from_gradients(np.full((12, 12), -0.3),
+                                                    np.full((12, 12), -0.2))
+    assert np.isfinite(facetlift.integrate(plane).depth).all()  # all >= 0 and > 1: a plane
+
+
 def test_unit_normals_facing_up_and_right_are_not_taken_for_an_encoding():
     plane = facetlift.normals_from_gradients(np.full((12, 12), -0.3), np.full((12, 12), -0.2))
     assert (plane >= 0).all()

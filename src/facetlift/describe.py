@@ -229,6 +229,11 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
                                f"({frames.facing_hint(frame)})")
             return guess
         lo = inside[:, :2].min()
+        scale = frames.encoded_scale(inside)
+        if scale is not None:
+            guess["likely"] = (f"undecoded {8 if scale == 255 else 16}-bit values as floats: "
+                               f"decode with v / {scale} * 2 - 1")
+            return guess
         # (all of x and y >= 0, around the encoding's 0.5: a flat view has them all near 0)
         if lo >= 0 and float(np.median(inside[:, :2])) > 0.25:
             guess["likely"] = "[0, 1]-encoded floats: decode with 2 * v - 1"

@@ -220,7 +220,8 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
     Raises
     ------
     ValueError
-        Other unsigned integer types; a float map that looks [0, 1]-encoded; a map whose
+        Other unsigned integer types; a float map that looks [0, 1]-encoded or like an
+        undecoded 8/16-bit image (values up to 255 or 65535); a map whose
         normals mostly face away from the viewer (a camera frame with z pointing away); a bad
         `frame`.
     """
@@ -283,7 +284,28 @@ def _inside(n: np.ndarray, mask, sample: int | None = None) -> np.ndarray | None
         return v[np.isfinite(v).all(axis=1)]
 
 
+def encoded_scale(v: np.ndarray) -> int | None:
+    """255 or 65535 where (k, 3) finite float vectors look like an 8/16-bit normal map that
+    was not decoded (every component in [0, max] and ``2 v / max - 1`` of unit length on
+    nine in ten), else None: an image read into floats and passed on as it is."""
+    if len(v) < ENCODING_CHECK_PIXELS or v.min() < 0 or not 1 < v.max() <= 65535:
+        return None
+    scale = 255 if v.max() <= 255 else 65535
+    d = v * (2.0 / scale) - 1.0
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    return scale if np.mean(np.abs(length - 1) < 0.05) > 0.9 else None
+
+
 def _check_encoding(v: np.ndarray, name: str) -> None:
+    scale = encoded_scale(v)
+    if scale is not None:
+        bits = 8 if scale == 255 else 16
+        raise ValueError(
+            f"`{name}` looks like an undecoded {bits}-bit normal map: every component inside "
+            f"the mask lies in [0, {scale}] and 2 * v / {scale} - 1 is of unit length; decode "
+            f"it first with n = v / {scale} * 2 - 1 (or pass the {bits}-bit integer image "
+            "itself)"
+        )
     if len(v) < ENCODING_CHECK_PIXELS or v.min() < 0 or v.max() > 1:
         return
     with np.errstate(over="ignore", invalid="ignore"):
