@@ -377,3 +377,39 @@ def test_on_record_gets_each_record_as_it_is_known(tmp_path):
     fb.batch([str(tmp_path / "in")], tmp_path / "o", workers=1, save=("npy",), resume=True,
              on_record=lambda r: seen.append((r["name"], r.get("resumed"))))
     assert seen == [("m0", True), ("m1", True)] and len(recs) == 2
+
+
+def test_names_stay_apart_and_resume_sees_changed_inputs(tmp_path):
+    """A map added beside another of the same stem never takes its folder, and a map replaced
+    under its old name runs again (both reported success over one overwritten folder)."""
+    maps(tmp_path / "in", n=2)
+    out = tmp_path / "o"
+    first = fb.batch([tmp_path / "in"], out, workers=1, save=("npy",))
+    assert [r["name"] for r in first] == ["m0", "m1"]
+    np.save(tmp_path / "in" / "m0.npy", np.dstack([np.zeros((5, 6, 2)), np.ones((5, 6))]))
+    again = fb.batch([tmp_path / "in"], out, workers=1, save=("npy",), resume=True)
+    by = {Path(r["item"]).name: r for r in again}
+    assert by["m0.png"].get("resumed") and by["m0.png"]["name"] == "m0"
+    assert by["m0.npy"]["name"] == "m0_npy" and by["m0.npy"]["shape"] == [5, 6]
+    assert np.load(out / "m0" / "depth.npy").shape == (16, 18)  # not overwritten
+    # m1.png replaced by another map under its name: run again, not resumed
+    (tmp_path / "in" / "m1.png").write_bytes((tmp_path / "in" / "m0.png").read_bytes())
+    third = {Path(r["item"]).name: r for r in fb.batch([tmp_path / "in"], out, workers=1,
+                                                          save=("npy",), resume=True)}
+    assert not third["m1.png"].get("resumed") and third["m0.png"].get("resumed")
+    # two extensions from the start: each named by its extension, whatever the order
+    assert [it.name for it in fb.items([tmp_path / "in"])] == ["m0_npy", "m0_png", "m1"]
+
+
+def test_links_and_explicit_mask_named_files_are_items(tmp_path):
+    maps(tmp_path / "in", n=1)
+    real = tmp_path / "in" / "m0.png"
+    (tmp_path / "in" / "l1.png").symlink_to(real)
+    (tmp_path / "in" / "l2.png").symlink_to(real)
+    assert [it.name for it in fb.items([tmp_path / "in"])] == ["l1", "l2", "m0"]
+    # a map whose name ends in _mask with no X beside it is a map; named, always an item
+    (tmp_path / "in" / "gas_mask.png").write_bytes(real.read_bytes())
+    assert "gas_mask" in [it.name for it in fb.items([tmp_path / "in"])]
+    io.write_mask(tmp_path / "in" / "m0_mask.png", np.ones((16, 18)))
+    assert "m0_mask" not in [it.name for it in fb.items([tmp_path / "in"])]
+    assert [it.name for it in fb.items([tmp_path / "in" / "m0_mask.png"])] == ["m0_mask"]

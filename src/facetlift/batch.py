@@ -51,8 +51,11 @@ def items(inputs, *, list_file=None) -> list[Item]:
     folders of either (one level), glob patterns, and the lines of `list_file` (one path or
     pattern per line; ``#`` starts a comment).
 
-    A file ``<stem>_mask.<ext>`` next to ``<stem>.<ext>`` is its mask, and is not an item.
-    Output names are the file stems or folder names, made unique with ``-2``, ``-3``, ...
+    A file ``<stem>_mask.<ext>`` next to a normal map ``<stem>.<ext>`` is its mask, and is not
+    an item unless named explicitly. Output names are the file stems or folder names; inputs
+    sharing a stem (``a.png``, ``a.npy``) are named with their extension (``a_png``,
+    ``a_npy``), and what still collides gets ``-2``, ``-3`` ... Paths are made absolute but
+    not resolved: two links to one file are two items.
 
     Raises
     ------
@@ -72,33 +75,43 @@ def items(inputs, *, list_file=None) -> list[Item]:
             line = line.split("#", 1)[0].strip()
             if line:
                 specs.append(line if os.path.isabs(line) else str(base / line))
-    paths: list[Path] = []
+    paths: list[tuple[Path, bool]] = []  # (path, named explicitly)
     for spec in specs:
-        if _GLOB & set(spec):
+        if _GLOB & set(spec) and not Path(spec).exists():  # (a file named 'a[1].png' is one)
             found = sorted(glob.glob(spec))
             if not found:
                 raise ValueError(f"`inputs`: the pattern {spec!r} matches nothing")
-            paths += [Path(f) for f in found]
+            paths += [(Path(f), False) for f in found]
             continue
         p = Path(spec)
         if not p.exists():
             raise ValueError(f"`inputs`: {p} does not exist")
         if p.is_dir() and not _is_dataset(p, NORMAL_READ_FORMATS):
             kinds = NORMAL_READ_FORMATS + (".mat",)
-            paths += sorted(c for c in p.iterdir()
+            paths += sorted((c, False) for c in p.iterdir()
                             if (c.is_dir() and _is_dataset(c, NORMAL_READ_FORMATS))
                             or (c.is_file() and c.suffix.lower() in kinds))
         else:
-            paths.append(p)
-    out, seen, taken = [], set(), {}
-    for p in paths:
-        key = str(p.resolve())
-        if key in seen or _is_mask_file(p):
+            paths.append((p, True))
+    found, seen = [], set()
+    for p, explicit in paths:
+        # (the path as given, made absolute: links to one file are items of their own, each
+        # with its own mask and name)
+        key = os.path.abspath(p)
+        if key in seen or (not explicit and _is_mask_file(p, NORMAL_READ_FORMATS)):
             continue
         seen.add(key)
-        stem = p.name if p.is_dir() else p.stem
-        taken[stem] = taken.get(stem, 0) + 1
-        name = stem if taken[stem] == 1 else f"{stem}-{taken[stem]}"
+        found.append((p, key))
+    names: dict[str, set] = {}
+    for p, _ in found:
+        names.setdefault(_stem(p), set()).add(p.name)
+    out, taken = [], set()
+    for p, key in found:
+        # a stem shared by inputs of different extensions (a.png and a.npy) names each by its
+        # extension too, whatever order they come in; then -2, -3 ... for what still collides
+        # (one name in several folders)
+        name = _stem(p) if len(names[_stem(p)]) == 1 else p.name.replace(".", "_")
+        name = _unique(name, taken)
         mask = None
         if p.is_file():
             mask = next((str(m) for ext in MASK_FORMATS
@@ -109,12 +122,33 @@ def items(inputs, *, list_file=None) -> list[Item]:
     return out
 
 
+def _stem(p: Path) -> str:
+    return p.name if p.is_dir() else p.stem
+
+
+def _unique(name: str, taken: set) -> str:
+    """`name`, or `name-2`, `name-3` ... whichever is not in `taken` (then added to it)."""
+    new, k = name, 1
+    while new in taken:
+        k += 1
+        new = f"{name}-{k}"
+    taken.add(new)
+    return new
+
+
 def _is_dataset(folder: Path, formats) -> bool:
     return any((folder / f"normal_map{ext}").is_file() for ext in formats)
 
 
-def _is_mask_file(p: Path) -> bool:
-    return p.is_file() and (p.stem == "mask" or p.stem.endswith("_mask"))
+def _is_mask_file(p: Path, formats) -> bool:
+    """In a folder or a pattern's matches: ``mask.*``, or ``X_mask.*`` beside a normal map
+    ``X.*``: a mask, not an item (a file named explicitly is always an item)."""
+    if not p.is_file():
+        return False
+    if p.stem == "mask":
+        return True
+    return p.stem.endswith("_mask") and any(
+        p.with_name(p.stem[:-len("_mask")] + ext).is_file() for ext in formats + (".mat",))
 
 
 def run_item(job: Job, threads: int | None = None) -> dict:
@@ -193,11 +227,32 @@ def settings(job: Job) -> dict:
     return jsonable(out)
 
 
-def _complete(rec: dict, asked: dict) -> bool:
+def fingerprint(item: Item) -> list:
+    """What an item's inputs are now: ``[name, size, mtime_ns]`` of its file (a dataset
+    folder: of each file in it) and of its mask file; ``--resume`` runs an item again when
+    they changed (a map replaced under the same name)."""
+    files = [Path(item.path)]
+    if files[0].is_dir():
+        files = sorted(f for f in files[0].iterdir() if f.is_file())
+    if item.mask is not None:
+        files.append(Path(item.mask))
+    out = []
+    for f in files:
+        try:
+            st = f.stat()
+        except OSError:
+            continue
+        out.append([f.name, st.st_size, st.st_mtime_ns])
+    return out
+
+
+def _complete(rec: dict, asked: dict, stamp: list | None = None) -> bool:
     """Whether an earlier record finished what is asked now: ``ok``, with the same settings
     (outputs, method, options, frames ...; a record without them, from an older log, does
-    not count) and every output it wrote still there."""
+    not count), the same inputs (:func:`fingerprint`, where given) and every output it wrote
+    still there."""
     return (rec.get("status") == "ok" and rec.get("settings") == asked
+            and (stamp is None or rec.get("input") == stamp)
             and all(Path(p).is_file() for p in rec.get("outputs", {}).values()))
 
 
@@ -270,11 +325,20 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     earlier = _finished(log_path) if resume else {}
     asked = settings(template)
     jobs, results = [], {}
+    stamps = {it.path: fingerprint(it) for it in found}
     for it in found:
         rec = earlier.get(it.path)
-        if rec is not None and _complete(rec, asked):
+        if rec is not None and _complete(rec, asked, stamps[it.path]):
             results[it.path] = dict(rec, resumed=True)
+    # the folders of the items kept from an earlier run are theirs: an item run now that
+    # would take one of those names (a new a.npy beside a kept a.png) is named anew
+    kept = {results[p]["name"] for p in results}
+    taken = set(kept)
+    for it in found:
+        if it.path in results:
             continue
+        if it.name in kept:
+            it = replace(it, name=_unique(it.name, taken))
         j = template.with_input(it.path, root / it.name)
         if it.mask is not None and template.mask is None:
             j = replace(j, mask=it.mask)
@@ -288,7 +352,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             _Bar(len(found), len(results), bool(progress)) as bar:
 
         def done(it: Item, rec: dict) -> None:
-            rec = dict(rec, item=it.path, name=it.name, settings=asked)
+            rec = dict(rec, item=it.path, name=it.name, settings=asked, input=stamps[it.path])
             results[it.path] = rec
             fh.write(json.dumps(log_record(rec)) + "\n")
             fh.flush()
@@ -395,7 +459,7 @@ def log_record(rec: dict) -> dict:
     from .jobs import jsonable
 
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
-            "shape", "facets", "converged", "warnings", "resumed", "settings")
+            "shape", "facets", "converged", "warnings", "resumed", "settings", "input")
     return jsonable({k: rec[k] for k in keep if k in rec})
 
 
