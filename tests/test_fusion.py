@@ -228,8 +228,9 @@ def test_confidence_lowers_the_weight_of_bad_normals():
      "`prior_weight` must be finite and >= 0 where the prior has a sample; got -1.0"),
     ({"prior_weight": 3.0}, "`prior_weight` applies only with a `prior`"),
     ({"confidence": np.ones((2, 2))}, r"`confidence` must be a number or have shape"),
-    ({"confidence": -np.ones((24, 28))}, "`confidence` must be finite and >= 0 everywhere; "
-     "got -1.0"),
+    ({"confidence": -np.ones((24, 28))},
+     r"`confidence` must be finite and >= 0 inside the mask \(NaN there is a "
+     r"missing normal\); got -1.0"),
     ({"prior": ([1, 2], [3, 99], [1.0, 2.0])}, "outside the 24 x 28 image"),
     ({"prior": ([1, 2], [3], [1.0, 2.0])}, "three arrays of one length"),
     ({"prior": np.ones((24, 28)), "method": "frankot_chellappa"},
@@ -476,3 +477,20 @@ def test_an_error_raised_by_progress_is_not_swallowed_by_the_multigrid_trial():
 
     with pytest.raises(Stop):
         run(n, prior=prior, prior_weight=100.0, progress=progress)
+
+
+def test_confidence_outside_the_mask_is_ignored_and_nan_inside_is_a_missing_normal():
+    H, W = 24, 28
+    r, c = np.indices((H, W))
+    n = facetlift.normals_from_gradients(0.1 * np.cos(c / 4), 0.1 * np.sin(r / 5))
+    mask = np.zeros((H, W), bool)
+    mask[2:-2, 3:-3] = True
+    conf = np.ones((H, W))
+    conf[0, 0], conf[1, 5] = np.nan, -3.0  # outside the mask: never looked at
+    conf[5, 6] = np.nan  # inside: a missing normal
+    s = facetlift.integrate(n, mask, confidence=conf)
+    missing = n.copy()
+    missing[5, 6] = np.nan
+    ref = facetlift.integrate(missing, mask)
+    assert s.info["input"]["zero_confidence"] == 1
+    np.testing.assert_allclose(s.depth[mask], ref.depth[mask], atol=1e-9)

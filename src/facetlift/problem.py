@@ -356,7 +356,7 @@ def prepare(
     usable = front & ~bad["grazing"]
     conf = None
     if confidence is not None:
-        conf = check_confidence(confidence, (H, W))[m]
+        conf = check_confidence(confidence, (H, W), mask=m)[m]
         counts_zero = usable & (conf == 0)
         usable = usable & (conf > 0)
         conf = np.where(usable, conf, 1.0)
@@ -495,14 +495,19 @@ def _weight_image(a, name: str, shape: tuple[int, int]) -> np.ndarray:
     return arr
 
 
-def check_confidence(confidence, shape: tuple[int, int]) -> np.ndarray:
-    """(H, W) float confidence of the normals: finite and >= 0 at every pixel (0 is a missing
-    normal), or a ValueError naming `confidence`, the value and what was expected."""
-    c = _weight_image(confidence, "confidence", shape)
+def check_confidence(confidence, shape: tuple[int, int], mask=None) -> np.ndarray:
+    """(H, W) float confidence of the normals: >= 0 and finite inside `mask` (every pixel
+    without one), or a ValueError naming `confidence`, the value and what was expected. NaN
+    inside the mask is 0 (a missing normal, as a missing sample of the map is); outside it
+    anything goes and becomes 0."""
+    c = _weight_image(confidence, "confidence", shape).astype(float, copy=True)
+    inside = np.ones(shape, bool) if mask is None else np.asarray(mask, bool)
+    c[~inside | np.isnan(c)] = 0.0
     bad = ~(np.isfinite(c) & (c >= 0))
     if bad.any():
         r, col = np.argwhere(bad)[0]
-        raise ValueError(f"`confidence` must be finite and >= 0 everywhere; got "
+        where = "everywhere" if mask is None else "inside the mask (NaN there is a missing normal)"
+        raise ValueError(f"`confidence` must be finite and >= 0 {where}; got "
                          f"{float(c[r, col])!r} at (row {r}, col {col}) ({int(bad.sum())} such "
                          "pixel(s))")
     return c
