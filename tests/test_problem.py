@@ -279,6 +279,8 @@ def test_one_pixel_domain_from_default_mask():
         ("a", "`pixel_size` must be a positive number; got 'a'"),
         (None, "`pixel_size` must be a positive number; got None"),
         ([1.0, 2.0], "`pixel_size` must be a positive number"),
+        (1e100, r"`pixel_size` must lie in \[1e-12, 1e\+12\]"),
+        (1e-100, r"`pixel_size` must lie in"),
     ],
 )
 def test_bad_pixel_size(pixel_size, match):
@@ -298,6 +300,8 @@ def test_bad_pixel_size(pixel_size, match):
         ([[500, 0, 3], [0, 500, 3], [0, 0, 2]], r"`K` must be upper-triangular with last row"),
         ([[500, 0, 3], [1, 500, 3], [0, 0, 1]], r"`K` must be upper-triangular"),
         ([["a", 0, 3], [0, 500, 3], [0, 0, 1]], "`K` must be a real numeric array"),
+        ([[1e-300, 0, 3], [0, 1e-300, 3], [0, 0, 1]], r"focal lengths .* must lie in"),
+        ([[500, 0, 3], [0, 1e300, 3], [0, 0, 1]], r"focal lengths .* must lie in"),
     ],
 )
 def test_bad_K(K, match):

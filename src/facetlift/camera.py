@@ -290,7 +290,18 @@ def make_camera(pixel_size=1.0, K=None) -> Camera:
         raise ValueError(f"`pixel_size` must be a positive number; got {pixel_size!r}") from None
     if isinstance(pixel_size, bool) or not (np.isfinite(h) and h > 0):
         raise ValueError(f"`pixel_size` must be a positive finite number; got {pixel_size!r}")
+    lo, hi = PIXEL_SIZE_RANGE
+    if not lo <= h <= hi:
+        raise ValueError(f"`pixel_size` must lie in [{lo:g}, {hi:g}] (beyond, the arithmetic "
+                         f"under- or overflows; choose other units); got {pixel_size!r}")
     return Orthographic(h)
+
+
+#: Focal lengths (pixels) that :func:`check_K` accepts, and pixel sizes that
+#: :func:`make_camera` accepts: far beyond any camera, and within them the arithmetic stays
+#: finite (a focal length of 1e-300 divided by zero; 1e300 overflowed the deviation).
+FOCAL_RANGE = (1e-6, 1e9)
+PIXEL_SIZE_RANGE = (1e-12, 1e12)
 
 
 def check_K(K) -> np.ndarray:
@@ -304,6 +315,13 @@ def check_K(K) -> np.ndarray:
         raise ValueError("`K` contains NaN or inf")
     if not (Km[0, 0] > 0 and Km[1, 1] > 0):
         raise ValueError(f"`K` must have positive focal lengths fx=K[0,0], fy=K[1,1]; got {Km}")
+    lo, hi = FOCAL_RANGE
+    if not (lo <= Km[0, 0] <= hi and lo <= Km[1, 1] <= hi):
+        raise ValueError(
+            f"`K`'s focal lengths fx=K[0,0]={Km[0, 0]:g}, fy=K[1,1]={Km[1, 1]:g} must lie in "
+            f"[{lo:g}, {hi:g}] pixels (beyond, the camera's arithmetic under- or overflows); "
+            "intrinsics in other units (normalised, mm) must be converted to pixels"
+        )
     if not np.allclose(Km[2], [0, 0, 1]) or Km[1, 0] != 0:
         raise ValueError(
             "`K` must be upper-triangular with last row [0, 0, 1] (OpenCV layout "
