@@ -761,3 +761,19 @@ def test_json_failure_prints_one_object(tmp_path, capsys):
     # without --json nothing goes to stdout
     code, out, _ = run(capsys, "integrate", str(tmp_path / "grey.npy"), "-o", str(tmp_path / "o"))
     assert code == 1 and out == ""
+
+
+def test_summary_counts_missing_and_unusable_normals(tmp_path, capsys):
+    r, c = np.indices((20, 24))
+    n = facetlift.normals_from_gradients(0.1 * np.cos(c / 4), 0.1 * np.sin(r / 5))
+    n[3:5, 3:5] = np.nan  # 4 missing (the documented marker: no warning)
+    n[10, 10] = [0.0, 0.3, -1.0]  # 1 back-facing (warned)
+    np.save(tmp_path / "n.npy", n)
+    code, out, err = run(capsys, "integrate", str(tmp_path / "n.npy"), "-o", str(tmp_path / "p"),
+                         "--mask", str(_all_mask(tmp_path, n.shape[:2])))
+    assert code == 0 and "4 missing normals, 1 unusable" in out and "back-facing" in err
+
+
+def _all_mask(tmp_path, shape):
+    io.write_mask(tmp_path / "all.png", np.ones(shape, bool))
+    return tmp_path / "all.png"

@@ -349,8 +349,17 @@ def summary(record: dict) -> str:
                      f"{len(prior.get('prior_components', []))} of "
                      f"{prior.get('components')} components"
                      + (f" ({outside} outside the mask, unused)" if outside else ""))
-    if "zero_confidence" in (info.get("input") or {}):
-        parts.append("confidence map")
+    counts = info.get("input") or {}
+    missing = counts.get("missing") or 0
+    if missing:  # (NaN inside the mask: no warning, being the documented way to say it)
+        parts.append(f"{missing} missing normal{'s' if missing != 1 else ''}")
+    unusable = sum(counts.get(k) or 0 for k in ("non-finite", "zero-length", "back-facing",
+                                                 "grazing"))
+    if unusable:
+        parts.append(f"{unusable} unusable")
+    if "zero_confidence" in counts:
+        zero = counts.get("zero_confidence") or 0
+        parts.append("confidence map" + (f" ({zero} at 0)" if zero else ""))
     dev = record.get("mean_deviation")
     if dev is not None:
         parts.append(f"mean deviation {dev:.2f} deg")
