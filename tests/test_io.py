@@ -194,6 +194,16 @@ def test_read_dataset_errors(tmp_path):
         io.read_dataset(tmp_path / "nope")
     with pytest.raises(ValueError, match="no normal_map"):
         io.read_dataset(tmp_path)
+    # a file that cannot be used is said, not skipped; two candidates are not picked from
+    n = np.dstack([np.zeros((6, 7, 2)), np.ones((6, 7))])
+    np.save(tmp_path / "normal_map.npy", n)
+    (tmp_path / "K.txt").mkdir()
+    with pytest.raises(ValueError, match=r"`folder`: .*K.txt is not a file"):
+        io.read_dataset(tmp_path)
+    (tmp_path / "K.txt").rmdir()
+    io.write_normals(tmp_path / "normal_map.png", n)
+    with pytest.raises(ValueError, match="holds normal_map.png and normal_map.npy; keep one"):
+        io.read_dataset(tmp_path)
 
 
 @pytest.mark.parametrize(

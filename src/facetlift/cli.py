@@ -680,7 +680,7 @@ def _as_flags(message: str) -> str:
     """The library's messages name Python arguments (`` `prior_weight` must be ...``); on the
     command line those that are flags are named as the flags (``--prior-weight must be ...``).
     """
-    names = {"path": "NORMALS", "p": "--gradients P", "q": "--gradients Q"}
+    names = {"path": "NORMALS", "folder": "NORMALS", "p": "--gradients P", "q": "--gradients Q"}
     for command in cli.commands.values():
         for param in command.params:
             if param.name not in names:

@@ -34,10 +34,17 @@ def read_K(path) -> np.ndarray:
 
 
 def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
-    for ext in formats:
-        if (folder / f"{stem}{ext}").is_file():
-            return folder / f"{stem}{ext}"
-    return None
+    """The folder's one ``stem.<ext>`` file, or None; a ValueError naming `folder` when it has
+    several (which one was meant?) or one that is not a file (a folder named K.txt was
+    skipped in silence, and the job ran without it)."""
+    found = [folder / f"{stem}{ext}" for ext in formats if (folder / f"{stem}{ext}").exists()]
+    for p in found:
+        if not p.is_file():
+            raise ValueError(f"`folder`: {p} is not a file")
+    if len(found) > 1:
+        raise ValueError(f"`folder`: {folder} holds {' and '.join(p.name for p in found)}; "
+                         "keep one (or give the files themselves)")
+    return found[0] if found else None
 
 
 def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
@@ -80,8 +87,8 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     normals, alpha = read_normals(npath, frame=frame, y_down=y_down)
     mpath = _find(f, "mask", MASK_FORMATS)
     mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
-    kpath = f / "K.txt"
-    K = read_K(kpath) if kpath.is_file() else None
+    kpath = _find(f, "K", (".txt",))
+    K = read_K(kpath) if kpath is not None else None
     from .images import PRIOR_FORMATS, read_prior, read_weights
 
     ppath = _find(f, "prior_depth", PRIOR_FORMATS) if with_prior else None
