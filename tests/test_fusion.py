@@ -225,8 +225,10 @@ def test_confidence_lowers_the_weight_of_bad_normals():
     ({"prior": np.ones((24, 28)), "prior_weight": np.full((3, 3), 1.0)},
      r"`prior_weight` must be a number or have shape \(24, 28\)"),
     ({"prior": np.ones((24, 28)), "prior_weight": -np.ones((24, 28))},
-     "`prior_weight` must be finite and >= 0 where the prior has a sample; got -1.0"),
+     r"`prior_weight` must be finite, >= 0 and <= 1e\+10 where the prior has a sample; got -1.0"),
     ({"prior_weight": 3.0}, "`prior_weight` applies only with a `prior`"),
+    ({"prior": np.ones((24, 28)), "prior_weight": 1e300}, r"<= 1e\+10 where the prior"),
+    ({"prior": np.full((24, 28), 2e200)}, r"`prior` depths must lie within \+-1e\+30"),
     ({"confidence": np.ones((2, 2))}, r"`confidence` must be a number or have shape"),
     ({"confidence": -np.ones((24, 28))},
      r"`confidence` must be finite and >= 0 inside the mask \(NaN there is a "

@@ -297,7 +297,7 @@ def test_cli_prior_blur(tmp_path, capsys):
     capsys.readouterr()
     assert main(args + ["--prior-blur", "-3", "-o", str(tmp_path / "e")]) == 1
     err = capsys.readouterr().err
-    assert "`prior_blur` must be a finite number of pixels >= 0" in err
+    assert "--prior-blur must be a finite number of pixels >= 0" in err
     assert "Traceback" not in err
 
 

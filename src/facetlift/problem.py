@@ -552,6 +552,14 @@ def prior_image(prior, shape: tuple[int, int]) -> np.ndarray:
     return arr
 
 
+#: The largest prior weight: at 1e8 the result already meets the prior where given to
+#: rounding (tests/test_fusion.py); 1e300 overflowed into a depth of 0 everywhere.
+MAX_PRIOR_WEIGHT = 1e10
+
+#: The largest |depth| of a prior sample (2e200 overflowed the energy's squares).
+MAX_PRIOR_DEPTH = 1e30
+
+
 def check_prior(prior, prior_weight, shape, mask, camera):
     """Checked prior: ``(values, weights, outside)``, the first two (m,) on the facets of
     `mask`, the values in the camera's unknown (:meth:`facetlift.camera.Camera.from_depth`),
@@ -577,11 +585,19 @@ def check_prior(prior, prior_weight, shape, mask, camera):
             + (f" ({outside} outside it)" if outside else "")
             + "; give depths where the normals are, NaN elsewhere"
         )
-    wbad = have & ~(np.isfinite(w) & (w >= 0))
+    wbad = have & ~(np.isfinite(w) & (w >= 0) & (w <= MAX_PRIOR_WEIGHT))
     if wbad.any():
         k = int(np.flatnonzero(wbad)[0])
-        raise ValueError(f"`prior_weight` must be finite and >= 0 where the prior has a sample; "
-                         f"got {float(w[k])!r} ({int(wbad.sum())} such pixel(s))")
+        raise ValueError(f"`prior_weight` must be finite, >= 0 and <= {MAX_PRIOR_WEIGHT:g} "
+                         f"where the prior has a sample; got {float(w[k])!r} "
+                         f"({int(wbad.sum())} such pixel(s)); {MAX_PRIOR_WEIGHT:g} already "
+                         "returns the prior where given")
+    huge = have & (np.abs(depth) > MAX_PRIOR_DEPTH)
+    if huge.any():
+        k = int(np.flatnonzero(huge)[0])
+        raise ValueError(f"`prior` depths must lie within +-{MAX_PRIOR_DEPTH:g} (beyond, the "
+                         f"energy's squares overflow; choose other units); got "
+                         f"{float(depth[k])!r} ({int(huge.sum())} such sample(s))")
     if camera.positive_depth:
         neg = have & (depth <= 0)
         if neg.any():
