@@ -303,3 +303,17 @@ def test_corner_copies_give_a_mesh_split_at_the_jumps(fake_method, tmp_path):
     plain = facetlift.integrate(np.dstack([np.zeros((H, W, 2)), np.ones((H, W))]))
     with pytest.raises(ValueError, match="no discontinuity map"):
         io.write_discontinuities(tmp_path / "k.png", plain)
+
+
+def test_submodules_are_attributes_of_a_plain_import():
+    """``import facetlift`` then ``facetlift.io.read_mask`` (as the docs write it) works, and
+    importing facetlift still loads none of them."""
+    import subprocess
+
+    code = ("import sys, facetlift; assert 'facetlift.io' not in sys.modules; "
+            "facetlift.io.read_mask; facetlift.synthetic.analytic; facetlift.metrics.made; "
+            "print('ok')")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.stdout.strip() == "ok", res.stderr
+    with pytest.raises(AttributeError, match="has no attribute 'nothing'"):
+        facetlift.nothing  # noqa: B018

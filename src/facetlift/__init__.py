@@ -39,6 +39,13 @@ _LAZY = {
 __all__ = sorted(_LAZY)
 
 
+#: Public submodules reachable as attributes after a plain ``import facetlift`` (loaded on
+#: first use, like numpy's): ``facetlift.io.read_normals(...)``.
+_SUBMODULES = ("io", "synthetic", "metrics", "frames", "camera", "conventions", "linalg",
+               "memory", "jobs", "methods", "operators", "bench", "errors", "problem",
+               "surface", "domain", "api", "describe", "options", "perspective")
+
+
 def __getattr__(name: str):
     if name in _LAZY:
         module, attr = _LAZY[name]
@@ -46,8 +53,10 @@ def __getattr__(name: str):
         value = value if attr is None else getattr(value, attr)
         globals()[name] = value  # later look-ups skip this function
         return value
+    if name in _SUBMODULES:
+        return importlib.import_module(f".{name}", __name__)  # (binds itself as an attribute)
     raise AttributeError(f"module 'facetlift' has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
+    return sorted(set(globals()) | set(_LAZY) | set(_SUBMODULES))
