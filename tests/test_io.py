@@ -148,6 +148,16 @@ def test_rgb_and_rgba_masks(tmp_path):
     rgba[1, 1, :3] = 0  # opaque black: outside
     (tmp_path / "rgba.png").write_bytes(imagecodecs.png_encode(rgba))
     np.testing.assert_array_equal(io.read_mask(tmp_path / "rgba.png"), [[0, 1], [1, 0]])
+    # the shape in the alpha of one colour (black): the alpha is the mask
+    shape = np.zeros((2, 2, 4), np.uint8)
+    shape[0, 1, 3] = shape[1, 0, 3] = 255
+    (tmp_path / "alpha.png").write_bytes(imagecodecs.png_encode(shape))
+    np.testing.assert_array_equal(io.read_mask(tmp_path / "alpha.png"), [[0, 1], [1, 0]])
+    # the shape in the colour, alpha 0 everywhere (an export without alpha): the colour
+    colour = np.zeros((2, 2, 4), np.uint8)
+    colour[1, 1, :3] = 255
+    (tmp_path / "colour.png").write_bytes(imagecodecs.png_encode(colour))
+    np.testing.assert_array_equal(io.read_mask(tmp_path / "colour.png"), [[0, 0], [0, 1]])
 
 
 def test_mask_shape_mismatch(tmp_path):

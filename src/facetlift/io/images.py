@@ -191,7 +191,9 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
     ----------
     path : str or Path
         ``.png``, ``.tif``/``.tiff`` or ``.npy``; grey, grey+alpha, RGB or RGBA. A colour pixel
-        is inside when any of its colour channels is nonzero (and its alpha, if any, is > 0).
+        is inside when any of its colour channels is nonzero and its alpha, if any, is > 0;
+        an alpha that is the same everywhere is ignored, and with one colour everywhere the
+        alpha alone is the mask.
     shape : (H, W), optional
         Required shape (that of the normal map).
 
@@ -212,7 +214,11 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
         colour = a[..., :3] if a.shape[-1] >= 3 else a[..., :1]
         m = (colour != 0).any(-1)
         if a.shape[-1] in (2, 4):
-            m &= a[..., -1] > 0
+            alpha = a[..., -1] > 0
+            if (colour == colour.flat[0]).all() and not (alpha == alpha.flat[0]).all():
+                m = alpha  # (one colour everywhere: the shape is in the alpha channel)
+            elif not (alpha == alpha.flat[0]).all():
+                m &= alpha  # (a constant alpha, e.g. 0 in a colour-only export, says nothing)
     elif a.ndim == 2:
         m = a != 0
     else:
