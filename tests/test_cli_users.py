@@ -777,3 +777,14 @@ def test_summary_counts_missing_and_unusable_normals(tmp_path, capsys):
 def _all_mask(tmp_path, shape):
     io.write_mask(tmp_path / "all.png", np.ones(shape, bool))
     return tmp_path / "all.png"
+
+
+def test_stale_outputs_of_an_earlier_run_are_named(tmp_path, capsys):
+    np.save(tmp_path / "n.npy", np.dstack([np.zeros((8, 9, 2)), np.ones((8, 9))]))
+    out = str(tmp_path / "o")
+    assert run(capsys, "integrate", str(tmp_path / "n.npy"), "-o", out, "-s", "obj")[0] == 0
+    code, _, err = run(capsys, "integrate", str(tmp_path / "n.npy"), "-o", out, "-s", "npy")
+    assert code == 0 and "also holds mesh.obj from an earlier run" in err
+    code, _, err = run(capsys, "integrate", str(tmp_path / "n.npy"), "-o", out, "-s", "npy",
+                       "-s", "obj")
+    assert code == 0 and "earlier run" not in err

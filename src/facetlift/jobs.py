@@ -318,6 +318,11 @@ def run(job: Job, *, progress=None) -> dict:
         t2 = time.perf_counter()
         for kind, name in zip(save, names, strict=True):
             _write(surface, kind, out.path(name), inp.normals, job.triangles)
+        stale = [n for n in OUTPUTS.values() if n not in names and (outdir / n).is_file()]
+        if stale:  # (left as they are: the folder is the user's; said, so none is mistaken)
+            warnings.warn(f"the output folder {outdir} also holds {', '.join(stale)} from an "
+                          "earlier run, not written now: they are not of this result",
+                          stacklevel=2)
     written = {kind: str(outdir / name) for kind, name in zip(save, names, strict=True)}
     sinfo = surface.info
     H, W = surface.shape
