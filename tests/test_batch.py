@@ -413,3 +413,10 @@ def test_links_and_explicit_mask_named_files_are_items(tmp_path):
     io.write_mask(tmp_path / "in" / "m0_mask.png", np.ones((16, 18)))
     assert "m0_mask" not in [it.name for it in fb.items([tmp_path / "in"])]
     assert [it.name for it in fb.items([tmp_path / "in" / "m0_mask.png"])] == ["m0_mask"]
+
+
+def test_bad_pixel_size_is_refused_before_any_item(tmp_path):
+    maps(tmp_path / "in", n=1)
+    with pytest.raises(ValueError, match="`pixel_size` must be a positive finite number"):
+        fb.batch([tmp_path / "in"], tmp_path / "o", workers=1, pixel_size=-1.0)
+    assert not (tmp_path / "o").exists()

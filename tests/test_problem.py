@@ -387,3 +387,12 @@ def test_normals_from_gradients_errors(p, q, match):
 def test_gradients_from_normals_errors(normals, match):
     with pytest.raises(ValueError, match=match):
         facetlift.gradients_from_normals(normals)
+
+
+def test_boolean_normals_or_prior_are_refused_as_a_mask_by_mistake():
+    with pytest.raises(ValueError, match=r"`normals` is a boolean array \(a mask\?\)"):
+        facetlift.prepare(np.ones((4, 5, 3), bool))
+    with pytest.raises(ValueError, match=r"`prior` is a boolean array \(a mask\?\)"):
+        facetlift.prepare(up((4, 5)), prior=np.ones((4, 5), bool))
+    with pytest.raises(ValueError, match=r"`path` must be a path"):
+        facetlift.io.read_normals(None)

@@ -425,6 +425,10 @@ def check_template(job: Job, local: bool = True) -> None:
     if job.normal_frame is not None:
         frames.parse(job.normal_frame)
     frames.gradient_frame(job.gradient_frame)
+    if job.pixel_size is not None:
+        from .camera import make_camera
+
+        make_camera(job.pixel_size)
     if job.prior_blur is not None:  # (whether an item has a prior is the item's own)
         from .problem import prior_blur_value
 

@@ -296,7 +296,10 @@ def prepare(
         back-facing normals with ``backfacing="error"``, or a bad prior, prior weight or
         confidence (see :func:`check_prior`).
     """
-    n = numeric_array(normals, "normals").astype(float, copy=False)
+    n = numeric_array(normals, "normals")
+    if n.dtype == bool:
+        raise ValueError("`normals` is a boolean array (a mask?); give (H, W, 3) numbers")
+    n = n.astype(float, copy=False)
     if n.ndim != 3 or n.shape[-1] != 3:
         raise ValueError(f"`normals` must have shape (H, W, 3); got {n.shape}")
     H, W = n.shape[:2]
@@ -542,6 +545,8 @@ def prior_image(prior, shape: tuple[int, int]) -> np.ndarray:
             img = np.where(count > 0, total / np.maximum(count, 1), np.nan)
         return img.reshape(H, W)
     arr = numeric_array(prior, "prior", "an (H, W) depth map or a (rows, cols, depths) triple")
+    if arr.dtype == bool:
+        raise ValueError("`prior` is a boolean array (a mask?); give depths, NaN where unknown")
     if arr.shape != shape:
         raise ValueError(f"`prior` must be an (H, W) depth map of shape {shape} to match "
                          f"`normals` (NaN where unknown) or a (rows, cols, depths) triple; got "

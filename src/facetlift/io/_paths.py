@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 
@@ -16,6 +17,8 @@ def _suffix(path: Path, allowed: tuple[str, ...], what: str, arg: str) -> str:
 
 
 def _existing(path, arg: str) -> Path:
+    if not isinstance(path, (str, os.PathLike)):
+        raise ValueError(f"`{arg}` must be a path (str or os.PathLike); got {path!r}")
     p = Path(path)
     if not p.exists():
         raise ValueError(f"`{arg}`: file {p} does not exist")
