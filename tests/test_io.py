@@ -459,3 +459,16 @@ def test_shading_of_a_surface_split_at_jumps_uses_each_facets_own_corners():
     err = np.abs(shade(s) - truth)[g.mask]
     # measured: 99th percentile 0.038, max 0.10 (one rim facet); on the vertex grid 0.21 / 0.58
     assert np.percentile(err, 99) < 0.08 and err.max() < 0.2
+
+
+def test_planar_tiff_reads_as_its_contiguous_twin(tmp_path, normals):
+    import tifffile
+
+    n, _ = normals
+    img = np.round((n + 1) / 2 * 65535).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "p.tif", np.moveaxis(img, -1, 0), planarconfig="separate",
+                     photometric="rgb")
+    tifffile.imwrite(tmp_path / "c.tif", img, photometric="rgb")
+    a, _ = io.read_normals(tmp_path / "p.tif")
+    b, _ = io.read_normals(tmp_path / "c.tif")
+    assert a.shape == n.shape and np.array_equal(a, b)

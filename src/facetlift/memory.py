@@ -204,7 +204,9 @@ def parse_size(value) -> int:
         raise ValueError(f"`max_memory` must be a number of bytes or a size such as '8G'; got "
                          f"{value!r}")
     if not (math.isfinite(out) and out > 0):
-        raise ValueError(f"`max_memory` must be positive; got {value!r}")
+        raise ValueError(f"`max_memory` must be a positive, finite size; got {value!r}"
+                         + ("" if math.isfinite(out) else " (infinite: leave it out for no "
+                            "limit)"))
     return int(out)
 
 

@@ -38,7 +38,12 @@ def _decode_image(path: Path, ext: str, arg: str) -> np.ndarray:
             return np.asarray(imagecodecs.png_decode(data))
         import tifffile
 
-        return np.asarray(tifffile.imread(path))
+        with tifffile.TiffFile(path) as tif:
+            a = np.asarray(tif.asarray())
+            planar = tif.pages[0].planarconfig == tifffile.PLANARCONFIG.SEPARATE
+        if planar and a.ndim == 3 and a.shape[0] in (2, 3, 4):  # (C, H, W) -> (H, W, C)
+            a = np.moveaxis(a, 0, -1)
+        return a
     except OSError as e:
         raise ValueError(f"`{arg}`: cannot read {path}: {e}") from None
     except Exception as e:  # corrupt or truncated files: each library has its own errors
