@@ -788,3 +788,18 @@ def test_stale_outputs_of_an_earlier_run_are_named(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", str(tmp_path / "n.npy"), "-o", out, "-s", "npy",
                        "-s", "obj")
     assert code == 0 and "earlier run" not in err
+
+
+def test_a_full_disk_names_the_output(tmp_path, capsys, monkeypatch):
+    import errno
+
+    import facetlift.jobs as jobs
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    np.save(tmp_path / "n.npy", np.dstack([np.zeros((5, 6, 2)), np.ones((5, 6))]))
+    monkeypatch.setattr(jobs, "_write", full)
+    code, _, err = run(capsys, "integrate", str(tmp_path / "n.npy"), "-o", str(tmp_path / "o"))
+    assert code == 1 and "No space left on device (writing depth.npy for " in one_line(err)
+    assert not (tmp_path / "o").exists()

@@ -317,7 +317,13 @@ def run(job: Job, *, progress=None) -> dict:
         t_integrate = time.perf_counter() - t1
         t2 = time.perf_counter()
         for kind, name in zip(save, names, strict=True):
-            _write(surface, kind, out.path(name), inp.normals, job.triangles)
+            try:
+                _write(surface, kind, out.path(name), inp.normals, job.triangles)
+            except OSError as e:  # (a full disk's error names no file: say which and where)
+                if e.filename is not None or e.errno is None:
+                    raise
+                raise OSError(e.errno, f"{e.strerror} (writing {name} for {outdir}; nothing "
+                                       "was written there)") from e
         stale = [n for n in OUTPUTS.values() if n not in names and (outdir / n).is_file()]
         if stale:  # (left as they are: the folder is the user's; said, so none is mistaken)
             warnings.warn(f"the output folder {outdir} also holds {', '.join(stale)} from an "
