@@ -803,3 +803,18 @@ def test_a_full_disk_names_the_output(tmp_path, capsys, monkeypatch):
     code, _, err = run(capsys, "integrate", str(tmp_path / "n.npy"), "-o", str(tmp_path / "o"))
     assert code == 1 and "No space left on device (writing depth.npy for " in one_line(err)
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("delay", [0.05, 0.15, 0.3])
+def test_ctrl_c_while_the_command_loads_is_one_line(tmp_path, delay):
+    """An interrupt during the console script's imports: exit 130 with one line, no
+    traceback (before Python's own handler is in place the signal may kill it: -2)."""
+    np.save(tmp_path / "n.npy", np.dstack([np.zeros((5, 6, 2)), np.ones((5, 6))]))
+    exe = Path(sys.executable).with_name("facetlift")
+    proc = subprocess.Popen([str(exe), "integrate", str(tmp_path / "n.npy"), "-o",
+                             str(tmp_path / "o")], stderr=subprocess.PIPE, text=True)
+    time.sleep(delay)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert "Traceback" not in err
+    assert proc.returncode in (130, -2, 0), err
