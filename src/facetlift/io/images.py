@@ -7,6 +7,9 @@ normal maps is in :mod:`facetlift.io`.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -52,11 +55,29 @@ def _decode_image(path: Path, ext: str, arg: str) -> np.ndarray:
         ) from None
 
 
+@contextlib.contextmanager
+def _stdout_to_stderr():
+    """The C library's own prints (OpenEXR warns about a corrupt file on stdout) go to stderr
+    meanwhile: stdout carries the command line's --json object alone."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError, AttributeError):  # (no real stdout: nothing to keep clean)
+        yield
+        return
+    try:
+        os.dup2(2, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
 def _read_exr(path: Path, arg: str) -> dict[str, np.ndarray]:
     try:
         import OpenEXR
 
-        with OpenEXR.File(str(path), separate_channels=True) as f:
+        with _stdout_to_stderr(), OpenEXR.File(str(path), separate_channels=True) as f:
             return {k: np.asarray(v.pixels) for k, v in f.channels().items()}
     except Exception as e:
         raise ValueError(
