@@ -69,8 +69,16 @@ def _stdout_to_stderr():
         os.dup2(2, 1)
         yield
     finally:
+        _flush_c_stdio()  # (what the library buffered goes where it was written: stderr)
         os.dup2(saved, 1)
         os.close(saved)
+
+
+def _flush_c_stdio() -> None:
+    with contextlib.suppress(Exception):
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
 
 
 def _read_exr(path: Path, arg: str) -> dict[str, np.ndarray]:
