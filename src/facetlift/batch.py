@@ -252,7 +252,7 @@ def _complete(rec: dict, asked: dict, stamp: list | None = None) -> bool:
     not count), the same inputs (:func:`fingerprint`, where given) and every output it wrote
     still there."""
     return (rec.get("status") == "ok" and rec.get("settings") == asked
-            and (stamp is None or rec.get("input") == stamp)
+            and (stamp is None or rec.get("input_stamp") == stamp)
             and all(Path(p).is_file() for p in rec.get("outputs", {}).values()))
 
 
@@ -352,7 +352,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             _Bar(len(found), len(results), bool(progress)) as bar:
 
         def done(it: Item, rec: dict) -> None:
-            rec = dict(rec, item=it.path, name=it.name, settings=asked, input=stamps[it.path])
+            rec = dict(rec, item=it.path, name=it.name, settings=asked,
+                       input_stamp=stamps[it.path])
             results[it.path] = rec
             fh.write(json.dumps(log_record(rec)) + "\n")
             fh.flush()
@@ -463,7 +464,7 @@ def log_record(rec: dict) -> dict:
     from .jobs import jsonable
 
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
-            "shape", "facets", "converged", "warnings", "resumed", "settings", "input")
+            "shape", "facets", "converged", "warnings", "resumed", "settings", "input_stamp")
     return jsonable({k: rec[k] for k in keep if k in rec})
 
 
