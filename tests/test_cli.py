@@ -295,8 +295,11 @@ def test_verbose_logs_to_stderr_for_one_run(tmp_path, capsys):
 def test_console_script_entry_point():
     from importlib.metadata import entry_points
 
+    from facetlift import _entry
+
     (ep,) = [e for e in entry_points(group="console_scripts") if e.name == "facetlift"]
-    assert ep.load() is main
+    assert ep.load() is _entry.main  # (which runs cli.main, catching an early Ctrl-C)
+    assert _entry.main.__module__ == "facetlift._entry" and callable(main)
 
 
 def test_runs_as_a_program(tmp_path):

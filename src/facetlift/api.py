@@ -10,6 +10,7 @@ import numpy as np
 
 from . import frames, memory, methods
 from ._warnings import warn
+from .conventions import CORNER_OFFSETS
 from .domain import Domain
 from .linalg import SolverError
 from .metrics import diagnose
@@ -449,8 +450,7 @@ def make_surface(problem: Problem, result: methods.MethodResult, method: str = "
         fval = d.facet_centres(vval) if result.values is None else np.asarray(result.values, float)
     elif result.values is not None:
         fval = np.asarray(result.values, dtype=float)
-        counts = np.bincount(d.corners.ravel(), minlength=d.n_vertices)
-        vval = np.bincount(d.corners.ravel(), np.repeat(fval, 4), d.n_vertices) / counts
+        vval = vertex_values(problem, fval)
     else:  # pragma: no cover - a method bug
         raise RuntimeError("method returned neither values nor vertex_values")
     cam = problem.camera
@@ -474,6 +474,29 @@ def make_surface(problem: Problem, result: methods.MethodResult, method: str = "
     if mesh is not None:
         _attach_split(surface, d, mesh, cam.to_depth(svals - shift[_split_component(d, mesh)]))
     return surface
+
+
+def vertex_values(problem: Problem, fval: np.ndarray) -> np.ndarray:
+    """Vertex values (n,) for a method that returns only the pixels' (facet centres') values
+    `fval` (m,): inside, the mean of the four pixels around a vertex; on the mask's edge
+    (fewer than four), the mean of each pixel's value carried to that corner along its own
+    normal (half a pixel step of its grid slopes; a pixel without a usable normal carries its
+    value flat). The mean of the pixels alone put an edge corner at its one pixel's value,
+    folding the edge quads of the mesh (a saddle integrated exactly by ``poisson`` showed a
+    mean deviation of 1.1 degrees, all of it on the edge facets)."""
+    d = problem.domain
+    c = d.corners.ravel()
+    counts = np.bincount(c, minlength=d.n_vertices)
+    vval = np.bincount(c, np.repeat(fval, 4), d.n_vertices) / counts
+    edge = counts < 4
+    if edge.any():
+        gx, gy = problem.grid_slopes
+        sx = np.array([-1.0 + 2.0 * dc for _, dc in CORNER_OFFSETS])  # +1 on the right
+        sy = np.array([1.0 - 2.0 * dr for dr, _ in CORNER_OFFSETS])  # +1 on the top (y up)
+        carried = fval[:, None] + 0.5 * np.nan_to_num(
+            gx[:, None] * sx + gy[:, None] * sy, nan=0.0, posinf=0.0, neginf=0.0)
+        vval = np.where(edge, np.bincount(c, carried.ravel(), d.n_vertices) / counts, vval)
+    return vval
 
 
 def _split_component(d: Domain, mesh) -> np.ndarray:

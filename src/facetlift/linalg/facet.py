@@ -452,6 +452,13 @@ ITERATION_PER_UNKNOWN, ITERATION_PER_CELL = 25e-9, 30e-9
 SWITCH_MARGIN = 0.7
 
 
+#: The most unknowns :func:`_factorize_instead` factorizes (where the model and the memory
+#: allow). 2M (8 x LARGE) before: 16,384 small disks of a 2048^2 map with 30 % missing normals
+#: (2.5M unknowns, 182 CG iterations, 25.6 s) factorize in 10.3 s; larger fat masks stay with CG
+#: by the model (a full 2048^2 square would take minutes).
+FACTOR_CAP = 8_000_000
+
+
 def _factorize_instead(K, pre, remaining: float) -> bool:
     """Whether factorizing `K` (SuperLU in nested-dissection order) is predicted to take less
     time than the `remaining` CG iterations (a model, :data:`FACTOR_PER_UNKNOWN` ...
@@ -459,16 +466,16 @@ def _factorize_instead(K, pre, remaining: float) -> bool:
     memory allows), and fits in memory (:func:`facetlift.memory.factorization_fits`, which
     reads the free memory). Not where the caller asked for CG itself
     (``pre.may_factorize`` False), not with PARDISO's own ordering, whose time this model
-    does not describe, nor above :data:`facetlift.linalg.LARGE` x 8 unknowns."""
+    does not describe, nor above :data:`FACTOR_CAP` unknowns."""
     from ..memory import factorization_fits
-    from . import LARGE, factorizer
+    from . import factorizer
     from .ordering import factorization_work
 
     n = K.shape[0]
     # (remaining may be inf, CG not predicted to converge at all: then factorize if it fits)
     if not remaining > 0 or not pre.may_factorize or pre.direct_failed:
         return False
-    if factorizer() != "superlu" or n > 8 * LARGE or not factorization_fits(n):
+    if factorizer() != "superlu" or n > FACTOR_CAP or not factorization_fits(n):
         return False
     H, W = pre.domain.shape
     iteration = ITERATION_PER_UNKNOWN * n + ITERATION_PER_CELL * (H + 1) * (W + 1)
