@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -26,17 +28,32 @@ def hierarchy(
     """
     import pyamg
 
-    if method == "sa":
-        return pyamg.smoothed_aggregation_solver(sp.csr_matrix(K), max_coarse=max_coarse)
-    kw = {}
-    if symmetric_gs:
-        kw = {
-            "presmoother": ("gauss_seidel", {"sweep": "forward"}),
-            "postsmoother": ("gauss_seidel", {"sweep": "backward"}),
-            "coarse_solver": coarse_solver,
-        }
-    return pyamg.ruge_stuben_solver(sp.csr_matrix(K), max_coarse=max_coarse,
-                                    interpolation=interpolation, **kw)
+    with _seeded():
+        if method == "sa":
+            return pyamg.smoothed_aggregation_solver(sp.csr_matrix(K), max_coarse=max_coarse)
+        kw = {}
+        if symmetric_gs:
+            kw = {
+                "presmoother": ("gauss_seidel", {"sweep": "forward"}),
+                "postsmoother": ("gauss_seidel", {"sweep": "backward"}),
+                "coarse_solver": coarse_solver,
+            }
+        return pyamg.ruge_stuben_solver(sp.csr_matrix(K), max_coarse=max_coarse,
+                                        interpolation=interpolation, **kw)
+
+
+@contextlib.contextmanager
+def _seeded(seed: int = 0):
+    """numpy's global random state seeded for a pyamg setup (its spectral-radius estimates
+    start from random vectors), then put back: the same input gives the same hierarchy, and
+    the caller's random sequence is not advanced (backend="amg" differed by 2e-12 from run to
+    run and moved numpy's global state)."""
+    state = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        yield
+    finally:
+        np.random.set_state(state)
 
 
 def preconditioner(K, **kw):
