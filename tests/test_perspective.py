@@ -283,3 +283,14 @@ def test_iterative_loop_stops_on_angles_in_perspective():
     assert s.info["iterations"] > 10
     assert rel_error(s.depth, gt, mask).mean() < 1e-4
     assert 0 < s.info["deviation"][-1] < 0.1  # degrees
+
+
+def test_pixel_size_with_K_is_refused_not_ignored():
+    n = np.dstack([np.zeros((6, 7, 2)), np.ones((6, 7))])
+    K = [[100.0, 0, 3], [0, 100, 3], [0, 0, 1]]
+    with pytest.raises(ValueError, match=r"`pixel_size` 0.5 applies to orthographic input"):
+        facetlift.integrate(n, K=K, pixel_size=0.5)
+    assert facetlift.integrate(n, K=K, pixel_size=np.float32(1.0)).K is not None
+    with pytest.raises(ValueError, match=r"as its second positional argument: "
+                       r"solve\(problem, 'poisson'\)"):
+        facetlift.solve(facetlift.prepare(n), method="poisson")

@@ -242,6 +242,10 @@ def solve(problem: Problem, method: str = "dgp", /, *, max_memory=None, **option
     is applied by :func:`integrate`, so prepare with ``outlier_eps=`` to match it here (a
     problem prepared with the camera's own threshold, below the route's, gets a warning).
     """
+    if "method" in options and not any(o.name == "method" for o in methods.get(method).specs()):
+        raise ValueError(f"solve() takes the method as its second positional argument: "
+                         f"solve(problem, {options['method']!r}); got method={options['method']!r}"
+                         " as a keyword")
     return _solve(problem, method, None, max_memory, options)
 
 

@@ -280,9 +280,18 @@ def make_camera(pixel_size=1.0, K=None) -> Camera:
     Raises
     ------
     ValueError
-        A non-positive or non-finite `pixel_size`, or `K` that is not valid intrinsics.
+        A non-positive or non-finite `pixel_size`, `K` that is not valid intrinsics, or a
+        `pixel_size` other than 1 with `K` (ignored before, silently).
     """
     if K is not None:
+        try:
+            one = not isinstance(pixel_size, bool) and float(pixel_size) == 1.0
+        except (TypeError, ValueError, OverflowError):
+            one = False
+        if not one:
+            raise ValueError(f"`pixel_size` {pixel_size!r} applies to orthographic input; with "
+                             "`K` the scale comes from the intrinsics: leave pixel_size at 1, "
+                             "or drop K")
         return Pinhole(check_K(K))
     try:
         h = float(pixel_size)
