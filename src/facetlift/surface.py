@@ -18,7 +18,8 @@ class Surface:
     depth : (H, W) float
         Depth at facet centres (larger is farther), NaN outside the domain.
     vertex_depth : (H+1, W+1) float
-        Depth at the facet corners, NaN where no facet touches.
+        Depth at the facet corners, NaN where no facet touches (a method that solves for pixel
+        values only gets them derived: :func:`facetlift.api.vertex_values`).
     mask : (H, W) bool
         The integration domain.
     info : dict
