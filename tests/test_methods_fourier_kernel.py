@@ -277,3 +277,23 @@ def test_kernel_refuses_perspective_and_no_samples():
         facetlift.integrate(n, method="kernel", K=K)
     with pytest.raises(ValueError, match="no usable normal"):
         prepare(n, np.ones((8, 8), bool), known=np.zeros((8, 8), bool))
+
+
+def test_frankot_chellappa_integrates_separate_components_apart():
+    """A plane beside a sphere: each in its own box, as each alone (the one box around both
+    carried the sphere's slopes into the plane: rms 0.62 of a 18-unit range)."""
+    H, W = 64, 96
+    r, c = np.indices((H, W)).astype(float)
+    d2 = (r - 32) ** 2 + (c - 28) ** 2
+    sph = d2 < 19.0**2
+    pl = (r > 8) & (r < 56) & (c > 58) & (c < 90)
+    x, y = c + 0.5, -(r + 0.5)
+    root = np.sqrt(np.maximum(400.0 - d2, 1e-9))
+    p = np.where(sph, -(x - 28.5) / root, 0.3)
+    q = np.where(sph, -(y + 32.5) / root, 0.2)
+    n = facetlift.normals_from_gradients(p, q)
+    both = facetlift.integrate(n, sph | pl, method="frankot_chellappa")
+    for part in (sph, pl):
+        alone = facetlift.integrate(n, part, method="frankot_chellappa")
+        np.testing.assert_allclose(both.depth[part], alone.depth[part], atol=1e-9)
+    assert both.info["boxes"] == 2
