@@ -297,3 +297,19 @@ def test_frankot_chellappa_integrates_separate_components_apart():
         alone = facetlift.integrate(n, part, method="frankot_chellappa")
         np.testing.assert_allclose(both.depth[part], alone.depth[part], atol=1e-9)
     assert both.info["boxes"] == 2
+
+
+@pytest.mark.parametrize("method", ["frankot_chellappa", "kernel", "poisson"])
+def test_a_component_without_any_normal_is_flat_and_warned(method):
+    """As dgp does: FC and kernel made up a 12- and 4-unit shape there, the graph methods
+    returned it flat in silence."""
+    from facetlift import synthetic
+
+    gt = synthetic.analytic("pyramid", 48)
+    n = gt.normals.copy()
+    mask = np.ones((48, 48), bool)
+    mask[:, 22:26] = False
+    n[:, 26:] = np.nan
+    with pytest.warns(UserWarning, match=r"1 connected component\(s\) have no usable normal"):
+        s = facetlift.integrate(n, mask, method=method)
+    assert np.ptp(s.depth[:, 26:]) == 0.0

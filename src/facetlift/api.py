@@ -298,6 +298,8 @@ def _solve(problem, method, t0, max_memory, options):
     except np.linalg.LinAlgError as e:  # a ValueError subclass, but a solver failure
         raise SolverError(f"method {method!r}: linear algebra failed ({e})") from e
     t2 = time.perf_counter()
+    if result.vertex_values is None and result.values is not None:
+        result = _flat_where_no_normal(cropped, result)
     surface = make_surface(cropped, result, method)
     t3 = time.perf_counter()
     checks = diagnose(cropped, surface)
@@ -478,6 +480,25 @@ def make_surface(problem: Problem, result: methods.MethodResult, method: str = "
     if mesh is not None:
         _attach_split(surface, d, mesh, cam.to_depth(svals - shift[_split_component(d, mesh)]))
     return surface
+
+
+def _flat_where_no_normal(problem: Problem, result):
+    """A pixel-value method's components without any usable normal (and no prior sample)
+    flat, with one warning, as dgp makes them: the graph methods returned them flat in
+    silence, Frankot-Chellappa and kernel made a shape up (a 12-unit bump)."""
+    d = problem.domain
+    have = np.bincount(d.facet_component[problem.usable], minlength=d.n_components) > 0
+    if problem.has_prior:
+        have |= np.asarray(problem.prior_components, bool)
+    empty = np.flatnonzero(~have)
+    if empty.size:
+        warn(f"{empty.size} connected component(s) have no usable normal (e.g. component "
+             f"{empty[0] + 1}); they are reconstructed flat")
+        values = np.array(result.values, dtype=float, copy=True)
+        values[np.isin(d.facet_component, empty)] = 0.0
+        result = methods.MethodResult(values=values, vertex_values=None, info=result.info,
+                                      extras=result.extras)
+    return result
 
 
 def vertex_values(problem: Problem, fval: np.ndarray) -> np.ndarray:
