@@ -446,3 +446,20 @@ def test_bini_fills_a_hole_of_missing_normals():
             # pixels are reached by their neighbours' terms)
     # measured 0.0455 of the range against poisson's 0.0454 (0.324 unfilled)
     assert err["bini"] < 1.2 * err["poisson"], err
+
+
+def test_options_of_another_route_are_refused_and_caps_are_warned():
+    from facetlift import synthetic
+
+    gt = synthetic.analytic("pyramid", 32)
+    with pytest.raises(ValueError, match=r"`max_iter` applies only with prior='edge_preserving'"):
+        facetlift.integrate(gt.normals, method="regularization", max_iter=3)
+    with pytest.raises(ValueError, match=r"`k` applies only with discontinuities=True"):
+        facetlift.integrate(gt.normals, method="bini", discontinuities=False, k=100.0)
+    noisy = synthetic.add_angular_noise(gt.normals, 3.0, np.random.default_rng(0))
+    with pytest.warns(UserWarning, match="alpha_surface: no convergence in 1 rounds"):
+        s = facetlift.integrate(noisy, method="alpha_surface", max_iter=1)
+    assert not s.info["converged"]
+    with pytest.warns(UserWarning, match="regularization: no convergence in 1 rounds"):
+        facetlift.integrate(gt.normals, method="regularization", prior="edge_preserving",
+                            max_iter=1)

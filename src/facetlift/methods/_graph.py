@@ -120,9 +120,10 @@ def relative_change(z_new: np.ndarray, z: np.ndarray) -> float:
 
 
 #: ``max_iter`` and ``tol`` options of the iterative graph methods (defaults differ).
-def iteration_options(max_iter: int, what: str) -> tuple[Option, Option]:
+def iteration_options(max_iter: int, what: str, when=None) -> tuple[Option, Option]:
+    when = {} if when is None else dict(when)
     return (
-        Option("max_iter", max_iter, f"most {what}", kind="int", low=1),
+        Option("max_iter", max_iter, f"most {what}", kind="int", low=1, when=when),
         Option("tol", 1e-3, "stop when the relative change of the unknown between "
-               f"{what} is below this", low=0.0),
+               f"{what} is below this", low=0.0, when=when),
     )

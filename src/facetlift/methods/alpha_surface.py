@@ -62,6 +62,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
 from .. import linalg
+from .._warnings import warn
 from ..operators import graph as pg
 from ..options import Option
 from . import MethodResult
@@ -178,6 +179,9 @@ def run(problem, *, alpha, max_iter, tol, backend, progress) -> MethodResult:
         if change < tol:
             converged = True
             break
+    if not converged:
+        warn(f"alpha_surface: no convergence in {rounds} rounds (the kept edges still grew); "
+             "raise `max_iter`")
     t2 = time.perf_counter()
     n_data = int(has.sum())
     info = {

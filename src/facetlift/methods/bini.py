@@ -51,13 +51,17 @@ from ..operators import graph as pg
 from ..options import Option
 from . import MethodResult
 
+#: The options of the bilateral reweighting (none apply with discontinuities=False, one solve).
+_BILATERAL = {"discontinuities": True}
+
 OPTIONS = (
     Option("discontinuities", True, "bilateral weights (False: both sides 1/2, a Poisson-like "
            "least squares)", kind="bool"),
     Option("k", 2.0, "sharpness of the bilateral sigmoid, in squared pixel footprints",
-           low=0.0, low_open=True),
-    Option("max_iter", 150, "most reweightings", kind="int", low=1),
-    Option("tol", 1e-4, "stop when the energy changes by less than this fraction", low=0.0),
+           low=0.0, low_open=True, when=_BILATERAL),
+    Option("max_iter", 150, "most reweightings", kind="int", low=1, when=_BILATERAL),
+    Option("tol", 1e-4, "stop when the energy changes by less than this fraction", low=0.0,
+           when=_BILATERAL),
     Option("cg_tol", 1e-3, "relative residual of each inner CG solve", low=0.0, low_open=True,
            high=1.0, high_open=True),
     Option("cg_max_iter", 5000, "most CG iterations per solve", kind="int", low=1),

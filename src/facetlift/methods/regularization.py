@@ -48,6 +48,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .. import linalg
+from .._warnings import warn
 from ..operators import graph as pg
 from ..options import Option
 from . import MethodResult
@@ -59,7 +60,7 @@ OPTIONS = (
     Option("lam", None, "weight of the smoothness prior (default 1 for 'laplacian', 10 for "
            "'edge_preserving')", low=0.0, none=True),
     Option("prior", "laplacian", "smoothness prior", kind="choice", choices=tuple(PRIORS)),
-    *g.iteration_options(10, "rounds (edge_preserving)"),
+    *g.iteration_options(10, "rounds", when={"prior": "edge_preserving"}),
     g.BACKEND,
     g.PROGRESS,
 )
@@ -115,13 +116,16 @@ def run(problem, *, lam, prior, max_iter, tol, backend, progress) -> MethodResul
             z_new = series.solve(K, rhs)
             if z is not None:
                 changes.append(g.relative_change(z_new, z))
-            if progress is not None:  # no change to report after the first round
-                progress(n_iter, changes[-1] if changes else float("nan"))
+            if progress is not None:  # (the first round: a change from nothing, 1)
+                progress(n_iter, changes[-1] if changes else 1.0)
             z = z_new
             if changes and changes[-1] < tol:
                 converged = True
                 break
             slope = (z[graph.head] - z[graph.tail]) / h
+        if not converged:
+            warn(f"regularization: no convergence in {n_iter} rounds (last relative change "
+                 f"{changes[-1] if changes else float('nan'):.3g} > tol={tol}); raise `max_iter`")
         info.update(iterations=n_iter, converged=converged, changes=changes)
     info["seconds"] = {"solve": time.perf_counter() - t0}
     return MethodResult(values=z, info=info)
