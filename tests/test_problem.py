@@ -396,3 +396,12 @@ def test_boolean_normals_or_prior_are_refused_as_a_mask_by_mistake():
         facetlift.prepare(up((4, 5)), prior=np.ones((4, 5), bool))
     with pytest.raises(ValueError, match=r"`path` must be a path"):
         facetlift.io.read_normals(None)
+
+
+def test_huge_finite_slopes_do_not_overflow():
+    p, q = np.zeros((5, 6)), np.zeros((5, 6))
+    p[2, 2] = 1e300
+    with np.errstate(over="raise"):
+        n = facetlift.normals_from_gradients(p, q)
+    assert np.isfinite(n).all() and np.allclose(np.linalg.norm(n, axis=-1), 1.0)
+    assert n[2, 2, 0] == pytest.approx(-1.0)

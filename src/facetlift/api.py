@@ -183,7 +183,8 @@ def integrate_gradients(
     Parameters
     ----------
     p, q : (H, W) array_like of float
-        The height's slopes, in height units per world unit; NaN marks a missing sample.
+        The height's slopes, in height units per world unit; NaN marks a missing sample, and
+        an infinite slope is a vertical (edge-on) facet: a grazing normal, counted as missing.
         With ``gradient_frame="xy"`` (default) ``p = dz/dx`` (x right) and ``q = dz/dy``
         (y up); with ``"rowcol"`` (alias ``"queau"``: Quéau's toolbox, MATLAB code)
         ``p = dz/d(row)`` downward and ``q = dz/d(col)``.
@@ -203,8 +204,8 @@ def integrate_gradients(
     Raises
     ------
     ValueError
-        As :func:`integrate`; also shapes that differ, inf values, a bad `gradient_frame`,
-        or `K` / `normal_frame` (they do not apply to a gradient field).
+        As :func:`integrate`; also shapes that differ, a bad `gradient_frame`, or `K` /
+        `normal_frame` (they do not apply to a gradient field).
     """
     for key in ("K", "normal_frame"):
         if kwargs.get(key) is not None:

@@ -199,6 +199,8 @@ def normals_from_gradients(p, q) -> np.ndarray:
         # grazing normal, which the grazing rule then counts as a missing sample)
         n[inf] = np.stack([-np.sign(p[inf]) * np.isinf(p[inf]),
                            -np.sign(q[inf]) * np.isinf(q[inf]), np.zeros(int(inf.sum()))], -1)
+    with np.errstate(invalid="ignore"):  # (NaN rows stay NaN)
+        n /= np.max(np.abs(n), axis=-1, keepdims=True)  # (no overflow in the norm: 1e300)
     return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
 
