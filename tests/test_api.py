@@ -317,3 +317,10 @@ def test_submodules_are_attributes_of_a_plain_import():
     assert res.stdout.strip() == "ok", res.stderr
     with pytest.raises(AttributeError, match="has no attribute 'nothing'"):
         facetlift.nothing  # noqa: B018
+
+
+@pytest.mark.parametrize("method", ["frankot_chellappa", "kernel", "poisson"])
+def test_every_method_reports_iterations_and_converged(method):
+    n = np.dstack([np.zeros((8, 9, 2)), np.ones((8, 9))])
+    info = facetlift.integrate(n, method=method).info
+    assert info["iterations"] >= 1 and info["converged"] is True

@@ -307,6 +307,8 @@ def _solve(problem, method, t0, max_memory, options):
     t4 = time.perf_counter()
     surface = uncrop(surface, problem, offset)
     out = dict(result.info)
+    out.setdefault("iterations", 1)  # (a direct method: one solve, done)
+    out.setdefault("converged", True)
     out.update(checks)
     out["method"] = method
     out["projection"] = problem.camera.projection

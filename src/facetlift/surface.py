@@ -23,8 +23,10 @@ class Surface:
     mask : (H, W) bool
         The integration domain.
     info : dict
-        Method diagnostics: ``method``, ``iterations``, ``converged``, ``deviation`` (average
-        angular deviation in degrees per iteration, where the method iterates), ``seconds``
+        Method diagnostics: ``method``, ``iterations`` (1 for a direct method),
+        ``converged``, ``deviation`` (average angular deviation in degrees per iteration, for
+        the DGP routes; the discontinuity route's one value is of the surface returned),
+        ``seconds``
         per phase, ``input`` (counts of unusable normals, :func:`facetlift.prepare`),
         ``mean_deviation`` (mean angle in degrees between the input normals and the result's
         facets), ``integrability`` (:func:`facetlift.frames.flip_check`), and method-specific
