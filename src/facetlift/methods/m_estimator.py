@@ -131,7 +131,7 @@ def run(problem, *, weight, k, scale, max_iter, tol, backend, progress) -> Metho
     if not converged:
         warn(
             f"m_estimator: no convergence in {max_iter} iterations (last relative change "
-            f"{changes[-1]:.3g} > tol={tol}); raise `max_iter`"
+            f"{changes[-1]:.3g} >= tol={tol}); raise `max_iter`"
         )
     t1 = time.perf_counter()
     info = {

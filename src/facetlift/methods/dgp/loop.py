@@ -135,7 +135,9 @@ def solve_iterative(
     if not converged:
         warn(
             f"dgp: no convergence in {max_iter} iterations (last change of the average "
-            f"deviation {abs(devs[-1] - devs[-2]):.3g} deg > tol={tol}); raise `max_iter`"
+            f"deviation {abs(devs[-1] - devs[-2]):.3g} deg"
+            + (", and tol=0 never stops the loop early" if tol == 0 else f" >= tol={tol}")
+            + "); raise `max_iter`"
         )
     info = {
         "solver": "iterative",
