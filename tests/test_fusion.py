@@ -496,3 +496,12 @@ def test_confidence_outside_the_mask_is_ignored_and_nan_inside_is_a_missing_norm
     ref = facetlift.integrate(missing, mask)
     assert s.info["input"]["zero_confidence"] == 1
     np.testing.assert_allclose(s.depth[mask], ref.depth[mask], atol=1e-9)
+
+
+def test_confidence_without_a_prior_is_scale_free():
+    r, c = np.indices((20, 24))
+    n = facetlift.normals_from_gradients(0.2 * np.cos(c / 4), 0.1 * np.sin(r / 5))
+    ref = facetlift.integrate(n)
+    for scale in (1e-12, 1e12):
+        s = facetlift.integrate(n, confidence=np.full((20, 24), scale))
+        np.testing.assert_allclose(s.depth, ref.depth, atol=1e-9)

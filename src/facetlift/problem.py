@@ -365,6 +365,11 @@ def prepare(
         counts_zero = usable & (conf == 0)
         usable = usable & (conf > 0)
         conf = np.where(usable, conf, 1.0)
+        if prior is None and usable.any():
+            # without a prior only the confidences' ratios mean something: scaled to a largest
+            # of 1, so 1e-12 everywhere is the same as 1 everywhere (it was flattened by the
+            # solvers' own tiny regularisers against such weights)
+            conf = conf / float(conf[usable].max())
 
     counts = {"pixels": int(m.sum()), "missing": int((~given | nan).sum())}
     counts.update({k: int(v.sum()) for k, v in bad.items()})
