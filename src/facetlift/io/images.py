@@ -263,6 +263,8 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
         raise ValueError(f"`{arg}`: {p} is empty (shape {a.shape})")
     if a.dtype.kind == "f" and not np.isfinite(a).all():
         raise ValueError(f"`{arg}`: {p} contains NaN or inf")
+    if shape is not None and len(tuple(shape)) == 3:  # (the normal map's own shape, H x W x 3)
+        shape = tuple(shape)[:2]
     if shape is not None and m.shape != tuple(shape):
         raise ValueError(
             f"`{arg}`: {p} has size {m.shape[0]}x{m.shape[1]} (HxW) but the normal map is "
