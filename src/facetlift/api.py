@@ -299,7 +299,8 @@ def _solve(problem, method, t0, max_memory, options):
     except np.linalg.LinAlgError as e:  # a ValueError subclass, but a solver failure
         raise SolverError(f"method {method!r}: linear algebra failed ({e})") from e
     t2 = time.perf_counter()
-    if result.vertex_values is None and result.values is not None:
+    if (result.vertex_values is None and result.values is not None
+            and "corner_values" not in result.extras):  # (dgp's routes do it themselves)
         result = _flat_where_no_normal(cropped, result)
     surface = make_surface(cropped, result, method)
     t3 = time.perf_counter()
