@@ -399,6 +399,16 @@ def test_names_stay_apart_and_resume_sees_changed_inputs(tmp_path):
     assert not third["m1.png"].get("resumed") and third["m0.png"].get("resumed")
     # two extensions from the start: each named by its extension, whatever the order
     assert [it.name for it in fb.items([tmp_path / "in"])] == ["m0_npy", "m0_png", "m1"]
+    # one name in three folders, the first kept from an earlier run: the two new ones must
+    # not both be renamed onto the same folder
+    for sub in ("x", "y", "z"):
+        maps(tmp_path / sub, n=1)
+    out2 = tmp_path / "o2"
+    fb.batch([tmp_path / "x" / "m0.png"], out2, workers=1, save=("npy",))
+    recs = fb.batch([tmp_path / s / "m0.png" for s in ("y", "z", "x")], out2, workers=1,
+                    save=("npy",), resume=True)
+    names = [r["name"] for r in recs]
+    assert len(set(names)) == 3 and names[2] == "m0", names
 
 
 def test_links_and_explicit_mask_named_files_are_items(tmp_path):
@@ -413,6 +423,18 @@ def test_links_and_explicit_mask_named_files_are_items(tmp_path):
     io.write_mask(tmp_path / "in" / "m0_mask.png", np.ones((16, 18)))
     assert "m0_mask" not in [it.name for it in fb.items([tmp_path / "in"])]
     assert [it.name for it in fb.items([tmp_path / "in" / "m0_mask.png"])] == ["m0_mask"]
+    # a shell-expanded *.png names the mask with its map: still the map's mask
+    listed = sorted((tmp_path / "in").glob("*.png"))
+    found = fb.items(listed)
+    assert "m0_mask" not in [it.name for it in found]
+    assert [it.mask for it in found if it.name == "m0"][0].endswith("m0_mask.png")
+    # extensions in capitals
+    (tmp_path / "caps").mkdir()
+    (tmp_path / "caps" / "A.PNG").write_bytes(real.read_bytes())
+    io.write_mask(tmp_path / "caps" / "A_mask.png", np.ones((16, 18)))
+    (tmp_path / "caps" / "A_mask.png").rename(tmp_path / "caps" / "A_mask.PNG")
+    (only,) = fb.items([tmp_path / "caps"])
+    assert only.name == "A" and only.mask.endswith("A_mask.PNG")
 
 
 def test_bad_pixel_size_is_refused_before_any_item(tmp_path):

@@ -94,11 +94,15 @@ def items(inputs, *, list_file=None) -> list[Item]:
         else:
             paths.append((p, True))
     found, seen = [], set()
+    given = {os.path.abspath(p) for p, _ in paths}
     for p, explicit in paths:
         # (the path as given, made absolute: links to one file are items of their own, each
         # with its own mask and name)
         key = os.path.abspath(p)
-        if key in seen or (not explicit and _is_mask_file(p, NORMAL_READ_FORMATS)):
+        # a mask beside its map is no item; named on its own it is (an unquoted *.png that the
+        # shell expanded names X_mask.png with X.png: still X's mask)
+        if key in seen or (_is_mask_file(p, NORMAL_READ_FORMATS)
+                           and (not explicit or _map_of(p, NORMAL_READ_FORMATS) in given)):
             continue
         seen.add(key)
         found.append((p, key))
@@ -113,9 +117,11 @@ def items(inputs, *, list_file=None) -> list[Item]:
         name = _stem(p) if len(names[_stem(p)]) == 1 else p.name.replace(".", "_")
         name = _unique(name, taken)
         mask = None
-        if p.is_file():
-            mask = next((str(m) for ext in MASK_FORMATS
-                         if (m := p.with_name(f"{p.stem}_mask{ext}")).is_file()), None)
+        if p.is_file():  # (X_mask with any case of a mask extension)
+            kinds = {e.lower() for e in MASK_FORMATS}
+            mask = next((str(m) for m in sorted(p.parent.glob(glob.escape(p.stem) + "_mask.*"))
+                         if m.stem == f"{p.stem}_mask" and m.suffix.lower() in kinds
+                         and m.is_file()), None)
         out.append(Item(path=key, name=name, mask=mask))
     if not out:
         raise ValueError(f"`inputs`: no normal map found in {specs}")
@@ -141,14 +147,26 @@ def _is_dataset(folder: Path, formats) -> bool:
 
 
 def _is_mask_file(p: Path, formats) -> bool:
-    """In a folder or a pattern's matches: ``mask.*``, or ``X_mask.*`` beside a normal map
-    ``X.*``: a mask, not an item (a file named explicitly is always an item)."""
+    """``mask.*``, or ``X_mask.*`` beside a normal map ``X.*`` (any case of the extension):
+    a mask, not an item, in a folder or a pattern's matches (named explicitly, only where
+    ``X.*`` is named too: :func:`items`)."""
     if not p.is_file():
         return False
-    if p.stem == "mask":
+    if p.stem.lower() == "mask":
         return True
-    return p.stem.endswith("_mask") and any(
-        p.with_name(p.stem[:-len("_mask")] + ext).is_file() for ext in formats + (".mat",))
+    return _map_of(p, formats) is not None
+
+
+def _map_of(p: Path, formats) -> str | None:
+    """The absolute path of the normal map ``X.*`` that ``X_mask.*`` belongs to, or None."""
+    if not p.stem.lower().endswith("_mask"):
+        return None
+    stem = p.stem[:-len("_mask")]
+    kinds = {e.lower() for e in formats + (".mat",)}
+    for c in p.parent.glob(glob.escape(stem) + ".*"):
+        if c.stem == stem and c.suffix.lower() in kinds and c.is_file():
+            return os.path.abspath(c)
+    return None
 
 
 def run_item(job: Job, threads: int | None = None) -> dict:
@@ -333,7 +351,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     # the folders of the items kept from an earlier run are theirs: an item run now that
     # would take one of those names (a new a.npy beside a kept a.png) is named anew
     kept = {results[p]["name"] for p in results}
-    taken = set(kept)
+    # (the names items() gave the others are taken too: a renamed one must not land on one)
+    taken = kept | {it.name for it in found if it.path not in results and it.name not in kept}
     for it in found:
         if it.path in results:
             continue
