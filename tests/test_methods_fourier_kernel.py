@@ -316,3 +316,11 @@ def test_a_component_without_any_normal_is_flat_and_warned(method, kw):
     said = [str(w.message) for w in record if "have no usable normal" in str(w.message)]
     assert len(said) == 1 and said[0].startswith("1 connected component(s)")  # (once)
     assert np.ptp(s.depth[:, 26:]) == 0.0
+
+
+def test_frankot_chellappa_shares_one_box_where_component_boxes_overlap():
+    r, c = np.indices((96, 96))
+    mask = ((r + c) % 8) < 3  # diagonal stripes: every component's box is nearly the image
+    n = np.dstack([np.zeros((96, 96, 2)), np.ones((96, 96))])
+    s = facetlift.integrate(n, mask, method="frankot_chellappa")
+    assert s.info["boxes"] == 1 and np.nanmax(np.abs(s.depth)) < 1e-12

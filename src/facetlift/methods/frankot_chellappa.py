@@ -20,7 +20,9 @@ Axes
 
 Masks and missing samples (an extension; FC itself needs a full rectangle)
     The method works on the bounding box of each connected component of the mask, one at a
-    time (the other components' pixels in that box count as outside). Gradients at box
+    time (the other components' pixels in that box count as outside; where the boxes overlap
+    so much that their areas add up to more than :data:`SHARED_BOX_FACTOR` times the union
+    box's, on the one union box, whose fill then couples the components). Gradients at box
     pixels outside the component, and at its pixels without a usable normal, are filled
     (option `fill`): ``"harmonic"``
     (default) solves Laplace's equation for p and q separately with the mask values as Dirichlet
@@ -69,6 +71,10 @@ from . import MethodResult
 
 log = logging.getLogger(__name__)
 
+#: The components share one box when their own boxes' areas add up to more than this many
+#: times the union box's (the cost of one FFT and fill per box).
+SHARED_BOX_FACTOR = 4.0
+
 PADS = ("mirror", "none")
 FILLS = ("harmonic", "nearest", "zero")
 
@@ -91,11 +97,18 @@ def run(problem: Problem, *, pad: str, fill: str) -> MethodResult:
     values = np.zeros(d.n_facets)
     order = np.argsort(d.facet_component, kind="stable")
     ends = np.cumsum(np.bincount(d.facet_component, minlength=d.n_components))
-    boxes, filled = [], 0
+    groups = np.split(order, ends[:-1])
     # each connected component in its own box: in one box around all, the fill between
     # separate parts carried one part's slopes into the other (a plane beside a sphere came
-    # back bent by 3 % of its range)
-    for f in np.split(order, ends[:-1]):
+    # back bent by 3 % of its range). Unless the boxes overlap so much that their total area
+    # is far above the union box's (64 diagonal stripes at 256^2: 9.4 s against 0.26 s), where
+    # the one shared box is used as before
+    area = sum(int(np.ptp(rows[f]) + 1) * int(np.ptp(cols[f]) + 1) for f in groups)
+    union = int(np.ptp(rows) + 1) * int(np.ptp(cols) + 1)
+    if len(groups) > 1 and area > SHARED_BOX_FACTOR * union:
+        groups = [np.arange(d.n_facets)]
+    boxes, filled = [], 0
+    for f in groups:
         r, c = rows[f], cols[f]
         r0, c0 = r.min(), c.min()
         H, W = r.max() - r0 + 1, c.max() - c0 + 1
