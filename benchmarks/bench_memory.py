@@ -77,7 +77,8 @@ def run_case(case: str, s: int) -> dict:
         from facetlift.methods import get as method_info
 
         eps = method_info(method).jump_grazing  # as facetlift.integrate applies it
-    problem = facetlift.prepare(normals, mask, pixel_size=1.0 / s, K=K, outlier_eps=eps)
+    problem = facetlift.prepare(normals, mask, pixel_size=1.0 / s if K is None else 1.0, K=K,
+                                outlier_eps=eps)
     del normals
     gc.collect()
     with open("/proc/self/clear_refs", "w") as f:
