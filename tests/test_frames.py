@@ -276,3 +276,20 @@ def test_integrate_gradients_refusals():
         facetlift.integrate_gradients(p, p, K=np.eye(3))
     with pytest.raises(ValueError, match="`q` must have the shape of `p`"):
         facetlift.integrate_gradients(p, np.zeros((4, 5)))
+
+
+def test_relative_curl_of_a_pinhole_does_not_depend_on_the_object_place():
+    """The same perspective view padded with empty columns on the left (and cx moved with it):
+    the same curl (the strips' crop once fed shifted columns to the camera)."""
+    data = io.read_dataset(BEAR)
+    n, m, K = data["normals"], data["mask"], np.array(data["K"], float)
+    pad = 37
+    n2 = np.concatenate([np.full((n.shape[0], pad, 3), np.nan), n], axis=1)
+    m2 = np.concatenate([np.zeros((m.shape[0], pad), bool), m], axis=1)
+    K2 = K.copy()
+    K2[0, 2] += pad
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        a = frames.relative_curl(prepare(n, m, K=K))
+        b = frames.relative_curl(prepare(n2, m2, K=K2))
+    assert a == pytest.approx(0.2220, abs=2e-3) and b == pytest.approx(a, rel=1e-9)

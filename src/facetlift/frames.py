@@ -369,12 +369,12 @@ def relative_curl(problem, flip=(1.0, 1.0, 1.0), *, sample: int = CURL_SAMPLE) -
     keep_row[tops + 1] = True  # strips (i, i + 1); every row when step == 1
     r, c = d.pixels
     k = np.flatnonzero(keep_row[r] & problem.usable)
+    n = problem.normals[k] * np.asarray(flip, float)
+    with np.errstate(invalid="ignore", divide="ignore"):  # (at the true columns: a pinhole's
+        gx, gy = problem.camera.grid_slopes(r[k], c[k], n)  # slopes depend on them)
     if k.size:  # (strips only as wide as the pixels used: an object's box, not the image)
         c = c - c[k].min()
         W = int(c[k].max()) + 1
-    n = problem.normals[k] * np.asarray(flip, float)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        gx, gy = problem.camera.grid_slopes(r[k], c[k], n)
     # strip images: row i of the image -> slot, so that rows i and i + 1 stay adjacent
     slot = np.cumsum(keep_row) - 1
     GX = np.full((int(keep_row.sum()), W), np.nan)
