@@ -472,3 +472,33 @@ def test_planar_tiff_reads_as_its_contiguous_twin(tmp_path, normals):
     a, _ = io.read_normals(tmp_path / "p.tif")
     b, _ = io.read_normals(tmp_path / "c.tif")
     assert a.shape == n.shape and np.array_equal(a, b)
+
+
+def test_stdout_redirection_of_overlapping_readers_is_undone():
+    import os
+    import threading
+    import time
+
+    from facetlift.io import images
+
+    before = os.fstat(1)
+    started = threading.Event()
+
+    def first():
+        with images._stdout_to_stderr():
+            started.set()
+            time.sleep(0.1)
+
+    def second():
+        started.wait()
+        with images._stdout_to_stderr():
+            time.sleep(0.02)
+
+    threads = [threading.Thread(target=first), threading.Thread(target=second)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    after = os.fstat(1)
+    assert (before.st_dev, before.st_ino) == (after.st_dev, after.st_ino)
+    assert images._REDIRECT["depth"] == 0 and images._REDIRECT["saved"] is None

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -55,23 +56,35 @@ def _decode_image(path: Path, ext: str, arg: str) -> np.ndarray:
         ) from None
 
 
+_REDIRECT = {"lock": threading.Lock(), "depth": 0, "saved": None}
+
+
 @contextlib.contextmanager
 def _stdout_to_stderr():
     """The C library's own prints (OpenEXR warns about a corrupt file on stdout) go to stderr
-    meanwhile: stdout carries the command line's --json object alone."""
+    meanwhile: stdout carries the command line's --json object alone. File descriptor 1 is
+    the process's: overlapping readers (threads) share one redirection, undone by the last
+    to leave."""
+    with _REDIRECT["lock"]:
+        if _REDIRECT["depth"] == 0:
+            try:
+                sys.stdout.flush()
+                saved = os.dup(1)
+                os.dup2(2, 1)
+            except (OSError, ValueError, AttributeError):  # (no real stdout: nothing to keep
+                saved = None  # clean)
+            _REDIRECT["saved"] = saved
+        _REDIRECT["depth"] += 1
     try:
-        sys.stdout.flush()
-        saved = os.dup(1)
-    except (OSError, ValueError, AttributeError):  # (no real stdout: nothing to keep clean)
-        yield
-        return
-    try:
-        os.dup2(2, 1)
         yield
     finally:
-        _flush_c_stdio()  # (what the library buffered goes where it was written: stderr)
-        os.dup2(saved, 1)
-        os.close(saved)
+        with _REDIRECT["lock"]:
+            _REDIRECT["depth"] -= 1
+            if _REDIRECT["depth"] == 0 and _REDIRECT["saved"] is not None:
+                _flush_c_stdio()  # (what the library buffered goes where it was written)
+                os.dup2(_REDIRECT["saved"], 1)
+                os.close(_REDIRECT["saved"])
+                _REDIRECT["saved"] = None
 
 
 def _flush_c_stdio() -> None:
