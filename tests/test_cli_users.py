@@ -831,3 +831,10 @@ def test_a_corrupt_exr_keeps_stdout_for_the_json(tmp_path):
     res = subprocess.run([str(exe), "integrate", str(tmp_path / "bad.exr"), "--json", "-o",
                           str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
     assert res.returncode == 1 and json.loads(res.stdout)["status"] == "error", res.stdout
+
+
+def test_messages_name_flags_only_where_the_flag_was_given(tmp_path, capsys):
+    np.save(tmp_path / "n.npy", np.dstack([np.zeros((8, 9, 2)), np.ones((8, 9))]))
+    code, _, err = run(capsys, "integrate", str(tmp_path / "n.npy"), "--method",
+                       "regularization", "--option", "prior=foo", "-o", str(tmp_path / "o"))
+    assert code == 1 and "`prior` must be one of" in one_line(err)  # (not the --prior file)

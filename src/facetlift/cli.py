@@ -572,7 +572,7 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
                 click.echo(f"facetlift: warning: {r['name']}: {' '.join(str(w).split())}",
                            err=True)
     for r in failed:
-        msg = " ".join(str(r["error"]).split())  # (one line each, as the docs say)
+        msg = _as_flags(" ".join(str(r["error"]).split()))  # (one line each, as the docs say)
         click.echo(f"facetlift: error: {r['name']} ({r['status']}): {msg}", err=True)
     if as_json:  # (every item's record was printed as it was known)
         _STATE["printed_json"] = True
@@ -678,14 +678,21 @@ def _error(message: str) -> None:
 
 def _as_flags(message: str) -> str:
     """The library's messages name Python arguments (`` `prior_weight` must be ...``); on the
-    command line those that are flags are named as the flags (``--prior-weight must be ...``).
-    """
-    names = {"path": "NORMALS", "folder": "NORMALS", "p": "--gradients P", "q": "--gradients Q"}
+    command line those given as flags are named as the flags (``--prior-weight must be
+    ...``), and the input as NORMALS. A name whose flag was not given stays as it is: a
+    dataset folder's K.txt is no --K, regularization's ``--option prior=`` no --prior."""
+    args = _STATE.get("args") or ()
+    names = {"path": "NORMALS", "folder": "NORMALS"}
+    if "--gradients" in args:
+        names.update(p="--gradients P", q="--gradients Q")
     for command in cli.commands.values():
         for param in command.params:
-            if param.name not in names:
-                names[param.name] = (param.name.upper() if param.param_type_name == "argument"
-                                     else max(param.opts, key=len))
+            if param.name in names:
+                continue
+            if param.param_type_name == "argument":
+                names[param.name] = param.name.upper()
+            elif any(a == o or a.startswith(o + "=") for o in param.opts for a in args):
+                names[param.name] = max(param.opts, key=len)
     return re.sub(r"`(\w+)`", lambda m: names.get(m.group(1), m.group(0)), message)
 
 
@@ -724,7 +731,7 @@ def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else list(argv)
     if not args:
         args = ["--help"]
-    _STATE.update(debug=False, errors=[], printed_json=False)
+    _STATE.update(debug=False, errors=[], printed_json=False, args=tuple(args))
     code = _main(args)
     if code != EXIT_OK and "--json" in args and not _STATE["printed_json"]:
         # a script reading --json gets one object on stdout for a failure too
