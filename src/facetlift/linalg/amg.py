@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import threading
 
 import numpy as np
 import scipy.sparse as sp
@@ -42,18 +43,22 @@ def hierarchy(
                                         interpolation=interpolation, **kw)
 
 
+_SEED_LOCK = threading.Lock()
+
+
 @contextlib.contextmanager
 def _seeded(seed: int = 0):
     """numpy's global random state seeded for a pyamg setup (its spectral-radius estimates
     start from random vectors), then put back: the same input gives the same hierarchy, and
     the caller's random sequence is not advanced (backend="amg" differed by 2e-12 from run to
     run and moved numpy's global state)."""
-    state = np.random.get_state()
-    np.random.seed(seed)
-    try:
-        yield
-    finally:
-        np.random.set_state(state)
+    with _SEED_LOCK:  # (threads, e.g. Dask's, build one at a time: the global state is one)
+        state = np.random.get_state()
+        np.random.seed(seed)
+        try:
+            yield
+        finally:
+            np.random.set_state(state)
 
 
 def preconditioner(K, **kw):

@@ -458,6 +458,9 @@ SWITCH_MARGIN = 0.7
 #: by the model (a full 2048^2 square would take minutes).
 FACTOR_CAP = 8_000_000
 
+#: ... and where CG is predicted never to finish (the time model cannot bound the choice).
+FACTOR_CAP_UNBOUNDED = 2_000_000
+
 
 def _factorize_instead(K, pre, remaining: float) -> bool:
     """Whether factorizing `K` (SuperLU in nested-dissection order) is predicted to take less
@@ -475,7 +478,10 @@ def _factorize_instead(K, pre, remaining: float) -> bool:
     # (remaining may be inf, CG not predicted to converge at all: then factorize if it fits)
     if not remaining > 0 or not pre.may_factorize or pre.direct_failed:
         return False
-    if factorizer() != "superlu" or n > FACTOR_CAP or not factorization_fits(n):
+    # (CG predicted never to finish, remaining inf, passes any time test: then only up to the
+    # old 2M cap, where no fat mask factorizes for minutes)
+    cap = FACTOR_CAP if np.isfinite(remaining) else FACTOR_CAP_UNBOUNDED
+    if factorizer() != "superlu" or n > cap or not factorization_fits(n):
         return False
     H, W = pre.domain.shape
     iteration = ITERATION_PER_UNKNOWN * n + ITERATION_PER_CELL * (H + 1) * (W + 1)
