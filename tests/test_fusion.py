@@ -505,3 +505,19 @@ def test_confidence_without_a_prior_is_scale_free():
     for scale in (1e-12, 1e12):
         s = facetlift.integrate(n, confidence=np.full((20, 24), scale))
         np.testing.assert_allclose(s.depth, ref.depth, atol=1e-9)
+
+
+def test_a_noisy_dense_prior_that_tears_the_discontinuity_route_is_warned_about():
+    from facetlift import synthetic
+
+    gt = synthetic.analytic("sphere", 64)
+    rng = np.random.default_rng(0)
+    noisy = np.where(gt.mask, gt.depth + rng.normal(0, 3 * gt.pixel_size, gt.depth.shape),
+                     np.nan)
+    with pytest.warns(UserWarning, match=r"of the facet corners were cut .* tear the surface"):
+        facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size, prior=noisy,
+                            discontinuities=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)  # a low weight: no such warning
+        facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size, prior=noisy,
+                            prior_weight=0.01, discontinuities=True)
