@@ -442,3 +442,62 @@ def test_bad_pixel_size_is_refused_before_any_item(tmp_path):
     with pytest.raises(ValueError, match="`pixel_size` must be a positive finite number"):
         fb.batch([tmp_path / "in"], tmp_path / "o", workers=1, pixel_size=-1.0)
     assert not (tmp_path / "o").exists()
+
+
+def _children(pid):
+    """PIDs whose parent is `pid` (Linux /proc)."""
+    import os
+
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as fh:
+                    fields = fh.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                out.append(int(entry))
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads /proc")
+def test_sigterm_stops_a_parallel_batch_and_its_workers(tmp_path):
+    """SIGTERM is handled like Ctrl-C: exit 143, the workers stopped (they ran on, orphaned)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    pytest.importorskip("dask")
+    maps(tmp_path / "in", n=8, H=120, W=140)
+    exe = Path(sys.executable).with_name("facetlift")
+    proc = subprocess.Popen([str(exe), "batch", str(tmp_path / "in"), "-o", str(tmp_path / "o"),
+                             "--workers", "2", "--discontinuities", "-s", "npy",
+                             "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    deadline = time.monotonic() + 60
+    kids = []
+    while time.monotonic() < deadline and len(kids) < 2 and proc.poll() is None:
+        kids = _children(proc.pid)
+        time.sleep(0.05)
+    if proc.poll() is not None:
+        pytest.skip("the batch finished before it could be signalled")
+    time.sleep(0.3)
+    kids = _children(proc.pid)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert "terminated (SIGTERM)" in err and "Traceback" not in err
+    time.sleep(0.5)
+    alive = []
+    for pid in kids:
+        try:
+            os.kill(pid, 0)
+            with open(f"/proc/{pid}/stat") as fh:
+                if fh.read().rsplit(")", 1)[1].split()[0] != "Z":  # (a zombie is gone)
+                    alive.append(pid)
+        except OSError:
+            pass
+    assert not alive, f"workers left running: {alive}"

@@ -382,18 +382,40 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
 
         existed = {j.outdir for _, j in jobs if Path(j.outdir).exists()}
         try:
-            if jobs and scheduler is not None:
-                _on_cluster(jobs, scheduler, done)
-            elif jobs and n_workers > 1:
-                _on_processes(jobs, n_workers, done)
-            else:
-                for it, j in jobs:
-                    done(it, run_item(j))
+            # (SIGTERM as an exception, like Ctrl-C: the workers are stopped, not orphaned)
+            with _sigterm_raises():
+                if jobs and scheduler is not None:
+                    _on_cluster(jobs, scheduler, done)
+                elif jobs and n_workers > 1:
+                    _on_processes(jobs, n_workers, done)
+                else:
+                    for it, j in jobs:
+                        done(it, run_item(j))
         except BaseException:  # (an interrupt: the abandoned items leave no folder behind)
             _clean_abandoned([j.outdir for it, j in jobs if it.path not in results
                               and j.outdir not in existed])
             raise
     return [results[it.path] for it in found]
+
+
+@contextlib.contextmanager
+def _sigterm_raises():
+    """SIGTERM raises :class:`facetlift.io.atomic.Terminated` in this (main) thread meanwhile:
+    the batch then stops its worker processes as for Ctrl-C (a SIGTERM left them running,
+    orphaned, and the log without their items)."""
+    import signal
+    import threading
+
+    from .io.atomic import _raise_terminated
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
 
 
 def _clean_abandoned(folders) -> None:

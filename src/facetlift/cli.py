@@ -791,7 +791,8 @@ def _main(args: list[str]) -> int:
         _error("interrupted")
         return EXIT_INTERRUPTED
     except Terminated:
-        _error("terminated (SIGTERM); no output was written")
+        _error("terminated (SIGTERM); nothing partial was written (a batch's finished items "
+               "are in its log)")
         return EXIT_TERMINATED
     except Exception as e:
         if _STATE["debug"]:
