@@ -293,3 +293,12 @@ def test_relative_curl_of_a_pinhole_does_not_depend_on_the_object_place():
         a = frames.relative_curl(prepare(n, m, K=K))
         b = frames.relative_curl(prepare(n2, m2, K=K2))
     assert a == pytest.approx(0.2220, abs=2e-3) and b == pytest.approx(a, rel=1e-9)
+
+
+def test_facing_away_is_judged_on_the_object_without_a_mask():
+    """An OpenCV-frame map with a zero background and no mask: the object (13 % of the image)
+    faces away; the background's zeros are no normals and must not outvote it."""
+    data = io.read_dataset(BEAR)
+    n = np.where(data["mask"][..., None], data["normals"], 0.0) * [1.0, -1.0, -1.0]
+    with pytest.raises(ValueError, match=r"face away from the viewer.*--normal-frame opencv"):
+        facetlift.integrate(n)

@@ -281,7 +281,10 @@ def _inside(n: np.ndarray, mask, sample: int | None = None) -> np.ndarray | None
     else:
         v = flat if m is None else n[m]
     with np.errstate(invalid="ignore"):
-        return v[np.isfinite(v).all(axis=1)]
+        keep = np.isfinite(v).all(axis=1)
+        if m is None:  # (no mask: the default one, finite non-zero normals; a background of
+            keep &= (v != 0).any(axis=1)  # zeros must not outvote the object)
+        return v[keep]
 
 
 def encoded_scale(v: np.ndarray) -> int | None:
