@@ -405,3 +405,19 @@ def test_huge_finite_slopes_do_not_overflow():
         n = facetlift.normals_from_gradients(p, q)
     assert np.isfinite(n).all() and np.allclose(np.linalg.norm(n, axis=-1), 1.0)
     assert n[2, 2, 0] == pytest.approx(-1.0)
+
+
+def test_many_normals_facing_away_ask_about_the_frame():
+    """A map turned into another frame (here 60 deg about x, as a world-frame export): the
+    unusable-normal warning asks about the frame; a few quantised ones do not."""
+    r, c = np.indices((30, 30))
+    n = facetlift.normals_from_gradients(0.8 * np.cos(c / 4), 0.8 * np.sin(r / 5))
+    a = np.radians(60)
+    rot = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    with pytest.warns(UserWarning, match=r"face away from the camera.* another frame"):
+        facetlift.prepare(n @ rot.T)
+    few = n.copy()
+    few[3, 4] = [0.1, 0.0, -1.0]
+    with pytest.warns(UserWarning) as record:
+        facetlift.prepare(few)
+    assert not any("another frame" in str(w.message) for w in record)

@@ -256,5 +256,11 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
                            f"{frames.flag(frames.negated(frame, 'y'))}, or "
                            f"{frames.flag(frames.negated(frame, 'x'))} if inside-out)")
     else:
-        guess["likely"] = "as read (consistent)"
+        from .problem import BACKFACING_FRAME_HINT
+
+        finite = max(problem.counts.get("pixels", 0) - problem.counts.get("missing", 0), 1)
+        away = problem.counts.get("back-facing", 0) / finite
+        guess["likely"] = ("as read (consistent)" if away <= BACKFACING_FRAME_HINT else
+                           f"another frame? {away:.0%} of the normals face away from the "
+                           "camera (a world-frame export?): see docs/conventions.md")
     return guess
