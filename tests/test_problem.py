@@ -265,8 +265,18 @@ def test_one_pixel_components_and_clean_mask():
 def test_one_pixel_domain_from_default_mask():
     n = np.full((5, 5, 3), np.nan)
     n[2, 2] = [0, 0, 1]
-    with pytest.raises(ValueError, match="one-pixel component"):
+    with pytest.raises(ValueError, match="every finite, non-zero normal is an isolated pixel"):
         facetlift.prepare(n)
+    # beside a larger part, a lone pixel of the normals' own mask is left out, with a warning
+    # (a map with 30 % NaN normals and no mask was refused for its one-pixel islands)
+    n[0:3, 0:3] = [0, 0, 1]
+    n[2, 2] = np.nan
+    n[4, 4] = [0, 0, 1]
+    with pytest.warns(UserWarning, match=r"1 isolated pixel\(s\) .* left out \(first at row 4"):
+        prob = facetlift.prepare(n)
+    assert prob.domain.mask.sum() == 8 and not prob.domain.mask[4, 4]
+    with pytest.raises(ValueError, match="one-pixel component"):  # (a mask given: as it is)
+        facetlift.prepare(n, np.isfinite(n[..., 0]))
 
 
 @pytest.mark.parametrize(

@@ -51,7 +51,8 @@ def integrate(
         hold anything.
     mask : (H, W) array_like of bool, optional
         Integration domain; any shape, several connected components allowed (each gets its
-        own constant). Default: the pixels with finite, non-zero normals.
+        own constant). Default: the pixels with finite, non-zero normals (isolated ones left
+        out, with a warning).
     method : str
         A registered method, see ``facetlift.methods.REGISTRY`` or ``facetlift methods``.
     pixel_size : float

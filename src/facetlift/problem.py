@@ -268,7 +268,8 @@ def prepare(
         Normal map (x right, y up, z toward the viewer); need not be unit length. NaN marks a
         missing sample inside the mask. Pixels outside the mask may hold anything.
     mask : (H, W) array_like of bool, optional
-        Integration domain. Default: pixels whose normal is finite and non-zero.
+        Integration domain. Default: pixels whose normal is finite and non-zero (an isolated
+        one, without such a neighbour, is left out with a warning).
     known : (H, W) array_like of bool, optional
         Pixels whose normal is given; the others in the mask are missing samples.
     pixel_size : float
@@ -324,6 +325,18 @@ def prepare(
         m = (np.isfinite(length2) & (length2 > 0)) | _huge(n, length2)
         if not m.any():
             raise ValueError("`normals` has no finite, non-zero normal: nothing to integrate")
+        lone = m & ~clean_mask(m)
+        if lone.any() and not (m & ~lone).any():
+            raise ValueError("`normals`: every finite, non-zero normal is an isolated pixel (no "
+                             "neighbour to fix its depth); give a mask, inside which NaN "
+                             "normals are missing samples")
+        if lone.any():  # (the mask is the normals' own: a lone pixel of it is left out, said)
+            rr, cc = np.nonzero(lone)
+            warn(f"{int(lone.sum())} isolated pixel(s) with a normal but no neighbour with one "
+                 f"were left out (first at row {rr[0]}, col {cc[0]}); without a mask the "
+                 "domain is the finite, non-zero normals, so NaN ones are outside it: give a "
+                 "mask to make them missing samples inside it")
+            m &= ~lone
     else:
         m = _bool_image(mask, "mask", (H, W))
         if not m.any():
