@@ -501,3 +501,12 @@ def test_sigterm_stops_a_parallel_batch_and_its_workers(tmp_path):
         except OSError:
             pass
     assert not alive, f"workers left running: {alive}"
+
+
+def test_method_options_as_keywords(tmp_path):
+    maps(tmp_path / "in", n=1)
+    (rec,) = facetlift.batch([tmp_path / "in"], tmp_path / "o", workers=1, save=("npy",),
+                             discontinuities=True)
+    assert rec["status"] == "ok" and rec["settings"]["options"] == {"discontinuities": True}
+    with pytest.raises(ValueError, match="unknown option"):
+        facetlift.batch([tmp_path / "in"], tmp_path / "p", workers=1, save=("npy",), nope=1)

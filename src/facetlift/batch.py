@@ -287,7 +287,9 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         The batch's output folder.
     job : facetlift.jobs.Job, optional
         The template for every item (method, options, outputs, frame ...); or give its fields
-        as keywords (``method="dgp"``, ``save=("npy",)``, ``options={...}``).
+        as keywords (``method="dgp"``, ``save=("npy",)``, ``options={...}``); any other
+        keyword is a method option (``discontinuities=True`` is ``options={"discontinuities":
+        True}``), checked with the template before any item runs.
     workers : int, optional
         Local worker processes (default: the CPU count, at most the item count, where Dask is
         installed, else 1); 1 runs the items one after another in this process, without
@@ -332,6 +334,17 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
 
     if job is not None and job_options:
         raise ValueError(f"give `job` or job options, not both; got {sorted(job_options)}")
+    if job is None:  # method options given as keywords (discontinuities=True) go to options
+        from dataclasses import fields
+
+        known = {f.name for f in fields(Job)}
+        extra = {k: v for k, v in job_options.items() if k not in known}
+        job_options = {k: v for k, v in job_options.items() if k in known}
+        if extra:
+            clash = sorted(set(extra) & set(job_options.get("options") or {}))
+            if clash:
+                raise ValueError(f"{clash} given both as keywords and in `options`")
+            job_options["options"] = {**(job_options.get("options") or {}), **extra}
     template = job if job is not None else Job(**job_options)
     # once, before any item: a bad template is no per-item failure (a report's matplotlib is
     # the workers' affair on a cluster)
