@@ -243,8 +243,9 @@ _JOB_OPTIONS = [
     click.option("--triangles", is_flag=True,
                  help="Write triangle meshes (the OBJ default)."),
     click.option("--max-memory", default=None, metavar="SIZE",
-                 help="Refuse the job if its estimated peak memory exceeds SIZE (bytes, or "
-                 "8G, 512M). Default: the available memory minus a margin, ulimit -v "
+                 help="Refuse the job if its estimated peak memory, above the input as "
+                 "loaded, exceeds SIZE (bytes, or 8G, 512M); optional factorizations then stay "
+                 "within it too. Default: the available memory minus a margin, ulimit -v "
                  "honoured."),
     click.option("--progress/--no-progress", default=None,
                  help="Progress bar on stderr for routes that iterate (and for batches). "
