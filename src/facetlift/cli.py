@@ -411,7 +411,7 @@ def integrate(normals, gradients, progress, as_json, **flags):
         if bar is not None:
             bar.close()
     for w in record["warnings"]:
-        click.echo(f"facetlift: warning: {w}", err=True)
+        click.echo(f"facetlift: warning: {_as_flags(str(w))}", err=True)
     if as_json:
         click.echo(json.dumps({k: v for k, v in record.items() if k != "warnings"}))
         _STATE["printed_json"] = True
@@ -570,8 +570,8 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     for r in records:  # (as integrate shows them; a resumed item's were shown before)
         if not r.get("resumed"):
             for w in r.get("warnings") or ():
-                click.echo(f"facetlift: warning: {r['name']}: {' '.join(str(w).split())}",
-                           err=True)
+                click.echo(f"facetlift: warning: {r['name']}: "
+                           f"{_as_flags(' '.join(str(w).split()))}", err=True)
     for r in failed:
         msg = _as_flags(" ".join(str(r["error"]).split()))  # (one line each, as the docs say)
         click.echo(f"facetlift: error: {r['name']} ({r['status']}): {msg}", err=True)
@@ -705,7 +705,7 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
     """Every warning the commands do not print themselves (those of a job that failed after
     its reading, numpy's), as ``facetlift: warning: ...`` on stderr: Python's display named
     a line of click's or numpy's source."""
-    text = " ".join(str(message).split())
+    text = _as_flags(" ".join(str(message).split()))
     print(f"facetlift: warning: {text}", file=sys.stderr if file is None else file)
 
 
