@@ -560,12 +560,23 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
         raise click.UsageError("give inputs (files, folders, patterns) or --list FILE")
     job = _make_job(**flags)
     t0 = time.perf_counter()
-    def stream(r):  # (each record as it is known: an interrupted batch has shown its part)
-        click.echo(json.dumps(log_record(r)))
+    known = []
 
-    records = run_batch(inputs, outdir, job=job, workers=workers, scheduler=scheduler,
-                        resume=resume, progress=_show_progress(progress), list_file=list_file,
-                        on_record=stream if as_json else None)
+    def stream(r):  # (each record as it is known: an interrupted batch has shown its part)
+        known.append(r["status"])
+        if as_json:
+            click.echo(json.dumps(log_record(r)))
+
+    try:
+        records = run_batch(inputs, outdir, job=job, workers=workers, scheduler=scheduler,
+                            resume=resume, progress=_show_progress(progress),
+                            list_file=list_file, on_record=stream)
+    except BaseException:  # (an interrupt, dead workers: what was done is said first)
+        if known:
+            ok = sum(k == "ok" for k in known)
+            click.echo(f"batch: stopped with {len(known)} item(s) done ({ok} ok; log: "
+                       f"{outdir / LOG_NAME}); --resume goes on", err=True)
+        raise
     failed = [r for r in records if r["status"] != "ok"]
     for r in records:  # (as integrate shows them; a resumed item's were shown before)
         if not r.get("resumed"):
