@@ -510,3 +510,15 @@ def test_method_options_as_keywords(tmp_path):
     assert rec["status"] == "ok" and rec["settings"]["options"] == {"discontinuities": True}
     with pytest.raises(ValueError, match="unknown option"):
         facetlift.batch([tmp_path / "in"], tmp_path / "p", workers=1, save=("npy",), nope=1)
+
+
+def test_mask_rules_with_several_maps_of_one_stem_and_capital_mask(tmp_path):
+    maps(tmp_path / "in", n=1)
+    d = tmp_path / "in"
+    (d / "m0.npy").write_bytes(b"")  # (another map of the stem, not named below)
+    io.write_mask(d / "m0_mask.png", np.ones((16, 18)))
+    found = fb.items([d / "m0.png", d / "m0_mask.png"])
+    assert [it.name for it in found] == ["m0"] and found[0].mask.endswith("m0_mask.png")
+    # "_MASK" is not the mask suffix: an item of its own, not dropped in silence
+    io.write_mask(d / "x_MASK.png", np.ones((16, 18)))
+    assert "x_MASK" in [it.name for it in fb.items([d])]

@@ -95,14 +95,15 @@ def items(inputs, *, list_file=None) -> list[Item]:
             paths.append((p, True))
     found, seen = [], set()
     given = {os.path.abspath(p) for p, _ in paths}
+    files = _Listing()  # (each folder listed once: a lookup per file was quadratic)
     for p, explicit in paths:
         # (the path as given, made absolute: links to one file are items of their own, each
         # with its own mask and name)
         key = os.path.abspath(p)
         # a mask beside its map is no item; named on its own it is (an unquoted *.png that the
         # shell expanded names X_mask.png with X.png: still X's mask)
-        if key in seen or (_is_mask_file(p, NORMAL_READ_FORMATS)
-                           and (not explicit or _map_of(p, NORMAL_READ_FORMATS) in given)):
+        if key in seen or (_is_mask_file(p, NORMAL_READ_FORMATS, files) and (
+                not explicit or given.intersection(_maps_of(p, NORMAL_READ_FORMATS, files)))):
             continue
         seen.add(key)
         found.append((p, key))
@@ -119,9 +120,8 @@ def items(inputs, *, list_file=None) -> list[Item]:
         mask = None
         if p.is_file():  # (X_mask with any case of a mask extension)
             kinds = {e.lower() for e in MASK_FORMATS}
-            mask = next((str(m) for m in sorted(p.parent.glob(glob.escape(p.stem) + "_mask.*"))
-                         if m.stem == f"{p.stem}_mask" and m.suffix.lower() in kinds
-                         and m.is_file()), None)
+            mask = next((str(m) for m in sorted(files.stem(p.parent, f"{p.stem}_mask"))
+                         if m.suffix.lower() in kinds), None)
         out.append(Item(path=key, name=name, mask=mask))
     if not out:
         raise ValueError(f"`inputs`: no normal map found in {specs}")
@@ -146,27 +146,42 @@ def _is_dataset(folder: Path, formats) -> bool:
     return any((folder / f"normal_map{ext}").is_file() for ext in formats)
 
 
-def _is_mask_file(p: Path, formats) -> bool:
-    """``mask.*``, or ``X_mask.*`` beside a normal map ``X.*`` (any case of the extension):
-    a mask, not an item, in a folder or a pattern's matches (named explicitly, only where
-    ``X.*`` is named too: :func:`items`)."""
+class _Listing:
+    """The files of each folder by stem, each folder listed once (os.scandir)."""
+
+    def __init__(self):
+        self._by_folder: dict = {}
+
+    def stem(self, folder: Path, stem: str) -> list:
+        if folder not in self._by_folder:
+            table: dict = {}
+            with contextlib.suppress(OSError), os.scandir(folder) as entries:
+                for e in entries:
+                    if e.is_file():
+                        p = Path(e.path)
+                        table.setdefault(p.stem, []).append(p)
+            self._by_folder[folder] = table
+        return self._by_folder[folder].get(stem, [])
+
+
+def _is_mask_file(p: Path, formats, files: _Listing) -> bool:
+    """``mask.*``, or ``X_mask.*`` beside a normal map ``X.*`` (``_mask`` as written, the
+    extension in any case): a mask, not an item, in a folder or a pattern's matches (named
+    explicitly, only where ``X.*`` is named too: :func:`items`)."""
     if not p.is_file():
         return False
     if p.stem.lower() == "mask":
         return True
-    return _map_of(p, formats) is not None
+    return bool(_maps_of(p, formats, files))
 
 
-def _map_of(p: Path, formats) -> str | None:
-    """The absolute path of the normal map ``X.*`` that ``X_mask.*`` belongs to, or None."""
-    if not p.stem.lower().endswith("_mask"):
-        return None
-    stem = p.stem[:-len("_mask")]
+def _maps_of(p: Path, formats, files: _Listing) -> list:
+    """The absolute paths of the normal maps ``X.*`` that ``X_mask.*`` may belong to."""
+    if not p.stem.endswith("_mask"):
+        return []
     kinds = {e.lower() for e in formats + (".mat",)}
-    for c in p.parent.glob(glob.escape(stem) + ".*"):
-        if c.stem == stem and c.suffix.lower() in kinds and c.is_file():
-            return os.path.abspath(c)
-    return None
+    return [os.path.abspath(c) for c in files.stem(p.parent, p.stem[:-len("_mask")])
+            if c.suffix.lower() in kinds]
 
 
 def run_item(job: Job, threads: int | None = None) -> dict:
