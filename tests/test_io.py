@@ -475,24 +475,27 @@ def test_planar_tiff_reads_as_its_contiguous_twin(tmp_path, normals):
 
 
 def test_stdout_redirection_of_overlapping_readers_is_undone():
+    """The first reader leaves while the second is still inside (the order a per-reader
+    save-and-restore gets wrong: fd 1 ended on stderr)."""
     import os
     import threading
-    import time
 
     from facetlift.io import images
 
     before = os.fstat(1)
-    started = threading.Event()
+    first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
 
     def first():
         with images._stdout_to_stderr():
-            started.set()
-            time.sleep(0.1)
+            first_in.set()
+            second_in.wait(10)
+        first_out.set()
 
     def second():
-        started.wait()
+        first_in.wait(10)
         with images._stdout_to_stderr():
-            time.sleep(0.02)
+            second_in.set()
+            first_out.wait(10)
 
     threads = [threading.Thread(target=first), threading.Thread(target=second)]
     for t in threads:

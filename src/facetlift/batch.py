@@ -304,7 +304,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         The template for every item (method, options, outputs, frame ...); or give its fields
         as keywords (``method="dgp"``, ``save=("npy",)``, ``options={...}``); any other
         keyword is a method option (``discontinuities=True`` is ``options={"discontinuities":
-        True}``), checked with the template before any item runs.
+        True}``), checked with the template before any item runs. (``prior`` is the Job's
+        depth-prior file; regularization's smoothness prior goes in ``options``.)
     workers : int, optional
         Local worker processes (default: the CPU count, at most the item count, where Dask is
         installed, else 1); 1 runs the items one after another in this process, without
@@ -443,7 +444,8 @@ def _sigterm_raises():
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, old)
+        # (None: a handler installed outside Python, which cannot be put back: the default)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if old is None else old)
 
 
 def _clean_abandoned(folders) -> None:

@@ -555,6 +555,8 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     """
     from .batch import LOG_NAME, log_record
     from .batch import batch as run_batch
+    from .errors import WorkersDied
+    from .io.atomic import Terminated
 
     if not inputs and list_file is None:
         raise click.UsageError("give inputs (files, folders, patterns) or --list FILE")
@@ -563,7 +565,8 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     known = []
 
     def stream(r):  # (each record as it is known: an interrupted batch has shown its part)
-        known.append(r["status"])
+        if not r.get("resumed"):
+            known.append(r["status"])
         if as_json:
             click.echo(json.dumps(log_record(r)))
 
@@ -571,11 +574,12 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
         records = run_batch(inputs, outdir, job=job, workers=workers, scheduler=scheduler,
                             resume=resume, progress=_show_progress(progress),
                             list_file=list_file, on_record=stream)
-    except BaseException:  # (an interrupt, dead workers: what was done is said first)
+    except (KeyboardInterrupt, click.exceptions.Abort, Terminated, WorkersDied):
+        # (stopped from outside, or its workers died: what this run finished is said first)
         if known:
             ok = sum(k == "ok" for k in known)
-            click.echo(f"batch: stopped with {len(known)} item(s) done ({ok} ok; log: "
-                       f"{outdir / LOG_NAME}); --resume goes on", err=True)
+            click.echo(f"batch: stopped with {len(known)} item(s) done in this run ({ok} ok; "
+                       f"log: {outdir / LOG_NAME}); --resume goes on", err=True)
         raise
     failed = [r for r in records if r["status"] != "ok"]
     for r in records:  # (as integrate shows them; a resumed item's were shown before)

@@ -325,7 +325,7 @@ def prepare(
         m = (np.isfinite(length2) & (length2 > 0)) | _huge(n, length2)
         if not m.any():
             raise ValueError("`normals` has no finite, non-zero normal: nothing to integrate")
-        lone = m & ~clean_mask(m)
+        lone = m & ~_has_neighbour(m)
         if lone.any() and not (m & ~lone).any():
             raise ValueError("`normals`: every finite, non-zero normal is an isolated pixel (no "
                              "neighbour to fix its depth); give a mask, inside which NaN "
@@ -677,6 +677,19 @@ def _check_components(domain: Domain) -> None:
             "an isolated pixel has no neighbour to fix its depth: remove it from the mask "
             "(facetlift.clean_mask does this)"
         )
+
+
+def _has_neighbour(m: np.ndarray) -> np.ndarray:
+    """Where `m` (H, W) bool has one of its 8 neighbours set (no labelling pass: a second one
+    cost 0.45 s of prepare's 0.88 at 2048^2)."""
+    p = np.pad(m, 1)
+    H, W = m.shape
+    out = np.zeros_like(m)
+    for dr in (0, 1, 2):
+        for dc in (0, 1, 2):
+            if dr != 1 or dc != 1:
+                out |= p[dr:dr + H, dc:dc + W]
+    return out
 
 
 def clean_mask(mask, min_size: int = 2) -> np.ndarray:
