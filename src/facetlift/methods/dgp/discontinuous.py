@@ -92,6 +92,7 @@ values are the glued ``z``; the per-corner weights tell where the mesh is cut.
 from __future__ import annotations
 
 import functools
+import logging
 import math
 import time
 
@@ -105,6 +106,8 @@ from ...errors import SolverError
 from ...linalg.amg import balanced, block_aggregates, hierarchy, refresh, vcycle
 from ...memory import factorization_fits
 from ...operators.stencil import E_TWIST, E_X, E_Y, prior_form, scatter_corners
+
+log = logging.getLogger(__name__)
 
 #: Default for ``discontinuity_k`` (squared pixel footprints; see the module docstring).
 DEFAULT_K = 4.0
@@ -886,6 +889,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         M = Ma = rhs = None  # (freed before the next state is formed)
         M, Ma, K, rhs, scale, z, y = reweighted(w, step, z)
         changes.append(float(np.abs(step).max()))
+        log.info("reweighting %d: largest corner-weight change %.3g (tol %.3g), %d CG "
+                 "iterations", it, changes[-1], tol, cg_its[-1])
         if callback is not None:
             callback(it, changes[-1])
         if moving:  # a blurred prior: its target corrected for this solve's surface
@@ -925,6 +930,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             M = Ma = rhs = None
             M, Ma, K, rhs, scale, z, y = reweighted(w, step, z)
             changes.append(float(-step.min()))
+            log.info("reweighting %d (crack growth): largest weight fall %.3g, %d CG "
+                     "iterations", it, changes[-1], cg_its[-1])
             step = unsettled = None
             if callback is not None:
                 callback(it, changes[-1])
