@@ -843,3 +843,20 @@ def test_messages_name_flags_only_where_the_flag_was_given(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", str(tmp_path / "n.npy"), "--method",
                        "regularization", "--option", "prior=foo", "-o", str(tmp_path / "o"))
     assert code == 1 and "`prior` must be one of" in one_line(err)  # (not the --prior file)
+
+
+def test_info_frame_hint_agrees_with_the_warning_when_a_mask_holds_zeros(tmp_path, capsys):
+    """An object rotated into another frame (a quarter of its normals face away) on a zero
+    background, with a mask of the whole image: info's share is of the finite, non-zero
+    normals, as integrate's warning's is (it was diluted by the zeros: 'consistent')."""
+    r, c = np.indices((60, 60))
+    obj = (r - 30) ** 2 + (c - 30) ** 2 < 15**2
+    n = facetlift.normals_from_gradients(0.8 * np.cos(c / 4), 0.8 * np.sin(r / 5))
+    a = np.radians(60)
+    rot = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    n = np.where(obj[..., None], n @ rot.T, 0.0)
+    np.save(tmp_path / "n.npy", n)
+    io.write_mask(tmp_path / "m.png", np.ones((60, 60), bool))
+    code, out, _ = run(capsys, "info", str(tmp_path / "n.npy"), "--mask", str(tmp_path / "m.png"),
+                       "--json")
+    assert code == 0 and json.loads(out)["frame"]["likely"].startswith("another frame?")
