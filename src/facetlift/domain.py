@@ -142,6 +142,20 @@ class Domain:
         indptr = np.arange(4 * m + 1)
         return sp.csr_matrix((data, self.corners.ravel(), indptr), shape=(4 * m, n))
 
+    def component_facets(self, shared: float | None = None) -> list:
+        """The facets of each connected component, (k,) index arrays in component order; with
+        `shared`, one array of every facet instead where the components' bounding boxes add
+        up to more than `shared` times the union box's area (a method working box by box
+        then does the union box once: interleaved stripes each span nearly all of it)."""
+        order = np.argsort(self.facet_component, kind="stable")
+        groups = np.split(order, np.cumsum(self.component_sizes)[:-1])
+        if shared is not None and len(groups) > 1:
+            r, c = self.pixels
+            area = sum(int(np.ptp(r[f]) + 1) * int(np.ptp(c[f]) + 1) for f in groups)
+            if area > shared * int(np.ptp(r) + 1) * int(np.ptp(c) + 1):
+                return [np.arange(self.n_facets)]
+        return groups
+
     def facet_operator(self, weights4: np.ndarray):
         """(m, n) sparse CSR matrix whose row k is ``weights4 . z[corners[k]]``."""
         import scipy.sparse as sp

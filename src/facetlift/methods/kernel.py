@@ -155,17 +155,10 @@ def run(problem, *, sigma, reg, tile, margin, progress) -> MethodResult:
     d = problem.domain
     rows, cols = d.pixels
     gx, gy = problem.grid_slopes
-    order = np.argsort(d.facet_component, kind="stable")
-    groups = np.split(order, np.cumsum(np.bincount(d.facet_component,
-                                                   minlength=d.n_components))[:-1])
     # each connected component on its own box: a fit window reaching into another component
     # took its samples (a flat part 3 pixels from a pyramid came back 0.086 high), unless the
-    # boxes overlap so much that their areas add up to far more than the union box's (as for
-    # frankot_chellappa: SHARED_BOX_FACTOR)
-    area = sum(int(np.ptp(rows[f]) + 1) * int(np.ptp(cols[f]) + 1) for f in groups)
-    union = int(np.ptp(rows) + 1) * int(np.ptp(cols) + 1)
-    if len(groups) > 1 and area > SHARED_BOX_FACTOR * union:
-        groups = [np.arange(d.n_facets)]
+    # boxes overlap so much that their areas add up to far more than the union box's
+    groups = d.component_facets(shared=SHARED_BOX_FACTOR)
     values = np.zeros(d.n_facets)
     info: dict = {}
     done = {"groups": 0, "facets": 0, "box": 0}
