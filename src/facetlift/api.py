@@ -491,14 +491,12 @@ def _flat_where_no_normal(problem: Problem, result):
     """A pixel-value method's components without any usable normal (and no prior sample)
     flat, with one warning, as dgp makes them: the graph methods returned them flat in
     silence, Frankot-Chellappa and kernel made a shape up (a 12-unit bump)."""
+    from .methods.dgp.common import empty_components
+
     d = problem.domain
-    have = np.bincount(d.facet_component[problem.usable], minlength=d.n_components) > 0
-    if problem.has_prior:
-        have |= np.asarray(problem.prior_components, bool)
-    empty = np.flatnonzero(~have)
+    empty = empty_components(d, problem.usable,
+                             problem.prior_components if problem.has_prior else None)
     if empty.size:
-        warn(f"{empty.size} connected component(s) have no usable normal (e.g. component "
-             f"{empty[0] + 1}); they are reconstructed flat")
         values = np.array(result.values, dtype=float, copy=True)
         values[np.isin(d.facet_component, empty)] = 0.0
         result = methods.MethodResult(values=values, vertex_values=None, info=result.info,

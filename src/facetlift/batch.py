@@ -346,7 +346,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         without a ``__main__`` guard); the log keeps what finished, so ``resume=True`` goes
         on.
     """
-    from .io.atomic import prepare_folder
+    from .io.atomic import prepare_folder, sigterm_raises
 
     if job is not None and job_options:
         raise ValueError(f"give `job` or job options, not both; got {sorted(job_options)}")
@@ -412,7 +412,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         existed = {j.outdir for _, j in jobs if Path(j.outdir).exists()}
         try:
             # (SIGTERM as an exception, like Ctrl-C: the workers are stopped, not orphaned)
-            with _sigterm_raises():
+            with sigterm_raises():
                 if jobs and scheduler is not None:
                     _on_cluster(jobs, scheduler, done)
                 elif jobs and n_workers > 1:
@@ -425,27 +425,6 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
                               and j.outdir not in existed])
             raise
     return [results[it.path] for it in found]
-
-
-@contextlib.contextmanager
-def _sigterm_raises():
-    """SIGTERM raises :class:`facetlift.io.atomic.Terminated` in this (main) thread meanwhile:
-    the batch then stops its worker processes as for Ctrl-C (a SIGTERM left them running,
-    orphaned, and the log without their items)."""
-    import signal
-    import threading
-
-    from .io.atomic import _raise_terminated
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = signal.signal(signal.SIGTERM, _raise_terminated)
-    try:
-        yield
-    finally:
-        # (None: a handler installed outside Python, which cannot be put back: the default)
-        signal.signal(signal.SIGTERM, signal.SIG_DFL if old is None else old)
 
 
 def _clean_abandoned(folders) -> None:

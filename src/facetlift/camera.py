@@ -291,7 +291,7 @@ def make_camera(pixel_size=1.0, K=None) -> Camera:
         if not one:
             raise ValueError(f"`pixel_size` {pixel_size!r} applies to orthographic input; with "
                              "`K` the scale comes from the intrinsics: leave pixel_size at 1, "
-                             "or drop K")
+                             "or drop K (--orthographic ignores a dataset folder's K.txt)")
         return Pinhole(check_K(K))
     try:
         h = float(pixel_size)

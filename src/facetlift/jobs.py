@@ -166,10 +166,6 @@ def read(job: Job) -> Input:
         K = io.read_K(job.K)
     if job.orthographic:
         K = None
-    if K is not None and job.pixel_size != 1.0:  # (ignored silently before)
-        raise ValueError(f"`pixel_size` {job.pixel_size!r} applies to orthographic input; this "
-                         "input has a camera K (its scale comes from K): drop --pixel-size, "
-                         "or give --orthographic to ignore K")
     if job.prior is not None:
         prior = io.read_prior(job.prior, job.prior_scale)
     elif job.prior_scale is not None and prior is None:

@@ -406,9 +406,9 @@ def prepare(
             rule = (f"; grazing: view cosine < {eps:.4g}"
                     f"{'' if grazing_note is None else ', ' + grazing_note}")
         frame = ""  # (many facing away: a map in another frame, e.g. world coordinates)
-        away = int(bad["back-facing"].sum())
-        if away > BACKFACING_FRAME_HINT * max(int(ok.sum()), 1):
-            frame = (f"; {away / max(int(ok.sum()), 1):.0%} of the normals face away from the "
+        away = int(bad["back-facing"].sum()) / max(int(ok.sum()), 1)
+        if away > BACKFACING_FRAME_HINT:
+            frame = (f"; {away:.0%} of the normals face away from the "
                      "camera, far more than noise or quantisation turn away: is the map in "
                      "another frame (world coordinates, a rotated export)? docs/conventions.md "
                      "and docs/recipes.md say how to convert it")

@@ -198,7 +198,7 @@ class OutputSet:
                 f"the output folder {self.outdir} is not writable: {e.strerror or e}"
             ) from None
         self.staged: dict[str, Path] = {}
-        self._old_handler = None
+        self._sigterm = sigterm_raises()
 
     def path(self, name: str) -> Path:
         """Where to write output `name` now (inside the staging folder)."""
@@ -227,8 +227,7 @@ class OutputSet:
                 self.outdir.rmdir()  # only when empty
 
     def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            self._old_handler = signal.signal(signal.SIGTERM, _raise_terminated)
+        self._sigterm.__enter__()
         return self
 
     def __exit__(self, kind, value, tb):
@@ -238,10 +237,24 @@ class OutputSet:
             else:
                 self.abort()
         finally:
-            if self._old_handler is not None:
-                signal.signal(signal.SIGTERM, self._old_handler)
+            self._sigterm.__exit__(None, None, None)
         return False
 
 
 def _raise_terminated(signum, frame):
     raise Terminated(f"terminated by signal {signum}")
+
+
+@contextlib.contextmanager
+def sigterm_raises():
+    """SIGTERM raises :class:`Terminated` in the main thread meanwhile (elsewhere: nothing), so
+    the code inside cleans up as for an exception; the previous handler is put back (one
+    installed outside Python, which cannot be, leaves the default)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if old is None else old)

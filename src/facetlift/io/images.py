@@ -262,10 +262,10 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
         m = (colour != 0).any(-1)
         if a.shape[-1] in (2, 4):
             alpha = a[..., -1] > 0
-            if (colour == colour.flat[0]).all() and not (alpha == alpha.flat[0]).all():
-                m = alpha  # (one colour everywhere: the shape is in the alpha channel)
-            elif not (alpha == alpha.flat[0]).all():
-                m &= alpha  # (a constant alpha, e.g. 0 in a colour-only export, says nothing)
+            if not (alpha == alpha.flat[0]).all():  # (a constant alpha, e.g. 0 in a
+                # colour-only export, says nothing; with one colour everywhere the shape is
+                # in the alpha alone)
+                m = alpha if (colour == colour.flat[0]).all() else m & alpha
     elif a.ndim == 2:
         m = a != 0
     else:

@@ -20,10 +20,13 @@ def targets(problem):
     return np.where(target, gx, 0.0), np.where(target, gy, 0.0), target
 
 
-def empty_components(domain, target):
-    """Indices of the components without any target normal (warned about: they come out flat)."""
-    have = np.bincount(domain.facet_component[target], minlength=domain.n_components)
-    empty = np.nonzero(have == 0)[0]
+def empty_components(domain, target, fixed=None):
+    """Indices of the components without any target normal, nor a place fixed by a prior
+    where `fixed` (n_components,) bool is given (warned about: they come out flat)."""
+    have = np.bincount(domain.facet_component[target], minlength=domain.n_components) > 0
+    if fixed is not None:
+        have |= np.asarray(fixed, bool)
+    empty = np.flatnonzero(~have)
     if empty.size:
         warn(
             f"{empty.size} connected component(s) have no usable normal (e.g. component "
