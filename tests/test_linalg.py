@@ -108,6 +108,71 @@ def test_cg_stops_at_maxiter_without_raising():
     assert z.converged and z.iterations == 0
 
 
+class _Spoiled:
+    """``A @ v``, except that product number `at` gets an error of `big` times its size,
+    orthogonal to `v` (the step length stays right, the recursive residual goes wrong): the
+    rounding of a preconditioner that is SPD only up to it, at one blow."""
+
+    def __init__(self, A, at, big):
+        self.A, self.at, self.big, self.calls, self.shape = A, at, big, 0, A.shape
+
+    def __matmul__(self, v):
+        self.calls += 1
+        out = self.A @ v
+        if self.calls == self.at:
+            e = np.random.default_rng(1).normal(size=v.size)
+            e -= (e @ v) / (v @ v) * v
+            out = out + self.big * np.linalg.norm(out) * e / np.linalg.norm(e)
+        return out
+
+
+def _chain(n=400):
+    return sp.diags([-np.ones(n - 1), 2.001 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1],
+                    format="csr"), np.random.default_rng(0).normal(size=n)
+
+
+def test_cg_goes_back_to_its_best_iterate_when_the_residual_explodes(monkeypatch):
+    import importlib
+
+    cgm = importlib.import_module("facetlift.linalg.cg")
+    A, b = _chain()
+    runs = {}
+    for retreats in (0, cgm.RETREATS):
+        monkeypatch.setattr(cgm, "RETREATS", retreats)
+        x, info = linalg.cg(_Spoiled(A, 100, 1e4), b, lambda r: r.copy(), rtol=1e-10,
+                            maxiter=5000, flexible=True)
+        assert info.converged
+        assert np.linalg.norm(b - A @ x) <= 1e-9 * np.linalg.norm(b)
+        runs[retreats] = info
+    lost, back = runs[0], runs[cgm.RETREATS]
+    # without the retreat the residual climbed 1e4-fold and CG took the long way down
+    assert max(lost.residuals[100:120]) > 1e3 * lost.residuals[99]
+    # with it the history shows the state CG went back to, and it finished sooner
+    assert max(back.residuals[100:]) <= 10 * back.residuals[99]
+    assert back.iterations < 0.7 * lost.iterations
+
+
+def test_cg_near_its_tolerance_keeps_its_best_iterate_when_the_residual_rises(monkeypatch):
+    import importlib
+
+    cgm = importlib.import_module("facetlift.linalg.cg")
+    A, b = _chain()
+    _, plain = linalg.cg(A, b, lambda r: r.copy(), rtol=1e-10, maxiter=5000, flexible=True)
+    k = next(i for i, r in enumerate(plain.residuals) if r < 1e-8)
+    rtol = plain.residuals[k] / 3  # iterate k is within the factor 10 that convergence allows
+    runs = {}
+    for retreats in (0, cgm.RETREATS):
+        monkeypatch.setattr(cgm, "RETREATS", retreats)
+        # a 100-fold rise (below GROWTH) right after iterate k
+        x, info = linalg.cg(_Spoiled(A, k + 1, 1e2), b, lambda r: r.copy(), rtol=rtol,
+                            maxiter=5000, flexible=True)
+        assert info.converged
+        assert np.linalg.norm(b - A @ x) <= 10 * rtol * np.linalg.norm(b)
+        runs[retreats] = info
+    assert max(runs[0].residuals[k + 1:k + 5]) > 10 * plain.residuals[k]
+    assert runs[cgm.RETREATS].iterations <= k + 3 < runs[0].iterations
+
+
 def test_choose_is_one_policy():
     pardiso = linalg.direct.pardiso_available()
     direct = "pardiso" if pardiso else "superlu"
