@@ -349,7 +349,9 @@ def test_cli_16bit_png_prior_needs_a_scale(tmp_path, capsys):
 
 
 def test_info_reads_a_dataset_with_a_16bit_png_prior_given_its_scale(tmp_path, capsys):
-    """info refused such a folder and named --prior-scale, which it did not take."""
+    """info refused such a folder and named --prior-scale, which it did not take; then it
+    refused it with --prior-scale's message. It describes the folder, the prior it holds,
+    and (without the scale) integrate's refusal as a warning naming both ways out."""
     import imagecodecs
 
     n, depth, _, sel = _write_inputs(tmp_path)
@@ -358,10 +360,19 @@ def test_info_reads_a_dataset_with_a_16bit_png_prior_given_its_scale(tmp_path, c
     np.save(folder / "normal_map.npy", n)
     counts = np.where(sel, np.rint((depth + 10.0) * 1000), 0).astype(np.uint16)
     (folder / "prior_depth.png").write_bytes(imagecodecs.png_encode(counts))
-    assert main(["info", str(folder)]) == 1
-    assert "--prior-scale" in capsys.readouterr().err
+    assert main(["info", str(folder)]) == 0
+    out = capsys.readouterr().out
+    assert f"{n.shape[0]}x{n.shape[1]} pixels" in out and "depth prior" not in out
+    assert "warning: integrate would refuse this folder" in out
+    assert "--prior-scale" in out and "--no-prior" in out
     assert main(["info", str(folder), "--prior-scale", "0.001"]) == 0
-    assert f"{n.shape[0]}x{n.shape[1]} pixels" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert f"depth prior (dataset file): {int(sel.sum())} known pixels" in out
+    assert "refuse" not in out
+    # integrate names both ways out too
+    assert main(["integrate", str(folder), "-o", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert "--prior-scale" in err and "--no-prior" in err
 
 
 def test_dataset_folder_picks_up_prior_and_confidence(tmp_path, capsys):

@@ -490,6 +490,12 @@ def _info_lines(rec: dict) -> list[str]:
     frame = rec.get("frame", {})
     lines.append(f"  frame: read as {frame.get('as_read')}; likely {frame.get('likely', '?')}")
     lines.append(f"  camera: {rec['projection']}" + (f", K = {rec['K']}" if rec["K"] else ""))
+    for name, what in (("prior", "depth prior"), ("confidence", "normal confidence")):
+        if rec.get(name):  # (a dataset folder's own files)
+            got = rec[name]
+            span = (f", {got['range'][0]:.6g} to {got['range'][1]:.6g}" if got["range"]
+                    else "")
+            lines.append(f"  {what} (dataset file): {got['known_pixels']} known pixels{span}")
     lines += [f"  warning: {w}" for w in rec.get("warnings", [])]
     if not rec["usable"]:
         lines.append(f"  cannot be integrated as read: {rec['problem']}")

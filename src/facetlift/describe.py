@@ -9,6 +9,7 @@ mask-shape benchmark (:data:`SECONDS_PER_PIXEL`).
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -77,8 +78,9 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
 def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
              gradient_frame: str = "xy", prior_scale=None) -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
-    encoding, mask and components, unusable normals (with the first one's location), K, and
-    :func:`estimate` for the default method.
+    encoding, mask and components, unusable normals (with the first one's location), K, a
+    dataset folder's depth prior and normal confidence (``prior`` / ``confidence``: known
+    pixels and value range), and :func:`estimate` for the default method.
 
     Parameters
     ----------
@@ -108,15 +110,31 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
               mat_keys=None if mat_keys is None else tuple(mat_keys),
               gradient_frame=gradient_frame, prior_scale=prior_scale)
     src = job.source
+    unread = []
     with recorded_warnings() as read_caught:  # (a gradient layout's, ...)
-        inp = read(job)  # (first: a folder without a normal map is the reader's clear error)
+        try:  # (first: a folder without a normal map is the reader's clear error)
+            inp = read(job)
+        except ValueError as e:
+            if not src.is_dir():
+                raise
+            # a folder's prior or confidence that integrate would refuse: the rest is still
+            # described, that refusal as a warning (if the folder reads without them)
+            inp = read(replace(job, dataset_prior=False, dataset_confidence=False,
+                                   prior_scale=None))
+            unread.append(f"integrate would refuse this folder: {e}")
     out = {"input": str(src), **_file_facts(src),
-           "warnings": [str(w.message) for w in read_caught]}
+           "warnings": unread + [str(w.message) for w in read_caught]}
     # (a gradient field in the other layout: no frame of the normals made from it is right)
     layout = next((w.message.other for w in read_caught
                    if isinstance(w.message, frames.LayoutWarning)), None)
     n = inp.normals
     H, W = n.shape[:2]
+    for name, arr in (("prior", inp.prior), ("confidence", inp.confidence)):
+        if arr is not None:  # (a dataset folder's prior_depth / confidence file)
+            known = np.isfinite(arr)
+            out[name] = {"known_pixels": int(known.sum()),
+                         "range": [float(arr[known].min()), float(arr[known].max())]
+                         if known.any() else None}
     out.update(shape=[H, W], mask_source=inp.mask_source,
                K=None if inp.K is None else inp.K.tolist(),
                projection="perspective" if inp.K is not None else "orthographic")

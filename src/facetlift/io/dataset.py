@@ -92,7 +92,15 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     from .images import PRIOR_FORMATS, read_prior, read_weights
 
     ppath = _find(f, "prior_depth", PRIOR_FORMATS) if with_prior else None
-    prior = read_prior(ppath, prior_scale, arg="prior") if ppath is not None else None
     cpath = _find(f, "confidence", PRIOR_FORMATS) if with_confidence else None
-    conf = read_weights(cpath, arg="confidence") if cpath is not None else None
+    try:
+        prior = read_prior(ppath, prior_scale, arg="prior") if ppath is not None else None
+    except ValueError as e:  # (the folder's own file: it can also be left unread)
+        raise ValueError(f"{e}; or leave the folder's prior unread with --no-prior "
+                         "(with_prior=False in Python)") from None
+    try:
+        conf = read_weights(cpath, arg="confidence") if cpath is not None else None
+    except ValueError as e:
+        raise ValueError(f"{e}; or leave the folder's confidence unread with --no-confidence "
+                         "(with_confidence=False in Python)") from None
     return {"normals": normals, "mask": mask, "K": K, "prior": prior, "confidence": conf}
