@@ -25,7 +25,7 @@ demo: $(STAMP)
 test: $(TEST_STAMP)
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
-test-slow: $(TEST_STAMP)  # tests marked slow: >= 10,000 property examples, the whole CLI campaign
+test-slow: $(TEST_STAMP)  # tests marked slow: >= 10,000 property examples, the CLI campaign beyond the default sixth
 	$(BIN)/python -m pytest -q -m slow || [ $$? -eq 5 ]
 
 lint: $(TEST_STAMP)

@@ -3,7 +3,8 @@ masks, K files and paths, and every invalid value of every declared option of ev
 
 Each case must exit 0, 1 or 2 (never 3: that is a bug), print at most one error line and no
 traceback, leave no staging or temporary file behind, and, on exit 0, write finite depth on
-the mask. The default run takes every 6th case; ``make test-slow`` runs all of them.
+the mask. The default run takes every 6th case; ``make test-slow`` runs the others (all of
+them: ``pytest -m "slow or not slow" tests/test_fuzz_cli.py``).
 """
 
 from __future__ import annotations

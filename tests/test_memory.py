@@ -61,7 +61,7 @@ def test_default_limit_honours_rlimit_as():
 def test_refuses_with_the_estimate_the_limit_and_what_to_do():
     n, m = _disk_normals()
     with pytest.raises(MemoryLimitError, match=r"would need about .* MiB at its peak .*more "
-                       r"than the 1 MiB allowed \(max_memory\).*crop the input"):
+                       r"than the 1 MiB allowed \(`max_memory`\).*crop the input"):
         facetlift.integrate(n, m, max_memory="1M")
     with pytest.raises(MemoryLimitError):
         facetlift.integrate(n, m, method="poisson", max_memory=2**20)

@@ -341,6 +341,24 @@ def test_the_cap_is_reported_as_not_converged(monkeypatch, options):
     assert not s.info["prior_blur"]["converged"] and not s.info["converged"]
 
 
+def test_cli_the_cap_is_a_note_not_a_solver_failure(tmp_path, capsys, monkeypatch):
+    """It exited 2 advising --max-iter or --tol, which the default solver refuses and which
+    do not reach the cap; a batch recorded it as not_converged."""
+    from facetlift.methods.dgp.common import BlurredPrior
+
+    monkeypatch.setattr(BlurredPrior, "MAX_UPDATES", 1)
+    n, depth, mask = two_bumps((48, 64))
+    np.save(tmp_path / "n.npy", np.where(mask[..., None], n, np.nan))
+    prior, sigma = coarse(depth, mask)
+    np.save(tmp_path / "prior.npy", prior)
+    args = ["integrate", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "prior.npy"),
+            "--prior-weight", "0.01", "--prior-blur", f"{sigma}", "-s", "npy"]
+    assert main(args + ["-o", str(tmp_path / "o")]) == 0
+    err = capsys.readouterr().err
+    assert "note: the blurred prior's target corrections stopped at their cap of 1" in err
+    assert "--max-iter" not in err and (tmp_path / "o" / "depth.npy").exists()
+
+
 def test_holes_sparse_samples_weight_maps_and_confidence_with_a_blur():
     n, depth, mask = two_bumps((48, 64))
     prior, sigma = coarse(depth, mask)

@@ -172,7 +172,7 @@ _JOB_OPTIONS = [
     click.option("--y-down", is_flag=True, help="Alias of --normal-frame directx."),
     click.option("--gradient-frame", default="xy", show_default=True,
                  help="Layout of a gradient field: xy (p = dz/dx right, q = dz/dy up) or "
-                 "rowcol (alias queau: p = dz/d(row) down, q = dz/d(col))."),
+                 "rowcol (aliases queau, matlab: p = dz/d(row) down, q = dz/d(col))."),
     click.option("--mat-keys", metavar="P,Q[,MASK] | N[,MASK]",
                  help="Variable names in a .mat input: a gradient field p,q[,mask] or a "
                  "normal map N[,mask]. Default: p,q[,mask], else the only HxWx3 variable."),
@@ -420,6 +420,16 @@ def integrate(normals, gradients, progress, as_json, **flags):
             click.echo(f"wrote {path}")
         click.echo(summary(record))
     info = record["info"]
+    blur = info.get("prior_blur") or {}
+    if blur and not blur.get("converged", True):
+        # a safety net, not a setting: the surface is usable (its mismatch is in the info)
+        click.echo(
+            f"note: the blurred prior's target corrections stopped at their cap of "
+            f"{blur.get('updates')} updates before the mismatch levelled off (a safety net; "
+            f"mismatch {blur.get('mismatch') or float('nan'):.3g}, first solve's "
+            f"{blur.get('mismatch_first') or float('nan'):.3g})",
+            err=True,
+        )
     if not record["converged"] and info.get("solver") == "discontinuous":
         # a fixed budget of reweightings by design: the surface is usable, say so and go on
         click.echo(
@@ -429,7 +439,7 @@ def integrate(normals, gradients, progress, as_json, **flags):
             "(--option discontinuity_iter=N)",
             err=True,
         )
-    elif not record["converged"]:
+    elif not record["converged"] and not blur:  # (prior_blur takes solver='direct' only)
         raise SolverFailure(
             f"method {info.get('method')!r} did not converge in {info.get('iterations')} "
             "iterations (outputs were written); raise --max-iter or --tol"
@@ -713,8 +723,10 @@ def _as_flags(message: str) -> str:
                 continue
             if param.param_type_name == "argument":
                 names[param.name] = param.name.upper()
-            elif any(a == o or a.startswith(o + "=") for o in param.opts for a in args):
-                names[param.name] = max(param.opts, key=len)
+            else:  # (the spelling the user typed: -s, --save or --format)
+                typed = [o for o in param.opts for a in args if a == o or a.startswith(o + "=")]
+                if typed:
+                    names[param.name] = typed[0]
     return re.sub(r"`(\w+)`", lambda m: names.get(m.group(1), m.group(0)), message)
 
 
@@ -788,7 +800,7 @@ def _main(args: list[str]) -> int:
         _error(msg)
         return EXIT_INPUT
     except MemoryLimitError as e:
-        _error(_one_line(e))
+        _error(_as_flags(_one_line(e)))
         return EXIT_INPUT
     except WorkersDied as e:  # a batch's local workers: not a bug in facetlift
         _error(_one_line(e).replace("resume=True", "--resume").replace("workers=1",

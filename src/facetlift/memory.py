@@ -444,7 +444,7 @@ def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
     est, route = estimate(problem, method, options)
     p = Plan(int(min(est, 2**62)), lim, route)
     if est > lim:
-        source = "max_memory" if max_memory is not None else "the available memory"
+        source = "`max_memory`" if max_memory is not None else "the available memory"
         raise MemoryLimitError(
             f"method {method!r} would need about {_size(est)} at its peak ({route}, "
             f"{problem.domain.n_facets:,} mask pixels), more than the "

@@ -628,8 +628,8 @@ def check_prior(prior, prior_weight, shape, mask, camera):
         k = int(np.flatnonzero(wbad)[0])
         raise ValueError(f"`prior_weight` must be finite, >= 0 and <= {MAX_PRIOR_WEIGHT:g} "
                          f"where the prior has a sample; got {float(w[k])!r} "
-                         f"({int(wbad.sum())} such pixel(s)); {MAX_PRIOR_WEIGHT:g} already "
-                         "returns the prior where given")
+                         f"({int(wbad.sum())} such pixel(s)); 1e8 already returns the prior "
+                         "where given")
     huge = have & (np.abs(depth) > MAX_PRIOR_DEPTH)
     if huge.any():
         k = int(np.flatnonzero(huge)[0])
