@@ -373,6 +373,15 @@ def test_info_reads_a_dataset_with_a_16bit_png_prior_given_its_scale(tmp_path, c
     assert main(["integrate", str(folder), "-o", str(tmp_path / "o")]) == 1
     err = capsys.readouterr().err
     assert "--prior-scale" in err and "--no-prior" in err
+    # a confidence map of the wrong size: left out, the prior still described, the refusal
+    # in the JSON for scripts that use info as a check
+    import json
+
+    np.save(folder / "confidence.npy", np.ones((3, 3)))
+    assert main(["info", str(folder), "--prior-scale", "0.001", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["prior"]["known_pixels"] == int(sel.sum()) and "confidence" not in rec
+    assert "--no-confidence" in rec["refused"] and "3x3" in rec["refused"]
 
 
 def test_dataset_folder_picks_up_prior_and_confidence(tmp_path, capsys):

@@ -339,6 +339,7 @@ def test_the_cap_is_reported_as_not_converged(monkeypatch, options):
     prior, sigma = coarse(depth, mask)
     s = run(n, mask, prior=prior, prior_weight=0.01, prior_blur=sigma, **options)
     assert not s.info["prior_blur"]["converged"] and not s.info["converged"]
+    assert s.info["prior_blur"]["capped"] and s.info["prior_blur"]["cap"] == 1
 
 
 def test_cli_the_cap_is_a_note_not_a_solver_failure(tmp_path, capsys, monkeypatch):
@@ -357,6 +358,12 @@ def test_cli_the_cap_is_a_note_not_a_solver_failure(tmp_path, capsys, monkeypatc
     err = capsys.readouterr().err
     assert "note: the blurred prior's target corrections stopped at their cap of 1" in err
     assert "--max-iter" not in err and (tmp_path / "o" / "depth.npy").exists()
+    # the reweighting budget, not the cap, stopped them: only the reweighting's note
+    monkeypatch.setattr(BlurredPrior, "MAX_UPDATES", 30)
+    assert main(args + ["--discontinuities", "--option", "discontinuity_iter=2", "-o",
+                        str(tmp_path / "d")]) == 0
+    err = capsys.readouterr().err
+    assert "discontinuity reweighting used all 2" in err and "cap of" not in err
 
 
 def test_holes_sparse_samples_weight_maps_and_confidence_with_a_blur():

@@ -209,7 +209,7 @@ def run_item(job: Job, threads: int | None = None) -> dict:
         rec.update(result)
         # (a fixed budget of reweightings, or the blurred prior's safety net: usable surfaces)
         if not result["converged"] and result["info"].get("solver") != "discontinuous" and (
-                not result["info"].get("prior_blur")):
+                not (result["info"].get("prior_blur") or {}).get("capped")):
             rec.update(status="not_converged", exit=2, error="did not converge")
     except MemoryLimitError as e:
         rec.update(status="memory", error=str(e), exit=1)

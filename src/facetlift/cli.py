@@ -421,11 +421,11 @@ def integrate(normals, gradients, progress, as_json, **flags):
         click.echo(summary(record))
     info = record["info"]
     blur = info.get("prior_blur") or {}
-    if blur and not blur.get("converged", True):
+    if blur.get("capped"):
         # a safety net, not a setting: the surface is usable (its mismatch is in the info)
         click.echo(
             f"note: the blurred prior's target corrections stopped at their cap of "
-            f"{blur.get('updates')} updates before the mismatch levelled off (a safety net; "
+            f"{blur.get('cap')} updates before the mismatch levelled off (a safety net; "
             f"mismatch {blur.get('mismatch') or float('nan'):.3g}, first solve's "
             f"{blur.get('mismatch_first') or float('nan'):.3g})",
             err=True,
@@ -439,7 +439,7 @@ def integrate(normals, gradients, progress, as_json, **flags):
             "(--option discontinuity_iter=N)",
             err=True,
         )
-    elif not record["converged"] and not blur:  # (prior_blur takes solver='direct' only)
+    elif not record["converged"] and not blur.get("capped"):
         raise SolverFailure(
             f"method {info.get('method')!r} did not converge in {info.get('iterations')} "
             "iterations (outputs were written); raise --max-iter or --tol"

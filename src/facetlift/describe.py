@@ -80,7 +80,8 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
     encoding, mask and components, unusable normals (with the first one's location), K, a
     dataset folder's depth prior and normal confidence (``prior`` / ``confidence``: known
-    pixels and value range), and :func:`estimate` for the default method.
+    pixels and value range; one that ``integrate`` would refuse is left out and the refusal
+    given as ``refused`` and a warning), and :func:`estimate` for the default method.
 
     Parameters
     ----------
@@ -118,12 +119,23 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
             if not src.is_dir():
                 raise
             # a folder's prior or confidence that integrate would refuse: the rest is still
-            # described, that refusal as a warning (if the folder reads without them)
-            inp = read(replace(job, dataset_prior=False, dataset_confidence=False,
-                                   prior_scale=None))
+            # described (without the file at fault, if the folder reads so), the refusal in
+            # "refused" and as a warning
+            inp = None
+            for prior, conf in ((False, True), (True, False), (False, False)):
+                try:
+                    inp = read(replace(job, dataset_prior=prior, dataset_confidence=conf,
+                                       prior_scale=job.prior_scale if prior else None))
+                    break
+                except ValueError:
+                    continue
+            if inp is None:
+                raise
             unread.append(f"integrate would refuse this folder: {e}")
     out = {"input": str(src), **_file_facts(src),
            "warnings": unread + [str(w.message) for w in read_caught]}
+    if unread:
+        out["refused"] = unread[0].split(": ", 1)[1]
     # (a gradient field in the other layout: no frame of the normals made from it is right)
     layout = next((w.message.other for w in read_caught
                    if isinstance(w.message, frames.LayoutWarning)), None)

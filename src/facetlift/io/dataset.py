@@ -103,4 +103,11 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     except ValueError as e:
         raise ValueError(f"{e}; or leave the folder's confidence unread with --no-confidence "
                          "(with_confidence=False in Python)") from None
+    H, W = normals.shape[:2]
+    for name, path, arr, flag in (("prior", ppath, prior, "prior"),
+                                  ("confidence", cpath, conf, "confidence")):
+        if arr is not None and arr.shape != (H, W):
+            raise ValueError(f"`{name}`: {path} is {arr.shape[0]}x{arr.shape[1]} (HxW) but the "
+                             f"normal map is {H}x{W}; or leave the folder's {name} unread "
+                             f"with --no-{flag} (with_{flag}=False in Python)")
     return {"normals": normals, "mask": mask, "K": K, "prior": prior, "confidence": conf}

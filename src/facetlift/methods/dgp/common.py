@@ -171,6 +171,7 @@ class BlurredPrior:
         self.done = False
         self.updates = 0
         self._capped = 0  # (updates counted toward MAX_UPDATES)
+        self.capped = False  # (stopped by MAX_UPDATES)
         self.accelerate = False  # (Anderson mixing and reverts: the direct route's)
         self._mixed = False  # (whether the last step was a mixed one)
         self._previous = self.target
@@ -223,7 +224,7 @@ class BlurredPrior:
                 self.updates -= 1
             return False
         if settled and self._capped >= self.MAX_UPDATES:
-            self.done = True
+            self.done = self.capped = True
             return False
         f = self.OMEGA * r
         step = f
@@ -250,7 +251,9 @@ class BlurredPrior:
         samples, in the camera's unknown: height, or log-depth for a perspective camera) of
         the surface returned, of the first solve's (``mismatch_first``) and of the last
         surface the updates saw (``mismatch_last``: the discontinuity route's final solve,
-        with its own weights, comes after it), and whether the updates levelled off."""
+        with its own weights, comes after it), whether the updates levelled off
+        (``converged``), and whether :data:`MAX_UPDATES` (``cap``) stopped them (``capped``;
+        with discontinuities the reweighting budget can stop them before either)."""
         first = self.residuals[0] if self.residuals else None
         last = self.residuals[-1] if self.residuals else None
         if self.grew and len(self.residuals) > 1:
@@ -258,4 +261,5 @@ class BlurredPrior:
         return {"sigma": self.sigma, "updates": self.updates,
                 "mismatch": self.returned if self.returned is not None else last,
                 "mismatch_first": first, "mismatch_last": last,
-                "converged": self.converged}
+                "converged": self.converged, "capped": self.capped,
+                "cap": self.MAX_UPDATES}
