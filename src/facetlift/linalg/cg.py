@@ -168,6 +168,8 @@ def cg(
             rnorm = np.sqrt(_dot(r, r))
             best, best_at, saved = rnorm, it, False
             info.residuals[-1] = rnorm / bnorm  # (the state this iteration leaves)
+            if callback is not None:
+                callback(x)
             if progress is not None:
                 progress(it, info.residuals[-1])
             # (as a converged CG's true residual: within 10x the tolerance; with a forcing
