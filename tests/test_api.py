@@ -324,3 +324,29 @@ def test_every_method_reports_iterations_and_converged(method):
     n = np.dstack([np.zeros((8, 9, 2)), np.ones((8, 9))])
     info = facetlift.integrate(n, method=method).info
     assert info["iterations"] >= 1 and info["converged"] is True
+
+
+def test_warning_kinds_can_be_turned_into_errors_one_by_one():
+    """A library could not make "wrong frame" or "not converged" an error without matching
+    the message: every warning was a plain UserWarning but the unusable-normals one."""
+    import warnings
+
+    from facetlift import synthetic
+
+    g = synthetic.analytic("sphere", 48)
+    flipped = g.normals * np.array([1.0, -1.0, 1.0])  # (y down: the frame is wrong)
+    for kind in (facetlift.FrameWarning, facetlift.ConvergenceWarning,
+                 facetlift.UnusableNormalsWarning, facetlift.LayoutWarning):
+        assert issubclass(kind, UserWarning)
+    assert issubclass(facetlift.LayoutWarning, facetlift.FrameWarning)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", facetlift.FrameWarning)
+        facetlift.integrate(g.normals, g.mask)  # (the right frame: no warning)
+        with pytest.raises(facetlift.FrameWarning, match="y flipped"):
+            facetlift.integrate(flipped, g.mask)
+        with pytest.raises(facetlift.FrameWarning, match="decoded"):
+            facetlift.integrate(np.round((g.normals + 1) / 2 * 255).astype(np.uint8), g.mask)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", facetlift.ConvergenceWarning)
+        with pytest.raises(facetlift.ConvergenceWarning, match="bini"):
+            facetlift.integrate(g.normals, g.mask, method="bini", max_iter=1)

@@ -474,13 +474,15 @@ def test_planar_tiff_reads_as_its_contiguous_twin(tmp_path, normals):
     assert a.shape == n.shape and np.array_equal(a, b)
 
 
-def test_stdout_redirection_of_overlapping_readers_is_undone():
+def test_stdout_redirection_of_overlapping_readers_is_undone(monkeypatch):
     """The first reader leaves while the second is still inside (the order a per-reader
     save-and-restore gets wrong: fd 1 ended on stderr)."""
     import os
     import threading
 
     from facetlift.io import images
+
+    monkeypatch.setitem(images._REDIRECT, "enabled", True)  # (the command line's setting)
 
     before = os.fstat(1)
     first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
@@ -505,3 +507,18 @@ def test_stdout_redirection_of_overlapping_readers_is_undone():
     after = os.fstat(1)
     assert (before.st_dev, before.st_ino) == (after.st_dev, after.st_ino)
     assert images._REDIRECT["depth"] == 0 and images._REDIRECT["saved"] is None
+
+
+def test_a_library_caller_s_stdout_is_left_alone(monkeypatch):
+    """Only the command line sends stdout to stderr around the C readers: a library's host
+    printing from another thread meanwhile wrote to stderr (fd 1 is the process's)."""
+    import os
+
+    from facetlift.io import images
+
+    monkeypatch.setitem(images._REDIRECT, "enabled", False)
+    before = os.fstat(1)
+    with images._stdout_to_stderr():
+        inside = os.fstat(1)
+        assert images._REDIRECT["depth"] == 0
+    assert (before.st_dev, before.st_ino) == (inside.st_dev, inside.st_ino)

@@ -364,3 +364,52 @@ def test_amg_setup_is_deterministic_and_leaves_numpy_random_alone():
     after = np.random.get_state()
     assert np.array_equal(a.depth, b.depth, equal_nan=True)
     assert np.array_equal(before[1], after[1]) and before[2] == after[2]
+
+
+def test_ruge_stueben_setup_does_not_touch_numpy_random(monkeypatch):
+    """A library user's check: a thread drawing from numpy's global stream while
+    discontinuities=True ran got the seeded stream's numbers (the setup seeded it around
+    every hierarchy, which Ruge-Stueben does not need)."""
+    from facetlift import synthetic
+    from facetlift.linalg.amg import hierarchy
+
+    def refuse(*a, **kw):
+        raise AssertionError("numpy's global random state touched")
+
+    monkeypatch.setattr(np.random, "seed", refuse)
+    monkeypatch.setattr(np.random, "set_state", refuse)
+    K, _ = _spd(200, seed=1)
+    for interpolation in ("classical", "direct"):
+        hierarchy(K, symmetric_gs=True, interpolation=interpolation)
+    g = synthetic.analytic("tent", 48)
+    s = facetlift.integrate(g.normals, g.mask, discontinuities=True)
+    assert s.info["multigrid_builds"] >= 1
+
+
+def test_threaded_calls_leave_the_process_blas_threads_as_they_were():
+    """Two threads of discontinuities=True left the process on one BLAS thread for good (each
+    limited it and put back what it found, in the wrong order); the route sets no limit
+    now, and the shared limit of kernel's tiles puts back the process's own setting."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from threadpoolctl import threadpool_info
+
+    from facetlift import synthetic
+    from facetlift._threads import single_blas_thread
+
+    def threads():
+        return [d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"]
+
+    before = threads()
+    g = synthetic.analytic("tent", 40)
+    with ThreadPoolExecutor(2) as ex:
+        runs = [ex.submit(facetlift.integrate, g.normals, g.mask, discontinuities=True)
+                for _ in range(4)]
+        depths = [r.result().depth for r in runs]
+    assert threads() == before
+    assert all(np.array_equal(d, depths[0], equal_nan=True) for d in depths)
+    with single_blas_thread():
+        with single_blas_thread():
+            assert all(n == 1 for n in threads())
+        assert all(n == 1 for n in threads())
+    assert threads() == before

@@ -184,3 +184,27 @@ def test_pixel_methods_edge_vertices_follow_the_normals(method):
     v = s.vertex_depth
     centres = 0.25 * (v[:-1, :-1] + v[:-1, 1:] + v[1:, 1:] + v[1:, :-1])
     np.testing.assert_allclose(centres[gt.mask], s.depth[gt.mask], atol=1e-9)
+
+
+def test_preview_and_mesh_keywords_are_checked(tmp_path):
+    """A library user's check: bad keywords of save(".png") and to_mesh gave numpy errors,
+    a 2.7 TiB allocation, an all-black PNG, or silently triangles for triangles="no"."""
+    import facetlift
+    from facetlift import synthetic
+
+    g = synthetic.analytic("sphere", 24)
+    s = facetlift.integrate(g.normals, g.mask)
+    bad = [({"light": (1, 2)}, "`light`"), ({"light": "up"}, "`light`"),
+           ({"light": (0, 0, 0)}, "`light`"), ({"light": (np.nan, 1, 1)}, "`light`"),
+           ({"min_size": 10**6}, "`min_size`"), ({"min_size": "a"}, "`min_size`"),
+           ({"min_size": 2.5}, "`min_size`"), ({"background": (300, 0, 0)}, "`background`"),
+           ({"background": (0, 0)}, "`background`")]
+    for kw, name in bad:
+        with pytest.raises(ValueError, match=name):
+            s.save(tmp_path / "p.png", **kw)
+    assert not (tmp_path / "p.png").exists()
+    s.save(tmp_path / "p.png", light=(0, 0, 1), min_size=0, background=(0, 0, 0))
+    with pytest.raises(ValueError, match="`triangles` must be True or False"):
+        s.to_mesh(triangles="no")
+    with pytest.raises(ValueError, match="`pixel_size` must be a positive number"):
+        facetlift.integrate(g.normals, g.mask, pixel_size="1")

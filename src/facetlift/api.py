@@ -140,11 +140,19 @@ def integrate(
 
     Warns
     -----
-    UserWarning
+    facetlift.UnusableNormalsWarning
         Once, when normals inside the mask cannot be used (non-finite, zero-length,
         back-facing or grazing): they become missing samples (``info["input"]`` counts them).
+    facetlift.FrameWarning
         When `normals` is uint8/uint16 (decoded as ``v / max * 2 - 1``). When the field is far
         more integrable with y or x flipped (:func:`facetlift.frames.flip_check`).
+    facetlift.ConvergenceWarning
+        When an iterative method stops at its iteration cap, or a linear solve did not
+        converge (the discontinuity route's cap is in ``info["converged"]`` only: a budget).
+    UserWarning
+        Others (isolated pixels, components without a normal, a prior's free components...).
+        All are subclasses of UserWarning: ``warnings.simplefilter("error",
+        facetlift.FrameWarning)`` turns one kind into an error.
     """
     t0 = time.perf_counter()
     info = methods.get(method)

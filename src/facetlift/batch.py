@@ -559,7 +559,10 @@ def _on_processes(jobs, n_workers: int, done) -> None:
     # items at shutdown, and an interrupt during a worker's start could leave the process
     # waiting for it at exit (a Ctrl-C hang, 2 of 2 tries at 3 s into a 3-map batch)
     ctx = _Recording(get_context())  # (every worker it starts: what _stop stops)
-    pool = ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_worker_start)
+    from .io.images import _REDIRECT
+
+    pool = ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_worker_start,
+                               initargs=(_REDIRECT["enabled"],))
     try:
         with _Done():
             # one item per dispatch: Dask's default hands ready tasks out in chunks of 6, so a
@@ -580,11 +583,15 @@ def _on_processes(jobs, n_workers: int, done) -> None:
     pool.shutdown(wait=True)
 
 
-def _worker_start() -> None:
-    """A batch worker process leaves Ctrl-C to the parent, which stops it (:func:`_stop`)."""
+def _worker_start(protect: bool = False) -> None:
+    """A batch worker process leaves Ctrl-C to the parent, which stops it (:func:`_stop`), and
+    keeps stdout as the parent does (`protect`: the command line's, which it shares)."""
     import signal
 
+    from .io.images import protect_stdout
+
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    protect_stdout(protect)
 
 
 #: Seconds :func:`_stop` waits for terminated workers before it kills them.

@@ -765,6 +765,9 @@ def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else list(argv)
     if not args:
         args = ["--help"]
+    from .io.images import protect_stdout
+
+    protect_stdout()  # (stdout carries the --json object alone: the C readers' prints aside)
     _STATE.update(debug=False, errors=[], printed_json=False, args=tuple(args))
     code = _main(args)
     if code != EXIT_OK and "--json" in args and not _STATE["printed_json"]:

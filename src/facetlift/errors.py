@@ -1,6 +1,10 @@
 """The exceptions facetlift raises besides ``ValueError`` (bad input, naming the argument):
 :class:`SolverError`, :class:`MemoryLimitError` and, from :func:`facetlift.batch`,
-:class:`WorkersDied`.
+:class:`WorkersDied`; and the warning categories a caller may filter or turn into errors
+(``warnings.simplefilter("error", facetlift.FrameWarning)``): :class:`FrameWarning`,
+:class:`ConvergenceWarning` (and :class:`facetlift.problem.UnusableNormalsWarning`,
+:class:`facetlift.frames.LayoutWarning`, a FrameWarning). The others are plain
+``UserWarning``.
 
 Kept in a module without heavy imports, so the command line can catch them cheaply.
 """
@@ -22,3 +26,15 @@ class WorkersDied(RuntimeError):
 class MemoryLimitError(MemoryError):
     """The planned peak memory of a job exceeds the limit (``max_memory``): the message names
     the estimate, the limit and what to do instead."""
+
+
+class FrameWarning(UserWarning):
+    """The input is probably not in the frame or encoding it was read in: far more
+    integrable with y (or x) flipped, a gradient field in the other layout
+    (:class:`facetlift.frames.LayoutWarning`), or integer normals decoded as a PNG encoding."""
+
+
+class ConvergenceWarning(UserWarning):
+    """An iterative method stopped at its iteration cap before its own stopping rule, or a
+    linear solve did not converge; the result is returned (``info["converged"]`` False where
+    the method reports it)."""

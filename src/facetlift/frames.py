@@ -43,6 +43,7 @@ import re
 import numpy as np
 
 from ._warnings import warn
+from .errors import FrameWarning
 
 #: Named frames -> axis strings (see the module docstring).
 FRAMES = {
@@ -240,7 +241,7 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
             )
         warn(
             f"`{name}` is {n.dtype}: decoded as v / {np.iinfo(n.dtype).max} * 2 - 1 (the PNG "
-            "encoding); pass float normals to silence this"
+            "encoding); pass float normals to silence this", FrameWarning
         )
         n = decode(n)
     n = to_facetlift(n, frame)
@@ -424,13 +425,13 @@ def flip_check(problem) -> dict:
         if frame == GRADIENT_FIELD:
             warn(f"{head}: the field's y slope probably has the wrong sign: negate q (p with "
                  "--gradient-frame rowcol), or the x slope instead if the surface then comes "
-                 "out inside-out")
+                 "out inside-out", FrameWarning)
         else:
             read = "" if is_identity(frame) else f" (read in the frame {axis_string(frame)})"
             warn(f"{head}: its frame{read} is probably wrong in y: try "
                  f"{flag(negated(frame, 'y'))}, or {flag(negated(frame, 'x'))} if the surface "
                  "then comes out inside-out; docs/conventions.md lists the frames of common "
-                 "sources")
+                 "sources", FrameWarning)
     return out
 
 
@@ -466,7 +467,7 @@ def gradient_frame(name) -> str:
 LAYOUT_MIN_CURL = 0.3
 
 
-class LayoutWarning(UserWarning):
+class LayoutWarning(FrameWarning):
     """A gradient field far more integrable in the other layout (:func:`layout_check`);
     `other` names that layout."""
 

@@ -103,6 +103,8 @@ class Surface:
         stretched across it. Faces list corners counter-clockwise seen from the viewer, so face
         normals point toward the viewer; facets in row-major pixel order.
         """
+        if not isinstance(triangles, (bool, np.bool_)):
+            raise ValueError(f"`triangles` must be True or False; got {triangles!r}")
         if self.split is not None:
             corners, i, j, depth = self.split
             verts = self.camera.points(i, j, depth)

@@ -56,15 +56,26 @@ def _decode_image(path: Path, ext: str, arg: str) -> np.ndarray:
         ) from None
 
 
-_REDIRECT = {"lock": threading.Lock(), "depth": 0, "saved": None}
+_REDIRECT = {"lock": threading.Lock(), "depth": 0, "saved": None, "enabled": False}
+
+
+def protect_stdout(enabled: bool = True) -> None:
+    """Whether the readers send the C libraries' own prints to stderr while they run
+    (:func:`_stdout_to_stderr`): the command line turns it on (its stdout carries the --json
+    object alone), a library caller's stdout is left alone (file descriptor 1 is the whole
+    process's: a host thread printing meanwhile would write to stderr)."""
+    _REDIRECT["enabled"] = bool(enabled)
 
 
 @contextlib.contextmanager
 def _stdout_to_stderr():
     """The C library's own prints (OpenEXR warns about a corrupt file on stdout) go to stderr
-    meanwhile: stdout carries the command line's --json object alone. File descriptor 1 is
-    the process's: overlapping readers (threads) share one redirection, undone by the last
-    to leave."""
+    meanwhile, where :func:`protect_stdout` is on: stdout carries the command line's --json
+    object alone. File descriptor 1 is the process's: overlapping readers (threads) share
+    one redirection, undone by the last to leave."""
+    if not _REDIRECT["enabled"]:
+        yield
+        return
     with _REDIRECT["lock"]:
         if _REDIRECT["depth"] == 0:
             try:

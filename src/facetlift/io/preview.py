@@ -9,6 +9,39 @@ import numpy as np
 from ._paths import _suffix
 from .images import _write_png
 
+#: The most pixels a preview's shorter side is enlarged to (`min_size`).
+MAX_MIN_SIZE = 8192
+
+
+def _light(light) -> np.ndarray:
+    try:
+        L = np.asarray(light, dtype=float)
+    except (TypeError, ValueError):
+        L = None
+    if L is None or L.shape != (3,) or not np.isfinite(L).all() or not np.any(L):
+        raise ValueError(f"`light` must be 3 finite numbers, not all zero (a direction x, y, "
+                         f"z); got {light!r}")
+    return L / np.linalg.norm(L)
+
+
+def _min_size(min_size) -> int:
+    if isinstance(min_size, bool) or not isinstance(min_size, (int, np.integer)) or not (
+            0 <= min_size <= MAX_MIN_SIZE):
+        raise ValueError(f"`min_size` must be an integer from 0 to {MAX_MIN_SIZE} (pixels of "
+                         f"the preview's shorter side); got {min_size!r}")
+    return int(min_size)
+
+
+def _background(background) -> np.ndarray:
+    try:
+        bg = np.asarray(background, dtype=float)
+    except (TypeError, ValueError):
+        bg = None
+    if bg is None or bg.shape != (3,) or not np.isfinite(bg).all() or (
+            bg.min() < 0 or bg.max() > 255):
+        raise ValueError(f"`background` must be 3 numbers in 0-255 (RGB); got {background!r}")
+    return np.round(bg).astype(np.uint8)
+
 
 def shade(surface, *, light=(-1.0, 1.0, 2.0), ambient: float = 0.15) -> np.ndarray:
     """Lambertian shading of a surface's facets, (H, W) in [0, 1], NaN outside the domain.
@@ -22,8 +55,7 @@ def shade(surface, *, light=(-1.0, 1.0, 2.0), ambient: float = 0.15) -> np.ndarr
     from ..metrics import surface_normals
 
     n = surface_normals(surface)
-    L = np.asarray(light, dtype=float)
-    L = L / np.linalg.norm(L)
+    L = _light(light)
     s = ambient + (1.0 - ambient) * np.clip(n @ L, 0.0, 1.0)
     s[~surface.mask] = np.nan
     return s
@@ -61,17 +93,14 @@ def write_preview(
     ------
     ImportError
         If `colormap` is given and matplotlib is not installed.
+    ValueError
+        A bad `light`, `colormap`, `min_size` (an integer up to :data:`MAX_MIN_SIZE`) or
+        `background`, naming it.
     """
     p = Path(path)
     _suffix(p, (".png",), "preview", "path")
-    s = shade(surface, light=light)
-    inside = surface.mask
-    bg = np.asarray(background, dtype=np.uint8)
-    img = np.empty(s.shape + (3,), dtype=np.uint8)
-    img[:] = bg
-    tint = np.array([0.92, 0.92, 0.97])
-    img[inside] = np.round(255 * s[inside, None] * tint).astype(np.uint8)
-    panels = [img]
+    min_size, bg = _min_size(min_size), _background(background)
+    cmap = None
     if colormap is not None:
         try:
             import matplotlib
@@ -80,11 +109,22 @@ def write_preview(
                 "write_preview(colormap=...) needs matplotlib, which comes with the plot extra: "
                 "pip install 'facetlift[plot]'"
             ) from e
-
+        try:
+            cmap = matplotlib.colormaps[colormap]
+        except (KeyError, TypeError):
+            raise ValueError(f"`colormap` must be a matplotlib colormap name (e.g. 'viridis'); "
+                             f"got {colormap!r}") from None
+    s = shade(surface, light=light)
+    inside = surface.mask
+    img = np.empty(s.shape + (3,), dtype=np.uint8)
+    img[:] = bg
+    tint = np.array([0.92, 0.92, 0.97])
+    img[inside] = np.round(255 * s[inside, None] * tint).astype(np.uint8)
+    panels = [img]
+    if cmap is not None:
         d = surface.depth
         lo, hi = np.nanmin(d[inside]), np.nanmax(d[inside])
         t = (d - lo) / (hi - lo) if hi > lo else np.zeros_like(d)
-        cmap = matplotlib.colormaps[colormap]
         col = np.empty_like(img)
         col[:] = bg
         col[inside] = np.round(255 * cmap(t[inside])[:, :3]).astype(np.uint8)
@@ -113,6 +153,7 @@ def write_discontinuities(path, surface, *, min_size: int = 256) -> Path:
     """
     p = Path(path)
     _suffix(p, (".png",), "discontinuity map", "path")
+    min_size = _min_size(min_size)
     jumps = getattr(surface, "discontinuities", None)
     if jumps is None:
         raise ValueError(

@@ -29,18 +29,18 @@ def hierarchy(
     """
     import pyamg
 
-    with _seeded():
-        if method == "sa":
+    if method == "sa":  # (Ruge-Stueben's setup draws no random numbers: no seeding)
+        with _seeded():
             return pyamg.smoothed_aggregation_solver(sp.csr_matrix(K), max_coarse=max_coarse)
-        kw = {}
-        if symmetric_gs:
-            kw = {
-                "presmoother": ("gauss_seidel", {"sweep": "forward"}),
-                "postsmoother": ("gauss_seidel", {"sweep": "backward"}),
-                "coarse_solver": coarse_solver,
-            }
-        return pyamg.ruge_stuben_solver(sp.csr_matrix(K), max_coarse=max_coarse,
-                                        interpolation=interpolation, **kw)
+    kw = {}
+    if symmetric_gs:
+        kw = {
+            "presmoother": ("gauss_seidel", {"sweep": "forward"}),
+            "postsmoother": ("gauss_seidel", {"sweep": "backward"}),
+            "coarse_solver": coarse_solver,
+        }
+    return pyamg.ruge_stuben_solver(sp.csr_matrix(K), max_coarse=max_coarse,
+                                    interpolation=interpolation, **kw)
 
 
 _SEED_LOCK = threading.Lock()
@@ -48,10 +48,13 @@ _SEED_LOCK = threading.Lock()
 
 @contextlib.contextmanager
 def _seeded(seed: int = 0):
-    """numpy's global random state seeded for a pyamg setup (its spectral-radius estimates
-    start from random vectors), then put back: the same input gives the same hierarchy, and
-    the caller's random sequence is not advanced (backend="amg" differed by 2e-12 from run to
-    run and moved numpy's global state)."""
+    """numpy's global random state seeded for a smoothed-aggregation setup (its spectral-radius
+    estimates start from random vectors), then put back: the same input gives the same
+    hierarchy, and the caller's random sequence is not advanced (backend="amg" differed by
+    2e-12 from run to run and moved numpy's global state). A thread of the caller's drawing
+    from that global state meanwhile draws from the seeded one: only the comparison methods'
+    smoothed aggregation (regularization, diffusion) does this; Ruge-Stueben, which every
+    other route uses, draws nothing and is not seeded."""
     with _SEED_LOCK:  # (threads, e.g. Dask's, build one at a time: the global state is one)
         state = np.random.get_state()
         np.random.seed(seed)

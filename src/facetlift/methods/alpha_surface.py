@@ -63,6 +63,7 @@ from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
 from .. import linalg
 from .._warnings import warn
+from ..errors import ConvergenceWarning
 from ..operators import graph as pg
 from ..options import Option
 from . import MethodResult
@@ -181,7 +182,7 @@ def run(problem, *, alpha, max_iter, tol, backend, progress) -> MethodResult:
             break
     if not converged:
         warn(f"alpha_surface: no convergence in {rounds} rounds (the kept edges still grew); "
-             "raise `max_iter`")
+             "raise `max_iter`", ConvergenceWarning)
     t2 = time.perf_counter()
     n_data = int(has.sum())
     info = {

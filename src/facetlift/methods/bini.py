@@ -47,6 +47,7 @@ import scipy.sparse as sp
 
 from .. import linalg
 from .._warnings import warn
+from ..errors import ConvergenceWarning
 from ..operators import graph as pg
 from ..options import Option
 from . import MethodResult
@@ -177,7 +178,8 @@ def run(problem, *, discontinuities, k, max_iter, tol, cg_tol, cg_max_iter, prog
             converged = True
             break
     if not converged:
-        warn(f"bini: the energy still changed by {changes[-1]:.2g} after {max_iter} iterations")
+        warn(f"bini: the energy still changed by {changes[-1]:.2g} after {max_iter} iterations",
+             ConvergenceWarning)
     u, filled = fill_unreached(problem, A, u)
     info = {
         "iterations": it,

@@ -93,9 +93,9 @@ import scipy.ndimage as ndi
 import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 import scipy.sparse.linalg as spla
-from threadpoolctl import threadpool_limits
 
 from .. import linalg
+from .._threads import single_blas_thread
 from ..options import Option
 from . import MethodResult
 
@@ -265,7 +265,7 @@ def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin, progress=None)
         return len(members)
 
     workers = max(1, min(len(groups), os.cpu_count() or 1, 8))
-    with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(workers) as pool:
+    with single_blas_thread(), ThreadPoolExecutor(workers) as pool:
         done, total = 0, max(sum(len(m) for m in groups.values()), 1)
         for k, count in enumerate(pool.map(fit_group, groups.values()), 1):
             done += count

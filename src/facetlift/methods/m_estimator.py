@@ -62,6 +62,7 @@ import numpy as np
 
 from .. import linalg
 from .._warnings import warn
+from ..errors import ConvergenceWarning
 from ..operators import graph as pg
 from ..options import Option
 from . import MethodResult
@@ -131,7 +132,7 @@ def run(problem, *, weight, k, scale, max_iter, tol, backend, progress) -> Metho
     if not converged:
         warn(
             f"m_estimator: no convergence in {max_iter} iterations (last relative change "
-            f"{changes[-1]:.3g} >= tol={tol}); raise `max_iter`"
+            f"{changes[-1]:.3g} >= tol={tol}); raise `max_iter`", ConvergenceWarning
         )
     t1 = time.perf_counter()
     info = {

@@ -49,6 +49,7 @@ import scipy.sparse as sp
 
 from .. import linalg
 from .._warnings import warn
+from ..errors import ConvergenceWarning
 from ..operators import graph as pg
 from ..options import Option
 from . import MethodResult
@@ -125,7 +126,8 @@ def run(problem, *, lam, prior, max_iter, tol, backend, progress) -> MethodResul
             slope = (z[graph.head] - z[graph.tail]) / h
         if not converged:
             warn(f"regularization: no convergence in {n_iter} rounds (last relative change "
-                 f"{changes[-1] if changes else float('nan'):.3g} >= tol={tol}); raise `max_iter`")
+                 f"{changes[-1] if changes else float('nan'):.3g} >= tol={tol}); raise `max_iter`",
+                 ConvergenceWarning)
         info.update(iterations=n_iter, converged=converged, changes=changes)
     info["seconds"] = {"solve": time.perf_counter() - t0}
     return MethodResult(values=z, info=info)

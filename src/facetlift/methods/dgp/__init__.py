@@ -68,6 +68,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..._warnings import warn
+from ...errors import ConvergenceWarning
 from ...operators.stencil import E_X, E_Y
 from ...options import Option
 from .. import MethodResult
@@ -168,7 +169,7 @@ def run(
                  f"{domain.n_vertices:,} vertices did not converge in CG (relative residual "
                  f"up to {max(info['unsolved']):.1e}) and were too large to factorize here "
                  f"(more than {discontinuous.DIRECT_POLISH:,} vertices, or short of memory): "
-                 "the surface is usable but less exact (info['unsolved'])")
+                 "the surface is usable but less exact (info['unsolved'])", ConvergenceWarning)
         copies, pinfo = place_pieces(domain, y, bx, by, target, s,
                                      anchored=None if prior is None else prior[0] > 0,
                                      hang_anchored=blur is not None)

@@ -98,7 +98,6 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
-from threadpoolctl import threadpool_limits
 
 from ... import linalg
 from ...conventions import CORNER_OFFSETS
@@ -666,12 +665,13 @@ def solve_discontinuous(
         ``unsolved`` (the relative residuals of the solves whose unfinished CG iterate was kept,
         too large to factorize), ``unsettled_corners``, ``seconds``.
     """
-    # the solves take vector norms and products (CG, the coarse solves): with multi-threaded
-    # BLAS on a busy machine each one costs milliseconds (measured with pyamg's V-cycle: 13 of
-    # 20 s on the bear), single-threaded microseconds
-    with threadpool_limits(limits=1, user_api="blas"):
-        return _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight,
-                      cg_rtol, callback, prior, weights, x0, final_weights, blur)
+    # (BLAS was limited to one thread here while pyamg's own V-cycle took its vector norms
+    # through it: 13 of 20 s on the bear on a busy machine. CG's products are einsum's and
+    # the V-cycle is ours since; the process-wide limit stuck at one thread for a library's
+    # threaded callers, and without it the timing objects take the same time: bear 0.77 /
+    # 0.77 s, bunny 2.34 / 2.41 s, medians of 3 interleaved, 2026-12-03)
+    return _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight,
+                  cg_rtol, callback, prior, weights, x0, final_weights, blur)
 
 
 def _affordable(n: int) -> bool:

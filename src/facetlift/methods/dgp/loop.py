@@ -14,6 +14,7 @@ import numpy as np
 
 from ... import linalg
 from ..._warnings import warn
+from ...errors import ConvergenceWarning
 from ...linalg.facet import FacetPreconditioner, thin
 from ...linalg.spectral import RectangleSolver
 from ...operators.stencil import (
@@ -137,7 +138,7 @@ def solve_iterative(
             f"dgp: no convergence in {max_iter} iterations (last change of the average "
             f"deviation {abs(devs[-1] - devs[-2]):.3g} deg"
             + (", and tol=0 never stops the loop early" if tol == 0 else f" >= tol={tol}")
-            + "); raise `max_iter`"
+            + "); raise `max_iter`", ConvergenceWarning
         )
     info = {
         "solver": "iterative",

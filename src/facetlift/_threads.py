@@ -1,0 +1,40 @@
+"""One BLAS thread while a method's own worker threads run (``kernel``'s tiles), shared by
+overlapping calls.
+
+The limit (threadpoolctl) is process-wide: two calls that each set it and put back what they
+found, overlapping in threads, put it back in the wrong order and left the whole process on
+one BLAS thread for good (a library user's check: then ``[1, 1]`` threads where there were
+2). Here the first call to enter sets it and the last to leave puts back the process's own
+setting. While any such call runs, every thread of the process has one BLAS thread: the limit
+cannot be per thread. (OpenBLAS 0.3.31 with pthreads ignores a thread's setting while the
+thread that set the limit is still running inside the library's limit: overlapping calls
+from two threads whose first to enter leaves first can still leave one thread; the
+discontinuity route, which a user may well call from threads, sets no limit.)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+
+_LOCK = threading.Lock()
+_STATE = {"depth": 0, "limiter": None}
+
+
+@contextlib.contextmanager
+def single_blas_thread():
+    """BLAS limited to one thread for the duration (see the module docstring)."""
+    from threadpoolctl import threadpool_limits
+
+    with _LOCK:
+        if _STATE["depth"] == 0:
+            _STATE["limiter"] = threadpool_limits(limits=1, user_api="blas")
+        _STATE["depth"] += 1
+    try:
+        yield
+    finally:
+        with _LOCK:
+            _STATE["depth"] -= 1
+            if _STATE["depth"] == 0:
+                _STATE["limiter"].restore_original_limits()
+                _STATE["limiter"] = None
