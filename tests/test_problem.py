@@ -181,10 +181,18 @@ def test_backfacing_error_on_request(bad):
 
 
 def test_no_usable_normal_is_refused():
+    """An error alone: it came after a warning about the same normals (a library user's
+    check); with every usable normal at confidence 0 the error names `confidence`."""
+    import warnings
+
     n = np.zeros((3, 3, 3))
     n[..., 0] = 1.0  # every normal edge-on
-    with pytest.warns(UserWarning), pytest.raises(ValueError, match="no usable normal"):
-        facetlift.prepare(n, np.ones((3, 3), bool))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match="no usable normal"):
+            facetlift.prepare(n, np.ones((3, 3), bool))
+        with pytest.raises(ValueError, match="`confidence` is 0 at every usable normal"):
+            facetlift.prepare(up(), np.ones(up().shape[:2], bool), confidence=0)
 
 
 def test_zero_length_normal_inside_mask():

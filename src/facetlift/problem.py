@@ -396,6 +396,15 @@ def prepare(
         counts["zero_confidence"] = int(counts_zero.sum())
     counts["usable"] = int(usable.sum())
     counts["outlier_eps"] = float(eps)
+    if not usable.any():  # (an error alone: no warning about the same normals first)
+        if conf is not None and counts_zero.any():
+            raise ValueError(
+                f"`confidence` is 0 at every usable normal inside the mask "
+                f"({int(counts_zero.sum())} of them): nothing is left to integrate ({counts})")
+        raise ValueError(
+            "`normals` has no usable normal inside the mask (all missing, non-finite, "
+            f"back-facing or grazing: {counts})"
+        )
     problems = {k: v for k, v in bad.items() if v.any()}
     if problems:
         first = int(np.flatnonzero(np.logical_or.reduce(list(problems.values())))[0])
@@ -416,11 +425,6 @@ def prepare(
             f"{sum(int(v.sum()) for v in problems.values())} normal(s) inside the mask cannot be "
             f"used and were treated as missing samples ({what}{rule}); first at "
             f"(row {r[first]}, col {c[first]}){frame}", UnusableNormalsWarning
-        )
-    if not usable.any():
-        raise ValueError(
-            "`normals` has no usable normal inside the mask (all missing, non-finite, "
-            f"back-facing or grazing: {counts})"
         )
     nf[~front] = np.nan
     pv = pw = None
