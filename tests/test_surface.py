@@ -204,7 +204,11 @@ def test_preview_and_mesh_keywords_are_checked(tmp_path):
             s.save(tmp_path / "p.png", **kw)
     assert not (tmp_path / "p.png").exists()
     s.save(tmp_path / "p.png", light=(0, 0, 1), min_size=0, background=(0, 0, 0))
+    s.save(tmp_path / "q.png", min_size=300.0, background=0)  # (a whole float, a grey level)
     with pytest.raises(ValueError, match="`triangles` must be True or False"):
         s.to_mesh(triangles="no")
+    for ext in (".ply", ".obj"):  # (save turned it into bool("no") before to_mesh saw it)
+        with pytest.raises(ValueError, match="`triangles` must be True or False"):
+            s.save(tmp_path / f"m{ext}", triangles="no")
     with pytest.raises(ValueError, match="`pixel_size` must be a positive number"):
         facetlift.integrate(g.normals, g.mask, pixel_size="1")

@@ -765,11 +765,17 @@ def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else list(argv)
     if not args:
         args = ["--help"]
-    from .io.images import protect_stdout
+    from .io.images import _REDIRECT, protect_stdout
 
-    protect_stdout()  # (stdout carries the --json object alone: the C readers' prints aside)
+    # (stdout carries the --json object alone: the C readers' prints aside; put back after
+    # an in-process call, whose host's stdout is its own)
+    protected = _REDIRECT["enabled"]
+    protect_stdout()
     _STATE.update(debug=False, errors=[], printed_json=False, args=tuple(args))
-    code = _main(args)
+    try:
+        code = _main(args)
+    finally:
+        protect_stdout(protected)
     if code != EXIT_OK and "--json" in args and not _STATE["printed_json"]:
         # a script reading --json gets one object on stdout for a failure too
         click.echo(json.dumps({"status": _STATUS.get(code, "error"), "exit_code": code,

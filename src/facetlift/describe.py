@@ -221,7 +221,9 @@ def _file_facts(src: Path) -> dict:
         elif ext == ".exr":
             import OpenEXR
 
-            with OpenEXR.File(str(f), separate_channels=True) as e:
+            from .io.images import _stdout_to_stderr
+
+            with _stdout_to_stderr(), OpenEXR.File(str(f), separate_channels=True) as e:
                 ch = e.channels()
                 facts.update(channels=sorted(ch),
                              dtype=sorted({str(np.asarray(v.pixels).dtype) for v in ch.values()}),

@@ -215,7 +215,7 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
 
     Warns
     -----
-    UserWarning
+    FrameWarning
         uint8/uint16 input, decoded as ``v / max * 2 - 1``.
 
     Raises

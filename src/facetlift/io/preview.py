@@ -9,8 +9,18 @@ import numpy as np
 from ._paths import _suffix
 from .images import _write_png
 
-#: The most pixels a preview's shorter side is enlarged to (`min_size`).
+#: The most pixels a preview's shorter side is enlarged to (`min_size`), and the longest
+#: side an enlargement may make (a long thin map is enlarged less).
 MAX_MIN_SIZE = 8192
+MAX_SIDE = 16384
+
+
+def _factor(shape, min_size: int, width: int | None = None) -> int:
+    """The integer enlargement of an image of `shape` (and `width` columns in all, panels
+    included) for `min_size`, within :data:`MAX_SIDE`."""
+    k = max(1, int(np.ceil(min_size / max(1, min(shape)))))
+    longest = max(shape[0], shape[1] if width is None else width)
+    return max(1, min(k, MAX_SIDE // max(1, longest)))
 
 
 def _light(light) -> np.ndarray:
@@ -25,10 +35,12 @@ def _light(light) -> np.ndarray:
 
 
 def _min_size(min_size) -> int:
-    if isinstance(min_size, bool) or not isinstance(min_size, (int, np.integer)) or not (
-            0 <= min_size <= MAX_MIN_SIZE):
-        raise ValueError(f"`min_size` must be an integer from 0 to {MAX_MIN_SIZE} (pixels of "
-                         f"the preview's shorter side); got {min_size!r}")
+    ok = (not isinstance(min_size, bool) and isinstance(min_size, (int, float, np.number))
+          and np.isfinite(min_size) and float(min_size) == int(min_size)
+          and 0 <= min_size <= MAX_MIN_SIZE)
+    if not ok:
+        raise ValueError(f"`min_size` must be a whole number from 0 to {MAX_MIN_SIZE} (pixels "
+                         f"of the preview's shorter side); got {min_size!r}")
     return int(min_size)
 
 
@@ -37,9 +49,12 @@ def _background(background) -> np.ndarray:
         bg = np.asarray(background, dtype=float)
     except (TypeError, ValueError):
         bg = None
+    if bg is not None and bg.shape == ():  # (one grey level)
+        bg = np.full(3, float(bg))
     if bg is None or bg.shape != (3,) or not np.isfinite(bg).all() or (
             bg.min() < 0 or bg.max() > 255):
-        raise ValueError(f"`background` must be 3 numbers in 0-255 (RGB); got {background!r}")
+        raise ValueError(f"`background` must be 3 numbers in 0-255 (RGB), or one grey level; "
+                         f"got {background!r}")
     return np.round(bg).astype(np.uint8)
 
 
@@ -85,9 +100,10 @@ def write_preview(
         alone does not.
     min_size : int
         Small surfaces are enlarged by an integer factor (nearest neighbour) so that the
-        shorter side has at least this many pixels.
-    background : (3,) int
-        RGB colour outside the domain.
+        shorter side has at least this many pixels (at most :data:`MAX_MIN_SIZE`; the
+        longest side is kept within :data:`MAX_SIDE`).
+    background : (3,) int, or int
+        RGB colour outside the domain (one number: a grey level).
 
     Raises
     ------
@@ -132,7 +148,7 @@ def write_preview(
         gap[:] = bg
         panels += [gap, col]
     out = np.concatenate(panels, axis=1)
-    k = max(1, int(np.ceil(min_size / max(1, min(inside.shape)))))
+    k = _factor(inside.shape, min_size, out.shape[1])
     if k > 1:
         out = np.repeat(np.repeat(out, k, axis=0), k, axis=1)
     _write_png(p, out)
@@ -171,7 +187,7 @@ def write_discontinuities(path, surface, *, min_size: int = 256) -> Path:
         img[cut] = np.column_stack([
             np.round(150 + 105 * rel), np.round(40 * (1 - rel)), np.round(40 * (1 - rel))
         ]).astype(np.uint8)
-    k = max(1, int(np.ceil(min_size / max(1, min(inside.shape)))))
+    k = _factor(inside.shape, min_size)
     if k > 1:
         img = np.repeat(np.repeat(img, k, axis=0), k, axis=1)
     _write_png(p, img)

@@ -62,7 +62,7 @@ def save_surface(surface, path, **kwargs) -> Path:
         if extra:
             raise ValueError(f"{ext} output takes only `triangles`; got {extra}")
         triangles = kwargs.get("triangles")
-        triangles = ext == ".obj" if triangles is None else bool(triangles)
+        triangles = ext == ".obj" if triangles is None else triangles  # (to_mesh checks it)
         verts, faces = surface.to_mesh(triangles=triangles)
         return write_mesh(p, verts, faces)
     preview_kw = {"light", "colormap", "min_size", "background"}

@@ -52,9 +52,10 @@ def _seeded(seed: int = 0):
     estimates start from random vectors), then put back: the same input gives the same
     hierarchy, and the caller's random sequence is not advanced (backend="amg" differed by
     2e-12 from run to run and moved numpy's global state). A thread of the caller's drawing
-    from that global state meanwhile draws from the seeded one: only the comparison methods'
-    smoothed aggregation (regularization, diffusion) does this; Ruge-Stueben, which every
-    other route uses, draws nothing and is not seeded."""
+    from that global state meanwhile draws from the seeded one: only smoothed aggregation
+    does this (dgp's explicit ``backend="amg"`` and the regularization and diffusion
+    methods); Ruge-Stueben, which the discontinuity route and poisson's multigrid use, draws
+    nothing and is not seeded."""
     with _SEED_LOCK:  # (threads, e.g. Dask's, build one at a time: the global state is one)
         state = np.random.get_state()
         np.random.seed(seed)

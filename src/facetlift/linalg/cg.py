@@ -26,9 +26,10 @@ class CGInfo:
         ``|r| <= rtol |b|`` was reached (or `b` is zero), confirmed on the true residual
         ``b - A x`` to within a factor 10 (CG restarts from it, at most 3 times, otherwise);
         or a residual :data:`GROWTH` times the smallest so far sent CG back to that smallest
-        one's iterate, whose true residual is within that factor 10 (within ``rtol`` itself
-        with `reduction`), or `maxiter` stopped CG far above its smallest residual, whose
-        iterate is returned and within that factor 10 (not with `reduction`).
+        one's iterate, whose true residual is within that factor 10 (with `reduction`: within
+        the stopping threshold itself, the larger of ``rtol |b|`` and ``reduction |r_0|``), or
+        `maxiter` stopped CG far above its smallest residual, whose iterate is returned and
+        within that factor 10 (not with `reduction`).
     residuals : list of float
         ``|r_k| / |b|`` before the first and after every iteration; a solve that a
         factorization finished (:func:`facetlift.linalg.facet.solve`) appends that solution's
@@ -100,7 +101,9 @@ def cg(
     rtol : float
         Stop at ``|r| <= rtol |b|``.
     maxiter : int
-        Most iterations; the result after them is returned with ``converged=False``.
+        Most iterations; the result after them is returned with ``converged=False`` (the
+        iterate of the smallest residual where the last is ten times worse, and converged if
+        its true residual is within 10x the tolerance, without `reduction`: :data:`GROWTH`).
     callback : callable(x), optional
         Called after every iteration with the current iterate.
     flexible : bool
