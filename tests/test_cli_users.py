@@ -703,12 +703,21 @@ sys.exit(main(sys.argv[2:]))
 """
 
 
+def _interruptible() -> None:
+    """In the child before its exec: Ctrl-C at its default, so that Python turns it into
+    KeyboardInterrupt. A test run started in the background of a non-interactive shell (nohup,
+    `&`) ignores SIGINT, and its children inherit that: the interrupt tests then saw the
+    command finish with exit 0."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _signal_during_the_write(dome_png, tmp_path, sig):
     """Run `integrate` whose mesh writer stalls, send `sig` in the write phase: (returncode,
     stderr, the output folder)."""
     out, flag = tmp_path / "o", tmp_path / "flag"
     proc = subprocess.Popen([sys.executable, "-c", SLOW_WRITE, str(flag), "integrate",
-                             str(dome_png), "-o", str(out)], stderr=subprocess.PIPE, text=True)
+                             str(dome_png), "-o", str(out)], stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_interruptible)
     deadline = time.monotonic() + 60
     while not flag.exists() and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.05)
@@ -814,7 +823,7 @@ def test_ctrl_c_while_the_command_loads_is_one_line(tmp_path, monkeypatch):
     exe = Path(sys.executable).with_name("facetlift")
     proc = subprocess.Popen([str(exe), "integrate", str(tmp_path / "n.npy"), "--json", "-o",
                              str(tmp_path / "o")], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, preexec_fn=_interruptible)
     deadline = time.monotonic() + 60
     while not mark.exists() and time.monotonic() < deadline:
         time.sleep(0.02)
