@@ -350,3 +350,22 @@ def test_warning_kinds_can_be_turned_into_errors_one_by_one():
         warnings.simplefilter("error", facetlift.ConvergenceWarning)
         with pytest.raises(facetlift.ConvergenceWarning, match="bini"):
             facetlift.integrate(g.normals, g.mask, method="bini", max_iter=1)
+
+
+def test_a_string_prior_for_a_method_without_the_option_names_prior():
+    """It said "unknown option(s) ['prior'] for method 'dgp'", while dgp takes a depth prior."""
+    from facetlift import synthetic
+
+    g = synthetic.analytic("sphere", 16)
+    with pytest.raises(ValueError, match=r"`prior` must be a depth map .* 'dgp' has none"):
+        facetlift.integrate(g.normals, g.mask, prior="abc")
+
+
+def test_a_pinhole_camera_object_is_taken_as_k():
+    from facetlift import synthetic
+
+    g = synthetic.analytic("sphere", 16)
+    K = np.array([[20.0, 0, 8], [0, 20.0, 8], [0, 0, 1]])
+    a = facetlift.integrate(g.normals, g.mask, K=facetlift.Pinhole(K))
+    b = facetlift.integrate(g.normals, g.mask, K=K)
+    assert np.array_equal(a.depth, b.depth, equal_nan=True)

@@ -57,7 +57,7 @@ def integrate(
         A registered method, see ``facetlift.methods.REGISTRY`` or ``facetlift methods``.
     pixel_size : float
         Pixel width in world units for orthographic input.
-    K : (3, 3) array_like, optional
+    K : (3, 3) array_like or facetlift.Pinhole, optional
         Perspective intrinsics (OpenCV layout); None for an orthographic view.
     known : (H, W) array_like of bool, optional
         Pixels whose normal is given; the other mask pixels are missing samples.
@@ -157,7 +157,12 @@ def integrate(
     t0 = time.perf_counter()
     info = methods.get(method)
     if isinstance(prior, str):  # a method option named "prior" (regularization's smoothness
-        options["prior"] = prior  # prior, a string), not a depth prior
+        if "prior" not in info.options():  # prior, a string), not a depth prior
+            raise ValueError(
+                f"`prior` must be a depth map (H, W) or samples (rows, cols, depths); got the "
+                f"string {prior!r} (a string is the option 'prior' of a method that has one, "
+                f"e.g. regularization; {method!r} has none)")
+        options["prior"] = prior
         prior = None
     note = None
     if discontinuities is not None and not _check_discontinuities(info, discontinuities):

@@ -283,6 +283,8 @@ def make_camera(pixel_size=1.0, K=None) -> Camera:
         A non-positive or non-finite `pixel_size`, `K` that is not valid intrinsics, or a
         `pixel_size` other than 1 with `K` (ignored before, silently).
     """
+    if isinstance(K, Pinhole):  # (a camera object: its intrinsics)
+        K = K.K
     if isinstance(pixel_size, (str, bytes)):  # (float("1") would take it)
         raise ValueError(f"`pixel_size` must be a positive number; got {pixel_size!r}")
     if K is not None:
