@@ -21,14 +21,22 @@ _LOCK = threading.Lock()
 _STATE = {"depth": 0, "limiter": None}
 
 
-@contextlib.contextmanager
 def single_blas_thread():
     """BLAS limited to one thread for the duration (see the module docstring)."""
+    return blas_limit(1)
+
+
+@contextlib.contextmanager
+def blas_limit(threads: int = 1):
+    """BLAS limited to `threads` for the duration, shared by overlapping calls: the first to
+    enter sets its limit (a later one's, overlapping it, is not applied), the last to leave
+    puts back the process's own (see the module docstring; a batch's items in one worker's
+    threads use it too)."""
     from threadpoolctl import threadpool_limits
 
     with _LOCK:
         if _STATE["depth"] == 0:
-            _STATE["limiter"] = threadpool_limits(limits=1, user_api="blas")
+            _STATE["limiter"] = threadpool_limits(limits=threads, user_api="blas")
         _STATE["depth"] += 1
     try:
         yield

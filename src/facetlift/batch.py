@@ -202,9 +202,11 @@ def run_item(job: Job, threads: int | None = None) -> dict:
             if threads is None:
                 result = run(job)
             else:
-                from threadpoolctl import threadpool_limits
+                from ._threads import blas_limit
 
-                with threadpool_limits(threads):
+                # (shared: items overlapping in one worker's threads, e.g. a Dask cluster's,
+                # put the process's setting back in the right order)
+                with blas_limit(threads):
                     result = run(job)
         rec.update(result)
         # (a fixed budget of reweightings, or the blurred prior's safety net: usable surfaces)
