@@ -400,8 +400,9 @@ def test_threaded_calls_leave_the_process_blas_threads_as_they_were():
     def threads():
         return [d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"]
 
-    before = threads()
     g = synthetic.analytic("tent", 40)
+    facetlift.integrate(g.normals, g.mask, discontinuities=True)  # (every BLAS loaded)
+    before = threads()
     with ThreadPoolExecutor(2) as ex:
         runs = [ex.submit(facetlift.integrate, g.normals, g.mask, discontinuities=True)
                 for _ in range(4)]
@@ -413,3 +414,11 @@ def test_threaded_calls_leave_the_process_blas_threads_as_they_were():
             assert all(n == 1 for n in threads())
         assert all(n == 1 for n in threads())
     assert threads() == before
+    from facetlift._threads import blas_limit
+
+    if max(before, default=1) >= 2:  # (a batch item's limit, kernel's tiles inside it)
+        with blas_limit(2):
+            with single_blas_thread():
+                assert all(n == 1 for n in threads())
+            assert all(n == 2 for n in threads())
+        assert threads() == before

@@ -18,7 +18,7 @@ import contextlib
 import threading
 
 _LOCK = threading.Lock()
-_STATE = {"depth": 0, "limiter": None}
+_STATE = {"depth": 0, "limiter": None, "limit": None}
 
 
 def single_blas_thread():
@@ -29,20 +29,29 @@ def single_blas_thread():
 @contextlib.contextmanager
 def blas_limit(threads: int = 1):
     """BLAS limited to `threads` for the duration, shared by overlapping calls: the first to
-    enter sets its limit (a later one's, overlapping it, is not applied), the last to leave
-    puts back the process's own (see the module docstring; a batch's items in one worker's
-    threads use it too)."""
+    enter sets its limit, the last to leave puts back the process's own (see the module
+    docstring; a batch's items in one worker's threads use it too). A call inside that asks
+    for fewer threads (``kernel``'s tiles inside a batch item) gets them for its own duration
+    and then puts back the limit it found; one that asks for more keeps the current limit."""
     from threadpoolctl import threadpool_limits
 
+    inner = None
     with _LOCK:
         if _STATE["depth"] == 0:
             _STATE["limiter"] = threadpool_limits(limits=threads, user_api="blas")
+            _STATE["limit"] = threads
+        elif threads < _STATE["limit"]:
+            inner = (threadpool_limits(limits=threads, user_api="blas"), _STATE["limit"])
+            _STATE["limit"] = threads
         _STATE["depth"] += 1
     try:
         yield
     finally:
         with _LOCK:
             _STATE["depth"] -= 1
+            if inner is not None:
+                inner[0].restore_original_limits()
+                _STATE["limit"] = inner[1]
             if _STATE["depth"] == 0:
                 _STATE["limiter"].restore_original_limits()
-                _STATE["limiter"] = None
+                _STATE["limiter"] = _STATE["limit"] = None
