@@ -869,3 +869,20 @@ def test_info_frame_hint_agrees_with_the_warning_when_a_mask_holds_zeros(tmp_pat
     code, out, _ = run(capsys, "info", str(tmp_path / "n.npy"), "--mask", str(tmp_path / "m.png"),
                        "--json")
     assert code == 0 and json.loads(out)["frame"]["likely"].startswith("another frame?")
+
+
+def test_summary_names_the_camera_and_bini_s_k_is_pointed_to(tmp_path, capsys):
+    """A BiNI user's check: the summary did not say whether K.txt was used, and
+    --option k=2 (BiNI's name) for dgp said only "unknown option"."""
+    bear = Path(__file__).resolve().parents[2] / "shared" / "data" / "normal_maps"
+    if not (bear / "diligent_bear").is_dir():
+        pytest.skip("../shared/data not available")
+    code, out, _ = run(capsys, "integrate", str(bear / "bini_supp_tent_ortho"), "-o",
+                       str(tmp_path / "t"), "-s", "npy")
+    assert code == 0 and ", orthographic, method dgp" in out
+    code, out, err = run(capsys, "integrate", str(bear / "diligent_bear"), "-o",
+                         str(tmp_path / "b"), "-s", "npy")
+    assert code == 0 and ", perspective (K), method dgp" in out
+    code, _, err = run(capsys, "integrate", str(bear / "diligent_bear"), "--discontinuities",
+                       "--option", "k=2", "-o", str(tmp_path / "k"))
+    assert code == 1 and "BiNI's k is 'discontinuity_k' here" in one_line(err)

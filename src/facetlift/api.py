@@ -176,6 +176,9 @@ def integrate(
                     "outlier_eps / --outlier-eps sets another")
     if solver is not None:
         options["solver"] = solver
+    # (a mistyped option is refused before the input is read and checked: its warnings, e.g.
+    # about grazing normals, came first and hid the one line that mattered)
+    validate(info.specs(), options, method)
     normals = frames.checked(normals, mask, frame=normal_frame)
     problem = prepare(
         normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,

@@ -337,6 +337,7 @@ def summary(record: dict) -> str:
     H, W = record["shape"]
     parts = [
         f"{H}x{W} pixels, {record['facets']} facets (mask: {record['mask_source']})",
+        "perspective (K)" if record.get("perspective") else "orthographic",
         f"method {info.get('method')}" + (f" ({info['solver']})" if "solver" in info else ""),
     ]
     it = info.get("iterations")

@@ -146,8 +146,12 @@ def validate(options: tuple[Option, ...], given: dict, method: str) -> dict:
     spec = {o.name: o for o in options}
     unknown = sorted(set(given) - set(spec))
     if unknown:
+        hint = ""  # (a BiNI user's k: the bilateral sharpness is discontinuity_k for dgp)
+        if "k" in unknown and "discontinuity_k" in spec:
+            hint = "; BiNI's k is 'discontinuity_k' here (default 4.0, with discontinuities)"
         raise ValueError(
             f"unknown option(s) {unknown} for method {method!r}; valid options: {sorted(spec)}"
+            + hint
         )
     values = {name: o.default for name, o in spec.items()}
     for name, value in given.items():

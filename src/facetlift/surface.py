@@ -19,7 +19,10 @@ class Surface:
         Depth at facet centres (larger is farther), NaN outside the domain.
     vertex_depth : (H+1, W+1) float
         Depth at the facet corners, NaN where no facet touches (a method that solves for pixel
-        values only gets them derived: :func:`facetlift.api.vertex_values`).
+        values only gets them derived: :func:`facetlift.api.vertex_values`). Where the
+        surface is cut at depth jumps (:attr:`cuts`) a vertex on a cut has one copy per side
+        in the mesh (:meth:`to_mesh`), and this keeps one glued value that is neither side's
+        (docs/conventions.md).
     mask : (H, W) bool
         The integration domain.
     info : dict
