@@ -191,7 +191,7 @@ def run_item(job: Job, threads: int | None = None) -> dict:
     import warnings
 
     from .errors import MemoryLimitError, SolverError
-    from .jobs import run
+    from .jobs import finished_unconverged, run
 
     t0 = time.perf_counter()
     rec = {"status": "ok", "error": None, "exit": 0}
@@ -209,9 +209,7 @@ def run_item(job: Job, threads: int | None = None) -> dict:
                 with blas_limit(threads):
                     result = run(job)
         rec.update(result)
-        # (a fixed budget of reweightings, or the blurred prior's safety net: usable surfaces)
-        if not result["converged"] and result["info"].get("solver") != "discontinuous" and (
-                not (result["info"].get("prior_blur") or {}).get("capped")):
+        if not result["converged"] and not finished_unconverged(result["info"]):
             rec.update(status="not_converged", exit=2, error="did not converge")
     except MemoryLimitError as e:
         rec.update(status="memory", error=str(e), exit=1)

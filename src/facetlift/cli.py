@@ -440,7 +440,7 @@ def integrate(normals, gradients, progress, as_json, **flags):
             "(--option discontinuity_iter=N)",
             err=True,
         )
-    elif not record["converged"] and not blur.get("capped"):
+    elif not record["converged"] and not jobs.finished_unconverged(info):
         raise SolverFailure(
             f"method {info.get('method')!r} did not converge in {info.get('iterations')} "
             "iterations (outputs were written); raise --max-iter or --tol"

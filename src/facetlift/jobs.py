@@ -358,6 +358,15 @@ def _write(surface, kind: str, path: Path, normals, triangles) -> None:
         surface.save(path)
 
 
+def finished_unconverged(info: dict) -> bool:
+    """Whether a result reported ``converged=False`` is nevertheless a finished, usable
+    surface: the discontinuity reweighting stopped by its cap (a budget), or the blurred
+    prior's corrections by theirs (a safety net). The command line notes these with exit 0
+    and a batch records them as ok; any other unconverged result is a solver failure."""
+    return info.get("solver") == "discontinuous" or bool(
+        (info.get("prior_blur") or {}).get("capped"))
+
+
 def jsonable(obj):
     """`obj` with numpy values, tuples and non-finite floats turned into JSON (None for NaN)."""
     if isinstance(obj, dict):

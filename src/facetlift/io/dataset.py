@@ -91,23 +91,23 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     K = read_K(kpath) if kpath is not None else None
     from .images import PRIOR_FORMATS, read_prior, read_weights
 
-    ppath = _find(f, "prior_depth", PRIOR_FORMATS) if with_prior else None
-    cpath = _find(f, "confidence", PRIOR_FORMATS) if with_confidence else None
-    try:
-        prior = read_prior(ppath, prior_scale, arg="prior") if ppath is not None else None
-    except ValueError as e:  # (the folder's own file: it can also be left unread)
-        raise ValueError(f"{e}; or leave the folder's prior unread with --no-prior "
-                         "(with_prior=False in Python)") from None
-    try:
-        conf = read_weights(cpath, arg="confidence") if cpath is not None else None
-    except ValueError as e:
-        raise ValueError(f"{e}; or leave the folder's confidence unread with --no-confidence "
-                         "(with_confidence=False in Python)") from None
     H, W = normals.shape[:2]
-    for name, path, arr, flag in (("prior", ppath, prior, "prior"),
-                                  ("confidence", cpath, conf, "confidence")):
-        if arr is not None and arr.shape != (H, W):
-            raise ValueError(f"`{name}`: {path} is {arr.shape[0]}x{arr.shape[1]} (HxW) but the "
-                             f"normal map is {H}x{W}; or leave the folder's {name} unread "
-                             f"with --no-{flag} (with_{flag}=False in Python)")
-    return {"normals": normals, "mask": mask, "K": K, "prior": prior, "confidence": conf}
+    extra = {}  # the folder's own prior and confidence: a file at fault can be left unread
+    for name, stem, wanted, reader in (
+            ("prior", "prior_depth", with_prior,
+             lambda p: read_prior(p, prior_scale, arg="prior")),
+            ("confidence", "confidence", with_confidence,
+             lambda p: read_weights(p, arg="confidence"))):
+        path = _find(f, stem, PRIOR_FORMATS) if wanted else None
+        extra[name] = None
+        if path is None:
+            continue
+        skip = f"or leave the folder's {name} unread with --no-{name} (with_{name}=False in Python)"
+        try:
+            extra[name] = reader(path)
+        except ValueError as e:
+            raise ValueError(f"{e}; {skip}") from None
+        if extra[name].shape != (H, W):
+            raise ValueError(f"`{name}`: {path} is {extra[name].shape[0]}x"
+                             f"{extra[name].shape[1]} (HxW) but the normal map is {H}x{W}; {skip}")
+    return {"normals": normals, "mask": mask, "K": K, **extra}
