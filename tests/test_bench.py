@@ -158,6 +158,9 @@ def test_bench_input_errors(tmp_path):
         run_bench(tmp_path, methods=["nope"], progress=False)
     with pytest.raises(ValueError, match="`experiments`: unknown"):
         run_bench(tmp_path, experiments=["fig99"], progress=False)
+    with pytest.raises(ValueError, match="`conditions`: unknown.*'noise9'.*smooth3"):
+        run_bench(tmp_path, experiments=["discontinuities"], conditions=["noise9"],
+                  progress=False)
     with pytest.raises(ValueError, match="`extra_meshes`"):
         run_bench(tmp_path, extra_meshes=[tmp_path / "none.ply"], progress=False)
     assert "fig9" in EXPERIMENTS

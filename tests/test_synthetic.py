@@ -11,6 +11,7 @@ from facetlift import normals_from_gradients, synthetic
 from facetlift.synthetic import (
     GroundTruth,
     add_angular_noise,
+    add_smooth_noise,
     analytic,
     analytic_height,
     continuous_region,
@@ -207,6 +208,36 @@ def test_angular_noise_statistics():
         add_angular_noise(n, -1.0, rng)
     with pytest.raises(ValueError, match="`normals`"):
         add_angular_noise(np.zeros((4, 2)), 1.0, rng)
+
+
+def test_smooth_noise_is_correlated_with_the_rms_asked():
+    rng = np.random.default_rng(3)
+    n = normals_from_gradients(rng.normal(0, 0.3, (160, 160)), rng.normal(0, 0.3, (160, 160)))
+    n[0, 0] = np.nan
+    out = add_smooth_noise(n, 3.0, 8.0, np.random.default_rng(5))
+    assert np.isnan(out[0, 0]).all()
+    np.testing.assert_allclose(np.linalg.norm(out[1:], axis=-1), 1.0, atol=1e-12)
+    ang = _angle(n, out)
+    ang[0, 0] = np.nan
+    # the RMS over the image is the one asked (a 160^2 image holds ~100 correlation areas)
+    assert np.sqrt(np.nanmean(ang**2)) == pytest.approx(3.0, rel=0.05)
+    # neighbours' errors agree: on a constant normal map the change of the error between
+    # neighbours is far below the error itself (independent noise: sqrt(2) of it)
+    flat = np.broadcast_to(np.array([0.3, 0.0, 1.0]) / np.hypot(0.3, 1.0), (160, 160, 3))
+    err = add_smooth_noise(flat, 3.0, 8.0, np.random.default_rng(5)) - flat
+    step = np.linalg.norm(err[1:] - err[:-1], axis=-1)
+    assert np.sqrt(np.mean(step**2)) < 0.3 * np.sqrt(np.mean(np.sum(err**2, -1)))
+    # keep_front: a strong field never turns a normal away from the viewer
+    big = add_smooth_noise(n, 30.0, 4.0, np.random.default_rng(8))
+    assert (big[1:, :, 2] > 0).all()
+    # seeded: the same field for the same seed
+    np.testing.assert_array_equal(out, add_smooth_noise(n, 3.0, 8.0, np.random.default_rng(5)))
+    with pytest.raises(ValueError, match="`sigma_deg`"):
+        add_smooth_noise(n, -1.0)
+    with pytest.raises(ValueError, match="`length`"):
+        add_smooth_noise(n, 1.0, 0.0)
+    with pytest.raises(ValueError, match="`normals`"):
+        add_smooth_noise(np.zeros((4, 3)), 1.0)
 
 
 @pytest.mark.parametrize("fraction", [0.15, 0.3, 0.5, 0.55])

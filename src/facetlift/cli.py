@@ -689,8 +689,13 @@ def _split(text):
               help="Add a data folder (normal_map.png, mask.png[, K.txt]) to Fig. 10.")
 @click.option("--data", "data_dir", default=None, type=click.Path(exists=True, file_okay=False),
               help="Data folder with meshes/ and normal_maps/ (default: $FACETLIFT_DATA).")
+@click.option("--conditions", default=None,
+              help="Comma-separated normal conditions of the discontinuities experiment "
+                   "(default exact,16bit,8bit,noise3; also smooth3: correlated 3-degree "
+                   "errors, outliers: 2 %% of the normals rotated by up to 45 degrees).")
 @click.option("--no-progress", is_flag=True, help="No progress bars.")
-def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_dir, no_progress):
+def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_dir, conditions,
+          no_progress):
     """Reproduce the paper's experiments (Table 1, Figs. 4-10) into a folder."""
     from .bench import run_bench
 
@@ -698,7 +703,7 @@ def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_di
         path = run_bench(out, quick=quick, methods=_split(methods), models=_split(models),
                          experiments=_split(experiments), extra_meshes=meshes,
                          extra_normal_maps=normal_maps, data_dir=data_dir,
-                         progress=not no_progress)
+                         conditions=_split(conditions), progress=not no_progress)
     except ValueError as e:
         raise click.UsageError(str(e)) from None
     click.echo(f"wrote {path / 'report.md'}")

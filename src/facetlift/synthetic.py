@@ -39,6 +39,7 @@ __all__ = [
     "VIEWS",
     "GroundTruth",
     "add_angular_noise",
+    "add_smooth_noise",
     "analytic",
     "continuous_region",
     "perturb_fraction",
@@ -837,6 +838,65 @@ def add_angular_noise(normals, sigma_deg: float, rng=None, *, keep_front: bool =
     angles = np.radians(sigma_deg) * rng.normal(size=int(ok.sum()))
     flat[ok] = _rotate(flat[ok], angles, rng, keep_front)
     return flat.reshape(n.shape)
+
+
+def add_smooth_noise(normals, sigma_deg: float, length: float = 8.0, rng=None, *,
+                     keep_front: bool = True):
+    """Rotate the normals by a smooth random field: correlated errors, as a normal estimator
+    makes them (a network's low-frequency bias, a photometric stereo's wrong light), where
+    :func:`add_angular_noise` draws every pixel's error alone.
+
+    The rotation vector of every pixel lies in the image plane; its two components are white
+    noise smoothed by a Gaussian of standard deviation `length` pixels and scaled so that the
+    rotation angle's root mean square over the image is `sigma_deg`.
+
+    Parameters
+    ----------
+    normals : (H, W, 3) array_like
+        Unit normals; NaN rows stay NaN.
+    sigma_deg : float
+        Root mean square rotation angle in degrees.
+    length : float
+        Correlation length of the field in pixels (> 0).
+    rng : numpy.random.Generator or seed
+    keep_front : bool
+        Where a rotation would turn a front-facing normal away from the viewer, rotate by the
+        opposite angle instead (:func:`add_angular_noise`).
+
+    Returns
+    -------
+    (H, W, 3) float
+    """
+    from scipy.ndimage import gaussian_filter
+
+    n = _check_normals(normals)
+    if n.ndim != 3:
+        raise ValueError(f"`normals` must be an (H, W, 3) map; got shape {n.shape}")
+    if not (np.isfinite(sigma_deg) and sigma_deg >= 0):
+        raise ValueError(f"`sigma_deg` must be a finite number >= 0; got {sigma_deg!r}")
+    if not (np.isfinite(length) and length > 0):
+        raise ValueError(f"`length` must be a finite number of pixels > 0; got {length!r}")
+    rng = _rng(rng)
+    field = np.stack([gaussian_filter(rng.normal(size=n.shape[:2]), length, mode="reflect")
+                      for _ in range(2)], axis=-1)
+    rms = float(np.sqrt(np.mean(np.sum(field**2, axis=-1))))
+    field *= np.radians(sigma_deg) / (rms if rms > 0 else 1.0)
+    angle = np.linalg.norm(field, axis=-1)
+    axis = np.zeros(n.shape)
+    nz = angle > 0
+    axis[nz, :2] = field[nz] / angle[nz, None]
+    out = n.copy()
+    ok = np.isfinite(n).all(axis=-1) & nz
+    v, k, t = n[ok], axis[ok], angle[ok][:, None]
+    kv = np.cross(k, v)
+    rot = v * np.cos(t) + kv * np.sin(t) + k * (k * v).sum(axis=1, keepdims=True) * (1 - np.cos(t))
+    if keep_front:
+        back = (rot[:, 2] <= 0) & (v[:, 2] > 0)
+        t = np.where(back[:, None], -t, t)
+        rot = (v * np.cos(t) + kv * np.sin(t)
+               + k * (k * v).sum(axis=1, keepdims=True) * (1 - np.cos(t)))
+    out[ok] = rot / np.linalg.norm(rot, axis=1, keepdims=True)
+    return out
 
 
 def _pick(ok: np.ndarray, fraction: float, rng) -> np.ndarray:

@@ -43,9 +43,14 @@ from .tables import md_table, write_csv, write_text
 
 log = logging.getLogger(__name__)
 
-#: Condition name -> ("quantize", bits) or ("noise", degrees) or None.
+#: Condition name -> ("quantize", bits), ("noise", degrees), ("smooth", RMS degrees,
+#: correlation length px: :func:`facetlift.synthetic.add_smooth_noise`), ("outliers", fraction,
+#: largest degrees: :func:`facetlift.synthetic.perturb_fraction`) or None. The last two are not
+#: in the default run (``Settings.disc_conditions``); ``benchmarks/bench_discontinuities.py
+#: --conditions`` runs them.
 CONDITIONS = {"exact": None, "16bit": ("quantize", 16), "8bit": ("quantize", 8),
-              "noise3": ("noise", 3.0)}
+              "noise3": ("noise", 3.0), "smooth3": ("smooth", 3.0, 8.0),
+              "outliers": ("outliers", 0.02, 45.0)}
 #: Analytic jump scenes of the benchmark (see the module docstring for ``helix``).
 ANALYTIC = tuple(n for n in synthetic.WITH_JUMPS if n != "helix")
 #: Focal length (px) of the wide-angle camera and its distance to the object.
@@ -166,6 +171,10 @@ def condition(gt, cond: str, name: str):
     if how[0] == "quantize":
         return synthetic.quantize(gt.normals, how[1])
     rng = np.random.default_rng([SEED, zlib.crc32(name.encode())])
+    if how[0] == "smooth":
+        return synthetic.add_smooth_noise(gt.normals, how[1], how[2], rng)
+    if how[0] == "outliers":
+        return synthetic.perturb_fraction(gt.normals, how[1], max_deg=how[2], rng=rng)[0]
     return synthetic.add_angular_noise(gt.normals, how[1], rng)
 
 

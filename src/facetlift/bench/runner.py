@@ -69,6 +69,7 @@ def run_bench(
     extra_meshes=(),
     extra_normal_maps=(),
     data_dir=None,
+    conditions=None,
     progress: bool = True,
 ) -> Path:
     """Run the experiments and write tables and figures into `out_dir`.
@@ -90,6 +91,10 @@ def run_bench(
         More meshes for Fig. 9 (rendered from every view).
     extra_normal_maps : iterable of paths
         More data folders (``normal_map.png`` + ``mask.png`` [+ ``K.txt``]) for Fig. 10.
+    conditions : iterable of str, optional
+        Normal conditions of the discontinuities experiment, names of
+        :data:`facetlift.bench.discontinuities.CONDITIONS` (default
+        ``Settings.disc_conditions``); its k sweep runs on those of them it has.
     data_dir : path, optional
         Folder with ``meshes/`` and ``normal_maps/``; default :func:`default_data_dir`.
     progress : bool
@@ -108,6 +113,15 @@ def run_bench(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     s = _settings(quick, methods)
+    if conditions is not None:
+        from .discontinuities import CONDITIONS
+
+        conditions = tuple(conditions)
+        bad = [c for c in conditions if c not in CONDITIONS]
+        if bad or not conditions:
+            raise ValueError(f"`conditions`: unknown {bad or 'none given'}; valid: "
+                             f"{list(CONDITIONS)}")
+        s.disc_conditions = conditions
     exps = EXPERIMENTS if experiments is None else tuple(experiments)
     bad = [e for e in exps if e not in EXPERIMENTS]
     if bad:
