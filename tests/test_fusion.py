@@ -541,3 +541,35 @@ def test_a_noisy_dense_prior_that_tears_the_discontinuity_route_is_warned_about(
         warnings.simplefilter("error", UserWarning)  # a low weight: no such warning
         facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size, prior=noisy,
                             prior_weight=0.01, discontinuities=True)
+
+
+def test_a_weak_prior_takes_the_forcing_term_and_a_strong_one_does_not(monkeypatch):
+    """The reweightings' CG stops early (PRIOR_FORCING) with a prior no stronger than the
+    normals, not with a stronger one; the weak prior's surface stays the tightly solved one's."""
+    from facetlift.methods.dgp import discontinuous as D
+
+    n, depth = wave((40, 44))
+    depth = depth + 3.0 * (np.indices(depth.shape)[1] >= 22)
+    rng = np.random.default_rng(2)
+    prior, sel = sparse(depth, 0.05, seed=3)
+    prior = prior + 0.02 * rng.normal(size=prior.shape)
+    seen = []
+    real_cg = D.linalg.cg
+
+    def cg(*args, **kwargs):
+        seen.append(kwargs.get("reduction"))
+        return real_cg(*args, **kwargs)
+
+    monkeypatch.setattr(D.linalg, "cg", cg)
+    weak = run(n, discontinuities=True, prior=prior, prior_weight=1.0)
+    assert D.PRIOR_FORCING in seen
+    seen.clear()
+    run(n, discontinuities=True, prior=prior, prior_weight=2.0)
+    assert set(seen) == {None}
+    seen.clear()
+    monkeypatch.setattr(D, "PRIOR_FORCING", None)
+    tight = run(n, discontinuities=True, prior=prior, prior_weight=1.0)
+    assert set(seen) == {None}
+    m = np.isfinite(depth)
+    err = lambda s: np.abs(s.depth[m] - depth[m]).mean()  # noqa: E731
+    assert err(weak) <= 1.1 * err(tight)
