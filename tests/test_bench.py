@@ -161,6 +161,42 @@ def test_bench_input_errors(tmp_path):
     with pytest.raises(ValueError, match="`conditions`: unknown.*'noise9'.*smooth3"):
         run_bench(tmp_path, experiments=["discontinuities"], conditions=["noise9"],
                   progress=False)
+    with pytest.raises(ValueError, match="`conditions`: none given"):
+        run_bench(tmp_path, experiments=["discontinuities"], conditions=",", progress=False)
+    with pytest.raises(ValueError, match="`conditions` applies to the discontinuities"):
+        run_bench(tmp_path, experiments=["fig4"], conditions=["smooth3"], progress=False)
+
+
+def test_every_discontinuity_condition_perturbs_as_named():
+    from facetlift.bench.discontinuities import CONDITIONS, condition
+    from facetlift.synthetic import analytic
+
+    gt = analytic("vase", 48)
+    m = gt.mask
+    for name in CONDITIONS:
+        n = condition(gt, name, "vase")
+        assert n.shape == gt.normals.shape and np.isfinite(n[m]).all(), name
+        ang = np.degrees(np.arccos(np.clip(np.sum(n[m] * gt.normals[m], axis=-1), -1, 1)))
+        if name == "exact":
+            np.testing.assert_array_equal(n, gt.normals)
+        elif name in ("noise3", "smooth3"):  # RMS 3 degrees
+            assert np.sqrt(np.mean(ang**2)) == pytest.approx(3.0, rel=0.1), name
+        elif name == "outliers":  # 2 % moved, by up to 45 degrees
+            assert (ang > 1e-3).mean() == pytest.approx(0.02, abs=0.002)
+            assert ang.max() <= 45.0 + 1e-6
+        else:  # quantised (8 bits turn the vase's steep normals by degrees)
+            assert 0 < ang.max() < 10.0, name
+        np.testing.assert_array_equal(n, condition(gt, name, "vase"))  # seeded by the name
+
+
+def test_cli_bench_refuses_an_unknown_condition(tmp_path):
+    from click.testing import CliRunner
+
+    from facetlift.cli import cli
+
+    r = CliRunner().invoke(cli, ["bench", "-o", str(tmp_path), "--experiments",
+                                 "discontinuities", "--conditions", "noise9"])
+    assert r.exit_code == 2 and "noise9" in r.output and "smooth3" in r.output
     with pytest.raises(ValueError, match="`extra_meshes`"):
         run_bench(tmp_path, extra_meshes=[tmp_path / "none.ply"], progress=False)
     assert "fig9" in EXPERIMENTS

@@ -544,8 +544,9 @@ def test_a_noisy_dense_prior_that_tears_the_discontinuity_route_is_warned_about(
 
 
 def test_a_weak_prior_takes_the_forcing_term_and_a_strong_one_does_not(monkeypatch):
-    """The reweightings' CG stops early (PRIOR_FORCING) with a prior no stronger than the
-    normals, not with a stronger one; the weak prior's surface stays the tightly solved one's."""
+    """The reweightings' CG stops early (PRIOR_FORCING) with a pointwise prior no stronger
+    than the normals, not with a stronger or a blurred one; the weak prior's surface stays the
+    tightly solved one's."""
     from facetlift.methods.dgp import discontinuous as D
 
     n, depth = wave((40, 44))
@@ -560,16 +561,26 @@ def test_a_weak_prior_takes_the_forcing_term_and_a_strong_one_does_not(monkeypat
         seen.append(kwargs.get("reduction"))
         return real_cg(*args, **kwargs)
 
+    def reductions(**kw):
+        seen.clear()
+        out = run(n, discontinuities=True, prior=prior, **kw)
+        return out, set(seen)
+
     monkeypatch.setattr(D.linalg, "cg", cg)
-    weak = run(n, discontinuities=True, prior=prior, prior_weight=1.0)
-    assert D.PRIOR_FORCING in seen
+    weak, used = reductions(prior_weight=1.0)
+    assert D.PRIOR_FORCING in used
+    assert reductions(prior_weight=2.0)[1] == {None}
+    assert reductions(prior_weight=1.0, prior_blur=2.0)[1] == {None}
+    # the normals' weights are the usable ones': a missing normal (weight 1 in the system, no
+    # target) does not make a prior 100x the others' weak
+    conf = np.full(depth.shape, 0.01)
+    holed = n.copy()
+    holed[5, 5] = np.nan
     seen.clear()
-    run(n, discontinuities=True, prior=prior, prior_weight=2.0)
+    run(holed, discontinuities=True, prior=prior, prior_weight=1.0, confidence=conf)
     assert set(seen) == {None}
-    seen.clear()
     monkeypatch.setattr(D, "PRIOR_FORCING", None)
-    tight = run(n, discontinuities=True, prior=prior, prior_weight=1.0)
-    assert set(seen) == {None}
-    m = np.isfinite(depth)
-    err = lambda s: np.abs(s.depth[m] - depth[m]).mean()  # noqa: E731
-    assert err(weak) <= 1.1 * err(tight)
+    tight, used = reductions(prior_weight=1.0)
+    assert used == {None}
+    # measured 6e-4 apart at 0.03 (0.125 with a forcing term of 0.3)
+    np.testing.assert_allclose(weak.depth, tight.depth, atol=0.01)

@@ -214,7 +214,7 @@ def test_smooth_noise_is_correlated_with_the_rms_asked():
     rng = np.random.default_rng(3)
     n = normals_from_gradients(rng.normal(0, 0.3, (160, 160)), rng.normal(0, 0.3, (160, 160)))
     n[0, 0] = np.nan
-    out = add_smooth_noise(n, 3.0, 8.0, np.random.default_rng(5))
+    out = add_smooth_noise(n, 3.0, np.random.default_rng(5), length=8.0)
     assert np.isnan(out[0, 0]).all()
     np.testing.assert_allclose(np.linalg.norm(out[1:], axis=-1), 1.0, atol=1e-12)
     ang = _angle(n, out)
@@ -224,18 +224,26 @@ def test_smooth_noise_is_correlated_with_the_rms_asked():
     # neighbours' errors agree: on a constant normal map the change of the error between
     # neighbours is far below the error itself (independent noise: sqrt(2) of it)
     flat = np.broadcast_to(np.array([0.3, 0.0, 1.0]) / np.hypot(0.3, 1.0), (160, 160, 3))
-    err = add_smooth_noise(flat, 3.0, 8.0, np.random.default_rng(5)) - flat
+    err = add_smooth_noise(flat, 3.0, np.random.default_rng(5), length=8.0) - flat
     step = np.linalg.norm(err[1:] - err[:-1], axis=-1)
     assert np.sqrt(np.mean(step**2)) < 0.3 * np.sqrt(np.mean(np.sum(err**2, -1)))
+    # the RMS is the one asked on a masked, strongly tilted map too (the field is turned onto
+    # every normal's tangent plane, and the RMS taken over the finite normals)
+    sphere = analytic("sphere", 96)
+    ang = _angle(sphere.normals, add_smooth_noise(sphere.normals, 3.0, 1, length=6.0))
+    assert np.sqrt(np.nanmean(ang[sphere.mask] ** 2)) == pytest.approx(3.0, rel=1e-6)
     # keep_front: a strong field never turns a normal away from the viewer
-    big = add_smooth_noise(n, 30.0, 4.0, np.random.default_rng(8))
+    big = add_smooth_noise(n, 30.0, np.random.default_rng(8), length=4.0)
     assert (big[1:, :, 2] > 0).all()
     # seeded: the same field for the same seed
-    np.testing.assert_array_equal(out, add_smooth_noise(n, 3.0, 8.0, np.random.default_rng(5)))
+    np.testing.assert_array_equal(
+        out, add_smooth_noise(n, 3.0, np.random.default_rng(5), length=8.0))
     with pytest.raises(ValueError, match="`sigma_deg`"):
         add_smooth_noise(n, -1.0)
+    with pytest.raises(ValueError, match="`sigma_deg`"):
+        add_smooth_noise(n, 45.0)
     with pytest.raises(ValueError, match="`length`"):
-        add_smooth_noise(n, 1.0, 0.0)
+        add_smooth_noise(n, 1.0, length=0.0)
     with pytest.raises(ValueError, match="`normals`"):
         add_smooth_noise(np.zeros((4, 3)), 1.0)
 

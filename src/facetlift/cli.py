@@ -691,8 +691,9 @@ def _split(text):
               help="Data folder with meshes/ and normal_maps/ (default: $FACETLIFT_DATA).")
 @click.option("--conditions", default=None,
               help="Comma-separated normal conditions of the discontinuities experiment "
-                   "(default exact,16bit,8bit,noise3; also smooth3: correlated 3-degree "
-                   "errors, outliers: 2 %% of the normals rotated by up to 45 degrees).")
+                   "(default exact,16bit,8bit,noise3, with --quick exact,8bit; also smooth3: "
+                   "spatially correlated errors of 3 degrees RMS, outliers: 2 % of the "
+                   "normals rotated by up to 45 degrees).")
 @click.option("--no-progress", is_flag=True, help="No progress bars.")
 def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_dir, conditions,
           no_progress):

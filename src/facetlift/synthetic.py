@@ -23,7 +23,9 @@ Mesh rendering (:func:`render_mesh`)
 
 Perturbations
     :func:`add_angular_noise` (Gaussian angle about a random perpendicular axis, Sec. 5),
-    :func:`perturb_fraction` (Fig. 5a: a fraction of the samples rotated by up to 20 degrees),
+    :func:`add_smooth_noise` (a smooth, spatially correlated rotation field: an estimator's
+    errors), :func:`perturb_fraction` (Fig. 5a: a fraction of the samples rotated by up to 20
+    degrees),
     :func:`remove_samples` (missing samples as NaN).
 """
 
@@ -802,12 +804,7 @@ def _rotate(n, angles, rng, keep_front):
     axis = a - np.einsum("ij,ij->i", a, n)[:, None] * n
     axis /= np.linalg.norm(axis, axis=1, keepdims=True)
     side = np.cross(axis, n)  # unit, perpendicular to n, in the rotation plane
-    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
-    out = n * c + side * s
-    if keep_front:
-        flip = (out[:, 2] <= 0) & (n[:, 2] > 0)
-        out[flip] = n[flip] * c[flip] - side[flip] * s[flip]
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
+    return _turn(n, side, angles, keep_front)
 
 
 def add_angular_noise(normals, sigma_deg: float, rng=None, *, keep_front: bool = True):
@@ -840,28 +837,30 @@ def add_angular_noise(normals, sigma_deg: float, rng=None, *, keep_front: bool =
     return flat.reshape(n.shape)
 
 
-def add_smooth_noise(normals, sigma_deg: float, length: float = 8.0, rng=None, *,
+def add_smooth_noise(normals, sigma_deg: float, rng=None, *, length: float = 8.0,
                      keep_front: bool = True):
     """Rotate the normals by a smooth random field: correlated errors, as a normal estimator
     makes them (a network's low-frequency bias, a photometric stereo's wrong light), where
     :func:`add_angular_noise` draws every pixel's error alone.
 
-    The rotation vector of every pixel lies in the image plane; its two components are white
-    noise smoothed by a Gaussian of standard deviation `length` pixels and scaled so that the
-    rotation angle's root mean square over the image is `sigma_deg`.
+    A field of rotation vectors in the image plane, white noise smoothed by a Gaussian of
+    standard deviation `length` pixels, is projected on every normal's tangent plane (so that
+    the normal turns by the vector's length) and scaled so that the root mean square of the
+    rotation angle over the finite normals is `sigma_deg`.
 
     Parameters
     ----------
     normals : (H, W, 3) array_like
         Unit normals; NaN rows stay NaN.
     sigma_deg : float
-        Root mean square rotation angle in degrees.
+        Root mean square rotation angle in degrees, at most 30 (single angles reach about
+        three times the RMS).
+    rng : numpy.random.Generator or seed
     length : float
         Correlation length of the field in pixels (> 0).
-    rng : numpy.random.Generator or seed
     keep_front : bool
         Where a rotation would turn a front-facing normal away from the viewer, rotate by the
-        opposite angle instead (:func:`add_angular_noise`).
+        opposite angle instead (:func:`add_angular_noise`; the field is then not smooth there).
 
     Returns
     -------
@@ -872,31 +871,40 @@ def add_smooth_noise(normals, sigma_deg: float, length: float = 8.0, rng=None, *
     n = _check_normals(normals)
     if n.ndim != 3:
         raise ValueError(f"`normals` must be an (H, W, 3) map; got shape {n.shape}")
-    if not (np.isfinite(sigma_deg) and sigma_deg >= 0):
-        raise ValueError(f"`sigma_deg` must be a finite number >= 0; got {sigma_deg!r}")
+    if not (np.isfinite(sigma_deg) and 0 <= sigma_deg <= 30):
+        raise ValueError(f"`sigma_deg` must be a number in [0, 30]; got {sigma_deg!r}")
     if not (np.isfinite(length) and length > 0):
         raise ValueError(f"`length` must be a finite number of pixels > 0; got {length!r}")
     rng = _rng(rng)
-    field = np.stack([gaussian_filter(rng.normal(size=n.shape[:2]), length, mode="reflect")
-                      for _ in range(2)], axis=-1)
-    rms = float(np.sqrt(np.mean(np.sum(field**2, axis=-1))))
-    field *= np.radians(sigma_deg) / (rms if rms > 0 else 1.0)
-    angle = np.linalg.norm(field, axis=-1)
-    axis = np.zeros(n.shape)
-    nz = angle > 0
-    axis[nz, :2] = field[nz] / angle[nz, None]
+    field = np.zeros(n.shape)
+    for i in range(2):
+        field[..., i] = gaussian_filter(rng.normal(size=n.shape[:2]), length, mode="reflect")
     out = n.copy()
-    ok = np.isfinite(n).all(axis=-1) & nz
-    v, k, t = n[ok], axis[ok], angle[ok][:, None]
-    kv = np.cross(k, v)
-    rot = v * np.cos(t) + kv * np.sin(t) + k * (k * v).sum(axis=1, keepdims=True) * (1 - np.cos(t))
-    if keep_front:
-        back = (rot[:, 2] <= 0) & (v[:, 2] > 0)
-        t = np.where(back[:, None], -t, t)
-        rot = (v * np.cos(t) + kv * np.sin(t)
-               + k * (k * v).sum(axis=1, keepdims=True) * (1 - np.cos(t)))
-    out[ok] = rot / np.linalg.norm(rot, axis=1, keepdims=True)
+    ok = np.isfinite(n).all(axis=-1)
+    v, r = n[ok], field[ok]
+    r -= np.einsum("ij,ij->i", r, v)[:, None] * v  # (on the tangent plane: turns v by |r|)
+    angle = np.linalg.norm(r, axis=1)
+    rms = float(np.sqrt(np.mean(angle**2))) if angle.size else 0.0
+    if rms == 0.0 or sigma_deg == 0:
+        return out
+    angle *= np.radians(sigma_deg) / rms
+    moved = angle > 0
+    v, r, angle = v[moved], r[moved], angle[moved]
+    side = np.cross(r / np.linalg.norm(r, axis=1, keepdims=True), v)  # unit, tangent
+    rot = _turn(v, side, angle, keep_front)
+    idx = np.flatnonzero(ok.ravel())[moved]
+    out.reshape(-1, 3)[idx] = rot
     return out
+
+
+def _turn(v, side, angle, keep_front):
+    """Unit vectors `v` turned by `angle` (rad) toward the unit tangents `side`."""
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    out = v * c + side * s
+    if keep_front:
+        flip = (out[:, 2] <= 0) & (v[:, 2] > 0)
+        out[flip] = v[flip] * c[flip] - side[flip] * s[flip]
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
 def _pick(ok: np.ndarray, fraction: float, rng) -> np.ndarray:

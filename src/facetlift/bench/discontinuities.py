@@ -46,8 +46,9 @@ log = logging.getLogger(__name__)
 #: Condition name -> ("quantize", bits), ("noise", degrees), ("smooth", RMS degrees,
 #: correlation length px: :func:`facetlift.synthetic.add_smooth_noise`), ("outliers", fraction,
 #: largest degrees: :func:`facetlift.synthetic.perturb_fraction`) or None. The last two are not
-#: in the default run (``Settings.disc_conditions``); ``benchmarks/bench_discontinuities.py
-#: --conditions`` runs them.
+#: in the default run (``Settings.disc_conditions``): ``facetlift bench --experiments
+#: discontinuities --conditions smooth3,outliers`` runs them (``benchmarks/bench_jump_free.py
+#: --conditions`` too).
 CONDITIONS = {"exact": None, "16bit": ("quantize", 16), "8bit": ("quantize", 8),
               "noise3": ("noise", 3.0), "smooth3": ("smooth", 3.0, 8.0),
               "outliers": ("outliers", 0.02, 45.0)}
@@ -172,7 +173,7 @@ def condition(gt, cond: str, name: str):
         return synthetic.quantize(gt.normals, how[1])
     rng = np.random.default_rng([SEED, zlib.crc32(name.encode())])
     if how[0] == "smooth":
-        return synthetic.add_smooth_noise(gt.normals, how[1], how[2], rng)
+        return synthetic.add_smooth_noise(gt.normals, how[1], rng, length=how[2])
     if how[0] == "outliers":
         return synthetic.perturb_fraction(gt.normals, how[1], max_deg=how[2], rng=rng)[0]
     return synthetic.add_angular_noise(gt.normals, how[1], rng)

@@ -94,7 +94,8 @@ def run_bench(
     conditions : iterable of str, optional
         Normal conditions of the discontinuities experiment, names of
         :data:`facetlift.bench.discontinuities.CONDITIONS` (default
-        ``Settings.disc_conditions``); its k sweep runs on those of them it has.
+        ``Settings.disc_conditions``; a string is split at commas); its k sweep runs on
+        those of them it has.
     data_dir : path, optional
         Folder with ``meshes/`` and ``normal_maps/``; default :func:`default_data_dir`.
     progress : bool
@@ -108,21 +109,29 @@ def run_bench(
     Raises
     ------
     ValueError
-        Unknown method or experiment names, or a missing extra file.
+        Unknown method, experiment or condition names, conditions without the
+        discontinuities experiment, or a missing extra file.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     s = _settings(quick, methods)
+    if isinstance(experiments, str):
+        experiments = experiments.split(",")
+    exps = EXPERIMENTS if experiments is None else tuple(experiments)
     if conditions is not None:
         from .discontinuities import CONDITIONS
 
-        conditions = tuple(conditions)
+        if isinstance(conditions, str):
+            conditions = conditions.split(",")
+        conditions = tuple(c.strip() for c in conditions if c.strip())
         bad = [c for c in conditions if c not in CONDITIONS]
         if bad or not conditions:
-            raise ValueError(f"`conditions`: unknown {bad or 'none given'}; valid: "
-                             f"{list(CONDITIONS)}")
+            raise ValueError(f"`conditions`: {f'unknown {bad}' if bad else 'none given'}; "
+                             f"valid: {list(CONDITIONS)}")
+        if "discontinuities" not in exps:
+            raise ValueError("`conditions` applies to the discontinuities experiment only, "
+                             f"which is not among the experiments {list(exps)}")
         s.disc_conditions = conditions
-    exps = EXPERIMENTS if experiments is None else tuple(experiments)
     bad = [e for e in exps if e not in EXPERIMENTS]
     if bad:
         raise ValueError(f"`experiments`: unknown {bad}; valid: {list(EXPERIMENTS)}")

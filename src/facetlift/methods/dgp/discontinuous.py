@@ -282,9 +282,9 @@ RHS_SCALE_FLOOR = 1e-6
 #: (perspective) and 10 % (orthographic), with exact samples -0.5 % / +11 %.
 FORCING = 0.1
 
-#: Forcing term of the reweightings' solves with a depth prior that is nowhere stronger than
-#: the normals (every sample's weight at most the largest normal weight, ``prior_weight`` <= 1
-#: without a confidence map) and compared pixel by pixel; None for a stronger or a blurred
+#: Forcing term of the reweightings' solves with a depth prior no stronger than the normals
+#: (its largest sample weight at most the largest weight of a usable normal: ``prior_weight``
+#: <= 1 without a confidence map) and compared pixel by pixel; None for a stronger or a blurred
 #: prior (:data:`FORCING` is not used with any prior). Measured on 2026-12-03 against tight
 #: solves (one interleaved A/B on the fusion benchmark's scenes, perspective and
 #: orthographic): 1 % noisy samples at weight 1, 35 scenes: median time 0.77x, CG iterations
@@ -880,7 +880,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     it = 0
     # (the forcing term; with a prior only a weak pointwise one's, PRIOR_FORCING)
     forcing = FORCING if prior is None else (
-        PRIOR_FORCING if blur is None and prior[0].max() <= fusion[0].max() else None)
+        PRIOR_FORCING if blur is None
+        and prior[0].max() <= fusion[0][target].max(initial=0.0) else None)
     forced = forcing is not None
 
     def reweighted(w, step, z):
