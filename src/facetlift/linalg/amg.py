@@ -10,6 +10,7 @@ import scipy.sparse as sp
 
 from .cg import cg
 from .direct import Factor, SolverError
+from .matvec import parallel
 
 
 def hierarchy(
@@ -120,7 +121,10 @@ def vcycle(ml):
         A = lv.A
         x = np.zeros_like(b)
         sweep(A, x, b, A.shape[0], True)
-        x += lv.P @ down(levels, lvl + 1, lv.R @ (b - A @ x))
+        Am, P, R = A, lv.P, lv.R
+        if lvl == 0:  # (the finest level's products on two threads, if a core is free)
+            Am, P, R = parallel(A), parallel(P), parallel(R)
+        x += P @ down(levels, lvl + 1, R @ (b - Am @ x))
         sweep(A, x, b, A.shape[0], False)
         return x
 

@@ -13,6 +13,8 @@ from typing import Callable
 
 import numpy as np
 
+from .matvec import parallel
+
 
 @dataclass
 class CGInfo:
@@ -122,6 +124,7 @@ def cg(
     x : (n,) float
     info : CGInfo
     """
+    A = parallel(A)  # (large CSR matrices: the products on two threads where a core is free)
     b = np.asarray(b, dtype=float)
     x = np.zeros_like(b) if x0 is None else np.array(x0, dtype=float)
     r = b - A @ x if x0 is not None else b.copy()

@@ -1,0 +1,94 @@
+"""Sparse matrix-vector products on two threads, where a core is free.
+
+scipy's CSR product runs on one core. Its compiled kernel releases the GIL, so the rows can be
+split between the calling thread and one worker: each computes its half of the result into a
+slice of one output array, reading the matrix's own arrays (no copy of the matrix). Measured
+on the 2-core VM, otherwise idle, on a 9-point grid matrix of 2049^2 rows (38 M non-zeros):
+39-41 ms on one thread, 23-29 ms on two (`docs/benchmarks.md`, "Both cores").
+
+The split is used only for matrices of at least :data:`MIN_ROWS` rows (below that the
+thread's hand-over costs more than it saves), and only while a core is free by the same rule
+as the transforms' threads (:func:`facetlift.linalg.spectral.fft_workers`: the load average
+below the number of cores minus one half), read once per solve. Where scipy's kernel cannot be
+reached (its private module moved), the product is scipy's own.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+
+import numpy as np
+import scipy.sparse as sp
+
+try:  # scipy's compiled CSR kernel: y += A x over a range of rows, the GIL released
+    from scipy.sparse._sparsetools import csr_matvec as _kernel
+except ImportError:  # pragma: no cover - a scipy that moved it: scipy's own product
+    _kernel = None
+
+#: Fewest rows for which a product is split between two threads (about 5 ms on one core).
+MIN_ROWS = 500_000
+
+_POOL = {"pid": None, "pool": None}
+_POOL_LOCK = threading.Lock()
+
+
+def _pool():
+    """One worker thread, made anew in a forked child (a pool's threads do not survive a
+    fork, and a copied pool would wait on them for ever)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with _POOL_LOCK:
+        if _POOL["pid"] != os.getpid():
+            _POOL["pool"] = ThreadPoolExecutor(1, thread_name_prefix="facetlift-matvec")
+            _POOL["pid"] = os.getpid()
+        return _POOL["pool"]
+
+
+class SplitProduct:
+    """``A @ x`` for a CSR matrix `A` and a float64 vector `x`, the rows in two halves on two
+    threads; anything else (a block of vectors, another dtype) is scipy's own product."""
+
+    def __init__(self, A: sp.csr_matrix):
+        self.A = A
+        self.shape = A.shape
+        self.dtype = A.dtype
+        n = A.shape[0]
+        # halves of equal non-zeros, not of equal rows (a mask's rows differ)
+        self._cut = int(np.searchsorted(A.indptr, A.indptr[-1] // 2))
+        self._cut = min(max(self._cut, 1), n - 1)
+
+    def _rows(self, a: int, b: int, x: np.ndarray, y: np.ndarray) -> None:
+        A = self.A
+        y[a:b] = 0.0
+        _kernel(b - a, A.shape[1], A.indptr[a:b + 1], A.indices, A.data, x, y[a:b])
+
+    def __matmul__(self, x):
+        if not (isinstance(x, np.ndarray) and x.ndim == 1 and x.dtype == np.float64
+                and x.flags.c_contiguous):
+            return self.A @ x
+        y = np.empty(self.shape[0])
+        n, cut = self.shape[0], self._cut
+        job = _pool().submit(self._rows, cut, n, x, y)
+        try:
+            self._rows(0, cut, x, y)
+        finally:
+            job.result()
+        return y
+
+
+def free_core() -> bool:
+    """Whether a second core is free now (the transforms' rule)."""
+    from .spectral import fft_workers
+
+    return fft_workers() != 1
+
+
+def parallel(A):
+    """`A` as an operator whose products use two threads where that helps (see the module
+    docstring), else `A` itself."""
+    if (_kernel is None or not sp.issparse(A) or A.format != "csr" or A.shape[0] < MIN_ROWS
+            or A.dtype != np.float64 or A.indptr.dtype != A.indices.dtype
+            or not free_core()):
+        return A
+    return SplitProduct(A)
