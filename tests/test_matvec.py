@@ -84,5 +84,38 @@ def test_a_forked_child_makes_its_own_worker(split):
         os.kill(pid, signal.SIGKILL)
         os.waitpid(pid, 0)
     assert ready, "the forked child's product hung"
-    assert os.read(r, 1) == b"1"
-    os.waitpid(pid, 0)
+    try:
+        assert os.read(r, 1) == b"1"
+    finally:
+        os.close(r)
+        os.waitpid(pid, 0)
+
+
+def test_wrong_lengths_tiny_matrices_and_a_pool_shut_down(split, monkeypatch):
+    K = grid_matrix(40)
+    A = matvec.parallel(K)
+    with pytest.raises(ValueError, match="dimension mismatch"):  # scipy's own error
+        A @ np.ones(K.shape[1] - 1)
+    for n in (0, 1):  # (a split needs two rows)
+        tiny = sp.csr_matrix((n, n))
+        assert matvec.parallel(tiny) is tiny
+    # the worker takes no new job (the interpreter shutting down): the caller does it all
+    x = np.random.default_rng(3).normal(size=K.shape[0])
+
+    class Closed:
+        def submit(self, *a, **k):
+            raise RuntimeError("cannot schedule new futures after interpreter shutdown")
+
+    monkeypatch.setattr(matvec, "_pool", lambda: Closed())
+    np.testing.assert_array_equal(A @ x, K @ x)
+
+
+def test_a_kernel_that_disagrees_is_not_used(split, monkeypatch):
+    def wrong(n_row, n_col, indptr, indices, data, x, y):
+        y += 1.0
+
+    monkeypatch.setattr(matvec, "_kernel", wrong)
+    monkeypatch.setattr(matvec, "_CHECKED", {"ok": None})
+    K = grid_matrix(30)
+    assert matvec.parallel(K) is K
+    assert matvec._kernel is None

@@ -9,8 +9,11 @@ on the 2-core VM, otherwise idle, on a 9-point grid matrix of 2049^2 rows (38 M 
 The split is used only for matrices of at least :data:`MIN_ROWS` rows (below that the
 thread's hand-over costs more than it saves), and only while a core is free by the same rule
 as the transforms' threads (:func:`facetlift.linalg.spectral.fft_workers`: the load average
-below the number of cores minus one half), read once per solve. Where scipy's kernel cannot be
-reached (its private module moved), the product is scipy's own.
+below the number of cores minus one half), read once per CG solve and per V-cycle product.
+scipy's kernel is private: it is checked once against scipy's own product on a small matrix,
+and where it cannot be reached or disagrees, the product is scipy's own; so it is where the
+worker cannot take a job (the interpreter shutting down) or for a vector of another length
+(scipy's own error).
 """
 
 from __future__ import annotations
@@ -45,6 +48,44 @@ def _pool():
         return _POOL["pool"]
 
 
+def _after_fork_in_child() -> None:  # (a lock held by another thread at the fork stays held)
+    global _POOL_LOCK
+    _POOL_LOCK = threading.Lock()
+    _POOL.update(pid=None, pool=None)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+def _kernel_works() -> bool:
+    """Whether scipy's private kernel computes what scipy's product does (checked once, on
+    a small matrix with int32 and int64 indices, over a range of rows)."""
+    global _kernel
+    if _kernel is None:
+        return False
+    if _CHECKED["ok"] is None:
+        ok = True
+        try:
+            A = sp.random(7, 5, density=0.6, format="csr", random_state=0)
+            x = np.arange(1.0, 6.0)
+            for idx in (np.int32, np.int64):
+                y = np.full(7, np.nan)
+                y[2:7] = 0.0
+                ip, ix = A.indptr.astype(idx), A.indices.astype(idx)
+                _kernel(5, 5, ip[2:8], ix, A.data, x, y[2:7])
+                ok = ok and np.allclose(y[2:], (A @ x)[2:], rtol=1e-12, atol=0.0)
+        except Exception:  # (any failure: scipy's own product)
+            ok = False
+        _CHECKED["ok"] = ok
+        if not ok:
+            _kernel = None
+    return _CHECKED["ok"]
+
+
+_CHECKED = {"ok": None}
+
+
 class SplitProduct:
     """``A @ x`` for a CSR matrix `A` and a float64 vector `x`, the rows in two halves on two
     threads; anything else (a block of vectors, another dtype) is scipy's own product."""
@@ -65,11 +106,15 @@ class SplitProduct:
 
     def __matmul__(self, x):
         if not (isinstance(x, np.ndarray) and x.ndim == 1 and x.dtype == np.float64
-                and x.flags.c_contiguous):
-            return self.A @ x
+                and x.flags.c_contiguous and x.shape[0] == self.shape[1]):
+            return self.A @ x  # (scipy's own product, and its errors)
         y = np.empty(self.shape[0])
         n, cut = self.shape[0], self._cut
-        job = _pool().submit(self._rows, cut, n, x, y)
+        try:
+            job = _pool().submit(self._rows, cut, n, x, y)
+        except RuntimeError:  # (no new jobs: the interpreter is shutting down)
+            self._rows(0, n, x, y)
+            return y
         try:
             self._rows(0, cut, x, y)
         finally:
@@ -87,8 +132,8 @@ def free_core() -> bool:
 def parallel(A):
     """`A` as an operator whose products use two threads where that helps (see the module
     docstring), else `A` itself."""
-    if (_kernel is None or not sp.issparse(A) or A.format != "csr" or A.shape[0] < MIN_ROWS
+    if (not sp.issparse(A) or A.format != "csr" or A.shape[0] < max(MIN_ROWS, 2)
             or A.dtype != np.float64 or A.indptr.dtype != A.indices.dtype
-            or not free_core()):
+            or not free_core() or not _kernel_works()):
         return A
     return SplitProduct(A)
