@@ -60,6 +60,7 @@ def main(argv=None) -> int:
     scenes = [s for s in bd.scenes(ctx) if s[0] in ("perspective", "ortho")][::args.step]
     routes = ("default",) if args.discontinuities else ("amg", "facet")
     ratios = {r: [] for r in routes}
+    by_prior = {}  # (route, prior) -> ratios
     print("| scene | plain s | prior | " + " | ".join(f"{r}: ratio (route, CG)" for r in routes)
           + " |")
     print("|---|---|---|" + "---|" * len(routes))
@@ -79,6 +80,7 @@ def main(argv=None) -> int:
                     t, s = best(args.repeat, gt.normals, gt.mask, prior=prior,
                                 prior_weight=weight, **kw)
                     ratios[route].append(t / t0)
+                    by_prior.setdefault((route, cond), []).append(t / t0)
                     its = s.info.get("cg_iterations")
                     its = sum(its) if isinstance(its, list) else its
                     cells.append(f"{t / t0:.2f} ({s.info.get('backend', 'reweighted')}, {its})")
@@ -90,6 +92,10 @@ def main(argv=None) -> int:
         if r:
             print(f"\n{route}: time ratio median {np.median(r):.2f}, max {np.max(r):.2f}, "
                   f"{len(r)} runs")
+            for (rt, cond), rc in by_prior.items():
+                if rt == route:
+                    print(f"  {cond}: median {np.median(rc):.2f}, max {np.max(rc):.2f}, "
+                          f"{len(rc)} runs")
     return 0
 
 

@@ -857,7 +857,8 @@ def add_smooth_noise(normals, sigma_deg: float, rng=None, *, length: float = 8.0
         three times the RMS).
     rng : numpy.random.Generator or seed
     length : float
-        Correlation length of the field in pixels (> 0).
+        Standard deviation of the smoothing Gaussian in pixels (> 0); the field's correlation
+        falls to 1/e at about twice that distance.
     keep_front : bool
         Where a rotation would turn a front-facing normal away from the viewer, rotate by the
         opposite angle instead (:func:`add_angular_noise`; the field is then not smooth there).

@@ -44,7 +44,7 @@ from .tables import md_table, write_csv, write_text
 log = logging.getLogger(__name__)
 
 #: Condition name -> ("quantize", bits), ("noise", degrees), ("smooth", RMS degrees,
-#: correlation length px: :func:`facetlift.synthetic.add_smooth_noise`), ("outliers", fraction,
+#: smoothing sigma px: :func:`facetlift.synthetic.add_smooth_noise`), ("outliers", fraction,
 #: largest degrees: :func:`facetlift.synthetic.perturb_fraction`) or None. The last two are not
 #: in the default run (``Settings.disc_conditions``): ``facetlift bench --experiments
 #: discontinuities --conditions smooth3,outliers`` runs them (``benchmarks/bench_jump_free.py
