@@ -91,13 +91,13 @@ def run_bench(
         More meshes for Fig. 9 (rendered from every view).
     extra_normal_maps : iterable of paths
         More data folders (``normal_map.png`` + ``mask.png`` [+ ``K.txt``]) for Fig. 10.
+    data_dir : path, optional
+        Folder with ``meshes/`` and ``normal_maps/``; default :func:`default_data_dir`.
     conditions : iterable of str, optional
         Normal conditions of the discontinuities experiment, names of
         :data:`facetlift.bench.discontinuities.CONDITIONS` (default
         ``Settings.disc_conditions``; a string is split at commas); its k sweep runs on
         those of them it has.
-    data_dir : path, optional
-        Folder with ``meshes/`` and ``normal_maps/``; default :func:`default_data_dir`.
     progress : bool
         Show tqdm progress bars.
 
