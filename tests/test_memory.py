@@ -58,6 +58,29 @@ def test_default_limit_honours_rlimit_as():
     assert lim <= 8 * 2**30 - vm + 2**20
 
 
+def test_a_fraction_of_a_byte_is_refused_with_a_unit_suggested():
+    for bad in ("1.5", 1.5):  # (--max-memory 1.5 read as 1 byte; meant 1.5G)
+        with pytest.raises(ValueError, match="fraction of a byte.*'1.5G'"):
+            memory.parse_size(bad)
+
+
+def test_ulimit_v_is_named_as_the_limit_and_bounds_an_explicit_one(monkeypatch):
+    """Under ulimit -v the refusal named 'the available memory' and advised --max-memory,
+    which then ran out of address space (a large-map user's check); the discontinuity
+    route's refusal names the smooth route where that fits."""
+    n, m = _disk_normals()
+    smooth = memory.estimate(facetlift.prepare(n, m), "dgp", {})[0]
+    monkeypatch.setattr(memory, "_address_space_headroom", lambda: int(smooth) + 2**20)
+    monkeypatch.setattr(memory, "_meminfo", lambda: {"MemTotal": 2**40, "MemAvailable": 2**40})
+    assert memory.default_limit_source()[1] == memory.ADDRESS_SPACE
+    with pytest.raises(MemoryLimitError, match=r"ulimit -v.*integrate without "
+                       r"discontinuities \(about .*\).*raise or lift ulimit -v"):
+        facetlift.integrate(n, m, discontinuities=True)
+    with pytest.raises(MemoryLimitError, match=r"ulimit -v.*cannot go beyond it"):
+        facetlift.integrate(n, m, discontinuities=True, max_memory="100G")
+    assert facetlift.integrate(n, m, max_memory="100G").depth is not None
+
+
 def test_refuses_with_the_estimate_the_limit_and_what_to_do():
     n, m = _disk_normals()
     with pytest.raises(MemoryLimitError, match=r"would need about .* MiB at its peak .*more "

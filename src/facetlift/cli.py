@@ -530,7 +530,7 @@ def _info_lines(rec: dict) -> list[str]:
             f"({e['route']} route; {fits} the {_mib(e['limit'])} allowed here)")
     if e["seconds"] is not None:
         lo, hi = e["seconds"]
-        line += f", {lo:.2g}-{hi:.2g} s on the 2-core benchmark machine"
+        line += f", {_seconds(lo)}-{_seconds(hi)} s on the 2-core benchmark machine"
     lines.append(line)
     return lines
 
@@ -708,6 +708,12 @@ def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_di
     except ValueError as e:
         raise click.UsageError(str(e)) from None
     click.echo(f"wrote {path / 'report.md'}")
+
+
+def _seconds(t: float) -> str:
+    """A time estimate in seconds, two significant digits without an exponent (110, 17, 1.5,
+    0.04)."""
+    return f"{float(f'{t:.2g}'):g}" if t < 1e5 else f"{t:.0f}"
 
 
 def _error(message: str) -> None:

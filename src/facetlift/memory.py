@@ -204,6 +204,9 @@ def parse_size(value) -> int:
     else:
         raise ValueError(f"`max_memory` must be a number of bytes or a size such as '8G'; got "
                          f"{value!r}")
+    if math.isfinite(out) and out > 0 and out != int(out):
+        raise ValueError(f"`max_memory` is in bytes without a unit, and a fraction of a byte "
+                         f"is no size: got {value!r}; give a unit, e.g. '{value}G'")
     if not (math.isfinite(out) and out > 0):
         raise ValueError(f"`max_memory` must be a positive, finite size; got {value!r}"
                          + ("" if math.isfinite(out) else " (infinite: leave it out for no "
@@ -254,8 +257,41 @@ def _vm_size() -> int:
     return 0
 
 
+#: Address space kept free under ``ulimit -v`` beyond the plan: threads' stacks and the
+#: allocator's arenas take address space that is not resident memory (a 1024^2 job planned at
+#: 93 MiB in 131 MiB of address space ran out of it).
+ADDRESS_MARGIN = 256 * MiB
+
+
+def _address_space_headroom() -> int | None:
+    """What ``ulimit -v`` (RLIMIT_AS) leaves above the process's virtual size, less
+    :data:`ADDRESS_MARGIN`; None without such a limit."""
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    except (ImportError, ValueError, OSError):  # pragma: no cover - not POSIX
+        return None
+    if soft == resource.RLIM_INFINITY:
+        return None
+    return soft - _vm_size() - ADDRESS_MARGIN
+
+
 def default_limit() -> int:
     """The default ``max_memory`` in bytes (module docstring)."""
+    return default_limit_source()[0]
+
+
+#: What bounds the default limit, as :func:`default_limit_source` names it.
+FREE, ADDRESS_SPACE, CGROUP = ("the available memory", "what ulimit -v (the address-space "
+                               "limit) leaves above this process", "the container's memory "
+                               "limit")
+
+
+def default_limit_source() -> tuple[int, str]:
+    """``(bytes, what bounds them)``: :func:`default_limit` and which of the free memory
+    (:data:`FREE`), ``ulimit -v`` (:data:`ADDRESS_SPACE`) or a cgroup (:data:`CGROUP`) is the
+    smallest."""
     info = _meminfo()
     total = info.get("MemTotal")
     avail = info.get("MemAvailable")
@@ -266,19 +302,15 @@ def default_limit() -> int:
             total = os.sysconf("SC_PHYS_PAGES") * page
         except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
             avail = total = 2**62
-    limits = [avail - max(256 * MiB, int(MARGIN * (total or avail)))]
-    try:
-        import resource
-
-        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-        if soft != resource.RLIM_INFINITY:
-            limits.append(soft - _vm_size())
-    except (ImportError, ValueError, OSError):  # pragma: no cover - not POSIX
-        pass
+    limits = [(avail - max(256 * MiB, int(MARGIN * (total or avail))), FREE)]
+    space = _address_space_headroom()
+    if space is not None:
+        limits.append((space, ADDRESS_SPACE))
     cg = _cgroup_headroom()
     if cg is not None:
-        limits.append(cg)
-    return max(int(min(limits)), 0)
+        limits.append((cg, CGROUP))
+    size, source = min(limits, key=lambda t: t[0])
+    return max(int(size), 0), source
 
 
 #: Bytes the running job may take beyond its plan's estimate (its limit minus the estimate),
@@ -432,7 +464,14 @@ def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
         A bad `max_memory`.
     """
     _release_retained()  # (the memory a previous job left in the process counts as free)
-    lim = limit(max_memory)
+    source = "`max_memory`"
+    if max_memory is None:
+        lim, source = default_limit_source()
+    else:
+        lim = limit(max_memory)
+        space = _address_space_headroom()  # (an explicit limit cannot go beyond ulimit -v)
+        if space is not None and space < lim:
+            lim, source = max(space, 0), ADDRESS_SPACE
     m = problem.domain.n_facets
     cap = SIZE_LIMITS.get(method)
     if cap is not None and m > cap and max_memory is None:
@@ -445,14 +484,20 @@ def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
     est, route = estimate(problem, method, options)
     p = Plan(int(min(est, 2**62)), lim, route)
     if est > lim:
-        source = "`max_memory`" if max_memory is not None else "the available memory"
+        leaner = ""
+        if method != "dgp":
+            leaner = "use a route that needs less (the default method='dgp' is the leanest), "
+        elif options.get("discontinuities"):
+            smooth = estimate(problem, method, {**options, "discontinuities": False})[0]
+            if smooth <= lim:
+                leaner = (f"integrate without discontinuities (about {_size(smooth)}), ")
         raise MemoryLimitError(
             f"method {method!r} would need about {_size(est)} at its peak ({route}, "
             f"{problem.domain.n_facets:,} mask pixels), more than the "
             f"{_size(lim)} allowed ({source}); "
-            "crop the input or lower its resolution, "
-            + ("use a route that needs less (the default method='dgp' is the leanest), "
-               if method != "dgp" else "")
-            + "or raise the limit with max_memory= / --max-memory if the memory is there"
+            "crop the input or lower its resolution, " + leaner
+            + ("or raise or lift ulimit -v (max_memory= / --max-memory cannot go beyond it)"
+               if source == ADDRESS_SPACE else
+               "or raise the limit with max_memory= / --max-memory if the memory is there")
         )
     return p
