@@ -340,9 +340,17 @@ def factorization_fits(n: int) -> bool:
     return need <= default_limit() / 2 and (room is None or need <= room)
 
 
-def limit(max_memory=None) -> int:
-    """`max_memory` in bytes (checked), or :func:`default_limit` when None."""
-    return default_limit() if max_memory is None else parse_size(max_memory)
+def limit_source(max_memory=None) -> tuple[int, str]:
+    """``(bytes, what bounds them)`` of the job's limit: :func:`default_limit_source` when
+    `max_memory` is None, else `max_memory` (checked), which cannot go beyond what ``ulimit
+    -v`` leaves (:data:`ADDRESS_SPACE`)."""
+    if max_memory is None:
+        return default_limit_source()
+    lim = parse_size(max_memory)
+    space = _address_space_headroom()
+    if space is not None and space < lim:
+        return max(space, 0), ADDRESS_SPACE
+    return lim, "`max_memory`"
 
 
 def _box(domain) -> tuple[int, int]:
@@ -464,14 +472,7 @@ def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
         A bad `max_memory`.
     """
     _release_retained()  # (the memory a previous job left in the process counts as free)
-    source = "`max_memory`"
-    if max_memory is None:
-        lim, source = default_limit_source()
-    else:
-        lim = limit(max_memory)
-        space = _address_space_headroom()  # (an explicit limit cannot go beyond ulimit -v)
-        if space is not None and space < lim:
-            lim, source = max(space, 0), ADDRESS_SPACE
+    lim, source = limit_source(max_memory)
     m = problem.domain.n_facets
     cap = SIZE_LIMITS.get(method)
     if cap is not None and m > cap and max_memory is None:
