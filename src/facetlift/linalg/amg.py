@@ -158,18 +158,34 @@ def amg(K, *, rtol: float = 1e-10, maxiter: int = 500, method: str = "rs",
     return factor
 
 
-def refresh(ml, K, coarse_solver: str = "splu") -> None:
+def refresh(ml, K, coarse_solver: str = "splu", reinterpolate: bool = False) -> None:
     """Give the hierarchy `ml` a new finest matrix `K` (same pattern of unknowns): the
     coarsening and the interpolation are kept, the coarse operators recomputed
     (``A_{l+1} = R A_l P``, Galerkin) and pyamg's coarse solver replaced by a new one of
     kind `coarse_solver` (it factorizes at its first use); a fraction of the cost of a new
     hierarchy. The callables of :func:`vcycle` see the new operators (their coarsest factor
-    is redone at the next call)."""
+    is redone at the next call).
+
+    With `reinterpolate` each level's interpolation is also formed anew from the new matrix:
+    Ruge-Stueben direct interpolation on the level's old coarse points, from the same coarse
+    neighbours as before (the old pattern; the costly splitting is kept), so couplings the
+    new matrix has weakened, e.g. across a new cut, stop carrying the coarse correction.
+    Needs a hierarchy of :func:`hierarchy` with ``method="rs"``."""
     import pyamg
 
     levels = ml.levels
     levels[0].A = sp.csr_matrix(K)
     for fine, coarse in zip(levels[:-1], levels[1:], strict=True):
+        if reinterpolate:
+            from pyamg.classical.interpolate import direct_interpolation
+
+            # the strong coarse neighbours of each point: the columns of its row of P
+            P = fine.P.tocsr()
+            cpts = np.flatnonzero(fine.splitting).astype(P.indices.dtype)
+            C = sp.csr_matrix((np.ones(P.nnz), cpts[P.indices], P.indptr.copy()),
+                              shape=fine.A.shape)
+            fine.P = direct_interpolation(fine.A, C, fine.splitting.astype(C.indptr.dtype))
+            fine.R = fine.P.T.tocsr()
         coarse.A = (fine.R @ fine.A @ fine.P).tocsr()
     ml.coarse_solver = pyamg.multilevel.coarse_grid_solver(coarse_solver)
 

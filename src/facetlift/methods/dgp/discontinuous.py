@@ -209,6 +209,21 @@ REUSE_STEP = 0.5
 #: objects).
 REFRESH_ITS = 8
 
+#: A refresh after a slow solve (:data:`REFRESH_ITS`) also recomputes the interpolation from
+#: the new matrix (direct interpolation on each level's old coarse points and pattern,
+#: :func:`facetlift.linalg.amg.refresh`): new cuts make the old interpolation average across
+#: them, and a Galerkin refresh alone left 8-10 CG iterations per reweighting on maps with
+#: long jumps, where a new hierarchy takes about 3 but costs a Ruge-Stueben splitting each
+#: time. Measured (2026-12-03, fifth session; interleaved A/B, 2-core VM): the analytic
+#: ``occluder`` at 512^2 13.2-15.0 -> 9.0-9.5 s (CG iterations 325 -> 165, error 11.9636 ->
+#: 11.9644 %), at 1024^2 70.9 -> 63.7 s (417 -> 218 iterations over 42 -> 60 reweightings,
+#: the path moved; 12.200 -> 12.194 %); the timing objects within the noise (armadillo 185 ->
+#: 169 iterations); the benchmark's 64 renders at exact and 3-deg-noise normals (128 runs):
+#: median time 1.00x, CG iterations -3 %, 12 errors better and 10 worse by more than 1 %
+#: (group means within 0.2 %), 128 / 128 converged. Recomputing it at every refresh was
+#: faster still on the occluder (8.4 s) but slower on the objects (bunny 2.39 -> 2.67 s).
+REINTERPOLATE = True
+
 #: Side (vertices) of the square blocks whose piecewise constants are solved exactly in every
 #: preconditioning step once CG has been slow (:func:`facetlift.linalg.amg.balanced`). The
 #: Ruge-Stueben hierarchy resolves the smooth error of these glued systems slowly: whole
@@ -803,7 +818,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             amg["for"] = K
         elif rebuild or (amg["last_its"] > REFRESH_ITS and not trial):
             amg["bal"] = None  # (formed anew below)
-            refresh(amg["ml"], K)
+            refresh(amg["ml"], K,
+                    reinterpolate=REINTERPOLATE and amg["last_its"] > REFRESH_ITS)
             amg["refreshes"] += 1
             amg["for"] = None  # refreshed, not built, for K
         pre = amg["pre"]
