@@ -754,7 +754,16 @@ def test_discontinuities_show_a_progress_bar(tmp_path, capsys):
     path = io.write_normals(tmp_path / "roof.npy", n)
     code, _, err = run(capsys, "integrate", path, "--discontinuities", "--progress",
                        "-o", tmp_path / "o")
-    assert code == 0 and "integrating" in err
+    assert code == 0
+    # the steps without iterations are named as they start (a large map spends tens of
+    # seconds in them), the reweightings counted
+    for stage in ("reading", "integrating", "smooth start", "reweighting", "final solve",
+                  "placing pieces", "writing outputs"):
+        assert stage in err, stage
+    assert "it [" in err
+    import threading  # the thread that redraws the bar ended with it
+
+    assert not [t for t in threading.enumerate() if t.name == "facetlift-progress"]
 
 
 def test_json_failure_prints_one_object(tmp_path, capsys):

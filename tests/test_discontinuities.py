@@ -338,6 +338,21 @@ def test_stopping_rule_and_cap():
     facetlift.integrate(n, discontinuities=True, progress=lambda it, ch: seen.append((it, ch)))
     assert [it for it, _ in seen] == list(range(1, len(seen) + 1))
     assert [ch for _, ch in seen] == dw
+    # a progress callable with a `stage` attribute also hears the steps without iterations
+    # start, in order, between the same iteration reports (facetlift._progress)
+    events = []
+
+    def report(it, ch):
+        events.append(it)
+
+    report.stage = events.append
+    facetlift.integrate(n, discontinuities=True, progress=report)
+    names = [e for e in events if isinstance(e, str)]
+    assert names == ["smooth start", "reweighting", "crack growth", "final solve",
+                     "placing pieces"] if s.info["grown"] else names == [
+        "smooth start", "reweighting", "final solve", "placing pieces"]
+    assert [e for e in events if not isinstance(e, str)] == [it for it, _ in seen]
+    assert events.index("reweighting") == 1 and events[2] == 1  # (then the first report)
 
 
 def tent(N=48, a=10, b=38):

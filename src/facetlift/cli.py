@@ -137,26 +137,58 @@ def _out_dir(ctx, param, value):
     return Path(value)
 
 
+#: Seconds between redraws of the progress bar while a stage without iterations runs (its
+#: elapsed time keeps counting).
+_TICK = 1.0
+
+
 def _progress_bar(total: int | None):
-    """(bar, update): a tqdm bar on stderr that appears at the first update (a route that
-    never reports progress shows nothing); ``bar.close()`` is safe either way."""
+    """(bar, update): a tqdm bar on stderr that appears at the first update or stage (a
+    route that reports neither shows nothing); ``bar.close()`` is safe either way.
+
+    ``update.stage(name)`` (facetlift._progress) names the step that starts in the bar's
+    description, and a thread redraws the bar every :data:`_TICK` seconds so that its
+    elapsed time runs on through steps that report no iteration (a large map's smooth start,
+    final solve and writing)."""
+    import threading
+
     from tqdm import tqdm
 
     state = {}
+    stop = threading.Event()
+
+    def bar(desc="integrating"):
+        if "bar" not in state:
+            state["bar"] = tqdm(total=total, desc=desc, unit="it", file=sys.stderr,
+                                leave=False)
+        return state["bar"]
+
+    def tick(b):
+        while not stop.wait(_TICK):
+            b.refresh()
 
     class _Bar:
         def close(self):
+            stop.set()
+            if "ticker" in state:
+                state["ticker"].join()
             if "bar" in state:
                 state["bar"].close()
 
     def update(iteration, value):
-        if "bar" not in state:
-            state["bar"] = tqdm(total=total, desc="integrating", unit="it", file=sys.stderr,
-                                leave=False)
-        bar = state["bar"]
-        bar.update(iteration - bar.n)
-        bar.set_postfix_str(f"{value:.4g}", refresh=False)
+        b = bar()
+        b.update(iteration - b.n)
+        b.set_postfix_str(f"{value:.4g}", refresh=False)
 
+    def stage(name):
+        b = bar(name)
+        b.set_description_str(name)  # (redraws)
+        if "ticker" not in state:
+            state["ticker"] = threading.Thread(target=tick, args=(b,), daemon=True,
+                                               name="facetlift-progress")
+            state["ticker"].start()
+
+    update.stage = stage
     return _Bar(), update
 
 

@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ._progress import announce
+
 #: Output kinds (``--save``) -> file names written into the output folder.
 OUTPUTS = {
     "npy": "depth.npy",
@@ -293,6 +295,7 @@ def run(job: Job, *, progress=None) -> dict:
     # phase fails, a write or the outputs' commit too)
     with recorded_warnings() as caught, \
             io.OutputSet(outdir, names, inputs=input_paths(job)) as out:
+        announce(progress, "reading")
         inp = read(job)
         t_read = time.perf_counter() - t0
         opts = dict(job.options)
@@ -303,6 +306,7 @@ def run(job: Job, *, progress=None) -> dict:
                              f"method option prior={opts['prior']!r} were both given")
         depth_prior = opts.pop("prior", None) if inp.prior is None else inp.prior
         t1 = time.perf_counter()
+        announce(progress, "integrating")
         with frames.read_in(frames.GRADIENT_FIELD if inp.field else job.normal_frame):
             surface = facetlift.integrate(
                 inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size, K=inp.K,
@@ -312,6 +316,7 @@ def run(job: Job, *, progress=None) -> dict:
             )
         t_integrate = time.perf_counter() - t1
         t2 = time.perf_counter()
+        announce(progress, "writing outputs")
         for kind, name in zip(save, names, strict=True):
             try:
                 _write(surface, kind, out.path(name), inp.normals, job.triangles)

@@ -67,6 +67,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..._progress import announce
 from ..._warnings import warn
 from ...errors import ConvergenceWarning
 from ...operators.stencil import E_X, E_Y
@@ -103,7 +104,9 @@ OPTIONS = (
            "flattest of otherwise equal solutions)", low=0.0, low_open=True),
     Option("progress", None, "callable(iteration, value) called after every iteration of "
            "the routes that iterate: the loop (value: deviation), the reweightings, the CG "
-           "of the direct route (value: relative residual)", kind="callable", none=True),
+           "of the direct route (value: relative residual); one with a `stage` attribute "
+           "also hears stage(name) as the discontinuity route's steps without iterations "
+           "start (facetlift._progress)", kind="callable", none=True),
     Option("discontinuity_k", DEFAULT_K, "sharpness of the bilateral weights, in squared pixel "
            "footprints (larger cuts more readily)", low=0.0, low_open=True, when=_DISC),
     Option("discontinuity_iter", DEFAULT_ITER, "cap on the reweightings, the growth phase's "
@@ -170,6 +173,7 @@ def run(
                  f"up to {max(info['unsolved']):.1e}) and were too large to factorize here "
                  f"(more than {discontinuous.DIRECT_POLISH:,} vertices, or short of memory): "
                  "the surface is usable but less exact (info['unsolved'])", ConvergenceWarning)
+        announce(progress, "placing pieces")
         copies, pinfo = place_pieces(domain, y, bx, by, target, s,
                                      anchored=None if prior is None else prior[0] > 0,
                                      hang_anchored=blur is not None)

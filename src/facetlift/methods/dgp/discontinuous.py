@@ -100,6 +100,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ... import linalg
+from ..._progress import announce
 from ...conventions import CORNER_OFFSETS
 from ...errors import SolverError
 from ...linalg.amg import balanced, block_aggregates, hierarchy, refresh, vcycle
@@ -884,6 +885,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         return z
 
     # the first (smooth) solution only starts the reweightings: as loose as theirs
+    announce(callback, "smooth start")
     z, its = solve(K, rhs, np.zeros(domain.n_vertices) if x0 is None else x0, scale=scale,
                    rtol=max(cg_rtol, LOOSE_RTOL) if max_iter > 0 else cg_rtol)
     cg_its = [its]
@@ -915,6 +917,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     moving = blur is not None and max_iter > 0 and blur.update(y.mean(axis=1), settled=False)
     if moving:
         retarget(blur.target)
+    if max_iter > 0:
+        announce(callback, "reweighting")
     for it in range(1, max_iter + 1):
         step = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes) - w
         if it > SETTLE_AFTER:
@@ -958,6 +962,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             if it >= max_iter:  # (the cap counts the growth too)
                 converged = False
                 break
+            if not grown:
+                announce(callback, "crack growth")
             it += 1
             grown += 1
             w = w + step
@@ -987,6 +993,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         M = Ma = rhs = None
         M, Ma, K, rhs, scale = state(w)
     polish = None  # (how the final system was solved to cg_rtol: info["polish"])
+    if final or it > 0:
+        announce(callback, "final solve")
     if it > 0 and (LOOSE_RTOL > cg_rtol or forced or final):  # solved loosely: polish
         # on the hierarchy at hand when it does so quickly (large smooth maps: 2-3 CG
         # iterations, where a new hierarchy costs seconds), else by a factorization where
