@@ -69,7 +69,11 @@ def main(argv=None) -> int:
     rows = []
     sink = open(a.json, "w") if a.json else None
     for group, name, load in bd.scenes(ctx):
-        gt = load()
+        try:
+            gt = load()
+        except Exception as e:  # (e.g. a mesh that covers no pixel at a small size)
+            print(f"{name:26s} skipped: {type(e).__name__}: {e}", flush=True)
+            continue
         if gt.mask.sum() < a.min_pixels:
             continue
         for cond in conds:
@@ -79,16 +83,24 @@ def main(argv=None) -> int:
             for label, kw in (("dgp-disc", {"method": "dgp", "discontinuities": True}),
                               ("bini", {"method": "bini"})):
                 t = time.perf_counter()
-                s = facetlift.integrate(normals, gt.mask, pixel_size=gt.pixel_size, K=gt.K, **kw)
+                try:
+                    s = facetlift.integrate(normals, gt.mask, pixel_size=gt.pixel_size,
+                                            K=gt.K, **kw)
+                except Exception as e:  # recorded; the scene leaves the tables
+                    row["failed"] = f"{label}: {type(e).__name__}: {e}"[:300]
+                    break
                 row[label + " s"] = time.perf_counter() - t
                 row[label] = bd.error_of(gt, s.depth)
+            if sink:
+                sink.write(json.dumps(row) + "\n")
+                sink.flush()
+            if "failed" in row:
+                print(f"{name:26s} {cond:7s} failed: {row['failed']}", flush=True)
+                continue
             rows.append(row)
             print(f"{name:26s} {cond:7s} {row['pixels']:8d} px  dgp-disc {row['dgp-disc']:7.3f} "
                   f"mm {row['dgp-disc s']:6.1f} s   bini {row['bini']:7.3f} mm "
                   f"{row['bini s']:6.1f} s", flush=True)
-            if sink:
-                sink.write(json.dumps(row) + "\n")
-                sink.flush()
     print(f"\n{H} x {W}, views {a.views}")
     print("| condition | scenes | dgp-disc mean MADE (mm) | BiNI | wins / losses | dgp-disc / BiNI "
           "time (s) |")
@@ -102,6 +114,8 @@ def main(argv=None) -> int:
         print(f"| {cond} | {len(rs)} | {d.mean():.3f} | {b.mean():.3f} | "
               f"{int((d < 0.99 * b).sum())} / {int((d > 1.01 * b).sum())} | "
               f"{sum(r['dgp-disc s'] for r in rs):.1f} / {sum(r['bini s'] for r in rs):.1f} |")
+    if sink:
+        sink.close()
     return 0
 
 

@@ -354,6 +354,35 @@ def test_refresh_with_reinterpolation_follows_a_new_cut():
     np.testing.assert_allclose(x1, x0, atol=1e-5 * np.abs(x0).max())
 
 
+def test_reinterpolation_of_the_same_matrix_and_its_index_types():
+    """Reinterpolated for its own matrix, a hierarchy keeps its interpolation; 64-bit index
+    arrays (pyamg's kernels take one index type; a mix raised TypeError) and a mix of a
+    32-bit hierarchy and a 64-bit matrix work; a hierarchy without a C/F splitting (smoothed
+    aggregation) is refused clearly."""
+    from facetlift.linalg.amg import hierarchy, refresh, vcycle
+
+    A, B = _cut_laplacian(40, 1.0), _cut_laplacian(40, 1e-6)
+    ml = hierarchy(A, symmetric_gs=True, interpolation="direct")
+    before = [lv.P.copy() for lv in ml.levels[:-1]]
+    refresh(ml, A, reinterpolate=True)
+    for P, lv in zip(before, ml.levels[:-1], strict=True):
+        assert abs(P - lv.P).max() < 1e-14
+
+    def wide(M):
+        M = M.tocsr().copy()
+        M.indices, M.indptr = M.indices.astype(np.int64), M.indptr.astype(np.int64)
+        return M
+
+    r = np.ones(A.shape[0])
+    for a, b in ((wide(A), wide(B)), (A, wide(B)), (wide(A), B)):
+        ml = hierarchy(a, symmetric_gs=True, interpolation="direct")
+        refresh(ml, b, reinterpolate=True)
+        assert linalg.cg(b, r, vcycle(ml), rtol=1e-8, maxiter=300)[1].converged
+    sa = hierarchy(A, method="sa")
+    with pytest.raises(ValueError, match="Ruge-Stueben"):
+        refresh(sa, B, reinterpolate=True)
+
+
 def test_balanced_two_level_is_spd_and_catches_piecewise_constant_error():
     from facetlift.linalg.amg import balanced, block_aggregates
 

@@ -280,7 +280,8 @@ _JOB_OPTIONS = [
                  "within it too. Default: the available memory minus a margin, ulimit -v "
                  "honoured."),
     click.option("--progress/--no-progress", default=None,
-                 help="Progress bar on stderr for routes that iterate (and for batches). "
+                 help="Progress bar on stderr: the iterations of routes that iterate and the "
+                 "steps of the job (reading, integrating, writing; for batches, the items). "
                  "Default: when stderr is a terminal."),
 ]
 

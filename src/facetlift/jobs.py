@@ -261,7 +261,9 @@ def run(job: Job, *, progress=None) -> dict:
     ----------
     job : Job
     progress : callable(iteration, value), optional
-        Passed to methods that report progress.
+        Passed to methods that report progress; with a ``stage`` attribute it also hears
+        the job's steps start ("reading", "integrating", "writing outputs" and the method's
+        own: :mod:`facetlift._progress`).
 
     Returns
     -------

@@ -169,25 +169,52 @@ def refresh(ml, K, coarse_solver: str = "splu", reinterpolate: bool = False) -> 
     With `reinterpolate` each level's interpolation is also formed anew from the new matrix:
     Ruge-Stueben direct interpolation on the level's old coarse points, from the same coarse
     neighbours as before (the old pattern; the costly splitting is kept), so couplings the
-    new matrix has weakened, e.g. across a new cut, stop carrying the coarse correction.
-    Needs a hierarchy of :func:`hierarchy` with ``method="rs"``."""
+    new matrix has weakened, e.g. across a new cut, stop carrying the coarse correction
+    (unless such a coupling is a point's only coarse neighbour: direct interpolation scales
+    its row to reproduce constants). Needs a hierarchy of :func:`hierarchy` with
+    ``method="rs"``."""
     import pyamg
 
     levels = ml.levels
+    if reinterpolate and any(not hasattr(lv, "splitting") for lv in levels[:-1]):
+        raise ValueError("refresh: reinterpolate=True needs a Ruge-Stueben hierarchy (its "
+                         "levels' C/F splitting); this one has none (smoothed aggregation?)")
     levels[0].A = sp.csr_matrix(K)
     for fine, coarse in zip(levels[:-1], levels[1:], strict=True):
         if reinterpolate:
-            from pyamg.classical.interpolate import direct_interpolation
-
-            # the strong coarse neighbours of each point: the columns of its row of P
-            P = fine.P.tocsr()
-            cpts = np.flatnonzero(fine.splitting).astype(P.indices.dtype)
-            C = sp.csr_matrix((np.ones(P.nnz), cpts[P.indices], P.indptr.copy()),
-                              shape=fine.A.shape)
-            fine.P = direct_interpolation(fine.A, C, fine.splitting.astype(C.indptr.dtype))
-            fine.R = fine.P.T.tocsr()
+            _reinterpolate(fine)
         coarse.A = (fine.R @ fine.A @ fine.P).tocsr()
     ml.coarse_solver = pyamg.multilevel.coarse_grid_solver(coarse_solver)
+
+
+def _reinterpolate(level) -> None:
+    """Give the hierarchy `level` (of a Ruge-Stueben hierarchy) the direct interpolation of
+    its (new) matrix ``level.A`` on its coarse points ``level.splitting`` (True = coarse),
+    from each fine point's coarse neighbours in its old ``level.P``: pyamg's
+    :func:`direct_interpolation` with a strength matrix of P's pattern, whose rows of coarse
+    points are left empty (pyamg's passes read none there); and ``R = P^T``. The old P and R
+    are dropped before the new ones are formed. The index arrays all take A's dtype (pyamg's
+    kernels take one)."""
+    from pyamg.classical.interpolate import direct_interpolation
+
+    A, splitting = level.A, np.asarray(level.splitting, dtype=bool)
+    dt = A.indices.dtype
+    P = level.P.tocsr()
+    level.P = level.R = None
+    cpts = np.flatnonzero(splitting).astype(dt)
+    counts = np.diff(P.indptr)
+    counts[splitting] = 0  # (a coarse point's row of P is itself)
+    keep = np.repeat(~splitting, np.diff(P.indptr))
+    indptr = np.zeros(len(counts) + 1, dtype=dt)
+    np.cumsum(counts, out=indptr[1:])
+    C = sp.csr_matrix((np.ones(int(indptr[-1])), cpts[P.indices[keep]], indptr),
+                      shape=A.shape)
+    del P, keep, counts, indptr
+    if C.indices.dtype != dt:  # (scipy may choose another index type)
+        C.indices, C.indptr = C.indices.astype(dt), C.indptr.astype(dt)
+    level.P = direct_interpolation(A, C, splitting.astype(dt))
+    del C
+    level.R = level.P.T.tocsr()
 
 
 def block_aggregates(rows, cols, size: int, groups=None) -> sp.csr_matrix:

@@ -218,11 +218,13 @@ REFRESH_ITS = 8
 #: time. Measured (2026-12-03, fifth session; interleaved A/B, 2-core VM): the analytic
 #: ``occluder`` at 512^2 13.2-15.0 -> 9.0-9.5 s (CG iterations 325 -> 165, error 11.9636 ->
 #: 11.9644 %), at 1024^2 70.9 -> 63.7 s (417 -> 218 iterations over 42 -> 60 reweightings,
-#: the path moved; 12.200 -> 12.194 %); the timing objects within the noise (armadillo 185 ->
-#: 169 iterations); the benchmark's 64 renders at exact and 3-deg-noise normals (128 runs):
-#: median time 1.00x, CG iterations -3 %, 12 errors better and 10 worse by more than 1 %
-#: (group means within 0.2 %), 128 / 128 converged. Recomputing it at every refresh was
-#: faster still on the occluder (8.4 s) but slower on the objects (bunny 2.39 -> 2.67 s).
+#: the path moved; 12.200 -> 12.194 %; 61-66 s in later runs); the timing objects within
+#: the noise (armadillo 185 -> 169 iterations); the benchmark's 64 renders at exact and
+#: 3-deg-noise normals (128 runs): median time 1.00x, CG iterations -3 %, 12 errors better
+#: and 10 worse by more than 1 % (group means within 0.2 %), 128 / 128 converged; with a
+#: sparse prior (18 scenes, 1 % exact or noisy samples) no change (CG iterations within 3 %).
+#: Recomputing it at every refresh was faster still on the occluder (8.4 s) but slower on
+#: the objects (bunny 2.39 -> 2.67 s).
 REINTERPOLATE = True
 
 #: Side (vertices) of the square blocks whose piecewise constants are solved exactly in every
