@@ -549,6 +549,7 @@ def test_multigrid_policy_refresh_rebuild_and_block_coarse_space(monkeypatch):
     # finishes within its 10 iterations on this small scene, and the paths below are not
     # taken)
     monkeypatch.setattr(disc, "REINTERPOLATE", False)
+    monkeypatch.setattr(disc, "POLISH_REFRESH", False)
     # the trial's 10 iterations leave it short, at a rate that says as many again finish it:
     # they go on on the same hierarchy (no new one, no factorization)
     maxiters = []
@@ -652,6 +653,7 @@ def test_a_slow_solve_on_a_stale_hierarchy_refreshes_it(monkeypatch):
     monkeypatch.setattr(disc, "FORCING", None)  # (as above: comparable paths)
     monkeypatch.setattr(disc, "REUSE_STEP", math.inf)  # no refresh for a large weight step
     monkeypatch.setattr(disc, "REFRESH_ITS", math.inf)
+    monkeypatch.setattr(disc, "POLISH_REFRESH", False)  # (nor before the polish: below)
     stale = facetlift.integrate(n, discontinuities=True)
     assert stale.info["multigrid_refreshes"] == 0
     monkeypatch.setattr(disc, "REFRESH_ITS", 8)
@@ -676,6 +678,15 @@ def test_a_slow_solve_on_a_stale_hierarchy_refreshes_it(monkeypatch):
     monkeypatch.setattr(disc, "REINTERPOLATE", False)
     plain = facetlift.integrate(n, discontinuities=True)
     np.testing.assert_allclose(again.depth, plain.depth, atol=1e-4 * np.ptp(plain.depth))
+    # and before the polish's trial, a reinterpolating refresh for the final system
+    # (POLISH_REFRESH): one more refresh, the last, and the same surface
+    monkeypatch.setattr(disc, "REINTERPOLATE", True)
+    monkeypatch.setattr(disc, "POLISH_REFRESH", True)
+    how.clear()
+    polished = facetlift.integrate(n, discontinuities=True)
+    assert polished.info["multigrid_refreshes"] == again.info["multigrid_refreshes"] + 1
+    assert how[-1]["reinterpolate"] and polished.info["polish"] == "trial"
+    np.testing.assert_allclose(polished.depth, again.depth, atol=1e-5 * np.ptp(again.depth))
 
 
 def test_a_final_solve_cg_cannot_finish_is_factorized_or_its_iterate_kept(monkeypatch):

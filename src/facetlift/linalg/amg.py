@@ -190,30 +190,41 @@ def refresh(ml, K, coarse_solver: str = "splu", reinterpolate: bool = False) -> 
 def _reinterpolate(level) -> None:
     """Give the hierarchy `level` (of a Ruge-Stueben hierarchy) the direct interpolation of
     its (new) matrix ``level.A`` on its coarse points ``level.splitting`` (True = coarse),
-    from each fine point's coarse neighbours in its old ``level.P``: pyamg's
-    :func:`direct_interpolation` with a strength matrix of P's pattern, whose rows of coarse
-    points are left empty (pyamg's passes read none there); and ``R = P^T``. The old P and R
-    are dropped before the new ones are formed. The index arrays all take A's dtype (pyamg's
-    kernels take one)."""
-    from pyamg.classical.interpolate import direct_interpolation
+    from each fine point's coarse neighbours in its old ``level.P``, and ``R = P^T``: the
+    arithmetic of pyamg's :func:`direct_interpolation` (its two kernels, called here) with a
+    strength pattern of P's columns; a coarse point's row of the pattern is left empty (the
+    kernels read none there). The old P and R are dropped before the new ones are formed.
+    Every index array takes one type, 64-bit if any of A's is (the kernels take one; scipy
+    picks the smallest type for a product, which a 64-bit matrix then mismatched)."""
+    from pyamg import amg_core
 
-    A, splitting = level.A, np.asarray(level.splitting, dtype=bool)
-    dt = A.indices.dtype
+    A, splitting = level.A.tocsr(), np.asarray(level.splitting, dtype=bool)
+    n = A.shape[0]
+    dt = np.int64 if np.int64 in (A.indices.dtype, A.indptr.dtype) else np.int32
     P = level.P.tocsr()
     level.P = level.R = None
     cpts = np.flatnonzero(splitting).astype(dt)
     counts = np.diff(P.indptr)
-    counts[splitting] = 0  # (a coarse point's row of P is itself)
-    keep = np.repeat(~splitting, np.diff(P.indptr))
-    indptr = np.zeros(len(counts) + 1, dtype=dt)
+    keep = np.repeat(~splitting, counts)  # (entries on fine points' rows)
+    counts[splitting] = 0
+    indptr = np.zeros(n + 1, dtype=dt)
     np.cumsum(counts, out=indptr[1:])
-    C = sp.csr_matrix((np.ones(int(indptr[-1])), cpts[P.indices[keep]], indptr),
-                      shape=A.shape)
+    pattern = sp.csr_matrix((np.ones(int(indptr[-1])), cpts[P.indices[keep]], indptr),
+                            shape=A.shape)
     del P, keep, counts, indptr
-    if C.indices.dtype != dt:  # (scipy may choose another index type)
-        C.indices, C.indptr = C.indices.astype(dt), C.indptr.astype(dt)
-    level.P = direct_interpolation(A, C, splitting.astype(dt))
-    del C
+    C = pattern.multiply(A).tocsr()  # (A's entries on the pattern)
+    del pattern
+    a_ptr, a_ind = A.indptr.astype(dt, copy=False), A.indices.astype(dt, copy=False)
+    c_ptr, c_ind = C.indptr.astype(dt, copy=False), C.indices.astype(dt, copy=False)
+    split = splitting.astype(dt)
+    p_ptr = np.empty(n + 1, dtype=dt)
+    amg_core.rs_direct_interpolation_pass1(n, c_ptr, c_ind, split, p_ptr)
+    p_ind = np.empty(int(p_ptr[-1]), dtype=dt)
+    p_data = np.empty(int(p_ptr[-1]), dtype=A.dtype)
+    amg_core.rs_direct_interpolation_pass2(n, a_ptr, a_ind, A.data, c_ptr, c_ind, C.data,
+                                           split, p_ptr, p_ind, p_data)
+    del C, c_ptr, c_ind
+    level.P = sp.csr_array((p_data, p_ind, p_ptr), shape=(n, int(splitting.sum())))
     level.R = level.P.T.tocsr()
 
 
