@@ -426,8 +426,15 @@ def test_info_memory_is_the_planners_figure(tmp_path, capsys, case):
                      "missing64": "dgp-pcg"}[case]
     lo, hi = e["seconds"]
     assert 0 < lo < hi and e["fits"] is True
+    # and what --discontinuities would need (a user's check: info had no such estimate)
+    d = json.loads(out)["estimate_discontinuities"]
+    assert d["route"] == "dgp-discontinuous" and 0 < d["seconds"][0] < d["seconds"][1]
+    if case in ("sphere48", "missing64"):  # the solve reports the same figure
+        got = facetlift.integrate(n, mask, discontinuities=True).info["memory_estimate"]
+        assert got == d["bytes"]
     code, out, _ = run(capsys, "info", tmp_path / "n.npy", "--mask", tmp_path / "m.npy")
     assert f"peak about {e['bytes'] / 2**20:.0f} MiB above the input ({route} route" in out
+    assert "with --discontinuities (estimate): peak about" in out
 
 
 # ------------------------------------------------------------------------------ outputs
@@ -764,6 +771,49 @@ def test_discontinuities_show_a_progress_bar(tmp_path, capsys):
     import threading  # the thread that redraws the bar ended with it
 
     assert not [t for t in threading.enumerate() if t.name == "facetlift-progress"]
+
+
+def test_progress_bar_labels_the_value_per_stage(monkeypatch):
+    """The bar names what its number is where a stage says (the crack growth's weight falls
+    read as a divergence unlabelled: a user's check), and a stage drops the last one's."""
+    from facetlift import cli
+
+    shown = []
+
+    class Bar:
+        n = 0
+
+        def __init__(self, **kw):
+            self.desc = kw.get("desc")
+
+        def update(self, k):
+            self.n += k
+
+        def set_postfix_str(self, text, refresh=True):
+            shown.append((self.desc, text))
+
+        def set_description_str(self, text):
+            self.desc = text
+
+        def refresh(self):
+            pass
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr("tqdm.tqdm", Bar)
+    bar, update = cli._progress_bar(None)
+    update(1, 0.5)
+    update.stage("reweighting")
+    update(2, 0.25)
+    update.stage("crack growth")
+    update(3, 3.9)
+    update.stage("final solve")
+    bar.close()
+    # (each stage clears the value, then renames the bar: one redraw)
+    assert shown == [("integrating", "0.5"), ("integrating", ""),
+                     ("reweighting", "largest weight change 0.25"), ("reweighting", ""),
+                     ("crack growth", "largest weight fall 3.9"), ("crack growth", "")]
 
 
 def test_json_failure_prints_one_object(tmp_path, capsys):

@@ -253,6 +253,12 @@ def test_perspective_prior_must_be_positive():
     prior[3, 4] = -2.0
     with pytest.raises(ValueError, match="`prior` must hold positive z-depths .* got -2.0"):
         facetlift.integrate(n, K=K, prior=prior)
+    # a map with 0 for "unknown" (a user's check): the message says to write NaN
+    prior = np.zeros((24, 28))
+    prior[3, 4] = 5.0
+    with pytest.raises(ValueError, match=r"671 of them are 0: if 0 marks an unknown depth, "
+                       "write NaN"):
+        facetlift.integrate(n, K=K, prior=prior)
 
 
 def test_iterative_without_mean_subtraction_refuses_a_prior():

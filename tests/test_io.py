@@ -172,9 +172,36 @@ def test_read_K(tmp_path):
     np.testing.assert_array_equal(io.read_K(tmp_path / "K.txt"), K)
 
 
+@pytest.mark.parametrize("text", [
+    "500 0 320.5\n0 510 240.25\n0 0 1\n",  # three rows
+    "# intrinsics\n500, 0, 320.5\n0, 510, 240.25\n0, 0, 1\n",  # commas, a comment
+    "500 0 320.5 0 510 240.25 0 0 1\n",  # nine numbers on one line, row by row
+    "500 510 320.5 240.25\n",  # fx fy cx cy
+    "npy",
+])
+def test_read_K_layouts(tmp_path, text):
+    """The layouts users' files come in (a user's check: K.npy failed with a utf-8 error,
+    nine numbers on one line with 'got shape (1, 9)')."""
+    K = np.array([[500.0, 0, 320.5], [0, 510, 240.25], [0, 0, 1]])
+    if text == "npy":
+        np.save(tmp_path / "K.npy", K)
+        path = tmp_path / "K.npy"
+    else:
+        path = tmp_path / "K.txt"
+        path.write_text(text)
+    np.testing.assert_array_equal(io.read_K(path), K)
+
+
+def test_read_K_names_a_transposed_matrix(tmp_path):
+    (tmp_path / "K.txt").write_text("500 0 0\n0 510 0\n320.5 240.25 1\n")
+    with pytest.raises(ValueError, match="last row.*looks transposed"):
+        io.read_K(tmp_path / "K.txt")
+
+
 @pytest.mark.parametrize(
     "text, match",
-    [("1 2 3\n4 5 6\n", r"3x3"), ("a b c\n", "cannot parse"),
+    [("1 2 3\n4 5 6\n", r"6 number\(s\).*3x3.*fx fy cx cy"), ("a b c\n", "cannot parse"),
+     ("1 2\n", r"2 number\(s\)"),
      ("-1 0 0\n0 1 0\n0 0 1\n", "focal"), ("1 0 0\n0 1 0\n1 0 1\n", "last row")],
 )
 def test_read_K_errors(tmp_path, text, match):

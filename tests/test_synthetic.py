@@ -317,6 +317,14 @@ def test_render_perspective_depth_normals_and_camera():
         synthetic.render_perspective(trimesh.creation.icosphere(), K, (8, 8), samples=0)
     with pytest.raises(ValueError, match="`distance` must be a positive"):
         synthetic.render_perspective(trimesh.creation.icosphere(), K, (8, 8), distance=-1)
+    # the default camera at another aspect ratio keeps DiLiGenT's pixel shape (both focal
+    # lengths scaled by W / 612: per axis, 1536 x 2048 got fx / fy 1.12, a user's check)
+    # and its principal point's place in the image
+    tall = synthetic.render_perspective(trimesh.creation.icosphere(), None, (48, 40))
+    D = synthetic.DILIGENT_K
+    assert tall.K[0, 0] / tall.K[1, 1] == pytest.approx(D[0, 0] / D[1, 1], rel=1e-12)
+    assert tall.K[0, 2] / 40 == pytest.approx(D[0, 2] / 612)
+    assert tall.K[1, 2] / 48 == pytest.approx(D[1, 2] / 512)
 
 
 def test_jump_edges_find_the_occluding_contour_and_nothing_else():

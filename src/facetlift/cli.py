@@ -141,6 +141,12 @@ def _out_dir(ctx, param, value):
 #: elapsed time keeps counting).
 _TICK = 1.0
 
+#: What the reported value is, per stage that reports one (shown beside it in the bar): the
+#: discontinuity route's weight change falls toward `discontinuity_tol` while it reweights;
+#: its crack growth reports how far a weight fell (a cut opening: up to 4), which read as a
+#: divergence unlabelled (a user's check).
+_STAGE_VALUES = {"reweighting": "largest weight change", "crack growth": "largest weight fall"}
+
 
 def _progress_bar(total: int | None):
     """(bar, update): a tqdm bar on stderr that appears at the first update or stage (a
@@ -178,10 +184,13 @@ def _progress_bar(total: int | None):
     def update(iteration, value):
         b = bar()
         b.update(iteration - b.n)
-        b.set_postfix_str(f"{value:.4g}", refresh=False)
+        label = _STAGE_VALUES.get(state.get("stage"))
+        b.set_postfix_str(f"{label} {value:.3g}" if label else f"{value:.4g}", refresh=False)
 
     def stage(name):
+        state["stage"] = name
         b = bar(name)
+        b.set_postfix_str("", refresh=False)  # (the last stage's value is not this one's)
         b.set_description_str(name)  # (redraws)
         if "ticker" not in state:
             state["ticker"] = threading.Thread(target=tick, args=(b,), daemon=True,
@@ -557,14 +566,18 @@ def _info_lines(rec: dict) -> list[str]:
         lines.append(f"  with --discontinuities (dgp): {jg['more_grazing']} more grazing (view "
                      f"cosine < {jg['outlier_eps']:.4g}), treated as missing unless "
                      "--outlier-eps says otherwise")
-    e = rec["estimate"]
-    fits = "within" if e["fits"] else "more than"
-    line = (f"  default integration (estimate): peak about {_mib(e['bytes'])} above the input "
-            f"({e['route']} route; {fits} the {_mib(e['limit'])} allowed here)")
-    if e["seconds"] is not None:
-        lo, hi = e["seconds"]
-        line += f", {_seconds(lo)}-{_seconds(hi)} s on the 2-core benchmark machine"
-    lines.append(line)
+    for key, what in (("estimate", "default integration"),
+                      ("estimate_discontinuities", "with --discontinuities")):
+        e = rec.get(key)
+        if e is None:
+            continue
+        fits = "within" if e["fits"] else "more than"
+        line = (f"  {what} (estimate): peak about {_mib(e['bytes'])} above the input "
+                f"({e['route']} route; {fits} the {_mib(e['limit'])} allowed here)")
+        if e["seconds"] is not None:
+            lo, hi = e["seconds"]
+            line += f", {_seconds(lo)}-{_seconds(hi)} s on the 2-core benchmark machine"
+        lines.append(line)
     return lines
 
 

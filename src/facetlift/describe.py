@@ -25,6 +25,13 @@ SECONDS_PER_PIXEL = {
     "dgp-pcg": (1.8e-6, 1.2e-5),
     "dgp-pcg-missing": (3.8e-6, 1.6e-5),
     "dgp-superlu": (5.3e-6, 5.7e-6),
+    # discontinuities=True (docs/benchmarks.md, "Discontinuities"), measured 2026-12-02/03:
+    # fastest the 2048^2 disk of the mask suite's smooth surface (21.3 s, 3.3 M pixels; the
+    # full square 37 s, 8.9e-6), the timing objects 1.7-3.6e-5 (0.7-2.4 s for 41-73k
+    # pixels), the analytic occluder 2.8-8.0e-5 (256^2 1.8 s to 2048^2 335 s: long jumps
+    # cost reweightings that grow with the side), slowest a user's check's 1536 x 2048
+    # render of the armadillo, 548k pixels in 59 s on a shared machine
+    "dgp-discontinuous": (6.5e-6, 1.1e-4),
 }
 
 
@@ -63,6 +70,8 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
     key = route
     if route == "dgp-pcg" and not bool(problem.usable.all()):
         key = "dgp-pcg-missing"
+    if values.get("discontinuities"):
+        key = "dgp-discontinuous"
     rate = SECONDS_PER_PIXEL.get(key) if method == "dgp" else None
     m = problem.domain.n_facets
     return {
@@ -175,6 +184,8 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
             w.category, UnusableNormalsWarning)],
         frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame, layout=layout),
         estimate=estimate(problem),
+        # (what --discontinuities would need: a user planning a large job asked)
+        estimate_discontinuities=estimate(problem, "dgp", discontinuities=True),
         discontinuity_grazing=_jump_grazing(problem),
     )
     return out

@@ -644,9 +644,12 @@ def check_prior(prior, prior_weight, shape, mask, camera):
         neg = have & (depth <= 0)
         if neg.any():
             k = int(np.flatnonzero(neg)[0])
+            zeros = int((have & (depth == 0)).sum())
+            hint = (f"; {zeros} of them are 0: if 0 marks an unknown depth, write NaN there "
+                    "(or pass the samples as (rows, cols, depths))" if zeros else "")
             raise ValueError(
                 "`prior` must hold positive z-depths for a perspective camera (`K`); got "
-                f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s))"
+                f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s)){hint}"
             )
     values = np.where(have, camera.from_depth(np.where(have, depth, 1.0)), np.nan)
     return values, np.where(have, w, 0.0), int(np.isfinite(img[~mask]).sum())

@@ -574,7 +574,8 @@ def render_perspective(
     ----------
     mesh : trimesh.Trimesh or path
     K : (3, 3) array_like, optional
-        Default :data:`DILIGENT_K` (scaled to `resolution` if it differs from 512 x 612).
+        Default :data:`DILIGENT_K`, scaled to `resolution` if it differs from 512 x 612: both
+        focal lengths by W / 612, the principal point to the same place in the image.
     resolution : (H, W) or int
     view : str or (3,) array_like
         A name in :data:`VIEWS` or the direction the rays travel, in mesh coordinates.
@@ -605,9 +606,12 @@ def render_perspective(
     H, W = _size(resolution, "resolution")
     if K is None:
         K = DILIGENT_K.copy()
-        if (H, W) != (512, 612):
+        if (H, W) != (512, 612):  # the focal lengths by one factor (square pixels stay
+            # square: scaled per axis, a 1536 x 2048 image got fx / fy 1.12), the principal
+            # point to the same place in the image
             K[0] *= W / 612
-            K[1] *= H / 512
+            K[1, 1] *= W / 612
+            K[1, 2] *= H / 512
     K = check_K(K)
     if not (np.isfinite(distance) and distance > 0):
         raise ValueError(f"`distance` must be a positive number; got {distance!r}")

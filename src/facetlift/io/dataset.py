@@ -11,26 +11,49 @@ from .images import MASK_FORMATS, NORMAL_READ_FORMATS, read_mask, read_normals
 
 
 def read_K(path) -> np.ndarray:
-    """Read 3x3 perspective intrinsics (OpenCV layout) from a text file (``np.loadtxt``).
+    """Read 3x3 perspective intrinsics (OpenCV layout) from a file.
+
+    A text file holds the matrix as three rows (``np.loadtxt``; numbers separated by spaces,
+    tabs or commas), or its nine numbers on one line (row by row), or the four numbers
+    ``fx fy cx cy`` (cx a column, cy a row from the top); a ``.npy`` file holds a (3, 3)
+    array, nine or four numbers likewise.
 
     Raises
     ------
     ValueError
-        Missing or unparsable file, a shape other than 3x3, or a matrix that is not valid
-        intrinsics (see :mod:`facetlift.conventions`).
+        Missing or unparsable file, another count of numbers, or a matrix that is not valid
+        intrinsics (see :mod:`facetlift.conventions`; a transposed matrix is named so).
     """
     from ..camera import check_K
 
     arg = "K"
     p = _existing(path, arg)
     try:
-        K = np.loadtxt(p, dtype=float, ndmin=2)
+        if p.suffix.lower() == ".npy":
+            K = np.load(p, allow_pickle=False)
+        else:
+            text = p.read_text(encoding="utf-8").replace(",", " ")
+            K = np.loadtxt(text.splitlines(), dtype=float, ndmin=2)
+        K = np.asarray(K, dtype=float)
     except Exception as e:
         raise ValueError(f"`{arg}`: cannot parse {p} as a 3x3 matrix ({e})") from None
+    if K.size == 9 and K.shape != (3, 3):  # nine numbers on one line, row by row
+        K = K.reshape(3, 3)
+    elif K.size == 4:  # fx fy cx cy
+        fx, fy, cx, cy = K.ravel()
+        K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    elif K.shape != (3, 3):
+        raise ValueError(f"`{arg}`: {p} holds {K.size} number(s) in shape {K.shape}; expected "
+                         "a 3x3 matrix (three rows, or nine numbers), or the four numbers "
+                         "fx fy cx cy") from None
     try:
         return check_K(K)
     except ValueError as e:
-        raise ValueError(f"`{arg}`: {p}: {e}") from None
+        hint = ""
+        if np.allclose(K[:, 2], [0, 0, 1]) and np.allclose(np.triu(K, 1), 0) and K[0, 0] > 0:
+            hint = ("; it looks transposed (a column-vector layout, e.g. MATLAB's): give its "
+                    "transpose")
+        raise ValueError(f"`{arg}`: {p}: {e}{hint}") from None
 
 
 def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
