@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import warnings
 
 import numpy as np
@@ -295,6 +296,46 @@ def test_cli_prior_and_confidence(tmp_path, capsys):
     assert code == 0, capsys.readouterr().err
     out = np.load(tmp_path / "o" / "depth.npy")
     assert np.abs(out[sel] - prior[sel]).max() < 1e-3
+
+
+@pytest.mark.parametrize("layout", ["plain", "header", "comments"])
+def test_cli_prior_from_a_points_file(tmp_path, capsys, layout):
+    """Sparse samples as a text file of points (SfM, LiDAR): the same surface as the same
+    samples in an (H, W) map; a header may order the columns (x a column, y a row)."""
+    n, depth, prior, sel = _write_inputs(tmp_path)
+    r, c = np.nonzero(sel)
+    z = prior[r, c]
+    if layout == "plain":
+        text = "".join(f"{a} {b} {float(v)!r}\n" for a, b, v in zip(r, c, z, strict=True))
+    elif layout == "header":
+        text = "z,x,y\n" + "".join(f"{float(v)!r},{b},{a}\n"
+                                    for a, b, v in zip(r, c, z, strict=True))
+    else:  # comments, tabs, fractional positions that round to the same pixels
+        text = "# row\tcol\tdepth\n" + "".join(
+            f"{a + 0.3}\t{b - 0.4}\t{float(v)!r}\n" for a, b, v in zip(r, c, z, strict=True))
+    (tmp_path / "pts.csv").write_text(text)
+    for name, src in (("map", "prior.npy"), ("points", "pts.csv")):
+        code = main(["integrate", str(tmp_path / "n.npy"), "--prior", str(tmp_path / src),
+                     "-s", "npy", "-o", str(tmp_path / name)])
+        assert code == 0, capsys.readouterr().err
+    np.testing.assert_array_equal(np.load(tmp_path / "points" / "depth.npy"),
+                                  np.load(tmp_path / "map" / "depth.npy"))
+
+
+@pytest.mark.parametrize("text,match", [
+    ("1 2\n3 4\n", r"three numbers per line .*\[2\]"),
+    ("a,b,c\n1,2,3\n", "header 'a b c' must name three columns"),
+    ("row col depth\n", "holds no sample"),
+    ("1 2 x\n", "a line that is not three numbers"),
+    ("1 900 5\n", r"pixel \(row 1, col 900\) is outside the 24 x 28 image"),
+])
+def test_cli_prior_points_file_errors(tmp_path, capsys, text, match):
+    _write_inputs(tmp_path)
+    (tmp_path / "pts.txt").write_text(text)
+    code = main(["integrate", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "pts.txt"),
+                 "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 1 and re.search(match, err) and "Traceback" not in err, err
 
 
 def test_weight_maps_read_alike_from_png_and_tiff_and_scale_with_the_weight(tmp_path):

@@ -247,7 +247,9 @@ _JOB_OPTIONS = [
                  "methods')."),
     click.option("--prior", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Depth prior (npy, EXR, TIFF, or 16-bit PNG with --prior-scale), NaN or "
-                 "0 where unknown, in the output's depth convention (metric z-depth with K). "
+                 "0 where unknown, or a points file (.csv/.txt/.xyz: 'row col depth' per line, "
+                 "or columns named in a header, e.g. x,y,z), in the output's depth convention "
+                 "(metric z-depth with K). "
                  "A dataset folder's prior_depth.* is used automatically. docs/fusion.md."),
     click.option("--prior-scale", type=float, default=None, metavar="S",
                  help="Depth units per count of a 16-bit PNG prior (e.g. 0.001)."),

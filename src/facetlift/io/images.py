@@ -468,23 +468,45 @@ def write_mask(path, mask) -> Path:
 PRIOR_FORMATS = (".npy", ".exr", ".tif", ".tiff", ".png")
 
 
-def read_prior(path, scale: float | None = None, *, arg: str = "prior") -> np.ndarray:
-    """An (H, W) depth prior, NaN where unknown.
+#: Text files of depth samples as points, one per line (:func:`read_prior`).
+PRIOR_POINT_FORMATS = (".csv", ".txt", ".xyz")
+
+#: Column names a points file's header may use (lower case) -> what they hold. ``x``/``u``
+#: is a column (to the right), ``y``/``v`` a row (down, from the top): OpenCV's image axes.
+_POINT_COLUMNS = {"row": "row", "r": "row", "y": "row", "v": "row",
+                  "col": "col", "column": "col", "c": "col", "x": "col", "u": "col",
+                  "depth": "depth", "z": "depth", "d": "depth"}
+
+
+def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
+    """A depth prior: an (H, W) map, NaN where unknown, or from a points file a ``(rows,
+    cols, depths)`` triple (:func:`facetlift.integrate`'s other form of `prior`).
 
     ``.npy``, OpenEXR (channel Z or the only one) and TIFF hold depth as stored (NaN, or 0 in
     an integer TIFF, where unknown); a 16-bit PNG holds ``depth / scale`` (`scale` in depth
     units per count, e.g. 0.001 for millimetres stored as metres; 0 = unknown), and `scale`
     is required for it. A given `scale` multiplies the other formats too.
 
+    A points file (``.csv``, ``.txt``, ``.xyz``: sparse samples, e.g. SfM or LiDAR points
+    projected with K) holds one sample per line, three numbers separated by commas or white
+    space: ``row col depth`` (pixel indices from the top left; fractional positions go to the
+    nearest pixel, samples in one pixel are averaged). An optional header line names the
+    columns in any order: ``row``/``y``/``v``, ``col``/``x``/``u`` and ``depth``/``z``; lines
+    starting with ``#`` are comments.
+
     Raises
     ------
     ValueError
-        An unreadable file, a PNG that is not 16-bit or without `scale`, or a bad `scale`.
+        An unreadable file, a PNG that is not 16-bit or without `scale`, or a bad `scale`; a
+        points file without three columns, with a header it cannot read, or with no sample.
     """
     p = _existing(path, arg)
-    ext = _suffix(p, PRIOR_FORMATS, "depth prior", arg)
     if scale is not None and not (np.isfinite(scale) and scale > 0):
         raise ValueError(f"`prior_scale` must be a positive number; got {scale!r}")
+    if p.suffix.lower() in PRIOR_POINT_FORMATS:
+        rows, cols, depths = _read_points(p, arg)
+        return rows, cols, depths if scale is None else depths * float(scale)
+    ext = _suffix(p, PRIOR_FORMATS + PRIOR_POINT_FORMATS, "depth prior", arg)
     if ext == ".png":
         a = _decode_image(p, ext, arg)
         if a.dtype != np.uint16 or a.ndim != 2:
@@ -501,6 +523,44 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior") -> np.nd
     if zero_unknown:
         a[a == 0] = np.nan
     return a if scale is None else a * float(scale)
+
+
+def _read_points(p: Path, arg: str):
+    """(rows, cols, depths) of a points file (:func:`read_prior`)."""
+    try:
+        lines = [ln.strip() for ln in p.read_text(encoding="utf-8").splitlines()]
+    except (OSError, UnicodeDecodeError) as e:
+        raise ValueError(f"`{arg}`: cannot read {p} as a text file of points ({e})") from None
+    lines = [ln.replace(",", " ").replace(";", " ") for ln in lines
+             if ln and not ln.startswith("#")]
+    order = ("row", "col", "depth")
+    if lines and not _numeric(lines[0].split()[0]):  # a header
+        names = [_POINT_COLUMNS.get(w.lower()) for w in lines[0].split()]
+        if sorted(n for n in names if n) != ["col", "depth", "row"] or len(names) != 3:
+            raise ValueError(f"`{arg}`: {p}: header {lines[0]!r} must name three columns: "
+                             "row (or y, v), col (or x, u) and depth (or z)")
+        order = tuple(names)
+        lines = lines[1:]
+    try:
+        a = np.array([[float(v) for v in ln.split()] for ln in lines], dtype=float)
+    except ValueError as e:
+        raise ValueError(f"`{arg}`: {p}: a line that is not three numbers ({e})") from None
+    if a.size == 0:
+        raise ValueError(f"`{arg}`: {p} holds no sample")
+    if a.ndim != 2 or a.shape[1] != 3:
+        widths = sorted({len(ln.split()) for ln in lines})
+        raise ValueError(f"`{arg}`: {p} must hold three numbers per line (row col depth); "
+                         f"got lines of {widths} numbers")
+    col = {name: a[:, k] for k, name in enumerate(order)}
+    return col["row"], col["col"], col["depth"]
+
+
+def _numeric(word: str) -> bool:
+    try:
+        float(word)
+    except ValueError:
+        return False
+    return True
 
 
 def read_weights(path, *, arg: str) -> np.ndarray:
