@@ -298,22 +298,25 @@ def test_cli_prior_and_confidence(tmp_path, capsys):
     assert np.abs(out[sel] - prior[sel]).max() < 1e-3
 
 
-@pytest.mark.parametrize("layout", ["plain", "header", "comments"])
+@pytest.mark.parametrize("layout", ["plain", "header", "comments", "spreadsheet"])
 def test_cli_prior_from_a_points_file(tmp_path, capsys, layout):
     """Sparse samples as a text file of points (SfM, LiDAR): the same surface as the same
-    samples in an (H, W) map; a header may order the columns (x a column, y a row)."""
+    samples in an (H, W) map; the header orders the columns (x a column, y a row)."""
     n, depth, prior, sel = _write_inputs(tmp_path)
     r, c = np.nonzero(sel)
     z = prior[r, c]
+    rows = zip(r, c, z, strict=True)
     if layout == "plain":
-        text = "".join(f"{a} {b} {float(v)!r}\n" for a, b, v in zip(r, c, z, strict=True))
-    elif layout == "header":
-        text = "z,x,y\n" + "".join(f"{float(v)!r},{b},{a}\n"
-                                    for a, b, v in zip(r, c, z, strict=True))
-    else:  # comments, tabs, fractional positions that round to the same pixels
-        text = "# row\tcol\tdepth\n" + "".join(
-            f"{a + 0.3}\t{b - 0.4}\t{float(v)!r}\n" for a, b, v in zip(r, c, z, strict=True))
-    (tmp_path / "pts.csv").write_text(text)
+        text = "row col depth\n" + "".join(f"{a} {b} {float(v)!r}\n" for a, b, v in rows)
+    elif layout == "header":  # another order, an extra column
+        text = "z,x,intensity,y\n" + "".join(f"{float(v)!r},{b},7,{a}\n" for a, b, v in rows)
+    elif layout == "comments":  # comments, tabs, fractional positions to the same pixels
+        text = "# from SfM\nrow\tcol\tdepth  # pixels\n" + "".join(
+            f"{a + 0.3}\t{b - 0.4}\t{float(v)!r}  # a point\n" for a, b, v in rows)
+    else:  # a spreadsheet's CSV UTF-8: byte-order mark, quoted names, semicolons, CRLF
+        text = "\ufeff\"u\";\"v\";\"depth\"\r\n" + "".join(
+            f"{b};{a};{float(v)!r}\r\n" for a, b, v in rows)
+    (tmp_path / "pts.csv").write_bytes(text.encode("utf-8"))
     for name, src in (("map", "prior.npy"), ("points", "pts.csv")):
         code = main(["integrate", str(tmp_path / "n.npy"), "--prior", str(tmp_path / src),
                      "-s", "npy", "-o", str(tmp_path / name)])
@@ -323,11 +326,14 @@ def test_cli_prior_from_a_points_file(tmp_path, capsys, layout):
 
 
 @pytest.mark.parametrize("text,match", [
-    ("1 2\n3 4\n", r"three numbers per line .*\[2\]"),
-    ("a,b,c\n1,2,3\n", "header 'a b c' must name three columns"),
+    ("1 2 3\n4 5 6\n", r"the first line must be a header naming the columns.*'1 2 3'"),
+    ("a,b,c\n1,2,3\n", "the first line must be a header"),
     ("row col depth\n", "holds no sample"),
-    ("1 2 x\n", "a line that is not three numbers"),
-    ("1 900 5\n", r"pixel \(row 1, col 900\) is outside the 24 x 28 image"),
+    ("", "holds no sample"),
+    ("row col depth\n1 2 x\n", "a line that is not 3 numbers"),
+    ("row col depth\n1 2\n", "lines of 2 numbers under a header of 3 columns"),
+    ("row col\n1 2\n", "the first line must be a header"),
+    ("row col depth\n1 900 5\n", r"pixel \(row 1, col 900\) is outside the 24 x 28 image"),
 ])
 def test_cli_prior_points_file_errors(tmp_path, capsys, text, match):
     _write_inputs(tmp_path)

@@ -177,6 +177,8 @@ def test_read_K(tmp_path):
     "# intrinsics\n500, 0, 320.5\n0, 510, 240.25\n0, 0, 1\n",  # commas, a comment
     "500 0 320.5 0 510 240.25 0 0 1\n",  # nine numbers on one line, row by row
     "500 510 320.5 240.25\n",  # fx fy cx cy
+    "\ufeff500 0 320.5\r\n0 510 240.25\r\n0 0 1\r\n",  # a spreadsheet's byte-order mark, CRLF
+    "500; 0; 320.5\n0; 510; 240.25\n0; 0; 1\n",  # semicolons
     "npy",
 ])
 def test_read_K_layouts(tmp_path, text):

@@ -247,8 +247,8 @@ _JOB_OPTIONS = [
                  "methods')."),
     click.option("--prior", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Depth prior (npy, EXR, TIFF, or 16-bit PNG with --prior-scale), NaN or "
-                 "0 where unknown, or a points file (.csv/.txt/.xyz: 'row col depth' per line, "
-                 "or columns named in a header, e.g. x,y,z), in the output's depth convention "
+                 "0 where unknown, or a points file (.csv/.txt: one sample per line under a "
+                 "header naming the columns, e.g. x,y,z), in the output's depth convention "
                  "(metric z-depth with K). "
                  "A dataset folder's prior_depth.* is used automatically. docs/fusion.md."),
     click.option("--prior-scale", type=float, default=None, metavar="S",

@@ -32,7 +32,8 @@ def read_K(path) -> np.ndarray:
         if p.suffix.lower() == ".npy":
             K = np.load(p, allow_pickle=False)
         else:
-            text = p.read_text(encoding="utf-8").replace(",", " ")
+            # ("utf-8-sig": a byte-order mark, as spreadsheets write, is not a number)
+            text = p.read_text(encoding="utf-8-sig").replace(",", " ").replace(";", " ")
             K = np.loadtxt(text.splitlines(), dtype=float, ndmin=2)
         K = np.asarray(K, dtype=float)
     except Exception as e:

@@ -468,8 +468,9 @@ def write_mask(path, mask) -> Path:
 PRIOR_FORMATS = (".npy", ".exr", ".tif", ".tiff", ".png")
 
 
-#: Text files of depth samples as points, one per line (:func:`read_prior`).
-PRIOR_POINT_FORMATS = (".csv", ".txt", ".xyz")
+#: Text files of depth samples as points, one per line (:func:`read_prior`). (Not ``.xyz``:
+#: that is usually world coordinates, which would be read as pixels where they fit.)
+PRIOR_POINT_FORMATS = (".csv", ".txt")
 
 #: Column names a points file's header may use (lower case) -> what they hold. ``x``/``u``
 #: is a column (to the right), ``y``/``v`` a row (down, from the top): OpenCV's image axes.
@@ -487,18 +488,21 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
     units per count, e.g. 0.001 for millimetres stored as metres; 0 = unknown), and `scale`
     is required for it. A given `scale` multiplies the other formats too.
 
-    A points file (``.csv``, ``.txt``, ``.xyz``: sparse samples, e.g. SfM or LiDAR points
-    projected with K) holds one sample per line, three numbers separated by commas or white
-    space: ``row col depth`` (pixel indices from the top left; fractional positions go to the
-    nearest pixel, samples in one pixel are averaged). An optional header line names the
-    columns in any order: ``row``/``y``/``v``, ``col``/``x``/``u`` and ``depth``/``z``; lines
-    starting with ``#`` are comments.
+    A points file (``.csv``, ``.txt``: sparse samples, e.g. SfM or LiDAR points projected
+    with K) holds one sample per line, numbers separated by commas, semicolons or white
+    space, under a header line that names the columns in any order: ``row``/``y``/``v``,
+    ``col``/``x``/``u`` (pixel positions from the top left, OpenCV's image axes; fractional
+    ones go to the nearest pixel, samples in one pixel are averaged) and ``depth``/``z``;
+    other named columns are ignored, names may be quoted, ``#`` starts a comment. The header
+    is required: ``row col depth`` and ``u v depth`` files look alike, and one read as the
+    other transposes every sample.
 
     Raises
     ------
     ValueError
         An unreadable file, a PNG that is not 16-bit or without `scale`, or a bad `scale`; a
-        points file without three columns, with a header it cannot read, or with no sample.
+        points file without a header naming the three columns, with lines of other lengths or
+        words, or with no sample.
     """
     p = _existing(path, arg)
     if scale is not None and not (np.isfinite(scale) and scale > 0):
@@ -527,31 +531,39 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
 
 def _read_points(p: Path, arg: str):
     """(rows, cols, depths) of a points file (:func:`read_prior`)."""
-    try:
-        lines = [ln.strip() for ln in p.read_text(encoding="utf-8").splitlines()]
+    try:  # ("utf-8-sig": a spreadsheet's "CSV UTF-8" starts with a byte-order mark)
+        text = p.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as e:
         raise ValueError(f"`{arg}`: cannot read {p} as a text file of points ({e})") from None
-    lines = [ln.replace(",", " ").replace(";", " ") for ln in lines
-             if ln and not ln.startswith("#")]
-    order = ("row", "col", "depth")
-    if lines and not _numeric(lines[0].split()[0]):  # a header
-        names = [_POINT_COLUMNS.get(w.lower()) for w in lines[0].split()]
-        if sorted(n for n in names if n) != ["col", "depth", "row"] or len(names) != 3:
-            raise ValueError(f"`{arg}`: {p}: header {lines[0]!r} must name three columns: "
-                             "row (or y, v), col (or x, u) and depth (or z)")
-        order = tuple(names)
-        lines = lines[1:]
-    try:
-        a = np.array([[float(v) for v in ln.split()] for ln in lines], dtype=float)
-    except ValueError as e:
-        raise ValueError(f"`{arg}`: {p}: a line that is not three numbers ({e})") from None
-    if a.size == 0:
+    lines = []
+    for ln in text.splitlines():
+        ln = ln.split("#", 1)[0]
+        for sep in ",;\t":
+            ln = ln.replace(sep, " ")
+        if ln.strip():
+            lines.append(ln)
+    if not lines:
         raise ValueError(f"`{arg}`: {p} holds no sample")
-    if a.ndim != 2 or a.shape[1] != 3:
-        widths = sorted({len(ln.split()) for ln in lines})
-        raise ValueError(f"`{arg}`: {p} must hold three numbers per line (row col depth); "
-                         f"got lines of {widths} numbers")
-    col = {name: a[:, k] for k, name in enumerate(order)}
+    header = [w.strip("\"'").lower() for w in lines[0].split()]
+    names = [_POINT_COLUMNS.get(w) for w in header]
+    if all(_numeric(w) for w in header) or sorted(n for n in names if n) != [
+            "col", "depth", "row"]:
+        raise ValueError(
+            f"`{arg}`: {p}: the first line must be a header naming the columns: row (or y, v), "
+            "col (or x, u) and depth (or z), e.g. 'x,y,z' or 'row col depth'; got "
+            f"{lines[0].strip()!r} (without a header, 'row col depth' and 'u v depth' files "
+            "look alike)")
+    if len(lines) == 1:
+        raise ValueError(f"`{arg}`: {p} holds no sample")
+    try:
+        a = np.loadtxt(lines[1:], dtype=float, ndmin=2)
+    except ValueError as e:
+        raise ValueError(f"`{arg}`: {p}: a line that is not {len(header)} numbers ({e})") \
+            from None
+    if a.shape[1] != len(header):
+        raise ValueError(f"`{arg}`: {p}: lines of {a.shape[1]} numbers under a header of "
+                         f"{len(header)} columns")
+    col = {n: a[:, k] for k, n in enumerate(names) if n}
     return col["row"], col["col"], col["depth"]
 
 

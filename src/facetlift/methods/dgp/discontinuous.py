@@ -210,25 +210,26 @@ REUSE_STEP = 0.5
 #: there (:data:`POLISH_REFRESH`).
 REFRESH_ITS = 8
 
-#: A refresh after a slow solve (:data:`REFRESH_ITS`) also recomputes the interpolation from
-#: the new matrix (direct interpolation on each level's old coarse points and pattern,
-#: :func:`facetlift.linalg.amg.refresh`): new cuts make the old interpolation average across
-#: them, and a Galerkin refresh alone left 8-10 CG iterations per reweighting on maps with
-#: long jumps, where a new hierarchy takes about 3 but costs a Ruge-Stueben splitting each
-#: time. Measured (2026-12-03, fifth session; interleaved A/B, 2-core VM): the analytic
-#: ``occluder`` at 512^2 13.2-15.0 -> 9.0-9.5 s (CG iterations 325 -> 165, error 11.9636 ->
-#: 11.9644 %), at 1024^2 70.9 -> 63.7 s (417 -> 218 iterations over 42 -> 60 reweightings,
-#: the path moved; 12.200 -> 12.194 %; 61-66 s in later runs); the timing objects within
-#: the noise (armadillo 185 -> 169 iterations); the benchmark's 64 renders at exact and
-#: 3-deg-noise normals (128 runs): median time 1.00x, CG iterations -3 %, 12 errors better
-#: and 10 worse by more than 1 % (group means within 0.2 %), 128 / 128 converged; with a
-#: sparse prior (18 scenes, 1 % exact or noisy samples) no change (CG iterations within 3 %).
-#: Recomputing it at every refresh was faster still on the occluder (8.4 s) but slower on
-#: the objects (bunny 2.39 -> 2.67 s).
+#: A refresh after a slow solve (:data:`REFRESH_ITS`) also recomputes the interpolation from the new
+#: matrix (direct interpolation on each level's old coarse points and pattern,
+#: :func:`facetlift.linalg.amg.refresh`): new cuts make the old interpolation average across them,
+#: and a Galerkin refresh alone left 8-10 CG iterations per reweighting on maps with long jumps,
+#: where a new hierarchy takes about 3 but costs a Ruge-Stueben splitting each time. Measured
+#: (2026-12-03, fifth session; interleaved A/B, 2-core VM): the analytic ``occluder`` at 512^2
+#: 13.2-15.0 -> 9.0-9.5 s (CG iterations 325 -> 165, error 11.9636 -> 11.9644 %), at 1024^2 70.9 ->
+#: 63.7 s (417 -> 218 iterations over 42 -> 60 reweightings, the path moved; 12.200 -> 12.194 %;
+#: 61-66 s in later runs); the timing objects: bear, bunny and max_planck on the same paths,
+#: armadillo on another (35 -> 41 reweightings, CG 185 -> 169, 1.04-1.27x the time in paired runs
+#: with POLISH_REFRESH, docs/benchmarks.md); the benchmark's 64 renders at exact and 3-deg-noise
+#: normals (128 runs): median time 1.00x, CG iterations -3 %, 12 errors better and 10 worse by more
+#: than 1 % (group means within 0.2 %), 128 / 128 converged; with a sparse prior (18 scenes, 1 %
+#: exact or noisy samples) no change (CG iterations within 3 %). Recomputing it at every refresh was
+#: faster still on the occluder (8.4 s) but slower on the objects (bunny 2.39 -> 2.67 s).
 REINTERPOLATE = True
 
 #: Before the final polish's trial (:data:`POLISH_TRIAL`) the hierarchy is refreshed for the
-#: final system, its interpolation recomputed (:data:`REINTERPOLATE`): the final weights
+#: final system (unless it is of that system already), its interpolation recomputed where
+#: :data:`REINTERPOLATE` says so: the final weights
 #: (:data:`FINAL_COS_POWER`) change every facet's normal term, and on the reweightings' old
 #: hierarchy the trial had failed on every object and large map, leaving a factorization
 #: (or a new hierarchy above :data:`DIRECT_POLISH`). Measured (2026-12-03, fifth session,
@@ -813,8 +814,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         vr, vc = np.nonzero(domain.vertex_mask)
         return block_aggregates(vr, vc, COARSE_BLOCK, domain.vertex_component)
 
-    amg = {"ml": None, "pre": None, "for": None, "builds": 0, "refreshes": 0, "last_its": 0,
-           "slow": False, "unsolved": [], "bal": None}
+    amg = {"ml": None, "pre": None, "for": None, "at": None, "builds": 0, "refreshes": 0,
+           "last_its": 0, "slow": False, "unsolved": [], "bal": None}
 
     def solve(K, rhs, z0, rebuild=True, rtol=cg_rtol, fresh=False, scale=None, trial=False,
               reduction=None):
@@ -830,14 +831,17 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             amg["ml"] = hierarchy(K, symmetric_gs=True, interpolation=INTERPOLATION)
             amg["pre"] = vcycle(amg["ml"])
             amg["builds"] += 1
-            amg["for"] = K
+            amg["for"] = amg["at"] = K
         elif rebuild or (amg["last_its"] > REFRESH_ITS and not trial) or (
-                trial and POLISH_REFRESH):
+                # (the final system, unless the hierarchy is of it already: a prior compared
+                # pixel by pixel keeps the last reweighting's system)
+                trial and POLISH_REFRESH and amg["at"] is not K):
             amg["bal"] = None  # (formed anew below)
-            refresh(amg["ml"], K, reinterpolate=(
-                REINTERPOLATE and amg["last_its"] > REFRESH_ITS) or (trial and POLISH_REFRESH))
+            refresh(amg["ml"], K, reinterpolate=REINTERPOLATE and (
+                trial or amg["last_its"] > REFRESH_ITS))
             amg["refreshes"] += 1
             amg["for"] = None  # refreshed, not built, for K
+            amg["at"] = K
         pre = amg["pre"]
         if amg["slow"]:  # regions' offsets converge slowly: add the block coarse space
             # formed with the hierarchy's own finest matrix, and kept until the hierarchy is
