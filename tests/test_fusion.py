@@ -437,6 +437,32 @@ def test_info_reads_a_dataset_with_a_16bit_png_prior_given_its_scale(tmp_path, c
     assert "--no-confidence" in rec["refused"] and "3x3" in rec["refused"]
 
 
+def test_dataset_folder_picks_up_a_points_prior(tmp_path, capsys):
+    """A folder's prior_depth.csv is read like --prior's points file, as a map: info
+    describes it, integrate uses it (a review: it was ignored in silence)."""
+    n, depth, prior, sel = _write_inputs(tmp_path)
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", n)
+    r, c = np.nonzero(sel)
+    (folder / "prior_depth.csv").write_text("row,col,depth\n" + "".join(
+        f"{a},{b},{float(prior[a, b])!r}\n" for a, b in zip(r, c, strict=True)))
+    data = facetlift.io.read_dataset(folder)
+    np.testing.assert_array_equal(np.isfinite(data["prior"]), sel)
+    import json
+
+    assert main(["info", str(folder), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["prior"]["known_pixels"] == int(sel.sum())
+    assert main(["integrate", str(folder), "-s", "npy", "--prior-weight", "1e6",
+                 "-o", str(tmp_path / "o")]) == 0, capsys.readouterr().err
+    out = np.load(tmp_path / "o" / "depth.npy")
+    assert np.abs(out[sel] - prior[sel]).max() < 1e-3
+    (folder / "prior_depth.csv").write_text("row,col,depth\n999,0,1.0\n")
+    assert main(["integrate", str(folder), "-o", str(tmp_path / "p")]) == 1
+    err = capsys.readouterr().err
+    assert "outside the 24 x 28 image" in err and "--no-prior" in err
+
+
 def test_dataset_folder_picks_up_prior_and_confidence(tmp_path, capsys):
     n, depth, prior, sel = _write_inputs(tmp_path)
     folder = tmp_path / "ds"

@@ -81,7 +81,8 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     Without ``K.txt`` the view is orthographic. Pixels outside the mask may hold anything.
     `frame` and `y_down` are those of :func:`~facetlift.io.read_normals`. A depth prior
     ``prior_depth.*`` and a normal confidence ``confidence.*`` (``.npy``, ``.exr``, ``.tif``,
-    ``.png``; docs/fusion.md) are picked up like ``K.txt``; `prior_scale` is that of
+    ``.png``; the prior also as a points file, ``.csv`` or ``.txt``, returned as a map;
+    docs/fusion.md) are picked up like ``K.txt``; `prior_scale` is that of
     :func:`~facetlift.io.read_prior` (required for a 16-bit PNG prior); `with_prior` and
     `with_confidence` False leave those files unread (``None``).
 
@@ -113,7 +114,8 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
     kpath = _find(f, "K", (".txt",))
     K = read_K(kpath) if kpath is not None else None
-    from .images import PRIOR_FORMATS, read_prior, read_weights
+    from ..problem import prior_image
+    from .images import PRIOR_FORMATS, PRIOR_POINT_FORMATS, read_prior, read_weights
 
     H, W = normals.shape[:2]
     extra = {}  # the folder's own prior and confidence: a file at fault can be left unread
@@ -122,13 +124,16 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
              lambda p: read_prior(p, prior_scale, arg="prior")),
             ("confidence", "confidence", with_confidence,
              lambda p: read_weights(p, arg="confidence"))):
-        path = _find(f, stem, PRIOR_FORMATS) if wanted else None
+        formats = PRIOR_FORMATS + (PRIOR_POINT_FORMATS if name == "prior" else ())
+        path = _find(f, stem, formats) if wanted else None
         extra[name] = None
         if path is None:
             continue
         skip = f"or leave the folder's {name} unread with --no-{name} (with_{name}=False in Python)"
         try:
             extra[name] = reader(path)
+            if isinstance(extra[name], tuple):  # (a points file: as a map of this size)
+                extra[name] = prior_image(extra[name], (H, W))
         except ValueError as e:
             raise ValueError(f"{e}; {skip}") from None
         if extra[name].shape != (H, W):
