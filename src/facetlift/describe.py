@@ -70,8 +70,6 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
     key = route
     if route == "dgp-pcg" and not bool(problem.usable.all()):
         key = "dgp-pcg-missing"
-    if values.get("discontinuities"):
-        key = "dgp-discontinuous"
     rate = SECONDS_PER_PIXEL.get(key) if method == "dgp" else None
     m = problem.domain.n_facets
     return {

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ._paths import _existing
-from .images import MASK_FORMATS, NORMAL_READ_FORMATS, read_mask, read_normals
+from .images import MASK_FORMATS, NORMAL_READ_FORMATS, _text_rows, read_mask, read_normals
 
 
 def read_K(path) -> np.ndarray:
@@ -32,9 +32,7 @@ def read_K(path) -> np.ndarray:
         if p.suffix.lower() == ".npy":
             K = np.load(p, allow_pickle=False)
         else:
-            # ("utf-8-sig": a byte-order mark, as spreadsheets write, is not a number)
-            text = p.read_text(encoding="utf-8-sig").replace(",", " ").replace(";", " ")
-            K = np.loadtxt(text.splitlines(), dtype=float, ndmin=2)
+            K = np.loadtxt(_text_rows(p), dtype=float, ndmin=2)
         K = np.asarray(K, dtype=float)
     except Exception as e:
         raise ValueError(f"`{arg}`: cannot parse {p} as a 3x3 matrix ({e})") from None

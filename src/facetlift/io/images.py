@@ -529,19 +529,26 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
     return a if scale is None else a * float(scale)
 
 
-def _read_points(p: Path, arg: str):
-    """(rows, cols, depths) of a points file (:func:`read_prior`)."""
-    try:  # ("utf-8-sig": a spreadsheet's "CSV UTF-8" starts with a byte-order mark)
-        text = p.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as e:
-        raise ValueError(f"`{arg}`: cannot read {p} as a text file of points ({e})") from None
-    lines = []
-    for ln in text.splitlines():
+def _text_rows(p: Path) -> list[str]:
+    """The non-blank lines of a small text table (points, intrinsics), `#` comments cut,
+    commas, semicolons and tabs read as spaces, a byte-order mark dropped ("utf-8-sig": a
+    spreadsheet's "CSV UTF-8" starts with one). Raises OSError or UnicodeDecodeError."""
+    rows = []
+    for ln in p.read_text(encoding="utf-8-sig").splitlines():
         ln = ln.split("#", 1)[0]
         for sep in ",;\t":
             ln = ln.replace(sep, " ")
         if ln.strip():
-            lines.append(ln)
+            rows.append(ln)
+    return rows
+
+
+def _read_points(p: Path, arg: str):
+    """(rows, cols, depths) of a points file (:func:`read_prior`)."""
+    try:
+        lines = _text_rows(p)
+    except (OSError, UnicodeDecodeError) as e:
+        raise ValueError(f"`{arg}`: cannot read {p} as a text file of points ({e})") from None
     if not lines:
         raise ValueError(f"`{arg}`: {p} holds no sample")
     header = [w.strip("\"'").lower() for w in lines[0].split()]

@@ -58,6 +58,10 @@ if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
+#: The verdict of :func:`_kernel_works` (None: not checked yet).
+_CHECKED = {"ok": None}
+
+
 def _kernel_works() -> bool:
     """Whether scipy's private kernel computes what scipy's product does (checked once, on
     a small matrix with int32 and int64 indices, over a range of rows)."""
@@ -82,8 +86,6 @@ def _kernel_works() -> bool:
             _kernel = None
     return _CHECKED["ok"]
 
-
-_CHECKED = {"ok": None}
 
 
 class SplitProduct:

@@ -1012,7 +1012,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         M = Ma = rhs = None
         M, Ma, K, rhs, scale = state(w)
     polish = None  # (how the final system was solved to cg_rtol: info["polish"])
-    if final or it > 0:
+    if it > 0:  # (a final solve follows the reweightings: the polish, or the final weights')
         announce(callback, "final solve")
     if it > 0 and (LOOSE_RTOL > cg_rtol or forced or final):  # solved loosely: polish
         # on the hierarchy at hand when it does so quickly (large smooth maps: 2-3 CG
