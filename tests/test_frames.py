@@ -280,7 +280,8 @@ def test_integrate_gradients_refusals():
 
 def test_relative_curl_of_a_pinhole_does_not_depend_on_the_object_place():
     """The same perspective view padded with empty columns on the left (and cx moved with it):
-    the same curl (the strips' crop once fed shifted columns to the camera)."""
+    the same curl (the strips' crop once fed shifted columns to the camera); 0.219 over every
+    row pair of the object (0.222 when it was sampled as a part of the 512 x 612 image)."""
     data = io.read_dataset(BEAR)
     n, m, K = data["normals"], data["mask"], np.array(data["K"], float)
     pad = 37
@@ -292,7 +293,7 @@ def test_relative_curl_of_a_pinhole_does_not_depend_on_the_object_place():
         warnings.simplefilter("ignore")
         a = frames.relative_curl(prepare(n, m, K=K))
         b = frames.relative_curl(prepare(n2, m2, K=K2))
-    assert a == pytest.approx(0.2220, abs=2e-3) and b == pytest.approx(a, rel=1e-9)
+    assert a == pytest.approx(0.2190, abs=2e-3) and b == pytest.approx(a, rel=1e-9)
 
 
 def test_facing_away_is_judged_on_the_object_without_a_mask():
