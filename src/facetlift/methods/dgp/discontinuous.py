@@ -95,6 +95,7 @@ import functools
 import logging
 import math
 import time
+import weakref
 
 import numpy as np
 import scipy.sparse as sp
@@ -719,6 +720,11 @@ def solve_discontinuous(
                   cg_rtol, callback, prior, weights, x0, final_weights, blur)
 
 
+def _of(ref, K) -> bool:
+    """Whether the weak reference `ref` (or None) is to the matrix `K`."""
+    return ref is not None and ref() is K
+
+
 def _affordable(n: int) -> bool:
     """Whether a system of `n` unknowns is factorized when CG on it is slow: up to
     :data:`DIRECT_POLISH`, and where the factorization fits in half the free memory and in
@@ -754,7 +760,6 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         # every sample), and decides the offsets the cuts leave free
         KP, rP = prior_form(domain, (1.0 - PRIOR_OWN) * prior[0], prior[1])
     corners = domain.corners
-    nb = evidence(neighbours(domain), normal_scale)
     eye_rows = np.stack([E_X, E_Y], axis=1)  # (4, 2): corner vector -> (x-slope, y-slope)
 
     a_normals = centre = None
@@ -814,6 +819,9 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         vr, vc = np.nonzero(domain.vertex_mask)
         return block_aggregates(vr, vc, COARSE_BLOCK, domain.vertex_component)
 
+    # ("for": the system the hierarchy was built for, "at": the one it was last refreshed or
+    # built for; weak references, compared by identity: a held reference kept a third
+    # system's matrix alive while the next one was formed, 0.3 GB at 2048^2)
     amg = {"ml": None, "pre": None, "for": None, "at": None, "builds": 0, "refreshes": 0,
            "last_its": 0, "slow": False, "unsolved": [], "bal": None}
 
@@ -825,23 +833,23 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         # much, or the last solve needed more than REFRESH_ITS iterations on it, the old one's
         # coarse operators are recomputed for the new system (Galerkin refresh, a fraction of
         # a build); once the weights settle, it serves as it is
-        if amg["ml"] is None or amg["last_its"] > REUSE_ITS or (fresh and amg["for"] is not K):
+        if amg["ml"] is None or amg["last_its"] > REUSE_ITS or (fresh and not _of(amg["for"], K)):
             # (the old one freed before the new one is built: the block space's closure too)
             amg["ml"] = amg["pre"] = amg["bal"] = None
             amg["ml"] = hierarchy(K, symmetric_gs=True, interpolation=INTERPOLATION)
             amg["pre"] = vcycle(amg["ml"])
             amg["builds"] += 1
-            amg["for"] = amg["at"] = K
+            amg["for"] = amg["at"] = weakref.ref(K)
         elif rebuild or (amg["last_its"] > REFRESH_ITS and not trial) or (
                 # (the final system, unless the hierarchy is of it already: a prior compared
                 # pixel by pixel keeps the last reweighting's system)
-                trial and POLISH_REFRESH and amg["at"] is not K):
+                trial and POLISH_REFRESH and not _of(amg["at"], K)):
             amg["bal"] = None  # (formed anew below)
             refresh(amg["ml"], K, reinterpolate=REINTERPOLATE and (
                 trial or amg["last_its"] > REFRESH_ITS))
             amg["refreshes"] += 1
             amg["for"] = None  # refreshed, not built, for K
-            amg["at"] = K
+            amg["at"] = weakref.ref(K)
         pre = amg["pre"]
         if amg["slow"]:  # regions' offsets converge slowly: add the block coarse space
             # formed with the hierarchy's own finest matrix, and kept until the hierarchy is
@@ -905,9 +913,16 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
 
     # the first (smooth) solution only starts the reweightings: as loose as theirs
     announce(callback, "smooth start")
+    # (the glue inverse, the copies' constant part and the pairs' evidence are formed after
+    # this solve, whose first multigrid build is the run's largest transient, about four
+    # times the matrix: 2048^2 peaks there)
+    M = Ma = None
     z, its = solve(K, rhs, np.zeros(domain.n_vertices) if x0 is None else x0, scale=scale,
                    rtol=max(cg_rtol, LOOSE_RTOL) if max_iter > 0 else cg_rtol)
     cg_its = [its]
+    nb = evidence(neighbours(domain), normal_scale)
+    M = GlueInverse(target, w, A_other, fusion)
+    Ma = M.apply(a)
     zc = z[corners]
     y = copies(M, Ma, w, zc)
     energies = [energy(y, w, zc)]
@@ -921,11 +936,12 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         and prior[0].max() <= fusion[0][target].max(initial=0.0) else None)
     forced = forcing is not None
 
-    def reweighted(w, step, z):
-        """The system of weights `w` (after `step`), its loose solve from `z`, the copies and
-        the energy trace's entry."""
+    def reweighted(w, big, z):
+        """The system of weights `w` (after a step that `big` says was large,
+        :func:`changes_big`), its loose solve from `z`, the copies and the energy trace's
+        entry."""
         M, Ma, K, rhs, scale = state(w)
-        z, its = solve(K, rhs, z, rebuild=changes_big(step), scale=scale,
+        z, its = solve(K, rhs, z, rebuild=big, scale=scale,
                        rtol=max(cg_rtol, LOOSE_RTOL), reduction=forcing)
         cg_its.append(its)
         zc = z[corners]
@@ -943,9 +959,11 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         if it > SETTLE_AFTER:
             step *= DECAY ** (it - SETTLE_AFTER)
         w = w + step
-        M = Ma = rhs = None  # (freed before the next state is formed)
-        M, Ma, K, rhs, scale, z, y = reweighted(w, step, z)
         changes.append(float(np.abs(step).max()))
+        big = changes_big(step)
+        # (freed before the next state is formed: the solve's own hierarchy holds its matrix)
+        M = Ma = K = rhs = y = step = None
+        M, Ma, K, rhs, scale, z, y = reweighted(w, big, z)
         log.info("reweighting %d: largest corner-weight change %.3g (tol %.3g), %d CG "
                  "iterations", it, changes[-1], tol, cg_its[-1])
         if callback is not None:
@@ -986,12 +1004,12 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             it += 1
             grown += 1
             w = w + step
-            M = Ma = rhs = None
-            M, Ma, K, rhs, scale, z, y = reweighted(w, step, z)
             changes.append(float(-step.min()))
+            big = changes_big(step)
+            M = Ma = K = rhs = y = step = unsettled = None
+            M, Ma, K, rhs, scale, z, y = reweighted(w, big, z)
             log.info("reweighting %d (crack growth): largest weight fall %.3g, %d CG "
                      "iterations", it, changes[-1], cg_its[-1])
-            step = unsettled = None
             if callback is not None:
                 callback(it, changes[-1])
         del grid, step
@@ -1004,12 +1022,12 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     slow = amg["slow"]
     final = final_weights is not None and it > 0 and (prior is None or blur is not None)
     if moving and not final:  # (the cap stopped the reweightings: the last target's system)
-        M = Ma = rhs = None
+        M = Ma = K = rhs = None
         M, Ma, K, rhs, scale = state(w)
     if final:  # the final solve's own normal weights (FINAL_COS_POWER), on the settled cuts
         fusion = (np.asarray(final_weights, dtype=float), np.zeros(m), np.zeros(m))
         A_other, a = _facet_system(bx, by, flat_weight, fusion, target)
-        M = Ma = rhs = None
+        M = Ma = K = rhs = None
         M, Ma, K, rhs, scale = state(w)
     polish = None  # (how the final system was solved to cg_rtol: info["polish"])
     if it > 0:  # (a final solve follows the reweightings: the polish, or the final weights')
