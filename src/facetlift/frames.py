@@ -383,36 +383,45 @@ def _curl_ratio(dgx_dy, dgy_dx, sign: float = -1.0) -> float:
 def _cross_derivatives(problem, flip, sample):
     """The cross derivatives ``d gx / dy`` and ``d gy / dx`` of the grid slopes of the normals
     times `flip` at every vertex between four usable sampled pixels (:func:`relative_curl`),
-    or ``(None, None)`` where there is no such vertex."""
+    or ``(None, None)`` where there is no such vertex.
+
+    The sample: every row that holds usable pixels, with the row below it, where the object
+    has at most `sample` usable pixels; else every `step`-th such row (a mask's period cannot
+    hide the object from evenly spaced image rows). The four pixels of a block are found by
+    their row-major index among the kept pixels: memory in proportion to them, not to the
+    object's box."""
     d = problem.domain
     H, W = d.shape
-    used = int(np.count_nonzero(problem.usable))  # (the object's pixels, not the image's)
+    r, c = d.pixels  # (row-major)
+    usable = np.asarray(problem.usable, bool)
+    rows = np.unique(r[usable])
+    if rows.size == 0:
+        return None, None
+    used = int(np.count_nonzero(usable))  # (the object's pixels, not the image's)
     step = 1 if used <= sample else max(2, (2 * used) // sample)
-    keep_row = np.zeros(H, bool)
-    tops = np.arange(0, H - 1, step)
-    keep_row[tops] = True
-    keep_row[tops + 1] = True  # strips (i, i + 1); every row when step == 1
-    r, c = d.pixels
-    k = np.flatnonzero(keep_row[r] & problem.usable)
+    top = np.zeros(H + 1, bool)
+    top[rows[::step]] = True
+    keep_row = top.copy()
+    keep_row[1:] |= top[:-1]  # (each top row with the row below it)
+    k = np.flatnonzero(keep_row[r] & usable)
     n = problem.normals[k] * np.asarray(flip, float)
+    rk, ck = r[k], c[k]
     with np.errstate(invalid="ignore", divide="ignore"):  # (at the true columns: a pinhole's
-        gx, gy = problem.camera.grid_slopes(r[k], c[k], n)  # slopes depend on them)
-    if k.size:  # (strips only as wide as the pixels used: an object's box, not the image)
-        c = c - c[k].min()
-        W = int(c[k].max()) + 1
-    # strip images: row i of the image -> slot, so that rows i and i + 1 stay adjacent
-    slot = np.cumsum(keep_row) - 1
-    GX = np.full((int(keep_row.sum()), W), np.nan)
-    GY = np.full_like(GX, np.nan)
-    GX[slot[r[k]], c[k]] = gx
-    GY[slot[r[k]], c[k]] = gy
-    if step > 1:  # only (top, bottom) pairs of one strip are neighbours
-        GX, GY = (np.stack([A[0::2], A[1::2]], axis=1).reshape(-1, 2, W) for A in (GX, GY))
-    else:
-        GX, GY = (np.stack([A[:-1], A[1:]], axis=1) for A in (GX, GY))
+        gx, gy = problem.camera.grid_slopes(rk, ck, n)  # slopes depend on them)
+    lin = rk.astype(np.int64) * W + ck  # (ascending)
+    tl = np.flatnonzero(top[rk] & (ck < W - 1))  # top-left pixels of the blocks
+
+    def find(offset):
+        want = lin[tl] + offset
+        at = np.minimum(np.searchsorted(lin, want), lin.size - 1)
+        return at, lin[at] == want
+
+    (tr, ok1), (bl, ok2), (br, ok3) = find(1), find(W), find(W + 1)
+    ok = ok1 & ok2 & ok3
+    tl, tr, bl, br = tl[ok], tr[ok], bl[ok], br[ok]
     # at the vertex between four pixels; y points up (toward row 0)
-    dgx_dy = (GX[:, 0, :-1] + GX[:, 0, 1:] - GX[:, 1, :-1] - GX[:, 1, 1:]) / 2
-    dgy_dx = (GY[:, 0, 1:] + GY[:, 1, 1:] - GY[:, 0, :-1] - GY[:, 1, :-1]) / 2
+    dgx_dy = (gx[tl] + gx[tr] - gx[bl] - gx[br]) / 2
+    dgy_dx = (gy[tr] + gy[br] - gy[tl] - gy[bl]) / 2
     good = np.isfinite(dgx_dy) & np.isfinite(dgy_dx)
     if not good.any():
         return None, None
@@ -431,7 +440,9 @@ def flip_check(problem) -> dict:
     dict
         ``{"curl": ..., "curl_y_flipped": ..., "curl_x_flipped": ...}``.
     """
-    if problem.camera.perspective:  # (a pinhole's slopes are not odd in nx or ny)
+    from .camera import Orthographic
+
+    if not isinstance(problem.camera, Orthographic):  # (a pinhole's are not odd in nx, ny)
         out = {
             "curl": relative_curl(problem),
             "curl_y_flipped": relative_curl(problem, (1.0, -1.0, 1.0)),
@@ -502,8 +513,13 @@ class LayoutWarning(FrameWarning):
         self.other = other
 
 
+#: :func:`layout_curls` looks at about this many pixels of the image (a gradient field's own
+#: sample; 2^18 as before :data:`CURL_SAMPLE` became 2^16).
+LAYOUT_SAMPLE = 2**18
+
+
 def layout_curls(gx, gy, mask=None, *, gy_sign: float = 1.0,
-                 sample: int = CURL_SAMPLE) -> tuple[float, float, float]:
+                 sample: int = LAYOUT_SAMPLE) -> tuple[float, float, float]:
     """``(curl, curl of the other layout, curl with y flipped)`` of a gradient field in
     facetlift's frame (``gx = dz/dx``, ``gy = dz/dy``, y up), each relative to the sum of all
     four first derivatives' magnitudes (a denominator both layouts share), over the 2 x 2

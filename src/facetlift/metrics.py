@@ -214,7 +214,7 @@ def _own_normals(surface, r, c, k) -> np.ndarray:
 def input_deviation(problem, surface, *, sample: int = DEVIATION_SAMPLE) -> float:
     """Mean angle in degrees between the usable input normals and the facet normals of the
     result (from each facet's own corners where the surface is split at jumps), over at most
-    `sample` usable facets evenly spaced in row-major order (exact up to 512 x 512); NaN when
+    `sample` usable facets evenly spaced in row-major order (exact up to 65,536); NaN when
     no facet is usable.
 
     Parameters
