@@ -945,3 +945,15 @@ def test_summary_names_the_camera_and_bini_s_k_is_pointed_to(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", str(bear / "diligent_bear"), "--discontinuities",
                        "--option", "k=2", "-o", str(tmp_path / "k"))
     assert code == 1 and "BiNI's k is 'discontinuity_k' here" in one_line(err)
+
+
+def test_a_bad_max_memory_is_refused_before_the_input_is_read(tmp_path, capsys):
+    """A sixth fresh-user check: `--max-memory lots` on a map with a back-facing normal printed
+    the map's warning first, then the error about the option."""
+    n = dome()
+    n[3, 4] = [0.0, 0.0, -1.0]
+    np.save(tmp_path / "n.npy", n)
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "o",
+                       "--max-memory", "lots")
+    assert code == 1 and "--max-memory must be a number of bytes" in one_line(err)
+    assert not (tmp_path / "o").exists()

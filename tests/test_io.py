@@ -551,3 +551,19 @@ def test_a_library_caller_s_stdout_is_left_alone(monkeypatch):
         inside = os.fstat(1)
         assert images._REDIRECT["depth"] == 0
     assert (before.st_dev, before.st_ino) == (inside.st_dev, inside.st_ino)
+
+
+def test_atomic_write_errors_name_the_target(tmp_path, monkeypatch):
+    """A failed write (a read-only folder, a full disk) named the hidden temporary file; the
+    error names the file asked for (a sixth fresh-user check)."""
+    import errno
+
+    from facetlift.io import atomic
+
+    def full(fh, arr, **kw):
+        raise OSError(errno.ENOSPC, "No space left on device", fh.name)
+
+    monkeypatch.setattr(atomic.np, "save", full)
+    with pytest.raises(OSError, match=r"cannot write .*depth\.npy: No space left on device"):
+        atomic._save_npy(tmp_path / "depth.npy", np.zeros(3))
+    assert list(tmp_path.iterdir()) == []

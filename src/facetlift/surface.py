@@ -130,9 +130,12 @@ class Surface:
         """Write the surface; the format follows the extension.
 
         ``.npy``, ``.exr``, ``.tif``/``.tiff``: the depth map (float32 for EXR/TIFF);
-        ``.npz``: depth, vertex depth and mask; ``.ply``/``.obj``: the mesh (quads, or
-        triangles with ``triangles=True``); ``.png``: a shaded preview. Files are written
-        atomically. Returns the path written.
+        ``.npz``: depth, vertex depth, mask, pixel size and K, and where the surface has
+        depth jumps the cut edges ``cuts_right``, ``cuts_down`` and the ``discontinuities``
+        map; ``.ply``/``.obj``: the mesh, split at the jumps (quads, or triangles with
+        ``triangles=True``); ``.png``: a shaded preview (any ``.png`` name: the map of the
+        jumps is :func:`facetlift.io.write_discontinuities`, as ``--save discontinuities``
+        writes it). Files are written atomically. Returns the path written.
         """
         from . import io
 

@@ -325,7 +325,11 @@ def analytic(name: str, size=128, *, pixel_size: float = 1.0) -> GroundTruth:
         One of :data:`ANALYTIC`: ``saddle`` (Fig. 6), ``pyramid`` and ``ramps`` (sharp creases,
         Fig. 7), ``face`` (a smooth face-like sum of anisotropic Gaussians, Fig. 8),
         ``sphere`` (a spherical cap on a disc), ``vase`` (a surface of revolution with an
-        irregular outline), ``tent`` (a hipped roof on flat ground), ``plane``.
+        irregular outline), ``tent`` (a hipped roof on flat ground), ``plane``; with depth
+        jumps (:data:`WITH_JUMPS`, :func:`jump_edges` gives them): ``steps`` (three terraces
+        between cliffs), ``plateau`` (a table top above a sloped floor), ``helix`` (a spiral
+        ramp whose cliff is joined around the turn), ``occluder`` (a ball in front of a tilted
+        wall), ``fold`` (a sheet over another, its cliff fading out inside the image).
     size : int or (H, W)
     pixel_size : float
         Pixel width in world units.

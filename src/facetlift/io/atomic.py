@@ -41,9 +41,13 @@ def atomic_path(path):
         finally:
             os.close(fd)
         os.replace(tmp, target)
-    except BaseException:
+    except BaseException as e:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(e, OSError) and e.errno is not None and e.filename in (str(tmp), tmp):
+            # (the error named the temporary file, not the target: a read-only folder, a
+            # full disk)
+            raise OSError(e.errno, f"cannot write {target}: {e.strerror}") from e
         raise
     with contextlib.suppress(OSError):  # persist the rename; not possible everywhere
         dfd = os.open(target.parent, os.O_RDONLY)

@@ -35,7 +35,10 @@ def read_K(path) -> np.ndarray:
             K = np.loadtxt(_text_rows(p), dtype=float, ndmin=2)
         K = np.asarray(K, dtype=float)
     except Exception as e:
-        raise ValueError(f"`{arg}`: cannot parse {p} as a 3x3 matrix ({e})") from None
+        # (numpy's advice on its own arguments, e.g. "use `usecols`", means nothing here)
+        why = str(e).split("; use `usecols`")[0].strip()
+        raise ValueError(f"`{arg}`: cannot parse {p} as a 3x3 matrix ({why}): give three rows "
+                         "of three numbers, nine numbers, or fx fy cx cy") from None
     if K.size == 9 and K.shape != (3, 3):  # nine numbers on one line, row by row
         K = K.reshape(3, 3)
     elif K.size == 4:  # fx fy cx cy

@@ -168,11 +168,14 @@ def run(
                  "dense prior with noise of 1-3 pixel footprints, docs/fusion.md), give "
                  "prior_blur, or integrate without discontinuities")
         if info["unsolved"]:
+            why = (f"more than {discontinuous.DIRECT_POLISH:,} vertices"
+                   if domain.n_vertices > discontinuous.DIRECT_POLISH else
+                   "a factorization would not fit in the memory the job may use: the limit "
+                   "of max_memory (--max-memory), or half the free memory")
             warn(f"discontinuities: {len(info['unsolved'])} linear solve(s) of "
                  f"{domain.n_vertices:,} vertices did not converge in CG (relative residual "
-                 f"up to {max(info['unsolved']):.1e}) and were too large to factorize here "
-                 f"(more than {discontinuous.DIRECT_POLISH:,} vertices, or short of memory): "
-                 "the surface is usable but less exact (info['unsolved'])", ConvergenceWarning)
+                 f"up to {max(info['unsolved']):.1e}) and were not factorized ({why}): the "
+                 "surface is usable but less exact (info['unsolved'])", ConvergenceWarning)
         announce(progress, "placing pieces")
         copies, pinfo = place_pieces(domain, y, bx, by, target, s,
                                      anchored=None if prior is None else prior[0] > 0,
