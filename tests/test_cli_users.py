@@ -432,9 +432,13 @@ def test_info_memory_is_the_planners_figure(tmp_path, capsys, case):
     if case in ("sphere48", "missing64"):  # the solve reports the same figure
         got = facetlift.integrate(n, mask, discontinuities=True).info["memory_estimate"]
         assert got == d["bytes"]
+    # (its last solve factorized where that fits: 1.7-1.8x the plan's figure in a sixth
+    # user's check at 1024^2, now given beside it)
+    assert d["bytes_factorized"] > d["bytes"]
     code, out, _ = run(capsys, "info", tmp_path / "n.npy", "--mask", tmp_path / "m.npy")
     assert f"peak about {e['bytes'] / 2**20:.0f} MiB above the input ({route} route" in out
     assert "with --discontinuities (estimate): peak about" in out
+    assert "where its last solve is factorized (when that fits)" in out
 
 
 # ------------------------------------------------------------------------------ outputs

@@ -586,6 +586,9 @@ def _info_lines(rec: dict) -> list[str]:
         if e["seconds"] is not None:
             lo, hi = e["seconds"]
             line += f", {_seconds(lo)}-{_seconds(hi)} s on the 2-core benchmark machine"
+        if e.get("bytes_factorized"):
+            line += (f"; up to about {_mib(e['bytes_factorized'])} where its last solve is "
+                     "factorized (when that fits)")
         lines.append(line)
     return lines
 
