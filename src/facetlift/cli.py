@@ -147,6 +147,11 @@ _TICK = 1.0
 #: divergence unlabelled (a user's check).
 _STAGE_VALUES = {"reweighting": "largest weight change", "crack growth": "largest weight fall"}
 
+#: Stages that count iterations; the others show their name and the elapsed time only (a
+#: user's check read "writing outputs: 51it [00:27, 3.64it/s]", the reweightings' count).
+_COUNTED = ("integrating", "reweighting", "crack growth")
+_UNCOUNTED_FORMAT = "{desc} [{elapsed}]{postfix}"
+
 
 def _progress_bar(total: int | None):
     """(bar, update): a tqdm bar on stderr that appears at the first update or stage (a
@@ -166,7 +171,8 @@ def _progress_bar(total: int | None):
     def bar(desc="integrating"):
         if "bar" not in state:
             state["bar"] = tqdm(total=total, desc=desc, unit="it", file=sys.stderr,
-                                leave=False)
+                                leave=False,
+                                bar_format=None if desc in _COUNTED else _UNCOUNTED_FORMAT)
         return state["bar"]
 
     def tick(b):
@@ -191,6 +197,7 @@ def _progress_bar(total: int | None):
         state["stage"] = name
         b = bar(name)
         b.set_postfix_str("", refresh=False)  # (the last stage's value is not this one's)
+        b.bar_format = None if name in _COUNTED else _UNCOUNTED_FORMAT
         b.set_description_str(name)  # (redraws)
         if "ticker" not in state:
             state["ticker"] = threading.Thread(target=tick, args=(b,), daemon=True,
