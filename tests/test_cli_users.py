@@ -961,3 +961,20 @@ def test_a_bad_max_memory_is_refused_before_the_input_is_read(tmp_path, capsys):
                        "--max-memory", "lots")
     assert code == 1 and "--max-memory must be a number of bytes" in one_line(err)
     assert not (tmp_path / "o").exists()
+
+
+def test_warnings_show_as_they_come_with_a_progress_bar(tmp_path, capsys):
+    """A sixth fresh-user check: the unusable-normals warning, known once the map is read,
+    came only after 'writing outputs'. With the bar it is printed as it is raised, once."""
+    n = dome()
+    n[3, 4] = [0.0, 0.0, -1.0]
+    np.save(tmp_path / "n.npy", n)
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "--progress",
+                       "-o", tmp_path / "o")
+    assert code == 0
+    text = err.replace("\r", "\n")
+    warned = text.index("warning: 1 normal(s) inside the mask")
+    assert warned < text.index("writing outputs")
+    assert text.count("warning: 1 normal(s) inside the mask") == 1
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "p")
+    assert code == 0 and err.count("warning: 1 normal(s) inside the mask") == 1

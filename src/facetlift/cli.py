@@ -460,8 +460,16 @@ def integrate(normals, gradients, progress, as_json, **flags):
     bar, update = (None, None)
     if _show_progress(progress) and "progress" in _methods.get(job.method).options():
         bar, update = _progress_bar(_progress_total(job))
+    shown = []  # (the warnings printed as they came, above the bar: not again at the end)
+
+    def live(message):
+        from tqdm import tqdm
+
+        shown.append(str(message))
+        tqdm.write(f"facetlift: warning: {_as_flags(str(message))}", file=sys.stderr)
+
     try:
-        record = jobs.run(job, progress=update)
+        record = jobs.run(job, progress=update, on_warning=None if bar is None else live)
     except ValueError as e:  # name the command-line flag where the library names a keyword
         raise ValueError(
             str(e).replace("pass backfacing='missing'", "pass --backfacing missing")
@@ -470,6 +478,9 @@ def integrate(normals, gradients, progress, as_json, **flags):
         if bar is not None:
             bar.close()
     for w in record["warnings"]:
+        if str(w) in shown:
+            shown.remove(str(w))
+            continue
         click.echo(f"facetlift: warning: {_as_flags(str(w))}", err=True)
     if as_json:
         click.echo(json.dumps({k: v for k, v in record.items() if k != "warnings"}))

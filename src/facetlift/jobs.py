@@ -201,15 +201,24 @@ def _normals_from_field(g: dict, job: Job) -> np.ndarray:
 
 
 @contextlib.contextmanager
-def recorded_warnings():
+def recorded_warnings(on_warning=None):
     """The warnings of its block, recorded (for the job's record); if the block raises, they
     are given again on the way out, so that a caller's own record (a failed batch item's)
-    keeps them: they may say why it failed."""
+    keeps them: they may say why it failed. `on_warning` (callable(message)), where given,
+    also hears each as it is raised (a command line's progress bar shows them then, not
+    after the run)."""
     kept: list = []
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             kept = caught
+            if on_warning is not None:
+                def show(message, category, filename, lineno, file=None, line=None):
+                    caught.append(warnings.WarningMessage(message, category, filename,
+                                                          lineno, file, line))
+                    on_warning(message)
+
+                warnings.showwarning = show  # (restored by catch_warnings)
             yield caught
     except BaseException:
         for w in kept:
@@ -254,7 +263,7 @@ def _check_outputs(save, job: Job, local: bool = True) -> None:
             )
 
 
-def run(job: Job, *, progress=None) -> dict:
+def run(job: Job, *, progress=None, on_warning=None) -> dict:
     """Run `job`: outputs written as one set; returns its record.
 
     Parameters
@@ -264,6 +273,8 @@ def run(job: Job, *, progress=None) -> dict:
         Passed to methods that report progress; with a ``stage`` attribute it also hears
         the job's steps start ("reading", "integrating", "writing outputs" and the method's
         own: :mod:`facetlift._progress`).
+    on_warning : callable(message), optional
+        Hears each warning as it is raised (they are in the record's ``warnings`` too).
 
     Returns
     -------
@@ -295,7 +306,7 @@ def run(job: Job, *, progress=None) -> dict:
     names = [OUTPUTS[s] for s in save]
     # (one record of the whole job's warnings, the gradient layout's, ...: given again if any
     # phase fails, a write or the outputs' commit too)
-    with recorded_warnings() as caught, \
+    with recorded_warnings(on_warning) as caught, \
             io.OutputSet(outdir, names, inputs=input_paths(job)) as out:
         announce(progress, "reading")
         inp = read(job)
