@@ -299,10 +299,8 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
                 problem = prepare(n, mask, K=K)
         except ValueError:
             return guess
-    curls = {
-        "curl": frames.relative_curl(problem),
-        "curl_y_flipped": frames.relative_curl(problem, (1.0, -1.0, 1.0)),
-    }
+    curls = frames.flip_curls(problem)
+    curls.pop("curl_x_flipped")
     guess.update(curls)
     own, flipped = curls["curl"], curls["curl_y_flipped"]
     if own > frames.FLIP_MIN_CURL and flipped < frames.FLIP_RATIO * own:
