@@ -369,3 +369,19 @@ def test_a_pinhole_camera_object_is_taken_as_k():
     a = facetlift.integrate(g.normals, g.mask, K=facetlift.Pinhole(K))
     b = facetlift.integrate(g.normals, g.mask, K=K)
     assert np.array_equal(a.depth, b.depth, equal_nan=True)
+
+
+def test_progress_true_shows_the_command_lines_bar(capsys):
+    """A sixth fresh-user check: progress=True was refused (a callable or None); it is the
+    command line's bar, on stderr, closed after the solve."""
+    import threading
+
+    from facetlift import synthetic
+
+    gt = synthetic.analytic("occluder", 48)
+    s = facetlift.integrate(gt.normals, gt.mask, discontinuities=True, progress=True)
+    err = capsys.readouterr().err
+    assert s.info["iterations"] > 0 and "reweighting" in err and "smooth start" in err
+    assert not [t for t in threading.enumerate() if t.name == "facetlift-progress"]
+    with pytest.raises(ValueError, match="`progress` must be a callable"):
+        facetlift.integrate(gt.normals, gt.mask, progress="yes")

@@ -116,6 +116,9 @@ def integrate(
         the ``prior_blur`` capability ("dgp" with ``solver="direct"``).
     **options
         Method options (``facetlift methods`` lists them, with types and defaults).
+        ``progress=True`` shows the command line's progress bar on stderr (the methods'
+        ``progress`` option otherwise takes a callable ``progress(iteration, value)``, which
+        may carry a ``stage`` attribute: :mod:`facetlift._progress`).
 
     Returns
     -------
@@ -177,8 +180,10 @@ def integrate(
     if solver is not None:
         options["solver"] = solver
     # (a mistyped option is refused before the input is read and checked: its warnings, e.g.
-    # about grazing normals, came first and hid the one line that mattered)
-    validate(info.specs(), options, method)
+    # about grazing normals, came first and hid the one line that mattered; progress=True is
+    # a bar made in _solve)
+    validate(info.specs(), {**options, "progress": _no_progress}
+             if options.get("progress") is True else options, method)
     normals = frames.checked(normals, mask, frame=normal_frame)
     problem = prepare(
         normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
@@ -267,10 +272,22 @@ def solve(problem: Problem, method: str = "dgp", /, *, max_memory=None, **option
     return _solve(problem, method, None, max_memory, options)
 
 
+def _no_progress(iteration, value):
+    """(A stand-in for ``progress=True`` while the options are checked.)"""
+
+
 def _solve(problem, method, t0, max_memory, options):
     """:func:`solve`, timed from `t0` (integrate's start; None: now). (Its own arguments are
     positional here: an option named ``t0`` or ``problem`` is the method's, refused as such.)"""
     t0 = time.perf_counter() if t0 is None else t0
+    if options.get("progress") is True:  # the command line's bar, on stderr
+        from ._progress import progress_bar
+
+        bar, update = progress_bar(None)
+        try:
+            return _solve(problem, method, t0, max_memory, {**options, "progress": update})
+        finally:
+            bar.close()
     info = methods.get(method)
     values = validate(info.specs(), options, method)
     eps = problem.counts.get("outlier_eps")

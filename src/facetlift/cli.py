@@ -23,6 +23,7 @@ import click
 
 from . import __version__
 from . import methods as _methods
+from ._progress import progress_bar as _progress_bar
 from .errors import SolverError
 from .jobs import DEFAULT_SAVE, OUTPUTS, jsonable
 
@@ -135,77 +136,6 @@ def _out_dir(ctx, param, value):
     if not str(value).strip():
         raise click.BadParameter("is empty: give a folder")
     return Path(value)
-
-
-#: Seconds between redraws of the progress bar while a stage without iterations runs (its
-#: elapsed time keeps counting).
-_TICK = 1.0
-
-#: What the reported value is, per stage that reports one (shown beside it in the bar): the
-#: discontinuity route's weight change falls toward `discontinuity_tol` while it reweights;
-#: its crack growth reports how far a weight fell (a cut opening: up to 4), which read as a
-#: divergence unlabelled (a user's check).
-_STAGE_VALUES = {"reweighting": "largest weight change", "crack growth": "largest weight fall"}
-
-#: Stages that count iterations; the others show their name and the elapsed time only (a
-#: user's check read "writing outputs: 51it [00:27, 3.64it/s]", the reweightings' count).
-_COUNTED = ("integrating", "reweighting", "crack growth")
-_UNCOUNTED_FORMAT = "{desc} [{elapsed}]{postfix}"
-
-
-def _progress_bar(total: int | None):
-    """(bar, update): a tqdm bar on stderr that appears at the first update or stage (a
-    route that reports neither shows nothing); ``bar.close()`` is safe either way.
-
-    ``update.stage(name)`` (facetlift._progress) names the step that starts in the bar's
-    description, and a thread redraws the bar every :data:`_TICK` seconds so that its
-    elapsed time runs on through steps that report no iteration (a large map's smooth start,
-    final solve and writing)."""
-    import threading
-
-    from tqdm import tqdm
-
-    state = {}
-    stop = threading.Event()
-
-    def bar(desc="integrating"):
-        if "bar" not in state:
-            state["bar"] = tqdm(total=total, desc=desc, unit="it", file=sys.stderr,
-                                leave=False,
-                                bar_format=None if desc in _COUNTED else _UNCOUNTED_FORMAT)
-        return state["bar"]
-
-    def tick(b):
-        while not stop.wait(_TICK):
-            b.refresh()
-
-    class _Bar:
-        def close(self):
-            stop.set()
-            if "ticker" in state:
-                state["ticker"].join()
-            if "bar" in state:
-                state["bar"].close()
-
-    def update(iteration, value):
-        b = bar()
-        b.update(iteration - b.n)
-        label = _STAGE_VALUES.get(state.get("stage"))
-        b.set_postfix_str(f"{label} {value:.3g}" if label else f"{value:.4g}", refresh=False)
-
-    def stage(name):
-        state["stage"] = name
-        b = bar(name)
-        b.set_postfix_str("", refresh=False)  # (the last stage's value is not this one's)
-        b.bar_format = None if name in _COUNTED else _UNCOUNTED_FORMAT
-        b.set_description_str(name)  # (redraws)
-        if "ticker" not in state:
-            state["ticker"] = threading.Thread(target=tick, args=(b,), daemon=True,
-                                               name="facetlift-progress")
-            state["ticker"].start()
-
-    update.stage = stage
-    return _Bar(), update
 
 
 #: The options ``integrate`` and ``batch`` share: what to read and how to integrate it.
