@@ -978,3 +978,7 @@ def test_warnings_show_as_they_come_with_a_progress_bar(tmp_path, capsys):
     assert text.count("warning: 1 normal(s) inside the mask") == 1
     code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "p")
     assert code == 0 and err.count("warning: 1 normal(s) inside the mask") == 1
+    # a job that fails after its reading: said once too (a review: the failure gave them again)
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "--progress", "--max-memory",
+                       "1K", "-o", tmp_path / "q")
+    assert code == 1 and err.count("warning: 1 normal(s) inside the mask") == 1

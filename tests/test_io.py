@@ -560,10 +560,20 @@ def test_atomic_write_errors_name_the_target(tmp_path, monkeypatch):
 
     from facetlift.io import atomic
 
-    def full(fh, arr, **kw):
-        raise OSError(errno.ENOSPC, "No space left on device", fh.name)
+    def named(fh, arr, **kw):
+        raise OSError(errno.EROFS, "Read-only file system", fh.name)
 
-    monkeypatch.setattr(atomic.np, "save", full)
-    with pytest.raises(OSError, match=r"cannot write .*depth\.npy: No space left on device"):
-        atomic._save_npy(tmp_path / "depth.npy", np.zeros(3))
-    assert list(tmp_path.iterdir()) == []
+    def unnamed(fh, arr, **kw):  # (a full disk fails in the write: no file named)
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    for fail in (named, unnamed):
+        monkeypatch.setattr(atomic.np, "save", fail)
+        with pytest.raises(OSError) as e:
+            atomic._save_npy(tmp_path / "depth.npy", np.zeros(3))
+        assert e.value.filename == str(tmp_path / "depth.npy") and e.value.errno
+        assert list(tmp_path.iterdir()) == []
+    # (a name near the file system's limit leaves the temporary room: it is cut short)
+    monkeypatch.undo()
+    long = tmp_path / ("d" * 240 + ".npy")
+    atomic._save_npy(long, np.zeros(3))
+    assert long.is_file()

@@ -181,10 +181,10 @@ _JOB_OPTIONS = [
                  "auto, pcg, pardiso, superlu, amg."),
     click.option("--discontinuities", is_flag=True,
                  help="Allow depth jumps (methods that handle discontinuities: 'facetlift "
-                 "methods'). About 30 reweighted solves: 10-20x the time of the smooth "
-                 "integration ('facetlift info' estimates it); the cut's sharpness is "
-                 "--option discontinuity_k=K (default 4), the jumps' map --save "
-                 "discontinuities."),
+                 "methods'). About 30 reweighted solves: up to 10-20x the time of the smooth "
+                 "integration (the DiLiGenT bear 3x; 'facetlift info' estimates it); the "
+                 "cut's sharpness is --option discontinuity_k=K (default 4), the jumps' map "
+                 "--save discontinuities."),
     click.option("--prior", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Depth prior (npy, EXR, TIFF, or 16-bit PNG with --prior-scale), NaN or "
                  "0 where unknown, or a points file (.csv/.txt: one sample per line under a "
@@ -269,10 +269,6 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
     if K is not None and orthographic:
         raise ValueError(f"--K {K} and --orthographic contradict each other: --orthographic "
                          "ignores a camera (e.g. a dataset folder's K.txt); give one of them")
-    if max_memory is not None:  # (before the input is read: its warnings would come first)
-        from .memory import parse_size
-
-        parse_size(max_memory)
     opts = dict(_parse_option(o) for o in options)
     for key, value in (("solver", solver), ("max_iter", max_iter), ("tol", tol),
                        ("backend", backend), ("max_memory", max_memory),
@@ -283,6 +279,10 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
             raise ValueError(f"--option {key}={json.dumps(opts[key])} and "
                              f"--{key.replace('_', '-')} contradict each other; give one")
         opts[key] = value
+    if opts.get("max_memory") is not None:  # (before the input is read: its warnings came
+        from .memory import parse_size  # first; --option max_memory=... as well)
+
+        parse_size(opts["max_memory"])
     frame = frames.resolve(normal_frame, y_down)
     if frame is not None:
         frames.parse(frame)

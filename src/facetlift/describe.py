@@ -307,6 +307,11 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
         guess["likely"] = ("y flipped: far more integrable with y negated (try "
                            f"{frames.flag(frames.negated(frame, 'y'))}, or "
                            f"{frames.flag(frames.negated(frame, 'x'))} if inside-out)")
+    elif own > frames.FLIP_MIN_CURL and flipped < frames.FLIP_HINT * own:
+        guess["likely"] = ("as read, or y flipped: more integrable with y negated, not by the "
+                           "margin that says so (correlated errors on a flat view do this "
+                           f"too); if the surface looks wrong, try "
+                           f"{frames.flag(frames.negated(frame, 'y'))}")
     else:
         from .problem import BACKFACING_FRAME_HINT
 

@@ -221,8 +221,9 @@ def recorded_warnings(on_warning=None):
                 warnings.showwarning = show  # (restored by catch_warnings)
             yield caught
     except BaseException:
-        for w in kept:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        if on_warning is None:  # (a caller that heard them as they came has them already)
+            for w in kept:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         raise
 
 
@@ -333,8 +334,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         for kind, name in zip(save, names, strict=True):
             try:
                 _write(surface, kind, out.path(name), inp.normals, job.triangles)
-            except OSError as e:  # (a full disk's error names no file: say which and where)
-                if e.filename is not None or e.errno is None:
+            except OSError as e:  # (say which and where: the file written is a staging one)
+                if e.errno is None:
                     raise
                 raise OSError(e.errno, f"{e.strerror} (writing {name} for {outdir}; nothing "
                                        "was written there)") from e

@@ -32,7 +32,10 @@ def atomic_path(path):
     if not target.parent.is_dir():  # (the error named the temporary file, not the target)
         raise FileNotFoundError(f"cannot write {target}: its folder {target.parent} does not "
                                 "exist")
-    tmp = target.with_name(f".{target.name}.{_host()}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    # (the name cut short: a target name near the file system's limit would leave no room
+    # for the temporary's prefix and suffix)
+    tmp = target.with_name(f".{target.name[:96]}.{_host()}.{os.getpid()}."
+                           f"{secrets.token_hex(4)}.tmp")
     try:
         yield tmp
         fd = os.open(tmp, os.O_RDONLY)
@@ -44,10 +47,11 @@ def atomic_path(path):
     except BaseException as e:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
-        if isinstance(e, OSError) and e.errno is not None and e.filename in (str(tmp), tmp):
-            # (the error named the temporary file, not the target: a read-only folder, a
-            # full disk)
-            raise OSError(e.errno, f"cannot write {target}: {e.strerror}") from e
+        if isinstance(e, OSError) and e.errno is not None and e.filename in (None, str(tmp),
+                                                                              tmp):
+            # (the error named the temporary file, not the target: a read-only folder; or no
+            # file at all: a full disk fails in the write itself)
+            raise OSError(e.errno, e.strerror, str(target)) from e
         raise
     with contextlib.suppress(OSError):  # persist the rename; not possible everywhere
         dfd = os.open(target.parent, os.O_RDONLY)

@@ -35,6 +35,9 @@ def read_K(path) -> np.ndarray:
             K = np.loadtxt(_text_rows(p), dtype=float, ndmin=2)
         K = np.asarray(K, dtype=float)
     except Exception as e:
+        if p.suffix.lower() == ".npy":  # (numpy's advice on allow_pickle means nothing here)
+            raise ValueError(f"`{arg}`: cannot read {p} as a numpy array of 3x3 (or 9, or 4) "
+                             "numbers: not a .npy file of numbers, or a damaged one") from None
         # (numpy's advice on its own arguments, e.g. "use `usecols`", means nothing here)
         why = str(e).split("; use `usecols`")[0].strip()
         raise ValueError(f"`{arg}`: cannot parse {p} as a 3x3 matrix ({why}): give three rows "

@@ -907,7 +907,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             raise SolverError(
                 f"discontinuities: multigrid-preconditioned CG failed on {K.shape[0]:,} "
                 f"unknowns (a non-finite iterate), which are too many to factorize here "
-                f"(more than {DIRECT_POLISH:,}, or more than the free memory allows)")
+                f"(more than {DIRECT_POLISH:,}, or more than the memory the job may use "
+                "allows: max_memory / --max-memory, or half the free memory)")
         amg["unsolved"].append(r)
         return z
 
