@@ -90,8 +90,7 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
 
         n = problem.domain.n_vertices
         if n <= DIRECT_POLISH:
-            out["bytes_factorized"] = peak + int(
-                memory.COEFFICIENTS["dgp-factor"][3] * n * np.log2(max(n, 2)))
+            out["bytes_factorized"] = peak + int(memory.factorization_bytes(n))
     return out
 
 
@@ -303,11 +302,12 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
     curls.pop("curl_x_flipped")
     guess.update(curls)
     own, flipped = curls["curl"], curls["curl_y_flipped"]
-    if own > frames.FLIP_MIN_CURL and flipped < frames.FLIP_RATIO * own:
+    verdict = frames.flip_verdict(own, flipped)
+    if verdict == "claim":
         guess["likely"] = ("y flipped: far more integrable with y negated (try "
                            f"{frames.flag(frames.negated(frame, 'y'))}, or "
                            f"{frames.flag(frames.negated(frame, 'x'))} if inside-out)")
-    elif own > frames.FLIP_MIN_CURL and flipped < frames.FLIP_HINT * own:
+    elif verdict == "hint":
         guess["likely"] = ("as read, or y flipped: more integrable with y negated, not by the "
                            "margin that says so (correlated errors on a flat view do this "
                            f"too); if the surface looks wrong, try "

@@ -458,6 +458,17 @@ def flip_curls(problem) -> dict:
     return {"curl": _curl_ratio(*parts), "curl_y_flipped": flipped, "curl_x_flipped": flipped}
 
 
+def flip_verdict(own: float, flipped: float) -> str | None:
+    """"claim" where the flipped field's relative curl `flipped` is below :data:`FLIP_RATIO`
+    of the field's own `own`, "hint" where below :data:`FLIP_HINT`, else None (also where
+    `own` is at most :data:`FLIP_MIN_CURL`: a clean field is left alone)."""
+    if not own > FLIP_MIN_CURL:
+        return None
+    if flipped < FLIP_RATIO * own:
+        return "claim"
+    return "hint" if flipped < FLIP_HINT * own else None
+
+
 def flip_check(problem) -> dict:
     """Relative curl (:func:`relative_curl`) of the field as given and with y and x flipped;
     warns, naming the flag to try, when a flip is far more integrable (:data:`FLIP_RATIO`),
@@ -472,9 +483,10 @@ def flip_check(problem) -> dict:
         ``{"curl": ..., "curl_y_flipped": ..., "curl_x_flipped": ...}``.
     """
     out = flip_curls(problem)
-    own, best = out["curl"], min(out["curl_y_flipped"], out["curl_x_flipped"])
-    if own > FLIP_MIN_CURL and FLIP_RATIO * own <= best < FLIP_HINT * own:
-        frame = _READ_IN.get()
+    own = out["curl"]
+    verdict = flip_verdict(own, min(out["curl_y_flipped"], out["curl_x_flipped"]))
+    frame = _READ_IN.get()  # (the frame the map was read in: the hint is relative to it)
+    if verdict == "hint":
         try_ = ("negating the y slope (q)" if frame == GRADIENT_FIELD
                 else flag(negated(frame, "y")))
         warn(f"the normals are more integrable with y flipped (relative curl {own:.2f} as "
@@ -482,8 +494,7 @@ def flip_check(problem) -> dict:
              "says the frame is wrong (strongly correlated errors on a nearly flat view do "
              f"this too): if the surface looks bent or inside-out, try {try_}",
              FrameWarning)
-    elif own > FLIP_MIN_CURL and best < FLIP_RATIO * own:
-        frame = _READ_IN.get()  # (the frame the map was read in: the hint is relative to it)
+    elif verdict == "claim":
         head = (f"the normals are far more integrable with y flipped (relative curl {own:.2f} "
                 f"as given, {out['curl_y_flipped']:.2f} with y flipped)")
         if frame == GRADIENT_FIELD:

@@ -7,7 +7,14 @@ from pathlib import Path
 import numpy as np
 
 from ._paths import _existing
-from .images import MASK_FORMATS, NORMAL_READ_FORMATS, _text_rows, read_mask, read_normals
+from .images import (
+    MASK_FORMATS,
+    NORMAL_READ_FORMATS,
+    _loadtxt_reason,
+    _text_rows,
+    read_mask,
+    read_normals,
+)
 
 
 def read_K(path) -> np.ndarray:
@@ -38,10 +45,9 @@ def read_K(path) -> np.ndarray:
         if p.suffix.lower() == ".npy":  # (numpy's advice on allow_pickle means nothing here)
             raise ValueError(f"`{arg}`: cannot read {p} as a numpy array of 3x3 (or 9, or 4) "
                              "numbers: not a .npy file of numbers, or a damaged one") from None
-        # (numpy's advice on its own arguments, e.g. "use `usecols`", means nothing here)
-        why = str(e).split("; use `usecols`")[0].strip()
-        raise ValueError(f"`{arg}`: cannot parse {p} as a 3x3 matrix ({why}): give three rows "
-                         "of three numbers, nine numbers, or fx fy cx cy") from None
+        raise ValueError(f"`{arg}`: cannot parse {p} as a 3x3 matrix ({_loadtxt_reason(e)}): "
+                         "give three rows of three numbers, nine numbers, or fx fy cx cy") \
+            from None
     if K.size == 9 and K.shape != (3, 3):  # nine numbers on one line, row by row
         K = K.reshape(3, 3)
     elif K.size == 4:  # fx fy cx cy

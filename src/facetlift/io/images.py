@@ -543,6 +543,12 @@ def _text_rows(p: Path) -> list[str]:
     return rows
 
 
+def _loadtxt_reason(e: Exception) -> str:
+    """numpy.loadtxt's error without its advice on its own arguments ("use `usecols`"),
+    which means nothing to the reader of a file."""
+    return str(e).split("; use `usecols`")[0].strip()
+
+
 def _read_points(p: Path, arg: str):
     """(rows, cols, depths) of a points file (:func:`read_prior`)."""
     try:
@@ -565,8 +571,8 @@ def _read_points(p: Path, arg: str):
     try:
         a = np.loadtxt(lines[1:], dtype=float, ndmin=2)
     except ValueError as e:
-        raise ValueError(f"`{arg}`: {p}: a line that is not {len(header)} numbers ({e})") \
-            from None
+        raise ValueError(f"`{arg}`: {p}: a line that is not {len(header)} numbers "
+                         f"({_loadtxt_reason(e)})") from None
     if a.shape[1] != len(header):
         raise ValueError(f"`{arg}`: {p}: lines of {a.shape[1]} numbers under a header of "
                          f"{len(header)} columns")

@@ -87,7 +87,6 @@ def _kernel_works() -> bool:
     return _CHECKED["ok"]
 
 
-
 class SplitProduct:
     """``A @ x`` for a CSR matrix `A` and a float64 vector `x`, the rows in two halves on two
     threads; anything else (a block of vectors, another dtype) is scipy's own product."""
