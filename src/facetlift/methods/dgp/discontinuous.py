@@ -105,6 +105,7 @@ from ..._progress import announce
 from ...conventions import CORNER_OFFSETS
 from ...errors import SolverError
 from ...linalg.amg import balanced, block_aggregates, hierarchy, refresh, vcycle
+from ...linalg.cg import norm
 from ...memory import factorization_fits
 from ...operators.stencil import E_TWIST, E_X, E_Y, prior_form, scatter_corners
 
@@ -476,10 +477,10 @@ def _rhs_scale(rhs, normals_part, centred):
     information where the normals carry little, e.g. a flat view of steps), and at least
     :data:`RHS_SCALE_FLOOR` of the whole (rounding).
     """
-    whole = float(np.linalg.norm(rhs))
+    whole = norm(rhs)
     if whole == 0.0:
         return 1.0
-    ref = max(float(np.linalg.norm(normals_part)), RHS_SHARE * float(np.linalg.norm(centred)))
+    ref = max(norm(normals_part), RHS_SHARE * norm(centred))
     return min(1.0, max(ref / whole, RHS_SCALE_FLOOR))
 
 
@@ -899,8 +900,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     def _kept(K, rhs, z, z0, start):
         """Of CG's unfinished iterate `z` and its start `z0` (relative residual `start`), the
         finite one with the smaller true residual, recorded in ``amg["unsolved"]``."""
-        bn = float(np.linalg.norm(rhs)) or 1.0
-        r = float(np.linalg.norm(rhs - K @ z)) / bn if np.isfinite(z).all() else np.inf
+        bn = norm(rhs) or 1.0
+        r = norm(rhs - K @ z) / bn if np.isfinite(z).all() else np.inf
         if not r <= start and np.isfinite(z0).all() and np.isfinite(start):
             z, r = z0, start
         if not np.isfinite(r):
