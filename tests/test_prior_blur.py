@@ -206,6 +206,34 @@ def test_a_prior_that_is_not_blurred_as_said_is_warned_about():
                                 prior_blur=sigma, **options)
 
 
+def test_a_blurred_prior_that_tears_the_surface_apart_falls_back_to_pointwise():
+    """Block means upsampled by repetition, given as blurred by half a block, with jumps (a
+    fresh user's check: depths from 1e-14 to 5e12, exit 0): the corrections of the blurred
+    prior tore the surface into pieces that ran far beyond the prior's depth range. The route
+    then compares the prior pixel by pixel instead, says so, and returns exactly that."""
+    from facetlift import synthetic
+
+    gt = synthetic.analytic("occluder", 48)
+    d = np.where(gt.mask, gt.depth, np.nan)
+    blocks = np.nanmean(d.reshape(6, 8, 6, 8), axis=(1, 3))
+    prior = np.kron(blocks, np.ones((8, 8)))
+    kw = dict(prior=prior, prior_weight=0.01, discontinuities=True)
+    with pytest.warns(UserWarning, match=r"prior_blur: the surface departed from the blurred "
+                                         r"prior by up to [\d.]+ times .* compared pixel by pixel"):
+        s = facetlift.integrate(gt.normals, gt.mask, prior_blur=4, **kw)
+    info = s.info["prior_blur"]
+    assert info["fallback"] and info["astray"] > 2.0
+    np.testing.assert_array_equal(s.depth, run(gt.normals, gt.mask, **kw).depth)
+    span = np.nanmax(d) - np.nanmin(d)
+    assert np.nanmax(np.abs(s.depth - gt.depth)) < span
+    # the benchmark's kind of coarse prior, truly blurred, keeps its blurred route
+    n, depth, mask = two_bumps((48, 64))
+    coarse_prior, sigma = coarse(depth, mask)
+    info = run(n, mask, prior=coarse_prior, prior_weight=0.01, prior_blur=sigma,
+               discontinuities=True).info["prior_blur"]
+    assert not info["fallback"] and info["astray"] is None
+
+
 def test_zero_blur_is_the_pointwise_prior():
     n, depth, mask = two_bumps((48, 64))
     prior, _ = coarse(depth, mask)

@@ -159,8 +159,9 @@ _JOB_OPTIONS = [
     click.option("--pixel-size", type=float, default=1.0, show_default=True,
                  help="Pixel width in world units (orthographic): scales depth with x and y."),
     click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-                 help="Perspective intrinsics, a 3x3 text file (OpenCV layout). A dataset "
-                 "folder's K.txt is used automatically."),
+                 help="Perspective intrinsics: a text file of the 3x3 matrix (OpenCV layout) "
+                 "or of fx fy cx cy, or a (3, 3) .npy. A dataset folder's K.txt is used "
+                 "automatically."),
     click.option("--orthographic", is_flag=True,
                  help="Ignore K (e.g. a dataset's K.txt) and integrate orthographically."),
     click.option("--backfacing", type=click.Choice(["missing", "error", "outlier"]),
@@ -201,8 +202,9 @@ _JOB_OPTIONS = [
     click.option("--prior-blur", type=float, default=None, metavar="SIGMA",
                  help="The prior is coarse or blurred (a monocular network, a low-resolution "
                  "sensor): the standard deviation in pixels of its blur; it is then compared "
-                 "with the result blurred alike (0.5x the factor of block means upsampled "
-                 "bilinearly; docs/fusion.md, 'Blurred priors')."),
+                 "with the result blurred alike (1.1x the factor of block means blurred by one "
+                 "coarse pixel and upsampled bilinearly; block means alone did better pixel "
+                 "by pixel: docs/fusion.md, 'Blurred priors')."),
     click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Per-pixel weights >= 0 of the normals (npy, EXR, float TIFF as stored; "
                  "8/16-bit PNG or TIFF = v/max); "
