@@ -383,5 +383,6 @@ def test_progress_true_shows_the_command_lines_bar(capsys):
     err = capsys.readouterr().err
     assert s.info["iterations"] > 0 and "reweighting" in err and "smooth start" in err
     assert not [t for t in threading.enumerate() if t.name == "facetlift-progress"]
-    with pytest.raises(ValueError, match="`progress` must be a callable"):
+    with pytest.raises(ValueError, match=r"`progress` must be True \(a progress bar on stderr\), "
+                       r"a callable or None; got .yes."):
         facetlift.integrate(gt.normals, gt.mask, progress="yes")

@@ -643,7 +643,8 @@ def test_bad_options(saddle, options, match):
         ({"max_iter": float("inf"), "solver": "iterative"}, "`max_iter` must be an integer"),
         ({"outlier_eps": "x"}, "`outlier_eps` must be a number"),
         ({"flat_weight": "x"}, "`flat_weight` must be a number > 0"),
-        ({"progress": 3, "solver": "iterative"}, "`progress` must be a callable or None"),
+        ({"progress": 3, "solver": "iterative"},
+         r"`progress` must be True \(a progress bar on stderr\), a callable or None"),
     ],
 )
 def test_bad_option_types(saddle, options, match):

@@ -234,7 +234,8 @@ def test_confidence_lowers_the_weight_of_bad_normals():
     ({"confidence": -np.ones((24, 28))},
      r"`confidence` must be finite and >= 0 inside the mask \(NaN there is a "
      r"missing normal\); got -1.0"),
-    ({"prior": ([1, 2], [3, 99], [1.0, 2.0])}, "outside the 24 x 28 image"),
+    ({"prior": ([1, 2], [99, 99], [1.0, 2.0])},
+     r"2 of the 2 sample\(s\) lie outside the 24 x 28 image.*no sample is inside"),
     ({"prior": ([1, 2], [3], [1.0, 2.0])}, "three arrays of one length"),
     ({"prior": np.ones((24, 28)), "method": "frankot_chellappa"},
      "method 'frankot_chellappa' does not take a `prior`"),
@@ -333,7 +334,8 @@ def test_cli_prior_from_a_points_file(tmp_path, capsys, layout):
     ("row col depth\n1 2 x\n", "a line that is not 3 numbers"),
     ("row col depth\n1 2\n", "lines of 2 numbers under a header of 3 columns"),
     ("row col\n1 2\n", "the first line must be a header"),
-    ("row col depth\n1 900 5\n", r"pixel \(row 1, col 900\) is outside the 24 x 28 image"),
+    ("row col depth\n1 900 5\n",
+     r"1 of the 1 sample\(s\) lie outside the 24 x 28 image, the first at \(row 1, col 900\)"),
 ])
 def test_cli_prior_points_file_errors(tmp_path, capsys, text, match):
     _write_inputs(tmp_path)
@@ -342,6 +344,23 @@ def test_cli_prior_points_file_errors(tmp_path, capsys, text, match):
                  "-o", str(tmp_path / "o")])
     err = capsys.readouterr().err
     assert code == 1 and re.search(match, err) and "Traceback" not in err, err
+
+
+def test_points_outside_the_image_are_left_out_with_a_warning(tmp_path, capsys):
+    """One stray point of a point cloud refused the whole job (a user's check)."""
+    _write_inputs(tmp_path)
+    (tmp_path / "pts.txt").write_text("row col depth\n3 4 5\n1 900 5\n-2 1 5\n")
+    code = main(["integrate", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "pts.txt"),
+                 "-s", "npy", "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert re.search(r"warning: --prior \(rows, cols, depths\): 2 of the 3 sample\(s\) lie "
+                     r"outside the 24 x 28 image, the first at \(row 1, col 900\); they were "
+                     r"left out", err), err
+    n = np.load(tmp_path / "n.npy")
+    with pytest.warns(UserWarning, match="1 of the 2 sample"):
+        a = facetlift.integrate(n, prior=([3, 30], [4, 4], [5.0, 5.0])).depth
+    np.testing.assert_array_equal(a, facetlift.integrate(n, prior=([3], [4], [5.0])).depth)
 
 
 def test_weight_maps_read_alike_from_png_and_tiff_and_scale_with_the_weight(tmp_path):

@@ -253,9 +253,19 @@ def test_one_pixel_components_and_clean_mask():
     mask[6, 7] = True  # isolated
     mask[0, 8] = True  # isolated (corner)
     mask[6, 1:3] = True  # two pixels: fine
-    with pytest.raises(ValueError, match=r"`mask` has 2 one-pixel component\(s\) \(first at "
-                       r"row 0, col 8\).*facetlift.clean_mask"):
-        facetlift.prepare(up((8, 9)), mask)
+    # a mask's stray pixels are left out with a warning (a few pixels never refuse the job)
+    with pytest.warns(UserWarning, match=r"`mask` has 2 one-pixel component\(s\) \(first at "
+                      r"row 0, col 8\).*left out \(NaN in the output; facetlift.clean_mask"):
+        prob = facetlift.prepare(up((8, 9)), mask)
+    assert prob.domain.n_components == 2 and not prob.domain.mask[6, 7]
+    assert not prob.domain.mask[0, 8] and prob.domain.mask.sum() == 14
+    with pytest.warns(UserWarning, match="one-pixel component"):
+        surface = facetlift.integrate(up((8, 9)), mask, method="poisson")
+    assert np.isnan(surface.depth[6, 7]) and np.isfinite(surface.depth[1:4, 1:5]).all()
+    lone = np.zeros((5, 5), bool)
+    lone[0, 0] = lone[3, 3] = True
+    with pytest.raises(ValueError, match="`mask`: every pixel of it is isolated"):
+        facetlift.prepare(up((5, 5)), lone)
     cleaned = facetlift.clean_mask(mask)
     expected = mask.copy()
     expected[6, 7] = expected[0, 8] = False
@@ -283,8 +293,9 @@ def test_one_pixel_domain_from_default_mask():
     with pytest.warns(UserWarning, match=r"1 isolated pixel\(s\) .* left out \(first at row 4"):
         prob = facetlift.prepare(n)
     assert prob.domain.mask.sum() == 8 and not prob.domain.mask[4, 4]
-    with pytest.raises(ValueError, match="one-pixel component"):  # (a mask given: as it is)
-        facetlift.prepare(n, np.isfinite(n[..., 0]))
+    with pytest.warns(UserWarning, match="one-pixel component"):  # (a mask given: said too)
+        prob = facetlift.prepare(n, np.isfinite(n[..., 0]))
+    assert prob.domain.mask.sum() == 8 and not prob.domain.mask[4, 4]
 
 
 @pytest.mark.parametrize(
@@ -309,8 +320,10 @@ def test_bad_pixel_size(pixel_size, match):
 @pytest.mark.parametrize(
     "K, match",
     [
-        (np.eye(2), r"`K` must be a 3x3 intrinsics matrix; got shape \(2, 2\)"),
-        (np.ones(9), r"`K` must be a 3x3 intrinsics matrix; got shape \(9,\)"),
+        (np.eye(2), r"`K` must be a 3x3 intrinsics matrix or four numbers \(fx, fy, cx, cy\); "
+                    r"got shape \(2, 2\)"),
+        (np.ones(9), r"`K` must be a 3x3 intrinsics matrix .*; got shape \(9,\)"),
+        ([500, -500, 3, 3], r"`K` must have positive focal lengths"),
         ([[500, 0, np.nan], [0, 500, 3], [0, 0, 1]], "`K` contains NaN or inf"),
         ([[np.inf, 0, 3], [0, 500, 3], [0, 0, 1]], "`K` contains NaN or inf"),
         ([[-500, 0, 3], [0, 500, 3], [0, 0, 1]], r"`K` must have positive focal lengths"),
@@ -325,6 +338,13 @@ def test_bad_pixel_size(pixel_size, match):
 def test_bad_K(K, match):
     with pytest.raises(ValueError, match=match):
         facetlift.prepare(up(), K=K)
+
+
+def test_K_as_four_numbers_is_the_matrix():
+    """The command line's K files take fx fy cx cy; the API refused the same four numbers."""
+    K = np.array([[520.0, 0, 3.5], [0, 510.0, 2.5], [0, 0, 1]])
+    a = facetlift.integrate(up(), K=[520, 510, 3.5, 2.5], method="poisson").depth
+    np.testing.assert_array_equal(a, facetlift.integrate(up(), K=K, method="poisson").depth)
 
 
 def test_bad_backfacing_option():

@@ -136,6 +136,8 @@ def read(job: Job) -> Input:
     src = job.source
     K = prior = conf = None
     field_input = bool(job.gradients)
+    if job.prior is None and (field_input or not src.is_dir()):  # (no dataset's prior_depth:
+        _no_prior_checks(job)  # the prior's own flags refused before the map is read)
     if job.gradients:
         g = read_gradients(*job.gradients)
         n, m, source = _normals_from_field(g, job), g["mask"], "valid gradients"
@@ -170,23 +172,32 @@ def read(job: Job) -> Input:
         K = None
     if job.prior is not None:
         prior = io.read_prior(job.prior, job.prior_scale)
-    elif job.prior_scale is not None and prior is None:
-        raise ValueError("`prior_scale` applies only with a prior (a dataset folder's "
-                         "prior_depth file, or integrate's --prior)")
+    elif prior is None:
+        _no_prior_checks(job)
     if job.confidence is not None:
         conf = io.read_weights(job.confidence, arg="confidence")
     weight = job.prior_weight
     if job.prior_weight_map is not None:  # (times --prior-weight: an 8-bit map reaches 100)
         weight = job.prior_weight * io.read_weights(job.prior_weight_map, arg="prior_weight_map")
-    if prior is None and (job.prior_weight_map is not None or job.prior_weight != 1.0):
-        raise ValueError("`prior_weight` applies only with a prior (--prior or a dataset's "
-                         "prior_depth file)")
     for name, arr in (("prior", prior), ("confidence", conf), ("prior_weight_map", weight)):
         if isinstance(arr, np.ndarray) and arr.shape != n.shape[:2]:
             raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW) but the normal "
                              f"map is {n.shape[0]}x{n.shape[1]}")
     return Input(normals=n, mask=m, K=K, mask_source=source, prior=prior, prior_weight=weight,
                  confidence=conf, field=bool(field_input))
+
+
+def _no_prior_checks(job: Job) -> None:
+    """Refuse the prior's own settings in a job without a prior (ValueError naming each)."""
+    if job.prior_scale is not None:
+        raise ValueError("`prior_scale` applies only with a prior (a dataset folder's "
+                         "prior_depth file, or integrate's --prior)")
+    for name, given in (("prior_weight_map", job.prior_weight_map is not None),
+                        ("prior_weight", job.prior_weight != 1.0),
+                        ("prior_blur", job.prior_blur not in (None, 0, 0.0))):
+        if given:
+            raise ValueError(f"`{name}` applies only with a prior (--prior or a dataset's "
+                             "prior_depth file)")
 
 
 def _normals_from_field(g: dict, job: Job) -> np.ndarray:

@@ -214,7 +214,8 @@ def gradients_from_normals(normals) -> tuple[np.ndarray, np.ndarray]:
     """``(p, q) = (-n_x / n_z, -n_y / n_z)`` for an (H, W, 3) normal map."""
     n = _float_array(normals, "normals")
     if n.ndim != 3 or n.shape[-1] != 3:
-        raise ValueError(f"`normals` must have shape (H, W, 3); got {n.shape}")
+        raise ValueError(f"`normals` must have shape (H, W, 3); got {n.shape}"
+                         + _channel_first_hint(n.shape))
     with np.errstate(divide="ignore", invalid="ignore"):
         return -n[..., 0] / n[..., 2], -n[..., 1] / n[..., 2]
 
@@ -300,17 +301,19 @@ def prepare(
     Raises
     ------
     ValueError
-        On a wrong shape or dtype, an empty mask, a mask of another size, one-pixel
-        components, a bad pixel size, `K` or `outlier_eps`, no usable normal at all,
-        back-facing normals with ``backfacing="error"``, or a bad prior, prior weight or
-        confidence (see :func:`check_prior`).
+        On a wrong shape or dtype, an empty mask, a mask of another size, a mask of
+        isolated pixels only (stray ones are left out with a warning), a bad pixel size,
+        `K` or `outlier_eps`, no usable normal at all, back-facing normals with
+        ``backfacing="error"``, or a bad prior, prior weight or confidence (see
+        :func:`check_prior`).
     """
     n = numeric_array(normals, "normals")
     if n.dtype == bool:
         raise ValueError("`normals` is a boolean array (a mask?); give (H, W, 3) numbers")
     n = n.astype(float, copy=False)
     if n.ndim != 3 or n.shape[-1] != 3:
-        raise ValueError(f"`normals` must have shape (H, W, 3); got {n.shape}")
+        raise ValueError(f"`normals` must have shape (H, W, 3); got {n.shape}"
+                         + _channel_first_hint(n.shape))
     H, W = n.shape[:2]
     if H < 1 or W < 1:
         raise ValueError(f"`normals` must have at least one pixel; got shape {n.shape}")
@@ -341,6 +344,17 @@ def prepare(
         m = _bool_image(mask, "mask", (H, W))
         if not m.any():
             raise ValueError("`mask` is empty: no pixel to integrate")
+        lone = m & ~_has_neighbour(m)
+        if lone.any() and not (m & ~lone).any():
+            raise ValueError("`mask`: every pixel of it is isolated (no neighbour, not even at "
+                             "a corner, to fix its depth): nothing to integrate")
+        if lone.any():  # (a segmentation's stray pixels: left out, said; never the whole job)
+            rr, cc = np.nonzero(lone)
+            warn(f"`mask` has {int(lone.sum())} one-pixel component(s) (first at row {rr[0]}, "
+                 f"col {cc[0]}): an isolated pixel has no neighbour to fix its depth, so they "
+                 "were left out (NaN in the output; facetlift.clean_mask removes them "
+                 "beforehand)")
+            m = m & ~lone
     domain = Domain.from_mask(m)
     _check_components(domain)
     # from here on only the mask's pixels, as (k,) facet arrays in row-major order
@@ -421,6 +435,12 @@ def prepare(
                      "camera, far more than noise or quantisation turn away: is the map in "
                      "another frame (world coordinates, a rotated export)? docs/conventions.md "
                      "and docs/recipes.md say how to convert it")
+            Kc = getattr(cam, "K", None)
+            if Kc is not None:  # (a K of another image turns the rays: a user's check)
+                frame += (f"; or is K for another image (a crop or a resize)? Its principal "
+                          f"point (cx {Kc[0, 2]:g}, cy {Kc[1, 2]:g}) is usually near the "
+                          f"centre of this {W} x {H} image, its focal lengths fx "
+                          f"{Kc[0, 0]:g}, fy {Kc[1, 1]:g} scale with the image")
         warn(
             f"{sum(int(v.sum()) for v in problems.values())} normal(s) inside the mask cannot be "
             f"used and were treated as missing samples ({what}{rule}); first at "
@@ -569,11 +589,15 @@ def prior_image(prior, shape: tuple[int, int]) -> np.ndarray:
         r = np.rint(rows).astype(np.int64)
         c = np.rint(cols).astype(np.int64)
         out = (r < 0) | (r >= H) | (c < 0) | (c >= W)
-        if out.any():
+        if out.any():  # (a point cloud's strays: left out, said; all of them: refused)
             k = int(np.flatnonzero(out)[0])
-            raise ValueError(f"`prior` (rows, cols, depths): pixel (row {rows[k]:g}, col "
-                             f"{cols[k]:g}) is outside the {H} x {W} image ({int(out.sum())} "
-                             "such sample(s))")
+            where = (f"{int(out.sum())} of the {out.size} sample(s) lie outside the {H} x {W} "
+                     f"image, the first at (row {rows[k]:g}, col {cols[k]:g})")
+            if out.all():
+                raise ValueError(f"`prior` (rows, cols, depths): {where}: no sample is inside "
+                                 "(points projected with another K or image size?)")
+            warn(f"`prior` (rows, cols, depths): {where}; they were left out")
+            r, c, depths = r[~out], c[~out], depths[~out]
         keep = np.isfinite(depths)
         idx = r[keep] * W + c[keep]
         count = np.bincount(idx, minlength=H * W)
@@ -661,6 +685,13 @@ def _huge(n, length2) -> np.ndarray:
     if over.any():
         over &= np.isfinite(n).all(-1)
     return over
+
+
+def _channel_first_hint(shape) -> str:
+    """Advice for a channel-first (3, H, W) array, else ''."""
+    if len(shape) == 3 and shape[0] == 3 and shape[-1] != 3:
+        return ": it looks channel-first (3, H, W); numpy.moveaxis(normals, 0, -1) gives (H, W, 3)"
+    return ""
 
 
 def _where_facets(domain: Domain, bad: np.ndarray) -> str:

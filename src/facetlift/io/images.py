@@ -163,6 +163,10 @@ def _split_alpha(pixels: np.ndarray, path: Path, arg: str):
             f"`{arg}`: {path} must be an (H, W, 3) RGB or (H, W, 4) RGBA normal map; got "
             f"shape {pixels.shape}"
             + (f" ({channels} channel(s))" if channels is not None else "")
+            + ("; it looks channel-first (3 or 4, H, W): transpose it to (H, W, 3), e.g. "
+               "numpy.moveaxis(a, 0, -1)"
+               if pixels.ndim == 3 and pixels.shape[0] in (3, 4) and pixels.shape[-1] > 4
+               else "")
         )
     if pixels.shape[-1] == 4:
         return pixels[..., :3], pixels[..., 3] > 0
