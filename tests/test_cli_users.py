@@ -93,7 +93,7 @@ def test_an_opengl_map_read_as_opencv_is_told_to_drop_the_flag(tmp_path, capsys)
         text = one_line(err) if cmd == "integrate" else out
         assert "face away" in text and "camera frame has them: the default frame" in text, text
         assert "try --normal-frame opencv" not in text
-        assert code == (1 if cmd == "integrate" else 0)
+        assert code == 1  # (info too: the input cannot be integrated as read)
 
 
 def test_an_empty_output_folder_is_refused(dome_png, tmp_path, capsys, monkeypatch):
@@ -333,7 +333,10 @@ def test_info_detects_flips_encodings_and_counts(tmp_path, capsys):
     assert rec["mask_pixels"] == 40 * 48 - 1  # the NaN pixel is not in the default mask
     io.write_normals(tmp_path / "cv.npy", frames.from_facetlift(dome(), "opencv"))
     code, out, _ = run(capsys, "info", tmp_path / "cv.npy")
-    assert code == 0 and "z flipped" in out and "cannot be integrated as read" in out
+    # (exit 1 then, for a preflight script; the report is printed all the same)
+    assert code == 1 and "z flipped" in out and "cannot be integrated as read" in out
+    code, out, _ = run(capsys, "info", tmp_path / "cv.npy", "--json")
+    assert code == 1 and json.loads(out)["problem"]
 
 
 def test_info_on_a_folder_without_a_normal_map_is_a_clear_error(tmp_path, capsys):
@@ -361,7 +364,7 @@ def test_info_lines_say_each_thing_once_and_guess_the_encoding_right(tmp_path, c
     assert "grazing" not in str(rec[0].message)
     np.save(tmp_path / "enc.npy", 0.5 * dome() + 0.5)  # a [0, 1]-encoded float map
     code, out, _ = run(capsys, "info", tmp_path / "enc.npy")
-    assert code == 0 and "[0, 1]-encoded floats" in out
+    assert code == 1 and "[0, 1]-encoded floats" in out
 
 
 def test_info_takes_the_gradient_layout_and_y_down_and_shows_warnings(tmp_path, capsys):

@@ -346,6 +346,34 @@ def test_cli_prior_points_file_errors(tmp_path, capsys, text, match):
     assert code == 1 and re.search(match, err) and "Traceback" not in err, err
 
 
+def test_info_checks_a_prior_and_a_confidence_given_as_flags(tmp_path, capsys):
+    """info read only a dataset folder's prior (a user's check: no way to preflight one's
+    own points file); now --prior / --confidence are read and checked as integrate would."""
+    import json
+
+    n, depth, prior, sel = _write_inputs(tmp_path)
+    np.save(tmp_path / "conf.npy", np.ones(depth.shape))
+    (tmp_path / "pts.csv").write_text("row,col,depth\n3,4,5\n1,900,5\n")
+    code = main(["info", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "pts.csv"),
+                 "--confidence", str(tmp_path / "conf.npy")])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "depth prior (" in out and "pts.csv): 1 known pixels, 5 to 5" in out
+    assert "normal confidence (" in out and "conf.npy): 672 known pixels, 1 to 1" in out
+    assert out.count("1 of the 2 sample(s) lie outside the 24 x 28 image") == 1
+    np.save(tmp_path / "bad.npy", np.where(sel, -1.0, np.nan))
+    code = main(["info", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "bad.npy"),
+                 "--K", str(_K_file(tmp_path)), "--json"])
+    rec = json.loads(capsys.readouterr().out)
+    assert code == 1 and "positive z-depths" in rec["problem"]
+
+
+def _K_file(tmp_path):
+    path = tmp_path / "K.txt"
+    path.write_text("30 0 14\n0 30 12\n0 0 1\n")
+    return path
+
+
 def test_points_outside_the_image_are_left_out_with_a_warning(tmp_path, capsys):
     """One stray point of a point cloud refused the whole job (a user's check)."""
     _write_inputs(tmp_path)

@@ -461,16 +461,22 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--gradient-frame", "gradient_frame", default="xy", show_default=True,
               help="Layout of a gradient field in a .mat input (as for 'integrate').")
 @click.option("--mat-keys", metavar="KEYS", help="Variable names in a .mat input.")
+@click.option("--prior", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="A depth prior (map or points file) to check against the map, as for "
+              "'integrate'.")
 @click.option("--prior-scale", type=float, default=None, metavar="S",
-              help="Depth units per count of a dataset folder's 16-bit PNG prior_depth (as for "
-              "'integrate').")
+              help="Depth units per count of a 16-bit PNG prior, --prior's or a dataset "
+              "folder's prior_depth (as for 'integrate').")
+@click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="A confidence map to check against the map, as for 'integrate'.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, prior_scale,
-         as_json):
+def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, prior, prior_scale,
+         confidence, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
     encoding, mask and components, unusable normals, K, and the memory planner's estimate of
     the peak memory the default integration would need (the figure --max-memory is checked
-    against), with a time range from the benchmarks.
+    against), with a time range from the benchmarks. Exit status 1 where the input cannot
+    be integrated as read (the report says why), 0 otherwise.
 
     \b
     Examples:
@@ -483,13 +489,15 @@ def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, prior
     frames.gradient_frame(gradient_frame)  # (refused as integrate refuses it, on any input)
     rec = describe(normals, mask=mask, K=K, normal_frame=frames.resolve(normal_frame, y_down),
                    mat_keys=_split(mat_keys), gradient_frame=gradient_frame,
-                   prior_scale=prior_scale)
+                   prior_scale=prior_scale, prior=prior, confidence=confidence)
+    status = EXIT_INPUT if rec.get("problem") else EXIT_OK  # (for preflight scripts)
     if as_json:
         click.echo(json.dumps(jsonable(rec)))
-        return EXIT_OK
+        _STATE["printed_json"] = True  # (the report is the one object, failed or not)
+        return status
     for line in _info_lines(rec):
         click.echo(line)
-    return EXIT_OK
+    return status
 
 
 def _info_lines(rec: dict) -> list[str]:
@@ -503,11 +511,12 @@ def _info_lines(rec: dict) -> list[str]:
     lines.append(f"  frame: read as {frame.get('as_read')}; likely {frame.get('likely', '?')}")
     lines.append(f"  camera: {rec['projection']}" + (f", K = {rec['K']}" if rec["K"] else ""))
     for name, what in (("prior", "depth prior"), ("confidence", "normal confidence")):
-        if rec.get(name):  # (a dataset folder's own files)
+        if rec.get(name):  # (--prior / --confidence, or a dataset folder's own files)
             got = rec[name]
             span = (f", {got['range'][0]:.6g} to {got['range'][1]:.6g}" if got["range"]
                     else "")
-            lines.append(f"  {what} (dataset file): {got['known_pixels']} known pixels{span}")
+            lines.append(f"  {what} ({got.get('source', 'dataset file')}): "
+                         f"{got['known_pixels']} known pixels{span}")
     lines += [f"  warning: {w}" for w in rec.get("warnings", [])]
     if not rec["usable"]:
         lines.append(f"  cannot be integrated as read: {rec['problem']}")

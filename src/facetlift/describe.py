@@ -95,7 +95,8 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
 
 
 def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
-             gradient_frame: str = "xy", prior_scale=None) -> dict:
+             gradient_frame: str = "xy", prior_scale=None, prior=None,
+             confidence=None) -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
     encoding, mask and components, unusable normals (with the first one's location), K, a
     dataset folder's depth prior and normal confidence (``prior`` / ``confidence``: known
@@ -113,8 +114,12 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
     gradient_frame : str
         The layout of a gradient field in a ``.mat`` input (as for ``integrate``).
     prior_scale : float, optional
-        Depth units per count of a dataset folder's 16-bit PNG ``prior_depth`` (as for
-        ``integrate``: such a prior is refused without it).
+        Depth units per count of a 16-bit PNG prior, the dataset folder's ``prior_depth`` or
+        `prior` (as for ``integrate``: such a prior is refused without it).
+    prior, confidence : str or Path, optional
+        A depth prior (map or points file) and a confidence map, as for ``integrate``'s
+        ``--prior`` and ``--confidence``: read and checked against the map (a prior that
+        ``integrate`` would refuse makes the input unusable, with the reason).
 
     Raises
     ------
@@ -128,7 +133,9 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
     job = Job(normals=str(path), mask=None if mask is None else str(mask),
               K=None if K is None else str(K), normal_frame=normal_frame,
               mat_keys=None if mat_keys is None else tuple(mat_keys),
-              gradient_frame=gradient_frame, prior_scale=prior_scale)
+              gradient_frame=gradient_frame, prior_scale=prior_scale,
+              prior=None if prior is None else str(prior),
+              confidence=None if confidence is None else str(confidence))
     src = job.source
     unread = []
     with recorded_warnings() as read_caught:  # (a gradient layout's, ...)
@@ -160,10 +167,19 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
                    if isinstance(w.message, frames.LayoutWarning)), None)
     n = inp.normals
     H, W = n.shape[:2]
-    for name, arr in (("prior", inp.prior), ("confidence", inp.confidence)):
-        if arr is not None:  # (a dataset folder's prior_depth / confidence file)
+    prior_map = inp.prior
+    if isinstance(prior_map, tuple):  # (a points file: as integrate places them, once)
+        from .problem import prior_image
+
+        with recorded_warnings() as placed:
+            prior_map = prior_image(prior_map, (H, W))
+        out["warnings"] += [str(w.message) for w in placed]
+    for name, arr in (("prior", prior_map), ("confidence", inp.confidence)):
+        if arr is not None:  # (a prior / confidence file, or a dataset folder's)
             known = np.isfinite(arr)
-            out[name] = {"known_pixels": int(known.sum()),
+            given = prior if name == "prior" else confidence
+            out[name] = {"source": "dataset file" if given is None else str(given),
+                         "known_pixels": int(known.sum()),
                          "range": [float(arr[known].min()), float(arr[known].max())]
                          if known.any() else None}
     out.update(shape=[H, W], mask_source=inp.mask_source,
@@ -174,7 +190,8 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         try:
             with frames.read_in(normal_frame):  # (read in it already: hints relative to it)
                 checked = frames.checked(n, inp.mask, frame=None)
-            problem = prepare(checked, inp.mask, K=inp.K)
+            problem = prepare(checked, inp.mask, K=inp.K, prior=prior_map,
+                              confidence=inp.confidence)
         except ValueError as e:
             out["usable"] = False
             out["problem"] = str(e)
