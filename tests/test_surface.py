@@ -212,3 +212,19 @@ def test_preview_and_mesh_keywords_are_checked(tmp_path):
             s.save(tmp_path / f"m{ext}", triangles="no")
     with pytest.raises(ValueError, match="`pixel_size` must be a positive number"):
         facetlift.integrate(g.normals, g.mask, pixel_size="1")
+
+
+def test_a_png_named_as_depth_warns_that_it_is_a_preview(tmp_path):
+    """Surface.save("depth.png") wrote a shaded picture without a word (a user's check)."""
+    import warnings
+
+    import facetlift
+    from facetlift import synthetic
+
+    gt = synthetic.analytic("sphere", 24)
+    s = facetlift.integrate(gt.normals, gt.mask)
+    with pytest.warns(UserWarning, match=r"depth.png: a .png is a shaded preview .* \.exr"):
+        s.save(tmp_path / "depth.png")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s.save(tmp_path / "preview.png")

@@ -69,6 +69,11 @@ def save_surface(surface, path, **kwargs) -> Path:
     extra = sorted(set(kwargs) - preview_kw)
     if extra:
         raise ValueError(f".png output takes only {sorted(preview_kw)}; got {extra}")
+    if "depth" in p.stem.lower():  # (a user's trap: "depth.png" held no depth)
+        from .._warnings import warn
+
+        warn(f"{p.name}: a .png is a shaded preview of the surface, not its depth; write "
+             "depth as .exr, .tif or .npy (or .npz with the vertex depth and the mask)")
     return write_preview(p, surface, **kwargs)
 
 
