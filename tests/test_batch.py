@@ -522,3 +522,13 @@ def test_mask_rules_with_several_maps_of_one_stem_and_capital_mask(tmp_path):
     # "_MASK" is not the mask suffix: an item of its own, not dropped in silence
     io.write_mask(d / "x_MASK.png", np.ones((16, 18)))
     assert "x_MASK" in [it.name for it in fb.items([d])]
+
+
+def test_a_template_takes_progress_true_as_integrate_does():
+    """check_template refused progress=True with a message that offered True (a review)."""
+    from facetlift.batch import check_template
+    from facetlift.jobs import Job
+
+    check_template(Job(normals="x.npy", options={"progress": True}))
+    with pytest.raises(ValueError, match=r"`progress` must be True .*; got 'x'"):
+        check_template(Job(normals="x.npy", options={"progress": "x"}))

@@ -366,6 +366,19 @@ def test_info_checks_a_prior_and_a_confidence_given_as_flags(tmp_path, capsys):
                  "--K", str(_K_file(tmp_path)), "--json"])
     rec = json.loads(capsys.readouterr().out)
     assert code == 1 and "positive z-depths" in rec["problem"]
+    # every point outside the image: a report whose problem says so (not an error line)
+    (tmp_path / "out.csv").write_text("row,col,depth\n999,0,5\n")
+    code = main(["info", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "out.csv"),
+                 "--json"])
+    rec = json.loads(capsys.readouterr().out)
+    assert code == 1 and "no sample is inside" in rec["problem"] and rec["shape"] == [24, 28]
+    # without a prior, --prior-blur's own value errors come first (a review)
+    for value, match in (("-1", "--prior-blur must be a finite number of pixels >= 0"),
+                         ("0.2", "--prior-blur below half a pixel is no blur"),
+                         ("4", "--prior-blur 4 applies only with a prior")):
+        code = main(["integrate", str(tmp_path / "n.npy"), "--prior-blur", value, "-o",
+                     str(tmp_path / "o")])
+        assert code == 1 and match in capsys.readouterr().err
 
 
 def _K_file(tmp_path):
@@ -460,7 +473,7 @@ def test_info_reads_a_dataset_with_a_16bit_png_prior_given_its_scale(tmp_path, c
     np.save(folder / "normal_map.npy", n)
     counts = np.where(sel, np.rint((depth + 10.0) * 1000), 0).astype(np.uint16)
     (folder / "prior_depth.png").write_bytes(imagecodecs.png_encode(counts))
-    assert main(["info", str(folder)]) == 0
+    assert main(["info", str(folder)]) == 1  # (described, and integrate would refuse it)
     out = capsys.readouterr().out
     assert f"{n.shape[0]}x{n.shape[1]} pixels" in out and "depth prior" not in out
     assert "warning: integrate would refuse this folder" in out
@@ -478,10 +491,17 @@ def test_info_reads_a_dataset_with_a_16bit_png_prior_given_its_scale(tmp_path, c
     import json
 
     np.save(folder / "confidence.npy", np.ones((3, 3)))
-    assert main(["info", str(folder), "--prior-scale", "0.001", "--json"]) == 0
+    assert main(["info", str(folder), "--prior-scale", "0.001", "--json"]) == 1
     rec = json.loads(capsys.readouterr().out)
     assert rec["prior"]["known_pixels"] == int(sel.sum()) and "confidence" not in rec
     assert "--no-confidence" in rec["refused"] and "3x3" in rec["refused"]
+    # the source of a folder's prior is the folder's file, of --prior the file given (a
+    # review: the retry loop's flag was printed, "depth prior (True)")
+    assert main(["info", str(folder), "--prior-scale", "0.001"]) == 1
+    assert "depth prior (dataset file)" in capsys.readouterr().out
+    (tmp_path / "pts.csv").write_text("row,col,depth\n3,4,5\n")
+    assert main(["info", str(folder), "--prior", str(tmp_path / "pts.csv")]) == 1
+    assert "depth prior (" in (out := capsys.readouterr().out) and "pts.csv): 1 known" in out
 
 
 def test_dataset_folder_picks_up_a_points_prior(tmp_path, capsys):

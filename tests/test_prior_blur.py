@@ -232,6 +232,19 @@ def test_a_blurred_prior_that_tears_the_surface_apart_falls_back_to_pointwise():
     info = run(n, mask, prior=coarse_prior, prior_weight=0.01, prior_blur=sigma,
                discontinuities=True).info["prior_blur"]
     assert not info["fallback"] and info["astray"] is None
+    # relief that the blur flattens (a review's case: a ripple on a nearly flat wall, its
+    # amplitude above the prior's whole range) is no runaway: the first solve has its range
+    r, c = np.indices((64, 64)) + 0.5
+    k = 2 * np.pi / 8
+    height = 0.005 * c + np.sin(k * c) * np.sin(k * r)
+    n = facetlift.normals_from_gradients(0.005 + k * np.cos(k * c) * np.sin(k * r),
+                                         -k * np.sin(k * c) * np.cos(k * r))
+    full = np.ones((64, 64), bool)
+    ripple_prior, sigma = coarse(-height, full, block=8)
+    assert np.nanmax(ripple_prior) - np.nanmin(ripple_prior) < 0.5  # (the relief is gone)
+    info = run(n, full, prior=ripple_prior, prior_weight=0.1, prior_blur=sigma,
+               discontinuities=True).info["prior_blur"]
+    assert not info["fallback"] and info["astray"] is None
 
 
 def test_zero_blur_is_the_pointwise_prior():

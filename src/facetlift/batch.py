@@ -474,6 +474,8 @@ def check_template(job: Job, local: bool = True) -> None:
         from .api import _check_discontinuities
 
         _check_discontinuities(info, opts.pop("discontinuities"))
+    if opts.get("progress") is True:  # (integrate's own bar, as each item's integrate takes it)
+        opts.pop("progress")
     validate(info.specs(), opts, job.method)
     if job.normal_frame is not None:
         frames.parse(job.normal_frame)

@@ -490,7 +490,8 @@ def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, prior
     rec = describe(normals, mask=mask, K=K, normal_frame=frames.resolve(normal_frame, y_down),
                    mat_keys=_split(mat_keys), gradient_frame=gradient_frame,
                    prior_scale=prior_scale, prior=prior, confidence=confidence)
-    status = EXIT_INPUT if rec.get("problem") else EXIT_OK  # (for preflight scripts)
+    # (for preflight scripts: as integrate would fail, on the map or on a folder's files)
+    status = EXIT_INPUT if rec.get("problem") or rec.get("refused") else EXIT_OK
     if as_json:
         click.echo(json.dumps(jsonable(rec)))
         _STATE["printed_json"] = True  # (the report is the one object, failed or not)

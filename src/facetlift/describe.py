@@ -148,10 +148,10 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
             # described (without the file at fault, if the folder reads so), the refusal in
             # "refused" and as a warning
             inp = None
-            for prior, conf in ((False, True), (True, False), (False, False)):
+            for use_prior, use_conf in ((False, True), (True, False), (False, False)):
                 try:
-                    inp = read(replace(job, dataset_prior=prior, dataset_confidence=conf,
-                                       prior_scale=job.prior_scale if prior else None))
+                    inp = read(replace(job, dataset_prior=use_prior, dataset_confidence=use_conf,
+                                       prior_scale=job.prior_scale if use_prior else None))
                     break
                 except ValueError:
                     continue
@@ -172,7 +172,16 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         from .problem import prior_image
 
         with recorded_warnings() as placed:
-            prior_map = prior_image(prior_map, (H, W))
+            try:
+                prior_map = prior_image(prior_map, (H, W))
+            except ValueError as e:  # (every point outside: reported, as integrate refuses)
+                out.update(shape=[H, W], mask_source=inp.mask_source,
+                           K=None if inp.K is None else inp.K.tolist(),
+                           projection="perspective" if inp.K is not None else "orthographic",
+                           usable=False, problem=str(e),
+                           frame=_frame_guess(n, inp.mask, inp.K, frame=normal_frame,
+                                              layout=layout))
+                return out
         out["warnings"] += [str(w.message) for w in placed]
     for name, arr in (("prior", prior_map), ("confidence", inp.confidence)):
         if arr is not None:  # (a prior / confidence file, or a dataset folder's)

@@ -193,11 +193,14 @@ def _no_prior_checks(job: Job) -> None:
         raise ValueError("`prior_scale` applies only with a prior (a dataset folder's "
                          "prior_depth file, or integrate's --prior)")
     for name, given in (("prior_weight_map", job.prior_weight_map is not None),
-                        ("prior_weight", job.prior_weight != 1.0),
-                        ("prior_blur", job.prior_blur not in (None, 0, 0.0))):
+                        ("prior_weight", job.prior_weight != 1.0)):
         if given:
             raise ValueError(f"`{name}` applies only with a prior (--prior or a dataset's "
                              "prior_depth file)")
+    if job.prior_blur is not None:  # (its value's own errors first, then the missing prior)
+        from .problem import check_prior_blur
+
+        check_prior_blur(job.prior_blur, has_prior=False)
 
 
 def _normals_from_field(g: dict, job: Job) -> np.ndarray:

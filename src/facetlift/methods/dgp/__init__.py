@@ -162,23 +162,6 @@ def run(
             callback=progress, prior=prior, weights=weights, x0=z0, final_weights=final,
             blur=blur,
         )
-        if prior is not None and blur is None and info["cut_corners"] > TORN:
-            samples = int((prior[0] > 0).sum())
-            warn(f"discontinuities with a depth prior: {info['cut_corners']:.0%} of the facet "
-                 f"corners were cut ({samples:,} prior samples): where the prior disagrees "
-                 "with the normals from pixel to pixel (a noisy dense map), its samples tear "
-                 "the surface apart. Lower prior_weight (--prior-weight; 0.01 did best for a "
-                 "dense prior with noise of 1-3 pixel footprints, docs/fusion.md), give "
-                 "prior_blur, or integrate without discontinuities")
-        if info["unsolved"]:
-            why = (f"more than {discontinuous.DIRECT_POLISH:,} vertices"
-                   if domain.n_vertices > discontinuous.DIRECT_POLISH else
-                   "a factorization would not fit in the memory the job may use: the limit "
-                   "of max_memory (--max-memory), or half the free memory")
-            warn(f"discontinuities: {len(info['unsolved'])} linear solve(s) of "
-                 f"{domain.n_vertices:,} vertices did not converge in CG (relative residual "
-                 f"up to {max(info['unsolved']):.1e}) and were not factorized ({why}): the "
-                 "surface is usable but less exact (info['unsolved'])", ConvergenceWarning)
         announce(progress, "placing pieces")
         copies, pinfo = place_pieces(domain, y, bx, by, target, s,
                                      anchored=None if prior is None else prior[0] > 0,
@@ -194,13 +177,16 @@ def run(
             copies, pinfo = place_pieces(domain, y, bx, by, target, s, anchored=prior[0] > 0)
             blur.returned = blur.rms(copies.mean(axis=1))  # (of the surface returned)
             warn(f"prior_blur: the surface departed from the blurred prior by up to "
-                 f"{astray:.3g} times the prior's whole depth range (99.9th percentile), far "
-                 "beyond what a blur can hide: the blurred prior's corrections tore it apart "
+                 f"{astray:.3g} times the depth range of the prior (or of the first solve, the "
+                 "larger; 99.9th percentile), far beyond what a blur can hide: the blurred "
+                 "prior's corrections tore it apart "
                  f"(sigma {problem.prior_blur:g} px; block means upsampled without a further "
                  "blur are known to do so, docs/fusion.md). The prior was compared pixel by "
                  "pixel instead (info['prior_blur']['fallback']); a smaller prior_weight "
                  "(--prior-weight) or integrating without discontinuities may do better",
                  ConvergenceWarning)
+        pointwise = prior is not None and (blur is None or astray is not None)
+        _discontinuity_warnings(info, prior if pointwise else None, domain)
         info.update(pinfo)
         info["solver"] = "discontinuous"
         # (of the facets as returned, each on its own corner copies: the glued vertices' mean
@@ -230,9 +216,33 @@ def run(
     return result
 
 
+def _discontinuity_warnings(info: dict, prior, domain) -> None:
+    """The discontinuity route's warnings on the solve returned: a pointwise `prior` that tore
+    the surface apart (:data:`TORN`; None: no such prior), and solves left unfinished."""
+    if prior is not None and info["cut_corners"] > TORN:
+        samples = int((prior[0] > 0).sum())
+        warn(f"discontinuities with a depth prior: {info['cut_corners']:.0%} of the facet "
+             f"corners were cut ({samples:,} prior samples): where the prior disagrees "
+             "with the normals from pixel to pixel (a noisy dense map), its samples tear "
+             "the surface apart. Lower prior_weight (--prior-weight; 0.01 did best for a "
+             "dense prior with noise of 1-3 pixel footprints, docs/fusion.md), give "
+             "prior_blur, or integrate without discontinuities")
+    if info["unsolved"]:
+        why = (f"more than {discontinuous.DIRECT_POLISH:,} vertices"
+               if domain.n_vertices > discontinuous.DIRECT_POLISH else
+               "a factorization would not fit in the memory the job may use: the limit "
+               "of max_memory (--max-memory), or half the free memory")
+        warn(f"discontinuities: {len(info['unsolved'])} linear solve(s) of "
+             f"{domain.n_vertices:,} vertices did not converge in CG (relative residual "
+             f"up to {max(info['unsolved']):.1e}) and were not factorized ({why}): the "
+             "surface is usable but less exact (info['unsolved'])", ConvergenceWarning)
+
+
 #: The discontinuity route's surface has run away from a blurred prior when the 99.9th
 #: percentile of its pointwise departure from the prior (at the samples) exceeds this multiple
-#: of the prior's whole depth range: a blur hides detail within the range, not beyond it.
+#: of the larger of the prior's whole depth range and the first solve's (before any
+#: correction of the target; relief that the blur flattens has its range there): a blur hides
+#: detail within the range, not beyond it.
 #: Measured on the fusion benchmark's coarse priors (every second scene, 26 scenes at weights
 #: 0.003 and 0.01, sigma 8.94 px): 0.013-1.10 (median 0.5), and none of the 102 runs of all 51
 #: scenes at those weights fell back; a fresh-user check's blocky priors
@@ -251,7 +261,7 @@ def blur_astray(blur, centres) -> float | None:
         return None
     dev = np.abs(np.nan_to_num(centres[blur.samples], nan=np.inf) - p)
     q = float(np.quantile(dev, 0.999))
-    span = float(p.max() - p.min())
+    span = max(float(p.max() - p.min()), blur.first_span or 0.0)
     floor = 1e-9 * (1.0 + float(np.abs(p).max()))
     if not span > floor or not q > floor:
         return None

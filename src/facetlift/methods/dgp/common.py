@@ -179,6 +179,7 @@ class BlurredPrior:
         self._dx: list = []
         self._df: list = []
         self._settled = False  # (whether the last mismatch was of a settled surface)
+        self.first_span = None  # (the first solve's depth range at the samples: a scale)
 
     def mismatch(self, centres):
         """``p - B u`` (m,) at the samples (0 elsewhere) for facet-centre values `centres`."""
@@ -204,6 +205,9 @@ class BlurredPrior:
         the mismatch grow is followed by a plain one from the history's start, and a plain
         one that did stops the updates with :attr:`grew` set and the target put back: the
         caller then returns the surface before it (the update is not counted)."""
+        if self.first_span is None:  # (the first solve's surface, before any correction)
+            seen = centres[self.samples]
+            self.first_span = float(np.ptp(seen)) if seen.size else 0.0
         if self.done:
             return False
         r = self.mismatch(centres)
