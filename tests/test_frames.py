@@ -138,6 +138,32 @@ def test_normals_facing_away_name_the_opencv_frame():
         facetlift.integrate(frames.from_facetlift(n, "opencv"))
 
 
+def test_edge_on_normals_of_an_indoor_view_do_not_count_as_facing_away(tmp_path):
+    """A pinhole view of a room: walls parallel to the optical axis have z = 0, stored as 128
+    in 8 bits (+-1/255 decoded). Counted by the sign of z, 53 % of a user's correct
+    camera-frame map "faced away" and it was refused; only clear ones count now."""
+    import imagecodecs
+
+    from facetlift import io
+
+    H, W = 48, 64
+    n = np.zeros((H, W, 3))
+    n[:, : W // 3] = [1.0, 0.0, 0.0]  # the left wall, edge-on
+    n[:, 2 * W // 3:] = [-1.0, 0.0, 0.0]  # the right wall
+    n[:, W // 3: 2 * W // 3] = [0.0, 0.0, 1.0]  # the far wall, facing the camera
+    stored = np.rint((frames.from_facetlift(n, "opencv") + 1) / 2 * 255).astype(np.uint8)
+    (tmp_path / "room.png").write_bytes(imagecodecs.png_encode(stored))
+    normals, _ = io.read_normals(tmp_path / "room.png", frame="opencv")
+    assert np.mean(normals[..., 2] < 0) > 0.6  # (z = 0 stored as 128: -1/255 read so)
+    checked = frames.checked(normals)  # (refused before: "face away from the viewer")
+    assert checked.shape == (H, W, 3)
+    assert frames.facing_away(normals.reshape(-1, 3)) == 0.0
+    # the camera-frame map read without its flag is still refused, naming the flag
+    with pytest.raises(ValueError, match=r"100% of the normals .* not edge-on face away.*"
+                                         r"--normal-frame opencv"):
+        frames.checked(frames.from_facetlift(n, "opencv"))
+
+
 @pytest.mark.parametrize("stored, given, hint", [
     ("opengl", "opencv", "the default frame (no --normal-frame"),  # the flag was the mistake
     ("x,y,-z", "directx", "--normal-frame x,y,-z"),

@@ -730,3 +730,21 @@ def test_a_weak_prior_takes_the_forcing_term_and_a_strong_one_does_not(monkeypat
     assert used == {None}
     # measured 6e-4 apart at 0.03 (0.125 with a forcing term of 0.3)
     np.testing.assert_allclose(weak.depth, tight.depth, atol=0.01)
+
+
+def test_a_prior_that_fights_the_normals_is_warned_about():
+    """A network's disparity given as depth (near is large) pulled a user's surface inside out
+    (mean deviation 82-124 deg, exit 0, no word): a prior whose result deviates from the
+    normals by more than PRIOR_FIGHT degrees gets a warning; the right prior stays silent."""
+    import warnings
+
+    from facetlift import api, synthetic
+
+    gt = synthetic.analytic("sphere", 48)
+    with pytest.warns(UserWarning, match=r"deviates from its input normals by \d+ deg on "
+                                         r"average: the depth prior fights them.*disparity"):
+        s = facetlift.integrate(gt.normals, gt.mask, prior=-gt.depth, prior_weight=1.0)
+    assert s.info["mean_deviation"] > api.PRIOR_FIGHT == 30.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        facetlift.integrate(gt.normals, gt.mask, prior=gt.depth, prior_weight=1.0)

@@ -301,9 +301,9 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
     guess = {"as_read": f"{name} ({frames.axis_string(frame)})"}
     inside = frames._inside(n, mask)
     if inside is not None and len(inside):
-        away = float(np.mean(inside[:, 2] < 0))
+        away = frames.facing_away(inside)
         guess["facing_away"] = away
-        if away > 0.5:
+        if away is not None and away > 0.5:
             guess["likely"] = ("z flipped: the normals face away from the viewer as read "
                                f"({frames.facing_hint(frame)})")
             return guess
@@ -332,7 +332,9 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
     if verdict == "claim":
         guess["likely"] = ("y flipped: far more integrable with y negated (try "
                            f"{frames.flag(frames.negated(frame, 'y'))}, or "
-                           f"{frames.flag(frames.negated(frame, 'x'))} if inside-out)")
+                           f"{frames.flag(frames.negated(frame, 'x'))}: the two are equally "
+                           "integrable and inside-out from each other; your estimator's "
+                           "frame is in docs/conventions.md)")
     elif verdict == "hint":
         guess["likely"] = ("as read, or y flipped: more integrable with y negated, not by the "
                            "margin that says so (correlated errors on a flat view do this "

@@ -671,6 +671,8 @@ def check_prior(prior, prior_weight, shape, mask, camera):
             zeros = int((have & (depth == 0)).sum())
             hint = (f"; {zeros} of them are 0: if 0 marks an unknown depth, write NaN there "
                     "(or pass the samples as (rows, cols, depths))" if zeros else "")
+            hint += ("; a disparity or inverse-depth map (0 at the far end) must be inverted "
+                     "into depth first (docs/fusion.md, 'Recipes')")
             raise ValueError(
                 "`prior` must hold positive z-depths for a perspective camera (`K`); got "
                 f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s)){hint}"
