@@ -9,9 +9,12 @@ from pathlib import Path
 def _suffix(path: Path, allowed: tuple[str, ...], what: str, arg: str) -> str:
     ext = path.suffix.lower()
     if ext not in allowed:
+        lossy = (" (a JPEG's lossy 8 bits still integrate well: convert it to PNG first, "
+                 "e.g. with Pillow, Image.open(p).save(q))"
+                 if ext in (".jpg", ".jpeg") and ".png" in allowed else "")
         raise ValueError(
             f"`{arg}`: unsupported {what} format {ext or '(no extension)'!r} for {path}; "
-            f"supported: {', '.join(allowed)}"
+            f"supported: {', '.join(allowed)}{lossy}"
         )
     return ext
 
