@@ -162,6 +162,11 @@ def test_edge_on_normals_of_an_indoor_view_do_not_count_as_facing_away(tmp_path)
     with pytest.raises(ValueError, match=r"100% of the normals .* not edge-on face away.*"
                                          r"--normal-frame opencv"):
         frames.checked(frames.from_facetlift(n, "opencv"))
+    # integrated orthographically, the edge-on walls are unusable normals, but no sign of
+    # another frame (a review: "67% ... face away ... another frame?" was printed)
+    with pytest.warns(UserWarning, match="cannot be used") as rec:
+        facetlift.integrate(normals)
+    assert not any("another frame" in str(w.message) for w in rec)
 
 
 @pytest.mark.parametrize("stored, given, hint", [

@@ -742,9 +742,10 @@ def test_a_prior_that_fights_the_normals_is_warned_about():
 
     gt = synthetic.analytic("sphere", 48)
     with pytest.warns(UserWarning, match=r"deviates from its input normals by \d+ deg on "
-                                         r"average: the depth prior fights them.*disparity"):
+                                         r"average: the depth prior fights them. If the scene "
+                                         r"has depth jumps, .*discontinuities=True.*disparity"):
         s = facetlift.integrate(gt.normals, gt.mask, prior=-gt.depth, prior_weight=1.0)
-    assert s.info["mean_deviation"] > api.PRIOR_FIGHT == 30.0
+    assert s.info["mean_deviation"] > api.PRIOR_FIGHT == 45.0
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         facetlift.integrate(gt.normals, gt.mask, prior=gt.depth, prior_weight=1.0)

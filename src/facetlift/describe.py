@@ -343,10 +343,8 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
     else:
         from .problem import BACKFACING_FRAME_HINT
 
-        c = problem.counts  # (the share prepare's warning takes: of the finite, non-zero)
-        finite = max(c.get("pixels", 0) - c.get("missing", 0) - c.get("non-finite", 0)
-                     - c.get("zero-length", 0), 1)
-        away = c.get("back-facing", 0) / finite
+        c = problem.counts  # (the share prepare's warning takes: of those not edge-on)
+        away = c.get("facing_away", 0.0)
         guess["likely"] = ("as read (consistent)" if away <= BACKFACING_FRAME_HINT else
                            f"another frame? {away:.0%} of the normals face away from the "
                            "camera (a world-frame export?): see docs/conventions.md")

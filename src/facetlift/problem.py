@@ -429,7 +429,13 @@ def prepare(
             rule = (f"; grazing: view cosine < {eps:.4g}"
                     f"{'' if grazing_note is None else ', ' + grazing_note}")
         frame = ""  # (many facing away: a map in another frame, e.g. world coordinates)
-        away = int(bad["back-facing"].sum()) / max(int(ok.sum()), 1)
+        # (the share among the normals that are not edge-on, as the frame check counts them:
+        # an indoor view's walls, z = 0 stored as 128, read -1/255 and counted back-facing)
+        from .frames import EDGE_ON
+
+        clear = ok & (np.abs(cos) > EDGE_ON)
+        away = int((clear & (cos < 0)).sum()) / max(int(clear.sum()), 1)
+        counts["facing_away"] = away  # (for info's frame guess: the same share)
         if away > BACKFACING_FRAME_HINT:
             frame = (f"; {away:.0%} of the normals face away from the "
                      "camera, far more than noise or quantisation turn away: is the map in "
@@ -670,9 +676,9 @@ def check_prior(prior, prior_weight, shape, mask, camera):
             k = int(np.flatnonzero(neg)[0])
             zeros = int((have & (depth == 0)).sum())
             hint = (f"; {zeros} of them are 0: if 0 marks an unknown depth, write NaN there "
-                    "(or pass the samples as (rows, cols, depths))" if zeros else "")
-            hint += ("; a disparity or inverse-depth map (0 at the far end) must be inverted "
-                     "into depth first (docs/fusion.md, 'Recipes')")
+                    "(or pass the samples as (rows, cols, depths)); a disparity or "
+                    "inverse-depth map (0 at the far end) must be inverted into depth first "
+                    "(docs/fusion.md, 'Recipes')" if zeros else "")
             raise ValueError(
                 "`prior` must hold positive z-depths for a perspective camera (`K`); got "
                 f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s)){hint}"

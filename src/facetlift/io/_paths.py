@@ -11,7 +11,8 @@ def _suffix(path: Path, allowed: tuple[str, ...], what: str, arg: str) -> str:
     if ext not in allowed:
         lossy = (" (a JPEG's lossy 8 bits still integrate well: convert it to PNG first, "
                  "e.g. with Pillow, Image.open(p).save(q))"
-                 if ext in (".jpg", ".jpeg") and ".png" in allowed else "")
+                 if ext in (".jpg", ".jpeg") and what == "normal map" and arg != "path"
+                 else "")  # (a map being read: not a mask, whose JPEG edges would grow it)
         raise ValueError(
             f"`{arg}`: unsupported {what} format {ext or '(no extension)'!r} for {path}; "
             f"supported: {', '.join(allowed)}{lossy}"
