@@ -71,6 +71,8 @@ def test_in_process_batch_isolates_failures_and_logs_each_item(tmp_path):
     assert sorted(r["name"] for r in log) == sorted(status)
     assert all(r["mean_deviation"] is not None and r["seconds"] > 0
                for r in log if r["status"] == "ok")
+    # (which mask each item used, as integrate --json says: a user asked)
+    assert all(r["mask_source"] for r in log if r["status"] == "ok")
     assert not (out / "broken").exists()
 
 
@@ -218,7 +220,8 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
     assert [r.get("resumed", False) for r in recs] == [True, True, False]
     assert "info" not in recs[2] and {"status", "error", "exit", "warnings"} <= set(recs[2])
     assert set(recs[0]) - {"resumed"} <= set(recs[2]) | {"outputs", "mean_deviation",
-                                                         "shape", "facets", "converged"}
+                                                         "shape", "facets", "converged",
+                                                         "mask_source"}
     code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "1",
                  "-s", "npy", "--progress"])
     assert code == 1 and "batch:" in capsys.readouterr().err  # the bar, on stderr

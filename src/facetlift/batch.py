@@ -518,7 +518,8 @@ def log_record(rec: dict) -> dict:
     from .jobs import jsonable
 
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
-            "shape", "facets", "converged", "warnings", "resumed", "settings", "input_stamp")
+            "shape", "facets", "mask_source", "converged", "warnings", "resumed", "settings",
+            "input_stamp")  # (mask_source: whether NAME_mask.png was used, a user asked)
     return jsonable({k: rec[k] for k in keep if k in rec})
 
 

@@ -246,9 +246,10 @@ def _discontinuity_warnings(info: dict, prior, domain) -> None:
 #: Measured on the fusion benchmark's coarse priors (every second scene, 26 scenes at weights
 #: 0.003 and 0.01, sigma 8.94 px): 0.013-1.10 (median 0.5), and none of the 102 runs of all 51
 #: scenes at those weights fell back; a fresh-user check's blocky priors
-#: (8 x 8 block means, sigma 4 px, a sphere and a box before a wall): 2.7 with bilinear
+#: (8 x 8 block means, sigma 4 px, a sphere and a box before a wall): 2.6 with bilinear
 #: upsampling (487-2,762 pieces, error 8.8 % against 2.3 % pixel by pixel) and 44 with
-#: nearest (12,144 pieces, depths from 1e-14 to 5e12).
+#: nearest (12,144 pieces, depths from 1e-14 to 5e12). A review's ripple that the blur
+#: flattens (its amplitude above the prior's range) stays below with the first solve's range.
 ASTRAY = 2.0
 
 
