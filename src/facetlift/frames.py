@@ -527,7 +527,9 @@ def flip_check(problem) -> dict:
             warn(f"{head}: its frame{read} is probably wrong in y: try "
                  f"{flag(negated(frame, 'y'))}, or {flag(negated(frame, 'x'))} if the surface "
                  "then comes out inside-out; docs/conventions.md lists the frames of common "
-                 "sources", FrameWarning)
+                 "sources. If the frame is right, the image itself may be flipped or mirrored "
+                 "(rows or columns reversed by an export): flip it back instead",
+                 FrameWarning)
     return out
 
 
