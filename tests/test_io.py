@@ -577,3 +577,24 @@ def test_atomic_write_errors_name_the_target(tmp_path, monkeypatch):
     long = tmp_path / ("d" * 240 + ".npy")
     atomic._save_npy(long, np.zeros(3))
     assert long.is_file()
+
+
+def test_a_saved_npz_reads_back_as_depth_and_as_a_prior(tmp_path):
+    """Surface.save's .npz could not be read by io.read_depth or given as a prior file (a
+    user's check); its orthographic K is the NaN sentinel its docstring names."""
+    import facetlift
+    from facetlift import synthetic
+
+    gt = synthetic.analytic("sphere", 24)
+    s = facetlift.integrate(gt.normals, gt.mask)
+    s.save(tmp_path / "s.npz")
+    np.testing.assert_array_equal(io.read_depth(tmp_path / "s.npz"), s.depth)
+    np.testing.assert_array_equal(io.read_prior(tmp_path / "s.npz"), s.depth)
+    with np.load(tmp_path / "s.npz") as z:
+        assert np.isnan(z["K"]).all()
+    np.savez(tmp_path / "two.npz", a=np.zeros((2, 2)), b=np.ones((2, 2)))
+    with pytest.raises(ValueError, match=r"must hold an array named 'depth' or a single array"):
+        io.read_depth(tmp_path / "two.npz")
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="not a readable .npz archive"):
+        io.read_prior(tmp_path / "bad.npz")

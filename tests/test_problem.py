@@ -191,7 +191,7 @@ def test_no_usable_normal_is_refused():
         warnings.simplefilter("error")
         with pytest.raises(ValueError, match="no usable normal"):
             facetlift.prepare(n, np.ones((3, 3), bool))
-        with pytest.raises(ValueError, match="`confidence` is 0 at every usable normal"):
+        with pytest.raises(ValueError, match="`confidence` is 0 or NaN at every usable normal"):
             facetlift.prepare(up(), np.ones(up().shape[:2], bool), confidence=0)
 
 

@@ -148,8 +148,10 @@ def integrate(
     Warns
     -----
     facetlift.UnusableNormalsWarning
-        Once, when normals inside the mask cannot be used (non-finite, zero-length,
+        Once, when normals inside the mask cannot be used (infinite, zero-length,
         back-facing or grazing): they become missing samples (``info["input"]`` counts them).
+        A NaN normal is a missing sample by definition: counted as ``missing``, not warned
+        about.
     facetlift.FrameWarning
         When `normals` is uint8/uint16 (decoded as ``v / max * 2 - 1``). When the field is far
         more integrable with y or x flipped (:func:`facetlift.frames.flip_check`).

@@ -187,7 +187,8 @@ _JOB_OPTIONS = [
                  "cut's sharpness is --option discontinuity_k=K (default 4), the jumps' map "
                  "--save discontinuities."),
     click.option("--prior", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-                 help="Depth prior (npy, EXR, TIFF, or 16-bit PNG with --prior-scale), NaN or "
+                 help="Depth prior (npy, EXR, TIFF, an earlier result's npz, or 16-bit PNG with "
+                 "--prior-scale), NaN or "
                  "0 where unknown, or a points file (.csv/.txt: one sample per line under a "
                  "header naming the columns, e.g. x,y,z), in the output's depth convention "
                  "(metric z-depth with K). "

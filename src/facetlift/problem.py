@@ -413,7 +413,7 @@ def prepare(
     if not usable.any():  # (an error alone: no warning about the same normals first)
         if conf is not None and counts_zero.any():
             raise ValueError(
-                f"`confidence` is 0 at every usable normal inside the mask "
+                f"`confidence` is 0 or NaN at every usable normal inside the mask "
                 f"({int(counts_zero.sum())} of them): nothing is left to integrate ({counts})")
         raise ValueError(
             "`normals` has no usable normal inside the mask (all missing, non-finite, "

@@ -130,7 +130,8 @@ class Surface:
         """Write the surface; the format follows the extension.
 
         ``.npy``, ``.exr``, ``.tif``/``.tiff``: the depth map (float32 for EXR/TIFF);
-        ``.npz``: depth, vertex depth, mask, pixel size and K, and where the surface has
+        ``.npz``: depth, vertex depth, mask, pixel size and K (3 x 3 NaN for an orthographic
+        surface: test ``np.isnan(K).all()``), and where the surface has
         depth jumps the cut edges ``cuts_right``, ``cuts_down`` and the ``discontinuities``
         map; ``.ply``/``.obj``: the mesh, split at the jumps (quads, or triangles with
         ``triangles=True``); ``.png``: a shaded preview (any ``.png`` name: the map of the

@@ -11,6 +11,7 @@ import contextlib
 import os
 import sys
 import threading
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -308,6 +309,8 @@ def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = ())
     ext = _suffix(p, formats, what, arg)
     if ext == ".npy":
         a = _read_npy(p, arg)
+    elif ext == ".npz":  # (Surface.save's archive: its depth)
+        a = _read_npz_depth(p, arg)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
         name = next((c for c in prefer if c in ch), next(iter(ch)) if len(ch) == 1 else None)
@@ -322,9 +325,32 @@ def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = ())
     return a
 
 
+def _read_npz_depth(p: Path, arg: str) -> np.ndarray:
+    """The ``depth`` array of an ``.npz`` archive (:meth:`facetlift.Surface.save`'s), or its
+    only array."""
+    try:
+        z = np.load(p, allow_pickle=False)
+    except (OSError, EOFError, ValueError, zipfile.BadZipFile) as e:
+        raise ValueError(f"`{arg}`: {p} is not a readable .npz archive ({e})") from None
+    if not isinstance(z, np.lib.npyio.NpzFile):  # (a .npy saved under the .npz name)
+        return np.asarray(z)
+    with z:
+        names = list(z.files)
+        name = "depth" if "depth" in names else (names[0] if len(names) == 1 else None)
+        if name is None:
+            raise ValueError(f"`{arg}`: {p} must hold an array named 'depth' or a single "
+                             f"array; got {sorted(names)}")
+        try:
+            return np.asarray(z[name])
+        except (OSError, EOFError, ValueError, zipfile.BadZipFile) as e:
+            raise ValueError(f"`{arg}`: {p} is not a readable .npz archive ({e})") from None
+
+
 def read_depth(path) -> np.ndarray:
-    """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF)."""
-    return read_plane(path, DEPTH_FORMATS, "depth", "path", prefer=("Z",)).astype(np.float64)
+    """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF) or
+    the ``depth`` of a :meth:`facetlift.Surface.save` ``.npz``."""
+    return read_plane(path, DEPTH_FORMATS + (".npz",), "depth", "path",
+                      prefer=("Z",)).astype(np.float64)
 
 
 # --------------------------------------------------------------------------------------------
@@ -487,8 +513,9 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
     """A depth prior: an (H, W) map, NaN where unknown, or from a points file a ``(rows,
     cols, depths)`` triple (:func:`facetlift.integrate`'s other form of `prior`).
 
-    ``.npy``, OpenEXR (channel Z or the only one) and TIFF hold depth as stored (NaN, or 0 in
-    an integer TIFF, where unknown); a 16-bit PNG holds ``depth / scale`` (`scale` in depth
+    ``.npy``, OpenEXR (channel Z or the only one), TIFF and a :meth:`facetlift.Surface.save`
+    ``.npz`` (its ``depth``: an earlier result) hold depth as stored (NaN, or 0 in an integer
+    TIFF, where unknown); a 16-bit PNG holds ``depth / scale`` (`scale` in depth
     units per count, e.g. 0.001 for millimetres stored as metres; 0 = unknown), and `scale`
     is required for it. A given `scale` multiplies the other formats too.
 
@@ -514,7 +541,7 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
     if p.suffix.lower() in PRIOR_POINT_FORMATS:
         rows, cols, depths = _read_points(p, arg)
         return rows, cols, depths if scale is None else depths * float(scale)
-    ext = _suffix(p, PRIOR_FORMATS + PRIOR_POINT_FORMATS, "depth prior", arg)
+    ext = _suffix(p, PRIOR_FORMATS + (".npz",) + PRIOR_POINT_FORMATS, "depth prior", arg)
     if ext == ".png":
         a = _decode_image(p, ext, arg)
         if a.dtype != np.uint16 or a.ndim != 2:
@@ -525,7 +552,7 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
                              "with --prior-scale (prior_scale= in Python; e.g. 0.001 for "
                              "millimetres in metres)")
         return np.where(a > 0, a * float(scale), np.nan)
-    a = read_plane(p, PRIOR_FORMATS, "depth prior", arg, prefer=("Z",))
+    a = read_plane(p, PRIOR_FORMATS + (".npz",), "depth prior", arg, prefer=("Z",))
     zero_unknown = a.dtype.kind in "ui"
     a = a.astype(np.float64)
     if zero_unknown:
