@@ -37,6 +37,12 @@ _COUNTED = ("integrating", "reweighting", "crack growth")
 _UNCOUNTED_FORMAT = "{desc} [{elapsed}]{postfix}"
 
 
+def _bar_format(stage: str) -> str | None:
+    """tqdm's format for a stage: its own (a count) where the stage counts, else the name and
+    the elapsed time."""
+    return None if stage in _COUNTED else _UNCOUNTED_FORMAT
+
+
 def progress_bar(total: int | None):
     """(bar, update): a tqdm bar on stderr that appears at the first update or stage (a
     route that reports neither shows nothing); ``bar.close()`` is safe either way. The
@@ -56,8 +62,7 @@ def progress_bar(total: int | None):
     def bar(desc="integrating"):
         if "bar" not in state:
             state["bar"] = tqdm(total=total, desc=desc, unit="it", file=sys.stderr,
-                                leave=False,
-                                bar_format=None if desc in _COUNTED else _UNCOUNTED_FORMAT)
+                                leave=False, bar_format=_bar_format(desc))
         return state["bar"]
 
     def tick(b):
@@ -82,7 +87,7 @@ def progress_bar(total: int | None):
         state["stage"] = name
         b = bar(name)
         b.set_postfix_str("", refresh=False)  # (the last stage's value is not this one's)
-        b.bar_format = None if name in _COUNTED else _UNCOUNTED_FORMAT
+        b.bar_format = _bar_format(name)
         b.set_description_str(name)  # (redraws)
         if "ticker" not in state:
             state["ticker"] = threading.Thread(target=tick, args=(b,), daemon=True,

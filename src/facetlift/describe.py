@@ -167,6 +167,15 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
                    if isinstance(w.message, frames.LayoutWarning)), None)
     n = inp.normals
     H, W = n.shape[:2]
+    where = dict(shape=[H, W], mask_source=inp.mask_source,
+                 K=None if inp.K is None else inp.K.tolist(),
+                 projection="perspective" if inp.K is not None else "orthographic")
+
+    def unusable(e: ValueError) -> dict:  # (integrate would refuse it: why, and the frame)
+        out.update(usable=False, problem=str(e),
+                   frame=_frame_guess(n, inp.mask, inp.K, frame=normal_frame, layout=layout))
+        return out
+
     prior_map = inp.prior
     if isinstance(prior_map, tuple):  # (a points file: as integrate places them, once)
         from .problem import prior_image
@@ -175,13 +184,8 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
             try:
                 prior_map = prior_image(prior_map, (H, W))
             except ValueError as e:  # (every point outside: reported, as integrate refuses)
-                out.update(shape=[H, W], mask_source=inp.mask_source,
-                           K=None if inp.K is None else inp.K.tolist(),
-                           projection="perspective" if inp.K is not None else "orthographic",
-                           usable=False, problem=str(e),
-                           frame=_frame_guess(n, inp.mask, inp.K, frame=normal_frame,
-                                              layout=layout))
-                return out
+                out.update(where)
+                return unusable(e)
         out["warnings"] += [str(w.message) for w in placed]
     for name, arr in (("prior", prior_map), ("confidence", inp.confidence)):
         if arr is not None:  # (a prior / confidence file, or a dataset folder's)
@@ -191,9 +195,7 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
                          "known_pixels": int(known.sum()),
                          "range": [float(arr[known].min()), float(arr[known].max())]
                          if known.any() else None}
-    out.update(shape=[H, W], mask_source=inp.mask_source,
-               K=None if inp.K is None else inp.K.tolist(),
-               projection="perspective" if inp.K is not None else "orthographic")
+    out.update(where)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
@@ -202,11 +204,7 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
             problem = prepare(checked, inp.mask, K=inp.K, prior=prior_map,
                               confidence=inp.confidence)
         except ValueError as e:
-            out["usable"] = False
-            out["problem"] = str(e)
-            out["frame"] = _frame_guess(n, inp.mask, inp.K, frame=normal_frame,
-                                        layout=layout)
-            return out
+            return unusable(e)
     d = problem.domain
     counts = dict(problem.counts)
     out.update(

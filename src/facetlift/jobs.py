@@ -136,8 +136,9 @@ def read(job: Job) -> Input:
     src = job.source
     K = prior = conf = None
     field_input = bool(job.gradients)
-    if job.prior is None and (field_input or not src.is_dir()):  # (no dataset's prior_depth:
-        _no_prior_checks(job)  # the prior's own flags refused before the map is read)
+    folder = not field_input and src.is_dir()  # (a dataset folder may hold its own prior)
+    if job.prior is None and not folder:  # (the prior's own flags refused before the map is
+        _no_prior_checks(job)  # read; a folder's, once it is read)
     if job.gradients:
         g = read_gradients(*job.gradients)
         n, m, source = _normals_from_field(g, job), g["mask"], "valid gradients"
@@ -172,7 +173,7 @@ def read(job: Job) -> Input:
         K = None
     if job.prior is not None:
         prior = io.read_prior(job.prior, job.prior_scale)
-    elif prior is None:
+    elif prior is None and folder:
         _no_prior_checks(job)
     if job.confidence is not None:
         conf = io.read_weights(job.confidence, arg="confidence")

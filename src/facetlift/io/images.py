@@ -328,22 +328,20 @@ def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = ())
 def _read_npz_depth(p: Path, arg: str) -> np.ndarray:
     """The ``depth`` array of an ``.npz`` archive (:meth:`facetlift.Surface.save`'s), or its
     only array."""
+    names = None
     try:
         z = np.load(p, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):  # (a .npy saved under the .npz name)
+            return np.asarray(z)
+        with z:
+            names = sorted(z.files)
+            name = "depth" if "depth" in names else (names[0] if len(names) == 1 else None)
+            if name is not None:
+                return np.asarray(z[name])
     except (OSError, EOFError, ValueError, zipfile.BadZipFile) as e:
         raise ValueError(f"`{arg}`: {p} is not a readable .npz archive ({e})") from None
-    if not isinstance(z, np.lib.npyio.NpzFile):  # (a .npy saved under the .npz name)
-        return np.asarray(z)
-    with z:
-        names = list(z.files)
-        name = "depth" if "depth" in names else (names[0] if len(names) == 1 else None)
-        if name is None:
-            raise ValueError(f"`{arg}`: {p} must hold an array named 'depth' or a single "
-                             f"array; got {sorted(names)}")
-        try:
-            return np.asarray(z[name])
-        except (OSError, EOFError, ValueError, zipfile.BadZipFile) as e:
-            raise ValueError(f"`{arg}`: {p} is not a readable .npz archive ({e})") from None
+    raise ValueError(f"`{arg}`: {p} must hold an array named 'depth' or a single array; got "
+                     f"{names}")
 
 
 def read_depth(path) -> np.ndarray:
@@ -541,7 +539,8 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
     if p.suffix.lower() in PRIOR_POINT_FORMATS:
         rows, cols, depths = _read_points(p, arg)
         return rows, cols, depths if scale is None else depths * float(scale)
-    ext = _suffix(p, PRIOR_FORMATS + (".npz",) + PRIOR_POINT_FORMATS, "depth prior", arg)
+    maps = PRIOR_FORMATS + (".npz",)  # (an earlier result's archive: its depth)
+    ext = _suffix(p, maps + PRIOR_POINT_FORMATS, "depth prior", arg)
     if ext == ".png":
         a = _decode_image(p, ext, arg)
         if a.dtype != np.uint16 or a.ndim != 2:
@@ -552,7 +551,7 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
                              "with --prior-scale (prior_scale= in Python; e.g. 0.001 for "
                              "millimetres in metres)")
         return np.where(a > 0, a * float(scale), np.nan)
-    a = read_plane(p, PRIOR_FORMATS + (".npz",), "depth prior", arg, prefer=("Z",))
+    a = read_plane(p, maps, "depth prior", arg, prefer=("Z",))
     zero_unknown = a.dtype.kind in "ui"
     a = a.astype(np.float64)
     if zero_unknown:
