@@ -19,10 +19,13 @@ Routes: ``smooth`` (every normal known), ``missing`` (30 % of the mask's normals
 point at the centre), ``discontinuities`` (``facetlift.integrate(..., discontinuities=True)``
 through the public API only).
 
-Each case runs in its own subprocess: ``facetlift.integrate`` once, then, in the same
-process, a plain Poisson solve of the same mask as a user would write it with scipy and
-pyamg (4-neighbour graph Laplacian of the mask, divergence of the slopes, one pin per
-component, ``pyamg.smoothed_aggregation_solver(...).solve(..., accel="cg", tol=1e-8)``).
+Each case runs in its own subprocess: a 64^2 warm-up of the same shape and route through
+both sides (``--cold`` skips it; facetlift's warm-up time is reported as ``cold_s``),
+``facetlift.integrate`` once, then, in the same process, a plain Poisson solve of the same
+mask as a user would write it with scipy and pyamg (4-neighbour graph Laplacian of the mask,
+divergence of the slopes, one pin per component,
+``pyamg.smoothed_aggregation_solver(...).solve(..., accel="cg", tol=1e-8)``; BLAS held to one
+thread, :func:`poisson_baseline`).
 Reported: wall time, CG iterations, peak resident memory of the facetlift part (ru_maxrss
 before the baseline runs; it includes the input arrays, 24-36 bytes per pixel), bytes per
 mask pixel, and the time ratio facetlift / baseline. Growth exponents are fitted per
@@ -155,7 +158,19 @@ def inputs(shape: str, s: int, route: str):
 
 
 def poisson_baseline(normals: np.ndarray, mask: np.ndarray | None) -> dict:
-    """A plain scipy + pyamg Poisson solve of the same mask (what a user would write)."""
+    """A plain scipy + pyamg Poisson solve of the same mask (what a user would write), with
+    BLAS held to one thread: pyamg's CG takes its norms and dots through BLAS, and on this
+    2-core VM a call that hands work to a second, sleeping BLAS thread waits for it to wake.
+    After two idle seconds the bear mask's 512^2 solve took 0.74-0.96 s instead of 0.12-0.15 s
+    (the same 14 iterations; in the suite it runs after the slower input preparation), which
+    flattered facetlift's ratio; held to one thread it took 0.12-0.15 s either way."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _poisson(normals, mask)
+
+
+def _poisson(normals: np.ndarray, mask: np.ndarray | None) -> dict:
     import pyamg
     import scipy.sparse as sp
     import scipy.sparse.csgraph as csgraph
@@ -190,18 +205,39 @@ def poisson_baseline(normals: np.ndarray, mask: np.ndarray | None) -> dict:
     return {"baseline_s": t2 - t0, "baseline_setup_s": t1 - t0, "baseline_its": len(res) - 1}
 
 
-def run_case(shape: str, s: int, route: str, baseline: bool) -> dict:
-    import facetlift
+#: Side of the warm-up case (the same shape and route) that each process integrates, and
+#: solves with the baseline, before either is timed (``--cold`` skips it).
+WARM_SIZE = 64
 
-    normals, mask, K = inputs(shape, s, route)
-    pixels = int(s * s if mask is None else mask.sum())
-    out = {"shape": shape, "size": s, "route": route, "pixels": pixels}
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    t0 = time.perf_counter()
+
+def _integrate(facetlift, normals, mask, K, s: int, route: str):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        surf = facetlift.integrate(normals, mask, pixel_size=1.0 / s if K is None else 1.0, K=K,
+        return facetlift.integrate(normals, mask, pixel_size=1.0 / s if K is None else 1.0, K=K,
                                    discontinuities=route == "discontinuities")
+
+
+def run_case(shape: str, s: int, route: str, baseline: bool, warm: bool = True) -> dict:
+    """One case in this process. With `warm`, both sides first run a :data:`WARM_SIZE` case of
+    the same shape and route: the first call of a process pays one-time costs (lazy imports
+    of scipy.sparse.linalg, scipy.fft, scipy.ndimage and pyamg, first-use caches: 0.1-0.2 s
+    on a 512^2 map) that the baseline, run second, did not pay; ``cold_s`` is facetlift's
+    warm-up call."""
+    import facetlift
+
+    out = {"shape": shape, "size": s, "route": route, "warm": warm}
+    if warm:
+        n0, m0, K0 = inputs(shape, WARM_SIZE, route)
+        t0 = time.perf_counter()
+        _integrate(facetlift, n0, m0, K0, WARM_SIZE, route)
+        out["cold_s"] = time.perf_counter() - t0
+        if baseline:
+            poisson_baseline(n0, m0)
+    normals, mask, K = inputs(shape, s, route)
+    out["pixels"] = int(s * s if mask is None else mask.sum())
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    t0 = time.perf_counter()
+    surf = _integrate(facetlift, normals, mask, K, s, route)
     out["total_s"] = time.perf_counter() - t0
     out["peak_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     out["input_mib"] = before
@@ -216,8 +252,8 @@ def run_case(shape: str, s: int, route: str, baseline: bool) -> dict:
     return out
 
 
-def spawn(shape, s, route, baseline, timeout) -> dict:
-    cmd = [sys.executable, __file__, "--case", f"{shape},{s},{route},{int(baseline)}"]
+def spawn(shape, s, route, baseline, timeout, warm: bool = True) -> dict:
+    cmd = [sys.executable, __file__, "--case", f"{shape},{s},{route},{int(baseline)},{int(warm)}"]
     try:
         res = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -277,19 +313,23 @@ def main(argv=None) -> int:
                     help="routes that also run the scipy + pyamg Poisson baseline ('' for none)")
     ap.add_argument("--repeat", type=int, default=1, help="runs per case (median time)")
     ap.add_argument("--timeout", type=float, default=900.0, help="seconds per case")
+    ap.add_argument("--cold", action="store_true",
+                    help="time each case's first call in its process (no warm-up; the "
+                         "baseline, run second, is then warm)")
     ap.add_argument("--json", help="append the raw results to this file (one JSON per line)")
     ap.add_argument("--case", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.case:
-        shape, s, route, base = args.case.split(",")
-        print(json.dumps(run_case(shape, int(s), route, bool(int(base)))))
+        shape, s, route, base, warm = args.case.split(",")
+        print(json.dumps(run_case(shape, int(s), route, bool(int(base)), bool(int(warm)))))
         return 0
     results = []
     for s in (int(x) for x in args.sizes.split(",")):
         for shape in args.shapes.split(","):
             for route in args.routes.split(","):
                 base = route in args.baseline_routes.split(",")
-                runs = [spawn(shape, s, route, base, args.timeout) for _ in range(args.repeat)]
+                runs = [spawn(shape, s, route, base, args.timeout, not args.cold)
+                        for _ in range(args.repeat)]
                 ok = [r for r in runs if "error" not in r]
                 r = dict(ok[0]) if ok else runs[0]
                 for key in ("total_s", "baseline_s"):
