@@ -187,6 +187,32 @@ def test_a_hang_that_would_bridge_a_jump_is_undone():
     assert after.n_pieces == 2
 
 
+def test_a_chain_of_two_hangs_across_a_jump_undoes_only_those_two():
+    """Two facets on either side of a jump, each hung on its own side, that meet each other
+    within the gap join the two sides; undoing every hang in the piece they made (as before)
+    left hundreds of harmless hangs undone on a 384^2 armadillo render (316 single quads in
+    its mesh, 7 now). Only the two are undone; an island elsewhere stays hung."""
+    from facetlift.operators.split import from_copies
+
+    pr = facetlift.prepare(np.dstack([np.zeros((12, 14, 2)), np.ones((12, 14))]))
+    d = pr.domain
+    r, c = d.pixels
+    copies = np.where((c >= 7)[:, None], 1.0, 0.0) * np.ones((1, 4))  # flat, a jump of 1
+    a, b, g = (np.flatnonzero((r == rr) & (c == cc))[0] for rr, cc in ((5, 6), (5, 7), (2, 2)))
+    copies[a] = [0.6, 1.2, 1.2, 0.6]  # hung on the left: right edge at 0.6
+    copies[b] = [0.2, 0.45, 0.45, 0.2]  # hung on the right: left edge at 0.75
+    copies[g] += 0.8
+    mesh, _ = from_copies(d, copies, 0.5)
+    assert sorted(np.bincount(mesh.facet_piece)) == [1, 1, 1, 82, 83]
+    out = spl.absorb_small_pieces(mesh, copies, 4, 0.5)
+    after, _ = from_copies(d, out, 0.5)
+    left, right = (np.flatnonzero((r == 5) & (c == cc))[0] for cc in (5, 8))
+    assert after.facet_piece[left] != after.facet_piece[right]  # the sides stay apart
+    np.testing.assert_array_equal(out[[a, b]], copies[[a, b]])  # the chain undone
+    np.testing.assert_allclose(out[g], 0.0)  # the island hung on the left side
+    assert after.n_pieces == 4
+
+
 @pytest.mark.skipif(not (BEAR / "depth_gt.npz").is_file(), reason="no DiLiGenT bear data")
 @pytest.mark.filterwarnings("ignore:.*cannot be used")
 def test_the_bear_mesh_has_no_loose_quads():
