@@ -5,6 +5,7 @@ this process."""
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +45,30 @@ def test_items_from_globs_folders_lists_and_masks(tmp_path):
     assert [it.name for it in found] == ["m0", "m1", "m0-2", "bear"]
     assert found[0].mask.endswith("m0_mask.png") and found[1].mask is None
     assert [it.name for it in fb.items([tmp_path / "ds"])] == ["bear"]
+    # a '#' inside a name is no comment (a user's 'obj#3.png' was cut to 'obj')
+    (tmp_path / "b" / "obj#3.png").write_bytes((tmp_path / "b" / "m0.png").read_bytes())
+    (tmp_path / "list2.txt").write_text("b/obj#3.png\t# the third\n  #b/m0.png\n")
+    assert [it.name for it in fb.items([], list_file=tmp_path / "list2.txt")] == ["obj#3"]
+
+
+def test_items_skip_lone_masks_and_say_what_a_folder_left_out(tmp_path):
+    """A user's check: obj_normal.png + obj_mask.png ran the mask as a map (and failed) and
+    the map without it; a folder of day folders ran nothing of them, without a word."""
+    maps(tmp_path / "d", n=1)
+    (tmp_path / "d" / "m0.png").rename(tmp_path / "d" / "obj_normal.png")
+    io.write_mask(tmp_path / "d" / "obj_mask.png", np.ones((16, 18)))
+    with pytest.warns(UserWarning, match=r"obj_mask.png\).*obj_normal_mask.png"):
+        found = fb.items([tmp_path / "d"])
+    assert [it.name for it in found] == ["obj_normal"]
+    # named on its own, it is an item
+    assert [it.name for it in fb.items([tmp_path / "d" / "obj_mask.png"])] == ["obj_mask"]
+    maps(tmp_path / "days" / "day1", n=1)
+    maps(tmp_path / "days" / "day2", n=1)
+    (tmp_path / "days" / "stray.png").write_bytes((tmp_path / "days" / "day1" / "m0.png")
+                                                   .read_bytes())
+    with pytest.warns(UserWarning, match=r"skipped 2 subfolder\(s\).*day1, day2.*one level"):
+        found = fb.items([tmp_path / "days"])
+    assert [it.name for it in found] == ["stray"]
 
 
 @pytest.mark.parametrize("inputs, message", [
@@ -221,7 +246,7 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
     assert "info" not in recs[2] and {"status", "error", "exit", "warnings"} <= set(recs[2])
     assert set(recs[0]) - {"resumed"} <= set(recs[2]) | {"outputs", "mean_deviation",
                                                          "shape", "facets", "converged",
-                                                         "mask_source"}
+                                                         "mask_source", "perspective"}
     code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "1",
                  "-s", "npy", "--progress"])
     assert code == 1 and "batch:" in capsys.readouterr().err  # the bar, on stderr
@@ -320,6 +345,57 @@ def test_dask_local_processes_equal_in_process(tmp_path, monkeypatch):
     for name, depth in depths.items():
         np.testing.assert_allclose(np.load(tmp_path / "o" / name / "depth.npy"), depth,
                                    atol=1e-12)
+
+
+def test_cli_batch_says_an_items_error_when_it_is_done(tmp_path, capsys, monkeypatch):
+    """A user's check: errors and warnings came after the last item (and never for a batch
+    stopped before its end); the summary counted an item whose frame was wrong as a plain
+    success."""
+    import sys
+
+    from facetlift import jobs
+
+    maps(tmp_path / "in", n=1)
+    (tmp_path / "in" / "a.png").write_bytes(b"bad")  # (sorted before m0.png)
+    real = jobs.run
+
+    def run(job, **kw):
+        sys.stderr.write(f"RUNNING {Path(job.normals).name}\n")
+        return real(job, **kw)
+
+    monkeypatch.setattr(jobs, "run", run)
+    code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "o"), "--workers", "1",
+                 "--save", "npy", "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 1
+    assert err.index("facetlift: error: a (error):") < err.index("RUNNING m0.png"), err
+    assert "batch: 1 of 2 succeeded, 1 failed" in out
+    # an item that succeeded with a warning is counted as such (here a normal facing away)
+    n = io.read_normals(tmp_path / "in" / "m0.png")[0]
+    n[5, 6] = [0.0, 0.6, -0.8]
+    (tmp_path / "in2").mkdir()
+    io.write_normals(tmp_path / "in2" / "odd.png", n)
+    code = main(["batch", str(tmp_path / "in2"), "-o", str(tmp_path / "o2"), "--no-progress",
+                 "--save", "npy"])
+    out, err = capsys.readouterr()
+    assert code == 0 and "warning: odd:" in err
+    assert "batch: 1 of 1 succeeded (1 with warnings)" in out
+
+
+def test_batch_warns_of_a_camera_file_beside_plain_maps(tmp_path):
+    """A user's rig folder (maps, masks and K.txt, no normal_map.*) was integrated
+    orthographically without a word; the records did not say whether a camera was used."""
+    maps(tmp_path / "rig", n=1)
+    (tmp_path / "rig" / "K.txt").write_text("600 0 9\n0 600 8\n0 0 1\n")
+    with pytest.warns(UserWarning, match=r"holds K.txt beside its normal maps.*--K"):
+        recs = facetlift.batch([tmp_path / "rig"], tmp_path / "o", save=("npy",))
+    assert recs[0]["status"] == "ok" and recs[0]["perspective"] is False
+    assert fb.log_record(recs[0])["perspective"] is False
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (given as --K: no warning)
+        recs = facetlift.batch([tmp_path / "rig"], tmp_path / "p", save=("npy",),
+                               K=str(tmp_path / "rig" / "K.txt"))
+    assert recs[0]["perspective"] is True
 
 
 def test_distributed_local_cluster_with_two_workers_equals_in_process(tmp_path, capsys):

@@ -331,6 +331,9 @@ def test_info_detects_flips_encodings_and_counts(tmp_path, capsys):
     assert code == 0 and rec["frame"]["likely"].startswith("y flipped")
     assert rec["counts"]["back-facing"] == 1 and rec["first_unusable"] == [3, 5]
     assert rec["mask_pixels"] == 40 * 48 - 1  # the NaN pixel is not in the default mask
+    assert rec["holes"] == 1  # ... and is said to be a hole (a user's check)
+    code, out, _ = run(capsys, "info", tmp_path / "f.npy")
+    assert "holes: 1 pixels inside the object" in out and "--mask" in out
     io.write_normals(tmp_path / "cv.npy", frames.from_facetlift(dome(), "opencv"))
     code, out, _ = run(capsys, "info", tmp_path / "cv.npy")
     # (exit 1 then, for a preflight script; the report is printed all the same)
@@ -347,6 +350,8 @@ def test_info_on_a_folder_without_a_normal_map_is_a_clear_error(tmp_path, capsys
         folder.mkdir(exist_ok=True)
         code, _, err = run(capsys, "info", folder)
         assert code == 1 and "has no normal_map file" in err and "internal" not in err
+        # a folder of maps is named as such, with the batch command (a user's check)
+        assert ("bear.png" in err and "facetlift batch" in err) == (folder.name == "maps")
 
 
 def test_info_lines_say_each_thing_once_and_guess_the_encoding_right(tmp_path, capsys):

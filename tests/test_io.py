@@ -72,6 +72,19 @@ def test_alpha_channel_becomes_mask(tmp_path, normals, ext):
     np.testing.assert_allclose(back, n, atol=2e-5)
 
 
+@pytest.mark.parametrize("ext", [".png", ".tif", ".exr", ".npy"])
+@pytest.mark.parametrize("value", [True, False])
+def test_alpha_the_same_everywhere_is_no_mask(tmp_path, normals, ext, value):
+    # an opaque export (alpha 255 over the background too, as editors and OpenCV write it)
+    # integrated its background fill as missing normals inside the mask (a user's check);
+    # fully transparent was refused as an empty mask
+    n, mask = normals
+    io.write_normals(tmp_path / f"n{ext}", n, np.full(mask.shape, value))
+    back, alpha = io.read_normals(tmp_path / f"n{ext}")
+    assert alpha is None
+    np.testing.assert_allclose(back, n, atol=2e-5)
+
+
 @pytest.mark.parametrize(
     "ext, bits, atol", [(".exr", 32, 1e-7), (".npy", 32, 0), (".tif", 32, 1e-7),
                         (".tif", 16, 2e-5), (".tif", 8, 4e-3)]

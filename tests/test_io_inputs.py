@@ -8,6 +8,7 @@ import struct
 import subprocess
 import sys
 import zlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -156,6 +157,39 @@ def test_output_set_commits_all_or_nothing(tmp_path):
             raise RuntimeError("second failed")
     assert sorted(p.name for p in out.iterdir()) == ["a.npy", "b.npy"]
     np.testing.assert_array_equal(np.load(out / "a.npy"), np.zeros(2))
+
+
+def test_output_set_commit_that_fails_leaves_the_folder_as_it_was(tmp_path, monkeypatch):
+    """A user's check: a folder named like one output (mkdir out/preview.png) left a new
+    depth.npy and mesh.ply beside the staging folder, with a bare '[Errno 21]'."""
+    out = tmp_path / "o"
+    with atomic.OutputSet(out, ["a.npy", "b.npy"]) as s:
+        np.save(s.path("a.npy"), np.zeros(2))
+        np.save(s.path("b.npy"), np.zeros(2))
+    (out / "c.npy").mkdir()
+    with pytest.raises(OSError, match=r"c.npy: a folder of that name is in the way.*-o"):
+        with atomic.OutputSet(out, ["a.npy", "b.npy", "c.npy"]) as s:
+            for name in ("a.npy", "b.npy", "c.npy"):
+                np.save(s.path(name), np.ones(2))
+    assert sorted(p.name for p in out.iterdir()) == ["a.npy", "b.npy", "c.npy"]
+    np.testing.assert_array_equal(np.load(out / "a.npy"), np.zeros(2))
+    # a move that fails half-way puts back what the earlier ones replaced
+    (out / "c.npy").rmdir()
+    real = atomic.os.replace
+
+    def replace(src, dst):  # (the staged b.npy cannot be moved in)
+        if Path(dst).name == "b.npy" and Path(src).parent.name.startswith(atomic.STAGING_PREFIX):
+            raise OSError(28, "No space left on device", str(dst))
+        return real(src, dst)
+
+    monkeypatch.setattr(atomic.os, "replace", replace)
+    with pytest.raises(OSError, match="left as it was"):
+        with atomic.OutputSet(out, ["a.npy", "b.npy", "c.npy"]) as s:
+            for name in ("a.npy", "b.npy", "c.npy"):
+                np.save(s.path(name), np.ones(2))
+    assert sorted(p.name for p in out.iterdir()) == ["a.npy", "b.npy"]
+    np.testing.assert_array_equal(np.load(out / "a.npy"), np.zeros(2))
+    np.testing.assert_array_equal(np.load(out / "b.npy"), np.zeros(2))
 
 
 def test_output_set_removes_a_folder_it_created_on_failure(tmp_path):

@@ -23,9 +23,11 @@ import contextlib
 import glob
 import json
 import os
+import re
 import sys
 import time
 import types
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -46,10 +48,15 @@ class Item:
     mask: str | None = None
 
 
+#: A list file's comment: from a ``#`` at the start of a line or after white space.
+_COMMENT = re.compile(r"(^|\s)#.*$")
+
+
 def items(inputs, *, list_file=None) -> list[Item]:
     """The batch items of `inputs`: normal-map files, dataset folders (with ``normal_map.*``),
     folders of either (one level), glob patterns, and the lines of `list_file` (one path or
-    pattern per line; ``#`` starts a comment).
+    pattern per line, relative to the list file's folder; ``#`` at the start of a line or
+    after a space starts a comment).
 
     A file ``<stem>_mask.<ext>`` next to a normal map ``<stem>.<ext>`` is its mask, and is not
     an item unless named explicitly. Output names are the file stems or folder names; inputs
@@ -72,7 +79,8 @@ def items(inputs, *, list_file=None) -> list[Item]:
             raise ValueError(f"`list_file`: cannot read {list_file}: {e.strerror}") from None
         base = Path(list_file).parent
         for line in lines:
-            line = line.split("#", 1)[0].strip()
+            # (a comment starts the line or follows a space: 'obj#3.png' is a file name)
+            line = _COMMENT.sub("", line).strip()
             if line:
                 specs.append(line if os.path.isabs(line) else str(base / line))
     paths: list[tuple[Path, bool]] = []  # (path, named explicitly)
@@ -91,9 +99,18 @@ def items(inputs, *, list_file=None) -> list[Item]:
             paths += sorted((c, False) for c in p.iterdir()
                             if (c.is_dir() and _is_dataset(c, NORMAL_READ_FORMATS))
                             or (c.is_file() and c.suffix.lower() in kinds))
+            deeper = sorted(c.name for c in p.iterdir() if c.is_dir()
+                            and not _is_dataset(c, NORMAL_READ_FORMATS)
+                            and any(g.suffix.lower() in kinds for g in c.iterdir()))
+            if deeper:  # (a user's folder of days, each a folder of maps: silently skipped)
+                warnings.warn(
+                    f"batch: {p}: skipped {len(deeper)} subfolder(s) holding maps but no "
+                    f"normal_map.* ({', '.join(deeper[:3])}{', ...' if len(deeper) > 3 else ''})"
+                    f": a folder is read one level deep; give them as inputs, e.g. "
+                    f"'{p / '*'}'", stacklevel=2)
         else:
             paths.append((p, True))
-    found, seen = [], set()
+    found, seen, lone = [], set(), []
     given = {os.path.abspath(p) for p, _ in paths}
     files = _Listing()  # (each folder listed once: a lookup per file was quadratic)
     for p, explicit in paths:
@@ -105,8 +122,18 @@ def items(inputs, *, list_file=None) -> list[Item]:
         if key in seen or (_is_mask_file(p, NORMAL_READ_FORMATS, files) and (
                 not explicit or given.intersection(_maps_of(p, NORMAL_READ_FORMATS, files)))):
             continue
+        if not explicit and p.stem.endswith("_mask") and _grey(p):
+            lone.append(p.name)  # (a grey X_mask.* without its map X.*: a mask, no item)
+            continue
         seen.add(key)
         found.append((p, key))
+    if lone:  # (a user's obj_normal.png + obj_mask.png: the mask ran as a map and failed)
+        warnings.warn(
+            f"batch: skipped {len(lone)} grey file(s) named like a mask without a map of that "
+            f"name beside them ({', '.join(lone[:3])}{', ...' if len(lone) > 3 else ''}): "
+            "NAME_mask.* is the mask of NAME.* (obj_normal.png pairs with obj_normal_mask.png); "
+            "name such a "
+            "file as an input to integrate it as a map", stacklevel=2)
     names: dict[str, set] = {}
     for p, _ in found:
         names.setdefault(_stem(p), set()).add(p.name)
@@ -128,6 +155,23 @@ def items(inputs, *, list_file=None) -> list[Item]:
     return out
 
 
+def _grey(p: Path) -> bool:
+    """Whether `p` is a one-channel (or grey + alpha) PNG or a 2-d ``.npy``, from its header:
+    a mask, not a normal map (other files: False)."""
+    try:
+        if p.suffix.lower() == ".png":
+            with open(p, "rb") as fh:
+                head = fh.read(26)
+            return len(head) == 26 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[25] in (0, 4)
+        if p.suffix.lower() == ".npy":
+            import numpy as np
+
+            return np.load(p, mmap_mode="r").ndim == 2
+    except (OSError, ValueError):
+        pass
+    return False
+
+
 def _stem(p: Path) -> str:
     return p.name if p.is_dir() else p.stem
 
@@ -140,6 +184,19 @@ def _unique(name: str, taken: set) -> str:
         new = f"{name}-{k}"
     taken.add(new)
     return new
+
+
+def _unused_cameras(found) -> None:
+    """Warn once per folder that holds a ``K.txt`` beside normal-map files: only a dataset
+    folder's (``normal_map.*`` + ``K.txt``) is read, so its maps would be integrated
+    orthographically (a user's rig: 583 mm MADE instead of 1.88 mm, and no word)."""
+    folders = sorted({Path(it.path).parent for it in found if Path(it.path).is_file()})
+    folders = [f for f in folders if (f / "K.txt").is_file()]
+    for folder in folders:
+        warnings.warn(
+            f"batch: {folder} holds K.txt beside its normal maps, but only a dataset folder's "
+            "K.txt (with normal_map.*) is read: these maps are integrated orthographically; "
+            f"give --K {folder / 'K.txt'} (K=) to use that camera", stacklevel=3)
 
 
 def _is_dataset(folder: Path, formats) -> bool:
@@ -188,8 +245,6 @@ def run_item(job: Job, threads: int | None = None) -> dict:
     """Run one job and return its record; never raises (the record's ``status`` says why it
     failed). Runs in the worker processes, where `threads` limits the BLAS threads (one worker
     process per core: more threads would only compete)."""
-    import warnings
-
     from .errors import MemoryLimitError, SolverError
     from .jobs import finished_unconverged, run
 
@@ -368,6 +423,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     # the workers' affair on a cluster)
     check_template(template, local=scheduler is None)
     found = items(inputs, list_file=list_file)
+    if template.K is None:
+        _unused_cameras(found)
     root = Path(out).resolve()
     prepare_folder(root)  # created and checked before any work
     log_path = root / LOG_NAME if log is None else Path(log)
@@ -519,7 +576,8 @@ def log_record(rec: dict) -> dict:
 
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
             "shape", "facets", "mask_source", "converged", "warnings", "resumed", "settings",
-            "input_stamp")  # (mask_source: whether NAME_mask.png was used, a user asked)
+            "input_stamp", "perspective")  # (mask_source: whether NAME_mask.png was used,
+    # a user asked; perspective: whether a camera was used, a dataset folder's K.txt included)
     return jsonable({k: rec[k] for k in keep if k in rec})
 
 

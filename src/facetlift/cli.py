@@ -526,6 +526,10 @@ def _info_lines(rec: dict) -> list[str]:
     c = rec["counts"]
     lines.append(f"  mask: {rec['mask_pixels']} pixels ({rec['mask_source']}), "
                  f"{rec['components']} component(s)")
+    if rec.get("holes"):
+        lines.append(f"  holes: {rec['holes']} pixels inside the object without a valid normal "
+                     "are outside the domain (NaN or background fill); give a mask (--mask) "
+                     "to integrate across them as missing samples")
     bad = ", ".join(f"{c[k]} {k}" for k in ("missing", "non-finite", "zero-length",
                                             "back-facing", "grazing") if c.get(k))
     first = rec.get("first_unusable")
@@ -562,10 +566,26 @@ def _mib(b: float) -> str:
     return f"{b / 1024:.0f} KiB" if b >= 1024 else f"{b:.0f} bytes"  # (not "0 MiB")
 
 
+def _say_item(r: dict) -> None:
+    """A batch item's warnings and error on stderr as soon as the item is done (above the
+    progress bar; one line each, as integrate shows them), not after the last item: an
+    overnight batch shows its failures as they happen, and a stopped one those it had."""
+    from tqdm import tqdm
+
+    for w in r.get("warnings") or ():
+        tqdm.write(f"facetlift: warning: {r['name']}: {_as_flags(' '.join(str(w).split()))}",
+                   file=sys.stderr)
+    if r["status"] != "ok":
+        msg = _as_flags(" ".join(str(r["error"]).split()))
+        tqdm.write(f"facetlift: error: {r['name']} ({r['status']}): {msg}", file=sys.stderr)
+
+
 @cli.command("batch", context_settings=CONTEXT)
 @click.argument("inputs", nargs=-1)
 @click.option("--list", "list_file", type=click.Path(exists=True, dir_okay=False),
-              help="A text file with more inputs, one path or glob pattern per line.")
+              help="A text file with more inputs, one path or glob pattern per line; relative "
+              "paths are relative to the file's folder, '#' at a line's start or after a space "
+              "starts a comment.")
 @_job_options
 @click.option("-o", "--out", "outdir", required=True,
               type=click.Path(file_okay=False), callback=_out_dir,
@@ -601,8 +621,9 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     known = []
 
     def stream(r):  # (each record as it is known: an interrupted batch has shown its part)
-        if not r.get("resumed"):
+        if not r.get("resumed"):  # (a resumed item's warnings were shown by its own run)
             known.append(r["status"])
+            _say_item(r)
         if as_json:
             click.echo(json.dumps(log_record(r)))
 
@@ -618,18 +639,12 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
                        f"log: {outdir / LOG_NAME}); --resume goes on", err=True)
         raise
     failed = [r for r in records if r["status"] != "ok"]
-    for r in records:  # (as integrate shows them; a resumed item's were shown before)
-        if not r.get("resumed"):
-            for w in r.get("warnings") or ():
-                click.echo(f"facetlift: warning: {r['name']}: "
-                           f"{_as_flags(' '.join(str(w).split()))}", err=True)
-    for r in failed:
-        msg = _as_flags(" ".join(str(r["error"]).split()))  # (one line each, as the docs say)
-        click.echo(f"facetlift: error: {r['name']} ({r['status']}): {msg}", err=True)
     if as_json:  # (every item's record was printed as it was known)
         _STATE["printed_json"] = True
     resumed = sum(bool(r.get("resumed")) for r in records)
+    warned = sum(r["status"] == "ok" and bool(r.get("warnings")) for r in records)
     line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
+            + (f" ({warned} with warnings)" if warned else "")
             + (f" ({resumed} from an earlier run)" if resumed else "")
             + (f", {len(failed)} failed" if failed else "")
             + f" (log: {outdir / LOG_NAME}), {time.perf_counter() - t0:.1f} s")

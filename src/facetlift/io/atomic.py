@@ -215,12 +215,47 @@ class OutputSet:
         return p
 
     def commit(self) -> dict[str, Path]:
-        """Move every staged file into `outdir`; returns name -> final path."""
-        done = {}
-        for name, p in self.staged.items():
-            if p.exists():
-                os.replace(p, self.outdir / name)
-                done[name] = self.outdir / name
+        """Move every staged file into `outdir`; returns name -> final path.
+
+        All or nothing: a target that is a folder is refused before anything moves, and a
+        move that fails puts back what the earlier ones replaced (kept aside in the staging
+        folder until the end), so the folder is left as it was.
+
+        Raises
+        ------
+        OSError
+            A target is in the way (a folder of that name) or a move failed; the message
+            names it and says that the folder was left as it was.
+        """
+        moves = [(name, p, self.outdir / name) for name, p in self.staged.items() if p.exists()]
+        for _, _, target in moves:
+            if target.is_dir() and not target.is_symlink():
+                self.abort()
+                raise OSError(f"cannot write {target}: a folder of that name is in the way "
+                              "(move it, or choose another output folder, -o); nothing was "
+                              "written")
+        aside = self.staging / ".replaced"
+        done: dict[str, Path] = {}
+        kept: dict[str, Path] = {}
+        try:
+            for name, p, target in moves:
+                if target.exists() or target.is_symlink():
+                    (aside / name).parent.mkdir(parents=True, exist_ok=True)
+                    os.replace(target, aside / name)
+                    kept[name] = target
+                os.replace(p, target)
+                done[name] = target
+        except OSError as e:
+            for target in done.values():
+                with contextlib.suppress(OSError):
+                    target.unlink()
+            for name, target in kept.items():
+                with contextlib.suppress(OSError):
+                    os.replace(aside / name, target)
+            self.abort()
+            raise OSError(f"could not move the outputs into {self.outdir} "
+                          f"({e.strerror or e}: {e.filename or ''}); the folder was left as it "
+                          "was") from None
         shutil.rmtree(self.staging, ignore_errors=True)
         return done
 

@@ -115,9 +115,14 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
         raise ValueError(f"`folder`: {f} is not a directory")
     npath = _find(f, "normal_map", NORMAL_READ_FORMATS)
     if npath is None:
+        maps = sorted(p.name for p in f.iterdir()
+                      if p.is_file() and p.suffix.lower() in NORMAL_READ_FORMATS)
         raise ValueError(
             f"`folder`: {f} has no normal_map file (looked for normal_map with extension "
             f"{', '.join(NORMAL_READ_FORMATS)})"
+            + (f"; it holds other maps ({', '.join(maps[:3])}{', ...' if len(maps) > 3 else ''})"
+               ": integrate one by its path, or all of them with `facetlift batch "
+               f"{f} -o OUT`" if maps else "")
         )
     normals, alpha = read_normals(npath, frame=frame, y_down=y_down)
     mpath = _find(f, "mask", MASK_FORMATS)

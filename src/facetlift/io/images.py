@@ -170,8 +170,16 @@ def _split_alpha(pixels: np.ndarray, path: Path, arg: str):
                else "")
         )
     if pixels.shape[-1] == 4:
-        return pixels[..., :3], pixels[..., 3] > 0
+        return pixels[..., :3], _alpha_mask(pixels[..., 3])
     return pixels, None
+
+
+def _alpha_mask(alpha: np.ndarray) -> np.ndarray | None:
+    """``alpha > 0``, or None where that is the same everywhere: an opaque export (editors and
+    OpenCV write alpha 255 over the background too) or a fully transparent one hold no mask,
+    and the valid-normals rule decides (as for a mask file, :func:`read_mask`)."""
+    m = alpha > 0
+    return None if (m == m.flat[0]).all() else m
 
 
 # --------------------------------------------------------------------------------------------
@@ -203,7 +211,9 @@ def read_normals(
         Normals, x right, y up, z toward the viewer, as decoded (not renormalised: that is
         done by :func:`facetlift.prepare`); NaN where an integer pixel holds no normal.
     alpha_mask : (H, W) bool or None
-        ``alpha > 0`` where the file has an alpha channel, else None.
+        ``alpha > 0`` where the file has an alpha channel that is not the same everywhere;
+        None without one, or where every pixel is opaque (or every pixel transparent): such an
+        alpha holds no mask, and the valid-normals rule of :func:`facetlift.prepare` decides.
 
     Raises
     ------
@@ -239,7 +249,7 @@ def read_normals(
                 "HALF or FLOAT, holding the components themselves"
             )
         n = np.stack([ch[c] for c in names], axis=-1).astype(np.float64)
-        alpha = ch["A"] > 0 if "A" in ch else None
+        alpha = _alpha_mask(ch["A"]) if "A" in ch else None
     else:
         arr = _read_npy(p, arg)
         rgb, alpha = _split_alpha(arr, p, arg)
