@@ -57,7 +57,7 @@ def test_items_skip_lone_masks_and_say_what_a_folder_left_out(tmp_path):
     maps(tmp_path / "d", n=1)
     (tmp_path / "d" / "m0.png").rename(tmp_path / "d" / "obj_normal.png")
     io.write_mask(tmp_path / "d" / "obj_mask.png", np.ones((16, 18)))
-    with pytest.warns(UserWarning, match=r"obj_mask.png\).*obj_normal_mask.png"):
+    with pytest.warns(UserWarning, match=r"obj_mask.png\).*rename.*obj_normal_mask.png"):
         found = fb.items([tmp_path / "d"])
     assert [it.name for it in found] == ["obj_normal"]
     # named on its own, it is an item
@@ -69,6 +69,16 @@ def test_items_skip_lone_masks_and_say_what_a_folder_left_out(tmp_path):
     with pytest.warns(UserWarning, match=r"skipped 2 subfolder\(s\).*day1, day2.*one level"):
         found = fb.items([tmp_path / "days"])
     assert [it.name for it in found] == ["stray"]
+    # not for hidden folders, integrate's output folders or an unreadable one (a review)
+    import shutil
+    import warnings
+
+    for name in (".ipynb_checkpoints", "stray_facetlift"):
+        shutil.copytree(tmp_path / "days" / "day1", tmp_path / "days2" / name)
+    (tmp_path / "days2" / "s.png").write_bytes((tmp_path / "days" / "stray.png").read_bytes())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert [it.name for it in fb.items([tmp_path / "days2"])] == ["s"]
 
 
 @pytest.mark.parametrize("inputs, message", [
@@ -395,7 +405,9 @@ def test_batch_warns_of_a_camera_file_beside_plain_maps(tmp_path):
         warnings.simplefilter("error")  # (given as --K: no warning)
         recs = facetlift.batch([tmp_path / "rig"], tmp_path / "p", save=("npy",),
                                K=str(tmp_path / "rig" / "K.txt"))
-    assert recs[0]["perspective"] is True
+        assert recs[0]["perspective"] is True
+        # (nor where orthographic was asked for: a review)
+        facetlift.batch([tmp_path / "rig"], tmp_path / "q", save=("npy",), orthographic=True)
 
 
 def test_distributed_local_cluster_with_two_workers_equals_in_process(tmp_path, capsys):

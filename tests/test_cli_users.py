@@ -333,7 +333,7 @@ def test_info_detects_flips_encodings_and_counts(tmp_path, capsys):
     assert rec["mask_pixels"] == 40 * 48 - 1  # the NaN pixel is not in the default mask
     assert rec["holes"] == 1  # ... and is said to be a hole (a user's check)
     code, out, _ = run(capsys, "info", tmp_path / "f.npy")
-    assert "holes: 1 pixels inside the object" in out and "--mask" in out
+    assert "holes: 1 pixels enclosed by the object" in out and "--mask" in out
     io.write_normals(tmp_path / "cv.npy", frames.from_facetlift(dome(), "opencv"))
     code, out, _ = run(capsys, "info", tmp_path / "cv.npy")
     # (exit 1 then, for a preflight script; the report is printed all the same)

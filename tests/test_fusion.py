@@ -65,6 +65,23 @@ def test_huge_weight_returns_the_prior_where_given(method, options):
     assert s.info["prior"]["gauged_components"] == []
 
 
+def test_discontinuities_warn_of_a_prior_weight_above_what_they_solve():
+    """A fresh user's exact samples at weight 1e4-1e8 with discontinuities came out worse
+    than at 100 (0 CG iterations per reweighting), although the docs promised the prior."""
+    import warnings
+
+    from facetlift.methods import dgp
+
+    n, depth = wave()
+    prior, _ = sparse(depth, 0.05)
+    with pytest.warns(UserWarning, match=r"prior_weight up to 10000: above 100 the "
+                      r"reweightings' solves stop"):
+        facetlift.integrate(n, discontinuities=True, prior=prior, prior_weight=1e4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        facetlift.integrate(n, discontinuities=True, prior=prior, prior_weight=dgp.PRIOR_STRONG)
+
+
 @pytest.mark.parametrize("method,options", ROUTES)
 def test_tiny_weight_returns_the_normals_only_result(method, options):
     n, depth = wave()
@@ -261,6 +278,27 @@ def test_perspective_prior_must_be_positive():
     with pytest.raises(ValueError, match=r"671 of them are 0: if 0 marks an unknown depth, "
                        "write NaN"):
         facetlift.integrate(n, K=K, prior=prior)
+
+
+def test_points_behind_the_camera_are_left_out_and_swapped_axes_are_named():
+    """A user's LiDAR cloud with 10 points behind the camera was refused whole (points
+    outside the image are left out); points given as (x, y, z) for (rows, cols, depths)
+    landed mostly outside the mask without a word."""
+    n, _ = wave()
+    K = np.array([[100.0, 0, 14], [0, 100.0, 12], [0, 0, 1]])
+    rows, cols = np.array([3, 10, 20, 5]), np.array([4, 12, 25, 6])
+    with pytest.warns(UserWarning, match=r"1 sample\(s\) with a non-positive z-depth \(behind "
+                      r"the camera\), the first -3.0 at \(row 5, col 6\); they were left out"):
+        a = facetlift.integrate(n, K=K, prior=(rows, cols, [5.0, 5.0, 5.0, -3.0])).depth
+    b = facetlift.integrate(n, K=K, prior=(rows[:3], cols[:3], [5.0, 5.0, 5.0])).depth
+    np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="positive z-depths"):  # (all of them: refused)
+        facetlift.integrate(n, K=K, prior=(rows, cols, [-5.0, -5.0, -5.0, -3.0]))
+    mask = np.zeros((24, 28), bool)
+    mask[:, :5] = True
+    with pytest.warns(UserWarning, match=r"3 of the 4 sample\(s\) inside the image lie outside "
+                      r"the mask.*rows and cols swapped"):
+        facetlift.integrate(n, mask, prior=(rows, cols, [5.0, 5.0, 5.0, 5.0]))
 
 
 def test_iterative_without_mean_subtraction_refuses_a_prior():
@@ -680,13 +718,35 @@ def test_a_noisy_dense_prior_that_tears_the_discontinuity_route_is_warned_about(
     rng = np.random.default_rng(0)
     noisy = np.where(gt.mask, gt.depth + rng.normal(0, 3 * gt.pixel_size, gt.depth.shape),
                      np.nan)
-    with pytest.warns(UserWarning, match=r"of the facet corners were cut .* tear the surface"):
+    with pytest.warns(UserWarning, match=r"of the facet corners were cut.* tear the surface"):
         facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size, prior=noisy,
                             discontinuities=True)
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)  # a low weight: no such warning
         facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size, prior=noisy,
                             prior_weight=0.01, discontinuities=True)
+
+
+def test_a_prior_that_tears_the_surface_into_many_pieces_is_warned_about():
+    """A fresh user's noisy dense prior cut 26 % of the corners (below TORN) into 3,497 mesh
+    pieces without a word: many pieces warn too (TORN_PIECES)."""
+    from facetlift import synthetic
+    from facetlift.methods import dgp
+
+    gt = synthetic.analytic("sphere", 96)
+    rng = np.random.default_rng(0)
+    rng.normal(size=gt.depth.shape)  # (the draw measured: sigma 2 first, then 4)
+    noisy = np.where(gt.mask, gt.depth + rng.normal(0, 4 * gt.pixel_size, gt.depth.shape),
+                     np.nan)
+    with pytest.warns(UserWarning, match=r"corners were cut, \d+ pieces .* tear the surface"):
+        s = facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size, prior=noisy,
+                                prior_weight=0.1, discontinuities=True)
+    assert s.info["cut_corners"] < dgp.TORN
+    assert s.info["pieces"] > dgp.TORN_PIECES * gt.mask.sum()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)  # a lower weight: a few pieces, no warning
+        facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size, prior=noisy,
+                            prior_weight=0.03, discontinuities=True)
 
 
 def test_a_weak_prior_takes_the_forcing_term_and_a_strong_one_does_not(monkeypatch):
@@ -746,6 +806,9 @@ def test_a_prior_that_fights_the_normals_is_warned_about():
                                          r"has depth jumps, .*discontinuities=True.*disparity"):
         s = facetlift.integrate(gt.normals, gt.mask, prior=-gt.depth, prior_weight=1.0)
     assert s.info["mean_deviation"] > api.PRIOR_FIGHT == 45.0
+    # orthographic: the warning names K (a user forgot --K with a metric prior)
+    with pytest.warns(UserWarning, match=r"Without K the depth is orthographic.*--K"):
+        facetlift.integrate(gt.normals, gt.mask, prior=-gt.depth, prior_weight=1.0)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         facetlift.integrate(gt.normals, gt.mask, prior=gt.depth, prior_weight=1.0)

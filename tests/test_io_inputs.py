@@ -191,6 +191,21 @@ def test_output_set_commit_that_fails_leaves_the_folder_as_it_was(tmp_path, monk
     np.testing.assert_array_equal(np.load(out / "a.npy"), np.zeros(2))
     np.testing.assert_array_equal(np.load(out / "b.npy"), np.zeros(2))
 
+    # interrupted between two moves (SIGTERM, Ctrl-C: a review): no target is ever absent
+    def interrupted(src, dst):
+        if Path(dst).name == "b.npy" and Path(src).parent.name.startswith(atomic.STAGING_PREFIX):
+            assert (out / "b.npy").exists()  # (the old one still in place)
+            raise KeyboardInterrupt
+        return real(src, dst)
+
+    monkeypatch.setattr(atomic.os, "replace", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        with atomic.OutputSet(out, ["a.npy", "b.npy"]) as s:
+            for name in ("a.npy", "b.npy"):
+                np.save(s.path(name), np.ones(2))
+    assert sorted(p.name for p in out.iterdir()) == ["a.npy", "b.npy"]
+    np.testing.assert_array_equal(np.load(out / "a.npy"), np.zeros(2))
+
 
 def test_output_set_removes_a_folder_it_created_on_failure(tmp_path):
     with pytest.raises(ValueError, match="boom"):

@@ -357,7 +357,8 @@ def _solve(problem, method, t0, max_memory, options):
     out["memory_estimate"] = plan.estimate
     if problem.prior is not None:
         out["prior"] = prior_info(problem, surface)
-        _prior_fight_check(out.get("mean_deviation"), out.get("solver") == "discontinuous")
+        _prior_fight_check(out.get("mean_deviation"), out.get("solver") == "discontinuous",
+                           problem.camera.projection == "orthographic")
     seconds = dict(out.get("seconds", {}))
     seconds["prepare"] = t1 - t0
     seconds["total"] = time.perf_counter() - t0
@@ -410,15 +411,19 @@ def info_text(info: dict, prefix: str = "") -> str:
 PRIOR_FIGHT = 45.0
 
 
-def _prior_fight_check(deviation, discontinuities: bool) -> None:
+def _prior_fight_check(deviation, discontinuities: bool, orthographic: bool = False) -> None:
     if deviation is not None and np.isfinite(deviation) and deviation > PRIOR_FIGHT:
         jumps = ("" if discontinuities else "If the scene has depth jumps, integrate with "
                  "discontinuities=True (--discontinuities): a prior across a jump bends the "
                  "smooth surface. ")
+        # (a user forgot --K with a metric prior: orthographic pixel units against metres)
+        camera = ("Without K the depth is orthographic, in units of pixel_size (default 1: "
+                  "pixels): a metric prior from a perspective camera needs its K (--K). "
+                  if orthographic else "")
         warn(f"the surface deviates from its input normals by {deviation:.0f} deg on average: "
-             f"the depth prior fights them. {jumps}Is the prior depth along the viewing axis "
-             "(larger = farther; not disparity or inverse depth, which must be inverted "
-             "first), in the output's units (metric with K), and aligned (a monocular "
+             f"the depth prior fights them. {jumps}{camera}Is the prior depth along the "
+             "viewing axis (larger = farther; not disparity or inverse depth, which must be "
+             "inverted first), in the output's units (metric with K), and aligned (a monocular "
              "network's relative depth needs its scale and shift fitted first: "
              "docs/fusion.md, 'Recipes')? Else lower prior_weight (--prior-weight)")
 

@@ -100,14 +100,13 @@ def items(inputs, *, list_file=None) -> list[Item]:
                             if (c.is_dir() and _is_dataset(c, NORMAL_READ_FORMATS))
                             or (c.is_file() and c.suffix.lower() in kinds))
             deeper = sorted(c.name for c in p.iterdir() if c.is_dir()
-                            and not _is_dataset(c, NORMAL_READ_FORMATS)
-                            and any(g.suffix.lower() in kinds for g in c.iterdir()))
+                            and not _is_dataset(c, NORMAL_READ_FORMATS) and _holds_maps(c))
             if deeper:  # (a user's folder of days, each a folder of maps: silently skipped)
                 warnings.warn(
                     f"batch: {p}: skipped {len(deeper)} subfolder(s) holding maps but no "
                     f"normal_map.* ({', '.join(deeper[:3])}{', ...' if len(deeper) > 3 else ''})"
-                    f": a folder is read one level deep; give them as inputs, e.g. "
-                    f"'{p / '*'}'", stacklevel=2)
+                    f": a folder is read one level deep; name each as an input (facetlift "
+                    f"batch {p / deeper[0]} ...)", stacklevel=2)
         else:
             paths.append((p, True))
     found, seen, lone = [], set(), []
@@ -131,9 +130,8 @@ def items(inputs, *, list_file=None) -> list[Item]:
         warnings.warn(
             f"batch: skipped {len(lone)} grey file(s) named like a mask without a map of that "
             f"name beside them ({', '.join(lone[:3])}{', ...' if len(lone) > 3 else ''}): "
-            "NAME_mask.* is the mask of NAME.* (obj_normal.png pairs with obj_normal_mask.png); "
-            "name such a "
-            "file as an input to integrate it as a map", stacklevel=2)
+            "NAME_mask.* is the mask of NAME.*: rename it after its map (obj_normal.png pairs "
+            "with obj_normal_mask.png)", stacklevel=2)
     names: dict[str, set] = {}
     for p, _ in found:
         names.setdefault(_stem(p), set()).add(p.name)
@@ -153,6 +151,28 @@ def items(inputs, *, list_file=None) -> list[Item]:
     if not out:
         raise ValueError(f"`inputs`: no normal map found in {specs}")
     return out
+
+
+def _holds_maps(folder: Path) -> bool:
+    """Whether `folder` (not hidden, no facetlift output folder) holds a file that may be a
+    normal map: an extension of one, and neither a mask nor an output's name; False where it
+    cannot be listed."""
+    from .io.images import NORMAL_READ_FORMATS
+
+    if folder.name.startswith(".") or folder.name.endswith("_facetlift"):
+        return False
+    outputs = {"depth", "preview", "mesh", "surface", "report", "discontinuities"}
+    kinds = NORMAL_READ_FORMATS + (".mat",)
+    try:
+        with os.scandir(folder) as it:
+            names = [e.name for e in it if e.is_file()]
+    except OSError:
+        return False
+    if "batch.jsonl" in names:
+        return False
+    return any(Path(n).suffix.lower() in kinds and Path(n).stem not in outputs
+               and Path(n).stem.lower() != "mask" and not Path(n).stem.endswith("_mask")
+               for n in names)
 
 
 def _grey(p: Path) -> bool:
@@ -423,7 +443,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     # the workers' affair on a cluster)
     check_template(template, local=scheduler is None)
     found = items(inputs, list_file=list_file)
-    if template.K is None:
+    if template.K is None and not template.orthographic:
         _unused_cameras(found)
     root = Path(out).resolve()
     prepare_folder(root)  # created and checked before any work

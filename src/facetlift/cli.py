@@ -527,9 +527,9 @@ def _info_lines(rec: dict) -> list[str]:
     lines.append(f"  mask: {rec['mask_pixels']} pixels ({rec['mask_source']}), "
                  f"{rec['components']} component(s)")
     if rec.get("holes"):
-        lines.append(f"  holes: {rec['holes']} pixels inside the object without a valid normal "
-                     "are outside the domain (NaN or background fill); give a mask (--mask) "
-                     "to integrate across them as missing samples")
+        lines.append(f"  holes: {rec['holes']} pixels enclosed by the object have no valid "
+                     "normal and are outside the domain (a real hole, or NaN / background fill "
+                     "inside: a mask, --mask, integrates across those as missing samples)")
     bad = ", ".join(f"{c[k]} {k}" for k in ("missing", "non-finite", "zero-length",
                                             "back-facing", "grazing") if c.get(k))
     first = rec.get("first_unusable")
@@ -642,7 +642,8 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     if as_json:  # (every item's record was printed as it was known)
         _STATE["printed_json"] = True
     resumed = sum(bool(r.get("resumed")) for r in records)
-    warned = sum(r["status"] == "ok" and bool(r.get("warnings")) for r in records)
+    warned = sum(r["status"] == "ok" and bool(r.get("warnings")) and not r.get("resumed")
+                 for r in records)  # (those whose warnings this run printed)
     line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
             + (f" ({warned} with warnings)" if warned else "")
             + (f" ({resumed} from an earlier run)" if resumed else "")

@@ -227,9 +227,9 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
 
 
 def _holes(mask) -> int:
-    """Pixels enclosed by the domain but outside it: without a mask, normals that are NaN or
-    background fill inside the object are left out (no missing samples; a user's map with
-    20 % NaN inside read as 'unusable normals: none')."""
+    """Pixels enclosed by the domain but outside it: a real hole (a ring's), or, without a
+    mask, normals that are NaN or background fill inside the object, which are left out (no
+    missing samples; a user's map with 20 % NaN inside read as 'unusable normals: none')."""
     from scipy import ndimage
 
     return int((ndimage.binary_fill_holes(mask) & ~mask).sum())

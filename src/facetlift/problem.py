@@ -663,6 +663,18 @@ def check_prior(prior, prior_weight, shape, mask, camera):
         raise ValueError(f"`prior` depths must lie within +-{MAX_PRIOR_DEPTH:g} (beyond, the "
                          f"energy's squares overflow; choose other units); got "
                          f"{float(depth[k])!r} ({int(huge.sum())} such sample(s))")
+    points = isinstance(prior, (tuple, list)) and len(prior) == 3 and not np.isscalar(prior[0])
+    if camera.positive_depth and points and (have & (depth <= 0)).any() and (
+            have & (depth > 0)).any():
+        # (a point cloud's points behind the camera: left out and said, as those outside
+        # the image; a user's LiDAR cloud with 10 such points was refused whole)
+        neg = have & (depth <= 0)
+        k = int(np.flatnonzero(neg)[0])
+        r, c = (np.nonzero(mask)[0][k], np.nonzero(mask)[1][k])
+        warn(f"`prior` (rows, cols, depths): {int(neg.sum())} sample(s) with a non-positive "
+             f"z-depth (behind the camera), the first {float(depth[k])!r} at (row {r}, col "
+             f"{c}); they were left out")
+        have &= ~neg
     if camera.positive_depth:
         neg = have & (depth <= 0)
         if neg.any():
@@ -676,8 +688,13 @@ def check_prior(prior, prior_weight, shape, mask, camera):
                 "`prior` must hold positive z-depths for a perspective camera (`K`); got "
                 f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s)){hint}"
             )
+    outside = int(np.isfinite(img[~mask]).sum())
+    if points and outside > have.sum():  # (a user's (u, v, z) given as (rows, cols, depths))
+        warn(f"`prior` (rows, cols, depths): {outside} of the {outside + int(have.sum())} "
+             "sample(s) inside the image lie outside the mask (no normal there: left out); "
+             "are rows and cols swapped (x, y given for row, col)?")
     values = np.where(have, camera.from_depth(np.where(have, depth, 1.0)), np.nan)
-    return values, np.where(have, w, 0.0), int(np.isfinite(img[~mask]).sum())
+    return values, np.where(have, w, 0.0), outside
 
 
 def _huge(n, length2) -> np.ndarray:

@@ -162,6 +162,18 @@ def prepare_folder(folder) -> bool:
     return created
 
 
+def _keep(target: Path, to: Path) -> None:
+    """A second name `to` for the file `target` (a hard link; a copy where links fail; the
+    link itself for a symbolic link), which stays in place."""
+    if target.is_symlink():
+        os.symlink(os.readlink(target), to)
+        return
+    try:
+        os.link(target, to)
+    except OSError:
+        shutil.copy2(target, to)
+
+
 class OutputSet:
     """All outputs of one run, written into a staging folder inside `outdir` and moved into
     place only when every one of them succeeded.
@@ -206,6 +218,7 @@ class OutputSet:
                 f"the output folder {self.outdir} is not writable: {e.strerror or e}"
             ) from None
         self.staged: dict[str, Path] = {}
+        self._in_the_way(names)  # (before any work; commit checks again)
         self._sigterm = sigterm_raises()
 
     def path(self, name: str) -> Path:
@@ -218,8 +231,10 @@ class OutputSet:
         """Move every staged file into `outdir`; returns name -> final path.
 
         All or nothing: a target that is a folder is refused before anything moves, and a
-        move that fails puts back what the earlier ones replaced (kept aside in the staging
-        folder until the end), so the folder is left as it was.
+        move that fails or is interrupted (SIGTERM, Ctrl-C) puts back what the earlier ones
+        replaced, so the folder is left as it was. A replaced file is kept as a second link
+        (a copy where the file system has none) before the new one is renamed over it: the
+        target is never absent.
 
         Raises
         ------
@@ -228,12 +243,7 @@ class OutputSet:
             names it and says that the folder was left as it was.
         """
         moves = [(name, p, self.outdir / name) for name, p in self.staged.items() if p.exists()]
-        for _, _, target in moves:
-            if target.is_dir() and not target.is_symlink():
-                self.abort()
-                raise OSError(f"cannot write {target}: a folder of that name is in the way "
-                              "(move it, or choose another output folder, -o); nothing was "
-                              "written")
+        self._in_the_way(name for name, _, _ in moves)
         aside = self.staging / ".replaced"
         done: dict[str, Path] = {}
         kept: dict[str, Path] = {}
@@ -241,23 +251,35 @@ class OutputSet:
             for name, p, target in moves:
                 if target.exists() or target.is_symlink():
                     (aside / name).parent.mkdir(parents=True, exist_ok=True)
-                    os.replace(target, aside / name)
+                    _keep(target, aside / name)
                     kept[name] = target
                 os.replace(p, target)
                 done[name] = target
-        except OSError as e:
-            for target in done.values():
+        except BaseException as e:
+            for name, target in done.items():
                 with contextlib.suppress(OSError):
-                    target.unlink()
-            for name, target in kept.items():
-                with contextlib.suppress(OSError):
-                    os.replace(aside / name, target)
+                    if name in kept:
+                        os.replace(aside / name, target)
+                    else:
+                        target.unlink()
             self.abort()
-            raise OSError(f"could not move the outputs into {self.outdir} "
-                          f"({e.strerror or e}: {e.filename or ''}); the folder was left as it "
-                          "was") from None
+            if isinstance(e, OSError):
+                raise OSError(f"could not move the outputs into {self.outdir} "
+                              f"({e.strerror or e}: {e.filename2 or e.filename or ''}); the "
+                              "folder was left as it was") from None
+            raise
         shutil.rmtree(self.staging, ignore_errors=True)
         return done
+
+    def _in_the_way(self, names) -> None:
+        """Refuse a target that is a folder (a user's 'mkdir out/preview.png'), before work."""
+        for name in names:
+            target = self.outdir / name
+            if target.is_dir() and not target.is_symlink():
+                self.abort()
+                raise OSError(f"cannot write {target}: a folder of that name is in the way "
+                              "(move it, or choose another output folder, -o); nothing was "
+                              "written")
 
     def abort(self) -> None:
         """Remove the staging folder (and `outdir`, if this run created it and it is empty)."""

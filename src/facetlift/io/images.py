@@ -435,7 +435,8 @@ def write_normals(
     normals : (H, W, 3) float
         Components in [-1, 1]; NaN is written as 0 (PNG/integer TIFF: decodes as NaN again).
     mask : (H, W) bool, optional
-        Stored as the alpha channel.
+        Stored as the alpha channel (a mask True everywhere is stored, but reads back as no
+        mask: :func:`read_normals` ignores an alpha that is the same everywhere).
     bits : {8, 16, 32}
         PNG: 8 or 16 bit per channel; TIFF: 8, 16 (integer) or 32 (float32). Ignored for EXR
         (float32) and npy (float64).

@@ -186,7 +186,7 @@ def run(
                  "(--prior-weight) or integrating without discontinuities may do better",
                  ConvergenceWarning)
         pointwise = prior is not None and (blur is None or astray is not None)
-        _discontinuity_warnings(info, prior if pointwise else None, domain)
+        _discontinuity_warnings(info, prior if pointwise else None, domain, pinfo["pieces"])
         info.update(pinfo)
         info["solver"] = "discontinuous"
         # (of the facets as returned, each on its own corner copies: the glued vertices' mean
@@ -216,13 +216,22 @@ def run(
     return result
 
 
-def _discontinuity_warnings(info: dict, prior, domain) -> None:
+def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0) -> None:
     """The discontinuity route's warnings on the solve returned: a pointwise `prior` that tore
-    the surface apart (:data:`TORN`; None: no such prior), and solves left unfinished."""
-    if prior is not None and info["cut_corners"] > TORN:
+    the surface apart (:data:`TORN`, :data:`TORN_PIECES`; None: no such prior), and solves
+    left unfinished."""
+    if prior is not None and prior[0].max() > PRIOR_STRONG:
+        warn(f"discontinuities with prior_weight up to {prior[0].max():g}: above "
+             f"{PRIOR_STRONG:g} the reweightings' solves stop before the normals' part is "
+             "solved (their tolerance is relative to a right-hand side the samples dominate), "
+             "and the surface away from the samples gets worse, not better; "
+             f"{PRIOR_STRONG:g} already meets exact samples closely (docs/fusion.md, 'Units')")
+    many = max(TORN_PIECES * domain.n_facets, 50)
+    if prior is not None and (info["cut_corners"] > TORN or pieces > many):
         samples = int((prior[0] > 0).sum())
         warn(f"discontinuities with a depth prior: {info['cut_corners']:.0%} of the facet "
-             f"corners were cut ({samples:,} prior samples): where the prior disagrees "
+             f"corners were cut, {pieces:,} pieces ({samples:,} prior samples): where the "
+             "prior disagrees "
              "with the normals from pixel to pixel (a noisy dense map), its samples tear "
              "the surface apart. Lower prior_weight (--prior-weight; 0.01 did best for a "
              "dense prior with noise of 1-3 pixel footprints, docs/fusion.md), give "
@@ -327,6 +336,21 @@ SMALL_PASSES = 3
 #: Without a prior the benchmark's 64 renders (exact and 3-deg noise) and the three real
 #: maps cut 0.0-0.21 (median 0.07; measured 2026-12-03).
 TORN = 0.4
+
+#: Largest pointwise prior weight the discontinuity route solves well (a warning above it).
+#: A fresh user's table scene (480 x 612, fx 600, 1,500 exact samples on its left half):
+#: mean error on the right half, without samples, 0.38 mm at weight 100, 8.29 at 1e4, 27.9
+#: at 1e8 (0 CG iterations in every reweighting); with samples everywhere 0.61, 0.78 and
+#: 2.32 mm. Measuring the tolerance against the samples' variation at unit weight solved
+#: 1e4 (0.40 mm) but took 2,903 CG iterations (16 s) and 974 at weight 100 (113 before).
+PRIOR_STRONG = 100.0
+
+#: ... or where the cuts leave more pieces than this share of the facets (and more than 50):
+#: a fresh user's dense prior with 6 mm of noise (about 4 footprints) at weight 0.1 cut 26 %
+#: of the corners into 3,497 pieces (12 % of the facets, no warning), 1,500 points with 3 %
+#: outliers at weight 100 into 782 (1.6 %). Without a prior the benchmark's 60 mesh renders
+#: at exact and 8-bit normals give at most 42 mesh pieces (0.2 %; 2026-12-03, eighth session).
+TORN_PIECES = 0.01
 
 
 def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
