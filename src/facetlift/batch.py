@@ -665,13 +665,16 @@ def _on_processes(jobs, n_workers: int, done) -> None:
 
 
 def _worker_start(protect: bool = False) -> None:
-    """A batch worker process leaves Ctrl-C to the parent, which stops it (:func:`_stop`), and
+    """A batch worker process leaves Ctrl-C to the parent, which stops it (:func:`_stop`),
+    dies at once on the parent's SIGTERM (:func:`facetlift.io.atomic.die_on_sigterm`), and
     keeps stdout as the parent does (`protect`: the command line's, which it shares)."""
     import signal
 
+    from .io.atomic import die_on_sigterm
     from .io.images import protect_stdout
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_on_sigterm()
     protect_stdout(protect)
 
 

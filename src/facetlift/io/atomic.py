@@ -310,12 +310,26 @@ def _raise_terminated(signum, frame):
     raise Terminated(f"terminated by signal {signum}")
 
 
+#: Whether this process is a local batch worker (:func:`die_on_sigterm`).
+_WORKER = False
+
+
+def die_on_sigterm() -> None:
+    """In this process SIGTERM keeps its default, dying at once, also while an output set is
+    open: a local batch's worker, stopped by its parent, which then sweeps what the worker
+    left (:func:`facetlift.batch._stop`). Raised inside the worker instead, :class:`Terminated`
+    went on through the process pool's machinery while the parent was stopping it."""
+    global _WORKER
+    _WORKER = True
+
+
 @contextlib.contextmanager
 def sigterm_raises():
-    """SIGTERM raises :class:`Terminated` in the main thread meanwhile (elsewhere: nothing), so
-    the code inside cleans up as for an exception; the previous handler is put back (one
-    installed outside Python, which cannot be, leaves the default)."""
-    if threading.current_thread() is not threading.main_thread():
+    """SIGTERM raises :class:`Terminated` in the main thread meanwhile (elsewhere, and in a
+    batch worker, :func:`die_on_sigterm`: nothing), so the code inside cleans up as for an
+    exception; the previous handler is put back (one installed outside Python, which cannot
+    be, leaves the default)."""
+    if _WORKER or threading.current_thread() is not threading.main_thread():
         yield
         return
     old = signal.signal(signal.SIGTERM, _raise_terminated)
