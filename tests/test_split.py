@@ -211,6 +211,21 @@ def test_a_chain_of_two_hangs_across_a_jump_undoes_only_those_two():
     np.testing.assert_array_equal(out[[a, b]], copies[[a, b]])  # the chain undone
     np.testing.assert_allclose(out[g], 0.0)  # the island hung on the left side
     assert after.n_pieces == 4
+    # the same through an anchored piece between them (a review: every hang was undone)
+    q = np.flatnonzero((r == 4) & (c == 7))[0]
+    copies = np.where((c >= 7)[:, None], 1.0, 0.0) * np.ones((1, 4))
+    copies[a] = [0.6, 1.2, 1.2, 0.6]
+    copies[b] = [0.6, 0.5, 0.3, 0.6]  # anchored: not moved, joined to both hung pieces
+    copies[q] = [1.6, 1.6, 1.1, 1.1]
+    copies[g] += 0.8
+    mesh, _ = from_copies(d, copies, 0.5)
+    anchored = np.zeros(d.n_facets, bool)
+    anchored[b] = True
+    out = spl.absorb_small_pieces(mesh, copies, 4, 0.5, anchored)
+    after, _ = from_copies(d, out, 0.5)
+    assert after.facet_piece[left] != after.facet_piece[right]
+    np.testing.assert_array_equal(out[[a, b, q]], copies[[a, b, q]])
+    np.testing.assert_allclose(out[g], 0.0)
 
 
 @pytest.mark.skipif(not (BEAR / "depth_gt.npz").is_file(), reason="no DiLiGenT bear data")

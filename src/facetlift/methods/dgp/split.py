@@ -199,9 +199,10 @@ def absorb_small_pieces(mesh: SplitMesh, copies, size: int, gap: float, anchored
     # pieces of two different owners joins them: the hung pieces on such an edge are undone,
     # until none is left. (Undoing every hang in a piece that a bridge had made instead, as
     # before, undid 331 of 524 hangs on a 384^2 armadillo render for a few bridges: 316
-    # single quads floated in its mesh.) A bridge through pieces that were not hung (no owner)
-    # is found as a piece of the new split holding facets of two larger pieces: every hang in
-    # it is then undone
+    # single quads floated in its mesh.) A piece without an owner (anchored, or undone) joined
+    # to pieces of two owners bridges them: the hung pieces joined to it are undone. A longer
+    # bridge through such pieces is found as a piece of the new split holding facets of two
+    # larger pieces: every hang in it is then undone
     owner = np.full(k, -1, dtype=np.int64)
     owner[large] = np.flatnonzero(large)
     owner[hung] = fp[best[hung, 1]]
@@ -212,6 +213,7 @@ def absorb_small_pieces(mesh: SplitMesh, copies, size: int, gap: float, anchored
         rp = np.pad(after.right, 1, constant_values=True)  # rp[r + 1, c + 1] = right[r, c]
         dp = np.pad(after.down, 1, constant_values=True)
         undo = np.zeros(k, bool)
+        via = []  # (piece without an owner, owner of a piece joined to it, that piece)
         for key, cut in (("+x", rp[r + 1, c + 1]), ("-y", dp[r + 1, c + 1])):
             g = nb[key]
             sel = np.flatnonzero((g >= 0) & ~cut)
@@ -220,6 +222,17 @@ def absorb_small_pieces(mesh: SplitMesh, copies, size: int, gap: float, anchored
             clash = (oa >= 0) & (ob >= 0) & (oa != ob)
             undo[pa[clash]] = True
             undo[pb[clash]] = True
+            for x, o, y in ((pa, ob, pb), (pb, oa, pa)):
+                one = (owner[x] < 0) & (o >= 0) & (x != y)
+                via.append(np.stack([x[one], o[one], y[one]]))
+        # a piece without an owner (an anchored one, or one undone) joined to pieces of two
+        # owners: the hung pieces joined to it are undone (a review: the fallback below undid
+        # every hang in the merged piece for such a bridge)
+        via = np.concatenate(via, axis=1)
+        if via.shape[1]:
+            pairs = np.unique(via[0] * k + via[1])
+            bad = np.bincount(pairs // k, minlength=k) > 1
+            undo[via[2][bad[via[0]]]] = True
         undo &= ~large
         if not undo.any():
             # (new pieces holding facets of more than one larger piece)
