@@ -410,6 +410,30 @@ def test_batch_warns_of_a_camera_file_beside_plain_maps(tmp_path):
         facetlift.batch([tmp_path / "rig"], tmp_path / "q", save=("npy",), orthographic=True)
 
 
+def test_abandoned_items_are_swept_also_in_folders_that_existed(tmp_path):
+    """A review: workers that die at once on SIGTERM left their staging folders in item
+    folders that existed before the batch (only the batch's own folders were swept)."""
+    import signal
+
+    from facetlift.io import atomic
+
+    old, new = tmp_path / "old", tmp_path / "new"
+    for folder in (old, new):
+        (folder / f"{atomic.STAGING_PREFIX}{atomic._host()}-999999-deadbeef").mkdir(parents=True)
+    (old / "depth.npy").write_bytes(b"kept")
+    fb._clean_abandoned([old, new], {old})
+    assert [p.name for p in old.iterdir()] == ["depth.npy"] and not new.exists()
+    # a worker's SIGTERM is the default again, whatever the parent had installed (fork)
+    before = signal.getsignal(signal.SIGTERM)
+    try:
+        signal.signal(signal.SIGTERM, atomic._raise_terminated)
+        atomic.die_on_sigterm()
+        assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+    finally:
+        atomic._WORKER = False
+        signal.signal(signal.SIGTERM, before)
+
+
 def test_distributed_local_cluster_with_two_workers_equals_in_process(tmp_path, capsys):
     distributed = pytest.importorskip("distributed")
     depths = maps(tmp_path / "in", n=4)

@@ -287,18 +287,28 @@ def test_points_behind_the_camera_are_left_out_and_swapped_axes_are_named():
     n, _ = wave()
     K = np.array([[100.0, 0, 14], [0, 100.0, 12], [0, 0, 1]])
     rows, cols = np.array([3, 10, 20, 5]), np.array([4, 12, 25, 6])
-    with pytest.warns(UserWarning, match=r"1 sample\(s\) with a non-positive z-depth \(behind "
+    with pytest.warns(UserWarning, match=r"2 sample\(s\) with a non-positive z-depth \(behind "
                       r"the camera\), the first -3.0 at \(row 5, col 6\); they were left out"):
-        a = facetlift.integrate(n, K=K, prior=(rows, cols, [5.0, 5.0, 5.0, -3.0])).depth
+        a = facetlift.integrate(n, K=K, prior=(np.r_[rows, 3], np.r_[cols, 4],
+                                               [5.0, 5.0, 5.0, -3.0, -0.2])).depth
+    # (left out before a pixel's points are averaged: (3, 4) keeps its 5.0; a review)
     b = facetlift.integrate(n, K=K, prior=(rows[:3], cols[:3], [5.0, 5.0, 5.0])).depth
     np.testing.assert_array_equal(a, b)
     with pytest.raises(ValueError, match="positive z-depths"):  # (all of them: refused)
         facetlift.integrate(n, K=K, prior=(rows, cols, [-5.0, -5.0, -5.0, -3.0]))
     mask = np.zeros((24, 28), bool)
     mask[:, :5] = True
-    with pytest.warns(UserWarning, match=r"3 of the 4 sample\(s\) inside the image lie outside "
-                      r"the mask.*rows and cols swapped"):
-        facetlift.integrate(n, mask, prior=(rows, cols, [5.0, 5.0, 5.0, 5.0]))
+    with pytest.warns(UserWarning, match=r"1 of the 4 sample\(s\) lie on the mask, 4 would "
+                      r"with rows and cols swapped"):
+        facetlift.integrate(n, mask, prior=([1, 2, 3, 4], [10, 15, 20, 3], [5.0] * 4))
+    # a cloud over the whole image beside a small object: most points off the mask either
+    # way, no warning (a review)
+    import warnings
+
+    rr, cc = np.meshgrid(np.arange(0, 24, 2), np.arange(0, 28, 2), indexing="ij")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        facetlift.integrate(n, mask, prior=(rr.ravel(), cc.ravel(), np.full(rr.size, 5.0)))
 
 
 def test_iterative_without_mean_subtraction_refuses_a_prior():

@@ -139,7 +139,9 @@ def integrate(
         or normals that look [0, 1]-encoded or face away from the viewer
         (:func:`facetlift.frames.checked`); a `prior` or `confidence` of the wrong shape,
         negative weights, a prior without a finite sample in the mask, non-positive
-        perspective prior depth, or a prior / confidence for a method without the capability.
+        perspective prior depth in a map (points of a ``(rows, cols, depths)`` prior with one
+        are left out with a warning, unless every one is), or a prior / confidence for a
+        method without the capability.
     facetlift.SolverError
         The solver failed or produced non-finite depth inside the mask.
     facetlift.errors.MemoryLimitError

@@ -220,7 +220,8 @@ def _unused_cameras(found) -> None:
 
 
 def _is_dataset(folder: Path, formats) -> bool:
-    return any((folder / f"normal_map{ext}").is_file() for ext in formats)
+    # (os.path.isfile: False for a folder that cannot be read, where Path.is_file raises)
+    return any(os.path.isfile(folder / f"normal_map{ext}") for ext in formats)
 
 
 class _Listing:
@@ -500,23 +501,25 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
                     for it, j in jobs:
                         done(it, run_item(j))
         except BaseException:  # (an interrupt: the abandoned items leave no folder behind)
-            _clean_abandoned([j.outdir for it, j in jobs if it.path not in results
-                              and j.outdir not in existed])
+            _clean_abandoned([j.outdir for it, j in jobs if it.path not in results], existed)
             raise
     return [results[it.path] for it in found]
 
 
-def _clean_abandoned(folders) -> None:
-    """Remove the output folders that abandoned items created (a killed worker cannot): what
-    killed runs left in them (:func:`facetlift.io.atomic.sweep`), then the folder if that
-    left it empty (an interrupted batch left an empty folder per running item)."""
+def _clean_abandoned(folders, existed=()) -> None:
+    """Sweep the output folders of abandoned items (a killed worker cannot) of what killed
+    runs left in them (:func:`facetlift.io.atomic.sweep`), and remove those the batch
+    created if that left them empty (an interrupted batch left an empty folder per running
+    item); a folder in `existed` stays (a review: its staging folder stayed too)."""
     from .io.atomic import sweep
 
+    existed = {Path(f) for f in existed}
     for folder in map(Path, folders):
         if folder.is_dir():
             sweep(folder)
-            with contextlib.suppress(OSError):
-                folder.rmdir()  # (only if empty)
+            if folder not in existed:
+                with contextlib.suppress(OSError):
+                    folder.rmdir()  # (only if empty)
 
 
 def check_template(job: Job, local: bool = True) -> None:

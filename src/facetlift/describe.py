@@ -182,7 +182,7 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
 
         with recorded_warnings() as placed:
             try:
-                prior_map = prior_image(prior_map, (H, W))
+                prior_map = prior_image(prior_map, (H, W), positive=inp.K is not None)
             except ValueError as e:  # (every point outside: reported, as integrate refuses)
                 out.update(where)
                 return unusable(e)

@@ -572,10 +572,12 @@ def check_confidence(confidence, shape: tuple[int, int], mask=None) -> np.ndarra
     return c
 
 
-def prior_image(prior, shape: tuple[int, int]) -> np.ndarray:
+def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.ndarray:
     """The prior as an (H, W) depth image, NaN where unknown: from an (H, W) array or a
     ``(rows, cols, depths)`` triple (pixel indices, rounded to the nearest pixel; depths of the
-    same pixel averaged). Raises ValueError naming `prior`."""
+    same pixel averaged). With `positive` (a perspective camera) a triple's points with a
+    depth <= 0 (behind the camera) are left out before the averaging, with a warning, unless
+    every one is (then the caller refuses them). Raises ValueError naming `prior`."""
     H, W = shape
     if isinstance(prior, (tuple, list)) and len(prior) == 3 and not np.isscalar(prior[0]):
         rows, cols, depths = (numeric_array(v, f"prior[{k}]").astype(float).ravel()
@@ -598,6 +600,16 @@ def prior_image(prior, shape: tuple[int, int]) -> np.ndarray:
             warn(f"`prior` (rows, cols, depths): {where}; they were left out")
             r, c, depths = r[~out], c[~out], depths[~out]
         keep = np.isfinite(depths)
+        behind = keep & (depths <= 0)
+        if positive and behind.any() and (keep & ~behind).any():
+            # (a point cloud's points behind the camera: left out and said, as those outside
+            # the image, before the averaging mixes them with good ones; a user's LiDAR cloud
+            # with 10 such points was refused whole)
+            k = int(np.flatnonzero(behind)[0])
+            warn(f"`prior` (rows, cols, depths): {int(behind.sum())} sample(s) with a "
+                 f"non-positive z-depth (behind the camera), the first {float(depths[k])!r} "
+                 f"at (row {r[k]}, col {c[k]}); they were left out")
+            keep &= ~behind
         idx = r[keep] * W + c[keep]
         count = np.bincount(idx, minlength=H * W)
         total = np.bincount(idx, depths[keep], minlength=H * W)
@@ -638,7 +650,7 @@ def check_prior(prior, prior_weight, shape, mask, camera):
         depth for a perspective camera; a weight that is negative, not finite or of another
         shape (the message names the argument, the value and what was expected).
     """
-    img = prior_image(prior, shape)
+    img = prior_image(prior, shape, positive=camera.positive_depth)
     weight = _weight_image(prior_weight, "prior_weight", shape)
     depth = img[mask]
     w = weight[mask]
@@ -664,17 +676,6 @@ def check_prior(prior, prior_weight, shape, mask, camera):
                          f"energy's squares overflow; choose other units); got "
                          f"{float(depth[k])!r} ({int(huge.sum())} such sample(s))")
     points = isinstance(prior, (tuple, list)) and len(prior) == 3 and not np.isscalar(prior[0])
-    if camera.positive_depth and points and (have & (depth <= 0)).any() and (
-            have & (depth > 0)).any():
-        # (a point cloud's points behind the camera: left out and said, as those outside
-        # the image; a user's LiDAR cloud with 10 such points was refused whole)
-        neg = have & (depth <= 0)
-        k = int(np.flatnonzero(neg)[0])
-        r, c = (np.nonzero(mask)[0][k], np.nonzero(mask)[1][k])
-        warn(f"`prior` (rows, cols, depths): {int(neg.sum())} sample(s) with a non-positive "
-             f"z-depth (behind the camera), the first {float(depth[k])!r} at (row {r}, col "
-             f"{c}); they were left out")
-        have &= ~neg
     if camera.positive_depth:
         neg = have & (depth <= 0)
         if neg.any():
@@ -689,12 +690,27 @@ def check_prior(prior, prior_weight, shape, mask, camera):
                 f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s)){hint}"
             )
     outside = int(np.isfinite(img[~mask]).sum())
-    if points and outside > have.sum():  # (a user's (u, v, z) given as (rows, cols, depths))
-        warn(f"`prior` (rows, cols, depths): {outside} of the {outside + int(have.sum())} "
-             "sample(s) inside the image lie outside the mask (no normal there: left out); "
-             "are rows and cols swapped (x, y given for row, col)?")
+    if points:  # (a user's (u, v, z) given as (rows, cols, depths): 57 % fell outside)
+        _swapped_check(prior, mask)
     values = np.where(have, camera.from_depth(np.where(have, depth, 1.0)), np.nan)
     return values, np.where(have, w, 0.0), outside
+
+
+def _swapped_check(prior, mask) -> None:
+    """Warn where a points prior's rows and cols look swapped: read the other way round,
+    more than twice as many of its points would land on the mask (a cloud projected over a
+    whole image lands mostly beside a small object either way: no warning)."""
+    H, W = mask.shape
+    rows, cols = (np.rint(np.asarray(v, float).ravel()) for v in prior[:2])
+
+    def on_mask(r, c):
+        ok = (r >= 0) & (r < H) & (c >= 0) & (c < W)
+        return int(mask[r[ok].astype(np.int64), c[ok].astype(np.int64)].sum())
+
+    now, swapped = on_mask(rows, cols), on_mask(cols, rows)
+    if swapped > 2 * max(now, 1):
+        warn(f"`prior` (rows, cols, depths): {now} of the {rows.size} sample(s) lie on the "
+             f"mask, {swapped} would with rows and cols swapped: were x, y given for row, col?")
 
 
 def _huge(n, length2) -> np.ndarray:

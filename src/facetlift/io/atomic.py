@@ -170,8 +170,13 @@ def _keep(target: Path, to: Path) -> None:
         return
     try:
         os.link(target, to)
+        return
     except OSError:
+        pass
+    try:  # (no hard links on this file system, or protected_hardlinks: a copy)
         shutil.copy2(target, to)
+    except OSError:  # (nor a copy: an unreadable file of another user; moved, as before)
+        os.replace(target, to)
 
 
 class OutputSet:
@@ -253,14 +258,14 @@ class OutputSet:
                     (aside / name).parent.mkdir(parents=True, exist_ok=True)
                     _keep(target, aside / name)
                     kept[name] = target
+                done[name] = target  # (before the move: an interrupt right after it)
                 os.replace(p, target)
-                done[name] = target
         except BaseException as e:
             for name, target in done.items():
                 with contextlib.suppress(OSError):
                     if name in kept:
                         os.replace(aside / name, target)
-                    else:
+                    elif not (self.staged[name]).exists():  # (moved in: taken back out)
                         target.unlink()
             self.abort()
             if isinstance(e, OSError):
@@ -321,6 +326,8 @@ def die_on_sigterm() -> None:
     went on through the process pool's machinery while the parent was stopping it."""
     global _WORKER
     _WORKER = True
+    # (a forked worker inherits a handler the parent had installed: the default again)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 @contextlib.contextmanager

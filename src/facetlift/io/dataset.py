@@ -151,7 +151,9 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
         try:
             extra[name] = reader(path)
             if isinstance(extra[name], tuple):  # (a points file: as a map of this size)
-                extra[name] = prior_image(extra[name], (H, W))
+                # (with the folder's K, points behind the camera are left out here, as
+                # integrate leaves them out of a points file given with --prior)
+                extra[name] = prior_image(extra[name], (H, W), positive=K is not None)
         except ValueError as e:
             raise ValueError(f"{e}; {skip}") from None
         if extra[name].shape != (H, W):

@@ -229,7 +229,9 @@ def absorb_small_pieces(mesh: SplitMesh, copies, size: int, gap: float, anchored
         # owners: the hung pieces joined to it are undone (a review: the fallback below undid
         # every hang in the merged piece for such a bridge)
         via = np.concatenate(via, axis=1)
-        if via.shape[1]:
+        # (only once no clash is left: a clash's undoing may already have broken the bridge,
+        # a review's fuzzing found hangs undone for nothing otherwise)
+        if via.shape[1] and not (undo & ~large).any():
             pairs = np.unique(via[0] * k + via[1])
             bad = np.bincount(pairs // k, minlength=k) > 1
             undo[via[2][bad[via[0]]]] = True
