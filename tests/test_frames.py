@@ -371,3 +371,35 @@ def test_flip_hint_on_a_noisy_map_with_jumps():
         s = facetlift.integrate(n, gt.mask)
     ratio = s.info["integrability"]["curl_y_flipped"] / s.info["integrability"]["curl"]
     assert 1.2 < ratio < 2.0
+
+
+def test_decoded_normals_far_from_unit_length_are_warned_about():
+    """A texture artist's map with the blue channel fixed at 255 (two-channel bakes are often
+    filled so) read as consistent and lost 29 % of its height; a well-encoded map, 8 or 16
+    bits, stays silent."""
+    import warnings
+
+    yy, xx = np.mgrid[0:64, 0:64]
+    n = np.dstack([-0.5 * np.cos(xx / 10), -0.3 * np.sin(yy / 7), np.ones((64, 64))])
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    for dtype in (np.uint8, np.uint16):
+        top = np.iinfo(dtype).max
+        v = np.round((n + 1) / 2 * top).astype(dtype)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            frames.decode(v)
+        v[..., 2] = top
+        with pytest.warns(UserWarning, match=r"not unit length .* is z stored"):
+            frames.decode(v)
+
+
+def test_the_grazing_warning_names_the_option_that_keeps_steep_walls():
+    """A stamp whose near-vertical walls were dropped by the paper's rule vanished (plateau 0
+    instead of 20); the smooth route's warning did not name --outlier-eps."""
+    import facetlift
+
+    n = np.dstack([np.zeros((20, 20)), np.zeros((20, 20)), np.ones((20, 20))])
+    n[8, 3:17] = [0.0, 0.999, 0.045]  # (a wall seen at 87 deg)
+    with pytest.warns(UserWarning, match=r"grazing: view cosine < 0.08716, the paper's outlier "
+                      r"rule; outlier_eps / --outlier-eps sets another"):
+        facetlift.integrate(n)

@@ -421,8 +421,14 @@ def prepare(
         what = ", ".join(f"{int(v.sum())} {k}" for k, v in problems.items())
         rule = ""  # (the grazing rule, where it took some)
         if "grazing" in problems:
+            # (a texture artist's stamp with near-vertical walls vanished: the warning did not
+            # name the option that keeps them)
+            note = grazing_note if grazing_note is not None else (
+                None if outlier_eps is not None else
+                "the paper's outlier rule; outlier_eps / --outlier-eps sets another (e.g. "
+                "0.01 keeps steeper walls)")
             rule = (f"; grazing: view cosine < {eps:.4g}"
-                    f"{'' if grazing_note is None else ', ' + grazing_note}")
+                    f"{'' if note is None else ', ' + note}")
         frame = ""  # (many facing away: a map in another frame, e.g. world coordinates)
         # (the share among the normals that are not edge-on, as the frame check counts them:
         # an indoor view's walls, z = 0 stored as 128, read -1/255 and counted back-facing)
