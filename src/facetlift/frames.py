@@ -49,8 +49,11 @@ from .errors import FrameWarning
 FRAMES = {
     "opengl": "x,y,z",
     "directx": "x,-y,z",
+    "dx": "x,-y,z",
+    "unreal": "x,-y,z",
     "y_down": "x,-y,z",
     "y-down": "x,-y,z",
+    "gl": "x,y,z",
     "opencv": "x,-y,-z",
 }
 
