@@ -611,3 +611,38 @@ def test_a_saved_npz_reads_back_as_depth_and_as_a_prior(tmp_path):
     (tmp_path / "bad.npz").write_bytes(b"not a zip")
     with pytest.raises(ValueError, match="not a readable .npz archive"):
         io.read_prior(tmp_path / "bad.npz")
+
+
+def test_height_map_png_is_16_bit_scaled_to_the_depth_range(tmp_path, capsys):
+    """A texture artist had no height map for an engine (a shaded 8-bit preview and float
+    depth only): height.png is 16-bit, 0..1 over the domain, alpha 0 outside, and its depth
+    range is returned (and in the job record, --json)."""
+    import json
+
+    import imagecodecs
+
+    import facetlift
+    from facetlift.cli import main
+
+    yy, xx = np.mgrid[0:24, 0:30]
+    p, q = 0.1 * np.cos(xx / 4.0), 0.05 * np.ones_like(xx, float)
+    n = facetlift.normals_from_gradients(p, q)
+    mask = np.ones((24, 30), bool)
+    mask[:3, :3] = False
+    s = facetlift.integrate(n, mask)
+    path, (low, high) = io.write_height(tmp_path / "h.png", s)
+    img = imagecodecs.png_decode(path.read_bytes())
+    assert img.dtype == np.uint16 and img.shape == (24, 30, 2)
+    np.testing.assert_array_equal(img[..., 1] > 0, mask)
+    h = img[..., 0] / 65535.0
+    np.testing.assert_allclose(h[mask], (low - s.depth[mask]) / (low - high), atol=1e-5)
+    assert h[mask].min() == 0.0 and h[mask].max() == 1.0
+    with pytest.raises(ValueError, match="height map"):
+        io.write_height(tmp_path / "h.exr", s)
+    io.write_normals(tmp_path / "n.png", np.where(mask[..., None], n, np.nan), mask)
+    code = main(["integrate", str(tmp_path / "n.png"), "-o", str(tmp_path / "o"), "-s",
+                 "height", "-s", "npy", "--json"])
+    assert code == 0 and (tmp_path / "o" / "height.png").is_file()
+    rec = json.loads(capsys.readouterr().out)
+    d = np.load(tmp_path / "o" / "depth.npy")
+    assert rec["depth_range"] == [np.nanmax(d), np.nanmin(d)]

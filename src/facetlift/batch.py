@@ -599,8 +599,9 @@ def log_record(rec: dict) -> dict:
 
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
             "shape", "facets", "mask_source", "converged", "warnings", "resumed", "settings",
-            "input_stamp", "perspective")  # (mask_source: whether NAME_mask.png was used,
-    # a user asked; perspective: whether a camera was used, a dataset folder's K.txt included)
+            "input_stamp", "perspective", "depth_range")
+    # (mask_source: whether NAME_mask.png was used, a user asked; perspective: whether a
+    # camera was used, a dataset folder's K.txt included; depth_range: height.png's scale)
     return jsonable({k: rec[k] for k in keep if k in rec})
 
 

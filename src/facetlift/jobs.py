@@ -33,6 +33,7 @@ OUTPUTS = {
     "png": "preview.png",
     "report": "report.png",
     "discontinuities": "discontinuities.png",
+    "height": "height.png",
 }
 DEFAULT_SAVE = ("npy", "ply", "png")
 
@@ -369,6 +370,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "facets": int(surface.mask.sum()),
         "mask_source": inp.mask_source,
         "perspective": surface.K is not None,
+        # (the depth of height.png's 0 and 65535, as io.write_height scales it)
+        "depth_range": _depth_range(surface),
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),
         "converged": bool(sinfo.get("converged", True)),
         "warnings": [str(w.message) for w in caught],
@@ -376,6 +379,13 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "timings": {"read": t_read, "integrate": t_integrate,
                     "write": time.perf_counter() - t2, "total": time.perf_counter() - t0},
     }
+
+
+def _depth_range(surface) -> list | None:
+    """``[largest, smallest]`` finite depth (height.png's 0 and 65535), None without one."""
+    d = np.asarray(surface.depth, dtype=float)
+    ok = np.isfinite(d)
+    return [float(d[ok].max()), float(d[ok].min())] if ok.any() else None
 
 
 def _write(surface, kind: str, path: Path, normals, triangles) -> None:
@@ -386,6 +396,8 @@ def _write(surface, kind: str, path: Path, normals, triangles) -> None:
                         mean_deviation=surface.info.get("mean_deviation"))
     elif kind == "discontinuities":
         io.write_discontinuities(path, surface)
+    elif kind == "height":
+        io.write_height(path, surface)
     elif kind in ("ply", "obj") and triangles is not None:
         surface.save(path, triangles=triangles)
     else:

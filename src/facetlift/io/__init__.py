@@ -56,7 +56,7 @@ from .images import (
     write_normals,
 )
 from .meshes import MESH_FORMATS, write_mesh
-from .preview import shade, write_discontinuities, write_preview
+from .preview import shade, write_discontinuities, write_height, write_preview
 from .report import write_report
 from .surface import SURFACE_FORMATS, save_surface
 
@@ -85,6 +85,7 @@ __all__ = [
     "write_mesh",
     "write_normals",
     "write_discontinuities",
+    "write_height",
     "write_preview",
     "write_report",
 ]

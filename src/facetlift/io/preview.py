@@ -192,3 +192,36 @@ def write_discontinuities(path, surface, *, min_size: int = 256) -> Path:
         img = np.repeat(np.repeat(img, k, axis=0), k, axis=1)
     _write_png(p, img)
     return p
+
+
+def write_height(path, surface) -> tuple[Path, tuple[float, float]]:
+    """Write the surface's height (``-depth``) as a 16-bit grey + alpha PNG, scaled to 0..1
+    over the domain: 0 at its lowest point (the largest depth), 65535 at its highest, alpha 0
+    outside the mask. For displacement and height maps of game engines and texture tools
+    (a texture artist's check: only a shaded 8-bit preview and float depth existed).
+
+    Returns the path and ``(low, high)``, the depth of the values 0 and 65535, in the
+    depth's units (texels for a texture integrated with ``pixel_size=1``): the displacement
+    scale is ``low - high``. A flat surface is written as 0 everywhere.
+
+    Raises
+    ------
+    ValueError
+        A path that is not ``.png``; a surface without a finite depth.
+    """
+    p = Path(path)
+    _suffix(p, (".png",), "height map", "path")
+    depth = np.asarray(surface.depth, dtype=float)
+    inside = np.isfinite(depth)
+    if not inside.any():
+        raise ValueError("the surface has no finite depth to write as a height map")
+    low, high = float(depth[inside].max()), float(depth[inside].min())
+    span = low - high
+    h = np.zeros(depth.shape)
+    if span > 0:
+        h[inside] = (low - depth[inside]) / span
+    img = np.zeros(depth.shape + (2,), dtype=np.uint16)
+    img[..., 0] = np.round(h * 65535)
+    img[..., 1] = np.where(inside, 65535, 0)
+    _write_png(p, img)
+    return p, (low, high)
