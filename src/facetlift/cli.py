@@ -145,7 +145,8 @@ _JOB_OPTIONS = [
                  "mask.png, else the alpha channel, else every pixel with a valid normal."),
     click.option("--normal-frame", "normal_frame", metavar="FRAME",
                  help="Frame of the normal map: opengl (default: x right, y up, z toward the "
-                 "viewer), directx (y down), opencv (y down, z away), or an axis string such "
+                 "viewer; alias gl), directx (y down; aliases dx, unreal), opencv (y down, z "
+                 "away), or an axis string such "
                  "as 'x,-y,-z' (docs/conventions.md lists common sources)."),
     click.option("--y-down", is_flag=True, help="Alias of --normal-frame directx."),
     click.option("--gradient-frame", default="xy", show_default=True,

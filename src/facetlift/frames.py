@@ -215,24 +215,30 @@ def resolve(frame, y_down: bool) -> str | None:
     )
 
 
-def decode(pixels: np.ndarray) -> np.ndarray:
+def decode(pixels: np.ndarray, where=None) -> np.ndarray:
     """uint8/uint16 pixels -> float64 normals ``v / max * 2 - 1``; NaN where the decoded
-    length is outside :data:`ENCODED_LENGTH_RANGE` (background fill, not a normal)."""
+    length is outside :data:`ENCODED_LENGTH_RANGE` (background fill, not a normal). A warning
+    where many of them (among `where`, (H, W) bool: the mask or alpha, where known) are
+    longer than unit length (:data:`UNIT_TOLERANCE`): z not stored."""
     maxval = float(np.iinfo(pixels.dtype).max)
     n = pixels.astype(np.float64) / maxval * 2.0 - 1.0
     length = np.sqrt(np.einsum("...i,...i->...", n, n))
     lo, hi = ENCODED_LENGTH_RANGE
     bad = (length < lo) | (length > hi)
     n[bad] = np.nan
-    off = np.abs(length[~bad] - 1.0) > UNIT_TOLERANCE
+    where = None if where is None else np.asarray(where)
+    seen = ~bad if where is None or where.shape != bad.shape else ~bad & where.astype(bool)
+    # (longer only: averaging, resizing and noise shorten vectors, which renormalising fixes)
+    off = length[seen] > 1.0 + UNIT_TOLERANCE
     if off.size and off.mean() > UNIT_SHARE:
         # (a texture artist's map with the blue channel fixed at 255, as two-channel bakes are
         # often filled, read as 'consistent' and lost 29 % of its height)
-        warn(f"{off.mean():.0%} of the decoded normals are not unit length (off by more than "
-             f"{UNIT_TOLERANCE:.0%}, median length {np.median(length[~bad]):.3g}): is z "
+        warn(f"{off.mean():.0%} of the decoded normals are longer than unit length (by more "
+             f"than {UNIT_TOLERANCE:.0%}, median length {np.median(length[seen]):.3g}): is z "
              "stored (a blue channel fixed at one value, as two-channel maps are often "
              "filled, must be rebuilt as z = sqrt(1 - x^2 - y^2) first)? facetlift "
-             "renormalises each vector, which is right only where it points the right way")
+             "renormalises each vector, which is right only where it points the right way",
+             FrameWarning)
     return n
 
 
@@ -273,7 +279,7 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
             f"`{name}` is {n.dtype}: decoded as v / {np.iinfo(n.dtype).max} * 2 - 1 (the PNG "
             "encoding); pass float normals to silence this", FrameWarning
         )
-        n = decode(n)
+        n = decode(n, where=mask)
     n = to_facetlift(n, frame)
     sample = _inside(n, mask, sample=CHECK_SAMPLE)
     if sample is not None:

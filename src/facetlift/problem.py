@@ -425,8 +425,7 @@ def prepare(
             # name the option that keeps them)
             note = grazing_note if grazing_note is not None else (
                 None if outlier_eps is not None else
-                "the paper's outlier rule; outlier_eps / --outlier-eps sets another (e.g. "
-                "0.01 keeps steeper walls)")
+                "outlier_eps / --outlier-eps sets another: a smaller one keeps more, 0 all")
             rule = (f"; grazing: view cosine < {eps:.4g}"
                     f"{'' if note is None else ', ' + note}")
         frame = ""  # (many facing away: a map in another frame, e.g. world coordinates)

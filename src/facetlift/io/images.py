@@ -144,11 +144,11 @@ def _check_png_normals(data: bytes, path: Path, arg: str) -> None:
         )
 
 
-def _decode_unit(pixels: np.ndarray, path: Path, arg: str) -> np.ndarray:
-    """uint8/uint16 -> [-1, 1] per channel (:func:`facetlift.frames.decode`); float passes
-    through; other dtypes are refused."""
+def _decode_unit(pixels: np.ndarray, path: Path, arg: str, where=None) -> np.ndarray:
+    """uint8/uint16 -> [-1, 1] per channel (:func:`facetlift.frames.decode`, its unit-length
+    check among `where`, the alpha mask); float passes through; other dtypes are refused."""
     if pixels.dtype in frames.ENCODED_DTYPES:
-        return frames.decode(pixels)
+        return frames.decode(pixels, where=where)
     if pixels.dtype.kind == "f":
         return pixels.astype(np.float64)
     raise ValueError(
@@ -232,7 +232,7 @@ def read_normals(
                 _check_png_normals(fh.read(26), p, arg)
         pixels = _decode_image(p, ext, arg)
         rgb, alpha = _split_alpha(pixels, p, arg)
-        n = _decode_unit(rgb, p, arg)
+        n = _decode_unit(rgb, p, arg, alpha)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
         for names in (("R", "G", "B"), ("X", "Y", "Z")):
@@ -253,7 +253,7 @@ def read_normals(
     else:
         arr = _read_npy(p, arg)
         rgb, alpha = _split_alpha(arr, p, arg)
-        n = _decode_unit(rgb, p, arg)  # uint8/uint16 arrays decode like PNG pixels
+        n = _decode_unit(rgb, p, arg, alpha)  # uint8/uint16 arrays decode like PNG pixels
     return frames.to_facetlift(n, frame), alpha
 
 
