@@ -342,6 +342,21 @@ def test_info_detects_flips_encodings_and_counts(tmp_path, capsys):
     assert code == 1 and json.loads(out)["problem"]
 
 
+def test_info_says_when_the_frame_check_cannot_tell(tmp_path, capsys):
+    """A texture artist's y-down 8-bit detail map (slopes under 1 deg) was called 'as read
+    (consistent)'; integrated as read it was 44 % off."""
+    rng = np.random.default_rng(1)
+    f = np.fft.fft2(rng.normal(size=(128, 128)))
+    k2 = np.fft.fftfreq(128)[:, None] ** 2 + np.fft.fftfreq(128)[None] ** 2
+    h = np.real(np.fft.ifft2(f * np.exp(-k2 / (2 * 0.02**2))))
+    gy, gx = np.gradient(h)
+    s = 0.015 / np.abs(np.r_[gx.ravel(), gy.ravel()]).max()
+    n = facetlift.normals_from_gradients(gx * s, -gy * s)
+    io.write_normals(tmp_path / "d.png", n * [1, -1, 1], bits=8)
+    code, out, _ = run(capsys, "info", tmp_path / "d.png", "--json")
+    assert code == 0 and "the check cannot tell" in json.loads(out)["frame"]["likely"]
+
+
 def test_info_on_a_folder_without_a_normal_map_is_a_clear_error(tmp_path, capsys):
     """As integrate says it (it was an internal error, exit 3)."""
     (tmp_path / "maps").mkdir()

@@ -300,6 +300,11 @@ def _frame_guess(n, mask, K, problem=None, *, frame=None, layout=None) -> dict:
     return guess
 
 
+#: Where the field's own relative curl is above :data:`facetlift.frames.FLIP_MIN_CURL` and the
+#: y-flipped field's is below this multiple of it, ``info`` says the frame check cannot tell.
+UNTOLD = 1.5
+
+
 def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
     """:func:`_frame_guess` from the normals alone."""
     from . import frames
@@ -356,4 +361,13 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
         guess["likely"] = ("as read (consistent)" if away <= BACKFACING_FRAME_HINT else
                            f"another frame? {away:.0%} of the normals face away from the "
                            "camera (a world-frame export?): see docs/conventions.md")
+        if away <= BACKFACING_FRAME_HINT and own > frames.FLIP_MIN_CURL and (
+                flipped < UNTOLD * own):
+            # (a texture artist's y-down detail map, slopes under 1 deg in 8 bits, was called
+            # consistent: as read 43.9 % RMS, with --y-down 1.7 %)
+            guess["likely"] = ("as read, or y flipped: the check cannot tell (about as "
+                               "integrable either way: slopes near the quantisation step, "
+                               "noise, or planes meeting at creases and jumps); if the map "
+                               "is y-down (DirectX), name it: "
+                               f"{frames.flag(frames.negated(frame, 'y'))}")
     return guess
