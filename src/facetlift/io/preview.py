@@ -215,13 +215,15 @@ def write_height(path, surface) -> tuple[Path, tuple[float, float]]:
     inside = np.isfinite(depth)
     if not inside.any():
         raise ValueError("the surface has no finite depth to write as a height map")
-    low, high = float(depth[inside].max()), float(depth[inside].min())
+    low, high = float(np.nanmax(depth)), float(np.nanmin(depth))
     span = low - high
-    h = np.zeros(depth.shape)
-    if span > 0:
-        h[inside] = (low - depth[inside]) / span
     img = np.zeros(depth.shape + (2,), dtype=np.uint16)
-    img[..., 0] = np.round(h * 65535)
-    img[..., 1] = np.where(inside, 65535, 0)
+    if span > 0:  # (row by row: no full-size float temporaries beside the depth)
+        for r in range(depth.shape[0]):
+            row = np.subtract(low, depth[r])
+            row *= 65535.0 / span
+            np.rint(row, out=row)
+            img[r, :, 0] = np.nan_to_num(row)
+    img[..., 1][inside] = 65535
     _write_png(p, img)
     return p, (low, high)
