@@ -31,7 +31,7 @@ import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from .jobs import Job
+from .jobs import OUTPUT_STEMS, Job
 
 #: Name of the JSON-lines log inside the batch's output folder.
 LOG_NAME = "batch.jsonl"
@@ -96,11 +96,12 @@ def items(inputs, *, list_file=None) -> list[Item]:
             raise ValueError(f"`inputs`: {p} does not exist")
         if p.is_dir() and not _is_dataset(p, NORMAL_READ_FORMATS):
             kinds = NORMAL_READ_FORMATS + (".mat",)
-            paths += sorted((c, False) for c in p.iterdir()
-                            if (c.is_dir() and _is_dataset(c, NORMAL_READ_FORMATS))
-                            or (c.is_file() and c.suffix.lower() in kinds))
-            deeper = sorted(c.name for c in p.iterdir() if c.is_dir()
-                            and not _is_dataset(c, NORMAL_READ_FORMATS) and _holds_maps(c))
+            children = sorted(p.iterdir())
+            folders = {c: _is_dataset(c, NORMAL_READ_FORMATS) for c in children if c.is_dir()}
+            paths += [(c, False) for c in children if folders.get(c)
+                      or (c.is_file() and c.suffix.lower() in kinds)]
+            deeper = [c.name for c, dataset in folders.items()
+                      if not dataset and _holds_maps(c)]
             if deeper:  # (a user's folder of days, each a folder of maps: silently skipped)
                 warnings.warn(
                     f"batch: {p}: skipped {len(deeper)} subfolder(s) holding maps but no "
@@ -161,7 +162,6 @@ def _holds_maps(folder: Path) -> bool:
 
     if folder.name.startswith(".") or folder.name.endswith("_facetlift"):
         return False
-    outputs = {"depth", "preview", "mesh", "surface", "report", "discontinuities"}
     kinds = NORMAL_READ_FORMATS + (".mat",)
     try:
         with os.scandir(folder) as it:
@@ -170,7 +170,7 @@ def _holds_maps(folder: Path) -> bool:
         return False
     if "batch.jsonl" in names:
         return False
-    return any(Path(n).suffix.lower() in kinds and Path(n).stem not in outputs
+    return any(Path(n).suffix.lower() in kinds and Path(n).stem not in OUTPUT_STEMS
                and Path(n).stem.lower() != "mask" and not Path(n).stem.endswith("_mask")
                for n in names)
 

@@ -358,11 +358,10 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
 
         c = problem.counts  # (the share prepare's warning takes: of those not edge-on)
         away = c.get("facing_away", 0.0)
-        guess["likely"] = ("as read (consistent)" if away <= BACKFACING_FRAME_HINT else
-                           f"another frame? {away:.0%} of the normals face away from the "
-                           "camera (a world-frame export?): see docs/conventions.md")
-        if away <= BACKFACING_FRAME_HINT and own > frames.FLIP_MIN_CURL and (
-                flipped < UNTOLD * own):
+        if away > BACKFACING_FRAME_HINT:
+            guess["likely"] = (f"another frame? {away:.0%} of the normals face away from the "
+                               "camera (a world-frame export?): see docs/conventions.md")
+        elif own > frames.FLIP_MIN_CURL and flipped < UNTOLD * own:
             # (a texture artist's y-down detail map, slopes under 1 deg in 8 bits, was called
             # consistent: as read 43.9 % RMS, with --y-down 1.7 %)
             guess["likely"] = ("as read, or y flipped: the check cannot tell (about as "
@@ -370,4 +369,6 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
                                "noise, or planes meeting at creases and jumps); if the map "
                                "is y-down (DirectX), name it: "
                                f"{frames.flag(frames.negated(frame, 'y'))}")
+        else:
+            guess["likely"] = "as read (consistent)"
     return guess

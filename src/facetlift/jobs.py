@@ -36,6 +36,9 @@ OUTPUTS = {
     "height": "height.png",
 }
 DEFAULT_SAVE = ("npy", "ply", "png")
+#: The file stems of :data:`OUTPUTS` ("depth", "mesh", ...): files by these names in a folder
+#: are facetlift's results, not inputs.
+OUTPUT_STEMS = frozenset(Path(name).stem for name in OUTPUTS.values())
 
 
 @dataclass(frozen=True)

@@ -577,6 +577,11 @@ def check_confidence(confidence, shape: tuple[int, int], mask=None) -> np.ndarra
     return c
 
 
+def _is_points(prior) -> bool:
+    """Whether `prior` is a ``(rows, cols, depths)`` triple, not an (H, W) map."""
+    return isinstance(prior, (tuple, list)) and len(prior) == 3 and not np.isscalar(prior[0])
+
+
 def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.ndarray:
     """The prior as an (H, W) depth image, NaN where unknown: from an (H, W) array or a
     ``(rows, cols, depths)`` triple (pixel indices, rounded to the nearest pixel; depths of the
@@ -584,7 +589,7 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
     depth <= 0 (behind the camera) are left out before the averaging, with a warning, unless
     every one is (then the caller refuses them). Raises ValueError naming `prior`."""
     H, W = shape
-    if isinstance(prior, (tuple, list)) and len(prior) == 3 and not np.isscalar(prior[0]):
+    if _is_points(prior):
         rows, cols, depths = (numeric_array(v, f"prior[{k}]").astype(float).ravel()
                               for k, v in enumerate(prior))
         if not rows.size == cols.size == depths.size:
@@ -680,7 +685,6 @@ def check_prior(prior, prior_weight, shape, mask, camera):
         raise ValueError(f"`prior` depths must lie within +-{MAX_PRIOR_DEPTH:g} (beyond, the "
                          f"energy's squares overflow; choose other units); got "
                          f"{float(depth[k])!r} ({int(huge.sum())} such sample(s))")
-    points = isinstance(prior, (tuple, list)) and len(prior) == 3 and not np.isscalar(prior[0])
     if camera.positive_depth:
         neg = have & (depth <= 0)
         if neg.any():
@@ -695,7 +699,7 @@ def check_prior(prior, prior_weight, shape, mask, camera):
                 f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s)){hint}"
             )
     outside = int(np.isfinite(img[~mask]).sum())
-    if points:  # (a user's (u, v, z) given as (rows, cols, depths): 57 % fell outside)
+    if _is_points(prior):  # (a user's (u, v, z) given as (rows, cols, depths): 57 % fell off)
         _swapped_check(prior, mask)
     values = np.where(have, camera.from_depth(np.where(have, depth, 1.0)), np.nan)
     return values, np.where(have, w, 0.0), outside

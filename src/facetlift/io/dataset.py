@@ -115,8 +115,10 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
         raise ValueError(f"`folder`: {f} is not a directory")
     npath = _find(f, "normal_map", NORMAL_READ_FORMATS)
     if npath is None:
-        other = {"mask", "prior_depth", "confidence", "depth", "preview", "mesh", "surface",
-                 "report", "discontinuities"}  # (the folder's other files, facetlift's outputs)
+        from ..jobs import OUTPUT_STEMS
+
+        # (the folder's other files, and facetlift's outputs)
+        other = {"mask", "prior_depth", "confidence"} | OUTPUT_STEMS
         maps = sorted(p.name for p in f.iterdir()
                       if p.is_file() and p.suffix.lower() in NORMAL_READ_FORMATS
                       and p.stem.lower() not in other and not p.stem.endswith("_mask"))
