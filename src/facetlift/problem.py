@@ -481,7 +481,12 @@ def prepare(
         domain=domain, normals=nf, known=front, camera=cam, usable=usable, counts=counts,
         prior=pv, prior_weight=pw, confidence=conf, prior_blur=blur,
         # (whether the grazing threshold was chosen, or the camera's: facetlift.api.solve)
-        extras={"outlier_eps_given": outlier_eps is not None},
+        extras={"outlier_eps_given": outlier_eps is not None,
+                # (facets without a normal, not for the view's sake: missing, non-finite or
+                # zero-length, or of confidence 0; the discontinuity route fills the isolated
+                # ones, facetlift.methods.dgp.fill_gaps)
+                "no_normal": ~given | nan | bad["non-finite"] | bad["zero-length"] | (
+                    False if conf is None else counts_zero)},
     )
     if problem.has_prior and not problem.prior_components.all():
         _warn_unfixed(problem)

@@ -140,6 +140,14 @@ def run(
         prior = (blur.weight,) + prior[1:]
     if discontinuities:
         empty_components(domain, target)
+        given = target  # (the input's own normals: the deviation is measured on them)
+        scale = normal_scale(problem)
+        cosines = problem.view_cosines
+        filled = None
+        if FILL_WEIGHT > 0:
+            bx, by, target, scale, cosines, weights, filled = fill_gaps(
+                domain, bx, by, target, scale, cosines, weights,
+                problem.extras.get("no_normal", ~problem.known))
         def start(prior):
             if prior is None or target.all():
                 return None
@@ -154,10 +162,10 @@ def run(
         final = None
         power = discontinuous.FINAL_COS_POWER  # (docs/perspective.md, "Final weights")
         if (prior is None or blur is not None) and power:
-            final = np.where(target, problem.view_cosines, 1.0) ** power
+            final = np.where(target, cosines, 1.0) ** power
             final = final if weights is None else final * weights
         z, y, w, info = solve_discontinuous(
-            domain, bx, by, target, normal_scale=normal_scale(problem), k=discontinuity_k,
+            domain, bx, by, target, normal_scale=scale, k=discontinuity_k,
             max_iter=discontinuity_iter, tol=discontinuity_tol, flat_weight=flat_weight,
             callback=progress, prior=prior, weights=weights, x0=z0, final_weights=final,
             blur=blur,
@@ -170,7 +178,7 @@ def run(
         if astray is not None:  # (a blurred prior's corrections ran away: the pointwise one)
             prior = fusion_terms(problem)
             z, y, w, info = solve_discontinuous(
-                domain, bx, by, target, normal_scale=normal_scale(problem),
+                domain, bx, by, target, normal_scale=scale,
                 k=discontinuity_k, max_iter=discontinuity_iter, tol=discontinuity_tol,
                 flat_weight=flat_weight, callback=progress, prior=prior, weights=weights,
                 x0=start(prior))
@@ -191,7 +199,8 @@ def run(
         info["solver"] = "discontinuous"
         # (of the facets as returned, each on its own corner copies: the glued vertices' mean
         # angle, 1.8 deg where the result's was 0.68, described a surface not returned)
-        info["deviation"] = [mean_angle(copies @ E_X, copies @ E_Y, bx, by, target, s)]
+        info["deviation"] = [mean_angle(copies @ E_X, copies @ E_Y, bx, by, given, s)]
+        info["gaps_filled"] = 0 if filled is None else int(filled.sum())
         result = MethodResult(values=copies.mean(axis=1), info=info,
                               extras={"corner_values": copies})
     elif solver == "direct":  # both loops share this fixed point
@@ -214,6 +223,43 @@ def run(
     info["outliers"] = int((problem.known & ~target).sum())
     info["missing"] = int((~problem.known).sum())
     return result
+
+
+#: The discontinuity route gives a facet without a usable normal, at least two of whose four
+#: edge neighbours have one, their mean slope as its target with this weight (times their
+#: mean normal weight). Without it such a facet transmits no offset: where a cut leaves a
+#: bridge a facet or two wide (the DiLiGenT bear's head on its body), one missing normal in
+#: the bridge set the head free (400 random missing normals, 1 %: MADE 0.023 -> 0.273 mm on
+#: one seed of three). Larger gaps keep the flattest fill inside.
+FILL_WEIGHT = 0.1
+
+
+def fill_gaps(domain, bx, by, target, scale, cosines, weights, gaps):
+    """`bx, by, target, scale, cosines, weights` with the facets that :data:`FILL_WEIGHT`
+    fills given their edge neighbours' means (weights: times FILL_WEIGHT), and those facets
+    (m,) bool. Only facets of `gaps` (m,) bool are filled: those without a normal, not the
+    grazing or back-facing ones, which lie on the silhouettes, where the neighbours' slopes
+    would glue an occluding rim to what it occludes (filling those too took the bear from
+    0.025 to 0.38 mm)."""
+    sides = list(discontinuous.neighbours(domain).values())  # (-1: none)
+    nb = [np.maximum(q, 0) for q in sides]
+    have = [(q >= 0) & target[qq] for q, qq in zip(sides, nb, strict=True)]
+    count = np.sum(have, axis=0)
+    fill = gaps & ~target & (count >= 2)
+    if not fill.any():
+        return bx, by, target, scale, cosines, weights, fill
+    c = count[fill].astype(float)
+
+    def mean(v):
+        out = np.array(v, dtype=float)
+        out[fill] = sum(np.where(h[fill], v[qq[fill]], 0.0)
+                        for h, qq in zip(have, nb, strict=True)) / c
+        return out
+
+    w = np.ones(domain.n_facets) if weights is None else np.asarray(weights, dtype=float)
+    w = mean(w)
+    w[fill] *= FILL_WEIGHT
+    return (mean(bx), mean(by), target | fill, mean(scale), mean(cosines), w, fill)
 
 
 def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0) -> None:
