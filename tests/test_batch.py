@@ -111,6 +111,26 @@ def test_in_process_batch_isolates_failures_and_logs_each_item(tmp_path):
     assert not (out / "broken").exists()
 
 
+def test_the_log_counts_each_item_s_missing_and_unusable_normals(tmp_path):
+    """A photometric-stereo user's check: an item's 197 shadowed (NaN) normals were nowhere in
+    batch.jsonl (missing normals are no warning)."""
+    (tmp_path / "in").mkdir()
+    r, c = np.indices((16, 18)) + 0.5
+    n = facetlift.normals_from_gradients(0.3 * np.cos(c / 3), 0.2 * np.sin(r / 4))
+    n[2:4, 5:8] = np.nan  # 6 missing
+    n[9, 9] = 0.0  # 1 zero-length
+    np.save(tmp_path / "in" / "a.npy", n)
+    io.write_mask(tmp_path / "in" / "a_mask.png", np.ones((16, 18), bool))
+    out = tmp_path / "out"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        facetlift.batch([tmp_path / "in"], out, workers=1, save=("npy",), progress=False)
+    log = [json.loads(line) for line in (out / fb.LOG_NAME).read_text().splitlines()]
+    counts = log[0]["normals"]
+    assert counts["pixels"] == 288 and counts["missing"] == 6 and counts["zero-length"] == 1
+    assert counts["usable"] == 288 - 7 and "zero_confidence" not in counts
+
+
 def test_resume_skips_finished_items_and_retries_failed_ones(tmp_path, monkeypatch):
     maps(tmp_path / "in", n=3)
     out = tmp_path / "out"
@@ -257,7 +277,7 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
     assert set(recs[0]) - {"resumed"} <= set(recs[2]) | {"outputs", "mean_deviation",
                                                          "shape", "facets", "converged",
                                                          "mask_source", "perspective",
-                                                         "depth_range"}
+                                                         "depth_range", "normals"}
     code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "1",
                  "-s", "npy", "--progress"])
     assert code == 1 and "batch:" in capsys.readouterr().err  # the bar, on stderr
@@ -391,6 +411,14 @@ def test_cli_batch_says_an_items_error_when_it_is_done(tmp_path, capsys, monkeyp
     out, err = capsys.readouterr()
     assert code == 0 and "warning: odd:" in err
     assert "batch: 1 of 1 succeeded (1 with warnings)" in out
+    # ... and so is one from an earlier run (a user's resumed batch hid its wrong-frame
+    # warning): the summary says that its warnings are in the log
+    code = main(["batch", str(tmp_path / "in2"), "-o", str(tmp_path / "o2"), "--no-progress",
+                 "--save", "npy", "--resume"])
+    out, err = capsys.readouterr()
+    assert code == 0 and "warning: odd:" not in err
+    assert ("batch: 1 of 1 succeeded (1 with warnings, 1 of them from an earlier run, in the "
+            "log) (1 from an earlier run)") in out
 
 
 def test_batch_warns_of_a_camera_file_beside_plain_maps(tmp_path):

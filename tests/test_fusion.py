@@ -400,14 +400,21 @@ def test_info_checks_a_prior_and_a_confidence_given_as_flags(tmp_path, capsys):
     import json
 
     n, depth, prior, sel = _write_inputs(tmp_path)
-    np.save(tmp_path / "conf.npy", np.ones(depth.shape))
+    conf = np.ones(depth.shape)
+    conf[0, 0] = 0.0  # (outside the mask below: not in the range, a user's check)
+    np.save(tmp_path / "conf.npy", conf)
     (tmp_path / "pts.csv").write_text("row,col,depth\n3,4,5\n1,900,5\n")
+    mask = np.ones(depth.shape, bool)
+    mask[0, :] = False
+    facetlift.io.write_mask(tmp_path / "m.png", mask)
     code = main(["info", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "pts.csv"),
-                 "--confidence", str(tmp_path / "conf.npy")])
+                 "--confidence", str(tmp_path / "conf.npy"), "--mask", str(tmp_path / "m.png")])
     out = capsys.readouterr().out
     assert code == 0, out
-    assert "depth prior (" in out and "pts.csv): 1 known pixels, 5 to 5" in out
-    assert "normal confidence (" in out and "conf.npy): 672 known pixels, 1 to 1" in out
+    assert ("depth prior (" in out
+            and "pts.csv): 1 known pixels, 1 in the mask, 5 to 5 there" in out)
+    assert ("normal confidence (" in out
+            and "conf.npy): 672 known pixels, 644 in the mask, 1 to 1 there" in out)
     assert out.count("1 of the 2 sample(s) lie outside the 24 x 28 image") == 1
     np.save(tmp_path / "bad.npy", np.where(sel, -1.0, np.nan))
     code = main(["info", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "bad.npy"),
@@ -620,6 +627,17 @@ def test_dataset_folder_picks_up_prior_and_confidence(tmp_path, capsys):
         assert "contradict" in capsys.readouterr().err
     data = facetlift.io.read_dataset(folder, with_prior=False, with_confidence=False)
     assert data["prior"] is None and data["confidence"] is None
+    # a method that takes neither names the folder's file and the flag that leaves it out (a
+    # batch user's --method bini was refused a confidence it had not asked for)
+    assert main(["integrate", str(folder), "--no-prior", "--method", "bini", "-o",
+                 str(tmp_path / "b")]) == 1
+    err = " ".join(capsys.readouterr().err.split())
+    assert ("does not take a" in err and "the dataset folder's confidence.* file: "
+            "--no-confidence leaves it out" in err)
+    assert main(["integrate", str(folder), "--no-confidence", "--method", "bini", "-o",
+                 str(tmp_path / "b")]) == 1
+    assert "prior_depth.* file: --no-prior leaves it out" in " ".join(
+        capsys.readouterr().err.split())
 
 
 @pytest.mark.parametrize("extra,match", [
@@ -775,6 +793,13 @@ def test_a_prior_that_tears_the_surface_into_many_pieces_is_warned_about():
         warnings.simplefilter("error", UserWarning)  # a lower weight: a few pieces, no warning
         facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size, prior=noisy,
                             prior_weight=0.03, discontinuities=True)
+    # already at the weight the warning recommends: it says so instead of recommending it (a
+    # user at 0.01 was told to lower it to 0.01)
+    noisier = np.where(gt.mask, gt.depth + rng.normal(0, 40 * gt.pixel_size, gt.depth.shape),
+                       np.nan)
+    with pytest.warns(UserWarning, match=r"A prior_weight below its 0\.01 .*may be noisier"):
+        facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size, prior=noisier,
+                            prior_weight=0.01, discontinuities=True)
 
 
 def test_a_weak_prior_takes_the_forcing_term_and_a_strong_one_does_not(monkeypatch):

@@ -599,9 +599,10 @@ def log_record(rec: dict) -> dict:
 
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
             "shape", "facets", "mask_source", "converged", "warnings", "resumed", "settings",
-            "input_stamp", "perspective", "depth_range")
+            "input_stamp", "perspective", "depth_range", "normals")
     # (mask_source: whether NAME_mask.png was used, a user asked; perspective: whether a
-    # camera was used, a dataset folder's K.txt included; depth_range: height.png's scale)
+    # camera was used, a dataset folder's K.txt included; depth_range: height.png's scale;
+    # normals: the mask's pixels without a usable normal, by reason)
     return jsonable({k: rec[k] for k in keep if k in rec})
 
 

@@ -519,8 +519,11 @@ def _info_lines(rec: dict) -> list[str]:
             got = rec[name]
             span = (f", {got['range'][0]:.6g} to {got['range'][1]:.6g}" if got["range"]
                     else "")
+            inside = got.get("known_in_mask")
             lines.append(f"  {what} ({got.get('source', 'dataset file')}): "
-                         f"{got['known_pixels']} known pixels{span}")
+                         f"{got['known_pixels']} known pixels"
+                         + (f", {inside} in the mask" if inside is not None else "")
+                         + (f"{span} there" if span and inside is not None else span))
     lines += [f"  warning: {w}" for w in rec.get("warnings", [])]
     if not rec["usable"]:
         lines.append(f"  cannot be integrated as read: {rec['problem']}")
@@ -644,10 +647,13 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     if as_json:  # (every item's record was printed as it was known)
         _STATE["printed_json"] = True
     resumed = sum(bool(r.get("resumed")) for r in records)
-    warned = sum(r["status"] == "ok" and bool(r.get("warnings")) and not r.get("resumed")
-                 for r in records)  # (those whose warnings this run printed)
+    warned = [bool(r.get("resumed")) for r in records
+              if r["status"] == "ok" and r.get("warnings")]
+    # (those of an earlier run too, whose warnings this run did not print: a user's resumed
+    # batch said nothing of a wrong-frame warning its log held)
+    old = (f", {sum(warned)} of them from an earlier run, in the log" if any(warned) else "")
     line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
-            + (f" ({warned} with warnings)" if warned else "")
+            + (f" ({len(warned)} with warnings{old})" if warned else "")
             + (f" ({resumed} from an earlier run)" if resumed else "")
             + (f", {len(failed)} failed" if failed else "")
             + f" (log: {outdir / LOG_NAME}), {time.perf_counter() - t0:.1f} s")
@@ -777,6 +783,14 @@ def _as_flags(message: str) -> str:
                 typed = [o for o in param.opts for a in args if a == o or a.startswith(o + "=")]
                 if typed:
                     names[param.name] = typed[0]
+    # (a method option given as --option KEY=VALUE: named so, `k` alone was a name the user
+    # had not typed, a user's check)
+    given = [b for a, b in zip(args, args[1:], strict=False) if a == "--option"] + [
+        a[len("--option="):] for a in args if a.startswith("--option=")]
+    for text in given:
+        key = text.split("=", 1)[0].strip().replace("-", "_")
+        if key.isidentifier() and key not in names:
+            names[key] = f"--option {key}"
     return re.sub(r"`(\w+)`", lambda m: names.get(m.group(1), m.group(0)), message)
 
 

@@ -206,6 +206,12 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         except ValueError as e:
             return unusable(e)
     d = problem.domain
+    for name, arr in (("prior", prior_map), ("confidence", inp.confidence)):
+        if arr is not None and name in out:  # (the range over the mask, where it is used: a
+            # user's confidence read "0 to 1" from the background's zeros)
+            inside = d.mask & np.isfinite(arr)
+            out[name].update(known_in_mask=int(inside.sum()), range=[
+                float(arr[inside].min()), float(arr[inside].max())] if inside.any() else None)
     counts = dict(problem.counts)
     out.update(
         usable=True,
@@ -338,9 +344,11 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
         except ValueError:
             return guess
     curls = frames.flip_curls(problem)
-    curls.pop("curl_x_flipped")
+    # (the verdict on the better flip, as integrate's warning: info called a map "not by the
+    # margin" that integrate called far more integrable flipped, a user's check)
+    flipped = min(curls["curl_y_flipped"], curls.pop("curl_x_flipped"))
     guess.update(curls)
-    own, flipped = curls["curl"], curls["curl_y_flipped"]
+    own = curls["curl"]
     verdict = frames.flip_verdict(own, flipped)
     if verdict == "claim":
         guess["likely"] = ("y flipped: far more integrable with y negated (try "

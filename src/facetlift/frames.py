@@ -528,19 +528,24 @@ def flip_check(problem) -> dict:
     """
     out = flip_curls(problem)
     own = out["curl"]
-    verdict = flip_verdict(own, min(out["curl_y_flipped"], out["curl_x_flipped"]))
+    best = min(out["curl_y_flipped"], out["curl_x_flipped"])
+    verdict = flip_verdict(own, best)
     frame = _READ_IN.get()  # (the frame the map was read in: the hint is relative to it)
+    # (the figure the verdict was made on: the y flip's alone was printed, 0.47 against 0.93
+    # as given, where the x flip's 0.44 had made the claim, a user's check)
+    flips = (f"{out['curl_y_flipped']:.2f} with y flipped" if out["curl_y_flipped"] <= best
+             else f"{out['curl_y_flipped']:.2f} with y flipped, {best:.2f} with x flipped")
     if verdict == "hint":
         try_ = ("negating the y slope (q)" if frame == GRADIENT_FIELD
                 else flag(negated(frame, "y")))
         warn(f"the normals are more integrable with y flipped (relative curl {own:.2f} as "
-             f"given, {out['curl_y_flipped']:.2f} with y flipped), not by the margin that "
+             f"given, {flips}), not by the margin that "
              "says the frame is wrong (strongly correlated errors on a nearly flat view do "
              f"this too): if the surface looks bent or inside-out, try {try_}",
              FrameWarning)
     elif verdict == "claim":
         head = (f"the normals are far more integrable with y flipped (relative curl {own:.2f} "
-                f"as given, {out['curl_y_flipped']:.2f} with y flipped)")
+                f"as given, {flips})")
         if frame == GRADIENT_FIELD:
             warn(f"{head}: the field's y slope probably has the wrong sign: negate q (p with "
                  "--gradient-frame rowcol), or the x slope instead if the surface then comes "

@@ -192,6 +192,19 @@ def read(job: Job) -> Input:
                  confidence=conf, field=bool(field_input))
 
 
+def _from_folder(message: str, job: Job, inp: Input) -> str:
+    """`message` with the dataset folder's file named where a method refused a prior or a
+    confidence that the folder gave (a batch user's `--method bini` was refused a
+    `confidence` it had not asked for, without the file or the flag that leaves it out)."""
+    for what, given, stem, flag in (
+            ("prior", job.prior is None and inp.prior is not None, "prior_depth", "--no-prior"),
+            ("confidence", job.confidence is None and inp.confidence is not None, "confidence",
+             "--no-confidence")):
+        if given and f"does not take a `{what}`" in message:
+            return f"{message} (given by the dataset folder's {stem}.* file: {flag} leaves it out)"
+    return message
+
+
 def _no_prior_checks(job: Job) -> None:
     """Refuse the prior's own settings in a job without a prior (ValueError naming each)."""
     if job.prior_scale is not None:
@@ -341,12 +354,16 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         t1 = time.perf_counter()
         announce(progress, "integrating")
         with frames.read_in(frames.GRADIENT_FIELD if inp.field else job.normal_frame):
-            surface = facetlift.integrate(
-                inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size, K=inp.K,
-                backfacing=job.backfacing, outlier_eps=job.outlier_eps, prior=depth_prior,
-                prior_weight=inp.prior_weight if inp.prior is not None else 1.0,
-                confidence=inp.confidence, prior_blur=job.prior_blur, **opts,
-            )
+            try:
+                surface = facetlift.integrate(
+                    inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size,
+                    K=inp.K, backfacing=job.backfacing, outlier_eps=job.outlier_eps,
+                    prior=depth_prior,
+                    prior_weight=inp.prior_weight if inp.prior is not None else 1.0,
+                    confidence=inp.confidence, prior_blur=job.prior_blur, **opts,
+                )
+            except ValueError as e:
+                raise ValueError(_from_folder(str(e), job, inp)) from None
         t_integrate = time.perf_counter() - t1
         t2 = time.perf_counter()
         announce(progress, "writing outputs")
@@ -377,11 +394,27 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "depth_range": _depth_range(surface),
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),
         "converged": bool(sinfo.get("converged", True)),
+        # (how many mask pixels had no usable normal, by reason: a batch's missing normals
+        # were nowhere in batch.jsonl, a photometric-stereo user's check)
+        "normals": _normal_counts(sinfo),
         "warnings": [str(w.message) for w in caught],
         "info": jsonable(sinfo),
         "timings": {"read": t_read, "integrate": t_integrate,
                     "write": time.perf_counter() - t2, "total": time.perf_counter() - t0},
     }
+
+
+#: The counts of info["input"] a job record keeps (``normals``), in this order.
+NORMAL_COUNTS = ("pixels", "usable", "missing", "non-finite", "zero-length", "back-facing",
+                 "grazing", "zero_confidence")
+
+
+def _normal_counts(info: dict) -> dict:
+    """Pixels of the mask and how many had a usable normal or none, by reason (those of
+    :data:`NORMAL_COUNTS` that the method's info has)."""
+    counts = info.get("input") or {}
+    return {k: int(counts[k]) for k in NORMAL_COUNTS
+            if isinstance(counts.get(k), (int, np.integer))}
 
 
 def _depth_range(surface) -> list | None:

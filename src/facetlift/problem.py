@@ -442,8 +442,9 @@ def prepare(
         if away > BACKFACING_FRAME_HINT:
             frame = (f"; {away:.0%} of the normals face away from the "
                      "camera, far more than noise or quantisation turn away: is the map in "
-                     "another frame (world coordinates, a rotated export)? docs/conventions.md "
-                     "and docs/recipes.md say how to convert it")
+                     "another frame (world coordinates, a rotated export) or in BGR channel "
+                     "order (OpenCV's imwrite; an axis string such as z,-y,-x swaps it back)? "
+                     "docs/conventions.md and docs/recipes.md say how to convert it")
             Kc = getattr(cam, "K", None)
             if Kc is not None:  # (a K of another image turns the rays: a user's check)
                 frame += (f"; or is K for another image (a crop or a resize)? Its principal "

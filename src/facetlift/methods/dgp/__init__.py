@@ -275,13 +275,19 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0) -> None:
     many = max(TORN_PIECES * domain.n_facets, 50)
     if prior is not None and (info["cut_corners"] > TORN or pieces > many):
         samples = int((prior[0] > 0).sum())
+        typical = float(np.median(prior[0][prior[0] > 0])) if samples else 0.0
+        # (a user at 0.01 was told to lower it to 0.01)
+        lower = ("A lower prior_weight (--prior-weight; 0.01 did best for a dense prior with "
+                 "noise of 1-3 pixel footprints, docs/fusion.md)" if typical > TORN_BEST * 1.01
+                 else f"A prior_weight below its {typical:g} (--prior-weight; {TORN_BEST:g} did "
+                 "best for a dense prior with noise of 1-3 pixel footprints, docs/fusion.md: "
+                 "this one may be noisier, or not aligned with the normals)")
         warn(f"discontinuities with a depth prior: {info['cut_corners']:.0%} of the facet "
              f"corners were cut, {pieces:,} pieces ({samples:,} prior samples): where the "
              "prior disagrees "
              "with the normals from pixel to pixel (a noisy dense map), its samples tear "
-             "the surface apart. Lower prior_weight (--prior-weight; 0.01 did best for a "
-             "dense prior with noise of 1-3 pixel footprints, docs/fusion.md), give "
-             "prior_blur, or integrate without discontinuities")
+             f"the surface apart. {lower}, prior_blur, or integrating without discontinuities "
+             "may do better")
     if info["unsolved"]:
         why = (f"more than {discontinuous.DIRECT_POLISH:,} vertices"
                if domain.n_vertices > discontinuous.DIRECT_POLISH else
@@ -397,6 +403,10 @@ PRIOR_STRONG = 100.0
 #: outliers at weight 100 into 782 (1.6 %). Without a prior the benchmark's 60 mesh renders
 #: at exact and 8-bit normals give at most 42 mesh pieces (0.2 %; 2026-12-03, eighth session).
 TORN_PIECES = 0.01
+
+#: The weight that did best for a dense noisy prior with discontinuities (docs/fusion.md),
+#: which the tearing warning recommends.
+TORN_BEST = 0.01
 
 
 def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
