@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import gc
 import math
+import warnings
 import weakref
 from contextlib import nullcontext
 from pathlib import Path
@@ -875,7 +876,7 @@ def test_the_polish_refresh_skips_a_hierarchy_already_of_its_system(monkeypatch)
 
 def test_isolated_missing_normals_are_filled_weakly_and_silhouettes_are_not():
     """fill_gaps: a facet without a normal with at least two edge neighbours that have one
-    gets their mean slope at FILL_WEIGHT of their weight; a grazing facet is never filled,
+    gets their mean slope at GAP_WEIGHT of their weight; a grazing facet is never filled,
     nor one of a larger gap's inside."""
     from facetlift.domain import Domain
     from facetlift.methods import dgp
@@ -898,7 +899,7 @@ def test_isolated_missing_normals_are_filled_weakly_and_silhouettes_are_not():
         domain, np.where(target, bx, 0), np.where(target, by, 0), target, scale, cos, None, gaps)
     assert filled[lone] and not filled[grazing] and t2[lone] and not t2[grazing]
     assert bx2[lone] == pytest.approx(0.3) and by2[lone] == pytest.approx(0.4)
-    assert w2[lone] == pytest.approx(dgp.FILL_WEIGHT) and w2[~filled] == pytest.approx(1.0)
+    assert w2[lone] == pytest.approx(dgp.GAP_WEIGHT) and w2[~filled] == pytest.approx(1.0)
     assert s2[lone] == 2.0 and c2[lone] == 0.5
     assert filled[block].tolist() == ((r[block] == 1) & (c[block] == 4)).tolist()
     # nothing to fill: the inputs as they were (no weights made)
@@ -908,9 +909,9 @@ def test_isolated_missing_normals_are_filled_weakly_and_silhouettes_are_not():
 
 def test_scattered_missing_normals_keep_the_bear_s_head_in_place():
     """A photometric-stereo user's check: 200-400 random missing normals (0.5-1 % of the
-    bear) set its head loose on 2 of 5 seeds (0.27 mm MADE instead of 0.025): a facet without
+    bear) set its head loose on 3 of 5 seeds (0.27 mm MADE instead of 0.025): a facet without
     a normal passed no offset across the narrow bridge the neck's cut leaves. Filled weakly
-    from its neighbours (FILL_WEIGHT), the head stays."""
+    from its neighbours (GAP_WEIGHT), the head stays."""
     bear = Path(__file__).resolve().parents[2] / "shared" / "data" / "normal_maps" / \
         "diligent_bear"
     if not bear.is_dir():
@@ -926,3 +927,59 @@ def test_scattered_missing_normals_keep_the_bear_s_head_in_place():
         s = facetlift.integrate(n, d["mask"], K=d["K"], discontinuities=True)
     assert s.info["missing"] == 400 and s.info["gaps_filled"] == 400
     assert facetlift.metrics.made(s.depth, gt, d["mask"])[0] < 0.05
+
+
+def test_pieces_that_hold_no_prior_sample_are_counted():
+    """A LiDAR user's sphere without a point on it was placed by the occlusion rule 498 mm
+    off, without a word: place_pieces counts the large pieces that no sample holds."""
+    from facetlift.domain import Domain
+    from facetlift.methods import dgp
+
+    H, W = 12, 30
+    domain = Domain(np.ones((H, W), bool))
+    r, c = domain.pixels
+    height = np.where(c < 15, 0.0, 50.0)  # two pieces, a jump of 50 between them
+    copies = np.repeat(height[:, None], 4, axis=1)
+    zeros = np.zeros(domain.n_facets)
+    target = np.ones(domain.n_facets, bool)
+    anchored = (c == 3) & (r == 5)  # one sample, on the left piece
+    _, info = dgp.place_pieces(domain, copies, zeros, zeros, target, 1.0, anchored=anchored)
+    assert info["pieces"] == 2 and info["unanchored_pieces"] == 1
+    assert info["unanchored_facets"] == H * 15 and info["unanchored_largest"][0] == H * 15
+    _, info = dgp.place_pieces(domain, copies, zeros, zeros, target, 1.0,
+                               anchored=anchored | ((c == 20) & (r == 5)))
+    assert info["unanchored_pieces"] == 0
+
+
+def test_gap_fill_weights_and_which_facets_it_fills_end_to_end():
+    """A review's gaps: the fill's weight with a confidence map (GAP_WEIGHT times the
+    neighbours' mean), a confidence-0 facet filled, a back-facing one not, and the counts."""
+    from facetlift.domain import Domain
+    from facetlift.methods import dgp
+
+    domain = Domain(np.ones((5, 5), bool))
+    m = domain.n_facets
+    r, c = domain.pixels
+    lone = int(np.flatnonzero((r == 2) & (c == 2))[0])
+    target = np.ones(m, bool)
+    target[lone] = False
+    gaps = ~target
+    conf = np.where(c % 2 == 0, 2.0, 4.0)  # the four neighbours of (2, 2): 4, 4, 2, 2
+    out = dgp.fill_gaps(domain, np.zeros(m), np.zeros(m), target, np.ones(m), np.ones(m),
+                        conf, gaps)
+    assert out[5][lone] == pytest.approx(dgp.GAP_WEIGHT * 3.0)
+    assert out[5][~out[6]] == pytest.approx(conf[~out[6]]) and conf[lone] == 2.0  # (a copy)
+
+    r, c = np.indices((24, 28))
+    n = facetlift.normals_from_gradients(0.2 * np.cos(c / 4), 0.1 * np.sin(r / 5))
+    n[5, 6] = [0.0, 0.3, -0.95]  # back-facing: not filled
+    n[10, 12] = np.nan  # missing: filled
+    conf = np.ones((24, 28))
+    conf[15, 20] = 0.0  # confidence 0: filled as a missing normal
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        s = facetlift.integrate(n, np.ones((24, 28), bool), confidence=conf,
+                                discontinuities=True)
+    assert s.info["gaps_filled"] == 2
+    assert s.info["missing"] == 2 and s.info["outliers"] == 1  # (the back-facing facet is
+    # not known; the confidence-0 one is known and not usable: counted as before the fill)

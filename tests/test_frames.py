@@ -218,6 +218,29 @@ def test_flip_check_warns_on_a_y_flipped_map_and_names_the_flag():
     assert good.info["mean_deviation"] < s.info["mean_deviation"]
 
 
+def test_flip_check_names_the_axis_whose_flip_decided_with_a_camera():
+    """A review: with a pinhole camera the two flips differ; an x-flipped map (0.65 as given,
+    0.68 with y flipped, 0.0005 with x flipped) was told to try the y flip."""
+    from facetlift import describe
+    from facetlift.errors import FrameWarning
+    from facetlift.perspective import normals_from_depth
+
+    H, W = 120, 160
+    K = np.array([[60.0, 0, 79.5], [0, 60.0, 59.5], [0, 0, 1]])
+    r, c = np.indices((H, W))
+    depth = 3.0 + 0.4 * np.cos(c / 9.0) * np.sin(r / 11.0)
+    n = normals_from_depth(depth, K) * [-1, 1, 1]
+    with pytest.warns(FrameWarning, match=r"far more integrable with x flipped .*"
+                      r"with x flipped, .* with y flipped\).*wrong in x: try "
+                      r"--normal-frame=-x,y,z") as rec:
+        s = facetlift.integrate(n, K=K)
+    ic = s.info["integrability"]
+    assert ic["curl_x_flipped"] < frames.FLIP_RATIO * ic["curl"] < ic["curl_y_flipped"]
+    assert len([w for w in rec if issubclass(w.category, FrameWarning)]) == 1
+    guess = describe._frame_guess(n, None, K, prepare(n, K=K), frame=None, layout=None)
+    assert guess["likely"].startswith("x flipped") and "curl_x_flipped" in guess
+
+
 def test_flip_check_on_the_real_bear_as_read_and_flipped():
     data = io.read_dataset(BEAR)
     ok = frames.flip_check(prepare(data["normals"], data["mask"], K=data["K"]))

@@ -308,3 +308,18 @@ def test_a_principal_point_outside_the_image_is_warned_about():
         warnings.simplefilter("error")
         facetlift.integrate(n, K=[100.0, 100.0, 14.5, 9.5])  # the centre: no warning
         facetlift.integrate(n, K=[100.0, 100.0, -0.5, 19.5])  # (the edges still inside)
+
+
+def test_info_keeps_the_principal_point_warning_of_a_map_it_cannot_integrate(tmp_path, capsys):
+    """A review: `info` dropped the warnings that came before the refusal, and a K for another
+    image is what makes a map unusable."""
+    from facetlift.cli import main
+
+    n = np.zeros((20, 30, 3))
+    n[..., 0], n[..., 2] = 0.8, 0.6
+    np.save(tmp_path / "n.npy", n)
+    (tmp_path / "K.txt").write_text("100 100 -2000 10\n")
+    code = main(["info", str(tmp_path / "n.npy"), "--K", str(tmp_path / "K.txt")])
+    out = " ".join(capsys.readouterr().out.split())
+    assert code == 1 and "cannot be integrated as read" in out
+    assert "principal point (cx -2000, cy 10) lies outside" in out

@@ -55,8 +55,10 @@ def test_backfacing_is_judged_by_the_viewing_ray_in_perspective():
     tilt[..., 2] -= 0.6  # n_z < 0 but still facing the camera
     tilt /= np.linalg.norm(tilt, axis=-1, keepdims=True)
     assert (tilt[..., 2] < 0).all()
-    assert facetlift.prepare(tilt, K=K_off).usable.all()  # accepted
-    with pytest.raises(ValueError, match="facing away from the camera"):
+    with pytest.warns(UserWarning, match="principal point"):  # (far off-axis on purpose)
+        assert facetlift.prepare(tilt, K=K_off).usable.all()  # accepted
+    with pytest.raises(ValueError, match="facing away from the camera"), \
+            pytest.warns(UserWarning, match="principal point"):
         facetlift.prepare(-seen, K=K_off, backfacing="error")
     with pytest.raises(ValueError, match="facing away from the camera"):
         facetlift.prepare(tilt, backfacing="error")  # orthographically the same normals do

@@ -524,7 +524,7 @@ def _info_lines(rec: dict) -> list[str]:
                          f"{got['known_pixels']} known pixels"
                          + (f", {inside} in the mask" if inside is not None else "")
                          + (f"{span} there" if span and inside is not None else span))
-    lines += [f"  warning: {w}" for w in rec.get("warnings", [])]
+    lines += [f"  warning: {_as_flags(w)}" for w in rec.get("warnings", [])]
     if not rec["usable"]:
         lines.append(f"  cannot be integrated as read: {rec['problem']}")
         return lines
@@ -788,9 +788,12 @@ def _as_flags(message: str) -> str:
     given = [b for a, b in zip(args, args[1:], strict=False) if a == "--option"] + [
         a[len("--option="):] for a in args if a.startswith("--option=")]
     for text in given:
-        key = text.split("=", 1)[0].strip().replace("-", "_")
-        if key.isidentifier() and key not in names:
-            names[key] = f"--option {key}"
+        typed = text.split("=", 1)[0].strip()
+        key = typed.replace("-", "_")
+        # (not "prior": regularization's --option prior= is no depth prior, and a message
+        # about the depth prior (integrate's own `prior`) keeps its name, a review)
+        if key.isidentifier() and key not in names and key != "prior":
+            names[key] = f"--option {typed}"
     return re.sub(r"`(\w+)`", lambda m: names.get(m.group(1), m.group(0)), message)
 
 

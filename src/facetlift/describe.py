@@ -204,6 +204,10 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
             problem = prepare(checked, inp.mask, K=inp.K, prior=prior_map,
                               confidence=inp.confidence)
         except ValueError as e:
+            # (the warnings that came first too: a K for another image is what makes a map
+            # unusable, and its warning was dropped, a review)
+            out["warnings"] += [str(w.message) for w in caught if not issubclass(
+                w.category, UnusableNormalsWarning)]
             return unusable(e)
     d = problem.domain
     for name, arr in (("prior", prior_map), ("confidence", inp.confidence)):
@@ -344,23 +348,23 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
         except ValueError:
             return guess
     curls = frames.flip_curls(problem)
-    # (the verdict on the better flip, as integrate's warning: info called a map "not by the
-    # margin" that integrate called far more integrable flipped, a user's check)
-    flipped = min(curls["curl_y_flipped"], curls.pop("curl_x_flipped"))
     guess.update(curls)
-    own = curls["curl"]
+    # (the verdict on the better flip, named, as integrate's warning: info called a map "not
+    # by the margin" that integrate called far more integrable flipped, a user's check)
+    a, b = ("y", "x") if curls["curl_y_flipped"] <= curls["curl_x_flipped"] else ("x", "y")
+    own, flipped = curls["curl"], curls[f"curl_{a}_flipped"]
     verdict = frames.flip_verdict(own, flipped)
     if verdict == "claim":
-        guess["likely"] = ("y flipped: far more integrable with y negated (try "
-                           f"{frames.flag(frames.negated(frame, 'y'))}, or "
-                           f"{frames.flag(frames.negated(frame, 'x'))}: the two are equally "
-                           "integrable and inside-out from each other; your estimator's "
-                           "frame is in docs/conventions.md)")
+        guess["likely"] = (f"{a} flipped: far more integrable with {a} negated (try "
+                           f"{frames.flag(frames.negated(frame, a))}, or "
+                           f"{frames.flag(frames.negated(frame, b))}: inside-out from each "
+                           "other, and about as integrable without a camera; your "
+                           "estimator's frame is in docs/conventions.md)")
     elif verdict == "hint":
-        guess["likely"] = ("as read, or y flipped: more integrable with y negated, not by the "
-                           "margin that says so (correlated errors on a flat view do this "
+        guess["likely"] = (f"as read, or {a} flipped: more integrable with {a} negated, not by "
+                           "the margin that says so (correlated errors on a flat view do this "
                            f"too); if the surface looks wrong, try "
-                           f"{frames.flag(frames.negated(frame, 'y'))}")
+                           f"{frames.flag(frames.negated(frame, a))}")
     else:
         from .problem import BACKFACING_FRAME_HINT
 

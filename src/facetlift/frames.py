@@ -528,32 +528,34 @@ def flip_check(problem) -> dict:
     """
     out = flip_curls(problem)
     own = out["curl"]
-    best = min(out["curl_y_flipped"], out["curl_x_flipped"])
+    # the axis whose flip is the more integrable decides and is named first (with a pinhole
+    # camera the two flips differ: a review's x-flipped map, 0.65 as given, 0.68 with y and
+    # 0.0005 with x flipped, was told to try the y flip); orthographically they tie: y first
+    a, b = ("y", "x") if out["curl_y_flipped"] <= out["curl_x_flipped"] else ("x", "y")
+    best = out[f"curl_{a}_flipped"]
     verdict = flip_verdict(own, best)
     frame = _READ_IN.get()  # (the frame the map was read in: the hint is relative to it)
-    # (the figure the verdict was made on: the y flip's alone was printed, 0.47 against 0.93
-    # as given, where the x flip's 0.44 had made the claim, a user's check)
-    flips = (f"{out['curl_y_flipped']:.2f} with y flipped" if out["curl_y_flipped"] <= best
-             else f"{out['curl_y_flipped']:.2f} with y flipped, {best:.2f} with x flipped")
+    flips = f"{best:.2f} with {a} flipped, {out[f'curl_{b}_flipped']:.2f} with {b} flipped"
+    slope = {"y": "q", "x": "p"}
     if verdict == "hint":
-        try_ = ("negating the y slope (q)" if frame == GRADIENT_FIELD
-                else flag(negated(frame, "y")))
-        warn(f"the normals are more integrable with y flipped (relative curl {own:.2f} as "
+        try_ = (f"negating the {a} slope ({slope[a]})" if frame == GRADIENT_FIELD
+                else flag(negated(frame, a)))
+        warn(f"the normals are more integrable with {a} flipped (relative curl {own:.2f} as "
              f"given, {flips}), not by the margin that "
              "says the frame is wrong (strongly correlated errors on a nearly flat view do "
              f"this too): if the surface looks bent or inside-out, try {try_}",
              FrameWarning)
     elif verdict == "claim":
-        head = (f"the normals are far more integrable with y flipped (relative curl {own:.2f} "
-                f"as given, {flips})")
+        head = (f"the normals are far more integrable with {a} flipped (relative curl "
+                f"{own:.2f} as given, {flips})")
         if frame == GRADIENT_FIELD:
-            warn(f"{head}: the field's y slope probably has the wrong sign: negate q (p with "
-                 "--gradient-frame rowcol), or the x slope instead if the surface then comes "
-                 "out inside-out", FrameWarning)
+            warn(f"{head}: the field's {a} slope probably has the wrong sign: negate "
+                 f"{slope[a]} ({'p' if a == 'y' else 'q'} with --gradient-frame rowcol), or the "
+                 f"{b} slope instead if the surface then comes out inside-out", FrameWarning)
         else:
             read = "" if is_identity(frame) else f" (read in the frame {axis_string(frame)})"
-            warn(f"{head}: its frame{read} is probably wrong in y: try "
-                 f"{flag(negated(frame, 'y'))}, or {flag(negated(frame, 'x'))} if the surface "
+            warn(f"{head}: its frame{read} is probably wrong in {a}: try "
+                 f"{flag(negated(frame, a))}, or {flag(negated(frame, b))} if the surface "
                  "then comes out inside-out; docs/conventions.md lists the frames of common "
                  "sources. If the frame is right, the image itself may be flipped or mirrored "
                  "(rows or columns reversed by an export): flip it back instead",

@@ -193,16 +193,29 @@ def read(job: Job) -> Input:
 
 
 def _from_folder(message: str, job: Job, inp: Input) -> str:
-    """`message` with the dataset folder's file named where a method refused a prior or a
+    """`message` with the dataset folder's files named where a method refused a prior or a
     confidence that the folder gave (a batch user's `--method bini` was refused a
-    `confidence` it had not asked for, without the file or the flag that leaves it out)."""
-    for what, given, stem, flag in (
-            ("prior", job.prior is None and inp.prior is not None, "prior_depth", "--no-prior"),
-            ("confidence", job.confidence is None and inp.confidence is not None, "confidence",
-             "--no-confidence")):
-        if given and f"does not take a `{what}`" in message:
-            return f"{message} (given by the dataset folder's {stem}.* file: {flag} leaves it out)"
-    return message
+    `confidence` it had not asked for, without the file or the flag that leaves it out); every
+    such file the method does not take, so that one run says all (a review)."""
+    from . import methods
+
+    if not any(f"does not take a `{w}`" in message for w in ("prior", "confidence")):
+        return message
+    try:
+        able = methods.get(job.method)
+    except (KeyError, ValueError):
+        return message
+    files = [(stem, flag) for what, given, stem, flag in (
+        ("prior", job.prior is None and inp.prior is not None, "prior_depth", "--no-prior"),
+        ("confidence", job.confidence is None and inp.confidence is not None, "confidence",
+         "--no-confidence")) if given and not getattr(able, what, True)]
+    if not files:
+        return message
+    named = " and ".join(f"{stem}.*" for stem, _ in files)
+    flags = " ".join(flag for _, flag in files)
+    return (f"{message} (the dataset folder's {named} file{'s' if len(files) > 1 else ''}, "
+            f"which this method does not take: {flags} leave{'s' if len(files) == 1 else ''} "
+            f"{'it' if len(files) == 1 else 'them'} out)")
 
 
 def _no_prior_checks(job: Job) -> None:
@@ -363,7 +376,10 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                     confidence=inp.confidence, prior_blur=job.prior_blur, **opts,
                 )
             except ValueError as e:
-                raise ValueError(_from_folder(str(e), job, inp)) from None
+                said = _from_folder(str(e), job, inp)
+                if said == str(e):
+                    raise
+                raise ValueError(said) from None
         t_integrate = time.perf_counter() - t1
         t2 = time.perf_counter()
         announce(progress, "writing outputs")

@@ -436,6 +436,10 @@ def estimate(problem, method: str, options: dict) -> tuple[float, str]:
         if options.get("discontinuities"):
             if problem.prior is not None:  # the prior's own matrix, sum and normals' part:
                 prior_bytes += 330 * m  # measured 0.79-0.82 of the peak without this
+            gaps = problem.extras.get("no_normal")
+            if gaps is not None and gaps.any():  # the filled gaps' targets and weights
+                # (methods.dgp.fill_gaps; a review at 300^2: 137-182 B per facet more peak)
+                prior_bytes += 180 * m
             return _cost("dgp-discontinuous", m, B) + prior_bytes, "dgp-discontinuous"
         loop = "dgp-loop" if options.get("solver") == "iterative" else "dgp"
         from .linalg.facet import thin

@@ -443,7 +443,8 @@ def prepare(
             frame = (f"; {away:.0%} of the normals face away from the "
                      "camera, far more than noise or quantisation turn away: is the map in "
                      "another frame (world coordinates, a rotated export) or in BGR channel "
-                     "order (OpenCV's imwrite; an axis string such as z,-y,-x swaps it back)? "
+                     "order (OpenCV's imwrite; an axis string swaps it back: z,-y,-x for an "
+                     "OpenCV-frame map, z,y,x for an OpenGL one)? "
                      "docs/conventions.md and docs/recipes.md say how to convert it")
             Kc = getattr(cam, "K", None)
             if Kc is not None:  # (a K of another image turns the rays: a user's check)
@@ -610,6 +611,11 @@ def _is_points(prior) -> bool:
     return isinstance(prior, (tuple, list)) and len(prior) == 3 and not np.isscalar(prior[0])
 
 
+#: A points prior of at least CROWDED_MIN samples falling into fewer pixels than
+#: CROWDED_SHARE of their number gets a warning (points in the wrong units).
+CROWDED_MIN, CROWDED_SHARE = 20, 0.1
+
+
 def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.ndarray:
     """The prior as an (H, W) depth image, NaN where unknown: from an (H, W) array or a
     ``(rows, cols, depths)`` triple (pixel indices, rounded to the nearest pixel; depths of the
@@ -651,6 +657,14 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
         idx = r[keep] * W + c[keep]
         count = np.bincount(idx, minlength=H * W)
         total = np.bincount(idx, depths[keep], minlength=H * W)
+        pixels = int(np.count_nonzero(count))
+        if keep.sum() >= CROWDED_MIN and pixels < CROWDED_SHARE * keep.sum():
+            # (a LiDAR user's camera-frame x, y, z in metres under an x,y,z header, read as
+            # pixel columns and rows: 2,900 points in 6 pixels, 500 mm off, no word)
+            warn(f"`prior` (rows, cols, depths): the {int(keep.sum())} samples fall into only "
+                 f"{pixels} pixel(s), averaged per pixel: are they 3-D points or in other units "
+                 "(x, y as metres, not as the image's columns and rows)? Project 3-D points "
+                 "with K first (docs/fusion.md, 'Sparse SfM points projected with K')")
         with np.errstate(invalid="ignore", divide="ignore"):
             img = np.where(count > 0, total / np.maximum(count, 1), np.nan)
         return img.reshape(H, W)

@@ -144,10 +144,13 @@ def run(
         scale = normal_scale(problem)
         cosines = problem.view_cosines
         filled = None
-        if FILL_WEIGHT > 0:
-            bx, by, target, scale, cosines, weights, filled = fill_gaps(
-                domain, bx, by, target, scale, cosines, weights,
-                problem.extras.get("no_normal", ~problem.known))
+        if GAP_WEIGHT > 0:
+            # (a Problem built without prepare has no such mask: nothing is filled, not the
+            # back-facing facets that ~known would add, a review)
+            gaps = problem.extras.get("no_normal")
+            if gaps is not None:
+                bx, by, target, scale, cosines, weights, filled = fill_gaps(
+                    domain, bx, by, target, scale, cosines, weights, gaps)
         def start(prior):
             if prior is None or target.all():
                 return None
@@ -195,6 +198,13 @@ def run(
                  ConvergenceWarning)
         pointwise = prior is not None and (blur is None or astray is not None)
         _discontinuity_warnings(info, prior if pointwise else None, domain, pinfo["pieces"])
+        if pointwise and pinfo.get("unanchored_pieces"):
+            size, row, col = pinfo["unanchored_largest"]
+            warn(f"discontinuities with a depth prior: {pinfo['unanchored_pieces']} piece(s) "
+                 f"that the cuts separate hold no prior sample ({pinfo['unanchored_facets']:,} "
+                 f"pixels; the largest {size:,}, e.g. at (row {row}, col {col})): their depth "
+                 "is placed against their neighbours by the occlusion rule, not measured, and "
+                 "may be far off (info['unanchored_pieces']); give samples there")
         info.update(pinfo)
         info["solver"] = "discontinuous"
         # (of the facets as returned, each on its own corner copies: the glued vertices' mean
@@ -220,23 +230,27 @@ def run(
         if not info["prior_blur"]["fallback"]:
             info["converged"] = bool(info.get("converged", True)) and blur.converged
             _blur_check(info["prior_blur"], blur.prior[blur.samples])
-    info["outliers"] = int((problem.known & ~target).sum())
+    # (of the input's own usable normals: the discontinuity route's filled target would leave
+    # out the filled facets of confidence 0, a review)
+    info["outliers"] = int((problem.known & ~problem.usable).sum())
     info["missing"] = int((~problem.known).sum())
     return result
 
 
-#: The discontinuity route gives a facet without a usable normal, at least two of whose four
-#: edge neighbours have one, their mean slope as its target with this weight (times their
-#: mean normal weight). Without it such a facet transmits no offset: where a cut leaves a
-#: bridge a facet or two wide (the DiLiGenT bear's head on its body), one missing normal in
-#: the bridge set the head free (400 random missing normals, 1 %: MADE 0.023 -> 0.273 mm on
-#: one seed of three). Larger gaps keep the flattest fill inside.
-FILL_WEIGHT = 0.1
+#: The discontinuity route gives a facet without a normal (missing, non-finite, zero-length
+#: or of confidence 0), at least two of whose four edge neighbours have a usable one, their
+#: mean slope as its target with this weight (times their mean normal weight). Without it
+#: such a facet transmits no offset: where a cut leaves a bridge a facet or two wide (the
+#: DiLiGenT bear's head on its body), one missing normal in the bridge set the head free
+#: (200 or 400 random missing normals: MADE 0.27 mm instead of 0.025 on 3 of 5 seeds each).
+#: Larger gaps keep the flattest fill inside. Measured in docs/perspective.md
+#: (benchmarks/bench_missing_jumps.py).
+GAP_WEIGHT = 0.1
 
 
 def fill_gaps(domain, bx, by, target, scale, cosines, weights, gaps):
-    """`bx, by, target, scale, cosines, weights` with the facets that :data:`FILL_WEIGHT`
-    fills given their edge neighbours' means (weights: times FILL_WEIGHT), and those facets
+    """`bx, by, target, scale, cosines, weights` with the facets that :data:`GAP_WEIGHT`
+    fills given their edge neighbours' means (weights: times GAP_WEIGHT), and those facets
     (m,) bool. Only facets of `gaps` (m,) bool are filled: those without a normal, not the
     grazing or back-facing ones, which lie on the silhouettes, where the neighbours' slopes
     would glue an occluding rim to what it occludes (filling those too took the bear from
@@ -258,7 +272,7 @@ def fill_gaps(domain, bx, by, target, scale, cosines, weights, gaps):
 
     w = np.ones(domain.n_facets) if weights is None else np.asarray(weights, dtype=float)
     w = mean(w)
-    w[fill] *= FILL_WEIGHT
+    w[fill] *= GAP_WEIGHT
     return (mean(bx), mean(by), target | fill, mean(scale), mean(cosines), w, fill)
 
 
@@ -380,6 +394,11 @@ def normal_scale(problem):
 SMALL_PIECE = 4
 SMALL_PASSES = 3
 
+#: With a pointwise prior, pieces the cuts separate that hold no sample and at least this
+#: many facets and this share of them are warned about: the occlusion rule placed them, the
+#: prior did not (a LiDAR user's sphere without a point on it came out 498 mm off, silently).
+UNANCHORED_MIN, UNANCHORED_SHARE = 50, 0.001
+
 #: Share of cut facet corners above which a pointwise depth prior is said to tear the
 #: discontinuity route's surface apart (a warning). On 12 perspective renders with a dense
 #: prior of 1 or 3 pixel footprints of noise (mean over the scenes): 0.07-0.08 at weights
@@ -431,6 +450,17 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
         fixed = np.bincount(mesh.facet_piece[anchored], minlength=mesh.n_pieces) > 0
     offsets = occlusion_offsets(mesh, values, bx, by, target, scale=footprint, fixed=fixed)
     moved = int((np.abs(offsets) > GAP * footprint).sum())
+    loose = {}
+    if fixed is not None:  # (large pieces no sample holds: placed by the rule, not measured)
+        sizes = np.bincount(mesh.facet_piece, minlength=mesh.n_pieces)
+        big = ~fixed & (sizes >= max(UNANCHORED_MIN, UNANCHORED_SHARE * domain.n_facets))
+        first = np.flatnonzero(big)
+        loose = {"unanchored_pieces": int(big.sum()), "unanchored_facets": int(sizes[big].sum())}
+        if first.size:  # (a pixel of the largest, for the warning)
+            k = first[np.argmax(sizes[first])]
+            f = int(np.flatnonzero(mesh.facet_piece == k)[0])
+            r, c = domain.pixels
+            loose["unanchored_largest"] = [int(sizes[k]), int(r[f]), int(c[f])]
     placed = (values + offsets[mesh.piece])[mesh.corners]
     # then the small pieces hung on their larger neighbours (after the placement: hung before,
     # one can bridge two pieces the placement moves apart, e.g. the DiLiGenT bear's arm)
@@ -451,4 +481,4 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
             break
         placed, after = hung
     return placed, {"pieces": mesh.n_pieces, "moved_pieces": moved,
-                    "hung_facets": int(np.any(placed != before, axis=1).sum())}
+                    "hung_facets": int(np.any(placed != before, axis=1).sum()), **loose}
