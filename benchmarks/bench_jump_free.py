@@ -100,8 +100,10 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def scene_arguments(description: str) -> argparse.ArgumentParser:
+    """A parser with the options every script over the benchmark's renders takes: --data,
+    --cache, --step, --groups."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--data", type=Path, default=DATA, help="the shared data folder")
     ap.add_argument("--cache", type=Path,
                     default=Path(os.environ.get("FACETLIFT_BENCH_CACHE",
@@ -109,14 +111,24 @@ def main(argv=None) -> int:
                     help="render cache (the benchmark's: $FACETLIFT_BENCH_CACHE)")
     ap.add_argument("--step", type=int, default=1, help="every STEP-th scene")
     ap.add_argument("--groups", default="perspective,wide,ortho")
-    ap.add_argument("--conditions", default="exact,16bit,8bit,noise3")
-    ap.add_argument("--json", type=Path, help="write every region's row (one JSON per line)")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def context(a):
+    """The benchmark's context for parsed :func:`scene_arguments` (warnings silenced)."""
     from facetlift.bench.core import Context, Settings
 
     warnings.simplefilter("ignore")
     os.environ["FACETLIFT_BENCH_CACHE"] = str(a.cache)  # (the bench's own cache variable)
-    ctx = Context(out=a.cache.parent, settings=Settings(), data=a.data)
+    return Context(out=a.cache.parent, settings=Settings(), data=a.data)
+
+
+def main(argv=None) -> int:
+    ap = scene_arguments(__doc__.split("\n\n")[0])
+    ap.add_argument("--conditions", default="exact,16bit,8bit,noise3")
+    ap.add_argument("--json", type=Path, help="write every region's row (one JSON per line)")
+    a = ap.parse_args(argv)
+    ctx = context(a)
     out = open(a.json, "w") if a.json else None
     try:
         rows = run(ctx, a.step, tuple(a.groups.split(",")), tuple(a.conditions.split(",")),

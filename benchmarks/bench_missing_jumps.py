@@ -20,19 +20,15 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import sys
 import time
-import warnings
 import zlib
 from pathlib import Path
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-DATA = HERE.parent.parent / "shared" / "data"
 
 #: Scenes whose error without the fill is below this (mm or %) are the DiLiGenT-like class.
 SMALL = 1.0
@@ -94,25 +90,17 @@ def table(rows: list[dict], weights) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--data", type=Path, default=DATA, help="the shared data folder")
-    ap.add_argument("--cache", type=Path,
-                    default=Path(os.environ.get("FACETLIFT_BENCH_CACHE",
-                                                "/tmp/facetlift-bench-cache/discontinuities")),
-                    help="render cache (the benchmark's: $FACETLIFT_BENCH_CACHE)")
+    sys.path.insert(0, str(HERE))
+    from bench_jump_free import context, scene_arguments
+
+    ap = scene_arguments(__doc__.split("\n\n")[0])
     ap.add_argument("--weights", default="0,0.1", help="GAP_WEIGHT values (0: no fill)")
     ap.add_argument("--shares", default="0.01,0.05", help="shares of the normals removed")
-    ap.add_argument("--step", type=int, default=1, help="every STEP-th scene")
-    ap.add_argument("--groups", default="perspective,wide,ortho")
     ap.add_argument("--json", type=Path, help="write every run's row (one JSON per line)")
     a = ap.parse_args(argv)
-    from facetlift.bench.core import Context, Settings
-
     weights = [float(w) for w in a.weights.split(",")]
     shares = [float(x) for x in a.shares.split(",")]
-    warnings.simplefilter("ignore")
-    os.environ["FACETLIFT_BENCH_CACHE"] = str(a.cache)
-    ctx = Context(out=a.cache.parent, settings=Settings(), data=a.data)
+    ctx = context(a)
     out = open(a.json, "w") if a.json else None
     try:
         rows = run(ctx, weights, shares, a.step, a.groups.split(","), out)
