@@ -80,7 +80,10 @@ def table(rows: list[dict], weights) -> str:
         means = " | ".join(f"{np.mean([v[w] for v in runs]):.4f}" for w in weights)
         split = []
         for small in (True, False):
-            part = [v for v in runs if (v[0.0] < SMALL) == small] if 0.0 in weights else []
+            if 0.0 not in weights:  # (nothing to compare with)
+                split.append("-")
+                continue
+            part = [v for v in runs if (v[0.0] < SMALL) == small]
             split.append(", ".join(
                 f"{w:g}: {sum(v[w] < 0.99 * v[0.0] for v in part)} / "
                 f"{sum(v[w] > 1.01 * v[0.0] for v in part)}" for w in weights if w != 0.0)

@@ -910,3 +910,61 @@ def test_points_crowded_into_a_few_pixels_are_warned_about():
         warnings.simplefilter("error", UserWarning)
         prior_image((rng.uniform(0, 39, 100), rng.uniform(0, 49, 100), np.full(100, 3.0)),
                     (40, 50), positive=True)
+
+
+def test_far_samples_on_a_fronto_parallel_wall_and_dense_points_are_not_warned_about():
+    """A review's false alarms: exact samples on an orthographic wall of constant depth (no
+    depth range: the floor was 0) with smoothly noisy normals; a depth map at 4x the
+    resolution given as points (16 per pixel, every pixel covered)."""
+    from facetlift import synthetic
+    from facetlift.problem import prior_image
+
+    n = np.zeros((120, 120, 3))
+    n[..., 2] = 1.0
+    rng = np.random.default_rng(0)
+    n = synthetic.add_smooth_noise(n, 3.0, rng, length=20.0)
+    rr, cc = np.meshgrid(np.arange(5, 120, 10), np.arange(5, 120, 10), indexing="ij")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        s = facetlift.integrate(n, prior=(rr.ravel(), cc.ravel(), np.full(rr.size, 7.0)))
+        fine = np.indices((160, 160)) / 4.0 - 0.375
+        prior_image((fine[0].ravel(), fine[1].ravel(), np.full(fine[0].size, 2.0)), (40, 40))
+    assert s.info["prior"]["far_samples"] == 0
+
+
+def test_the_pieces_warning_names_image_pixels_and_leaves_unsampled_components_alone(
+        monkeypatch):
+    """A review: the largest unsampled piece was named in the cropped problem's rows and
+    columns, and a mask component without a sample (the gauge's, warned about on its own)
+    was reported as a piece the cuts separate."""
+    from facetlift.methods import dgp
+
+    real = dgp.place_pieces
+
+    def one_loose(*a, **k):  # (the crop's row 3, col 4 as the largest unsampled piece)
+        placed, info = real(*a, **k)
+        return placed, {**info, "unanchored_pieces": 1, "unanchored_facets": 150,
+                        "unanchored_largest": [150, 3, 4]}
+
+    monkeypatch.setattr(dgp, "place_pieces", one_loose)
+    n = np.zeros((50, 60, 3))
+    n[..., 2] = 1.0
+    mask = np.zeros((50, 60), bool)
+    mask[20:45, 25:55] = True  # (cropped by 20 rows and 25 columns)
+    pts = (np.full(4, 30), np.arange(30, 50, 5), np.full(4, 3.0))
+    with pytest.warns(UserWarning, match=r"largest 150, e\.g\. at \(row 23, col 29\)"):
+        s = facetlift.integrate(n, mask, prior=pts, discontinuities=True)
+    assert s.info["unanchored_largest"] == [150, 23, 29]
+    monkeypatch.setattr(dgp, "place_pieces", real)
+    # a second component without a sample: the gauge warning only
+    two = np.zeros((60, 90), bool)
+    two[5:55, 5:40] = two[5:55, 50:85] = True
+    flat = np.zeros((60, 90, 3))
+    flat[..., 2] = 1.0
+    pts = (np.full(5, 30), np.arange(10, 35, 5), np.full(5, 3.0))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        s = facetlift.integrate(flat, two, prior=pts, discontinuities=True)
+    text = " ".join(str(w.message) for w in caught)
+    assert "mask components" in text and "that the cuts separate" not in text
+    assert s.info["unanchored_pieces"] == 0

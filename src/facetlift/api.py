@@ -359,8 +359,9 @@ def _solve(problem, method, t0, max_memory, options):
     out["memory_estimate"] = plan.estimate
     if problem.prior is not None:
         out["prior"] = prior_info(problem, surface)
-        _far_samples_check(out["prior"], problem.prior_blur > 0,
-                           out.get("solver") == "discontinuous")
+        blurred = problem.prior_blur > 0 and not (out.get("prior_blur") or {}).get("fallback")
+        _far_samples_check(out["prior"], blurred, out.get("solver") == "discontinuous"
+                           or not getattr(info, "discontinuities", False))
         _prior_fight_check(out.get("mean_deviation"), out.get("solver") == "discontinuous",
                            problem.camera.projection == "orthographic")
     seconds = dict(out.get("seconds", {}))
@@ -445,16 +446,18 @@ FAR, FAR_FLOOR = 10.0, 0.02
 
 
 def _far_samples_check(info: dict, blurred: bool, discontinuities: bool = True) -> None:
+    """The far-samples warning (:data:`FAR`); `discontinuities`: the route cut jumps, or the
+    method cannot (no hint to do so)."""
     far = info.get("far_samples", 0)
     # (the smooth route bends over a depth jump and leaves exact samples there far from it:
     # 1-2 of 12 renders with 5 % exact or noisy samples on the fusion benchmark)
     jumps = ("" if discontinuities else ", or samples across a depth jump that the smooth "
-             "surface bends over (discontinuities=True cuts it)")
+             "surface bends over (discontinuities=True, --discontinuities, cuts it)")
     if far and not blurred:  # (a blurred prior's samples differ from the surface by design)
         r, c = info["farthest_sample"]
         warn(f"prior: {far} of the {info['samples']} samples lie far from the surface returned "
              f"(more than {info['far_threshold']:.3g} from it, {FAR:g} times the median "
-             f"distance or more; the farthest {info['max_abs_residual']:.3g} at (row {r}, col "
+             f"distance or more; the farthest {info['farthest_distance']:.3g} at (row {r}, col "
              f"{c})): outliers, such as a depth sensor's occluded or flying points or "
              f"mismatched SfM points, or samples on a depth jump's edge{jumps}? Outliers "
              "pull the "
@@ -467,7 +470,8 @@ def prior_info(problem: Problem, surface: Surface) -> dict:
     dropped), components whose constant the prior fixed, those that
     kept the camera's gauge (1-based labels of ``Domain.labels``) and that gauge (None when
     the prior fixed every component), and the fit at the samples (mean and largest absolute
-    depth difference)."""
+    depth difference; ``far_samples``, and with two or more finite samples ``far_threshold``
+    and ``farthest_sample`` (row, col): :data:`FAR`)."""
     d = problem.domain
     w = problem.prior_weight
     used = w > 0
@@ -493,17 +497,24 @@ def prior_info(problem: Problem, surface: Surface) -> dict:
 def _far_samples(problem: Problem, diff: np.ndarray, depths: np.ndarray) -> dict:
     """``far_samples`` (how many samples lie far from the surface: :data:`FAR`), the
     threshold and the farthest sample's (row, col)."""
-    if diff.size < 2 or not np.isfinite(diff).all():
+    ok = np.isfinite(diff)  # (a facet flattened or left out: the other samples are checked)
+    if ok.sum() < 2:
         return {"far_samples": 0}
-    scale = (float(np.median(depths)) if problem.camera.perspective
-             else float(np.ptp(depths)))
-    threshold = max(FAR * float(np.median(diff)), FAR_FLOOR * scale)
-    far = diff > threshold
-    k = int(np.argmax(diff))
+    if problem.camera.perspective:
+        scale = float(np.median(depths[ok]))
+    else:  # (the object's size too: a fronto-parallel wall's samples span no depth, and 3 deg
+        # of smooth noise on its normals put one exact sample past 10x the median, a review)
+        rows, cols = np.nonzero(problem.domain.mask)
+        size = max(np.ptp(rows), np.ptp(cols)) + 1
+        scale = max(float(np.ptp(depths[ok])), size * problem.camera.pixel_size)
+    threshold = max(FAR * float(np.median(diff[ok])), FAR_FLOOR * scale)
+    far = ok & (diff > threshold)
+    k = int(np.argmax(np.where(ok, diff, -np.inf)))
     r, c = problem.domain.pixels
     used = np.flatnonzero(problem.prior_weight > 0)
     return {"far_samples": int(far.sum()), "far_threshold": threshold,
-            "farthest_sample": [int(r[used[k]]), int(c[used[k]])]}
+            "farthest_sample": [int(r[used[k]]), int(c[used[k]])],
+            "farthest_distance": float(diff[k])}
 
 
 def crop(problem: Problem) -> tuple[Problem, tuple[int, int]]:
@@ -522,6 +533,9 @@ def crop(problem: Problem) -> tuple[Problem, tuple[int, int]]:
     sub = problem.restrict(
         Domain.from_mask(mask[r0:r1, c0:c1]), problem.camera.cropped(int(r0), int(c0))
     )
+    # (a new dict: the methods' messages that name a pixel give it in the image's rows and
+    # columns, not the crop's, a review)
+    sub.extras = {**sub.extras, "offset": (int(r0), int(c0))}
     return sub, (int(r0), int(c0))
 
 

@@ -538,8 +538,8 @@ def flip_check(problem) -> dict:
     flips = f"{best:.2f} with {a} flipped, {out[f'curl_{b}_flipped']:.2f} with {b} flipped"
     slope = {"y": "q", "x": "p"}
     if verdict == "hint":
-        try_ = (f"negating the {a} slope ({slope[a]})" if frame == GRADIENT_FIELD
-                else flag(negated(frame, a)))
+        try_ = (f"negating the {a} slope ({slope[a]}; {slope[b]} with --gradient-frame "
+                "rowcol)" if frame == GRADIENT_FIELD else flag(negated(frame, a)))
         warn(f"the normals are more integrable with {a} flipped (relative curl {own:.2f} as "
              f"given, {flips}), not by the margin that "
              "says the frame is wrong (strongly correlated errors on a nearly flat view do "

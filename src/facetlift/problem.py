@@ -612,8 +612,9 @@ def _is_points(prior) -> bool:
 
 
 #: A points prior of at least CROWDED_MIN samples falling into fewer pixels than
-#: CROWDED_SHARE of their number gets a warning (points in the wrong units).
-CROWDED_MIN, CROWDED_SHARE = 20, 0.1
+#: CROWDED_SHARE of their number, all within a box of CROWDED_BOX of the image, gets a
+#: warning (points in the wrong units: a cloud's metres read as pixels land near a corner).
+CROWDED_MIN, CROWDED_SHARE, CROWDED_BOX = 20, 0.1, 0.01
 
 
 def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.ndarray:
@@ -658,7 +659,12 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
         count = np.bincount(idx, minlength=H * W)
         total = np.bincount(idx, depths[keep], minlength=H * W)
         pixels = int(np.count_nonzero(count))
-        if keep.sum() >= CROWDED_MIN and pixels < CROWDED_SHARE * keep.sum():
+        rk, ck = r[keep], c[keep]
+        box = ((int(np.ptp(rk)) + 1) * (int(np.ptp(ck)) + 1)) if rk.size else 0
+        # (and in a small corner of the image: a depth map at 4x the resolution given as
+        # points fills every pixel 16 times, a review)
+        if (keep.sum() >= CROWDED_MIN and pixels < CROWDED_SHARE * keep.sum()
+                and box < CROWDED_BOX * H * W):
             # (a LiDAR user's camera-frame x, y, z in metres under an x,y,z header, read as
             # pixel columns and rows: 2,900 points in 6 pixels, 500 mm off, no word)
             warn(f"`prior` (rows, cols, depths): the {int(keep.sum())} samples fall into only "

@@ -200,11 +200,14 @@ def run(
         _discontinuity_warnings(info, prior if pointwise else None, domain, pinfo["pieces"])
         if pointwise and pinfo.get("unanchored_pieces"):
             size, row, col = pinfo["unanchored_largest"]
+            r0, c0 = problem.extras.get("offset", (0, 0))  # (the image's rows and columns)
+            row, col = row + r0, col + c0
+            pinfo["unanchored_largest"] = [size, row, col]
             warn(f"discontinuities with a depth prior: {pinfo['unanchored_pieces']} piece(s) "
                  f"that the cuts separate hold no prior sample ({pinfo['unanchored_facets']:,} "
                  f"pixels; the largest {size:,}, e.g. at (row {row}, col {col})): their depth "
                  "is placed against their neighbours by the occlusion rule, not measured, and "
-                 "may be far off (info['unanchored_pieces']); give samples there")
+                 "may be far off (info['unanchored_pieces'], --json); give samples there")
         info.update(pinfo)
         info["solver"] = "discontinuous"
         # (of the facets as returned, each on its own corner copies: the glued vertices' mean
@@ -457,11 +460,18 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
     if fixed is not None:  # (large pieces no sample holds: placed by the rule, not measured)
         sizes = np.bincount(mesh.facet_piece, minlength=mesh.n_pieces)
         big = ~fixed & (sizes >= max(UNANCHORED_MIN, UNANCHORED_SHARE * domain.n_facets))
+        # (only in components that hold a sample: a component without one keeps the camera's
+        # gauge, warned about on its own, and no cut separates it, a review)
+        comp = domain.facet_component
+        held = np.bincount(comp[anchored], minlength=domain.n_components) > 0
+        lead = np.full(mesh.n_pieces, -1)
+        lead[mesh.facet_piece[::-1]] = np.arange(domain.n_facets)[::-1]  # (a facet of each)
+        big &= held[comp[lead]]
         first = np.flatnonzero(big)
         loose = {"unanchored_pieces": int(big.sum()), "unanchored_facets": int(sizes[big].sum())}
         if first.size:  # (a pixel of the largest, for the warning)
             k = first[np.argmax(sizes[first])]
-            f = int(np.flatnonzero(mesh.facet_piece == k)[0])
+            f = int(lead[k])
             r, c = domain.pixels
             loose["unanchored_largest"] = [int(sizes[k]), int(r[f]), int(c[f])]
     placed = (values + offsets[mesh.piece])[mesh.corners]
