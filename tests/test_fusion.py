@@ -968,3 +968,17 @@ def test_the_pieces_warning_names_image_pixels_and_leaves_unsampled_components_a
     text = " ".join(str(w.message) for w in caught)
     assert "mask components" in text and "that the cuts separate" not in text
     assert s.info["unanchored_pieces"] == 0
+
+
+def test_a_grey_exr_confidence_stored_as_rgb_is_read_as_its_grey_level(tmp_path):
+    """A photometric-stereo user's grey EXR (R = G = B) was refused ('must hold one
+    channel'), where a grey RGB PNG is read; channels that differ are still refused."""
+    from facetlift.io.images import _write_exr
+
+    w = np.linspace(0.0, 2.0, 12 * 10).reshape(12, 10).astype(np.float32)
+    _write_exr(tmp_path / "c.exr", {"R": w, "G": w, "B": w})
+    np.testing.assert_array_equal(facetlift.io.read_weights(tmp_path / "c.exr",
+                                                            arg="confidence"), w)
+    _write_exr(tmp_path / "d.exr", {"R": w, "G": w, "B": w + 1})
+    with pytest.raises(ValueError, match="`confidence`: .* R, G, B that differ"):
+        facetlift.io.read_weights(tmp_path / "d.exr", arg="confidence")

@@ -658,4 +658,12 @@ def read_weights(path, *, arg: str) -> np.ndarray:
         if ext == ".png":
             raise ValueError(f"`{arg}`: {p} must be an 8- or 16-bit PNG; got dtype {a.dtype}")
         return a.astype(np.float64)
-    return read_plane(p, PRIOR_FORMATS, "weight", arg).astype(np.float64)
+    if ext == ".exr":  # (a grey EXR stored as R = G = B, as grey PNGs are: a user's check)
+        ch = _read_exr(p, arg)
+        rgb = [ch.get(k) for k in ("R", "G", "B")]
+        if len(ch) > 1 and "Y" not in ch and all(c is not None for c in rgb):
+            if not all(np.array_equal(rgb[0], c, equal_nan=True) for c in rgb[1:]):
+                raise ValueError(f"`{arg}`: {p} has colour channels R, G, B that differ; give "
+                                 "a single-channel (grey) image of the weights")
+            return rgb[0].astype(np.float64)
+    return read_plane(p, PRIOR_FORMATS, "weight", arg, prefer=("Y",)).astype(np.float64)
