@@ -633,7 +633,8 @@ def read_weights(path, *, arg: str) -> np.ndarray:
     """An (H, W) map of weights >= 0 (``--confidence``, ``--prior-weight-map``): ``.npy``,
     EXR and floating-point TIFF as stored; an 8- or 16-bit image (PNG or TIFF) as ``value /
     255`` or ``value / 65535`` (the same mask gives the same weights in either format; a TIFF
-    of 255s was read as 255). A grey image stored as RGB(A) is read as its grey level; colour
+    of 255s was read as 255). A grey image stored as RGB(A), or an EXR with equal R, G, B
+    channels, is read as its grey level (an EXR's Y channel where it has one); colour
     channels that differ are refused (only the first was read)."""
     p = _existing(path, arg)
     ext = _suffix(p, PRIOR_FORMATS, "weight", arg)
