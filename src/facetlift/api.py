@@ -460,9 +460,8 @@ def _far_samples_check(info: dict, blurred: bool, discontinuities: bool = True) 
              f"distance or more; the farthest {info['farthest_distance']:.3g} at (row {r}, col "
              f"{c})): outliers, such as a depth sensor's occluded or flying points or "
              f"mismatched SfM points, or samples on a depth jump's edge{jumps}? Outliers "
-             "pull the "
-             "surface with them: remove them and run again (docs/fusion.md, 'Outlier "
-             "samples'; info['prior'])")
+             "pull the surface with them: remove them and run again (docs/fusion.md, "
+             "'Outlier samples'; info['prior'], --json)")
 
 
 def prior_info(problem: Problem, surface: Surface) -> dict:
