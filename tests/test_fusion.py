@@ -982,3 +982,24 @@ def test_a_grey_exr_confidence_stored_as_rgb_is_read_as_its_grey_level(tmp_path)
     _write_exr(tmp_path / "d.exr", {"R": w, "G": w, "B": w + 1})
     with pytest.raises(ValueError, match="`confidence`: .* R, G, B that differ"):
         facetlift.io.read_weights(tmp_path / "d.exr", arg="confidence")
+
+
+def test_points_files_with_a_column_named_twice_or_nan_depths_say_so(tmp_path):
+    """A LiDAR user's headers 'u,v,depth,x,y,z' and 'u,v,z,r' (r: reflectivity) were told
+    that the header was missing; lines with a NaN depth were dropped without a count."""
+    from facetlift.problem import prior_image
+
+    (tmp_path / "a.csv").write_text("u,v,depth,x,y,z\n1,2,3,0.1,0.2,3\n")
+    with pytest.raises(ValueError, match=r"names a column twice \('v' and 'y' both name the "
+                       r"row; 'u' and 'x' both name the col; 'depth' and 'z' both name the "
+                       r"depth\)"):
+        facetlift.io.read_prior(tmp_path / "a.csv")
+    (tmp_path / "b.csv").write_text("u,v,z,r\n1,2,3,0.5\n")
+    with pytest.raises(ValueError, match=r"'v' and 'r' both name the row.*'reflectivity'"):
+        facetlift.io.read_prior(tmp_path / "b.csv")
+    (tmp_path / "c.csv").write_text("u,v,z,reflectivity\n1,2,3,0.5\n4,5,nan,0.1\n")
+    pts = facetlift.io.read_prior(tmp_path / "c.csv")
+    with pytest.warns(UserWarning, match=r"1 sample\(s\) with a non-finite depth, the first at "
+                      r"\(row 5, col 4\)"):
+        img = prior_image(pts, (10, 10))
+    assert np.isfinite(img).sum() == 1 and img[2, 1] == 3.0

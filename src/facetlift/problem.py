@@ -645,6 +645,10 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
             warn(f"`prior` (rows, cols, depths): {where}; they were left out")
             r, c, depths = r[~out], c[~out], depths[~out]
         keep = np.isfinite(depths)
+        if not keep.all() and keep.any():  # (counted, not silently: a user's 53 lines, 50 used)
+            k = int(np.flatnonzero(~keep)[0])
+            warn(f"`prior` (rows, cols, depths): {int((~keep).sum())} sample(s) with a "
+                 f"non-finite depth, the first at (row {r[k]}, col {c[k]}); they were left out")
         behind = keep & (depths <= 0)
         if positive and behind.any() and (keep & ~behind).any():
             # (a point cloud's points behind the camera: left out and said, as those outside

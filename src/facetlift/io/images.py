@@ -600,6 +600,17 @@ def _read_points(p: Path, arg: str):
         raise ValueError(f"`{arg}`: {p} holds no sample")
     header = [w.strip("\"'").lower() for w in lines[0].split()]
     names = [_POINT_COLUMNS.get(w) for w in header]
+    twice = [n for n in ("row", "col", "depth") if names.count(n) > 1]
+    if twice and not all(_numeric(w) for w in header):
+        # (a LiDAR user's 'u,v,depth,x,y,z' and 'u,v,z,r' (r: reflectivity) were told that
+        # the header was missing)
+        said = "; ".join(
+            f"{' and '.join(repr(w) for w, m in zip(header, names, strict=True) if m == n)} "
+            f"{'both' if names.count(n) == 2 else 'all'} name the {n}" for n in twice)
+        raise ValueError(
+            f"`{arg}`: {p}: the header names a column twice ({said}): keep one name per "
+            "column (row/y/v/r, col/x/u/c, depth/z/d are taken; rename other columns, e.g. "
+            "'reflectivity', which is then ignored)")
     if all(_numeric(w) for w in header) or sorted(n for n in names if n) != [
             "col", "depth", "row"]:
         raise ValueError(
