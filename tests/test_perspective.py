@@ -307,7 +307,10 @@ def test_a_principal_point_outside_the_image_is_warned_about():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         facetlift.integrate(n, K=[100.0, 100.0, 14.5, 9.5])  # the centre: no warning
-        facetlift.integrate(n, K=[100.0, 100.0, -0.5, 19.5])  # (the edges still inside)
+        facetlift.integrate(n, K=[100.0, 100.0, 3.0, 16.0])  # (off-centre, not at an edge)
+    # at the edge: a K for the photo at twice the map's size (a user's check, 43x the error)
+    with pytest.warns(UserWarning, match=r"\(cx 29.5, cy 19.5\) lies at the edge of this"):
+        facetlift.integrate(n, K=[200.0, 200.0, 29.5, 19.5])
 
 
 def test_info_keeps_the_principal_point_warning_of_a_map_it_cannot_integrate(tmp_path, capsys):

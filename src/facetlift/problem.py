@@ -495,6 +495,11 @@ def prepare(
     return problem
 
 
+#: A pinhole K whose principal point lies outside the image, or within this share of its
+#: width or height of an edge, gets a warning (:func:`_check_principal_point`).
+PRINCIPAL_EDGE = 0.05
+
+
 def _check_principal_point(cam, H: int, W: int) -> None:
     """A warning where a pinhole camera's principal point lies outside the image: right for a
     crop of a corner with K shifted, but usually a K made for the whole image (a fresh user's
@@ -504,9 +509,14 @@ def _check_principal_point(cam, H: int, W: int) -> None:
     if Kc is None:
         return
     cx, cy = float(Kc[0, 2]), float(Kc[1, 2])
-    if -0.5 <= cx <= W - 0.5 and -0.5 <= cy <= H - 0.5:
+    # (or within PRINCIPAL_EDGE of an edge: a neural-normals user's K of the photo at twice
+    # the map's size put it in the map's corner, 43x the error, no word)
+    ex, ey = PRINCIPAL_EDGE * W, PRINCIPAL_EDGE * H
+    if -0.5 + ex <= cx <= W - 0.5 - ex and -0.5 + ey <= cy <= H - 0.5 - ey:
         return
-    warn(f"`K`: the principal point (cx {cx:g}, cy {cy:g}) lies outside this {W} x {H} image "
+    inside = -0.5 <= cx <= W - 0.5 and -0.5 <= cy <= H - 0.5
+    where = "lies at the edge of" if inside else "lies outside"
+    warn(f"`K`: the principal point (cx {cx:g}, cy {cy:g}) {where} this {W} x {H} image "
          "(columns 0..W-1, rows 0..H-1): is K for another image? After a crop, subtract the "
          "crop's first column and row from cx and cy; after a resize, scale fx, fy, cx and cy "
          "with the image (docs/conventions.md, 'A K for another image')")
