@@ -501,8 +501,9 @@ PRINCIPAL_EDGE = 0.05
 
 
 def _check_principal_point(cam, H: int, W: int) -> None:
-    """A warning where a pinhole camera's principal point lies outside the image: right for a
-    crop of a corner with K shifted, but usually a K made for the whole image (a fresh user's
+    """A warning where a pinhole camera's principal point lies outside the image or at its
+    edge (:data:`PRINCIPAL_EDGE`): right for a crop of a corner with K shifted, but usually a
+    K made for another image (a fresh user's
     300 x 300 crop of the bear with the full image's K: 0.661 mm MADE against 0.024 with the
     crop's K, and no word)."""
     Kc = getattr(cam, "K", None)
