@@ -327,3 +327,27 @@ def test_comparison_methods_show_progress(tmp_path, capsys, method, extra):
                            "--method", method, *extra, flag, "-s", "npy")
         assert code == 0, err
         assert ("integrating" in err) == shown, err
+
+
+def test_a_point_cloud_output(tmp_path):
+    """-s points: a PLY point cloud, one point per mask pixel (a LiDAR user found no point
+    cloud output), with the input normals; a missing normal gets (0, 0, 0)."""
+    import meshio
+
+    r, c = np.indices((20, 24))
+    n = facetlift.normals_from_gradients(0.2 * np.cos(c / 4), 0.1 * np.sin(r / 5))
+    n[4, 5] = np.nan
+    np.save(tmp_path / "n.npy", n)
+    mask = np.ones((20, 24), bool)
+    mask[:, :3] = False
+    facetlift.io.write_mask(tmp_path / "m.png", mask)
+    assert main(["integrate", str(tmp_path / "n.npy"), "--mask", str(tmp_path / "m.png"),
+                 "-s", "points", "-o", str(tmp_path / "o")]) == 0
+    cloud = meshio.read(tmp_path / "o" / "points.ply")
+    s = facetlift.integrate(n, mask)  # (a NaN normal is a missing sample: no warning)
+    np.testing.assert_allclose(cloud.points, s.points(), rtol=1e-9, atol=1e-9)
+    normals = np.stack([cloud.point_data[k] for k in ("nx", "ny", "nz")], axis=1)
+    rr, cc = np.nonzero(mask)
+    missing = (rr == 4) & (cc == 5)
+    assert (normals[missing] == 0).all()
+    np.testing.assert_allclose(normals[~missing], n[rr, cc][~missing], atol=1e-6)

@@ -225,7 +225,8 @@ _JOB_OPTIONS = [
                  "with shading, depth, deviation and discontinuity panels (needs "
                  "facetlift[plot]), discontinuities = where the surface is cut by depth jumps "
                  "(with --discontinuities), height = a 16-bit height map PNG scaled to 0..1 "
-                 "(its depth range in --json's depth_range). Default: npy, ply, png."),
+                 "(its depth range in --json's depth_range), points = a PLY point cloud "
+                 "(a point per pixel with the input's normal). Default: npy, ply, png."),
     click.option("--quads", is_flag=True,
                  help="Write quad meshes (the PLY default; OBJ defaults to triangles)."),
     click.option("--triangles", is_flag=True,

@@ -34,6 +34,7 @@ OUTPUTS = {
     "report": "report.png",
     "discontinuities": "discontinuities.png",
     "height": "height.png",
+    "points": "points.ply",
 }
 DEFAULT_SAVE = ("npy", "ply", "png")
 #: The file stems of :data:`OUTPUTS` ("depth", "mesh", ...): files by these names in a folder
@@ -450,10 +451,24 @@ def _write(surface, kind: str, path: Path, normals, triangles) -> None:
         io.write_discontinuities(path, surface)
     elif kind == "height":
         io.write_height(path, surface)
+    elif kind == "points":  # (one point per pixel centre, with the input's normal there)
+        io.write_points(path, surface.points(), _point_normals(surface, normals))
     elif kind in ("ply", "obj") and triangles is not None:
         surface.save(path, triangles=triangles)
     else:
         surface.save(path)
+
+
+def _point_normals(surface, normals):
+    """The input normals at :meth:`Surface.points`' pixels (facetlift's frame), unit length;
+    None where they are not an (H, W, 3) map of the surface's shape (a gradient field)."""
+    n = None if normals is None else np.asarray(normals, dtype=float)
+    if n is None or n.shape != surface.shape + (3,):
+        return None
+    r, c = np.nonzero(surface.mask)
+    v = n[r, c]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
 def finished_unconverged(info: dict) -> bool:

@@ -55,7 +55,7 @@ from .images import (
     write_mask,
     write_normals,
 )
-from .meshes import MESH_FORMATS, write_mesh
+from .meshes import MESH_FORMATS, write_mesh, write_points
 from .preview import shade, write_discontinuities, write_height, write_preview
 from .report import write_report
 from .surface import SURFACE_FORMATS, save_surface
@@ -83,6 +83,7 @@ __all__ = [
     "write_depth",
     "write_mask",
     "write_mesh",
+    "write_points",
     "write_normals",
     "write_discontinuities",
     "write_height",

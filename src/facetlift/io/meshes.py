@@ -55,3 +55,30 @@ def write_mesh(path, vertices, faces) -> Path:
         else:
             meshio.write(tmp, mesh, file_format="obj")
     return p
+
+
+def write_points(path, points, normals=None) -> Path:
+    """Write a point cloud as binary PLY: `points` (n, 3) float, and optional unit `normals`
+    (n, 3) as the vertex properties nx, ny, nz (CloudCompare, Open3D and PCL read both; a
+    point without a finite normal gets (0, 0, 0)). Points with a non-finite coordinate are
+    left out."""
+    import meshio
+
+    p = Path(path)
+    _suffix(p, (".ply",), "point cloud", "path")
+    v = np.asarray(points, dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"`points` must have shape (n, 3); got {v.shape}")
+    keep = np.isfinite(v).all(axis=1)
+    data = {}
+    if normals is not None:
+        n = np.asarray(normals, dtype=np.float64)
+        if n.shape != v.shape:
+            raise ValueError(f"`normals` must have the shape of `points` {v.shape}; got "
+                             f"{n.shape}")
+        n = np.where(np.isfinite(n).all(axis=1)[:, None], n, 0.0)
+        data = {k: n[keep, i].astype(np.float32) for i, k in enumerate(("nx", "ny", "nz"))}
+    cloud = meshio.Mesh(v[keep], [], point_data=data)
+    with atomic_path(p) as tmp:
+        meshio.write(tmp, cloud, file_format="ply", binary=True)
+    return p
