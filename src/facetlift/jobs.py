@@ -460,14 +460,18 @@ def _write(surface, kind: str, path: Path, normals, triangles) -> None:
 
 
 def _point_normals(surface, normals):
-    """The input normals at :meth:`Surface.points`' pixels (facetlift's frame), unit length;
-    None where they are not an (H, W, 3) map of the surface's shape (a gradient field)."""
+    """The input normals at :meth:`Surface.points`' pixels (facetlift's frame, as read: a
+    gradient field's from its slopes), unit length; None where they are not an (H, W, 3) map
+    of the surface's shape."""
     n = None if normals is None else np.asarray(normals, dtype=float)
     if n is None or n.shape != surface.shape + (3,):
         return None
     r, c = np.nonzero(surface.mask)
     v = n[r, c]
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        # (scaled by the largest component first: a normal of 1e300 is a usable direction, a
+        # review)
+        v = v / np.max(np.abs(v), axis=1, keepdims=True)
         return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 

@@ -512,8 +512,11 @@ def _check_principal_point(cam, H: int, W: int) -> None:
     cx, cy = float(Kc[0, 2]), float(Kc[1, 2])
     # (or within PRINCIPAL_EDGE of an edge: a neural-normals user's K of the photo at twice
     # the map's size put it in the map's corner, 43x the error, no word)
-    ex, ey = PRINCIPAL_EDGE * W, PRINCIPAL_EDGE * H
-    if -0.5 + ex <= cx <= W - 0.5 - ex and -0.5 + ey <= cy <= H - 0.5 - ey:
+    # (the distance to the nearer edge against the limit, with a rounding margin: the limit
+    # held on one side and not the other at some widths, a review)
+    tol = 1e-9
+    if (min(cx + 0.5, W - 0.5 - cx) >= PRINCIPAL_EDGE * W - tol
+            and min(cy + 0.5, H - 0.5 - cy) >= PRINCIPAL_EDGE * H - tol):
         return
     inside = -0.5 <= cx <= W - 0.5 and -0.5 <= cy <= H - 0.5
     where = "lies at the edge of" if inside else "lies outside"
