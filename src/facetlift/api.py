@@ -39,6 +39,7 @@ def integrate(
     prior_weight=1.0,
     confidence=None,
     prior_blur=None,
+    prior_outliers: str = "remove",
     **options,
 ) -> Surface:
     """Reconstruct a surface from a normal map.
@@ -118,6 +119,12 @@ def integrate(
         range) is integrated with the prior pixel by pixel instead, with a warning
         (``info["prior_blur"]["fallback"]``). None or 0: compared pixel by pixel. For methods
         with the ``prior_blur`` capability ("dgp" with ``solver="direct"``).
+    prior_outliers : {"remove", "keep"}
+        "remove" (default): samples of a sparse prior (at most a quarter of the pixels, not
+        blurred) that disagree with every neighbouring sample they can be compared with,
+        along the normals, are left out before the solve, counted in
+        ``info["prior"]["outliers"]`` and named in a warning (mismatched SfM points, a
+        sensor's stray returns: docs/fusion.md, "Outlier samples"); "keep" uses every sample.
     **options
         Method options (``facetlift methods`` lists them, with types and defaults).
         ``progress=True`` shows the command line's progress bar on stderr (the methods'
@@ -196,7 +203,7 @@ def integrate(
     problem = prepare(
         normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
         outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight, confidence=confidence,
-        grazing_note=note, prior_blur=prior_blur,
+        grazing_note=note, prior_blur=prior_blur, prior_outliers=prior_outliers,
     )
     # (the flip check's hint is relative to the frame given; none given: the caller's, e.g.
     # a reader's, stays)
@@ -487,6 +494,7 @@ def prior_info(problem: Problem, surface: Surface) -> dict:
         "prior_components": [int(k) + 1 for k in np.flatnonzero(fixed)],
         "gauged_components": [int(k) + 1 for k in np.flatnonzero(~fixed)],
         "gauge": gauge,
+        "outliers": problem.extras.get("prior_outliers"),
         "mean_abs_residual": float(diff.mean()) if diff.size else 0.0,
         "max_abs_residual": float(diff.max()) if diff.size else 0.0,
         **_far_samples(problem, diff, target[used]),

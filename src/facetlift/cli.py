@@ -96,7 +96,8 @@ RESERVED_OPTIONS = {
     "known": "NaN normals in the map (missing samples; the command line has no `known`)",
     "backfacing": "--backfacing", "outlier_eps": "--outlier-eps",
     "normal_frame": "--normal-frame", "prior_weight": "--prior-weight",
-    "confidence": "--confidence", "prior_blur": "--prior-blur", "progress": "--progress",
+    "confidence": "--confidence", "prior_blur": "--prior-blur",
+    "prior_outliers": "--prior-outliers", "progress": "--progress",
 }
 
 
@@ -207,6 +208,11 @@ _JOB_OPTIONS = [
                  "with the result blurred alike (1.1x the factor of block means blurred by one "
                  "coarse pixel and upsampled bilinearly; block means alone did better pixel "
                  "by pixel: docs/fusion.md, 'Blurred priors')."),
+    click.option("--prior-outliers", type=click.Choice(["remove", "keep"]), default=None,
+                 help="remove (the default): samples of a sparse prior that disagree with "
+                 "every neighbouring sample along the normals are left out, counted and "
+                 "named in a warning (mismatched SfM points, stray sensor returns); keep: "
+                 "use every sample. docs/fusion.md, 'Outlier samples'."),
     click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Per-pixel weights >= 0 of the normals (npy, EXR, float TIFF as stored; "
                  "8/16-bit PNG or TIFF = v/max); "
@@ -255,7 +261,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
               save=(), quads=False, triangles=False, outdir=None, max_memory=None, prior=None,
               prior_scale=None, prior_weight=1.0, prior_weight_map=None, confidence=None,
-              prior_blur=None, no_prior=False, no_confidence=False):
+              prior_blur=None, prior_outliers=None, no_prior=False, no_confidence=False):
     """A :class:`facetlift.jobs.Job` from the parsed flags (ValueError on bad values)."""
     from . import frames
     from .jobs import Job
@@ -307,7 +313,8 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         prior_weight=prior_weight,
         prior_weight_map=None if prior_weight_map is None else str(prior_weight_map),
         confidence=None if confidence is None else str(confidence), prior_blur=prior_blur,
-        dataset_prior=not no_prior, dataset_confidence=not no_confidence,
+        prior_outliers=prior_outliers, dataset_prior=not no_prior,
+        dataset_confidence=not no_confidence,
     )
 
 

@@ -77,6 +77,9 @@ class Job:
     confidence: str | None = None
     #: Standard deviation (pixels) of the prior's blur (``prior_blur``, docs/fusion.md).
     prior_blur: float | None = None
+    #: What to do with a sparse prior's outlier samples ("remove" or "keep"; None: the
+    #: default, remove; facetlift.prior_outliers).
+    prior_outliers: str | None = None
     #: Whether a dataset folder's prior_depth.* and confidence.* files are used.
     dataset_prior: bool = True
     dataset_confidence: bool = True
@@ -233,6 +236,10 @@ def _no_prior_checks(job: Job) -> None:
         from .problem import check_prior_blur
 
         check_prior_blur(job.prior_blur, has_prior=False)
+    if job.prior_outliers is not None:
+        from .problem import check_prior_outliers
+
+        check_prior_outliers(job.prior_outliers, has_prior=False)
 
 
 def _normals_from_field(g: dict, job: Job) -> np.ndarray:
@@ -374,7 +381,9 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                     K=inp.K, backfacing=job.backfacing, outlier_eps=job.outlier_eps,
                     prior=depth_prior,
                     prior_weight=inp.prior_weight if inp.prior is not None else 1.0,
-                    confidence=inp.confidence, prior_blur=job.prior_blur, **opts,
+                    confidence=inp.confidence, prior_blur=job.prior_blur,
+                    **({} if job.prior_outliers is None or inp.prior is None
+                       else {"prior_outliers": job.prior_outliers}), **opts,
                 )
             except ValueError as e:
                 said = _from_folder(str(e), job, inp)

@@ -261,6 +261,7 @@ def prepare(
     confidence=None,
     grazing_note: str | None = None,
     prior_blur=None,
+    prior_outliers: str = "remove",
 ) -> Problem:
     """Check user inputs and build a :class:`Problem`.
 
@@ -298,6 +299,10 @@ def prepare(
     prior_blur : float, optional
         Standard deviation in pixels of the blur the prior is seen through
         (:func:`check_prior_blur`, docs/fusion.md); None or 0: none.
+    prior_outliers : {"remove", "keep"}
+        "remove" (default): samples of a sparse prior that disagree with every neighbouring
+        sample along the normals are left out, counted and named in a warning
+        (:mod:`facetlift.prior_outliers`); "keep": every sample is used.
 
     Raises
     ------
@@ -466,6 +471,7 @@ def prepare(
     elif not _is_default_weight(prior_weight):
         raise ValueError(f"`prior_weight` applies only with a `prior`; got {_short(prior_weight)} "
                          "and prior=None")
+    check_prior_outliers(prior_outliers, prior is not None)
     blur = check_prior_blur(prior_blur, prior is not None, (H, W))
     if blur > 0 and pw is not None:
         used = pw[pw > 0]
@@ -490,9 +496,70 @@ def prepare(
                 "no_normal": ~given | nan | bad["non-finite"] | bad["zero-length"] | (
                     False if conf is None else counts_zero)},
     )
+    if problem.has_prior and prior_outliers == "remove":
+        _remove_outliers(problem)
     if problem.has_prior and not problem.prior_components.all():
         _warn_unfixed(problem)
     return problem
+
+
+#: ``prior_outliers=`` choices (:func:`prepare`).
+PRIOR_OUTLIERS = ("remove", "keep")
+#: More outliers than this share of the samples checked are not removed, but warned about.
+OUTLIERS_AT_MOST = 0.5
+
+
+def check_prior_outliers(value, has_prior: bool = True) -> str:
+    """`prior_outliers` checked: one of :data:`PRIOR_OUTLIERS`, and "keep" only with a
+    prior; raises ValueError naming it."""
+    if not isinstance(value, str) or value not in PRIOR_OUTLIERS:
+        raise ValueError(f"`prior_outliers` must be one of {', '.join(PRIOR_OUTLIERS)}; got "
+                         f"{_short(value)}")
+    if value != "remove" and not has_prior:
+        raise ValueError(f"`prior_outliers` {value!r} applies only with a prior (`prior`, "
+                         "--prior, or a dataset folder's prior_depth file)")
+    return value
+
+
+def _remove_outliers(problem: Problem) -> None:
+    """Give the outlier samples of the prior (:mod:`facetlift.prior_outliers`) weight 0,
+    count them (``extras["prior_outliers"]``, for ``info["prior"]``) and warn."""
+    from .prior_outliers import find_outliers
+
+    found = find_outliers(problem)
+    if found is None:
+        return
+    bad, details = found
+    k = int(bad.sum())
+    first = None
+    if k > OUTLIERS_AT_MOST * details["checked"]:
+        # (so many are the normals' or the setup's fault, not the samples')
+        problem.extras["prior_outliers"] = {"removed": 0, "disagreeing": k, "first": None,
+                                            **details}
+        warn(f"prior: {k} of the {details['checked']} samples disagree with every "
+             "neighbouring sample along the normals, too many to be outliers: all are used. "
+             "The prior and the normals disagree; check the prior's units, `pixel_size` or "
+             "`K`, and the normals' frame (info['prior']['outliers']; docs/fusion.md, "
+             "'Outlier samples')")
+        return
+    if k:
+        r, c = problem.domain.pixels
+        f = int(np.flatnonzero(bad)[0])
+        first = [int(r[f]), int(c[f])]
+        problem.prior_weight = np.where(bad, 0.0, problem.prior_weight)
+        problem.__dict__.pop("prior_components", None)  # (cached; samples are gone)
+    t = details["threshold"]
+    # (the tolerance in the prior's own terms: a relative depth with a camera, else depth)
+    tol = f"{np.expm1(t):.2%} of the depth" if problem.perspective else f"{t:.3g}"
+    problem.extras["prior_outliers"] = {"removed": k, "first": first, "tolerance": tol,
+                                        **details}
+    if k:
+        warn(f"prior: {k} of the {details['checked']} samples disagree with every "
+             f"neighbouring sample they could be compared with, by more than {tol} along "
+             f"the normals (the first at row {first[0]}, col {first[1]}): left out as "
+             "outliers, such as mismatched SfM points or a sensor's stray returns "
+             "(info['prior']['outliers']; prior_outliers='keep', --prior-outliers keep, "
+             "uses them; docs/fusion.md, 'Outlier samples')")
 
 
 #: A pinhole K whose principal point lies outside the image, or within this share of its

@@ -1,0 +1,145 @@
+"""Outlier samples of a sparse depth prior, found before the solve from the normals.
+
+A sample of a depth prior (a LiDAR return, an SfM point) that lies far off the surface pulls
+its piece with it: the prior term is quadratic, and with ``discontinuities`` the route may cut
+a blob loose around the sample and move it there (docs/fusion.md, "Outlier samples"). The
+surface returned cannot tell such a sample, since a strong prior weight makes the surface meet
+it; the normals can. Between two samples ``i`` and ``j`` the normals predict the difference
+of the camera's unknown (height, or log-depth with a pinhole camera) by integrating their
+slopes along the straight line from one to the other; the samples' own difference should
+agree with it, up to the normals' and the samples' noise, unless a depth jump lies between
+them. Every sample is compared so with its :data:`K_NEAR` nearest samples (and with those
+that have it among theirs).
+
+A comparison is left out (neither agreeing nor disagreeing) where the line leaves the mask or
+crosses a facet without a usable normal or one steeper than :data:`STEEP` (view cosine): a jump
+that the normals show at all shows as such a rim. A sample is an **outlier** when it can be
+compared with at least three of its neighbours and with :data:`KNOWN` of them, and agrees with
+none: a sample on a piece of its own, whose every neighbour lies across a jump the normals do
+not show, agrees with none either, but lies on the rim's other side from most of them, so
+that too few of its comparisons are made. Two samples agree when their difference and the
+normals' differ by at most the larger of :data:`FAR` times the median over all comparisons
+and :data:`FLOOR` (a relative depth with a pinhole camera, else a share of the larger of the
+samples' depth range and the object's width).
+
+Dense priors (samples on more than :data:`DENSE` of the facets: a depth sensor's map, a
+monocular network's) and blurred ones (``prior_blur``) are not checked: a dense map's errors
+are smooth, not isolated, and a blurred prior's samples differ from the surface by design.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Nearest samples each sample is compared with.
+K_NEAR = 8
+#: A line across a facet whose normal's view cosine is below this is not compared (a rim).
+STEEP = 0.3
+#: Share of a sample's comparisons that must be made before it can be called an outlier.
+KNOWN = 0.75
+#: Agreement tolerance: FAR times the median disagreement over all comparisons, and at least
+#: FLOOR (relative depth with a camera; a share of the depth range or object width without).
+FAR, FLOOR = 10.0, 0.02
+#: Priors with samples on more than this share of the facets are not checked.
+DENSE = 0.25
+#: Lines longer than this many pixels are not compared.
+MAX_LENGTH = 128
+#: Points along the lines per pixel of their length.
+STEPS_PER_PIXEL = 2
+#: Line points handled at once (memory: about 50 bytes each).
+CHUNK = 1_000_000
+
+
+def find_outliers(problem) -> tuple[np.ndarray, dict] | None:
+    """``(outlier, details)``: (m,) bool, True at the facets whose prior sample is an outlier
+    (module docstring), and ``checked`` (samples compared), ``comparisons`` and
+    ``threshold`` (the tolerance, in the camera's unknown: log-depth or height); None where
+    the prior is not checked (none, dense, blurred, or fewer than 5 samples)."""
+    w = problem.prior_weight
+    if w is None or problem.prior_blur > 0:
+        return None
+    d = problem.domain
+    u = problem.prior
+    s = np.flatnonzero((w > 0) & np.isfinite(u))
+    n = s.size
+    if n < 5 or n > DENSE * d.n_facets:
+        return None
+    r, c = d.pixels
+    H, W = d.shape
+    index = np.full((H, W), -1, dtype=np.int64)
+    index[r, c] = np.arange(r.size)
+    gx, gy = problem.grid_slopes
+    rim = problem.view_cosines < STEEP  # (also where there is no usable normal: cosine 0)
+    gx = np.where(rim, np.nan, gx)
+    gy = np.where(rim, np.nan, gy)
+    pts = np.column_stack([r[s], c[s]]).astype(float)
+    a, b = _pairs(pts, min(K_NEAR, n - 1))
+    predicted = _line_integrals(pts, a, b, index, gx, gy)
+    e = np.abs((u[s[b]] - u[s[a]]) - predicted)
+    made = np.isfinite(e)
+    if made.sum() < 3:
+        return None
+    if problem.camera.perspective:
+        floor = FLOOR
+    else:
+        size = max(np.ptp(r), np.ptp(c)) + 1
+        floor = FLOOR * max(float(np.ptp(u[s])), size * problem.camera.pixel_size)
+    threshold = max(FAR * float(np.median(e[made])), floor)
+    agree = made & (e <= threshold)
+
+    def tally(sel):
+        return np.bincount(a[sel], minlength=n) + np.bincount(b[sel], minlength=n)
+
+    total, compared, agreeing = tally(slice(None)), tally(made), tally(agree)
+    bad = (compared >= 3) & (compared >= KNOWN * total) & (agreeing == 0)
+    out = np.zeros(d.n_facets, dtype=bool)
+    out[s[bad]] = True
+    return out, {"checked": int(n), "comparisons": int(made.sum()), "threshold": threshold}
+
+
+def _pairs(pts: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample with its `k` nearest, every unordered pair once."""
+    from scipy.spatial import cKDTree
+
+    _, near = cKDTree(pts).query(pts, k + 1)
+    near = near[:, 1:]
+    a = np.repeat(np.arange(len(pts)), k)
+    pair = np.unique(np.sort(np.column_stack([a, near.ravel()]), axis=1), axis=0)
+    return pair[:, 0], pair[:, 1]
+
+
+def _line_integrals(pts, a, b, index, gx, gy) -> np.ndarray:
+    """The change of the unknown from sample `a` to sample `b` along the straight line by the
+    midpoint rule over the nearest facets' slopes; NaN where the line leaves the domain,
+    crosses a facet without a slope or is longer than :data:`MAX_LENGTH`."""
+    H, W = index.shape
+    dr = pts[b, 0] - pts[a, 0]
+    dc = pts[b, 1] - pts[a, 1]
+    length = np.maximum(np.abs(dr), np.abs(dc))
+    steps = np.maximum(np.ceil(STEPS_PER_PIXEL * length), 1).astype(np.int64)
+    out = np.full(a.size, np.nan)
+    todo = np.flatnonzero(length <= MAX_LENGTH)
+    if not todo.size:
+        return out
+    todo = todo[np.argsort(steps[todo], kind="stable")]  # (similar lengths share a chunk)
+    lo = 0
+    while lo < todo.size:
+        # (the most lines whose padded points fit CHUNK: k lines cost k times the last one's)
+        cost = np.arange(1, todo.size - lo + 1) * steps[todo[lo:]]
+        hi = lo + max(1, int(np.searchsorted(cost, CHUNK, side="right")))
+        q = todo[lo:hi]
+        lo = hi
+        longest = int(steps[q[-1]])
+        st = steps[q][:, None]
+        t = (np.arange(longest) + 0.5)[None, :] / st
+        on = t < 1.0
+        rr = np.clip(np.rint(pts[a[q], 0][:, None] + t * dr[q][:, None]), 0, H - 1)
+        cc = np.clip(np.rint(pts[a[q], 1][:, None] + t * dc[q][:, None]), 0, W - 1)
+        f = index[rr.astype(np.int64), cc.astype(np.int64)]
+        fs = np.maximum(f, 0)
+        # (x along columns, y up: a step down the rows is a step of -1 in y)
+        g = (gx[fs] * dc[q][:, None] - gy[fs] * dr[q][:, None]) / st
+        g = np.where(on, g, 0.0)
+        ok = ((f >= 0) | ~on).all(axis=1) & np.isfinite(g).all(axis=1)
+        out[q] = np.where(ok, g.sum(axis=1), np.nan)
+    return out
