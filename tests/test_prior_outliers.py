@@ -106,11 +106,72 @@ def test_dense_and_blurred_priors_are_not_checked():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         s = facetlift.integrate(gt.normals, gt.mask, prior=dense, prior_weight=0.01)
-    assert s.info["prior"]["outliers"] is None
+    out = s.info["prior"]["outliers"]
+    assert out["removed"] == 0 and "dense prior" in out["skipped"]
     _, r, c, z = _sphere_samples(40)
     problem = facetlift.prepare(gt.normals, gt.mask, prior=(r * 0.75, c * 0.75, z),
                                 prior_blur=2.0, prior_weight=0.001)
-    assert "prior_outliers" not in problem.extras
+    assert "blurred" in problem.extras["prior_outliers"]["skipped"]
+    problem = facetlift.prepare(gt.normals, gt.mask, prior=(r[:4] * 0.75, c[:4] * 0.75, z[:4]))
+    assert problem.extras["prior_outliers"] == {"removed": 0,
+                                                "skipped": "4 samples (fewer than 5)"}
+
+
+def test_a_far_sample_or_object_does_not_widen_the_orthographic_tolerance():
+    # (the floor once took the samples' whole depth range: one sample 100 ranges off, or a
+    # second object far behind, raised it 20-fold and hid the other outliers, a review)
+    gt, r, c, z = _sphere_samples()
+    span = np.nanmax(gt.depth) - np.nanmin(gt.depth)
+    z[:3] += 0.3 * span
+    z[3] += 100 * span
+    with pytest.warns(UserWarning, match="4 of the 80 samples .* left out as outliers"):
+        problem = facetlift.prepare(gt.normals, gt.mask, prior=(r, c, z),
+                                    pixel_size=gt.pixel_size)
+    assert problem.extras["prior_outliers"]["removed"] == 4
+    # two spheres side by side, the right one far behind; the outliers on the left one
+    normals = np.concatenate([gt.normals, gt.normals], axis=1)
+    mask = np.concatenate([gt.mask, gt.mask], axis=1)
+    r2 = np.r_[r[4:], r[4:]]
+    c2 = np.r_[c[4:], c[4:] + gt.mask.shape[1]]
+    z2 = np.r_[z[4:], z[4:] + 1000 * span]
+    z2[:3] += 0.3 * span
+    with pytest.warns(UserWarning, match="3 of the 152 samples .* left out as outliers"):
+        problem = facetlift.prepare(normals, mask, prior=(r2, c2, z2), pixel_size=gt.pixel_size)
+    assert problem.extras["prior_outliers"]["removed"] == 3
+
+
+def test_a_diagonal_rim_one_pixel_wide_stops_a_line():
+    # (a 45-degree line visits every other diagonal only; the pixels beside its steps are
+    # looked at too, a review)
+    from facetlift.prior_outliers import _line_integrals
+
+    n = 20
+    index = np.arange(n * n).reshape(n, n)
+    gx = np.zeros(n * n)
+    rows, cols = np.divmod(np.arange(n * n), n)
+    for wall in (19, 20):  # (odd and even diagonals)
+        gy = np.where(rows + cols == wall, np.nan, 0.0)
+        pts = np.array([[5.0, 5.0], [14.0, 14.0], [5.0, 6.0], [14.0, 13.0]])
+        got = _line_integrals(pts, np.array([0, 2]), np.array([1, 3]), index,
+                              np.where(np.isnan(gy), np.nan, gx), gy)
+        assert np.isnan(got).all(), wall
+    # and with no wall the lines are made
+    got = _line_integrals(pts, np.array([0, 2]), np.array([1, 3]), index, gx, np.zeros(n * n))
+    assert np.all(got == 0.0)
+
+
+def test_a_method_without_a_prior_refuses_it_before_any_outlier_warning():
+    gt, r, c, z = _sphere_samples()
+    z[:3] += 0.3 * (np.nanmax(gt.depth) - np.nanmin(gt.depth))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match="does not take a `prior`"):
+            facetlift.integrate(gt.normals, gt.mask, prior=(r, c, z), method="bini",
+                                pixel_size=gt.pixel_size)
+    # None is the default
+    s = facetlift.integrate(gt.normals, gt.mask, prior=(r[3:], c[3:], z[3:]),
+                            prior_outliers=None, pixel_size=gt.pixel_size)
+    assert s.info["prior"]["outliers"]["removed"] == 0
 
 
 def test_bad_values_are_refused_by_name(tmp_path, capsys):
@@ -146,6 +207,10 @@ def test_the_command_line_removes_and_keeps(tmp_path, capsys):
     captured = capsys.readouterr()
     assert code == 0 and "disagree" not in captured.err
     assert json.loads(captured.out)["info"]["prior"]["outliers"] is None
+    # the text summary counts them
+    code = main([*base[:-1], "-o", str(tmp_path / "c")])
+    captured = capsys.readouterr()
+    assert code == 0 and "2 prior outliers left out" in captured.out + captured.err
 
 
 def test_a_majority_disagreeing_is_not_removed_but_warned(monkeypatch):

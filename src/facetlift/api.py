@@ -15,7 +15,7 @@ from .domain import Domain
 from .linalg import SolverError
 from .metrics import diagnose
 from .options import validate
-from .problem import Problem, normals_from_gradients, prepare
+from .problem import Problem, check_prior_outliers, normals_from_gradients, prepare
 from .surface import Surface
 
 log = logging.getLogger("facetlift")
@@ -120,11 +120,12 @@ def integrate(
         (``info["prior_blur"]["fallback"]``). None or 0: compared pixel by pixel. For methods
         with the ``prior_blur`` capability ("dgp" with ``solver="direct"``).
     prior_outliers : {"remove", "keep"}
-        "remove" (default): samples of a sparse prior (at most a quarter of the pixels, not
-        blurred) that disagree with every neighbouring sample they can be compared with,
-        along the normals, are left out before the solve, counted in
-        ``info["prior"]["outliers"]`` and named in a warning (mismatched SfM points, a
-        sensor's stray returns: docs/fusion.md, "Outlier samples"); "keep" uses every sample.
+        "remove" (default; None too): samples of a sparse prior (on at most a quarter of the
+        mask's pixels, not blurred) that disagree with every neighbouring sample they can be
+        compared with, along the normals, are left out before the solve, counted in
+        ``info["prior"]["outliers"]`` (``skipped`` says why where the prior is not checked)
+        and named in a warning (mismatched SfM points, a sensor's stray returns:
+        docs/fusion.md, "Outlier samples"); "keep" uses every sample.
     **options
         Method options (``facetlift methods`` lists them, with types and defaults).
         ``progress=True`` shows the command line's progress bar on stderr (the methods'
@@ -200,6 +201,10 @@ def integrate(
     validate(info.specs(), {**options, "progress": _no_progress}
              if options.get("progress") is True else options, method)
     normals = frames.checked(normals, mask, frame=normal_frame)
+    if prior is not None and not info.prior:
+        # (the method refuses the prior in _solve: no outlier check to warn about before)
+        check_prior_outliers(prior_outliers)
+        prior_outliers = "keep"
     problem = prepare(
         normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
         outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight, confidence=confidence,
@@ -477,7 +482,10 @@ def prior_info(problem: Problem, surface: Surface) -> dict:
     kept the camera's gauge (1-based labels of ``Domain.labels``) and that gauge (None when
     the prior fixed every component), and the fit at the samples (mean and largest absolute
     depth difference; ``far_samples``, and with two or more finite samples ``far_threshold``
-    and ``farthest_sample`` (row, col): :data:`FAR`)."""
+    and ``farthest_sample`` (row, col): :data:`FAR`) and ``outliers``: the samples left out
+    before the solve (:mod:`facetlift.prior_outliers`; ``removed``, and ``skipped`` with the
+    reason where the prior was not checked; None with ``prior_outliers="keep"``): ``samples``
+    counts those used, ``info["input"]["prior_samples"]`` those given."""
     d = problem.domain
     w = problem.prior_weight
     used = w > 0

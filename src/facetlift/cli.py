@@ -352,6 +352,9 @@ def summary(record: dict) -> str:
                      f"{len(prior.get('prior_components', []))} of "
                      f"{prior.get('components')} components"
                      + (f" ({outside} outside the mask, unused)" if outside else ""))
+        removed = (prior.get("outliers") or {}).get("removed") or 0
+        if removed:
+            parts.append(f"{removed} prior outlier{'s' if removed != 1 else ''} left out")
     counts = info.get("input") or {}
     missing = counts.get("missing") or 0
     if missing:  # (NaN inside the mask: no warning, being the documented way to say it)

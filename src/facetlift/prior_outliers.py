@@ -15,12 +15,13 @@ A comparison is left out (neither agreeing nor disagreeing) where the line leave
 crosses a facet without a usable normal or one steeper than :data:`STEEP` (view cosine): a jump
 that the normals show at all shows as such a rim. A sample is an **outlier** when it can be
 compared with at least three of its neighbours and with :data:`KNOWN` of them, and agrees with
-none: a sample on a piece of its own, whose every neighbour lies across a jump the normals do
-not show, agrees with none either, but lies on the rim's other side from most of them, so
-that too few of its comparisons are made. Two samples agree when their difference and the
-normals' differ by at most the larger of :data:`FAR` times the median over all comparisons
-and :data:`FLOOR` (a relative depth with a pinhole camera, else a share of the larger of the
-samples' depth range and the object's width).
+none: a correct sample on a piece of its own beyond a jump agrees with none of its neighbours
+either, but where the normals show the jump as a rim, most of its lines cross the rim and are
+not made. Two samples agree when their difference and the normals' differ by at most the
+larger of :data:`FAR` times the median over all comparisons and :data:`FLOOR` (a relative
+depth with a pinhole camera; without one a share of the larger of the object's width and
+the samples' depth range, taken per mask component between the 5th and 95th percentiles so
+that the outliers sought and other objects at other depths do not widen it).
 
 Dense priors (samples on more than :data:`DENSE` of the facets: a depth sensor's map, a
 monocular network's) and blurred ones (``prior_blur``) are not checked: a dense map's errors
@@ -50,20 +51,26 @@ STEPS_PER_PIXEL = 2
 CHUNK = 1_000_000
 
 
-def find_outliers(problem) -> tuple[np.ndarray, dict] | None:
+def find_outliers(problem) -> tuple[np.ndarray | None, dict]:
     """``(outlier, details)``: (m,) bool, True at the facets whose prior sample is an outlier
-    (module docstring), and ``checked`` (samples compared), ``comparisons`` and
-    ``threshold`` (the tolerance, in the camera's unknown: log-depth or height); None where
-    the prior is not checked (none, dense, blurred, or fewer than 5 samples)."""
+    (module docstring), and ``checked`` (the samples with a positive weight), ``comparisons``
+    (made) and ``threshold`` (the tolerance, in the camera's unknown: log-depth or height).
+    Where the prior is not checked, ``(None, {"skipped": why})``: no prior, a blurred or a
+    dense one, fewer than 5 samples, or fewer than 3 comparisons made."""
     w = problem.prior_weight
-    if w is None or problem.prior_blur > 0:
-        return None
+    if w is None:
+        return None, {"skipped": "no prior"}
+    if problem.prior_blur > 0:
+        return None, {"skipped": "a blurred prior (prior_blur)"}
     d = problem.domain
     u = problem.prior
     s = np.flatnonzero((w > 0) & np.isfinite(u))
     n = s.size
-    if n < 5 or n > DENSE * d.n_facets:
-        return None
+    if n < 5:
+        return None, {"skipped": f"{n} samples (fewer than 5)"}
+    if n > DENSE * d.n_facets:
+        return None, {"skipped": f"a dense prior (samples on more than {DENSE:.0%} of the "
+                                 "mask's pixels)"}
     r, c = d.pixels
     H, W = d.shape
     index = np.full((H, W), -1, dtype=np.int64)
@@ -78,12 +85,14 @@ def find_outliers(problem) -> tuple[np.ndarray, dict] | None:
     e = np.abs((u[s[b]] - u[s[a]]) - predicted)
     made = np.isfinite(e)
     if made.sum() < 3:
-        return None
+        return None, {"skipped": f"{int(made.sum())} comparisons made (fewer than 3)",
+                      "checked": int(n)}
     if problem.camera.perspective:
         floor = FLOOR
     else:
         size = max(np.ptp(r), np.ptp(c)) + 1
-        floor = FLOOR * max(float(np.ptp(u[s])), size * problem.camera.pixel_size)
+        width = size * problem.camera.pixel_size
+        floor = FLOOR * max(_spread(u[s], d.facet_component[s]), width)
     threshold = max(FAR * float(np.median(e[made])), floor)
     agree = made & (e <= threshold)
 
@@ -95,6 +104,18 @@ def find_outliers(problem) -> tuple[np.ndarray, dict] | None:
     out = np.zeros(d.n_facets, dtype=bool)
     out[s[bad]] = True
     return out, {"checked": int(n), "comparisons": int(made.sum()), "threshold": threshold}
+
+
+def _spread(values: np.ndarray, component: np.ndarray) -> float:
+    """The largest range between the 5th and 95th percentiles of `values` within a component
+    (the outliers sought and objects at other depths do not widen it)."""
+    out = 0.0
+    for k in np.unique(component):
+        v = values[component == k]
+        if v.size > 1:
+            lo, hi = np.percentile(v, [5, 95])
+            out = max(out, float(hi - lo))
+    return out
 
 
 def _pairs(pts: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -135,11 +156,22 @@ def _line_integrals(pts, a, b, index, gx, gy) -> np.ndarray:
         on = t < 1.0
         rr = np.clip(np.rint(pts[a[q], 0][:, None] + t * dr[q][:, None]), 0, H - 1)
         cc = np.clip(np.rint(pts[a[q], 1][:, None] + t * dc[q][:, None]), 0, W - 1)
-        f = index[rr.astype(np.int64), cc.astype(np.int64)]
+        ri, ci = rr.astype(np.int64), cc.astype(np.int64)
+        f = index[ri, ci]
         fs = np.maximum(f, 0)
         # (x along columns, y up: a step down the rows is a step of -1 in y)
         g = (gx[fs] * dc[q][:, None] - gy[fs] * dr[q][:, None]) / st
         g = np.where(on, g, 0.0)
         ok = ((f >= 0) | ~on).all(axis=1) & np.isfinite(g).all(axis=1)
+        # a diagonal step between two points passes a corner: a one-pixel diagonal rim there
+        # is crossed unseen unless both pixels beside the step are looked at (blocked when
+        # both are: a 45-degree line visits only every other diagonal)
+        diag = on[:, 1:] & (ri[:, 1:] != ri[:, :-1]) & (ci[:, 1:] != ci[:, :-1])
+        if diag.any():
+            def usable(a, b):
+                k = index[a, b]
+                return (k >= 0) & np.isfinite(gx[np.maximum(k, 0)])
+            side = usable(ri[:, :-1], ci[:, 1:]) | usable(ri[:, 1:], ci[:, :-1])
+            ok &= ~(diag & ~side).any(axis=1)
         out[q] = np.where(ok, g.sum(axis=1), np.nan)
     return out

@@ -471,7 +471,7 @@ def prepare(
     elif not _is_default_weight(prior_weight):
         raise ValueError(f"`prior_weight` applies only with a `prior`; got {_short(prior_weight)} "
                          "and prior=None")
-    check_prior_outliers(prior_outliers, prior is not None)
+    prior_outliers = check_prior_outliers(prior_outliers, prior is not None)
     blur = check_prior_blur(prior_blur, prior is not None, (H, W))
     if blur > 0 and pw is not None:
         used = pw[pw > 0]
@@ -510,8 +510,10 @@ OUTLIERS_AT_MOST = 0.5
 
 
 def check_prior_outliers(value, has_prior: bool = True) -> str:
-    """`prior_outliers` checked: one of :data:`PRIOR_OUTLIERS`, and "keep" only with a
-    prior; raises ValueError naming it."""
+    """`prior_outliers` checked: one of :data:`PRIOR_OUTLIERS` (None: "remove", the default),
+    and "keep" only with a prior; raises ValueError naming it."""
+    if value is None:
+        return "remove"
     if not isinstance(value, str) or value not in PRIOR_OUTLIERS:
         raise ValueError(f"`prior_outliers` must be one of {', '.join(PRIOR_OUTLIERS)}; got "
                          f"{_short(value)}")
@@ -526,16 +528,21 @@ def _remove_outliers(problem: Problem) -> None:
     count them (``extras["prior_outliers"]``, for ``info["prior"]``) and warn."""
     from .prior_outliers import find_outliers
 
-    found = find_outliers(problem)
-    if found is None:
+    bad, details = find_outliers(problem)
+    if bad is None:
+        problem.extras["prior_outliers"] = {"removed": 0, **details}
         return
-    bad, details = found
     k = int(bad.sum())
     first = None
+    t = details["threshold"]
+    # (the tolerance in the prior's own terms: a relative depth with a camera, else depth)
+    tol = (f"{np.expm1(t):.2%} of the depth" if problem.perspective
+           else f"{t:.3g} (depth units)")
     if k > OUTLIERS_AT_MOST * details["checked"]:
-        # (so many are the normals' or the setup's fault, not the samples')
+        # (so many are the normals' or the setup's fault, not the samples'; a guard: the
+        # tolerance follows the median disagreement, so this is seldom reached)
         problem.extras["prior_outliers"] = {"removed": 0, "disagreeing": k, "first": None,
-                                            **details}
+                                            "tolerance": tol, **details}
         warn(f"prior: {k} of the {details['checked']} samples disagree with every "
              "neighbouring sample along the normals, too many to be outliers: all are used. "
              "The prior and the normals disagree; check the prior's units, `pixel_size` or "
@@ -548,9 +555,6 @@ def _remove_outliers(problem: Problem) -> None:
         first = [int(r[f]), int(c[f])]
         problem.prior_weight = np.where(bad, 0.0, problem.prior_weight)
         problem.__dict__.pop("prior_components", None)  # (cached; samples are gone)
-    t = details["threshold"]
-    # (the tolerance in the prior's own terms: a relative depth with a camera, else depth)
-    tol = f"{np.expm1(t):.2%} of the depth" if problem.perspective else f"{t:.3g}"
     problem.extras["prior_outliers"] = {"removed": k, "first": first, "tolerance": tol,
                                         **details}
     if k:
