@@ -1005,26 +1005,32 @@ def test_points_files_with_a_column_named_twice_or_nan_depths_say_so(tmp_path):
     assert np.isfinite(img).sum() == 1 and img[2, 1] == 3.0
 
 
-def test_points_hidden_behind_nearer_ones_of_their_pixel_are_left_out():
+def test_a_pixel_whose_points_disagree_is_left_out():
     """A LiDAR cloud seen past an object's edge puts points of the wall behind into the
-    object's pixels; averaged with the object's own they made a depth neither surface has."""
-    from facetlift.problem import HIDDEN, prior_image
+    object's pixels, and an SfM point duplicated across views may be mismatched in one: the
+    mean was a depth neither surface has; keeping the nearest kept a mismatch in front and
+    dropped the good points behind it (a user's check)."""
+    from facetlift.problem import CONFLICT, prior_image
 
-    rows = np.array([2.0, 2.2, 1.9, 5.0, 5.1])
-    cols = np.array([3.0, 2.9, 3.1, 7.0, 7.0])
-    depths = np.array([2.0, 2.0 * (1 + HIDDEN / 2), 3.0, 4.0, 4.0])
-    with pytest.warns(UserWarning, match=r"1 sample\(s\) lie behind nearer ones of their pixel "
-                      r"\(1 pixel\(s\), the first at row 2, col 3\), by more than 2% of the "
-                      r"depth: hidden from the camera"):
+    rows = np.array([2.0, 2.2, 1.9, 5.0, 5.1, 7.0])
+    cols = np.array([3.0, 2.9, 3.1, 7.0, 7.0, 1.0])
+    depths = np.array([2.0, 2.0 * (1 + CONFLICT / 2), 3.0, 4.0, 4.0, 1.0])
+    with pytest.warns(UserWarning, match=r"1 pixel\(s\) hold points whose depths differ by "
+                      r"more than 2% of the depth \(the first at row 2, col 3; 3 points\): they "
+                      r"were left out"):
         img = prior_image((rows, cols, depths), (8, 10), positive=True)
-    assert img[2, 3] == pytest.approx(2.0 * (1 + HIDDEN / 4))  # (the near two averaged)
-    assert img[5, 7] == 4.0 and np.isfinite(img).sum() == 2
+    assert np.isnan(img[2, 3]) and img[5, 7] == 4.0 and img[7, 1] == 1.0
+    assert np.isfinite(img).sum() == 2
+    # a mismatch in front of two good points: the pixel goes, not the good points alone
+    with pytest.warns(UserWarning, match=r"1 pixel\(s\) hold points"):
+        img = prior_image((rows[:3], cols[:3], [2.0, 2.0, 1.5]), (8, 10), positive=True)
+    assert np.isfinite(img).sum() == 0
     # without a camera: a share of the samples' depth range
     with pytest.warns(UserWarning, match=r"by more than 2% of the depth range"):
         img = prior_image((rows, cols, depths), (8, 10))
-    assert img[2, 3] == pytest.approx(2.0 * (1 + HIDDEN / 4))
+    assert np.isnan(img[2, 3])
     # points of one surface in a pixel are averaged without a word
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)
         img = prior_image((rows[:2], cols[:2], depths[:2]), (8, 10), positive=True)
-    assert img[2, 3] == pytest.approx(2.0 * (1 + HIDDEN / 4))
+    assert img[2, 3] == pytest.approx(2.0 * (1 + CONFLICT / 4))

@@ -485,7 +485,7 @@ def prior_info(problem: Problem, surface: Surface) -> dict:
     and ``farthest_sample`` (row, col): :data:`FAR`) and ``outliers``: the samples left out
     before the solve (:mod:`facetlift.prior_outliers`; ``removed``, and ``skipped`` with the
     reason where the prior was not checked; None with ``prior_outliers="keep"``): ``samples``
-    counts those used, ``info["input"]["prior_samples"]`` those given."""
+    counts those used, ``info["input"]["prior_samples"]`` those given in the mask (pixels)."""
     d = problem.domain
     w = problem.prior_weight
     used = w > 0

@@ -702,30 +702,34 @@ def _is_points(prior) -> bool:
 CROWDED_MIN, CROWDED_SHARE, CROWDED_BOX = 20, 0.1, 0.01
 
 
-#: Points of one pixel farther than this share of the nearest one's depth behind it (of the
-#: samples' depth range without a camera, 5th to 95th percentile) are hidden and left out.
-HIDDEN = 0.02
+#: A pixel whose points' depths span more than this share of their nearest one's depth (of
+#: the samples' depth range without a camera, 5th to 95th percentile) is left out: a
+#: mismatched point beside a good one, or a sensor's points on both sides of an edge (keeping
+#: the nearest kept a mismatch in front and dropped the good ones behind it, a user's check).
+CONFLICT = 0.02
 
 
-def _front(idx: np.ndarray, depth: np.ndarray, n: int, positive: bool) -> np.ndarray:
-    """(k,) bool: the points (pixel `idx`, `depth`) within :data:`HIDDEN` of their pixel's
-    nearest point."""
+def _agreeing(idx: np.ndarray, depth: np.ndarray, n: int, positive: bool) -> np.ndarray:
+    """(k,) bool: the points (pixel `idx`, `depth`) of pixels whose points lie within
+    :data:`CONFLICT` of each other."""
     nearest = np.full(n, np.inf)
+    farthest = np.full(n, -np.inf)
     np.minimum.at(nearest, idx, depth)
+    np.maximum.at(farthest, idx, depth)
     near = nearest[idx]
     if positive:
-        tol = HIDDEN * np.abs(near)  # (all behind the camera: refused by the caller)
+        tol = CONFLICT * np.abs(near)  # (all behind the camera: refused by the caller)
     else:
         lo, hi = np.percentile(depth, [5, 95]) if depth.size else (0.0, 0.0)
-        tol = HIDDEN * (hi - lo)
-    return depth <= near + tol
+        tol = CONFLICT * (hi - lo)
+    return farthest[idx] - near <= tol
 
 
 def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.ndarray:
     """The prior as an (H, W) depth image, NaN where unknown: from an (H, W) array or a
     ``(rows, cols, depths)`` triple (pixel indices, rounded to the nearest pixel; depths of the
-    same pixel averaged, those within :data:`HIDDEN` of its nearest only: the camera sees the
-    nearest surface, the points behind it are hidden, and are counted in a warning). With
+    same pixel averaged; a pixel whose points differ by more than :data:`CONFLICT` is left out,
+    counted in a warning: which of them is right is unknown). With
     `positive` (a perspective camera) a triple's points with a depth <= 0 (behind the camera)
     are left out before the averaging, with a warning, unless every one is (then the caller
     refuses them). Raises ValueError naming `prior`."""
@@ -767,18 +771,18 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
             keep &= ~behind
         idx = r[keep] * W + c[keep]
         d = depths[keep]
-        front = _front(idx, d, H * W, positive)
-        if not front.all():
-            hidden = np.unique(idx[~front])
-            k = int(hidden[0])
-            warn(f"`prior` (rows, cols, depths): {int((~front).sum())} sample(s) lie behind "
-                 f"nearer ones of their pixel ({hidden.size} pixel(s), the first at row "
-                 f"{k // W}, col {k % W}), by more than {HIDDEN:.0%} of the depth"
-                 + ("" if positive else " range") + ": hidden from the camera, they were "
-                 "left out (a sensor's points seen past an edge; docs/fusion.md, 'Outlier "
-                 "samples')")
-        count = np.bincount(idx[front], minlength=H * W)
-        total = np.bincount(idx[front], d[front], minlength=H * W)
+        agree = _agreeing(idx, d, H * W, positive)
+        if not agree.all():
+            torn = np.unique(idx[~agree])
+            k = int(torn[0])
+            warn(f"`prior` (rows, cols, depths): {torn.size} pixel(s) hold points whose depths "
+                 f"differ by more than {CONFLICT:.0%} of the depth"
+                 + ("" if positive else " range") + f" (the first at row {k // W}, col "
+                 f"{k % W}; {int((~agree).sum())} points): they were left out, which of them "
+                 "is right being unknown (a mismatched point beside a good one, or a sensor's "
+                 "points seen past an edge; docs/fusion.md, 'Outlier samples')")
+        count = np.bincount(idx[agree], minlength=H * W)
+        total = np.bincount(idx[agree], d[agree], minlength=H * W)
         pixels = int(np.count_nonzero(count))
         rk, ck = r[keep], c[keep]
         box = ((int(np.ptp(rk)) + 1) * (int(np.ptp(ck)) + 1)) if rk.size else 0
