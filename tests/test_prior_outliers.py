@@ -34,6 +34,10 @@ def test_isolated_outliers_are_left_out_counted_and_named():
     out = s.info["prior"]["outliers"]
     assert out["removed"] == 3 and out["checked"] == 80
     assert tuple(out["first"]) in set(zip(r[:3], c[:3], strict=True))
+    # every one named, in the image's rows and columns (a user cleans the SfM model with them)
+    assert sorted(map(tuple, out["pixels"])) == sorted(zip(r[:3].tolist(), c[:3].tolist(),
+                                                           strict=True))
+    assert out["unconfirmed"] == len(out["unconfirmed_pixels"])
     assert s.info["prior"]["samples"] == 77
     # the same as giving the other 77 samples alone
     alone = facetlift.integrate(gt.normals, gt.mask, prior=(r[3:], c[3:], z[3:]), **kw)
@@ -232,3 +236,23 @@ def test_a_majority_disagreeing_is_not_removed_but_warned(monkeypatch):
     out = s.info["prior"]["outliers"]
     assert out["removed"] == 0 and out["disagreeing"] == 80
     assert s.info["prior"]["samples"] == 80
+
+
+def test_samples_compared_too_little_to_be_removed_are_named_beside_the_outliers(monkeypatch):
+    # (a user's mismatched SfM points that agreed with none of the 5 of 8 comparisons made were
+    # kept without a word; the finder's count is reported, and said only beside outliers)
+    from facetlift import prior_outliers
+
+    gt, r, c, z = _sphere_samples()
+    z[:3] += 0.3 * (np.nanmax(gt.depth) - np.nanmin(gt.depth))
+    real = prior_outliers.find_outliers
+
+    def doubting(problem):
+        bad, details = real(problem)
+        return bad, {**details, "unconfirmed": 2, "unconfirmed_pixels": [[1, 2], [3, 4]]}
+
+    monkeypatch.setattr(prior_outliers, "find_outliers", doubting)
+    with pytest.warns(UserWarning, match=r"3 of the 80 samples .* stray returns; 2 more "
+                      r"disagree with the few they could be compared with and were kept"):
+        s = facetlift.integrate(gt.normals, gt.mask, prior=(r, c, z), pixel_size=gt.pixel_size)
+    assert s.info["prior"]["outliers"]["unconfirmed_pixels"] == [[1, 2], [3, 4]]

@@ -101,9 +101,19 @@ def find_outliers(problem) -> tuple[np.ndarray | None, dict]:
 
     total, compared, agreeing = tally(slice(None)), tally(made), tally(agree)
     bad = (compared >= 3) & (compared >= KNOWN * total) & (agreeing == 0)
+    # (and those that agree with none of the few comparisons made: kept, but counted)
+    doubtful = (compared >= 1) & (agreeing == 0) & ~bad
     out = np.zeros(d.n_facets, dtype=bool)
     out[s[bad]] = True
-    return out, {"checked": int(n), "comparisons": int(made.sum()), "threshold": threshold}
+    return out, {"checked": int(n), "comparisons": int(made.sum()), "threshold": threshold,
+                 "unconfirmed": int(doubtful.sum()),
+                 "unconfirmed_pixels": image_pixels(d, s[doubtful])}
+
+
+def image_pixels(domain, facets: np.ndarray) -> list[list[int]]:
+    """[[row, col], ...] of `facets` in the image."""
+    r, c = domain.pixels
+    return [[int(a), int(b)] for a, b in zip(r[facets], c[facets], strict=True)]
 
 
 def _spread(values: np.ndarray, component: np.ndarray) -> float:

@@ -526,7 +526,7 @@ def check_prior_outliers(value, has_prior: bool = True) -> str:
 def _remove_outliers(problem: Problem) -> None:
     """Give the outlier samples of the prior (:mod:`facetlift.prior_outliers`) weight 0,
     count them (``extras["prior_outliers"]``, for ``info["prior"]``) and warn."""
-    from .prior_outliers import find_outliers
+    from .prior_outliers import find_outliers, image_pixels
 
     bad, details = find_outliers(problem)
     if bad is None:
@@ -549,21 +549,25 @@ def _remove_outliers(problem: Problem) -> None:
              "`K`, and the normals' frame (info['prior']['outliers']; docs/fusion.md, "
              "'Outlier samples')")
         return
+    pixels = image_pixels(problem.domain, np.flatnonzero(bad))
     if k:
-        r, c = problem.domain.pixels
-        f = int(np.flatnonzero(bad)[0])
-        first = [int(r[f]), int(c[f])]
+        first = pixels[0]
         problem.prior_weight = np.where(bad, 0.0, problem.prior_weight)
         problem.__dict__.pop("prior_components", None)  # (cached; samples are gone)
     problem.extras["prior_outliers"] = {"removed": k, "first": first, "tolerance": tol,
-                                        **details}
+                                        "pixels": pixels, **details}
     if k:
+        doubt = details["unconfirmed"]
+        # (those are said only beside outliers found: clean priors have a few, near rims)
+        more = (f"; {doubt} more disagree with the few they could be compared with and were "
+                "kept (info['prior']['outliers']['unconfirmed_pixels']; a lower prior_weight "
+                "limits what they can do)" if doubt else "")
         warn(f"prior: {k} of the {details['checked']} samples disagree with every "
              f"neighbouring sample they could be compared with, by more than {tol} along "
              f"the normals (the first at row {first[0]}, col {first[1]}): left out as "
-             "outliers, such as mismatched SfM points or a sensor's stray returns "
-             "(info['prior']['outliers']; prior_outliers='keep', --prior-outliers keep, "
-             "uses them; docs/fusion.md, 'Outlier samples')")
+             f"outliers, such as mismatched SfM points or a sensor's stray returns{more} "
+             "(all: info['prior']['outliers']['pixels'], --json; prior_outliers='keep', "
+             "--prior-outliers keep, uses them; docs/fusion.md, 'Outlier samples')")
 
 
 #: A pinhole K whose principal point lies outside the image, or within this share of its
