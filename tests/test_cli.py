@@ -351,3 +351,14 @@ def test_a_point_cloud_output(tmp_path):
     missing = (rr == 4) & (cc == 5)
     assert (normals[missing] == 0).all()
     np.testing.assert_allclose(normals[~missing], n[rr, cc][~missing], atol=1e-6)
+
+
+def test_python_m_facetlift_runs_the_command_line():
+    """A user found only the console script: `python -m facetlift` is the same command."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "facetlift", "--version"], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("facetlift, version")

@@ -454,9 +454,12 @@ def test_points_outside_the_image_are_left_out_with_a_warning(tmp_path, capsys):
     assert re.search(r"warning: --prior \(rows, cols, depths\): 2 of the 3 sample\(s\) lie "
                      r"outside the 24 x 28 image, the first at \(row 1, col 900\); they were "
                      r"left out", err), err
+    # most of them outside: a camera-frame cloud read as pixels? (a user's mm under x,y,z)
+    assert "most of them: 3-D points" in err and "Project them with K first" in err
     n = np.load(tmp_path / "n.npy")
-    with pytest.warns(UserWarning, match="1 of the 2 sample"):
+    with pytest.warns(UserWarning, match="1 of the 2 sample") as rec:
         a = facetlift.integrate(n, prior=([3, 30], [4, 4], [5.0, 5.0])).depth
+    assert not any("3-D points" in str(w.message) for w in rec)
     np.testing.assert_array_equal(a, facetlift.integrate(n, prior=([3], [4], [5.0])).depth)
 
 

@@ -192,7 +192,8 @@ _JOB_OPTIONS = [
                  help="Depth prior (npy, EXR, TIFF, an earlier result's npz, or 16-bit PNG with "
                  "--prior-scale), NaN or "
                  "0 where unknown, or a points file (.csv/.txt: one sample per line under a "
-                 "header naming the columns, e.g. x,y,z), in the output's depth convention "
+                 "header naming the columns, e.g. u,v,depth: pixels, not a cloud's metres), in "
+                 "the output's depth convention "
                  "(metric z-depth with K). "
                  "A dataset folder's prior_depth.* is used automatically. docs/fusion.md."),
     click.option("--prior-scale", type=float, default=None, metavar="S",

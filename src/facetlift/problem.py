@@ -755,8 +755,13 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
                      f"image, the first at (row {rows[k]:g}, col {cols[k]:g})")
             if out.all():
                 raise ValueError(f"`prior` (rows, cols, depths): {where}: no sample is inside "
-                                 "(points projected with another K or image size?)")
-            warn(f"`prior` (rows, cols, depths): {where}; they were left out")
+                                 "(points projected with another K or image size, or 3-D "
+                                 "points not projected with K at all?)")
+            # (most of them: a camera-frame cloud, mm or m read as pixel positions, a user's)
+            hint = ("; most of them: 3-D points (x, y in metres or mm, not the image's columns "
+                    "and rows)? Project them with K first (docs/fusion.md, 'Sparse SfM points "
+                    "projected with K')" if out.mean() > 0.5 else "")
+            warn(f"`prior` (rows, cols, depths): {where}; they were left out{hint}")
             r, c, depths = r[~out], c[~out], depths[~out]
         keep = np.isfinite(depths)
         if not keep.all() and keep.any():  # (counted, not silently: a user's 53 lines, 50 used)

@@ -615,7 +615,7 @@ def _read_points(p: Path, arg: str):
             "col", "depth", "row"]:
         raise ValueError(
             f"`{arg}`: {p}: the first line must be a header naming the columns: row (or y, v), "
-            "col (or x, u) and depth (or z), e.g. 'x,y,z' or 'row col depth'; got "
+            "col (or x, u) and depth (or z), e.g. 'u,v,depth' or 'row col depth'; got "
             f"{lines[0].strip()!r} (without a header, 'row col depth' and 'u v depth' files "
             "look alike)")
     if len(lines) == 1:
