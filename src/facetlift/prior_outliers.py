@@ -54,9 +54,11 @@ CHUNK = 1_000_000
 def find_outliers(problem) -> tuple[np.ndarray | None, dict]:
     """``(outlier, details)``: (m,) bool, True at the facets whose prior sample is an outlier
     (module docstring), and ``checked`` (the samples with a positive weight), ``comparisons``
-    (made) and ``threshold`` (the tolerance, in the camera's unknown: log-depth or height).
-    Where the prior is not checked, ``(None, {"skipped": why})``: no prior, a blurred or a
-    dense one, fewer than 5 samples, or fewer than 3 comparisons made."""
+    (made), ``threshold`` (the tolerance, in the camera's unknown: log-depth or height) and
+    ``unconfirmed`` / ``unconfirmed_pixels`` (image [row, col]): samples that agree with none
+    of their comparisons made, too few to call them outliers. Where the prior is not checked,
+    ``(None, {"skipped": why})``: no prior, a blurred or a dense one, fewer than 5 samples,
+    or fewer than 3 comparisons made."""
     w = problem.prior_weight
     if w is None:
         return None, {"skipped": "no prior"}
@@ -117,15 +119,16 @@ def image_pixels(domain, facets: np.ndarray) -> list[list[int]]:
 
 
 def _spread(values: np.ndarray, component: np.ndarray) -> float:
-    """The largest range between the 5th and 95th percentiles of `values` within a component
-    (the outliers sought and objects at other depths do not widen it)."""
-    out = 0.0
-    for k in np.unique(component):
-        v = values[component == k]
-        if v.size > 1:
-            lo, hi = np.percentile(v, [5, 95])
-            out = max(out, float(hi - lo))
-    return out
+    """The largest range between the 5th and 95th percentiles (nearest rank) of `values`
+    within a mask component (the outliers sought and objects at other depths do not widen
+    it); vectorized over the components (a mask may hold thousands)."""
+    order = np.lexsort((values, component))
+    v, comp = values[order], component[order]
+    start = np.flatnonzero(np.r_[True, comp[1:] != comp[:-1]])
+    count = np.diff(np.r_[start, comp.size])
+    lo = v[start + np.floor(0.05 * (count - 1)).astype(np.int64)]
+    hi = v[start + np.ceil(0.95 * (count - 1)).astype(np.int64)]
+    return float(np.max(hi - lo)) if v.size else 0.0
 
 
 def _pairs(pts: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
