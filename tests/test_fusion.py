@@ -1060,3 +1060,29 @@ def test_exact_sparse_samples_on_a_render_with_rim_slivers_do_not_warn_of_tearin
                                 discontinuities=True)
     assert s.info["pieces"] > 0.05 * gt.mask.sum()  # (the slivers before the hanging)
     assert not [w for w in caught if "tear" in str(w.message)]
+
+
+def test_pixel_conflicts_do_not_hide_crowded_points_walls_or_points_behind_the_camera():
+    """A review: a camera-frame cloud read as pixels put thousands of points of spread depths
+    into 9 pixels, every one conflicted, and the crowded warning said '0 pixel(s)'; points all
+    behind the camera conflicted away before the sign error; a wall's exact samples (depth
+    range 0) conflicted over a rounding difference."""
+    from facetlift.problem import prior_image
+
+    xyz = np.random.default_rng(1).uniform(0, 2, (2900, 3)) + [0, 0, 2.5]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        img = prior_image((xyz[:, 1], xyz[:, 0], xyz[:, 2]), (40, 50), positive=True)
+    said = " ".join(str(w.message) for w in caught)
+    assert re.search(r"fall into only [1-9]\d* pixel", said) and "hold points" not in said
+    assert np.isfinite(img).sum() == 9
+    K = np.array([[100.0, 0, 14], [0, 100.0, 12], [0, 0, 1]])
+    n, _ = wave()
+    with pytest.raises(ValueError, match="positive z-depths"):
+        facetlift.integrate(n, K=K, prior=([2, 2.2], [3, 3], [-2.0, -2.5]))
+    rows, cols = np.divmod(np.arange(20), 5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        img = prior_image((np.r_[rows, 1], np.r_[cols, 1], np.r_[np.full(20, 3.0), 3.0 + 1e-12]),
+                          (8, 10))
+    assert np.isfinite(img).sum() == 20

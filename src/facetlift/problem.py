@@ -542,7 +542,7 @@ def _remove_outliers(problem: Problem) -> None:
         # (so many are the normals' or the setup's fault, not the samples'; a guard: the
         # tolerance follows the median disagreement, so this is seldom reached)
         problem.extras["prior_outliers"] = {"removed": 0, "disagreeing": k, "first": None,
-                                            "tolerance": tol, **details}
+                                            "pixels": [], "tolerance": tol, **details}
         warn(f"prior: {k} of the {details['checked']} samples disagree with every "
              "neighbouring sample along the normals, too many to be outliers: all are used. "
              "The prior and the normals disagree; check the prior's units, `pixel_size` or "
@@ -725,7 +725,8 @@ def _agreeing(idx: np.ndarray, depth: np.ndarray, n: int, positive: bool) -> np.
         tol = CONFLICT * np.abs(near)  # (all behind the camera: refused by the caller)
     else:
         lo, hi = np.percentile(depth, [5, 95]) if depth.size else (0.0, 0.0)
-        tol = CONFLICT * (hi - lo)
+        # (and a relative rounding margin: on a fronto-parallel wall the range is 0, a review)
+        tol = CONFLICT * (hi - lo) + 1e-9 * (np.abs(near) + 1.0)
     return farthest[idx] - near <= tol
 
 
@@ -780,7 +781,26 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
             keep &= ~behind
         idx = r[keep] * W + c[keep]
         d = depths[keep]
-        agree = _agreeing(idx, d, H * W, positive)
+        pixels = int(np.unique(idx).size)
+        rk, ck = r[keep], c[keep]
+        box = ((int(np.ptp(rk)) + 1) * (int(np.ptp(ck)) + 1)) if rk.size else 0
+        # (and in a small corner of the image: a depth map at 4x the resolution given as
+        # points fills every pixel 16 times, a review)
+        crowded = (keep.sum() >= CROWDED_MIN and pixels < CROWDED_SHARE * keep.sum()
+                   and box < CROWDED_BOX * H * W)
+        if crowded:
+            # (a LiDAR user's camera-frame x, y, z in metres under an x,y,z header, read as
+            # pixel columns and rows: 2,900 points in 6 pixels, 500 mm off, no word)
+            warn(f"`prior` (rows, cols, depths): the {int(keep.sum())} samples fall into only "
+                 f"{pixels} pixel(s), averaged per pixel: are they 3-D points or in other units "
+                 "(x, y as metres, not as the image's columns and rows)? Project 3-D points "
+                 "with K first (docs/fusion.md, 'Sparse SfM points projected with K')")
+        # a pixel's points that disagree: left out (not where the points are crowded, which
+        # the warning above explains, nor where all lie behind the camera, which the caller
+        # refuses: their pixels' conflicts hid both, a review)
+        agree = np.ones(d.size, dtype=bool)
+        if not crowded and not (positive and d.size and (d <= 0).all()):
+            agree = _agreeing(idx, d, H * W, positive)
         if not agree.all():
             torn = np.unique(idx[~agree])
             k = int(torn[0])
@@ -792,19 +812,6 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
                  "points seen past an edge; docs/fusion.md, 'Outlier samples')")
         count = np.bincount(idx[agree], minlength=H * W)
         total = np.bincount(idx[agree], d[agree], minlength=H * W)
-        pixels = int(np.count_nonzero(count))
-        rk, ck = r[keep], c[keep]
-        box = ((int(np.ptp(rk)) + 1) * (int(np.ptp(ck)) + 1)) if rk.size else 0
-        # (and in a small corner of the image: a depth map at 4x the resolution given as
-        # points fills every pixel 16 times, a review)
-        if (keep.sum() >= CROWDED_MIN and pixels < CROWDED_SHARE * keep.sum()
-                and box < CROWDED_BOX * H * W):
-            # (a LiDAR user's camera-frame x, y, z in metres under an x,y,z header, read as
-            # pixel columns and rows: 2,900 points in 6 pixels, 500 mm off, no word)
-            warn(f"`prior` (rows, cols, depths): the {int(keep.sum())} samples fall into only "
-                 f"{pixels} pixel(s), averaged per pixel: are they 3-D points or in other units "
-                 "(x, y as metres, not as the image's columns and rows)? Project 3-D points "
-                 "with K first (docs/fusion.md, 'Sparse SfM points projected with K')")
         with np.errstate(invalid="ignore", divide="ignore"):
             img = np.where(count > 0, total / np.maximum(count, 1), np.nan)
         return img.reshape(H, W)
