@@ -34,6 +34,12 @@ SECONDS_PER_PIXEL = {
     "dgp-discontinuous": (6.5e-6, 1.1e-4),
 }
 
+#: With a depth prior the slowest time is this many times the one without: the time ratio
+#: with / without a sparse prior measured 1.09-1.37 in the median on the discontinuity route
+#: and 1.13 on the smooth one (docs/fusion.md, "Time"), but a LiDAR user's 640 x 480 scene at
+#: weight 100 took 8.1 s against 1.2-4.9 s estimated; up to 5-8x on flat analytic scenes.
+PRIOR_SLOWER = 2.0
+
 
 def estimate(problem, method: str = "dgp", **options) -> dict:
     """Peak memory (the planner's) and a time range for integrating a prepared problem.
@@ -52,10 +58,11 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
         ``bytes``: :func:`facetlift.memory.estimate`'s peak above the prepared problem (what
         ``max_memory`` is compared with); ``route``: the planner's route name;
         ``limit``: the default ``max_memory`` on this machine and ``fits``; ``seconds``:
-        ``[fastest, slowest]`` from :data:`SECONDS_PER_PIXEL`, or None where no route was
-        measured; ``estimate: True``; for the discontinuity route ``bytes_factorized``, the
-        peak where its last solve is factorized (when CG is slow on it and the factorization
-        fits: not in the plan, which is CG's).
+        ``[fastest, slowest]`` from :data:`SECONDS_PER_PIXEL` (the slowest times
+        :data:`PRIOR_SLOWER` with a depth prior), or None where no route was measured;
+        ``estimate: True``; for the discontinuity route ``bytes_factorized``, the peak where
+        its last solve is factorized (when CG is slow on it and the factorization fits: not in
+        the plan, which is CG's).
 
     Raises
     ------
@@ -79,7 +86,8 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
         "route": route,
         "limit": lim,
         "fits": peak <= lim,
-        "seconds": None if rate is None else [rate[0] * m, rate[1] * m],
+        "seconds": None if rate is None else [
+            rate[0] * m, rate[1] * m * (PRIOR_SLOWER if problem.has_prior else 1.0)],
         "estimate": True,
     }
     if route == "dgp-discontinuous":
