@@ -256,3 +256,28 @@ def test_samples_compared_too_little_to_be_removed_are_named_beside_the_outliers
                       r"disagree with the few they could be compared with and were kept"):
         s = facetlift.integrate(gt.normals, gt.mask, prior=(r, c, z), pixel_size=gt.pixel_size)
     assert s.info["prior"]["outliers"]["unconfirmed_pixels"] == [[1, 2], [3, 4]]
+
+
+def test_a_prior_that_runs_against_the_normals_is_named():
+    """A user's disparity given as the prior at a low weight deviated 26 deg without a word
+    (below the fight warning's 45): the prior's changes between neighbouring samples are
+    compared in sign with the normals'."""
+    gt, r, c, z = _sphere_samples()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        s = facetlift.integrate(gt.normals, gt.mask, prior=(r, c, z), pixel_size=gt.pixel_size)
+    assert s.info["prior"]["trend"]["agreement"] > 0.9
+    with pytest.warns(UserWarning, match=r"its depth changes run against the normals'.* a "
+                      r"height rather than a depth"):
+        s = facetlift.integrate(gt.normals, gt.mask, prior=(r, c, -z), pixel_size=gt.pixel_size)
+    assert s.info["prior"]["trend"]["agreement"] < 0.1
+    # the DiLiGenT bear with its depth given as disparity, densely, at a low weight
+    d = facetlift.io.read_dataset(BEAR)
+    depth = np.load(BEAR / "depth_gt.npz")["depth_gt"]
+    with pytest.warns(UserWarning, match=r"disparity or inverse depth"):
+        facetlift.prepare(d["normals"], d["mask"], K=d["K"], prior=1e6 / depth,
+                          prior_weight=0.01)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        p = facetlift.prepare(d["normals"], d["mask"], K=d["K"], prior=depth, prior_weight=0.01)
+    assert p.extras["prior_trend"]["agreement"] > 0.9

@@ -112,6 +112,69 @@ def find_outliers(problem) -> tuple[np.ndarray | None, dict]:
                  "unconfirmed_pixels": image_pixels(d, s[doubtful])}
 
 
+#: Samples (a random subset of a denser prior) whose differences are compared with the
+#: normals' for :func:`trend`.
+TREND_SAMPLES = 1000
+#: ... over the pairs whose predicted change exceeds this (relative depth; orthographic: a
+#: share of the larger of the object's width and the samples' range).
+TREND_FLOOR = 0.002
+#: ... and only with at least this many such pairs (with 15-21, a noisy prior on a flat render
+#: agreed on none).
+TREND_PAIRS = 30
+
+
+def trend(problem) -> tuple[float, int] | None:
+    """``(agreement, pairs)``: the share of pairs of neighbouring samples (up to
+    :data:`TREND_SAMPLES` of them, a fixed random subset of a denser prior; lines as for the
+    outliers) whose change of the camera's unknown does not have the opposite sign of the one
+    the normals predict (and half the floor), over the pairs where they predict one; near 1
+    for a prior that matches the normals, near 0 for one that runs against them (a disparity
+    or inverse depth, a height given as depth). None with fewer than 5
+    samples, or fewer than :data:`TREND_PAIRS` pairs where the normals predict a change of at
+    least :data:`TREND_FLOOR`."""
+    w = problem.prior_weight
+    if w is None:
+        return None
+    d = problem.domain
+    u = problem.prior
+    s = np.flatnonzero((w > 0) & np.isfinite(u))
+    if s.size > TREND_SAMPLES:
+        s = np.sort(np.random.default_rng(0).choice(s, TREND_SAMPLES, replace=False))
+    if s.size < 5:
+        return None
+    r, c = d.pixels
+    H, W = d.shape
+    index = np.full((H, W), -1, dtype=np.int64)
+    index[r, c] = np.arange(r.size)
+    gx, gy = problem.grid_slopes
+    rim = problem.view_cosines < STEEP
+    gx = np.where(rim, np.nan, gx)
+    gy = np.where(rim, np.nan, gy)
+    pts = np.column_stack([r[s], c[s]]).astype(float)
+    a, b = _pairs(pts, min(K_NEAR, s.size - 1))
+    predicted = _line_integrals(pts, a, b, index, gx, gy)
+    given = u[s[b]] - u[s[a]]
+    made = np.isfinite(predicted) & np.isfinite(given)
+    if made.sum() < 10:
+        return None
+    x, y = predicted[made], given[made]
+    # (the sign agreement where the normals predict a change: robust to the few pairs across
+    # a jump, which dominated a correlation)
+    if problem.camera.perspective:
+        floor = TREND_FLOOR
+    else:
+        width = (max(np.ptp(r), np.ptp(c)) + 1) * problem.camera.pixel_size
+        floor = TREND_FLOOR * max(_spread(u[s], d.facet_component[s]), width)
+    big = np.abs(x) >= floor
+    if big.sum() < TREND_PAIRS:
+        return None
+    x, y = x[big], y[big]
+    # (against: the opposite sign and a change of its own; a prior of one depth on a wall whose
+    # normals are noisy runs against nothing, a test)
+    against = (np.sign(y) == -np.sign(x)) & (np.abs(y) >= 0.5 * floor)
+    return float(1.0 - np.mean(against)), int(big.sum())
+
+
 #: The most pixels listed in ``info`` (``pixels``, ``unconfirmed_pixels``: about 13 bytes
 #: each in --json; the counts stay whole).
 LISTED = 100_000
