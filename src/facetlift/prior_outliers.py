@@ -74,16 +74,7 @@ def find_outliers(problem) -> tuple[np.ndarray | None, dict]:
         return None, {"skipped": f"a dense prior (samples on more than {DENSE:.0%} of the "
                                  "mask's pixels)"}
     r, c = d.pixels
-    H, W = d.shape
-    index = np.full((H, W), -1, dtype=np.int64)
-    index[r, c] = np.arange(r.size)
-    gx, gy = problem.grid_slopes
-    rim = problem.view_cosines < STEEP  # (also where there is no usable normal: cosine 0)
-    gx = np.where(rim, np.nan, gx)
-    gy = np.where(rim, np.nan, gy)
-    pts = np.column_stack([r[s], c[s]]).astype(float)
-    a, b = _pairs(pts, min(K_NEAR, n - 1))
-    predicted = _line_integrals(pts, a, b, index, gx, gy)
+    a, b, predicted = _predicted(problem, s)
     e = np.abs((u[s[b]] - u[s[a]]) - predicted)
     made = np.isfinite(e)
     if made.sum() < 3:
@@ -143,16 +134,7 @@ def trend(problem) -> tuple[float, int] | None:
     if s.size < 5:
         return None
     r, c = d.pixels
-    H, W = d.shape
-    index = np.full((H, W), -1, dtype=np.int64)
-    index[r, c] = np.arange(r.size)
-    gx, gy = problem.grid_slopes
-    rim = problem.view_cosines < STEEP
-    gx = np.where(rim, np.nan, gx)
-    gy = np.where(rim, np.nan, gy)
-    pts = np.column_stack([r[s], c[s]]).astype(float)
-    a, b = _pairs(pts, min(K_NEAR, s.size - 1))
-    predicted = _line_integrals(pts, a, b, index, gx, gy)
+    a, b, predicted = _predicted(problem, s)
     given = u[s[b]] - u[s[a]]
     made = np.isfinite(predicted) & np.isfinite(given)
     if made.sum() < 10:
@@ -198,6 +180,24 @@ def _spread(values: np.ndarray, component: np.ndarray) -> float:
     lo = v[start + np.floor(0.05 * (count - 1)).astype(np.int64)]
     hi = v[start + np.ceil(0.95 * (count - 1)).astype(np.int64)]
     return float(np.max(hi - lo)) if v.size else 0.0
+
+
+def _predicted(problem, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(a, b, predicted)``: pairs of the samples at facets `s` (indices into `s`, each with
+    its :data:`K_NEAR` nearest, every pair once) and the change of the unknown from a to b
+    that the normals predict along the line (NaN where not compared: rims, no normal,
+    outside the mask, too long)."""
+    d = problem.domain
+    r, c = d.pixels
+    index = np.full(d.shape, -1, dtype=np.int64)
+    index[r, c] = np.arange(r.size)
+    gx, gy = problem.grid_slopes
+    rim = problem.view_cosines < STEEP  # (also where there is no usable normal: cosine 0)
+    gx = np.where(rim, np.nan, gx)
+    gy = np.where(rim, np.nan, gy)
+    pts = np.column_stack([r[s], c[s]]).astype(float)
+    a, b = _pairs(pts, min(K_NEAR, s.size - 1))
+    return a, b, _line_integrals(pts, a, b, index, gx, gy)
 
 
 def _pairs(pts: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
