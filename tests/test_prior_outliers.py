@@ -271,6 +271,10 @@ def test_a_prior_that_runs_against_the_normals_is_named():
                       r"height rather than a depth"):
         s = facetlift.integrate(gt.normals, gt.mask, prior=(r, c, -z), pixel_size=gt.pixel_size)
     assert s.info["prior"]["trend"]["agreement"] < 0.1
+    # whatever the prior's units (a review: 1 / depth in small units agreed everywhere)
+    for prior in (1.0 / (z - z.min() + 100.0), -z / 1000.0, -z * 1000.0):
+        with pytest.warns(UserWarning, match=r"run against the normals'"):
+            facetlift.prepare(gt.normals, gt.mask, prior=(r, c, prior), pixel_size=gt.pixel_size)
     # the DiLiGenT bear with its depth given as disparity, densely, at a low weight
     d = facetlift.io.read_dataset(BEAR)
     depth = np.load(BEAR / "depth_gt.npz")["depth_gt"]

@@ -34,10 +34,13 @@ SECONDS_PER_PIXEL = {
     "dgp-discontinuous": (6.5e-6, 1.1e-4),
 }
 
-#: With a depth prior the slowest time is this many times the one without: the time ratio
-#: with / without a sparse prior measured 1.09-1.37 in the median on the discontinuity route
-#: and 1.13 on the smooth one (docs/fusion.md, "Time"), but a LiDAR user's 640 x 480 scene at
-#: weight 100 took 8.1 s against 1.2-4.9 s estimated; up to 5-8x on flat analytic scenes.
+#: With a depth prior the slowest rate of the route (a prior already moves a full rectangle
+#: from the spectral route to the facet CG) is doubled. The time with / without a prior on the
+#: same scene (docs/fusion.md, "Time"): medians 0.9-3.8 on masks and with discontinuities,
+#: maxima 14-20 on small flat analytic scenes; blurred priors 3-6 in the median. Against the
+#: route's slowest rate: a LiDAR user's 640 x 480 scene at weight 100 took 8.1 s against
+#: 1.2-4.9 s estimated; a review's 480 x 640 plane, tent and sphere with 1 % samples at
+#: weights 1 and 100, 0.33-1.38 s against 0.24-7.37 s.
 PRIOR_SLOWER = 2.0
 
 

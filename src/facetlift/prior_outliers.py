@@ -114,15 +114,19 @@ TREND_FLOOR = 0.002
 TREND_PAIRS = 30
 
 
-def trend(problem) -> tuple[float, int] | None:
-    """``(agreement, pairs)``: the share of pairs of neighbouring samples (up to
-    :data:`TREND_SAMPLES` of them, a fixed random subset of a denser prior; lines as for the
-    outliers) whose change of the camera's unknown does not have the opposite sign of the one
-    the normals predict (and half the floor), over the pairs where they predict one; near 1
-    for a prior that matches the normals, near 0 for one that runs against them (a disparity
-    or inverse depth, a height given as depth). None with fewer than 5
-    samples, or fewer than :data:`TREND_PAIRS` pairs where the normals predict a change of at
-    least :data:`TREND_FLOOR`."""
+def trend(problem) -> dict | None:
+    """How the prior's changes between neighbouring samples follow the normals' signs.
+
+    Over up to :data:`TREND_SAMPLES` samples (a fixed random subset of a denser prior), the
+    pairs of neighbours (lines as for the outliers) between which the normals predict a change
+    of the camera's unknown of at least :data:`TREND_FLOOR` (relative depth; orthographic, of
+    the object's width) are decided where the prior's own change is at least half that (of its
+    own 5-95 % range without a camera: the sign test does not depend on the prior's units):
+    ``{"agreement": share of the decided pairs whose change has the predicted sign, "pairs":
+    decided, "undecided": the others}``; near 1 for a prior that matches the normals, near 0
+    for one that runs against them (a disparity or inverse depth, a height given as depth),
+    about 0.5 for noise. None with fewer than 5 samples, fewer than 10 comparisons made, or
+    fewer than :data:`TREND_PAIRS` decided pairs."""
     w = problem.prior_weight
     if w is None:
         return None
@@ -140,21 +144,23 @@ def trend(problem) -> tuple[float, int] | None:
     if made.sum() < 10:
         return None
     x, y = predicted[made], given[made]
-    # (the sign agreement where the normals predict a change: robust to the few pairs across
-    # a jump, which dominated a correlation)
+    # (signs where the normals predict a change: robust to the few pairs across a jump, which
+    # dominated a correlation; the prior's floor in its own units, a review: a prior in
+    # smaller units than pixel_size had every pair agree)
     if problem.camera.perspective:
-        floor = TREND_FLOOR
+        floor_x = floor_y = TREND_FLOOR
     else:
-        width = (max(np.ptp(r), np.ptp(c)) + 1) * problem.camera.pixel_size
-        floor = TREND_FLOOR * max(_spread(u[s], d.facet_component[s]), width)
-    big = np.abs(x) >= floor
-    if big.sum() < TREND_PAIRS:
-        return None
+        floor_x = TREND_FLOOR * (max(np.ptp(r), np.ptp(c)) + 1) * problem.camera.pixel_size
+        floor_y = TREND_FLOOR * _spread(u[s], d.facet_component[s])
+    big = np.abs(x) >= floor_x
     x, y = x[big], y[big]
-    # (against: the opposite sign and a change of its own; a prior of one depth on a wall whose
-    # normals are noisy runs against nothing, a test)
-    against = (np.sign(y) == -np.sign(x)) & (np.abs(y) >= 0.5 * floor)
-    return float(1.0 - np.mean(against)), int(big.sum())
+    sized = (np.abs(y) >= 0.5 * floor_y) & (y != 0)
+    same = sized & (np.sign(y) == np.sign(x))
+    decided = int(sized.sum())
+    if decided < TREND_PAIRS:
+        return None
+    return {"agreement": float(same.sum() / decided), "pairs": decided,
+            "undecided": int(x.size - decided)}
 
 
 #: The most pixels listed in ``info`` (``pixels``, ``unconfirmed_pixels``: about 13 bytes

@@ -525,14 +525,16 @@ def check_prior_outliers(value, has_prior: bool = True) -> str:
     return value
 
 
-#: A prior whose depth changes between neighbouring samples agree in sign with the normals'
-#: on fewer than this share of the pairs (where the normals predict a change of at least
-#: 0.2 %, 30 pairs or more: :func:`facetlift.prior_outliers.trend`) runs against them: a
-#: warning. Measured 2026-12-04 on every second render of the discontinuity benchmark, exact /
-#: 8-bit / 3-degree normals (514 runs with a verdict): 1 % / 0.1 % exact, 1 % noisy and coarse
-#: dense priors 0.73-1.0; disparity (1 / depth), dense or sparse, 0-0.27; a height given as
-#: depth (orthographic) 0-0.15; a vertically mirrored projection 0-1.0 (found on some).
-TREND_AGREE = 0.5
+#: A prior whose changes between neighbouring samples follow the normals' predicted sign on
+#: fewer than this share of the decided pairs (:func:`facetlift.prior_outliers.trend`: the
+#: normals predict at least 0.2 %, the prior changes by half that; 30 pairs or more) runs
+#: against them: a warning. Noise gives about 0.5 (a review: 0.47-0.71 on noisy samples over
+#: nearly flat walls), hence well below it. Measured 2026-12-04 on every second render of the
+#: discontinuity benchmark, exact / 8-bit / 3-degree normals (511 runs with a verdict): 1 % /
+#: 0.1 % exact, 1 % noisy and coarse dense priors 0.73-1.0; disparity (1 / depth), dense or
+#: sparse, 0-0.13; a height given as depth (orthographic) 0-0.13; a vertically mirrored
+#: projection 0-1.0 (found on some).
+TREND_AGREE = 0.3
 
 
 def _check_trend(problem: Problem) -> None:
@@ -543,15 +545,15 @@ def _check_trend(problem: Problem) -> None:
     found = trend(problem)
     if found is None:
         return
-    agree, pairs = found
-    problem.extras["prior_trend"] = {"agreement": agree, "pairs": pairs}
+    problem.extras["prior_trend"] = found
+    agree, pairs = found["agreement"], found["pairs"]
     if agree < TREND_AGREE:
         warn(f"prior: its depth changes run against the normals': between neighbouring "
-             f"samples they agree in sign on only {agree:.0%} of {pairs} pairs where the "
-             "normals predict a change. Is it a disparity or inverse depth (invert it "
-             "first), a height rather than a depth (larger = farther), or are the normals "
-             "in another frame (normal_frame, --normal-frame)? (info['prior']['trend']; "
-             "docs/fusion.md, 'Outlier samples')")
+             f"samples where both change, they change the same way on only {agree:.0%} of "
+             f"{pairs} pairs. Is it a disparity or inverse depth (invert it first), a height "
+             "rather than a depth (larger = farther), or are the normals in another frame "
+             "(normal_frame, --normal-frame)? (info['prior']['trend']; docs/fusion.md, 'A "
+             "prior that runs against the normals')")
 
 
 def _remove_outliers(problem: Problem) -> None:
