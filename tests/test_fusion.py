@@ -1103,3 +1103,19 @@ def test_the_time_estimate_allows_for_a_prior():
         assert fused["seconds"] == pytest.approx([fast * 672, PRIOR_SLOWER * slow * 672])
         fast, slow = SECONDS_PER_PIXEL[plain["route"]]
         assert plain["seconds"] == pytest.approx([fast * 672, slow * 672])
+
+
+def test_a_prior_out_of_the_normals_scale_is_named_by_the_tearing_warning():
+    """Exact samples with a pixel_size 32 times too small: no outlier can be told (the
+    tolerance grows with the disagreement), and the cuts tear the sphere apart; the warning
+    now names the scale as a cause."""
+    from facetlift import synthetic
+
+    gt = synthetic.analytic("sphere", 64)
+    rng = np.random.default_rng(0)
+    rr, cc = np.nonzero(gt.mask)
+    k = rng.choice(rr.size, 80, replace=False)
+    with pytest.warns(UserWarning, match=r"tear the surface apart.* not in the normals' scale "
+                      r"\(pixel_size, K"):
+        facetlift.integrate(gt.normals, gt.mask, prior=(rr[k], cc[k], gt.depth[rr[k], cc[k]]),
+                            pixel_size=gt.pixel_size / 32, discontinuities=True)

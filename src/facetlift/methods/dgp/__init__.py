@@ -305,7 +305,9 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0) -> None:
              "prior disagrees "
              "with the normals from pixel to pixel (a noisy dense map), its samples tear "
              f"the surface apart. {lower}, prior_blur, or integrating without discontinuities "
-             "may do better")
+             "may do better; or the prior is not in the normals' scale (pixel_size, K, the "
+             "prior's units: a pixel_size 32 times too small tore a sphere's exact samples "
+             "apart so)")
     if info["unsolved"]:
         why = (f"more than {discontinuous.DIRECT_POLISH:,} vertices"
                if domain.n_vertices > discontinuous.DIRECT_POLISH else
