@@ -66,14 +66,13 @@ def find_outliers(problem) -> tuple[np.ndarray | None, dict]:
         return None, {"skipped": "a blurred prior (prior_blur)"}
     d = problem.domain
     u = problem.prior
-    s = np.flatnonzero((w > 0) & np.isfinite(u))
+    s = _samples(problem)
     n = s.size
     if n < 5:
         return None, {"skipped": f"{n} samples (fewer than 5)"}
     if n > DENSE * d.n_facets:
         return None, {"skipped": f"a dense prior (samples on more than {DENSE:.0%} of the "
                                  "mask's pixels)"}
-    r, c = d.pixels
     a, b, predicted = _predicted(problem, s)
     e = np.abs((u[s[b]] - u[s[a]]) - predicted)
     made = np.isfinite(e)
@@ -83,9 +82,7 @@ def find_outliers(problem) -> tuple[np.ndarray | None, dict]:
     if problem.camera.perspective:
         floor = FLOOR
     else:
-        size = max(np.ptp(r), np.ptp(c)) + 1
-        width = size * problem.camera.pixel_size
-        floor = FLOOR * max(_spread(u[s], d.facet_component[s]), width)
+        floor = FLOOR * max(_spread(u[s], d.facet_component[s]), _width(problem))
     threshold = max(FAR * float(np.median(e[made])), floor)
     agree = made & (e <= threshold)
 
@@ -107,7 +104,8 @@ def find_outliers(problem) -> tuple[np.ndarray | None, dict]:
 #: normals' for :func:`trend`.
 TREND_SAMPLES = 1000
 #: ... over the pairs whose predicted change exceeds this (relative depth; orthographic: a
-#: share of the larger of the object's width and the samples' range).
+#: share of the object's width) and whose prior changes by half of it (orthographic: of the
+#: samples' own range).
 TREND_FLOOR = 0.002
 #: ... and only with at least this many such pairs (with 15-21, a noisy prior on a flat render
 #: agreed on none).
@@ -132,12 +130,11 @@ def trend(problem) -> dict | None:
         return None
     d = problem.domain
     u = problem.prior
-    s = np.flatnonzero((w > 0) & np.isfinite(u))
+    s = _samples(problem)
     if s.size > TREND_SAMPLES:
         s = np.sort(np.random.default_rng(0).choice(s, TREND_SAMPLES, replace=False))
     if s.size < 5:
         return None
-    r, c = d.pixels
     a, b, predicted = _predicted(problem, s)
     given = u[s[b]] - u[s[a]]
     made = np.isfinite(predicted) & np.isfinite(given)
@@ -150,7 +147,7 @@ def trend(problem) -> dict | None:
     if problem.camera.perspective:
         floor_x = floor_y = TREND_FLOOR
     else:
-        floor_x = TREND_FLOOR * (max(np.ptp(r), np.ptp(c)) + 1) * problem.camera.pixel_size
+        floor_x = TREND_FLOOR * _width(problem)
         floor_y = TREND_FLOOR * _spread(u[s], d.facet_component[s])
     big = np.abs(x) >= floor_x
     x, y = x[big], y[big]
@@ -173,6 +170,17 @@ def image_pixels(domain, facets: np.ndarray) -> list[list[int]]:
     r, c = domain.pixels
     f = facets[:LISTED]
     return [[int(a), int(b)] for a, b in zip(r[f], c[f], strict=True)]
+
+
+def _samples(problem) -> np.ndarray:
+    """The facets holding a prior sample with a positive weight."""
+    return np.flatnonzero((problem.prior_weight > 0) & np.isfinite(problem.prior))
+
+
+def _width(problem) -> float:
+    """The object's width (its larger side over the mask, in pixel_size units)."""
+    r, c = problem.domain.pixels
+    return float(max(np.ptp(r), np.ptp(c)) + 1) * problem.camera.pixel_size
 
 
 def _spread(values: np.ndarray, component: np.ndarray) -> float:

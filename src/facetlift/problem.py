@@ -755,7 +755,7 @@ def _agreeing(idx: np.ndarray, depth: np.ndarray, n: int, positive: bool) -> np.
     np.maximum.at(farthest, idx, depth)
     near = nearest[idx]
     if positive:
-        tol = CONFLICT * np.abs(near)  # (all behind the camera: refused by the caller)
+        tol = CONFLICT * near  # (points behind the camera never get here)
     else:
         lo, hi = np.percentile(depth, [5, 95]) if depth.size else (0.0, 0.0)
         # (and a relative rounding margin: on a fronto-parallel wall the range is 0, a review)
