@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
+import warnings
 
 import numpy as np
 
@@ -15,6 +16,7 @@ from .domain import Domain
 from .linalg import SolverError
 from .metrics import diagnose
 from .options import validate
+from .prior_fit import check as prior_fit_check
 from .problem import Problem, check_prior_outliers, normals_from_gradients, prepare
 from .surface import Surface
 
@@ -40,6 +42,7 @@ def integrate(
     confidence=None,
     prior_blur=None,
     prior_outliers: str = "remove",
+    prior_fit: str | None = None,
     **options,
 ) -> Surface:
     """Reconstruct a surface from a normal map.
@@ -126,6 +129,18 @@ def integrate(
         ``info["prior"]["outliers"]`` (``skipped`` says why where the prior is not checked)
         and named in a warning (mismatched SfM points, a sensor's stray returns:
         docs/fusion.md, "Outlier samples"); "keep" uses every sample.
+    prior_fit : {"none", "affine", "scale", "disparity"}
+        What the `prior` is known up to. "none" (default; None too): depth in the output's
+        convention. "affine": depth up to an unknown scale and shift (``depth = a * prior +
+        b``, a > 0: a monocular network's affine-invariant depth); "scale": up to a scale;
+        "disparity" (pinhole camera only): an affine-invariant inverse depth (``1 / depth = a *
+        prior + b``; MiDaS, Depth Anything's relative models). The route then runs twice: on
+        the normals alone, then with the prior aligned to that surface by a robust fit that
+        uses only the shape within each of its connected pieces (the pieces' offsets are
+        left to the prior: :mod:`facetlift.prior_fit`); ``info["prior"]["fit"]`` gives
+        ``scale``, ``shift`` and the fit's residual. The result keeps the normals' own units
+        (a pinhole camera's median depth near 1, not metric). A prior that runs against the
+        normals (fitted scale <= 0) is refused.
     **options
         Method options (``facetlift methods`` lists them, with types and defaults).
         ``progress=True`` shows the command line's progress bar on stderr (the methods'
@@ -183,6 +198,18 @@ def integrate(
                 f"e.g. regularization; {method!r} has none)")
         options["prior"] = prior
         prior = None
+    fit_kind = prior_fit_check(prior_fit, prior is not None, K is not None)
+    if fit_kind != "none":
+        if not info.prior:
+            able = sorted(k for k, v in methods.REGISTRY.items() if v.prior)
+            raise ValueError(f"method {method!r} does not take a `prior` (its energy has no "
+                             f"such term); methods that do: {able}")
+        return _integrate_fitted(
+            fit_kind, normals, mask, method=method, pixel_size=pixel_size, K=K, known=known,
+            discontinuities=discontinuities, solver=solver, backfacing=backfacing,
+            outlier_eps=outlier_eps, normal_frame=normal_frame, max_memory=max_memory,
+            prior=prior, prior_weight=prior_weight, confidence=confidence,
+            prior_blur=prior_blur, prior_outliers=prior_outliers, **options)
     note = None
     if discontinuities is not None and not _check_discontinuities(info, discontinuities):
         if "discontinuities" in info.options():  # (an explicit False, e.g. for "bini")
@@ -215,6 +242,48 @@ def integrate(
     with (contextlib.nullcontext() if frames.is_identity(normal_frame)
           else frames.read_in(normal_frame)):
         return _solve(problem, method, t0, max_memory, options)
+
+
+def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
+                      prior_outliers, **kwargs) -> Surface:
+    """:func:`integrate` with a prior known up to scale (and shift): the normals alone
+    first, the prior aligned to that surface (:func:`facetlift.prior_fit.fit`), then the
+    fusion with the aligned prior."""
+    from . import prior_fit as pf
+    from .problem import _weight_image, prior_blur_value, prior_image
+
+    t0 = time.perf_counter()
+    shape = np.shape(normals)[:2]
+    if len(shape) != 2:  # (integrate's own check names the problem)
+        return integrate(normals, mask, prior=prior, prior_weight=prior_weight,
+                         prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
+    raw = prior_image(prior, shape)  # (raw values: any sign before the alignment)
+    weight = prior_weight
+    if np.ndim(prior_weight) == 2:
+        weight = _weight_image(prior_weight, "prior_weight", shape)
+    elif not (np.isscalar(prior_weight) and np.isfinite(prior_weight) and prior_weight >= 0):
+        raise ValueError(f"`prior_weight` must be a number >= 0 or an (H, W) map; got "
+                         f"{prior_weight!r}")
+    with warnings.catch_warnings(record=True) as said:  # (the second run repeats them)
+        warnings.simplefilter("always")
+        first = integrate(normals, mask, **kwargs)
+    with warnings.catch_warnings():  # (said once above)
+        warnings.simplefilter("ignore")
+        n = frames.checked(normals, mask, frame=kwargs.get("normal_frame"))
+    aligned, details = pf.fit(raw, weight, first, kind, kwargs.get("K") is not None,
+                              blur=prior_blur_value(prior_blur), normals=n)
+    details["seconds"] = time.perf_counter() - t0
+    if aligned is None:  # (left out, with a warning): the normals-only surface
+        for w in said:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        surface = first
+    else:
+        surface = integrate(normals, mask, prior=aligned, prior_weight=prior_weight,
+                            prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
+    surface.info.setdefault("prior", {})["fit"] = details
+    if isinstance(surface.info.get("seconds"), dict):
+        surface.info["seconds"]["prior_fit"] = details["seconds"]
+    return surface
 
 
 def integrate_gradients(

@@ -97,7 +97,7 @@ RESERVED_OPTIONS = {
     "backfacing": "--backfacing", "outlier_eps": "--outlier-eps",
     "normal_frame": "--normal-frame", "prior_weight": "--prior-weight",
     "confidence": "--confidence", "prior_blur": "--prior-blur",
-    "prior_outliers": "--prior-outliers", "progress": "--progress",
+    "prior_outliers": "--prior-outliers", "prior_fit": "--prior-fit", "progress": "--progress",
 }
 
 
@@ -214,6 +214,14 @@ _JOB_OPTIONS = [
                  "every neighbouring sample along the normals are left out, counted and "
                  "named in a warning (mismatched SfM points, stray sensor returns); keep: "
                  "use every sample. docs/fusion.md, 'Outlier samples'."),
+    click.option("--prior-fit", type=click.Choice(["none", "affine", "scale", "disparity"]),
+                 default=None,
+                 help="What the prior is known up to: none (the default: depth in the "
+                 "output's units); affine: depth up to scale and shift (a monocular network's "
+                 "affine-invariant depth); scale: up to a scale; disparity (with K): an "
+                 "affine-invariant inverse depth (MiDaS, Depth Anything). It is aligned to the "
+                 "normals-only surface, piece by piece, then fused; the result keeps the "
+                 "normals' units. docs/fusion.md, 'A monocular depth map'."),
     click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Per-pixel weights >= 0 of the normals (npy, EXR, float TIFF as stored; "
                  "8/16-bit PNG or TIFF = v/max); "
@@ -262,7 +270,8 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
               save=(), quads=False, triangles=False, outdir=None, max_memory=None, prior=None,
               prior_scale=None, prior_weight=1.0, prior_weight_map=None, confidence=None,
-              prior_blur=None, prior_outliers=None, no_prior=False, no_confidence=False):
+              prior_blur=None, prior_outliers=None, prior_fit=None, no_prior=False,
+              no_confidence=False):
     """A :class:`facetlift.jobs.Job` from the parsed flags (ValueError on bad values)."""
     from . import frames
     from .jobs import Job
@@ -314,7 +323,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         prior_weight=prior_weight,
         prior_weight_map=None if prior_weight_map is None else str(prior_weight_map),
         confidence=None if confidence is None else str(confidence), prior_blur=prior_blur,
-        prior_outliers=prior_outliers, dataset_prior=not no_prior,
+        prior_outliers=prior_outliers, prior_fit=prior_fit, dataset_prior=not no_prior,
         dataset_confidence=not no_confidence,
     )
 

@@ -80,6 +80,9 @@ class Job:
     #: What to do with a sparse prior's outlier samples ("remove" or "keep"; None: the
     #: default, remove; facetlift.prior_outliers).
     prior_outliers: str | None = None
+    #: What the prior is known up to: "none" (None: the default), "affine", "scale",
+    #: "disparity" (facetlift.prior_fit).
+    prior_fit: str | None = None
     #: Whether a dataset folder's prior_depth.* and confidence.* files are used.
     dataset_prior: bool = True
     dataset_confidence: bool = True
@@ -240,6 +243,10 @@ def _no_prior_checks(job: Job) -> None:
         from .problem import check_prior_outliers
 
         check_prior_outliers(job.prior_outliers, has_prior=False)
+    if job.prior_fit not in (None, "none"):
+        from .prior_fit import check
+
+        check(job.prior_fit, has_prior=False, perspective=True)
 
 
 def _normals_from_field(g: dict, job: Job) -> np.ndarray:
@@ -383,7 +390,9 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                     prior_weight=inp.prior_weight if inp.prior is not None else 1.0,
                     confidence=inp.confidence, prior_blur=job.prior_blur,
                     **({} if job.prior_outliers is None or inp.prior is None
-                       else {"prior_outliers": job.prior_outliers}), **opts,
+                       else {"prior_outliers": job.prior_outliers}),
+                    **({} if job.prior_fit is None or inp.prior is None
+                       else {"prior_fit": job.prior_fit}), **opts,
                 )
             except ValueError as e:
                 said = _from_folder(str(e), job, inp)

@@ -1,0 +1,211 @@
+"""A prior known up to scale and shift (``prior_fit``): aligned to the normals piece by piece,
+so that it places what the normals cannot (separate parts, depth jumps)."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import facetlift
+from facetlift import prior_fit
+from facetlift.perspective import normals_from_depth, rays
+
+ROUTES = [("dgp", {}), ("dgp", {"discontinuities": True}), ("poisson", {})]
+
+
+def run(normals, mask=None, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return facetlift.integrate(normals, mask, **kw)
+
+
+def steps():
+    """Three tilted, curved parts side by side, separated by empty columns, at heights 0, 6
+    and 15 that no normal shows: normals, depth, mask, the part of every pixel."""
+    H, W = 40, 62
+    r, c = np.indices((H, W))
+    x, y = c + 0.5, -(r + 0.5)
+    part = np.digitize(c, [20, 41])
+    height = 0.1 * x + 0.05 * y + 0.8 * np.sin(x / 5.0) + np.array([0.0, 6.0, 15.0])[part]
+    p = 0.1 + 0.16 * np.cos(x / 5.0)
+    q = np.full((H, W), 0.05)
+    mask = ~np.isin(c, [20, 41])
+    return facetlift.normals_from_gradients(p, q), -height, mask, part
+
+
+@pytest.mark.parametrize("method,options", ROUTES)
+def test_affine_prior_places_separate_parts_orthographic(method, options):
+    n, depth, mask, part = steps()
+    prior = np.where(mask, 0.37 * depth + 40.0, np.nan)
+    s = run(n, mask, method=method, prior=prior, prior_weight=0.01, prior_fit="affine",
+            **options)
+    fit = s.info["prior"]["fit"]
+    assert fit["used"] and fit["pieces"] == 3 and fit["method"] == "pieces"
+    assert fit["scale"] == pytest.approx(1 / 0.37, rel=1e-3)
+    off = [np.median((s.depth - depth)[mask & (part == k)]) for k in range(3)]
+    assert np.ptp(off) < 0.05  # every part at its true height (6 and 15 apart), up to a constant
+    # the raw prior, taken as depth: the parts' heights shrink with it (2.5x too close)
+    raw = run(n, mask, method=method, prior=prior, prior_weight=0.01, **options)
+    off = [np.median((raw.depth - depth)[mask & (part == k)]) for k in range(3)]
+    assert np.ptp(off) > 5.0
+
+
+def test_orthographic_scale_prior_keeps_its_zero():
+    n, depth, mask, _ = steps()
+    s = run(n, mask, prior=np.where(mask, 2.0 * depth, np.nan), prior_weight=0.01,
+            prior_fit="scale")
+    np.testing.assert_allclose(s.depth[mask], depth[mask], atol=2e-3 * np.ptp(depth[mask]))
+
+
+def spheres(H=72, W=112):
+    """A near sphere beside a far one, as separate mask components: normals, depth, mask, K,
+    the component of every pixel (0 near, 1 far)."""
+    K = np.array([[160.0, 0, W / 2 - 0.3], [0, 160.0, H / 2 + 0.2], [0, 0, 1]])
+    rr, cc = np.mgrid[0:H, 0:W]
+    d = rays(K, rr.ravel(), cc.ravel()).reshape(H, W, 3)
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    depth = np.full((H, W), np.nan)
+    comp = np.full((H, W), -1)
+    for i, (centre, radius) in enumerate((((-0.6, 0.05, 4.0), 0.55), ((1.6, -0.1, 8.0), 1.0))):
+        C = np.asarray(centre)
+        b = d @ C
+        disc = b * b - (C @ C - radius ** 2)
+        t = b - np.sqrt(np.where(disc > 0, disc, np.nan))
+        z = t * d[..., 2]
+        hit = np.isfinite(z) & (disc > 0.15 * radius ** 2) & ~(comp >= 0)
+        depth[hit], comp[hit] = z[hit], i
+    mask = comp >= 0
+    n = normals_from_depth(np.where(mask, depth, np.nan), K)
+    mask &= np.isfinite(n).all(-1)
+    comp[~mask] = -1
+    return n, depth, mask, K, comp
+
+
+@pytest.mark.parametrize("kind", ["affine", "scale", "disparity"])
+@pytest.mark.parametrize("discontinuities", [False, True])
+def test_perspective_priors_give_the_parts_their_relative_depth(kind, discontinuities):
+    n, depth, mask, K, comp = spheres()
+    P = {"affine": 0.5 * depth + 300.0, "scale": 2.0 * depth,
+         "disparity": 3.0 / depth + 0.01}[kind]
+    prior = np.where(mask, P, np.nan)
+    s0 = run(n, mask, K=K, discontinuities=discontinuities)
+    s = run(n, mask, K=K, discontinuities=discontinuities, prior=prior, prior_weight=0.01,
+            prior_fit=kind)
+    assert s.info["prior"]["fit"]["used"]
+    true = np.median(depth[comp == 1]) / np.median(depth[comp == 0])
+    got = np.median(s.depth[comp == 1]) / np.median(s.depth[comp == 0])
+    assert got == pytest.approx(true, rel=1e-2)
+    # without the prior each part has its own scale (median 1): the ratio is lost
+    alone = np.median(s0.depth[comp == 1]) / np.median(s0.depth[comp == 0])
+    assert abs(alone - true) > 0.5
+    # the normals' units are kept: the near sphere where the normals alone put it
+    assert np.median(s.depth[comp == 0]) == pytest.approx(np.median(s0.depth[comp == 0]),
+                                                          rel=1e-2)
+
+
+@pytest.mark.parametrize("kind", ["affine", "disparity"])
+def test_slopes_fit_where_the_pieces_do_not_decide(monkeypatch, kind):
+    """Where the pieces' fit is undetermined (forced here) the prior's own slopes against the
+    normals' give the scale: no integration, so the pieces' placement does not enter."""
+    monkeypatch.setattr(prior_fit, "SE_MAX", 0.0)
+    n, depth, mask, K, comp = spheres()
+    P = 0.5 * depth + 300.0 if kind == "affine" else 3.0 / depth + 0.01
+    s = run(n, mask, K=K, prior=np.where(mask, P, np.nan), prior_weight=0.01, prior_fit=kind)
+    fit = s.info["prior"]["fit"]
+    assert fit["method"] == "gradients" and fit["scale_error"] < 0.1
+    true = np.median(depth[comp == 1]) / np.median(depth[comp == 0])
+    got = np.median(s.depth[comp == 1]) / np.median(s.depth[comp == 0])
+    assert got == pytest.approx(true, rel=2e-2)
+    n, depth, mask, part = steps()  # orthographic: the scale from the slopes
+    s = run(n, mask, prior=np.where(mask, 0.37 * depth + 40.0, np.nan), prior_weight=0.01,
+            prior_fit="affine")
+    assert s.info["prior"]["fit"]["method"] == "gradients"
+    assert s.info["prior"]["fit"]["scale"] == pytest.approx(1 / 0.37, rel=1e-2)
+
+
+def test_disparity_given_as_depth_is_left_out_with_a_warning():
+    n, depth, mask, K, comp = spheres()
+    prior = np.where(mask, 3.0 / depth + 0.01, np.nan)
+    with pytest.warns(UserWarning, match="runs against the normals.*prior_fit='disparity'"):
+        s = facetlift.integrate(n, mask, K=K, prior=prior, prior_fit="affine")
+    assert s.info["prior"]["fit"]["used"] is False
+    assert s.info["prior"]["fit"]["correlation"] < -0.9
+    np.testing.assert_allclose(s.depth, run(n, mask, K=K).depth, equal_nan=True)
+
+
+def test_flat_view_fits_over_the_whole_surface_or_leaves_the_prior_out():
+    H, W = 30, 40
+    K = np.array([[300.0, 0, W / 2], [0, 300.0, H / 2], [0, 0, 1]])
+    n = np.zeros((H, W, 3))
+    n[..., 2] = 1.0  # a fronto-parallel plane: its depth does not vary, no scale to fit
+    rng = np.random.default_rng(0)
+    prior = 5.0 + 0.01 * rng.standard_normal((H, W))
+    with pytest.warns(UserWarning, match="prior_fit='affine' was left out: neither"):
+        s = facetlift.integrate(n, K=K, prior=prior, prior_fit="affine")
+    assert not s.info["prior"]["fit"]["used"]
+    assert np.nanmedian(s.depth) == pytest.approx(1.0)
+
+
+def test_fit_is_robust_to_a_silhouette_band_of_wrong_depths():
+    n, depth, mask, _ = steps()
+    prior = np.where(mask, 0.37 * depth + 40.0, np.nan)
+    prior[:, [0, 1, 60, 61]] += 5.0  # a network's blend of foreground and background
+    s = run(n, mask, prior=prior, prior_weight=0.01, prior_fit="affine")
+    assert s.info["prior"]["fit"]["scale"] == pytest.approx(1 / 0.37, rel=1e-2)
+    assert s.info["prior"]["fit"]["down_weighted"] >= 4 * 40 * 0.9
+
+
+def test_pieces_follow_the_split_mesh():
+    n, depth, mask, part = steps()
+    s = run(n, mask)
+    lab = prior_fit.pieces(s)
+    assert lab.max() == 2 and (lab[~mask] == -1).all()
+    assert all(np.unique(lab[mask & (part == k)]).size == 1 for k in range(3))
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"prior_fit": "bogus"}, "`prior_fit` must be one of"),
+    ({"prior_fit": "affine", "prior": None}, "`prior_fit`='affine' needs a `prior`"),
+    ({"prior_fit": "disparity"}, "needs a pinhole camera"),
+    ({"prior_fit": "affine", "method": "frankot_chellappa"}, "does not take a `prior`"),
+    ({"prior_fit": "affine", "prior_weight": -1.0}, "prior_weight"),
+])
+def test_errors_name_the_argument(kwargs, match):
+    n, depth, mask, _ = steps()
+    kw = {"prior": np.where(mask, depth, np.nan), **kwargs}
+    with pytest.raises(ValueError, match=match):
+        facetlift.integrate(n, mask, **kw)
+
+
+def test_too_few_samples_on_the_surface_are_refused():
+    n, depth, mask, _ = steps()
+    prior = np.full(depth.shape, np.nan)
+    prior[3, 3] = prior[5, 30] = 1.0
+    with pytest.raises(ValueError, match="only 2 sample"):
+        facetlift.integrate(n, mask, prior=prior, prior_fit="affine")
+
+
+def test_cli_prior_fit(tmp_path, capsys):
+    import json
+
+    from facetlift.cli import main
+
+    n, depth, mask, part = steps()
+    np.save(tmp_path / "n.npy", n)
+    np.save(tmp_path / "m.npy", mask)
+    np.save(tmp_path / "p.npy", np.where(mask, 0.37 * depth + 40.0, np.nan))
+    args = ["integrate", str(tmp_path / "n.npy"), "-m", str(tmp_path / "m.npy"), "--prior",
+            str(tmp_path / "p.npy"), "--prior-weight", "0.01", "--prior-fit", "affine",
+            "-o", str(tmp_path / "out"), "--save", "npy", "--json"]
+    assert main(args) == 0
+    rec = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert rec["info"]["prior"]["fit"]["used"]
+    d = np.load(tmp_path / "out" / "depth.npy")
+    off = [np.median((d - depth)[mask & (part == k)]) for k in range(3)]
+    assert np.ptp(off) < 0.05
+    # without a prior the flag is refused
+    assert main(["integrate", str(tmp_path / "n.npy"), "-m", str(tmp_path / "m.npy"),
+                 "--prior-fit", "affine", "-o", str(tmp_path / "o2")]) != 0
+    assert "--prior-fit" in capsys.readouterr().err
