@@ -136,11 +136,16 @@ def integrate(
         "disparity" (pinhole camera only): an affine-invariant inverse depth (``1 / depth = a *
         prior + b``; MiDaS, Depth Anything's relative models). The route then runs twice: on
         the normals alone, then with the prior aligned to that surface by a robust fit that
-        uses only the shape within each of its connected pieces (the pieces' offsets are
-        left to the prior: :mod:`facetlift.prior_fit`); ``info["prior"]["fit"]`` gives
-        ``scale``, ``shift`` and the fit's residual. The result keeps the normals' own units
-        (a pinhole camera's median depth near 1, not metric). A prior that runs against the
-        normals (fitted scale <= 0) is refused.
+        uses only the surface's local shape: differences between nearby samples in one of its
+        connected pieces with no cut between them (the pieces' offsets, and the levels a jump
+        it did not cut misplaced, are left to the prior), or, where that leaves the scale
+        undetermined, the shape within each piece (:mod:`facetlift.prior_fit`);
+        ``info["prior"]["fit"]`` gives
+        ``method``, ``scale``, ``shift`` and the scale's relative error. The result keeps the
+        normals' own units (a pinhole camera's median depth near 1, not metric). A prior
+        that cannot be aligned (constant, running against the normals, its scale
+        undetermined) is left out with a warning: the result is then the normals-only one
+        (``info["prior"]["left_out"]``). docs/fusion.md, "A monocular depth map".
     **options
         Method options (``facetlift methods`` lists them, with types and defaults).
         ``progress=True`` shows the command line's progress bar on stderr (the methods'
@@ -261,28 +266,38 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
     weight = prior_weight
     if np.ndim(prior_weight) == 2:
         weight = _weight_image(prior_weight, "prior_weight", shape)
-    elif not (np.isscalar(prior_weight) and np.isfinite(prior_weight) and prior_weight >= 0):
+    elif not (np.ndim(prior_weight) == 0 and np.isreal(prior_weight)
+              and np.isfinite(prior_weight) and prior_weight >= 0):
         raise ValueError(f"`prior_weight` must be a number >= 0 or an (H, W) map; got "
                          f"{prior_weight!r}")
-    with warnings.catch_warnings(record=True) as said:  # (the second run repeats them)
+    else:
+        weight = float(prior_weight)
+    failed = None
+    with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
         first = integrate(normals, mask, **kwargs)
-    with warnings.catch_warnings():  # (said once above)
-        warnings.simplefilter("ignore")
-        n = frames.checked(normals, mask, frame=kwargs.get("normal_frame"))
-    aligned, details = pf.fit(raw, weight, first, kind, kwargs.get("K") is not None,
-                              blur=prior_blur_value(prior_blur), normals=n)
+        try:
+            aligned, details = pf.fit(raw, weight, first, kind, kwargs.get("K") is not None,
+                                      blur=prior_blur_value(prior_blur))
+        except ValueError as e:
+            failed, aligned = e, None
+    for w in said:  # (in their order; the input's only where no second run says them again)
+        if aligned is None or "prior_fit=" in str(w.message):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    if failed is not None:
+        raise failed
     details["seconds"] = time.perf_counter() - t0
     if aligned is None:  # (left out, with a warning): the normals-only surface
-        for w in said:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         surface = first
+        surface.info["prior"] = {"fit": details, "left_out": True}
     else:
         surface = integrate(normals, mask, prior=aligned, prior_weight=prior_weight,
                             prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
-    surface.info.setdefault("prior", {})["fit"] = details
-    if isinstance(surface.info.get("seconds"), dict):
-        surface.info["seconds"]["prior_fit"] = details["seconds"]
+        surface.info.setdefault("prior", {})["fit"] = details
+    seconds = surface.info.get("seconds")
+    if isinstance(seconds, dict):
+        seconds["prior_fit"] = details["seconds"]
+        seconds["total"] = time.perf_counter() - t0
     return surface
 
 
@@ -510,8 +525,9 @@ def _prior_fight_check(deviation, discontinuities: bool, orthographic: bool = Fa
              f"the depth prior fights them. {jumps}{camera}Is the prior depth along the "
              "viewing axis (larger = farther; not disparity or inverse depth, which must be "
              "inverted first), in the output's units (metric with K), and aligned (a monocular "
-             "network's relative depth needs its scale and shift fitted first: "
-             "docs/fusion.md, 'Recipes')? Else lower prior_weight (--prior-weight)")
+             "network's relative depth or disparity needs its scale and shift fitted: "
+             "prior_fit='affine' or 'disparity', --prior-fit; docs/fusion.md, 'Recipes')? "
+             "Else lower prior_weight (--prior-weight)")
 
 
 #: A prior sample lies far from the surface returned when its depth difference exceeds both

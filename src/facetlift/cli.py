@@ -356,7 +356,11 @@ def summary(record: dict) -> str:
         parts.append(f"{it} iteration{'s' if it != 1 else ''}"
                      + ("" if record["converged"] else " (not converged)"))
     prior = info.get("prior")
-    if isinstance(prior, dict):  # (also a dataset folder's prior_depth file, read silently)
+    fit = prior.get("fit") if isinstance(prior, dict) else None
+    if isinstance(prior, dict) and prior.get("left_out"):  # (--prior-fit could not align it)
+        parts.append(f"depth prior left out (--prior-fit {fit.get('kind')}: not aligned, "
+                     "see the warning)")
+    elif isinstance(prior, dict):  # (also a dataset folder's prior_depth file, read silently)
         outside = prior.get("outside_mask") or 0
         parts.append(f"depth prior: {prior.get('samples')} samples fixing "
                      f"{len(prior.get('prior_components', []))} of "
@@ -365,6 +369,9 @@ def summary(record: dict) -> str:
         removed = (prior.get("outliers") or {}).get("removed") or 0
         if removed:
             parts.append(f"{removed} prior outlier{'s' if removed != 1 else ''} left out")
+        if fit:
+            parts.append(f"prior aligned by --prior-fit {fit.get('kind')} ({fit.get('method')}: "
+                         f"scale {fit.get('scale'):.4g}, shift {fit.get('shift'):.4g})")
     counts = info.get("input") or {}
     missing = counts.get("missing") or 0
     if missing:  # (NaN inside the mask: no warning, being the documented way to say it)
@@ -491,11 +498,14 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--prior-scale", type=float, default=None, metavar="S",
               help="Depth units per count of a 16-bit PNG prior, --prior's or a dataset "
               "folder's prior_depth (as for 'integrate').")
+@click.option("--prior-fit", type=click.Choice(["none", "affine", "scale", "disparity"]),
+              default=None, help="What the prior is known up to, as for 'integrate': its "
+              "values are not checked as depths, and the time estimate allows for two runs.")
 @click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="A confidence map to check against the map, as for 'integrate'.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, prior, prior_scale,
-         confidence, as_json):
+         prior_fit, confidence, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
     encoding, mask and components, unusable normals, K, and the memory planner's estimate of
     the peak memory the default integration would need (the figure --max-memory is checked
@@ -513,7 +523,8 @@ def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, prior
     frames.gradient_frame(gradient_frame)  # (refused as integrate refuses it, on any input)
     rec = describe(normals, mask=mask, K=K, normal_frame=frames.resolve(normal_frame, y_down),
                    mat_keys=_split(mat_keys), gradient_frame=gradient_frame,
-                   prior_scale=prior_scale, prior=prior, confidence=confidence)
+                   prior_scale=prior_scale, prior=prior, confidence=confidence,
+                   prior_fit=prior_fit)
     # (for preflight scripts: as integrate would fail, on the map or on a folder's files)
     status = EXIT_INPUT if rec.get("problem") or rec.get("refused") else EXIT_OK
     if as_json:
@@ -544,7 +555,9 @@ def _info_lines(rec: dict) -> list[str]:
             lines.append(f"  {what} ({got.get('source', 'dataset file')}): "
                          f"{got['known_pixels']} known pixels"
                          + (f", {inside} in the mask" if inside is not None else "")
-                         + (f"{span} there" if span and inside is not None else span))
+                         + (f"{span} there" if span and inside is not None else span)
+                         + (f"; aligned by --prior-fit {got['fit']} (the route runs twice)"
+                            if got.get("fit") else ""))
     lines += [f"  warning: {_as_flags(w)}" for w in rec.get("warnings", [])]
     if not rec["usable"]:
         lines.append(f"  cannot be integrated as read: {rec['problem']}")

@@ -107,7 +107,7 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
 
 def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
              gradient_frame: str = "xy", prior_scale=None, prior=None,
-             confidence=None) -> dict:
+             confidence=None, prior_fit=None) -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
     encoding, mask and components, unusable normals (with the first one's location), K, a
     dataset folder's depth prior and normal confidence (``prior`` / ``confidence``: known
@@ -131,6 +131,10 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         A depth prior (map or points file) and a confidence map, as for ``integrate``'s
         ``--prior`` and ``--confidence``: read and checked against the map (a prior that
         ``integrate`` would refuse makes the input unusable, with the reason).
+    prior_fit : str, optional
+        What the prior is known up to, as for ``integrate`` (:mod:`facetlift.prior_fit`): its
+        values are then not checked as depths (any sign), and the time estimate allows for
+        the route's two runs.
 
     Raises
     ------
@@ -187,13 +191,17 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
                    frame=_frame_guess(n, inp.mask, inp.K, frame=normal_frame, layout=layout))
         return out
 
+    from .prior_fit import check as check_fit
+
+    fitted = check_fit(prior_fit, inp.prior is not None, inp.K is not None) != "none"
     prior_map = inp.prior
     if isinstance(prior_map, tuple):  # (a points file: as integrate places them, once)
         from .problem import prior_image
 
         with recorded_warnings() as placed:
             try:
-                prior_map = prior_image(prior_map, (H, W), positive=inp.K is not None)
+                prior_map = prior_image(prior_map, (H, W),
+                                        positive=inp.K is not None and not fitted)
             except ValueError as e:  # (every point outside: reported, as integrate refuses)
                 out.update(where)
                 return unusable(e)
@@ -212,8 +220,9 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         try:
             with frames.read_in(normal_frame):  # (read in it already: hints relative to it)
                 checked = frames.checked(n, inp.mask, frame=None)
-            problem = prepare(checked, inp.mask, K=inp.K, prior=prior_map,
-                              confidence=inp.confidence)
+            # (a prior to be aligned is checked as values, not as depths: any sign)
+            problem = prepare(checked, inp.mask, K=inp.K,
+                              prior=None if fitted else prior_map, confidence=inp.confidence)
         except ValueError as e:
             # (the warnings that came first too: a K for another image is what makes a map
             # unusable, and its warning was dropped, a review)
@@ -221,6 +230,8 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
                 w.category, UnusableNormalsWarning)]
             return unusable(e)
     d = problem.domain
+    if fitted:
+        out["prior"]["fit"] = prior_fit
     for name, arr in (("prior", prior_map), ("confidence", inp.confidence)):
         if arr is not None and name in out:  # (the range over the mask, where it is used: a
             # user's confidence read "0 to 1" from the background's zeros)
@@ -238,13 +249,23 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         warnings=out["warnings"] + [str(w.message) for w in caught if not issubclass(
             w.category, UnusableNormalsWarning)],
         frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame, layout=layout),
-        estimate=estimate(problem),
+        estimate=_twice(estimate(problem), fitted),
         # (what --discontinuities would need: a user planning a large job asked)
-        estimate_discontinuities=estimate(problem, "dgp", discontinuities=True),
+        estimate_discontinuities=_twice(estimate(problem, "dgp", discontinuities=True),
+                                        fitted),
         discontinuity_grazing=_jump_grazing(problem),
         holes=_holes(d.mask) if inp.mask is None else 0,
     )
     return out
+
+
+def _twice(est: dict, fitted: bool) -> dict:
+    """`est` for a prior aligned by ``prior_fit``: the route runs on the normals alone, then
+    with the prior (the slowest time :data:`PRIOR_SLOWER` times one run's)."""
+    if fitted and est.get("seconds"):
+        lo, hi = est["seconds"]
+        est["seconds"] = [2.0 * lo, hi * (1.0 + PRIOR_SLOWER)]
+    return est
 
 
 def _holes(mask) -> int:

@@ -8,26 +8,24 @@ whole mask (the recipe before this module), the fit inherits that result's guess
 normals cannot decide: the offsets of pieces that a depth jump or a gap in the mask separates,
 which are exactly what the prior should decide.
 
-So the fit here uses only what the normals know: the shape *within* each piece of the
-normals-only surface (its connected parts: mask components, and the pieces of the split mesh
-with ``discontinuities=True``). Each piece gets its own free constant, the one thing the
-normals leave open, and the prior's scale (and shift) are shared:
-
-- orthographic, ``"affine"`` or ``"scale"``: ``P = alpha * z + gamma_k`` (depth known up to an
-  offset per piece); the aligned prior is ``(P - gamma_main) / alpha`` (``"affine"``), or
-  ``P / alpha`` (``"scale"``: the prior's zero is depth zero);
-- perspective, ``"affine"``: ``P = s_k * z + beta`` (a pinhole piece is known up to a scale);
-  aligned ``(P - beta) / s_main``; ``"scale"``: ``P = s_k * z``, aligned ``P / s_main``;
-- perspective, ``"disparity"``: ``P = t_k / z + delta``; aligned ``t_main / (P - delta)``
-  where that is positive.
-
-``main`` is the piece holding most of the prior's weight: the aligned prior agrees with the
-normals-only surface there, so a perspective result keeps that surface's scale (median depth
-near 1; the prior had none to give) and an orthographic one its depth units. Every other piece
-is then placed by the aligned prior in the second solve (:func:`facetlift.integrate` runs
-the route twice). The per-piece constants are eliminated in closed form, so the fit is a few
-sums per piece, repeated for a Huber reweighting (:data:`HUBER`, :data:`ROUNDS`) that keeps
-a network's errors at silhouettes (foreground and background blended) from tilting it.
+So the fit here uses only what the normals know, the surface's local shape. First the
+differences between samples :data:`PAIR_DISTANCE` pixels apart in one connected piece of the
+normals-only surface, with no cut between them (:func:`_by_pairs`): orthographic, ``P_j -
+P_i = alpha (z_j - z_i)``; pinhole (the normals give ``log z`` up to a constant),
+``P_j - P_i = (m + c) (log z_j - log z_i)`` for an affine depth ``z = a (P + c)``, ``m``
+the pair's mean, and the like for a disparity. Neither the pieces' offsets nor the level of a
+region that a jump the normals-only surface did not cut misplaced enter. Where that leaves
+the scale undetermined (:data:`SE_MAX`), the shape within each piece with a free constant per
+piece (orthographic ``P = alpha z + gamma_k``; pinhole ``P = s_k z + beta``), then one fit
+over the whole surface; else the prior is left out, with a warning. The remaining constant
+(``a`` for a pinhole camera, the offset orthographically) makes the main piece (the one with
+most of the prior's weight) agree with the normals-only surface in the median: a perspective
+result keeps that surface's scale (median depth near 1; the prior has none to give), an
+orthographic one its level. Every other piece is then placed by the aligned prior in the
+second solve (:func:`facetlift.integrate` runs the route twice). Every fit is a Huber
+regression (:data:`HUBER`, :data:`ROUNDS`: a network's errors at silhouettes, where it blends
+foreground and background, do not tilt it) whose relative standard error comes from a
+jackknife over image tiles (:data:`TILE`).
 """
 
 from __future__ import annotations
@@ -52,21 +50,27 @@ HUBER, ROUNDS = 1.345, 8
 #: 10-100x too small), and at least this many blur sigmas.
 TILE, TILE_BLURS = 16, 2.0
 
-#: The largest relative standard error of the scale that the pieces' shapes may leave; above
-#: it (a flat view, parallel planes, a noisy prior on a shallow surface) the scale is fitted
-#: over the whole surface instead (the normals-only depth on the prior, which shrinks an
-#: undetermined prior toward a flat one rather than blowing it up), and where that is not
-#: determined either (:data:`SE_WHOLE`) the prior is left out, with a warning.
-SE_MAX, SE_WHOLE = 0.1, 0.25
+#: Distance in pixels of the pairs of samples whose differences give the scale
+#: (:func:`_by_pairs`). On the benchmark's coarse priors (blurred, 63 scenes) 2, 4 and 8 were
+#: alike (46, 46 and 45 scenes within 5 % of the true offset; median error 0.75 %, 0.93 %,
+#: 0.71 %), 16 worse (43; pairs lost to cuts): docs/fusion.md.
+PAIR_DISTANCE = 2
 
-#: Where the pieces leave the scale undetermined, it is fitted from the prior's own slopes
-#: against the normals' (:func:`_by_gradients`), kept where its relative standard error is
-#: at most this; normals less head-on than GRADIENT_COS give no slope there.
-SE_GRADIENTS, GRADIENT_COS = 0.1, 0.3
+#: The largest relative standard error of the scale that a fit may leave; above it the next
+#: fit is tried (pairs, then pieces, then the whole surface, whose attenuated slope shrinks an
+#: undetermined prior toward a flat one rather than blowing it up, up to SE_WHOLE), and the
+#: prior is left out, with a warning, where none is determined.
+SE_MAX, SE_WHOLE = 0.1, 0.25
 
 #: A within-piece correlation between the prior and the normals-only depth at or below this
 #: (with no scale determined) names the prior as running against the normals in the warning.
 AGAINST = -0.5
+
+#: With ``prior_blur``, samples within this many blur sigmas of a cut or of a border between
+#: pieces are not compared (the blur mixes the pieces' offsets there, which the normals-only
+#: surface only guessed: a review's three parts came out 2.17 apart, at a scale 12 % off),
+#: halved until a quarter of the samples are left (an object cut in many places).
+BORDER_BLURS, BORDER_KEEP = 2.0, 0.25
 
 #: Compare the prior with the normals-only surface blurred by ``prior_blur`` where one is
 #: given, as the solve does.
@@ -110,26 +114,25 @@ def pieces(surface) -> np.ndarray:
 
 
 def fit(prior_img: np.ndarray, weight, surface, kind: str, perspective: bool,
-        blur: float = 0.0, normals=None):
+        blur: float = 0.0):
     """The prior aligned to `surface` (normals only): ``(aligned (H, W) or None, details)``.
 
     `prior_img` (H, W) raw prior values, NaN where unknown; `weight` a scalar or (H, W) map
-    (the prior's weights, which weigh the fit too); `normals` (H, W, 3) in facetlift's frame
-    (for the slopes' fit, :func:`_by_gradients`); `blur` the ``prior_blur`` sigma (pixels):
+    (the prior's weights, which weigh the fit too); `blur` the ``prior_blur`` sigma (pixels):
     the prior is then fitted to the surface blurred alike (:class:`~facetlift.operators.blur.
-    PlaneBlur`), as the solve compares them. `aligned` is None where the prior could not be
-    aligned (the caller returns the normals-only surface). `details` (for
-    ``info["prior"]["fit"]``): ``kind``, ``used``, ``scale`` and ``shift`` (depth = scale * P
-    + shift; for "disparity" 1 / depth = scale * P + shift), ``samples``, ``pieces`` that took
-    part, ``scale_error`` (relative standard error of the scale, by a jackknife over tiles),
-    ``down_weighted`` (samples the Huber weights reduced below one half), ``residual`` (robust
-    RMS of the fit in the aligned prior's depth units, at the median sample for a disparity),
-    ``dropped`` (samples whose aligned depth was not positive, perspective only),
+    PlaneBlur`), as the solve compares them, away from cuts (:data:`BORDER_BLURS`). The fits,
+    in turn until one determines the scale (:data:`SE_MAX`): differences of samples
+    :data:`PAIR_DISTANCE` pixels apart in one piece (:func:`_by_pairs`), the pieces' shapes
+    with a free constant each, the whole surface on the prior. `aligned` is None where none
+    does (the caller returns the normals-only surface). `details` (for
+    ``info["prior"]["fit"]``): ``kind``, ``used``, ``method`` ("pairs", "pieces", "whole"),
+    ``scale`` and ``shift`` (depth = scale * P + shift; for "disparity" 1 / depth = scale * P +
+    shift), ``samples``, ``scale_error`` (relative standard error of the scale, by a jackknife
+    over tiles), ``down_weighted`` (samples the Huber weights reduced below one half),
     ``correlation`` (of the prior with the normals-only depth within the pieces) and
-    ``whole`` (the scale was fitted over the whole surface, :data:`SE_MAX`). A prior whose
-    scale neither fit determines is left out with a warning (a few bad samples or a poor
-    prior never refuse the job). Raises ValueError naming `prior` where too few samples lie
-    on the surface.
+    ``dropped`` (samples whose aligned depth was not positive, perspective only). A prior
+    that no fit aligns is left out with a warning (a poor prior never refuses the job).
+    Raises ValueError naming `prior` where too few samples lie on the surface.
     """
     from ._warnings import warn
 
@@ -143,10 +146,25 @@ def fit(prior_img: np.ndarray, weight, surface, kind: str, perspective: bool,
     ok = np.isfinite(prior_img) & (lab >= 0) & np.isfinite(z) & (w_img > 0)
     if perspective:
         ok &= z > 0
+    if blur > 0 and MATCH_BLUR:
+        # near a cut or a border between pieces the blur mixes the pieces' offsets, which
+        # the normals-only surface only guessed (and the prior knows): not compared there
+        radius = BORDER_BLURS * blur
+        while radius >= 1.0:
+            far = ok & ~_near_borders(surface, lab, radius)
+            if far.sum() >= max(BORDER_KEEP * ok.sum(), 2 * MIN_SAMPLES):
+                ok = far
+                break
+            radius /= 2.0
     if ok.sum() < 2 * MIN_SAMPLES:
         raise ValueError(f"`prior` with prior_fit={kind!r}: only {int(ok.sum())} sample(s) "
                          f"with a weight > 0 lie on the surface; at least {2 * MIN_SAMPLES} "
                          "are needed to fit its scale")
+    lo, hi = np.percentile(prior_img[ok], [5, 95])
+    if not hi - lo > 1e-9 * max(abs(lo), abs(hi)):
+        warn(f"`prior` with prior_fit={kind!r} was left out, the surface is the normals-only "
+             f"one: it is constant over the surface ({lo:.6g}), with no scale to fit")
+        return None, {"kind": kind, "used": False, "samples": int(ok.sum())}
     rows, cols = np.nonzero(ok)
     side = max(TILE, int(np.ceil(TILE_BLURS * blur)))
     tw = -(-ok.shape[1] // side)
@@ -157,63 +175,58 @@ def fit(prior_img: np.ndarray, weight, surface, kind: str, perspective: bool,
     om = om / om.mean()
     x = 1.0 / z[ok] if kind == "disparity" else z[ok].astype(float)
     k = lab[ok]
-    big = np.bincount(k)[k] >= MIN_SAMPLES
     per_offset = not perspective  # (orthographic: a constant per piece; pinhole: a scale)
     model = ("offset" if per_offset else ("scale" if kind == "scale" else "slope"))
-    whole = big.sum() < 2 * MIN_SAMPLES  # (every sample on a small piece of its own)
-    first = corr = None
-    method = "pieces"
-    if not whole:
-        _, kk = np.unique(k[big], return_inverse=True)
-        r = _robust(x[big], y[big], kk, tile[big], om[big], model)
-        theta, first = r["theta"], r["error"]
-        corr = _within_correlation(x[big], y[big], kk, om[big] * r["rob"])
-        whole = not (theta > 0 and first <= SE_MAX)
-    if not whole:
-        scale = 1.0 / theta
-        shift = 0.0 if model == "scale" or kind == "scale" else (
-            -r["each"][r["main"]] * scale if per_offset else -r["common"] * scale)
-        samples, pieces_used, error = int(big.sum()), int(kk.max()) + 1, first
-        rms, down = r["rms"] * scale, int((r["rob"] < 0.5).sum())
-    else:
-        g = None
-        if normals is not None:
-            g = _by_gradients(prior_img, normals, surface, lab, kind, perspective,
-                              blur if MATCH_BLUR else 0.0, w_img, side)
-        if g is not None and g["scale"] > 0 and g["error"] <= SE_GRADIENTS:
-            method = "gradients"
-            scale, shift, error = g["scale"], g["shift"], g["error"]
-            samples, pieces_used, rms, down = g["samples"], 0, None, g["down"]
-        else:  # the normals' depth (or 1 / depth) on the prior, over every sample: one piece
-            method = "whole"
-            kk = np.zeros(y.size, dtype=np.int64)
-            r = _robust(y, x, kk, tile, om, "scale" if model == "scale" else "offset")
-            if corr is None:
-                corr = _within_correlation(x, y, kk, om * r["rob"])
-            if not (r["theta"] > 0 and r["error"] <= SE_WHOLE):
-                why = (f"it runs against the normals (correlation {corr:.2f} with the "
-                       "normals-only depth within its pieces): " + _against_hint(kind)
-                       if corr is not None and corr <= AGAINST else
-                       "neither the normals' shape within the surface's pieces, nor their "
-                       "slopes, nor the whole surface determine its scale (relative errors "
-                       f"{_fmt(first)}, {_fmt(None if g is None else g['error'])} and "
-                       f"{_fmt(r['error'])}): a flat view, parallel planes, or a prior unlike "
-                       "the normals' surface")
-                warn(f"`prior` with prior_fit={kind!r} was left out: {why}; the surface is "
-                     "the normals-only one")
-                return None, {"kind": kind, "used": False, "correlation": _num(corr),
-                              "scale_error": _num(first), "whole_error": _num(r["error"]),
-                              "samples": int(y.size)}
-            scale, error = r["theta"], r["error"]
-            shift = 0.0 if model == "scale" or (kind == "scale" and per_offset) else \
-                r["each"][0]
-            samples, pieces_used, rms, down = int(y.size), 1, r["rms"], int(
-                (r["rob"] < 0.5).sum())
-            warn(f"`prior` with prior_fit={kind!r}: neither the normals' shape within the "
-                 "surface's pieces nor their slopes determine the prior's scale (relative "
-                 f"errors {_fmt(first)} and {_fmt(None if g is None else g['error'])}: a flat "
-                 "view, parallel planes, a noisy prior on a shallow surface), so it was fitted "
-                 "over the whole surface: the pieces keep the normals' own placement")
+    errors = {}
+    got = _by_pairs(np.where(ok, prior_img, np.nan), z, surface, lab, kind, perspective,
+                    w_img, side, PAIR_DISTANCE)
+    errors["pairs"] = None if got is None else got["error"]
+    method = "pairs"
+    corr = None
+    if not _determined(got, SE_MAX):
+        method = "pieces"
+        got = None
+        big = np.bincount(k)[k] >= MIN_SAMPLES
+        if big.sum() >= 2 * MIN_SAMPLES:
+            _, kk = np.unique(k[big], return_inverse=True)
+            r = _robust(x[big], y[big], kk, tile[big], om[big], model)
+            corr = _within_correlation(x[big], y[big], kk, om[big] * r["rob"])
+            if r["theta"] != 0:
+                scale = 1.0 / r["theta"]
+                shift = 0.0 if model == "scale" or kind == "scale" else (
+                    -r["each"][r["main"]] * scale if per_offset else -r["common"] * scale)
+                got = {"scale": scale, "shift": shift, "error": r["error"],
+                       "samples": int(big.sum()), "down": int((r["rob"] < 0.5).sum())}
+        errors["pieces"] = None if got is None else got["error"]
+    if not _determined(got, SE_MAX):
+        method = "whole"  # the normals' depth (or 1 / depth) on the prior: one piece
+        r = _robust(y, x, np.zeros(y.size, dtype=np.int64), tile, om,
+                    "scale" if model == "scale" else "offset")
+        if corr is None:
+            corr = _within_correlation(x, y, np.zeros(y.size, dtype=np.int64), om * r["rob"])
+        shift = 0.0 if model == "scale" or (kind == "scale" and per_offset) else r["each"][0]
+        got = {"scale": r["theta"], "shift": shift, "error": r["error"], "samples": int(y.size),
+               "down": int((r["rob"] < 0.5).sum())}
+        errors["whole"] = got["error"]
+        tried = ", ".join(f"{m} {_fmt(e)}" for m, e in errors.items())
+        if not _determined(got, SE_WHOLE):
+            why = (f"it runs against the normals (correlation {corr:.2f} with the "
+                   "normals-only depth within its pieces): " + _against_hint(kind)
+                   if corr is not None and corr <= AGAINST else
+                   f"no fit determines its scale (relative errors: {tried}): a flat view, "
+                   "parallel planes, or a prior unlike the normals' surface")
+            warn(f"`prior` with prior_fit={kind!r} was left out, the surface is the "
+                 f"normals-only one: {why}")
+            return None, {"kind": kind, "used": False, "correlation": _num(corr),
+                          "errors": {m: _num(e) for m, e in errors.items()},
+                          "samples": int(y.size)}
+        warn(f"`prior` with prior_fit={kind!r}: neither the normals' shape between nearby "
+             f"samples nor within the surface's pieces determines the prior's scale ({tried}: "
+             "a flat view, parallel planes, a noisy prior on a shallow surface), so it was "
+             "fitted over the whole surface: the pieces keep the normals' own placement")
+    scale, shift = got["scale"], got["shift"]
+    if not perspective and kind == "scale":
+        shift = 0.0  # (the prior's zero is depth zero)
     lin = scale * prior_img + shift
     aligned = 1.0 / lin if kind == "disparity" else lin
     dropped = 0
@@ -224,93 +237,126 @@ def fit(prior_img: np.ndarray, weight, surface, kind: str, perspective: bool,
         if dropped:
             warn(f"`prior` with prior_fit={kind!r}: {dropped} sample(s) on the mask give a depth "
                  f"<= 0 once aligned (scale {scale:.4g}, shift {shift:.4g}) and were left out")
-    elif kind == "scale":
-        aligned = scale * prior_img  # (the prior's zero is depth zero)
-    # (the residual in the aligned prior's depth units, at the median sample for disparity)
-    unit = float(np.median(z[ok])) ** 2 if kind == "disparity" else 1.0
     details = {"kind": kind, "used": True, "method": method, "scale": float(scale),
-               "shift": float(shift), "correlation": _num(corr), "samples": samples,
-               "pieces": pieces_used, "scale_error": float(error), "down_weighted": down,
-               "residual": None if rms is None else float(abs(rms) * unit),
-               "dropped": dropped}
+               "shift": float(shift), "scale_error": float(got["error"]),
+               "samples": got["samples"], "down_weighted": got["down"],
+               "correlation": _num(corr), "dropped": dropped}
     return aligned, details
 
 
-def _by_gradients(prior_img, normals, surface, lab, kind, perspective, blur, w_img, side):
-    """The scale from the prior's own slopes against the normals' (pixel by pixel, no
-    integration: the pieces' placement does not enter). Orthographic: ``dP = alpha * d
-    depth``; pinhole: ``dP = (P + c) d log z`` (affine depth ``z = a (P + c)``), ``dD = -(D +
-    c) d log z`` (disparity ``1 / z = a (D + c)``), then ``a`` so that the main piece agrees
-    with `surface` in the median. Slopes of normals with a view cosine below
-    :data:`GRADIENT_COS` are left out (a rim's slopes would lever the fit). Returns a dict
-    (``scale``, ``shift`` as :func:`fit`'s, ``error``, ``samples``, ``rms`` in depth units,
-    ``down``) or None where there are too few samples."""
-    if perspective and kind == "scale":  # (no offset to find: the pieces always fit it)
+def _determined(got, limit) -> bool:
+    return got is not None and got["scale"] > 0 and got["error"] <= limit
+
+
+def _by_pairs(prior_img, z, surface, lab, kind, perspective, w_img, side, distance):
+    """The scale from differences between samples `distance` pixels apart in one piece, with
+    no cut between them: the normals-only surface enters only through such local differences,
+    so neither the pieces' offsets nor a sub-region's level that a jump it did not cut
+    misplaced (a partial cut) do. Orthographic: ``P_j - P_i = alpha (z_j - z_i)``; pinhole
+    (``u = log z``): ``P_j - P_i = (m + c) (u_j - u_i)`` for an affine depth ``z = a (P + c)``,
+    ``D_j - D_i = -(m + c) (u_j - u_i)`` for a disparity ``1 / z = a (D + c)``, ``m`` the
+    pair's mean prior; then ``a`` so that the main piece agrees with `surface` in the median.
+    Returns a dict as :func:`_by_gradients`' or None."""
+    if perspective and kind == "scale":
         return None
     H, W = prior_img.shape
-    mask = surface.mask
-    r, c = np.nonzero(mask)
-    n = normals[r, c]
-    cam = surface.camera
-    with np.errstate(invalid="ignore", divide="ignore"):
-        gx, gy = cam.grid_slopes(r, c, n)
-        cos = cam.view_cosine(r, c, n)
-    good = np.isfinite(gx) & np.isfinite(gy) & (cos >= GRADIENT_COS)
-    G = []
-    for g in (gx, gy):
-        img = np.full((H, W), np.nan)
-        img[r[good], c[good]] = g[good]
-        if blur > 0:
-            from .operators.blur import PlaneBlur
-
-            valid = np.isfinite(img)
-            img = np.where(valid, PlaneBlur(valid, blur)(np.where(valid, img, 0.0)), np.nan)
-        G.append(img)
-    P = np.where(mask & (w_img > 0), prior_img, np.nan)
-    dPx = np.full((H, W), np.nan)
-    dPy = np.full((H, W), np.nan)
-    dPx[:, 1:-1] = (P[:, 2:] - P[:, :-2]) / 2.0
-    dPy[1:-1, :] = -(P[2:, :] - P[:-2, :]) / 2.0  # (y up)
-    ys, xs, ws, ts = [], [], [], []
+    ok = np.isfinite(prior_img) & np.isfinite(z) & (lab >= 0) & (w_img > 0)
+    if perspective:
+        ok &= z > 0
+    u = np.log(np.where(ok & (z > 0), z, 1.0)) if perspective else z
+    cut_r = cut_d = None
+    if surface.cuts is not None:
+        cut_r = np.cumsum(np.pad(surface.cuts[0], ((0, 0), (1, 0))), axis=1)  # (H, W)
+        cut_d = np.cumsum(np.pad(surface.cuts[1], ((1, 0), (0, 0))), axis=0)  # (H, W)
+    ys, xs, ms, ws, ts = [], [], [], [], []
     tw = -(-W // side)
-    for d, g in ((dPx, G[0]), (dPy, G[1])):
-        ok = np.isfinite(d) & np.isfinite(g) & np.isfinite(P)
-        rr, cc = np.nonzero(ok)
-        if perspective:
-            sign = -1.0 if kind == "disparity" else 1.0
-            ys.append(d[ok] - sign * P[ok] * g[ok])  # = c * (sign * g)
-            xs.append(sign * g[ok])
+    d = int(distance)
+    for axis in (0, 1):
+        if (W if axis == 1 else H) <= d:
+            continue
+        a = (slice(None), slice(0, W - d)) if axis == 1 else (slice(0, H - d), slice(None))
+        b = (slice(None), slice(d, W)) if axis == 1 else (slice(d, H), slice(None))
+        pair = ok[a] & ok[b] & (lab[a] == lab[b])
+        if cut_r is not None:  # (no cut edge between them)
+            cs = cut_r if axis == 1 else cut_d
+            pair &= (cs[b] - cs[a]) == 0
+        rr, cc = np.nonzero(pair)
+        Pa, Pb = prior_img[a][pair], prior_img[b][pair]
+        du = u[b][pair] - u[a][pair]
+        if axis == 0:
+            du = -du  # (y up: the difference along y is the negative of the row's; for the
+            # fit the sign is irrelevant, kept for clarity)
+            dP = -(Pb - Pa)
         else:
-            ys.append(d[ok])  # = alpha * d depth = alpha * (-g) (the unknown is the height)
-            xs.append(-g[ok])
-        ws.append(w_img[rr, cc])
+            dP = Pb - Pa
+        ys.append(dP)
+        xs.append(du)
+        ms.append(0.5 * (Pa + Pb))
+        ws.append(np.minimum(w_img[a][pair], w_img[b][pair]))
         ts.append((rr // side) * tw + cc // side)
-    yv, xv, wv, tv = (np.concatenate(v) for v in (ys, xs, ws, ts))
-    if yv.size < 6 * MIN_SAMPLES:
+    if not ys:
+        return None
+    dP, du, m, wv, tv = (np.concatenate(v) for v in (ys, xs, ms, ws, ts))
+    if dP.size < 6 * MIN_SAMPLES:
         return None
     wv = wv / wv.mean()
     _, tv = np.unique(tv, return_inverse=True)
-    zero = np.zeros(yv.size, dtype=np.int64)
-    rfit = _robust(xv, yv, zero, tv, wv, "scale")
+    if perspective:
+        sign = -1.0 if kind == "disparity" else 1.0
+        yv, xv = dP - sign * m * du, sign * du  # = c * xv
+    else:
+        yv, xv = dP, du  # = alpha * xv
+    rfit = _robust(xv, yv, np.zeros(yv.size, dtype=np.int64), tv, wv, "scale")
     coef = rfit["theta"]
+    return _levels(coef, rfit, prior_img, surface, lab, kind, perspective, ok, dP.size)
+
+
+def _levels(coef, rfit, prior_img, surface, lab, kind, perspective, ok, samples):
+    """(scale, shift) from a fitted `coef` (pinhole: the prior's offset ``c``; orthographic:
+    ``alpha``), placed so that the main piece agrees with `surface` in the median: a dict as
+    :func:`_by_gradients`' or None where the fit is degenerate."""
+    P = np.where(ok, prior_img, np.nan)
     main_lab = np.argmax(np.bincount(lab[np.isfinite(P) & (lab >= 0)]))
     on = (lab == main_lab) & np.isfinite(P) & np.isfinite(surface.depth)
     z0 = surface.depth[on]
+    error = rfit["error"]
     if perspective:
         unit = P[on] + coef  # proportional to z (affine) or to 1 / z (disparity)
-        ratio = (1.0 / z0) / unit if kind == "disparity" else z0 / unit
-        ratio = ratio[unit > 0]
-        if ratio.size == 0 or coef == 0:
+        mid = float(np.median(unit)) if unit.size else 0.0
+        if not (mid > 1e-9 * float(np.max(np.abs(P[on]))) and np.mean(unit > 0) >= 0.99):
             return None
-        lam = float(np.median(ratio))
+        error = rfit["error"] * abs(coef) / mid
+        ratio = (1.0 / z0) / unit if kind == "disparity" else z0 / unit
+        lam = float(np.median(ratio[unit > 0]))
         scale, shift = lam, lam * coef
     else:
         if not coef != 0:
             return None
         scale = 1.0 / coef
         shift = 0.0 if kind == "scale" else float(np.median(z0 - scale * P[on]))
-    return {"scale": scale, "shift": shift, "error": rfit["error"], "samples": int(yv.size),
+    return {"scale": scale, "shift": shift, "error": error, "samples": int(samples),
             "down": int((rfit["rob"] < 0.5).sum())}
+
+
+def _near_borders(surface, lab: np.ndarray, radius: float) -> np.ndarray:
+    """(H, W) bool: pixels within `radius` of a cut edge of `surface` or of an edge between
+    two of its pieces `lab`."""
+    from scipy import ndimage
+
+    H, W = lab.shape
+    edge_r = (lab[:, :-1] != lab[:, 1:]) & (lab[:, :-1] >= 0) & (lab[:, 1:] >= 0)
+    edge_d = (lab[:-1] != lab[1:]) & (lab[:-1] >= 0) & (lab[1:] >= 0)
+    if surface.cuts is not None:
+        edge_r = edge_r | surface.cuts[0]
+        edge_d = edge_d | surface.cuts[1]
+    border = np.zeros((H, W), bool)
+    border[:, :-1] |= edge_r
+    border[:, 1:] |= edge_r
+    border[:-1] |= edge_d
+    border[1:] |= edge_d
+    if not border.any():
+        return border
+    return ndimage.distance_transform_edt(~border) < radius
 
 
 def _fmt(v) -> str:

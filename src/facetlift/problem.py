@@ -550,7 +550,8 @@ def _check_trend(problem: Problem) -> None:
     if agree < TREND_AGREE:
         warn(f"prior: its depth changes run against the normals': between neighbouring "
              f"samples where both change, they change the same way on only {agree:.0%} of "
-             f"{pairs} pairs. Is it a disparity or inverse depth (invert it first), a height "
+             f"{pairs} pairs. Is it a disparity or inverse depth (invert it first, or give it "
+             "with prior_fit='disparity', --prior-fit disparity), a height "
              "rather than a depth (larger = farther), or are the normals in another frame "
              "(normal_frame, --normal-frame)? (info['prior']['trend']; docs/fusion.md, 'A "
              "prior that runs against the normals')")
@@ -916,6 +917,8 @@ def check_prior(prior, prior_weight, shape, mask, camera):
                     "(or pass the samples as (rows, cols, depths)); a disparity or "
                     "inverse-depth map (0 at the far end) must be inverted into depth first "
                     "(docs/fusion.md, 'Recipes')" if zeros else "")
+            hint += ("; relative depth or disparity from a monocular network (any sign, up "
+                     "to scale and shift): prior_fit='affine' or 'disparity' (--prior-fit)")
             raise ValueError(
                 "`prior` must hold positive z-depths for a perspective camera (`K`); got "
                 f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s)){hint}"
