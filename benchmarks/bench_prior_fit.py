@@ -124,7 +124,7 @@ def summary(rows: list[dict]) -> None:
     for r in rows:
         groups[r["group"]].append(r)
     print("\n| group | scenes | column | mean | better / worse than normals | better / worse "
-          "than recipe | fit by pieces / slopes / whole / left out |")
+          "than recipe | fit by pairs / pieces / left out |")
     print("|---|---|---|---|---|---|---|")
     for g, rs in groups.items():
         for c in COLUMNS:
@@ -136,7 +136,7 @@ def summary(rows: list[dict]) -> None:
             rec = np.array([r["recipe"] for r in have])
             how = [((r.get(f"fit_{c}") or {}).get("method") if (r.get(f"fit_{c}") or {}).get(
                 "used", True) else "out") for r in have]
-            counts = "/".join(str(how.count(m)) for m in ("pieces", "gradients", "whole", "out"))
+            counts = "/".join(str(how.count(m)) for m in ("pairs", "pieces", "out"))
             print(f"| {g} | {len(have)} | {c} | {v.mean():.4f} | {int((v < 0.99 * n).sum())} / "
                   f"{int((v > 1.01 * n).sum())} | {int((v < 0.99 * rec).sum())} / "
                   f"{int((v > 1.01 * rec).sum())} | "

@@ -16,8 +16,8 @@ P_i = alpha (z_j - z_i)``; pinhole (the normals give ``log z`` up to a constant)
 the pair's mean, and the like for a disparity. Neither the pieces' offsets nor the level of a
 region that a jump the normals-only surface did not cut misplaced enter. Where that leaves
 the scale undetermined (:data:`SE_MAX`), the shape within each piece with a free constant per
-piece (orthographic ``P = alpha z + gamma_k``; pinhole ``P = s_k z + beta``), then one fit
-over the whole surface; else the prior is left out, with a warning. The remaining constant
+piece (orthographic ``P = alpha z + gamma_k``; pinhole ``P = s_k z + beta``); else the prior
+is left out, with a warning. The remaining constant
 (``a`` for a pinhole camera, the offset orthographically) makes the main piece (the one with
 most of the prior's weight) agree with the normals-only surface in the median: a perspective
 result keeps that surface's scale (median depth near 1; the prior has none to give), an
@@ -25,7 +25,9 @@ orthographic one its level. Every other piece is then placed by the aligned prio
 second solve (:func:`facetlift.integrate` runs the route twice). Every fit is a Huber
 regression (:data:`HUBER`, :data:`ROUNDS`: a network's errors at silhouettes, where it blends
 foreground and background, do not tilt it) whose relative standard error comes from a
-jackknife over image tiles (:data:`TILE`).
+jackknife over image tiles (:data:`TILE`). The normals-only surface is compared through the
+blur that the prior seems to have been seen through (:func:`_prior_blur`): a coarse prior's
+differences are smaller than a sharp surface's, which made its scale 1.5-3x too large.
 """
 
 from __future__ import annotations
@@ -57,23 +59,31 @@ TILE, TILE_BLURS = 16, 2.0
 PAIR_DISTANCE = 2
 
 #: The largest relative standard error of the scale that a fit may leave; above it the next
-#: fit is tried (pairs, then pieces, then the whole surface, whose attenuated slope shrinks an
-#: undetermined prior toward a flat one rather than blowing it up, up to SE_WHOLE), and the
-#: prior is left out, with a warning, where none is determined.
-SE_MAX, SE_WHOLE = 0.1, 0.25
+#: fit is tried (pairs, then pieces), and the prior is left out, with a warning, where none
+#: is determined.
+SE_MAX = 0.1
 
 #: A within-piece correlation between the prior and the normals-only depth at or below this
 #: (with no scale determined) names the prior as running against the normals in the warning.
 AGAINST = -0.5
 
-#: With ``prior_blur``, samples within this many blur sigmas of a cut or of a border between
+#: Blurred, samples within this many blur sigmas of a cut or of a border between
 #: pieces are not compared (the blur mixes the pieces' offsets there, which the normals-only
 #: surface only guessed: a review's three parts came out 2.17 apart, at a scale 12 % off),
 #: halved until a quarter of the samples are left (an object cut in many places).
 BORDER_BLURS, BORDER_KEEP = 2.0, 0.25
 
-#: Compare the prior with the normals-only surface blurred by ``prior_blur`` where one is
-#: given, as the solve does.
+#: Blurs (sigma, pixels) tried for the comparison, besides the ``prior_blur`` given: the one
+#: whose local differences agree with the prior's at two distances is used
+#: (:func:`_prior_blur`).
+BLUR_CANDIDATES = (0.0, 1.0, 2.0, 4.0, 8.0, 16.0)
+
+#: The second distance of :func:`_prior_blur`'s check, and how much closer (in the log of the
+#: two fits' relief ratio) another blur must bring them to replace the ``prior_blur`` given.
+CHECK_DISTANCE, BLUR_BETTER = 8, 0.02
+
+#: Compare the prior with the normals-only surface blurred (:func:`_prior_blur`); False
+#: compares them as they are (for measurements).
 MATCH_BLUR = True
 
 
@@ -119,43 +129,40 @@ def fit(prior_img: np.ndarray, weight, surface, kind: str, perspective: bool,
 
     `prior_img` (H, W) raw prior values, NaN where unknown; `weight` a scalar or (H, W) map
     (the prior's weights, which weigh the fit too); `blur` the ``prior_blur`` sigma (pixels):
-    the prior is then fitted to the surface blurred alike (:class:`~facetlift.operators.blur.
-    PlaneBlur`), as the solve compares them, away from cuts (:data:`BORDER_BLURS`). The fits,
+    the prior is fitted to the surface blurred as it seems to be (:func:`_prior_blur`, which
+    keeps `blur` unless another agrees clearly better; :class:`~facetlift.operators.blur.
+    PlaneBlur`), away from cuts (:data:`BORDER_BLURS`). The fits,
     in turn until one determines the scale (:data:`SE_MAX`): differences of samples
-    :data:`PAIR_DISTANCE` pixels apart in one piece (:func:`_by_pairs`), the pieces' shapes
-    with a free constant each, the whole surface on the prior. `aligned` is None where none
+    :data:`PAIR_DISTANCE` pixels apart in one piece (:func:`_by_pairs`), then the pieces'
+    shapes with a free constant each. `aligned` is None where neither
     does (the caller returns the normals-only surface). `details` (for
-    ``info["prior"]["fit"]``): ``kind``, ``used``, ``method`` ("pairs", "pieces", "whole"),
+    ``info["prior"]["fit"]``): ``kind``, ``used``, ``method`` ("pairs", "pieces"),
     ``scale`` and ``shift`` (depth = scale * P + shift; for "disparity" 1 / depth = scale * P +
     shift), ``samples``, ``scale_error`` (relative standard error of the scale, by a jackknife
     over tiles), ``down_weighted`` (samples the Huber weights reduced below one half),
-    ``correlation`` (of the prior with the normals-only depth within the pieces) and
-    ``dropped`` (samples whose aligned depth was not positive, perspective only). A prior
+    ``correlation`` (of the prior with the normals-only depth within the pieces), ``blur``
+    (the one compared through) and ``dropped`` (samples whose aligned depth was not
+    positive, perspective only). A prior
     that no fit aligns is left out with a warning (a poor prior never refuses the job).
     Raises ValueError naming `prior` where too few samples lie on the surface.
     """
     from ._warnings import warn
 
     z = surface.depth
-    if blur > 0 and MATCH_BLUR:
-        from .operators.blur import PlaneBlur
-
-        z = PlaneBlur(surface.mask, blur)(np.where(surface.mask, z, 0.0))
     lab = pieces(surface)
     w_img = np.broadcast_to(np.asarray(weight, float), prior_img.shape)
     ok = np.isfinite(prior_img) & (lab >= 0) & np.isfinite(z) & (w_img > 0)
     if perspective:
         ok &= z > 0
+    side = max(TILE, int(np.ceil(TILE_BLURS * blur)))
+    if MATCH_BLUR:
+        blur = _prior_blur(prior_img, z, surface, lab, _away(surface, lab, ok, blur), blur,
+                           kind, perspective, w_img, side)
     if blur > 0 and MATCH_BLUR:
-        # near a cut or a border between pieces the blur mixes the pieces' offsets, which
-        # the normals-only surface only guessed (and the prior knows): not compared there
-        radius = BORDER_BLURS * blur
-        while radius >= 1.0:
-            far = ok & ~_near_borders(surface, lab, radius)
-            if far.sum() >= max(BORDER_KEEP * ok.sum(), 2 * MIN_SAMPLES):
-                ok = far
-                break
-            radius /= 2.0
+        from .operators.blur import PlaneBlur
+
+        z = PlaneBlur(surface.mask, blur)(np.where(surface.mask, z, 0.0))
+        ok = _away(surface, lab, ok & np.isfinite(z), blur)
     if ok.sum() < 2 * MIN_SAMPLES:
         raise ValueError(f"`prior` with prior_fit={kind!r}: only {int(ok.sum())} sample(s) "
                          f"with a weight > 0 lie on the surface; at least {2 * MIN_SAMPLES} "
@@ -199,31 +206,20 @@ def fit(prior_img: np.ndarray, weight, surface, kind: str, perspective: bool,
                        "samples": int(big.sum()), "down": int((r["rob"] < 0.5).sum())}
         errors["pieces"] = None if got is None else got["error"]
     if not _determined(got, SE_MAX):
-        method = "whole"  # the normals' depth (or 1 / depth) on the prior: one piece
-        r = _robust(y, x, np.zeros(y.size, dtype=np.int64), tile, om,
-                    "scale" if model == "scale" else "offset")
-        if corr is None:
-            corr = _within_correlation(x, y, np.zeros(y.size, dtype=np.int64), om * r["rob"])
-        shift = 0.0 if model == "scale" or (kind == "scale" and per_offset) else r["each"][0]
-        got = {"scale": r["theta"], "shift": shift, "error": r["error"], "samples": int(y.size),
-               "down": int((r["rob"] < 0.5).sum())}
-        errors["whole"] = got["error"]
+        # (a fit of the whole surface on the prior, the manual recipe, gained nothing on the
+        # benchmark and took a scale 50x off as determined: a fresh check)
         tried = ", ".join(f"{m} {_fmt(e)}" for m, e in errors.items())
-        if not _determined(got, SE_WHOLE):
-            why = (f"it runs against the normals (correlation {corr:.2f} with the "
-                   "normals-only depth within its pieces): " + _against_hint(kind)
-                   if corr is not None and corr <= AGAINST else
-                   f"no fit determines its scale (relative errors: {tried}): a flat view, "
-                   "parallel planes, or a prior unlike the normals' surface")
-            warn(f"`prior` with prior_fit={kind!r} was left out, the surface is the "
-                 f"normals-only one: {why}")
-            return None, {"kind": kind, "used": False, "correlation": _num(corr),
-                          "errors": {m: _num(e) for m, e in errors.items()},
-                          "samples": int(y.size)}
-        warn(f"`prior` with prior_fit={kind!r}: neither the normals' shape between nearby "
-             f"samples nor within the surface's pieces determines the prior's scale ({tried}: "
-             "a flat view, parallel planes, a noisy prior on a shallow surface), so it was "
-             "fitted over the whole surface: the pieces keep the normals' own placement")
+        if corr is None:
+            corr = _within_correlation(x, y, k, om)
+        why = (f"it runs against the normals (correlation {corr:.2f} with the normals-only "
+               "depth within its pieces): " + _against_hint(kind)
+               if corr is not None and corr <= AGAINST else
+               f"no fit determines its scale (relative errors: {tried}): a flat view, "
+               "parallel planes, or a prior unlike the normals' surface")
+        warn(f"`prior` with prior_fit={kind!r} was left out, the surface is the normals-only "
+             f"one: {why}")
+        return None, {"kind": kind, "used": False, "correlation": _num(corr),
+                      "errors": {m: _num(e) for m, e in errors.items()}, "samples": int(y.size)}
     scale, shift = got["scale"], got["shift"]
     if not perspective and kind == "scale":
         shift = 0.0  # (the prior's zero is depth zero)
@@ -240,7 +236,7 @@ def fit(prior_img: np.ndarray, weight, surface, kind: str, perspective: bool,
     details = {"kind": kind, "used": True, "method": method, "scale": float(scale),
                "shift": float(shift), "scale_error": float(got["error"]),
                "samples": got["samples"], "down_weighted": got["down"],
-               "correlation": _num(corr), "dropped": dropped}
+               "correlation": _num(corr), "dropped": dropped, "blur": float(blur)}
     return aligned, details
 
 
@@ -248,28 +244,16 @@ def _determined(got, limit) -> bool:
     return got is not None and got["scale"] > 0 and got["error"] <= limit
 
 
-def _by_pairs(prior_img, z, surface, lab, kind, perspective, w_img, side, distance):
-    """The scale from differences between samples `distance` pixels apart in one piece, with
-    no cut between them: the normals-only surface enters only through such local differences,
-    so neither the pieces' offsets nor a sub-region's level that a jump it did not cut
-    misplaced (a partial cut) do. Orthographic: ``P_j - P_i = alpha (z_j - z_i)``; pinhole
-    (``u = log z``): ``P_j - P_i = (m + c) (u_j - u_i)`` for an affine depth ``z = a (P + c)``,
-    ``D_j - D_i = -(m + c) (u_j - u_i)`` for a disparity ``1 / z = a (D + c)``, ``m`` the
-    pair's mean prior; then ``a`` so that the main piece agrees with `surface` in the median.
-    Returns a dict as :func:`_by_gradients`' or None."""
-    if perspective and kind == "scale":
-        return None
-    H, W = prior_img.shape
-    ok = np.isfinite(prior_img) & np.isfinite(z) & (lab >= 0) & (w_img > 0)
-    if perspective:
-        ok &= z > 0
-    u = np.log(np.where(ok & (z > 0), z, 1.0)) if perspective else z
+def _pairs(ok, lab, surface, distance):
+    """Flat indices (i, j) of the pairs of pixels `distance` apart along a row or a column,
+    both `ok`, in one piece of `lab` and with no cut edge of `surface` between them."""
+    H, W = ok.shape
     cut_r = cut_d = None
     if surface.cuts is not None:
         cut_r = np.cumsum(np.pad(surface.cuts[0], ((0, 0), (1, 0))), axis=1)  # (H, W)
         cut_d = np.cumsum(np.pad(surface.cuts[1], ((1, 0), (0, 0))), axis=0)  # (H, W)
-    ys, xs, ms, ws, ts = [], [], [], [], []
-    tw = -(-W // side)
+    flat = np.arange(H * W).reshape(H, W)
+    ii, jj = [], []
     d = int(distance)
     for axis in (0, 1):
         if (W if axis == 1 else H) <= d:
@@ -277,38 +261,91 @@ def _by_pairs(prior_img, z, surface, lab, kind, perspective, w_img, side, distan
         a = (slice(None), slice(0, W - d)) if axis == 1 else (slice(0, H - d), slice(None))
         b = (slice(None), slice(d, W)) if axis == 1 else (slice(d, H), slice(None))
         pair = ok[a] & ok[b] & (lab[a] == lab[b])
-        if cut_r is not None:  # (no cut edge between them)
+        if cut_r is not None:
             cs = cut_r if axis == 1 else cut_d
             pair &= (cs[b] - cs[a]) == 0
-        rr, cc = np.nonzero(pair)
-        Pa, Pb = prior_img[a][pair], prior_img[b][pair]
-        du = u[b][pair] - u[a][pair]
-        if axis == 0:
-            du = -du  # (y up: the difference along y is the negative of the row's; for the
-            # fit the sign is irrelevant, kept for clarity)
-            dP = -(Pb - Pa)
-        else:
-            dP = Pb - Pa
-        ys.append(dP)
-        xs.append(du)
-        ms.append(0.5 * (Pa + Pb))
-        ws.append(np.minimum(w_img[a][pair], w_img[b][pair]))
-        ts.append((rr // side) * tw + cc // side)
-    if not ys:
+        ii.append(flat[a][pair])
+        jj.append(flat[b][pair])
+    if not ii:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(ii), np.concatenate(jj)
+
+
+def _by_pairs(prior_img, z, surface, lab, kind, perspective, w_img, side, distance,
+              error: bool = True):
+    """The scale from differences between samples `distance` pixels apart in one piece, with
+    no cut between them (:func:`_pairs`): the normals-only surface enters only through such
+    local differences, so neither the pieces' offsets nor a sub-region's level that a jump it
+    did not cut misplaced (a partial cut) do. Orthographic: ``P_j - P_i = alpha (z_j -
+    z_i)``; pinhole (``u = log z``): ``P_j - P_i = (m + c) (u_j - u_i)`` for an affine depth
+    ``z = a (P + c)``, ``D_j - D_i = -(m + c) (u_j - u_i)`` for a disparity ``1 / z = a (D +
+    c)``, ``m`` the pair's mean prior; then ``a`` so that the main piece agrees with `surface`
+    in the median (:func:`_levels`). Returns a dict (``scale``, ``shift``, ``error``,
+    ``samples``, ``down``) or None. `error`: with the jackknife's relative standard error
+    (else inf)."""
+    if perspective and kind == "scale":
         return None
-    dP, du, m, wv, tv = (np.concatenate(v) for v in (ys, xs, ms, ws, ts))
-    if dP.size < 6 * MIN_SAMPLES:
+    W = prior_img.shape[1]
+    ok = np.isfinite(prior_img) & np.isfinite(z) & (lab >= 0) & (w_img > 0)
+    if perspective:
+        ok &= z > 0
+    u = (np.log(np.where(ok, z, 1.0)) if perspective else z).ravel()
+    i, j = _pairs(ok, lab, surface, distance)
+    if i.size < 6 * MIN_SAMPLES:
         return None
+    P = prior_img.ravel()
+    dP, du, m = P[j] - P[i], u[j] - u[i], 0.5 * (P[i] + P[j])
+    wv = np.minimum(w_img.ravel()[i], w_img.ravel()[j])
     wv = wv / wv.mean()
-    _, tv = np.unique(tv, return_inverse=True)
+    tw = -(-W // side)
+    _, tv = np.unique((i // W // side) * tw + (i % W) // side, return_inverse=True)
     if perspective:
         sign = -1.0 if kind == "disparity" else 1.0
         yv, xv = dP - sign * m * du, sign * du  # = c * xv
     else:
         yv, xv = dP, du  # = alpha * xv
-    rfit = _robust(xv, yv, np.zeros(yv.size, dtype=np.int64), tv, wv, "scale")
-    coef = rfit["theta"]
-    return _levels(coef, rfit, prior_img, surface, lab, kind, perspective, ok, dP.size)
+    rfit = _robust(xv, yv, np.zeros(yv.size, dtype=np.int64), tv, wv, "scale", error=error)
+    return _levels(rfit["theta"], rfit, prior_img, surface, lab, kind, perspective, ok, i.size)
+
+
+def _prior_blur(prior_img, z, surface, lab, ok, given, kind, perspective, w_img, side):
+    """The blur (sigma, pixels) of the normals-only surface `z` whose local differences agree
+    with the prior's at two distances (:data:`PAIR_DISTANCE` and :data:`CHECK_DISTANCE`): a
+    surface sharper than the prior makes the near differences too large against the prior's,
+    more than the far ones, so the two fits' scales part; the blur where they agree best,
+    over :data:`BLUR_CANDIDATES` and the `given` ``prior_blur`` (kept unless another agrees
+    better by :data:`BLUR_BETTER`). A coarse prior given pixel by pixel came out 1.5-3x off
+    on the benchmark (docs/fusion.md)."""
+    from .operators.blur import PlaneBlur
+
+    P = np.where(ok, prior_img, np.nan)
+    lo, mid, hi = np.nanpercentile(P, [5, 50, 95])
+    found = {}
+    longest = max(surface.mask.shape) / 8
+    for sigma in sorted({*BLUR_CANDIDATES, given}):
+        if sigma > longest and sigma != given:
+            continue
+        zs = z if sigma == 0 else PlaneBlur(surface.mask, sigma)(np.where(surface.mask, z, 0.0))
+        reliefs = []
+        for d in (PAIR_DISTANCE, CHECK_DISTANCE):
+            got = _by_pairs(P, zs, surface, lab, kind, perspective, w_img, side, d,
+                            error=False)
+            if got is None or not got["scale"] > 0:
+                break
+            a, b = got["scale"], got["shift"]
+            if perspective:  # (the aligned prior's relief relative to its depth)
+                q = [a * v + b for v in (lo, mid, hi)]
+                if kind == "disparity":
+                    q = [1.0 / v if v > 0 else np.nan for v in q]
+                reliefs.append(abs(q[2] - q[0]) / q[1] if q[1] > 0 else np.nan)
+            else:
+                reliefs.append(a)
+        if len(reliefs) == 2 and np.isfinite(reliefs).all() and min(reliefs) > 0:
+            found[sigma] = abs(np.log(reliefs[0] / reliefs[1]))
+    if not found:
+        return given
+    best = min(found, key=found.get)
+    return best if found[best] < found.get(given, np.inf) - BLUR_BETTER else given
 
 
 def _levels(coef, rfit, prior_img, surface, lab, kind, perspective, ok, samples):
@@ -336,6 +373,20 @@ def _levels(coef, rfit, prior_img, surface, lab, kind, perspective, ok, samples)
         shift = 0.0 if kind == "scale" else float(np.median(z0 - scale * P[on]))
     return {"scale": scale, "shift": shift, "error": error, "samples": int(samples),
             "down": int((rfit["rob"] < 0.5).sum())}
+
+
+def _away(surface, lab, ok, blur: float) -> np.ndarray:
+    """`ok` without the samples within :data:`BORDER_BLURS` `blur` sigmas of a cut or of a
+    border between pieces, where a blur mixes the pieces' offsets, which the normals-only
+    surface only guessed (and the prior knows); the radius halved until :data:`BORDER_KEEP`
+    of the samples are left."""
+    radius = BORDER_BLURS * blur
+    while radius >= 1.0:
+        far = ok & ~_near_borders(surface, lab, radius)
+        if far.sum() >= max(BORDER_KEEP * ok.sum(), 2 * MIN_SAMPLES):
+            return far
+        radius /= 2.0
+    return ok
 
 
 def _near_borders(surface, lab: np.ndarray, radius: float) -> np.ndarray:
@@ -367,7 +418,7 @@ def _num(v):
     return None if v is None or not np.isfinite(v) else float(v)
 
 
-def _robust(x, y, k, tile, om, model):
+def _robust(x, y, k, tile, om, model, error: bool = True):
     """The piece model `model` fitted to ``y`` on ``x`` with Huber weights: a dict of
     ``theta`` (the scale parameter: ``alpha`` of "offset" ``y = alpha x + gamma_k``, the main
     piece's ``s`` of "slope" ``y = s_k x + beta`` and "scale" ``y = s_k x``), ``common``,
@@ -395,7 +446,8 @@ def _robust(x, y, k, tile, om, model):
     res = y - (common * x + each[k] if model == "offset" else each[k] * x + common)
     rms = float(np.sqrt(np.sum(w * res ** 2) / np.sum(w)))
     return {"theta": float(theta), "common": float(common), "each": each, "main": main,
-            "error": _jackknife(x, y, k, tile, w, Mk, model, main, theta), "rob": rob,
+            "error": _jackknife(x, y, k, tile, w, Mk, model, main, theta) if error else np.inf,
+            "rob": rob,
             "rms": rms}
 
 
