@@ -154,10 +154,9 @@ def fit(prior_img: np.ndarray, weight, surface, kind: str, perspective: bool,
     ok = np.isfinite(prior_img) & (lab >= 0) & np.isfinite(z) & (w_img > 0)
     if perspective:
         ok &= z > 0
-    side = max(TILE, int(np.ceil(TILE_BLURS * blur)))
     if MATCH_BLUR:
         blur = _prior_blur(prior_img, z, surface, lab, _away(surface, lab, ok, blur), blur,
-                           kind, perspective, w_img, side)
+                           kind, perspective, w_img, TILE)
     if blur > 0 and MATCH_BLUR:
         from .operators.blur import PlaneBlur
 
