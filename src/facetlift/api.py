@@ -206,9 +206,7 @@ def integrate(
     fit_kind = prior_fit_check(prior_fit, prior is not None, K is not None)
     if fit_kind != "none":
         if not info.prior:
-            able = sorted(k for k, v in methods.REGISTRY.items() if v.prior)
-            raise ValueError(f"method {method!r} does not take a `prior` (its energy has no "
-                             f"such term); methods that do: {able}")
+            raise _lacks(method, "prior")
         return _integrate_fitted(
             fit_kind, normals, mask, method=method, pixel_size=pixel_size, K=K, known=known,
             discontinuities=discontinuities, solver=solver, backfacing=backfacing,
@@ -249,6 +247,13 @@ def integrate(
         return _solve(problem, method, t0, max_memory, options)
 
 
+def _lacks(method: str, what: str) -> ValueError:
+    """The error for a `what` ("prior", "confidence", "prior_blur") that `method` lacks."""
+    able = sorted(k for k, v in methods.REGISTRY.items() if getattr(v, what))
+    return ValueError(f"method {method!r} does not take a `{what}` (its energy has no such "
+                      f"term); methods that do: {able}")
+
+
 def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
                       prior_outliers, **kwargs) -> Surface:
     """:func:`integrate` with a prior known up to scale (and shift): the normals alone
@@ -263,15 +268,7 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
         return integrate(normals, mask, prior=prior, prior_weight=prior_weight,
                          prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
     raw = prior_image(prior, shape)  # (raw values: any sign before the alignment)
-    weight = prior_weight
-    if np.ndim(prior_weight) == 2:
-        weight = _weight_image(prior_weight, "prior_weight", shape)
-    elif not (np.ndim(prior_weight) == 0 and np.isreal(prior_weight)
-              and np.isfinite(prior_weight) and prior_weight >= 0):
-        raise ValueError(f"`prior_weight` must be a number >= 0 or an (H, W) map; got "
-                         f"{prior_weight!r}")
-    else:
-        weight = float(prior_weight)
+    weight = _weight_image(prior_weight, "prior_weight", shape)
     failed = None
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
@@ -417,11 +414,7 @@ def _solve(problem, method, t0, max_memory, options):
                         ("confidence", problem.confidence is not None),
                         ("prior_blur", problem.prior_blur > 0)):
         if given and not getattr(info, what):
-            able = sorted(k for k, v in methods.REGISTRY.items() if getattr(v, what))
-            raise ValueError(
-                f"method {method!r} does not take a `{what}` (its energy has no such term); "
-                f"methods that do: {able}"
-            )
+            raise _lacks(method, what)
     if not problem.usable.all() and not info.missing:
         raise ValueError(
             f"method {method!r} cannot take missing samples ({int((~problem.usable).sum())} "

@@ -155,13 +155,10 @@ def fit(prior_img: np.ndarray, weight, surface, kind: str, perspective: bool,
     if perspective:
         ok &= z > 0
     if MATCH_BLUR:
-        blur = _prior_blur(prior_img, z, surface, lab, _away(surface, lab, ok, blur), blur,
-                           kind, perspective, w_img, TILE)
-    if blur > 0 and MATCH_BLUR:
-        from .operators.blur import PlaneBlur
-
-        z = PlaneBlur(surface.mask, blur)(np.where(surface.mask, z, 0.0))
-        ok = _away(surface, lab, ok & np.isfinite(z), blur)
+        blur, z = _prior_blur(prior_img, z, surface, lab, _away(surface, lab, ok, blur), blur,
+                              kind, perspective, w_img, TILE)
+        if blur > 0:
+            ok = _away(surface, lab, ok & np.isfinite(z), blur)
     if ok.sum() < 2 * MIN_SAMPLES:
         raise ValueError(f"`prior` with prior_fit={kind!r}: only {int(ok.sum())} sample(s) "
                          f"with a weight > 0 lie on the surface; at least {2 * MIN_SAMPLES} "
@@ -314,17 +311,18 @@ def _prior_blur(prior_img, z, surface, lab, ok, given, kind, perspective, w_img,
     more than the far ones, so the two fits' scales part; the blur where they agree best,
     over :data:`BLUR_CANDIDATES` and the `given` ``prior_blur`` (kept unless another agrees
     better by :data:`BLUR_BETTER`). A coarse prior given pixel by pixel came out 1.5-3x off
-    on the benchmark (docs/fusion.md)."""
+    on the benchmark (docs/fusion.md). Returns ``(sigma, z blurred by it)``."""
     from .operators.blur import PlaneBlur
 
     P = np.where(ok, prior_img, np.nan)
     lo, mid, hi = np.nanpercentile(P, [5, 50, 95])
-    found = {}
+    found, blurred = {}, {}
     longest = max(surface.mask.shape) / 8
     for sigma in sorted({*BLUR_CANDIDATES, given}):
         if sigma > longest and sigma != given:
             continue
         zs = z if sigma == 0 else PlaneBlur(surface.mask, sigma)(np.where(surface.mask, z, 0.0))
+        blurred[sigma] = zs
         reliefs = []
         for d in (PAIR_DISTANCE, CHECK_DISTANCE):
             got = _by_pairs(P, zs, surface, lab, kind, perspective, w_img, side, d,
@@ -341,16 +339,16 @@ def _prior_blur(prior_img, z, surface, lab, ok, given, kind, perspective, w_img,
                 reliefs.append(a)
         if len(reliefs) == 2 and np.isfinite(reliefs).all() and min(reliefs) > 0:
             found[sigma] = abs(np.log(reliefs[0] / reliefs[1]))
-    if not found:
-        return given
-    best = min(found, key=found.get)
-    return best if found[best] < found.get(given, np.inf) - BLUR_BETTER else given
+    best = min(found, key=found.get) if found else given
+    if best != given and not found[best] < found.get(given, np.inf) - BLUR_BETTER:
+        best = given  # (the given blur unless another agrees clearly better)
+    return best, blurred[best]
 
 
 def _levels(coef, rfit, prior_img, surface, lab, kind, perspective, ok, samples):
     """(scale, shift) from a fitted `coef` (pinhole: the prior's offset ``c``; orthographic:
     ``alpha``), placed so that the main piece agrees with `surface` in the median: a dict as
-    :func:`_by_gradients`' or None where the fit is degenerate."""
+    :func:`_by_pairs`' or None where the fit is degenerate."""
     P = np.where(ok, prior_img, np.nan)
     main_lab = np.argmax(np.bincount(lab[np.isfinite(P) & (lab >= 0)]))
     on = (lab == main_lab) & np.isfinite(P) & np.isfinite(surface.depth)
@@ -422,8 +420,7 @@ def _robust(x, y, k, tile, om, model, error: bool = True):
     ``theta`` (the scale parameter: ``alpha`` of "offset" ``y = alpha x + gamma_k``, the main
     piece's ``s`` of "slope" ``y = s_k x + beta`` and "scale" ``y = s_k x``), ``common``,
     ``each`` (K,), ``main``, ``error`` (theta's relative standard error, a jackknife over the
-    tiles `tile`: each tile left out in turn), ``rob`` (Huber weights), ``rms`` (their
-    weighted residual RMS, y units)."""
+    tiles `tile`: each tile left out in turn) and ``rob`` (Huber weights)."""
     K = int(k.max()) + 1
     main = int(np.argmax(np.bincount(k, weights=om, minlength=K)))
     rob = np.ones_like(om)
@@ -442,12 +439,9 @@ def _robust(x, y, k, tile, om, model, error: bool = True):
     Mk = _moments(x, y, k, w, K)
     common, each = _params(Mk, model)
     theta = common if model == "offset" else each[main]
-    res = y - (common * x + each[k] if model == "offset" else each[k] * x + common)
-    rms = float(np.sqrt(np.sum(w * res ** 2) / np.sum(w)))
     return {"theta": float(theta), "common": float(common), "each": each, "main": main,
             "error": _jackknife(x, y, k, tile, w, Mk, model, main, theta) if error else np.inf,
-            "rob": rob,
-            "rms": rms}
+            "rob": rob}
 
 
 def _jackknife(x, y, k, tile, w, Mk, model, main, theta) -> float:
