@@ -285,6 +285,35 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
     assert code == 1 and "give inputs" in capsys.readouterr().err
 
 
+def test_a_missing_input_is_a_failed_item_not_the_end_of_the_batch(tmp_path, capsys):
+    """A user's list of 40 maps with one stale line stopped before any item ran: a missing
+    file or an empty pattern is now a failed record, the others run (only nothing found at
+    all is refused)."""
+    maps(tmp_path / "in", n=1)
+    (tmp_path / "maps.txt").write_text("in/m0.png\nin/gone.png\n")
+    out = tmp_path / "o"
+    recs = facetlift.batch([str(tmp_path / "none" / "*.png")], out, workers=1, save=("npy",),
+                           list_file=tmp_path / "maps.txt", progress=False)
+    assert [(r["name"], r["status"]) for r in recs] == [
+        ("m0", "ok"), ("pattern", "error"), ("gone.png", "error")]
+    assert "matches nothing" in recs[1]["error"] and "gone.png does not exist" in recs[2]["error"]
+    assert recs[1]["exit"] == recs[2]["exit"] == 1 and (out / "m0" / "depth.npy").is_file()
+    assert not (out / "gone.png").exists()
+    log = [json.loads(line) for line in (out / fb.LOG_NAME).read_text().splitlines()]
+    assert sorted(r["status"] for r in log) == ["error", "error", "ok"]
+    # the command line: the count says so, exit 1; --resume runs the map once it is there
+    code = main(["batch", "--list", str(tmp_path / "maps.txt"), "-o", str(tmp_path / "p"),
+                 "--workers", "1", "-s", "npy", "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 1 and "batch: 1 of 2 succeeded" in out and "gone.png does not exist" in err
+    maps(tmp_path / "more", n=1)
+    (tmp_path / "more" / "m0.png").rename(tmp_path / "in" / "gone.png")
+    code = main(["batch", "--list", str(tmp_path / "maps.txt"), "-o", str(tmp_path / "p"),
+                 "--workers", "1", "-s", "npy", "--no-progress", "--resume"])
+    out, _ = capsys.readouterr()
+    assert code == 0 and "batch: 2 of 2 succeeded (1 from an earlier run)" in out
+
+
 def test_the_default_workers_without_dask_run_in_this_process(tmp_path, monkeypatch):
     """Without the batch extra the default is one worker (it was the CPU count, which then
     failed for want of Dask); an explicit workers=2 still names the extra."""

@@ -46,6 +46,9 @@ class Item:
     path: str
     name: str
     mask: str | None = None
+    #: Why the input cannot run (it does not exist, a pattern matches nothing): the batch
+    #: records it as a failed item and runs the others.
+    error: str | None = None
 
 
 #: A list file's comment: from a ``#`` at the start of a line or after white space.
@@ -64,10 +67,14 @@ def items(inputs, *, list_file=None) -> list[Item]:
     ``a_npy``), and what still collides gets ``-2``, ``-3`` ... Paths are made absolute but
     not resolved: two links to one file are two items.
 
+    An input that does not exist, or a pattern that matches nothing, is an item with its
+    ``error`` set (a batch records it as failed and runs the others: one stale line of a long
+    list must not stop the rest), after the others.
+
     Raises
     ------
     ValueError
-        An input that does not exist or a pattern that matches nothing; no item at all.
+        No normal map found at all (every input missing, or none holds a map).
     """
     from .io.images import MASK_FORMATS, NORMAL_READ_FORMATS
 
@@ -84,16 +91,18 @@ def items(inputs, *, list_file=None) -> list[Item]:
             if line:
                 specs.append(line if os.path.isabs(line) else str(base / line))
     paths: list[tuple[Path, bool]] = []  # (path, named explicitly)
+    absent: list[tuple[str, str]] = []  # (the input as given, why it cannot run)
     for spec in specs:
         if _GLOB & set(spec) and not Path(spec).exists():  # (a file named 'a[1].png' is one)
             found = sorted(glob.glob(spec))
             if not found:
-                raise ValueError(f"`inputs`: the pattern {spec!r} matches nothing")
+                absent.append((spec, f"`inputs`: the pattern {spec!r} matches nothing"))
             paths += [(Path(f), False) for f in found]
             continue
         p = Path(spec)
         if not p.exists():
-            raise ValueError(f"`inputs`: {p} does not exist")
+            absent.append((spec, f"`inputs`: {p} does not exist"))
+            continue
         if p.is_dir() and not _is_dataset(p, NORMAL_READ_FORMATS):
             kinds = NORMAL_READ_FORMATS + (".mat",)
             children = sorted(p.iterdir())
@@ -150,7 +159,17 @@ def items(inputs, *, list_file=None) -> list[Item]:
                          if m.suffix.lower() in kinds), None)
         out.append(Item(path=key, name=name, mask=mask))
     if not out:
+        if absent:
+            more = f" (and {len(absent) - 1} more such input(s))" if len(absent) > 1 else ""
+            raise ValueError(absent[0][1] + more)
         raise ValueError(f"`inputs`: no normal map found in {specs}")
+    for spec, why in absent:
+        key = os.path.abspath(spec)
+        if key not in seen:  # (named twice: one record)
+            seen.add(key)
+            # (the log's name; no folder is made: a pattern's is "pattern")
+            name = "pattern" if _GLOB & set(spec) else (Path(spec).name or "input")
+            out.append(Item(path=key, name=_unique(name, taken), error=why))
     return out
 
 
@@ -463,7 +482,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     # (the names items() gave the others are taken too: a renamed one must not land on one)
     taken = kept | {it.name for it in found if it.path not in results and it.name not in kept}
     for it in found:
-        if it.path in results:
+        if it.path in results or it.error is not None:
             continue
         if it.name in kept:
             it = replace(it, name=_unique(it.name, taken))
@@ -489,6 +508,10 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             if on_record is not None:
                 on_record(rec)
 
+        for it in found:  # (missing inputs: failed records, nothing to run)
+            if it.error is not None and it.path not in results:
+                done(it, {"status": "error", "error": it.error, "exit": 1, "seconds": 0.0,
+                          "warnings": [], "mean_deviation": None, "outputs": {}})
         existed = {j.outdir for _, j in jobs if Path(j.outdir).exists()}
         try:
             # (SIGTERM as an exception, like Ctrl-C: the workers are stopped, not orphaned)
