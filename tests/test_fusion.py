@@ -1009,6 +1009,87 @@ def test_points_files_with_a_column_named_twice_or_nan_depths_say_so(tmp_path):
     assert np.isfinite(img).sum() == 1 and img[2, 1] == 3.0
 
 
+@pytest.mark.parametrize("discontinuities", [False, True])
+def test_points_with_their_own_weights(discontinuities):
+    """SfM points come with a confidence (reprojection error, track length): a fourth array
+    of per-point weights gives what the same samples give with those weights as a
+    prior_weight map; a point of weight 0 is no sample; points in one pixel are averaged
+    by weight."""
+    from facetlift.problem import prior_samples
+
+    n, depth = wave()
+    prior, sel = sparse(depth, 0.05)
+    r, c = np.nonzero(sel)
+    w = np.random.default_rng(1).uniform(0.2, 5.0, r.size)
+    wmap = np.ones(depth.shape)
+    wmap[r, c] = w
+    kw = dict(discontinuities=discontinuities)
+    a = run(n, prior=(r, c, prior[r, c], w), prior_weight=3.0, **kw)
+    b = run(n, prior=prior, prior_weight=3.0 * wmap, **kw)
+    np.testing.assert_allclose(a.depth, b.depth, rtol=0, atol=1e-9)
+    plain = run(n, prior=(r, c, prior[r, c]), prior_weight=3.0, **kw)
+    assert np.abs(a.depth - plain.depth).max() > 1e-6  # (the weights did something)
+    # a far-off point of weight 0 is no sample
+    far = (np.r_[r, 5], np.r_[c, 5], np.r_[prior[r, c], 50.0], np.r_[w, 0.0])
+    np.testing.assert_allclose(run(n, prior=far, prior_weight=3.0, **kw).depth, a.depth,
+                               rtol=0, atol=1e-9)
+    img, wimg = prior_samples(([2, 2, 4], [3, 3, 1], [100.0, 101.5, 2.0], [1.0, 2.0, 0.5]),
+                              (8, 8), positive=True)
+    assert img[2, 3] == 101.0 and wimg[2, 3] == 1.5 and img[4, 1] == 2.0 and wimg[4, 1] == 0.5
+    assert np.isfinite(img).sum() == 2 and prior_samples(prior, depth.shape)[1] is None
+
+
+@pytest.mark.parametrize("weights, match", [
+    ([1.0, -1.0], r"`prior\[3\]` \(the points' weights\) must be finite and >= 0; got -1.0 "
+                  r"for the point at \(row 3, col 4\)"),
+    ([1.0, np.nan], r"`prior\[3\]`.* got nan"),
+    ([0.0, 0.0], r"every point's weight is 0"),
+    ([1.0], r"needs four arrays of one length; got lengths 2, 2, 2, 1"),
+])
+def test_points_weights_errors(weights, match):
+    n, _ = wave()
+    with pytest.raises(ValueError, match=match):
+        run(n, prior=([1, 3], [2, 4], [1.0, 1.0], weights))
+
+
+def test_points_files_with_a_weight_column(tmp_path, capsys):
+    """A weight (or confidence) column of a points file weighs its points, given with --prior
+    or as a dataset folder's prior_depth.csv; info reads it; a bad weight names its line."""
+    n, depth, prior, sel = _write_inputs(tmp_path)
+    r, c = np.nonzero(sel)
+    w = np.linspace(0.5, 4.0, r.size)
+    wmap = np.ones(depth.shape)
+    wmap[r, c] = w
+    np.save(tmp_path / "wmap.npy", wmap)
+    (tmp_path / "pts.csv").write_text("u,v,depth,confidence\n" + "".join(
+        f"{b},{a},{float(prior[a, b])!r},{float(x)!r}\n" for a, b, x in zip(r, c, w, strict=True)))
+    pts = facetlift.io.read_prior(tmp_path / "pts.csv")
+    assert len(pts) == 4 and np.array_equal(pts[3], w)
+    for name, extra in (("map", ["--prior", str(tmp_path / "prior.npy"), "--prior-weight-map",
+                                 str(tmp_path / "wmap.npy")]),
+                        ("points", ["--prior", str(tmp_path / "pts.csv")])):
+        code = main(["integrate", str(tmp_path / "n.npy"), *extra, "--prior-weight", "2",
+                     "-s", "npy", "-o", str(tmp_path / name)])
+        assert code == 0, capsys.readouterr().err
+    expected = np.load(tmp_path / "map" / "depth.npy")
+    np.testing.assert_allclose(np.load(tmp_path / "points" / "depth.npy"), expected, atol=1e-9)
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", n)
+    (folder / "prior_depth.csv").write_text((tmp_path / "pts.csv").read_text())
+    assert len(facetlift.io.read_dataset(folder)["prior"]) == 4
+    assert main(["integrate", str(folder), "--prior-weight", "2", "-s", "npy",
+                 "-o", str(tmp_path / "ds_out")]) == 0, capsys.readouterr().err
+    np.testing.assert_allclose(np.load(tmp_path / "ds_out" / "depth.npy"), expected, atol=1e-9)
+    assert main(["info", str(folder)]) == 0 and "depth prior" in capsys.readouterr().out
+    (tmp_path / "bad.csv").write_text("row col depth weight\n1 2 3 1\n2 3 4 -2\n")
+    code = main(["integrate", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "bad.csv"),
+                 "-o", str(tmp_path / "bad")])
+    err = capsys.readouterr().err
+    assert code == 1 and "weight column must hold finite numbers >= 0; got -2.0 on data " \
+        "line 2" in err, err
+
+
 def test_a_pixel_whose_points_disagree_is_left_out():
     """A LiDAR cloud seen past an object's edge puts points of the wall behind into the
     object's pixels, and an SfM point duplicated across views may be mismatched in one: the

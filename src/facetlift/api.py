@@ -90,11 +90,13 @@ def integrate(
         Refuse the job (MemoryLimitError) if its estimated peak memory exceeds this many bytes
         (or a size such as ``"8G"``). Default: the available physical memory minus a margin,
         and the process's address-space limit (:mod:`facetlift.memory`).
-    prior : (H, W) array_like of float or (rows, cols, depths), optional
+    prior : (H, W) array_like of float or (rows, cols, depths[, weights]), optional
         Depth known besides the normals, in the output's depth convention (orthographic:
         depth along the viewing axis in world units; perspective: metric z-depth > 0), NaN
         where unknown: a dense map, a sparse one or a few points; or three arrays of pixel
-        rows, columns (rounded to the nearest pixel) and depths. Every connected component
+        rows, columns (rounded to the nearest pixel) and depths, and optionally a fourth of
+        per-point weights >= 0 that multiply `prior_weight` (points in one pixel: their
+        weighted mean depth, their mean weight). Every connected component
         with a sample gets its constant (and, for a perspective camera, its scale) from the
         prior: depth is then absolute (metric for a pinhole camera); components without a
         sample keep the usual convention, and ``info["prior"]["gauged_components"]`` names
@@ -260,15 +262,19 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
     first, the prior aligned to that surface (:func:`facetlift.prior_fit.fit`), then the
     fusion with the aligned prior."""
     from . import prior_fit as pf
-    from .problem import _weight_image, prior_blur_value, prior_image
+    from .problem import _weight_image, prior_blur_value, prior_samples
 
     t0 = time.perf_counter()
     shape = np.shape(normals)[:2]
     if len(shape) != 2:  # (integrate's own check names the problem)
         return integrate(normals, mask, prior=prior, prior_weight=prior_weight,
                          prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
-    raw = prior_image(prior, shape)  # (raw values: any sign before the alignment)
+    raw, own = prior_samples(prior, shape)  # (raw values: any sign before the alignment)
     weight = _weight_image(prior_weight, "prior_weight", shape)
+    if own is not None:  # (points with their own weights: those times prior_weight, as
+        # the fused run below is given them, the aligned prior being a map)
+        weight = np.where(np.isfinite(own), weight * own, weight)
+        prior_weight = weight
     failed = None
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")

@@ -730,8 +730,10 @@ def check_confidence(confidence, shape: tuple[int, int], mask=None) -> np.ndarra
 
 
 def _is_points(prior) -> bool:
-    """Whether `prior` is a ``(rows, cols, depths)`` triple, not an (H, W) map."""
-    return isinstance(prior, (tuple, list)) and len(prior) == 3 and not np.isscalar(prior[0])
+    """Whether `prior` is a ``(rows, cols, depths)`` triple (or ``(rows, cols, depths,
+    weights)``), not an (H, W) map."""
+    return (isinstance(prior, (tuple, list)) and len(prior) in (3, 4)
+            and not np.isscalar(prior[0]))
 
 
 #: A points prior of at least CROWDED_MIN samples falling into fewer pixels than
@@ -771,14 +773,43 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
     counted in a warning: which of them is right is unknown). With
     `positive` (a perspective camera) a triple's points with a depth <= 0 (behind the camera)
     are left out before the averaging, with a warning, unless every one is (then the caller
-    refuses them). Raises ValueError naming `prior`."""
+    refuses them). Raises ValueError naming `prior`. A fourth array of per-point weights
+    (:func:`prior_samples`) weighs the average."""
+    return prior_samples(prior, shape, positive)[0]
+
+
+def prior_samples(prior, shape: tuple[int, int],
+                  positive: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`prior_image` and, for ``(rows, cols, depths, weights)``, the (H, W) weights of
+    its pixels (None otherwise): a pixel's depth is its points' weighted mean and its weight
+    their mean weight (points of weight 1 give what the triple gives), NaN where no point
+    is. The weights must be finite and >= 0 (a ValueError names ``prior[3]``); a pixel whose
+    points all weigh 0 holds no sample. They multiply ``prior_weight`` (SfM points by their
+    reprojection error or track length, a LiDAR's by its return strength)."""
     H, W = shape
     if _is_points(prior):
-        rows, cols, depths = (numeric_array(v, f"prior[{k}]").astype(float).ravel()
-                              for k, v in enumerate(prior))
-        if not rows.size == cols.size == depths.size:
-            raise ValueError(f"`prior` as (rows, cols, depths) needs three arrays of one length; "
-                             f"got lengths {rows.size}, {cols.size}, {depths.size}")
+        arrays = [numeric_array(v, f"prior[{k}]").astype(float).ravel()
+                  for k, v in enumerate(prior)]
+        rows, cols, depths = arrays[:3]
+        pw = arrays[3] if len(arrays) == 4 else None
+        if not rows.size == cols.size == depths.size == (rows.size if pw is None else pw.size):
+            raise ValueError(
+                "`prior` as (rows, cols, depths" + ("" if pw is None else ", weights")
+                + f") needs {'three' if pw is None else 'four'} arrays of one length; got "
+                "lengths "
+                + ", ".join(str(a.size) for a in arrays))
+        if pw is not None:
+            bad = ~(np.isfinite(pw) & (pw >= 0))
+            if bad.any():
+                k = int(np.flatnonzero(bad)[0])
+                raise ValueError(f"`prior[3]` (the points' weights) must be finite and >= 0; "
+                                 f"got {float(pw[k])!r} for the point at (row {rows[k]:g}, col "
+                                 f"{cols[k]:g}) ({int(bad.sum())} such point(s))")
+            zero = pw == 0  # (no sample: as if it were not given)
+            if zero.all():
+                raise ValueError("`prior[3]`: every point's weight is 0 (no sample)")
+            if zero.any():
+                rows, cols, depths, pw = rows[~zero], cols[~zero], depths[~zero], pw[~zero]
         if not (np.isfinite(rows).all() and np.isfinite(cols).all()):
             raise ValueError("`prior` (rows, cols, depths): rows and cols must be finite")
         r = np.rint(rows).astype(np.int64)
@@ -798,6 +829,7 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
                     "projected with K')" if out.mean() > 0.5 else "")
             warn(f"`prior` (rows, cols, depths): {where}; they were left out{hint}")
             r, c, depths = r[~out], c[~out], depths[~out]
+            pw = None if pw is None else pw[~out]
         keep = np.isfinite(depths)
         if not keep.all() and keep.any():  # (counted, not silently: a user's 53 lines, 50 used)
             k = int(np.flatnonzero(~keep)[0])
@@ -815,6 +847,7 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
             keep &= ~behind
         idx = r[keep] * W + c[keep]
         d = depths[keep]
+        pw = None if pw is None else pw[keep]
         pixels = int(np.unique(idx).size)
         rk, ck = r[keep], c[keep]
         box = ((int(np.ptp(rk)) + 1) * (int(np.ptp(ck)) + 1)) if rk.size else 0
@@ -845,10 +878,14 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
                  "is right being unknown (a mismatched point beside a good one, or a sensor's "
                  "points seen past an edge; docs/fusion.md, 'Outlier samples')")
         count = np.bincount(idx[agree], minlength=H * W)
-        total = np.bincount(idx[agree], d[agree], minlength=H * W)
+        wk = np.ones(int(agree.sum())) if pw is None else pw[agree]
+        mass = np.bincount(idx[agree], wk, minlength=H * W)
+        total = np.bincount(idx[agree], wk * d[agree], minlength=H * W)
         with np.errstate(invalid="ignore", divide="ignore"):
-            img = np.where(count > 0, total / np.maximum(count, 1), np.nan)
-        return img.reshape(H, W)
+            img = np.where(count > 0, total / np.where(count > 0, mass, 1.0), np.nan)
+            wimg = None if pw is None else np.where(count > 0, mass / np.maximum(count, 1),
+                                                    np.nan).reshape(H, W)
+        return img.reshape(H, W), wimg
     arr = numeric_array(prior, "prior", "an (H, W) depth map or a (rows, cols, depths) triple")
     if arr.dtype == bool:
         raise ValueError("`prior` is a boolean array (a mask?); give depths, NaN where unknown")
@@ -859,7 +896,7 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
     arr = arr.astype(float)
     if np.isinf(arr).any():
         raise ValueError("`prior` must not contain inf (use NaN where the depth is unknown)")
-    return arr
+    return arr, None
 
 
 #: The largest prior weight: at 1e8 the result already meets the prior where given to
@@ -883,8 +920,10 @@ def check_prior(prior, prior_weight, shape, mask, camera):
         depth for a perspective camera; a weight that is negative, not finite or of another
         shape (the message names the argument, the value and what was expected).
     """
-    img = prior_image(prior, shape, positive=camera.positive_depth)
+    img, own = prior_samples(prior, shape, positive=camera.positive_depth)
     weight = _weight_image(prior_weight, "prior_weight", shape)
+    if own is not None:  # (the points' own weights: times prior_weight)
+        weight = np.where(np.isfinite(own), weight * own, weight)
     depth = img[mask]
     w = weight[mask]
     have = np.isfinite(depth)

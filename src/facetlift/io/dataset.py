@@ -91,10 +91,11 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     Without ``K.txt`` the view is orthographic. Pixels outside the mask may hold anything.
     `frame` and `y_down` are those of :func:`~facetlift.io.read_normals`. A depth prior
     ``prior_depth.*`` and a normal confidence ``confidence.*`` (``.npy``, ``.exr``, ``.tif``,
-    ``.png``; the prior also as a points file, ``.csv`` or ``.txt``, returned as a map;
-    docs/fusion.md) are picked up like ``K.txt``; `prior_scale` is that of
-    :func:`~facetlift.io.read_prior` (required for a 16-bit PNG prior); `with_prior` and
-    `with_confidence` False leave those files unread (``None``).
+    ``.png``; the prior also as a points file, ``.csv`` or ``.txt``, returned as a map, or
+    as its points with their weights where it has a weight column; docs/fusion.md) are
+    picked up like ``K.txt``; `prior_scale` is that of :func:`~facetlift.io.read_prior`
+    (required for a 16-bit PNG prior); `with_prior` and `with_confidence` False leave those
+    files unread (``None``).
 
     Returns
     -------
@@ -152,13 +153,15 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
         skip = f"or leave the folder's {name} unread with --no-{name} (with_{name}=False in Python)"
         try:
             extra[name] = reader(path)
-            if isinstance(extra[name], tuple):  # (a points file: as a map of this size)
-                # (with the folder's K, points behind the camera are left out here, as
-                # integrate leaves them out of a points file given with --prior)
+            if isinstance(extra[name], tuple) and len(extra[name]) == 3:
+                # (a points file: as a map of this size; with the folder's K, points behind
+                # the camera are left out here, as integrate leaves them out of a points file
+                # given with --prior. With a weight column they stay points, whose weights
+                # integrate applies)
                 extra[name] = prior_image(extra[name], (H, W), positive=K is not None)
         except ValueError as e:
             raise ValueError(f"{e}; {skip}") from None
-        if extra[name].shape != (H, W):
+        if not isinstance(extra[name], tuple) and extra[name].shape != (H, W):
             raise ValueError(f"`{name}`: {path} is {extra[name].shape[0]}x"
                              f"{extra[name].shape[1]} (HxW) but the normal map is {H}x{W}; {skip}")
     return {"normals": normals, "mask": mask, "K": K, **extra}

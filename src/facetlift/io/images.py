@@ -515,7 +515,8 @@ PRIOR_POINT_FORMATS = (".csv", ".txt")
 #: is a column (to the right), ``y``/``v`` a row (down, from the top): OpenCV's image axes.
 _POINT_COLUMNS = {"row": "row", "r": "row", "y": "row", "v": "row",
                   "col": "col", "column": "col", "c": "col", "x": "col", "u": "col",
-                  "depth": "depth", "z": "depth", "d": "depth"}
+                  "depth": "depth", "z": "depth", "d": "depth",
+                  "weight": "weight", "confidence": "weight"}
 
 
 def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
@@ -532,7 +533,9 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
     with K) holds one sample per line, numbers separated by commas, semicolons or white
     space, under a header line that names the columns in any order: ``row``/``y``/``v``,
     ``col``/``x``/``u`` (pixel positions from the top left, OpenCV's image axes; fractional
-    ones go to the nearest pixel, samples in one pixel are averaged) and ``depth``/``z``;
+    ones go to the nearest pixel, samples in one pixel are averaged) and ``depth``/``z``, and
+    optionally ``weight``/``confidence``: each point's weight (>= 0, times ``prior_weight``;
+    the points are then returned with a fourth array, :func:`facetlift.problem.prior_samples`);
     other named columns are ignored, names may be quoted, ``#`` starts a comment. The header
     is required: ``row col depth`` and ``u v depth`` files look alike, and one read as the
     other transposes every sample.
@@ -548,8 +551,8 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
     if scale is not None and not (np.isfinite(scale) and scale > 0):
         raise ValueError(f"`prior_scale` must be a positive number; got {scale!r}")
     if p.suffix.lower() in PRIOR_POINT_FORMATS:
-        rows, cols, depths = _read_points(p, arg)
-        return rows, cols, depths if scale is None else depths * float(scale)
+        rows, cols, depths, *weights = _read_points(p, arg)
+        return (rows, cols, depths if scale is None else depths * float(scale), *weights)
     maps = PRIOR_FORMATS + (".npz",)  # (an earlier result's archive: its depth)
     ext = _suffix(p, maps + PRIOR_POINT_FORMATS, "depth prior", arg)
     if ext == ".png":
@@ -600,7 +603,7 @@ def _read_points(p: Path, arg: str):
         raise ValueError(f"`{arg}`: {p} holds no sample")
     header = [w.strip("\"'").lower() for w in lines[0].split()]
     names = [_POINT_COLUMNS.get(w) for w in header]
-    twice = [n for n in ("row", "col", "depth") if names.count(n) > 1]
+    twice = [n for n in ("row", "col", "depth", "weight") if names.count(n) > 1]
     if twice and not all(_numeric(w) for w in header):
         # (a LiDAR user's 'u,v,depth,x,y,z' and 'u,v,z,r' (r: reflectivity) were told that
         # the header was missing)
@@ -609,9 +612,9 @@ def _read_points(p: Path, arg: str):
             f"{'both' if names.count(n) == 2 else 'all'} name the {n}" for n in twice)
         raise ValueError(
             f"`{arg}`: {p}: the header names a column twice ({said}): keep one name per "
-            "column (row/y/v/r, col/x/u/c, depth/z/d are taken; rename other columns, e.g. "
-            "'reflectivity', which is then ignored)")
-    if all(_numeric(w) for w in header) or sorted(n for n in names if n) != [
+            "column (row/y/v/r, col/x/u/c, depth/z/d, weight/confidence are taken; rename "
+            "other columns, e.g. 'reflectivity', which is then ignored)")
+    if all(_numeric(w) for w in header) or sorted(n for n in names if n and n != "weight") != [
             "col", "depth", "row"]:
         raise ValueError(
             f"`{arg}`: {p}: the first line must be a header naming the columns: row (or y, v), "
@@ -629,7 +632,15 @@ def _read_points(p: Path, arg: str):
         raise ValueError(f"`{arg}`: {p}: lines of {a.shape[1]} numbers under a header of "
                          f"{len(header)} columns")
     col = {n: a[:, k] for k, n in enumerate(names) if n}
-    return col["row"], col["col"], col["depth"]
+    if "weight" not in col:
+        return col["row"], col["col"], col["depth"]
+    w = col["weight"]
+    bad = ~(np.isfinite(w) & (w >= 0))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"`{arg}`: {p}: the weight column must hold finite numbers >= 0; got "
+                         f"{float(w[k])!r} on data line {k + 1} ({int(bad.sum())} such line(s))")
+    return col["row"], col["col"], col["depth"], w
 
 
 def _numeric(word: str) -> bool:
