@@ -1052,6 +1052,33 @@ def test_points_weights_errors(weights, match):
         run(n, prior=([1, 3], [2, 4], [1.0, 1.0], weights))
 
 
+def test_a_few_points_as_a_list_of_rows_are_refused_not_read_as_columns():
+    """Three (row, col, depth) points in a list were read as the columns (rows, cols,
+    depths): the depths became pixel positions (a median depth of 273 instead of 1500 and
+    no word, a user's check); four of them were refused, and with a weights column they
+    would now be read as columns too."""
+    n, _ = wave()
+    for pts in ([(5, 6, 1.5), (6, 7, 1.5), (7, 6, 1.5)],
+                [(5, 6, 1.5), (6, 7, 1.5), (7, 6, 1.5), (8, 8, 1.5)]):
+        with pytest.raises(ValueError, match=r"could be columns \(rows, cols, depths\[, "
+                           r"weights\]\) or points.*tuple\(np.asarray\(points, float\).T\)"):
+            run(n, prior=pts)
+        s = run(n, prior=tuple(np.asarray(pts, float).T))
+        assert s.info["prior"]["samples"] == len(pts)
+    with pytest.raises(ValueError, match=r"got shape \(5, 3\); a list of \(row, col, depth\) "
+                       "points"):
+        run(n, prior=[(5, 6, 1.5)] * 5)
+
+
+def test_prior_weight_map_errors_name_the_flag(tmp_path, capsys):
+    n, depth, prior, sel = _write_inputs(tmp_path)
+    np.save(tmp_path / "wneg.npy", np.full(depth.shape, -1.0))
+    code = main(["integrate", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "prior.npy"),
+                 "--prior-weight-map", str(tmp_path / "wneg.npy"), "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 1 and "--prior-weight-map must be finite, >= 0" in err, err
+
+
 def test_points_files_with_a_weight_column(tmp_path, capsys):
     """A weight (or confidence) column of a points file weighs its points, given with --prior
     or as a dataset folder's prior_depth.csv; info reads it; a bad weight names its line."""

@@ -313,6 +313,28 @@ def test_a_principal_point_outside_the_image_is_warned_about():
         facetlift.integrate(n, K=[200.0, 200.0, 29.5, 19.5])
 
 
+def test_a_k_with_swapped_axes_is_warned_about_with_its_conversion():
+    """BiNI's K.txt files before its commit 0684184 swap the axes and count rows from the
+    bottom; upper-triangular all the same, they passed the layout check (a user's DiLiGenT
+    object: 0.347 mm MADE instead of 0.025, no word). The warning gives the converted K,
+    which is the bear's K.txt for the bear's old file."""
+    n = np.zeros((512, 612, 3))
+    n[..., 2] = 1.0
+    mask = np.zeros((512, 612), bool)
+    mask[200:210, 300:310] = True
+    old = [[3759.005431071329895, 0, 255.875], [0, 3772.077471010729823, 305.875], [0, 0, 1]]
+    with pytest.warns(UserWarning, match=r"principal point \(cx 255.875, cy 305.875\) lies "
+                      r"where this 612 x 512 image's centre \(cx 305.5, cy 255.5\) would with "
+                      r"x and y swapped.*fx 3772.08, fy 3759.01, cx 305.875, cy 255.125"):
+        facetlift.integrate(n, mask, K=old)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        facetlift.integrate(n, mask, K=[3772.08, 3759.01, 305.875, 255.125])
+        square = np.zeros((100, 104, 3))
+        square[..., 2] = 1.0  # (nearly square: the two centres agree, no verdict)
+        facetlift.integrate(square, K=[300.0, 300.0, 49.5, 51.5])
+
+
 def test_info_keeps_the_principal_point_warning_of_a_map_it_cannot_integrate(tmp_path, capsys):
     """A review: `info` dropped the warnings that came before the refusal, and a K for another
     image is what makes a map unusable."""

@@ -817,6 +817,12 @@ def _as_flags(message: str) -> str:
                 typed = [o for o in param.opts for a in args if a == o or a.startswith(o + "=")]
                 if typed:
                     names[param.name] = typed[0]
+    # (a --prior-weight-map's values are checked as integrate's `prior_weight`, and
+    # `mat_keys` comes from no file: both were named as Python arguments, a user's check)
+    if "prior_weight" not in names and any(a == "--prior-weight-map" or a.startswith(
+            "--prior-weight-map=") for a in args):
+        names["prior_weight"] = "--prior-weight-map"
+    names.setdefault("mat_keys", "--mat-keys")
     # (a method option given as --option KEY=VALUE: named so, `k` alone was a name the user
     # had not typed, a user's check)
     given = [b for a, b in zip(args, args[1:], strict=False) if a == "--option"] + [

@@ -410,8 +410,8 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
             # consistent: as read 43.9 % RMS, with --y-down 1.7 %)
             guess["likely"] = ("as read, or y flipped: the check cannot tell (about as "
                                "integrable either way: slopes near the quantisation step, "
-                               "noise, or planes meeting at creases and jumps); if the map "
-                               "is y-down (DirectX), name it: "
+                               "noise, or planes meeting at creases and jumps); if the map's "
+                               "y runs the other way, name that frame: "
                                f"{frames.flag(frames.negated(frame, 'y'))}")
         else:
             guess["likely"] = "as read (consistent)"

@@ -626,6 +626,7 @@ def _check_principal_point(cam, H: int, W: int) -> None:
     tol = 1e-9
     if (min(cx + 0.5, W - 0.5 - cx) >= PRINCIPAL_EDGE * W - tol
             and min(cy + 0.5, H - 0.5 - cy) >= PRINCIPAL_EDGE * H - tol):
+        _check_swapped_axes(Kc, H, W)
         return
     inside = -0.5 <= cx <= W - 0.5 and -0.5 <= cy <= H - 0.5
     where = "lies at the edge of" if inside else "lies outside"
@@ -633,6 +634,30 @@ def _check_principal_point(cam, H: int, W: int) -> None:
          "(columns 0..W-1, rows 0..H-1): is K for another image? After a crop, subtract the "
          "crop's first column and row from cx and cy; after a resize, scale fx, fy, cx and cy "
          "with the image (docs/conventions.md, 'A K for another image')")
+
+
+#: A principal point within this share of the image's size of the centre with x and y
+#: swapped, and farther than it from the true centre, gets a warning
+#: (:func:`_check_swapped_axes`).
+SWAPPED_CENTRE = 0.05
+
+
+def _check_swapped_axes(K, H: int, W: int) -> None:
+    """A warning where K's principal point sits at the centre of the image with its axes
+    swapped, ``(cx, cy) ~ ((H - 1) / 2, (W - 1) / 2)``, far from the true centre: the layout
+    of BiNI's K.txt files before its commit 0684184 (a user's DiLiGenT object: 0.347 mm MADE
+    instead of 0.025, and no word). Not on nearly square images, where both centres agree."""
+    cx, cy = float(K[0, 2]), float(K[1, 2])
+    cx0, cy0 = (W - 1) / 2, (H - 1) / 2
+    near = abs(cx - cy0) <= SWAPPED_CENTRE * W and abs(cy - cx0) <= SWAPPED_CENTRE * H
+    off = abs(cx - cx0) > SWAPPED_CENTRE * W or abs(cy - cy0) > SWAPPED_CENTRE * H
+    if near and off:
+        fx, fy = float(K[0, 0]), float(K[1, 1])
+        warn(f"`K`: the principal point (cx {cx:g}, cy {cy:g}) lies where this {W} x {H} "
+             f"image's centre (cx {cx0:g}, cy {cy0:g}) would with x and y swapped: is K in "
+             "another layout? BiNI's K.txt files before its commit 0684184 swap the axes and "
+             f"count rows from the bottom: the K for facetlift (OpenCV) is then fx {fy:g}, fy "
+             f"{fx:g}, cx {cy:g}, cy {H - 1 - cx:g} (docs/conventions.md)")
 
 
 def _warn_unfixed(problem: Problem) -> None:
@@ -788,6 +813,16 @@ def prior_samples(prior, shape: tuple[int, int],
     reprojection error or track length, a LiDAR's by its return strength)."""
     H, W = shape
     if _is_points(prior):
+        if all(isinstance(v, tuple) and len(v) == len(prior[0]) in (3, 4) for v in prior):
+            # (three points as a list of (row, col, depth) tuples were read as columns: the
+            # depths became pixel positions, 273 instead of 1500 and no word, a user's check;
+            # columns come as arrays or lists)
+            raise ValueError(
+                f"`prior`: {len(prior)} sequences of {len(prior[0])} numbers could be columns "
+                "(rows, cols, depths[, weights]) or points (row, col, depth) each: give the "
+                "columns as numpy arrays, prior=(np.asarray(rows), np.asarray(cols), "
+                "np.asarray(depths)), or a list of points as tuple(np.asarray(points, "
+                "float).T)")
         arrays = [numeric_array(v, f"prior[{k}]").astype(float).ravel()
                   for k, v in enumerate(prior)]
         rows, cols, depths = arrays[:3]
@@ -890,9 +925,12 @@ def prior_samples(prior, shape: tuple[int, int],
     if arr.dtype == bool:
         raise ValueError("`prior` is a boolean array (a mask?); give depths, NaN where unknown")
     if arr.shape != shape:
+        hint = ("; a list of (row, col, depth) points? Give it as columns, "
+                "tuple(np.asarray(points, float).T)" if arr.ndim == 2 and arr.shape[1] in (3, 4)
+                else "")
         raise ValueError(f"`prior` must be an (H, W) depth map of shape {shape} to match "
                          f"`normals` (NaN where unknown) or a (rows, cols, depths) triple; got "
-                         f"shape {arr.shape}")
+                         f"shape {arr.shape}{hint}")
     arr = arr.astype(float)
     if np.isinf(arr).any():
         raise ValueError("`prior` must not contain inf (use NaN where the depth is unknown)")
