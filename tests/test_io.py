@@ -173,6 +173,33 @@ def test_rgb_and_rgba_masks(tmp_path):
     np.testing.assert_array_equal(io.read_mask(tmp_path / "colour.png"), [[0, 0], [0, 1]])
 
 
+def test_an_antialiased_mask_is_warned_about(tmp_path):
+    """A mask with blurred edges: every non-zero pixel is inside, a halo past the object
+    that a user's bear mask grew by 2,549 pixels without a word; 0/1 and 0/255 masks, and
+    a few in-between pixels, are no matter."""
+    import warnings
+
+    import imagecodecs
+    from scipy import ndimage
+
+    hard = np.zeros((40, 50), np.uint8)
+    hard[10:30, 12:40] = 255
+    soft = np.clip(ndimage.gaussian_filter(hard.astype(float), 1.5), 0, 255).astype(np.uint8)
+    (tmp_path / "soft.png").write_bytes(imagecodecs.png_encode(soft))
+    with pytest.warns(UserWarning, match=r"soft.png: \d+ of its \d+ inside pixels hold values "
+                      r"between 0 and its largest, 255 \(an antialiased or blurred edge\?\)"):
+        m = io.read_mask(tmp_path / "soft.png")
+    assert m.sum() > (hard > 0).sum()
+    few = hard.copy()
+    few[10, 12] = 128
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for name, a in (("ones.png", (hard > 0).astype(np.uint8)), ("hard.png", hard),
+                        ("few.png", few)):
+            (tmp_path / name).write_bytes(imagecodecs.png_encode(a))
+            np.testing.assert_array_equal(io.read_mask(tmp_path / name), hard > 0)
+
+
 def test_mask_shape_mismatch(tmp_path):
     io.write_mask(tmp_path / "m.png", np.ones((4, 5)))
     with pytest.raises(ValueError, match=r"`mask`.*size 4x5.*normal map is 6x5"):

@@ -257,8 +257,31 @@ def read_normals(
     return frames.to_facetlift(n, frame), alpha
 
 
+#: A mask whose inside pixels take more than one value, with at least this share of them
+#: below the largest (an antialiased or blurred edge), gets a warning (:func:`read_mask`).
+SOFT_EDGE_SHARE = 0.01
+
+
+def _soft_edge_check(a: np.ndarray, m: np.ndarray, p, arg: str) -> None:
+    """Warn where a grey mask's inside pixels hold in-between values, as an antialiased
+    edge does: all of them count as inside, a halo around the object (a user's bear mask
+    with blurred edges grew by 2,549 pixels, whose normals were then missing and filled)."""
+    grey = a if a.ndim == 2 else (a[..., 0] if a.shape[-1] in (1, 2) else None)
+    if grey is None or not m.any():
+        return
+    vals = grey[m]
+    top = vals.max()
+    soft = int((vals < top).sum())
+    if soft and soft >= SOFT_EDGE_SHARE * vals.size:
+        warn(f"`{arg}`: {p}: {soft} of its {vals.size} inside pixels hold values between 0 "
+             f"and its largest, {top:g} (an antialiased or blurred edge?): every non-zero "
+             "pixel is inside, so the mask reaches past the object's edge; threshold it "
+             f"(e.g. at half of {top:g}) if those pixels hold no normal of the object")
+
+
 def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
-    """Read a mask image: nonzero is inside.
+    """Read a mask image: nonzero is inside (a warning where many inside pixels hold values
+    below the largest: an antialiased edge, :func:`_soft_edge_check`).
 
     Parameters
     ----------
@@ -302,6 +325,7 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
         raise ValueError(f"`{arg}`: {p} is empty (shape {a.shape})")
     if a.dtype.kind == "f" and not np.isfinite(a).all():
         raise ValueError(f"`{arg}`: {p} contains NaN or inf")
+    _soft_edge_check(a, m, p, arg)
     if shape is not None and len(tuple(shape)) == 3:  # (the normal map's own shape, H x W x 3)
         shape = tuple(shape)[:2]
     if shape is not None and m.shape != tuple(shape):
