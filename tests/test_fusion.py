@@ -1052,6 +1052,38 @@ def test_points_weights_errors(weights, match):
         run(n, prior=([1, 3], [2, 4], [1.0, 1.0], weights))
 
 
+def test_prior_and_confidence_from_matlab_files(tmp_path, capsys):
+    """Quéau's toolbox keeps a prior z0 and its weights lambda in .mat files: --prior and
+    --confidence read them (a variable of a known name, or the only (H, W) one), as a dataset
+    folder's prior_depth.mat does; anything else lists the variables."""
+    from scipy import io as sio
+
+    n, depth, prior, sel = _write_inputs(tmp_path)
+    conf = np.ones(depth.shape)
+    conf[2:5, 2:5] = 0.0
+    np.save(tmp_path / "conf.npy", conf)
+    sio.savemat(tmp_path / "z0.mat", {"z0": prior, "lambda": np.full(depth.shape, 7.0)})
+    sio.savemat(tmp_path / "c.mat", {"anything": conf})
+    np.testing.assert_array_equal(facetlift.io.read_prior(tmp_path / "z0.mat"), prior)
+    np.testing.assert_array_equal(facetlift.io.read_weights(tmp_path / "z0.mat", arg="w"),
+                                  np.full(depth.shape, 7.0))
+    for name, extra in (("npy", ["--prior", str(tmp_path / "prior.npy"), "--confidence",
+                                 str(tmp_path / "conf.npy")]),
+                        ("mat", ["--prior", str(tmp_path / "z0.mat"), "--confidence",
+                                 str(tmp_path / "c.mat")])):
+        code = main(["integrate", str(tmp_path / "n.npy"), *extra, "-s", "npy",
+                     "-o", str(tmp_path / name)])
+        assert code == 0, capsys.readouterr().err
+    np.testing.assert_array_equal(np.load(tmp_path / "mat" / "depth.npy"),
+                                  np.load(tmp_path / "npy" / "depth.npy"))
+    sio.savemat(tmp_path / "two.mat", {"a": conf, "b": conf})
+    code = main(["integrate", str(tmp_path / "n.npy"), "--confidence", str(tmp_path / "two.mat"),
+                 "-o", str(tmp_path / "bad")])
+    err = capsys.readouterr().err
+    assert code == 1 and "must hold one (H, W) numeric weight variable, or one named " \
+        "confidence" in err and "got variables ['a', 'b']" in err, err
+
+
 def test_a_few_points_as_a_list_of_rows_are_refused_not_read_as_columns():
     """Three (row, col, depth) points in a list were read as the columns (rows, cols,
     depths): the depths became pixel positions (a median depth of 273 instead of 1500 and

@@ -336,13 +336,17 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
     return m
 
 
-def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = ()) -> np.ndarray:
+def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = (),
+               mat_names: tuple[str, ...] = ()) -> np.ndarray:
     """One (H, W) array as stored: ``.npy``, OpenEXR (its channel named in `prefer`, or its
-    only channel) or TIFF. Shared by :func:`read_depth` and the gradient readers."""
+    only channel), TIFF or a MATLAB ``.mat`` file (its variable named in `mat_names`, or its
+    only (H, W) one). Shared by :func:`read_depth` and the gradient readers."""
     p = _existing(path, arg)
     ext = _suffix(p, formats, what, arg)
     if ext == ".npy":
         a = _read_npy(p, arg)
+    elif ext == ".mat":
+        a = _read_mat_plane(p, arg, mat_names, what)
     elif ext == ".npz":  # (Surface.save's archive: its depth)
         a = _read_npz_depth(p, arg)
     elif ext == ".exr":
@@ -357,6 +361,30 @@ def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = ())
     if a.ndim != 2:
         raise ValueError(f"`{arg}`: {p} must hold an (H, W) {what} map; got shape {a.shape}")
     return a
+
+
+def _read_mat_plane(p: Path, arg: str, names: tuple[str, ...], what: str) -> np.ndarray:
+    """The (H, W) numeric variable of a ``.mat`` file (v4 to v7) named first in `names`, or its
+    only one; a ValueError lists the variables otherwise."""
+    from scipy import io as sio
+
+    try:
+        data = sio.loadmat(p)
+    except NotImplementedError:
+        raise ValueError(f"`{arg}`: {p} is a MATLAB v7.3 (HDF5) file, which scipy cannot read; "
+                         "save it with save(..., '-v7') in MATLAB, or read it with h5py and "
+                         "pass the array") from None
+    except Exception as e:
+        raise ValueError(f"`{arg}`: {p} is not a readable .mat file ({type(e).__name__}: "
+                         f"{e})") from None
+    plane = {k: np.asarray(v) for k, v in data.items() if not k.startswith("__")
+             and np.asarray(v).ndim == 2 and np.asarray(v).dtype.kind in "biuf"}
+    name = next((n for n in names if n in plane), next(iter(plane)) if len(plane) == 1 else None)
+    if name is None:
+        found = sorted(k for k in data if not k.startswith("__"))
+        raise ValueError(f"`{arg}`: {p} must hold one (H, W) numeric {what} variable, or one "
+                         f"named {', '.join(names)}; got variables {found}")
+    return plane[name]
 
 
 def _read_npz_depth(p: Path, arg: str) -> np.ndarray:
@@ -527,8 +555,15 @@ def write_mask(path, mask) -> Path:
 # --------------------------------------------------------------------------------------------
 # fusion inputs: depth priors and weight maps (docs/fusion.md)
 
-#: Formats of a depth prior (16-bit PNG needs a scale) and of weight maps.
-PRIOR_FORMATS = (".npy", ".exr", ".tif", ".tiff", ".png")
+#: Formats of a depth prior (16-bit PNG needs a scale) and of weight maps (a MATLAB file:
+#: the variable of one of the names :func:`read_prior` and :func:`read_weights` look for, or
+#: its only (H, W) one).
+PRIOR_FORMATS = (".npy", ".exr", ".tif", ".tiff", ".png", ".mat")
+
+#: Variable names of a ``.mat`` depth prior (Quéau's toolbox calls it ``z0``) and weight map
+#: (its ``lambda``), in the order looked for.
+MAT_PRIOR_NAMES = ("z0", "prior", "depth", "z", "Z")
+MAT_WEIGHT_NAMES = ("confidence", "weights", "weight", "lambda", "w")
 
 
 #: Text files of depth samples as points, one per line (:func:`read_prior`). (Not ``.xyz``:
@@ -547,11 +582,13 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
     """A depth prior: an (H, W) map, NaN where unknown, or from a points file a ``(rows,
     cols, depths)`` triple (:func:`facetlift.integrate`'s other form of `prior`).
 
-    ``.npy``, OpenEXR (channel Z or the only one), TIFF and a :meth:`facetlift.Surface.save`
-    ``.npz`` (its ``depth``: an earlier result) hold depth as stored (NaN, or 0 in an integer
-    TIFF, where unknown); a 16-bit PNG holds ``depth / scale`` (`scale` in depth
-    units per count, e.g. 0.001 for millimetres stored as metres; 0 = unknown), and `scale`
-    is required for it. A given `scale` multiplies the other formats too.
+    ``.npy``, OpenEXR (channel Z or the only one), TIFF, a MATLAB ``.mat`` file (its variable
+    of :data:`MAT_PRIOR_NAMES`, e.g. Quéau's ``z0``, or its only (H, W) one) and a
+    :meth:`facetlift.Surface.save` ``.npz`` (its ``depth``: an earlier result) hold depth as
+    stored (NaN, or 0 in an integer TIFF, where unknown); a 16-bit PNG holds
+    ``depth / scale`` (`scale` in depth units per count, e.g. 0.001 for millimetres stored as
+    metres; 0 = unknown), and `scale` is required for it. A given `scale` multiplies the
+    other formats too.
 
     A points file (``.csv``, ``.txt``: sparse samples, e.g. SfM or LiDAR points projected
     with K) holds one sample per line, numbers separated by commas, semicolons or white
@@ -589,7 +626,7 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
                              "with --prior-scale (prior_scale= in Python; e.g. 0.001 for "
                              "millimetres in metres)")
         return np.where(a > 0, a * float(scale), np.nan)
-    a = read_plane(p, maps, "depth prior", arg, prefer=("Z",))
+    a = read_plane(p, maps, "depth prior", arg, prefer=("Z",), mat_names=MAT_PRIOR_NAMES)
     zero_unknown = a.dtype.kind in "ui"
     a = a.astype(np.float64)
     if zero_unknown:
@@ -681,7 +718,8 @@ def read_weights(path, *, arg: str) -> np.ndarray:
     255`` or ``value / 65535`` (the same mask gives the same weights in either format; a TIFF
     of 255s was read as 255). A grey image stored as RGB(A), or an EXR with equal R, G, B
     channels, is read as its grey level (an EXR's Y channel where it has one); colour
-    channels that differ are refused (only the first was read)."""
+    channels that differ are refused (only the first was read). A MATLAB ``.mat`` file: its
+    variable of :data:`MAT_WEIGHT_NAMES` (Quéau's ``lambda``), or its only (H, W) one."""
     p = _existing(path, arg)
     ext = _suffix(p, PRIOR_FORMATS, "weight", arg)
     if ext in (".png", ".tif", ".tiff"):
@@ -713,4 +751,5 @@ def read_weights(path, *, arg: str) -> np.ndarray:
                 raise ValueError(f"`{arg}`: {p} has colour channels R, G, B that differ; give "
                                  "a single-channel (grey) image of the weights")
             return rgb[0].astype(np.float64)
-    return read_plane(p, PRIOR_FORMATS, "weight", arg, prefer=("Y",)).astype(np.float64)
+    return read_plane(p, PRIOR_FORMATS, "weight", arg, prefer=("Y",),
+                      mat_names=MAT_WEIGHT_NAMES).astype(np.float64)
