@@ -262,6 +262,24 @@ def test_pieces_are_mask_components_or_the_split_mesh_pieces():
     np.testing.assert_array_equal(prior_fit.pieces(surf), [[0, 0, 1]])
 
 
+
+@pytest.mark.parametrize("kind", ["scale", "affine"])
+def test_a_torn_fused_surface_names_the_fit_among_the_causes(monkeypatch, kind):
+    """A user's exact dense prior with an offset, fitted 'scale' (or 'affine' a few % off),
+    tore the surface and was told it was a noisy dense map: the warning now gives the fit
+    and, for 'scale', names 'affine'. (Any cut counts as torn here, so that a small scene
+    shows the warning.)"""
+    from facetlift.methods import dgp
+
+    monkeypatch.setattr(dgp, "TORN", -1.0)
+    n, depth, mask, _ = steps()
+    prior = np.where(mask, 0.37 * depth + 40.0, np.nan)
+    with pytest.warns(UserWarning, match=rf"tear the surface apart.*With prior_fit='{kind}' "
+                      r"the prior was aligned first \(scale [-\d.]+, shift [-\d.e+]+\)") as got:
+        facetlift.integrate(n, mask, prior=prior, prior_fit=kind, discontinuities=True)
+    torn = [str(w.message) for w in got if "tear the surface apart" in str(w.message)]
+    assert len(torn) == 1 and ("needs prior_fit='affine'" in torn[0]) == (kind == "scale")
+
 @pytest.mark.parametrize("kwargs,match", [
     ({"prior_fit": "bogus"}, "`prior_fit` must be one of"),
     ({"prior_fit": "affine", "prior": None}, "`prior_fit`='affine' needs a `prior`"),

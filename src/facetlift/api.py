@@ -294,8 +294,23 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
         surface = first
         surface.info["prior"] = {"fit": details, "left_out": True}
     else:
-        surface = integrate(normals, mask, prior=aligned, prior_weight=prior_weight,
-                            prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
+        with warnings.catch_warnings(record=True) as fused:
+            warnings.simplefilter("always")
+            surface = integrate(normals, mask, prior=aligned, prior_weight=prior_weight,
+                                prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
+        for w in fused:  # (re-emitted, a torn surface's with what the fit adds to its causes)
+            text = str(w.message)
+            if text.startswith("discontinuities with a depth prior:"):
+                # (a user's exact prior with an offset, fitted 'scale' or an 'affine' 4 % off:
+                # told it was a noisy dense map, a review)
+                text += (f". With prior_fit={kind!r} the prior was aligned first (scale "
+                         f"{details['scale']:.4g}, shift {details['shift']:.4g}): an alignment "
+                         "a few % off tears a sharp dense prior alike, which a lower "
+                         "--prior-weight or --prior-blur also helps"
+                         + ("; a prior with an offset needs prior_fit='affine' (a scale alone "
+                            "cannot align it)" if kind == "scale" else ""))
+                w.message = w.category(text)
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         surface.info.setdefault("prior", {})["fit"] = details
     seconds = surface.info.get("seconds")
     if isinstance(seconds, dict):
