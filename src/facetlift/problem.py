@@ -416,13 +416,20 @@ def prepare(
     counts["usable"] = int(usable.sum())
     counts["outlier_eps"] = float(eps)
     if not usable.any():  # (an error alone: no warning about the same normals first)
+        # (the counts in words, not a dict: a user's check)
+        said = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items()
+                         if k not in ("pixels", "usable") and isinstance(v, int) and v)
+        said = f"{counts['pixels']} pixel(s): {said or 'none usable'}"
+        if "grazing" in counts and counts["grazing"]:
+            said += (f"; grazing: view cosine < {counts['outlier_eps']:.4g}, outlier_eps / "
+                     "--outlier-eps sets another")
         if conf is not None and counts_zero.any():
             raise ValueError(
                 f"`confidence` is 0 or NaN at every usable normal inside the mask "
-                f"({int(counts_zero.sum())} of them): nothing is left to integrate ({counts})")
+                f"({int(counts_zero.sum())} of them): nothing is left to integrate ({said})")
         raise ValueError(
             "`normals` has no usable normal inside the mask (all missing, non-finite, "
-            f"back-facing or grazing: {counts})"
+            f"back-facing or grazing: {said})"
         )
     problems = {k: v for k, v in bad.items() if v.any()}
     if problems:
