@@ -301,7 +301,8 @@ def test_points_behind_the_camera_are_left_out_and_swapped_axes_are_named():
     mask[:, :5] = True
     with pytest.warns(UserWarning, match=r"1 of the 4 sample\(s\) lie on the mask, 4 would "
                       r"with rows and cols swapped"):
-        facetlift.integrate(n, mask, prior=([1, 2, 3, 4], [10, 15, 20, 3], [5.0] * 4))
+        facetlift.integrate(n, mask, prior=(np.array([1, 2, 3, 4]), np.array([10, 15, 20, 3]),
+                                            np.full(4, 5.0)))
     # a cloud over the whole image beside a small object: most points off the mask either
     # way, no warning (a review)
     import warnings
@@ -1029,13 +1030,15 @@ def test_points_with_their_own_weights(discontinuities):
     np.testing.assert_allclose(a.depth, b.depth, rtol=0, atol=1e-9)
     plain = run(n, prior=(r, c, prior[r, c]), prior_weight=3.0, **kw)
     assert np.abs(a.depth - plain.depth).max() > 1e-6  # (the weights did something)
-    # a far-off point of weight 0 is no sample
-    far = (np.r_[r, 5], np.r_[c, 5], np.r_[prior[r, c], 50.0], np.r_[w, 0.0])
+    # a far-off point of weight 0 is no sample (in a sampled pixel: kept, it would make the
+    # pixel's points disagree, which leaves the pixel out)
+    far = (np.r_[r, r[0]], np.r_[c, c[0]], np.r_[prior[r, c], 50.0], np.r_[w, 0.0])
     np.testing.assert_allclose(run(n, prior=far, prior_weight=3.0, **kw).depth, a.depth,
                                rtol=0, atol=1e-9)
-    img, wimg = prior_samples(([2, 2, 4], [3, 3, 1], [100.0, 101.5, 2.0], [1.0, 2.0, 0.5]),
-                              (8, 8), positive=True)
-    assert img[2, 3] == 101.0 and wimg[2, 3] == 1.5 and img[4, 1] == 2.0 and wimg[4, 1] == 0.5
+    img, wimg = prior_samples(tuple(map(np.array, ([2, 2, 4], [3, 3, 1], [100.0, 101.5, 2.0],
+                                                   [1.0, 2.0, 0.5]))), (8, 8), positive=True)
+    assert img[2, 3] == 101.0 and wimg[2, 3] == pytest.approx(5 / 3)  # (sum w^2 / sum w)
+    assert img[4, 1] == 2.0 and wimg[4, 1] == 0.5
     assert np.isfinite(img).sum() == 2 and prior_samples(prior, depth.shape)[1] is None
 
 
@@ -1063,10 +1066,15 @@ def test_prior_and_confidence_from_matlab_files(tmp_path, capsys):
     conf[2:5, 2:5] = 0.0
     np.save(tmp_path / "conf.npy", conf)
     sio.savemat(tmp_path / "z0.mat", {"z0": prior, "lambda": np.full(depth.shape, 7.0)})
-    sio.savemat(tmp_path / "c.mat", {"anything": conf})
+    sio.savemat(tmp_path / "c.mat", {"anything": conf, "scalar": 3.0})
     np.testing.assert_array_equal(facetlift.io.read_prior(tmp_path / "z0.mat"), prior)
-    np.testing.assert_array_equal(facetlift.io.read_weights(tmp_path / "z0.mat", arg="w"),
-                                  np.full(depth.shape, 7.0))
+    # lambda is the prior's weight (Quéau's), no confidence of the normals (a review)
+    np.testing.assert_array_equal(
+        facetlift.io.read_weights(tmp_path / "z0.mat", arg="prior_weight_map"),
+        np.full(depth.shape, 7.0))
+    with pytest.raises(ValueError, match=r"one named confidence, weights, weight, w; got "
+                       r"variables lambda \(24x28\), z0 \(24x28\)"):
+        facetlift.io.read_weights(tmp_path / "z0.mat", arg="confidence")
     for name, extra in (("npy", ["--prior", str(tmp_path / "prior.npy"), "--confidence",
                                  str(tmp_path / "conf.npy")]),
                         ("mat", ["--prior", str(tmp_path / "z0.mat"), "--confidence",
@@ -1080,8 +1088,8 @@ def test_prior_and_confidence_from_matlab_files(tmp_path, capsys):
     code = main(["integrate", str(tmp_path / "n.npy"), "--confidence", str(tmp_path / "two.mat"),
                  "-o", str(tmp_path / "bad")])
     err = capsys.readouterr().err
-    assert code == 1 and "must hold one (H, W) numeric weight variable, or one named " \
-        "confidence" in err and "got variables ['a', 'b']" in err, err
+    assert code == 1 and "must hold one (H, W) numeric weight map, or one named " \
+        "confidence" in err and "got variables a (24x28), b (24x28)" in err, err
 
 
 def test_a_few_points_as_a_list_of_rows_are_refused_not_read_as_columns():
@@ -1091,6 +1099,7 @@ def test_a_few_points_as_a_list_of_rows_are_refused_not_read_as_columns():
     would now be read as columns too."""
     n, _ = wave()
     for pts in ([(5, 6, 1.5), (6, 7, 1.5), (7, 6, 1.5)],
+                [[5, 6, 1.5], [6, 7, 1.5], [7, 6, 1.5], [8, 8, 1.5]],  # (json.load, tolist())
                 [(5, 6, 1.5), (6, 7, 1.5), (7, 6, 1.5), (8, 8, 1.5)]):
         with pytest.raises(ValueError, match=r"could be columns \(rows, cols, depths\[, "
                            r"weights\]\) or points.*tuple\(np.asarray\(points, float\).T\)"):
@@ -1100,15 +1109,23 @@ def test_a_few_points_as_a_list_of_rows_are_refused_not_read_as_columns():
     with pytest.raises(ValueError, match=r"got shape \(5, 3\); a list of \(row, col, depth\) "
                        "points"):
         run(n, prior=[(5, 6, 1.5)] * 5)
+    # a map of three or four rows given as a nested list is a map (a review)
+    small = np.ones((4, 5, 3)) * [0.0, 0.0, 1.0]
+    for rows in (3, 4):
+        s = run(small[:rows], prior=np.full((rows, 5), 2.0).tolist())
+        assert s.info["prior"]["samples"] == rows * 5
 
 
 def test_prior_weight_map_errors_name_the_flag(tmp_path, capsys):
     n, depth, prior, sel = _write_inputs(tmp_path)
     np.save(tmp_path / "wneg.npy", np.full(depth.shape, -1.0))
-    code = main(["integrate", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "prior.npy"),
-                 "--prior-weight-map", str(tmp_path / "wneg.npy"), "-o", str(tmp_path / "o")])
-    err = capsys.readouterr().err
-    assert code == 1 and "--prior-weight-map must be finite, >= 0" in err, err
+    for extra in ([], ["--prior-weight", "5"]):  # (its product was blamed on --prior-weight)
+        code = main(["integrate", str(tmp_path / "n.npy"), "--prior",
+                     str(tmp_path / "prior.npy"), "--prior-weight-map", str(tmp_path / "wneg.npy"),
+                     *extra, "-o", str(tmp_path / "o")])
+        err = capsys.readouterr().err
+        assert code == 1 and "--prior-weight-map: " in err and "must hold weights >= 0" in err \
+            and "got -1.0 at (row 0, col 0)" in err, err
 
 
 def test_points_files_with_a_weight_column(tmp_path, capsys):
@@ -1141,6 +1158,13 @@ def test_points_files_with_a_weight_column(tmp_path, capsys):
                  "-o", str(tmp_path / "ds_out")]) == 0, capsys.readouterr().err
     np.testing.assert_allclose(np.load(tmp_path / "ds_out" / "depth.npy"), expected, atol=1e-9)
     assert main(["info", str(folder)]) == 0 and "depth prior" in capsys.readouterr().out
+    (folder / "prior_depth.csv").write_text("row,col,depth,weight\n999,0,1.0,1\n")
+    assert main(["integrate", str(folder), "-o", str(tmp_path / "far")]) == 1
+    err = capsys.readouterr().err  # (the folder's hint, as for a file without weights)
+    assert "outside the 24 x 28 image" in err and "--no-prior" in err, err
+    (tmp_path / "zero.csv").write_text("row col depth weights\n1 2 3 0\n2 3 4 0\n")
+    with pytest.raises(ValueError, match=r"zero.csv: the weight column is 0 on every line"):
+        facetlift.io.read_prior(tmp_path / "zero.csv")
     (tmp_path / "bad.csv").write_text("row col depth weight\n1 2 3 1\n2 3 4 -2\n")
     code = main(["integrate", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "bad.csv"),
                  "-o", str(tmp_path / "bad")])

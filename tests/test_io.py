@@ -186,16 +186,24 @@ def test_an_antialiased_mask_is_warned_about(tmp_path):
     hard[10:30, 12:40] = 255
     soft = np.clip(ndimage.gaussian_filter(hard.astype(float), 1.5), 0, 255).astype(np.uint8)
     (tmp_path / "soft.png").write_bytes(imagecodecs.png_encode(soft))
-    with pytest.warns(UserWarning, match=r"soft.png: \d+ of its \d+ inside pixels hold values "
-                      r"between 0 and its largest, 255 \(an antialiased or blurred edge\?\)"):
+    with pytest.warns(UserWarning, match=r"soft.png: \d+ of its \d+ inside pixels, along its "
+                      r"edge, hold values between 0 and its largest, 255 \(an antialiased"):
         m = io.read_mask(tmp_path / "soft.png")
     assert m.sum() > (hard > 0).sum()
+    # the same edge in the alpha of a one-colour RGBA export
+    rgba = np.zeros((40, 50, 4), np.uint8)
+    rgba[..., 3] = soft
+    (tmp_path / "alpha.png").write_bytes(imagecodecs.png_encode(rgba))
+    with pytest.warns(UserWarning, match=r"alpha.png: \d+ of its"):
+        io.read_mask(tmp_path / "alpha.png")
     few = hard.copy()
     few[10, 12] = 128
+    labels = hard // 255  # a label mask: 1 and 2, every non-zero inside (a review)
+    labels[10:30, 26:40] = 2
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         for name, a in (("ones.png", (hard > 0).astype(np.uint8)), ("hard.png", hard),
-                        ("few.png", few)):
+                        ("few.png", few), ("labels.png", labels)):
             (tmp_path / name).write_bytes(imagecodecs.png_encode(a))
             np.testing.assert_array_equal(io.read_mask(tmp_path / name), hard > 0)
 

@@ -333,6 +333,11 @@ def test_a_k_with_swapped_axes_is_warned_about_with_its_conversion():
         square = np.zeros((100, 104, 3))
         square[..., 2] = 1.0  # (nearly square: the two centres agree, no verdict)
         facetlift.integrate(square, K=[300.0, 300.0, 49.5, 51.5])
+        cam = np.zeros((560, 640, 3))
+        cam[..., 2] = 1.0  # (a real camera's principal point a little off the centre, a review)
+        small = np.zeros((560, 640), bool)
+        small[270:280, 300:310] = True
+        facetlift.integrate(cam, small, K=[500.0, 500.0, 285.0, 310.0])
 
 
 def test_info_keeps_the_principal_point_warning_of_a_map_it_cannot_integrate(tmp_path, capsys):

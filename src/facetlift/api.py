@@ -96,7 +96,7 @@ def integrate(
         where unknown: a dense map, a sparse one or a few points; or three arrays of pixel
         rows, columns (rounded to the nearest pixel) and depths, and optionally a fourth of
         per-point weights >= 0 that multiply `prior_weight` (points in one pixel: their
-        weighted mean depth, their mean weight). Every connected component
+        weighted mean depth, and the weights' weighted mean). Every connected component
         with a sample gets its constant (and, for a perspective camera, its scale) from the
         prior: depth is then absolute (metric for a pinhole camera); components without a
         sample keep the usual convention, and ``info["prior"]["gauged_components"]`` names
@@ -300,7 +300,8 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
                                 prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
         for w in fused:  # (re-emitted, a torn surface's with what the fit adds to its causes)
             text = str(w.message)
-            if text.startswith("discontinuities with a depth prior:"):
+            if text.startswith("discontinuities with a depth prior:") and (
+                    "of the facet corners were cut" in text):  # (the torn warning alone)
                 # (a user's exact prior with an offset, fitted 'scale' or an 'affine' 4 % off:
                 # told it was a noisy dense map, a review)
                 text += (f". With prior_fit={kind!r} the prior was aligned first (scale "

@@ -644,9 +644,11 @@ def _check_principal_point(cam, H: int, W: int) -> None:
 
 
 #: A principal point within this share of the image's size of the centre with x and y
-#: swapped, and farther than it from the true centre, gets a warning
-#: (:func:`_check_swapped_axes`).
-SWAPPED_CENTRE = 0.05
+#: swapped (an old BiNI K.txt holds it to the half pixel), at least SWAPPED_FARTHER times
+#: farther from the true centre, on an image whose sides differ by SWAPPED_SIDES of the longer
+#: or more, gets a warning (:func:`_check_swapped_axes`; a review: 5 % windows overlapped on
+#: nearly square images and warned on a real camera's K).
+SWAPPED_CENTRE, SWAPPED_FARTHER, SWAPPED_SIDES = 0.01, 5.0, 0.1
 
 
 def _check_swapped_axes(K, H: int, W: int) -> None:
@@ -656,9 +658,11 @@ def _check_swapped_axes(K, H: int, W: int) -> None:
     instead of 0.025, and no word). Not on nearly square images, where both centres agree."""
     cx, cy = float(K[0, 2]), float(K[1, 2])
     cx0, cy0 = (W - 1) / 2, (H - 1) / 2
-    near = abs(cx - cy0) <= SWAPPED_CENTRE * W and abs(cy - cx0) <= SWAPPED_CENTRE * H
-    off = abs(cx - cx0) > SWAPPED_CENTRE * W or abs(cy - cy0) > SWAPPED_CENTRE * H
-    if near and off:
+    if abs(W - H) < SWAPPED_SIDES * max(W, H):
+        return
+    swapped = float(np.hypot((cx - cy0) / W, (cy - cx0) / H))
+    true = float(np.hypot((cx - cx0) / W, (cy - cy0) / H))
+    if swapped <= SWAPPED_CENTRE and true >= SWAPPED_FARTHER * max(swapped, SWAPPED_CENTRE / 2):
         fx, fy = float(K[0, 0]), float(K[1, 1])
         warn(f"`K`: the principal point (cx {cx:g}, cy {cy:g}) lies where this {W} x {H} "
              f"image's centre (cx {cx0:g}, cy {cy0:g}) would with x and y swapped: is K in "
@@ -761,11 +765,25 @@ def check_confidence(confidence, shape: tuple[int, int], mask=None) -> np.ndarra
     return c
 
 
-def _is_points(prior) -> bool:
+def _is_points(prior, shape: tuple[int, int] | None = None) -> bool:
     """Whether `prior` is a ``(rows, cols, depths)`` triple (or ``(rows, cols, depths,
-    weights)``), not an (H, W) map."""
-    return (isinstance(prior, (tuple, list)) and len(prior) in (3, 4)
-            and not np.isscalar(prior[0]))
+    weights)``), not an (H, W) map: a nested list of `shape` (a map of 3 or 4 rows given as
+    a list) is a map."""
+    if not (isinstance(prior, (tuple, list)) and len(prior) in (3, 4)
+            and not np.isscalar(prior[0])):
+        return False
+    return shape is None or not (len(prior) == shape[0] and all(
+        not isinstance(v, np.ndarray) and np.ndim(v) == 1 and len(v) == shape[1]
+        for v in prior))
+
+
+def _ambiguous_points(prior) -> bool:
+    """Whether `prior`'s 3 or 4 sequences of 3 or 4 numbers each (not numpy arrays) could as
+    well be that many points (row, col, depth[, weight]) as columns: a list of points from
+    ``json.load`` or ``tolist()`` was read as columns, its depths as pixel positions."""
+    lengths = {np.size(v) for v in prior}
+    return (len(lengths) == 1 and lengths <= {3, 4}
+            and not any(isinstance(v, np.ndarray) for v in prior))
 
 
 #: A points prior of at least CROWDED_MIN samples falling into fewer pixels than
@@ -814,16 +832,18 @@ def prior_samples(prior, shape: tuple[int, int],
                   positive: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """:func:`prior_image` and, for ``(rows, cols, depths, weights)``, the (H, W) weights of
     its pixels (None otherwise): a pixel's depth is its points' weighted mean and its weight
-    their mean weight (points of weight 1 give what the triple gives), NaN where no point
-    is. The weights must be finite and >= 0 (a ValueError names ``prior[3]``); a pixel whose
-    points all weigh 0 holds no sample. They multiply ``prior_weight`` (SfM points by their
-    reprojection error or track length, a LiDAR's by its return strength)."""
+    the weighted mean of their weights, ``sum w^2 / sum w`` (a doubtful point beside a good
+    one does not halve its pull; points of weight 1 give what the triple gives), NaN where
+    no point is. The weights must be finite and >= 0 (a ValueError names ``prior[3]``); a
+    pixel whose points all weigh 0 holds no sample. They multiply ``prior_weight`` (SfM points
+    by their reprojection error or track length, a LiDAR's by its return strength).
+    """
     H, W = shape
-    if _is_points(prior):
-        if all(isinstance(v, tuple) and len(v) == len(prior[0]) in (3, 4) for v in prior):
-            # (three points as a list of (row, col, depth) tuples were read as columns: the
+    if _is_points(prior, shape):
+        if _ambiguous_points(prior):
+            # (three points as a list of (row, col, depth) rows were read as columns: the
             # depths became pixel positions, 273 instead of 1500 and no word, a user's check;
-            # columns come as arrays or lists)
+            # a review: lists too, e.g. from json.load)
             raise ValueError(
                 f"`prior`: {len(prior)} sequences of {len(prior[0])} numbers could be columns "
                 "(rows, cols, depths[, weights]) or points (row, col, depth) each: give the "
@@ -925,8 +945,11 @@ def prior_samples(prior, shape: tuple[int, int],
         total = np.bincount(idx[agree], wk * d[agree], minlength=H * W)
         with np.errstate(invalid="ignore", divide="ignore"):
             img = np.where(count > 0, total / np.where(count > 0, mass, 1.0), np.nan)
-            wimg = None if pw is None else np.where(count > 0, mass / np.maximum(count, 1),
-                                                    np.nan).reshape(H, W)
+            # (the weights' own weighted mean: a doubtful point beside a good one does not
+            # halve its pull, a review)
+            wimg = None if pw is None else np.where(
+                count > 0, np.bincount(idx[agree], wk * wk, minlength=H * W)
+                / np.where(count > 0, mass, 1.0), np.nan).reshape(H, W)
         return img.reshape(H, W), wimg
     arr = numeric_array(prior, "prior", "an (H, W) depth map or a (rows, cols, depths) triple")
     if arr.dtype == bool:
@@ -1008,7 +1031,7 @@ def check_prior(prior, prior_weight, shape, mask, camera):
                 f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s)){hint}"
             )
     outside = int(np.isfinite(img[~mask]).sum())
-    if _is_points(prior):  # (a user's (u, v, z) given as (rows, cols, depths): 57 % fell off)
+    if _is_points(prior, shape):  # (a user's (u, v, z) as (rows, cols, depths): 57 % fell off)
         _swapped_check(prior, mask)
     values = np.where(have, camera.from_depth(np.where(have, depth, 1.0)), np.nan)
     return values, np.where(have, w, 0.0), outside

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -135,7 +136,7 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
     kpath = _find(f, "K", (".txt",))
     K = read_K(kpath) if kpath is not None else None
-    from ..problem import prior_image
+    from ..problem import prior_image, prior_samples
     from .images import PRIOR_FORMATS, PRIOR_POINT_FORMATS, read_prior, read_weights
 
     H, W = normals.shape[:2]
@@ -159,6 +160,11 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                 # given with --prior. With a weight column they stay points, whose weights
                 # integrate applies)
                 extra[name] = prior_image(extra[name], (H, W), positive=K is not None)
+            elif isinstance(extra[name], tuple):  # (checked here too: its errors get the
+                # folder's hint; its warnings come when integrate places the points)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    prior_samples(extra[name], (H, W))
         except ValueError as e:
             raise ValueError(f"{e}; {skip}") from None
         if not isinstance(extra[name], tuple) and extra[name].shape != (H, W):

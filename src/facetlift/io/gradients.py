@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ._paths import _existing, _suffix
-from .images import read_mask, read_plane
+from .images import load_mat, read_mask, read_plane
 
 GRADIENT_FORMATS = (".npy", ".exr", ".tif", ".tiff")
 
@@ -71,23 +71,10 @@ def read_mat(path, keys=None) -> dict:
         Unreadable or v7.3 file, a missing variable (the message lists those present), or
         arrays of the wrong shape.
     """
-    from scipy import io as sio
-
     arg = "path"
     f = _existing(path, arg)
     _suffix(f, (".mat",), "MATLAB", arg)
-    try:
-        data = sio.loadmat(f)
-    except NotImplementedError:
-        raise ValueError(
-            f"`{arg}`: {f} is a MATLAB v7.3 (HDF5) file, which scipy cannot read; save it "
-            "with save(..., '-v7') in MATLAB, or read it with h5py and pass the arrays to "
-            "facetlift.integrate_gradients"
-        ) from None
-    except Exception as e:
-        raise ValueError(
-            f"`{arg}`: {f} is not a readable .mat file ({type(e).__name__}: {e})"
-        ) from None
+    data = load_mat(f, arg, "pass the arrays to facetlift.integrate_gradients")
     names = sorted(k for k in data if not k.startswith("__"))
     keys = _default_keys(data, names) if keys is None else list(keys)
     missing = [k for k in keys if k not in data]

@@ -257,26 +257,31 @@ def read_normals(
     return frames.to_facetlift(n, frame), alpha
 
 
-#: A mask whose inside pixels take more than one value, with at least this share of them
-#: below the largest (an antialiased or blurred edge), gets a warning (:func:`read_mask`).
-SOFT_EDGE_SHARE = 0.01
+#: A mask whose inside pixels next to the outside (within 2 pixels) hold at least
+#: SOFT_EDGE_VALUES distinct values below its largest, on SOFT_EDGE_SHARE of its inside pixels
+#: or more (an antialiased or blurred edge), gets a warning (:func:`read_mask`). (Label masks,
+#: 0/1/2 with every non-zero inside, have few values: no warning, a review.)
+SOFT_EDGE_SHARE, SOFT_EDGE_VALUES = 0.01, 4
 
 
-def _soft_edge_check(a: np.ndarray, m: np.ndarray, p, arg: str) -> None:
-    """Warn where a grey mask's inside pixels hold in-between values, as an antialiased
-    edge does: all of them count as inside, a halo around the object (a user's bear mask
-    with blurred edges grew by 2,549 pixels, whose normals were then missing and filled)."""
-    grey = a if a.ndim == 2 else (a[..., 0] if a.shape[-1] in (1, 2) else None)
-    if grey is None or not m.any():
+def _soft_edge_check(plane: np.ndarray | None, m: np.ndarray, p, arg: str) -> None:
+    """Warn where the mask's `plane` (its grey values, or the alpha that makes it) holds
+    in-between values along its edge, as an antialiased edge does: all of them count as
+    inside, a halo around the object (a user's bear mask with blurred edges grew by 2,549
+    pixels, whose normals were then missing and filled)."""
+    from scipy import ndimage
+
+    if plane is None or not m.any() or m.all():
         return
-    vals = grey[m]
-    top = vals.max()
-    soft = int((vals < top).sum())
-    if soft and soft >= SOFT_EDGE_SHARE * vals.size:
-        warn(f"`{arg}`: {p}: {soft} of its {vals.size} inside pixels hold values between 0 "
-             f"and its largest, {top:g} (an antialiased or blurred edge?): every non-zero "
-             "pixel is inside, so the mask reaches past the object's edge; threshold it "
-             f"(e.g. at half of {top:g}) if those pixels hold no normal of the object")
+    top = plane[m].max()
+    edge = m & ndimage.binary_dilation(~m, iterations=2)
+    soft = edge & (plane < top)
+    if soft.sum() < SOFT_EDGE_SHARE * m.sum() or np.unique(plane[soft]).size < SOFT_EDGE_VALUES:
+        return
+    warn(f"`{arg}`: {p}: {int(soft.sum())} of its {int(m.sum())} inside pixels, along its edge, "
+         f"hold values between 0 and its largest, {top:g} (an antialiased or blurred edge?): "
+         "every non-zero pixel is inside, so the mask reaches past the object's edge; "
+         f"threshold it (e.g. at half of {top:g}) if those pixels hold no normal of the object")
 
 
 def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
@@ -306,17 +311,22 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
     p = _existing(path, arg)
     ext = _suffix(p, MASK_FORMATS, "mask", arg)
     a = _decode_image(p, ext, arg) if ext != ".npy" else _read_npy(p, arg)
+    plane = None  # (the values whose in-between levels would be an antialiased edge)
     if a.ndim == 3 and a.shape[-1] in (1, 2, 3, 4):
         colour = a[..., :3] if a.shape[-1] >= 3 else a[..., :1]
         m = (colour != 0).any(-1)
+        plane = a[..., 0] if a.shape[-1] in (1, 2) else None
         if a.shape[-1] in (2, 4):
             alpha = a[..., -1] > 0
             if not (alpha == alpha.flat[0]).all():  # (a constant alpha, e.g. 0 in a
                 # colour-only export, says nothing; with one colour everywhere the shape is
                 # in the alpha alone)
-                m = alpha if (colour == colour.flat[0]).all() else m & alpha
+                one = (colour == colour.flat[0]).all()
+                m = alpha if one else m & alpha
+                plane = a[..., -1] if one else plane
     elif a.ndim == 2:
         m = a != 0
+        plane = a
     else:
         raise ValueError(
             f"`{arg}`: {p} must be an (H, W) image or have 1-4 channels; got shape {a.shape}"
@@ -325,7 +335,7 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
         raise ValueError(f"`{arg}`: {p} is empty (shape {a.shape})")
     if a.dtype.kind == "f" and not np.isfinite(a).all():
         raise ValueError(f"`{arg}`: {p} contains NaN or inf")
-    _soft_edge_check(a, m, p, arg)
+    _soft_edge_check(plane, m, p, arg)
     if shape is not None and len(tuple(shape)) == 3:  # (the normal map's own shape, H x W x 3)
         shape = tuple(shape)[:2]
     if shape is not None and m.shape != tuple(shape):
@@ -363,27 +373,38 @@ def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = (),
     return a
 
 
-def _read_mat_plane(p: Path, arg: str, names: tuple[str, ...], what: str) -> np.ndarray:
-    """The (H, W) numeric variable of a ``.mat`` file (v4 to v7) named first in `names`, or its
-    only one; a ValueError lists the variables otherwise."""
+def load_mat(p: Path, arg: str, then: str = "pass the arrays") -> dict:
+    """The variables of a MATLAB ``.mat`` file (v4 to v7) by :func:`scipy.io.loadmat`; a
+    ValueError naming `arg` for a v7.3 (HDF5) or unreadable file (`then`: what to do with
+    h5py's arrays instead)."""
     from scipy import io as sio
 
     try:
-        data = sio.loadmat(p)
+        return sio.loadmat(p)
     except NotImplementedError:
-        raise ValueError(f"`{arg}`: {p} is a MATLAB v7.3 (HDF5) file, which scipy cannot read; "
-                         "save it with save(..., '-v7') in MATLAB, or read it with h5py and "
-                         "pass the array") from None
+        raise ValueError(
+            f"`{arg}`: {p} is a MATLAB v7.3 (HDF5) file, which scipy cannot read; save it "
+            f"with save(..., '-v7') in MATLAB, or read it with h5py and {then}") from None
     except Exception as e:
-        raise ValueError(f"`{arg}`: {p} is not a readable .mat file ({type(e).__name__}: "
-                         f"{e})") from None
+        raise ValueError(
+            f"`{arg}`: {p} is not a readable .mat file ({type(e).__name__}: {e})") from None
+
+
+def _read_mat_plane(p: Path, arg: str, names: tuple[str, ...], what: str) -> np.ndarray:
+    """The (H, W) numeric variable of a ``.mat`` file named first in `names`, or its only one
+    (a 1 x N or scalar variable is no map: Quéau's scalar ``lambda``); a ValueError lists
+    the variables otherwise."""
+    data = load_mat(p, arg, "pass the array")
     plane = {k: np.asarray(v) for k, v in data.items() if not k.startswith("__")
-             and np.asarray(v).ndim == 2 and np.asarray(v).dtype.kind in "biuf"}
+             and np.asarray(v).ndim == 2 and min(np.shape(v)) > 1
+             and np.asarray(v).dtype.kind in "biuf"}
     name = next((n for n in names if n in plane), next(iter(plane)) if len(plane) == 1 else None)
     if name is None:
-        found = sorted(k for k in data if not k.startswith("__"))
-        raise ValueError(f"`{arg}`: {p} must hold one (H, W) numeric {what} variable, or one "
-                         f"named {', '.join(names)}; got variables {found}")
+        found = {k: "x".join(map(str, np.shape(v))) for k, v in data.items()
+                 if not k.startswith("__")}
+        raise ValueError(f"`{arg}`: {p} must hold one (H, W) numeric {what} map, or one "
+                         f"named {', '.join(names)}; got variables "
+                         + (", ".join(f"{k} ({v})" for k, v in sorted(found.items())) or "none"))
     return plane[name]
 
 
@@ -560,10 +581,12 @@ def write_mask(path, mask) -> Path:
 #: its only (H, W) one).
 PRIOR_FORMATS = (".npy", ".exr", ".tif", ".tiff", ".png", ".mat")
 
-#: Variable names of a ``.mat`` depth prior (Quéau's toolbox calls it ``z0``) and weight map
-#: (its ``lambda``), in the order looked for.
+#: Variable names of a ``.mat`` depth prior (Quéau's toolbox calls it ``z0``), of the
+#: normals' confidence and of the prior's weight map (Quéau's ``lambda``, the weight of
+#: ``z0``: no confidence of the normals), in the order looked for.
 MAT_PRIOR_NAMES = ("z0", "prior", "depth", "z", "Z")
-MAT_WEIGHT_NAMES = ("confidence", "weights", "weight", "lambda", "w")
+MAT_CONFIDENCE_NAMES = ("confidence", "weights", "weight", "w")
+MAT_PRIOR_WEIGHT_NAMES = ("lambda", "prior_weight", "weights", "weight", "w")
 
 
 #: Text files of depth samples as points, one per line (:func:`read_prior`). (Not ``.xyz``:
@@ -575,7 +598,7 @@ PRIOR_POINT_FORMATS = (".csv", ".txt")
 _POINT_COLUMNS = {"row": "row", "r": "row", "y": "row", "v": "row",
                   "col": "col", "column": "col", "c": "col", "x": "col", "u": "col",
                   "depth": "depth", "z": "depth", "d": "depth",
-                  "weight": "weight", "confidence": "weight"}
+                  "weight": "weight", "weights": "weight", "confidence": "weight"}
 
 
 def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
@@ -701,6 +724,8 @@ def _read_points(p: Path, arg: str):
         k = int(np.flatnonzero(bad)[0])
         raise ValueError(f"`{arg}`: {p}: the weight column must hold finite numbers >= 0; got "
                          f"{float(w[k])!r} on data line {k + 1} ({int(bad.sum())} such line(s))")
+    if not w.any():
+        raise ValueError(f"`{arg}`: {p}: the weight column is 0 on every line (no sample)")
     return col["row"], col["col"], col["depth"], w
 
 
@@ -719,7 +744,8 @@ def read_weights(path, *, arg: str) -> np.ndarray:
     of 255s was read as 255). A grey image stored as RGB(A), or an EXR with equal R, G, B
     channels, is read as its grey level (an EXR's Y channel where it has one); colour
     channels that differ are refused (only the first was read). A MATLAB ``.mat`` file: its
-    variable of :data:`MAT_WEIGHT_NAMES` (Quéau's ``lambda``), or its only (H, W) one."""
+    variable of :data:`MAT_PRIOR_WEIGHT_NAMES` (Quéau's ``lambda``) for ``prior_weight_map``,
+    of :data:`MAT_CONFIDENCE_NAMES` otherwise, or its only (H, W) one."""
     p = _existing(path, arg)
     ext = _suffix(p, PRIOR_FORMATS, "weight", arg)
     if ext in (".png", ".tif", ".tiff"):
@@ -751,5 +777,6 @@ def read_weights(path, *, arg: str) -> np.ndarray:
                 raise ValueError(f"`{arg}`: {p} has colour channels R, G, B that differ; give "
                                  "a single-channel (grey) image of the weights")
             return rgb[0].astype(np.float64)
+    names = MAT_PRIOR_WEIGHT_NAMES if arg == "prior_weight_map" else MAT_CONFIDENCE_NAMES
     return read_plane(p, PRIOR_FORMATS, "weight", arg, prefer=("Y",),
-                      mat_names=MAT_WEIGHT_NAMES).astype(np.float64)
+                      mat_names=names).astype(np.float64)
