@@ -353,6 +353,58 @@ def test_a_point_cloud_output(tmp_path):
     np.testing.assert_allclose(normals[~missing], n[rr, cc][~missing], atol=1e-6)
 
 
+@pytest.mark.parametrize("frame, axes", [("opencv", (1, -1, -1)), ("directx", (1, -1, 1)),
+                                          ("z,x,y", None)])
+def test_output_frame_for_the_mesh_and_the_point_cloud(tmp_path, frame, axes):
+    """--output-frame opencv: the mesh and the points in the camera frame of OpenCV and COLMAP
+    (a user fusing them with an SfM cloud flipped y and z by hand); a mirrored frame
+    (directx) lists the faces the other way round, so that they still face the viewer."""
+    import meshio
+
+    from facetlift import frames
+
+    r, c = np.indices((12, 14))
+    n = facetlift.normals_from_gradients(0.2 * np.cos(c / 4), 0.1 * np.sin(r / 5))
+    np.save(tmp_path / "n.npy", n)
+    K = tmp_path / "K.txt"
+    np.savetxt(K, [[40.0, 0, 6.5], [0, 40.0, 5.5], [0, 0, 1]])
+    for out, extra in (("a", []), ("b", ["--output-frame", frame])):
+        assert main(["integrate", str(tmp_path / "n.npy"), "--K", str(K), "-s", "ply", "-s",
+                     "points", "-s", "npy", "-o", str(tmp_path / out)]
+                    + extra) == 0
+    a, b = (meshio.read(tmp_path / o / "mesh.ply") for o in "ab")
+    pa, pb = (meshio.read(tmp_path / o / "points.ply") for o in "ab")
+    if axes is not None:
+        np.testing.assert_allclose(b.points, a.points * axes, rtol=1e-12)
+        np.testing.assert_allclose(pb.points, pa.points * axes, rtol=1e-12)
+    np.testing.assert_allclose(b.points, frames.from_facetlift(a.points, frame), rtol=1e-12)
+    na, nb = (np.stack([p.point_data[k] for k in ("nx", "ny", "nz")], axis=1) for p in (pa, pb))
+    np.testing.assert_allclose(nb, frames.from_facetlift(na, frame), atol=1e-6)
+    np.testing.assert_array_equal(np.load(tmp_path / "b" / "depth.npy"),
+                                  np.load(tmp_path / "a" / "depth.npy"))
+
+    def facing(mesh):  # (each face's normal, in the mesh's own frame)
+        q = mesh.cells_dict["quad"]
+        v = mesh.points
+        return np.cross(v[q[:, 1]] - v[q[:, 0]], v[q[:, 2]] - v[q[:, 0]])
+
+    viewer = frames.from_facetlift(np.array([0.0, 0.0, 1.0]), frame)  # (toward the viewer)
+    assert (facing(a) @ [0.0, 0.0, 1.0] > 0).all() and (facing(b) @ viewer > 0).all()
+    flipped = frames.mirrors(frame)
+    assert flipped == (frame == "directx")
+    np.testing.assert_array_equal(b.cells_dict["quad"],
+                                  a.cells_dict["quad"][:, ::-1] if flipped
+                                  else a.cells_dict["quad"])
+
+
+def test_a_bad_output_frame_is_refused_before_the_job(tmp_path, capsys):
+    np.save(tmp_path / "n.npy", np.dstack([np.zeros((4, 4)), np.zeros((4, 4)), np.ones((4, 4))]))
+    code = main(["integrate", str(tmp_path / "n.npy"), "--output-frame", "x,x,z",
+                 "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 1 and "--output-frame must be one of" in err and not (tmp_path / "o").exists()
+
+
 def test_python_m_facetlift_runs_the_command_line():
     """A user found only the console script: `python -m facetlift` is the same command."""
     import subprocess

@@ -582,6 +582,8 @@ def check_template(job: Job, local: bool = True) -> None:
     validate(info.specs(), opts, job.method)
     if job.normal_frame is not None:
         frames.parse(job.normal_frame)
+    if job.output_frame is not None:
+        frames.parse(job.output_frame, "output_frame")
     frames.gradient_frame(job.gradient_frame)
     if job.pixel_size is not None:
         from .camera import make_camera

@@ -246,6 +246,11 @@ _JOB_OPTIONS = [
                  help="Write quad meshes (the PLY default; OBJ defaults to triangles)."),
     click.option("--triangles", is_flag=True,
                  help="Write triangle meshes (the OBJ default)."),
+    click.option("--output-frame", "output_frame", metavar="FRAME",
+                 help="Frame of the mesh's and the point cloud's coordinates (and the points' "
+                 "normals): opengl (default: x right, y up, z toward the viewer), opencv (the "
+                 "camera frame of OpenCV and COLMAP: y down, z away), directx, or an axis "
+                 "string such as 'x,-y,-z', as for --normal-frame. Depth maps are unchanged."),
     click.option("--max-memory", default=None, metavar="SIZE",
                  help="Refuse the job if its estimated peak memory, above the input as "
                  "loaded, exceeds SIZE (bytes, or 8G, 512M); optional factorizations then stay "
@@ -268,7 +273,8 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               gradient_frame="xy", mat_keys=None, method="dgp", pixel_size=1.0, K=None,
               orthographic=False, backfacing="missing", outlier_eps=None, solver=None,
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
-              save=(), quads=False, triangles=False, outdir=None, max_memory=None, prior=None,
+              save=(), quads=False, triangles=False, output_frame=None, outdir=None,
+              max_memory=None, prior=None,
               prior_scale=None, prior_weight=1.0, prior_weight_map=None, confidence=None,
               prior_blur=None, prior_outliers=None, prior_fit=None, no_prior=False,
               no_confidence=False):
@@ -308,6 +314,8 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
     frame = frames.resolve(normal_frame, y_down)
     if frame is not None:
         frames.parse(frame)
+    if output_frame is not None:
+        frames.parse(output_frame, "output_frame")
     frames.gradient_frame(gradient_frame)
     return Job(
         normals=None if normals is None else str(normals),
@@ -318,6 +326,8 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         backfacing=backfacing, outlier_eps=outlier_eps, options=opts,
         save=tuple(save) or DEFAULT_SAVE,
         triangles=True if triangles else (False if quads else None),
+        output_frame=None if output_frame is None or frames.is_identity(output_frame)
+        else output_frame,
         outdir=None if outdir is None else str(outdir),
         prior=None if prior is None else str(prior), prior_scale=prior_scale,
         prior_weight=prior_weight,

@@ -91,7 +91,7 @@ FLIP_MIN_CURL = 0.4
 _AXIS = re.compile(r"^\s*([+-]?)\s*([xyz])\s*$")
 
 
-def parse(frame) -> tuple[tuple[int, int, int], np.ndarray]:
+def parse(frame, name: str = "normal_frame") -> tuple[tuple[int, int, int], np.ndarray]:
     """``(channels, signs)`` of a frame: facetlift axis ``i`` = ``signs[i] * source[channels[i]]``.
 
     Parameters
@@ -99,6 +99,8 @@ def parse(frame) -> tuple[tuple[int, int, int], np.ndarray]:
     frame : str or None
         A name in :data:`FRAMES` (case-insensitive), an axis string such as ``"x,-y,-z"``, or
         None for the facetlift frame.
+    name : str
+        The argument that gave it, for the error.
 
     Raises
     ------
@@ -107,12 +109,12 @@ def parse(frame) -> tuple[tuple[int, int, int], np.ndarray]:
     """
     text = "x,y,z" if frame is None else frame
     if not isinstance(text, str):
-        raise ValueError(f"`normal_frame` must be a frame name or an axis string; got {frame!r}")
+        raise ValueError(f"`{name}` must be a frame name or an axis string; got {frame!r}")
     text = FRAMES.get(text.strip().lower(), text)
     parts = [_AXIS.match(t) for t in text.lower().split(",")]
     if len(parts) != 3 or not all(parts) or {p.group(2) for p in parts} != {"x", "y", "z"}:
         raise ValueError(
-            f"`normal_frame` must be one of {sorted(FRAMES)} or an axis string such as "
+            f"`{name}` must be one of {sorted(FRAMES)} or an axis string such as "
             f"'x,-y,-z' (each of x, y, z once, optionally negated); got {frame!r}"
         )
     channels = tuple("xyz".index(p.group(2)) for p in parts)
@@ -192,14 +194,24 @@ def to_facetlift(normals: np.ndarray, frame) -> np.ndarray:
     return normals[..., list(channels)] * signs
 
 
-def from_facetlift(normals: np.ndarray, frame) -> np.ndarray:
-    """(..., 3) facetlift normals -> `frame`: the inverse of :func:`to_facetlift`."""
+def from_facetlift(normals: np.ndarray, frame, name: str = "normal_frame") -> np.ndarray:
+    """(..., 3) facetlift normals (or points) -> `frame`: the inverse of
+    :func:`to_facetlift`."""
     if is_identity(frame):
         return normals
-    channels, signs = parse(frame)
+    channels, signs = parse(frame, name)
     out = np.empty_like(normals, dtype=np.result_type(normals, float))
     out[..., list(channels)] = normals * signs
     return out
+
+
+def mirrors(frame, name: str = "frame") -> bool:
+    """Whether `frame` is left-handed relative to facetlift's (its axis map's determinant is
+    -1: ``directx``, one axis negated): a mesh written in it needs its faces reversed to keep
+    them facing the viewer."""
+    channels, signs = parse(frame, name)
+    odd = sum(channels[i] > channels[j] for i in range(3) for j in range(i + 1, 3)) % 2
+    return bool((np.prod(signs) < 0) != bool(odd))
 
 
 def resolve(frame, y_down: bool) -> str | None:

@@ -66,6 +66,10 @@ class Job:
     options: dict = field(default_factory=dict)
     save: tuple = DEFAULT_SAVE
     triangles: bool | None = None
+    #: Frame of the mesh's and the point cloud's coordinates (and the points' normals):
+    #: None for facetlift's (x right, y up, z toward the viewer), "opencv" for the camera
+    #: frame of OpenCV and COLMAP, or any frame a normal map may be in (facetlift.frames).
+    output_frame: str | None = None
     outdir: str | None = None
     #: Depth prior file (docs/fusion.md), its scale (16-bit PNG), weight or weight map file,
     #: and the normals' confidence file; a dataset folder's prior_depth.* / confidence.* are
@@ -369,6 +373,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
     if unknown:
         raise ValueError(f"`save`: unknown output(s) {unknown}; valid: {sorted(OUTPUTS)}")
     _check_outputs(save, job)  # (before any reading or solving: not after the whole job)
+    if job.output_frame is not None:
+        frames.parse(job.output_frame, "output_frame")
     src = job.source
     outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)
     names = [OUTPUTS[s] for s in save]
@@ -411,7 +417,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         announce(progress, "writing outputs")
         for kind, name in zip(save, names, strict=True):
             try:
-                _write(surface, kind, out.path(name), inp.normals, job.triangles)
+                _write(surface, kind, out.path(name), inp.normals, job.triangles,
+                       job.output_frame)
             except OSError as e:  # (say which and where: the file written is a staging one)
                 if e.errno is None:
                     raise
@@ -466,8 +473,8 @@ def _depth_range(surface) -> list | None:
     return [float(d[ok].max()), float(d[ok].min())] if ok.any() else None
 
 
-def _write(surface, kind: str, path: Path, normals, triangles) -> None:
-    from . import io
+def _write(surface, kind: str, path: Path, normals, triangles, frame=None) -> None:
+    from . import frames, io
 
     if kind == "report":
         io.write_report(path, surface, normals,
@@ -477,9 +484,12 @@ def _write(surface, kind: str, path: Path, normals, triangles) -> None:
     elif kind == "height":
         io.write_height(path, surface)
     elif kind == "points":  # (one point per pixel centre, with the input's normal there)
-        io.write_points(path, surface.points(), _point_normals(surface, normals))
-    elif kind in ("ply", "obj") and triangles is not None:
-        surface.save(path, triangles=triangles)
+        pn = _point_normals(surface, normals)
+        io.write_points(path, surface.points(frame=frame),
+                        None if pn is None else frames.from_facetlift(pn, frame, "frame"))
+    elif kind in ("ply", "obj"):
+        surface.save(path, frame=frame, **({} if triangles is None else
+                                           {"triangles": triangles}))
     else:
         surface.save(path)
 

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import frames
 from .camera import Camera, make_camera
 from .domain import Domain
 
@@ -81,50 +82,59 @@ class Surface:
     def shape(self) -> tuple[int, int]:
         return self.mask.shape
 
-    def points(self, where: str = "facets") -> np.ndarray:
+    def points(self, where: str = "facets", frame=None) -> np.ndarray:
         """(N, 3) points in a right-handed frame: x right, y up, z toward the viewer.
 
         ``where="facets"`` gives one point per domain pixel at its centre (row-major);
         ``"vertices"`` one per used vertex (row-major). Orthographic:
         ``(x, y) = (col, -row) * pixel_size`` on the vertex grid, a pixel centre at
         ``col + 0.5``; perspective: back-projected with `K` (pixel centres at integer indices),
-        see :mod:`facetlift.camera`.
+        see :mod:`facetlift.camera`. `frame`: the points in another frame, named as a normal
+        map's (:mod:`facetlift.frames`): ``"opencv"`` gives the camera frame of OpenCV and
+        COLMAP (x right, y down, z away from the viewer: ``(x, -y, -z)``).
         """
         if where == "facets":
             r, c = np.nonzero(self.mask)
-            return self.camera.points(r + 0.5, c + 0.5, self.depth[r, c])
-        if where == "vertices":
+            pts = self.camera.points(r + 0.5, c + 0.5, self.depth[r, c])
+        elif where == "vertices":
             i, j = np.nonzero(np.isfinite(self.vertex_depth))
-            return self.camera.points(i, j, self.vertex_depth[i, j])
-        raise ValueError(f"`where` must be 'facets' or 'vertices'; got {where!r}")
+            pts = self.camera.points(i, j, self.vertex_depth[i, j])
+        else:
+            raise ValueError(f"`where` must be 'facets' or 'vertices'; got {where!r}")
+        return frames.from_facetlift(pts, frame, "frame")
 
-    def to_mesh(self, triangles: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def to_mesh(self, triangles: bool = False, frame=None) -> tuple[np.ndarray, np.ndarray]:
         """The facet mesh: vertices (n, 3) and faces (m, 4) quads or (2m, 3) triangles.
 
         Vertices are those of ``points("vertices")``, or, where the surface has depth jumps
         (:attr:`cuts`), the split vertices: one copy per side of a jump, so that no face is
         stretched across it. Faces list corners counter-clockwise seen from the viewer, so face
-        normals point toward the viewer; facets in row-major pixel order.
+        normals point toward the viewer; facets in row-major pixel order. `frame`: the
+        vertices in another frame (:meth:`points`); in a mirrored one (``directx``) the faces
+        are listed the other way round, so that they still face the viewer.
         """
         if not isinstance(triangles, (bool, np.bool_)):
             raise ValueError(f"`triangles` must be True or False; got {triangles!r}")
         if self.split is not None:
             corners, i, j, depth = self.split
-            verts = self.camera.points(i, j, depth)
+            verts = frames.from_facetlift(self.camera.points(i, j, depth), frame, "frame")
         else:
             corners = Domain.from_mask(self.mask).corners
-            verts = self.points("vertices")
+            verts = self.points("vertices", frame=frame)
         # conventional corner order (r,c),(r,c+1),(r+1,c+1),(r+1,c) is clockwise seen from the
         # viewer (y up); reverse it for outward (viewer-facing) normals
         quads = corners[:, ::-1]
         if not triangles:
-            return verts, quads
-        a, b, c, d = quads.T
-        # split along the diagonal from (r+1, c) to (r, c+1)
-        tris = np.empty((2 * len(quads), 3), dtype=quads.dtype)
-        tris[0::2] = np.column_stack([a, b, c])
-        tris[1::2] = np.column_stack([a, c, d])
-        return verts, tris
+            faces = quads
+        else:
+            a, b, c, d = quads.T
+            # split along the diagonal from (r+1, c) to (r, c+1)
+            faces = np.empty((2 * len(quads), 3), dtype=quads.dtype)
+            faces[0::2] = np.column_stack([a, b, c])
+            faces[1::2] = np.column_stack([a, c, d])
+        if frame is not None and frames.mirrors(frame):  # (still facing the viewer)
+            faces = np.ascontiguousarray(faces[:, ::-1])
+        return verts, faces
 
     def save(self, path, **kwargs) -> Path:
         """Write the surface; the format follows the extension.

@@ -58,12 +58,12 @@ def save_surface(surface, path, **kwargs) -> Path:
             )
         return p
     if ext in MESH_FORMATS:
-        extra = sorted(set(kwargs) - {"triangles"})
+        extra = sorted(set(kwargs) - {"triangles", "frame"})
         if extra:
-            raise ValueError(f"{ext} output takes only `triangles`; got {extra}")
+            raise ValueError(f"{ext} output takes only `triangles` and `frame`; got {extra}")
         triangles = kwargs.get("triangles")
         triangles = ext == ".obj" if triangles is None else triangles  # (to_mesh checks it)
-        verts, faces = surface.to_mesh(triangles=triangles)
+        verts, faces = surface.to_mesh(triangles=triangles, frame=kwargs.get("frame"))
         return write_mesh(p, verts, faces)
     preview_kw = {"light", "colormap", "min_size", "background"}
     extra = sorted(set(kwargs) - preview_kw)
