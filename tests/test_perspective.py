@@ -340,6 +340,37 @@ def test_a_k_with_swapped_axes_is_warned_about_with_its_conversion():
         facetlift.integrate(cam, small, K=[500.0, 500.0, 285.0, 310.0])
 
 
+def test_fov_gives_a_centred_pinhole_k(tmp_path, capsys):
+    """Networks' normals come without K: --fov DEG (across the width) gives fx = fy =
+    (W/2)/tan(fov/2) and the centre as principal point, the same surface as that K given as a
+    file; it contradicts --K and --orthographic; info takes it too."""
+    from facetlift.camera import K_from_fov
+    from facetlift.cli import main
+
+    K = K_from_fov((30, 40), 60.0)
+    np.testing.assert_allclose(K, [[20 / np.tan(np.radians(30)), 0, 19.5],
+                                   [0, 20 / np.tan(np.radians(30)), 14.5], [0, 0, 1]])
+    r, c = np.indices((30, 40))
+    n = facetlift.normals_from_gradients(0.1 * np.cos(c / 5), 0.05 * np.sin(r / 4))
+    np.save(tmp_path / "n.npy", n)
+    np.savetxt(tmp_path / "K.txt", K)
+    for out, extra in (("fov", ["--fov", "60"]), ("k", ["--K", str(tmp_path / "K.txt")])):
+        assert main(["integrate", str(tmp_path / "n.npy"), *extra, "-s", "npy",
+                     "-o", str(tmp_path / out)]) == 0, capsys.readouterr().err
+    np.testing.assert_allclose(np.load(tmp_path / "fov" / "depth.npy"),
+                               np.load(tmp_path / "k" / "depth.npy"), rtol=1e-12)
+    for extra, match in ((["--K", str(tmp_path / "K.txt")], "--fov 60 and --K contradict"),
+                         (["--orthographic"], "--fov 60 and --orthographic contradict")):
+        assert main(["integrate", str(tmp_path / "n.npy"), "--fov", "60", *extra,
+                     "-o", str(tmp_path / "x")]) == 1
+        assert match in capsys.readouterr().err
+    assert main(["integrate", str(tmp_path / "n.npy"), "--fov", "180", "-o",
+                 str(tmp_path / "x")]) == 1
+    assert "--fov must be a horizontal field of view in degrees" in capsys.readouterr().err
+    assert main(["info", str(tmp_path / "n.npy"), "--fov", "60"]) == 0
+    assert "camera: perspective" in capsys.readouterr().out
+
+
 def test_info_keeps_the_principal_point_warning_of_a_map_it_cannot_integrate(tmp_path, capsys):
     """A review: `info` dropped the warnings that came before the refusal, and a K for another
     image is what makes a map unusable."""

@@ -274,6 +274,20 @@ class Pinhole(Camera):
         return f"Pinhole(fx={K[0, 0]:g}, fy={K[1, 1]:g}, cx={K[0, 2]:g}, cy={K[1, 2]:g})"
 
 
+def K_from_fov(shape, fov: float) -> np.ndarray:
+    """A pinhole K for an (H, W) image from its horizontal field of view `fov` (degrees,
+    across the width): ``fx = fy = (W / 2) / tan(fov / 2)``, the principal point at the
+    image's centre ``((W - 1) / 2, (H - 1) / 2)`` (OpenCV layout). For a network's normals
+    without intrinsics, or a phone's 35 mm-equivalent focal length ``f35``: ``fov = 2
+    atan(18 / f35)`` across the long side (docs/conventions.md)."""
+    H, W = (int(v) for v in tuple(shape)[:2])
+    if isinstance(fov, bool) or not (np.isfinite(fov) and 0.0 < float(fov) < 180.0):
+        raise ValueError(f"`fov` must be a horizontal field of view in degrees, > 0 and < 180; "
+                         f"got {fov!r}")
+    f = (W / 2.0) / np.tan(np.radians(float(fov)) / 2.0)
+    return np.array([[f, 0.0, (W - 1) / 2.0], [0.0, f, (H - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+
 def make_camera(pixel_size=1.0, K=None) -> Camera:
     """:class:`Pinhole` for intrinsics `K` (checked), else :class:`Orthographic`.
 

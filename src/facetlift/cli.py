@@ -164,6 +164,10 @@ _JOB_OPTIONS = [
                  help="Perspective intrinsics: a text file of the 3x3 matrix (OpenCV layout) "
                  "or of fx fy cx cy, or a (3, 3) .npy. A dataset folder's K.txt is used "
                  "automatically."),
+    click.option("--fov", type=float, default=None, metavar="DEG",
+                 help="Horizontal field of view in degrees (across the width), for a camera "
+                 "without a K: fx = fy = (W/2)/tan(fov/2), the principal point at the centre. "
+                 "Instead of --K (a dataset's K.txt is then not used)."),
     click.option("--orthographic", is_flag=True,
                  help="Ignore K (e.g. a dataset's K.txt) and integrate orthographically."),
     click.option("--backfacing", type=click.Choice(["missing", "error", "outlier"]),
@@ -271,7 +275,8 @@ def _job_options(f):
 
 def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_down=False,
               gradient_frame="xy", mat_keys=None, method="dgp", pixel_size=1.0, K=None,
-              orthographic=False, backfacing="missing", outlier_eps=None, solver=None,
+              fov=None, orthographic=False, backfacing="missing", outlier_eps=None,
+              solver=None,
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
               save=(), quads=False, triangles=False, output_frame=None, outdir=None,
               max_memory=None, prior=None,
@@ -294,6 +299,16 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         raise ValueError(f"`pixel_size` {pixel_size!r} applies to orthographic input; --K "
                          f"{K} gives a camera (its scale comes from K): drop --pixel-size, or "
                          "give --orthographic without --K")
+    if fov is not None:
+        from .camera import K_from_fov
+
+        K_from_fov((2, 2), fov)  # (checked before the input is read)
+        clash = "--K" if K is not None else ("--orthographic" if orthographic else None)
+        if clash:
+            raise ValueError(f"--fov {fov:g} and {clash} contradict each other; give one")
+        if pixel_size != 1.0:
+            raise ValueError(f"`pixel_size` {pixel_size!r} applies to orthographic input; "
+                             f"--fov gives a camera: drop --pixel-size")
     if K is not None and orthographic:
         raise ValueError(f"--K {K} and --orthographic contradict each other: --orthographic "
                          "ignores a camera (e.g. a dataset folder's K.txt); give one of them")
@@ -320,7 +335,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
     return Job(
         normals=None if normals is None else str(normals),
         gradients=tuple(str(g) for g in gradients) if gradients else None,
-        mask=None if mask is None else str(mask), K=None if K is None else str(K),
+        mask=None if mask is None else str(mask), K=None if K is None else str(K), fov=fov,
         orthographic=orthographic, normal_frame=frame, gradient_frame=gradient_frame,
         mat_keys=_split(mat_keys), method=method, pixel_size=pixel_size,
         backfacing=backfacing, outlier_eps=outlier_eps, options=opts,
@@ -496,6 +511,8 @@ def integrate(normals, gradients, progress, as_json, **flags):
               help="Mask image, as for 'integrate'.")
 @click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Perspective intrinsics, as for 'integrate'.")
+@click.option("--fov", type=float, default=None, metavar="DEG",
+              help="Horizontal field of view in degrees instead of --K, as for 'integrate'.")
 @click.option("--normal-frame", "normal_frame", metavar="FRAME",
               help="Read the map in this frame (as for 'integrate').")
 @click.option("--y-down", is_flag=True, help="Alias of --normal-frame directx.")
@@ -514,8 +531,8 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="A confidence map to check against the map, as for 'integrate'.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, prior, prior_scale,
-         prior_fit, confidence, as_json):
+def info(normals, mask, K, fov, normal_frame, y_down, gradient_frame, mat_keys, prior,
+         prior_scale, prior_fit, confidence, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
     encoding, mask and components, unusable normals, K, and the memory planner's estimate of
     the peak memory the default integration would need (the figure --max-memory is checked
@@ -531,7 +548,14 @@ def info(normals, mask, K, normal_frame, y_down, gradient_frame, mat_keys, prior
     from .describe import describe
 
     frames.gradient_frame(gradient_frame)  # (refused as integrate refuses it, on any input)
-    rec = describe(normals, mask=mask, K=K, normal_frame=frames.resolve(normal_frame, y_down),
+    if fov is not None:  # (as integrate refuses them)
+        from .camera import K_from_fov
+
+        K_from_fov((2, 2), fov)
+        if K is not None:
+            raise ValueError(f"--fov {fov:g} and --K contradict each other; give one")
+    rec = describe(normals, mask=mask, K=K, fov=fov,
+                   normal_frame=frames.resolve(normal_frame, y_down),
                    mat_keys=_split(mat_keys), gradient_frame=gradient_frame,
                    prior_scale=prior_scale, prior=prior, confidence=confidence,
                    prior_fit=prior_fit)

@@ -107,7 +107,7 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
 
 def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
              gradient_frame: str = "xy", prior_scale=None, prior=None,
-             confidence=None, prior_fit=None) -> dict:
+             confidence=None, prior_fit=None, fov=None) -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
     encoding, mask and components, unusable normals (with the first one's location), K, a
     dataset folder's depth prior and normal confidence (``prior`` / ``confidence``: known
@@ -120,6 +120,8 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
         A normal-map file, a dataset folder, or a ``.mat`` file.
     mask, K : str or Path, optional
         As for ``facetlift integrate``.
+    fov : float, optional
+        Horizontal field of view in degrees instead of `K` (as for ``integrate``).
     normal_frame : str, optional
         The frame to read it in (default facetlift's).
     gradient_frame : str
@@ -150,7 +152,7 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
               mat_keys=None if mat_keys is None else tuple(mat_keys),
               gradient_frame=gradient_frame, prior_scale=prior_scale,
               prior=None if prior is None else str(prior),
-              confidence=None if confidence is None else str(confidence))
+              confidence=None if confidence is None else str(confidence), fov=fov)
     src = job.source
     unread = []
     with recorded_warnings() as read_caught:  # (a gradient layout's, ...)

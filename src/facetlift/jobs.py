@@ -55,6 +55,9 @@ class Job:
     gradients: tuple | None = None
     mask: str | None = None
     K: str | None = None
+    #: Horizontal field of view in degrees: a pinhole K with the principal point at the
+    #: centre (facetlift.camera.K_from_fov), instead of a K file.
+    fov: float | None = None
     orthographic: bool = False
     normal_frame: str | None = None
     gradient_frame: str = "xy"
@@ -184,6 +187,12 @@ def read(job: Job) -> Input:
         source = str(job.mask)
     if job.K is not None:
         K = io.read_K(job.K)
+    if job.fov is not None:
+        if field_input:
+            raise ValueError("`fov`: a gradient field is orthographic; --fov does not apply")
+        from .camera import K_from_fov
+
+        K = K_from_fov(n.shape[:2], job.fov)
     if job.orthographic:
         K = None
     if job.prior is not None:
