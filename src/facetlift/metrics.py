@@ -223,25 +223,40 @@ def input_deviation(problem, surface, *, sample: int = DEVIATION_SAMPLE) -> floa
     surface : facetlift.Surface
         The result on the problem's domain (same shape and camera).
     """
+    angles = _deviations(problem, surface, sample)
+    return float(angles.mean()) if angles.size else float("nan")
+
+
+#: Deviation (degrees) above which a facet counts in ``info["deviation_over_10"]``.
+DEVIATION_LARGE = 10.0
+
+
+def _deviations(problem, surface, sample: int) -> np.ndarray:
+    """The angles (degrees) of :func:`input_deviation`, one per sampled usable facet."""
     k = np.flatnonzero(problem.usable)
     if k.size == 0:
-        return float("nan")
+        return np.zeros(0)
     if k.size > sample:
         k = k[:: -(-k.size // sample)]
     r, c = (a[k] for a in problem.domain.pixels)
     nrec = _own_normals(surface, r, c, k)
     cos = np.clip(np.einsum("ij,ij->i", nrec, problem.normals[k]), -1.0, 1.0)
-    return float(np.degrees(np.arccos(cos)).mean())
+    return np.degrees(np.arccos(cos))
 
 
 def diagnose(problem, surface) -> dict:
     """What :func:`facetlift.solve` adds to ``Surface.info`` about the result and its input:
-    ``mean_deviation`` (:func:`input_deviation`, degrees) and ``integrability``
-    (:func:`facetlift.frames.flip_check`, which warns when a flipped map would be far more
-    integrable)."""
+    ``mean_deviation`` (:func:`input_deviation`, degrees), ``deviation_over_10`` (the share of
+    those facets that deviate by more than :data:`DEVIATION_LARGE` degrees: where a smooth
+    integration bends across depth jumps, the command line suggests ``--discontinuities``) and
+    ``integrability`` (:func:`facetlift.frames.flip_check`, which warns when a flipped map
+    would be far more integrable)."""
     from .frames import flip_check
 
-    return {"mean_deviation": input_deviation(problem, surface),
+    angles = _deviations(problem, surface, DEVIATION_SAMPLE)
+    return {"mean_deviation": float(angles.mean()) if angles.size else float("nan"),
+            "deviation_over_10": (float((angles > DEVIATION_LARGE).mean()) if angles.size
+                                  else float("nan")),
             "integrability": flip_check(problem)}
 
 
