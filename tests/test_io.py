@@ -491,8 +491,12 @@ def test_unsupported_pixel_type(tmp_path):
 
 def test_unknown_extensions(tmp_path, surface):
     (tmp_path / "n.jpg").write_bytes(b"x")
-    with pytest.raises(ValueError, match=r"unsupported normal map format '\.jpg'.*\.png"):
+    # (the JPEG's advice where a map is read: it never showed, a user's audit)
+    with pytest.raises(ValueError, match=r"unsupported normal map format '\.jpg'.*\.png.*"
+                       r"also takes a MATLAB \.mat file and a dataset folder \(a JPEG's lossy"):
         io.read_normals(tmp_path / "n.jpg")
+    with pytest.raises(ValueError, match=r"unsupported normal map format '\.jpg'.*\.npy$"):
+        io.write_normals(tmp_path / "w.jpg", np.dstack([np.zeros((2, 2))] * 2 + [np.ones((2, 2))]))
     with pytest.raises(ValueError, match=r"unsupported surface format '\.stl'.*\.npz.*\.ply"):
         surface.save(tmp_path / "m.stl")
     with pytest.raises(ValueError, match=r"unsupported depth format '\.png'"):

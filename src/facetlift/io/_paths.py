@@ -6,16 +6,22 @@ import os
 from pathlib import Path
 
 
-def _suffix(path: Path, allowed: tuple[str, ...], what: str, arg: str) -> str:
+def _suffix(path: Path, allowed: tuple[str, ...], what: str, arg: str,
+            reading_map: bool = False) -> str:
+    """`path`'s extension (lower case) where `allowed`, else a ValueError naming `arg`;
+    `reading_map`: a normal map being read, whose refusal of a JPEG says how to convert it
+    (not a mask's, whose JPEG edges would grow it, nor an output's) and names the command
+    line's other inputs."""
     ext = path.suffix.lower()
     if ext not in allowed:
         lossy = (" (a JPEG's lossy 8 bits still integrate well: convert it to PNG first, "
                  "e.g. with Pillow, Image.open(p).save(q))"
-                 if ext in (".jpg", ".jpeg") and what == "normal map" and arg != "path"
-                 else "")  # (a map being read: not a mask, whose JPEG edges would grow it)
+                 if ext in (".jpg", ".jpeg") and reading_map else "")
+        more = ("; the command line also takes a MATLAB .mat file and a dataset folder"
+                if reading_map else "")
         raise ValueError(
             f"`{arg}`: unsupported {what} format {ext or '(no extension)'!r} for {path}; "
-            f"supported: {', '.join(allowed)}{lossy}"
+            f"supported: {', '.join(allowed)}{more}{lossy}"
         )
     return ext
 

@@ -225,7 +225,7 @@ def read_normals(
     frame = frames.resolve(frame, y_down)
     frames.parse(frame)
     p = _existing(path, arg)
-    ext = _suffix(p, NORMAL_READ_FORMATS, "normal map", arg)
+    ext = _suffix(p, NORMAL_READ_FORMATS, "normal map", arg, reading_map=True)
     if ext in (".png", ".tif", ".tiff"):
         if ext == ".png":
             with open(p, "rb") as fh:
