@@ -314,6 +314,29 @@ def test_a_missing_input_is_a_failed_item_not_the_end_of_the_batch(tmp_path, cap
     assert code == 0 and "batch: 2 of 2 succeeded (1 from an earlier run)" in out
 
 
+def test_fov_and_output_frame_in_templates_and_resume_settings(tmp_path):
+    """A bad fov, or one with K or orthographic, is refused once for the template, not per
+    item; the resume settings leave unset new fields out (older logs stay complete) and read
+    an output frame's spellings alike (a review)."""
+    from facetlift.jobs import read
+
+    for job, match in ((Job(fov=200.0), "`fov` must be a horizontal field of view"),
+                       (Job(fov=60.0, orthographic=True), "`fov` 60 and `orthographic`"),
+                       (Job(fov=60.0, K="K.txt"), "`fov` 60 and `K` contradict")):
+        with pytest.raises(ValueError, match=match):
+            fb.check_template(job)
+    maps(tmp_path / "in", n=1)
+    np.savetxt(tmp_path / "K.txt", np.diag([50.0, 50.0, 1.0]) + [[0, 0, 8.5], [0, 0, 7.5],
+                                                                  [0, 0, 0]])
+    with pytest.raises(ValueError, match="`fov` 60 and `K` contradict"):
+        read(Job(normals=str(tmp_path / "in" / "m0.png"), K=str(tmp_path / "K.txt"), fov=60.0))
+    plain = fb.settings(Job())
+    assert "fov" not in plain and "output_frame" not in plain
+    a, b, c = (fb.settings(Job(output_frame=f)) for f in ("opencv", "OpenCV", "x,-y,-z"))
+    assert a == b == c and a["output_frame"] == "x,-y,-z"
+    assert fb.settings(Job(output_frame="opengl")) == plain
+
+
 def test_the_default_workers_without_dask_run_in_this_process(tmp_path, monkeypatch):
     """Without the batch extra the default is one worker (it was the CPU count, which then
     failed for want of Dask); an explicit workers=2 still names the extra."""

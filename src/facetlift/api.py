@@ -158,7 +158,9 @@ def integrate(
     -------
     Surface
         ``info["mean_deviation"]`` is the mean angle (degrees) between the input normals and
-        the result's facets; ``info["integrability"]`` compares the field with flipped ones.
+        the result's facets (``info["deviation_over_10"]`` the share of them deviating by
+        more than 10 degrees); ``info["integrability"]`` compares the field with flipped
+        ones.
 
     Raises
     ------

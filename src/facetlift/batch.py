@@ -349,11 +349,19 @@ def settings(job: Job) -> dict:
     as the log records it: ``--resume`` skips only items finished with the same."""
     from dataclasses import asdict
 
+    from . import frames
     from .jobs import jsonable
 
     out = {k: v for k, v in asdict(job).items() if k not in ("normals", "gradients", "outdir")}
     out["options"] = {k: v for k, v in job.options.items() if k not in NEUTRAL_OPTIONS}
     out["save"] = sorted(set(job.save))
+    for key in ("fov", "output_frame"):  # (unset: as in a log written before they existed)
+        if out.get(key) is None:
+            out.pop(key, None)
+    if "output_frame" in out:  # (its spellings alike: "OpenCV", "opencv", "x,-y,-z")
+        out["output_frame"] = frames.axis_string(out["output_frame"])
+        if out["output_frame"] == "x,y,z":
+            out.pop("output_frame")
     return jsonable(out)
 
 
@@ -584,6 +592,9 @@ def check_template(job: Job, local: bool = True) -> None:
         frames.parse(job.normal_frame)
     if job.output_frame is not None:
         frames.parse(job.output_frame, "output_frame")
+    from .jobs import check_fov
+
+    check_fov(job)
     frames.gradient_frame(job.gradient_frame)
     if job.pixel_size is not None:
         from .camera import make_camera

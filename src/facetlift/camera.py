@@ -276,10 +276,11 @@ class Pinhole(Camera):
 
 def K_from_fov(shape, fov: float) -> np.ndarray:
     """A pinhole K for an (H, W) image from its horizontal field of view `fov` (degrees,
-    across the width): ``fx = fy = (W / 2) / tan(fov / 2)``, the principal point at the
-    image's centre ``((W - 1) / 2, (H - 1) / 2)`` (OpenCV layout). For a network's normals
-    without intrinsics, or a phone's 35 mm-equivalent focal length ``f35``: ``fov = 2
-    atan(18 / f35)`` across the long side (docs/conventions.md)."""
+    across the width, the W columns): ``fx = fy = (W / 2) / tan(fov / 2)``, the principal
+    point at the image's centre ``((W - 1) / 2, (H - 1) / 2)`` (OpenCV layout). A phone's
+    35 mm-equivalent focal length ``f35`` gives ``2 atan(18 / f35)`` across the long side:
+    for a portrait photo (H > W) the width's is ``2 atan((W / H) tan(fov_long / 2))``
+    (docs/conventions.md)."""
     H, W = (int(v) for v in tuple(shape)[:2])
     if isinstance(fov, bool) or not (np.isfinite(fov) and 0.0 < float(fov) < 180.0):
         raise ValueError(f"`fov` must be a horizontal field of view in degrees, > 0 and < 180; "

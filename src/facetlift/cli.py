@@ -165,9 +165,10 @@ _JOB_OPTIONS = [
                  "or of fx fy cx cy, or a (3, 3) .npy. A dataset folder's K.txt is used "
                  "automatically."),
     click.option("--fov", type=float, default=None, metavar="DEG",
-                 help="Horizontal field of view in degrees (across the width), for a camera "
-                 "without a K: fx = fy = (W/2)/tan(fov/2), the principal point at the centre. "
-                 "Instead of --K (a dataset's K.txt is then not used)."),
+                 help="Horizontal field of view in degrees (across the width, also for a "
+                 "portrait photo), for a camera without a K: fx = fy = (W/2)/tan(fov/2), the "
+                 "principal point at the centre. Instead of --K (a dataset's K.txt is then "
+                 "not used)."),
     click.option("--orthographic", is_flag=True,
                  help="Ignore K (e.g. a dataset's K.txt) and integrate orthographically."),
     click.option("--backfacing", type=click.Choice(["missing", "error", "outlier"]),
@@ -254,7 +255,8 @@ _JOB_OPTIONS = [
                  help="Frame of the mesh's and the point cloud's coordinates (and the points' "
                  "normals): opengl (default: x right, y up, z toward the viewer), opencv (the "
                  "camera frame of OpenCV and COLMAP: y down, z away), directx, or an axis "
-                 "string such as 'x,-y,-z', as for --normal-frame. Depth maps are unchanged."),
+                 "string such as 'x,-y,-z', as for --normal-frame. For the ply, obj and "
+                 "points outputs; depth maps are unchanged."),
     click.option("--max-memory", default=None, metavar="SIZE",
                  help="Refuse the job if its estimated peak memory, above the input as "
                  "loaded, exceeds SIZE (bytes, or 8G, 512M); optional factorizations then stay "
@@ -299,16 +301,9 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         raise ValueError(f"`pixel_size` {pixel_size!r} applies to orthographic input; --K "
                          f"{K} gives a camera (its scale comes from K): drop --pixel-size, or "
                          "give --orthographic without --K")
-    if fov is not None:
-        from .camera import K_from_fov
-
-        K_from_fov((2, 2), fov)  # (checked before the input is read)
-        clash = "--K" if K is not None else ("--orthographic" if orthographic else None)
-        if clash:
-            raise ValueError(f"--fov {fov:g} and {clash} contradict each other; give one")
-        if pixel_size != 1.0:
-            raise ValueError(f"`pixel_size` {pixel_size!r} applies to orthographic input; "
-                             f"--fov gives a camera: drop --pixel-size")
+    if fov is not None and pixel_size != 1.0:
+        raise ValueError(f"`pixel_size` {pixel_size!r} applies to orthographic input; "
+                         f"--fov gives a camera: drop --pixel-size")
     if K is not None and orthographic:
         raise ValueError(f"--K {K} and --orthographic contradict each other: --orthographic "
                          "ignores a camera (e.g. a dataset folder's K.txt); give one of them")
@@ -332,7 +327,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
     if output_frame is not None:
         frames.parse(output_frame, "output_frame")
     frames.gradient_frame(gradient_frame)
-    return Job(
+    job = Job(
         normals=None if normals is None else str(normals),
         gradients=tuple(str(g) for g in gradients) if gradients else None,
         mask=None if mask is None else str(mask), K=None if K is None else str(K), fov=fov,
@@ -351,6 +346,10 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         prior_outliers=prior_outliers, prior_fit=prior_fit, dataset_prior=not no_prior,
         dataset_confidence=not no_confidence,
     )
+    from .jobs import check_fov
+
+    check_fov(job)  # (before the input is read)
+    return job
 
 
 def _show_progress(flag) -> bool:
@@ -427,14 +426,24 @@ JUMP_HINT_SHARE = 0.002
 
 
 def _jump_hint(job, info: dict) -> None:
-    """A note where a smooth integration by a method that can keep depth jumps deviates from
-    its normals in the way bent-across jumps do (:data:`JUMP_HINT_SHARE`)."""
+    """A note where a smooth integration by a method that can keep depth jumps, but did not
+    (its own default, e.g. bini's, or the option given), deviates from its normals in the way
+    bent-across jumps do (:data:`JUMP_HINT_SHARE`); not where the map seems read in the wrong
+    frame (that warning explains the deviation)."""
+    from . import frames
+
     share = info.get("deviation_over_10")
     method = _methods.REGISTRY.get(info.get("method") or job.method)
-    if (share is None or not share > JUMP_HINT_SHARE or method is None
-            or not method.discontinuities or info.get("solver") == "discontinuous"
-            or job.options.get("discontinuities") is False
-            or "discontinuities" in job.options):
+    if share is None or not share > JUMP_HINT_SHARE or method is None:
+        return
+    if not method.discontinuities or "discontinuities" in job.options:
+        return
+    if method.options().get("discontinuities") or info.get("solver") == "discontinuous":
+        return  # (bini keeps jumps by default: the flag would change nothing, a review)
+    ic = info.get("integrability") or {}
+    own = ic.get("curl")
+    flipped = min(ic.get("curl_y_flipped", float("inf")), ic.get("curl_x_flipped", float("inf")))
+    if own is not None and frames.flip_verdict(own, flipped) is not None:
         return
     click.echo(f"hint: {share:.1%} of the facets deviate from their normals by more than 10 "
                "deg, as where a smooth surface bends across depth jumps: --discontinuities "
@@ -576,11 +585,9 @@ def info(normals, mask, K, fov, normal_frame, y_down, gradient_frame, mat_keys, 
 
     frames.gradient_frame(gradient_frame)  # (refused as integrate refuses it, on any input)
     if fov is not None:  # (as integrate refuses them)
-        from .camera import K_from_fov
+        from .jobs import Job, check_fov
 
-        K_from_fov((2, 2), fov)
-        if K is not None:
-            raise ValueError(f"--fov {fov:g} and --K contradict each other; give one")
+        check_fov(Job(K=None if K is None else str(K), fov=fov))
     rec = describe(normals, mask=mask, K=K, fov=fov,
                    normal_frame=frames.resolve(normal_frame, y_down),
                    mat_keys=_split(mat_keys), gradient_frame=gradient_frame,

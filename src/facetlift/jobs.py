@@ -188,6 +188,7 @@ def read(job: Job) -> Input:
     if job.K is not None:
         K = io.read_K(job.K)
     if job.fov is not None:
+        check_fov(job)
         if field_input:
             raise ValueError("`fov`: a gradient field is orthographic; --fov does not apply")
         from .camera import K_from_fov
@@ -243,6 +244,19 @@ def _from_folder(message: str, job: Job, inp: Input) -> str:
     return (f"{message} (the dataset folder's {named} file{'s' if len(files) > 1 else ''}, "
             f"which this method does not take: {flags} leave{'s' if len(files) == 1 else ''} "
             f"{'it' if len(files) == 1 else 'them'} out)")
+
+
+def check_fov(job: Job) -> None:
+    """A job's `fov` checked: a field of view (:func:`facetlift.camera.K_from_fov`) and not
+    with `K` or `orthographic`, which it contradicts (ValueError naming them)."""
+    if job.fov is None:
+        return
+    from .camera import K_from_fov
+
+    K_from_fov((2, 2), job.fov)
+    clash = "K" if job.K is not None else ("orthographic" if job.orthographic else None)
+    if clash:
+        raise ValueError(f"`fov` {job.fov:g} and `{clash}` contradict each other; give one")
 
 
 def _no_prior_checks(job: Job) -> None:

@@ -223,8 +223,11 @@ def input_deviation(problem, surface, *, sample: int = DEVIATION_SAMPLE) -> floa
     surface : facetlift.Surface
         The result on the problem's domain (same shape and camera).
     """
-    angles = _deviations(problem, surface, sample)
-    return float(angles.mean()) if angles.size else float("nan")
+    return _mean(_deviations(problem, surface, sample))
+
+
+def _mean(values: np.ndarray) -> float:
+    return float(values.mean()) if values.size else float("nan")
 
 
 #: Deviation (degrees) above which a facet counts in ``info["deviation_over_10"]``.
@@ -254,9 +257,8 @@ def diagnose(problem, surface) -> dict:
     from .frames import flip_check
 
     angles = _deviations(problem, surface, DEVIATION_SAMPLE)
-    return {"mean_deviation": float(angles.mean()) if angles.size else float("nan"),
-            "deviation_over_10": (float((angles > DEVIATION_LARGE).mean()) if angles.size
-                                  else float("nan")),
+    return {"mean_deviation": _mean(angles),
+            "deviation_over_10": _mean(angles > DEVIATION_LARGE),
             "integrability": flip_check(problem)}
 
 

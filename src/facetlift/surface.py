@@ -33,7 +33,8 @@ class Surface:
         ``seconds``
         per phase, ``input`` (counts of unusable normals, :func:`facetlift.prepare`),
         ``mean_deviation`` (mean angle in degrees between the input normals and the result's
-        facets), ``integrability`` (:func:`facetlift.frames.flip_check`), and method-specific
+        facets), ``deviation_over_10`` (the share of them deviating by more than 10 degrees),
+        ``integrability`` (:func:`facetlift.frames.flip_check`), and method-specific
         entries.
     camera : facetlift.camera.Camera
         The camera the depth is measured in; give it, or `pixel_size` and `K` (read back as
@@ -83,7 +84,7 @@ class Surface:
         return self.mask.shape
 
     def points(self, where: str = "facets", frame=None) -> np.ndarray:
-        """(N, 3) points in a right-handed frame: x right, y up, z toward the viewer.
+        """(N, 3) points: x right, y up, z toward the viewer, or in `frame`.
 
         ``where="facets"`` gives one point per domain pixel at its centre (row-major);
         ``"vertices"`` one per used vertex (row-major). Orthographic:
@@ -146,7 +147,8 @@ class Surface:
         map; ``.ply``/``.obj``: the mesh, split at the jumps (quads, or triangles with
         ``triangles=True``); ``.png``: a shaded preview (any ``.png`` name: the map of the
         jumps is :func:`facetlift.io.write_discontinuities`, as ``--save discontinuities``
-        writes it). Files are written atomically. Returns the path written.
+        writes it). ``frame=`` writes a mesh in another frame (:meth:`to_mesh`). Files are
+        written atomically. Returns the path written.
         """
         from . import io
 
