@@ -227,6 +227,11 @@ def test_read_K(tmp_path):
     "500 510 320.5 240.25\n",  # fx fy cx cy
     "\ufeff500 0 320.5\r\n0 510 240.25\r\n0 0 1\r\n",  # a spreadsheet's byte-order mark, CRLF
     "500; 0; 320.5\n0; 510; 240.25\n0; 0; 1\n",  # semicolons
+    "fx fy cx cy\n500 510 320.5 240.25\n",  # a header (a user's file was refused)
+    "cx,cy,fx,fy\n320.5,240.25,500,510\n",  # a header in another order
+    "[[500, 0, 320.5], [0, 510, 240.25], [0, 0, 1]]",  # JSON
+    "[500, 510, 320.5, 240.25]",
+    '{"fx": 500, "fy": 510, "cx": 320.5, "cy": 240.25}',
     "npy",
 ])
 def test_read_K_layouts(tmp_path, text):
@@ -252,7 +257,10 @@ def test_read_K_names_a_transposed_matrix(tmp_path):
     "text, match",
     [("1 2 3\n4 5 6\n", r"6 number\(s\).*3x3.*fx fy cx cy"), ("a b c\n", "cannot parse"),
      ("1 2\n", r"2 number\(s\)"),
-     ("-1 0 0\n0 1 0\n0 0 1\n", "focal"), ("1 0 0\n0 1 0\n1 0 1\n", "last row")],
+     ("-1 0 0\n0 1 0\n0 0 1\n", "focal"), ("1 0 0\n0 1 0\n1 0 1\n", "last row"),
+     ("fx fy cx\n1 2 3\n", r"a header must name fx, fy, cx, cy once each"),
+     ('{"fx": 500, "fy": 510}', r"a JSON object needs fx, fy, cx, cy; \['cx', 'cy'\] missing"),
+     ("[1, 2", "cannot parse.*as JSON")],
 )
 def test_read_K_errors(tmp_path, text, match):
     (tmp_path / "K.txt").write_text(text)

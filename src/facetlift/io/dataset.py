@@ -23,8 +23,10 @@ def read_K(path) -> np.ndarray:
 
     A text file holds the matrix as three rows (``np.loadtxt``; numbers separated by spaces,
     tabs or commas), or its nine numbers on one line (row by row), or the four numbers
-    ``fx fy cx cy`` (cx a column, cy a row from the top); a ``.npy`` file holds a (3, 3)
-    array, nine or four numbers likewise.
+    ``fx fy cx cy`` (cx a column, cy a row from the top), the four possibly under a header
+    naming them in any order (``cx cy fx fy``); or JSON: a 3x3 list, nine or four numbers, or
+    an object with ``fx``, ``fy``, ``cx``, ``cy``. A ``.npy`` file holds a (3, 3) array, nine or
+    four numbers likewise.
 
     Raises
     ------
@@ -40,15 +42,15 @@ def read_K(path) -> np.ndarray:
         if p.suffix.lower() == ".npy":
             K = np.load(p, allow_pickle=False)
         else:
-            K = np.loadtxt(_text_rows(p), dtype=float, ndmin=2)
+            K = _K_text(p)
         K = np.asarray(K, dtype=float)
     except Exception as e:
         if p.suffix.lower() == ".npy":  # (numpy's advice on allow_pickle means nothing here)
             raise ValueError(f"`{arg}`: cannot read {p} as a numpy array of 3x3 (or 9, or 4) "
                              "numbers: not a .npy file of numbers, or a damaged one") from None
         raise ValueError(f"`{arg}`: cannot parse {p} as a 3x3 matrix ({_loadtxt_reason(e)}): "
-                         "give three rows of three numbers, nine numbers, or fx fy cx cy") \
-            from None
+                         "give three rows of three numbers, nine numbers, or fx fy cx cy (under "
+                         "a header naming them, or as JSON)") from None
     if K.size == 9 and K.shape != (3, 3):  # nine numbers on one line, row by row
         K = K.reshape(3, 3)
     elif K.size == 4:  # fx fy cx cy
@@ -66,6 +68,39 @@ def read_K(path) -> np.ndarray:
             hint = ("; it looks transposed (a column-vector layout, e.g. MATLAB's): give its "
                     "transpose")
         raise ValueError(f"`{arg}`: {p}: {e}{hint}") from None
+
+
+#: The names a K file's header or JSON object may give its four numbers.
+_K_NAMES = ("fx", "fy", "cx", "cy")
+
+
+def _K_text(p: Path):
+    """The numbers of a text K file (:func:`read_K`): JSON, a header of names over the four
+    numbers (a user's 'fx fy cx cy' first line was refused), or plain rows."""
+    import json
+
+    text = p.read_text(encoding="utf-8-sig").strip()
+    if text[:1] in "[{":
+        data = json.loads(text)
+        if isinstance(data, dict):
+            low = {str(k).lower(): v for k, v in data.items()}
+            missing = [k for k in _K_NAMES if k not in low]
+            if missing:
+                raise ValueError(f"a JSON object needs {', '.join(_K_NAMES)}; {missing} missing")
+            data = [low[k] for k in _K_NAMES]
+        return np.asarray(data, dtype=float)
+    rows = _text_rows(p)
+    head = rows[0].split() if rows else []
+    if head and all(w.strip("\"'").lower() in _K_NAMES for w in head):
+        names = [w.strip("\"'").lower() for w in head]
+        if sorted(names) != sorted(_K_NAMES):
+            raise ValueError(f"a header must name {', '.join(_K_NAMES)} once each; got {head}")
+        values = np.loadtxt(rows[1:], dtype=float, ndmin=2)
+        if values.shape != (1, 4):
+            raise ValueError(f"one line of four numbers under the header; got shape "
+                             f"{values.shape}")
+        return np.array([values[0, names.index(k)] for k in _K_NAMES])
+    return np.loadtxt(rows, dtype=float, ndmin=2)
 
 
 def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
