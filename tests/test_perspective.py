@@ -367,6 +367,9 @@ def test_fov_gives_a_centred_pinhole_k(tmp_path, capsys):
     assert main(["integrate", str(tmp_path / "n.npy"), "--fov", "180", "-o",
                  str(tmp_path / "x")]) == 1
     assert "--fov must be a horizontal field of view in degrees" in capsys.readouterr().err
+    for bad in ("abc", None, [60]):  # (the API's: a clear error, not numpy's TypeError)
+        with pytest.raises(ValueError, match="`fov` must be a horizontal field of view"):
+            K_from_fov((30, 40), bad)
     assert main(["info", str(tmp_path / "n.npy"), "--fov", "60"]) == 0
     assert "camera: perspective" in capsys.readouterr().out
 

@@ -282,10 +282,14 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
     for a portrait photo (H > W) the width's is ``2 atan((W / H) tan(fov_long / 2))``
     (docs/conventions.md)."""
     H, W = (int(v) for v in tuple(shape)[:2])
-    if isinstance(fov, bool) or not (np.isfinite(fov) and 0.0 < float(fov) < 180.0):
+    try:
+        value = float(fov)
+    except (TypeError, ValueError):
+        value = float("nan")
+    if isinstance(fov, bool) or not (np.isfinite(value) and 0.0 < value < 180.0):
         raise ValueError(f"`fov` must be a horizontal field of view in degrees, > 0 and < 180; "
                          f"got {fov!r}")
-    f = (W / 2.0) / np.tan(np.radians(float(fov)) / 2.0)
+    f = (W / 2.0) / np.tan(np.radians(value) / 2.0)
     return np.array([[f, 0.0, (W - 1) / 2.0], [0.0, f, (H - 1) / 2.0], [0.0, 0.0, 1.0]])
 
 

@@ -256,7 +256,8 @@ def check_fov(job: Job) -> None:
     K_from_fov((2, 2), job.fov)
     clash = "K" if job.K is not None else ("orthographic" if job.orthographic else None)
     if clash:
-        raise ValueError(f"`fov` {job.fov:g} and `{clash}` contradict each other; give one")
+        raise ValueError(f"`fov` {float(job.fov):g} and `{clash}` contradict each other; "
+                         "give one")
 
 
 def _no_prior_checks(job: Job) -> None:
