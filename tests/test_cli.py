@@ -397,6 +397,14 @@ def test_output_frame_for_the_mesh_and_the_point_cloud(tmp_path, frame, axes):
                                   else a.cells_dict["quad"])
 
 
+def test_an_output_frame_without_a_mesh_or_points_says_so(tmp_path, capsys):
+    np.save(tmp_path / "n.npy", np.dstack([np.zeros((4, 4)), np.zeros((4, 4)), np.ones((4, 4))]))
+    assert main(["integrate", str(tmp_path / "n.npy"), "--output-frame", "opencv", "-s", "npy",
+                 "-o", str(tmp_path / "o")]) == 0
+    err = capsys.readouterr().err
+    assert "--output-frame 'opencv' applies to the mesh and point outputs" in err, err
+
+
 def test_a_bad_output_frame_is_refused_before_the_job(tmp_path, capsys):
     np.save(tmp_path / "n.npy", np.dstack([np.zeros((4, 4)), np.zeros((4, 4)), np.ones((4, 4))]))
     code = main(["integrate", str(tmp_path / "n.npy"), "--output-frame", "x,x,z",

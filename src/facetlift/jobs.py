@@ -399,6 +399,12 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
     _check_outputs(save, job)  # (before any reading or solving: not after the whole job)
     if job.output_frame is not None:
         frames.parse(job.output_frame, "output_frame")
+        if not set(save) & {"ply", "obj", "points"}:  # (accepted and ignored: a review)
+            from ._warnings import warn
+
+            warn(f"`output_frame` {job.output_frame!r} applies to the mesh and point outputs "
+                 "(ply, obj, points), none of which is saved: depth maps stay in facetlift's "
+                 "convention (depth along the viewing axis)")
     src = job.source
     outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)
     names = [OUTPUTS[s] for s in save]
