@@ -314,6 +314,16 @@ def test_a_missing_input_is_a_failed_item_not_the_end_of_the_batch(tmp_path, cap
     assert code == 0 and "batch: 2 of 2 succeeded (1 from an earlier run)" in out
 
 
+def test_one_input_as_a_str_or_a_path(tmp_path):
+    """A Python user's batch('maps/sphere.npy', ...) was read letter by letter (each letter a
+    missing input, '.' the working folder); a Path raised a bare TypeError."""
+    maps(tmp_path / "in", n=1)
+    one = tmp_path / "in" / "m0.png"
+    for given in (str(one), one):
+        recs = facetlift.batch(given, tmp_path / "o", workers=1, save=("npy",), progress=False)
+        assert [(r["name"], r["status"]) for r in recs] == [("m0", "ok")]
+
+
 def test_fov_and_output_frame_in_templates_and_resume_settings(tmp_path):
     """A bad fov, or one with K or orthographic, is refused once for the template, not per
     item; the resume settings leave unset new fields out (older logs stay complete) and read

@@ -397,6 +397,13 @@ def test_output_frame_for_the_mesh_and_the_point_cloud(tmp_path, frame, axes):
                                   else a.cells_dict["quad"])
 
 
+def test_a_bad_frame_for_points_and_meshes_names_frame():
+    s = facetlift.integrate(np.dstack([np.zeros((4, 4)), np.zeros((4, 4)), np.ones((4, 4))]))
+    for call in (lambda: s.points(frame="bogus"), lambda: s.to_mesh(frame="bogus")):
+        with pytest.raises(ValueError, match=r"^`frame` must be one of"):
+            call()
+
+
 def test_an_output_frame_without_a_mesh_or_points_says_so(tmp_path, capsys):
     np.save(tmp_path / "n.npy", np.dstack([np.zeros((4, 4)), np.zeros((4, 4)), np.ones((4, 4))]))
     assert main(["integrate", str(tmp_path / "n.npy"), "--output-frame", "opencv", "-s", "npy",

@@ -1124,8 +1124,16 @@ def test_prior_weight_map_errors_name_the_flag(tmp_path, capsys):
                      str(tmp_path / "prior.npy"), "--prior-weight-map", str(tmp_path / "wneg.npy"),
                      *extra, "-o", str(tmp_path / "o")])
         err = capsys.readouterr().err
-        assert code == 1 and "--prior-weight-map: " in err and "must hold weights >= 0" in err \
-            and "got -1.0 at (row 0, col 0)" in err, err
+        assert code == 1 and ("--prior-weight-map must be finite, >= 0" if not extra else
+                              "--prior-weight-map (times --prior-weight) must be finite, >= 0"
+                              ) in err, err
+    # a sentinel where the prior has no sample is no error (as integrate's prior_weight)
+    wmap = np.full(depth.shape, -1.0)
+    wmap[sel] = 2.0
+    np.save(tmp_path / "wsentinel.npy", wmap)
+    assert main(["integrate", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "prior.npy"),
+                 "--prior-weight-map", str(tmp_path / "wsentinel.npy"), "-s", "npy",
+                 "-o", str(tmp_path / "ok")]) == 0, capsys.readouterr().err
 
 
 def test_points_files_with_a_weight_column(tmp_path, capsys):

@@ -78,6 +78,8 @@ def items(inputs, *, list_file=None) -> list[Item]:
     """
     from .io.images import MASK_FORMATS, NORMAL_READ_FORMATS
 
+    if isinstance(inputs, (str, os.PathLike)):  # (one input: a str was read letter by letter)
+        inputs = [inputs]
     specs = [str(s) for s in inputs]
     if list_file is not None:
         try:
@@ -401,7 +403,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
 
     Parameters
     ----------
-    inputs : sequence of str or Path
+    inputs : str, Path or a sequence of them
         Files, dataset folders, folders of them, glob patterns (see :func:`items`).
     out : str or Path
         The batch's output folder.
@@ -436,8 +438,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     Returns
     -------
     list of dict
-        One record per item, in item order (skipped items: their earlier record, with
-        ``"resumed": True``).
+        One record per item, in item order, inputs that do not exist after the others
+        (skipped items: their earlier record, with ``"resumed": True``).
 
     Raises
     ------

@@ -281,7 +281,14 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
     35 mm-equivalent focal length ``f35`` gives ``2 atan(18 / f35)`` across the long side:
     for a portrait photo (H > W) the width's is ``2 atan((W / H) tan(fov_long / 2))``
     (docs/conventions.md)."""
-    H, W = (int(v) for v in tuple(shape)[:2])
+    try:
+        H, W = (int(v) for v in tuple(shape)[:2])
+        ok = len(tuple(shape)) >= 2 and H > 0 and W > 0 and (H, W) == tuple(shape)[:2]
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"`shape` must be the image's (H, W), two positive integers; got "
+                         f"{shape!r}")
     try:
         value = float(fov)
     except (TypeError, ValueError):

@@ -893,9 +893,9 @@ def _as_flags(message: str) -> str:
                     names[param.name] = typed[0]
     # (a --prior-weight-map's values are checked as integrate's `prior_weight`, and
     # `mat_keys` comes from no file: both were named as Python arguments, a user's check)
-    if "prior_weight" not in names and any(a == "--prior-weight-map" or a.startswith(
-            "--prior-weight-map=") for a in args):
-        names["prior_weight"] = "--prior-weight-map"
+    if any(a == "--prior-weight-map" or a.startswith("--prior-weight-map=") for a in args):
+        names["prior_weight"] = ("--prior-weight-map" if "prior_weight" not in names
+                                 else f"--prior-weight-map (times {names['prior_weight']})")
     names.setdefault("mat_keys", "--mat-keys")
     # (a method option given as --option KEY=VALUE: named so, `k` alone was a name the user
     # had not typed, a user's check)

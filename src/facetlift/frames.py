@@ -133,9 +133,9 @@ def _axes(channels, signs) -> str:
                     for c, s in zip(channels, signs, strict=True))
 
 
-def is_identity(frame) -> bool:
+def is_identity(frame, name: str = "normal_frame") -> bool:
     """True when `frame` is the facetlift frame (nothing to convert)."""
-    channels, signs = parse(frame)
+    channels, signs = parse(frame, name)
     return channels == (0, 1, 2) and bool((signs > 0).all())
 
 
@@ -197,7 +197,7 @@ def to_facetlift(normals: np.ndarray, frame) -> np.ndarray:
 def from_facetlift(normals: np.ndarray, frame, name: str = "normal_frame") -> np.ndarray:
     """(..., 3) facetlift normals (or points) -> `frame`: the inverse of
     :func:`to_facetlift`."""
-    if is_identity(frame):
+    if is_identity(frame, name):
         return normals
     channels, signs = parse(frame, name)
     out = np.empty_like(normals, dtype=np.result_type(normals, float))

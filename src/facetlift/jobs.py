@@ -204,14 +204,9 @@ def read(job: Job) -> Input:
         conf = io.read_weights(job.confidence, arg="confidence")
     weight = job.prior_weight
     if job.prior_weight_map is not None:  # (times --prior-weight: an 8-bit map reaches 100)
-        wmap = io.read_weights(job.prior_weight_map, arg="prior_weight_map")
-        bad = ~(np.isfinite(wmap) | np.isnan(wmap)) | (wmap < 0)
-        if bad.any():  # (checked as the map: its product was blamed on --prior-weight)
-            r, c = np.argwhere(bad)[0]
-            raise ValueError(f"`prior_weight_map`: {job.prior_weight_map} must hold weights "
-                             f">= 0 (NaN where there is no sample); got {float(wmap[r, c])!r} "
-                             f"at (row {r}, col {c}) ({int(bad.sum())} such pixel(s))")
-        weight = job.prior_weight * wmap
+        # (its values are checked where the prior has a sample, as integrate's prior_weight:
+        # a sentinel elsewhere is no error; the command line names the map in the message)
+        weight = job.prior_weight * io.read_weights(job.prior_weight_map, arg="prior_weight_map")
     for name, arr in (("prior", prior), ("confidence", conf), ("prior_weight_map", weight)):
         if isinstance(arr, np.ndarray) and arr.shape != n.shape[:2]:
             raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW) but the normal "

@@ -144,11 +144,11 @@ class Surface:
         ``.npz``: depth, vertex depth, mask, pixel size and K (3 x 3 NaN for an orthographic
         surface: test ``np.isnan(K).all()``), and where the surface has
         depth jumps the cut edges ``cuts_right``, ``cuts_down`` and the ``discontinuities``
-        map; ``.ply``/``.obj``: the mesh, split at the jumps (quads, or triangles with
-        ``triangles=True``); ``.png``: a shaded preview (any ``.png`` name: the map of the
-        jumps is :func:`facetlift.io.write_discontinuities`, as ``--save discontinuities``
-        writes it). ``frame=`` writes a mesh in another frame (:meth:`to_mesh`). Files are
-        written atomically. Returns the path written.
+        map; ``.ply``/``.obj``: the mesh, split at the jumps (``.ply`` quads and ``.obj``
+        triangles unless ``triangles=`` says otherwise); ``.png``: a shaded preview (any
+        ``.png`` name: the map of the jumps is :func:`facetlift.io.write_discontinuities`, as
+        ``--save discontinuities`` writes it). ``frame=`` writes a mesh in another frame
+        (:meth:`to_mesh`). Files are written atomically. Returns the path written.
         """
         from . import io
 

@@ -737,8 +737,10 @@ def _numeric(word: str) -> bool:
     return True
 
 
-def read_weights(path, *, arg: str) -> np.ndarray:
-    """An (H, W) map of weights >= 0 (``--confidence``, ``--prior-weight-map``): ``.npy``,
+def read_weights(path, *, arg: str = "weights") -> np.ndarray:
+    """An (H, W) map of weights (``--confidence``, ``--prior-weight-map``; their values, >= 0
+    where they apply, are checked by :func:`facetlift.integrate` against the mask, so a
+    sentinel outside it is no error): ``.npy``,
     EXR and floating-point TIFF as stored; an 8- or 16-bit image (PNG or TIFF) as ``value /
     255`` or ``value / 65535`` (the same mask gives the same weights in either format; a TIFF
     of 255s was read as 255). A grey image stored as RGB(A), or an EXR with equal R, G, B
