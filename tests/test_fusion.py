@@ -238,6 +238,9 @@ def test_confidence_lowers_the_weight_of_bad_normals():
 @pytest.mark.parametrize("kwargs,match", [
     ({"prior": np.zeros((5, 5))}, r"`prior` must be an \(H, W\) depth map of shape \(24, 28\)"),
     ({"prior": np.full((24, 28), np.nan)}, "`prior` has no finite depth sample inside the mask"),
+    # (every point left out, here two disagreeing in one pixel: said so, an audit)
+    ({"prior": (np.array([3, 3]), np.array([4, 4]), np.array([1.0, 5.0]))},
+     r"no finite depth sample inside the mask; its points were all left out .*disagreeing"),
     ({"prior": np.full((24, 28), np.inf)}, "`prior` must not contain inf"),
     ({"prior": np.ones((24, 28)), "prior_weight": -1.0}, "`prior_weight` must be a finite "
      "number >= 0; got -1.0"),

@@ -997,10 +997,14 @@ def check_prior(prior, prior_weight, shape, mask, camera):
     have = np.isfinite(depth)
     if not have.any():
         outside = int(np.isfinite(img).sum())
+        # (points all left out, e.g. every pixel's points conflicting: said so, an audit)
+        left = ("; its points were all left out or fell outside the mask (the warnings above "
+                "say why: outside the image, behind the camera, non-finite, or disagreeing "
+                "within a pixel)" if _is_points(prior, shape) and not outside else "")
         raise ValueError(
             "`prior` has no finite depth sample inside the mask"
             + (f" ({outside} outside it)" if outside else "")
-            + "; give depths where the normals are, NaN elsewhere"
+            + (left or "; give depths where the normals are, NaN elsewhere")
         )
     wbad = have & ~(np.isfinite(w) & (w >= 0) & (w <= MAX_PRIOR_WEIGHT))
     if wbad.any():
