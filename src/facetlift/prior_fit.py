@@ -267,6 +267,58 @@ def _pairs(ok, lab, surface, distance):
     return np.concatenate(ii), np.concatenate(jj)
 
 
+#: Where too few samples lie :data:`PAIR_DISTANCE` apart (sparse points), each sample is paired
+#: with its SPARSE_NEIGHBOURS nearest ones in the same piece, within SPARSE_REACH times the
+#: median nearest-neighbour distance (:func:`_nearest_pairs`): the pieces' fit, which came
+#: next, compares whole pieces of a surface that jumps the normals do not show bend (an
+#: audit: 1 % exact samples of the analytic occluder and steps gave a scale 22-24 % off with
+#: a jackknife error of 2-8 %).
+SPARSE_PAIRS, SPARSE_NEIGHBOURS, SPARSE_REACH = True, 3, 3.0
+
+
+def _nearest_pairs(ok, lab, surface):
+    """Flat indices (i, j) of each `ok` pixel and its :data:`SPARSE_NEIGHBOURS` nearest `ok`
+    pixels in the same piece of `lab`, within :data:`SPARSE_REACH` median nearest-neighbour
+    distances, with no cut edge of `surface` on one of the two paths between them along a
+    row and a column, each pair once."""
+    from scipy.spatial import cKDTree
+
+    r, c = np.nonzero(ok)
+    if r.size < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    pts = np.column_stack([r, c]).astype(float)
+    k = min(SPARSE_NEIGHBOURS + 1, r.size)
+    dist, nb = cKDTree(pts).query(pts, k=k)
+    reach = SPARSE_REACH * float(np.median(dist[:, 1]))
+    a = np.repeat(np.arange(r.size), k - 1)
+    b, d = nb[:, 1:].ravel(), dist[:, 1:].ravel()
+    W = ok.shape[1]
+    flat = r * W + c
+    keep = (d <= reach) & (lab[r[a], c[a]] == lab[r[b], c[b]]) & (a < b)
+    # (each pair once: a < b drops the mirrored ones; a pair only one side lists is kept)
+    mirror = (d <= reach) & (lab[r[a], c[a]] == lab[r[b], c[b]]) & (a > b)
+    pairs = {(int(x), int(y)) for x, y in zip(a[keep], b[keep], strict=True)}
+    pairs |= {(int(y), int(x)) for x, y in zip(a[mirror], b[mirror], strict=True)}
+    if not pairs:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    ij = np.array(sorted(pairs), dtype=np.int64)
+    if surface.cuts is not None:  # (no cut on the row-then-column or column-then-row path)
+        cr = np.cumsum(np.pad(surface.cuts[0], ((0, 0), (1, 0))), axis=1)  # (H, W)
+        cd = np.cumsum(np.pad(surface.cuts[1], ((1, 0), (0, 0))), axis=0)
+        r1, c1, r2, c2 = r[ij[:, 0]], c[ij[:, 0]], r[ij[:, 1]], c[ij[:, 1]]
+
+        def crossed(ra, ca, cb):  # (cut edges along row ra between columns ca and cb)
+            return np.abs(cr[ra, cb] - cr[ra, ca])
+
+        def crossed_col(ca, ra, rb):
+            return np.abs(cd[rb, ca] - cd[ra, ca])
+
+        rows_first = crossed(r1, c1, c2) + crossed_col(c2, r1, r2)
+        cols_first = crossed_col(c1, r1, r2) + crossed(r2, c1, c2)
+        ij = ij[(rows_first == 0) | (cols_first == 0)]
+    return flat[ij[:, 0]], flat[ij[:, 1]]
+
+
 def _by_pairs(prior_img, z, surface, lab, kind, perspective, w_img, side, distance,
               error: bool = True):
     """The scale from differences between samples `distance` pixels apart in one piece, with
@@ -287,6 +339,8 @@ def _by_pairs(prior_img, z, surface, lab, kind, perspective, w_img, side, distan
         ok &= z > 0
     u = (np.log(np.where(ok, z, 1.0)) if perspective else z).ravel()
     i, j = _pairs(ok, lab, surface, distance)
+    if i.size < 6 * MIN_SAMPLES and SPARSE_PAIRS:  # (sparse samples: their nearest ones)
+        i, j = _nearest_pairs(ok, lab, surface)
     if i.size < 6 * MIN_SAMPLES:
         return None
     P = prior_img.ravel()
