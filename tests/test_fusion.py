@@ -1112,6 +1112,11 @@ def test_a_few_points_as_a_list_of_rows_are_refused_not_read_as_columns():
     with pytest.raises(ValueError, match=r"got shape \(5, 3\); a list of \(row, col, depth\) "
                        "points"):
         run(n, prior=[(5, 6, 1.5)] * 5)
+    r3 = np.array([[5, 6, 7, 8, 9], [6, 7, 6, 8, 9], [1.5] * 5])  # (rows, cols, depths) rows
+    with pytest.raises(ValueError, match=r"got shape \(3, 5\); the rows \(rows, cols, depths"
+                       r"\[, weights\]\) of one array\? Give them as a tuple, tuple\(arr\)"):
+        run(n, prior=r3)
+    assert run(n, prior=tuple(r3)).info["prior"]["samples"] == 5
     # a map of three or four rows given as a nested list is a map (a review)
     small = np.ones((4, 5, 3)) * [0.0, 0.0, 1.0]
     for rows in (3, 4):

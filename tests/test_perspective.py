@@ -370,6 +370,9 @@ def test_fov_gives_a_centred_pinhole_k(tmp_path, capsys):
     for bad in ("abc", None, [60]):  # (the API's: a clear error, not numpy's TypeError)
         with pytest.raises(ValueError, match="`fov` must be a horizontal field of view"):
             K_from_fov((30, 40), bad)
+    with pytest.warns(UserWarning, match=r"`fov` 1.2 deg is a telescope's .*in radians\? Give "
+                      r"degrees \(68.75 deg for 1.2 rad\)"):
+        K_from_fov((30, 40), 1.2)
     for shape in (200, (-5, 0), (200.7, 300.2)):  # (an audit: silently 0 or truncated)
         with pytest.raises(ValueError, match=r"`shape` must be the image's \(H, W\)"):
             K_from_fov(shape, 60)

@@ -274,6 +274,11 @@ class Pinhole(Camera):
         return f"Pinhole(fx={K[0, 0]:g}, fy={K[1, 1]:g}, cx={K[0, 2]:g}, cy={K[1, 2]:g})"
 
 
+#: A field of view (degrees) below which :func:`K_from_fov` asks whether it was given in
+#: radians (pi rad is 180 deg; a phone's 1.2 rad, 69 deg, read as 1.2 deg gave fx = 14,323).
+FOV_RADIANS = 3.2
+
+
 def K_from_fov(shape, fov: float) -> np.ndarray:
     """A pinhole K for an (H, W) image from its horizontal field of view `fov` (degrees,
     across the width, the W columns): ``fx = fy = (W / 2) / tan(fov / 2)``, the principal
@@ -296,6 +301,11 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
     if isinstance(fov, bool) or not (np.isfinite(value) and 0.0 < value < 180.0):
         raise ValueError(f"`fov` must be a horizontal field of view in degrees, > 0 and < 180; "
                          f"got {fov!r}")
+    if value < FOV_RADIANS:  # (a field of view in radians read as degrees: a telescope)
+        from ._warnings import warn
+
+        warn(f"`fov` {value:g} deg is a telescope's field of view: is it in radians? Give "
+             f"degrees ({np.degrees(value):.4g} deg for {value:g} rad)")
     f = (W / 2.0) / np.tan(np.radians(value) / 2.0)
     return np.array([[f, 0.0, (W - 1) / 2.0], [0.0, f, (H - 1) / 2.0], [0.0, 0.0, 1.0]])
 

@@ -957,7 +957,8 @@ def prior_samples(prior, shape: tuple[int, int],
     if arr.shape != shape:
         hint = ("; a list of (row, col, depth) points? Give it as columns, "
                 "tuple(np.asarray(points, float).T)" if arr.ndim == 2 and arr.shape[1] in (3, 4)
-                else "")
+                else "; the rows (rows, cols, depths[, weights]) of one array? Give them as "
+                "a tuple, tuple(arr)" if arr.ndim == 2 and arr.shape[0] in (3, 4) else "")
         raise ValueError(f"`prior` must be an (H, W) depth map of shape {shape} to match "
                          f"`normals` (NaN where unknown) or a (rows, cols, depths) triple; got "
                          f"shape {arr.shape}{hint}")
