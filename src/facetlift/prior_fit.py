@@ -240,14 +240,21 @@ def _determined(got, limit) -> bool:
     return got is not None and got["scale"] > 0 and got["error"] <= limit
 
 
+def _cut_counts(surface):
+    """``(along_rows, along_columns)``, each (H, W): the cut edges of `surface` from the
+    row's (the column's) first pixel to each pixel, whose difference counts the cuts between
+    two pixels of a row (a column); ``(None, None)`` without cuts."""
+    if surface.cuts is None:
+        return None, None
+    return (np.cumsum(np.pad(surface.cuts[0], ((0, 0), (1, 0))), axis=1),
+            np.cumsum(np.pad(surface.cuts[1], ((1, 0), (0, 0))), axis=0))
+
+
 def _pairs(ok, lab, surface, distance):
     """Flat indices (i, j) of the pairs of pixels `distance` apart along a row or a column,
     both `ok`, in one piece of `lab` and with no cut edge of `surface` between them."""
     H, W = ok.shape
-    cut_r = cut_d = None
-    if surface.cuts is not None:
-        cut_r = np.cumsum(np.pad(surface.cuts[0], ((0, 0), (1, 0))), axis=1)  # (H, W)
-        cut_d = np.cumsum(np.pad(surface.cuts[1], ((1, 0), (0, 0))), axis=0)  # (H, W)
+    cut_r, cut_d = _cut_counts(surface)
     flat = np.arange(H * W).reshape(H, W)
     ii, jj = [], []
     d = int(distance)
@@ -292,30 +299,18 @@ def _nearest_pairs(ok, lab, surface):
     reach = SPARSE_REACH * float(np.median(dist[:, 1]))
     a = np.repeat(np.arange(r.size), k - 1)
     b, d = nb[:, 1:].ravel(), dist[:, 1:].ravel()
-    W = ok.shape[1]
-    flat = r * W + c
-    keep = (d <= reach) & (lab[r[a], c[a]] == lab[r[b], c[b]]) & (a < b)
-    # (each pair once: a < b drops the mirrored ones; a pair only one side lists is kept)
-    mirror = (d <= reach) & (lab[r[a], c[a]] == lab[r[b], c[b]]) & (a > b)
-    pairs = {(int(x), int(y)) for x, y in zip(a[keep], b[keep], strict=True)}
-    pairs |= {(int(y), int(x)) for x, y in zip(a[mirror], b[mirror], strict=True)}
-    if not pairs:
+    keep = (d <= reach) & (lab[r[a], c[a]] == lab[r[b], c[b]])
+    # (each pair once, listed by either side: the sorted unique index pairs)
+    ij = np.unique(np.sort(np.column_stack([a[keep], b[keep]]), axis=1), axis=0)
+    if ij.size == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    ij = np.array(sorted(pairs), dtype=np.int64)
-    if surface.cuts is not None:  # (no cut on the row-then-column or column-then-row path)
-        cr = np.cumsum(np.pad(surface.cuts[0], ((0, 0), (1, 0))), axis=1)  # (H, W)
-        cd = np.cumsum(np.pad(surface.cuts[1], ((1, 0), (0, 0))), axis=0)
+    cr, cd = _cut_counts(surface)
+    if cr is not None:  # (no cut on the row-then-column or column-then-row path)
         r1, c1, r2, c2 = r[ij[:, 0]], c[ij[:, 0]], r[ij[:, 1]], c[ij[:, 1]]
-
-        def crossed(ra, ca, cb):  # (cut edges along row ra between columns ca and cb)
-            return np.abs(cr[ra, cb] - cr[ra, ca])
-
-        def crossed_col(ca, ra, rb):
-            return np.abs(cd[rb, ca] - cd[ra, ca])
-
-        rows_first = crossed(r1, c1, c2) + crossed_col(c2, r1, r2)
-        cols_first = crossed_col(c1, r1, r2) + crossed(r2, c1, c2)
-        ij = ij[(rows_first == 0) | (cols_first == 0)]
+        along_row1, along_row2 = cr[r1, c2] != cr[r1, c1], cr[r2, c2] != cr[r2, c1]
+        along_col1, along_col2 = cd[r2, c1] != cd[r1, c1], cd[r2, c2] != cd[r1, c2]
+        ij = ij[~(along_row1 | along_col2) | ~(along_col1 | along_row2)]
+    flat = r * ok.shape[1] + c
     return flat[ij[:, 0]], flat[ij[:, 1]]
 
 
