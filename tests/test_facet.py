@@ -178,6 +178,7 @@ def test_a_slow_box_is_replaced_by_a_factorization_where_that_is_predicted_faste
     from facetlift.linalg import facet
 
     d, strong, K, b = _many_disks_with_gaps()
+    monkeypatch.setattr(facet, "SCATTERED", 2.0)  # (no factorization before the probe)
     monkeypatch.setattr(facet, "FACTOR_PER_UNKNOWN", 1e6)  # "costly": CG goes on
     pre = FacetPreconditioner(d, K, strong, coarse="box")
     x_cg, info_cg = facet.solve(K, b, pre, rtol=1e-10)
@@ -201,6 +202,7 @@ def test_a_slow_box_is_replaced_by_a_factorization_where_that_is_predicted_faste
     assert pre.direct is None
 
     monkeypatch.undo()  # the model as it is decides by a model, not a clock: the same route
+    monkeypatch.setattr(facet, "SCATTERED", 2.0)
     runs = []
     for _ in range(2):
         pre = FacetPreconditioner(d, K, strong, coarse="box")
@@ -243,16 +245,79 @@ def test_no_switch_when_cg_was_asked_for_and_cg_goes_on_when_the_factorization_f
     n[np.random.default_rng(2).random(mask.shape) < 0.3] = np.nan
     assert facetlift.integrate(n, mask, backend="pcg").info["backend"] == "pcg-facet"
 
-    def broken(K, grid=None):
-        raise SolverError("SuperLU factorization failed: singular")
+    real = direct.superlu
 
-    monkeypatch.setattr(direct, "superlu", broken)
+    def broken(K, grid=None):  # (the whole system's; the local block's factorizes)
+        if K.shape[0] == d.n_vertices:
+            raise SolverError("SuperLU factorization failed: singular")
+        return real(K, grid)
+
     d, strong, K, b = _many_disks_with_gaps()
+    monkeypatch.setattr(direct, "superlu", broken)
     pre = FacetPreconditioner(d, K, strong, coarse="box")
     x, info = facet.solve(K, b, pre, rtol=1e-10)
     assert info.converged and pre.direct is None and pre.direct_failed
     assert info.iterations > facet.PROBE
     assert np.linalg.norm(K @ x - b) <= 1e-8 * np.linalg.norm(b)
+
+
+def test_scattered_gaps_factorize_before_the_probe_where_the_model_says_it_is_cheap(
+        monkeypatch):
+    """30 % of the facets without a target, scattered: CG would need about twice its usual
+    iterations, so a factorization the model prices below FIRST_ITERATIONS box iterations is
+    taken before any iteration (and the local block is never factorized); priced above, or
+    with fewer scattered gaps, or where the caller asked for CG, the probe runs as before."""
+    from facetlift.linalg import facet
+
+    d, strong, K, b = _many_disks_with_gaps()
+    pre = FacetPreconditioner(d, K, strong, coarse="box")
+    assert pre.scattered > facet.SCATTERED and pre.n_weak > 0
+    x, info = facet.solve(K, b, pre, rtol=1e-10)
+    assert info.converged and info.iterations == 0 and pre.direct is not None
+    assert info.relative_residual < 1e-10 and pre._lu is None
+    ref_pre = FacetPreconditioner(d, K, strong, coarse="box")
+    ref_pre.may_factorize = False  # (CG, as asked: no factorization at all)
+    x_cg, info_cg = facet.solve(K, b, ref_pre, rtol=1e-10)
+    assert ref_pre.direct is None and info_cg.iterations > facet.PROBE
+    comp = d.vertex_component
+    diff = x - x_cg
+    diff -= (np.bincount(comp, diff) / np.bincount(comp))[comp]
+    assert np.abs(diff).max() < 1e-6 * np.abs(x_cg).max()
+
+    monkeypatch.setattr(facet, "FIRST_ITERATIONS", 1e-3)  # priced above: the probe first
+    pre = FacetPreconditioner(d, K, strong, coarse="box")
+    x, info = facet.solve(K, b, pre, rtol=1e-10)
+    assert info.iterations >= facet.PROBE
+    monkeypatch.undo()
+    monkeypatch.setattr(facet, "SCATTERED", 0.5)  # fewer scattered gaps than the rule's
+    pre = FacetPreconditioner(d, K, strong, coarse="box")
+    x, info = facet.solve(K, b, pre, rtol=1e-10)
+    assert info.iterations >= facet.PROBE
+
+
+def test_a_local_block_of_most_unknowns_factorizes_the_whole_system_first(monkeypatch):
+    """Half the facets without a target percolate into one cluster: the local block would be
+    a 2-D system nearly as large as the whole, so the whole is factorized first, whatever
+    the time model says (LOCAL_WHOLE); the answer is the CG answer."""
+    from facetlift.linalg import facet
+
+    r, c = np.mgrid[0:96, 0:96]
+    d = Domain.from_mask((r - 47.5) ** 2 + (c - 47.5) ** 2 < 45 ** 2)
+    rng = np.random.default_rng(5)
+    strong = rng.random(d.n_facets) >= 0.5
+    K = facet_form(d, [(np.where(strong, 1.0, 1e-9), SLOPE_BLOCK), (1.0, TWIST_BLOCK)])
+    b = K @ rng.standard_normal(d.n_vertices)
+    monkeypatch.setattr(facet, "FACTOR_PER_UNKNOWN", 1e6)  # (the model says "costly")
+    pre = FacetPreconditioner(d, K, strong, coarse="box")
+    assert pre.n_weak > facet.LOCAL_WHOLE * d.n_vertices
+    x, info = facet.solve(K, b, pre, rtol=1e-10)
+    assert info.iterations == 0 and pre.direct is not None and info.relative_residual < 1e-10
+    ref = FacetPreconditioner(d, K, strong, coarse="box")
+    ref.may_factorize = False
+    x_cg, info_cg = facet.solve(K, b, ref, rtol=1e-10)
+    assert info_cg.converged and ref.direct is None
+    diff = (x - x_cg) - np.mean(x - x_cg)  # (one component: one constant)
+    assert np.abs(diff).max() < 1e-6 * np.abs(x_cg).max()
 
 
 def test_an_inexact_factorization_never_replaces_a_better_iterate(monkeypatch):

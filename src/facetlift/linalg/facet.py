@@ -144,7 +144,7 @@ def thin(domain) -> bool:
     return int(core.sum()) < THIN_SHARE * domain.n_facets
 
 
-def weak_vertices(domain, strong: np.ndarray, *, every: bool = False) -> np.ndarray:
+def weak_vertices(domain, strong: np.ndarray, *, every: bool = False, big=None) -> np.ndarray:
     """(n,) bool: the vertices of the local solve.
 
     Vertices all of whose facets are weak (``strong`` False), and every vertex of a weak
@@ -158,22 +158,35 @@ def weak_vertices(domain, strong: np.ndarray, *, every: bool = False) -> np.ndar
     domain : Domain
     strong : (m,) bool
         Facets carrying the full slope-and-twist block (e.g. facets with a target normal).
+    big : (m,) bool, optional
+        :func:`clustered` of the weak facets, where the caller has it.
     """
-    import scipy.ndimage as ndi
-
     vm = domain.vertex_mask
     weak = ~np.asarray(strong, dtype=bool)
     if every:
         return _touched(domain, weak)[vm]
     out = ~_touched(domain, ~weak)[vm]
-    if weak.sum() >= CLUSTER:
-        img = domain.to_image(weak, fill=False).astype(bool)
-        labels, _ = ndi.label(img, structure=np.ones((3, 3), dtype=bool))
-        sizes = np.bincount(labels.ravel())
-        big = (sizes >= CLUSTER) & (sizes <= MAX_LOCAL)
-        big[0] = False
-        out |= _touched(domain, big[labels[domain.pixels]])[vm]
+    if big is None:
+        big = clustered(domain, weak)
+    if big.any():
+        out |= _touched(domain, big)[vm]
     return out
+
+
+def clustered(domain, weak: np.ndarray) -> np.ndarray:
+    """(m,) bool: the `weak` facets in 8-connected clusters of :data:`CLUSTER` to
+    :data:`MAX_LOCAL` weak facets (whose every vertex :func:`weak_vertices` takes)."""
+    import scipy.ndimage as ndi
+
+    weak = np.asarray(weak, dtype=bool)
+    if weak.sum() < CLUSTER:
+        return np.zeros_like(weak)
+    img = domain.to_image(weak, fill=False).astype(bool)
+    labels, _ = ndi.label(img, structure=np.ones((3, 3), dtype=bool))
+    sizes = np.bincount(labels.ravel())
+    big = (sizes >= CLUSTER) & (sizes <= MAX_LOCAL)
+    big[0] = False
+    return big[labels[domain.pixels]]
 
 
 def heavy_vertices(K, mass: np.ndarray) -> np.ndarray:
@@ -195,6 +208,19 @@ def heavy_vertices(K, mass: np.ndarray) -> np.ndarray:
     if heavy.sum() > HEAVY_SHARE * heavy.size:
         return np.zeros_like(heavy)
     return heavy
+
+
+def _local_factor(KEE, domain, E: np.ndarray):
+    """The local block's factorization: SuperLU in nested-dissection order on the grid
+    positions of its vertices `E` (:func:`facetlift.linalg.direct.superlu`). A large cluster
+    of weak facets (half the normals missing at random: the weak facets percolate) makes the
+    block a 2-D grid system of its own, which SuperLU's minimum-degree order filled badly:
+    a 512^2 disk with 50 % missing normals took 0.85 s to factorize and 23 ms per local
+    solve (docs/benchmarks.md)."""
+    from .direct import superlu
+
+    vr, vc = domain.vertices
+    return superlu(KEE, (vr[E], vc[E]))
 
 
 class FacetPreconditioner:
@@ -326,7 +352,12 @@ class FacetPreconditioner:
         # on a thin domain (a strip a few pixels wide) the weak vertices' block factorizes
         # with little fill however many there are: take them all (thin spiral with 30 %
         # missing normals at 2048^2: 643 CG iterations, 88 s with the clusters only)
-        local = weak_vertices(self.domain, strong, every=self._thin)
+        weak = ~np.asarray(strong, dtype=bool)
+        big = None if self._thin else clustered(self.domain, weak)
+        local = weak_vertices(self.domain, strong, every=self._thin, big=big)
+        #: share of the facets that are weak outside the local solve's clusters (scattered
+        #: missing normals: CG needs about twice the iterations, :func:`_factorize_first`)
+        self.scattered = 0.0 if big is None else float(np.mean(weak & ~big))
         if self._heavy is not None:
             local |= self._heavy
         E = np.flatnonzero(local)
@@ -336,10 +367,8 @@ class FacetPreconditioner:
             self._kc_inv = 1.0 / np.maximum(kc, 1e-300)
         self.n_weak = int(E.size)
         self._E = E
-        self._lu = None
+        self._lu = self._KEE = None
         if E.size:
-            import scipy.sparse.linalg as spla
-
             K = sp.csr_matrix(K)
             rows = K[E]
             # the rows of K at E, and (K symmetric) its columns of E restricted to the rows
@@ -351,12 +380,18 @@ class FacetPreconditioner:
             # a tiny diagonal shift keeps a weak cluster that is free in the constant (a whole
             # component without targets) factorizable; CG works in the range of K anyway
             shift = 1e-12 * max(float(np.abs(KEE.diagonal()).max()), 1e-300)
-            KEE = KEE + sp.diags(np.full(E.size, shift), format="csc")
-            self._lu = spla.splu(
-                KEE, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                options={"SymmetricMode": True},
-            )
+            # (factorized at its first use: a solve that factorizes the whole system first,
+            # :func:`_factorize_first`, never needs it)
+            self._KEE = KEE + sp.diags(np.full(E.size, shift), format="csc")
         return self
+
+    @property
+    def _local(self):
+        """The local block's factorization (:func:`_local_factor`), made at the first use."""
+        if self._lu is None:
+            self._lu = _local_factor(self._KEE, self.domain, self._E)
+            self._KEE = None
+        return self._lu
 
     def _coarse(self, r: np.ndarray) -> np.ndarray:
         return self._P @ (self._kc_inv * (self._P.T @ r))
@@ -371,9 +406,9 @@ class FacetPreconditioner:
         return x
 
     def _apply(self, r: np.ndarray) -> np.ndarray:
-        if self._lu is None:
+        if not self._E.size:
             return self._global(r)
-        E, lu = self._E, self._lu
+        E, lu = self._E, self._local
         xE = lu.solve(r[E])
         r1 = r.copy()
         r1[self._near] -= self._cols_E @ xE
@@ -404,6 +439,14 @@ def solve(
         start = 1.0 if x0 is None else float(np.linalg.norm(b - K @ x0)) / bn
         if start <= rtol:
             return x0, CGInfo(converged=True, residuals=[start])
+        done = _direct(K, b, pre, CGInfo(residuals=[start]), rtol)
+        if done is not None and done[1].converged:
+            return done
+        if done is not None and done[1].residuals[-1] < start:  # (CG goes on from the better)
+            x0 = done[0]
+    if (pre.direct is None or pre.direct[0] is not K) and _factorize_first(K, pre):
+        bn = float(np.linalg.norm(b)) or 1.0
+        start = 1.0 if x0 is None else float(np.linalg.norm(b - K @ x0)) / bn
         done = _direct(K, b, pre, CGInfo(residuals=[start]), rtol)
         if done is not None and done[1].converged:
             return done
@@ -506,6 +549,53 @@ def _factorize_instead(K, pre, remaining: float) -> bool:
     estimate = FACTOR_PER_UNKNOWN * n + FACTOR_PER_WORK * factorization_work(
         *pre.domain.vertices)
     return estimate < SWITCH_MARGIN * remaining * iteration
+
+
+#: :func:`_factorize_first`: the whole system is factorized before any CG iteration where the
+#: local block holds more than this share of the unknowns (more than about 40 % of the normals
+#: missing at random: the weak facets percolate into one cluster, and the local block is a 2-D
+#: system nearly as large as the whole, solved twice per iteration: a 512^2 disk with 50 %
+#: missing took 5.0 s, factorized 0.65 s; docs/benchmarks.md) ...
+LOCAL_WHOLE = 0.25
+
+#: ... or where at least this share of the facets are weak outside the local clusters
+#: (scattered missing normals: 52-93 CG iterations at 30 % on the mask suite's shapes, 24-45
+#: with every normal) and the modelled factorization costs less than :data:`FIRST_ITERATIONS`
+#: box iterations (:data:`ITERATION_PER_UNKNOWN`, and :data:`ITERATION_PER_CELL` per cell of
+#: the domain's bounding box, half that for a float32 box, :data:`FLOAT32_FROM`). Measured with
+#: 30 % missing on the mask suite (2026-12-04, best of 2 against CG): factorized first 0.32-0.83x
+#: the time where the model's ratio was 31-78 iterations (bear, human and many components at
+#: 256^2-1024^2, the torus at 256^2), 1.19-1.8x where it was 127-204 (the torus at 512^2 and
+#: 1024^2, the bear mask at 1024^2, the disk at 512^2; the human mask at 2048^2, 115: 8.7 s
+#: against CG's 4.8 s), a tie at 93 (the disk at 256^2); with 10 % missing (scattered share
+#: 0.1) the gains were mixed (0.71-1.42x), so those stay with CG.
+SCATTERED, FIRST_ITERATIONS = 0.2, 85.0
+
+
+def _factorize_first(K, pre) -> bool:
+    """Whether :func:`solve` factorizes `K` before the probe (:data:`LOCAL_WHOLE`,
+    :data:`SCATTERED`): a model, as :func:`_factorize_instead`, with the same conditions
+    (the caller allows it, SuperLU, :data:`FACTOR_CAP`, the memory)."""
+    from ..memory import factorization_fits
+    from . import factorizer
+    from .ordering import factorization_work
+
+    if not pre.may_factorize or pre.direct_failed or pre.coarse != "box" or pre.exact:
+        return False
+    n = K.shape[0]
+    large_local = pre.n_weak > LOCAL_WHOLE * n
+    if not large_local and pre.scattered < SCATTERED:
+        return False
+    if factorizer() != "superlu" or n > FACTOR_CAP or not factorization_fits(n):
+        return False
+    if large_local:
+        return True
+    box = box_vertices(pre.domain)
+    iteration = ITERATION_PER_UNKNOWN * n + ITERATION_PER_CELL * box * (
+        0.5 if box >= FLOAT32_FROM else 1.0)
+    estimate = FACTOR_PER_UNKNOWN * n + FACTOR_PER_WORK * factorization_work(
+        *pre.domain.vertices)
+    return estimate < FIRST_ITERATIONS * iteration
 
 
 def _direct(K, b, pre, info: CGInfo, rtol: float):
