@@ -60,7 +60,7 @@ def sparse_prior(weight, fixed) -> bool:
     return bool(np.all(fixed)) and float(np.mean(weight > 0)) <= SPARSE_PRIOR
 
 
-def _multigrid_trial(K, rhs, progress):
+def _multigrid_trial(K, rhs, progress, rtol=RTOL):
     """CG on `K` preconditioned by a Ruge-Stueben V-cycle, at most :data:`AMG_TRIAL`
     iterations: ``(x, CGInfo)``, or ``(None, None)`` where the hierarchy cannot be built
     (a singular coarsest level). Isolated stiff samples: the box preconditioner does not see
@@ -70,12 +70,12 @@ def _multigrid_trial(K, rhs, progress):
         pre(np.zeros(K.shape[0]))  # (factorizes the coarsest level now, inside the guard)
     except RuntimeError:
         return None, None
-    return linalg.cg(K, rhs, pre, rtol=RTOL, maxiter=AMG_TRIAL, progress=progress)
+    return linalg.cg(K, rhs, pre, rtol=rtol, maxiter=AMG_TRIAL, progress=progress)
 
 
 def solve_direct(
     domain, bx, by, target, backend="auto", flat_weight=1e-9, weights=None, *, h=1.0,
-    prior=None, progress=None, blur=None,
+    prior=None, progress=None, blur=None, rtol=None,
 ):
     """The fixed point of the local/global loop in one sparse solve.
 
@@ -88,9 +88,12 @@ def solve_direct(
     and the factorizations have no iterations to report. `blur`: a
     :class:`~facetlift.methods.dgp.common.BlurredPrior` of the prior (``prior_blur``): after
     the solve its target is corrected and the same system solved again (the matrix and its
-    preconditioner or factorization kept, from the last solution) until it stops.
+    preconditioner or factorization kept, from the last solution) until it stops. `rtol`:
+    the CG routes' relative residual (default :data:`RTOL`; a looser one where the solution
+    only starts another solver, not with `blur`).
     """
     t0 = time.perf_counter()
+    tight = RTOL if rtol is None else float(rtol)
     empty = empty_components(domain, target)
     fixed = None
     if prior is not None:
@@ -132,7 +135,7 @@ def solve_direct(
         resolve = factor = None  # (x0, rhs) -> (x, its): the same system again (the updates)
         if route == "pcg" and prior is not None and blur is None and sparse_prior(pw, fixed):
             t1 = time.perf_counter()
-            z0, trial = _multigrid_trial(K, rhs, progress)
+            z0, trial = _multigrid_trial(K, rhs, progress, tight)
             if trial is not None and trial.converged:
                 sinfo, used = trial, "pcg-amg"
             elif trial is not None:  # the facet preconditioner goes on from its iterate
@@ -150,7 +153,7 @@ def solve_direct(
                 def report(it, res, _p=progress, _n=tried):
                     return _p(it + _n, res)
             z, sinfo = linalg.solve(K, rhs, "pcg", preconditioner=pre, flexible=True,
-                                    rtol=RTOL if blur is None else blur.RTOL,
+                                    rtol=tight if blur is None else blur.RTOL,
                                     progress=report, x0=z0)
             # (the facet solve factorizes instead where that is predicted to be faster)
             used = "pcg-facet" if pre.direct is None else "pcg-facet+superlu"
@@ -163,7 +166,7 @@ def solve_direct(
             K = pin_components(domain, K, skip=fixed)
             t1 = time.perf_counter()
             factor = linalg.factorize(K, route, kind="spd", grid=domain.vertices,
-                                      rtol=RTOL if blur is None else blur.RTOL)
+                                      rtol=tight if blur is None else blur.RTOL)
 
             def resolve(x0, b):  # (x0: a factorization needs no start)
                 x = factor.solve(b)
