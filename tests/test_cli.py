@@ -14,15 +14,18 @@ from facetlift.cli import main
 from facetlift.methods import REGISTRY
 
 
-def write_input(folder, H=20, W=26, *, alpha=False):
-    """A 16-bit normal map of a tilted roof with a ridge, and a mask with a hole."""
+def write_input(folder, H=20, W=26, *, alpha=False, name="normals.png"):
+    """A 16-bit normal map of a tilted roof with a ridge, and a mask with a hole (as a
+    dataset folder's files with ``name="normal_map.png"``)."""
     r, c = np.mgrid[0:H, 0:W] + 0.5
     p = np.where(c < W / 2, 0.4, -0.4)
     q = np.full((H, W), 0.1)
     n = facetlift.normals_from_gradients(p, q)
     mask = np.ones((H, W), bool)
     mask[6:10, 4:8] = False
-    npath = io.write_normals(folder / "normal_map.png", n, mask if alpha else None)
+    # (not normal_map.png: a map of that name beside mask.png is warned about as a dataset
+    # folder's, integrated without its mask)
+    npath = io.write_normals(folder / name, n, mask if alpha else None)
     mpath = io.write_mask(folder / "mask.png", mask)
     return npath, mpath, mask
 
@@ -48,11 +51,31 @@ def test_integrate_end_to_end(tmp_path, capsys):
     np.testing.assert_allclose(depth[mask], expected.depth[mask], atol=1e-9)
 
 
+def test_a_map_inside_a_dataset_folder_names_the_folder_files_it_leaves_unread(tmp_path,
+                                                                               capsys):
+    """An audit: `integrate bear/normal_map.png` ran orthographically on the valid normals,
+    without the folder's K.txt and mask.png, and said nothing; the folder itself reads them."""
+    npath, mpath, mask = write_input(tmp_path, name="normal_map.png")
+    (tmp_path / "K.txt").write_text("600 0 13\n0 600 10\n0 0 1\n")
+    code, _, err = run(capsys, "integrate", npath, "-s", "npy", "-o", tmp_path / "a")
+    assert code == 0, err
+    assert re.search(r"lies in a dataset folder whose K.txt .* and mask.png .* does not read",
+                     err) and f"facetlift integrate {tmp_path}" in err
+    code, _, err = run(capsys, "integrate", npath, "--K", tmp_path / "K.txt", "--mask", mpath,
+                       "-s", "npy", "-o", tmp_path / "b")
+    assert code == 0 and "dataset folder" not in err
+    code, _, err = run(capsys, "integrate", npath, "--orthographic", "-s", "npy", "-o",
+                       tmp_path / "c")  # (orthographic asked for: only the mask is named)
+    assert code == 0 and "mask.png (its mask)" in err and "K.txt (its camera" not in err
+    code, _, err = run(capsys, "integrate", tmp_path, "-s", "npy", "-o", tmp_path / "d")
+    assert code == 0 and "dataset folder" not in err
+
+
 def test_default_outdir_and_alpha_mask(tmp_path, capsys):
     npath, _, mask = write_input(tmp_path, alpha=True)
     code, stdout, err = run(capsys, "integrate", npath, "--save", "npz")
     assert code == 0, err
-    out = tmp_path / "normal_map_facetlift"
+    out = tmp_path / "normals_facetlift"
     assert [p.name for p in out.iterdir()] == ["surface.npz"]
     assert "mask: alpha channel" in stdout
     with np.load(out / "surface.npz") as z:
@@ -65,7 +88,7 @@ def test_default_outdir_is_beside_a_link_not_its_target(tmp_path, capsys):
     real, view = tmp_path / "real", tmp_path / "view"
     real.mkdir()
     view.mkdir()
-    npath, _, _ = write_input(real)
+    npath, _, _ = write_input(real, name="normal_map.png")
     (view / "data").symlink_to(real, target_is_directory=True)
     (view / "n.png").symlink_to(npath)
     for given, out in ((view / "data", view / "data_facetlift"),
@@ -77,7 +100,7 @@ def test_default_outdir_is_beside_a_link_not_its_target(tmp_path, capsys):
 
 
 def test_dataset_folder_and_formats(tmp_path, capsys):
-    write_input(tmp_path)
+    write_input(tmp_path, name="normal_map.png")
     out = tmp_path / "o"
     code, _, err = run(capsys, "integrate", tmp_path, "-o", out, "-s", "exr", "-s", "tif",
                        "--format", "obj", "--triangles", "--pixel-size", "0.5")
@@ -99,6 +122,27 @@ def test_json_output(tmp_path, capsys):
     assert set(rec["outputs"]) == {"npy", "ply", "png"}
     assert all(tmp_path.joinpath(p).is_file() for p in rec["outputs"].values())
     assert rec["timings"]["total"] >= rec["timings"]["integrate"] > 0
+    assert rec["warnings"] == [] and rec["hints"] == []
+
+
+def test_json_output_carries_the_warnings_and_hints(tmp_path, capsys):
+    """An audit: the frame warning went to stderr only, while batch records keep warnings;
+    a script reading --json can act on them now (with the command line's flag names)."""
+    npath, mpath, mask = write_input(tmp_path)
+    n, _ = io.read_normals(npath)
+    n[2, 3] *= -1.0  # (two normals facing away: missing samples, warned about)
+    n[15, 20] *= -1.0
+    npath = io.write_normals(tmp_path / "away.png", n)
+    code, stdout, err = run(capsys, "integrate", npath, "-m", mpath, "-o", tmp_path / "j",
+                            "--json")
+    assert code == 0, err
+    rec = json.loads(stdout)
+    printed = [line[len("facetlift: warning: "):] for line in err.splitlines()
+               if line.startswith("facetlift: warning: ")]
+    assert rec["warnings"] == printed and len(printed) >= 1
+    assert any("2 normal(s) inside the mask cannot be used" in w for w in rec["warnings"])
+    assert rec["hints"] == [line[len("hint: "):] for line in err.splitlines()
+                            if line.startswith("hint: ")]
 
 
 def test_options_are_forwarded(tmp_path, capsys, monkeypatch):
@@ -205,7 +249,7 @@ def test_mask_of_other_size_exits_1(tmp_path, capsys):
     io.write_mask(tmp_path / "small.png", np.ones((5, 5)))
     code, _, err = run(capsys, "integrate", npath, "--mask", tmp_path / "small.png")
     assert code == 1 and "size 5x5" in _one_line_error(err)
-    assert not (tmp_path / "normal_map_facetlift").exists()
+    assert not (tmp_path / "normals_facetlift").exists()
 
 
 def test_backfacing_is_a_warning_or_on_request_an_error(tmp_path, capsys):

@@ -282,6 +282,18 @@ def test_perspective_prior_must_be_positive():
     with pytest.raises(ValueError, match=r"671 of them are 0: if 0 marks an unknown depth, "
                        "write NaN"):
         facetlift.integrate(n, K=K, prior=prior)
+    # orthographic, where 0 is a depth like any other: a warning when the zeros look like a
+    # fill (an audit: 40,270 zeros beside 400 samples in mm, no word but the jump hint)
+    prior[5:8, 6:9] = 7.0
+    with pytest.warns(UserWarning, match=r"662 of its 672 samples in the mask are exactly 0 "
+                      r"while the others all lie between 5 and 7: if 0 marks an unknown"):
+        facetlift.integrate(n, prior=prior)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        prior[10, 10] = -1.0  # (both signs among the others: a relief about 0, no warning)
+        facetlift.integrate(n, prior=prior)
+        facetlift.integrate(n, prior=np.zeros((24, 28)))  # (a plane at 0: no warning)
+    assert not [w for w in caught if "exactly 0" in str(w.message)]
 
 
 def test_points_behind_the_camera_are_left_out_and_swapped_axes_are_named():
@@ -1299,3 +1311,24 @@ def test_a_prior_out_of_the_normals_scale_is_named_by_the_tearing_warning():
                       r"\(pixel_size, K"):
         facetlift.integrate(gt.normals, gt.mask, prior=(rr[k], cc[k], gt.depth[rr[k], cc[k]]),
                             pixel_size=gt.pixel_size / 32, discontinuities=True)
+
+
+def test_an_orthographic_prior_in_other_units_than_the_normals_is_named():
+    """An audit: the DiLiGenT bear's exact samples in mm without its K (or pixel size) came
+    out 30x worse with only the depth-jump hint. The prior's relief against the normals' (at
+    `pixel_size`) is measured on pairs of nearby samples and a factor of 2 or more named."""
+    n, depth = wave((60, 70))
+    prior = sparse(3.0 * depth)[0]  # (the depth at pixel_size 3)
+    with pytest.warns(UserWarning, match=r"prior: its relief is 3\.\d* times what the normals "
+                      r"give at pixel_size 1 .* pixel_size of about 3\.\d"):
+        s = facetlift.integrate(n, prior=prior)
+    assert s.info["prior"]["relief_ratio"] == pytest.approx(3.0, rel=0.05)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        s = facetlift.integrate(n, prior=prior, pixel_size=3.0)
+        facetlift.integrate(n, prior=sparse(depth)[0])
+    assert not [w for w in caught if "relief" in str(w.message)]
+    assert s.info["prior"]["relief_ratio"] == pytest.approx(1.0, rel=0.05)
+    K = np.array([[100.0, 0, 35], [0, 100.0, 30], [0, 0, 1]])  # (log-depth: no units to miss)
+    s = facetlift.integrate(n, prior=sparse(3.0 * depth + 100.0)[0], K=K)
+    assert s.info["prior"]["relief_ratio"] is None

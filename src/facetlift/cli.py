@@ -430,30 +430,36 @@ def summary(record: dict) -> str:
 JUMP_HINT_SHARE, JUMP_HINT_CURL = 0.002, 0.02
 
 
-def _jump_hint(job, info: dict) -> None:
-    """A note where a smooth integration by a method that can keep depth jumps, but did not
-    (its own default, e.g. bini's, or the option given), deviates from its normals in the way
-    bent-across jumps do (:data:`JUMP_HINT_SHARE`); not where the map seems read in the wrong
-    frame (that warning explains the deviation)."""
+def _jump_hint(job, info: dict) -> str | None:
+    """The hint (also printed) where a smooth integration by a method that can keep depth
+    jumps, but did not (its own default, e.g. bini's, or the option given), deviates from its
+    normals in the way bent-across jumps do (:data:`JUMP_HINT_SHARE`); not where the map
+    seems read in the wrong frame (that warning explains the deviation); None where there is
+    no hint."""
     from . import frames
 
     share = info.get("deviation_over_10")
     method = _methods.REGISTRY.get(info.get("method") or job.method)
     if share is None or not share > JUMP_HINT_SHARE or method is None:
-        return
+        return None
     if not method.discontinuities or "discontinuities" in job.options:
-        return
+        return None
     if method.options().get("discontinuities") or info.get("solver") == "discontinuous":
-        return  # (bini keeps jumps by default: the flag would change nothing, a review)
+        return None  # (bini keeps jumps by default: the flag would change nothing, a review)
+    relief = (info.get("prior") or {}).get("relief_ratio")
+    if relief is not None and not 0.5 <= relief <= 2.0:
+        return None  # (a prior in other units explains it, warned about: an audit)
     ic = info.get("integrability") or {}
     own = ic.get("curl")
     flipped = min(ic.get("curl_y_flipped", float("inf")), ic.get("curl_x_flipped", float("inf")))
     if own is not None and (frames.flip_verdict(own, flipped) is not None
                             or not own >= JUMP_HINT_CURL):
-        return  # (a wrong frame explains it; an integrable field has no jump to keep)
-    click.echo(f"hint: {share:.1%} of the facets deviate from their normals by more than 10 "
-               "deg, as where a smooth surface bends across depth jumps: --discontinuities "
-               "keeps them (slower; docs/perspective.md)", err=True)
+        return None  # (a wrong frame explains it; an integrable field has no jump to keep)
+    hint = (f"{share:.1%} of the facets deviate from their normals by more than 10 deg, as "
+            "where a smooth surface bends across depth jumps: --discontinuities keeps them "
+            "(slower; docs/perspective.md)")
+    click.echo(f"hint: {hint}", err=True)
+    return hint
 
 
 @cli.command(context_settings=CONTEXT)
@@ -511,15 +517,18 @@ def integrate(normals, gradients, progress, as_json, **flags):
             shown.remove(str(w))
             continue
         click.echo(f"facetlift: warning: {_as_flags(str(w))}", err=True)
-    if as_json:
-        click.echo(json.dumps({k: v for k, v in record.items() if k != "warnings"}))
-        _STATE["printed_json"] = True
-    else:
+    info = record["info"]
+    if not as_json:
         for path in record["outputs"].values():
             click.echo(f"wrote {path}")
         click.echo(summary(record))
-    info = record["info"]
-    _jump_hint(job, info)
+    hint = _jump_hint(job, info)
+    if as_json:  # (the warnings and hints as printed: a script can act on a wrong frame)
+        out = {k: v for k, v in record.items() if k != "warnings"}
+        out["warnings"] = [_as_flags(str(w)) for w in record["warnings"]]
+        out["hints"] = [] if hint is None else [hint]
+        click.echo(json.dumps(out))
+        _STATE["printed_json"] = True
     blur = info.get("prior_blur") or {}
     if blur.get("capped"):
         # a safety net, not a setting: the surface is usable (its mismatch is in the info)

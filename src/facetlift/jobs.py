@@ -180,6 +180,7 @@ def read(job: Job) -> Input:
     else:
         n, m = io.read_normals(src, frame=job.normal_frame)
         source = "alpha channel" if m is not None else "valid normals"
+        _beside_dataset_files(src, job)
     if field_input and job.K is not None:
         raise ValueError("`K`: a gradient field is orthographic; --K does not apply")
     if job.mask is not None:
@@ -213,6 +214,33 @@ def read(job: Job) -> Input:
                              f"map is {n.shape[0]}x{n.shape[1]}")
     return Input(normals=n, mask=m, K=K, mask_source=source, prior=prior, prior_weight=weight,
                  confidence=conf, field=bool(field_input))
+
+
+def _beside_dataset_files(src: Path, job: Job) -> None:
+    """Warn where a normal map given by its path lies in a dataset folder (``normal_map.*``
+    beside ``K.txt`` or ``mask.*``) whose files the job does not use: only the folder as the
+    input reads them (a user's ``integrate bear/normal_map.png`` ran orthographically on the
+    valid normals, without the folder's K and mask, and no word; an audit)."""
+    from ._warnings import warn
+    from .io.dataset import _find
+    from .io.images import MASK_FORMATS
+
+    folder = src.parent
+    if src.stem.lower() != "normal_map":
+        return
+    unused = []
+    if job.K is None and job.fov is None and not job.orthographic and (folder / "K.txt").is_file():
+        unused.append("K.txt (its camera: the map is integrated orthographically)")
+    try:
+        mpath = _find(folder, "mask", MASK_FORMATS)
+    except ValueError:  # (several mask files: the folder's own reading would say so)
+        mpath = None
+    if job.mask is None and mpath is not None:
+        unused.append(f"{mpath.name} (its mask)")
+    if unused:
+        warn(f"{src} lies in a dataset folder whose {' and '.join(unused)} this run does not "
+             f"read: only the folder as the input reads them (facetlift integrate {folder}); "
+             "or give them with --K / --mask", UserWarning)
 
 
 def _from_folder(message: str, job: Job, inp: Input) -> str:

@@ -580,3 +580,72 @@ def _against_hint(kind: str) -> str:
             if kind == "disparity" else
             "is it a disparity or inverse depth, near being large (then prior_fit='disparity' "
             "with a pinhole camera)?") + " Or are the normals in another frame (normal_frame)?"
+
+
+#: :func:`relief_ratio`: at most this many samples (evenly spread by their order) are paired,
+#: each with its nearest other sample at least RELIEF_NEAR and at most RELIEF_FAR pixels away;
+#: at least RELIEF_PAIRS pairs with a measurable relief give a ratio.
+RELIEF_SAMPLES, RELIEF_NEAR, RELIEF_FAR, RELIEF_PAIRS = 3000, 8.0, 32.0, 10
+
+#: ... and only where the counted pairs' mean slope along their paths is at least this (about
+#: 6 degrees), in the median.
+RELIEF_SLOPE = 0.1
+
+
+def relief_ratio(problem) -> tuple[float, int] | None:
+    """``(ratio, pairs)``: the median over pairs of nearby prior samples of the prior's depth
+    difference over the one the normals predict along the straight path between them (their
+    slopes summed pixel by pixel; the unknown's units, so orthographic depth in units of
+    `pixel_size`); None where there are too few pairs or no measurable relief (a flat view).
+
+    Pairs across a jump or a gap are outliers the median ignores; only the half with the
+    larger predicted relief counts. A ratio far from 1 says that the prior's units are not the
+    normals' (a metric prior without ``K``, or with a wrong ``pixel_size``), and a negative
+    one that it runs the other way (height for depth)."""
+    from scipy.spatial import cKDTree
+
+    if problem.prior is None or problem.prior_weight is None:
+        return None
+    d = problem.domain
+    have = np.flatnonzero(np.isfinite(problem.prior) & (problem.prior_weight > 0))
+    if have.size < 2:
+        return None
+    if have.size > RELIEF_SAMPLES:
+        have = have[np.linspace(0, have.size - 1, RELIEF_SAMPLES).astype(np.int64)]
+    r, c = (a[have].astype(float) for a in d.pixels)
+    dist, nn = cKDTree(np.c_[r, c]).query(np.c_[r, c], k=min(32, have.size))
+    dist, nn = dist[:, 1:], nn[:, 1:]  # (the first is the sample itself)
+    ok = (dist >= RELIEF_NEAR) & (dist <= RELIEF_FAR)
+    first = np.argmax(ok, axis=1)
+    rows = np.flatnonzero(ok[np.arange(have.size), first])
+    if rows.size < RELIEF_PAIRS:
+        return None
+    j = nn[rows, first[rows]]
+    i = rows
+    gx, gy = problem.grid_slopes
+    H, W = d.shape
+    index = np.full(H * W, -1, dtype=np.int64)
+    index[d.pixels[0] * W + d.pixels[1]] = np.arange(d.n_facets)
+    dr, dc = r[j] - r[i], c[j] - c[i]
+    steps = np.ceil(np.maximum(np.abs(dr), np.abs(dc))).astype(np.int64)
+    total = int(steps.sum())
+    pair = np.repeat(np.arange(i.size), steps)
+    t = (np.arange(total) - np.repeat(np.cumsum(steps) - steps, steps) + 0.5) / steps[pair]
+    mr = np.rint(r[i][pair] + t * dr[pair]).astype(np.int64)
+    mc = np.rint(c[i][pair] + t * dc[pair]).astype(np.int64)
+    f = index[mr * W + mc]
+    sx, sy = dc[pair] / steps[pair], dr[pair] / steps[pair]
+    step = np.where(f >= 0, gx[np.maximum(f, 0)] * sx - gy[np.maximum(f, 0)] * sy, np.nan)
+    predicted = np.bincount(pair, np.nan_to_num(step, nan=0.0), minlength=i.size)
+    broken = np.bincount(pair, ~np.isfinite(step), minlength=i.size) > 0
+    measured = problem.prior[have[j]] - problem.prior[have[i]]
+    keep = ~broken & np.isfinite(measured)
+    if keep.sum() < RELIEF_PAIRS:
+        return None
+    predicted, measured = predicted[keep], measured[keep]
+    size = np.abs(predicted)
+    top = size >= np.median(size)
+    # (a flat view's few-degree tilts are noise: a ratio of noise to noise says nothing)
+    if not np.median(size[top] / steps[keep][top]) >= RELIEF_SLOPE * problem.camera.footprint():
+        return None
+    return float(np.median(measured[top] / predicted[top])), int(top.sum())

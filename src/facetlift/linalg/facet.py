@@ -342,8 +342,8 @@ class FacetPreconditioner:
         """Use a new matrix (same domain) and weak set. The global part is kept: the box
         (it depends on the domain only), or the multigrid hierarchy, whose coarse operators
         are recomputed for new facet `weights` when given (:meth:`use_multigrid`; the
-        coarsening and interpolation stay). The local factorization is redone. Returns
-        self."""
+        coarsening and interpolation stay). The local factorization is redone (at its first
+        use). Returns self."""
         if weights is not None and self.coarse == "amg":
             self._regalerkin(weights)
         self.K = K
