@@ -425,6 +425,37 @@ def test_decoded_normals_far_from_unit_length_are_warned_about():
         frames.decode(v)
 
 
+def test_an_srgb_encoded_map_is_named_with_the_curve_that_undoes_it():
+    """An audit: an 8-bit map passed through an sRGB curve (a colour-managed export) gave 30x
+    the depth error, and the warning blamed a missing z. Either way round, the curve that
+    makes the vectors unit length is named, with its code; a map with z missing keeps the
+    z message."""
+    import warnings
+
+    yy, xx = np.mgrid[0:64, 0:64]
+    n = np.dstack([-0.5 * np.cos(xx / 10), -0.3 * np.sin(yy / 7), np.ones((64, 64))])
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    v = (n + 1) / 2
+    for curve, says, undo in ((frames._linear_to_srgb, "sRGB-encoded", frames._srgb_to_linear),
+                              (frames._srgb_to_linear, "linearised by an sRGB decode",
+                               frames._linear_to_srgb)):
+        stored = np.round(curve(v) * 255).astype(np.uint8)
+        with pytest.warns(UserWarning, match=rf"longer than unit length .* the map looks "
+                          rf"{says}.*Non-Color") as rec:
+            frames.decode(stored)
+        assert "is z stored" not in str(rec[0].message)
+        fixed = 2.0 * undo(stored / 255.0) - 1.0  # (the conversion the message gives)
+        length = np.linalg.norm(fixed, axis=-1)
+        assert np.abs(length - 1).max() < 0.03
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            facetlift.integrate(fixed)
+    stored = np.round(v * 255).astype(np.uint8)
+    stored[..., 2] = 255
+    with pytest.warns(UserWarning, match=r"is z stored"):
+        frames.decode(stored)
+
+
 def test_the_grazing_warning_names_the_option_that_keeps_steep_walls():
     """A stamp whose near-vertical walls were dropped by the paper's rule vanished (plateau 0
     instead of 20); the smooth route's warning did not name --outlier-eps."""
@@ -435,3 +466,24 @@ def test_the_grazing_warning_names_the_option_that_keeps_steep_walls():
     with pytest.warns(UserWarning, match=r"grazing: view cosine < 0.08716, outlier_eps / "
                       r"--outlier-eps sets another: a smaller one keeps more"):
         facetlift.integrate(n)
+
+
+def test_half_facing_away_names_the_reversed_channel_order():
+    """An audit: an OpenCV-frame map saved in BGR order and read with normal_frame='opencv'
+    had half its normals facing away, and the refusal offered two frames that both ran 20
+    deg off. The reversed order that faces the viewer is measured and named first."""
+    r, c = np.mgrid[0:48, 0:48] + 0.5
+    x, y = (c - 20) / 32, -(r - 24) / 32  # (off-centre: 59 % of x > 0)
+    n = np.dstack([x, y, np.sqrt(1 - x**2 - y**2)])  # a sphere cap, facing the viewer
+    stored = frames.from_facetlift(n, "opencv")[..., ::-1]  # in BGR order
+    with pytest.raises(ValueError, match=r"face away .* channels in another order, e\.g\. BGR "
+                       r".*--normal-frame z,-y,-x \(normal_frame='z,-y,-x'\) leaves 0% facing "
+                       r"away") as e:
+        facetlift.integrate(stored, normal_frame="opencv")
+    assert "z,-y,-x" in str(e.value).split("; else")[0]
+    s = facetlift.integrate(stored, normal_frame="z,-y,-x")
+    assert s.info["mean_deviation"] < 0.5
+    # nearly every normal facing away is a flipped z: no channel order is offered
+    with pytest.raises(ValueError, match="face away") as e:
+        facetlift.integrate(frames.from_facetlift(n, "opencv"))
+    assert "channels in another order" not in str(e.value)

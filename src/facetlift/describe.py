@@ -361,8 +361,10 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
         away = frames.facing_away(inside)
         guess["facing_away"] = away
         if away is not None and away > 0.5:
-            guess["likely"] = ("z flipped: the normals face away from the viewer as read "
-                               f"({frames.facing_hint(frame)})")
+            what = ("z flipped" if away > frames.SWAP_RANGE[1] else
+                    "z flipped or channels in another order")
+            guess["likely"] = (f"{what}: the normals face away from the viewer as read "
+                               f"({frames.facing_hint(frame, inside)})")
             return guess
         lo = inside[:, :2].min()
         scale = frames.encoded_scale(inside)

@@ -245,13 +245,50 @@ def decode(pixels: np.ndarray, where=None) -> np.ndarray:
     if off.size and off.mean() > UNIT_SHARE:
         # (a texture artist's map with the blue channel fixed at 255, as two-channel bakes are
         # often filled, read as 'consistent' and lost 29 % of its height)
+        gamma = _gamma_hint(pixels[seen].astype(np.float64) / maxval, off.mean())
         warn(f"{off.mean():.0%} of the decoded normals are longer than unit length (by more "
-             f"than {UNIT_TOLERANCE:.0%}, median length {np.median(length[seen]):.3g}): is z "
-             "stored (a blue channel fixed at one value, as two-channel maps are often "
-             "filled, must be rebuilt as z = sqrt(1 - x^2 - y^2) first)? facetlift "
-             "renormalises each vector, which is right only where it points the right way",
-             FrameWarning)
+             f"than {UNIT_TOLERANCE:.0%}, median length {np.median(length[seen]):.3g}): "
+             + (gamma or "is z stored (a blue channel fixed at one value, as two-channel maps "
+                "are often filled, must be rebuilt as z = sqrt(1 - x^2 - y^2) first)?")
+             + " facetlift renormalises each vector, which is right only where it points the "
+             "right way", FrameWarning)
     return n
+
+
+def _srgb_to_linear(v: np.ndarray) -> np.ndarray:
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+def _linear_to_srgb(v: np.ndarray) -> np.ndarray:
+    return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1.0 / 2.4) - 0.055)
+
+
+#: The sRGB transfer curves tried on a map whose decoded normals are too long
+#: (:func:`_gamma_hint`): (name in the message, function of the stored values in [0, 1], the
+#: Python that undoes it).
+GAMMAS = (
+    ("sRGB-encoded (a colour-managed export, or one saved through a display profile)",
+     _srgb_to_linear, "v = np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)"),
+    ("linearised by an sRGB decode (read as a colour texture)", _linear_to_srgb,
+     "v = np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)"),
+)
+
+
+def _gamma_hint(v: np.ndarray, share: float) -> str | None:
+    """The colour transfer that explains too-long normals, as a sentence, or None: the sRGB
+    curve one way or the other (:data:`GAMMAS`) applied to the stored values `v` (k, 3) in [0,
+    1] leaves at most a fifth of the share `share` too long (an audit: an 8-bit map through
+    an sRGB curve, 80 % too long, was blamed on a missing z; 30x the depth error)."""
+    for name, fix, code in GAMMAS:
+        n = 2.0 * fix(v) - 1.0
+        length = np.sqrt(np.einsum("ki,ki->k", n, n))
+        if np.mean(length > 1.0 + UNIT_TOLERANCE) <= 0.2 * share:
+            return (f"the map looks {name}: with its values v (0..1) first mapped by {code}, "
+                    f"{np.mean(np.abs(length - 1.0) <= UNIT_TOLERANCE):.0%} of them decode to "
+                    "unit length. Save normal maps without colour management (linear, "
+                    "'Non-Color' in Blender), or convert the values so and decode them "
+                    "yourself (n = 2 v - 1), passing floats.")
+    return None
 
 
 def checked(normals, mask=None, *, frame=None, name: str = "normals"):
@@ -400,14 +437,51 @@ def _check_facing(v: np.ndarray, name: str, frame=None) -> None:
         return
     raise ValueError(
         f"`{name}`: {away:.0%} of the normals inside the mask that are not edge-on face away "
-        f"from the viewer (z < 0), {facing_hint(frame)}, or see docs/conventions.md for the "
-        "frame of your source"
+        f"from the viewer (z < 0), {facing_hint(frame, v)}, or see docs/conventions.md for "
+        "the frame of your source"
     )
 
 
-def facing_hint(frame) -> str:
+#: A map read in some frame with about half its normals facing away has its channels in
+#: another order (a flipped z turns nearly all away): between these shares the swapped
+#: orders are tried (:func:`facing_hint`), and one is named where it leaves at most
+#: SWAP_AWAY of them facing away.
+SWAP_RANGE, SWAP_AWAY = (0.2, 0.8), 0.05
+
+
+def _swapped_orders(frame, v: np.ndarray) -> str | None:
+    """For normals `v` (k, 3) read in `frame` (facetlift frame): the frames with the source's
+    channels in reverse order (BGR for RGB), with their y and z negated or not, that leave at
+    most :data:`SWAP_AWAY` facing away, as a sentence; None where none does."""
+    channels, signs = parse(frame)
+    raw = from_facetlift(v, frame)
+    found = []
+    for flip in ("", "yz", "z"):
+        cand = _axes(tuple(2 - c for c in channels), signs.copy())
+        cand = negated(cand, flip) if flip else cand
+        away = facing_away(to_facetlift(raw, cand))
+        if away is not None and away <= SWAP_AWAY:
+            found.append(f"{flag(cand)} leaves {away:.0%} facing away")
+    if not found:
+        return None
+    return ("about half facing away is the sign of channels in another order, e.g. BGR "
+            "(OpenCV's imwrite) rather than RGB: read with their order reversed, "
+            + "; ".join(found) + " (the y sign is yours to check: the integrability warning "
+            "says if it is wrong)")
+
+
+def facing_hint(frame, v: np.ndarray | None = None) -> str:
     """What to try for a map that faces away from the viewer when read in `frame`: relative
-    to the frame given (the flag the user gave is never the suggestion)."""
+    to the frame given (the flag the user gave is never the suggestion). With the normals `v`
+    (k, 3) as read, about half of them facing away (:data:`SWAP_RANGE`) is tried against the
+    reversed channel order first (an audit: an OpenCV-frame map saved in BGR order and read
+    with --normal-frame opencv was offered two frames that both ran at 20 deg off)."""
+    if v is not None:
+        away = facing_away(np.asarray(v, float))
+        if away is not None and SWAP_RANGE[0] <= away <= SWAP_RANGE[1]:
+            swapped = _swapped_orders(frame, np.asarray(v, float))
+            if swapped is not None:
+                return f"{swapped}; else {facing_hint(frame)}"
     if is_identity(frame):
         return ("the map is probably in a camera frame with z pointing away (OpenCV, "
                 f"Omnidata, Metric3D): try {flag('opencv')}")
