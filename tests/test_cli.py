@@ -473,3 +473,19 @@ def test_python_m_facetlift_runs_the_command_line():
                          text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.startswith("facetlift, version")
+
+
+def test_flags_of_another_input_kind_or_route_say_what_applies(tmp_path, capsys):
+    """An audit: --gradient-frame with a normal map was ignored in silence; --max-iter with
+    --discontinuities named only the solver, not the reweightings' own cap."""
+    npath, mpath, _ = write_input(tmp_path)
+    code, _, err = run(capsys, "integrate", npath, "-m", mpath, "--gradient-frame", "rowcol",
+                       "-o", tmp_path / "a")
+    assert code == 1 and "--gradient-frame 'rowcol' applies to a gradient field" in err
+    assert not (tmp_path / "a").exists()
+    code, _, err = run(capsys, "integrate", npath, "-m", mpath, "--discontinuities",
+                       "--max-iter", "5", "-o", tmp_path / "b")
+    assert code == 1 and "--option discontinuity_iter=" in " ".join(err.split())
+    code, out, _ = run(capsys, "methods", "--help")
+    text = " ".join(out.split())
+    assert code == 0 and all(f"{c} (" in text for c in REGISTRY["dgp"].capabilities())

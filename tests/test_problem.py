@@ -485,3 +485,15 @@ def test_a_mask_of_another_view_is_questioned_and_its_transpose_named():
         gappy[np.random.default_rng(0).random((40, 40)) < 0.3] = np.nan  # (random gaps)
         prepare(gappy, inside)
     assert not [w for w in caught if "`mask`:" in str(w.message)]
+
+
+@pytest.mark.parametrize("shape, advice", [
+    ((1, 20, 30, 3), r"a batch of one \(1, H, W, 3\); normals\[0\] gives"),
+    ((1, 3, 20, 30), r"a batch of one, channel-first .*moveaxis\(normals\[0\], 0, -1\)"),
+    ((3, 20, 30), r"channel-first \(3, H, W\); numpy.moveaxis\(normals, 0, -1\)"),
+])
+def test_a_network_tensor_shape_gets_the_indexing_that_makes_a_map(shape, advice):
+    """An audit: (1, H, W, 3) and (1, 3, H, W), a network's batch of one, got only 'must
+    have shape (H, W, 3)'."""
+    with pytest.raises(ValueError, match=advice):
+        facetlift.integrate(np.ones(shape))

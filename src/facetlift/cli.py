@@ -162,8 +162,8 @@ _JOB_OPTIONS = [
                  help="Pixel width in world units (orthographic): scales depth with x and y."),
     click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Perspective intrinsics: a text file of the 3x3 matrix (OpenCV layout) "
-                 "or of fx fy cx cy, or a (3, 3) .npy. A dataset folder's K.txt is used "
-                 "automatically."),
+                 "or of fx fy cx cy (also under a header naming them), JSON, or a (3, 3) "
+                 ".npy. A dataset folder's K.txt is used automatically."),
     click.option("--fov", type=float, default=None, metavar="DEG",
                  help="Horizontal field of view in degrees (across the width, also for a "
                  "portrait photo), for a camera without a K: fx = fy = (W/2)/tan(fov/2), the "
@@ -194,9 +194,9 @@ _JOB_OPTIONS = [
                  "cut's sharpness is --option discontinuity_k=K (default 4), the jumps' map "
                  "--save discontinuities."),
     click.option("--prior", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-                 help="Depth prior (npy, EXR, TIFF, an earlier result's npz, or 16-bit PNG with "
-                 "--prior-scale), NaN or "
-                 "0 where unknown, or a points file (.csv/.txt: one sample per line under a "
+                 help="Depth prior (npy, EXR, TIFF, MATLAB .mat, an earlier result's npz, or "
+                 "16-bit PNG with --prior-scale), NaN where unknown (0 too in integer "
+                 "files), or a points file (.csv/.txt: one sample per line under a "
                  "header naming the columns, e.g. u,v,depth: pixels, not a cloud's metres), in "
                  "the output's depth convention "
                  "(metric z-depth with K). "
@@ -372,7 +372,8 @@ def summary(record: dict) -> str:
     H, W = record["shape"]
     parts = [
         f"{H}x{W} pixels, {record['facets']} facets (mask: {record['mask_source']})",
-        "perspective (K)" if record.get("perspective") else "orthographic",
+        (f"perspective ({record.get('camera', 'K')})" if record.get("perspective")
+         else "orthographic"),
         f"method {info.get('method')}" + (f" ({info['solver']})" if "solver" in info else ""),
     ]
     it = info.get("iterations")
@@ -786,8 +787,10 @@ def methods(as_json, markdown):
     """List the integration methods, what they can take, and their options.
 
     Capabilities: masks (any domain shape), missing (NaN normals inside the mask),
-    perspective (a camera K), discontinuities (depth jumps). Options are passed with
-    --solver/--max-iter/--tol/--backend or '--option KEY=VALUE'.
+    perspective (a camera K), discontinuities (depth jumps), prior (a depth prior: --prior),
+    confidence (per-pixel normal weights: --confidence), prior_blur (a prior seen through a
+    blur: --prior-blur). Options are passed with --solver/--max-iter/--tol/--backend or
+    '--option KEY=VALUE'.
     """
     if markdown:
         click.echo(_methods.markdown(), nl=False)

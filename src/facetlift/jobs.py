@@ -183,6 +183,11 @@ def read(job: Job) -> Input:
         _beside_dataset_files(src, job)
     if field_input and job.K is not None:
         raise ValueError("`K`: a gradient field is orthographic; --K does not apply")
+    if not field_input and job.gradient_frame != Job.gradient_frame:  # (ignored silently: an
+        # audit)
+        raise ValueError(f"`gradient_frame` {job.gradient_frame!r} applies to a gradient field "
+                         "(--gradients P Q, or a .mat file holding p and q); this input is a "
+                         "normal map, whose frame is --normal-frame: leave it out")
     if job.mask is not None:
         m = io.read_mask(job.mask, n.shape[:2])
         source = str(job.mask)
@@ -492,6 +497,9 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "facets": int(surface.mask.sum()),
         "mask_source": inp.mask_source,
         "perspective": surface.K is not None,
+        # (where the camera came from, for the summary: K, a field of view, a dataset's K.txt)
+        "camera": ("orthographic" if surface.K is None else
+                   f"fov {float(job.fov):g} deg" if job.fov is not None else "K"),
         # (the depth of height.png's 0 and 65535, as io.write_height scales it)
         "depth_range": _depth_range(surface),
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),

@@ -160,9 +160,16 @@ def validate(options: tuple[Option, ...], given: dict, method: str) -> dict:
     for name in given:
         for other, want in spec[name].when.items():
             if values[other] != want:
+                # (an audit: --max-iter with --discontinuities named only the solver; the
+                # reweightings' own cap is another option)
+                alike = [o for o in ("discontinuity_iter", "discontinuity_tol")
+                         if o in spec and values.get("discontinuities") and o != name
+                         and o.rsplit("_", 1)[1] in name]
                 raise ValueError(
                     f"`{name}` applies only with {other}={want!r} (method {method!r} has "
                     f"{other}={values[other]!r}); leave it out or set {other}={want!r}"
+                    + (f"; with discontinuities=True the reweightings' counterpart is "
+                       f"`{alike[0]}` (--option {alike[0]}=...)" if alike else "")
                 )
     return values
 

@@ -461,7 +461,13 @@ def prepare(
                      "OpenCV-frame map, z,y,x for an OpenGL one)? "
                      "docs/conventions.md and docs/recipes.md say how to convert it")
             Kc = getattr(cam, "K", None)
-            if Kc is not None:  # (a K of another image turns the rays: a user's check)
+            centred = (abs(Kc[0, 2] - (W - 1) / 2) <= 1 and abs(Kc[1, 2] - (H - 1) / 2) <= 1
+                       if Kc is not None else False)
+            if Kc is not None and centred:  # (a K from a field of view, --fov: an audit)
+                frame += (f"; or is the camera's focal length right (fx {Kc[0, 0]:g}, fy "
+                          f"{Kc[1, 1]:g} for this {W} x {H} image; from --fov, the field of "
+                          "view across the width)?")
+            elif Kc is not None:  # (a K of another image turns the rays: a user's check)
                 frame += (f"; or is K for another image (a crop or a resize)? Its principal "
                           f"point (cx {Kc[0, 2]:g}, cy {Kc[1, 2]:g}) is usually near the "
                           f"centre of this {W} x {H} image, its focal lengths fx "
@@ -1165,7 +1171,17 @@ def _huge(n, length2) -> np.ndarray:
 
 
 def _channel_first_hint(shape) -> str:
-    """Advice for a channel-first (3, H, W) array, else ''."""
+    """Advice for a channel-first (3, H, W) array or a batch of one, (1, H, W, 3) or (1, 3, H,
+    W) (a network's output tensor, an audit), else ''."""
+    shape = tuple(shape)
+    if len(shape) == 4 and shape[0] == 1:
+        inner = _channel_first_hint(shape[1:])
+        if shape[-1] == 3:
+            return ": it looks like a batch of one (1, H, W, 3); normals[0] gives (H, W, 3)"
+        if inner:
+            return (": it looks like a batch of one, channel-first (1, 3, H, W); "
+                    "numpy.moveaxis(normals[0], 0, -1) gives (H, W, 3)")
+        return ""
     if len(shape) == 3 and shape[0] == 3 and shape[-1] != 3:
         return ": it looks channel-first (3, H, W); numpy.moveaxis(normals, 0, -1) gives (H, W, 3)"
     return ""
