@@ -378,6 +378,17 @@ def test_fov_gives_a_centred_pinhole_k(tmp_path, capsys):
             K_from_fov(shape, 60)
     assert main(["info", str(tmp_path / "n.npy"), "--fov", "60"]) == 0
     assert "camera: perspective" in capsys.readouterr().out
+    # a dataset folder's K.txt is replaced by --fov, and said so (an audit: in silence)
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", n)
+    np.savetxt(folder / "K.txt", np.diag([2.0, 2.0, 1.0]) @ K)
+    assert main(["integrate", str(folder), "--fov", "60", "-s", "npy", "-o",
+                 str(tmp_path / "f2")]) == 0
+    err = " ".join(capsys.readouterr().err.split())
+    assert "--fov 60 deg replaces the K of the dataset folder's K.txt" in err
+    np.testing.assert_allclose(np.load(tmp_path / "f2" / "depth.npy"),
+                               np.load(tmp_path / "fov" / "depth.npy"), rtol=1e-12)
 
 
 def test_info_keeps_the_principal_point_warning_of_a_map_it_cannot_integrate(tmp_path, capsys):

@@ -197,7 +197,12 @@ def read(job: Job) -> Input:
         check_fov(job)
         if field_input:
             raise ValueError("`fov`: a gradient field is orthographic; --fov does not apply")
+        from ._warnings import warn
         from .camera import K_from_fov
+
+        if K is not None:  # (documented, but replaced in silence: an audit)
+            warn(f"`fov` {float(job.fov):g} deg replaces the K of the dataset folder's K.txt "
+                 f"(fx {K[0, 0]:g}, cx {K[0, 2]:g}, cy {K[1, 2]:g}); leave --fov out to use it")
 
         K = K_from_fov(n.shape[:2], job.fov)
     if job.orthographic:
