@@ -994,7 +994,7 @@ def test_summary_names_the_camera_and_bini_s_k_is_pointed_to(tmp_path, capsys):
     assert code == 0 and ", orthographic, method dgp" in out
     code, out, err = run(capsys, "integrate", str(bear / "diligent_bear"), "-o",
                          str(tmp_path / "b"), "-s", "npy")
-    assert code == 0 and ", perspective (K), method dgp" in out
+    assert code == 0 and ", perspective (the folder's K.txt), method dgp" in out
     code, _, err = run(capsys, "integrate", str(bear / "diligent_bear"), "--discontinuities",
                        "--option", "k=2", "-o", str(tmp_path / "k"))
     assert code == 1 and "BiNI's k is 'discontinuity_k' here" in one_line(err)

@@ -484,6 +484,10 @@ def test_a_mask_of_another_view_is_questioned_and_its_transpose_named():
         gappy = n.copy()
         gappy[np.random.default_rng(0).random((40, 40)) < 0.3] = np.nan  # (random gaps)
         prepare(gappy, inside)
+        finite = n.copy()  # (a map with a finite background: its NaNs are holes, a review)
+        finite[~inside] = [0.0, 0.0, 1.0]
+        finite[inside & (np.random.default_rng(1).random((40, 40)) < 0.3)] = np.nan
+        prepare(finite, inside[:, ::-1])
     assert not [w for w in caught if "`mask`:" in str(w.message)]
 
 

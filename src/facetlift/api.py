@@ -607,6 +607,7 @@ def prior_info(problem: Problem, surface: Surface) -> dict:
         "outliers": problem.extras.get("prior_outliers"),
         "trend": problem.extras.get("prior_trend"),
         "relief_ratio": problem.extras.get("prior_relief"),
+        "relief_warned": bool(problem.extras.get("prior_relief_warned", False)),
         "mean_abs_residual": float(diff.mean()) if diff.size else 0.0,
         "max_abs_residual": float(diff.max()) if diff.size else 0.0,
         **_far_samples(problem, diff, target[used]),

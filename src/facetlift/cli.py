@@ -447,8 +447,7 @@ def _jump_hint(job, info: dict) -> str | None:
         return None
     if method.options().get("discontinuities") or info.get("solver") == "discontinuous":
         return None  # (bini keeps jumps by default: the flag would change nothing, a review)
-    relief = (info.get("prior") or {}).get("relief_ratio")
-    if relief is not None and not 0.5 <= relief <= 2.0:
+    if (info.get("prior") or {}).get("relief_warned"):
         return None  # (a prior in other units explains it, warned about: an audit)
     ic = info.get("integrability") or {}
     own = ic.get("curl")

@@ -184,10 +184,12 @@ def read(job: Job) -> Input:
     if field_input and job.K is not None:
         raise ValueError("`K`: a gradient field is orthographic; --K does not apply")
     if not field_input and job.gradient_frame != Job.gradient_frame:  # (ignored silently: an
-        # audit)
-        raise ValueError(f"`gradient_frame` {job.gradient_frame!r} applies to a gradient field "
-                         "(--gradients P Q, or a .mat file holding p and q); this input is a "
-                         "normal map, whose frame is --normal-frame: leave it out")
+        # audit; a warning, not an error: a batch may mix fields and maps, a review)
+        from ._warnings import warn
+
+        warn(f"`gradient_frame` {job.gradient_frame!r} applies to a gradient field "
+             f"(--gradients P Q, or a .mat file holding p and q); {src.name} is a normal map, "
+             "whose frame is --normal-frame: it is ignored here")
     if job.mask is not None:
         m = io.read_mask(job.mask, n.shape[:2])
         source = str(job.mask)
@@ -504,7 +506,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "perspective": surface.K is not None,
         # (where the camera came from, for the summary: K, a field of view, a dataset's K.txt)
         "camera": ("orthographic" if surface.K is None else
-                   f"fov {float(job.fov):g} deg" if job.fov is not None else "K"),
+                   f"fov {float(job.fov):g} deg" if job.fov is not None else
+                   "K" if job.K is not None else "the folder's K.txt"),
         # (the depth of height.png's 0 and 65535, as io.write_height scales it)
         "depth_range": _depth_range(surface),
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),

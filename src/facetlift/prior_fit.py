@@ -582,10 +582,14 @@ def _against_hint(kind: str) -> str:
             "with a pinhole camera)?") + " Or are the normals in another frame (normal_frame)?"
 
 
-#: :func:`relief_ratio`: at most this many samples (evenly spread by their order) are paired,
-#: each with its nearest other sample at least RELIEF_NEAR and at most RELIEF_FAR pixels away;
+#: :func:`relief_ratio`: at most this many samples (a random subset) are paired, each with
+#: its nearest other sample at least RELIEF_NEAR and at most RELIEF_FAR pixels away;
 #: at least RELIEF_PAIRS pairs with a measurable relief give a ratio.
 RELIEF_SAMPLES, RELIEF_NEAR, RELIEF_FAR, RELIEF_PAIRS = 3000, 8.0, 32.0, 10
+
+#: ... among at most this many samples (a random subset: 2e5 over a 4096^2 map are about 9
+#: px apart).
+RELIEF_POOL = 200_000
 
 #: ... and only where the counted pairs' mean slope along their paths is at least this (about
 #: 6 degrees), in the median.
@@ -610,18 +614,26 @@ def relief_ratio(problem) -> tuple[float, int] | None:
     have = np.flatnonzero(np.isfinite(problem.prior) & (problem.prior_weight > 0))
     if have.size < 2:
         return None
-    if have.size > RELIEF_SAMPLES:
-        have = have[np.linspace(0, have.size - 1, RELIEF_SAMPLES).astype(np.int64)]
+    # anchors, and the partners they are paired with: random subsets (seeded: the same input
+    # gives the same verdict), the partners dense enough to lie within RELIEF_FAR of an
+    # anchor on any map (an evenly strided subset of a dense 4096^2 prior is a lattice 57 px
+    # apart, beyond it: a review)
+    rng = np.random.default_rng(0)
+    if have.size > RELIEF_POOL:
+        have = np.sort(rng.choice(have, RELIEF_POOL, replace=False))
+    anchors = (np.arange(have.size) if have.size <= RELIEF_SAMPLES else
+               np.sort(rng.choice(have.size, RELIEF_SAMPLES, replace=False)))
     r, c = (a[have].astype(float) for a in d.pixels)
-    dist, nn = cKDTree(np.c_[r, c]).query(np.c_[r, c], k=min(32, have.size))
+    dist, nn = cKDTree(np.c_[r, c]).query(np.c_[r[anchors], c[anchors]],
+                                          k=min(32, have.size))
     dist, nn = dist[:, 1:], nn[:, 1:]  # (the first is the sample itself)
     ok = (dist >= RELIEF_NEAR) & (dist <= RELIEF_FAR)
     first = np.argmax(ok, axis=1)
-    rows = np.flatnonzero(ok[np.arange(have.size), first])
+    rows = np.flatnonzero(ok[np.arange(anchors.size), first])
     if rows.size < RELIEF_PAIRS:
         return None
     j = nn[rows, first[rows]]
-    i = rows
+    i = anchors[rows]
     gx, gy = problem.grid_slopes
     H, W = d.shape
     index = np.full(H * W, -1, dtype=np.int64)

@@ -410,8 +410,6 @@ def prepare(
         conf = np.where(usable, conf, 1.0)
 
     counts = {"pixels": int(m.sum()), "missing": int((~given | nan).sum())}
-    if mask is not None and known is None and nan.mean() > MASK_MISSING:
-        _mask_fit_check(n, m, float(nan.mean()))
     counts.update({k: int(v.sum()) for k, v in bad.items()})
     if conf is not None:
         counts["zero_confidence"] = int(counts_zero.sum())
@@ -433,6 +431,8 @@ def prepare(
             "`normals` has no usable normal inside the mask (all missing, non-finite, "
             f"back-facing or grazing: {said})"
         )
+    if mask is not None and known is None and nan.mean() > MASK_MISSING:
+        _mask_fit_check(n, m, float(nan.mean()))  # (after the refusal of a map without any)
     problems = {k: v for k, v in bad.items() if v.any()}
     if problems:
         first = int(np.flatnonzero(np.logical_or.reduce(list(problems.values())))[0])
@@ -463,10 +463,11 @@ def prepare(
             Kc = getattr(cam, "K", None)
             centred = (abs(Kc[0, 2] - (W - 1) / 2) <= 1 and abs(Kc[1, 2] - (H - 1) / 2) <= 1
                        if Kc is not None else False)
-            if Kc is not None and centred:  # (a K from a field of view, --fov: an audit)
-                frame += (f"; or is the camera's focal length right (fx {Kc[0, 0]:g}, fy "
-                          f"{Kc[1, 1]:g} for this {W} x {H} image; from --fov, the field of "
-                          "view across the width)?")
+            if Kc is not None and centred:  # (e.g. a K from a field of view, --fov: an audit)
+                frame += (f"; or is K for another image size, or its focal length wrong (fx "
+                          f"{Kc[0, 0]:g}, fy {Kc[1, 1]:g} for this {W} x {H} image; they scale "
+                          "with the image, and --fov gives them from the field of view across "
+                          "the width)?")
             elif Kc is not None:  # (a K of another image turns the rays: a user's check)
                 frame += (f"; or is K for another image (a crop or a resize)? Its principal "
                           f"point (cx {Kc[0, 2]:g}, cy {Kc[1, 2]:g}) is usually near the "
@@ -592,8 +593,8 @@ def _check_relief(problem: Problem) -> None:
     :func:`_check_trend`'s."""
     from .prior_fit import relief_ratio
 
-    if problem.camera.projection != "orthographic":
-        return
+    if problem.camera.projection != "orthographic" or problem.prior_blur > 0:
+        return  # (a declared blur removes the relief between the pairs: no measure of units)
     got = relief_ratio(problem)
     if got is None:
         return
@@ -602,6 +603,7 @@ def _check_relief(problem: Problem) -> None:
     sparse = float(np.mean(problem.prior_weight > 0)) <= RELIEF_SPARSE
     factor = RELIEF_FACTOR if sparse else RELIEF_FACTOR_DENSE
     if ratio > 0 and not 1.0 / factor <= ratio <= factor:
+        problem.extras["prior_relief_warned"] = True  # (the jump hint then stays quiet)
         h = problem.pixel_size
         warn(f"prior: its relief is {ratio:.3g} times what the normals give at pixel_size "
              f"{h:g} (the median over {pairs} pairs of nearby samples): without K the depth "
@@ -1092,8 +1094,9 @@ def check_prior(prior, prior_weight, shape, mask, camera):
 
 
 #: Share of an orthographic prior's samples that are exactly 0, beside others all of one
-#: sign, above which 0 is taken for a fill of the unknown pixels (:func:`_zero_fill_check`).
-ZERO_FILL = 0.25
+#: sign and ZERO_FAR times their spread or more away from 0, above which 0 is taken for a fill
+#: of the unknown pixels (:func:`_zero_fill_check`).
+ZERO_FILL, ZERO_FAR = 0.25, 2.0
 
 
 def _zero_fill_check(depth: np.ndarray) -> None:
@@ -1107,6 +1110,10 @@ def _zero_fill_check(depth: np.ndarray) -> None:
         return
     if not (np.all(other > 0) or np.all(other < 0)):
         return
+    # (and the others far from 0 for their spread, as an object's depths in mm are: a relief
+    # on a base plane at 0, e.g. the analytic tent, rises from it, a review)
+    if not np.abs(other).min() > ZERO_FAR * float(np.ptp(other)):
+        return
     warn(f"`prior`: {int(zeros.sum())} of its {depth.size} samples in the mask are exactly 0 "
          f"while the others all lie between {float(other.min()):.6g} and "
          f"{float(other.max()):.6g}: if 0 marks an unknown depth, write NaN there (or pass "
@@ -1114,10 +1121,10 @@ def _zero_fill_check(depth: np.ndarray) -> None:
 
 
 #: Share of a given mask's pixels without a normal (NaN) above which the mask is questioned
-#: where its transpose or a flip would leave half as many or fewer without one, and above
-#: which it is questioned anyway (:func:`_mask_fit_check`; 30 % random gaps inside the right
-#: mask, the mask suite's "missing" route, stay silent).
-MASK_MISSING, MASK_MISSING_ANYWAY = 0.25, 0.5
+#: where the map's background outside it is NaN and its transpose or a flip would leave half
+#: as many or fewer without one (:func:`_mask_fit_check`; random gaps inside the right mask,
+#: the mask suite's "missing" route, and maps with a finite background stay silent).
+MASK_MISSING = 0.25
 
 
 def _mask_fit_check(n: np.ndarray, m: np.ndarray, share: float) -> None:
@@ -1128,21 +1135,27 @@ def _mask_fit_check(n: np.ndarray, m: np.ndarray, share: float) -> None:
     word was the depth-jump hint."""
     have = np.all(np.isfinite(n), axis=-1)
     H, W = m.shape
+
+    def background(alt) -> bool:  # (most of the map outside `alt` NaN: the map's background)
+        out = ~alt
+        return bool(out.any()) and float(have[out].mean()) < 0.5
+
+    if not background(m):
+        return  # (a finite background: the NaNs inside are holes, not the map's outside)
     tries = [("flipped upside down", m[::-1]), ("flipped left to right", m[:, ::-1])]
     if H == W:
         tries.insert(0, ("transposed", m.T))
     better = []
     for what, alt in tries:
         miss = 1.0 - float(have[alt].sum()) / max(int(alt.sum()), 1)
-        if miss < 0.5 * share:
+        if miss < 0.5 * share and background(alt):
             better.append(f"{what}, {miss:.0%}")
-    if not better and share <= MASK_MISSING_ANYWAY:
+    if not better:
         return  # (random gaps inside the right mask: missing samples, no question)
     warn(f"`mask`: {share:.0%} of its pixels have no normal (NaN: the map's background?); is "
-         "the mask this map's, not another view's"
-         + (f"? The mask {'; '.join(better)} of its pixels would have none" if better else
-            ", transposed or flipped?")
-         + " (missing normals inside a mask are integrated as missing samples)")
+         f"the mask this map's, not another view's? The mask {'; '.join(better)} of its "
+         "pixels would have none (missing normals inside a mask are integrated as missing "
+         "samples)")
 
 
 def _swapped_check(prior, mask) -> None:
