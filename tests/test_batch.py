@@ -738,3 +738,19 @@ def test_a_template_takes_progress_true_as_integrate_does():
     check_template(Job(normals="x.npy", options={"progress": True}))
     with pytest.raises(ValueError, match=r"`progress` must be True .*; got 'x'"):
         check_template(Job(normals="x.npy", options={"progress": "x"}))
+
+
+def test_bad_batch_arguments_are_refused_before_any_item_or_folder(tmp_path):
+    """An audit: an array K (or mask, prior) reached every item as a path (a 'bug' record
+    each), save="npy" was read letter by letter, workers=0 was refused after the output
+    folder was made; a single output name is one output."""
+    maps(tmp_path / "in", n=2)
+    for kw, match in (({"K": np.eye(3)}, r"`K` of a batch is a file path .* got ndarray"),
+                      ({"mask": np.ones((4, 4), bool)}, r"`mask` of a batch is a file path"),
+                      ({"workers": 0}, r"`workers` must be a positive integer")):
+        with pytest.raises(ValueError, match=match):
+            facetlift.batch([tmp_path / "in"], tmp_path / "o", **kw)
+        assert not (tmp_path / "o").exists()
+    recs = facetlift.batch([tmp_path / "in"], tmp_path / "o", save="npy", workers=1)
+    assert [r["status"] for r in recs] == ["ok", "ok"]
+    assert all(set(r["outputs"]) == {"npy"} for r in recs)

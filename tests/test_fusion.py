@@ -1332,3 +1332,23 @@ def test_an_orthographic_prior_in_other_units_than_the_normals_is_named():
     K = np.array([[100.0, 0, 35], [0, 100.0, 30], [0, 0, 1]])  # (log-depth: no units to miss)
     s = facetlift.integrate(n, prior=sparse(3.0 * depth + 100.0)[0], K=K)
     assert s.info["prior"]["relief_ratio"] is None
+
+
+def test_prior_fit_from_threads_leaves_the_warning_state_as_it_was():
+    """An audit: integrate(..., prior_fit=...) from a two-thread pool left an 'always' filter
+    and the display of later warnings pointing at a finished thread's record (the capture
+    swaps module-wide state); the capturing blocks now take turns."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    n, depth = wave((40, 48))
+    prior = np.where(np.isfinite(depth), 2.0 * depth + 5.0, np.nan)
+    serial = facetlift.integrate(n, prior=prior, prior_fit="affine").depth
+    show, filters = warnings._showwarnmsg_impl, list(warnings.filters)
+    with ThreadPoolExecutor(2) as ex:
+        depths = list(ex.map(lambda _: facetlift.integrate(n, prior=prior,
+                                                           prior_fit="affine").depth, range(12)))
+    assert warnings._showwarnmsg_impl is show and warnings.filters == filters
+    for d in depths:
+        np.testing.assert_array_equal(d, serial)
+    with pytest.warns(UserWarning, match="still heard"):
+        warnings.warn("still heard", UserWarning, stacklevel=1)

@@ -404,3 +404,19 @@ def test_info_keeps_the_principal_point_warning_of_a_map_it_cannot_integrate(tmp
     out = " ".join(capsys.readouterr().out.split())
     assert code == 1 and "cannot be integrated as read" in out
     assert "principal point (cx -2000, cy 10) lies outside" in out
+
+
+def test_camera_classes_check_what_integrate_checks():
+    """An audit: Pinhole([fx, fy, cx, cy]) raised numpy's LinAlgError although integrate
+    takes four numbers, a transposed K was taken (cx = cy = 0), and Orthographic(-1) turned
+    the surface inside out (0 flattened it)."""
+    K = np.array([[100.0, 0, 16], [0, 100.0, 12], [0, 0, 1]])
+    np.testing.assert_array_equal(facetlift.Pinhole([100, 100, 16, 12]).K, K)
+    with pytest.raises(ValueError, match="upper-triangular with last row"):
+        facetlift.Pinhole(K.T)
+    with pytest.raises(ValueError, match=r"`K` must be a 3x3 intrinsics matrix"):
+        facetlift.Pinhole(np.eye(4))
+    for bad in (-1, 0, float("nan"), "1", True):
+        with pytest.raises(ValueError, match="`pixel_size` must be a positive finite number"):
+            facetlift.Orthographic(bad)
+    assert facetlift.Orthographic(0.5).footprint() == 0.5

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
+import threading
 import warnings
 
 _PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
@@ -21,3 +23,21 @@ def warn(message: str, category: type[Warning] = UserWarning, **fields) -> None:
         level += 1
     warnings.warn(category(message, **fields) if fields else message, category,
                   stacklevel=level)
+
+
+#: Serialises the blocks that swap the process's warning state (:func:`recording`):
+#: ``warnings.catch_warnings`` sets module-wide state, so two threads recording at once put
+#: one item's warnings in the other's record and left the caller's display broken (an audit:
+#: a Dask client with two threads per worker; ``prior_fit`` from a thread pool). Re-entrant:
+#: a batch item records around an integration that records too.
+RECORDING = threading.RLock()
+
+
+@contextlib.contextmanager
+def recording(record: bool = True, action: str = "always"):
+    """``warnings.catch_warnings(record=record)`` with ``simplefilter(action)``, one thread at
+    a time (:data:`RECORDING`); yields the list of caught warnings (None without
+    `record`)."""
+    with RECORDING, warnings.catch_warnings(record=record) as caught:
+        warnings.simplefilter(action)
+        yield caught

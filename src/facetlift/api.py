@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 
 from . import frames, memory, methods
-from ._warnings import warn
+from ._warnings import recording, warn
 from .conventions import CORNER_OFFSETS
 from .domain import Domain
 from .linalg import SolverError
@@ -278,8 +278,7 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
         weight = np.where(np.isfinite(own), weight * own, weight)
         prior_weight = weight
     failed = None
-    with warnings.catch_warnings(record=True) as said:
-        warnings.simplefilter("always")
+    with recording() as said:
         first = integrate(normals, mask, **kwargs)
         try:
             aligned, details = pf.fit(raw, weight, first, kind, kwargs.get("K") is not None,
@@ -296,8 +295,7 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
         surface = first
         surface.info["prior"] = {"fit": details, "left_out": True}
     else:
-        with warnings.catch_warnings(record=True) as fused:
-            warnings.simplefilter("always")
+        with recording() as fused:
             surface = integrate(normals, mask, prior=aligned, prior_weight=prior_weight,
                                 prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
         for w in fused:  # (re-emitted, a torn surface's with what the fit adds to its causes)

@@ -31,6 +31,7 @@ import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from ._warnings import recording
 from .jobs import OUTPUT_STEMS, Job
 
 #: Name of the JSON-lines log inside the batch's output folder.
@@ -294,8 +295,7 @@ def run_item(job: Job, threads: int | None = None) -> dict:
     rec = {"status": "ok", "error": None, "exit": 0}
     caught = []  # (a failed item's warnings too: e.g. a gradient layout's, which may say why)
     try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
+        with recording() as caught:
             if threads is None:
                 result = run(job)
             else:
@@ -468,10 +468,14 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             if clash:
                 raise ValueError(f"{clash} given both as keywords and in `options`")
             job_options["options"] = {**(job_options.get("options") or {}), **extra}
+    if isinstance(job_options.get("save"), (str, os.PathLike)):  # (one output, not letters)
+        job_options["save"] = (str(job_options["save"]),)
     template = job if job is not None else Job(**job_options)
     # once, before any item: a bad template is no per-item failure (a report's matplotlib is
     # the workers' affair on a cluster)
     check_template(template, local=scheduler is None)
+    if workers is not None:  # (checked before the output folder is made: an audit)
+        _workers(workers, 1)
     found = items(inputs, list_file=list_file)
     if template.K is None and not template.orthographic:
         _unused_cameras(found)
@@ -577,6 +581,15 @@ def check_template(job: Job, local: bool = True) -> None:
     info = methods.get(job.method)
     if not isinstance(job.options, dict):
         raise ValueError(f"`options` must be a dict of method options; got {job.options!r}")
+    for name in ("mask", "K", "prior", "prior_weight_map", "confidence"):
+        value = getattr(job, name, None)
+        if value is not None and not isinstance(value, (str, os.PathLike)):
+            # (an array reached every item as a path: a TypeError 'bug' record each, an audit)
+            raise ValueError(f"`{name}` of a batch is a file path read for every item; got "
+                             f"{type(value).__name__}: write it to a file, or integrate each "
+                             "map with facetlift.integrate, which takes arrays")
+    if isinstance(job.save, (str, os.PathLike)) or not all(isinstance(k, str) for k in job.save):
+        raise ValueError(f"`save` must be a sequence of output names; got {job.save!r}")
     opts = dict(job.options)
     if opts.get("max_memory") is not None:
         memory.parse_size(opts["max_memory"])

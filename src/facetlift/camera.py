@@ -142,6 +142,13 @@ class Orthographic(Camera):
     grazing = OUTLIER_EPS
     unknown = "height"
 
+    def __post_init__(self):
+        # (a pixel size of -1 turned the surface inside out, 0 flattened it: an audit)
+        h = self.pixel_size
+        if isinstance(h, bool) or not isinstance(h, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(h) or not h > 0:
+            raise ValueError(f"`pixel_size` must be a positive finite number; got {h!r}")
+
     def footprint(self) -> float:
         return float(self.pixel_size)
 
@@ -194,7 +201,9 @@ class Pinhole(Camera):
     pixel_size = 1.0
 
     def __post_init__(self):
-        K = np.array(self.K, dtype=float)
+        # (checked as integrate checks K: four numbers gave numpy's LinAlgError and a
+        # transposed K was taken with cx = cy = 0, an audit)
+        K = np.array(check_K(self.K), dtype=float)
         K.setflags(write=False)
         object.__setattr__(self, "K", K)
         object.__setattr__(self, "_Kinv", np.linalg.inv(K))

@@ -8,11 +8,12 @@ mask-shape benchmark (:data:`SECONDS_PER_PIXEL`).
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+
+from ._warnings import recording
 
 #: Planner route -> (fastest, slowest) seconds per mask pixel of the default dgp solve, over
 #: the mask shapes of docs/benchmarks.md ("Mask-shape suite", the 2048² rows: orthographic and
@@ -217,8 +218,7 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
                          "range": [float(arr[known].min()), float(arr[known].max())]
                          if known.any() else None}
     out.update(where)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with recording() as caught:
         try:
             with frames.read_in(normal_frame):  # (read in it already: hints relative to it)
                 checked = frames.checked(n, inp.mask, frame=None)
@@ -378,8 +378,7 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
             return guess
     if problem is None:
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
+            with recording(record=False, action="ignore"):
                 problem = prepare(n, mask, K=K)
         except ValueError:
             return guess

@@ -318,8 +318,10 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
         `frame`.
     """
     parse(frame)
+    from .problem import unmasked
+
     try:
-        n = np.asarray(normals)
+        n = np.asarray(unmasked(normals))  # (a masked array's masked normals: missing)
     except Exception:
         return normals  # prepare() says what is wrong with it
     if n.ndim != 3 or n.shape[-1] != 3 or n.dtype.kind not in "uif":

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ._progress import announce
+from ._warnings import recording
 
 #: Output kinds (``--save``) -> file names written into the output folder.
 OUTPUTS = {
@@ -339,8 +340,7 @@ def recorded_warnings(on_warning=None):
     after the run)."""
     kept: list = []
     try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
+        with recording() as caught:
             kept = caught
             if on_warning is not None:
                 def show(message, category, filename, lineno, file=None, line=None):

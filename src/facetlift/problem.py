@@ -224,6 +224,7 @@ def gradients_from_normals(normals) -> tuple[np.ndarray, np.ndarray]:
 def numeric_array(a, name: str, what: str = "a real numeric array") -> np.ndarray:
     """``np.asarray(a)`` if it is a real numeric (or boolean) array, else a ValueError naming
     `name`. Shared by the input checks here and the writers in :mod:`facetlift.io`."""
+    a = unmasked(a)
     try:
         arr = np.asarray(a)
     except Exception as e:  # ragged lists and the like
@@ -233,17 +234,41 @@ def numeric_array(a, name: str, what: str = "a real numeric array") -> np.ndarra
     return arr
 
 
+def unmasked(a, fill=np.nan):
+    """A numpy masked array as a plain float array with `fill` (NaN: missing, unknown) at its
+    masked entries; anything else as it is. ``np.asarray`` drops the mask: a masked array's
+    masked normals were integrated as if valid (an audit)."""
+    if np.ma.isMaskedArray(a) and np.ma.getmask(a) is not np.ma.nomask:
+        return np.ma.filled(np.ma.asarray(a).astype(float), fill)
+    return np.ma.getdata(a) if np.ma.isMaskedArray(a) else a
+
+
 def _float_array(a, name: str) -> np.ndarray:
     return numeric_array(a, name).astype(float, copy=True)
 
 
 def _bool_image(a, name: str, shape: tuple[int, int]) -> np.ndarray:
-    arr = numeric_array(a, name, "a boolean or numeric array")
+    arr = numeric_array(unmasked(a, 0.0), name, "a boolean or numeric array")  # (masked: out)
     if arr.shape != shape:
         raise ValueError(f"`{name}` must have shape {shape} to match `normals`; got {arr.shape}")
     if arr.dtype.kind == "f" and not np.isfinite(arr).all():
         raise ValueError(f"`{name}` contains NaN or inf")
-    return arr != 0
+    inside = arr != 0
+    if arr.dtype.kind == "f" and inside.any():
+        # (a soft matte or a probability map: every value above 0 was inside, the domain grew
+        # by 66 % on a blurred mask, an audit; read_mask warns about soft files alike)
+        soft = int(np.count_nonzero((arr > 0) & (arr < 1)))
+        if soft > SOFT_MASK_SHARE * int(inside.sum()):
+            warn(f"`{name}` holds {soft} values between 0 and 1 (a soft matte or a "
+                 "probability map?): every pixel above 0 counts as inside "
+                 f"({int(inside.sum())} pixels); threshold it first (e.g. {name} > 0.5) if "
+                 "that is not meant")
+    return inside
+
+
+#: Share of a float mask's inside pixels with values strictly between 0 and 1 above which it
+#: is warned about as soft (:func:`_bool_image`).
+SOFT_MASK_SHARE = 0.01
 
 
 def prepare(
