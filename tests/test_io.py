@@ -693,3 +693,24 @@ def test_height_map_png_is_16_bit_scaled_to_the_depth_range(tmp_path, capsys):
     rec = json.loads(capsys.readouterr().out)
     d = np.load(tmp_path / "o" / "depth.npy")
     assert rec["depth_range"] == [np.nanmax(d), np.nanmin(d)]
+
+
+def test_write_normals_keeps_the_direction_of_any_length_and_decodes_integers(tmp_path):
+    """An audit: a (-p, -q, 1) field (integrate renormalises it) was clipped component by
+    component (26 deg off when read back), and a uint8 map was written as all (1, 1, 1)."""
+    gt = facetlift.synthetic.analytic("sphere", 32)
+    n, m = gt.normals, gt.mask
+    p, q = facetlift.gradients_from_normals(n)
+    io.write_normals(tmp_path / "raw.png", np.dstack([-p, -q, np.ones_like(p)]), m)
+    back, _ = io.read_normals(tmp_path / "raw.png")
+    back = back[m] / np.linalg.norm(back[m], axis=-1, keepdims=True)
+    angle = np.degrees(np.arccos(np.clip(np.sum(back * n[m], axis=-1), -1, 1)))
+    assert angle.max() < 0.5
+    u8 = np.nan_to_num(np.round((n + 1) / 2 * 255)).astype(np.uint8)
+    with pytest.warns(UserWarning, match="is uint8: decoded as v / 255"):
+        io.write_normals(tmp_path / "u8.png", u8, m)
+    back, _ = io.read_normals(tmp_path / "u8.png")
+    assert np.isfinite(back[m]).all()
+    back = back[m] / np.linalg.norm(back[m], axis=-1, keepdims=True)  # (as integrate reads)
+    angle = np.degrees(np.arccos(np.clip(np.sum(back * n[m], axis=-1), -1, 1)))
+    assert angle.max() < 1.0

@@ -540,3 +540,21 @@ def test_a_soft_float_mask_is_named():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         prepare(np.nan_to_num(gt.normals), gt.mask.astype(float))
+
+
+def test_entry_points_name_a_wrong_argument_kind():
+    """An audit: solve(array) raised "no attribute 'counts'", clean_mask of a 3-D mask
+    "too many values to unpack", of min_size '2' numpy's UFuncTypeError (and -5 passed),
+    K_from_fov of an image printed the whole array in its message."""
+    from facetlift.camera import K_from_fov
+
+    with pytest.raises(ValueError, match=r"solve\(\) takes a Problem .* got ndarray .*"
+                       r"facetlift.integrate"):
+        facetlift.solve(np.zeros((4, 4, 3)))
+    with pytest.raises(ValueError, match=r"`mask` must be an \(H, W\) array; got shape"):
+        facetlift.clean_mask(np.ones((3, 3, 3)))
+    for bad in ("2", -5, 0, 1.5):
+        with pytest.raises(ValueError, match="`min_size` must be a positive integer"):
+            facetlift.clean_mask(np.ones((3, 3)), bad)
+    with pytest.raises(ValueError, match=r"got ndarray of shape \(100, 100, 3\)$"):
+        K_from_fov(np.zeros((100, 100, 3)), 60)

@@ -388,6 +388,10 @@ def solve(problem: Problem, method: str = "dgp", /, *, max_memory=None, **option
     is applied by :func:`integrate`, so prepare with ``outlier_eps=`` to match it here (a
     problem prepared with the camera's own threshold, below the route's, gets a warning).
     """
+    if not isinstance(problem, Problem):  # (an array gave "no attribute 'counts'": an audit)
+        raise ValueError(f"solve() takes a Problem from facetlift.prepare(normals, ...); got "
+                         f"{type(problem).__name__} (for a normal map as an array, "
+                         "facetlift.integrate(normals, ...) prepares and solves at once)")
     if "method" in options and not any(o.name == "method" for o in methods.get(method).specs()):
         raise ValueError(f"solve() takes the method as its second positional argument: "
                          f"solve(problem, {options['method']!r}); got method={options['method']!r}"

@@ -301,8 +301,10 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
     except (TypeError, ValueError):
         ok = False
     if not ok:
+        text = repr(shape)  # (an image given for its shape printed 12k characters: an audit)
+        text = text if len(text) <= 80 else f"{type(shape).__name__} of shape {np.shape(shape)}"
         raise ValueError(f"`shape` must be the image's (H, W), two positive integers; got "
-                         f"{shape!r}")
+                         f"{text}")
     try:
         value = float(fov)
     except (TypeError, ValueError):

@@ -1267,7 +1267,11 @@ def _has_neighbour(m: np.ndarray) -> np.ndarray:
 
 def clean_mask(mask, min_size: int = 2) -> np.ndarray:
     """Remove 8-connected components with fewer than `min_size` pixels from a mask."""
-    m = np.asarray(mask) != 0
+    if isinstance(min_size, bool) or not isinstance(min_size, (int, np.integer)) or min_size < 1:
+        raise ValueError(f"`min_size` must be a positive integer; got {min_size!r}")
+    m = numeric_array(unmasked(mask, 0.0), "mask", "a boolean or numeric array") != 0
+    if m.ndim != 2:
+        raise ValueError(f"`mask` must be an (H, W) array; got shape {m.shape}")
     d = Domain.from_mask(m)
     keep = np.concatenate([[False], d.component_sizes >= min_size])
     return keep[d.labels]

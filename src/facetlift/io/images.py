@@ -505,8 +505,12 @@ def write_normals(
     path : str or Path
         ``.png`` (RGB, or RGBA with the mask as alpha), ``.tif``/``.tiff``, ``.exr`` (R, G, B
         and A for the mask) or ``.npy`` ((H, W, 3), or (H, W, 4) with the mask).
-    normals : (H, W, 3) float
-        Components in [-1, 1]; NaN is written as 0 (PNG/integer TIFF: decodes as NaN again).
+    normals : (H, W, 3) float, or uint8/uint16 encoded as ``(n + 1) / 2 * max``
+        Written as given where every component lies in [-1, 1] and the length is one
+        :func:`read_normals` takes for a normal; other vectors are made unit length first
+        (:func:`facetlift.integrate` reads any length: only the direction counts). NaN and
+        zero-length ones are written as 0 (PNG/integer TIFF: decode as NaN again). Integer
+        input is decoded first, with the warning integrate gives.
     mask : (H, W) bool, optional
         Stored as the alpha channel (a mask True everywhere is stored, but reads back as no
         mask: :func:`read_normals` ignores an alpha that is the same everywhere).
@@ -520,9 +524,24 @@ def write_normals(
     """
     p = Path(path)
     ext = _suffix(p, NORMAL_WRITE_FORMATS, "normal map", "path")
-    n = _image_array(normals, "normals", 3).astype(np.float64)
-    if n.shape[-1] != 3:
-        raise ValueError(f"`normals` must have shape (H, W, 3); got {n.shape}")
+    raw = _image_array(normals, "normals", 3)
+    if raw.shape[-1] != 3:
+        raise ValueError(f"`normals` must have shape (H, W, 3); got {raw.shape}")
+    # (as integrate reads them: an 8/16-bit encoded map decoded, with its warning, and every
+    # vector made unit length; clipped component by component, a (-p, -q, 1) field came back
+    # 26 deg off and a uint8 map as all (1, 1, 1), an audit)
+    n = frames.checked(raw, frame=None, name="normals") if raw.dtype.kind == "u" else raw
+    n = np.array(n, dtype=np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        length = np.sqrt(np.einsum("...i,...i->...", n, n))
+        # (written as given where that keeps the direction and reads back as a normal, so a
+        # decoded map round-trips to the last bit; made unit where a component lies beyond
+        # +-1, which the encoding would clip, or the length is one the reader takes for a
+        # background fill; zero-length ones NaN)
+        lo, hi = frames.ENCODED_LENGTH_RANGE
+        off = ~((np.abs(n).max(axis=-1) <= 1.0) & (length >= lo) & (length <= hi))
+        n = np.where(off[..., None], np.where((length > 0)[..., None],
+                                              n / length[..., None], np.nan), n)
     n = frames.from_facetlift(n, frames.resolve(frame, y_down))
     m = None
     if mask is not None:
