@@ -275,3 +275,22 @@ def test_the_command_line_retains_freed_memory_unless_turned_off(monkeypatch):
     monkeypatch.setenv("FACETLIFT_RETAIN_MEMORY", "0")
     assert cli.main() == 0 and calls == [1]
     assert cli.main(["--version"]) == 0 and calls == [1]  # in-process callers: never
+
+
+def test_the_plan_counts_the_local_solve_of_a_large_hole():
+    """An audit: a 1024^2 sphere with 64 % of it missing planned 160 MiB and peaked at 1.26
+    GiB, so max_memory='400M' let it run; the facet preconditioner's local block (the hole's
+    vertices) is a factorization of its own, now in the plan (checked here at 256^2)."""
+    from facetlift import memory
+
+    gt = facetlift.synthetic.analytic("sphere", 256)
+    holed = gt.normals.copy()
+    holed[26:230, 26:230] = np.nan
+    full = memory.estimate(facetlift.prepare(gt.normals, gt.mask), "dgp", {})[0]
+    est, route = memory.estimate(facetlift.prepare(holed, gt.mask), "dgp", {})
+    from facetlift.linalg.facet import weak_vertices
+
+    p = facetlift.prepare(holed, gt.mask)
+    local = int(weak_vertices(p.domain, p.usable).sum())
+    assert route == "dgp-pcg" and local > 30_000
+    assert est >= full + memory.factorization_bytes(local) and est > 2.5 * full
