@@ -137,3 +137,25 @@ def test_angular_error_of_a_surface_split_at_jumps_uses_each_facets_own_corners(
     mean = angular_error(s, g.normals)[0]
     assert mean == pytest.approx(s.info["mean_deviation"], rel=1e-6)
     assert mean < 0.5 * angular_error(integrate(g.normals, g.mask), g.normals)[0]
+
+
+def test_metrics_take_a_surface_and_name_a_missing_scale():
+    """An audit: made(surface, ...) raised a bare TypeError, angular_error(depth, ...) an
+    AttributeError, and rmse / mae / normalized_error of a perspective result (median depth
+    1) against depth in mm returned 10.5 mm without a word."""
+    import warnings
+
+    gt = analytic("sphere", 48)
+    s = integrate(gt.normals, gt.mask)
+    assert rmse(s, gt.depth) == rmse(s.depth, gt.depth)
+    persp = integrate(gt.normals, gt.mask, K=[[60.0, 0, 24], [0, 60.0, 24], [0, 0, 1]])
+    assert made(persp, 3.0 * persp.depth)[0] == made(persp.depth, 3.0 * persp.depth)[0] == 0.0
+    with pytest.raises(ValueError, match="`surface` must be a facetlift.Surface"):
+        angular_error(s.depth, gt.normals)
+    for f in (rmse, mae, normalized_error):
+        with pytest.warns(UserWarning, match=r"depth spread is .* times the truth's: these "
+                          r"errors align by an offset only"):
+            f(s.depth, 1000.0 * gt.depth)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            f(s.depth, gt.depth)
