@@ -446,20 +446,13 @@ def solve(
     faster (kept on `pre` for later solves with the same `K`; its true residual is appended to
     the info's residuals, and a failed one leaves CG to go on).
     """
-    if pre.direct is not None and pre.direct[0] is K:  # (factorized by an earlier solve)
+    # factorized by an earlier solve with this K, or to be factorized before any iteration
+    # (_factorize_first); a start already within rtol needs neither
+    cached = pre.direct is not None and pre.direct[0] is K
+    if cached or _factorize_first(K, pre):
         bn = float(np.linalg.norm(b)) or 1.0
         start = 1.0 if x0 is None else float(np.linalg.norm(b - K @ x0)) / bn
         if start <= rtol:
-            return x0, CGInfo(converged=True, residuals=[start])
-        done = _direct(K, b, pre, CGInfo(residuals=[start]), rtol)
-        if done is not None and done[1].converged:
-            return done
-        if done is not None and done[1].residuals[-1] < start:  # (CG goes on from the better)
-            x0 = done[0]
-    if (pre.direct is None or pre.direct[0] is not K) and _factorize_first(K, pre):
-        bn = float(np.linalg.norm(b)) or 1.0
-        start = 1.0 if x0 is None else float(np.linalg.norm(b - K @ x0)) / bn
-        if start <= rtol:  # (a start already within rtol: nothing to factorize for)
             return x0, CGInfo(converged=True, residuals=[start])
         done = _direct(K, b, pre, CGInfo(residuals=[start]), rtol)
         if done is not None and done[1].converged:
