@@ -1352,3 +1352,31 @@ def test_prior_fit_from_threads_leaves_the_warning_state_as_it_was():
         np.testing.assert_array_equal(d, serial)
     with pytest.warns(UserWarning, match="still heard"):
         warnings.warn("still heard", UserWarning, stacklevel=1)
+
+
+def test_threads_record_their_own_warnings_at_the_same_time():
+    """A review: a lock around whole recording blocks ran a threaded cluster's items one at a
+    time (and could deadlock); each thread now records its own warnings while the others
+    run, and the state is put back when the last one leaves."""
+    import threading
+
+    from facetlift._warnings import recording
+
+    show, filters = warnings._showwarnmsg_impl, list(warnings.filters)
+    both_inside = threading.Barrier(2, timeout=10)  # (taking turns would time out here)
+    got = {}
+
+    def work(name):
+        with recording() as caught:
+            both_inside.wait()
+            warnings.warn(f"from {name}", UserWarning, stacklevel=1)
+            both_inside.wait()
+        got[name] = [str(w.message) for w in caught]
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in ("a", "b")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert got == {"a": ["from a"], "b": ["from b"]}
+    assert warnings._showwarnmsg_impl is show and warnings.filters == filters

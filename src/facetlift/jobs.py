@@ -340,15 +340,8 @@ def recorded_warnings(on_warning=None):
     after the run)."""
     kept: list = []
     try:
-        with recording() as caught:
+        with recording(on_warning=on_warning) as caught:
             kept = caught
-            if on_warning is not None:
-                def show(message, category, filename, lineno, file=None, line=None):
-                    caught.append(warnings.WarningMessage(message, category, filename,
-                                                          lineno, file, line))
-                    on_warning(message)
-
-                warnings.showwarning = show  # (restored by catch_warnings)
             yield caught
     except BaseException:
         if on_warning is None:  # (a caller that heard them as they came has them already)

@@ -9,7 +9,6 @@ from __future__ import annotations
 import importlib
 import logging
 import time
-import warnings
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -161,8 +160,9 @@ def run_method(spec: Spec, normals, mask, *, pixel_size=1.0, K=None, status=None
     if K is not None and not info.perspective:
         return Run(spec.label, "unsupported", message="no perspective support")
     t0 = time.perf_counter()
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    from .._warnings import recording
+
+    with recording() as caught:
         try:
             surface = integrate(
                 normals, mask, method=spec.method, pixel_size=pixel_size, K=K,

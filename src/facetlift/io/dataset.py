@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -197,8 +196,9 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                 extra[name] = prior_image(extra[name], (H, W), positive=K is not None)
             elif isinstance(extra[name], tuple):  # (checked here too: its errors get the
                 # folder's hint; its warnings come when integrate places the points)
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
+                from .._warnings import recording
+
+                with recording(record=False, action="ignore"):
                     prior_samples(extra[name], (H, W))
         except ValueError as e:
             raise ValueError(f"{e}; {skip}") from None
