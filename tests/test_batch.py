@@ -754,3 +754,5 @@ def test_bad_batch_arguments_are_refused_before_any_item_or_folder(tmp_path):
     recs = facetlift.batch([tmp_path / "in"], tmp_path / "o", save="npy", workers=1)
     assert [r["status"] for r in recs] == ["ok", "ok"]
     assert all(set(r["outputs"]) == {"npy"} for r in recs)
+    recs = facetlift.batch([tmp_path / "in"], tmp_path / "d", save=None, workers=1)
+    assert [r["status"] for r in recs] == ["ok", "ok"]  # (None: the default outputs)

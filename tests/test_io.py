@@ -714,3 +714,20 @@ def test_write_normals_keeps_the_direction_of_any_length_and_decodes_integers(tm
     back = back[m] / np.linalg.norm(back[m], axis=-1, keepdims=True)  # (as integrate reads)
     angle = np.degrees(np.arccos(np.clip(np.sum(back * n[m], axis=-1), -1, 1)))
     assert angle.max() < 1.0
+
+
+def test_masked_arrays_are_written_with_their_masked_entries_left_out(tmp_path):
+    """A review: a masked uint8 map was taken as floats 0..255 (40 deg off), a masked mask
+    wrote its masked entries as inside."""
+    gt = facetlift.synthetic.analytic("sphere", 32)
+    n8 = np.nan_to_num(np.round((gt.normals + 1) / 2 * 255)).astype(np.uint8)
+    hole = np.zeros(n8.shape, bool)
+    hole[10:13, 10:13] = True
+    with pytest.warns(UserWarning, match="is uint8: decoded"):
+        io.write_normals(tmp_path / "m.png", np.ma.masked_array(n8, hole), gt.mask)
+    back, _ = io.read_normals(tmp_path / "m.png")
+    assert np.isnan(back[10:13, 10:13]).all()
+    assert np.isfinite(back[gt.mask & ~hole[..., 0]]).all()
+    io.write_mask(tmp_path / "k.png", np.ma.masked_array(np.ones((8, 8), bool),
+                                                          mask=np.eye(8, dtype=bool)))
+    assert io.read_mask(tmp_path / "k.png").sum() == 56

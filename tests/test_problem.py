@@ -553,8 +553,11 @@ def test_entry_points_name_a_wrong_argument_kind():
         facetlift.solve(np.zeros((4, 4, 3)))
     with pytest.raises(ValueError, match=r"`mask` must be an \(H, W\) array; got shape"):
         facetlift.clean_mask(np.ones((3, 3, 3)))
-    for bad in ("2", -5, 0, 1.5):
-        with pytest.raises(ValueError, match="`min_size` must be a positive integer"):
+    for bad in ("2", -5, float("nan"), True):
+        with pytest.raises(ValueError, match="`min_size` must be a number of pixels >= 0"):
             facetlift.clean_mask(np.ones((3, 3)), bad)
+    m = np.zeros((6, 6), bool)
+    m[0, 0] = m[3:5, 3:5] = True  # (a float size, e.g. a share of the mask, and 0 work)
+    assert facetlift.clean_mask(m, 0).sum() == 5 and facetlift.clean_mask(m, 2.5).sum() == 4
     with pytest.raises(ValueError, match=r"got ndarray of shape \(100, 100, 3\)$"):
         K_from_fov(np.zeros((100, 100, 3)), 60)

@@ -470,6 +470,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             job_options["options"] = {**(job_options.get("options") or {}), **extra}
     if isinstance(job_options.get("save"), (str, os.PathLike)):  # (one output, not letters)
         job_options["save"] = (str(job_options["save"]),)
+    if "save" in job_options and job_options["save"] is None:  # (the default, as jobs.run)
+        del job_options["save"]
     template = job if job is not None else Job(**job_options)
     # once, before any item: a bad template is no per-item failure (a report's matplotlib is
     # the workers' affair on a cluster)

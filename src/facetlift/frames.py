@@ -318,10 +318,13 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
         `frame`.
     """
     parse(frame)
-    from .problem import unmasked
-
+    hidden = None  # (a masked array's masked pixels: missing, NaN once decoded)
+    if np.ma.isMaskedArray(normals):
+        hidden = np.ma.getmaskarray(normals)
+        hidden = hidden.any(axis=-1) if hidden.ndim == 3 else None
+        normals = np.ma.getdata(normals)
     try:
-        n = np.asarray(unmasked(normals))  # (a masked array's masked normals: missing)
+        n = np.asarray(normals)
     except Exception:
         return normals  # prepare() says what is wrong with it
     if n.ndim != 3 or n.shape[-1] != 3 or n.dtype.kind not in "uif":
@@ -336,7 +339,11 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
             f"`{name}` is {n.dtype}: decoded as v / {np.iinfo(n.dtype).max} * 2 - 1 (the PNG "
             "encoding); pass float normals to silence this", FrameWarning
         )
-        n = decode(n, where=mask)
+        n = decode(n, where=None if hidden is None or mask is None
+                   else np.asarray(mask) & ~hidden)
+    if hidden is not None and hidden.any():  # (after the decode: an 8-bit masked map, a review)
+        n = np.array(n, dtype=float)
+        n[hidden] = np.nan
     n = to_facetlift(n, frame)
     sample = _inside(n, mask, sample=CHECK_SAMPLE)
     if sample is not None:

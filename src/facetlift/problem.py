@@ -1267,8 +1267,10 @@ def _has_neighbour(m: np.ndarray) -> np.ndarray:
 
 def clean_mask(mask, min_size: int = 2) -> np.ndarray:
     """Remove 8-connected components with fewer than `min_size` pixels from a mask."""
-    if isinstance(min_size, bool) or not isinstance(min_size, (int, np.integer)) or min_size < 1:
-        raise ValueError(f"`min_size` must be a positive integer; got {min_size!r}")
+    ok = not isinstance(min_size, bool) and isinstance(min_size, (int, float, np.integer,
+                                                                   np.floating))
+    if not ok or not np.isfinite(min_size) or min_size < 0:  # (0.01 * m.sum() is a float)
+        raise ValueError(f"`min_size` must be a number of pixels >= 0; got {min_size!r}")
     m = numeric_array(unmasked(mask, 0.0), "mask", "a boolean or numeric array") != 0
     if m.ndim != 2:
         raise ValueError(f"`mask` must be an (H, W) array; got shape {m.shape}")

@@ -524,6 +524,8 @@ def write_normals(
     """
     p = Path(path)
     ext = _suffix(p, NORMAL_WRITE_FORMATS, "normal map", "path")
+    if np.ma.isMaskedArray(normals):  # (decoded, then NaN where masked: a review)
+        normals = frames.checked(normals, frame=None, name="normals")
     raw = _image_array(normals, "normals", 3)
     if raw.shape[-1] != 3:
         raise ValueError(f"`normals` must have shape (H, W, 3); got {raw.shape}")
@@ -545,7 +547,9 @@ def write_normals(
     n = frames.from_facetlift(n, frames.resolve(frame, y_down))
     m = None
     if mask is not None:
-        m = np.asarray(mask) != 0
+        from ..problem import unmasked
+
+        m = np.asarray(unmasked(mask, 0.0)) != 0  # (a masked mask's entries: outside)
         if m.shape != n.shape[:2]:
             raise ValueError(f"`mask` must have shape {n.shape[:2]}; got {m.shape}")
     allowed = {".png": (8, 16), ".tif": (8, 16, 32), ".tiff": (8, 16, 32)}
@@ -582,7 +586,9 @@ def write_mask(path, mask) -> Path:
     """Write an (H, W) mask: PNG or TIFF (8-bit, 255 inside) or ``.npy`` (bool)."""
     p = Path(path)
     ext = _suffix(p, MASK_FORMATS, "mask", "path")
-    m = _image_array(mask, "mask", 2) != 0
+    from ..problem import unmasked
+
+    m = _image_array(unmasked(mask, 0.0), "mask", 2) != 0  # (masked entries: outside)
     if ext == ".npy":
         _save_npy(p, m)
     elif ext == ".png":
