@@ -487,3 +487,20 @@ def test_half_facing_away_names_the_reversed_channel_order():
     with pytest.raises(ValueError, match="face away") as e:
         facetlift.integrate(frames.from_facetlift(n, "opencv"))
     assert "channels in another order" not in str(e.value)
+
+
+def test_an_integer_maps_unit_length_check_looks_inside_the_mask_only():
+    """A final read: the masked-array change passed no mask to the decode's unit-length check
+    for plain arrays, so a map's background fill (here decoding to length 1.3) would have
+    warned again."""
+    import warnings
+
+    yy, xx = np.mgrid[0:48, 0:48]
+    inside = (yy - 24) ** 2 + (xx - 24) ** 2 < 15 ** 2
+    n = np.dstack([np.zeros((48, 48)), np.zeros((48, 48)), np.ones((48, 48))])
+    v = np.round((n + 1) / 2 * 255).astype(np.uint8)
+    v[~inside] = [200, 200, 255]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        facetlift.integrate(v, inside)
+    assert not [w for w in caught if "longer than unit length" in str(w.message)]

@@ -339,8 +339,9 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
             f"`{name}` is {n.dtype}: decoded as v / {np.iinfo(n.dtype).max} * 2 - 1 (the PNG "
             "encoding); pass float normals to silence this", FrameWarning
         )
-        n = decode(n, where=None if hidden is None or mask is None
-                   else np.asarray(mask) & ~hidden)
+        where = mask if hidden is None else (
+            ~hidden if mask is None else np.asarray(mask).astype(bool) & ~hidden)
+        n = decode(n, where=where)
     if hidden is not None and hidden.any():  # (after the decode: an 8-bit masked map, a review)
         n = np.array(n, dtype=float)
         n[hidden] = np.nan
