@@ -40,10 +40,9 @@ _SHARED: dict = {"depth": 0, "restore": None, "show": None}
 _LOCAL = threading.local()
 
 
-def _reinit_after_fork() -> None:  # (a child forked while another thread held the lock)
-    global _LOCK
-    _LOCK = threading.Lock()
-    _LOCAL.__dict__.clear()
+def _reinit_after_fork() -> None:  # (a child forked while another thread held the lock;
+    global _LOCK  # the forking thread's own blocks, in its thread-local stack, go on as they
+    _LOCK = threading.Lock()  # were)
 
 
 if hasattr(os, "register_at_fork"):
