@@ -731,3 +731,28 @@ def test_masked_arrays_are_written_with_their_masked_entries_left_out(tmp_path):
     io.write_mask(tmp_path / "k.png", np.ma.masked_array(np.ones((8, 8), bool),
                                                           mask=np.eye(8, dtype=bool)))
     assert io.read_mask(tmp_path / "k.png").sum() == 56
+
+
+def test_write_normals_checks_bits_first_and_never_refuses_a_frame(tmp_path):
+    """A review: with integer input the decode warning came before the bits error, the
+    decode's unit check counted the background, and a map facing away was refused with
+    integrate's --normal-frame advice (a map is written, not integrated)."""
+    import warnings
+
+    v = np.zeros((12, 12, 3), np.uint8)
+    v[...] = [128, 128, 0]  # (every normal facing away: written as it is)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(ValueError, match="`bits` must be one of"):
+            io.write_normals(tmp_path / "a.png", v, bits=12)
+        io.write_normals(tmp_path / "a.png", v)
+    back, _ = io.read_normals(tmp_path / "a.png")
+    assert (back[..., 2] < -0.99).all()
+    v[...] = [128, 128, 255]
+    v[:, :4] = [200, 200, 255]  # (a too-long fill outside the mask: no unit-length warning)
+    mask = np.zeros((12, 12), bool)
+    mask[:, 4:] = True
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        io.write_normals(tmp_path / "b.png", v, mask)
+    assert not [w for w in caught if "longer than unit length" in str(w.message)]

@@ -524,16 +524,40 @@ def write_normals(
     """
     p = Path(path)
     ext = _suffix(p, NORMAL_WRITE_FORMATS, "normal map", "path")
-    if np.ma.isMaskedArray(normals):  # (decoded, then NaN where masked: a review)
-        normals = frames.checked(normals, frame=None, name="normals")
+    allowed = {".png": (8, 16), ".tif": (8, 16, 32), ".tiff": (8, 16, 32)}
+    if ext in allowed and bits not in allowed[ext]:  # (before any decoding and its warning)
+        raise ValueError(f"`bits` must be one of {allowed[ext]} for {ext}; got {bits!r}")
+    hidden = None  # (a masked array's masked pixels: NaN once decoded, a review)
+    if np.ma.isMaskedArray(normals):
+        hidden = np.ma.getmaskarray(normals)
+        hidden = hidden.any(axis=-1) if hidden.ndim == 3 else None
+        normals = np.ma.getdata(normals)
     raw = _image_array(normals, "normals", 3)
     if raw.shape[-1] != 3:
         raise ValueError(f"`normals` must have shape (H, W, 3); got {raw.shape}")
+    m = None
+    if mask is not None:
+        from ..problem import unmasked
+
+        m = np.asarray(unmasked(mask, 0.0)) != 0  # (a masked mask's entries: outside)
+        if m.shape != raw.shape[:2]:
+            raise ValueError(f"`mask` must have shape {raw.shape[:2]}; got {m.shape}")
     # (as integrate reads them: an 8/16-bit encoded map decoded, with its warning, and every
     # vector made unit length; clipped component by component, a (-p, -q, 1) field came back
-    # 26 deg off and a uint8 map as all (1, 1, 1), an audit)
-    n = frames.checked(raw, frame=None, name="normals") if raw.dtype.kind == "u" else raw
-    n = np.array(n, dtype=np.float64)
+    # 26 deg off and a uint8 map as all (1, 1, 1), an audit. No frame checks: a map is
+    # written, not integrated)
+    if raw.dtype.kind == "u":
+        if raw.dtype not in frames.ENCODED_DTYPES:
+            raise ValueError(f"`normals` has integer type {raw.dtype}; integer normal maps must "
+                             "be uint8 or uint16 (decoded as v / max * 2 - 1)")
+        from .._warnings import warn
+
+        warn(f"`normals` is {raw.dtype}: decoded as v / {np.iinfo(raw.dtype).max} * 2 - 1 (the "
+             "PNG encoding); pass float normals to silence this", frames.FrameWarning)
+        raw = frames.decode(raw, where=m)
+    n = np.array(raw, dtype=np.float64)
+    if hidden is not None:
+        n[hidden] = np.nan
     with np.errstate(invalid="ignore", divide="ignore"):
         length = np.sqrt(np.einsum("...i,...i->...", n, n))
         # (written as given where that keeps the direction and reads back as a normal, so a
@@ -545,16 +569,6 @@ def write_normals(
         n = np.where(off[..., None], np.where((length > 0)[..., None],
                                               n / length[..., None], np.nan), n)
     n = frames.from_facetlift(n, frames.resolve(frame, y_down))
-    m = None
-    if mask is not None:
-        from ..problem import unmasked
-
-        m = np.asarray(unmasked(mask, 0.0)) != 0  # (a masked mask's entries: outside)
-        if m.shape != n.shape[:2]:
-            raise ValueError(f"`mask` must have shape {n.shape[:2]}; got {m.shape}")
-    allowed = {".png": (8, 16), ".tif": (8, 16, 32), ".tiff": (8, 16, 32)}
-    if ext in allowed and bits not in allowed[ext]:
-        raise ValueError(f"`bits` must be one of {allowed[ext]} for {ext}; got {bits!r}")
     if ext == ".exr":
         ch = {"R": n[..., 0], "G": n[..., 1], "B": n[..., 2]}
         if m is not None:
