@@ -756,3 +756,18 @@ def test_bad_batch_arguments_are_refused_before_any_item_or_folder(tmp_path):
     assert all(set(r["outputs"]) == {"npy"} for r in recs)
     recs = facetlift.batch([tmp_path / "in"], tmp_path / "d", save=None, workers=1)
     assert [r["status"] for r in recs] == ["ok", "ok"]  # (None: the default outputs)
+
+
+def test_a_dataset_folders_map_given_as_a_file_is_warned_about_once(tmp_path):
+    """The final read: a dataset folder's normal_map.* given by its path was warned about by
+    the batch (as maps beside a K.txt) and by its item (jobs._beside_dataset_files, which
+    names the mask too); the item's warning alone stays."""
+    maps(tmp_path / "ds", n=1)
+    (tmp_path / "ds" / "m0.png").rename(tmp_path / "ds" / "normal_map.png")
+    (tmp_path / "ds" / "K.txt").write_text("600 0 9\n0 600 8\n0 0 1\n")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        recs = facetlift.batch([tmp_path / "ds" / "normal_map.png"], tmp_path / "o",
+                               save=("npy",), workers=1)
+    assert not [w for w in caught if "holds K.txt beside its normal maps" in str(w.message)]
+    assert any("lies in a dataset folder whose K.txt" in w for w in recs[0]["warnings"])

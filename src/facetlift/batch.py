@@ -232,8 +232,13 @@ def _unused_cameras(found) -> None:
     """Warn once per folder that holds a ``K.txt`` beside normal-map files: only a dataset
     folder's (``normal_map.*`` + ``K.txt``) is read, so its maps would be integrated
     orthographically (a user's rig: 583 mm MADE instead of 1.88 mm, and no word)."""
+    from .io.images import NORMAL_READ_FORMATS
+
     folders = sorted({Path(it.path).parent for it in found if Path(it.path).is_file()})
-    folders = [f for f in folders if (f / "K.txt").is_file()]
+    # (a dataset folder's own normal_map.* given as a file is warned about by its item,
+    # jobs._beside_dataset_files, which names the folder's mask too: not twice)
+    folders = [f for f in folders if (f / "K.txt").is_file()
+               and not _is_dataset(f, NORMAL_READ_FORMATS)]
     for folder in folders:
         warnings.warn(
             f"batch: {folder} holds K.txt beside its normal maps, but only a dataset folder's "

@@ -318,33 +318,14 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
         `frame`.
     """
     parse(frame)
-    hidden = None  # (a masked array's masked pixels: missing, NaN once decoded)
-    if np.ma.isMaskedArray(normals):
-        hidden = np.ma.getmaskarray(normals)
-        hidden = hidden.any(axis=-1) if hidden.ndim == 3 else None
-        normals = np.ma.getdata(normals)
+    normals, hidden = masked_pixels(normals)
     try:
         n = np.asarray(normals)
     except Exception:
         return normals  # prepare() says what is wrong with it
     if n.ndim != 3 or n.shape[-1] != 3 or n.dtype.kind not in "uif":
         return normals
-    if n.dtype.kind == "u":
-        if n.dtype not in ENCODED_DTYPES:
-            raise ValueError(
-                f"`{name}` has integer type {n.dtype}; integer normal maps must be uint8 or "
-                "uint16 (decoded as v / max * 2 - 1): decode it yourself and pass floats"
-            )
-        warn(
-            f"`{name}` is {n.dtype}: decoded as v / {np.iinfo(n.dtype).max} * 2 - 1 (the PNG "
-            "encoding); pass float normals to silence this", FrameWarning
-        )
-        where = mask if hidden is None else (
-            ~hidden if mask is None else np.asarray(mask).astype(bool) & ~hidden)
-        n = decode(n, where=where)
-    if hidden is not None and hidden.any():  # (after the decode: an 8-bit masked map, a review)
-        n = np.array(n, dtype=float)
-        n[hidden] = np.nan
+    n = as_float_normals(n, name, mask, hidden)
     n = to_facetlift(n, frame)
     sample = _inside(n, mask, sample=CHECK_SAMPLE)
     if sample is not None:
@@ -443,6 +424,39 @@ def facing_away(v: np.ndarray) -> float | None:
     if away + toward < ENCODING_CHECK_PIXELS:
         return None
     return away / (away + toward)
+
+
+def masked_pixels(a):
+    """``(data, hidden)``: a numpy masked array's data and its (H, W) pixels with any channel
+    masked (missing: NaN once decoded, an audit), or ``(a, None)``."""
+    if not np.ma.isMaskedArray(a):
+        return a, None
+    hidden = np.ma.getmaskarray(a)
+    return np.ma.getdata(a), (hidden.any(axis=-1) if hidden.ndim == 3 else None)
+
+
+def as_float_normals(n: np.ndarray, name: str, mask=None, hidden=None) -> np.ndarray:
+    """(H, W, 3) normals `n` as floats: a uint8/uint16 map decoded (:func:`decode`, its
+    unit-length check inside `mask` and outside `hidden`) with a warning, other unsigned
+    types refused; NaN at the `hidden` pixels (:func:`masked_pixels`). Shared by
+    :func:`checked` and :func:`facetlift.io.write_normals`."""
+    if n.dtype.kind == "u":
+        if n.dtype not in ENCODED_DTYPES:
+            raise ValueError(
+                f"`{name}` has integer type {n.dtype}; integer normal maps must be uint8 or "
+                "uint16 (decoded as v / max * 2 - 1): decode it yourself and pass floats"
+            )
+        warn(
+            f"`{name}` is {n.dtype}: decoded as v / {np.iinfo(n.dtype).max} * 2 - 1 (the PNG "
+            "encoding); pass float normals to silence this", FrameWarning
+        )
+        where = mask if hidden is None else (
+            ~hidden if mask is None else np.asarray(mask).astype(bool) & ~hidden)
+        n = decode(n, where=where)
+    if hidden is not None and hidden.any():  # (after the decode: an 8-bit masked map, a review)
+        n = np.array(n, dtype=float)
+        n[hidden] = np.nan
+    return n
 
 
 def _check_facing(v: np.ndarray, name: str, frame=None) -> None:

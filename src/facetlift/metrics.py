@@ -95,9 +95,7 @@ def normalized_error(estimate, truth, mask=None) -> tuple[float, np.ndarray]:
     ValueError
         Shape mismatch, no common pixel, or a flat ground truth (zero depth range).
     """
-    aligned, m = align(estimate, truth, mask)
-    gt = np.asarray(_depth_of(truth), dtype=float)
-    _scale_check(aligned, gt, m)
+    aligned, gt, m = _offset_aligned(estimate, truth, mask)
     rng = float(gt[m].max() - gt[m].min())
     if rng <= 0:
         raise ValueError("`truth` has zero depth range on the mask: the error is undefined")
@@ -108,17 +106,13 @@ def normalized_error(estimate, truth, mask=None) -> tuple[float, np.ndarray]:
 
 def rmse(estimate, truth, mask=None) -> float:
     """Root-mean-square depth error after :func:`align` (units of `truth`)."""
-    aligned, m = align(estimate, truth, mask)
-    gt = np.asarray(_depth_of(truth), dtype=float)
-    _scale_check(aligned, gt, m)
+    aligned, gt, m = _offset_aligned(estimate, truth, mask)
     return float(np.sqrt(np.mean((aligned[m] - gt[m]) ** 2)))
 
 
 def mae(estimate, truth, mask=None) -> float:
     """Mean absolute depth error after :func:`align` (units of `truth`)."""
-    aligned, m = align(estimate, truth, mask)
-    gt = np.asarray(_depth_of(truth), dtype=float)
-    _scale_check(aligned, gt, m)
+    aligned, gt, m = _offset_aligned(estimate, truth, mask)
     return float(np.mean(np.abs(aligned[m] - gt[m])))
 
 
@@ -127,6 +121,15 @@ def mae(estimate, truth, mask=None) -> float:
 #: warned about (an audit: a perspective result, median depth 1, scored 10.5 mm RMSE against
 #: the DiLiGenT bear in mm without a word, where made gives 0.468).
 SCALE_MISMATCH = 10.0
+
+
+def _offset_aligned(estimate, truth, mask):
+    """``(aligned, truth, mask)`` of :func:`align` for the offset-aligned errors, with
+    :func:`_scale_check`."""
+    aligned, m = align(estimate, truth, mask)
+    gt = np.asarray(_depth_of(truth), dtype=float)
+    _scale_check(aligned, gt, m)
+    return aligned, gt, m
 
 
 def _scale_check(est, gt, m) -> None:

@@ -527,11 +527,7 @@ def write_normals(
     allowed = {".png": (8, 16), ".tif": (8, 16, 32), ".tiff": (8, 16, 32)}
     if ext in allowed and bits not in allowed[ext]:  # (before any decoding and its warning)
         raise ValueError(f"`bits` must be one of {allowed[ext]} for {ext}; got {bits!r}")
-    hidden = None  # (a masked array's masked pixels: NaN once decoded, a review)
-    if np.ma.isMaskedArray(normals):
-        hidden = np.ma.getmaskarray(normals)
-        hidden = hidden.any(axis=-1) if hidden.ndim == 3 else None
-        normals = np.ma.getdata(normals)
+    normals, hidden = frames.masked_pixels(normals)
     raw = _image_array(normals, "normals", 3)
     if raw.shape[-1] != 3:
         raise ValueError(f"`normals` must have shape (H, W, 3); got {raw.shape}")
@@ -546,18 +542,7 @@ def write_normals(
     # vector made unit length; clipped component by component, a (-p, -q, 1) field came back
     # 26 deg off and a uint8 map as all (1, 1, 1), an audit. No frame checks: a map is
     # written, not integrated)
-    if raw.dtype.kind == "u":
-        if raw.dtype not in frames.ENCODED_DTYPES:
-            raise ValueError(f"`normals` has integer type {raw.dtype}; integer normal maps must "
-                             "be uint8 or uint16 (decoded as v / max * 2 - 1)")
-        from .._warnings import warn
-
-        warn(f"`normals` is {raw.dtype}: decoded as v / {np.iinfo(raw.dtype).max} * 2 - 1 (the "
-             "PNG encoding); pass float normals to silence this", frames.FrameWarning)
-        raw = frames.decode(raw, where=m)
-    n = np.array(raw, dtype=np.float64)
-    if hidden is not None:
-        n[hidden] = np.nan
+    n = np.array(frames.as_float_normals(raw, "normals", m, hidden), dtype=np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
         length = np.sqrt(np.einsum("...i,...i->...", n, n))
         # (written as given where that keeps the direction and reads back as a normal, so a
