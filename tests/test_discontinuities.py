@@ -601,6 +601,33 @@ def test_multigrid_policy_refresh_rebuild_and_block_coarse_space(monkeypatch):
     np.testing.assert_allclose(s.depth, ref.depth, atol=1e-4 * np.ptp(ref.depth[ref.mask]))
 
 
+def test_polish_factorizes_without_a_trial_after_the_block_coarse_space(monkeypatch):
+    """Where the reweightings turned the block coarse space on and the system is small
+    (DIRECT_FIRST), the final polish factorizes at once: no trial iterations, and the same
+    surface as after a trial that is cut short."""
+    n, gt, left = scissor_ortho()
+    monkeypatch.setattr(disc, "REUSE_ITS", 0)  # every solve counts as slow: the block space
+    maxiters = []
+    real_cg = disc.linalg.cg
+
+    def cg_spy(*a, **kw):
+        maxiters.append(kw.get("maxiter"))
+        return real_cg(*a, **kw)
+
+    monkeypatch.setattr(disc.linalg, "cg", cg_spy)
+    first = facetlift.integrate(n, discontinuities=True)
+    assert first.info["block_coarse_space"] and first.info["polish"] == "direct"
+    assert first.info["cg_iterations"][-1] == 0 and disc.POLISH_TRIAL not in maxiters
+    monkeypatch.setattr(disc, "DIRECT_FIRST", 0)  # the trial again, too short to finish
+    monkeypatch.setattr(disc, "POLISH_TRIAL", 1)
+    maxiters.clear()
+    tried = facetlift.integrate(n, discontinuities=True)
+    assert maxiters[-1] == 1 and tried.info["polish"] == "direct"
+    assert tried.info["cg_iterations"][-1] == 1
+    span = np.ptp(tried.depth[tried.mask])
+    np.testing.assert_allclose(first.depth, tried.depth, atol=1e-9 * span)
+
+
 def test_the_block_coarse_space_is_formed_once_per_hierarchy(monkeypatch):
     """Once on, the block coarse space is formed with the hierarchy's finest matrix and kept
     until the hierarchy is refreshed or rebuilt (it was formed for every solve); the surface

@@ -275,6 +275,17 @@ LOOSE_RTOL = 1e-4
 #: twice as many; the 2048^2 disk: 10 + 3 iterations, where a new hierarchy cost 3 s).
 POLISH_TRIAL = 10
 
+#: Most vertices for which the final polish skips the trial above and factorizes at once
+#: where the reweightings needed the block coarse space (:data:`COARSE_BLOCK`: a solve took
+#: more than :data:`REUSE_ITS` iterations) and the factorization is affordable. On the
+#: benchmark's 63 renders at exact, 8-bit and 3-deg-noise normals (189 runs, 2026-12-04) the
+#: trial failed on every one of the 49 runs that had turned the block space on (and finished
+#: on 48 of the other 140): its refresh and ten CG iterations were lost there (the timing
+#: objects bunny and max_planck, about 0.08 s of 2 s). The factorization is the one that
+#: followed the failed trial: the same surface. Larger systems keep the trial, where a
+#: factorization costs seconds.
+DIRECT_FIRST = 300_000
+
 #: Most vertices for which a system CG does not solve in time, above all the final polish when
 #: the trial above does not converge, is factorized (:func:`_factorized`) instead of solved by
 #: CG on a new hierarchy, where the factorization fits in memory (:func:`_affordable`). The
@@ -1054,7 +1065,9 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         # affordable (DIRECT_POLISH), else by CG on a new hierarchy of the final system
         affordable = _affordable(K.shape[0])  # (reads the free memory: once)
         its, done = 0, False
-        if amg["ml"] is not None or not affordable:  # (none where the last solve factorized)
+        direct = affordable and amg["slow"] and K.shape[0] <= DIRECT_FIRST
+        if (amg["ml"] is not None or not affordable) and not direct:
+            # (no hierarchy where the last solve factorized)
             z, its, done = solve(K, rhs, z, rebuild=False, scale=scale, trial=True)
             polish = "trial"
         if not done and affordable:
