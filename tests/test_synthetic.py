@@ -210,6 +210,37 @@ def test_angular_noise_statistics():
         add_angular_noise(np.zeros((4, 2)), 1.0, rng)
 
 
+def test_blur_normals_softens_a_boundary_inside_the_mask_only():
+    # two planes meeting at a column: the blur turns the boundary's normals gradually
+    n = np.zeros((20, 30, 3))
+    n[:, :15] = np.array([0.6, 0.0, 0.8])
+    n[:, 15:] = np.array([-0.6, 0.0, 0.8])
+    mask = np.ones((20, 30), bool)
+    mask[:, 25:] = False
+    n[~mask] = np.nan
+    out = synthetic.blur_normals(n, 1.5)
+    np.testing.assert_allclose(np.linalg.norm(out[mask], axis=-1), 1.0, atol=1e-12)
+    assert np.isnan(out[~mask]).all()
+    x = out[10, :25, 0]
+    assert x[0] == pytest.approx(0.6) and x[24] == pytest.approx(-0.6)  # far from the seam
+    assert 0.0 < x[14] < 0.6 and -0.6 < x[15] < 0.0  # the seam softened ...
+    assert np.all(np.diff(x) <= 1e-12)  # ... monotonically
+    # pixels outside the mask give no weight: the same as a map cut at the mask's edge
+    np.testing.assert_allclose(synthetic.blur_normals(n[:, :25], 1.5), out[:, :25], atol=1e-12)
+    # an explicit mask leaves its outside as it was
+    inner = mask.copy()
+    inner[:, :3] = False
+    kept = synthetic.blur_normals(n, 1.5, mask=inner)
+    np.testing.assert_array_equal(kept[:, :3], n[:, :3])
+    np.testing.assert_array_equal(synthetic.blur_normals(n, 0.0), n)
+    with pytest.raises(ValueError, match="`sigma`"):
+        synthetic.blur_normals(n, -1.0)
+    with pytest.raises(ValueError, match="`mask`"):
+        synthetic.blur_normals(n, 1.0, mask=mask[:, :5])
+    with pytest.raises(ValueError, match="`normals`"):
+        synthetic.blur_normals(np.zeros((4, 3)), 1.0)
+
+
 def test_smooth_noise_is_correlated_with_the_rms_asked():
     rng = np.random.default_rng(3)
     n = normals_from_gradients(rng.normal(0, 0.3, (160, 160)), rng.normal(0, 0.3, (160, 160)))

@@ -855,7 +855,8 @@ def _split(text):
               help="Comma-separated normal conditions of the discontinuities experiment "
                    "(default exact,16bit,8bit,noise3, with --quick exact,8bit; also smooth3: "
                    "spatially correlated errors of 3 degrees RMS, outliers: 2 % of the "
-                   "normals rotated by up to 45 degrees).")
+                   "normals rotated by up to 45 degrees, blur1.5: the normal map blurred by "
+                   "a Gaussian of 1.5 px, soft occlusion boundaries).")
 @click.option("--no-progress", is_flag=True, help="No progress bars.")
 def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_dir, conditions,
           no_progress):

@@ -906,6 +906,54 @@ def add_smooth_noise(normals, sigma_deg: float, rng=None, *, length: float = 8.0
     return out
 
 
+def blur_normals(normals, sigma: float, mask=None):
+    """The normal map seen through a Gaussian blur of `sigma` pixels: soft occlusion
+    boundaries, as a normal estimator's output (a network's, or photometric stereo at a
+    coarser resolution) has them, where a rendered map changes from one surface to the other
+    between two pixels.
+
+    Every component is averaged over the mask only (a normalised convolution: pixels outside
+    it give no weight), and the mean renormalised to unit length; a mean of length zero
+    (opposite normals) keeps the pixel's own normal.
+
+    Parameters
+    ----------
+    normals : (H, W, 3) array_like
+        Unit normals; NaN rows stay NaN and give no weight.
+    sigma : float
+        Standard deviation of the Gaussian in pixels (>= 0; 0 returns a copy).
+    mask : (H, W) bool, optional
+        The pixels that are blurred and give weight (default: the finite normals).
+
+    Returns
+    -------
+    (H, W, 3) float
+    """
+    from scipy.ndimage import gaussian_filter
+
+    n = _check_normals(normals)
+    if n.ndim != 3:
+        raise ValueError(f"`normals` must be an (H, W, 3) map; got shape {n.shape}")
+    if not (np.isfinite(sigma) and sigma >= 0):
+        raise ValueError(f"`sigma` must be a finite number of pixels >= 0; got {sigma!r}")
+    ok = np.isfinite(n).all(axis=-1)
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != n.shape[:2]:
+            raise ValueError(f"`mask` must have shape {n.shape[:2]}; got {mask.shape}")
+        ok &= mask
+    out = n.copy()
+    if sigma == 0 or not ok.any():
+        return out
+    weight = gaussian_filter(ok.astype(float), sigma, mode="constant")
+    mean = np.stack([gaussian_filter(np.where(ok, n[..., i], 0.0), sigma, mode="constant")
+                     for i in range(3)], axis=-1)
+    length = np.linalg.norm(mean, axis=-1)
+    use = ok & (weight > 0) & (length > 1e-12 * np.maximum(weight, 1e-300))
+    out[use] = mean[use] / length[use][:, None]
+    return out
+
+
 def _turn(v, side, angle, keep_front):
     """Unit vectors `v` turned by `angle` (rad) toward the unit tangents `side`."""
     c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]

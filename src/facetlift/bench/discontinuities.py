@@ -45,13 +45,14 @@ log = logging.getLogger(__name__)
 
 #: Condition name -> ("quantize", bits), ("noise", degrees), ("smooth", RMS degrees,
 #: smoothing sigma px: :func:`facetlift.synthetic.add_smooth_noise`), ("outliers", fraction,
-#: largest degrees: :func:`facetlift.synthetic.perturb_fraction`) or None. The last two are not
-#: in the default run (``Settings.disc_conditions``): ``facetlift bench --experiments
-#: discontinuities --conditions smooth3,outliers`` runs them (``benchmarks/bench_jump_free.py
-#: --conditions`` too).
+#: largest degrees: :func:`facetlift.synthetic.perturb_fraction`), ("blur", sigma px: soft
+#: occlusion boundaries, :func:`facetlift.synthetic.blur_normals`) or None. The last three are
+#: not in the default run (``Settings.disc_conditions``): ``facetlift bench --experiments
+#: discontinuities --conditions smooth3,outliers,blur1.5`` runs them
+#: (``benchmarks/bench_jump_free.py --conditions`` too).
 CONDITIONS = {"exact": None, "16bit": ("quantize", 16), "8bit": ("quantize", 8),
               "noise3": ("noise", 3.0), "smooth3": ("smooth", 3.0, 8.0),
-              "outliers": ("outliers", 0.02, 45.0)}
+              "outliers": ("outliers", 0.02, 45.0), "blur1.5": ("blur", 1.5)}
 #: Analytic jump scenes of the benchmark (see the module docstring for ``helix``).
 ANALYTIC = tuple(n for n in synthetic.WITH_JUMPS if n != "helix")
 #: Focal length (px) of the wide-angle camera and its distance to the object.
@@ -171,6 +172,8 @@ def condition(gt, cond: str, name: str):
         return gt.normals
     if how[0] == "quantize":
         return synthetic.quantize(gt.normals, how[1])
+    if how[0] == "blur":
+        return synthetic.blur_normals(gt.normals, how[1], mask=gt.mask)
     rng = np.random.default_rng([SEED, zlib.crc32(name.encode())])
     if how[0] == "smooth":
         return synthetic.add_smooth_noise(gt.normals, how[1], rng, length=how[2])
