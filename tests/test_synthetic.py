@@ -233,8 +233,9 @@ def test_blur_normals_softens_a_boundary_inside_the_mask_only():
     kept = synthetic.blur_normals(n, 1.5, mask=inner)
     np.testing.assert_array_equal(kept[:, :3], n[:, :3])
     np.testing.assert_array_equal(synthetic.blur_normals(n, 0.0), n)
-    with pytest.raises(ValueError, match="`sigma`"):
-        synthetic.blur_normals(n, -1.0)
+    for bad in (-1.0, np.inf, (1.0, 2.0), "wide"):
+        with pytest.raises(ValueError, match="`sigma`"):
+            synthetic.blur_normals(n, bad)
     with pytest.raises(ValueError, match="`mask`"):
         synthetic.blur_normals(n, 1.0, mask=mask[:, :5])
     with pytest.raises(ValueError, match="`normals`"):

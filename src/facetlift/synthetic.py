@@ -934,8 +934,13 @@ def blur_normals(normals, sigma: float, mask=None):
     n = _check_normals(normals)
     if n.ndim != 3:
         raise ValueError(f"`normals` must be an (H, W, 3) map; got shape {n.shape}")
-    if not (np.isfinite(sigma) and sigma >= 0):
+    try:
+        good = bool(np.isfinite(float(sigma)) and float(sigma) >= 0)
+    except (TypeError, ValueError):
+        good = False
+    if not good:
         raise ValueError(f"`sigma` must be a finite number of pixels >= 0; got {sigma!r}")
+    sigma = float(sigma)
     ok = np.isfinite(n).all(axis=-1)
     if mask is not None:
         mask = np.asarray(mask, dtype=bool)

@@ -278,12 +278,14 @@ POLISH_TRIAL = 10
 #: Most vertices for which the final polish skips the trial above and factorizes at once
 #: where the reweightings needed the block coarse space (:data:`COARSE_BLOCK`: a solve took
 #: more than :data:`REUSE_ITS` iterations) and the factorization is affordable. On the
-#: benchmark's 63 renders at exact, 8-bit and 3-deg-noise normals (189 runs, 2026-12-04) the
-#: trial failed on every one of the 49 runs that had turned the block space on (and finished
-#: on 48 of the other 140): its refresh and ten CG iterations were lost there (the timing
-#: objects bunny and max_planck, about 0.08 s of 2 s). The factorization is the one that
-#: followed the failed trial: the same surface. Larger systems keep the trial, where a
-#: factorization costs seconds.
+#: benchmark's 59 renders and 4 analytic scenes at exact, 8-bit and 3-deg-noise normals (189
+#: runs, 2026-12-04) the trial failed on every one of the 49 runs that had turned the block
+#: space on (and finished on 48 of the other 140), and on all 31 such runs of its renders at
+#: 1024 x 1224 (up to 260k pixels; it finished on 8 of the other 17): its refresh and ten
+#: CG iterations were lost there (max_planck@front 2.43-2.49 -> 2.28-2.29 s, bunny@front
+#: about 0.03 s of 2.2 s). Where the trial fails, the factorization is the one that followed
+#: it: the same surface (where it would have finished, the factorized one, within the
+#: tolerance of it). Larger systems keep the trial, where a factorization costs seconds.
 DIRECT_FIRST = 300_000
 
 #: Most vertices for which a system CG does not solve in time, above all the final polish when
@@ -726,7 +728,8 @@ def solve_discontinuous(
         turned on by the reweightings), ``cut_corners`` (fraction of corners with weight
         below :data:`CUT`), ``final_weights`` (whether the final solve used them),
         ``polish`` (how the last system was solved to `cg_rtol`: "trial" on the loop's
-        hierarchy, "direct" or "multigrid", :data:`DIRECT_POLISH`; None without a polish),
+        hierarchy, "direct" (after a trial that did not finish, or at once:
+        :data:`DIRECT_FIRST`) or "multigrid", :data:`DIRECT_POLISH`; None without a polish),
         ``unsolved`` (the relative residuals of the solves whose unfinished CG iterate was kept,
         too large to factorize), ``unsettled_corners``, ``seconds``.
     """
@@ -1062,7 +1065,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     if it > 0 and (LOOSE_RTOL > cg_rtol or forced or final):  # solved loosely: polish
         # on the hierarchy at hand when it does so quickly (large smooth maps: 2-3 CG
         # iterations, where a new hierarchy costs seconds), else by a factorization where
-        # affordable (DIRECT_POLISH), else by CG on a new hierarchy of the final system
+        # affordable (DIRECT_POLISH; at once where the loop was slow: DIRECT_FIRST), else by
+        # CG on a new hierarchy of the final system
         affordable = _affordable(K.shape[0])  # (reads the free memory: once)
         its, done = 0, False
         direct = affordable and amg["slow"] and K.shape[0] <= DIRECT_FIRST
