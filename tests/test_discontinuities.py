@@ -534,6 +534,20 @@ def test_forcing_term_still_polishes_to_cg_rtol(monkeypatch):
     assert seen[-1] <= 10 * 1e-3  # (CG's own acceptance: the true residual within 10x)
 
 
+def spy_cg_maxiter(monkeypatch):
+    """``(maxiters, real_cg)``: the route's CG replaced by one that records each call's
+    ``maxiter`` in the list."""
+    maxiters = []
+    real_cg = disc.linalg.cg
+
+    def cg_spy(*a, **kw):
+        maxiters.append(kw.get("maxiter"))
+        return real_cg(*a, **kw)
+
+    monkeypatch.setattr(disc.linalg, "cg", cg_spy)
+    return maxiters, real_cg
+
+
 def test_multigrid_policy_refresh_rebuild_and_block_coarse_space(monkeypatch):
     """The reweightings refresh their hierarchy when weights move much, rebuild it after a slow
     solve and then add the block coarse space; every policy reaches the same surface."""
@@ -553,14 +567,7 @@ def test_multigrid_policy_refresh_rebuild_and_block_coarse_space(monkeypatch):
     monkeypatch.setattr(disc, "POLISH_REFRESH", False)
     # the trial's 10 iterations leave it short, at a rate that says as many again finish it:
     # they go on on the same hierarchy (no new one, no factorization)
-    maxiters = []
-    real_cg = disc.linalg.cg
-
-    def cg_spy(*a, **kw):
-        maxiters.append(kw.get("maxiter"))
-        return real_cg(*a, **kw)
-
-    monkeypatch.setattr(disc.linalg, "cg", cg_spy)
+    maxiters, real_cg = spy_cg_maxiter(monkeypatch)
     going_on = facetlift.integrate(n, discontinuities=True)
     assert going_on.info["polish"] == "trial" and going_on.info["multigrid_builds"] == 1
     assert going_on.info["cg_iterations"][-1] > disc.POLISH_TRIAL
@@ -607,14 +614,7 @@ def test_polish_factorizes_without_a_trial_after_the_block_coarse_space(monkeypa
     surface as after a trial that is cut short."""
     n, gt, left = scissor_ortho()
     monkeypatch.setattr(disc, "REUSE_ITS", 0)  # every solve counts as slow: the block space
-    maxiters = []
-    real_cg = disc.linalg.cg
-
-    def cg_spy(*a, **kw):
-        maxiters.append(kw.get("maxiter"))
-        return real_cg(*a, **kw)
-
-    monkeypatch.setattr(disc.linalg, "cg", cg_spy)
+    maxiters, _ = spy_cg_maxiter(monkeypatch)
     first = facetlift.integrate(n, discontinuities=True)
     assert first.info["block_coarse_space"] and first.info["polish"] == "direct"
     assert first.info["cg_iterations"][-1] == 0 and disc.POLISH_TRIAL not in maxiters

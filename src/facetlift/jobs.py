@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ._progress import announce
-from ._warnings import recording
+from ._warnings import recording, warn
 
 #: Output kinds (``--save``) -> file names written into the output folder.
 OUTPUTS = {
@@ -186,8 +186,6 @@ def read(job: Job) -> Input:
         raise ValueError("`K`: a gradient field is orthographic; --K does not apply")
     if not field_input and job.gradient_frame != Job.gradient_frame:  # (ignored silently: an
         # audit; a warning, not an error: a batch may mix fields and maps, a review)
-        from ._warnings import warn
-
         warn(f"`gradient_frame` {job.gradient_frame!r} applies to a gradient field "
              f"(--gradients P Q, or a .mat file holding p and q); {src.name} is a normal map, "
              "whose frame is --normal-frame: it is ignored here")
@@ -200,7 +198,6 @@ def read(job: Job) -> Input:
         check_fov(job)
         if field_input:
             raise ValueError("`fov`: a gradient field is orthographic; --fov does not apply")
-        from ._warnings import warn
         from .camera import K_from_fov
 
         if K is not None:  # (documented, but replaced in silence: an audit)
@@ -234,7 +231,6 @@ def _beside_dataset_files(src: Path, job: Job) -> None:
     beside ``K.txt`` or ``mask.*``) whose files the job does not use: only the folder as the
     input reads them (a user's ``integrate bear/normal_map.png`` ran orthographically on the
     valid normals, without the folder's K and mask, and no word; an audit)."""
-    from ._warnings import warn
     from .io.dataset import _find
     from .io.images import MASK_FORMATS
 
@@ -428,8 +424,6 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
     if job.output_frame is not None:
         frames.parse(job.output_frame, "output_frame")
         if not set(save) & {"ply", "obj", "points"}:  # (accepted and ignored: a review)
-            from ._warnings import warn
-
             warn(f"`output_frame` {job.output_frame!r} applies to the mesh and point outputs "
                  "(ply, obj, points), none of which is saved: depth maps stay in facetlift's "
                  "convention (depth along the viewing axis)")

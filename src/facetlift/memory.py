@@ -483,9 +483,6 @@ def estimate(problem, method: str, options: dict) -> tuple[float, str]:
             # a normal (linalg.facet.weak_vertices): a factorization of its own, which a large
             # hole makes a 2-D system (an audit: a 1024^2 sphere with 64 % of it missing
             # planned 160 MiB and peaked at 1,257 MiB)
-            # (the vertices of clusters of weak facets are a 2-D block each, n log n; the
-            # scattered rest are tiny blocks, linear: charged n log n too, 30 % random gaps
-            # planned 250 MiB at 4096^2 where their factor held 4.5 MiB, a review)
             prior_bytes += _local_block_bytes(d, problem.usable)
         if loop == "dgp" and _sparse_prior(problem):
             # the Ruge-Stueben trial's hierarchy (methods.dgp.fixed_point.SPARSE_PRIOR): about

@@ -634,24 +634,16 @@ def relief_ratio(problem) -> tuple[float, int] | None:
         return None
     j = nn[rows, first[rows]]
     i = anchors[rows]
-    gx, gy = problem.grid_slopes
-    H, W = d.shape
-    index = np.full(H * W, -1, dtype=np.int64)
-    index[d.pixels[0] * W + d.pixels[1]] = np.arange(d.n_facets)
-    dr, dc = r[j] - r[i], c[j] - c[i]
-    steps = np.ceil(np.maximum(np.abs(dr), np.abs(dc))).astype(np.int64)
-    total = int(steps.sum())
-    pair = np.repeat(np.arange(i.size), steps)
-    t = (np.arange(total) - np.repeat(np.cumsum(steps) - steps, steps) + 0.5) / steps[pair]
-    mr = np.rint(r[i][pair] + t * dr[pair]).astype(np.int64)
-    mc = np.rint(c[i][pair] + t * dc[pair]).astype(np.int64)
-    f = index[mr * W + mc]
-    sx, sy = dc[pair] / steps[pair], dr[pair] / steps[pair]
-    step = np.where(f >= 0, gx[np.maximum(f, 0)] * sx - gy[np.maximum(f, 0)] * sy, np.nan)
-    predicted = np.bincount(pair, np.nan_to_num(step, nan=0.0), minlength=i.size)
-    broken = np.bincount(pair, ~np.isfinite(step), minlength=i.size) > 0
+    # (the normals' change along the straight path: the outlier check's line integrals, NaN
+    # where the path leaves the domain or crosses a facet without a slope)
+    from .prior_outliers import _line_integrals
+
+    index = np.full(d.shape, -1, dtype=np.int64)
+    index[d.pixels] = np.arange(d.n_facets)
+    predicted = _line_integrals(np.column_stack([r, c]), i, j, index, *problem.grid_slopes)
+    steps = np.ceil(np.maximum(np.abs(r[j] - r[i]), np.abs(c[j] - c[i])))
     measured = problem.prior[have[j]] - problem.prior[have[i]]
-    keep = ~broken & np.isfinite(measured)
+    keep = np.isfinite(predicted) & np.isfinite(measured)
     if keep.sum() < RELIEF_PAIRS:
         return None
     predicted, measured = predicted[keep], measured[keep]

@@ -802,6 +802,13 @@ def _check_normals(normals) -> np.ndarray:
     return n
 
 
+def _check_map(normals) -> np.ndarray:
+    n = _check_normals(normals)
+    if n.ndim != 3:
+        raise ValueError(f"`normals` must be an (H, W, 3) map; got shape {n.shape}")
+    return n
+
+
 def _rng(rng):
     return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
 
@@ -877,9 +884,7 @@ def add_smooth_noise(normals, sigma_deg: float, rng=None, *, length: float = 8.0
     """
     from scipy.ndimage import gaussian_filter
 
-    n = _check_normals(normals)
-    if n.ndim != 3:
-        raise ValueError(f"`normals` must be an (H, W, 3) map; got shape {n.shape}")
+    n = _check_map(normals)
     if not (np.isfinite(sigma_deg) and 0 <= sigma_deg <= 30):
         raise ValueError(f"`sigma_deg` must be a number in [0, 30]; got {sigma_deg!r}")
     if not (np.isfinite(length) and length > 0):
@@ -931,9 +936,7 @@ def blur_normals(normals, sigma: float, mask=None):
     """
     from scipy.ndimage import gaussian_filter
 
-    n = _check_normals(normals)
-    if n.ndim != 3:
-        raise ValueError(f"`normals` must be an (H, W, 3) map; got shape {n.shape}")
+    n = _check_map(normals)
     try:
         good = bool(np.isfinite(float(sigma)) and float(sigma) >= 0)
     except (TypeError, ValueError):

@@ -17,6 +17,7 @@ import numpy as np
 
 from .. import methods as _methods
 from .. import synthetic
+from .._warnings import recording
 
 log = logging.getLogger(__name__)
 
@@ -160,8 +161,6 @@ def run_method(spec: Spec, normals, mask, *, pixel_size=1.0, K=None, status=None
     if K is not None and not info.perspective:
         return Run(spec.label, "unsupported", message="no perspective support")
     t0 = time.perf_counter()
-    from .._warnings import recording
-
     with recording() as caught:
         try:
             surface = integrate(

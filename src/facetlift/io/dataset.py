@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._warnings import recording
 from ._paths import _existing
 from .images import (
     MASK_FORMATS,
@@ -196,8 +197,6 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                 extra[name] = prior_image(extra[name], (H, W), positive=K is not None)
             elif isinstance(extra[name], tuple):  # (checked here too: its errors get the
                 # folder's hint; its warnings come when integrate places the points)
-                from .._warnings import recording
-
                 with recording(record=False, action="ignore"):
                     prior_samples(extra[name], (H, W))
         except ValueError as e:
