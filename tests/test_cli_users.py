@@ -893,6 +893,21 @@ def test_summary_counts_missing_and_unusable_normals(tmp_path, capsys):
     assert code == 0 and "4 missing normals, 1 unusable" in out and "back-facing" in err
 
 
+def test_summary_says_when_the_mesh_is_in_pieces(tmp_path, capsys):
+    """An occluder is cut from the plane behind it: the summary says the mesh is in pieces
+    whose relative depths the occlusion rule chose (normals cannot tell them); a smooth run
+    says nothing of pieces."""
+    gt = facetlift.synthetic.analytic("occluder", 48)
+    np.save(tmp_path / "n.npy", gt.normals)
+    args = ("integrate", str(tmp_path / "n.npy"), "--mask", str(_all_mask(tmp_path, (48, 48))))
+    code, out, _ = run(capsys, *args, "-o", str(tmp_path / "a"), "--discontinuities")
+    m = re.search(r"mesh cut into (\d+) pieces \(their depths relative to each other by the "
+                  r"occlusion rule\)", out)
+    assert code == 0 and m and int(m.group(1)) >= 2
+    code, out, _ = run(capsys, *args, "-o", str(tmp_path / "b"))
+    assert code == 0 and "pieces" not in out
+
+
 def _all_mask(tmp_path, shape):
     io.write_mask(tmp_path / "all.png", np.ones(shape, bool))
     return tmp_path / "all.png"
