@@ -824,6 +824,41 @@ def test_discontinuities_show_a_progress_bar(tmp_path, capsys):
     assert not [t for t in threading.enumerate() if t.name == "facetlift-progress"]
 
 
+def test_progress_bar_counts_only_reported_iterations(tmp_path, capsys, monkeypatch):
+    """A direct solve reports no iteration: its bar names the step and the time, not
+    "0it"; a method that reports iterations gets them counted from the first."""
+    from facetlift import cli
+
+    path = io.write_normals(tmp_path / "dome.npy", dome())
+    code, _, err = run(capsys, "integrate", path, "--progress", "-o", tmp_path / "a")
+    assert code == 0 and "integrating [" in err and "0it" not in err
+    formats = []
+
+    class Bar:
+        n = 0
+
+        def __init__(self, **kw):
+            self.bar_format = kw.get("bar_format")
+            formats.append(self.bar_format)
+
+        def update(self, k):
+            self.n += k
+            formats.append(self.bar_format)
+
+        def set_postfix_str(self, text, refresh=True):
+            pass
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr("tqdm.tqdm", Bar)
+    bar, update = cli._progress_bar(None)
+    update(1, 0.5)  # (the bar is made here, as "integrating": uncounted, then counting)
+    update(2, 0.25)
+    bar.close()
+    assert formats[0] is not None and formats[1:] == [None, None]
+
+
 def test_progress_bar_labels_the_value_per_stage(monkeypatch):
     """The bar names what its number is where a stage says (the crack growth's weight falls
     read as a divergence unlabelled: a user's check), and a stage drops the last one's."""

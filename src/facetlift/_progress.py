@@ -32,8 +32,10 @@ _TICK = 1.0
 _STAGE_VALUES = {"reweighting": "largest weight change", "crack growth": "largest weight fall"}
 
 #: Stages that count iterations; the others show their name and the elapsed time only (a
-#: user's check read "writing outputs: 51it [00:27, 3.64it/s]", the reweightings' count).
-_COUNTED = ("integrating", "reweighting", "crack growth")
+#: user's check read "writing outputs: 51it [00:27, 3.64it/s]", the reweightings' count), and
+#: so does "integrating" until a method reports its first iteration (a direct solve read
+#: "integrating: 0it [00:00, ?it/s]").
+_COUNTED = ("reweighting", "crack growth")
 _UNCOUNTED_FORMAT = "{desc} [{elapsed}]{postfix}"
 
 
@@ -79,6 +81,9 @@ def progress_bar(total: int | None):
 
     def update(iteration, value):
         b = bar()
+        if state.get("stage", "integrating") == "integrating" and not state.get("counted"):
+            state["counted"] = True
+            b.bar_format = None  # (iterations reported: counted from here)
         b.update(iteration - b.n)
         label = _STAGE_VALUES.get(state.get("stage"))
         b.set_postfix_str(f"{label} {value:.3g}" if label else f"{value:.4g}", refresh=False)
