@@ -707,6 +707,8 @@ def make_surface(problem: Problem, result: methods.MethodResult, method: str = "
 
         mesh, svals = from_copies(d, copies, GAP * problem.camera.footprint())
         result.info["mesh_pieces"] = mesh.n_pieces  # (the pieces of the mesh returned)
+        # (those the cuts add to the mask's components, each a piece at least)
+        result.info["cut_pieces"] = mesh.n_pieces - d.n_components
         # vertex grid values: the mean of a grid vertex's copies (the mesh uses the copies)
         counts = np.bincount(mesh.vertex, minlength=d.n_vertices)
         grid = np.bincount(mesh.vertex, svals, d.n_vertices) / np.maximum(counts, 1)

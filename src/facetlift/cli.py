@@ -397,11 +397,13 @@ def summary(record: dict) -> str:
         if fit:
             parts.append(f"prior aligned by --prior-fit {fit.get('kind')} ({fit.get('method')}: "
                          f"scale {fit.get('scale'):.4g}, shift {fit.get('shift'):.4g})")
-    pieces = info.get("mesh_pieces") or 0
-    if pieces > 1:  # (docs/results.md, "What the remaining error is")
-        parts.append(f"mesh cut into {pieces} pieces (their depths relative to each other "
-                     + ("from the prior where it has samples, else " if prior else "")
-                     + "by the occlusion rule)")
+    cut = info.get("cut_pieces") or 0
+    if cut > 0:  # (docs/results.md, "What the remaining error is")
+        held = (isinstance(prior, dict) and not prior.get("left_out")
+                and (prior.get("samples") or 0) > 0)
+        parts.append(f"cuts split the mesh into {cut} more piece{'s' if cut != 1 else ''} "
+                     "(placed by " + ("the prior where they hold samples, else " if held
+                                      else "") + "the occlusion rule)")
     counts = info.get("input") or {}
     missing = counts.get("missing") or 0
     if missing:  # (NaN inside the mask: no warning, being the documented way to say it)
