@@ -406,6 +406,29 @@ def test_info_takes_the_gradient_layout_and_y_down_and_shows_warnings(tmp_path, 
     assert code == 0 and "read as directx" in out and "try the default frame" in out
 
 
+def test_info_takes_a_gradient_field_as_two_files(tmp_path, capsys):
+    """info --gradients P Q describes what integrate --gradients P Q reads (it had no such
+    option): its layout is checked as a .mat field's is; a map and a field together, or
+    neither, are refused with the reason."""
+    n = dome()
+    p, q = facetlift.gradients_from_normals(n)
+    np.save(tmp_path / "p.npy", p)
+    np.save(tmp_path / "q.npy", q)
+    np.save(tmp_path / "r.npy", -q)  # (rowcol: dz/d(row), dz/d(col))
+    np.save(tmp_path / "c.npy", p)
+    code, out, _ = run(capsys, "info", "--gradients", tmp_path / "p.npy", tmp_path / "q.npy")
+    assert code == 0 and "p.npy: 20x24 pixels" in out and "warning:" not in out
+    assert "mask: 480 pixels" in out
+    code, out, _ = run(capsys, "info", "--gradients", tmp_path / "r.npy", tmp_path / "c.npy")
+    assert code == 0 and "--gradient-frame rowcol" in out
+    code, _, err = run(capsys, "info")
+    assert code == 1 and "--gradients P Q" in err
+    stored = io.write_normals(tmp_path / "n.npy", n)
+    code, _, err = run(capsys, "info", stored, "--gradients", tmp_path / "p.npy",
+                       tmp_path / "q.npy")
+    assert code == 1 and "not both" in err
+
+
 def _disk(size):
     yy, xx = np.mgrid[:size, :size]
     mask = (yy - size / 2) ** 2 + (xx - size / 2) ** 2 < (0.45 * size) ** 2

@@ -564,7 +564,10 @@ def integrate(normals, gradients, progress, as_json, **flags):
 
 
 @cli.command(context_settings=CONTEXT)
-@click.argument("normals", type=click.Path(exists=True, path_type=Path))
+@click.argument("normals", required=False, type=click.Path(exists=True, path_type=Path))
+@click.option("--gradients", nargs=2, type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              metavar="P Q", help="Describe a gradient field instead: two files holding p and "
+              "q, as for 'integrate'; see --gradient-frame.")
 @click.option("-m", "--mask", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Mask image, as for 'integrate'.")
 @click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
@@ -575,7 +578,8 @@ def integrate(normals, gradients, progress, as_json, **flags):
               help="Read the map in this frame (as for 'integrate').")
 @click.option("--y-down", is_flag=True, help="Alias of --normal-frame directx.")
 @click.option("--gradient-frame", "gradient_frame", default="xy", show_default=True,
-              help="Layout of a gradient field in a .mat input (as for 'integrate').")
+              help="Layout of a gradient field (--gradients or a .mat input), as for "
+              "'integrate'.")
 @click.option("--mat-keys", metavar="KEYS", help="Variable names in a .mat input.")
 @click.option("--prior", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="A depth prior (map or points file) to check against the map, as for "
@@ -589,8 +593,8 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="A confidence map to check against the map, as for 'integrate'.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def info(normals, mask, K, fov, normal_frame, y_down, gradient_frame, mat_keys, prior,
-         prior_scale, prior_fit, confidence, as_json):
+def info(normals, gradients, mask, K, fov, normal_frame, y_down, gradient_frame, mat_keys,
+         prior, prior_scale, prior_fit, confidence, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
     encoding, mask and components, unusable normals, K, and the memory planner's estimate of
     the peak memory the default integration would need (the figure --max-memory is checked
@@ -601,6 +605,7 @@ def info(normals, mask, K, fov, normal_frame, y_down, gradient_frame, mat_keys, 
     Examples:
       facetlift info normal_map.png --mask mask.png
       facetlift info data/bear/ --json
+      facetlift info --gradients p.npy q.npy --gradient-frame rowcol
     """
     from . import frames
     from .describe import describe
@@ -610,7 +615,7 @@ def info(normals, mask, K, fov, normal_frame, y_down, gradient_frame, mat_keys, 
         from .jobs import Job, check_fov
 
         check_fov(Job(K=None if K is None else str(K), fov=fov))
-    rec = describe(normals, mask=mask, K=K, fov=fov,
+    rec = describe(normals, gradients=gradients, mask=mask, K=K, fov=fov,
                    normal_frame=frames.resolve(normal_frame, y_down),
                    mat_keys=_split(mat_keys), gradient_frame=gradient_frame,
                    prior_scale=prior_scale, prior=prior, confidence=confidence,

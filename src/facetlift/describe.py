@@ -106,8 +106,8 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
     return out
 
 
-def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
-             gradient_frame: str = "xy", prior_scale=None, prior=None,
+def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
+             mat_keys=None, gradient_frame: str = "xy", prior_scale=None, prior=None,
              confidence=None, prior_fit=None, fov=None) -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
     encoding, mask and components, unusable normals (with the first one's location), K, a
@@ -117,8 +117,11 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
 
     Parameters
     ----------
-    path : str or Path
+    path : str or Path, optional
         A normal-map file, a dataset folder, or a ``.mat`` file.
+    gradients : (str or Path, str or Path), optional
+        Instead of `path`: the two files of a gradient field (p, q), as for ``integrate``'s
+        ``--gradients``, in the layout `gradient_frame`.
     mask, K : str or Path, optional
         As for ``facetlift integrate``.
     fov : float, optional
@@ -148,7 +151,9 @@ def describe(path, *, mask=None, K=None, normal_frame=None, mat_keys=None,
     from .jobs import Job, read, recorded_warnings
     from .problem import UnusableNormalsWarning, prepare
 
-    job = Job(normals=str(path), mask=None if mask is None else str(mask),
+    job = Job(normals=None if path is None else str(path),
+              gradients=tuple(str(g) for g in gradients) if gradients else None,
+              mask=None if mask is None else str(mask),
               K=None if K is None else str(K), normal_frame=normal_frame,
               mat_keys=None if mat_keys is None else tuple(mat_keys),
               gradient_frame=gradient_frame, prior_scale=prior_scale,
