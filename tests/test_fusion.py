@@ -250,6 +250,10 @@ def test_confidence_lowers_the_weight_of_bad_normals():
      r"`prior_weight` must be finite, >= 0 and <= 1e\+10 where the prior has a sample; got -1.0"),
     ({"prior_weight": 3.0}, "`prior_weight` applies only with a `prior`"),
     ({"prior": np.ones((24, 28)), "prior_weight": 1e300}, r"<= 1e\+10 where the prior"),
+    # (a points file's own weights multiply it: the message says so, not prior_weight alone)
+    ({"prior": (np.array([3.0, 10.0]), np.array([4.0, 12.0]), np.array([1.0, 1.2]),
+                np.array([1.0, 1e5])), "prior_weight": 1e6},
+     r"`prior_weight` times the points' own weight \(here 1e\+06 x 100000\) must be finite"),
     ({"prior": np.full((24, 28), 2e200)}, r"`prior` depths must lie within \+-1e\+30"),
     ({"confidence": np.ones((2, 2))}, r"`confidence` must be a number or have shape"),
     ({"confidence": -np.ones((24, 28))},

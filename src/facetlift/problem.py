@@ -1087,7 +1087,12 @@ def check_prior(prior, prior_weight, shape, mask, camera):
     wbad = have & ~(np.isfinite(w) & (w >= 0) & (w <= MAX_PRIOR_WEIGHT))
     if wbad.any():
         k = int(np.flatnonzero(wbad)[0])
-        raise ValueError(f"`prior_weight` must be finite, >= 0 and <= {MAX_PRIOR_WEIGHT:g} "
+        mine = None if own is None else own[mask][k]
+        what = "`prior_weight`"
+        if mine is not None and np.isfinite(mine):  # (a points file's own weight column)
+            what = (f"`prior_weight` times the points' own weight (here "
+                    f"{float(weight[mask][k] / mine) if mine else 0.0:g} x {float(mine):g})")
+        raise ValueError(f"{what} must be finite, >= 0 and <= {MAX_PRIOR_WEIGHT:g} "
                          f"where the prior has a sample; got {float(w[k])!r} "
                          f"({int(wbad.sum())} such pixel(s)); 1e8 already returns the prior "
                          "where given")
