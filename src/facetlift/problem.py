@@ -1067,9 +1067,10 @@ def check_prior(prior, prior_weight, shape, mask, camera):
         shape (the message names the argument, the value and what was expected).
     """
     img, own = prior_samples(prior, shape, positive=camera.positive_depth)
-    weight = _weight_image(prior_weight, "prior_weight", shape)
+    given = _weight_image(prior_weight, "prior_weight", shape)
+    weight = given
     if own is not None:  # (the points' own weights: times prior_weight)
-        weight = np.where(np.isfinite(own), weight * own, weight)
+        weight = np.where(np.isfinite(own), given * own, given)
     depth = img[mask]
     w = weight[mask]
     have = np.isfinite(depth)
@@ -1091,7 +1092,7 @@ def check_prior(prior, prior_weight, shape, mask, camera):
         what = "`prior_weight`"
         if mine is not None and np.isfinite(mine):  # (a points file's own weight column)
             what = (f"`prior_weight` times the points' own weight (here "
-                    f"{float(weight[mask][k] / mine) if mine else 0.0:g} x {float(mine):g})")
+                    f"{float(given[mask][k]):g} x {float(mine):g})")
         raise ValueError(f"{what} must be finite, >= 0 and <= {MAX_PRIOR_WEIGHT:g} "
                          f"where the prior has a sample; got {float(w[k])!r} "
                          f"({int(wbad.sum())} such pixel(s)); 1e8 already returns the prior "

@@ -92,6 +92,7 @@ values are the glued ``z``; the per-corner weights tell where the mesh is cut.
 from __future__ import annotations
 
 import functools
+import itertools
 import logging
 import math
 import time
@@ -417,7 +418,7 @@ class FacetBlocks:
         vindex[at] = np.arange(vflat.size)
         # (filled in place, in the index type: no (n, 9) int64 stack, 300 MB at 2048^2)
         cols = np.empty(present.shape, idx_dtype)
-        for k, (dr, dc) in enumerate((dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)):
+        for k, (dr, dc) in enumerate(_OFFSETS):
             np.take(vindex, at + (dr * (W + 3) + dc), out=cols[:, k])
         self.indices = cols[present]
         # where each nonzero lies in the stencil planes (5, (H + 1) (W + 1)), in CSR order: a
@@ -426,11 +427,10 @@ class FacetBlocks:
         plane = (H + 1) * (W + 1)
         pos_dtype = np.int32 if len(FORWARD) * plane < 2**31 else np.int64
         base = []
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                ahead = (dr, dc) in FORWARD
-                base.append(FORWARD.index((dr, dc) if ahead else (-dr, -dc)) * plane
-                            + (0 if ahead else dr * (W + 1) + dc))
+        for dr, dc in _OFFSETS:
+            ahead = (dr, dc) in FORWARD
+            base.append(FORWARD.index((dr, dc) if ahead else (-dr, -dc)) * plane
+                        + (0 if ahead else dr * (W + 1) + dc))
         base = np.asarray(base, dtype=pos_dtype)
         self.position = (np.broadcast_to(base, present.shape)[present]
                          + np.repeat(vflat.astype(pos_dtype), counts))
@@ -469,6 +469,11 @@ class FacetBlocks:
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(n, n))
 
 
+#: A vertex's 3 x 3 neighbourhood, ``(dr, dc)`` in the column order of
+#: :func:`_shared_neighbours` (column ``3 (dr + 1) + (dc + 1)``).
+_OFFSETS = tuple(itertools.product((-1, 0, 1), repeat=2))
+
+
 def _shared_neighbours(domain) -> np.ndarray:
     """(n, 9) bool: whether every vertex shares a facet with its neighbour at offset
     ``(dr, dc)``, column ``3 (dr + 1) + (dc + 1)`` (itself in column 4)."""
@@ -476,15 +481,14 @@ def _shared_neighbours(domain) -> np.ndarray:
     mp = np.pad(domain.mask, 1)  # facet (r, c) at mp[r + 1, c + 1]
     vm = domain.vertex_mask
     present = []
-    for dr in (-1, 0, 1):
+    for dr, dc in _OFFSETS:
         rows = (-1, 0) if dr == 0 else ((-1,) if dr < 0 else (0,))  # facet rows vr + k
-        for dc in (-1, 0, 1):
-            cols = (-1, 0) if dc == 0 else ((-1,) if dc < 0 else (0,))
-            shared = np.zeros((H + 1, W + 1), bool)
-            for kr in rows:
-                for kc in cols:
-                    shared |= mp[1 + kr:H + 2 + kr, 1 + kc:W + 2 + kc]
-            present.append(shared[vm])
+        cols = (-1, 0) if dc == 0 else ((-1,) if dc < 0 else (0,))
+        shared = np.zeros((H + 1, W + 1), bool)
+        for kr in rows:
+            for kc in cols:
+                shared |= mp[1 + kr:H + 2 + kr, 1 + kc:W + 2 + kc]
+        present.append(shared[vm])
     return np.stack(present, axis=1)
 
 
