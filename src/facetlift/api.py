@@ -705,7 +705,11 @@ def make_surface(problem: Problem, result: methods.MethodResult, method: str = "
     if copies is not None:  # a discontinuity-preserving result: split the mesh at its jumps
         from .operators.split import GAP, from_copies
 
-        mesh, svals = from_copies(d, copies, GAP * problem.camera.footprint())
+        mesh = result.extras.get("split_mesh")  # (the method's split of these copies, if any)
+        if mesh is None:
+            mesh, svals = from_copies(d, copies, GAP * problem.camera.footprint())
+        else:
+            svals = mesh.values_of(copies)
         result.info["mesh_pieces"] = mesh.n_pieces  # (the pieces of the mesh returned)
         # (those the cuts add to the mask's components, each a piece at least)
         result.info["cut_pieces"] = mesh.n_pieces - d.n_components

@@ -63,6 +63,13 @@ class SplitMesh:
     right: np.ndarray
     down: np.ndarray
 
+    def values_of(self, copies: np.ndarray) -> np.ndarray:
+        """(n_vertices,) mean of the per-facet corner values `copies` (m, 4) that share each
+        split vertex."""
+        flat = self.corners.ravel()
+        counts = np.bincount(flat, minlength=self.n_vertices)
+        return np.bincount(flat, np.ravel(copies), self.n_vertices) / counts
+
     @property
     def n_cut_edges(self) -> int:
         inside_r = self.domain.mask[:, :-1] & self.domain.mask[:, 1:]
@@ -181,6 +188,4 @@ def from_copies(domain: Domain, copies: np.ndarray, gap: float):
         down = np.maximum(np.abs(img[:-1, :, 3] - img[1:, :, 0]),
                           np.abs(img[:-1, :, 2] - img[1:, :, 1])) > gap
     mesh = split(domain, right, down)
-    counts = np.bincount(mesh.corners.ravel(), minlength=mesh.n_vertices)
-    values = np.bincount(mesh.corners.ravel(), copies.ravel(), mesh.n_vertices) / counts
-    return mesh, values
+    return mesh, mesh.values_of(copies)
