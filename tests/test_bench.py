@@ -280,3 +280,26 @@ def test_coarse_prior_is_exact_for_a_plane_to_the_mask_edge():
     p = coarse_prior(gt)
     assert np.isnan(p[~mask]).all()
     assert np.abs(p - depth)[mask].max() < 1e-2
+
+
+def test_tabletop_scenes_take_every_mesh_in_turn(tmp_path):
+    """The tabletop group's scenes: two meshes each in turn, every third scene three, every
+    mesh once before any comes again; scene names are unique (the index is in them)."""
+    from facetlift.bench import discontinuities as D
+    from facetlift.bench.core import Context, Settings
+
+    m = list("abcdefghijkl")
+    picks = [D.tabletop_meshes(m, i) for i in range(8)]
+    assert [len(p) for p in picks] == [2, 2, 3, 2, 2, 3, 2, 2]
+    first = [x for p in picks[:5] for x in p]
+    assert len(set(first)) == len(first) == 11
+    assert set(first + picks[5]) == set(m)
+    data = tmp_path / "data"
+    (data / "meshes").mkdir(parents=True)
+    for name in ("one", "two", "three"):
+        (data / "meshes" / f"{name}.ply").write_text("")  # (listed, never loaded here)
+    ctx = Context(out=tmp_path, settings=Settings(disc_tabletop=3), data=data)
+    names = [n for g, n, _ in D.scenes(ctx) if g == "tabletop"]
+    assert names == ["one+three@table0", "two+one@table1", "three+two+one@table2"]
+    ctx = Context(out=tmp_path, settings=Settings(disc_tabletop=0), data=data)
+    assert not [g for g, _, _ in D.scenes(ctx) if g == "tabletop"]

@@ -375,6 +375,30 @@ def test_jump_edges_find_the_occluding_contour_and_nothing_else():
     assert r2.sum() + d2.sum() == 0  # a smooth sphere alone has no jump
 
 
+def test_tabletop_sets_objects_on_a_table_that_they_occlude():
+    """synthetic.tabletop: the objects stand on the plane y = 0 with the table under them;
+    seen from TABLE_VIEW the table is behind them (jumps along their outlines); the same seed
+    gives the same scene."""
+    K = np.array([[300.0, 0.0, 63.5], [0.0, 300.0, 47.5], [0.0, 0.0, 1.0]])
+    parts = [trimesh.creation.icosphere(subdivisions=3), trimesh.creation.box((1.0, 1.4, 0.8))]
+    scene = synthetic.tabletop(parts, seed=1)
+    assert isinstance(scene, trimesh.Trimesh)
+    objects = trimesh.util.concatenate([p.copy() for p in scene.split(only_watertight=False)
+                                        if p.bounds[1, 1] > 0.05])  # (not the thin table)
+    assert objects.bounds[0, 1] == pytest.approx(0.0, abs=1e-9)  # resting on the table top
+    assert scene.bounds[0, 1] == pytest.approx(-0.02)  # the table's underside
+    np.testing.assert_array_equal(synthetic.tabletop(parts, seed=1).vertices, scene.vertices)
+    assert not np.array_equal(synthetic.tabletop(parts, seed=2).vertices, scene.vertices)
+    gt = synthetic.render_perspective(scene, K, (96, 128), view=synthetic.TABLE_VIEW,
+                                      distance=10.0, fill=0.9)
+    right, down = synthetic.jump_edges(gt)
+    assert right.sum() + down.sum() > 40  # the objects' outlines against the table
+    # (where they rest on it the jump fades: the mask is one component, not cut through)
+    assert gt.mask.sum() > 2000
+    with pytest.raises(ValueError, match="at least one mesh"):
+        synthetic.tabletop([])
+
+
 def test_quantize():
     rng = np.random.default_rng(3)
     n = rng.standard_normal((20, 20, 3))

@@ -38,6 +38,7 @@ import numpy as np
 
 __all__ = [
     "ANALYTIC",
+    "TABLE_VIEW",
     "VIEWS",
     "GroundTruth",
     "add_angular_noise",
@@ -49,6 +50,7 @@ __all__ = [
     "remove_samples",
     "render_mesh",
     "render_perspective",
+    "tabletop",
     "DILIGENT_K",
     "WITH_JUMPS",
     "jump_edges",
@@ -376,6 +378,60 @@ VIEWS = {
     "oblique": (-_s3, -_s3, -_s3),
     "oblique2": (_s3, -_s3, -_s3),
 }
+
+
+#: The view of :func:`tabletop` scenes: from the front, about 29 degrees above the table.
+TABLE_VIEW = (0.0, -0.55, -1.0)
+
+
+def tabletop(meshes, *, seed: int = 0, spacing: float = 0.9, behind=(0.6, 1.2),
+             margin: float = 0.6):
+    """A scene of several objects resting on a table, as one triangle mesh (y up).
+
+    Each mesh is centred, scaled into the unit sphere and turned about the vertical by a
+    random angle; they stand side by side along x, `spacing` radii apart, every second one
+    set back by a random distance in `behind` (radii) so that the objects in front hide
+    parts of it, each with its lowest point on the plane y = 0. The table is a thin box under
+    them, `margin` radii larger than their footprint. Seen from :data:`TABLE_VIEW` (render with
+    ``view=TABLE_VIEW``), every object occludes the table (the jump fading where it rests on
+    it) and the objects set back are partly hidden by their neighbours: jumps between
+    separate objects, not only self-occlusions (as in DiLiGenT's `harvest`).
+
+    Parameters
+    ----------
+    meshes : sequence of trimesh.Trimesh or paths
+    seed : int
+        Seeds the turns and the set-backs.
+    spacing, behind, margin : float, (float, float), float
+        In units of the objects' radius (1 after the scaling).
+
+    Returns
+    -------
+    trimesh.Trimesh
+    """
+    import trimesh
+
+    if len(meshes) == 0:
+        raise ValueError("`meshes` must name at least one mesh")
+    rng = np.random.default_rng(seed)
+    parts = []
+    k = len(meshes)
+    for i, mesh in enumerate(meshes):
+        m = _load_mesh(mesh).copy()
+        m.apply_translation(-m.bounds.mean(axis=0))
+        m.apply_scale(1.0 / np.linalg.norm(m.vertices, axis=1).max())
+        m.apply_transform(trimesh.transformations.rotation_matrix(rng.uniform(-np.pi, np.pi),
+                                                                  [0.0, 1.0, 0.0]))
+        back = rng.uniform(*behind) if i % 2 else 0.0
+        m.apply_translation([(i - (k - 1) / 2) * spacing + rng.uniform(-0.15, 0.15),
+                             -m.bounds[0, 1], -back])
+        parts.append(m)
+    lo = np.min([m.bounds[0] for m in parts], axis=0)
+    hi = np.max([m.bounds[1] for m in parts], axis=0)
+    table = trimesh.creation.box(extents=[hi[0] - lo[0] + 2 * margin, 0.02,
+                                          hi[2] - lo[2] + 2 * margin])
+    table.apply_translation([(hi[0] + lo[0]) / 2, -0.01, (hi[2] + lo[2]) / 2])
+    return trimesh.util.concatenate(parts + [table])
 
 
 def _view_frame(view) -> np.ndarray:
