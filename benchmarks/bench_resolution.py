@@ -62,7 +62,8 @@ def main(argv=None) -> int:
     from facetlift.bench.core import Context, Settings
 
     settings = replace(Settings(), disc_resolution=(H, W), disc_views=tuple(a.views.split(",")),
-                       disc_wide_views=(), disc_ortho_views=(), disc_analytic=())
+                       disc_wide_views=(), disc_ortho_views=(), disc_analytic=(),
+                       disc_tabletop=0)
     out = Path(os.environ.get("FACETLIFT_BENCH_CACHE") or "/tmp/facetlift-bench-resolution")
     ctx = Context(out=out, settings=settings, data=a.data)
     conds = a.conditions.split(",")

@@ -294,6 +294,7 @@ def test_tabletop_scenes_take_every_mesh_in_turn(tmp_path):
     first = [x for p in picks[:5] for x in p]
     assert len(set(first)) == len(first) == 11
     assert set(first + picks[5]) == set(m)
+    assert D.tabletop_meshes(["a", "b"], 2) == ["a", "b"]  # (never a mesh twice in a scene)
     data = tmp_path / "data"
     (data / "meshes").mkdir(parents=True)
     for name in ("one", "two", "three"):

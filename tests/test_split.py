@@ -264,6 +264,7 @@ def test_the_bear_mesh_has_no_loose_quads():
         dgp.place_pieces = real
     for a, b in zip((*s.split, *s.cuts), (*anew.split, *anew.cuts), strict=True):
         np.testing.assert_array_equal(a, b)
+    assert "_mesh" not in s.info and "split_mesh" not in s.info
     V, F = s.to_mesh()
     g = sp.csr_matrix((np.ones(F.size), (np.repeat(F[:, 0], 4), F.ravel())),
                       shape=(len(V), len(V)))

@@ -384,24 +384,27 @@ VIEWS = {
 TABLE_VIEW = (0.0, -0.55, -1.0)
 
 
-def tabletop(meshes, *, seed: int = 0, spacing: float = 0.9, behind=(0.6, 1.2),
+def tabletop(meshes, *, seed: int = 0, spacing: float = 0.9, behind=(0.1, 0.6),
              margin: float = 0.6):
     """A scene of several objects resting on a table, as one triangle mesh (y up).
 
     Each mesh is centred, scaled into the unit sphere and turned about the vertical by a
     random angle; they stand side by side along x, `spacing` radii apart, every second one
-    set back by a random distance in `behind` (radii) so that the objects in front hide
-    parts of it, each with its lowest point on the plane y = 0. The table is a thin box under
-    them, `margin` radii larger than their footprint. Seen from :data:`TABLE_VIEW` (render with
-    ``view=TABLE_VIEW``), every object occludes the table (the jump fading where it rests on
-    it) and the objects set back are partly hidden by their neighbours: jumps between
-    separate objects, not only self-occlusions (as in DiLiGenT's `harvest`).
+    set back behind its neighbours' bounding boxes by a random gap in `behind` (radii), so
+    that the objects in front hide parts of it; each rests with its lowest point on the plane
+    y = 0, and no two bounding boxes meet (an object that would reach into another's is moved
+    along x until it does not): the objects touch the table, never one another. The table is
+    a thin box under them, `margin` radii larger than their footprint. Seen from
+    :data:`TABLE_VIEW` (render with ``view=TABLE_VIEW``), every object occludes the table
+    (the jump fading where it rests on it) and the objects set back are partly hidden by
+    their neighbours: jumps between separate objects, not only self-occlusions (as in
+    DiLiGenT's `harvest`).
 
     Parameters
     ----------
     meshes : sequence of trimesh.Trimesh or paths
     seed : int
-        Seeds the turns and the set-backs.
+        Seeds the turns, the jitter along x and the gaps behind.
     spacing, behind, margin : float, (float, float), float
         In units of the objects' radius (1 after the scaling).
 
@@ -409,6 +412,14 @@ def tabletop(meshes, *, seed: int = 0, spacing: float = 0.9, behind=(0.6, 1.2),
     -------
     trimesh.Trimesh
     """
+    import trimesh
+
+    parts, table = _tabletop_parts(meshes, seed, spacing, behind, margin)
+    return trimesh.util.concatenate(parts + [table])
+
+
+def _tabletop_parts(meshes, seed, spacing, behind, margin):
+    """The objects of :func:`tabletop`, placed, and the table: (list, trimesh.Trimesh)."""
     import trimesh
 
     if len(meshes) == 0:
@@ -422,16 +433,34 @@ def tabletop(meshes, *, seed: int = 0, spacing: float = 0.9, behind=(0.6, 1.2),
         m.apply_scale(1.0 / np.linalg.norm(m.vertices, axis=1).max())
         m.apply_transform(trimesh.transformations.rotation_matrix(rng.uniform(-np.pi, np.pi),
                                                                   [0.0, 1.0, 0.0]))
-        back = rng.uniform(*behind) if i % 2 else 0.0
-        m.apply_translation([(i - (k - 1) / 2) * spacing + rng.uniform(-0.15, 0.15),
-                             -m.bounds[0, 1], -back])
+        m.apply_translation([(i - (k - 1) / 2) * spacing + rng.uniform(-0.15, 0.15)
+                             - m.bounds.mean(axis=0)[0], -m.bounds[0, 1],
+                             -m.bounds.mean(axis=0)[2]])
         parts.append(m)
+    for i in range(1, k, 2):  # set back behind the neighbours in front
+        front = [parts[j].bounds[0, 2] for j in (i - 1, i + 1) if j < k]
+        parts[i].apply_translation([0.0, 0.0, min(front) - rng.uniform(*behind)
+                                    - parts[i].bounds[1, 2]])
+
+    def meet(a, b):
+        return bool(np.all(a.bounds[0] < b.bounds[1]) and np.all(b.bounds[0] < a.bounds[1]))
+
+    for _ in range(k):  # (each pass moves objects right only: at most k passes)
+        moved = False
+        for i in range(k):
+            for j in range(i):
+                if meet(parts[i], parts[j]):
+                    parts[i].apply_translation([parts[j].bounds[1, 0] - parts[i].bounds[0, 0]
+                                                + 0.05, 0.0, 0.0])
+                    moved = True
+        if not moved:
+            break
     lo = np.min([m.bounds[0] for m in parts], axis=0)
     hi = np.max([m.bounds[1] for m in parts], axis=0)
     table = trimesh.creation.box(extents=[hi[0] - lo[0] + 2 * margin, 0.02,
                                           hi[2] - lo[2] + 2 * margin])
     table.apply_translation([(hi[0] + lo[0]) / 2, -0.01, (hi[2] + lo[2]) / 2])
-    return trimesh.util.concatenate(parts + [table])
+    return parts, table
 
 
 def _view_frame(view) -> np.ndarray:

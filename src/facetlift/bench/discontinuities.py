@@ -3,8 +3,10 @@
 Built so that no single object can steer it: every mesh of the data folder rendered with a
 DiLiGenT-like pinhole camera (512 x 612, f = 3,700 px, about 1.5 m away) from several views and
 with a wide-angle camera (f = 600 px), rendered orthographically, plus the analytic surfaces
-with jumps (:data:`facetlift.synthetic.WITH_JUMPS`), each as exact, 16-bit and 8-bit quantised
-normals and with angular noise; and the real normal maps of the data folder with the defaults.
+with jumps (:data:`facetlift.synthetic.WITH_JUMPS`) and scenes of two or three meshes on a
+table (:func:`facetlift.synthetic.tabletop`: jumps between separate objects), each as exact,
+16-bit and 8-bit quantised normals and with angular noise; and the real normal maps of the
+data folder with the defaults.
 
 Every scene is integrated by the smooth DGP, the discontinuity-preserving DGP (defaults and a
 sweep of ``discontinuity_k``), BiNI, and the **oracle**: the same facet integration with the
@@ -126,12 +128,16 @@ def _pinhole(resolution, f=None):
 #: How much of the image's shorter side a :func:`facetlift.synthetic.tabletop` scene spans.
 TABLE_FILL = 0.9
 
+#: Version of the tabletop scenes in the render cache's keys (2: objects never meet).
+TABLE_VERSION = 2
+
 
 def tabletop_meshes(meshes: list, i: int) -> list:
     """The meshes of the `i`-th tabletop scene: the next two of `meshes` in turn, every third
-    scene three (every mesh once before any comes again)."""
-    start = sum(3 if j % 3 == 2 else 2 for j in range(i))
-    return [meshes[(start + j) % len(meshes)] for j in range(3 if i % 3 == 2 else 2)]
+    scene three (every mesh once before any comes again; never more than there are)."""
+    size = [min(3 if j % 3 == 2 else 2, len(meshes)) for j in range(i + 1)]
+    start = sum(size[:-1])
+    return [meshes[(start + j) % len(meshes)] for j in range(size[-1])]
 
 
 def scenes(ctx: Context) -> list[tuple[str, str, object]]:
@@ -166,7 +172,8 @@ def scenes(ctx: Context) -> list[tuple[str, str, object]]:
     for i in range(s.disc_tabletop if len(meshes) >= 2 else 0):
         pick = tabletop_meshes(meshes, i)
         name = "+".join(p.stem for p in pick) + f"@table{i}"
-        add("tabletop", name, f"table_{i}_{name}_{tag}",
+        # (the version and the framing in the cache key: a changed composer renders anew)
+        add("tabletop", name, f"table{TABLE_VERSION}_{i}_{name}_f{TABLE_FILL:g}_{tag}",
             lambda pick=pick, i=i, name=name: synthetic.render_perspective(
                 synthetic.tabletop([load_mesh(p) for p in pick], seed=i), _pinhole(res), res,
                 view=synthetic.TABLE_VIEW, fill=TABLE_FILL, samples=s.disc_samples, name=name))

@@ -465,8 +465,11 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
     Then the pieces of at most :data:`SMALL_PIECE` facets are hung on their larger
     neighbours: those holding a facet of `anchored` only with `hang_anchored` (a blurred
     prior, whose samples are no pointwise values: a huge pointwise weight must return the
-    prior where given). Returns the copies and ``{"pieces", "moved_pieces",
-    "hung_facets"}``."""
+    prior where given). Returns the copies and ``{"pieces", "mesh_pieces", "moved_pieces",
+    "hung_facets", "_mesh"}`` (with `anchored` also ``"unanchored_pieces"``,
+    ``"unanchored_facets"`` and, where there are such pieces, ``"unanchored_largest"``;
+    ``"_mesh"``, the split of the copies returned where the hanging made one, else None, is
+    for :func:`run`, which takes it out)."""
     from ...operators.split import GAP, from_copies
     from .split import absorb_small_pieces, occlusion_offsets
 
