@@ -304,3 +304,26 @@ def test_tabletop_scenes_take_every_mesh_in_turn(tmp_path):
     assert names == ["one+three@table0", "two+one@table1", "three+two+one@table2"]
     ctx = Context(out=tmp_path, settings=Settings(disc_tabletop=0), data=data)
     assert not [g for g, _, _ in D.scenes(ctx) if g == "tabletop"]
+
+
+def test_a_tabletop_scene_renders(tmp_path):
+    """The tabletop group's loader renders its scene with the benchmark's pinhole camera (two
+    small meshes, a small image) and caches it."""
+    import trimesh
+
+    from facetlift.bench import discontinuities as D
+    from facetlift.bench.core import Context, Settings
+
+    data = tmp_path / "data"
+    (data / "meshes").mkdir(parents=True)
+    trimesh.creation.icosphere(subdivisions=3).export(data / "meshes" / "ball.ply")
+    trimesh.creation.box((1.0, 1.4, 0.8)).export(data / "meshes" / "box.ply")
+    settings = Settings(disc_tabletop=1, disc_resolution=(48, 56), disc_samples=1,
+                        disc_views=(), disc_wide_views=(), disc_ortho_views=(), disc_analytic=())
+    ctx = Context(out=tmp_path / "out", settings=settings, data=data)
+    [(group, name, load)] = D.scenes(ctx)
+    gt = load()
+    assert (group, name, gt.name) == ("tabletop", "ball+box@table0", "ball+box@table0")
+    assert gt.K is not None and gt.K[0, 0] == pytest.approx(D._pinhole((48, 56))[0, 0])
+    assert gt.mask.sum() > 300 and np.isfinite(gt.depth[gt.mask]).all()
+    assert list((tmp_path / "out" / "cache").glob("table2_0_ball+box@table0_*.npz"))
