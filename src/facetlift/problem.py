@@ -1068,9 +1068,8 @@ def check_prior(prior, prior_weight, shape, mask, camera):
     """
     img, own = prior_samples(prior, shape, positive=camera.positive_depth)
     given = _weight_image(prior_weight, "prior_weight", shape)
-    weight = given
-    if own is not None:  # (the points' own weights: times prior_weight)
-        weight = np.where(np.isfinite(own), given * own, given)
+    # (the points' own weights: times prior_weight)
+    weight = given if own is None else np.where(np.isfinite(own), given * own, given)
     depth = img[mask]
     w = weight[mask]
     have = np.isfinite(depth)

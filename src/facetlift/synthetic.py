@@ -433,9 +433,9 @@ def _tabletop_parts(meshes, seed, spacing, behind, margin):
         m.apply_scale(1.0 / np.linalg.norm(m.vertices, axis=1).max())
         m.apply_transform(trimesh.transformations.rotation_matrix(rng.uniform(-np.pi, np.pi),
                                                                   [0.0, 1.0, 0.0]))
+        centre = m.bounds.mean(axis=0)  # (after the turn: x and z centred again)
         m.apply_translation([(i - (k - 1) / 2) * spacing + rng.uniform(-0.15, 0.15)
-                             - m.bounds.mean(axis=0)[0], -m.bounds[0, 1],
-                             -m.bounds.mean(axis=0)[2]])
+                             - centre[0], -m.bounds[0, 1], -centre[2]])
         parts.append(m)
     for i in range(1, k, 2):  # set back behind the neighbours in front
         front = [parts[j].bounds[0, 2] for j in (i - 1, i + 1) if j < k]
