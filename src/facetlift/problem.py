@@ -421,7 +421,10 @@ def prepare(
     conf = None
     if confidence is not None:
         conf = check_confidence(confidence, (H, W), mask=m)[m]
-        counts_zero = usable & (conf == 0)
+        # (a normal of confidence 0 is missing whatever it is, also a grazing one: it is then
+        # filled like one by the discontinuity route, not left as a silhouette's gap)
+        zero = conf == 0
+        counts_zero = usable & zero
         usable = usable & (conf > 0)
         if prior is None and usable.any():
             # without a prior only the confidences' ratios mean something: scaled to a largest
@@ -535,7 +538,7 @@ def prepare(
                 # zero-length, or of confidence 0; the discontinuity route fills the isolated
                 # ones, facetlift.methods.dgp.fill_gaps)
                 "no_normal": ~given | nan | bad["non-finite"] | bad["zero-length"] | (
-                    False if conf is None else counts_zero)},
+                    False if conf is None else zero)},
     )
     if problem.has_prior:
         _check_trend(problem)
