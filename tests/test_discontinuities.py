@@ -399,11 +399,13 @@ def test_crack_growth_cuts_a_fading_jump(monkeypatch):
         assert capped.info["grown"] == cap - (its - grown)
     exact = facetlift.integrate(n, discontinuities=True, discontinuity_iter=its)
     assert exact.info["converged"] and exact.info["grown"] == grown
-    # not with a depth prior: it decides the jump heights
+    # not in the reweightings with a depth prior (it decides the jump heights): only in the
+    # prior-free pass that gives them their starting cuts (PRIOR_CUTS_FIRST), the same as above
     prior = np.full(height.shape, np.nan)
     prior[::7, ::7] = -height[::7, ::7]
     fused = facetlift.integrate(n, discontinuities=True, prior=prior)
-    assert fused.info["grown"] == 0 and fused.info["converged"]
+    assert fused.info["prior_free"]["grown"] == grown and fused.info["grown"] == grown
+    assert fused.info["converged"] and fused.info["prior_free"]["iterations"] == its
 
 
 def perspective_sphere(H=96, W=112, f=600.0, R=60.0, dist=900.0):
@@ -500,7 +502,12 @@ def test_forcing_term_saves_cg_iterations_not_accuracy(monkeypatch):
 
 def test_forcing_term_is_off_with_a_depth_prior(monkeypatch):
     """With a prior the reweightings solve to the full loose tolerance (the forcing term
-    raised the fusion benchmark's errors with noisy samples): FORCING changes nothing."""
+    raised the fusion benchmark's errors with noisy samples): FORCING changes nothing there.
+    (The prior-free pass that gives them their starting cuts, PRIOR_CUTS_FIRST, is the
+    prior-free route's and takes it: turned off here.)"""
+    from facetlift.methods import dgp
+
+    monkeypatch.setattr(dgp, "PRIOR_CUTS_FIRST", 0.0)
     n, gt, left = scissor_ortho(H=30, W=36)
     prior = np.full(gt.shape, np.nan)
     prior[::7, ::5] = gt[::7, ::5]

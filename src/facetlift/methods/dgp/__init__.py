@@ -117,6 +117,53 @@ OPTIONS = (
 )
 
 
+#: With a depth prior compared pixel by pixel on at most this share of the facets (sparse
+#: samples), the reweightings start from the cuts of the normals alone (the prior-free
+#: reweightings, growth phase included, without their final solve) instead of from the smooth
+#: surface; 0 turns it off. From the smooth surface every sample pulls a dent into the region
+#: around it, and where that region sits wrong (a jump the normals do not show, a piece the
+#: occlusion rule misplaced) the bilateral weights cut the dents loose: islands of a few
+#: facets at the samples' depths in a region left where it was (the fusion benchmark's
+#: angle_block seen from the left: a 10-pixel strip 10 mm off, its 18 exact samples met to
+#: 1e-5 on islands). From the normals' cuts the samples move whole pieces and then add the
+#: cuts the normals do not show. Measured on the fusion benchmark's 51 scenes (2026-12-04,
+#: seventeenth session; docs/fusion.md, "Cuts from the normals first"), mean error before ->
+#: after, scenes better / worse by more than 1 %: 1 % exact samples perspective 0.861 ->
+#: 0.403 mm (24 / 3; the 0.2 mm target met on 20 of 36 instead of 17), orthographic 1.437 ->
+#: 1.280 % (7 / 4); 1 % noisy 0.868 -> 0.659 mm (23 / 5), 1.641 -> 1.405 % (7 / 1); 0.1 %
+#: exact 1.866 -> 1.700 mm (19 / 3), 4.896 -> 4.379 % (5 / 1); 5 % exact 0.315 -> 0.245 mm
+#: (27 / 3), 0.488 -> 0.450 % (8 / 4); the coarse dense prior (every facet) unchanged (1 / 0
+#: of 51) at 1.9x the time, hence the share. The cost: the prior-free reweightings come
+#: first, and a sparse prior's run now takes 1.8x the time of the same integration without
+#: a prior (median over 18 scenes, `benchmarks/bench_prior_time.py --step 3 --repeat 3
+#: --discontinuities`; 1.08 with exact and 1.22 with noisy samples before). Cheaper first
+#: passes were worse (every 2nd scene, 1 % exact and noisy samples, against this one):
+#: without the growth phase 1 / 3 and 0 / 6 better / worse at 0.95-0.97x the time, stopping
+#: at a weight change of 0.2 0 / 5 and 1 / 5 at 0.90x, ten reweightings 2 / 6 and 1 / 7 at
+#: 0.8x; so did starting the prior's reweightings in their decay (no free ones).
+PRIOR_CUTS_FIRST = 0.25
+
+
+def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights, **kw):
+    """:func:`solve_discontinuous`, from the normals' own cuts where a depth prior is compared
+    pixel by pixel (:data:`PRIOR_CUTS_FIRST`); ``info["prior_free"]`` has that first pass's
+    reweightings."""
+    if not (prior is not None and blur is None and kw["max_iter"] > 0
+            and 0 < np.mean(prior[0] > 0) <= PRIOR_CUTS_FIRST):
+        return solve_discontinuous(domain, bx, by, target, prior=prior, blur=blur, x0=x0,
+                                   final_weights=final_weights, **kw)
+    _, _, w, first = solve_discontinuous(domain, bx, by, target, polish_last=False, **kw)
+    z, y, w, info = solve_discontinuous(domain, bx, by, target, prior=prior, x0=x0, w0=w,
+                                        final_weights=final_weights, **kw)
+    info["prior_free"] = {key: first[key] for key in ("iterations", "grown", "converged",
+                                                      "seconds")}
+    info["iterations"] += first["iterations"]
+    info["grown"] += first["grown"]
+    info["converged"] = bool(info["converged"] and first["converged"])
+    info["cg_iterations"] = first["cg_iterations"] + info["cg_iterations"]
+    return z, y, w, info
+
+
 def run(
     problem, *, solver, discontinuities, mean_subtraction, max_iter, tol, backend, flat_weight,
     progress, discontinuity_k, discontinuity_iter, discontinuity_tol,
@@ -167,7 +214,7 @@ def run(
         if (prior is None or blur is not None) and power:
             final = np.where(target, cosines, 1.0) ** power
             final = final if weights is None else final * weights
-        z, y, w, info = solve_discontinuous(
+        z, y, w, info = _discontinuous(
             domain, bx, by, target, normal_scale=scale, k=discontinuity_k,
             max_iter=discontinuity_iter, tol=discontinuity_tol, flat_weight=flat_weight,
             callback=progress, prior=prior, weights=weights, x0=z0, final_weights=final,
@@ -180,11 +227,11 @@ def run(
         astray = None if blur is None else blur_astray(blur, copies.mean(axis=1))
         if astray is not None:  # (a blurred prior's corrections ran away: the pointwise one)
             prior = fusion_terms(problem)
-            z, y, w, info = solve_discontinuous(
+            z, y, w, info = _discontinuous(
                 domain, bx, by, target, normal_scale=scale,
                 k=discontinuity_k, max_iter=discontinuity_iter, tol=discontinuity_tol,
                 flat_weight=flat_weight, callback=progress, prior=prior, weights=weights,
-                x0=start(prior))
+                x0=start(prior), final_weights=None, blur=None)
             copies, pinfo = place_pieces(domain, y, bx, by, target, s, anchored=prior[0] > 0)
             blur.returned = blur.rms(copies.mean(axis=1))  # (of the surface returned)
             warn(f"prior_blur: the surface departed from the blurred prior by up to "

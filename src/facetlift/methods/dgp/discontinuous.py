@@ -673,7 +673,7 @@ def solve_discontinuous(
     domain, bx, by, target, *, normal_scale, k: float = DEFAULT_K,
     max_iter: int = DEFAULT_ITER, tol: float = DEFAULT_TOL, flat_weight: float = 1e-9,
     cg_rtol: float = 1e-6, callback=None, prior=None, weights=None, x0=None,
-    final_weights=None, blur=None,
+    final_weights=None, blur=None, w0=None, polish_last=True,
 ):
     """Minimise the glued facet energy with bilateral weights (see the module docstring).
 
@@ -717,6 +717,13 @@ def solve_discontinuous(
         every reweighting's solve (from the facets' own centre values), and the reweightings
         go on, even with settled weights, until it stops; the last system is then formed with
         the last target.
+    w0 : (m, 4) float, optional
+        Corner glue weights to start from (default all 1: the smooth solution); with
+        ``max_iter = 0`` the system of these weights is solved once to `cg_rtol`.
+    polish_last : bool
+        Solve the last system to `cg_rtol` after the reweightings (default). False where only
+        the weights are wanted (:data:`facetlift.methods.dgp.PRIOR_CUTS_FIRST`): `z` and `y`
+        are then the last loose solve's.
 
     Returns
     -------
@@ -746,7 +753,7 @@ def solve_discontinuous(
     # threaded callers, and without it the timing objects take the same time: bear 0.77 /
     # 0.77 s, bunny 2.34 / 2.41 s, medians of 3 interleaved, 2026-12-03)
     return _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight,
-                  cg_rtol, callback, prior, weights, x0, final_weights, blur)
+                  cg_rtol, callback, prior, weights, x0, final_weights, blur, w0, polish_last)
 
 
 def _of(ref, K) -> bool:
@@ -772,7 +779,8 @@ def _factorized(K, rhs, amg, grid):
 
 
 def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, cg_rtol,
-           callback, prior=None, weights=None, x0=None, final_weights=None, blur=None):
+           callback, prior=None, weights=None, x0=None, final_weights=None, blur=None, w0=None,
+           polish_last=True):
     t0 = time.perf_counter()
     m = domain.n_facets
     fusion = None
@@ -846,7 +854,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         return float((c * (fit + twist)).sum() + np.sum(fit_prior) + glue)
 
     slopes = (bx, by) if EVIDENCE == "residual" else None
-    w = np.ones((m, 4))
+    w = np.ones((m, 4)) if w0 is None else np.array(w0, dtype=float)
     M, Ma, K, rhs, scale = state(w)
     t1 = time.perf_counter()
 
@@ -1067,9 +1075,9 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         M = Ma = K = rhs = None
         M, Ma, K, rhs, scale = state(w)
     polish = None  # (how the final system was solved to cg_rtol: info["polish"])
-    if it > 0:  # (a final solve follows the reweightings: the polish, or the final weights')
+    if it > 0 and polish_last:  # (a final solve follows: the polish, or the final weights')
         announce(callback, "final solve")
-    if it > 0 and (LOOSE_RTOL > cg_rtol or forced or final):  # solved loosely: polish
+    if polish_last and it > 0 and (LOOSE_RTOL > cg_rtol or forced or final):  # solved loosely
         # on the hierarchy at hand when it does so quickly (large smooth maps: 2-3 CG
         # iterations, where a new hierarchy costs seconds), else by a factorization where
         # affordable (DIRECT_POLISH; at once where the loop was slow: DIRECT_FIRST), else by
