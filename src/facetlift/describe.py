@@ -41,7 +41,10 @@ SECONDS_PER_PIXEL = {
 #: maxima 14-20 on small flat analytic scenes; blurred priors 3-6 in the median. Against the
 #: route's slowest rate: a LiDAR user's 640 x 480 scene at weight 100 took 8.1 s against
 #: 1.2-4.9 s estimated; a review's 480 x 640 plane, tent and sphere with 1 % samples at
-#: weights 1 and 100, 0.33-1.38 s against 0.24-7.37 s.
+#: weights 1 and 100, 0.33-1.38 s against 0.24-7.37 s. Since the discontinuity route starts a
+#: sparse prior's reweightings from the prior-free pass's cuts (2026-12-04) its median with /
+#: without such a prior is 1.8 (largest 8.4 on flat analytic scenes; docs/fusion.md, "Cuts
+#: from the normals first"), within the doubled slowest rate.
 PRIOR_SLOWER = 2.0
 
 

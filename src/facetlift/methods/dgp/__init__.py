@@ -146,21 +146,33 @@ PRIOR_CUTS_FIRST = 0.25
 
 def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights, **kw):
     """:func:`solve_discontinuous`, from the normals' own cuts where a depth prior is compared
-    pixel by pixel (:data:`PRIOR_CUTS_FIRST`); ``info["prior_free"]`` has that first pass's
-    reweightings."""
+    pixel by pixel on few facets (:data:`PRIOR_CUTS_FIRST`). That first pass is the prior-free
+    route's reweightings (its confidence scaled to a largest of 1, as ``prepare`` scales it
+    without a prior); the two passes share ``max_iter``, and ``info`` counts both
+    (``info["prior_free"]``: the first pass's own)."""
     if not (prior is not None and blur is None and kw["max_iter"] > 0
             and 0 < np.mean(prior[0] > 0) <= PRIOR_CUTS_FIRST):
         return solve_discontinuous(domain, bx, by, target, prior=prior, blur=blur, x0=x0,
                                    final_weights=final_weights, **kw)
-    _, _, w, first = solve_discontinuous(domain, bx, by, target, polish_last=False, **kw)
+    first_kw = dict(kw)
+    weights = kw.get("weights")
+    if weights is not None and target.any():
+        first_kw["weights"] = np.where(target, weights / weights[target].max(), weights)
+    _, _, w, first = solve_discontinuous(domain, bx, by, target, polish_last=False,
+                                         **first_kw)
+    kw["max_iter"] -= first["iterations"]  # (0 left: one solve with these cuts)
     z, y, w, info = solve_discontinuous(domain, bx, by, target, prior=prior, x0=x0, w0=w,
                                         final_weights=final_weights, **kw)
     info["prior_free"] = {key: first[key] for key in ("iterations", "grown", "converged",
                                                       "seconds")}
-    info["iterations"] += first["iterations"]
-    info["grown"] += first["grown"]
+    for key in ("iterations", "grown", "multigrid_builds", "multigrid_refreshes"):
+        info[key] += first[key]
+    for key in ("energy", "weight_change", "cg_iterations", "unsolved"):
+        info[key] = list(first[key]) + list(info[key])
     info["converged"] = bool(info["converged"] and first["converged"])
-    info["cg_iterations"] = first["cg_iterations"] + info["cg_iterations"]
+    info["block_coarse_space"] = bool(info["block_coarse_space"] or first["block_coarse_space"])
+    info["seconds"] = {key: first["seconds"][key] + value
+                       for key, value in info["seconds"].items()}
     return z, y, w, info
 
 
@@ -315,10 +327,10 @@ GAP_WEIGHT = 0.1
 def fill_gaps(domain, bx, by, target, scale, cosines, weights, gaps):
     """`bx, by, target, scale, cosines, weights` with the facets that :data:`GAP_WEIGHT`
     fills given their edge neighbours' means (weights: times GAP_WEIGHT), and those facets
-    (m,) bool. Only facets of `gaps` (m,) bool are filled: those without a normal, not the
-    grazing or back-facing ones, which lie on the silhouettes, where the neighbours' slopes
-    would glue an occluding rim to what it occludes (filling those too took the bear from
-    0.025 to 0.38 mm)."""
+    (m,) bool. Only facets of `gaps` (m,) bool are filled: those without a normal (a normal
+    of confidence 0 is none, whatever its direction), not the grazing or back-facing ones,
+    which lie on the silhouettes, where the neighbours' slopes would glue an occluding rim to
+    what it occludes (filling those too took the bear from 0.025 to 0.38 mm)."""
     sides = list(discontinuous.neighbours(domain).values())  # (-1: none)
     nb = [np.maximum(q, 0) for q in sides]
     have = [(q >= 0) & target[qq] for q, qq in zip(sides, nb, strict=True)]

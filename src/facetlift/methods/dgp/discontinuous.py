@@ -55,7 +55,8 @@ Iteration and stopping rule
     when no such corner is left. Weights only fall, so it ends (a corner can fall by more than
     ``tol`` at most ``4 / tol`` times); its reweightings count in ``iterations`` and against
     the cap, ``info["grown"]`` says how many there were. Not with a depth prior, which decides
-    the jump heights itself.
+    the jump heights itself (a sparse one's reweightings start from the prior-free cuts, growth
+    included: :data:`facetlift.methods.dgp.PRIOR_CUTS_FIRST`).
 
     ``info["unsettled_corners"]`` is the fraction of corners whose own bilateral weight still
     differs from the settled one by more than :data:`CUT` (the ambiguous edges the settling
@@ -957,7 +958,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         return z
 
     # the first (smooth) solution only starts the reweightings: as loose as theirs
-    announce(callback, "smooth start")
+    announce(callback, "smooth start" if w0 is None else "start from the normals' cuts")
     # (the glue inverse, the copies' constant part and the pairs' evidence are formed after
     # this solve, whose first multigrid build is the run's largest transient, about four
     # times the matrix: 2048^2 peaks there)
@@ -1065,7 +1066,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         unsettled = float((np.abs(own - w) > CUT).mean())
         del own  # (freed before the final solve)
     slow = amg["slow"]
-    final = final_weights is not None and it > 0 and (prior is None or blur is not None)
+    final = (polish_last and final_weights is not None and it > 0
+             and (prior is None or blur is not None))
     if moving and not final:  # (the cap stopped the reweightings: the last target's system)
         M = Ma = K = rhs = None
         M, Ma, K, rhs, scale = state(w)
