@@ -774,7 +774,7 @@ real = meshes.write_mesh
 def slow(path, *a, **k):
     out = real(path, *a, **k)
     Path(sys.argv[1]).write_text("writing")
-    time.sleep(30)
+    time.sleep(300)  # (the signal ends it; a lost one fails the test at its timeout)
     return out
 meshes.write_mesh = slow
 import facetlift.io.surface as s
@@ -804,7 +804,14 @@ def _signal_during_the_write(dome_png, tmp_path, sig):
         time.sleep(0.05)
     assert flag.exists(), proc.stderr.read() if proc.poll() is not None else "no write"
     proc.send_signal(sig)
-    _, err = proc.communicate(timeout=30)
+    # (generous: a fresh clone's CI run once took more than 30 s to exit here under load,
+    # while the stalled writer slept 30 s)
+    try:
+        _, err = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        raise
     return proc.returncode, err, out
 
 
