@@ -835,11 +835,13 @@ def test_a_weak_prior_takes_the_forcing_term_and_a_strong_one_does_not(monkeypat
     """The reweightings' CG stops early (PRIOR_FORCING) with a pointwise prior no stronger
     than the normals, not with a stronger or a blurred one; the weak prior's surface stays the
     tightly solved one's. (The prior's own reweightings: the prior-free first pass that gives
-    them their starting cuts, PRIOR_CUTS_FIRST, takes the prior-free route's FORCING.)"""
+    them their starting cuts, PRIOR_CUTS_FIRST and BLURRED_CUTS_FIRST, takes the prior-free
+    route's FORCING.)"""
     from facetlift.methods import dgp
     from facetlift.methods.dgp import discontinuous as D
 
     monkeypatch.setattr(dgp, "PRIOR_CUTS_FIRST", 0.0)
+    monkeypatch.setattr(dgp, "BLURRED_CUTS_FIRST", False)
 
     n, depth = wave((40, 44))
     depth = depth + 3.0 * (np.indices(depth.shape)[1] >= 22)
