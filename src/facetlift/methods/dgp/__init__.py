@@ -133,10 +133,13 @@ OPTIONS = (
 #: 1.280 % (7 / 4); 1 % noisy 0.868 -> 0.659 mm (23 / 5), 1.641 -> 1.405 % (7 / 1); 0.1 %
 #: exact 1.866 -> 1.700 mm (19 / 3), 4.896 -> 4.379 % (5 / 1); 5 % exact 0.315 -> 0.245 mm
 #: (27 / 3), 0.488 -> 0.450 % (8 / 4); the coarse dense prior (every facet) unchanged (1 / 0
-#: of 51) at 1.9x the time, hence the share. The cost: the prior-free reweightings come
-#: first, and a sparse prior's run now takes 1.8x the time of the same integration without
-#: a prior (median over 18 scenes, `benchmarks/bench_prior_time.py --step 3 --repeat 3
-#: --discontinuities`; 1.08 with exact and 1.22 with noisy samples before). Cheaper first
+#: of 51) at 1.9x the time, hence the share; between them (every 3rd scene, exact samples at
+#: weight 100) 20 % of the pixels still gain (perspective 0.180 -> 0.152 mm, 11 / 0;
+#: orthographic 2 / 0), 50 % are mixed (0.094 -> 0.100 mm, 4 / 6; orthographic 3 / 2). The
+#: cost: the prior-free reweightings come first, and a sparse prior's run now takes 1.8x the
+#: time of the same integration without a prior (median over 18 scenes,
+#: `benchmarks/bench_prior_time.py --step 3 --repeat 3 --discontinuities`; 1.08 with exact and
+#: 1.22 with noisy samples before). Cheaper first
 #: passes were worse (every 2nd scene, 1 % exact and noisy samples, against this one):
 #: without the growth phase 1 / 3 and 0 / 6 better / worse at 0.95-0.97x the time, stopping
 #: at a weight change of 0.2 0 / 5 and 1 / 5 at 0.90x, ten reweightings 2 / 6 and 1 / 7 at
