@@ -202,9 +202,15 @@ def run(
     bx, by, target = targets(problem)
     s = problem.camera.footprint()
     domain = problem.domain
-    prior = fusion_terms(problem)
+    terms = prior = fusion_terms(problem)  # (the pointwise prior, as given)
     weights = problem.confidence  # None: every normal term weighs 1
     blur = astray = retried = None
+
+    def blurred():
+        """A new BlurredPrior of the prior's terms, and the prior it weighs."""
+        b = BlurredPrior(domain, terms[0], terms[1], problem.prior_blur)
+        return b, (b.weight,) + terms[1:]
+
     if prior is not None and problem.prior_blur > 0:  # docs/fusion.md, "Blurred priors"
         if solver != "direct":
             raise ValueError("`prior_blur` needs solver='direct' for method 'dgp' (the paper's "
@@ -213,8 +219,7 @@ def run(
             raise ValueError("`prior_blur` needs discontinuity_iter >= 1 with "
                              "discontinuities=True (the blurred prior's target is corrected "
                              "between reweightings); got discontinuity_iter=0")
-        blur = BlurredPrior(domain, prior[0], prior[1], problem.prior_blur)
-        prior = (blur.weight,) + prior[1:]
+        blur, prior = blurred()
     if discontinuities:
         empty_components(domain, target)
         given = target  # (the input's own normals: the deviation is measured on them)
@@ -244,12 +249,11 @@ def run(
         if (prior is None or blur is not None) and power:
             final = np.where(target, cosines, 1.0) ** power
             final = final if weights is None else final * weights
-        z, y, w, info = _discontinuous(
-            domain, bx, by, target, normal_scale=scale, k=discontinuity_k,
-            max_iter=discontinuity_iter, tol=discontinuity_tol, flat_weight=flat_weight,
-            callback=progress, prior=prior, weights=weights, x0=z0, final_weights=final,
-            blur=blur,
-        )
+        common = dict(normal_scale=scale, k=discontinuity_k, max_iter=discontinuity_iter,
+                      tol=discontinuity_tol, flat_weight=flat_weight, callback=progress,
+                      weights=weights)
+        z, y, w, info = _discontinuous(domain, bx, by, target, prior=prior, x0=z0,
+                                       final_weights=final, blur=blur, **common)
         announce(progress, "placing pieces")
         copies, pinfo = place_pieces(domain, y, bx, by, target, s,
                                      anchored=None if prior is None else prior[0] > 0,
@@ -258,25 +262,18 @@ def run(
         if astray is not None and "prior_free" in info:
             # (they ran away from the normals' cuts: the blurred prior once more from the
             # smooth surface, BLURRED_CUTS_FIRST)
-            terms = fusion_terms(problem)
-            blur = BlurredPrior(domain, terms[0], terms[1], problem.prior_blur)
-            prior = (blur.weight,) + terms[1:]
-            z, y, w, info = solve_discontinuous(
-                domain, bx, by, target, normal_scale=scale, k=discontinuity_k,
-                max_iter=discontinuity_iter, tol=discontinuity_tol, flat_weight=flat_weight,
-                callback=progress, prior=prior, weights=weights, x0=z0, final_weights=final,
-                blur=blur)
+            blur, prior = blurred()
+            z, y, w, info = solve_discontinuous(domain, bx, by, target, prior=prior, x0=z0,
+                                                final_weights=final, blur=blur, **common)
             retried = astray  # (the departure from the normals' cuts)
             copies, pinfo = place_pieces(domain, y, bx, by, target, s, anchored=prior[0] > 0,
                                          hang_anchored=True)
             astray = blur_astray(blur, copies.mean(axis=1))
         if astray is not None:  # (a blurred prior's corrections ran away: the pointwise one)
-            prior = fusion_terms(problem)
-            z, y, w, info = _discontinuous(
-                domain, bx, by, target, normal_scale=scale,
-                k=discontinuity_k, max_iter=discontinuity_iter, tol=discontinuity_tol,
-                flat_weight=flat_weight, callback=progress, prior=prior, weights=weights,
-                x0=start(prior), final_weights=None, blur=None)
+            prior = terms
+            z, y, w, info = _discontinuous(domain, bx, by, target, prior=prior,
+                                           x0=start(prior), final_weights=None, blur=None,
+                                           **common)
             copies, pinfo = place_pieces(domain, y, bx, by, target, s, anchored=prior[0] > 0)
             blur.returned = blur.rms(copies.mean(axis=1))  # (of the surface returned)
             warn(f"prior_blur: the surface departed from the blurred prior by up to "
