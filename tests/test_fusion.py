@@ -1432,6 +1432,40 @@ def test_samples_move_the_pieces_of_the_normals_cuts_instead_of_tearing_islands(
     assert "prior_free" not in dense.info
 
 
+def test_islands_around_samples_are_glued_back_where_the_normals_show_no_jump(monkeypatch):
+    """A jump the normals do not show (flat normals over a raised square: a CAD part seen
+    head-on) and exact samples on both levels: each sample pulled its own few facets to its
+    depth and the prior's reweightings cut them loose, islands inside a region left where the
+    normals put it. ISLAND_FACETS glues such islands back (the samples then move their
+    region); off, the surface met the samples at their own pixels only."""
+    from facetlift.methods import dgp
+
+    n = np.zeros((64, 64, 3))
+    n[..., 2] = 1.0
+    mask = np.ones((64, 64), bool)
+    depth = np.full((64, 64), 20.0)
+    depth[16:48, 16:48] = 40.0
+    prior = np.full(depth.shape, np.nan)
+    pick = np.random.default_rng(3).choice(depth.size, 60, replace=False)
+    prior.flat[pick] = depth.flat[pick]
+
+    def error(facets):
+        monkeypatch.setattr(dgp, "ISLAND_FACETS", facets)
+        s = run(n, mask, prior=prior, prior_weight=100.0, discontinuities=True)
+        return np.abs(s.depth - depth).mean(), s.info
+
+    kept, off = error(0)
+    glued, info = error(16)
+    assert info["islands_reglued"] >= 2 and "islands_reglued" not in off
+    assert glued < 0.8 * kept
+    assert len(info["cg_iterations"]) == len(off["cg_iterations"]) + 1  # (one more solve)
+    # samples that agree with the normals make no island
+    flat = run(n, mask, prior=np.where(np.isfinite(prior), 20.0, np.nan), prior_weight=100.0,
+               discontinuities=True)
+    assert flat.info["islands_reglued"] == 0
+    assert np.allclose(flat.depth, 20.0, atol=1e-6)
+
+
 def test_the_first_pass_is_the_prior_free_route_also_with_a_confidence_map():
     """The prior-free route takes a confidence map's ratios only (prepare scales it to a
     largest of 1 without a prior, not with one): the first pass scales it alike, so a uniform
