@@ -377,3 +377,38 @@ def test_sparse_samples_are_fitted_by_their_nearest_neighbours(name, discontinui
     assert fit["method"] == "pairs"
     tol = 0.1 if (name, discontinuities) == ("occluder", False) else 0.01
     assert fit["scale"] == pytest.approx(1 / 3, rel=tol)
+
+
+@pytest.mark.parametrize("blur", [None, 3.0])
+def test_the_second_run_reuses_the_first_runs_cuts(monkeypatch, blur):
+    """With discontinuities the fused run's first pass (PRIOR_CUTS_FIRST for sparse samples,
+    BLURRED_CUTS_FIRST for a blurred prior) is the prior-free reweightings that the
+    normals-only run has just done: shared_cuts keeps their weights, and the surface is the
+    same to the last bit as with both runs done in full."""
+    import contextlib
+
+    from facetlift.methods import dgp
+
+    n, depth, mask, _ = steps()
+    pick = np.random.default_rng(5).choice(np.flatnonzero(mask), 40, replace=False)
+    if blur is None:  # (sparse samples of an affine map of the depth)
+        prior = np.full(depth.shape, np.nan)
+        prior.flat[pick] = 3.0 * depth.flat[pick] + 7.0
+    else:
+        prior = np.where(mask, 3.0 * depth + 7.0, np.nan)
+    kw = {"discontinuities": True, "prior": prior, "prior_fit": "affine", "prior_blur": blur,
+          "prior_weight": 1.0 if blur is None else 0.01}
+    shared = run(n, mask, **kw)
+    assert shared.info["prior_free"]["reused"] is True
+    assert shared.info["prior_free"]["seconds"] == {"setup": 0.0, "solve": 0.0}
+    monkeypatch.setattr(dgp, "shared_cuts", contextlib.nullcontext)
+    full = run(n, mask, **kw)
+    assert full.info["prior_free"]["reused"] is False
+    assert np.array_equal(shared.depth, full.depth, equal_nan=True)
+    for key in ("iterations", "grown", "converged", "weight_change"):
+        assert shared.info[key] == full.info[key]
+    # (kept only within the call: a run with the aligned prior alone does its own first pass)
+    samples = np.full(depth.shape, np.nan)
+    samples.flat[pick] = depth.flat[pick]
+    again = run(n, mask, discontinuities=True, prior=samples)
+    assert again.info["prior_free"]["reused"] is False

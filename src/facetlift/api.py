@@ -263,8 +263,8 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
     """:func:`integrate` with a prior known up to scale (and shift): the normals alone
     first, the prior aligned to that surface (:func:`facetlift.prior_fit.fit`), then the
     fusion with the aligned prior."""
-    from . import prior_fit as pf
-    from .problem import _weight_image, prior_blur_value, prior_samples
+    from .methods.dgp import shared_cuts
+    from .problem import _weight_image, prior_samples
 
     t0 = time.perf_counter()
     shape = np.shape(normals)[:2]
@@ -277,6 +277,19 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
         # the fused run below is given them, the aligned prior being a map)
         weight = np.where(np.isfinite(own), weight * own, weight)
         prior_weight = weight
+    # (the discontinuity route's prior-free reweightings, run for the first surface, are the
+    # second run's first pass: done once, facetlift.methods.dgp.shared_cuts)
+    with shared_cuts():
+        return _fitted_runs(kind, normals, mask, raw, weight, t0, prior_weight=prior_weight,
+                            prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
+
+
+def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_blur,
+                 prior_outliers, **kwargs) -> Surface:
+    """The two runs of :func:`_integrate_fitted` and the fit between them."""
+    from . import prior_fit as pf
+    from .problem import prior_blur_value
+
     failed = None
     with recording() as said:
         first = integrate(normals, mask, **kwargs)

@@ -65,6 +65,9 @@ Reference
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+
 import numpy as np
 
 from ..._progress import announce
@@ -211,6 +214,42 @@ def _sample_islands(domain, copies, sampled, footprint):
     return verts, int(island.sum())
 
 
+_CUTS = contextvars.ContextVar("facetlift_dgp_cuts", default=None)
+
+#: What the prior-free reweightings' cut weights are kept with (:func:`shared_cuts`): a
+#: digest of the input they were found for (not the arrays: 40 bytes a pixel held through
+#: the second run), and the options.
+_CUT_OPTIONS = ("k", "max_iter", "tol", "flat_weight")
+
+
+@contextlib.contextmanager
+def shared_cuts():
+    """Within it, the discontinuity route's prior-free reweightings run once per input: the
+    corner weights of a prior-free run are kept, and a later run with a sparse or blurred
+    prior on the same normals, mask, confidence and options (:data:`PRIOR_CUTS_FIRST`,
+    :data:`BLURRED_CUTS_FIRST`) starts from them instead of repeating those reweightings
+    (``info["prior_free"]["reused"]``). :func:`facetlift.integrate` with ``prior_fit`` runs
+    the route on the normals alone and then with the aligned prior: the second run's first
+    pass is the first run's reweightings. Kept per context (thread), dropped on exit."""
+    token = _CUTS.set([])
+    try:
+        yield
+    finally:
+        _CUTS.reset(token)
+
+
+def _cut_key(domain, bx, by, target, kw) -> tuple:
+    """A digest of the input and the options that decide the prior-free cut weights."""
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=20)
+    for a in (domain.mask, bx, by, target, kw["normal_scale"], kw.get("weights")):
+        a = np.array([np.nan]) if a is None else np.ascontiguousarray(a)
+        h.update(f"{a.dtype}{a.shape}".encode())
+        h.update(a.view(np.uint8).ravel() if a.size else b"")
+    return h.hexdigest(), tuple(kw[key] for key in _CUT_OPTIONS)
+
+
 def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
                    footprint=None, **kw):
     """:func:`solve_discontinuous`, from the normals' own cuts where a depth prior is compared
@@ -224,14 +263,30 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
     if not (prior is not None and kw["max_iter"] > 0 and (
             (blur is None and 0 < np.mean(prior[0] > 0) <= PRIOR_CUTS_FIRST)
             or (blur is not None and BLURRED_CUTS_FIRST))):
-        return solve_discontinuous(domain, bx, by, target, prior=prior, blur=blur, x0=x0,
-                                   final_weights=final_weights, **kw)
+        out = solve_discontinuous(domain, bx, by, target, prior=prior, blur=blur, x0=x0,
+                                  final_weights=final_weights, **kw)
+        kept = _CUTS.get()
+        if prior is None and kept is not None and x0 is None:  # (shared_cuts)
+            info = out[3]
+            kept.append((_cut_key(domain, bx, by, target, kw), (out[2], {
+                key: info[key] for key in ("iterations", "grown", "converged", "energy",
+                                           "weight_change", "block_coarse_space")})))
+        return out
     first_kw = dict(kw)
     weights = kw.get("weights")
     if weights is not None and target.any():
         first_kw["weights"] = np.where(target, weights / weights[target].max(), weights)
-    _, _, w, first = solve_discontinuous(domain, bx, by, target, polish_last=False,
-                                         **first_kw)
+    kept = _CUTS.get()  # (shared_cuts)
+    reused = None if not kept else dict(kept).get(_cut_key(domain, bx, by, target, first_kw))
+    if reused is not None:
+        # (the same reweightings a prior-free run did on this input: their weights, none of
+        # their work counted again)
+        w, counts = reused
+        first = {**counts, "multigrid_builds": 0, "multigrid_refreshes": 0, "cg_iterations": [],
+                 "unsolved": [], "seconds": {"setup": 0.0, "solve": 0.0}}
+    else:
+        _, _, w, first = solve_discontinuous(domain, bx, by, target, polish_last=False,
+                                             **first_kw)
     w_first = w
     kw["max_iter"] -= first["iterations"]  # (0 left: one solve with these cuts)
     z, y, w, info = solve_discontinuous(domain, bx, by, target, prior=prior, x0=x0, w0=w,
@@ -253,6 +308,7 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
         info["islands_reglued"] = islands[1]
     info["prior_free"] = {key: first[key] for key in ("iterations", "grown", "converged",
                                                       "seconds")}
+    info["prior_free"]["reused"] = reused is not None
     for key in ("iterations", "grown", "multigrid_builds", "multigrid_refreshes"):
         info[key] += first[key]
     for key in ("energy", "weight_change", "cg_iterations", "unsolved"):
