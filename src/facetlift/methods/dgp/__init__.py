@@ -167,31 +167,35 @@ BLURRED_CUTS_FIRST = True
 #: other piece only (an island inside a region: the sample pulled its own few facets to its
 #: depth and the prior's reweightings cut them loose, leaving the region where the normals
 #: put it) is glued back after the prior's reweightings where at least half of its sample's
-#: :data:`ISLAND_COMPANY` nearest samples are on such islands too (its corners take the
-#: normals' own weights, :data:`PRIOR_CUTS_FIRST`'s first pass, and the last system is solved
-#: again): the samples then bend their region toward them. Where the normals show no jump the
-#: samples reveal (a CAD part seen head-on: flat plateaus), every sample on a raised plateau
-#: made such an island and the surface matched them only at their own pixels. An island
-#: among samples that sit on their region is an outlier's, which the cut keeps local, and is
-#: left so (glued back, three samples raised by 30 % of a sphere's depth range pulled dents:
-#: 0.08 -> 1.07 % of the range, a review). 0 turns it off. Measured on the fusion
+#: :data:`ISLAND_COMPANY` nearest samples on other pieces of its component are on such
+#: islands too: its corners take the normals' own weights (:data:`PRIOR_CUTS_FIRST`'s first
+#: pass) and the last system is solved again, so that the samples bend their region toward
+#: them. (An island's own samples do not vote: three adjacent outliers on one island voted
+#: themselves back into a dent, 0.05 -> 0.95 % of a sphere's range, a review.) Where the
+#: normals show no jump the samples reveal (a CAD part seen head-on: flat plateaus), every
+#: sample on a raised plateau made such an island and the surface matched them only at
+#: their own pixels. An island among samples that sit on their region is an outlier's, which
+#: the cut keeps local, and is left so (glued back, three samples raised by 30 % of a
+#: sphere's depth range pulled dents: 0.08 -> 1.07 % of the range, a review). 0 turns it
+#: off. Measured on the fusion
 #: benchmark's 51 scenes (one interleaved A/B, 2026-12-05, eighteenth session; docs/fusion.md,
 #: "Islands around samples"), mean error before -> after, scenes better / worse by more than
 #: 1 %: exact samples at weight 100, 0.1 % perspective 1.6997 -> 1.7003 mm (0 / 0),
-#: orthographic 4.379 -> 3.787 % (4 / 0); 1 % 0.403 -> 0.396 mm (1 / 0), 1.280 -> 1.209 %
-#: (1 / 0); 5 % unchanged (0 / 0); 1 % exact at weight 1 0.611 -> 0.607 mm (1 / 0), 1.344 ->
-#: 1.291 % (1 / 0); 1 % noisy at weight 1 0.779 -> 0.777 mm (2 / 4), 1.616 -> 1.563 % (1 / 1);
-#: 1 % exact with 3 % of them 5-30 % of the depth range off, weight 1, 0.491 -> 0.489 mm
-#: (1 / 0), 1.361 -> 1.288 % (1 / 0); losses at most 1.7 % (noisy samples); median time
-#: 1.00-1.02x. Every island inside one region glued back (no company rule) gained more on
+#: orthographic 4.379 -> 3.789 % (4 / 0); 1 % 0.403 -> 0.396 mm (1 / 0), 1.280 -> 1.209 %
+#: (1 / 0); 5 % unchanged (0 / 0); 1 % exact at weight 1 0.611 -> 0.608 mm (1 / 0), 1.344 ->
+#: 1.292 % (1 / 0); 1 % noisy at weight 1 0.779 -> 0.776 mm (2 / 4), 1.616 -> 1.564 % (1 / 1);
+#: 1 % exact with 3 % of them 5-30 % of the depth range off, weight 1, 0.491 -> 0.490 mm
+#: (1 / 0), 1.361 -> 1.290 % (1 / 0); losses at most 1.7 % (noisy samples); median time
+#: 1.01-1.02x. Every island inside one region glued back (no company rule) gained more on
 #: the flat scenes (1 % exact orthographic 1.046 %) but lost up to 10 % on noisy samples and
 #: 13x on outliers; any island (also one between two pieces) glued pieces the samples had
 #: rightly separated (cow@left, 1 % exact: 1.43 -> 6.83 mm).
 ISLAND_FACETS = 16
 
 #: How many nearest samples (pixel distance) :data:`ISLAND_FACETS` asks about an island's
-#: sample; 0 glues back every island inside one region.
-ISLAND_COMPANY = 4
+#: sample, of those on other pieces of its component among its nearest
+#: ``ISLAND_COMPANY + ISLAND_COMPANY_REACH``; 0 glues back every island inside one region.
+ISLAND_COMPANY, ISLAND_COMPANY_REACH = 4, 16
 
 
 def _sample_islands(domain, copies, sampled, footprint):
@@ -221,15 +225,19 @@ def _sample_islands(domain, copies, sampled, footprint):
         from scipy.spatial import cKDTree
 
         at = np.flatnonzero(sampled)
-        k = min(ISLAND_COMPANY, at.size - 1)
         r, c = domain.pixels
-        alone = island[piece[at]]
-        if k > 0:
-            _, near = cKDTree(np.column_stack([r[at], c[at]])).query(
-                np.column_stack([r[at], c[at]]), k=k + 1)
-            company = alone[near[:, 1:]].mean(axis=1) >= 0.5
-        else:
-            company = np.zeros(at.size, bool)
+        own, comp = piece[at], domain.facet_component[at]
+        alone = island[own]
+        # the nearest samples on other pieces of the same component (an island's own samples
+        # agree with it: three adjacent outliers on one island voted for each other, a review)
+        k = min(ISLAND_COMPANY + ISLAND_COMPANY_REACH, at.size)
+        xy = np.column_stack([r[at], c[at]])
+        _, near = cKDTree(xy).query(xy, k=k)
+        near = near.reshape(at.size, k)
+        valid = (own[near] != own[:, None]) & (comp[near] == comp[:, None])
+        valid &= np.cumsum(valid, axis=1) <= ISLAND_COMPANY
+        votes = valid.sum(axis=1)
+        company = (votes > 0) & ((alone[near] & valid).sum(axis=1) >= 0.5 * votes)
         keep = np.zeros(mesh.n_pieces, bool)
         keep[piece[at[alone & company]]] = True
         island &= keep
@@ -293,7 +301,8 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
             info = out[3]
             kept.append((_cut_key(domain, bx, by, target, kw), (out[2], {
                 key: info[key] for key in ("iterations", "grown", "converged", "energy",
-                                           "weight_change", "block_coarse_space")})))
+                                           "weight_change", "block_coarse_space",
+                                           "cg_iterations", "unsolved")})))
         return out
     first_kw = dict(kw)
     weights = kw.get("weights")
@@ -302,11 +311,12 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
     kept = _CUTS.get()  # (shared_cuts)
     reused = None if not kept else dict(kept).get(_cut_key(domain, bx, by, target, first_kw))
     if reused is not None:
-        # (the same reweightings a prior-free run did on this input: their weights, none of
-        # their work counted again)
+        # (the same reweightings a prior-free run did on this input: their weights and their
+        # counts, CG's and its unfinished solves' included (the prior-free run's warnings are
+        # not repeated, facetlift.api), but no time or multigrid build counted again)
         w, counts = reused
-        first = {**counts, "multigrid_builds": 0, "multigrid_refreshes": 0, "cg_iterations": [],
-                 "unsolved": [], "seconds": {"setup": 0.0, "solve": 0.0}}
+        first = {**counts, "multigrid_builds": 0, "multigrid_refreshes": 0, "factorizations": 0,
+                 "seconds": {"setup": 0.0, "solve": 0.0}}
     else:
         _, _, w, first = solve_discontinuous(domain, bx, by, target, polish_last=False,
                                              **first_kw)
@@ -330,14 +340,16 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
             info[key] += again[key]
         info["seconds"] = {key: again["seconds"][key] + value
                            for key, value in info["seconds"].items()}
-        info["polish"] = "multigrid"
+        info["polish"] = "direct" if again["factorizations"] else "multigrid"
+        info["factorizations"] += again["factorizations"]
         info["cut_corners"] = again["cut_corners"]  # (of the weights returned)
     if islands is not None:
         info["islands_reglued"] = islands[1]
     info["prior_free"] = {key: first[key] for key in ("iterations", "grown", "converged",
                                                       "seconds")}
     info["prior_free"]["reused"] = reused is not None
-    for key in ("iterations", "grown", "multigrid_builds", "multigrid_refreshes"):
+    for key in ("iterations", "grown", "multigrid_builds", "multigrid_refreshes",
+                "factorizations"):
         info[key] += first[key]
     for key in ("energy", "weight_change", "cg_iterations", "unsolved"):
         info[key] = list(first[key]) + list(info[key])

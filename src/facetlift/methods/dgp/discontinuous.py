@@ -776,6 +776,7 @@ def _factorized(K, rhs, amg, grid):
     hierarchy is dropped first (the caller drops its own references to it). `grid`: the
     vertices' grid positions (SuperLU's nested-dissection ordering)."""
     amg["ml"] = amg["pre"] = amg["for"] = amg["bal"] = None
+    amg["factorized"] += 1
     return linalg.solve(K, rhs, linalg.factorizer(), grid=grid)[0]
 
 
@@ -868,7 +869,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     # built for; weak references, compared by identity: a held reference kept a third
     # system's matrix alive while the next one was formed, 0.3 GB at 2048^2)
     amg = {"ml": None, "pre": None, "for": None, "at": None, "builds": 0, "refreshes": 0,
-           "last_its": 0, "slow": False, "unsolved": [], "bal": None}
+           "last_its": 0, "slow": False, "unsolved": [], "bal": None, "factorized": 0}
 
     def solve(K, rhs, z0, rebuild=True, rtol=cg_rtol, fresh=False, scale=None, trial=False,
               reduction=None):
@@ -1118,6 +1119,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         "discontinuity_k": float(k),
         "final_weights": bool(final),
         "polish": polish,
+        "factorizations": amg["factorized"],  # (systems solved by a factorization)
         # relative residuals of the solves whose unfinished CG iterate was kept (too large to
         # factorize: DIRECT_POLISH, or short of memory)
         "unsolved": amg["unsolved"],
