@@ -62,8 +62,9 @@ class PlaneBlur:
                          slice(max(cols[0] - pad, 0), min(cols[-1] + 1 + pad, W)))
         else:
             self._box = (slice(0, H), slice(0, W))
-        self.mask = full[self._box]
-        m = self.mask.astype(float)
+        self.mask = full
+        self._inside = full[self._box]  # (the mask on the box)
+        m = self._inside.astype(float)
         # coordinates about the image's centre (keeps the moments' cancellation small)
         y = (np.arange(H, dtype=float) - 0.5 * H)[self._box[0], None]
         x = (np.arange(W, dtype=float) - 0.5 * W)[None, self._box[1]]
@@ -83,14 +84,14 @@ class PlaneBlur:
         c1 = a02 * a12 - a01 * a22
         c2 = a01 * a12 - a02 * a11
         det = s0 * c0 + a01 * c1 + a02 * c2
-        ok = self.mask & (s0 > 0) & (np.abs(det) > 0)
+        ok = self._inside & (s0 > 0) & (np.abs(det) > 0)
         det = np.where(ok, det, 1.0)
         c0, c1, c2 = (np.where(ok, c / det, 0.0) for c in (c0, c1, c2))
         # value = c0 b0 + c1 (S(f x) - x b0) + c2 (S(f y) - y b0), b0 = S(f)
         #: (H, W) share of the Gaussian's mass on the mask around each pixel (1 inside, about
         #: 1/2 at a straight edge, 1/4 at a corner)
         self.support = np.zeros(self.shape)
-        self.support[self._box] = np.where(self.mask, s0, 0.0)
+        self.support[self._box] = np.where(self._inside, s0, 0.0)
         self._k0 = c0 - c1 * x - c2 * y
         self._kx, self._ky = c1, c2
         self._x, self._y = x, y
@@ -101,9 +102,9 @@ class PlaneBlur:
     def __call__(self, values: np.ndarray) -> np.ndarray:
         """The blurred image (H, W) of `values` (H, W) (read on the mask only); NaN outside
         the mask."""
-        f = np.where(self.mask, np.asarray(values)[self._box], 0.0)
+        f = np.where(self._inside, np.asarray(values)[self._box], 0.0)
         S = self._filter
         out = self._k0 * S(f) + self._kx * S(f * self._x) + self._ky * S(f * self._y)
         full = np.full(self.shape, np.nan)
-        full[self._box] = np.where(self.mask, out, np.nan)
+        full[self._box] = np.where(self._inside, out, np.nan)
         return full

@@ -165,31 +165,30 @@ BLURRED_CUTS_FIRST = True
 
 #: A piece of at most this many facets that holds a pointwise prior sample and touches one
 #: other piece only (an island inside a region: the sample pulled its own few facets to its
-#: depth and the prior's reweightings cut them loose, leaving the region where the normals
-#: put it) is glued back after the prior's reweightings where at least half of its sample's
-#: :data:`ISLAND_COMPANY` nearest samples on other pieces of its component are on such
-#: islands too: its corners take the normals' own weights (:data:`PRIOR_CUTS_FIRST`'s first
-#: pass) and the last system is solved again, so that the samples bend their region toward
-#: them. (An island's own samples do not vote: three adjacent outliers on one island voted
-#: themselves back into a dent, 0.05 -> 0.95 % of a sphere's range, a review.) Where the
-#: normals show no jump the samples reveal (a CAD part seen head-on: flat plateaus), every
-#: sample on a raised plateau made such an island and the surface matched them only at
-#: their own pixels. An island among samples that sit on their region is an outlier's, which
-#: the cut keeps local, and is left so (glued back, three samples raised by 30 % of a
-#: sphere's depth range pulled dents: 0.08 -> 1.07 % of the range, a review). 0 turns it
-#: off. Measured on the fusion
-#: benchmark's 51 scenes (one interleaved A/B, 2026-12-05, eighteenth session; docs/fusion.md,
-#: "Islands around samples"), mean error before -> after, scenes better / worse by more than
-#: 1 %: exact samples at weight 100, 0.1 % perspective 1.6997 -> 1.7003 mm (0 / 0),
-#: orthographic 4.379 -> 3.789 % (4 / 0); 1 % 0.403 -> 0.396 mm (1 / 0), 1.280 -> 1.209 %
-#: (1 / 0); 5 % unchanged (0 / 0); 1 % exact at weight 1 0.611 -> 0.608 mm (1 / 0), 1.344 ->
-#: 1.292 % (1 / 0); 1 % noisy at weight 1 0.779 -> 0.776 mm (2 / 4), 1.616 -> 1.564 % (1 / 1);
-#: 1 % exact with 3 % of them 5-30 % of the depth range off, weight 1, 0.491 -> 0.490 mm
-#: (1 / 0), 1.361 -> 1.290 % (1 / 0); losses at most 1.7 % (noisy samples); median time
-#: 1.01-1.02x. Every island inside one region glued back (no company rule) gained more on
-#: the flat scenes (1 % exact orthographic 1.046 %) but lost up to 10 % on noisy samples and
-#: 13x on outliers; any island (also one between two pieces) glued pieces the samples had
-#: rightly separated (cow@left, 1 % exact: 1.43 -> 6.83 mm).
+#: depth and the prior's reweightings cut them loose, leaving the region where the normals put
+#: it) is glued back after the prior's reweightings where at least half of its sample's
+#: :data:`ISLAND_COMPANY` nearest samples on other pieces of its component are on such islands
+#: too: its corners take the normals' own weights (:data:`PRIOR_CUTS_FIRST`'s first pass) and
+#: the last system is solved again, so that the samples bend their region toward them. (An
+#: island's own samples do not vote: three adjacent outliers on one island voted themselves
+#: back into a dent, 0.05 -> 0.95 % of a sphere's range, a review.) Where the normals show no
+#: jump the samples reveal (a CAD part seen head-on: flat plateaus), every sample on a raised
+#: plateau made such an island and the surface matched them only at their own pixels. An island
+#: among samples that sit on their region is an outlier's, which the cut keeps local, and is
+#: left so (glued back, three samples raised by 30 % of a sphere's depth range pulled dents:
+#: 0.08 -> 1.07 % of the range, a review). 0 turns it off. Measured on the fusion benchmark's
+#: 51 scenes (one interleaved A/B, 2026-12-05, eighteenth session; docs/fusion.md, "Islands
+#: around samples"), mean error before -> after, scenes better / worse by more than 1 %: exact
+#: samples at weight 100, 0.1 % perspective 1.6997 -> 1.7003 mm (0 / 0), orthographic 4.379 ->
+#: 3.789 % (4 / 0); 1 % 0.403 -> 0.396 mm (1 / 0), 1.280 -> 1.209 % (1 / 0); 5 % unchanged
+#: (0 / 0); 1 % exact at weight 1 0.611 -> 0.608 mm (1 / 0), 1.344 -> 1.292 % (1 / 0); 1 %
+#: noisy at weight 1 0.779 -> 0.776 mm (2 / 4), 1.616 -> 1.564 % (1 / 1); 1 % exact with 3 % of
+#: them 5-30 % of the depth range off, weight 1, 0.491 -> 0.490 mm (1 / 0), 1.361 -> 1.290 %
+#: (1 / 0); losses at most 1.7 % (noisy samples); median time 1.01-1.02x. Every island inside
+#: one region glued back (no company rule) gained more on the flat scenes (1 % exact
+#: orthographic 1.046 %) but lost up to 10 % on noisy samples and 13x on outliers; any island
+#: (also one between two pieces) glued pieces the samples had rightly separated (cow@left, 1 %
+#: exact: 1.43 -> 6.83 mm).
 ISLAND_FACETS = 16
 
 #: How many nearest samples (pixel distance) :data:`ISLAND_FACETS` asks about an island's
