@@ -67,6 +67,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import hashlib
 
 import numpy as np
 
@@ -198,21 +199,23 @@ ISLAND_COMPANY, ISLAND_COMPANY_REACH = 4, 16
 
 
 def _sample_islands(domain, copies, sampled, footprint):
-    """``(corners, count)``: which vertices (n,) bool to glue back around the islands of
-    :data:`ISLAND_FACETS` (and :data:`ISLAND_COMPANY`) in the split of `copies` (m, 4)
-    (`sampled` (m,) bool: the prior's facets), and how many islands; None where it is off."""
+    """``(corners, count, split)``: which vertices (n,) bool to glue back around the islands
+    of :data:`ISLAND_FACETS` (and :data:`ISLAND_COMPANY`) in the split of `copies` (m, 4)
+    (`sampled` (m,) bool: the prior's facets), how many islands, and that split (the mesh
+    and its values, as :func:`place_pieces` forms it); None where it is off."""
     if ISLAND_FACETS <= 0:
         return None
     from ...operators.split import GAP, from_copies
 
-    mesh, _ = from_copies(domain, copies, GAP * footprint)
+    split = from_copies(domain, copies, GAP * footprint)
+    mesh = split[0]
     piece = mesh.facet_piece
     sizes = np.bincount(piece, minlength=mesh.n_pieces)
     island = (sizes <= ISLAND_FACETS) & (
         np.bincount(piece[sampled], minlength=mesh.n_pieces) > 0)
     verts = np.zeros(domain.n_vertices, bool)
     if not island.any():
-        return verts, 0
+        return verts, 0, split
     pairs = []  # (island, neighbouring piece) across every facet edge
     for q in discontinuous.neighbours(domain).values():
         ok = (q >= 0) & island[piece]
@@ -241,7 +244,7 @@ def _sample_islands(domain, copies, sampled, footprint):
         keep[piece[at[alone & company]]] = True
         island &= keep
     verts[domain.corners[island[piece]].ravel()] = True
-    return verts, int(island.sum())
+    return verts, int(island.sum()), split
 
 
 _CUTS = contextvars.ContextVar("facetlift_dgp_cuts", default=None)
@@ -270,14 +273,29 @@ def shared_cuts():
 
 def _cut_key(domain, bx, by, target, kw) -> tuple:
     """A digest of the input and the options that decide the prior-free cut weights."""
-    import hashlib
-
     h = hashlib.blake2b(digest_size=20)
     for a in (domain.mask, bx, by, target, kw["normal_scale"], kw.get("weights")):
         a = np.array([np.nan]) if a is None else np.ascontiguousarray(a)
         h.update(f"{a.dtype}{a.shape}".encode())
         h.update(a.view(np.uint8).ravel() if a.size else b"")
     return h.hexdigest(), tuple(kw[key] for key in _CUT_OPTIONS)
+
+
+#: The counts of multigrid hierarchies and factorizations in a pass's ``info``.
+_BUILDS = ("multigrid_builds", "multigrid_refreshes", "factorizations")
+
+
+def _add_pass(info, other, counts, lists, before=False):
+    """`info` of a :func:`solve_discontinuous` with another pass's `other` counted in: the
+    keys `counts` summed, the lists `lists` joined (`other`'s first where `before`), the
+    seconds summed."""
+    for key in counts:
+        info[key] += other[key]
+    for key in lists:
+        info[key] = (list(other[key]) + list(info[key]) if before
+                     else list(info[key]) + list(other[key]))
+    info["seconds"] = {key: other["seconds"][key] + value
+                       for key, value in info["seconds"].items()}
 
 
 def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
@@ -289,7 +307,9 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
     without a prior); the two passes share ``max_iter``, and ``info`` counts both
     (``info["prior_free"]``: the first pass's own). With a pointwise prior and the pixel
     `footprint` (of the unknown), the islands of :data:`ISLAND_FACETS` are then glued back and
-    the last system solved again (``info["islands_reglued"]``)."""
+    the last system solved again (``info["islands_reglued"]``). Returns ``z, y, w, info`` as
+    :func:`solve_discontinuous` and the split of `y` where the islands' search formed it
+    (else None) for :func:`place_pieces`."""
     if not (prior is not None and kw["max_iter"] > 0 and (
             (blur is None and 0 < np.mean(prior[0] > 0) <= PRIOR_CUTS_FIRST)
             or (blur is not None and BLURRED_CUTS_FIRST))):
@@ -302,7 +322,7 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
                 key: info[key] for key in ("iterations", "grown", "converged", "energy",
                                            "weight_change", "block_coarse_space",
                                            "cg_iterations", "unsolved")})))
-        return out
+        return (*out, None)
     first_kw = dict(kw)
     weights = kw.get("weights")
     if weights is not None and target.any():
@@ -333,30 +353,21 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
                                              final_weights=final_weights, blur=blur,
                                              **{**kw, "max_iter": 0, "callback": None})
         # (the last system solved again to the same tolerance, by CG on a new hierarchy)
-        for key in ("cg_iterations", "unsolved"):
-            info[key] = list(info[key]) + list(again[key])
-        for key in ("multigrid_builds", "multigrid_refreshes"):
-            info[key] += again[key]
-        info["seconds"] = {key: again["seconds"][key] + value
-                           for key, value in info["seconds"].items()}
         info["polish"] = "direct" if again["factorizations"] else "multigrid"
-        info["factorizations"] += again["factorizations"]
         info["cut_corners"] = again["cut_corners"]  # (of the weights returned)
+        _add_pass(info, again, _BUILDS, ("cg_iterations", "unsolved"))
+    split = None
     if islands is not None:
         info["islands_reglued"] = islands[1]
+        split = None if islands[1] else islands[2]  # (of `y` as returned: nothing glued)
     info["prior_free"] = {key: first[key] for key in ("iterations", "grown", "converged",
                                                       "seconds")}
     info["prior_free"]["reused"] = reused is not None
-    for key in ("iterations", "grown", "multigrid_builds", "multigrid_refreshes",
-                "factorizations"):
-        info[key] += first[key]
-    for key in ("energy", "weight_change", "cg_iterations", "unsolved"):
-        info[key] = list(first[key]) + list(info[key])
+    _add_pass(info, first, ("iterations", "grown") + _BUILDS,
+              ("energy", "weight_change", "cg_iterations", "unsolved"), before=True)
     info["converged"] = bool(info["converged"] and first["converged"])
     info["block_coarse_space"] = bool(info["block_coarse_space"] or first["block_coarse_space"])
-    info["seconds"] = {key: first["seconds"][key] + value
-                       for key, value in info["seconds"].items()}
-    return z, y, w, info
+    return z, y, w, info, split
 
 
 def run(
@@ -417,10 +428,11 @@ def run(
         common = dict(normal_scale=scale, k=discontinuity_k, max_iter=discontinuity_iter,
                       tol=discontinuity_tol, flat_weight=flat_weight, callback=progress,
                       weights=weights)
-        z, y, w, info = _discontinuous(domain, bx, by, target, prior=prior, x0=z0,
-                                       final_weights=final, blur=blur, footprint=s, **common)
+        z, y, w, info, split = _discontinuous(domain, bx, by, target, prior=prior, x0=z0,
+                                              final_weights=final, blur=blur, footprint=s,
+                                              **common)
         announce(progress, "placing pieces")
-        copies, pinfo = place_pieces(domain, y, bx, by, target, s,
+        copies, pinfo = place_pieces(domain, y, bx, by, target, s, split=split,
                                      anchored=None if prior is None else prior[0] > 0,
                                      hang_anchored=blur is not None)
         astray = None if blur is None else blur_astray(blur, copies.mean(axis=1))
@@ -436,10 +448,11 @@ def run(
             astray = blur_astray(blur, copies.mean(axis=1))
         if astray is not None:  # (a blurred prior's corrections ran away: the pointwise one)
             prior = terms
-            z, y, w, info = _discontinuous(domain, bx, by, target, prior=prior,
-                                           x0=start(prior), final_weights=None, blur=None,
-                                           footprint=s, **common)
-            copies, pinfo = place_pieces(domain, y, bx, by, target, s, anchored=prior[0] > 0)
+            z, y, w, info, split = _discontinuous(domain, bx, by, target, prior=prior,
+                                                  x0=start(prior), final_weights=None,
+                                                  blur=None, footprint=s, **common)
+            copies, pinfo = place_pieces(domain, y, bx, by, target, s, anchored=prior[0] > 0,
+                                         split=split)
             blur.returned = blur.rms(copies.mean(axis=1))  # (of the surface returned)
             warn(f"prior_blur: the surface departed from the blurred prior by up to "
                  f"{astray:.3g} times the depth range of the prior (or of the first solve, the "
@@ -712,7 +725,7 @@ TORN_BEST = 0.01
 
 
 def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
-                 hang_anchored=False):
+                 hang_anchored=False, split=None):
     """The facets' corner copies (m, 4) with the pieces the jumps separate placed by the
     occlusion rule (:func:`facetlift.methods.dgp.split.occlusion_offsets`): the mesh is split
     where neighbouring copies part by more than :data:`facetlift.operators.split.GAP`
@@ -726,11 +739,13 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
     "hung_facets", "_mesh"}`` (with `anchored` also ``"unanchored_pieces"``,
     ``"unanchored_facets"`` and, where there are such pieces, ``"unanchored_largest"``;
     ``"_mesh"``, the split of the copies returned where the hanging made one, else None, is
-    for :func:`run`, which takes it out)."""
+    for :func:`run`, which takes it out). `split`: :func:`facetlift.operators.split.from_copies`
+    of `copies` where the caller formed it already (the islands' search), else formed here."""
     from ...operators.split import GAP, from_copies
     from .split import absorb_small_pieces, occlusion_offsets
 
-    mesh, values = from_copies(domain, copies, GAP * footprint)
+    mesh, values = split if split is not None else from_copies(domain, copies,
+                                                               GAP * footprint)
     fixed = None
     if anchored is not None:
         fixed = np.bincount(mesh.facet_piece[anchored], minlength=mesh.n_pieces) > 0
