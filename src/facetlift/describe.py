@@ -43,8 +43,9 @@ SECONDS_PER_PIXEL = {
 #: 1.2-4.9 s estimated; a review's 480 x 640 plane, tent and sphere with 1 % samples at
 #: weights 1 and 100, 0.33-1.38 s against 0.24-7.37 s. Since the discontinuity route starts a
 #: sparse prior's reweightings from the prior-free pass's cuts (2026-12-04) its median with /
-#: without such a prior is 1.8 (largest 8.4 on flat analytic scenes; docs/fusion.md, "Cuts
-#: from the normals first"), within the doubled slowest rate.
+#: without such a prior is 1.81, 1.88 since the islands around samples are glued back
+#: (2026-12-05; largest 8.65 on flat analytic scenes; docs/fusion.md, "Cuts from the normals
+#: first"), within the doubled slowest rate.
 PRIOR_SLOWER = 2.0
 
 
