@@ -329,19 +329,26 @@ def headroom(plan: Plan):
         _headroom.reset(token)
 
 
-def factorization_bytes(n: int) -> float:
+def factorization_bytes(n: int, blocks=None) -> float:
     """Bytes a factorization of a 9-point system of `n` unknowns takes: the "dgp-factor"
     route's bytes per ``n log2 n`` (110: about 2.2 GB at 1 M unknowns, where SuperLU measured
-    1.5 GB on the discontinuity route's final system)."""
-    return COEFFICIENTS["dgp-factor"][3] * n * math.log2(max(n, 2))
+    1.5 GB on the discontinuity route's final system). `blocks`: the unknowns of the system's
+    independent blocks (its mask's components, which do not fill each other in), summing
+    to `n`: each counts ``n_i log2 n_i``."""
+    per = COEFFICIENTS["dgp-factor"][3]
+    if blocks is None:
+        return per * n * math.log2(max(n, 2))
+    b = np.asarray(blocks, dtype=float)
+    return per * float(np.sum(b * np.log2(np.maximum(b, 2.0))))
 
 
-def factorization_fits(n: int) -> bool:
-    """Whether factorizing a 9-point system of `n` unknowns fits: its
-    :func:`factorization_bytes` within half of :func:`default_limit` now and within the
-    running job's :func:`headroom`. For a factorization a method takes only as a faster
-    alternative to CG, outside its plan (whose route is CG's)."""
-    need = factorization_bytes(n)
+def factorization_fits(n: int, blocks=None) -> bool:
+    """Whether factorizing a 9-point system of `n` unknowns (of independent `blocks`:
+    :func:`factorization_bytes`) fits: its :func:`factorization_bytes` within half of
+    :func:`default_limit` now and within the running job's :func:`headroom`. For a
+    factorization a method takes only as a faster alternative to CG, outside its plan (whose
+    route is CG's)."""
+    need = factorization_bytes(n, blocks)
     room = _headroom.get()
     return need <= default_limit() / 2 and (room is None or need <= room)
 

@@ -520,11 +520,19 @@ ITERATION_PER_UNKNOWN, ITERATION_PER_CELL = 25e-9, 30e-9
 SWITCH_MARGIN = 0.7
 
 
-#: The most unknowns :func:`_factorize_instead` factorizes (where the model and the memory
-#: allow). 2M (8 x LARGE) before: 16,384 small disks of a 2048^2 map with 30 % missing normals
+#: The most unknowns :func:`_factorize_instead` factorizes in one component of the mask
+#: (where the model and the memory allow; components do not fill each other in, so many
+#: small ones factorize in time and memory linear in their number: :func:`_largest_block`).
+#: 2M (8 x LARGE) before: 16,384 small disks of a 2048^2 map with 30 % missing normals
 #: (2.5M unknowns, 182 CG iterations, 25.6 s) factorize in 10.3 s; larger fat masks stay with CG
 #: by the model (a full 2048^2 square would take minutes).
 FACTOR_CAP = 8_000_000
+
+
+def _blocks(domain) -> np.ndarray:
+    """Unknowns (vertices) of each connected component of `domain`: the independent blocks of
+    its facet system."""
+    return np.bincount(domain.vertex_component)
 
 #: ... and where CG is predicted never to finish (the time model cannot bound the choice).
 FACTOR_CAP_UNBOUNDED = 2_000_000
@@ -537,7 +545,7 @@ def _factorize_instead(K, pre, remaining: float) -> bool:
     memory allows), and fits in memory (:func:`facetlift.memory.factorization_fits`, which
     reads the free memory). Not where the caller asked for CG itself
     (``pre.may_factorize`` False), not with PARDISO's own ordering, whose time this model
-    does not describe, nor above :data:`FACTOR_CAP` unknowns."""
+    does not describe, nor above :data:`FACTOR_CAP` unknowns in a component."""
     from ..memory import factorization_fits
     from . import factorizer
     from .ordering import factorization_work
@@ -549,7 +557,8 @@ def _factorize_instead(K, pre, remaining: float) -> bool:
     # (CG predicted never to finish, remaining inf, passes any time test: then only up to the
     # old 2M cap, where no fat mask factorizes for minutes)
     cap = FACTOR_CAP if np.isfinite(remaining) else FACTOR_CAP_UNBOUNDED
-    if factorizer() != "superlu" or n > cap or not factorization_fits(n):
+    blocks = _blocks(pre.domain)
+    if factorizer() != "superlu" or blocks.max() > cap or not factorization_fits(n, blocks):
         return False
     H, W = pre.domain.shape
     iteration = ITERATION_PER_UNKNOWN * n + ITERATION_PER_CELL * (H + 1) * (W + 1)
@@ -593,7 +602,9 @@ def _factorize_first(K, pre) -> bool:
     large_local = pre.n_weak > LOCAL_WHOLE * n
     if not large_local and pre.scattered < SCATTERED:
         return False
-    if factorizer() != "superlu" or n > FACTOR_CAP or not factorization_fits(n):
+    blocks = _blocks(pre.domain)
+    if (factorizer() != "superlu" or blocks.max() > FACTOR_CAP
+            or not factorization_fits(n, blocks)):
         return False
     if large_local:
         return True
@@ -613,13 +624,14 @@ def _direct(K, b, pre, info: CGInfo, rtol: float):
     one) and decides ``converged``. None where the factorization failed (singular, out of
     memory): `pre` then keeps to CG."""
     from ..operators.stencil import pin_components
-    from .direct import SolverError, superlu
+    from .direct import SolverError
 
     try:
         if pre.direct is None or pre.direct[0] is not K:
             fixed = None if pre._prior is None else np.asarray(pre._prior[1], dtype=bool)
             pinned = pin_components(pre.domain, K, skip=fixed)
-            pre.direct = (K, superlu(pinned, pre.domain.vertices))
+            pre.direct = (K, _by_blocks(pinned, pre.domain))
+            del pinned
         x = pre.direct[1].solve(b)
     except (SolverError, MemoryError):  # (CG goes on from where it was: the caller)
         pre.direct = None
@@ -629,6 +641,47 @@ def _direct(K, b, pre, info: CGInfo, rtol: float):
     info.residuals.append(float(np.linalg.norm(b - K @ x)) / bn)
     info.converged = info.residuals[-1] <= rtol
     return x, info
+
+
+#: Unknowns per factorization where a system of several components is factorized
+#: (:func:`_by_blocks`): whole components are grouped up to this size and each group is
+#: factorized alone, so that only one group's transient copies and SuperLU's work space are
+#: held at a time.
+BLOCK_UNKNOWNS = 1_000_000
+
+
+def _by_blocks(K, domain):
+    """A :class:`facetlift.linalg.direct.Factor` of the pinned facet system `K` of `domain`:
+    one SuperLU factorization (nested-dissection order on the grid) of each group of whole
+    components of about :data:`BLOCK_UNKNOWNS` unknowns (components do not couple: the same
+    solution as one factorization of the whole, to rounding), or of the whole where it is one
+    group."""
+    from .direct import Factor, superlu
+
+    sizes = _blocks(domain)
+    n = K.shape[0]
+    if n <= BLOCK_UNKNOWNS or sizes.size == 1:
+        return superlu(K, domain.vertices)
+    order = np.argsort(domain.vertex_component, kind="stable")
+    ends = np.cumsum(sizes)
+    # cut after the component where the running total first passes each multiple
+    cuts = np.unique(np.searchsorted(ends, np.arange(1, n // BLOCK_UNKNOWNS + 1)
+                                     * BLOCK_UNKNOWNS, side="left"))
+    bounds = np.unique(np.r_[0, ends[np.minimum(cuts, sizes.size - 1)], n])
+    rows, cols = domain.vertices
+    K = sp.csr_matrix(K)
+    parts = []
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        idx = np.sort(order[a:b])
+        parts.append((idx, superlu(K[idx][:, idx], (rows[idx], cols[idx]))))
+
+    def _solve(rhs):
+        x = np.empty_like(rhs)
+        for idx, f in parts:
+            x[idx] = f.solve(np.ascontiguousarray(rhs[idx]))
+        return x
+
+    return Factor(_solve, "superlu")
 
 
 def _after(progress, done: int):
