@@ -803,7 +803,9 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         pz = (1.0 - PRIOR_OWN) * prior[0] * CENTRE_BLOCK[0, 0]
         rP = prior_form(domain, (1.0 - PRIOR_OWN) * prior[0], prior[1], matrix=False)
     corners = domain.corners
-    eye_rows = np.stack([E_X, E_Y], axis=1)  # (4, 2): corner vector -> (x-slope, y-slope)
+    # (4, 3): corner vector -> (x-slope, y-slope, twist)
+    slope_twist = np.stack([E_X, E_Y, E_TWIST], axis=1)
+    all_target = bool(target.all())
 
     a_normals = centre = None
     if prior is not None:  # (for the CG tolerance: _rhs_scale)
@@ -840,20 +842,24 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         return M.apply(np.multiply(w, zc, out=np.empty_like(zc)), plus=Ma)
 
     def energy(y, w, zc):
-        slopes = y @ eye_rows
-        slopes[:, 0] -= bx
-        slopes[:, 1] -= by
-        fit = np.where(target, np.einsum("fa,fa->f", slopes, slopes), 0.0)
-        twist = (y @ E_TWIST) ** 2
+        # (the energy trace is a diagnostic: formed with few passes over the (m, 4) arrays,
+        # the sums as BLAS dot products; 2048^2: 0.32 -> 0.13 s a reweighting)
+        sx, sy, tw = (y @ slope_twist).T  # (each (m,), strided views)
+        sx = np.subtract(sx, bx)
+        sy = np.subtract(sy, by)
+        if not all_target:
+            sx[~target] = 0.0
+            sy[~target] = 0.0
         gap = np.subtract(y, zc)
-        glue = float(np.einsum("fa,fa,fa->", w, gap, gap))
+        gap *= gap
+        glue = float(np.dot(w.reshape(-1), gap.reshape(-1)))
         del gap
         if fusion is None:  # (no prior either)
-            return float(fit.sum() + twist.sum() + glue)
+            return float(np.dot(sx, sx) + np.dot(sy, sy) + np.dot(tw, tw) + glue)
         c = fusion[0]
         fit_prior = 0.0 if prior is None else fusion[1] * (y @ _QUARTER - prior[1]) ** 2 + (
             (1.0 - PRIOR_OWN) * prior[0] * (zc @ _QUARTER - prior[1]) ** 2)
-        return float((c * (fit + twist)).sum() + np.sum(fit_prior) + glue)
+        return float(np.dot(c, sx * sx + sy * sy + tw * tw) + np.sum(fit_prior) + glue)
 
     slopes = (bx, by) if EVIDENCE == "residual" else None
     w = np.ones((m, 4)) if w0 is None else np.array(w0, dtype=float)
