@@ -324,6 +324,21 @@ def test_many_components_factorize_group_by_group_and_the_cap_counts_a_component
     facet._by_blocks(pinned, d)
     assert sum(groups) == d.n_vertices and len(groups) >= d.n_vertices // 1500
     assert max(groups) < 1500 + sizes.max()
+    # the memory check counts the components' own fill: a limit between the grouped and the
+    # whole system's modelled bytes still factorizes, one below both does not
+    from facetlift import memory
+
+    grouped, whole_bytes = (factorization_bytes(d.n_vertices, sizes),
+                            factorization_bytes(d.n_vertices))
+    monkeypatch.setattr(memory, "default_limit", lambda: grouped + whole_bytes)
+    pre = FacetPreconditioner(d, K, strong, coarse="box")
+    x, info = facet.solve(K, b, pre, rtol=1e-10)
+    assert info.iterations == 0 and pre.direct is not None
+    monkeypatch.setattr(memory, "default_limit", lambda: grouped)
+    pre = FacetPreconditioner(d, K, strong, coarse="box")
+    x, info = facet.solve(K, b, pre, rtol=1e-10)
+    assert pre.direct is None and info.iterations > facet.PROBE
+    monkeypatch.undo()
     monkeypatch.setattr(facet, "FACTOR_CAP", int(sizes.max()) - 1)  # a component above it
     pre = FacetPreconditioner(d, K, strong, coarse="box")
     x, info = facet.solve(K, b, pre, rtol=1e-10)

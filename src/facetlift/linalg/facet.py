@@ -521,21 +521,24 @@ SWITCH_MARGIN = 0.7
 
 
 #: The most unknowns :func:`_factorize_instead` factorizes in one component of the mask
-#: (where the model and the memory allow; components do not fill each other in, so many
-#: small ones factorize in time and memory linear in their number: :func:`_largest_block`).
-#: 2M (8 x LARGE) before: 16,384 small disks of a 2048^2 map with 30 % missing normals
-#: (2.5M unknowns, 182 CG iterations, 25.6 s) factorize in 10.3 s; larger fat masks stay with CG
-#: by the model (a full 2048^2 square would take minutes).
+#: where its time model decides (components do not fill each other in, so many small ones
+#: factorize in time and memory linear in their number: :func:`_blocks`, :func:`_by_blocks`),
+#: and in the whole system where no time model decides (below, and
+#: :func:`_factorize_first`'s large local block). 2M (8 x LARGE) before: 16,384 small disks of
+#: a 2048^2 map with 30 % missing normals (2.5M unknowns, 182 CG iterations, 25.6 s)
+#: factorize in 10.3 s; larger fat masks stay with CG by the model (a full 2048^2 square
+#: would take minutes).
 FACTOR_CAP = 8_000_000
+
+#: ... and where CG is predicted never to finish (the time model cannot bound the choice;
+#: the whole system's unknowns).
+FACTOR_CAP_UNBOUNDED = 2_000_000
 
 
 def _blocks(domain) -> np.ndarray:
     """Unknowns (vertices) of each connected component of `domain`: the independent blocks of
     its facet system."""
     return np.bincount(domain.vertex_component)
-
-#: ... and where CG is predicted never to finish (the time model cannot bound the choice).
-FACTOR_CAP_UNBOUNDED = 2_000_000
 
 
 def _factorize_instead(K, pre, remaining: float) -> bool:
@@ -556,9 +559,11 @@ def _factorize_instead(K, pre, remaining: float) -> bool:
         return False
     # (CG predicted never to finish, remaining inf, passes any time test: then only up to the
     # old 2M cap, where no fat mask factorizes for minutes)
-    cap = FACTOR_CAP if np.isfinite(remaining) else FACTOR_CAP_UNBOUNDED
     blocks = _blocks(pre.domain)
-    if factorizer() != "superlu" or blocks.max() > cap or not factorization_fits(n, blocks):
+    # (the time model bounds a component's size; without it, the whole system's)
+    size = blocks.max() if np.isfinite(remaining) else n
+    cap = FACTOR_CAP if np.isfinite(remaining) else FACTOR_CAP_UNBOUNDED
+    if factorizer() != "superlu" or size > cap or not factorization_fits(n, blocks):
         return False
     H, W = pre.domain.shape
     iteration = ITERATION_PER_UNKNOWN * n + ITERATION_PER_CELL * (H + 1) * (W + 1)
@@ -603,7 +608,9 @@ def _factorize_first(K, pre) -> bool:
     if not large_local and pre.scattered < SCATTERED:
         return False
     blocks = _blocks(pre.domain)
-    if (factorizer() != "superlu" or blocks.max() > FACTOR_CAP
+    # (a large local block factorizes the whole without the time model: up to the cap in all)
+    size = n if large_local else blocks.max()
+    if (factorizer() != "superlu" or size > FACTOR_CAP
             or not factorization_fits(n, blocks)):
         return False
     if large_local:
