@@ -312,13 +312,13 @@ def test_info_on_the_bear(capsys):
     assert rec["mask_pixels"] == int(io.read_dataset(BEAR)["mask"].sum())
     assert rec["estimate"]["estimate"] is True and rec["estimate"]["bytes"] > 0
     # what --discontinuities will drop on top (its grazing rule), as integrate counts it
-    assert "with --discontinuities (dgp): 32 more grazing (view cosine < 0.08716)" in run(
+    assert "with --discontinuities (dgp): 13 more grazing (view cosine < 0.04362)" in run(
         capsys, "info", BEAR)[1]
     data = io.read_dataset(BEAR)
     with pytest.warns(UserWarning, match="grazing"):
         s = facetlift.integrate(data["normals"], data["mask"], K=data["K"],
                                 discontinuities=True, discontinuity_iter=1)
-    assert rec["discontinuity_grazing"]["more_grazing"] == s.info["input"]["grazing"] == 32
+    assert rec["discontinuity_grazing"]["more_grazing"] == s.info["input"]["grazing"] == 13
 
 
 def test_info_detects_flips_encodings_and_counts(tmp_path, capsys):

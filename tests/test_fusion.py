@@ -1528,8 +1528,8 @@ def test_confidence_zero_on_a_grazing_normal_equals_a_missing_one(prior):
     the same pixel without a normal was filled (two facets of a fusion benchmark scene: the
     surfaces differed)."""
     n, depth = wave()
-    tilt = np.array([np.sin(np.radians(87.0)), 0.0, np.cos(np.radians(87.0))])
-    n[9, 11] = tilt  # (grazing: view cosine below the route's cos 85 deg)
+    tilt = np.array([np.sin(np.radians(88.0)), 0.0, np.cos(np.radians(88.0))])
+    n[9, 11] = tilt  # (grazing: view cosine below the route's cos 87.5 deg)
     conf = np.ones(depth.shape)
     conf[9, 11] = 0.0
     missing = n.copy()

@@ -80,8 +80,8 @@ def integrate(
         Grazing threshold on the cosine between a normal and the direction toward the camera
         (the paper's outlier rule); below it a normal is a missing sample. Default: the
         camera's (:mod:`facetlift.camera`), except with ``discontinuities=True`` for "dgp":
-        the paper's 0.0871557 (cos 85 deg) for every camera (docs/results.md,
-        "Discontinuities: the grazing rule").
+        0.0436194 (cos 87.5 deg) for every camera (``facetlift.methods.JUMP_GRAZING``;
+        docs/results.md, "Discontinuities: the grazing rule").
     normal_frame : str, optional
         The frame `normals` are given in: ``"opengl"`` (the default, facetlift's own),
         ``"directx"`` (alias ``"y_down"``), ``"opencv"`` or an axis string such as
@@ -225,7 +225,8 @@ def integrate(
         options["discontinuities"] = True
         if outlier_eps is None and info.jump_grazing is not None:
             outlier_eps = info.jump_grazing
-            note = (f"the rule of {method!r} with discontinuities=True, cos 85 deg; "
+            note = (f"the rule of {method!r} with discontinuities=True, cos "
+                    f"{np.degrees(np.arccos(outlier_eps)):.3g} deg; "
                     "outlier_eps / --outlier-eps sets another")
     if solver is not None:
         options["solver"] = solver
@@ -397,7 +398,7 @@ def solve(problem: Problem, method: str = "dgp", /, *, max_memory=None, **option
     (:func:`facetlift.options.validate`), and the job's peak memory is planned against
     `max_memory` (:func:`facetlift.memory.plan`); see :func:`integrate` for what is raised.
     The normals `problem` treats as grazing were decided when it was prepared: the
-    discontinuity route's own threshold (``MethodInfo.jump_grazing``, cos 85 deg for "dgp")
+    discontinuity route's own threshold (``MethodInfo.jump_grazing``, cos 87.5 deg for "dgp")
     is applied by :func:`integrate`, so prepare with ``outlier_eps=`` to match it here (a
     problem prepared with the camera's own threshold, below the route's, gets a warning).
     """
@@ -431,17 +432,24 @@ def _solve(problem, method, t0, max_memory, options):
     info = methods.get(method)
     values = validate(info.specs(), options, method)
     eps = problem.counts.get("outlier_eps")
-    if (values.get("discontinuities") and info.jump_grazing is not None and eps is not None
-            and eps < info.jump_grazing and not problem.extras.get("outlier_eps_given", True)):
+    jump = info.jump_grazing
+    if (values.get("discontinuities") and jump is not None and eps is not None
+            and eps != jump and not problem.extras.get("outlier_eps_given", True)):
         # (integrate applies the route's own threshold; prepare + solve took the camera's:
-        # told where some normal lies between the two)
-        between = int(np.sum(problem.usable & (problem.view_cosines < info.jump_grazing)))
+        # told where some normal lies between the two, either way)
+        r, c = problem.domain.pixels
+        n = np.where(problem.known[:, None], problem.normals, [0.0, 0.0, 1.0])
+        cos = np.where(problem.known, problem.camera.view_cosine(r, c, n, unit=True), 1.0)
+        lo, hi = sorted((eps, jump))
+        between = int(np.sum(problem.known & (cos >= lo) & (cos < hi)))
         if between:
             warn(f"discontinuities=True on a problem prepared with the camera's grazing "
-                 f"threshold (view cosine {eps:.4g}): integrate uses the route's own, cos 85 "
-                 f"deg, which would treat {between} more normal(s) as missing here (the "
-                 "DiLiGenT bear: 0.025 mm MADE against 0.28); prepare(..., outlier_eps="
-                 f"facetlift.METHODS[{method!r}].jump_grazing) to match")
+                 f"threshold (view cosine {eps:.4g}): integrate uses the route's own, cos "
+                 f"{np.degrees(np.arccos(jump)):.3g} deg, which would treat {between} "
+                 f"{'more' if eps < jump else 'fewer'} normal(s) as missing here (the "
+                 "DiLiGenT bear with the pinhole default: 0.046 mm MADE against 0.28); "
+                 f"prepare(..., outlier_eps=facetlift.METHODS[{method!r}].jump_grazing) to "
+                 "match")
     if problem.perspective and not info.perspective:
         able = sorted(k for k, v in methods.REGISTRY.items() if v.perspective)
         raise ValueError(

@@ -178,7 +178,7 @@ _JOB_OPTIONS = [
                  "an error."),
     click.option("--outlier-eps", type=float, default=None,
                  help="Grazing threshold on the view cosine below which a normal is a missing "
-                 "sample (default: cos 85 deg orthographic, 1/255 perspective; cos 85 deg for "
+                 "sample (default: cos 85 deg orthographic, 1/255 perspective; cos 87.5 deg for "
                  "both with dgp --discontinuities)."),
     click.option("--solver", help="The method's solver, where it has one (dgp: 'direct' "
                  "solves the fixed point at once, the default; 'iterative' runs the paper's "

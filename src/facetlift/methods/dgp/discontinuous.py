@@ -77,8 +77,9 @@ Final weights
     on the surface returned.
 
 Grazing normals
-    The route is run (``facetlift.integrate``) with the paper's grazing threshold, cos 85 deg,
-    on every camera (``MethodInfo.jump_grazing``): a jump that fades out ends in nearly
+    The route is run (``facetlift.integrate``) with a grazing threshold of cos 87.5 deg on
+    every camera (``MethodInfo.jump_grazing``, ``facetlift.methods.JUMP_GRAZING``; the paper's
+    cos 85 deg until 2026-12-05): a jump that fades out ends in nearly
     edge-on normals, whose slopes would bridge it; as missing samples they give no evidence
     and no target, and the cut can close (docs/results.md, "Discontinuities: the grazing rule").
 
