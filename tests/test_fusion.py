@@ -1530,6 +1530,7 @@ def test_confidence_zero_on_a_grazing_normal_equals_a_missing_one(prior):
     n, depth = wave()
     tilt = np.array([np.sin(np.radians(88.0)), 0.0, np.cos(np.radians(88.0))])
     n[9, 11] = tilt  # (grazing: view cosine below the route's cos 87.5 deg)
+    assert tilt[2] < facetlift.METHODS["dgp"].jump_grazing
     conf = np.ones(depth.shape)
     conf[9, 11] = 0.0
     missing = n.copy()

@@ -400,7 +400,8 @@ def solve(problem: Problem, method: str = "dgp", /, *, max_memory=None, **option
     The normals `problem` treats as grazing were decided when it was prepared: the
     discontinuity route's own threshold (``MethodInfo.jump_grazing``, cos 87.5 deg for "dgp")
     is applied by :func:`integrate`, so prepare with ``outlier_eps=`` to match it here (a
-    problem prepared with the camera's own threshold, below the route's, gets a warning).
+    problem prepared with the camera's own threshold gets a warning where some normal lies
+    between the two, either way).
     """
     if not isinstance(problem, Problem):  # (an array gave "no attribute 'counts'": an audit)
         raise ValueError(f"solve() takes a Problem from facetlift.prepare(normals, ...); got "
@@ -433,6 +434,7 @@ def _solve(problem, method, t0, max_memory, options):
     values = validate(info.specs(), options, method)
     eps = problem.counts.get("outlier_eps")
     jump = info.jump_grazing
+    bear_note = " (the DiLiGenT bear with the pinhole default: 0.28 mm MADE against 0.046)"
     if (values.get("discontinuities") and jump is not None and eps is not None
             and eps != jump and not problem.extras.get("outlier_eps_given", True)):
         # (integrate applies the route's own threshold; prepare + solve took the camera's:
@@ -441,13 +443,16 @@ def _solve(problem, method, t0, max_memory, options):
         n = np.where(problem.known[:, None], problem.normals, [0.0, 0.0, 1.0])
         cos = np.where(problem.known, problem.camera.view_cosine(r, c, n, unit=True), 1.0)
         lo, hi = sorted((eps, jump))
-        between = int(np.sum(problem.known & (cos >= lo) & (cos < hi)))
+        # (a normal of confidence 0 is missing either way)
+        gone = problem.extras.get("no_normal")
+        counted = problem.known if gone is None else problem.known & ~np.asarray(gone, bool)
+        between = int(np.sum(counted & (cos >= lo) & (cos < hi)))
         if between:
             warn(f"discontinuities=True on a problem prepared with the camera's grazing "
                  f"threshold (view cosine {eps:.4g}): integrate uses the route's own, cos "
                  f"{np.degrees(np.arccos(jump)):.3g} deg, which would treat {between} "
-                 f"{'more' if eps < jump else 'fewer'} normal(s) as missing here (the "
-                 "DiLiGenT bear with the pinhole default: 0.046 mm MADE against 0.28); "
+                 f"{'more' if eps < jump else 'fewer'} normal(s) as missing here"
+                 f"{bear_note if eps < jump else ''}; "
                  f"prepare(..., outlier_eps=facetlift.METHODS[{method!r}].jump_grazing) to "
                  "match")
     if problem.perspective and not info.perspective:
