@@ -321,6 +321,23 @@ def test_info_on_the_bear(capsys):
     assert rec["discontinuity_grazing"]["more_grazing"] == s.info["input"]["grazing"] == 13
 
 
+def test_info_counts_grazing_normals_the_discontinuity_route_keeps(tmp_path, capsys):
+    """Orthographic: the camera's cos 85 deg drops a hemisphere's rim, --discontinuities (cos
+    87.5 deg) keeps part of it; info says how many (a review)."""
+    yy, xx = (np.mgrid[0:60, 0:60] + 0.5 - 30) / 30
+    inside = xx**2 + yy**2 < 0.9999
+    nz = np.sqrt(np.clip(1 - xx**2 - yy**2, 0, None))
+    n = np.dstack([xx, -yy, nz])
+    n[~inside] = np.nan
+    np.save(tmp_path / "hemi.npy", n)
+    kept = int((inside & (nz >= facetlift.METHODS["dgp"].jump_grazing)
+                & (nz < np.cos(np.radians(85.0)))).sum())
+    assert kept > 0
+    out = run(capsys, "info", tmp_path / "hemi.npy")[1]
+    assert f"with --discontinuities (dgp): {kept} of the grazing ones kept" in out
+    assert "more grazing" not in out
+
+
 def test_info_detects_flips_encodings_and_counts(tmp_path, capsys):
     n = dome(40, 48)
     n[3, 5] = [0.0, 0.0, -1.0]

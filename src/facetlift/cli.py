@@ -674,6 +674,9 @@ def _info_lines(rec: dict) -> list[str]:
         lines.append(f"  with --discontinuities (dgp): {jg['more_grazing']} more grazing (view "
                      f"cosine < {jg['outlier_eps']:.4g}), treated as missing unless "
                      "--outlier-eps says otherwise")
+    if jg.get("fewer_grazing"):
+        lines.append(f"  with --discontinuities (dgp): {jg['fewer_grazing']} of the grazing ones "
+                     f"kept (its rule is a view cosine < {jg['outlier_eps']:.4g})")
     for key, what in (("estimate", "default integration"),
                       ("estimate_discontinuities", "with --discontinuities")):
         e = rec.get(key)

@@ -289,15 +289,25 @@ def _holes(mask) -> int:
 
 
 def _jump_grazing(problem) -> dict:
-    """How many more normals `--discontinuities` (dgp) treats as grazing: that route uses
-    ``MethodInfo.jump_grazing`` on every camera instead of the camera's default."""
+    """How many more normals `--discontinuities` (dgp) treats as grazing, and how many fewer
+    (the camera's default drops them, the route keeps them: an orthographic camera's cos 85
+    deg): that route uses ``MethodInfo.jump_grazing`` on every camera."""
     from . import methods
 
     eps = methods.get("dgp").jump_grazing
     if eps is None:
         return {}
     cos = problem.view_cosines[problem.usable]
-    return {"outlier_eps": float(eps), "more_grazing": int((cos < eps).sum())}
+    # grazing by the camera's rule, not missing for another reason, above the route's
+    r, c = problem.domain.pixels
+    gone = problem.extras.get("no_normal")
+    dropped = problem.known & ~problem.usable
+    if gone is not None:
+        dropped &= ~np.asarray(gone, bool)
+    n = np.where(dropped[:, None], problem.normals, [0.0, 0.0, 1.0])
+    view = problem.camera.view_cosine(r, c, n, unit=True)
+    return {"outlier_eps": float(eps), "more_grazing": int((cos < eps).sum()),
+            "fewer_grazing": int((dropped & (view >= eps)).sum())}
 
 
 def _file_facts(src: Path) -> dict:
