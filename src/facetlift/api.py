@@ -434,19 +434,12 @@ def _solve(problem, method, t0, max_memory, options):
     values = validate(info.specs(), options, method)
     eps = problem.counts.get("outlier_eps")
     jump = info.jump_grazing
-    bear_note = " (the DiLiGenT bear with the pinhole default: 0.28 mm MADE against 0.046)"
     if (values.get("discontinuities") and jump is not None and eps is not None
             and eps != jump and not problem.extras.get("outlier_eps_given", True)):
         # (integrate applies the route's own threshold; prepare + solve took the camera's:
         # told where some normal lies between the two, either way)
-        r, c = problem.domain.pixels
-        n = np.where(problem.known[:, None], problem.normals, [0.0, 0.0, 1.0])
-        cos = np.where(problem.known, problem.camera.view_cosine(r, c, n, unit=True), 1.0)
-        lo, hi = sorted((eps, jump))
-        # (a normal of confidence 0 is missing either way)
-        gone = problem.extras.get("no_normal")
-        counted = problem.known if gone is None else problem.known & ~np.asarray(gone, bool)
-        between = int(np.sum(counted & (cos >= lo) & (cos < hi)))
+        between = problem.grazing_between(eps, jump)
+        bear_note = " (the DiLiGenT bear with the pinhole default: 0.28 mm MADE against 0.046)"
         if between:
             warn(f"discontinuities=True on a problem prepared with the camera's grazing "
                  f"threshold (view cosine {eps:.4g}): integrate uses the route's own, cos "

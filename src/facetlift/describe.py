@@ -297,17 +297,10 @@ def _jump_grazing(problem) -> dict:
     eps = methods.get("dgp").jump_grazing
     if eps is None:
         return {}
-    cos = problem.view_cosines[problem.usable]
-    # grazing by the camera's rule, not missing for another reason, above the route's
-    r, c = problem.domain.pixels
-    gone = problem.extras.get("no_normal")
-    dropped = problem.known & ~problem.usable
-    if gone is not None:
-        dropped &= ~np.asarray(gone, bool)
-    n = np.where(dropped[:, None], problem.normals, [0.0, 0.0, 1.0])
-    view = problem.camera.view_cosine(r, c, n, unit=True)
-    return {"outlier_eps": float(eps), "more_grazing": int((cos < eps).sum()),
-            "fewer_grazing": int((dropped & (view >= eps)).sum())}
+    camera = problem.counts.get("outlier_eps", eps)
+    between = problem.grazing_between(camera, eps)
+    return {"outlier_eps": float(eps), "more_grazing": between if camera < eps else 0,
+            "fewer_grazing": between if camera > eps else 0}
 
 
 def _file_facts(src: Path) -> dict:

@@ -125,6 +125,18 @@ class Problem:
         n = np.where(self.usable[:, None], self.normals, [0.0, 0.0, 1.0])
         return np.where(self.usable, self.camera.view_cosine(r, c, n, unit=True), 0.0)
 
+    def grazing_between(self, a: float, b: float) -> int:
+        """How many given normals (front-facing, not missing for another reason, confidence
+        above 0) have a view cosine between the thresholds `a` and `b` (the larger excluded):
+        those that one grazing threshold drops and the other keeps."""
+        gone = self.extras.get("no_normal")
+        given = self.known if gone is None else self.known & ~np.asarray(gone, bool)
+        r, c = self.domain.pixels
+        n = np.where(given[:, None], self.normals, [0.0, 0.0, 1.0])
+        cos = self.camera.view_cosine(r, c, n, unit=True)
+        lo, hi = sorted((a, b))
+        return int(np.sum(given & (cos >= lo) & (cos < hi)))
+
     @property
     def slopes(self) -> tuple[np.ndarray, np.ndarray]:
         """(p, q), each (m,): grid slopes per footprint; for an orthographic camera the height

@@ -674,7 +674,7 @@ def _by_blocks(K, domain):
     # cut after the component where the running total first passes each multiple
     cuts = np.unique(np.searchsorted(ends, np.arange(1, n // BLOCK_UNKNOWNS + 1)
                                      * BLOCK_UNKNOWNS, side="left"))
-    bounds = np.unique(np.r_[0, ends[np.minimum(cuts, sizes.size - 1)], n])
+    bounds = np.unique(np.r_[0, ends[cuts], n])
     rows, cols = domain.vertices
     K = sp.csr_matrix(K)
     parts = []
