@@ -312,13 +312,16 @@ def test_info_on_the_bear(capsys):
     assert rec["mask_pixels"] == int(io.read_dataset(BEAR)["mask"].sum())
     assert rec["estimate"]["estimate"] is True and rec["estimate"]["bytes"] > 0
     # what --discontinuities will drop on top (its grazing rule), as integrate counts it
-    assert "with --discontinuities (dgp): 13 more grazing (view cosine < 0.04362)" in run(
-        capsys, "info", BEAR)[1]
+    # (one of the 13 normals past the route's grazing rule is isolated: found first)
+    said = run(capsys, "info", BEAR)[1]
+    assert "with --discontinuities (dgp): 12 more grazing (view cosine < 0.04362)" in said
+    assert "with --discontinuities (dgp): 3 isolated (more than 15 deg" in said
     data = io.read_dataset(BEAR)
     with pytest.warns(UserWarning, match="grazing"):
         s = facetlift.integrate(data["normals"], data["mask"], K=data["K"],
                                 discontinuities=True, discontinuity_iter=1)
-    assert rec["discontinuity_grazing"]["more_grazing"] == s.info["input"]["grazing"] == 13
+    assert rec["discontinuity_grazing"]["more_grazing"] == s.info["input"]["grazing"] == 12
+    assert rec["discontinuity_grazing"]["isolated"] == s.info["input"]["isolated"] == 3
 
 
 def test_info_counts_grazing_normals_the_discontinuity_route_keeps(tmp_path, capsys):

@@ -972,7 +972,9 @@ def test_scattered_missing_normals_keep_the_bear_s_head_in_place():
     n[rr[pick], cc[pick]] = np.nan
     with pytest.warns(UserWarning, match="grazing"):  # (the bear's own rim)
         s = facetlift.integrate(n, d["mask"], K=d["K"], discontinuities=True)
-    assert s.info["missing"] == 400 and s.info["gaps_filled"] == 400
+    # (and the bear's own 3 isolated normals, MethodInfo.jump_isolated: filled as well)
+    assert s.info["missing"] == s.info["gaps_filled"] == 403
+    assert s.info["input"]["missing"] == 400 and s.info["input"]["isolated"] == 3
     # (0.038 mm; seeds 1-5 0.021-0.087 with the grazing rule at cos 87.5 deg, and 0.29-0.32 on
     # seeds 1-3 without the filling: the 0.10 mm for the bear tells them apart)
     assert facetlift.metrics.made(s.depth, gt, d["mask"])[0] < 0.10

@@ -175,7 +175,7 @@ def test_a_heavy_weight_with_a_blurred_prior_is_warned_about():
 
 @pytest.mark.skipif(not (BEAR / "depth_gt.npz").is_file(), reason="no DiLiGenT bear data")
 @pytest.mark.filterwarnings("ignore:.*cannot be used")
-def test_a_prior_that_is_not_blurred_as_said_is_warned_about():
+def test_a_prior_that_is_not_blurred_as_said_is_warned_about(monkeypatch):
     """The DiLiGenT bear's exact depth given as blurred by 4 px (a fresh user's try; here its
     neck and paw, 23k pixels): the surface returned meets it, through the blur, worse than the
     first solve (the whole bear: 0.85 mm MADE against 0.026 without the prior, no signal
@@ -199,8 +199,15 @@ def test_a_prior_that_is_not_blurred_as_said_is_warned_about():
     assert s.info["prior_blur"]["mismatch"] > s.info["prior_blur"]["mismatch_first"]
     # (at the route's cos 87.5 deg the first run, from the normals' cuts, warns itself)
     assert s.info["prior_blur"]["retried"] is None and not s.info["prior_blur"]["fallback"]
-    # the run-away path, pinned: with the paper's cos 85 deg the first run runs away (2.1x the
-    # depth range) and the second, from the smooth surface, warns
+    # the run-away path, pinned: with the paper's cos 85 deg and the bear's three isolated
+    # normals kept (as before 2026-12-05) the first run runs away (2.1x the depth range) and
+    # the second, from the smooth surface, warns
+    import dataclasses
+
+    from facetlift import methods
+
+    monkeypatch.setitem(methods.REGISTRY, "dgp",
+                        dataclasses.replace(methods.get("dgp"), jump_isolated=None))
     with pytest.warns(UserWarning, match=r"prior_blur: the surface returned meets the blurred "):
         s = facetlift.integrate(data["normals"][rows, cols], mask, K=K, prior=prior,
                                 prior_blur=4, prior_weight=0.003, discontinuities=True,

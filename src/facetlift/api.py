@@ -183,7 +183,9 @@ def integrate(
     -----
     facetlift.UnusableNormalsWarning
         Once, when normals inside the mask cannot be used (infinite, zero-length,
-        back-facing or grazing): they become missing samples (``info["input"]`` counts them).
+        back-facing or grazing; with ``discontinuities=True`` also isolated outliers,
+        ``MethodInfo.jump_isolated``): they become missing samples (``info["input"]`` counts
+        them).
         A NaN normal is a missing sample by definition: counted as ``missing``, not warned
         about.
     facetlift.FrameWarning
@@ -217,12 +219,13 @@ def integrate(
             outlier_eps=outlier_eps, normal_frame=normal_frame, max_memory=max_memory,
             prior=prior, prior_weight=prior_weight, confidence=confidence,
             prior_blur=prior_blur, prior_outliers=prior_outliers, **options)
-    note = None
+    note = isolated = None
     if discontinuities is not None and not _check_discontinuities(info, discontinuities):
         if "discontinuities" in info.options():  # (an explicit False, e.g. for "bini")
             options["discontinuities"] = False
     elif discontinuities:
         options["discontinuities"] = True
+        isolated = info.jump_isolated
         if outlier_eps is None and info.jump_grazing is not None:
             outlier_eps = info.jump_grazing
             note = (f"the rule of {method!r} with discontinuities=True, cos "
@@ -244,6 +247,7 @@ def integrate(
         normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
         outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight, confidence=confidence,
         grazing_note=note, prior_blur=prior_blur, prior_outliers=prior_outliers,
+        isolated=isolated,
     )
     # (the flip check's hint is relative to the frame given; none given: the caller's, e.g.
     # a reader's, stays)
@@ -401,7 +405,8 @@ def solve(problem: Problem, method: str = "dgp", /, *, max_memory=None, **option
     discontinuity route's own threshold (``MethodInfo.jump_grazing``, cos 87.5 deg for "dgp")
     is applied by :func:`integrate`, so prepare with ``outlier_eps=`` to match it here (a
     problem prepared with the camera's own threshold gets a warning where some normal lies
-    between the two, either way).
+    between the two, either way). Likewise the route's isolated normals
+    (``MethodInfo.jump_isolated``): prepare with ``isolated=`` to drop them here.
     """
     if not isinstance(problem, Problem):  # (an array gave "no attribute 'counts'": an audit)
         raise ValueError(f"solve() takes a Problem from facetlift.prepare(normals, ...); got "

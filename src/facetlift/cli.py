@@ -409,7 +409,7 @@ def summary(record: dict) -> str:
     if missing:  # (NaN inside the mask: no warning, being the documented way to say it)
         parts.append(f"{missing} missing normal{'s' if missing != 1 else ''}")
     unusable = sum(counts.get(k) or 0 for k in ("non-finite", "zero-length", "back-facing",
-                                                 "grazing"))
+                                                 "grazing", "isolated"))
     if unusable:
         parts.append(f"{unusable} unusable")
     if "zero_confidence" in counts:
@@ -677,6 +677,11 @@ def _info_lines(rec: dict) -> list[str]:
     if jg.get("fewer_grazing"):
         lines.append(f"  with --discontinuities (dgp): {jg['fewer_grazing']} of the grazing ones "
                      f"kept (its rule is a view cosine < {jg['outlier_eps']:.4g})")
+    if jg.get("isolated"):
+        dev, agree = jg["isolated_rule"]
+        lines.append(f"  with --discontinuities (dgp): {jg['isolated']} isolated (more than "
+                     f"{dev:g} deg from the median of their eight neighbours, which agree within "
+                     f"{agree:g} deg), treated as missing")
     for key, what in (("estimate", "default integration"),
                       ("estimate_discontinuities", "with --discontinuities")):
         e = rec.get(key)

@@ -291,16 +291,25 @@ def _holes(mask) -> int:
 def _jump_grazing(problem) -> dict:
     """How many more normals `--discontinuities` (dgp) treats as grazing, and how many fewer
     (the camera's default drops them, the route keeps them: an orthographic camera's cos 85
-    deg): that route uses ``MethodInfo.jump_grazing`` on every camera."""
+    deg): that route uses ``MethodInfo.jump_grazing`` on every camera; and how many it drops
+    as isolated (``MethodInfo.jump_isolated``, found first: not counted as grazing)."""
     from . import methods
+    from .problem import isolated_normals
 
-    eps = methods.get("dgp").jump_grazing
+    route = methods.get("dgp")
+    eps = route.jump_grazing
     if eps is None:
         return {}
+    iso = None
+    if route.jump_isolated is not None:
+        ok = np.isfinite(problem.normals).all(axis=1)
+        iso = isolated_normals(problem.domain, problem.normals, ok, *route.jump_isolated)
     camera = problem.counts.get("outlier_eps", eps)
-    between = problem.grazing_between(camera, eps)
+    between = problem.grazing_between(camera, eps, without=iso)
     return {"outlier_eps": float(eps), "more_grazing": between if camera < eps else 0,
-            "fewer_grazing": between if camera > eps else 0}
+            "fewer_grazing": between if camera > eps else 0,
+            "isolated": 0 if iso is None else int(iso.sum()),
+            "isolated_rule": route.jump_isolated}
 
 
 def _file_facts(src: Path) -> dict:

@@ -511,7 +511,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
 
 #: The counts of info["input"] a job record keeps (``normals``), in this order.
 NORMAL_COUNTS = ("pixels", "usable", "missing", "non-finite", "zero-length", "back-facing",
-                 "grazing", "zero_confidence")
+                 "grazing", "isolated", "zero_confidence")
 
 
 def _normal_counts(info: dict) -> dict:

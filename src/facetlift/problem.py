@@ -6,13 +6,16 @@
 Bad normals
     Only pixels inside the mask are inspected. A normal there that cannot be used -- not
     finite, zero length, facing away from the camera, or grazing (the view cosine below the
-    outlier threshold, Sec. 4.4 of Xie et al.) -- becomes a missing sample: counted in
+    outlier threshold, Sec. 4.4 of Xie et al.), or, where the caller asks for it (the
+    discontinuity route does), isolated (:func:`isolated_normals`) -- becomes a missing sample:
+    counted in
     ``Problem.counts``, named in one warning (how many of each kind, where the first is), and
     integrated like a NaN normal. A job is refused only when no usable normal is left.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -28,7 +31,7 @@ BACKFACING = ("missing", "error", "outlier")
 
 class UnusableNormalsWarning(UserWarning):
     """Normals inside the mask that were treated as missing samples (non-finite, zero-length,
-    back-facing, grazing), with their counts and the first one's place."""
+    back-facing, grazing, isolated), with their counts and the first one's place."""
 
 
 #: Share of a map's finite normals facing away from the camera above which the unusable-normal
@@ -125,12 +128,15 @@ class Problem:
         n = np.where(self.usable[:, None], self.normals, [0.0, 0.0, 1.0])
         return np.where(self.usable, self.camera.view_cosine(r, c, n, unit=True), 0.0)
 
-    def grazing_between(self, a: float, b: float) -> int:
+    def grazing_between(self, a: float, b: float, without=None) -> int:
         """How many given normals (front-facing, not missing for another reason, confidence
-        above 0) have a view cosine between the thresholds `a` and `b` (the larger excluded):
-        those that one grazing threshold drops and the other keeps."""
+        above 0, not in `without` (m,) bool) have a view cosine between the thresholds `a`
+        and `b` (the larger excluded): those that one grazing threshold drops and the other
+        keeps."""
         gone = self.extras.get("no_normal")
         given = self.known if gone is None else self.known & ~np.asarray(gone, bool)
+        if without is not None:
+            given = given & ~without
         r, c = self.domain.pixels
         n = np.where(given[:, None], self.normals, [0.0, 0.0, 1.0])
         cos = self.camera.view_cosine(r, c, n, unit=True)
@@ -299,6 +305,7 @@ def prepare(
     grazing_note: str | None = None,
     prior_blur=None,
     prior_outliers: str = "remove",
+    isolated: tuple[float, float] | None = None,
 ) -> Problem:
     """Check user inputs and build a :class:`Problem`.
 
@@ -340,6 +347,11 @@ def prepare(
         "remove" (default): samples of a sparse prior that disagree with every neighbouring
         sample along the normals are left out, counted and named in a warning
         (:mod:`facetlift.prior_outliers`); "keep": every sample is used.
+    isolated : (deviation, agreement) in degrees, optional
+        Front-facing normals more than `deviation` from the median of their eight
+        neighbours, which agree with that median within `agreement` (all but the farthest),
+        become missing samples (:func:`isolated_normals`; :func:`facetlift.integrate` passes
+        the discontinuity route's ``MethodInfo.jump_isolated``). Default None: none.
 
     Raises
     ------
@@ -365,6 +377,7 @@ def prepare(
     cam = make_camera(pixel_size, K) if camera is None else camera
     _check_principal_point(cam, H, W)
     eps = cam.grazing if outlier_eps is None else _check_eps(outlier_eps)
+    isolated = _check_isolated(isolated)
 
     if mask is None:
         with np.errstate(over="ignore", invalid="ignore"):
@@ -428,6 +441,9 @@ def prepare(
             "backfacing='missing'"
         )
     front = ok & (cos >= 0)
+    if isolated is not None:  # (among the front-facing normals, grazing ones included)
+        bad["isolated"] = isolated_normals(domain, nf, front, *isolated)
+        front &= ~bad["isolated"]
     bad["grazing"] = front & ((cos < eps) | (cos == 0))
     usable = front & ~bad["grazing"]
     conf = None
@@ -469,7 +485,7 @@ def prepare(
                 f"({int(counts_zero.sum())} of them): nothing is left to integrate ({said})")
         raise ValueError(
             "`normals` has no usable normal inside the mask (all missing, non-finite, "
-            f"back-facing or grazing: {said})"
+            f"back-facing, grazing or isolated: {said})"
         )
     if mask is not None and known is None and nan.mean() > MASK_MISSING:
         _mask_fit_check(n, m, float(nan.mean()))  # (after the refusal of a map without any)
@@ -487,6 +503,11 @@ def prepare(
                 "outlier_eps / --outlier-eps sets another: a smaller one keeps more, 0 all")
             rule = (f"; grazing: view cosine < {eps:.4g}"
                     f"{'' if note is None else ', ' + note}")
+        if "isolated" in problems:
+            rule += (f"; isolated: more than {isolated[0]:g} deg from the median of their "
+                     f"eight neighbours, which agree within {isolated[1]:g} deg (an outlier "
+                     "of a photometric stereo or a network, which bends the surface around it "
+                     "and can join pieces across a jump)")
         frame = ""  # (many facing away: a map in another frame, e.g. world coordinates)
         # (the share among the normals that are not edge-on, as the frame check counts them:
         # an indoor view's walls, z = 0 stored as 128, read -1/255 and counted back-facing)
@@ -550,7 +571,7 @@ def prepare(
                 # zero-length, or of confidence 0; the discontinuity route fills the isolated
                 # ones, facetlift.methods.dgp.fill_gaps)
                 "no_normal": ~given | nan | bad["non-finite"] | bad["zero-length"] | (
-                    False if conf is None else zero)},
+                    False if conf is None else zero) | bad.get("isolated", False)},
     )
     if problem.has_prior:
         _check_trend(problem)
@@ -1246,6 +1267,74 @@ def _channel_first_hint(shape) -> str:
     if len(shape) == 3 and shape[0] == 3 and shape[-1] != 3:
         return ": it looks channel-first (3, H, W); numpy.moveaxis(normals, 0, -1) gives (H, W, 3)"
     return ""
+
+
+def isolated_normals(domain: Domain, normals: np.ndarray, ok: np.ndarray,
+                     deviation: float, agreement: float) -> np.ndarray:
+    """(m,) bool: the facets whose unit normal (of `normals` (m, 3), where `ok`) lies more
+    than `deviation` degrees from the component-wise median of its eight neighbours' (renormed),
+    while those neighbours, all inside the mask and `ok`, agree with that median within
+    `agreement` degrees (all but the one farthest from it: two outliers side by side are found
+    too). A jump, a crease or a rim has neighbours on two sides that do not agree, and a mask's
+    border pixel lacks some: neither is taken. ``0 <= agreement <= deviation``.
+
+    Such a normal lies at least ``deviation - agreement`` from seven of its neighbours (the
+    triangle inequality of angles): that is checked first on a float32 grid of the unit
+    normals over the mask's box (about 18 bytes per pixel of the box, transient), and only the
+    facets where it holds, few on any map, get the median, from `normals` themselves."""
+    r, c = domain.pixels
+    out = np.zeros(domain.n_facets, bool)
+    if not ok.any():
+        return out
+    r0, c0 = int(r.min()), int(c.min())
+    H, W = int(r.max()) - r0 + 1, int(c.max()) - c0 + 1
+    rb, cb = r - r0 + 1, c - c0 + 1  # (in the box, padded by one all round)
+    grid = np.full((H + 2, W + 2, 3), np.nan, np.float32)
+    grid[rb[ok], cb[ok]] = normals[ok]
+    centre = grid[1:-1, 1:-1]
+    near = math.cos(math.radians(deviation - agreement)) + 1e-6  # (float32 rounding)
+    far = np.zeros((H, W), np.int8)
+    with np.errstate(invalid="ignore"):
+        for dr, dc in _RING:
+            cos = np.einsum("ijk,ijk->ij", centre, grid[1 + dr:H + 1 + dr, 1 + dc:W + 1 + dc])
+            far += cos <= near  # (NaN: a neighbour outside the mask or not ok, never far)
+    del grid, centre
+    index = np.full((H + 2, W + 2), -1, np.int64)  # (the facet at each place of the box)
+    index[rb[ok], cb[ok]] = np.flatnonzero(ok)
+    rr, cc = np.nonzero(far >= len(_RING) - 1)
+    rr, cc = rr + 1, cc + 1
+    own = index[rr, cc]
+    ring = np.stack([index[rr + dr, cc + dc] for dr, dc in _RING], axis=1)  # (k, 8)
+    keep = (own >= 0) & (ring >= 0).all(axis=1)
+    own, ring = own[keep], normals[ring[keep]]  # (k,), (k, 8, 3) float64
+    if own.size == 0:
+        return out
+    med = np.median(ring, axis=1)
+    med /= np.linalg.norm(med, axis=1, keepdims=True)
+    agree = np.sort(np.einsum("kjc,kc->kj", ring, med), axis=1)[:, 1]  # (all but the worst)
+    cos = np.einsum("kc,kc->k", normals[own], med)
+    out[own[(agree >= math.cos(math.radians(agreement)))
+            & (cos < math.cos(math.radians(deviation)))]] = True
+    return out
+
+
+def _check_isolated(isolated):
+    """`isolated` as ``(deviation, agreement)`` floats, or None."""
+    if isolated is None:
+        return None
+    try:
+        dev, agree = (float(v) for v in isolated)
+    except (TypeError, ValueError):
+        raise ValueError(f"`isolated` must be two angles in degrees (deviation, agreement) or "
+                         f"None; got {isolated!r}") from None
+    if not (0.0 <= agree <= dev <= 180.0):
+        raise ValueError(f"`isolated` must be (deviation, agreement) with 0 <= agreement <= "
+                         f"deviation <= 180 degrees; got ({dev:g}, {agree:g})")
+    return dev, agree
+
+
+#: The eight neighbours of a pixel, (dr, dc).
+_RING = tuple((dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0))
 
 
 def _where_facets(domain: Domain, bad: np.ndarray) -> str:

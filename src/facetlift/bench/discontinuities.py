@@ -238,9 +238,11 @@ def oracle(gt, normals) -> tuple[float, float, float, float]:
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        # the grazing rule of the discontinuity route (methods.REGISTRY["dgp"].jump_grazing)
-        eps = methods.get("dgp").jump_grazing
-        problem = prepare(normals, gt.mask, pixel_size=gt.pixel_size, K=gt.K, outlier_eps=eps)
+        # the input rules of the discontinuity route (methods.REGISTRY["dgp"]: jump_grazing,
+        # jump_isolated)
+        route = methods.get("dgp")
+        problem = prepare(normals, gt.mask, pixel_size=gt.pixel_size, K=gt.K,
+                          outlier_eps=route.jump_grazing, isolated=route.jump_isolated)
         bx, by, target = targets(problem)
         right, down = synthetic.jump_edges(gt)
         mesh = split(problem.domain, right, down)

@@ -29,6 +29,18 @@ from ..options import Option
 #: 0.025 -> 0.046 mm MADE (its neck's fading ends keep a few more normals).
 JUMP_GRAZING = 0.0436194
 
+#: Isolated normals of ``discontinuities=True``: a normal more than 15 deg from the median of
+#: its eight neighbours, which agree with that median within 10 deg (all but the farthest), is
+#: a missing sample, filled like one. An outlier (a photometric stereo's shadow or highlight)
+#: otherwise bends the surface around it and its cuts can join or part pieces across a jump.
+#: Chosen on the discontinuity benchmark (2026-12-05, one interleaved A/B on the 51 perspective
+#: and orthographic renders at exact, 3-deg-noise and 2 %-outlier normals; docs/results.md
+#: "Discontinuities: isolated normals"): with outliers perspective 2.677 -> 2.543 mm (19
+#: better / 9 worse by more than 1 %), orthographic 6.999 -> 6.847 % (8 / 1); exact and noisy
+#: normals lose one scene (mountain@left, one normal dropped, 10.69 -> 12.16 mm) and gain 8; the
+#: DiLiGenT bear 0.046 -> 0.020 mm (3 normals). 10 / 6 deg was worse with outliers.
+JUMP_ISOLATED = (15.0, 10.0)
+
 #: Capabilities a method may declare (``facetlift methods`` shows them).
 CAPABILITIES = ("masks", "missing", "perspective", "discontinuities", "prior", "confidence",
                 "prior_blur")
@@ -74,6 +86,10 @@ class MethodInfo:
     #: Grazing threshold (view cosine) that ``discontinuities=True`` uses for every camera
     #: when the caller gives no ``outlier_eps``; None: the camera's own default.
     jump_grazing: float | None = None
+    #: ``(deviation, agreement)`` in degrees: with ``discontinuities=True``, a normal farther
+    #: than `deviation` from the median of its eight neighbours, which agree within
+    #: `agreement`, is a missing sample (:func:`facetlift.problem.isolated_normals`); None: kept.
+    jump_isolated: tuple | None = None
     #: With ``discontinuities=True`` the surface carries its cut edges and jump map
     #: (``Surface.discontinuities``, ``--save discontinuities``) and a mesh split at them.
     jump_map: bool = False
@@ -128,6 +144,10 @@ register(
         # normals whose huge, unreliable slopes would bridge it (docs/results.md,
         # "Discontinuities: the grazing rule"; JUMP_GRAZING)
         jump_grazing=JUMP_GRAZING,
+        # an isolated outlier (a shadow's or a highlight's normal) bends the surface around it
+        # and can join pieces across a jump (docs/results.md, "Discontinuities: isolated
+        # normals"; JUMP_ISOLATED)
+        jump_isolated=JUMP_ISOLATED,
         jump_map=True,
     )
 )
