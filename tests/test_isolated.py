@@ -174,3 +174,20 @@ def test_facetlift_info_counts_isolated_normals_as_integrate_does(tmp_path, caps
     assert cli.main(["info", str(tmp_path / "n.npy"), "--json"]) == 0
     rec = json.loads(capsys.readouterr().out)
     assert rec["discontinuity_grazing"]["isolated"] == 1
+
+
+def test_prepare_and_solve_say_where_the_route_would_drop_isolated_normals():
+    n, _, _ = scissor_ortho()
+    n = n.copy()
+    n[10, 10] = _unit([0.9, 0.0, 0.5])
+    p = prepare(n)  # (the camera's own rules: the outlier is a usable normal)
+    assert p.counts["usable"] == n.shape[0] * n.shape[1]
+    with pytest.warns(UserWarning, match=r"integrate would treat 1 isolated normal\(s\) as "
+                                         r"missing here"):
+        facetlift.solve(p, "dgp", discontinuities=True)
+    with pytest.warns(facetlift.UnusableNormalsWarning, match="1 isolated"):
+        matched = prepare(n, isolated=methods.get("dgp").jump_isolated)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        facetlift.solve(matched, "dgp", discontinuities=True)
+        facetlift.solve(p, "dgp")  # (the smooth route keeps them: nothing to say)

@@ -406,7 +406,8 @@ def solve(problem: Problem, method: str = "dgp", /, *, max_memory=None, **option
     is applied by :func:`integrate`, so prepare with ``outlier_eps=`` to match it here (a
     problem prepared with the camera's own threshold gets a warning where some normal lies
     between the two, either way). Likewise the route's isolated normals
-    (``MethodInfo.jump_isolated``): prepare with ``isolated=`` to drop them here.
+    (``MethodInfo.jump_isolated``): prepare with ``isolated=`` to drop them here (a problem
+    prepared without gets a warning where some normal is isolated).
     """
     if not isinstance(problem, Problem):  # (an array gave "no attribute 'counts'": an audit)
         raise ValueError(f"solve() takes a Problem from facetlift.prepare(normals, ...); got "
@@ -452,6 +453,21 @@ def _solve(problem, method, t0, max_memory, options):
                  f"{'more' if eps < jump else 'fewer'} normal(s) as missing here"
                  f"{bear_note if eps < jump else ''}; "
                  f"prepare(..., outlier_eps=facetlift.METHODS[{method!r}].jump_grazing) to "
+                 "match")
+    if (values.get("discontinuities") and info.jump_isolated is not None
+            and not problem.extras.get("isolated_given", True)):
+        # (integrate drops the route's isolated normals; prepare + solve kept them: said)
+        from .problem import isolated_normals
+
+        kept = int(isolated_normals(problem.domain, problem.normals,
+                                    np.isfinite(problem.normals).all(axis=1),
+                                    *info.jump_isolated).sum())
+        if kept:
+            warn(f"discontinuities=True on a problem prepared without the route's isolated "
+                 f"normals rule: integrate would treat {kept} isolated normal(s) as missing "
+                 f"here (more than {info.jump_isolated[0]:g} deg from the median of their "
+                 f"eight neighbours, which agree within {info.jump_isolated[1]:g} deg); "
+                 f"prepare(..., isolated=facetlift.METHODS[{method!r}].jump_isolated) to "
                  "match")
     if problem.perspective and not info.perspective:
         able = sorted(k for k, v in methods.REGISTRY.items() if v.perspective)

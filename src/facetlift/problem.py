@@ -567,6 +567,7 @@ def prepare(
         prior=pv, prior_weight=pw, confidence=conf, prior_blur=blur,
         # (whether the grazing threshold was chosen, or the camera's: facetlift.api.solve)
         extras={"outlier_eps_given": outlier_eps is not None,
+                "isolated_given": isolated is not None,
                 # (facets without a normal, not for the view's sake: missing, non-finite or
                 # zero-length, or of confidence 0; the discontinuity route fills the isolated
                 # ones, facetlift.methods.dgp.fill_gaps)
