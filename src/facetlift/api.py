@@ -457,16 +457,13 @@ def _solve(problem, method, t0, max_memory, options):
     if (values.get("discontinuities") and info.jump_isolated is not None
             and not problem.extras.get("isolated_given", True)):
         # (integrate drops the route's isolated normals; prepare + solve kept them: said)
-        from .problem import isolated_normals
+        from .problem import isolated_rule_text
 
-        kept = int(isolated_normals(problem.domain, problem.normals,
-                                    np.isfinite(problem.normals).all(axis=1),
-                                    *info.jump_isolated).sum())
+        kept = int(problem.isolated(info.jump_isolated).sum())
         if kept:
             warn(f"discontinuities=True on a problem prepared without the route's isolated "
                  f"normals rule: integrate would treat {kept} isolated normal(s) as missing "
-                 f"here (more than {info.jump_isolated[0]:g} deg from the median of their "
-                 f"eight neighbours, which agree within {info.jump_isolated[1]:g} deg); "
+                 f"here ({isolated_rule_text(info.jump_isolated)}); "
                  f"prepare(..., isolated=facetlift.METHODS[{method!r}].jump_isolated) to "
                  "match")
     if problem.perspective and not info.perspective:

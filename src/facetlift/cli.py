@@ -678,10 +678,10 @@ def _info_lines(rec: dict) -> list[str]:
         lines.append(f"  with --discontinuities (dgp): {jg['fewer_grazing']} of the grazing ones "
                      f"kept (its rule is a view cosine < {jg['outlier_eps']:.4g})")
     if jg.get("isolated"):
-        dev, agree = jg["isolated_rule"]
-        lines.append(f"  with --discontinuities (dgp): {jg['isolated']} isolated (more than "
-                     f"{dev:g} deg from the median of their eight neighbours, which agree within "
-                     f"{agree:g} deg), treated as missing")
+        from .problem import isolated_rule_text
+
+        lines.append(f"  with --discontinuities (dgp): {jg['isolated']} isolated "
+                     f"({isolated_rule_text(jg['isolated_rule'])}), treated as missing")
     for key, what in (("estimate", "default integration"),
                       ("estimate_discontinuities", "with --discontinuities")):
         e = rec.get(key)

@@ -294,16 +294,12 @@ def _jump_grazing(problem) -> dict:
     deg): that route uses ``MethodInfo.jump_grazing`` on every camera; and how many it drops
     as isolated (``MethodInfo.jump_isolated``, found first: not counted as grazing)."""
     from . import methods
-    from .problem import isolated_normals
 
     route = methods.get("dgp")
     eps = route.jump_grazing
     if eps is None:
         return {}
-    iso = None
-    if route.jump_isolated is not None:
-        ok = np.isfinite(problem.normals).all(axis=1)
-        iso = isolated_normals(problem.domain, problem.normals, ok, *route.jump_isolated)
+    iso = None if route.jump_isolated is None else problem.isolated(route.jump_isolated)
     camera = problem.counts.get("outlier_eps", eps)
     between = problem.grazing_between(camera, eps, without=iso)
     return {"outlier_eps": float(eps), "more_grazing": between if camera < eps else 0,

@@ -143,6 +143,13 @@ class Problem:
         lo, hi = sorted((a, b))
         return int(np.sum(given & (cos >= lo) & (cos < hi)))
 
+    def isolated(self, rule) -> np.ndarray:
+        """(m,) bool: the normals that :func:`isolated_normals` of `rule` ``(deviation,
+        agreement)`` finds among this problem's front-facing ones (what a problem prepared
+        without ``isolated=`` kept and the discontinuity route would drop)."""
+        return isolated_normals(self.domain, self.normals,
+                                np.isfinite(self.normals).all(axis=1), *rule)
+
     @property
     def slopes(self) -> tuple[np.ndarray, np.ndarray]:
         """(p, q), each (m,): grid slopes per footprint; for an orthographic camera the height
@@ -504,10 +511,9 @@ def prepare(
             rule = (f"; grazing: view cosine < {eps:.4g}"
                     f"{'' if note is None else ', ' + note}")
         if "isolated" in problems:
-            rule += (f"; isolated: more than {isolated[0]:g} deg from the median of their "
-                     f"eight neighbours, which agree within {isolated[1]:g} deg (an outlier "
-                     "of a photometric stereo or a network, which bends the surface around it "
-                     "and can join pieces across a jump)")
+            rule += (f"; isolated: {isolated_rule_text(isolated)} (an outlier of a "
+                     "photometric stereo or a network, which bends the surface around it and "
+                     "can join pieces across a jump)")
         frame = ""  # (many facing away: a map in another frame, e.g. world coordinates)
         # (the share among the normals that are not edge-on, as the frame check counts them:
         # an indoor view's walls, z = 0 stored as 128, read -1/255 and counted back-facing)
@@ -1317,6 +1323,12 @@ def isolated_normals(domain: Domain, normals: np.ndarray, ok: np.ndarray,
     out[own[(agree >= math.cos(math.radians(agreement)))
             & (cos < math.cos(math.radians(deviation)))]] = True
     return out
+
+
+def isolated_rule_text(rule) -> str:
+    """The isolated-normal rule ``(deviation, agreement)`` in words, for messages."""
+    return (f"more than {rule[0]:g} deg from the median of their eight neighbours, which "
+            f"agree within {rule[1]:g} deg")
 
 
 def _check_isolated(isolated):
