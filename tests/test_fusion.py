@@ -1468,6 +1468,43 @@ def test_islands_around_samples_are_glued_back_where_the_normals_show_no_jump(mo
     assert np.allclose(flat.depth, 20.0, atol=1e-6)
 
 
+@pytest.mark.parametrize("company", [4, 0])
+def test_an_island_whose_piece_holds_no_other_sample_is_glued_back(monkeypatch, company):
+    """A piece the normals misplaced whose one sample the prior's reweightings cut loose on an
+    island of its own (the fusion benchmark's cow@left, 1 % exact samples: the head's only
+    sample, 4.7 mm MADE): the island's nearest samples lie on other, well-placed pieces, so
+    the company rule alone left it, and the piece kept no sample to place it. The island is
+    glued back where its piece holds no sample but islands'; not where the piece has one of
+    its own (that sample places it, and the island's is then the odd one)."""
+    from facetlift.domain import Domain
+    from facetlift.methods import dgp
+
+    monkeypatch.setattr(dgp, "ISLAND_COMPANY", company)
+    dom = Domain.from_mask(np.ones((40, 40), bool))
+    level = np.zeros((40, 40))
+    level[10:30, 10:30] = 10.0  # a piece cut from the rest all round
+    level[18:20, 18:20] = -5.0  # an island of 4 facets inside it
+    r, c = dom.pixels
+    copies = np.repeat(level[r, c][:, None], 4, axis=1)
+    grid = np.zeros((40, 40), bool)
+    grid[::5, ::5] = True
+    grid[10:30, 10:30] = False  # samples around the piece, none on it ...
+    grid[18, 18] = True  # ... but the island's
+
+    def islands(sampled, lonely=True):
+        monkeypatch.setattr(dgp, "ISLAND_LONELY", lonely)
+        verts, count, _ = dgp._sample_islands(dom, copies, sampled[r, c], 1.0)
+        return verts.reshape(41, 41), count
+
+    verts, count = islands(grid)
+    assert count == 1 and verts.sum() == 9 and verts[18:21, 18:21].all()
+    if company:  # (without the company rule every island inside one piece is glued back)
+        assert islands(grid, lonely=False)[1] == 0
+    held = grid.copy()
+    held[25, 25] = True  # the piece's own sample
+    assert islands(held)[1] == (0 if company else 1)
+
+
 @pytest.mark.parametrize("cluster", [False, True])
 def test_an_outlier_samples_island_is_left_cut(monkeypatch, cluster):
     """An outlier sample that the removal let through is cut loose on an island of its own,
