@@ -203,8 +203,12 @@ ISLAND_COMPANY, ISLAND_COMPANY_REACH = 4, 16
 #: its sample, and nothing else places it. The fusion benchmark's cow@left with 1 % exact
 #: samples: the head, joined to the body by a bridge when its one sample pulled, kept the
 #: normals' place 20 mm off while the sample sat on 9 facets of its own; the bridge was cut
-#: later. Measured on the fusion benchmark's 51 scenes (one interleaved A/B, 2026-12-05,
-#: twenty-first session; docs/fusion.md, "Islands around samples"): 1 % exact samples
+#: later. A sample alone on such a piece now places it, an outlier too: the removal of
+#: outlier samples can hardly compare a lone sample beyond a rim with others (docs/fusion.md,
+#: "Outlier samples"). No effect where :data:`ISLAND_COMPANY` is 0 (every island inside one
+#: region is glued back then). Measured on the fusion benchmark's 51 scenes (one interleaved
+#: A/B, 2026-12-05, twenty-first session; docs/fusion.md, "An island whose piece holds no
+#: other sample"): 1 % exact samples
 #: perspective 0.437 -> 0.351 mm (cow@left 4.68 -> 1.59; no other scene moved by 1 %),
 #: orthographic 1.2016 -> 1.2015 %; 1 % noisy samples orthographic armadillo@front 0.840 ->
 #: 0.856 % (a noisy sample alone places its piece), every other scene-condition within 1 %
@@ -227,8 +231,8 @@ def _sample_islands(domain, copies, sampled, footprint):
     mesh = split[0]
     piece = mesh.facet_piece
     sizes = np.bincount(piece, minlength=mesh.n_pieces)
-    island = (sizes <= ISLAND_FACETS) & (
-        np.bincount(piece[sampled], minlength=mesh.n_pieces) > 0)
+    held = np.bincount(piece[sampled], minlength=mesh.n_pieces) > 0  # (pieces with a sample)
+    island = (sizes <= ISLAND_FACETS) & held
     verts = np.zeros(domain.n_vertices, bool)
     if not island.any():
         return verts, 0, split
@@ -240,12 +244,12 @@ def _sample_islands(domain, copies, sampled, footprint):
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     island &= np.bincount(pairs[:, 0], minlength=mesh.n_pieces) == 1
     lonely = np.zeros_like(island)
-    if ISLAND_LONELY and island.any():
-        # (an island's one neighbouring piece that holds no sample but the islands')
+    if ISLAND_LONELY and ISLAND_COMPANY and island.any():
+        # (islands whose one neighbouring piece holds no sample: an island's samples are its
+        # own piece's, so only where that neighbour is an island too does it hold one)
         other = np.zeros(mesh.n_pieces, np.int64)
         on = island[pairs[:, 0]]
         other[pairs[on, 0]] = pairs[on, 1]
-        held = np.bincount(piece[sampled], minlength=mesh.n_pieces) > 0
         lonely = island & ~(held & ~island)[other]
     if ISLAND_COMPANY and island.any():
         from scipy.spatial import cKDTree
