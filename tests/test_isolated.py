@@ -198,8 +198,8 @@ def test_normals_of_confidence_0_are_neither_isolated_nor_neighbours():
     stranger normal counts that one as of confidence 0 (it was counted isolated: its
     neighbours, of confidence 0 too, agreed), and the surface is the one with the disk's
     normals missing (the fusion benchmark's corrupted disk at confidence 0 came out 2.2 % off
-    the missing disk on cow@front, where normals of the disk were the neighbours that made
-    others isolated)."""
+    the missing disk on cow@front: as neighbours, the disk's normals changed which normals
+    outside it were isolated)."""
     tilt = np.array([np.sin(np.radians(30.0)), 0.0, np.cos(np.radians(30.0))])
     n = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (40, 40, 3)).copy()
     rr, cc = np.mgrid[:40, :40]
