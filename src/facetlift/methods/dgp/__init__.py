@@ -214,9 +214,9 @@ ISLAND_COMPANY, ISLAND_COMPANY_REACH = 4, 16
 #: 0.856 % (a noisy sample alone places its piece), every other scene-condition within 1 %
 #: (0.1 %, 1 %, 5 % exact, 1 % noisy, 1 % with 3 % outliers; the wide-angle scenes as well);
 #: the tabletop scenes better or equal in all five (0.1 % exact 2.43 -> 2.17 mm); the
-#: prior-outlier benchmark's clustered outliers perspective 1.371 -> 1.378 mm (cheburashka@front
-#: 0.67 -> 0.96: a cluster's island glued back), single outliers 0.376 -> 0.349 (kept) and
-#: unchanged (removed). False: the company rule alone.
+#: prior-outlier benchmark's clustered outliers perspective 1.371 -> 1.378 mm
+#: (cheburashka@front 0.67 -> 0.96: a one-sample island glued back, its piece moved), single
+#: outliers 0.376 -> 0.349 (kept) and unchanged (removed). False: the company rule alone.
 ISLAND_LONELY = True
 
 
