@@ -133,8 +133,7 @@ class Problem:
         above 0, not in `without` (m,) bool) have a view cosine between the thresholds `a`
         and `b` (the larger excluded): those that one grazing threshold drops and the other
         keeps."""
-        gone = self.extras.get("no_normal")
-        given = self.known if gone is None else self.known & ~np.asarray(gone, bool)
+        given = self._given()
         if without is not None:
             given = given & ~without
         r, c = self.domain.pixels
@@ -148,11 +147,13 @@ class Problem:
         agreement)`` finds among this problem's front-facing ones (what a problem prepared
         without ``isolated=`` kept and the discontinuity route would drop); normals of
         confidence 0 are missing, as :func:`prepare` takes them."""
-        among = np.isfinite(self.normals).all(axis=1)
+        return isolated_normals(self.domain, self.normals, self._given(), *rule)
+
+    def _given(self) -> np.ndarray:
+        """(m,) bool: the front-facing normals not missing for another reason (missing,
+        non-finite, zero-length, of confidence 0): those the input rules look at."""
         gone = self.extras.get("no_normal")
-        if gone is not None:
-            among &= ~np.asarray(gone, bool)
-        return isolated_normals(self.domain, self.normals, among, *rule)
+        return self.known if gone is None else self.known & ~np.asarray(gone, bool)
 
     @property
     def slopes(self) -> tuple[np.ndarray, np.ndarray]:

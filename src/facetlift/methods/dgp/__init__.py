@@ -245,14 +245,6 @@ def _sample_islands(domain, copies, sampled, footprint):
     pairs = np.unique(np.concatenate(pairs), axis=0)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     island &= np.bincount(pairs[:, 0], minlength=mesh.n_pieces) == 1
-    lonely = np.zeros_like(island)
-    if ISLAND_LONELY and ISLAND_COMPANY and island.any():
-        # (islands whose one neighbouring piece holds no sample: an island's samples are its
-        # own piece's, so only where that neighbour is an island too does it hold one)
-        other = np.zeros(mesh.n_pieces, np.int64)
-        on = island[pairs[:, 0]]
-        other[pairs[on, 0]] = pairs[on, 1]
-        lonely = island & ~(held & ~island)[other]
     if ISLAND_COMPANY and island.any():
         from scipy.spatial import cKDTree
 
@@ -272,7 +264,13 @@ def _sample_islands(domain, copies, sampled, footprint):
         company = (votes > 0) & ((alone[near] & valid).sum(axis=1) >= 0.5 * votes)
         keep = np.zeros(mesh.n_pieces, bool)
         keep[piece[at[alone & company]]] = True
-        island &= keep | lonely
+        if ISLAND_LONELY:  # (and those whose one neighbouring piece holds no sample: an
+            # island's samples are its own piece's, so it holds one only where it is an island)
+            other = np.zeros(mesh.n_pieces, np.int64)
+            on = island[pairs[:, 0]]
+            other[pairs[on, 0]] = pairs[on, 1]
+            keep |= ~(held & ~island)[other]
+        island &= keep
     verts[domain.corners[island[piece]].ravel()] = True
     return verts, int(island.sum()), split
 
