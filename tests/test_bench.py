@@ -319,7 +319,8 @@ def test_a_tabletop_scene_renders(tmp_path):
     trimesh.creation.icosphere(subdivisions=3).export(data / "meshes" / "ball.ply")
     trimesh.creation.box((1.0, 1.4, 0.8)).export(data / "meshes" / "box.ply")
     settings = Settings(disc_tabletop=1, disc_resolution=(48, 56), disc_samples=1,
-                        disc_views=(), disc_wide_views=(), disc_ortho_views=(), disc_analytic=())
+                        disc_views=(), disc_wide_views=(), disc_ortho_views=(), disc_analytic=(),
+                        disc_vessels=())
     ctx = Context(out=tmp_path / "out", settings=settings, data=data)
     [(group, name, load)] = D.scenes(ctx)
     gt = load()
@@ -327,3 +328,24 @@ def test_a_tabletop_scene_renders(tmp_path):
     assert gt.K is not None and gt.K[0, 0] == pytest.approx(D._pinhole((48, 56))[0, 0])
     assert gt.mask.sum() > 300 and np.isfinite(gt.depth[gt.mask]).all()
     assert list((tmp_path / "out" / "cache").glob("table2_0_ball+box@table0_*.npz"))
+
+
+def test_a_vessel_scene_renders_with_the_jump_at_its_rim(tmp_path):
+    """The vessel group's loader renders an open cup seen from 40 degrees above with the
+    benchmark's pinhole camera (no mesh of the data folder needed) and caches it: the front of
+    the rim hides part of the inside, a depth jump."""
+    from facetlift import synthetic
+    from facetlift.bench import discontinuities as D
+    from facetlift.bench.core import Context, Settings
+
+    settings = Settings(disc_tabletop=0, disc_resolution=(96, 112), disc_samples=1,
+                        disc_views=(), disc_wide_views=(), disc_ortho_views=(), disc_analytic=(),
+                        disc_vessels=("cup",), disc_vessel_elevations=(40.0,))
+    ctx = Context(out=tmp_path / "out", settings=settings, data=tmp_path / "no-data")
+    [(group, name, load)] = D.scenes(ctx)
+    gt = load()
+    assert (group, name, gt.name) == ("vessel", "cup@e40", "cup@e40")
+    assert gt.K is not None and gt.mask.sum() > 1000
+    right, down = synthetic.jump_edges(gt)
+    assert down.sum() > 10  # the rim's front, across the rows
+    assert list((tmp_path / "out" / "cache").glob("vessel1_cup_e40_*.npz"))

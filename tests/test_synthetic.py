@@ -419,3 +419,26 @@ def test_quantize():
         assert np.nanmax(np.abs(q - n)) <= 1.0 / (2**bits - 1) + 1e-12
     with pytest.raises(ValueError, match="`bits` must be 8 or 16"):
         synthetic.quantize(n, 12)
+
+
+@pytest.mark.parametrize("kind", synthetic.VESSELS)
+def test_vessels_are_closed_surfaces_standing_on_the_ground(kind):
+    m = synthetic.vessel(kind, sections=32)
+    assert m.is_watertight
+    assert m.bounds[0, 1] == pytest.approx(0.0, abs=1e-12) and 0.4 < m.bounds[1, 1] <= 1.0
+    # the inside: a vertical ray down the axis from above meets the floor above the bottom
+    hits, _, _ = m.ray.intersects_location([[0.0, 2.0, 0.0]], [[0.0, -1.0, 0.0]])
+    assert hits[:, 1].max() > 0.05
+
+
+def test_vessel_errors():
+    with pytest.raises(ValueError, match="`kind`"):
+        synthetic.vessel("mug")
+    with pytest.raises(ValueError, match="`thickness`"):
+        synthetic.vessel("vase", thickness=0.2)
+    with pytest.raises(ValueError, match="`sections`"):
+        synthetic.vessel("cup", sections=3)
+    with pytest.raises(ValueError, match="`elevation_deg`"):
+        synthetic.vessel_view(90)
+    v = np.array(synthetic.vessel_view(30))
+    np.testing.assert_allclose([np.linalg.norm(v), v[1]], [1.0, -0.5])

@@ -51,7 +51,10 @@ __all__ = [
     "render_mesh",
     "render_perspective",
     "tabletop",
+    "vessel",
+    "vessel_view",
     "DILIGENT_K",
+    "VESSELS",
     "WITH_JUMPS",
     "jump_edges",
 ]
@@ -461,6 +464,87 @@ def _tabletop_parts(meshes, seed, spacing, behind, margin):
                                           hi[2] - lo[2] + 2 * margin])
     table.apply_translation([(hi[0] + lo[0]) / 2, -0.01, (hi[2] + lo[2]) / 2])
     return parts, table
+
+
+#: The kinds of :func:`vessel`.
+VESSELS = ("cup", "bowl", "goblet", "vase")
+
+
+def _vessel_outer(kind: str) -> tuple[np.ndarray, float]:
+    """Outer profile (radius, height) from the axis at the bottom up to the rim, and the
+    height of the inside's floor."""
+    if kind == "cup":  # slightly flared walls on a flat bottom
+        return np.array([(0.0, 0.0), (0.35, 0.0), (0.38, 0.05), (0.42, 0.8)]), 0.06
+    if kind == "bowl":  # a quarter ellipse on a low foot ring
+        a = np.linspace(0.1, np.pi / 2, 14)
+        arc = np.c_[0.25 + 0.35 * np.sin(a), 0.03 + 0.4 * (1.0 - np.cos(a))]
+        return np.vstack([[(0.0, 0.0), (0.25, 0.0), (0.25, 0.03)], arc]), 0.06
+    if kind == "goblet":  # a foot, a thin stem and a rounded cup above it
+        a = np.linspace(0.15, np.pi / 2, 12)
+        arc = np.c_[0.12 + 0.26 * np.sin(a), 0.48 + 0.5 * (1.0 - np.cos(a))]
+        base = [(0.0, 0.0), (0.35, 0.0), (0.35, 0.03), (0.06, 0.06), (0.045, 0.2),
+                (0.045, 0.4), (0.12, 0.48)]
+        return np.vstack([base, arc]), 0.55
+    if kind == "vase":  # a bulging body narrowing to the mouth
+        h = np.linspace(0.0, 1.0, 24)
+        body = np.c_[0.2 + 0.15 * np.sin(1.3 * np.pi * h) + 0.05 * h, h]
+        return np.vstack([[(0.0, 0.0)], body]), 0.06
+    raise ValueError(f"`kind` must be one of {list(VESSELS)}; got {kind!r}")
+
+
+def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256):
+    """An open vessel with walls of `thickness`, as one closed triangle mesh (y up, resting on
+    y = 0, about 1 unit tall): a surface of revolution whose profile runs up the outside, over
+    the rim and down the inside to the floor.
+
+    Seen from above the rim (:func:`vessel_view`), the inside shows through the mouth: the
+    front of the rim hides part of the inside (a depth jump whose height grows toward the
+    middle), the back of the rim folds into the inside wall (a crease, no jump), and the rim
+    itself is a band a few pixels wide. Photometric-stereo objects of this kind (cups, bowls,
+    goblets, vases, pots) are common, and the pieces the jumps separate are joined only across
+    such thin folds.
+
+    Parameters
+    ----------
+    kind : {"cup", "bowl", "goblet", "vase"}
+        Straight flared walls; a shallow rounded bowl on a foot ring; a rounded cup on a thin
+        stem and a foot (whose foot the cup can hide from the stem); a bulging body with a
+        narrow mouth.
+    thickness : float
+        Wall thickness (the rim's width), in the profile's units.
+    sections : int
+        Facets around the axis.
+
+    Returns
+    -------
+    trimesh.Trimesh
+    """
+    import trimesh
+
+    outer, floor = _vessel_outer(kind)
+    if not 0.0 < thickness < 0.5 * float(outer[-1, 0]):
+        raise ValueError(f"`thickness` must be in (0, {0.5 * float(outer[-1, 0]):g}) for "
+                         f"{kind!r}; got {thickness!r}")
+    if int(sections) < 8:
+        raise ValueError(f"`sections` must be at least 8; got {sections!r}")
+    top_r, top_h = outer[-1]
+    # the inside: the outer wall above the floor moved inward by the thickness, from the rim down
+    inner = [(max(r - thickness, 0.0), h) for r, h in outer[::-1] if h >= floor]
+    inner[0] = (top_r - thickness, top_h)
+    profile = np.vstack([outer, inner, [(0.0, floor)]])
+    mesh = trimesh.creation.revolve(profile, sections=int(sections))
+    # (revolve turns about z: make z the up axis y)
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1.0, 0.0, 0.0]))
+    return mesh
+
+
+def vessel_view(elevation_deg: float) -> tuple[float, float, float]:
+    """The viewing direction of a camera `elevation_deg` degrees above the horizontal, looking
+    at a y-up scene from its front (for ``render_perspective(..., view=...)``)."""
+    if not -90.0 < float(elevation_deg) < 90.0:
+        raise ValueError(f"`elevation_deg` must be in (-90, 90); got {elevation_deg!r}")
+    e = np.radians(float(elevation_deg))
+    return (0.0, -float(np.sin(e)), -float(np.cos(e)))
 
 
 def _view_frame(view) -> np.ndarray:

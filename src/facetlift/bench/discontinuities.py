@@ -4,7 +4,9 @@ Built so that no single object can steer it: every mesh of the data folder rende
 DiLiGenT-like pinhole camera (512 x 612, f = 3,700 px, about 1.5 m away) from several views and
 with a wide-angle camera (f = 600 px), rendered orthographically, plus the analytic surfaces
 with jumps (:data:`facetlift.synthetic.WITH_JUMPS`) and scenes of two or three meshes on a
-table (:func:`facetlift.synthetic.tabletop`: jumps between separate objects), each as exact,
+table (:func:`facetlift.synthetic.tabletop`: jumps between separate objects) and open vessels
+seen from above the rim (:func:`facetlift.synthetic.vessel`: the inside joined to the outside
+only across a rim a few pixels wide), each as exact,
 16-bit and 8-bit quantised normals and with angular noise; and the real normal maps of the
 data folder with the defaults.
 
@@ -132,6 +134,10 @@ TABLE_FILL = 0.9
 TABLE_VERSION = 2
 
 
+#: Version of the vessel scenes (:func:`facetlift.synthetic.vessel`) in the render cache's keys.
+VESSEL_VERSION = 1
+
+
 def tabletop_meshes(meshes: list, i: int) -> list:
     """The meshes of the `i`-th tabletop scene: the next two of `meshes` in turn, every third
     scene three (every mesh once before any comes again; never more than there are)."""
@@ -142,7 +148,8 @@ def tabletop_meshes(meshes: list, i: int) -> list:
 
 def scenes(ctx: Context) -> list[tuple[str, str, object]]:
     """(group, name, loader) of every synthetic scene; groups ``perspective``, ``wide``,
-    ``tabletop`` (several meshes on a table, DiLiGenT's camera) and ``ortho``."""
+    ``tabletop`` (several meshes on a table, DiLiGenT's camera), ``vessel`` (open vessels seen
+    from above the rim, :func:`facetlift.synthetic.vessel`) and ``ortho``."""
     s = ctx.settings
     meshes = ctx.meshes(s.disc_meshes)
     res = tuple(s.disc_resolution)
@@ -177,6 +184,13 @@ def scenes(ctx: Context) -> list[tuple[str, str, object]]:
             lambda pick=pick, i=i, name=name: synthetic.render_perspective(
                 synthetic.tabletop([load_mesh(p) for p in pick], seed=i), _pinhole(res), res,
                 view=synthetic.TABLE_VIEW, fill=TABLE_FILL, samples=s.disc_samples, name=name))
+    for kind in s.disc_vessels:
+        for elev in s.disc_vessel_elevations:
+            name = f"{kind}@e{elev:g}"
+            add("vessel", name, f"vessel{VESSEL_VERSION}_{kind}_e{elev:g}_{tag}",
+                lambda kind=kind, elev=elev, name=name: synthetic.render_perspective(
+                    synthetic.vessel(kind), _pinhole(res), res,
+                    view=synthetic.vessel_view(elev), samples=s.disc_samples, name=name))
     for name in s.disc_analytic:
         n = s.disc_ortho_size
         out.append(("ortho", name, lambda name=name, n=n: synthetic.analytic(name, n)))
