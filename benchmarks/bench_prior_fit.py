@@ -64,9 +64,9 @@ def main(argv=None) -> int:
     warnings.simplefilter("ignore")
     weight = (dict(prior_blur=bf.BLUR_SIGMA, prior_weight=bf.WEIGHTS["blur"])
               if args.mode == "blur" else dict(prior_weight=bf.WEIGHTS["coarse"]))
-    # (the scenes as documented: without the tabletop group, which came later)
+    # (the scenes as documented: without the tabletop and vessel groups, which came later)
     ctx = Context(out=Path("/tmp/facetlift-bench-prior-fit"),
-                  settings=Settings(disc_tabletop=0), data=args.data)
+                  settings=Settings(disc_tabletop=0, disc_vessels=()), data=args.data)
     scenes = bd.scenes(ctx)[args.offset::args.step]
     out = None if args.json is None else args.json.open("w")
     rows = []

@@ -63,7 +63,7 @@ def main(argv=None) -> int:
 
     settings = replace(Settings(), disc_resolution=(H, W), disc_views=tuple(a.views.split(",")),
                        disc_wide_views=(), disc_ortho_views=(), disc_analytic=(),
-                       disc_tabletop=0)
+                       disc_tabletop=0, disc_vessels=())
     out = Path(os.environ.get("FACETLIFT_BENCH_CACHE") or "/tmp/facetlift-bench-resolution")
     ctx = Context(out=out, settings=settings, data=a.data)
     conds = a.conditions.split(",")

@@ -348,4 +348,4 @@ def test_a_vessel_scene_renders_with_the_jump_at_its_rim(tmp_path):
     assert gt.K is not None and gt.mask.sum() > 1000
     right, down = synthetic.jump_edges(gt)
     assert down.sum() > 10  # the rim's front, across the rows
-    assert list((tmp_path / "out" / "cache").glob("vessel1_cup_e40_*.npz"))
+    assert list((tmp_path / "out" / "cache").glob(f"vessel{D.VESSEL_VERSION}_cup_e40_*.npz"))

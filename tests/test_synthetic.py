@@ -422,13 +422,24 @@ def test_quantize():
 
 
 @pytest.mark.parametrize("kind", synthetic.VESSELS)
-def test_vessels_are_closed_surfaces_standing_on_the_ground(kind):
-    m = synthetic.vessel(kind, sections=32)
-    assert m.is_watertight
+def test_vessels_are_open_with_walls_of_the_given_thickness(kind):
+    m = synthetic.vessel(kind, thickness=0.04, sections=32)
+    assert m.is_watertight and m.volume > 0
     assert m.bounds[0, 1] == pytest.approx(0.0, abs=1e-12) and 0.4 < m.bounds[1, 1] <= 1.0
-    # the inside: a vertical ray down the axis from above meets the floor above the bottom
+    top = m.bounds[1, 1]
+    # the rim: a flat band 0.04 wide at the top
+    rim = m.vertices[np.isclose(m.vertices[:, 1], top)]
+    radii = np.unique(np.round(np.hypot(rim[:, 0], rim[:, 2]), 9))
+    assert radii.size == 2 and radii[1] - radii[0] == pytest.approx(0.04)
+    # down the axis from above: the inside's floor, well below the rim (not a solid top)
     hits, _, _ = m.ray.intersects_location([[0.0, 2.0, 0.0]], [[0.0, -1.0, 0.0]])
-    assert hits[:, 1].max() > 0.05
+    floor = hits[:, 1].max()
+    assert 0.05 < floor < 0.6 * top
+    # across a wall half-way up the inside, along a section's plane: 0.04 along the radius
+    mid = 0.5 * (floor + top)
+    hits, _, _ = m.ray.intersects_location([[0.0, mid, 0.0]], [[1.0, 0.0, 0.0]])
+    x = np.sort(hits[:, 0])
+    assert x.size == 2 and x[1] - x[0] == pytest.approx(0.04, abs=1e-9)
 
 
 def test_vessel_errors():
@@ -438,6 +449,10 @@ def test_vessel_errors():
         synthetic.vessel("vase", thickness=0.2)
     with pytest.raises(ValueError, match="`sections`"):
         synthetic.vessel("cup", sections=3)
+    with pytest.raises(ValueError, match="`sections`"):
+        synthetic.vessel("cup", sections=8.5)
+    with pytest.raises(ValueError, match="`thickness`"):
+        synthetic.vessel("cup", thickness=None)
     with pytest.raises(ValueError, match="`elevation_deg`"):
         synthetic.vessel_view(90)
     v = np.array(synthetic.vessel_view(30))

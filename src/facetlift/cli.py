@@ -860,7 +860,10 @@ def _split(text):
               help="Output folder for tables (CSV, Markdown) and figures (PNG).")
 @click.option("--quick", is_flag=True, help="Small sizes and few models (a smoke test).")
 @click.option("--methods", default=None, help="Comma-separated method names.")
-@click.option("--models", default=None, help="Comma-separated Fig. 9 model names.")
+@click.option("--models", default=None,
+              help="Comma-separated Fig. 9 model names; for the discontinuity and fusion "
+                   "benchmarks also scene names, mesh names or vessel kinds (cup, bowl, "
+                   "goblet, vase).")
 @click.option("--experiments", default=None,  # facetlift.bench.EXPERIMENTS (a test checks)
               help="Comma-separated subset of: table1, fig4, fig5, maps, fig9, fig10, bear, "
                    "discontinuities, fusion.")

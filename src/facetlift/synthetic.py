@@ -475,7 +475,7 @@ def _vessel_outer(kind: str) -> tuple[np.ndarray, float]:
     height of the inside's floor."""
     if kind == "cup":  # slightly flared walls on a flat bottom
         return np.array([(0.0, 0.0), (0.35, 0.0), (0.38, 0.05), (0.42, 0.8)]), 0.06
-    if kind == "bowl":  # a quarter ellipse on a low foot ring
+    if kind == "bowl":  # a quarter ellipse on a low foot
         a = np.linspace(0.1, np.pi / 2, 14)
         arc = np.c_[0.25 + 0.35 * np.sin(a), 0.03 + 0.4 * (1.0 - np.cos(a))]
         return np.vstack([[(0.0, 0.0), (0.25, 0.0), (0.25, 0.03)], arc]), 0.06
@@ -493,9 +493,10 @@ def _vessel_outer(kind: str) -> tuple[np.ndarray, float]:
 
 
 def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256):
-    """An open vessel with walls of `thickness`, as one closed triangle mesh (y up, resting on
-    y = 0, about 1 unit tall): a surface of revolution whose profile runs up the outside, over
-    the rim and down the inside to the floor.
+    """An open vessel as one closed triangle mesh (y up, resting on y = 0, 0.43-1 unit tall): a
+    surface of revolution whose profile runs up the outside, over a flat rim `thickness` wide,
+    down the inside (the outside wall moved inward by `thickness` along the radius) and across a
+    flat floor to the axis.
 
     Seen from above the rim (:func:`vessel_view`), the inside shows through the mouth: the
     front of the rim hides part of the inside (a depth jump whose height grows toward the
@@ -507,40 +508,57 @@ def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256):
     Parameters
     ----------
     kind : {"cup", "bowl", "goblet", "vase"}
-        Straight flared walls; a shallow rounded bowl on a foot ring; a rounded cup on a thin
-        stem and a foot (whose foot the cup can hide from the stem); a bulging body with a
-        narrow mouth.
+        Straight flared walls on a flat bottom; a shallow rounded bowl on a low foot; a rounded
+        cup on a thin stem and a foot (whose foot the cup can hide from the stem); a bulging
+        body with a narrow mouth.
     thickness : float
-        Wall thickness (the rim's width), in the profile's units.
+        Radial thickness of the walls (the rim's width), in the profile's units.
     sections : int
-        Facets around the axis.
+        Facets around the axis (at least 8).
 
     Returns
     -------
     trimesh.Trimesh
+
+    Raises
+    ------
+    ValueError
+        For an unknown `kind`, a `thickness` outside (0, half the mouth's radius) or fewer than
+        8 `sections`.
     """
     import trimesh
 
     outer, floor = _vessel_outer(kind)
-    if not 0.0 < thickness < 0.5 * float(outer[-1, 0]):
-        raise ValueError(f"`thickness` must be in (0, {0.5 * float(outer[-1, 0]):g}) for "
-                         f"{kind!r}; got {thickness!r}")
-    if int(sections) < 8:
-        raise ValueError(f"`sections` must be at least 8; got {sections!r}")
-    top_r, top_h = outer[-1]
-    # the inside: the outer wall above the floor moved inward by the thickness, from the rim down
-    inner = [(max(r - thickness, 0.0), h) for r, h in outer[::-1] if h >= floor]
-    inner[0] = (top_r - thickness, top_h)
-    profile = np.vstack([outer, inner, [(0.0, floor)]])
-    mesh = trimesh.creation.revolve(profile, sections=int(sections))
+    top_r, top_h = (float(v) for v in outer[-1])
+    try:
+        t = float(thickness)
+        n = int(sections)
+    except (TypeError, ValueError):
+        raise ValueError(f"`thickness` must be a number and `sections` an integer; got "
+                         f"{thickness!r}, {sections!r}") from None
+    if not 0.0 < t < 0.5 * top_r:
+        raise ValueError(f"`thickness` must be in (0, {0.5 * top_r:g}) for {kind!r}; got "
+                         f"{thickness!r}")
+    if n != sections or n < 8:
+        raise ValueError(f"`sections` must be an integer of at least 8; got {sections!r}")
+    # the inside: the outside wall above the floor moved inward by the thickness, from the rim
+    # down to where the outside crosses the floor's height, then the floor to the axis
+    above = np.flatnonzero(outer[:, 1] > floor)
+    first = int(above[0])  # (the outside rises monotonically from here: every kind's profile)
+    (r0, h0), (r1, h1) = outer[first - 1], outer[first]
+    r_floor = r0 + (r1 - r0) * (floor - h0) / (h1 - h0)
+    inner = np.c_[outer[first:, 0] - t, outer[first:, 1]][::-1]
+    profile = np.vstack([outer, inner, [(r_floor - t, floor), (0.0, floor)]])
+    mesh = trimesh.creation.revolve(profile, sections=n)
     # (revolve turns about z: make z the up axis y)
     mesh.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1.0, 0.0, 0.0]))
     return mesh
 
 
 def vessel_view(elevation_deg: float) -> tuple[float, float, float]:
-    """The viewing direction of a camera `elevation_deg` degrees above the horizontal, looking
-    at a y-up scene from its front (for ``render_perspective(..., view=...)``)."""
+    """The viewing direction of a camera `elevation_deg` degrees above the horizontal (below it
+    for a negative angle), looking at a y-up scene from its front (for
+    ``render_perspective(..., view=...)``; above about 82 degrees the image's up turns)."""
     if not -90.0 < float(elevation_deg) < 90.0:
         raise ValueError(f"`elevation_deg` must be in (-90, 90); got {elevation_deg!r}")
     e = np.radians(float(elevation_deg))

@@ -13,8 +13,8 @@ and Markdown tables and PNG figures into one output folder:
 ``fig10``   angular error of every method on real normal maps without ground truth
 ``bear``    MADE on the perspective DiLiGenT bear for the methods that take perspective input
 ``discontinuities``  the discontinuity development benchmark (:mod:`.discontinuities`):
-            pinhole, wide-angle, tabletop (several objects) and orthographic scenes with
-            jumps x 4 normal conditions,
+            pinhole, wide-angle, tabletop (several objects), vessel (open vessels seen from
+            above the rim) and orthographic scenes with jumps x 4 normal conditions,
             against BiNI and the oracle with the true jumps cut; and the real normal maps
 
 A method whose module is missing or that raises is recorded as ``unavailable`` / ``failed`` in

@@ -134,8 +134,9 @@ TABLE_FILL = 0.9
 TABLE_VERSION = 2
 
 
-#: Version of the vessel scenes (:func:`facetlift.synthetic.vessel`) in the render cache's keys.
-VESSEL_VERSION = 1
+#: Version of the vessel scenes (:func:`facetlift.synthetic.vessel`) in the render cache's keys (2:
+#: the inside down to a flat floor; 1 had a cone from the rim to the floor's centre).
+VESSEL_VERSION = 2
 
 
 def tabletop_meshes(meshes: list, i: int) -> list:
@@ -473,8 +474,9 @@ def discontinuities(ctx: Context) -> None:
         write_csv(ctx.out / "discontinuities_real.csv", real)
     n_scenes = len({(r["group"], r["scene"]) for r in rows})
     text = [f"{n_scenes} synthetic scenes x {len(ctx.settings.disc_conditions)} conditions; "
-            "error = MADE for the pinhole groups (perspective, wide, tabletop), the paper's "
-            "normalised error in % for ortho; vs_oracle = mean error / the oracle's mean error.\n",
+            "error = MADE for the pinhole groups (perspective, wide, tabletop, vessel), the "
+            "paper's normalised error in % for ortho; vs_oracle = mean error / the oracle's "
+            "mean error.\n",
             md_table(table, ["group", "condition", "method", "scenes", "mean_error",
                              "median_error", "vs_oracle", "wins_vs_bini", "losses_vs_bini",
                              "converged", "mean_deviation", "seconds"])]
