@@ -150,14 +150,16 @@ def test_without_trimesh_only_render_mesh_needs_it():
         "sys.modules['trimesh'] = None  # `import trimesh` now fails\n"
         "from facetlift import synthetic\n"
         "assert synthetic.analytic('saddle', 8).normals.shape == (8, 8, 3)\n"
-        "try:\n"
-        "    synthetic.render_mesh('mesh.ply', 8)\n"
-        "except ImportError as e:\n"
-        "    print(e)\n"
+        "for call in (lambda: synthetic.render_mesh('mesh.ply', 8), synthetic.vessel):\n"
+        "    try:\n"
+        "        call()\n"
+        "    except ImportError as e:\n"
+        "        print(e)\n"
     )
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
-    assert "needs trimesh" in run.stdout and "pip install 'facetlift[render]'" in run.stdout
+    assert run.stdout.count("needs trimesh") == 2
+    assert run.stdout.count("pip install 'facetlift[render]'") == 2
 
 
 @pytest.mark.skipif(not (DATA / "meshes" / "spot.ply").is_file(), reason="data absent")
@@ -455,5 +457,7 @@ def test_vessel_errors():
         synthetic.vessel("cup", thickness=None)
     with pytest.raises(ValueError, match="`elevation_deg`"):
         synthetic.vessel_view(90)
+    with pytest.raises(ValueError, match="`elevation_deg`"):
+        synthetic.vessel_view("high")
     v = np.array(synthetic.vessel_view(30))
     np.testing.assert_allclose([np.linalg.norm(v), v[1]], [1.0, -0.5])

@@ -525,11 +525,17 @@ def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256):
     ValueError
         For an unknown `kind`, a `thickness` outside (0, half the mouth's radius) or fewer than
         8 `sections`.
+    ImportError
+        Without trimesh (the render extra).
     """
-    import trimesh
+    try:
+        import trimesh
+    except ImportError as e:
+        raise ImportError("facetlift.synthetic.vessel needs trimesh, which comes with the "
+                          "render extra: pip install 'facetlift[render]'") from e
 
     outer, floor = _vessel_outer(kind)
-    top_r, top_h = (float(v) for v in outer[-1])
+    top_r = float(outer[-1, 0])
     try:
         t = float(thickness)
         n = int(sections)
@@ -559,9 +565,13 @@ def vessel_view(elevation_deg: float) -> tuple[float, float, float]:
     """The viewing direction of a camera `elevation_deg` degrees above the horizontal (below it
     for a negative angle), looking at a y-up scene from its front (for
     ``render_perspective(..., view=...)``; above about 82 degrees the image's up turns)."""
-    if not -90.0 < float(elevation_deg) < 90.0:
-        raise ValueError(f"`elevation_deg` must be in (-90, 90); got {elevation_deg!r}")
-    e = np.radians(float(elevation_deg))
+    try:
+        e = float(elevation_deg)
+    except (TypeError, ValueError):
+        e = float("nan")
+    if not -90.0 < e < 90.0:
+        raise ValueError(f"`elevation_deg` must be a number in (-90, 90); got {elevation_deg!r}")
+    e = np.radians(e)
     return (0.0, -float(np.sin(e)), -float(np.cos(e)))
 
 
