@@ -423,16 +423,22 @@ def test_quantize():
         synthetic.quantize(n, 12)
 
 
+@pytest.mark.parametrize("rim", ["round", "flat"])
 @pytest.mark.parametrize("kind", synthetic.VESSELS)
-def test_vessels_are_open_with_walls_of_the_given_thickness(kind):
-    m = synthetic.vessel(kind, thickness=0.04, sections=32)
+def test_vessels_are_open_with_walls_of_the_given_thickness(kind, rim):
+    m = synthetic.vessel(kind, thickness=0.04, sections=32, rim=rim)
     assert m.is_watertight and m.volume > 0
-    assert m.bounds[0, 1] == pytest.approx(0.0, abs=1e-12) and 0.4 < m.bounds[1, 1] <= 1.0
+    assert m.bounds[0, 1] == pytest.approx(0.0, abs=1e-12) and 0.4 < m.bounds[1, 1] <= 1.03
     top = m.bounds[1, 1]
-    # the rim: a flat band 0.04 wide at the top
-    rim = m.vertices[np.isclose(m.vertices[:, 1], top)]
-    radii = np.unique(np.round(np.hypot(rim[:, 0], rim[:, 2]), 9))
-    assert radii.size == 2 and radii[1] - radii[0] == pytest.approx(0.04)
+    ring = m.vertices[np.isclose(m.vertices[:, 1], top)]
+    radii = np.unique(np.round(np.hypot(ring[:, 0], ring[:, 2]), 9))
+    if rim == "flat":  # a flat band 0.04 wide at the top
+        assert radii.size == 2 and radii[1] - radii[0] == pytest.approx(0.04)
+    else:  # a half circle over the wall: its top one ring, half the wall above the walls' tops
+        assert radii.size == 1
+        walls = m.vertices[np.isclose(np.hypot(m.vertices[:, 0], m.vertices[:, 2]),
+                                      radii[0] + 0.02)]
+        assert top - walls[:, 1].max() == pytest.approx(0.02)
     # down the axis from above: the inside's floor, well below the rim (not a solid top)
     hits, _, _ = m.ray.intersects_location([[0.0, 2.0, 0.0]], [[0.0, -1.0, 0.0]])
     floor = hits[:, 1].max()
@@ -455,6 +461,8 @@ def test_vessel_errors():
         synthetic.vessel("cup", sections=8.5)
     with pytest.raises(ValueError, match="`thickness`"):
         synthetic.vessel("cup", thickness=None)
+    with pytest.raises(ValueError, match="`rim`"):
+        synthetic.vessel("cup", rim="square")
     with pytest.raises(ValueError, match="`elevation_deg`"):
         synthetic.vessel_view(90)
     with pytest.raises(ValueError, match="`elevation_deg`"):

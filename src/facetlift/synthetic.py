@@ -492,10 +492,11 @@ def _vessel_outer(kind: str) -> tuple[np.ndarray, float]:
     raise ValueError(f"`kind` must be one of {list(VESSELS)}; got {kind!r}")
 
 
-def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256):
+def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256,
+           rim: str = "round"):
     """An open vessel as one closed triangle mesh (y up, resting on y = 0, 0.43-1 unit tall): a
-    surface of revolution whose profile runs up the outside, over a flat rim `thickness` wide,
-    down the inside (the outside wall moved inward by `thickness` along the radius) and across a
+    surface of revolution whose profile runs up the outside, over a rim `thickness` wide, down
+    the inside (the outside wall moved inward by `thickness` along the radius) and across a
     flat floor to the axis.
 
     Seen from above the rim (:func:`vessel_view`), the inside shows through the mouth: the
@@ -515,6 +516,11 @@ def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256):
         Radial thickness of the walls (the rim's width), in the profile's units.
     sections : int
         Facets around the axis (at least 8).
+    rim : {"round", "flat"}
+        The rim's top: a half circle across the wall (as turned or moulded rims are: its
+        normals turn to grazing at both edges, so the edge that hides the inside shows in the
+        normals), or a flat ring with sharp edges (whose normal is the floor's where both are
+        level: a jump between the two is then in no normal).
 
     Returns
     -------
@@ -523,8 +529,8 @@ def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256):
     Raises
     ------
     ValueError
-        For an unknown `kind`, a `thickness` outside (0, half the mouth's radius) or fewer than
-        8 `sections`.
+        For an unknown `kind` or `rim`, a `thickness` outside (0, half the mouth's radius) or
+        fewer than 8 `sections`.
     ImportError
         Without trimesh (the render extra).
     """
@@ -547,6 +553,8 @@ def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256):
                          f"{thickness!r}")
     if n != sections or n < 8:
         raise ValueError(f"`sections` must be an integer of at least 8; got {sections!r}")
+    if rim not in ("round", "flat"):
+        raise ValueError(f"`rim` must be 'round' or 'flat'; got {rim!r}")
     # the inside: the outside wall above the floor moved inward by the thickness, from the rim
     # down to where the outside crosses the floor's height, then the floor to the axis
     above = np.flatnonzero(outer[:, 1] > floor)
@@ -554,7 +562,12 @@ def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256):
     (r0, h0), (r1, h1) = outer[first - 1], outer[first]
     r_floor = r0 + (r1 - r0) * (floor - h0) / (h1 - h0)
     inner = np.c_[outer[first:, 0] - t, outer[first:, 1]][::-1]
-    profile = np.vstack([outer, inner, [(r_floor - t, floor), (0.0, floor)]])
+    top = np.empty((0, 2))
+    if rim == "round":  # a half circle from the outside's top to the inside's, over the wall
+        a = np.linspace(0.0, np.pi, 11)[1:-1]
+        top_h = float(outer[-1, 1])
+        top = np.c_[top_r - 0.5 * t + 0.5 * t * np.cos(a), top_h + 0.5 * t * np.sin(a)]
+    profile = np.vstack([outer, top, inner, [(r_floor - t, floor), (0.0, floor)]])
     mesh = trimesh.creation.revolve(profile, sections=n)
     # (revolve turns about z: make z the up axis y)
     mesh.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1.0, 0.0, 0.0]))

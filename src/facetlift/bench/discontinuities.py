@@ -134,9 +134,9 @@ TABLE_FILL = 0.9
 TABLE_VERSION = 2
 
 
-#: Version of the vessel scenes (:func:`facetlift.synthetic.vessel`) in the render cache's keys (2:
-#: the inside down to a flat floor; 1 had a cone from the rim to the floor's centre).
-VESSEL_VERSION = 2
+#: Version of the vessel scenes (:func:`facetlift.synthetic.vessel`) in the render cache's keys (3:
+#: rounded rims; 2: flat rims; 1 had a cone from the rim to the floor's centre).
+VESSEL_VERSION = 3
 
 
 def tabletop_meshes(meshes: list, i: int) -> list:
