@@ -534,12 +534,7 @@ def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256,
     ImportError
         Without trimesh (the render extra).
     """
-    try:
-        import trimesh
-    except ImportError as e:
-        raise ImportError("facetlift.synthetic.vessel needs trimesh, which comes with the "
-                          "render extra: pip install 'facetlift[render]'") from e
-
+    trimesh = _trimesh("vessel")
     outer, floor = _vessel_outer(kind)
     top_r = float(outer[-1, 0])
     try:
@@ -608,15 +603,20 @@ def _view_frame(view) -> np.ndarray:
     return np.stack([X, Y, Z])
 
 
-def _load_mesh(mesh):
+def _trimesh(caller: str):
+    """The trimesh module, or an ImportError naming `caller` and the extra that brings it."""
     try:
         import trimesh
     except ImportError as e:
         raise ImportError(
-            "facetlift.synthetic.render_mesh needs trimesh, which comes with the render extra: "
+            f"facetlift.synthetic.{caller} needs trimesh, which comes with the render extra: "
             "pip install 'facetlift[render]'"
         ) from e
+    return trimesh
 
+
+def _load_mesh(mesh):
+    trimesh = _trimesh("render_mesh")
     if isinstance(mesh, trimesh.Trimesh):
         return mesh
     if isinstance(mesh, (str, Path)):
