@@ -281,6 +281,43 @@ def test_occlusion_places_a_separated_piece_by_its_smallest_jump():
     assert g.min() < -1.5 and g.max() > 1.5
 
 
+def test_a_line_of_mixed_pixels_does_not_relay_a_placement():
+    """A one-facet row cut from both sides along a jump (mixed pixels: an open bowl's rim seen
+    from above) asks on each side for its smallest jump to be zero; relayed through it those
+    two guesses must not outweigh the two pieces' own boundary, whose jump fades to zero."""
+    from facetlift.methods.dgp import split as spl
+
+    H, W = 30, 40
+    r, c = np.mgrid[0:H, 0:W]
+    line = (r == 14) & (c >= 8)
+    lower = (r >= 14) & ~line
+    n = facetlift.normals_from_gradients(np.where(lower, -0.5, 0.0), np.where(line, 3.0, 0.0))
+    pr = prepare(n)
+    bx, by, tg = dgp.targets(pr)
+    right = np.zeros((H, W - 1), bool)
+    down = np.zeros((H - 1, W), bool)
+    down[13, :] = down[14, 8:] = right[14, 7] = True
+    mesh = spl.split(pr.domain, right, down)
+    upper_piece, lower_piece = mesh.facet_piece[0], mesh.facet_piece[-1]
+    assert mesh.n_pieces == 3 and spl.line_pieces(mesh, 4).sum() == 1
+    assert not spl.line_pieces(mesh, 40).any()  # (32 facets: not more than 40)
+    z, _ = spl.solve_pieces(mesh, bx, by, tg)
+
+    def own_gaps(small):
+        """The jumps on the two planes' own boundary, from the upper piece to the lower."""
+        o = spl.occlusion_offsets(mesh, z, bx, by, tg, scale=1.0, small=small)
+        pa, pb, gap = spl._continuation(mesh, z + o[mesh.piece], bx, by, tg)
+        own = (pa == upper_piece) & (pb == lower_piece)
+        own |= (pa == lower_piece) & (pb == upper_piece)
+        return np.where(pa[own] == upper_piece, gap[own], -gap[own])
+
+    g = own_gaps(4)
+    assert g.size == 8 and (g < 0.5).all()  # the lower plane in front, by 0 to 3.5 units
+    assert abs(np.quantile(g, 0.95)) < 0.05  # its smallest jump: zero, as the rule asks
+    # relayed through the line (every pair weighed by its length): about a unit off (1.09)
+    assert abs(np.quantile(own_gaps(None), 0.95)) > 0.5
+
+
 def test_the_mesh_is_split_at_the_jumps_and_agrees_with_the_depth():
     n, gt, left = scissor_ortho(H=30, W=36)
     s = facetlift.integrate(n, discontinuities=True)

@@ -777,7 +777,8 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
     fixed = None
     if anchored is not None:
         fixed = np.bincount(mesh.facet_piece[anchored], minlength=mesh.n_pieces) > 0
-    offsets = occlusion_offsets(mesh, values, bx, by, target, scale=footprint, fixed=fixed)
+    offsets = occlusion_offsets(mesh, values, bx, by, target, scale=footprint, fixed=fixed,
+                                small=SMALL_PIECE)
     moved = int((np.abs(offsets) > GAP * footprint).sum())
     loose = {}
     if fixed is not None:  # (large pieces no sample holds: placed by the rule, not measured)
