@@ -357,6 +357,26 @@ def test_bad_options(options, match):
         facetlift.integrate(n, discontinuities=True, **options)
 
 
+@pytest.mark.parametrize("case", ["plain", "missing", "prior"])
+def test_energy_trace_summed_in_blocks(case, monkeypatch):
+    """The energy trace (a diagnostic) is summed over blocks of facets: blocks of 7 facets
+    (the last one partial) give the trace of one block."""
+    n, gt, left = scissor_ortho(H=20, W=24)
+    kw = {}
+    if case == "missing":
+        n = n.copy()
+        n[5:8, 3:9] = np.nan
+    if case == "prior":
+        prior = np.full(gt.shape, np.nan)
+        prior[::5, ::5] = gt[::5, ::5]
+        kw = {"prior": prior, "confidence": np.where(left, 1.0, 0.5)}
+    one = facetlift.integrate(n, discontinuities=True, **kw).info["energy"]
+    monkeypatch.setattr(disc, "ENERGY_BLOCK", 7)
+    blocks = facetlift.integrate(n, discontinuities=True, **kw).info["energy"]
+    assert 20 * 24 % 7 and len(one) > 2
+    np.testing.assert_allclose(blocks, one, rtol=1e-12)
+
+
 def test_stopping_rule_and_cap():
     n, gt, left = scissor_ortho(H=30, W=36)
     s = facetlift.integrate(n, discontinuities=True)

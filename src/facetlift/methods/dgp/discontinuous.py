@@ -200,6 +200,12 @@ GROW = True
 #: weight 1, docs/fusion.md); with a blurred one (``prior_blur``) yes (module docstring).
 FINAL_COS_POWER = 2
 
+#: Facets per block of the energy trace's sums (a diagnostic, ``info["energy"]``): its
+#: temporaries (about 0.6 MB) stay in the cache, where whole (m, 4) ones were page-faulted in
+#: anew every reweighting (2048^2 full square: 0.25 s a reweighting in a profile, 1.13 s
+#: against 0.15 s for a fresh 4M-facet call in a microbenchmark, 0.11 / 0.09 s warm).
+ENERGY_BLOCK = 1 << 14
+
 #: Multigrid policy of the reweightings' solves. The hierarchy of the previous reweighting is
 #: reused as it is while no corner weight moves by more than :data:`REUSE_STEP`; when one
 #: does, its coarse operators are recomputed for the new system (a Galerkin refresh, about a
@@ -843,24 +849,31 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         return M.apply(np.multiply(w, zc, out=np.empty_like(zc)), plus=Ma)
 
     def energy(y, w, zc):
-        # (the energy trace is a diagnostic: formed with few passes over the (m, 4) arrays,
-        # the sums as BLAS dot products; 2048^2: 0.32 -> 0.13 s a reweighting)
-        sx, sy, tw = (y @ slope_twist).T  # (each (m,), strided views)
-        sx = np.subtract(sx, bx)
-        sy = np.subtract(sy, by)
-        if not all_target:
-            sx[~target] = 0.0
-            sy[~target] = 0.0
-        gap = np.subtract(y, zc)
-        gap *= gap
-        glue = float(np.dot(w.reshape(-1), gap.reshape(-1)))
-        del gap
-        if fusion is None:  # (no prior either)
-            return float(np.dot(sx, sx) + np.dot(sy, sy) + np.dot(tw, tw) + glue)
-        c = fusion[0]
-        fit_prior = 0.0 if prior is None else fusion[1] * (y @ _QUARTER - prior[1]) ** 2 + (
-            (1.0 - PRIOR_OWN) * prior[0] * (zc @ _QUARTER - prior[1]) ** 2)
-        return float(np.dot(c, sx * sx + sy * sy + tw * tw) + np.sum(fit_prior) + glue)
+        # (the energy trace is a diagnostic: summed over blocks of ENERGY_BLOCK facets, whose
+        # temporaries stay in the cache and are not page-faulted in anew every reweighting;
+        # 2048^2: 0.25 -> 0.1 s a reweighting, ENERGY_BLOCK)
+        total = 0.0
+        for s0 in range(0, m, ENERGY_BLOCK):
+            s1 = min(s0 + ENERGY_BLOCK, m)
+            yb = y[s0:s1]
+            st = yb @ slope_twist  # (b, 3): x-slope, y-slope and twist residuals
+            st[:, 0] -= bx[s0:s1]
+            st[:, 1] -= by[s0:s1]
+            if not all_target:
+                st[~target[s0:s1], :2] = 0.0
+            gap = np.subtract(yb, zc[s0:s1])
+            gap *= gap
+            total += float(np.dot(w[s0:s1].reshape(-1), gap.reshape(-1)))
+            st *= st
+            if fusion is None:  # (no prior either)
+                total += float(st.sum())
+                continue
+            total += float(np.dot(fusion[0][s0:s1], st.sum(axis=1)))
+            if prior is not None:
+                t = prior[1][s0:s1]
+                total += float(np.sum(fusion[1][s0:s1] * (yb @ _QUARTER - t) ** 2 + (
+                    (1.0 - PRIOR_OWN) * prior[0][s0:s1] * (zc[s0:s1] @ _QUARTER - t) ** 2)))
+        return total
 
     slopes = (bx, by) if EVIDENCE == "residual" else None
     w = np.ones((m, 4)) if w0 is None else np.array(w0, dtype=float)
