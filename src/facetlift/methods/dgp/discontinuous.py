@@ -564,15 +564,19 @@ class GlueInverse:
         if self.other.size:
             self.M_other = np.linalg.inv(A_other + w[self.other][:, :, None] * np.eye(4))
 
-    def apply(self, v, plus=None):
-        """``M_f v_f`` for every facet, plus `plus` (m, 4) where given: (m, 4)."""
+    def apply(self, v, plus=None, out=None):
+        """``M_f v_f`` for every facet, plus `plus` (m, 4) where given: (m, 4), in `out` where
+        given (which may be `v` itself: then formed in place)."""
         d = self.d  # (M v = d * (v + c (d . v)): one new (m, 4) array, no temporaries)
         s = np.einsum("fa,fa->f", d, v)
         s *= self.c
-        out = np.add(v, s[:, None])
+        other = None
+        if self.other.size:  # (before `out` overwrites `v`)
+            other = np.einsum("fab,fb->fa", self.M_other, v[self.other])
+        out = np.add(v, s[:, None], out=out)
         out *= d
-        if self.other.size:
-            out[self.other] = np.einsum("fab,fb->fa", self.M_other, v[self.other])
+        if other is not None:
+            out[self.other] = other
         if plus is not None:
             out += plus
         return out
@@ -846,7 +850,10 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
 
     def copies(M, Ma, w, zc):
         """Every facet's own corner values, for the vertex values at its corners `zc`."""
-        return M.apply(np.multiply(w, zc, out=np.empty_like(zc)), plus=Ma)
+        # (in place in the one new array: a second (m, 4) one was page-faulted in anew every
+        # reweighting, 128 MB at 2048^2)
+        wz = np.multiply(w, zc, out=np.empty_like(zc))
+        return M.apply(wz, plus=Ma, out=wz)
 
     def energy(y, w, zc):
         # (the energy trace is a diagnostic: summed over blocks of ENERGY_BLOCK facets, whose
