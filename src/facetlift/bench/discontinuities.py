@@ -247,7 +247,7 @@ def oracle(gt, normals) -> tuple[float, float, float, float]:
     from .. import methods
     from ..api import make_surface, prepare
     from ..methods import MethodResult
-    from ..methods.dgp import targets
+    from ..methods.dgp import SMALL_PIECE, targets
     from ..methods.dgp.split import solve_split, split
 
     t0 = time.perf_counter()
@@ -261,8 +261,9 @@ def oracle(gt, normals) -> tuple[float, float, float, float]:
         bx, by, target = targets(problem)
         right, down = synthetic.jump_edges(gt)
         mesh = split(problem.domain, right, down)
+        # (the route's rule, line pieces included: SMALL_PIECE)
         z, _, _ = solve_split(mesh, bx, by, target, rule="occlusion",
-                              scale=problem.camera.footprint())
+                              scale=problem.camera.footprint(), small=SMALL_PIECE)
         surface = make_surface(problem, MethodResult(values=z[mesh.corners].mean(axis=1),
                                                      extras={"corner_values": z[mesh.corners]}))
     dev = metrics.input_deviation(problem, surface)

@@ -201,9 +201,10 @@ GROW = True
 FINAL_COS_POWER = 2
 
 #: Facets per block of the energy trace's sums (a diagnostic, ``info["energy"]``): its
-#: temporaries (about 0.6 MB) stay in the cache, where whole (m, 4) ones were page-faulted in
-#: anew every reweighting (2048^2 full square: 0.25 s a reweighting in a profile, 1.13 s
-#: against 0.15 s for a fresh 4M-facet call in a microbenchmark, 0.11 / 0.09 s warm).
+#: temporaries (about 1 MB) stay in the cache, where whole (m, 4) ones were page-faulted in
+#: anew every reweighting (2048^2 full square, a library call, profiled: 2.47 -> 0.46 s over
+#: 10 reweightings; a fresh 4M-facet call in a microbenchmark 1.13 -> 0.15 s, warm 0.11 ->
+#: 0.09 s).
 ENERGY_BLOCK = 1 << 14
 
 #: Multigrid policy of the reweightings' solves. The hierarchy of the previous reweighting is
@@ -566,7 +567,8 @@ class GlueInverse:
 
     def apply(self, v, plus=None, out=None):
         """``M_f v_f`` for every facet, plus `plus` (m, 4) where given: (m, 4), in `out` where
-        given (which may be `v` itself: then formed in place)."""
+        given (which may be `v` itself: then formed in place; `plus` must not share memory
+        with `out`)."""
         d = self.d  # (M v = d * (v + c (d . v)): one new (m, 4) array, no temporaries)
         s = np.einsum("fa,fa->f", d, v)
         s *= self.c
@@ -857,8 +859,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
 
     def energy(y, w, zc):
         # (the energy trace is a diagnostic: summed over blocks of ENERGY_BLOCK facets, whose
-        # temporaries stay in the cache and are not page-faulted in anew every reweighting;
-        # 2048^2: 0.25 -> 0.1 s a reweighting, ENERGY_BLOCK)
+        # temporaries stay in the cache and are not page-faulted in anew every reweighting)
         total = 0.0
         for s0 in range(0, m, ENERGY_BLOCK):
             s1 = min(s0 + ENERGY_BLOCK, m)

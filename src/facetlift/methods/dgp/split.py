@@ -26,7 +26,7 @@ from ...operators.split import SplitMesh, split
 from ...operators.stencil import E_X, E_Y
 from .fixed_point import SLOPE_BLOCK, TWIST_BLOCK
 
-__all__ = ["SplitMesh", "absorb_small_pieces", "assemble", "occlusion_offsets",
+__all__ = ["SplitMesh", "absorb_small_pieces", "assemble", "line_pieces", "occlusion_offsets",
            "piece_offsets", "solve_pieces", "solve_split", "split"]
 
 
@@ -132,15 +132,19 @@ MIXED = 0.2
 #: else links them (a uniform factor changes nothing there). Measured on the benchmark's 83
 #: scenes at exact, 8-bit and 3-deg-noise normals against 1 (docs/results.md): vessel group
 #: 13.55 -> 12.56 mm with exact normals, 25 of 249 scene-conditions better by more than 1 %,
-#: 8 worse. Pieces of at most `small` facets (the ones hung on a neighbour afterwards) keep
-#: their full weight: the DiLiGenT bear's head is placed through such pieces on its neck
-#: (with every line piece scaled down its MADE went 0.020 -> 0.157 mm).
+#: 7 worse. Pieces of at most `small` facets (the route passes its SMALL_PIECE, the pieces it
+#: hangs on a neighbour afterwards) keep their full weight: the DiLiGenT bear's head is placed
+#: through such pieces on its neck (with every line piece scaled down its MADE went 0.020 ->
+#: 0.157 mm).
 LINE_RELAY = 1e-3
 
 
 def line_pieces(mesh: SplitMesh, small: int) -> np.ndarray:
     """(n_pieces,) bool: the pieces of more than `small` facets of which no facet has all
-    four neighbours in the piece (at most two facets wide: a line along a jump)."""
+    four neighbours in the piece (at most two facets wide: a line along a jump). Purely
+    geometric: a genuinely thin surface (a handle or stem one or two pixels wide, a band
+    between a fold and a jump) counts too, which is harmless where its pairs are the only link
+    (:data:`LINE_RELAY`)."""
     d = mesh.domain
     H, W = d.shape
     fp = mesh.facet_piece
@@ -390,10 +394,11 @@ def _continuation(mesh: SplitMesh, z, bx, by, target):
 
 
 def solve_split(mesh: SplitMesh, bx, by, target, *, weights=None, flat_weight=1e-9,
-                rule="continue", scale=None, backend="auto", reference=None):
+                rule="continue", scale=None, backend="auto", reference=None, small=4):
     """Split-vertex values of the DGP fixed point on `mesh` with the pieces placed by
     :func:`piece_offsets`, or (``reference`` (m,) facet values, e.g. the smooth solution) each
-    piece moved to the reference's mean over the piece; returns ``(z, facet values, info)``."""
+    piece moved to the reference's mean over the piece; returns ``(z, facet values, info)``.
+    `small`: :func:`occlusion_offsets`'s (with ``rule="occlusion"``)."""
     z, sinfo = solve_pieces(mesh, bx, by, target, weights=weights, flat_weight=flat_weight,
                             backend=backend)
     if reference is not None:
@@ -407,7 +412,7 @@ def solve_split(mesh: SplitMesh, bx, by, target, *, weights=None, flat_weight=1e
             o = np.atleast_1d(ndimage.median(reference - zf, mesh.facet_piece + 1,
                                              np.arange(1, k + 1)))
     elif rule == "occlusion":
-        o = occlusion_offsets(mesh, z, bx, by, target, scale=scale or 0.0)
+        o = occlusion_offsets(mesh, z, bx, by, target, scale=scale or 0.0, small=small)
     else:
         o = piece_offsets(mesh, z, bx, by, target, rule, scale)
     z = z + o[mesh.piece]
