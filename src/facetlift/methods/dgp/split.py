@@ -150,13 +150,14 @@ def line_pieces(mesh: SplitMesh, small: int) -> np.ndarray:
     (:data:`LINE_RELAY`)."""
     d = mesh.domain
     H, W = d.shape
-    fp = mesh.facet_piece
-    at = np.full((H + 2, W + 2), -1, np.int64)
+    k = max(mesh.n_pieces, 1)
+    # (the piece of every pixel, padded: int32, 268 MB at 8192^2 where int64 took 537)
+    fp = mesh.facet_piece.astype(np.int32 if k < 2**31 else np.int64)
+    at = np.full((H + 2, W + 2), -1, fp.dtype)
     r, c = d.pixels
     at[r + 1, c + 1] = fp
     inner = ((at[r + 1, c + 2] == fp) & (at[r + 1, c] == fp) & (at[r, c + 1] == fp)
              & (at[r + 2, c + 1] == fp))
-    k = max(mesh.n_pieces, 1)
     return ((np.bincount(fp[inner], minlength=k) == 0)
             & (np.bincount(fp, minlength=k) > small))
 
