@@ -854,7 +854,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         """Every facet's own corner values, for the vertex values at its corners `zc`."""
         # (in place in the one new array: a second (m, 4) one was page-faulted in anew every
         # reweighting, 128 MB at 2048^2)
-        wz = np.multiply(w, zc, out=np.empty_like(zc))
+        wz = w * zc
         return M.apply(wz, plus=Ma, out=wz)
 
     def energy(y, w, zc):

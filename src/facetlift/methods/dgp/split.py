@@ -294,7 +294,7 @@ def absorb_small_pieces(mesh: SplitMesh, copies, size: int, gap: float, anchored
 
 
 def occlusion_offsets(mesh: SplitMesh, z, bx, by, target, quantile: float = 0.05,
-                      scale: float = 0.0, fixed=None, small: int | None = 4):
+                      scale: float = 0.0, fixed=None, small: int | None = None):
     """Constants (n_pieces,) placing separated pieces by the occlusion rule.
 
     Across the boundary between two pieces one surface lies in front of the other: the jump
@@ -306,8 +306,9 @@ def occlusion_offsets(mesh: SplitMesh, z, bx, by, target, quantile: float = 0.05
     least squares weighted by their boundary length (one constant per group of connected
     pieces stays free). Pieces where `fixed` (n_pieces,) bool is True keep offset 0 (their
     place is known, e.g. from a depth prior); a group with a fixed piece has no free constant.
-    The pairs of a line piece of more than `small` facets (:func:`line_pieces`) weigh
-    :data:`LINE_RELAY` times their length (None: every pair its length).
+    With `small` (the route's :data:`facetlift.methods.dgp.SMALL_PIECE`), the pairs of a line
+    piece of more than `small` facets (:func:`line_pieces`) weigh :data:`LINE_RELAY` times
+    their length (None: every pair its length).
     """
     k = max(mesh.n_pieces, 1)
     if mesh.n_pieces <= 1 or (fixed is not None and fixed.all()):
@@ -398,7 +399,7 @@ def _continuation(mesh: SplitMesh, z, bx, by, target):
 
 
 def solve_split(mesh: SplitMesh, bx, by, target, *, weights=None, flat_weight=1e-9,
-                rule="continue", scale=None, backend="auto", reference=None, small=4):
+                rule="continue", scale=None, backend="auto", reference=None, small=None):
     """Split-vertex values of the DGP fixed point on `mesh` with the pieces placed by
     :func:`piece_offsets`, or (``reference`` (m,) facet values, e.g. the smooth solution) each
     piece moved to the reference's mean over the piece; returns ``(z, facet values, info)``.
