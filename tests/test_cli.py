@@ -171,7 +171,7 @@ def test_options_are_forwarded(tmp_path, capsys, monkeypatch):
     assert code == 1 and "spy stops here" in err
     np.testing.assert_array_equal(seen.pop("K"), K)
     assert seen == {"method": "dgp", "pixel_size": 1.0, "backfacing": "missing", "max_iter": 7,
-                    "outlier_eps": None, "prior": None, "prior_weight": 1.0, "confidence": None,
+                    "outlier_eps": None, "prior": None, "prior_weight": None, "confidence": None,
                     "prior_blur": None,
                     "flat_weight": 1e-6, "mean_subtraction": False, "name": "plain",
                     "backend": "superlu"}

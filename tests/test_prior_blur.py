@@ -162,7 +162,7 @@ def test_a_heavy_weight_with_a_blurred_prior_is_warned_about():
     n, depth, mask = two_bumps((48, 64))
     prior, sigma = coarse(depth, mask)
     with pytest.warns(UserWarning, match=r"`prior_weight` 1 with `prior_blur`.*deconvolution"):
-        facetlift.prepare(n, mask, prior=prior, prior_blur=sigma)
+        facetlift.prepare(n, mask, prior=prior, prior_blur=sigma, prior_weight=1.0)
     weights = np.full(mask.shape, 0.003)
     weights[:3] = 5.0  # (a few heavy samples: the median decides)
     with warnings.catch_warnings():
@@ -170,7 +170,38 @@ def test_a_heavy_weight_with_a_blurred_prior_is_warned_about():
         facetlift.prepare(n, mask, prior=prior, prior_weight=0.003, prior_blur=sigma)
         facetlift.prepare(n, mask, prior=prior, prior_weight=weights, prior_blur=sigma)
         facetlift.prepare(n, mask, prior=prior, prior_weight=1.0)  # (pointwise: no blur)
+        # (no weight given: the blurred prior's own default, silently)
+        given = facetlift.prepare(n, mask, prior=prior, prior_blur=sigma)
     assert fp.BLUR_WEIGHT_WARN == 0.03
+    np.testing.assert_array_equal(given.prior_weight[given.prior_weight > 0],
+                                  fp.BLURRED_PRIOR_WEIGHT)
+    assert fp.BLURRED_PRIOR_WEIGHT < fp.BLUR_WEIGHT_WARN
+
+
+def test_the_default_weight_depends_on_the_blur():
+    """No `prior_weight` given: 1 for a prior compared pixel by pixel, BLURRED_PRIOR_WEIGHT
+    for a blurred one (integrate and the command line alike; a fresh user's exact depth given
+    as blurred at weight 1 came out from 0.25 to 6 m for a scene of 0.75-1.6 m)."""
+    from facetlift import problem as fp
+
+    n, depth, mask = two_bumps((48, 64))
+    prior, sigma = coarse(depth, mask)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        default = facetlift.integrate(n, mask, prior=prior, prior_blur=sigma)
+        explicit = facetlift.integrate(n, mask, prior=prior, prior_blur=sigma,
+                                       prior_weight=fp.BLURRED_PRIOR_WEIGHT)
+        one = facetlift.integrate(n, mask, prior=prior, prior_blur=sigma, prior_weight=1.0)
+        plain = facetlift.integrate(n, mask, prior=prior)
+        plain_one = facetlift.integrate(n, mask, prior=prior, prior_weight=1.0)
+    np.testing.assert_array_equal(default.depth, explicit.depth)
+    assert not np.allclose(default.depth[mask], one.depth[mask])
+    np.testing.assert_array_equal(plain.depth, plain_one.depth)
+    assert fp.default_prior_weight(None, None) == 1.0
+    assert fp.default_prior_weight(None, 2.0) == fp.BLURRED_PRIOR_WEIGHT
+    assert fp.default_prior_weight(5.0, 2.0) == 5.0
+    with pytest.raises(ValueError, match="prior_blur"):
+        fp.default_prior_weight(None, -1.0)
 
 
 @pytest.mark.skipif(not (BEAR / "depth_gt.npz").is_file(), reason="no DiLiGenT bear data")

@@ -38,7 +38,7 @@ def integrate(
     normal_frame: str | None = None,
     max_memory=None,
     prior=None,
-    prior_weight=1.0,
+    prior_weight=None,
     confidence=None,
     prior_blur=None,
     prior_outliers: str = "remove",
@@ -108,7 +108,9 @@ def integrate(
         normal (a depth error at a sample costs as much as the same change of depth across
         one pixel against the normals). Dimensionless: independent of image size and depth
         units (for a perspective camera both terms are in log-depth). Large values fit the
-        prior exactly where given.
+        prior exactly where given. Default (None): 1, or 0.003 with a `prior_blur`
+        (``facetlift.problem.BLURRED_PRIOR_WEIGHT``: a blurred prior is met by undoing its blur,
+        which weights above about 0.03 turn into its own errors; docs/fusion.md).
     confidence : (H, W) array_like of float, optional
         Weight (>= 0) of each pixel's normal term; 0 is the same as a missing normal, 1 the
         default everywhere. For methods with the ``confidence`` capability.
@@ -269,9 +271,10 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
     first, the prior aligned to that surface (:func:`facetlift.prior_fit.fit`), then the
     fusion with the aligned prior."""
     from .methods.dgp import shared_cuts
-    from .problem import _weight_image, prior_samples
+    from .problem import _weight_image, default_prior_weight, prior_samples
 
     t0 = time.perf_counter()
+    prior_weight = default_prior_weight(prior_weight, prior_blur)
     shape = np.shape(normals)[:2]
     if len(shape) != 2:  # (integrate's own check names the problem)
         return integrate(normals, mask, prior=prior, prior_weight=prior_weight,

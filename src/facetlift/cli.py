@@ -203,8 +203,9 @@ _JOB_OPTIONS = [
                  "A dataset folder's prior_depth.* is used automatically. docs/fusion.md."),
     click.option("--prior-scale", type=float, default=None, metavar="S",
                  help="Depth units per count of a 16-bit PNG prior (e.g. 0.001)."),
-    click.option("--prior-weight", type=float, default=1.0, show_default=True, metavar="W",
-                 help="Weight of each prior sample relative to one pixel's normal."),
+    click.option("--prior-weight", type=float, default=None, metavar="W",
+                 help="Weight of each prior sample relative to one pixel's normal "
+                 "[default: 1, or 0.003 with --prior-blur]."),
     click.option("--prior-weight-map", type=click.Path(exists=True, dir_okay=False,
                  path_type=Path), help="Per-pixel prior weights, times --prior-weight (npy, "
                  "EXR, float TIFF as stored; 8/16-bit PNG or TIFF = v/max)."),
@@ -282,7 +283,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
               save=(), quads=False, triangles=False, output_frame=None, outdir=None,
               max_memory=None, prior=None,
-              prior_scale=None, prior_weight=1.0, prior_weight_map=None, confidence=None,
+              prior_scale=None, prior_weight=None, prior_weight_map=None, confidence=None,
               prior_blur=None, prior_outliers=None, prior_fit=None, no_prior=False,
               no_confidence=False):
     """A :class:`facetlift.jobs.Job` from the parsed flags (ValueError on bad values)."""

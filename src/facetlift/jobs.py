@@ -80,7 +80,8 @@ class Job:
     #: used when these are not given.
     prior: str | None = None
     prior_scale: float | None = None
-    prior_weight: float = 1.0
+    #: None: the default (1, or facetlift.problem.BLURRED_PRIOR_WEIGHT with prior_blur).
+    prior_weight: float | None = None
     prior_weight_map: str | None = None
     confidence: str | None = None
     #: Standard deviation (pixels) of the prior's blur (``prior_blur``, docs/fusion.md).
@@ -118,7 +119,7 @@ class Input:
     K: np.ndarray | None
     mask_source: str
     prior: np.ndarray | None = None
-    prior_weight: object = 1.0
+    prior_weight: object = None
     confidence: np.ndarray | None = None
     #: The normals were made from a gradient field (its hints speak of p and q).
     field: bool = False
@@ -217,7 +218,10 @@ def read(job: Job) -> Input:
     if job.prior_weight_map is not None:  # (times --prior-weight: an 8-bit map reaches 100)
         # (its values are checked where the prior has a sample, as integrate's prior_weight:
         # a sentinel elsewhere is no error; the command line names the map in the message)
-        weight = job.prior_weight * io.read_weights(job.prior_weight_map, arg="prior_weight_map")
+        from .problem import default_prior_weight
+
+        weight = default_prior_weight(job.prior_weight, job.prior_blur) * io.read_weights(
+            job.prior_weight_map, arg="prior_weight_map")
     for name, arr in (("prior", prior), ("confidence", conf), ("prior_weight_map", weight)):
         if isinstance(arr, np.ndarray) and arr.shape != n.shape[:2]:
             raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW) but the normal "
@@ -298,7 +302,7 @@ def _no_prior_checks(job: Job) -> None:
         raise ValueError("`prior_scale` applies only with a prior (a dataset folder's "
                          "prior_depth file, or integrate's --prior)")
     for name, given in (("prior_weight_map", job.prior_weight_map is not None),
-                        ("prior_weight", job.prior_weight != 1.0)):
+                        ("prior_weight", job.prior_weight not in (None, 1.0))):
         if given:
             raise ValueError(f"`{name}` applies only with a prior (--prior or a dataset's "
                              "prior_depth file)")
@@ -452,7 +456,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                     inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size,
                     K=inp.K, backfacing=job.backfacing, outlier_eps=job.outlier_eps,
                     prior=depth_prior,
-                    prior_weight=inp.prior_weight if inp.prior is not None else 1.0,
+                    prior_weight=inp.prior_weight if inp.prior is not None else None,
                     confidence=inp.confidence, prior_blur=job.prior_blur,
                     **({} if job.prior_outliers is None or inp.prior is None
                        else {"prior_outliers": job.prior_outliers}),

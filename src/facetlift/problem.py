@@ -44,6 +44,14 @@ BACKFACING_FRAME_HINT = 0.05
 #: (docs/fusion.md, "Blurred priors": the benchmark's range is 0.001-0.01).
 BLUR_WEIGHT_WARN = 0.03
 
+#: ``prior_weight`` where none is given and the prior is blurred (``prior_blur``): the fusion
+#: benchmark's weight for its blurred coarse prior (docs/fusion.md, "Measured: the coarse
+#: prior, blurred against pixel by pixel": the fused result beats both inputs on 45 / 38 of 51
+#: scenes, smooth / with discontinuities). Weight 1, the pointwise default, undoes the blur's
+#: own errors (a fresh user's exact depth given as blurred by 4 px: depth from 0.25 to 6 m for
+#: a scene of 0.75-1.6 m; 0.73-1.75 m at this weight).
+BLURRED_PRIOR_WEIGHT = 0.003
+
 #: A normal shorter than this fraction of the map's median normal length counts as
 #: zero-length (no direction, only rounding: a (1e-12, 0, 0) was renormalised to (1, 0, 0));
 #: relative, so that a map scaled as a whole keeps every normal.
@@ -312,7 +320,7 @@ def prepare(
     backfacing: str = "missing",
     outlier_eps: float | None = None,
     prior=None,
-    prior_weight=1.0,
+    prior_weight=None,
     confidence=None,
     grazing_note: str | None = None,
     prior_blur=None,
@@ -349,7 +357,9 @@ def prepare(
         keeps what it is given.
     prior, prior_weight, confidence
         Depth prior and weights (:func:`check_prior`, :func:`check_confidence`; see
-        docs/fusion.md). A pixel with confidence 0 becomes a missing sample.
+        docs/fusion.md). A pixel with confidence 0 becomes a missing sample. `prior_weight`
+        None: :func:`default_prior_weight` (1, or :data:`BLURRED_PRIOR_WEIGHT` with a
+        `prior_blur`).
     grazing_note : str, optional
         Where the grazing threshold comes from, for the warning.
     prior_blur : float, optional
@@ -557,7 +567,8 @@ def prepare(
     nf[~front] = np.nan
     pv = pw = None
     if prior is not None:
-        pv, pw, outside = check_prior(prior, prior_weight, (H, W), m, cam)
+        pv, pw, outside = check_prior(prior, default_prior_weight(prior_weight, prior_blur),
+                                      (H, W), m, cam)
         counts["prior_samples"] = int((pw > 0).sum())
         counts["prior_outside_mask"] = outside  # (dropped: counted, not silently)
     elif not _is_default_weight(prior_weight):
@@ -858,7 +869,16 @@ def _short(value) -> str:
 
 
 def _is_default_weight(w) -> bool:
-    return isinstance(w, (int, float)) and not isinstance(w, bool) and w == 1.0
+    return w is None or (isinstance(w, (int, float)) and not isinstance(w, bool) and w == 1.0)
+
+
+def default_prior_weight(prior_weight, prior_blur):
+    """`prior_weight` as given, or where it is None the default: 1 for a prior compared pixel
+    by pixel, :data:`BLURRED_PRIOR_WEIGHT` for a blurred one (`prior_blur` > 0; its own errors
+    are raised by :func:`prior_blur_value`)."""
+    if prior_weight is not None:
+        return prior_weight
+    return BLURRED_PRIOR_WEIGHT if prior_blur_value(prior_blur) > 0 else 1.0
 
 
 def _weight_image(a, name: str, shape: tuple[int, int]) -> np.ndarray:
