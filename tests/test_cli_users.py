@@ -734,6 +734,25 @@ def test_output_equal_to_an_input_is_refused_before_the_solve(tmp_path, capsys, 
     np.testing.assert_array_equal(np.load(tmp_path / "depth.npy"), n)
 
 
+def test_a_dataset_folder_takes_its_own_outputs_again(tmp_path, capsys):
+    """A run's outputs written into the dataset folder it read are no inputs of the next
+    run: only the files read_dataset reads count (a fresh user's second run was refused,
+    'the output depth.npy is the input'); its normal map still cannot be overwritten."""
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", dome())
+    for _ in range(2):
+        code, _, err = run(capsys, "integrate", folder, "-o", folder, "-s", "npy")
+        assert code == 0, err
+    assert (folder / "depth.npy").is_file()
+    from facetlift.io.dataset import dataset_files
+
+    assert dataset_files(folder) == [folder / "normal_map.npy"]
+    np.save(folder / "prior_depth.npy", np.ones(dome().shape[:2]))
+    assert dataset_files(folder, with_prior=False) == [folder / "normal_map.npy"]
+    assert dataset_files(folder)[-1] == folder / "prior_depth.npy"
+
+
 def test_unwritable_output_is_refused_before_the_solve(dome_png, tmp_path, capsys,
                                                        monkeypatch):
     (tmp_path / "file").write_text("x")

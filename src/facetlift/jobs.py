@@ -135,8 +135,11 @@ def default_outdir(src: Path) -> Path:
 def input_paths(job: Job) -> list[Path]:
     """Every file the job reads (a dataset folder's files too): outputs must not be these."""
     paths = [job.source] if job.normals is not None else [Path(p) for p in job.gradients]
-    if paths[0].is_dir():
-        paths = [p for p in paths[0].iterdir() if p.is_file()]
+    if paths[0].is_dir():  # (the files read_dataset reads, not an earlier run's outputs)
+        from .io.dataset import dataset_files
+
+        paths = dataset_files(paths[0], with_prior=job.dataset_prior,
+                              with_confidence=job.dataset_confidence)
     paths += [Path(p) for p in (job.mask, job.K, job.prior, job.prior_weight_map,
                                 job.confidence) if p is not None]
     return paths

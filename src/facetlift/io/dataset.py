@@ -117,6 +117,24 @@ def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
     return found[0] if found else None
 
 
+def dataset_files(folder, *, with_prior: bool = True, with_confidence: bool = True
+                  ) -> list[Path]:
+    """The files of `folder` that :func:`read_dataset` reads (its normal map, mask, K and,
+    where wanted, prior and confidence): what a job's outputs must not overwrite. Its other
+    files, an earlier run's outputs among them, are not inputs. Where a name is ambiguous
+    (two ``mask`` files) every candidate counts (read_dataset refuses the folder anyway)."""
+    from .images import PRIOR_FORMATS, PRIOR_POINT_FORMATS
+
+    f = Path(folder)
+    wanted = [("normal_map", NORMAL_READ_FORMATS), ("mask", MASK_FORMATS), ("K", (".txt",))]
+    if with_prior:
+        wanted.append(("prior_depth", PRIOR_FORMATS + PRIOR_POINT_FORMATS))
+    if with_confidence:
+        wanted.append(("confidence", PRIOR_FORMATS))
+    return [f / f"{stem}{ext}" for stem, formats in wanted for ext in formats
+            if (f / f"{stem}{ext}").is_file()]
+
+
 def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                  prior_scale: float | None = None, with_prior: bool = True,
                  with_confidence: bool = True) -> dict:
