@@ -504,3 +504,87 @@ def test_an_integer_maps_unit_length_check_looks_inside_the_mask_only():
         warnings.simplefilter("always")
         facetlift.integrate(v, inside)
     assert not [w for w in caught if "longer than unit length" in str(w.message)]
+
+
+def blob(shape=(60, 80), frame_pad=8):
+    """Normals of an ellipsoidal cap inside a margin (a silhouette: edge-on, pointing out of
+    the mask), with a lump so that the field is not symmetric, and its mask."""
+    H, W = shape
+    r, c = np.indices(shape)
+    u = (c + 0.5 - W / 2) / (W / 2 - frame_pad)
+    v = (H / 2 - r - 0.5) / (H / 2 - frame_pad)  # (y up)
+    inside = u**2 + v**2 < 1.0
+    z = np.sqrt(np.clip(1.0 - u**2 - v**2, 0.0, None)) + 0.2 * np.exp(
+        -((u - 0.3) ** 2 + (v + 0.2) ** 2) / 0.05)
+    gx = np.gradient(z, axis=1) * (W / 2 - frame_pad)
+    gy = -np.gradient(z, axis=0) * (H / 2 - frame_pad)
+    n = np.dstack([-gx, -gy, np.ones(shape)])
+    n /= np.linalg.norm(n, axis=2, keepdims=True)
+    mask = inside & np.isfinite(n).all(axis=2)
+    return n, mask
+
+
+def test_silhouette_names_the_wrong_axis_where_the_flips_tie():
+    """Orthographically a map with x negated and one with y negated are equally integrable
+    (inside-out from each other); at the object's silhouette the normals point out of it,
+    which tells them apart: a DSINE map (x left) was told to try the y flip first, and the
+    surface then came out inside-out (a user's check)."""
+    from facetlift import describe
+    from facetlift.errors import FrameWarning
+
+    n, mask = blob()
+    sil = frames.silhouette(prepare(n, mask))
+    assert sil["x"] == 1.0 and sil["y"] == 1.0 and min(sil["pixels"]) >= frames.SILHOUETTE_MIN
+    dsine = n * [-1, 1, 1]
+    with pytest.warns(FrameWarning, match=r"wrong in x \(at the object's silhouette the normals "
+                      r"point into it along x: 100 % .*try --normal-frame=-x,y,z"):
+        facetlift.integrate(dsine, mask)
+    guess = describe._frame_guess(dsine, mask, None, prepare(dsine, mask), frame=None,
+                                  layout=None)
+    assert guess["likely"].startswith("x flipped") and "-x,y,z" in guess["likely"]
+    with pytest.warns(FrameWarning, match=r"wrong in y \(at the object's silhouette"):
+        facetlift.integrate(n * [1, -1, 1], mask)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        facetlift.integrate(n, mask)
+
+
+def test_an_inside_out_map_is_told_by_its_silhouette():
+    """Both x and y negated: as integrable as the right map, so no curl tells; the normals
+    point into the object all round its silhouette. Read in the frame given, the fix is named
+    relative to it."""
+    from facetlift.errors import FrameWarning
+
+    n, mask = blob()
+    with pytest.warns(FrameWarning, match=r"point into the object at its silhouette along both "
+                      r"x and y .*inside-out.*try --normal-frame=-x,-y,z"):
+        s = facetlift.integrate(n * [-1, -1, 1], mask)
+    assert s.info["integrability"]["curl"] < frames.FLIP_MIN_CURL
+    with pytest.warns(FrameWarning, match=r"\(read in the frame x,-y,z\) point into the object.*"
+                      r"try --normal-frame=-x,y,z"):
+        facetlift.integrate(n * [-1, 1, 1], mask, normal_frame="directx")
+
+
+def test_silhouette_counts_only_the_mask_edge_inside_the_image():
+    """An object cut by the image's border has no contour there; a map filling its image has
+    none at all (the test stays silent); a cropped problem (an object in a larger image) sees
+    its neighbours beyond the crop box as the image's."""
+    n, mask = blob()
+    assert frames.silhouette(prepare(n))["x"] is None  # (every pixel: no edge in the image)
+    full = prepare(n, mask)
+    # the same object in a larger image, cropped to its box as integrate does
+    from facetlift.api import crop
+
+    big_n = np.zeros((100, 120, 3))
+    big_n[..., 2] = 1.0
+    big_n[20:80, 30:110] = n
+    big_m = np.zeros((100, 120), bool)
+    big_m[20:80, 30:110] = mask
+    sub, offset = crop(prepare(big_n, big_m))
+    assert offset != (0, 0) and sub.extras["image_shape"] == (100, 120)
+    assert frames.silhouette(sub) == frames.silhouette(full)
+    # its left half at the image's border: those columns' edge no longer counts
+    half = mask.copy()
+    half[:, :40] = False
+    cut = frames.silhouette(prepare(n[:, 40:], half[:, 40:]))
+    assert cut["pixels"][0] < frames.silhouette(prepare(n, half))["pixels"][0]

@@ -697,7 +697,7 @@ def crop(problem: Problem) -> tuple[Problem, tuple[int, int]]:
     )
     # (a new dict: the methods' messages that name a pixel give it in the image's rows and
     # columns, not the crop's, a review)
-    sub.extras = {**sub.extras, "offset": (int(r0), int(c0))}
+    sub.extras = {**sub.extras, "offset": (int(r0), int(c0)), "image_shape": mask.shape}
     return sub, (int(r0), int(c0))
 
 

@@ -403,15 +403,30 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
     guess.update(curls)
     # (the verdict on the better flip, named, as integrate's warning: info called a map "not
     # by the margin" that integrate called far more integrable flipped, a user's check)
-    a, b = ("y", "x") if curls["curl_y_flipped"] <= curls["curl_x_flipped"] else ("x", "y")
-    own, flipped = curls["curl"], curls[f"curl_{a}_flipped"]
+    # (where the two flips tie, the silhouette names the axis: a DSINE map, x flipped, was
+    # told y first, and following that advice made it inside-out, a user's check)
+    sil = frames.silhouette(problem)
+    a, b = frames.flip_order(curls, sil)
+    own = curls["curl"]
+    flipped = min(curls["curl_y_flipped"], curls["curl_x_flipped"])
     verdict = frames.flip_verdict(own, flipped)
-    if verdict == "claim":
+    says = {axis: frames._silhouette_says(sil, axis) for axis in ("x", "y")}
+    if verdict == "claim" and says[a] == "in" and says[b] == "out":
+        guess["likely"] = (f"{a} flipped: far more integrable with {a} negated, and at the "
+                           f"object's silhouette the normals point into it along {a} (try "
+                           f"{frames.flag(frames.negated(frame, a))}; your estimator's frame "
+                           "is in docs/conventions.md)")
+    elif verdict == "claim":
         guess["likely"] = (f"{a} flipped: far more integrable with {a} negated (try "
                            f"{frames.flag(frames.negated(frame, a))}, or "
                            f"{frames.flag(frames.negated(frame, b))}: inside-out from each "
                            "other, and about as integrable without a camera; your "
                            "estimator's frame is in docs/conventions.md)")
+    elif says["x"] == "in" and says["y"] == "in":
+        guess["likely"] = ("inside-out: at the object's silhouette the normals point into it "
+                           "along x and y (try "
+                           f"{frames.flag(frames.negated(frames.negated(frame, 'x'), 'y'))}; "
+                           "your estimator's frame is in docs/conventions.md)")
     elif verdict == "hint":
         guess["likely"] = (f"as read, or {a} flipped: more integrable with {a} negated, not by "
                            "the margin that says so (correlated errors on a flat view do this "
