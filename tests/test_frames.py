@@ -588,3 +588,24 @@ def test_silhouette_counts_only_the_mask_edge_inside_the_image():
     half[:, :40] = False
     cut = frames.silhouette(prepare(n[:, 40:], half[:, 40:]))
     assert cut["pixels"][0] < frames.silhouette(prepare(n, half))["pixels"][0]
+
+
+def test_no_flip_is_suggested_where_many_normals_face_away():
+    """A map in BGR channel order faces away from the camera on about half its pixels:
+    prepare's warning asks about another frame or BGR order; a flip of x or y mends neither,
+    and suggesting one (-x,-y,-z for an OpenCV map written by imwrite) contradicted it (a
+    user's check)."""
+    from facetlift.errors import FrameWarning
+    from facetlift.problem import UnusableNormalsWarning
+
+    n, mask = blob((90, 120), 10)
+    K = np.array([[150.0, 0, 59.5], [0, 150.0, 44.5], [0, 0, 1]])
+    bgr = (n * [1, -1, -1])[..., ::-1]  # (the OpenCV camera frame, written in BGR order)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        facetlift.integrate(bgr, mask, K=K, normal_frame="opencv")
+    said = [str(w.message) for w in rec]
+    assert any("BGR channel order" in m for m in said), said
+    assert not [m for m in said if "integrable with" in m], said
+    assert [w for w in rec if issubclass(w.category, UnusableNormalsWarning)]
+    assert not [w for w in rec if issubclass(w.category, FrameWarning)]  # (the hint)

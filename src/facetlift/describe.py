@@ -411,6 +411,11 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
     flipped = min(curls["curl_y_flipped"], curls["curl_x_flipped"])
     verdict = frames.flip_verdict(own, flipped)
     says = {axis: frames._silhouette_says(sil, axis) for axis in ("x", "y")}
+    from .problem import BACKFACING_FRAME_HINT
+
+    away = problem.counts.get("facing_away", 0.0)  # (the share prepare's warning takes)
+    if verdict == "hint" and away > BACKFACING_FRAME_HINT:  # (as integrate's check)
+        verdict = None
     if verdict == "claim" and says[a] == "in" and says[b] == "out":
         guess["likely"] = (f"{a} flipped: far more integrable with {a} negated, and at the "
                            f"object's silhouette the normals point into it along {a} (try "
@@ -422,7 +427,7 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
                            f"{frames.flag(frames.negated(frame, b))}: inside-out from each "
                            "other, and about as integrable without a camera; your "
                            "estimator's frame is in docs/conventions.md)")
-    elif says["x"] == "in" and says["y"] == "in":
+    elif says["x"] == "in" and says["y"] == "in" and away <= BACKFACING_FRAME_HINT:
         guess["likely"] = ("inside-out: at the object's silhouette the normals point into it "
                            "along x and y (try "
                            f"{frames.flag(frames.negated(frames.negated(frame, 'x'), 'y'))}; "
@@ -433,13 +438,10 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
                            f"too); if the surface looks wrong, try "
                            f"{frames.flag(frames.negated(frame, a))}")
     else:
-        from .problem import BACKFACING_FRAME_HINT
-
-        c = problem.counts  # (the share prepare's warning takes: of those not edge-on)
-        away = c.get("facing_away", 0.0)
         if away > BACKFACING_FRAME_HINT:
             guess["likely"] = (f"another frame? {away:.0%} of the normals face away from the "
-                               "camera (a world-frame export?): see docs/conventions.md")
+                               "camera (a world-frame export, or channels in BGR order?): see "
+                               "docs/conventions.md")
         elif own > frames.FLIP_MIN_CURL and flipped < UNTOLD * own:
             # (a texture artist's y-down detail map, slopes under 1 deg in 8 bits, was called
             # consistent: as read 43.9 % RMS, with --y-down 1.7 %)

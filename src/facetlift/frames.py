@@ -759,7 +759,15 @@ def flip_check(problem) -> dict:
     a, b = flip_order(out, sil)
     best = out[f"curl_{a}_flipped"]
     verdict = flip_verdict(own, min(out["curl_y_flipped"], out["curl_x_flipped"]))
-    if verdict is None:
+    from .problem import BACKFACING_FRAME_HINT
+
+    if verdict == "hint" and problem.counts.get("facing_away", 0.0) > BACKFACING_FRAME_HINT:
+        # (many normals faced away: prepare's warning asks about another frame or BGR order,
+        # which no flip of x or y mends, and the hint's small margin says little; a BGR map
+        # was also told to try -x,-y,-z, a user's check. A claim stays: an x-flipped map with
+        # a camera turns 7 % away and is told so)
+        verdict = None
+    elif verdict is None:
         inside_out_check(problem, sil)
     frame = _READ_IN.get()  # (the frame the map was read in: the hint is relative to it)
     flips = f"{best:.2f} with {a} flipped, {out[f'curl_{b}_flipped']:.2f} with {b} flipped"
