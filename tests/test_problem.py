@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -561,3 +563,38 @@ def test_entry_points_name_a_wrong_argument_kind():
     assert facetlift.clean_mask(m, 0).sum() == 5 and facetlift.clean_mask(m, 2.5).sum() == 4
     with pytest.raises(ValueError, match=r"got ndarray of shape \(100, 100, 3\)$"):
         K_from_fov(np.zeros((100, 100, 3)), 60)
+
+
+def _disk_on_flat_fill(shape=(40, 50)):
+    """A hemisphere's normals on a background filled with (0, 0, 1), and its disk mask."""
+    H, W = shape
+    r, c = np.indices(shape)
+    x, y = (c - W / 2 + 0.5) / 15.0, (H / 2 - r - 0.5) / 15.0
+    disk = x**2 + y**2 < 0.9
+    n = np.zeros(shape + (3,))
+    n[..., 2] = 1.0
+    zz = np.sqrt(np.clip(1 - x**2 - y**2, 1e-6, None))
+    n[disk] = np.stack([x, y, zz], -1)[disk]
+    return n, disk
+
+
+def test_an_inverted_mask_is_questioned():
+    """A mask with the object black and the background white (a fresh user's): where the
+    background is a flat fill the run integrated it without a word; where it is NaN the error
+    only counted missing normals. Both now ask whether the mask is inverted; the right mask,
+    and a flat object on a flat background, stay silent."""
+    n, disk = _disk_on_flat_fill()
+    with pytest.warns(UserWarning, match=r"`mask`: 100% of its pixels hold one and the same "
+                      r"normal .*is the mask inverted"):
+        prepare(n, ~disk)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        prepare(n, disk)
+        flat = np.zeros_like(n)
+        flat[..., 2] = 1.0
+        prepare(flat, disk)  # (a flat object: the outside is no different)
+    holed = n.copy()
+    holed[~disk] = np.nan
+    with pytest.raises(ValueError, match=r"no usable normal inside the mask .*outside the "
+                       r"mask \d[\d,]* of \d[\d,]* pixels hold a normal: is the mask inverted"):
+        prepare(holed, ~disk)

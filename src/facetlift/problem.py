@@ -512,9 +512,12 @@ def prepare(
         raise ValueError(
             "`normals` has no usable normal inside the mask (all missing, non-finite, "
             f"back-facing, grazing or isolated: {said})"
+            + (_inverted_mask_hint(n, m) if mask is not None and known is None else "")
         )
     if mask is not None and known is None and nan.mean() > MASK_MISSING:
         _mask_fit_check(n, m, float(nan.mean()))  # (after the refusal of a map without any)
+    elif mask is not None and known is None:
+        _flat_mask_check(n, m)
     problems = {k: v for k, v in bad.items() if v.any()}
     if problems:
         first = int(np.flatnonzero(np.logical_or.reduce(list(problems.values())))[0])
@@ -1261,6 +1264,53 @@ def _mask_fit_check(n: np.ndarray, m: np.ndarray, share: float) -> None:
          f"the mask this map's, not another view's? The mask {'; '.join(better)} of its "
          "pixels would have none (missing normals inside a mask are integrated as missing "
          "samples)")
+
+
+def _inverted_mask_hint(n: np.ndarray, m: np.ndarray) -> str:
+    """For the error of a mask without a usable normal: where most pixels outside it hold a
+    finite normal, the question whether it is inverted (a fresh user's mask with the object
+    black and the background white met only the count of missing normals)."""
+    out = ~m
+    if not out.any():
+        return ""
+    have = np.all(np.isfinite(n[out]), axis=-1)
+    if have.mean() < 0.5:
+        return ""
+    return (f"; outside the mask {int(have.sum()):,} of {int(out.sum()):,} pixels hold a "
+            "normal: is the mask inverted (the object must be white, or True)?")
+
+
+#: :func:`_flat_mask_check`: the share of a mask's pixels holding one and the same normal
+#: (a fill) above which the mask is questioned where the pixels outside it hold varied ones.
+MASK_FLAT = 0.95
+
+
+def _flat_mask_check(n: np.ndarray, m: np.ndarray) -> None:
+    """Warn where nearly every pixel of the mask holds the same normal (:data:`MASK_FLAT`;
+    a background fill) while most pixels outside it hold other, varied normals: an inverted
+    mask integrates the flat background without a word (a fresh user's check: 'mean deviation
+    0.00 deg'). A flat object masked alone on a flat background stays silent (the outside is
+    not varied)."""
+    out = ~m
+    if m.sum() < 16 or out.sum() < 16:
+        return
+    step_in = max(1, int(m.sum()) // 65536)
+    inside = n[m][::step_in]
+    inside = inside[np.all(np.isfinite(inside), axis=-1)]
+    if inside.shape[0] < 16:
+        return
+    first = np.median(inside, axis=0)
+    same = np.all(np.abs(inside - first) < 1e-6, axis=-1)
+    if same.mean() < MASK_FLAT:
+        return
+    outside = n[out][::max(1, int(out.sum()) // 65536)]
+    outside = outside[np.all(np.isfinite(outside), axis=-1)]
+    other = ~np.all(np.abs(outside - first) < 1e-6, axis=-1)
+    if outside.shape[0] < 16 or other.mean() < 0.5 or np.ptp(outside[other], axis=0).max() < 0.1:
+        return
+    warn(f"`mask`: {same.mean():.0%} of its pixels hold one and the same normal ({first[0]:.3g}, "
+         f"{first[1]:.3g}, {first[2]:.3g}: a background fill?) while the pixels outside it "
+         "hold varied normals: is the mask inverted (the object must be white, or True)?")
 
 
 def _swapped_check(prior, mask) -> None:
