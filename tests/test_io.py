@@ -109,6 +109,36 @@ def test_exr_xyz_channels(tmp_path, normals):
     np.testing.assert_allclose(back, n, atol=1e-7)
 
 
+def test_exr_multilayer_normal_pass(tmp_path, normals):
+    """A multilayer EXR (Blender's render layers: ``ViewLayer.Normal.X``, ...) gives its one
+    layer named normal, with that layer's alpha; without one, or with two, the message lists
+    the layers (a fresh user's file was refused with its channels only)."""
+    import OpenEXR
+
+    n, _ = normals
+    hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    ch = {f"ViewLayer.Normal.{k}": n[..., i].astype(np.float32) for i, k in enumerate("XYZ")}
+    ch.update({f"ViewLayer.Combined.{k}": np.ones(n.shape[:2], np.float32) for k in "RGBA"})
+    a = np.ones(n.shape[:2], np.float32)
+    a[0, 0] = 0.0
+    ch["ViewLayer.Normal.A"] = a
+    OpenEXR.File(hdr, ch).write(str(tmp_path / "m.exr"))
+    back, alpha = io.read_normals(tmp_path / "m.exr")
+    np.testing.assert_allclose(back, n, atol=1e-7)
+    assert alpha is not None and not alpha[0, 0] and alpha[1:].all()
+    del ch["ViewLayer.Normal.A"]
+    ch.update({f"Other.normal.{k}": n[..., i].astype(np.float32) for i, k in enumerate("XYZ")})
+    OpenEXR.File(hdr, ch).write(str(tmp_path / "two.exr"))
+    with pytest.raises(ValueError, match=r"layers with three components: Other.normal, "
+                       r"ViewLayer.Combined, ViewLayer.Normal \(more than one named normal"):
+        io.read_normals(tmp_path / "two.exr")
+    only = {f"ViewLayer.Combined.{k}": np.ones(n.shape[:2], np.float32) for k in "RGB"}
+    OpenEXR.File(hdr, only).write(str(tmp_path / "none.exr"))
+    with pytest.raises(ValueError, match=r"one layer named normal .*ViewLayer.Combined: save "
+                       r"the normal pass alone"):
+        io.read_normals(tmp_path / "none.exr")
+
+
 @pytest.mark.parametrize("ext", [".png", ".npy"])
 def test_y_down_flips_y_only(tmp_path, normals, ext):
     n, _ = normals

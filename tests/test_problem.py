@@ -598,3 +598,18 @@ def test_an_inverted_mask_is_questioned():
     with pytest.raises(ValueError, match=r"no usable normal inside the mask .*outside the "
                        r"mask \d[\d,]* of \d[\d,]* pixels hold a normal: is the mask inverted"):
         prepare(holed, ~disk)
+
+
+def test_a_focal_length_in_mm_is_questioned():
+    """fx = fy = 4.2 (a phone's focal length in mm) for a 240-pixel-wide image: a field of view
+    of 176 deg, 40 % of the normals then dropped as back-facing and a warning about BGR order
+    (a fresh user's check); named now. A wide-angle K (f 600 px at 612 px) stays silent."""
+    n = np.zeros((180, 240, 3))
+    n[..., 2] = 1.0
+    K = np.array([[4.2, 0, 119.5], [0, 4.2, 89.5], [0, 0, 1]])
+    with pytest.warns(UserWarning, match=r"`K`: the focal lengths fx 4.2, fy 4.2 give a field "
+                      r"of view of 176 deg .*in mm"):
+        prepare(n, K=K)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        prepare(n, K=np.array([[120.0, 0, 119.5], [0, 120.0, 89.5], [0, 0, 1]]))  # (90 deg)

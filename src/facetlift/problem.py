@@ -398,6 +398,7 @@ def prepare(
         raise ValueError(f"`backfacing` must be one of {BACKFACING[:2]}; got {backfacing!r}")
     cam = make_camera(pixel_size, K) if camera is None else camera
     _check_principal_point(cam, H, W)
+    _check_focal_length(cam, H, W)
     eps = cam.grazing if outlier_eps is None else _check_eps(outlier_eps)
     isolated = _check_isolated(isolated)
 
@@ -784,6 +785,29 @@ def _check_principal_point(cam, H: int, W: int) -> None:
          "(columns 0..W-1, rows 0..H-1): is K for another image? After a crop, subtract the "
          "crop's first column and row from cx and cy; after a resize, scale fx, fy, cx and cy "
          "with the image (docs/conventions.md, 'A K for another image')")
+
+
+#: A pinhole K whose field of view across the image's width or height exceeds this many
+#: degrees gets a warning (:func:`_check_focal_length`): a fish-eye's is wider, but a pinhole
+#: K that wide is usually a focal length in mm (a fresh user's fx = fy = 4.2 for a 240-pixel
+#: image, 176 deg: 40 % of the normals dropped as back-facing, and a warning about BGR order).
+FOV_WIDE = 150.0
+
+
+def _check_focal_length(cam, H: int, W: int) -> None:
+    """A warning where a pinhole camera's field of view exceeds :data:`FOV_WIDE` degrees
+    across the image (the focal length in mm, or a K for an image many times smaller)."""
+    Kc = getattr(cam, "K", None)
+    if Kc is None:
+        return
+    fx, fy = float(Kc[0, 0]), float(Kc[1, 1])
+    fov = max(2 * np.degrees(np.arctan(W / (2 * fx))), 2 * np.degrees(np.arctan(H / (2 * fy))))
+    if fov > FOV_WIDE:
+        warn(f"`K`: the focal lengths fx {fx:g}, fy {fy:g} give a field of view of {fov:.0f} "
+             f"deg across this {W} x {H} image: are they in mm (or for a much smaller "
+             "image), not pixels? In pixels, fx = the focal length in mm x the image's width "
+             "in pixels / the sensor's width in mm; a camera's field of view gives it too "
+             "(--fov, or fx = (W / 2) / tan(fov / 2); docs/conventions.md)")
 
 
 #: A principal point within this share of the image's size of the centre with x and y

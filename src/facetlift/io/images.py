@@ -118,6 +118,33 @@ def _read_exr(path: Path, arg: str) -> dict[str, np.ndarray]:
         ) from None
 
 
+def _exr_normal_channels(ch: dict, p: Path, arg: str) -> tuple[tuple[str, ...], str]:
+    """The three channels of an EXR normal map (R, G, B or X, Y, Z) and its alpha's name. A
+    multilayer file (Blender's: ``ViewLayer.Normal.X``, ...) without such bare channels gives
+    its one layer whose name holds "normal" (case aside); otherwise the message lists the
+    layers that could be it."""
+    for names in (("R", "G", "B"), ("X", "Y", "Z")):
+        if all(c in ch for c in names):
+            return names, "A"
+    layers = {}  # layer -> its channels' last names
+    for key in ch:
+        layer, _, last = key.rpartition(".")
+        if layer:
+            layers.setdefault(layer, set()).add(last)
+    found = [(layer, axes) for layer, have in sorted(layers.items())
+             for axes in (("X", "Y", "Z"), ("R", "G", "B")) if set(axes) <= have]
+    normal = [(layer, axes) for layer, axes in found if "normal" in layer.lower()]
+    if len(normal) == 1:
+        layer, axes = normal[0]
+        return tuple(f"{layer}.{a}" for a in axes), f"{layer}.A"
+    which = (f"; its layers with three components: {', '.join(layer for layer, _ in found)}"
+             + (" (more than one named normal: save the one you mean alone)"
+                if len(normal) > 1 else ": save the normal pass alone, or as its own file")
+             if found else "")
+    raise ValueError(f"`{arg}`: {p} must have channels R, G, B or X, Y, Z, or one layer named "
+                     f"normal with them (a multilayer file's); got {sorted(ch)}{which}")
+
+
 def _read_npy(path: Path, arg: str) -> np.ndarray:
     try:
         arr = np.load(path, allow_pickle=False)
@@ -235,13 +262,7 @@ def read_normals(
         n = _decode_unit(rgb, p, arg, alpha)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
-        for names in (("R", "G", "B"), ("X", "Y", "Z")):
-            if all(c in ch for c in names):
-                break
-        else:
-            raise ValueError(
-                f"`{arg}`: {p} must have channels R, G, B or X, Y, Z; got {sorted(ch)}"
-            )
+        names, alpha_name = _exr_normal_channels(ch, p, arg)
         ints = [c for c in names if ch[c].dtype.kind in "iu"]
         if ints:
             raise ValueError(
@@ -249,7 +270,7 @@ def read_normals(
                 "HALF or FLOAT, holding the components themselves"
             )
         n = np.stack([ch[c] for c in names], axis=-1).astype(np.float64)
-        alpha = _alpha_mask(ch["A"]) if "A" in ch else None
+        alpha = _alpha_mask(ch[alpha_name]) if alpha_name in ch else None
     else:
         arr = _read_npy(p, arg)
         rgb, alpha = _split_alpha(arr, p, arg)
