@@ -386,3 +386,27 @@ def test_progress_true_shows_the_command_lines_bar(capsys):
     with pytest.raises(ValueError, match=r"`progress` must be True \(a progress bar on stderr\), "
                        r"a callable or None; got .yes."):
         facetlift.integrate(gt.normals, gt.mask, progress="yes")
+
+
+def test_small_api_messages_a_user_met(tmp_path):
+    """A missing file is a FileNotFoundError (and the ValueError every bad input raises);
+    integrate_gradients names p and q, not the normals it made; a misspelt option gets the
+    names it may have meant."""
+    from facetlift import io
+    from facetlift.errors import InputFileNotFound
+
+    with pytest.raises(FileNotFoundError, match=r"`path`: file .*nope.png does not exist"):
+        io.read_normals(tmp_path / "nope.png")
+    with pytest.raises(ValueError, match="does not exist"):
+        io.read_normals(tmp_path / "nope.png")
+    assert issubclass(InputFileNotFound, ValueError)
+    with pytest.raises(ValueError, match=r"^`p`, `q` \(the normals made from them\) has no "
+                       "finite"):
+        facetlift.integrate_gradients(np.full((10, 10), np.nan), np.zeros((10, 10)))
+    n = np.zeros((10, 10, 3))
+    n[..., 2] = 1.0
+    with pytest.raises(ValueError, match=r"did you mean .*'discontinuities' for "
+                       r"'discontinuity'\?"):
+        facetlift.integrate(n, discontinuity=True)
+    with pytest.raises(ValueError, match=r"did you mean 'max_iter' for 'maxiter'\?"):
+        facetlift.integrate(n, maxiter=3)

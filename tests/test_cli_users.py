@@ -73,7 +73,7 @@ def test_normal_frame_flag_reads_the_map_in_that_frame(tmp_path, capsys, flags, 
 
 def test_conflicting_frame_flags_and_bad_frames_exit_1(dome_png, capsys):
     code, _, err = run(capsys, "integrate", dome_png, "--y-down", "--normal-frame", "opencv")
-    assert code == 1 and "conflicts with frame 'opencv'" in one_line(err)
+    assert code == 1 and "conflicts with the frame 'opencv'" in one_line(err)
     code, _, err = run(capsys, "integrate", dome_png, "--normal-frame", "up")
     assert code == 1 and "--normal-frame must be one of" in one_line(err)
 
@@ -1157,3 +1157,17 @@ def test_warnings_show_as_they_come_with_a_progress_bar(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "--progress", "--max-memory",
                        "1K", "-o", tmp_path / "q")
     assert code == 1 and err.count("warning: 1 normal(s) inside the mask") == 1
+
+
+def test_small_messages_a_user_met(tmp_path, capsys):
+    """--gradients with one file before an option, info on a map without a usable normal:
+    each said something that did not help (a user's check)."""
+    p = tmp_path / "p.npy"
+    np.save(p, np.zeros((8, 9)))
+    code, _, err = run(capsys, "integrate", "--gradients", p, "-o", tmp_path / "g")
+    assert code == 1 and "takes two files, P and Q; got '-o' where a file was expected" in err
+    z = tmp_path / "zeros.npy"
+    np.save(z, np.zeros((8, 9, 3)))
+    code, out, err = run(capsys, "info", z)
+    assert "likely cannot tell (no usable normal to judge the frame by)" in out + err
+    assert "likely ?" not in out + err

@@ -58,7 +58,7 @@ def test_y_down_is_an_alias_and_conflicts_are_refused():
     assert frames.resolve(None, True) == "directx"
     assert frames.resolve("x,-y,z", True) == "x,-y,z"
     assert frames.resolve("opencv", False) == "opencv"
-    with pytest.raises(ValueError, match="conflicts with frame 'opencv'"):
+    with pytest.raises(ValueError, match="conflicts with the frame 'opencv'"):
         frames.resolve("opencv", True)
 
 

@@ -129,13 +129,13 @@ def test_exr_multilayer_normal_pass(tmp_path, normals):
     del ch["ViewLayer.Normal.A"]
     ch.update({f"Other.normal.{k}": n[..., i].astype(np.float32) for i, k in enumerate("XYZ")})
     OpenEXR.File(hdr, ch).write(str(tmp_path / "two.exr"))
-    with pytest.raises(ValueError, match=r"layers with three components: Other.normal, "
+    with pytest.raises(ValueError, match=r"layers with three components are Other.normal, "
                        r"ViewLayer.Combined, ViewLayer.Normal \(more than one named normal"):
         io.read_normals(tmp_path / "two.exr")
     only = {f"ViewLayer.Combined.{k}": np.ones(n.shape[:2], np.float32) for k in "RGB"}
     OpenEXR.File(hdr, only).write(str(tmp_path / "none.exr"))
-    with pytest.raises(ValueError, match=r"one layer named normal .*ViewLayer.Combined: save "
-                       r"the normal pass alone"):
+    with pytest.raises(ValueError, match=r"one layer named normal .*are ViewLayer.Combined: "
+                       r"save the normal pass alone"):
         io.read_normals(tmp_path / "none.exr")
 
 

@@ -380,7 +380,15 @@ def integrate_gradients(
     frames.layout_check(p, q, gradient_frame, mask)  # (warns when the other layout fits)
     normals = normals_from_gradients(px, qy)
     with frames.read_in(frames.GRADIENT_FIELD):  # (hints speak of p and q)
-        return integrate(normals, mask, pixel_size=pixel_size, **kwargs)
+        try:
+            return integrate(normals, mask, pixel_size=pixel_size, **kwargs)
+        except ValueError as e:
+            text = str(e)
+            if not text.startswith("`normals`"):
+                raise
+            # (the normals are made here from p and q: named so, a user's check)
+            raise type(e)("`p`, `q` (the normals made from them)" + text[len("`normals`"):]
+                          ) from None
 
 
 def _check_discontinuities(info: methods.MethodInfo, value) -> bool:

@@ -470,9 +470,21 @@ def _jump_hint(job, info: dict) -> str | None:
     return hint
 
 
+class _FieldFile(click.Path):
+    """A file of --gradients P Q: a value that looks like an option is no file (``--gradients
+    p.npy -o out`` said "File '-o' does not exist", a user's check)."""
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str) and value.startswith("-") and not os.path.exists(value):
+            self.fail(f"takes two files, P and Q; got {value!r} where a file was expected "
+                      "(an option? give both files first)", param, ctx)
+        return super().convert(value, param, ctx)
+
+
 @cli.command(context_settings=CONTEXT)
 @click.argument("normals", required=False, type=click.Path(exists=True, path_type=Path))
-@click.option("--gradients", nargs=2, type=click.Path(exists=True, dir_okay=False, path_type=Path),
+@click.option("--gradients", nargs=2, type=_FieldFile(exists=True, dir_okay=False,
+                                                       path_type=Path),
               metavar="P Q", help="Integrate a gradient field instead: two files (npy, EXR, "
               "TIFF) holding p and q; see --gradient-frame.")
 @_job_options

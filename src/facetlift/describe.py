@@ -398,6 +398,8 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
             with recording(record=False, action="ignore"):
                 problem = prepare(n, mask, K=K)
         except ValueError:
+            # (no usable normal to judge by: said, not "?", a user's check)
+            guess["likely"] = "cannot tell (no usable normal to judge the frame by)"
             return guess
     curls = frames.flip_curls(problem)
     guess.update(curls)

@@ -1,5 +1,6 @@
 """The exceptions facetlift raises besides ``ValueError`` (bad input, naming the argument):
-:class:`SolverError`, :class:`MemoryLimitError` and, from :func:`facetlift.batch`,
+:class:`SolverError`, :class:`MemoryLimitError`, :class:`InputFileNotFound` (also a
+``ValueError``) and, from :func:`facetlift.batch`,
 :class:`WorkersDied`; and the warning categories a caller may filter or turn into errors
 (``warnings.simplefilter("error", facetlift.FrameWarning)``): :class:`FrameWarning`,
 :class:`ConvergenceWarning` (and :class:`facetlift.problem.UnusableNormalsWarning`,
@@ -10,6 +11,12 @@ Kept in a module without heavy imports, so the command line can catch them cheap
 """
 
 from __future__ import annotations
+
+
+class InputFileNotFound(FileNotFoundError, ValueError):
+    """An input file that does not exist: a ``FileNotFoundError`` (an ``OSError``) as Python
+    code expects of a missing file, and the ``ValueError`` that every other bad input raises
+    (the message names the argument)."""
 
 
 class SolverError(RuntimeError):

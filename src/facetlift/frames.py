@@ -224,8 +224,7 @@ def resolve(frame, y_down: bool) -> str | None:
     if ch == ch_dx and (sg == sg_dx).all():
         return frame
     raise ValueError(
-        f"`y_down=True` is the frame 'directx'; it conflicts with frame {frame!r}: give one "
-        "of them"
+        f"`y_down` (the frame 'directx') conflicts with the frame {frame!r}: give one of them"
     )
 
 

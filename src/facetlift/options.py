@@ -150,6 +150,15 @@ def validate(options: tuple[Option, ...], given: dict, method: str) -> dict:
         hint = ""  # (a BiNI user's k: the bilateral sharpness is discontinuity_k for dgp)
         if "k" in unknown and "discontinuity_k" in spec:
             hint = "; BiNI's k is 'discontinuity_k' here (default 4.0, with discontinuities)"
+        else:  # (a misspelling: discontinuity=True was told the valid list alone, a user's)
+            import difflib
+
+            close = {u: difflib.get_close_matches(u, sorted(spec), n=3, cutoff=0.75)
+                     for u in unknown}
+            close = {u: " or ".join(map(repr, m)) for u, m in close.items() if m}
+            if close:
+                hint = "; did you mean " + ", ".join(f"{m} for {u!r}"
+                                                     for u, m in close.items()) + "?"
         raise ValueError(
             f"unknown option(s) {unknown} for method {method!r}; valid options: {sorted(spec)}"
             + hint

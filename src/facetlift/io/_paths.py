@@ -31,7 +31,9 @@ def _existing(path, arg: str) -> Path:
         raise ValueError(f"`{arg}` must be a path (str or os.PathLike); got {path!r}")
     p = Path(path)
     if not p.exists():
-        raise ValueError(f"`{arg}`: file {p} does not exist")
+        from ..errors import InputFileNotFound
+
+        raise InputFileNotFound(f"`{arg}`: file {p} does not exist")
     if p.is_dir():
         raise ValueError(f"`{arg}`: {p} is a directory, not a file")
     return p

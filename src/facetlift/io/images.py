@@ -137,12 +137,13 @@ def _exr_normal_channels(ch: dict, p: Path, arg: str) -> tuple[tuple[str, ...], 
     if len(normal) == 1:
         layer, axes = normal[0]
         return tuple(f"{layer}.{a}" for a in axes), f"{layer}.A"
-    which = (f"; its layers with three components: {', '.join(layer for layer, _ in found)}"
+    which = ("; a multilayer file needs one layer named normal with them, and its layers "
+             f"with three components are {', '.join(layer for layer, _ in found)}"
              + (" (more than one named normal: save the one you mean alone)"
                 if len(normal) > 1 else ": save the normal pass alone, or as its own file")
              if found else "")
-    raise ValueError(f"`{arg}`: {p} must have channels R, G, B or X, Y, Z, or one layer named "
-                     f"normal with them (a multilayer file's); got {sorted(ch)}{which}")
+    raise ValueError(f"`{arg}`: {p} must have channels R, G, B or X, Y, Z; got {sorted(ch)}"
+                     f"{which}")
 
 
 def _read_npy(path: Path, arg: str) -> np.ndarray:
