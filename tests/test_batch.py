@@ -480,7 +480,7 @@ def test_cli_batch_says_an_items_error_when_it_is_done(tmp_path, capsys, monkeyp
     out, err = capsys.readouterr()
     assert code == 0 and "warning: odd:" not in err
     assert ("batch: 1 of 1 succeeded (1 with warnings, 1 of them from an earlier run, in the "
-            "log) (1 from an earlier run)") in out
+            "log; 1 in all from an earlier run)") in out
 
 
 def test_batch_warns_of_a_camera_file_beside_plain_maps(tmp_path):

@@ -211,10 +211,10 @@ _JOB_OPTIONS = [
                  "EXR, float TIFF as stored; 8/16-bit PNG or TIFF = v/max)."),
     click.option("--prior-blur", type=float, default=None, metavar="SIGMA",
                  help="The prior is coarse or blurred (a monocular network, a low-resolution "
-                 "sensor): the standard deviation in pixels of its blur; it is then compared "
-                 "with the result blurred alike (1.1x the factor of block means blurred by one "
-                 "coarse pixel and upsampled bilinearly; block means alone did better pixel "
-                 "by pixel: docs/fusion.md, 'Blurred priors')."),
+                 "sensor, a map upsampled from a coarse grid): the standard deviation in "
+                 "pixels of its blur, so that only its coarse shape counts (for a map "
+                 "upsampled by a factor f, about 1.1 f); --prior-weight then defaults to "
+                 "0.003. docs/fusion.md, 'Blurred priors'."),
     click.option("--prior-outliers", type=click.Choice(["remove", "keep"]), default=None,
                  help="remove (the default): samples of a sparse prior that disagree with "
                  "every neighbouring sample along the normals are left out, counted and "
@@ -802,9 +802,13 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     # (those of an earlier run too, whose warnings this run did not print: a user's resumed
     # batch said nothing of a wrong-frame warning its log held)
     old = (f", {sum(warned)} of them from an earlier run, in the log" if any(warned) else "")
+    # (one parenthesis: "(2 with warnings, 2 of them from an earlier run, in the log) (2 from
+    # an earlier run)" said the earlier run twice, a user's check)
+    said = [f"{len(warned)} with warnings{old}"] if warned else []
+    if resumed:
+        said.append(f"{resumed} {'in all ' if warned else ''}from an earlier run")
     line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
-            + (f" ({len(warned)} with warnings{old})" if warned else "")
-            + (f" ({resumed} from an earlier run)" if resumed else "")
+            + (f" ({'; '.join(said)})" if said else "")
             + (f", {len(failed)} failed" if failed else "")
             + f" (log: {outdir / LOG_NAME}), {time.perf_counter() - t0:.1f} s")
     click.echo(line, err=as_json)
