@@ -1171,3 +1171,36 @@ def test_small_messages_a_user_met(tmp_path, capsys):
     code, out, err = run(capsys, "info", z)
     assert "likely cannot tell (no usable normal to judge the frame by)" in out + err
     assert "likely ?" not in out + err
+
+
+def _y_flipped_npy(path, H=30, W=36):
+    """A coupled relief's normals with y negated (far more integrable flipped), as .npy."""
+    r, c = np.indices((H, W)) + 0.5
+    p = 0.6 * np.cos(c / 5) * np.cos(r / 7)
+    q = 0.6 / 7 * 5 * np.sin(c / 5) * np.sin(r / 7)  # (-dz/drow of z = 3 sin(c/5) cos(r/7))
+    n = facetlift.normals_from_gradients(p, q) * [1, -1, 1]
+    np.save(path, n)
+    return path
+
+
+def test_strict_fails_where_the_frame_looks_wrong(tmp_path, capsys):
+    """--strict turns a frame warning into a failure before anything is written (a pipeline
+    cannot watch warnings: with PYTHONWARNINGS=error the run still exited 0, and a batch
+    item's status was "ok", a user's check); without it the run warns and writes."""
+    src = _y_flipped_npy(tmp_path / "m.npy")
+    code, _, err = run(capsys, "integrate", src, "-o", tmp_path / "o", "-s", "npy")
+    assert code == 0 and "more integrable with y flipped" in err
+    code, _, err = run(capsys, "integrate", src, "-o", tmp_path / "s", "-s", "npy", "--strict")
+    assert code == 1 and "--strict: the input's frame looks wrong: the normals are far more " \
+        "integrable with y flipped" in err
+    assert not (tmp_path / "s").exists()
+    folder = tmp_path / "in"
+    folder.mkdir()
+    _y_flipped_npy(folder / "bad.npy")
+    good = np.load(src) * [1, -1, 1]
+    np.save(folder / "good.npy", good)
+    code, out, err = run(capsys, "batch", folder, "-o", tmp_path / "b", "--strict",
+                         "--save", "npy", "--no-progress", "--workers", "1")
+    assert code == 1 and "batch: 1 of 2 succeeded, 1 failed" in out + err
+    assert (tmp_path / "b" / "good" / "depth.npy").is_file()
+    assert not (tmp_path / "b" / "bad" / "depth.npy").exists()

@@ -267,6 +267,10 @@ _JOB_OPTIONS = [
                  help="Progress bar on stderr: the iterations of routes that iterate and the "
                  "steps of the job (reading, integrating, writing; for batches, the items). "
                  "Default: when stderr is a terminal."),
+    click.option("--strict", is_flag=True,
+                 help="Fail (exit 1, nothing written; in a batch, the item) where the input's "
+                 "frame looks wrong (a frame warning: far more integrable flipped, inside-out "
+                 "at the silhouette, the other gradient layout) instead of warning."),
 ]
 
 
@@ -285,7 +289,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               max_memory=None, prior=None,
               prior_scale=None, prior_weight=None, prior_weight_map=None, confidence=None,
               prior_blur=None, prior_outliers=None, prior_fit=None, no_prior=False,
-              no_confidence=False):
+              no_confidence=False, strict=False):
     """A :class:`facetlift.jobs.Job` from the parsed flags (ValueError on bad values)."""
     from . import frames
     from .jobs import Job
@@ -345,7 +349,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         prior_weight_map=None if prior_weight_map is None else str(prior_weight_map),
         confidence=None if confidence is None else str(confidence), prior_blur=prior_blur,
         prior_outliers=prior_outliers, prior_fit=prior_fit, dataset_prior=not no_prior,
-        dataset_confidence=not no_confidence,
+        dataset_confidence=not no_confidence, strict=strict,
     )
     from .jobs import check_fov
 

@@ -95,6 +95,9 @@ class Job:
     #: Whether a dataset folder's prior_depth.* and confidence.* files are used.
     dataset_prior: bool = True
     dataset_confidence: bool = True
+    #: Fail where the input's frame looks wrong (a :class:`facetlift.FrameWarning`), before
+    #: any output is written, instead of warning.
+    strict: bool = False
 
     def with_input(self, path, outdir) -> Job:
         """The same job on another normal-map input (a batch item)."""
@@ -472,6 +475,12 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                     raise
                 raise ValueError(said) from None
         t_integrate = time.perf_counter() - t1
+        if job.strict:  # (before the outputs: nothing is written)
+            from .errors import FrameWarning
+
+            wrong = [w for w in caught if issubclass(w.category, FrameWarning)]
+            if wrong:
+                raise ValueError(f"`strict`: the input's frame looks wrong: {wrong[0].message}")
         t2 = time.perf_counter()
         announce(progress, "writing outputs")
         for kind, name in zip(save, names, strict=True):
