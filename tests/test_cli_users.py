@@ -570,6 +570,22 @@ def test_report_adds_a_discontinuity_panel_when_the_surface_has_one(tmp_path, mo
     report.write_report(tmp_path / "b.png", s, dome())
     assert seen[0] is None and seen[1].shape == s.shape
     assert (tmp_path / "b.png").stat().st_size != (tmp_path / "a.png").stat().st_size
+    # five panels leave a cell of the 3 x 2 grid free: the input normals fill it (it stayed
+    # empty, a user's check); four fill a 2 x 2 grid
+    pytest.importorskip("matplotlib")
+    from matplotlib.figure import Figure
+
+    cells = []
+    real_add = Figure.add_subplot
+    monkeypatch.setattr(Figure, "add_subplot",
+                        lambda self, *a, **k: cells.append(a) or real_add(self, *a, **k))
+    report.write_report(tmp_path / "c.png", s, dome())
+    cells = [c for c in cells if len(c) == 3]  # (the colour bars are added without a grid)
+    assert [c[2] for c in cells] == [1, 2, 3, 4, 5, 6] and cells[0][:2] == (2, 3)
+    cells.clear()
+    report.write_report(tmp_path / "d.png", facetlift.integrate(dome()), dome())
+    cells = [c for c in cells if len(c) == 3]
+    assert [c[2] for c in cells] == [1, 2, 3, 4] and cells[0][:2] == (2, 2)
 
 
 def test_report_deviation_is_the_solves_and_its_scale_is_robust(tmp_path, monkeypatch):

@@ -3,8 +3,9 @@
 Panels: the surface shaded by two lights (upper left and lower right, so a bent or inside-out
 result shows), the depth colour-mapped with a colour bar, the angular deviation between the
 input normals and the result's facets, and the depth discontinuities where the result has them
-(``Surface.discontinuities`` or ``Surface.info["discontinuities"]``, an (H, W) map), each
-cropped to the mask's bounding box. The deviation panel's mean is the one given (the command
+(``Surface.discontinuities`` or ``Surface.info["discontinuities"]``, an (H, W) map), with the
+input normals as colours where that leaves a cell of the grid free, each cropped to the mask's
+bounding box. The deviation panel's mean is the one given (the command
 line gives the solve's, over the normals it used); its colour scale, and the jump map's,
 end at the 99th percentile (larger values saturate), and the jump map's one-pixel lines are
 widened to stay visible in a small panel.
@@ -90,6 +91,13 @@ def write_report(path, surface, normals=None, *, dpi: int = 100,
         shown = _thickened(np.where(surface.mask, jumps, 0.0), crop)
         panels.append(("discontinuities (jump height)", np.where(surface.mask, shown, np.nan),
                        "inferno", "depth", _robust_max(np.where(shown > 0, shown, np.nan))))
+    if normals is not None and len(panels) == 5:  # (the grid's sixth cell: the input, as read
+        # in facetlift's frame, RGB = (n + 1) / 2; it stayed empty, a user's check)
+        n = np.asarray(normals, dtype=float)
+        if n.shape == surface.shape + (3,):
+            rgb = np.clip((n + 1.0) / 2.0, 0.0, 1.0)
+            rgb[~(surface.mask & np.all(np.isfinite(n), axis=-1))] = 1.0
+            panels.append(("input normals (x right, y up, z viewer)", rgb, None, None, None))
     H, W = surface.shape
     panels = [(t, img[box], c, lab, top) for t, img, c, lab, top in panels]
     cols = 2 if len(panels) <= 4 else 3
@@ -100,7 +108,8 @@ def write_report(path, surface, normals=None, *, dpi: int = 100,
     for k, (title, img, cmap, label, top) in enumerate(panels):
         ax = fig.add_subplot(rows, cols, k + 1)
         kw = {} if top is None else {"vmin": 0.0, "vmax": top}
-        im = ax.imshow(np.ma.masked_invalid(img), cmap=cmap, interpolation="nearest", **kw)
+        im = ax.imshow(img if img.ndim == 3 else np.ma.masked_invalid(img), cmap=cmap,
+                       interpolation="nearest", **kw)
         ax.set_title(title, fontsize=9)
         ax.set_axis_off()
         if label is not None:
