@@ -73,7 +73,8 @@ def test_normal_frame_flag_reads_the_map_in_that_frame(tmp_path, capsys, flags, 
 
 def test_conflicting_frame_flags_and_bad_frames_exit_1(dome_png, capsys):
     code, _, err = run(capsys, "integrate", dome_png, "--y-down", "--normal-frame", "opencv")
-    assert code == 1 and "conflicts with the frame 'opencv'" in one_line(err)
+    assert code == 1 and "--y-down (the frame 'directx') conflicts with --normal-frame 'opencv'" \
+        in one_line(err)
     code, _, err = run(capsys, "integrate", dome_png, "--normal-frame", "up")
     assert code == 1 and "--normal-frame must be one of" in one_line(err)
 
@@ -1207,8 +1208,8 @@ def test_strict_fails_where_the_frame_looks_wrong(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", src, "-o", tmp_path / "o", "-s", "npy")
     assert code == 0 and "more integrable with y flipped" in err
     code, _, err = run(capsys, "integrate", src, "-o", tmp_path / "s", "-s", "npy", "--strict")
-    assert code == 1 and "--strict: the input's frame looks wrong: the normals are far more " \
-        "integrable with y flipped" in err
+    assert code == 1 and "--strict: the input's frame looks wrong (the normals are far more " \
+        "integrable with y flipped" in err and "nothing was written" in err
     assert not (tmp_path / "s").exists()
     folder = tmp_path / "in"
     folder.mkdir()
@@ -1220,3 +1221,23 @@ def test_strict_fails_where_the_frame_looks_wrong(tmp_path, capsys):
     assert code == 1 and "batch: 1 of 2 succeeded, 1 failed" in out + err
     assert (tmp_path / "b" / "good" / "depth.npy").is_file()
     assert not (tmp_path / "b" / "bad" / "depth.npy").exists()
+    # a weaker hint that right inputs give too (a concave surface masked alone points into
+    # the mask all round its edge) does not fail; many normals facing away (BGR order) does
+    r, c = np.indices((40, 40)) + 0.5
+    inside = (r - 20) ** 2 + (c - 20) ** 2 < 15**2
+    bowl = facetlift.normals_from_gradients((c - 20) / 20, (20 - r) / 20)  # (z = rho^2 / 40)
+    bowl[~inside] = np.nan
+    np.save(tmp_path / "bowl.npy", bowl)
+    code, _, err = run(capsys, "integrate", tmp_path / "bowl.npy", "-o", tmp_path / "bw",
+                       "-s", "npy", "--strict")
+    assert code == 0 and "point into the object at its mask's edge" in err
+    # many normals facing away (another frame, BGR order: a warning about unusable normals,
+    # no FrameWarning) fail too
+    from types import SimpleNamespace
+
+    from facetlift.jobs import _strict_check
+
+    with pytest.raises(ValueError, match=r"`strict`: the input's frame looks wrong \(30% of "
+                       r"the normals face away from the camera"):
+        _strict_check([], SimpleNamespace(info={"input": {"facing_away": 0.3}}))
+    _strict_check([], SimpleNamespace(info={"input": {"facing_away": 0.01}}))

@@ -269,8 +269,9 @@ _JOB_OPTIONS = [
                  "Default: when stderr is a terminal."),
     click.option("--strict", is_flag=True,
                  help="Fail (exit 1, nothing written; in a batch, the item) where the input's "
-                 "frame looks wrong (a frame warning: far more integrable flipped, inside-out "
-                 "at the silhouette, the other gradient layout) instead of warning."),
+                 "frame looks wrong instead of warning: far more integrable flipped, a "
+                 "gradient field in the other layout, many normals facing away (another frame "
+                 "or BGR order). Not on the weaker hints that right inputs give too."),
 ]
 
 
@@ -326,7 +327,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         from .memory import parse_size  # first; --option max_memory=... as well)
 
         parse_size(opts["max_memory"])
-    frame = frames.resolve(normal_frame, y_down)
+    frame = frames.resolve(normal_frame, y_down, "normal_frame")
     if frame is not None:
         frames.parse(frame)
     if output_frame is not None:
@@ -633,7 +634,7 @@ def info(normals, gradients, mask, K, fov, normal_frame, y_down, gradient_frame,
 
         check_fov(Job(K=None if K is None else str(K), fov=fov))
     rec = describe(normals, gradients=gradients, mask=mask, K=K, fov=fov,
-                   normal_frame=frames.resolve(normal_frame, y_down),
+                   normal_frame=frames.resolve(normal_frame, y_down, "normal_frame"),
                    mat_keys=_split(mat_keys), gradient_frame=gradient_frame,
                    prior_scale=prior_scale, prior=prior, confidence=confidence,
                    prior_fit=prior_fit)

@@ -200,7 +200,8 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
 
     def unusable(e: ValueError) -> dict:  # (integrate would refuse it: why, and the frame)
         out.update(usable=False, problem=str(e),
-                   frame=_frame_guess(n, inp.mask, inp.K, frame=normal_frame, layout=layout))
+                   frame=_frame_guess(n, inp.mask, inp.K, frame=normal_frame, layout=layout,
+                                      field=inp.field))
         return out
 
     from .prior_fit import check as check_fit
@@ -259,7 +260,8 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         # (the unusable normals have their own line: not again as a warning)
         warnings=out["warnings"] + [str(w.message) for w in caught if not issubclass(
             w.category, UnusableNormalsWarning)],
-        frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame, layout=layout),
+        frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame, layout=layout,
+                           field=inp.field),
         estimate=_twice(estimate(problem), fitted),
         # (what --discontinuities would need: a user planning a large job asked)
         estimate_discontinuities=_twice(estimate(problem, "dgp", discontinuities=True),
@@ -349,12 +351,13 @@ def _file_facts(src: Path) -> dict:
     return facts
 
 
-def _frame_guess(n, mask, K, problem=None, *, frame=None, layout=None) -> dict:
+def _frame_guess(n, mask, K, problem=None, *, frame=None, layout=None,
+                 field: bool = False) -> dict:
     """Whether the frame the map was read in looks right, from the view direction and the
     integrability; ``likely`` says what to change. `layout`: the other gradient layout, where
     the field was read in the wrong one (:class:`facetlift.frames.LayoutWarning`), which
     ``likely`` then names: its normals are in no frame that a flip would fix."""
-    guess = _frame_evidence(n, mask, K, problem, frame=frame)
+    guess = _frame_evidence(n, mask, K, problem, frame=frame, field=field)
     if layout is not None:
         guess["likely"] = (f"the other gradient layout: --gradient-frame {layout} "
                            f"(gradient_frame='{layout}')")
@@ -366,7 +369,19 @@ def _frame_guess(n, mask, K, problem=None, *, frame=None, layout=None) -> dict:
 UNTOLD = 1.5
 
 
-def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
+def _try(frame, axes: str, field: bool) -> str:
+    """What to try where the `axes` ("x", "y" or "xy") are negated: a frame's flag, or for
+    a gradient field (`field`) the slopes to negate (it has no normal frame)."""
+    from . import frames
+
+    if field:
+        return "negating " + " and ".join({"x": "p", "y": "q"}[a] for a in axes)
+    for a in axes:
+        frame = frames.negated(frame, a)
+    return frames.flag(frame)
+
+
+def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False) -> dict:
     """:func:`_frame_guess` from the normals alone."""
     from . import frames
     from .problem import prepare
@@ -421,24 +436,23 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
     if verdict == "claim" and says[a] == "in" and says[b] == "out":
         guess["likely"] = (f"{a} flipped: far more integrable with {a} negated, and at the "
                            f"object's silhouette the normals point into it along {a} (try "
-                           f"{frames.flag(frames.negated(frame, a))}; your estimator's frame "
-                           "is in docs/conventions.md)")
+                           f"{_try(frame, a, field)}; your estimator's frame is in "
+                           "docs/conventions.md)")
     elif verdict == "claim":
         guess["likely"] = (f"{a} flipped: far more integrable with {a} negated (try "
-                           f"{frames.flag(frames.negated(frame, a))}, or "
-                           f"{frames.flag(frames.negated(frame, b))}: inside-out from each "
-                           "other, and about as integrable without a camera; your "
+                           f"{_try(frame, a, field)}, or {_try(frame, b, field)}: inside-out "
+                           "from each other, and about as integrable without a camera; your "
                            "estimator's frame is in docs/conventions.md)")
-    elif says["x"] == "in" and says["y"] == "in" and away <= BACKFACING_FRAME_HINT:
-        guess["likely"] = ("inside-out: at the object's silhouette the normals point into it "
-                           "along x and y (try "
-                           f"{frames.flag(frames.negated(frames.negated(frame, 'x'), 'y'))}; "
-                           "your estimator's frame is in docs/conventions.md)")
+    elif verdict is None and says["x"] == "in" and says["y"] == "in" and (
+            away <= BACKFACING_FRAME_HINT):  # (as integrate's check: frames.flip_check)
+        guess["likely"] = ("as read, or inside-out: at the mask's edge the normals point into "
+                           "the object along x and y (if that edge is its silhouette, try "
+                           f"{_try(frame, 'xy', field)}; a concave surface masked alone, a "
+                           "bowl's inside or a crater, does this too)")
     elif verdict == "hint":
         guess["likely"] = (f"as read, or {a} flipped: more integrable with {a} negated, not by "
                            "the margin that says so (correlated errors on a flat view do this "
-                           f"too); if the surface looks wrong, try "
-                           f"{frames.flag(frames.negated(frame, a))}")
+                           f"too); if the surface looks wrong, try {_try(frame, a, field)}")
     else:
         if away > BACKFACING_FRAME_HINT:
             guess["likely"] = (f"another frame? {away:.0%} of the normals face away from the "
@@ -451,7 +465,7 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None) -> dict:
                                "integrable either way: slopes near the quantisation step, "
                                "noise, or planes meeting at creases and jumps); if the map's "
                                "y runs the other way, name that frame: "
-                               f"{frames.flag(frames.negated(frame, 'y'))}")
+                               f"{_try(frame, 'y', field)}")
         else:
             guess["likely"] = "as read (consistent)"
     return guess

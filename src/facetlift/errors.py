@@ -38,7 +38,15 @@ class MemoryLimitError(MemoryError):
 class FrameWarning(UserWarning):
     """The input is probably not in the frame or encoding it was read in: far more
     integrable with y (or x) flipped, a gradient field in the other layout
-    (:class:`facetlift.frames.LayoutWarning`), or integer normals decoded as a PNG encoding."""
+    (:class:`facetlift.frames.LayoutWarning`), or integer normals decoded as a PNG encoding;
+    the weaker signs are :class:`FrameHint`."""
+
+
+class FrameHint(FrameWarning):
+    """A weaker sign of a wrong frame, which right inputs can give too: more integrable
+    flipped by a small margin (correlated errors on a flat view), or normals pointing into the
+    object all round its silhouette (an inside-out map, or a concave surface masked alone).
+    The command line's ``--strict`` does not fail on these."""
 
 
 class ConvergenceWarning(UserWarning):

@@ -45,7 +45,7 @@ import re
 import numpy as np
 
 from ._warnings import warn
-from .errors import FrameWarning
+from .errors import FrameHint, FrameWarning
 
 #: Named frames -> axis strings (see the module docstring).
 FRAMES = {
@@ -216,15 +216,16 @@ def mirrors(frame, name: str = "frame") -> bool:
     return bool((np.prod(signs) < 0) != bool(odd))
 
 
-def resolve(frame, y_down: bool) -> str | None:
-    """One frame from a `frame` argument and the older ``y_down`` flag (its alias)."""
+def resolve(frame, y_down: bool, name: str = "frame") -> str | None:
+    """One frame from a `frame` argument (called `name` in the message) and the older
+    ``y_down`` flag (its alias)."""
     if not y_down or frame is None:
         return "directx" if y_down else frame
-    (ch, sg), (ch_dx, sg_dx) = parse(frame), parse("directx")
+    (ch, sg), (ch_dx, sg_dx) = parse(frame, name), parse("directx")
     if ch == ch_dx and (sg == sg_dx).all():
         return frame
     raise ValueError(
-        f"`y_down` (the frame 'directx') conflicts with the frame {frame!r}: give one of them"
+        f"`y_down` (the frame 'directx') conflicts with `{name}` {frame!r}: give one of them"
     )
 
 
@@ -720,19 +721,19 @@ def inside_out_check(problem, sil: dict | None = None) -> None:
     if not (_silhouette_says(sil, "x") == "in" and _silhouette_says(sil, "y") == "in"):
         return
     frame = _READ_IN.get()
-    if frame == GRADIENT_FIELD:
-        fix = "negate both p and q (or give the height's negative)"
-    else:
-        fix = f"try {flag(negated(negated(frame, 'x'), 'y'))}"
-    read = "" if is_identity(frame) or frame == GRADIENT_FIELD else (
-        f" (read in the frame {axis_string(frame)})")
+    field = frame == GRADIENT_FIELD  # (no normal frame to name: a review found a crash)
+    fix = ("negate both p and q (or give the height's negative)" if field
+           else f"try {flag(negated(negated(frame, 'x'), 'y'))}")
+    read = "" if field or is_identity(frame) else f" (read in the frame {axis_string(frame)})"
     kx, ky = sil["pixels"]
-    warn(f"the normals{read} point into the object at its silhouette along both x and y "
+    warn(f"the normals{read} point into the object at its mask's edge along both x and y "
          f"({100 * (1 - sil['x']):.0f} % of {kx} and {100 * (1 - sil['y']):.0f} % of {ky} "
-         "edge pixels), where an occluding contour's point out of it: the surface probably "
-         f"came out inside-out (both axes negated, which no integrability check can see): "
-         f"{fix}; docs/conventions.md lists the frames of common sources. A mask that is no "
-         "silhouette (a region cut out of a larger surface) can do this too", FrameWarning)
+         "edge pixels), where an occluding contour's point out of it: if the mask's edge is "
+         "the object's silhouette, the surface came out inside-out (both axes negated, which "
+         f"no integrability check can see): {fix}; docs/conventions.md lists the frames of "
+         "common sources. A concave surface masked alone (a bowl's inside, a crater, an "
+         "engraving) or a region cut out of a larger surface does this too: then all is well",
+         FrameHint)
 
 
 def flip_check(problem) -> dict:
@@ -760,13 +761,14 @@ def flip_check(problem) -> dict:
     verdict = flip_verdict(own, min(out["curl_y_flipped"], out["curl_x_flipped"]))
     from .problem import BACKFACING_FRAME_HINT
 
-    if verdict == "hint" and problem.counts.get("facing_away", 0.0) > BACKFACING_FRAME_HINT:
+    away = problem.counts.get("facing_away", 0.0) > BACKFACING_FRAME_HINT
+    if verdict == "hint" and away:
         # (many normals faced away: prepare's warning asks about another frame or BGR order,
         # which no flip of x or y mends, and the hint's small margin says little; a BGR map
         # was also told to try -x,-y,-z, a user's check. A claim stays: an x-flipped map with
         # a camera turns 7 % away and is told so)
         verdict = None
-    elif verdict is None:
+    elif verdict is None and not away:  # (describe's frame guess decides alike)
         inside_out_check(problem, sil)
     frame = _READ_IN.get()  # (the frame the map was read in: the hint is relative to it)
     flips = f"{best:.2f} with {a} flipped, {out[f'curl_{b}_flipped']:.2f} with {b} flipped"
@@ -778,7 +780,7 @@ def flip_check(problem) -> dict:
              f"given, {flips}), not by the margin that "
              "says the frame is wrong (strongly correlated errors on a nearly flat view do "
              f"this too): if the surface looks bent or inside-out, try {try_}",
-             FrameWarning)
+             FrameHint)
     elif verdict == "claim":
         head = (f"the normals are far more integrable with {a} flipped (relative curl "
                 f"{own:.2f} as given, {flips})")

@@ -476,11 +476,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                 raise ValueError(said) from None
         t_integrate = time.perf_counter() - t1
         if job.strict:  # (before the outputs: nothing is written)
-            from .errors import FrameWarning
-
-            wrong = [w for w in caught if issubclass(w.category, FrameWarning)]
-            if wrong:
-                raise ValueError(f"`strict`: the input's frame looks wrong: {wrong[0].message}")
+            _strict_check(caught, surface)
         t2 = time.perf_counter()
         announce(progress, "writing outputs")
         for kind, name in zip(save, names, strict=True):
@@ -523,6 +519,25 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "timings": {"read": t_read, "integrate": t_integrate,
                     "write": time.perf_counter() - t2, "total": time.perf_counter() - t0},
     }
+
+
+def _strict_check(caught, surface) -> None:
+    """``strict``: a ValueError where the input's frame looks wrong: a
+    :class:`facetlift.FrameWarning` that is no :class:`facetlift.errors.FrameHint` (which
+    right inputs give too), or many normals facing away (the unusable-normals warning's
+    question about another frame or BGR order). Its first clause says why; the warning
+    itself, printed before, the rest."""
+    from .errors import FrameHint, FrameWarning
+    from .problem import BACKFACING_FRAME_HINT
+
+    why = [str(w.message).split(": ", 1)[0] for w in caught
+           if issubclass(w.category, FrameWarning) and not issubclass(w.category, FrameHint)]
+    away = surface.info.get("input", {}).get("facing_away", 0.0)
+    if not why and away > BACKFACING_FRAME_HINT:
+        why = [f"{away:.0%} of the normals face away from the camera"]
+    if why:
+        raise ValueError(f"`strict`: the input's frame looks wrong ({why[0]}; the warning "
+                         "above says what to try); nothing was written")
 
 
 #: The counts of info["input"] a job record keeps (``normals``), in this order.
