@@ -345,6 +345,12 @@ def test_fov_and_output_frame_in_templates_and_resume_settings(tmp_path):
     a, b, c = (fb.settings(Job(output_frame=f)) for f in ("opencv", "OpenCV", "x,-y,-z"))
     assert a == b == c and a["output_frame"] == "x,-y,-z"
     assert fb.settings(Job(output_frame="opengl")) == plain
+    # the weight's default recorded as the result takes it (logs before it was None said 1;
+    # a review: every item of an old log ran again), --strict off left out as before it was
+    assert plain["prior_weight"] == 1.0 and "strict" not in plain
+    assert fb.settings(Job(prior_weight=1.0)) == plain
+    assert fb.settings(Job(prior_blur=4.0))["prior_weight"] == 0.003
+    assert fb.settings(Job(strict=True))["strict"] is True
 
 
 def test_the_default_workers_without_dask_run_in_this_process(tmp_path, monkeypatch):
@@ -479,8 +485,8 @@ def test_cli_batch_says_an_items_error_when_it_is_done(tmp_path, capsys, monkeyp
                  "--save", "npy", "--resume"])
     out, err = capsys.readouterr()
     assert code == 0 and "warning: odd:" not in err
-    assert ("batch: 1 of 1 succeeded (1 with warnings, 1 of them from an earlier run, in the "
-            "log; 1 in all from an earlier run)") in out
+    assert ("batch: 1 of 1 succeeded (1 from an earlier run; 1 with warnings, 1 of those in "
+            "the log only)") in out
 
 
 def test_batch_warns_of_a_camera_file_beside_plain_maps(tmp_path):

@@ -598,12 +598,40 @@ def test_an_inverted_mask_is_questioned():
     with pytest.raises(ValueError, match=r"no usable normal inside the mask .*outside the "
                        r"mask \d[\d,]* of \d[\d,]* pixels hold a normal: is the mask inverted"):
         prepare(holed, ~disk)
+    # ... and with one ring of the object's pixels in it, it ran without a word (a review)
+    H, W = disk.shape
+    r, c = np.indices((H, W))
+    smaller = ((c - W / 2 + 0.5) ** 2 + (H / 2 - r - 0.5) ** 2) / 225.0 < 0.75
+    with pytest.warns(UserWarning, match=r"`mask`: \d+% of its pixels have no normal while "
+                      r"100% of those outside it have one: is the mask inverted"):
+        prepare(holed, ~smaller)
+    # a flat object (a box's face) masked inside a scene of varied normals: its mask does not
+    # reach the image's border, as an inverted one would (a review's false alarm)
+    box = np.zeros_like(disk)
+    box[15:25, 5:12] = True
+    edge = np.zeros_like(disk)
+    scene = facetlift.normals_from_gradients(0.5 * np.sin(c / 3.0), 0.5 * np.cos(r / 4.0))
+    scene[box] = [0.0, 0.0, 1.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        prepare(scene, box)
+    edge[:, :7] = True  # (small at the image's border: still silent)
+    scene[edge] = [0.0, 0.0, 1.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        prepare(scene, edge)
+    edge = np.zeros_like(disk)  # (a large one at the image's border: questioned)
+    edge[:, 0:20] = True
+    scene[edge] = [0.0, 0.0, 1.0]
+    with pytest.warns(UserWarning, match="is the mask inverted"):
+        prepare(scene, edge)
 
 
 def test_a_focal_length_in_mm_is_questioned():
     """fx = fy = 4.2 (a phone's focal length in mm) for a 240-pixel-wide image: a field of view
     of 176 deg, 40 % of the normals then dropped as back-facing and a warning about BGR order
-    (a fresh user's check); named now. A wide-angle K (f 600 px at 612 px) stays silent."""
+    (a fresh user's check); named now. A wide-angle K (90 deg across the width) stays
+    silent."""
     n = np.zeros((180, 240, 3))
     n[..., 2] = 1.0
     K = np.array([[4.2, 0, 119.5], [0, 4.2, 89.5], [0, 0, 1]])

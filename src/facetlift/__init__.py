@@ -27,6 +27,7 @@ _LAZY = {
     "Pinhole": ("camera", "Pinhole"),
     "SolverError": ("errors", "SolverError"),
     "MemoryLimitError": ("errors", "MemoryLimitError"),
+    "InputFileNotFound": ("errors", "InputFileNotFound"),
     "FrameWarning": ("errors", "FrameWarning"),
     "ConvergenceWarning": ("errors", "ConvergenceWarning"),
     "LayoutWarning": ("frames", "LayoutWarning"),

@@ -365,6 +365,16 @@ def settings(job: Job) -> dict:
     for key in ("fov", "output_frame"):  # (unset: as in a log written before they existed)
         if out.get(key) is None:
             out.pop(key, None)
+    if not out.get("strict"):  # (off: as in a log written before it existed)
+        out.pop("strict", None)
+    if out.get("prior_weight") is None:  # (the default, as the result takes it: 1, as logs
+        # before the blurred prior's own default recorded it, or that one; a review)
+        from .problem import default_prior_weight
+
+        try:
+            out["prior_weight"] = default_prior_weight(None, job.prior_blur)
+        except ValueError:  # (a bad prior_blur: the item's own run says so)
+            out["prior_weight"] = 1.0
     if "output_frame" in out:  # (its spellings alike: "OpenCV", "opencv", "x,-y,-z")
         out["output_frame"] = frames.axis_string(out["output_frame"])
         if out["output_frame"] == "x,y,z":

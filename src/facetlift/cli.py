@@ -806,12 +806,12 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
               if r["status"] == "ok" and r.get("warnings")]
     # (those of an earlier run too, whose warnings this run did not print: a user's resumed
     # batch said nothing of a wrong-frame warning its log held)
-    old = (f", {sum(warned)} of them from an earlier run, in the log" if any(warned) else "")
     # (one parenthesis: "(2 with warnings, 2 of them from an earlier run, in the log) (2 from
     # an earlier run)" said the earlier run twice, a user's check)
-    said = [f"{len(warned)} with warnings{old}"] if warned else []
-    if resumed:
-        said.append(f"{resumed} {'in all ' if warned else ''}from an earlier run")
+    said = [f"{resumed} from an earlier run"] if resumed else []
+    if warned:  # (those earlier ones' warnings were not printed now: in the log)
+        said.append(f"{len(warned)} with warnings"
+                    + (f", {sum(warned)} of those in the log only" if any(warned) else ""))
     line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
             + (f" ({'; '.join(said)})" if said else "")
             + (f", {len(failed)} failed" if failed else "")

@@ -787,8 +787,8 @@ def _check_principal_point(cam, H: int, W: int) -> None:
          "with the image (docs/conventions.md, 'A K for another image')")
 
 
-#: A pinhole K whose field of view across the image's width or height exceeds this many
-#: degrees gets a warning (:func:`_check_focal_length`): a fish-eye's is wider, but a pinhole
+#: A pinhole K whose field of view across the image's width exceeds this many degrees gets a
+#: warning (:func:`_check_focal_length`): a fish-eye's is wider, but a pinhole
 #: K that wide is usually a focal length in mm (a fresh user's fx = fy = 4.2 for a 240-pixel
 #: image, 176 deg: 40 % of the normals dropped as back-facing, and a warning about BGR order).
 FOV_WIDE = 150.0
@@ -801,13 +801,16 @@ def _check_focal_length(cam, H: int, W: int) -> None:
     if Kc is None:
         return
     fx, fy = float(Kc[0, 0]), float(Kc[1, 1])
-    fov = max(2 * np.degrees(np.arctan(W / (2 * fx))), 2 * np.degrees(np.arctan(H / (2 * fy))))
+    # (across the width, as --fov gives it: a portrait image's height sees more, and --fov 140
+    # on one was questioned at 159 deg, a review)
+    fov = 2 * np.degrees(np.arctan(W / (2 * fx)))
     if fov > FOV_WIDE:
         warn(f"`K`: the focal lengths fx {fx:g}, fy {fy:g} give a field of view of {fov:.0f} "
-             f"deg across this {W} x {H} image: are they in mm (or for a much smaller "
+             f"deg across this {W}-pixel-wide image: are they in mm (or for a much smaller "
              "image), not pixels? In pixels, fx = the focal length in mm x the image's width "
              "in pixels / the sensor's width in mm; a camera's field of view gives it too "
-             "(--fov, or fx = (W / 2) / tan(fov / 2); docs/conventions.md)")
+             "(--fov, or fx = (W / 2) / tan(fov / 2); docs/conventions.md). A camera that "
+             "wide is seldom a pinhole: if yours is, all is well")
 
 
 #: A principal point within this share of the image's size of the centre with x and y
@@ -1272,6 +1275,14 @@ def _mask_fit_check(n: np.ndarray, m: np.ndarray, share: float) -> None:
         out = ~alt
         return bool(out.any()) and float(have[out].mean()) < 0.5
 
+    out = ~m
+    if share > 0.5 and out.any() and float(have[out].mean()) > 0.5:
+        # (most of the mask without a normal, most of its outside with one: the mask of the
+        # background; one ring of the object's pixels in it ran silently, a review)
+        warn(f"`mask`: {share:.0%} of its pixels have no normal while "
+             f"{float(have[out].mean()):.0%} of those outside it have one: is the mask "
+             "inverted (the object must be white, or True)?")
+        return
     if not background(m):
         return  # (a finite background: the NaNs inside are holes, not the map's outside)
     tries = [("flipped upside down", m[::-1]), ("flipped left to right", m[:, ::-1])]
@@ -1307,6 +1318,10 @@ def _inverted_mask_hint(n: np.ndarray, m: np.ndarray) -> str:
 #: :func:`_flat_mask_check`: the share of a mask's pixels holding one and the same normal
 #: (a fill) above which the mask is questioned where the pixels outside it hold varied ones.
 MASK_FLAT = 0.95
+#: ... where the mask reaches the image's border and covers at least this share of the image,
+#: as a background does (a flat object masked in a scene of varied normals, a box's face,
+#: was questioned otherwise, a review).
+MASK_FLAT_SHARE = 0.25
 
 
 def _flat_mask_check(n: np.ndarray, m: np.ndarray) -> None:
@@ -1317,6 +1332,12 @@ def _flat_mask_check(n: np.ndarray, m: np.ndarray) -> None:
     not varied)."""
     out = ~m
     if m.sum() < 16 or out.sum() < 16:
+        return
+    # (an inverted mask is the background, which reaches the image's border; a flat object
+    # masked inside a scene of varied normals, a box's face or a wall, does not always, and
+    # was questioned, a review)
+    if not (m[0].any() or m[-1].any() or m[:, 0].any() or m[:, -1].any()) or (
+            m.mean() < MASK_FLAT_SHARE):  # (... and covers much of the image)
         return
     step_in = max(1, int(m.sum()) // 65536)
     inside = n[m][::step_in]

@@ -123,16 +123,18 @@ def dataset_files(folder, *, with_prior: bool = True, with_confidence: bool = Tr
     where wanted, prior and confidence): what a job's outputs must not overwrite. Its other
     files, an earlier run's outputs among them, are not inputs. Where a name is ambiguous
     (two ``mask`` files) every candidate counts (read_dataset refuses the folder anyway)."""
+    f = Path(folder)
+    skip = {"prior_depth": not with_prior, "confidence": not with_confidence}
+    return [f / f"{stem}{ext}" for stem, formats in _dataset_formats().items()
+            if not skip.get(stem) for ext in formats if (f / f"{stem}{ext}").is_file()]
+
+
+def _dataset_formats() -> dict[str, tuple[str, ...]]:
+    """The files a dataset folder may hold, ``stem -> extensions`` (:func:`read_dataset`)."""
     from .images import PRIOR_FORMATS, PRIOR_POINT_FORMATS
 
-    f = Path(folder)
-    wanted = [("normal_map", NORMAL_READ_FORMATS), ("mask", MASK_FORMATS), ("K", (".txt",))]
-    if with_prior:
-        wanted.append(("prior_depth", PRIOR_FORMATS + PRIOR_POINT_FORMATS))
-    if with_confidence:
-        wanted.append(("confidence", PRIOR_FORMATS))
-    return [f / f"{stem}{ext}" for stem, formats in wanted for ext in formats
-            if (f / f"{stem}{ext}").is_file()]
+    return {"normal_map": NORMAL_READ_FORMATS, "mask": MASK_FORMATS, "K": (".txt",),
+            "prior_depth": PRIOR_FORMATS + PRIOR_POINT_FORMATS, "confidence": PRIOR_FORMATS}
 
 
 def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
@@ -168,7 +170,8 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     f = Path(folder)
     if not f.is_dir():
         raise ValueError(f"`folder`: {f} is not a directory")
-    npath = _find(f, "normal_map", NORMAL_READ_FORMATS)
+    formats = _dataset_formats()
+    npath = _find(f, "normal_map", formats["normal_map"])
     if npath is None:
         from ..jobs import OUTPUT_STEMS
 
@@ -185,12 +188,12 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                f"{f} -o OUT`" if maps else "")
         )
     normals, alpha = read_normals(npath, frame=frame, y_down=y_down)
-    mpath = _find(f, "mask", MASK_FORMATS)
+    mpath = _find(f, "mask", formats["mask"])
     mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
-    kpath = _find(f, "K", (".txt",))
+    kpath = _find(f, "K", formats["K"])
     K = read_K(kpath) if kpath is not None else None
     from ..problem import prior_image, prior_samples
-    from .images import PRIOR_FORMATS, PRIOR_POINT_FORMATS, read_prior, read_weights
+    from .images import read_prior, read_weights
 
     H, W = normals.shape[:2]
     extra = {}  # the folder's own prior and confidence: a file at fault can be left unread
@@ -199,8 +202,7 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
              lambda p: read_prior(p, prior_scale, arg="prior")),
             ("confidence", "confidence", with_confidence,
              lambda p: read_weights(p, arg="confidence"))):
-        formats = PRIOR_FORMATS + (PRIOR_POINT_FORMATS if name == "prior" else ())
-        path = _find(f, stem, formats) if wanted else None
+        path = _find(f, stem, formats[stem]) if wanted else None
         extra[name] = None
         if path is None:
             continue
