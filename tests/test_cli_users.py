@@ -1241,3 +1241,21 @@ def test_strict_fails_where_the_frame_looks_wrong(tmp_path, capsys):
                        r"the normals face away from the camera"):
         _strict_check([], SimpleNamespace(info={"input": {"facing_away": 0.3}}))
     _strict_check([], SimpleNamespace(info={"input": {"facing_away": 0.01}}))
+
+
+def test_the_jump_hint_names_a_dense_prior_too(capsys):
+    """A smooth run with a dense noisy prior deviates from its normals as one bent across
+    jumps does: the hint named only the jumps (a fresh user's sensor depth, 11 deg); with a
+    dense prior it names the prior's weight too, with a sparse one it does not."""
+    from types import SimpleNamespace
+
+    from facetlift.cli import _jump_hint
+
+    job = SimpleNamespace(method="dgp", options={})
+    info = {"method": "dgp", "deviation_over_10": 0.3, "input": {"usable": 1000},
+            "integrability": {"curl": 0.3, "curl_y_flipped": 0.9, "curl_x_flipped": 0.9}}
+    dense = _jump_hint(job, {**info, "prior": {"samples": 700}})
+    sparse = _jump_hint(job, {**info, "prior": {"samples": 10}})
+    assert "--discontinuities keeps them" in dense and "dense prior's own noise" in dense
+    assert "--discontinuities keeps them" in sparse and "dense prior" not in sparse
+    capsys.readouterr()

@@ -468,9 +468,15 @@ def _jump_hint(job, info: dict) -> str | None:
     if own is not None and (frames.flip_verdict(own, flipped) is not None
                             or not own >= JUMP_HINT_CURL):
         return None  # (a wrong frame explains it; an integrable field has no jump to keep)
+    prior = info.get("prior") or {}
+    # (with a dense prior its own noise bends the surface alike: a fresh user's sensor depth,
+    # 1 mm of noise at weight 0.5, deviated 11 deg, and only the jumps were named)
+    dense = prior.get("samples", 0) > 0.25 * max(int(info.get("input", {}).get("usable", 1)), 1)
+    also = (" (or the dense prior's own noise: a lower --prior-weight, 0.01 with "
+            "--discontinuities, or --prior-blur; docs/fusion.md)" if dense else "")
     hint = (f"{share:.1%} of the facets deviate from their normals by more than 10 deg, as "
             "where a smooth surface bends across depth jumps: --discontinuities keeps them "
-            "(slower; docs/perspective.md)")
+            f"(slower; docs/perspective.md){also}")
     click.echo(f"hint: {hint}", err=True)
     return hint
 
