@@ -4,6 +4,7 @@ so that it places what the normals cannot (separate parts, depth jumps)."""
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +12,8 @@ import pytest
 import facetlift
 from facetlift import prior_fit
 from facetlift.perspective import normals_from_depth, rays
+
+BEAR = Path(__file__).resolve().parents[2] / "shared" / "data" / "normal_maps" / "diligent_bear"
 
 ROUTES = [("dgp", {}), ("dgp", {"discontinuities": True}), ("poisson", {})]
 
@@ -416,3 +419,25 @@ def test_the_second_run_reuses_the_first_runs_cuts(monkeypatch, blur):
     samples.flat[pick] = depth.flat[pick]
     again = run(n, mask, discontinuities=True, prior=samples)
     assert again.info["prior_free"]["reused"] is False
+
+
+@pytest.mark.skipif(not (BEAR / "depth_gt.npz").is_file(), reason="no DiLiGenT bear data")
+def test_a_relative_depth_given_with_k_is_named_by_its_relief():
+    """With K the prior is metric depth, in any units: its log-depth relief is the normals'
+    whatever the units (a dense prior too: its nearest samples were too close to pair, and
+    dense priors had no ratio). A 0..1 relative depth (a monocular network's) gave no word
+    but a torn surface (a fresh user's check); it is named now, with prior_fit."""
+    from facetlift import io
+    from facetlift.prior_fit import relief_ratio
+
+    data = io.read_dataset(BEAR)
+    with np.load(BEAR / "depth_gt.npz") as z:
+        gt = np.asarray(z["depth_gt"], float)
+    n, mask, K = data["normals"], data["mask"], data["K"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        exact = facetlift.prepare(n, mask, K=K, prior=gt / 1000.0)  # (metres: the same)
+    assert relief_ratio(exact)[0] == pytest.approx(1.0, abs=0.02)
+    with pytest.warns(UserWarning, match=r"prior: its relative relief \(of log-depth\) is "
+                      r"\d+ times .*prior_fit='affine'"):
+        facetlift.prepare(n, mask, K=K, prior=(gt - 1460.0) / 60.0 + 0.01)

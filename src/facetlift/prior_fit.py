@@ -619,8 +619,11 @@ def relief_ratio(problem) -> tuple[float, int] | None:
     # anchor on any map (an evenly strided subset of a dense 4096^2 prior is a lattice 57 px
     # apart, beyond it: a review)
     rng = np.random.default_rng(0)
-    if have.size > RELIEF_POOL:
-        have = np.sort(rng.choice(have, RELIEF_POOL, replace=False))
+    # (a dense prior thinned to about RELIEF_NEAR / 2 apart: its 31 nearest samples lay
+    # within 3 px, none far enough to pair, and dense priors had no ratio at all, a review)
+    pool = min(RELIEF_POOL, max(RELIEF_SAMPLES, int(d.n_facets / (RELIEF_NEAR / 2) ** 2)))
+    if have.size > pool:
+        have = np.sort(rng.choice(have, pool, replace=False))
     anchors = (np.arange(have.size) if have.size <= RELIEF_SAMPLES else
                np.sort(rng.choice(have.size, RELIEF_SAMPLES, replace=False)))
     r, c = (a[have].astype(float) for a in d.pixels)
