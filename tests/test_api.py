@@ -410,3 +410,18 @@ def test_small_api_messages_a_user_met(tmp_path):
         facetlift.integrate(n, discontinuity=True)
     with pytest.raises(ValueError, match=r"did you mean 'max_iter' for 'maxiter'\?"):
         facetlift.integrate(n, maxiter=3)
+
+
+def test_a_misspelt_keyword_of_integrate_is_suggested():
+    """integrate's own keywords are offered for a misspelt one (normal_frmae was told the
+    method's options alone, a user's check); the list is integrate's signature."""
+    import inspect
+
+    from facetlift import api
+
+    own = set(inspect.signature(api.integrate).parameters) - {"normals", "options"}
+    assert set(api._INTEGRATE_KEYWORDS) == own
+    n = np.zeros((10, 10, 3))
+    n[..., 2] = 1.0
+    with pytest.raises(ValueError, match=r"did you mean 'normal_frame' for 'normal_frmae'\?"):
+        facetlift.integrate(n, normal_frmae="opencv")

@@ -239,7 +239,8 @@ def integrate(
     # about grazing normals, came first and hid the one line that mattered; progress=True is
     # a bar made in _solve)
     validate(info.specs(), {**options, "progress": _no_progress}
-             if options.get("progress") is True else options, method)
+             if options.get("progress") is True else options, method,
+             keywords=_INTEGRATE_KEYWORDS)
     normals = frames.checked(normals, mask, frame=normal_frame)
     if prior is not None and not info.prior:
         # (the method refuses the prior in _solve: no outlier check to warn about before)
@@ -256,6 +257,13 @@ def integrate(
     with (contextlib.nullcontext() if frames.is_identity(normal_frame)
           else frames.read_in(normal_frame)):
         return _solve(problem, method, t0, max_memory, options)
+
+
+#: :func:`integrate`'s own keyword arguments, offered where a misspelt one looks like one.
+_INTEGRATE_KEYWORDS = ("mask", "method", "pixel_size", "K", "known", "discontinuities",
+                       "solver", "backfacing", "outlier_eps", "normal_frame", "max_memory",
+                       "prior", "prior_weight", "confidence", "prior_blur", "prior_outliers",
+                       "prior_fit")
 
 
 def _lacks(method: str, what: str) -> ValueError:

@@ -400,9 +400,10 @@ def summary(record: dict) -> str:
         removed = (prior.get("outliers") or {}).get("removed") or 0
         if removed:
             parts.append(f"{removed} prior outlier{'s' if removed != 1 else ''} left out")
-        if fit:
+        if fit:  # (its depth keeps the normals' units: not metric, a user's check)
             parts.append(f"prior aligned by --prior-fit {fit.get('kind')} ({fit.get('method')}: "
-                         f"scale {fit.get('scale'):.4g}, shift {fit.get('shift'):.4g})")
+                         f"scale {fit.get('scale'):.4g}, shift {fit.get('shift'):.4g}; the depth "
+                         "keeps the normals' units, not the prior's)")
     cut = info.get("cut_pieces") or 0
     if cut > 0:  # (docs/results.md, "What the remaining error is")
         held = (isinstance(prior, dict) and not prior.get("left_out")

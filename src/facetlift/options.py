@@ -135,8 +135,11 @@ def _convert(opt: Option, value):
     return _number(opt, value)
 
 
-def validate(options: tuple[Option, ...], given: dict, method: str) -> dict:
+def validate(options: tuple[Option, ...], given: dict, method: str,
+             keywords: tuple[str, ...] = ()) -> dict:
     """Checked values of every option of `method`: the given ones converted, defaults elsewhere.
+    `keywords`: the caller's own keyword arguments, offered too where an unknown name looks
+    like one of them (a misspelt ``normal_frame`` was told the method's options alone).
 
     Raises
     ------
@@ -153,7 +156,8 @@ def validate(options: tuple[Option, ...], given: dict, method: str) -> dict:
         else:  # (a misspelling: discontinuity=True was told the valid list alone, a user's)
             import difflib
 
-            close = {u: difflib.get_close_matches(u, sorted(spec), n=3, cutoff=0.75)
+            close = {u: difflib.get_close_matches(u, sorted(set(spec) | set(keywords)), n=3,
+                                                  cutoff=0.75)
                      for u in unknown}
             close = {u: " or ".join(map(repr, m)) for u, m in close.items() if m}
             if close:
