@@ -64,6 +64,64 @@ class Surface:
         self.discontinuities = discontinuities
         self.split = split
 
+    @classmethod
+    def from_depth(cls, depth, mask=None, *, pixel_size: float = 1.0, K=None) -> Surface:
+        """A Surface of a depth map from elsewhere (a ground truth, a sensor's, another
+        tool's), to mesh it or compare it like a result: `depth` (H, W) in the convention of
+        :attr:`depth` (larger is farther; for a pinhole camera `K`, z-depth > 0), `mask`
+        (default: where it is finite, and positive with `K`). Each vertex takes the mean of the
+        pixels around it, each carried to that corner by half its central difference (one-sided
+        at the mask's edge), in the camera's unknown (height, or log-depth); no cuts.
+
+        Raises
+        ------
+        ValueError
+            A `depth` that is no (H, W) array, a `mask` of another shape, or a mask pixel
+            whose depth is not finite (or not positive with `K`).
+        """
+        from .problem import _short
+
+        d = np.asarray(depth, dtype=float)
+        if d.ndim != 2:
+            raise ValueError(f"`depth` must be an (H, W) array; got {_short(depth)}")
+        camera = make_camera(pixel_size, K)
+        ok = np.isfinite(d) & (d > 0 if camera.perspective else True)
+        m = ok if mask is None else np.asarray(mask, dtype=bool)
+        if m.shape != d.shape:
+            raise ValueError(f"`mask` must have the shape of `depth` {d.shape}; got {m.shape}")
+        if (m & ~ok).any():
+            r, c = np.argwhere(m & ~ok)[0]
+            what = "finite and positive (a pinhole camera's z-depth)" if camera.perspective \
+                else "finite"
+            raise ValueError(f"`depth` must be {what} inside the mask; got {d[r, c]!r} at "
+                             f"(row {r}, col {c})")
+        if not m.any():
+            raise ValueError("`mask` is empty: no pixel to make a surface of")
+        u = np.where(m, camera.from_depth(np.where(m, d, 1.0)), np.nan)
+        H, W = d.shape
+        pad = np.pad(u, 1, constant_values=np.nan)
+        c0 = pad[1:-1, 1:-1]
+
+        def slope(before, after):  # (central, else one-sided, else flat)
+            central = (after - before) / 2.0
+            one = np.where(np.isfinite(after - c0), after - c0, c0 - before)
+            out = np.where(np.isfinite(central), central, one)
+            return np.where(np.isfinite(out), out, 0.0)
+
+        gx = slope(pad[1:-1, :-2], pad[1:-1, 2:])  # (along the columns)
+        gr = slope(pad[:-2, 1:-1], pad[2:, 1:-1])  # (along the rows)
+        total = np.zeros((H + 1, W + 1))
+        count = np.zeros((H + 1, W + 1))
+        for dr in (0, 1):
+            for dc in (0, 1):
+                carried = c0 + 0.5 * ((2 * dc - 1) * gx + (2 * dr - 1) * gr)
+                total[dr:dr + H, dc:dc + W] += np.where(m, carried, 0.0)
+                count[dr:dr + H, dc:dc + W] += m
+        with np.errstate(invalid="ignore"):
+            vu = np.where(count > 0, total / np.maximum(count, 1), np.nan)
+        vdepth = np.where(count > 0, camera.to_depth(np.where(count > 0, vu, 0.0)), np.nan)
+        return cls(np.where(m, d, np.nan), vdepth, m, camera=camera)
+
     @property
     def pixel_size(self) -> float:
         """Pixel width in world units (orthographic; 1.0 for a pinhole camera)."""

@@ -58,7 +58,7 @@ from .images import (
 from .meshes import MESH_FORMATS, write_mesh, write_points
 from .preview import shade, write_discontinuities, write_height, write_preview
 from .report import write_report
-from .surface import SURFACE_FORMATS, save_surface
+from .surface import SURFACE_FORMATS, load_surface, save_surface
 
 __all__ = [
     "DEPTH_FORMATS",
@@ -78,6 +78,7 @@ __all__ = [
     "read_mask",
     "read_normals",
     "save_surface",
+    "load_surface",
     "shade",
     "sweep",
     "write_depth",

@@ -78,8 +78,51 @@ def save_surface(surface, path, **kwargs) -> Path:
 
 
 def _cut_arrays(surface) -> dict:
-    """``cuts_right``, ``cuts_down`` and ``discontinuities`` where the surface has jumps."""
+    """``cuts_right``, ``cuts_down`` and ``discontinuities`` where the surface has jumps, and
+    its split mesh (``split_corners``, ``split_i``, ``split_j``, ``split_depth``: what
+    :meth:`facetlift.Surface.to_mesh` needs, so that :func:`load_surface` gives the same mesh)."""
     if getattr(surface, "cuts", None) is None:
         return {}
-    return {"cuts_right": surface.cuts[0], "cuts_down": surface.cuts[1],
-            "discontinuities": surface.discontinuities}
+    out = {"cuts_right": surface.cuts[0], "cuts_down": surface.cuts[1],
+           "discontinuities": surface.discontinuities}
+    if getattr(surface, "split", None) is not None:
+        corners, i, j, depth = surface.split
+        out.update(split_corners=corners, split_i=i, split_j=j, split_depth=depth)
+    return out
+
+
+def load_surface(path):
+    """The :class:`facetlift.Surface` of a ``.npz`` written by :func:`save_surface` (``-s npz``
+    on the command line): depth, vertex depth, mask, camera and, where it has jumps, its cuts,
+    discontinuity map and split mesh (files written before 2026-12-05 lack the split mesh:
+    their mesh is then the unsplit one). ``info`` is not stored (``--json`` has it).
+
+    Raises
+    ------
+    ValueError
+        A missing file, or one that is no surface ``.npz`` (the message names what is missing).
+    """
+    from ..surface import Surface
+    from ._paths import _existing
+
+    p = _existing(path, "path")
+    _suffix(p, (".npz",), "surface", "path")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except Exception as e:
+        raise ValueError(f"`path`: {p} is not a readable .npz ({type(e).__name__}: {e})"
+                         ) from None
+    missing = [k for k in ("depth", "vertex_depth", "mask", "pixel_size", "K") if k not in data]
+    if missing:
+        raise ValueError(f"`path`: {p} is no surface written by facetlift (no {missing})")
+    K = data["K"]
+    K = None if not np.isfinite(K).all() else K
+    cuts = split = None
+    if "cuts_right" in data and "cuts_down" in data:
+        cuts = (data["cuts_right"].astype(bool), data["cuts_down"].astype(bool))
+    if all(k in data for k in ("split_corners", "split_i", "split_j", "split_depth")):
+        split = (data["split_corners"], data["split_i"], data["split_j"], data["split_depth"])
+    return Surface(data["depth"], data["vertex_depth"], data["mask"].astype(bool),
+                   pixel_size=float(data["pixel_size"]) if K is None else 1.0, K=K, cuts=cuts,
+                   discontinuities=data.get("discontinuities"), split=split)
