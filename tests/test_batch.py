@@ -777,3 +777,18 @@ def test_a_dataset_folders_map_given_as_a_file_is_warned_about_once(tmp_path):
                                save=("npy",), workers=1)
     assert not [w for w in caught if "holds K.txt beside its normal maps" in str(w.message)]
     assert any("lies in a dataset folder whose K.txt" in w for w in recs[0]["warnings"])
+
+
+def test_workers_that_cannot_import_a_stdin_script_are_named(monkeypatch):
+    """A batch started from a script read from stdin died with the advice to add a __main__
+    guard, which does not help: the workers cannot re-import a script without a file (a
+    user's check); it says so now, and nothing for a script file."""
+    import sys
+    import types
+
+    main = types.ModuleType("__main__")
+    main.__file__ = "<stdin>"
+    monkeypatch.setitem(sys.modules, "__main__", main)
+    assert "read from stdin" in fb._no_script_file()
+    main.__file__ = "/tmp/run.py"
+    assert fb._no_script_file() is None

@@ -469,3 +469,10 @@ def test_vessel_errors():
         synthetic.vessel_view("high")
     v = np.array(synthetic.vessel_view(30))
     np.testing.assert_allclose([np.linalg.norm(v), v[1]], [1.0, -0.5])
+
+
+def test_ground_truth_repr_is_a_summary():
+    """Not the arrays (a notebook printed them whole, a user's check)."""
+    gt = synthetic.analytic("sphere", 32)
+    assert repr(gt) == "GroundTruth('sphere', 32x32, %d pixels, orthographic, pixel_size=1)" % (
+        int(gt.mask.sum()))

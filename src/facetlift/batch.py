@@ -729,12 +729,29 @@ def _on_processes(jobs, n_workers: int, done) -> None:
         if isinstance(e, BrokenProcessPool):
             raise WorkersDied(
                 "the batch's worker processes died before finishing (killed, out of memory, "
-                "or started from a script without `if __name__ == '__main__':`, which worker "
-                "processes need); the log has the items that finished: rerun with "
-                "resume=True, or with workers=1"
+                + (_no_script_file() or "or started from a script without `if __name__ == "
+                   "'__main__':`, which worker processes need")
+                + "); the log has the items that finished: rerun with resume=True, or with "
+                "workers=1"
             ) from e
         raise
     pool.shutdown(wait=True)
+
+
+def _no_script_file() -> str | None:
+    """Why worker processes cannot start where the main module is a script read from stdin
+    (``python - <<EOF``): they re-import it from its file, and it has none (it was blamed on a
+    missing ``__main__`` guard, a user's check); None otherwise (a file, ``python -c``, an
+    interactive session or a notebook)."""
+    import sys
+
+    main = sys.modules.get("__main__")
+    name = getattr(main, "__file__", None)
+    if name is not None and str(name) in ("<stdin>", "-"):
+        return ("or started from a script read from stdin (`python - <<EOF`), which worker "
+                "processes cannot re-import: save it to a file and run that, with `if "
+                "__name__ == '__main__':`")
+    return None
 
 
 def _worker_start(protect: bool = False) -> None:

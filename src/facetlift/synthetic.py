@@ -88,6 +88,12 @@ class GroundTruth:
     name: str = ""
     K: np.ndarray | None = None
 
+    def __repr__(self) -> str:  # (not the arrays: a notebook printed them whole, a user's)
+        H, W = self.mask.shape
+        view = "orthographic" if self.K is None else "perspective"
+        return (f"GroundTruth({self.name!r}, {H}x{W}, {int(self.mask.sum())} pixels, {view}, "
+                f"pixel_size={self.pixel_size:g})")
+
     @property
     def camera(self):
         """The :class:`facetlift.camera.Camera` the depth and normals are given in."""
