@@ -574,7 +574,11 @@ def test_an_inside_out_map_is_told_by_its_silhouette():
 
     guess = describe._frame_guess(n * [-1, -1, 1], mask, None,
                                   prepare(n * [-1, -1, 1], mask), field=True)
-    assert "negating p and q" in guess["likely"] and "concave" in guess["likely"]
+    assert "negating both p and q" in guess["likely"] and "concave" in guess["likely"]
+    # one axis: named as the slope of the layout read, as integrate's warning names it
+    guess = describe._frame_guess(n * [1, -1, 1], mask, None, prepare(n * [1, -1, 1], mask),
+                                  field=True)
+    assert "negating the y slope (q; p with --gradient-frame rowcol)" in guess["likely"]
 
 
 def test_silhouette_counts_only_the_mask_edge_inside_the_image():

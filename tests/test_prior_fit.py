@@ -439,5 +439,5 @@ def test_a_relative_depth_given_with_k_is_named_by_its_relief():
         exact = facetlift.prepare(n, mask, K=K, prior=gt / 1000.0)  # (metres: the same)
     assert relief_ratio(exact)[0] == pytest.approx(1.0, abs=0.02)
     with pytest.warns(UserWarning, match=r"prior: its relative relief \(of log-depth\) is "
-                      r"\d+ times .*prior_fit='affine'"):
+                      r"[\d.]+ times .*prior_fit='affine'"):
         facetlift.prepare(n, mask, K=K, prior=(gt - 1460.0) / 60.0 + 0.01)

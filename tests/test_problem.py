@@ -603,7 +603,8 @@ def test_an_inverted_mask_is_questioned():
     r, c = np.indices((H, W))
     smaller = ((c - W / 2 + 0.5) ** 2 + (H / 2 - r - 0.5) ** 2) / 225.0 < 0.75
     with pytest.warns(UserWarning, match=r"`mask`: \d+% of its pixels have no normal while "
-                      r"100% of those outside it have one: is the mask inverted"):
+                      r"100% of those outside it hold varied ones \(an object.s\): is the "
+                      r"mask inverted"):
         prepare(holed, ~smaller)
     # a flat object (a box's face) masked inside a scene of varied normals: its mask does not
     # reach the image's border, as an inverted one would (a review's false alarm)
@@ -620,11 +621,25 @@ def test_an_inverted_mask_is_questioned():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         prepare(scene, edge)
-    edge = np.zeros_like(disk)  # (a large one at the image's border: questioned)
+    edge = np.zeros_like(disk)  # (a large one: what it leaves out reaches the border too)
     edge[:, 0:20] = True
     scene[edge] = [0.0, 0.0, 1.0]
-    with pytest.warns(UserWarning, match="is the mask inverted"):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
         prepare(scene, edge)
+    # a right mask with many holes over a zero or flat fill: no object outside it (a review)
+    holes = n.copy()
+    holes[disk & (np.random.default_rng(0).random(disk.shape) < 0.6)] = np.nan
+    for fill in ([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]):
+        filled = holes.copy()
+        filled[~disk] = fill
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # (the holes' own warnings)
+            warnings.simplefilter("error", UserWarning)
+            try:
+                prepare(filled, disk)
+            except UserWarning as w:
+                assert "inverted" not in str(w), w
 
 
 def test_a_focal_length_in_mm_is_questioned():

@@ -250,6 +250,22 @@ def test_a_surface_from_a_depth_map_and_one_reloaded(tmp_path):
     np.savez(tmp / "other.npz", depth=s.depth)
     with pytest.raises(ValueError, match=r"no surface written by facetlift \(no \['vertex_depth'"):
         io.load_surface(tmp / "other.npz")
+    # checked (a review: a wrong vertex_depth or a split without cuts loaded silently)
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    np.savez(tmp / "bad.npz", **{**arrays, "vertex_depth": arrays["vertex_depth"][:-1]})
+    with pytest.raises(ValueError, match=r"vertex_depth \(48, 49\) \(not \(49, 49\)\)"):
+        io.load_surface(tmp / "bad.npz")
+    np.savez(tmp / "nocuts.npz", **{k: v for k, v in arrays.items() if not k.startswith("cuts")})
+    with pytest.raises(ValueError, match="a split mesh without its cut edges"):
+        io.load_surface(tmp / "nocuts.npz")
+    np.savez(tmp / "old.npz", **{k: v for k, v in arrays.items() if not k.startswith("split")})
+    with pytest.warns(UserWarning, match="before surfaces kept their split mesh"):
+        old = io.load_surface(tmp / "old.npz")
+    assert old.cuts is not None and old.split is None
+    (tmp / "text.npz").write_text("not an archive")
+    with pytest.raises(ValueError, match="is not a .npz archive"):
+        io.load_surface(tmp / "text.npz")
     # a smooth depth map: the vertex depths agree with a smooth integration's to second order
     smooth = synthetic.analytic("sphere", 48)
     ref = facetlift.integrate(smooth.normals, smooth.mask, pixel_size=smooth.pixel_size)

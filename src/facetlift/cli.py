@@ -473,8 +473,8 @@ def _jump_hint(job, info: dict) -> str | None:
     # (with a dense prior its own noise bends the surface alike: a fresh user's sensor depth,
     # 1 mm of noise at weight 0.5, deviated 11 deg, and only the jumps were named)
     dense = prior.get("samples", 0) > 0.25 * max(int(info.get("input", {}).get("usable", 1)), 1)
-    also = (" (or the dense prior's own noise: a lower --prior-weight, 0.01 with "
-            "--discontinuities, or --prior-blur; docs/fusion.md)" if dense else "")
+    also = (" (or the dense prior's own noise: a lower --prior-weight, e.g. 0.01, or "
+            "--prior-blur; docs/fusion.md)" if dense else "")
     hint = (f"{share:.1%} of the facets deviate from their normals by more than 10 deg, as "
             "where a smooth surface bends across depth jumps: --discontinuities keeps them "
             f"(slower; docs/perspective.md){also}")

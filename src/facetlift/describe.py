@@ -374,8 +374,11 @@ def _try(frame, axes: str, field: bool) -> str:
     a gradient field (`field`) the slopes to negate (it has no normal frame)."""
     from . import frames
 
-    if field:
-        return "negating " + " and ".join({"x": "p", "y": "q"}[a] for a in axes)
+    if field:  # (in the layout read: rowcol's y slope is p, as integrate's warning says)
+        if len(axes) == 2:
+            return "negating both p and q"
+        own, other = ("q", "p") if axes == "y" else ("p", "q")
+        return f"negating the {axes} slope ({own}; {other} with --gradient-frame rowcol)"
     for a in axes:
         frame = frames.negated(frame, a)
     return frames.flag(frame)

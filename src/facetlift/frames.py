@@ -714,9 +714,10 @@ def _silhouette_note(sil: dict | None, a: str) -> str:
 
 
 def inside_out_check(problem, sil: dict | None = None) -> None:
-    """Warn (:class:`FrameWarning`) where the silhouette (:func:`silhouette`) says both x and
-    y are negated: such a map is as integrable as the right one, and the surface comes out
-    inside-out (a DSINE map read with y flipped instead of x)."""
+    """Warn (:class:`facetlift.errors.FrameHint`) where the silhouette (:func:`silhouette`)
+    says both x and y are negated: such a map is as integrable as the right one, and the
+    surface comes out inside-out (a DSINE map read with y flipped instead of x); a concave
+    surface masked alone says so too, hence a hint."""
     sil = silhouette(problem) if sil is None else sil
     if not (_silhouette_says(sil, "x") == "in" and _silhouette_says(sil, "y") == "in"):
         return

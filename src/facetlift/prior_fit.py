@@ -619,18 +619,24 @@ def relief_ratio(problem) -> tuple[float, int] | None:
     # anchor on any map (an evenly strided subset of a dense 4096^2 prior is a lattice 57 px
     # apart, beyond it: a review)
     rng = np.random.default_rng(0)
-    # (a dense prior thinned to about RELIEF_NEAR / 2 apart: its 31 nearest samples lay
-    # within 3 px, none far enough to pair, and dense priors had no ratio at all, a review)
-    pool = min(RELIEF_POOL, max(RELIEF_SAMPLES, int(d.n_facets / (RELIEF_NEAR / 2) ** 2)))
-    if have.size > pool:
-        have = np.sort(rng.choice(have, pool, replace=False))
+    if have.size > RELIEF_POOL:
+        have = np.sort(rng.choice(have, RELIEF_POOL, replace=False))
     anchors = (np.arange(have.size) if have.size <= RELIEF_SAMPLES else
                np.sort(rng.choice(have.size, RELIEF_SAMPLES, replace=False)))
+    # (the partners of a dense prior thinned to about RELIEF_NEAR / 2 apart: its 31 nearest
+    # samples lay within 3 px, none far enough to pair, and dense priors had no ratio; the
+    # anchors stay as many as a sparse prior's, a review: thinned too, a 128^2 map's 77 pairs
+    # gave noise-only ratios)
+    thin = max(RELIEF_SAMPLES, int(d.n_facets / (RELIEF_NEAR / 2) ** 2))
+    part = (np.arange(have.size) if have.size <= thin else
+            np.sort(rng.choice(have.size, thin, replace=False)))
     r, c = (a[have].astype(float) for a in d.pixels)
-    dist, nn = cKDTree(np.c_[r, c]).query(np.c_[r[anchors], c[anchors]],
-                                          k=min(32, have.size))
-    dist, nn = dist[:, 1:], nn[:, 1:]  # (the first is the sample itself)
-    ok = (dist >= RELIEF_NEAR) & (dist <= RELIEF_FAR)
+    dist, nn = cKDTree(np.c_[r[part], c[part]]).query(np.c_[r[anchors], c[anchors]],
+                                                      k=min(32, part.size))
+    if np.ndim(dist) == 1:  # (k = 1)
+        dist, nn = dist[:, None], nn[:, None]
+    nn = part[nn]  # (indices into `have`)
+    ok = (dist >= RELIEF_NEAR) & (dist <= RELIEF_FAR)  # (never the anchor itself)
     first = np.argmax(ok, axis=1)
     rows = np.flatnonzero(ok[np.arange(anchors.size), first])
     if rows.size < RELIEF_PAIRS:

@@ -666,9 +666,14 @@ def _check_trend(problem: Problem) -> None:
              "prior that runs against the normals')")
 
 
-#: An orthographic prior whose relief is this many times the normals' or more, or this many
-#: times less, is warned about (:func:`_check_relief`): a sparse one's (samples on at most a
-#: quarter of the facets), and a dense one's, whose blur and jumps move the ratio more.
+#: A prior whose relief is this many times the normals' or more, or this many times less, is
+#: warned about (:func:`_check_relief`; a perspective one's in log-depth): a sparse one's
+#: (samples on at most a quarter of the facets), and a dense one's (RELIEF_FACTOR_DENSE more,
+#: RELIEF_FACTOR_DENSE_LOW times less), whose blur, noise and jumps move the ratio more: since
+#: dense priors get a ratio at all (2026-12-05; a review, over 20 noise seeds on the analytic
+#: helix at 128^2: noise of 3 footprints 0.34-1.36, 5 footprints -0.1-1.59; a sphere's depth
+#: blurred by 8 px 0.32) only a gross mismatch is named (the DiLiGenT bear's depth made
+#: 0..1: 46 with K, 0.023 without).
 #: Measured on the fusion benchmark's 15 orthographic scenes at exact, 8-bit and 3-degree
 #: normals (2026-12-04): 0.1 %, 1 % and 5 % exact samples and 1 % noisy ones 0.92-1.25 (or no
 #: ratio: flat views), the coarse dense prior 0.62-1.93; the DiLiGenT bear with 400 exact
@@ -676,7 +681,8 @@ def _check_trend(problem: Problem) -> None:
 #: one-point-per-pixel path sum; since the ratio takes the outlier check's line integrals, on
 #: 50 of those sparse priors and the bear the ratios moved by at most 4 %, the bear's to 0.403
 #: and 1.012, and the flat `plateau` views gained a ratio of 1.0-1.14.)
-RELIEF_FACTOR, RELIEF_FACTOR_DENSE, RELIEF_SPARSE = 2.0, 3.0, 0.25
+RELIEF_FACTOR, RELIEF_FACTOR_DENSE, RELIEF_SPARSE = 2.0, 10.0, 0.25
+RELIEF_FACTOR_DENSE_LOW = 30.0
 
 
 def _check_relief(problem: Problem) -> None:
@@ -702,7 +708,8 @@ def _check_relief(problem: Problem) -> None:
     problem.extras["prior_relief"] = ratio
     sparse = float(np.mean(problem.prior_weight > 0)) <= RELIEF_SPARSE
     factor = RELIEF_FACTOR if sparse else RELIEF_FACTOR_DENSE
-    if ratio > 0 and not 1.0 / factor <= ratio <= factor and problem.perspective:
+    low = RELIEF_FACTOR if sparse else RELIEF_FACTOR_DENSE_LOW
+    if ratio > 0 and not 1.0 / low <= ratio <= factor and problem.perspective:
         problem.extras["prior_relief_warned"] = True
         # (log-depth relief: the same in any units, so a metric prior gives 1 whatever they
         # are; a relative depth with an offset does not: a fresh user's 0..1 map with K cut
@@ -713,7 +720,7 @@ def _check_relief(problem: Problem) -> None:
              "without an offset. A relative depth known only up to scale and shift (a "
              "monocular network's, e.g. 0..1) needs prior_fit='affine' (--prior-fit affine), "
              "an inverse depth prior_fit='disparity'; or is K's focal length wrong?")
-    elif ratio > 0 and not 1.0 / factor <= ratio <= factor:
+    elif ratio > 0 and not 1.0 / low <= ratio <= factor:
         problem.extras["prior_relief_warned"] = True  # (the jump hint then stays quiet)
         h = problem.pixel_size
         warn(f"prior: its relief is {ratio:.3g} times what the normals give at pixel_size "
@@ -1278,6 +1285,19 @@ def _zero_fill_check(depth: np.ndarray) -> None:
 MASK_MISSING = 0.25
 
 
+def _varied(v: np.ndarray) -> float:
+    """The share of normals `v` (k, 3) that are finite, not of zero length and not the most
+    common value (a background fill), in a sample of at most about 65k."""
+    v = v[:: max(1, v.shape[0] // 65536)]
+    if v.shape[0] == 0:
+        return 0.0
+    ok = np.all(np.isfinite(v), axis=-1) & (np.abs(v).max(axis=-1) > 0)
+    if not ok.any():
+        return 0.0
+    vals, counts = np.unique(np.round(v[ok], 6), axis=0, return_counts=True)
+    return float(ok.sum() - counts.max()) / v.shape[0]
+
+
 def _mask_fit_check(n: np.ndarray, m: np.ndarray, share: float) -> None:
     """Warn where a mask leaves many of its pixels without a normal (`share`, the normals
     `n` (H, W, 3) NaN there): the map's background decoded to NaN under a mask of another
@@ -1292,12 +1312,14 @@ def _mask_fit_check(n: np.ndarray, m: np.ndarray, share: float) -> None:
         return bool(out.any()) and float(have[out].mean()) < 0.5
 
     out = ~m
-    if share > 0.5 and out.any() and float(have[out].mean()) > 0.5:
-        # (most of the mask without a normal, most of its outside with one: the mask of the
-        # background; one ring of the object's pixels in it ran silently, a review)
+    if share > 0.5 and out.any() and _varied(n[out]) > 0.5:
+        # (most of the mask without a normal, most of its outside with varied ones, an
+        # object's, not a fill: the mask of the background; one ring of the object's pixels
+        # in it ran silently, a review; a zero or flat fill outside a mask with holes is no
+        # object, another review)
         warn(f"`mask`: {share:.0%} of its pixels have no normal while "
-             f"{float(have[out].mean()):.0%} of those outside it have one: is the mask "
-             "inverted (the object must be white, or True)?")
+             f"{_varied(n[out]):.0%} of those outside it hold varied ones (an object's): is "
+             "the mask inverted (the object must be white, or True)?")
         return
     if not background(m):
         return  # (a finite background: the NaNs inside are holes, not the map's outside)
@@ -1332,12 +1354,9 @@ def _inverted_mask_hint(n: np.ndarray, m: np.ndarray) -> str:
 
 
 #: :func:`_flat_mask_check`: the share of a mask's pixels holding one and the same normal
-#: (a fill) above which the mask is questioned where the pixels outside it hold varied ones.
+#: (a fill) above which the mask is questioned where the pixels outside it, which do not
+#: reach the image's border, hold varied ones.
 MASK_FLAT = 0.95
-#: ... where the mask reaches the image's border and covers at least this share of the image,
-#: as a background does (a flat object masked in a scene of varied normals, a box's face,
-#: was questioned otherwise, a review).
-MASK_FLAT_SHARE = 0.25
 
 
 def _flat_mask_check(n: np.ndarray, m: np.ndarray) -> None:
@@ -1349,12 +1368,12 @@ def _flat_mask_check(n: np.ndarray, m: np.ndarray) -> None:
     out = ~m
     if m.sum() < 16 or out.sum() < 16:
         return
-    # (an inverted mask is the background, which reaches the image's border; a flat object
-    # masked inside a scene of varied normals, a box's face or a wall, does not always, and
-    # was questioned, a review)
-    if not (m[0].any() or m[-1].any() or m[:, 0].any() or m[:, -1].any()) or (
-            m.mean() < MASK_FLAT_SHARE):  # (... and covers much of the image)
-        return
+    # (an inverted mask is the background, around an object inside the image; a flat object
+    # masked inside a scene of varied normals, a box's face or a wall, leaves out a scene that
+    # reaches the border, and was questioned, a review; a close-up object filling most of the
+    # image, inverted, is still questioned, another review)
+    if out[0].any() or out[-1].any() or out[:, 0].any() or out[:, -1].any():
+        return  # (... and the object it leaves out lies inside the image)
     step_in = max(1, int(m.sum()) // 65536)
     inside = n[m][::step_in]
     inside = inside[np.all(np.isfinite(inside), axis=-1)]

@@ -21,7 +21,9 @@ def save_surface(surface, path, **kwargs) -> Path:
     ``.npy``, ``.exr``, ``.tif``/``.tiff``: the (H, W) depth map (:func:`write_depth`);
     ``.npz``: arrays ``depth``, ``vertex_depth``, ``mask``, ``pixel_size`` and ``K``
     (NaN-filled 3x3 when orthographic), and where the surface has depth jumps ``cuts_right``,
-    ``cuts_down`` and ``discontinuities``; ``.ply``/``.obj``: the facet mesh
+    ``cuts_down``, ``discontinuities`` and the split mesh (``split_corners``, ``split_i``,
+    ``split_j``, ``split_depth``; :func:`load_surface` reads it all back); ``.ply``/``.obj``:
+    the facet mesh
     (:func:`write_mesh`, split at the jumps where there are any; keyword ``triangles``: True
     splits each quad in two, False keeps quads; default quads for PLY and triangles for OBJ,
     since OBJ readers such as Open3D's take triangles only); ``.png``: a shaded preview
@@ -110,19 +112,39 @@ def load_surface(path):
     try:
         with np.load(p, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
+    except ValueError:  # (a text file says "pickled data": it is no .npz archive at all)
+        raise ValueError(f"`path`: {p} is not a .npz archive") from None
     except Exception as e:
         raise ValueError(f"`path`: {p} is not a readable .npz ({type(e).__name__}: {e})"
                          ) from None
     missing = [k for k in ("depth", "vertex_depth", "mask", "pixel_size", "K") if k not in data]
     if missing:
         raise ValueError(f"`path`: {p} is no surface written by facetlift (no {missing})")
+    depth = data["depth"]
+    if depth.ndim != 2:
+        raise ValueError(f"`path`: {p}: its depth must be (H, W); got shape {depth.shape}")
+    H, W = depth.shape
+    want = {"mask": (H, W), "vertex_depth": (H + 1, W + 1), "K": (3, 3), "pixel_size": (),
+            "cuts_right": (H, W - 1), "cuts_down": (H - 1, W), "discontinuities": (H, W)}
+    wrong = [f"{k} {data[k].shape} (not {v})" for k, v in want.items()
+             if k in data and data[k].shape != v]
+    split_keys = ("split_corners", "split_i", "split_j", "split_depth")
+    has_split = [k in data for k in split_keys]
+    has_cuts = "cuts_right" in data and "cuts_down" in data
+    if any(has_split) and not (all(has_split) and has_cuts):
+        wrong.append("a split mesh without its cut edges, or in part")
+    if wrong:
+        raise ValueError(f"`path`: {p} is no surface written by facetlift: {'; '.join(wrong)}")
     K = data["K"]
     K = None if not np.isfinite(K).all() else K
-    cuts = split = None
-    if "cuts_right" in data and "cuts_down" in data:
-        cuts = (data["cuts_right"].astype(bool), data["cuts_down"].astype(bool))
-    if all(k in data for k in ("split_corners", "split_i", "split_j", "split_depth")):
-        split = (data["split_corners"], data["split_i"], data["split_j"], data["split_depth"])
-    return Surface(data["depth"], data["vertex_depth"], data["mask"].astype(bool),
+    cuts = (data["cuts_right"].astype(bool), data["cuts_down"].astype(bool)) if has_cuts else None
+    split = tuple(data[k] for k in split_keys) if all(has_split) else None
+    if cuts is not None and split is None:
+        from .._warnings import warn
+
+        warn(f"`path`: {p} was written before surfaces kept their split mesh: its cuts are "
+             "read, but its mesh (to_mesh, save) is not split at them; the mesh outputs of "
+             "that run have the split geometry")
+    return Surface(depth, data["vertex_depth"], data["mask"].astype(bool),
                    pixel_size=float(data["pixel_size"]) if K is None else 1.0, K=K, cuts=cuts,
                    discontinuities=data.get("discontinuities"), split=split)
