@@ -690,7 +690,7 @@ def _check_relief(problem: Problem) -> None:
     one's relative relief: :func:`facetlift.prior_fit.relief_ratio` in log-depth, the same in
     any units, so a relative depth with an offset; measured on the fusion benchmark's 48
     perspective and wide-angle renders, 2026-12-05: 1 % exact samples 0.998-1.048, 1 % noisy
-    0.891-1.198, the coarse dense prior 0.638-2.686; the DiLiGenT bear's depth 1.001, made
+    0.891-1.198, the coarse dense prior 0.641-2.638; the DiLiGenT bear's depth 1.001, made
     0..1 by (depth - 1460) / 60 46.0; an orthographic one's
     (:data:`RELIEF_FACTOR`, :func:`facetlift.prior_fit.relief_ratio`; ``extras
     ["prior_relief"]``): a metric prior with the default pixel_size of 1 (an audit: the
