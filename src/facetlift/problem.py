@@ -673,7 +673,7 @@ def _check_trend(problem: Problem) -> None:
 #: dense priors get a ratio at all (2026-12-05; a review, over 20 noise seeds on the analytic
 #: helix at 128^2: noise of 3 footprints 0.34-1.36, 5 footprints -0.1-1.59; a sphere's depth
 #: blurred by 8 px 0.32) only a gross mismatch is named (the DiLiGenT bear's depth made
-#: 0..1: 46 with K, 0.023 without).
+#: 0..1: 46 with K, 0.0067 without at pixel_size 1).
 #: Measured on the fusion benchmark's 15 orthographic scenes at exact, 8-bit and 3-degree
 #: normals (2026-12-04): 0.1 %, 1 % and 5 % exact samples and 1 % noisy ones 0.92-1.25 (or no
 #: ratio: flat views), the coarse dense prior 0.62-1.93; the DiLiGenT bear with 400 exact
