@@ -35,7 +35,7 @@ class Surface:
         ``mean_deviation`` (mean angle in degrees between the input normals and the result's
         facets), ``deviation_over_10`` (the share of them deviating by more than 10 degrees),
         ``integrability`` (:func:`facetlift.frames.flip_check`), and method-specific
-        entries.
+        entries (every key: docs/cli.md, "Surface.info").
     camera : facetlift.camera.Camera
         The camera the depth is measured in; give it, or `pixel_size` and `K` (read back as
         properties).
