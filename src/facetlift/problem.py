@@ -1285,10 +1285,19 @@ def _zero_fill_check(depth: np.ndarray) -> None:
 MASK_MISSING = 0.25
 
 
+def _sampled(n: np.ndarray, where: np.ndarray, at_most: int = 65536) -> np.ndarray:
+    """The normals (k, 3) of `n` (H, W, 3) at an evenly strided sample of at most about
+    `at_most` of the pixels `where` (H, W): the checks' samples, without a copy of every
+    pixel's normal first (400 MB at 4096^2)."""
+    step = max(1, where.size // (4 * at_most))  # (the image strided first: no index array
+    idx = np.flatnonzero(where.ravel()[::step]) * step  # of every pixel either)
+    idx = idx[:: max(1, idx.size // at_most)]
+    return n.reshape(-1, 3)[idx]
+
+
 def _varied(v: np.ndarray) -> float:
     """The share of normals `v` (k, 3) that are finite, not of zero length and not the most
-    common value (a background fill), in a sample of at most about 65k."""
-    v = v[:: max(1, v.shape[0] // 65536)]
+    common value (a background fill)."""
     if v.shape[0] == 0:
         return 0.0
     ok = np.all(np.isfinite(v), axis=-1) & (np.abs(v).max(axis=-1) > 0)
@@ -1312,14 +1321,15 @@ def _mask_fit_check(n: np.ndarray, m: np.ndarray, share: float) -> None:
         return bool(out.any()) and float(have[out].mean()) < 0.5
 
     out = ~m
-    if share > 0.5 and out.any() and _varied(n[out]) > 0.5:
+    varied = _varied(_sampled(n, out)) if out.any() else 0.0
+    if share > 0.5 and varied > 0.5:
         # (most of the mask without a normal, most of its outside with varied ones, an
         # object's, not a fill: the mask of the background; one ring of the object's pixels
         # in it ran silently, a review; a zero or flat fill outside a mask with holes is no
         # object, another review)
-        warn(f"`mask`: {share:.0%} of its pixels have no normal while "
-             f"{_varied(n[out]):.0%} of those outside it hold varied ones (an object's): is "
-             "the mask inverted (the object must be white, or True)?")
+        warn(f"`mask`: {share:.0%} of its pixels have no normal while {varied:.0%} of those "
+             "outside it hold varied ones (an object's): is the mask inverted (the object "
+             "must be white, or True)?")
         return
     if not background(m):
         return  # (a finite background: the NaNs inside are holes, not the map's outside)
@@ -1374,8 +1384,7 @@ def _flat_mask_check(n: np.ndarray, m: np.ndarray) -> None:
     # image, inverted, is still questioned, another review)
     if out[0].any() or out[-1].any() or out[:, 0].any() or out[:, -1].any():
         return  # (... and the object it leaves out lies inside the image)
-    step_in = max(1, int(m.sum()) // 65536)
-    inside = n[m][::step_in]
+    inside = _sampled(n, m)
     inside = inside[np.all(np.isfinite(inside), axis=-1)]
     if inside.shape[0] < 16:
         return
@@ -1383,7 +1392,7 @@ def _flat_mask_check(n: np.ndarray, m: np.ndarray) -> None:
     same = np.all(np.abs(inside - first) < 1e-6, axis=-1)
     if same.mean() < MASK_FLAT:
         return
-    outside = n[out][::max(1, int(out.sum()) // 65536)]
+    outside = _sampled(n, out)
     outside = outside[np.all(np.isfinite(outside), axis=-1)]
     other = ~np.all(np.abs(outside - first) < 1e-6, axis=-1)
     if outside.shape[0] < 16 or other.mean() < 0.5 or np.ptp(outside[other], axis=0).max() < 0.1:
