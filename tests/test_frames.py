@@ -201,14 +201,15 @@ def test_negated_frames_and_their_flags():
 def test_flip_check_warns_on_a_y_flipped_map_and_names_the_flag():
     n, _ = bump((40, 48))
     flipped = n * [1, -1, 1]
-    with pytest.warns(UserWarning, match=r"more integrable with y flipped.*--normal-frame "
-                      r"directx.*-x,y,z"):
+    # (a map filling its image: no silhouette, and without a camera the flips tie: both named)
+    with pytest.warns(UserWarning, match=r"more integrable with x or y flipped.*wrong in x or "
+                      r"in y: try --normal-frame directx.* or --normal-frame=-x,y,z.*bulges"):
         s = facetlift.integrate(flipped)
     ic = s.info["integrability"]
     assert ic["curl_y_flipped"] < frames.FLIP_RATIO * ic["curl"]
     # read in another frame, the hint is relative to it (not the flag given)
     with pytest.warns(UserWarning, match=r"frame \(read in the frame x,-y,z\) is probably "
-                      r"wrong in y: try the default frame") as rec:
+                      r"wrong in x or in y: try the default frame") as rec:
         facetlift.integrate(frames.from_facetlift(flipped, "directx"), normal_frame="directx")
     assert "try --normal-frame directx" not in str(rec[0].message)
     with warnings.catch_warnings():
@@ -625,3 +626,17 @@ def test_no_flip_is_suggested_where_many_normals_face_away():
     assert not [m for m in said if "integrable with" in m], said
     assert [w for w in rec if issubclass(w.category, UnusableNormalsWarning)]
     assert not [w for w in rec if issubclass(w.category, FrameWarning)]  # (the hint)
+
+
+def test_flip_decided_only_by_a_margin_or_the_silhouette():
+    """Two flips about as integrable (within SILHOUETTE_TIE) and no silhouette vote: neither
+    axis is known, and the warnings name both alike (a user's DSINE map with K and depth
+    jumps scored 0.43 with y and 0.52 with x flipped; y, the inside-out one, was named first
+    and followed). A silhouette vote for one axis, or a clear margin, decides."""
+    tie = {"curl_y_flipped": 0.43, "curl_x_flipped": 0.52}
+    assert not frames.flip_decided(tie, None)
+    assert not frames.flip_decided(tie, {"x": None, "y": None, "pixels": (0, 0)})
+    assert frames.flip_decided(tie, {"x": 0.1, "y": 0.95, "pixels": (80, 80)})
+    assert frames.flip_order(tie, {"x": 0.1, "y": 0.95, "pixels": (80, 80)}) == ("x", "y")
+    assert not frames.flip_decided(tie, {"x": 0.1, "y": 0.1, "pixels": (80, 80)})
+    assert frames.flip_decided({"curl_y_flipped": 0.68, "curl_x_flipped": 0.0005}, None)

@@ -441,11 +441,18 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
                            f"object's silhouette the normals point into it along {a} (try "
                            f"{_try(frame, a, field)}; your estimator's frame is in "
                            "docs/conventions.md)")
+    elif verdict == "claim" and not frames.flip_decided(curls, sil):
+        # (about as integrable flipped either way and no silhouette: both named alike, as
+        # integrate's warning; a user's DSINE map with K was told y first, the wrong one)
+        guess["likely"] = ("x or y flipped: far more integrable with either negated, and no "
+                           f"silhouette in view says which (try {_try(frame, a, field)} or "
+                           f"{_try(frame, b, field)}: inside-out from each other; keep the one "
+                           "whose surface bulges toward the camera where the object does; your "
+                           "estimator's frame is in docs/conventions.md)")
     elif verdict == "claim":
         guess["likely"] = (f"{a} flipped: far more integrable with {a} negated (try "
                            f"{_try(frame, a, field)}, or {_try(frame, b, field)}: inside-out "
-                           "from each other, and about as integrable without a camera; your "
-                           "estimator's frame is in docs/conventions.md)")
+                           "from each other; your estimator's frame is in docs/conventions.md)")
     elif verdict is None and says["x"] == "in" and says["y"] == "in" and (
             away <= BACKFACING_FRAME_HINT):  # (as integrate's check: frames.flip_check)
         guess["likely"] = ("as read, or inside-out: at the mask's edge the normals point into "
@@ -453,9 +460,13 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
                            f"{_try(frame, 'xy', field)}; a concave surface masked alone, a "
                            "bowl's inside or a crater, does this too)")
     elif verdict == "hint":
+        other = ("" if frames.flip_decided(curls, sil) else
+                 f" or {_try(frame, b, field)} (inside-out from each other: no silhouette in "
+                 "view says which)")
         guess["likely"] = (f"as read, or {a} flipped: more integrable with {a} negated, not by "
                            "the margin that says so (correlated errors on a flat view do this "
-                           f"too); if the surface looks wrong, try {_try(frame, a, field)}")
+                           f"too); if the surface looks wrong, try {_try(frame, a, field)}"
+                           f"{other}")
     else:
         if away > BACKFACING_FRAME_HINT:
             guess["likely"] = (f"another frame? {away:.0%} of the normals face away from the "

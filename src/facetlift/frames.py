@@ -711,6 +711,20 @@ def flip_order(curls: dict, sil: dict | None = None) -> tuple[str, str]:
     return ("y", "x") if cy <= cx else ("x", "y")
 
 
+def flip_decided(curls: dict, sil: dict | None = None) -> bool:
+    """Whether :func:`flip_order`'s first axis is known: the silhouette named it, or the two
+    flips' relative curls differ by more than :data:`SILHOUETTE_TIE`. Else (always without a
+    camera and a silhouette) the two flips are about as integrable, give surfaces inside-out
+    from each other, and a warning names both alike: with a camera and depth jumps the
+    inside-out one even scored lower (a user's DSINE map with K: 0.43 against 0.52, the y flip
+    named first and followed, a concave sphere without a word)."""
+    cy, cx = curls["curl_y_flipped"], curls["curl_x_flipped"]
+    if not max(cy, cx) <= SILHOUETTE_TIE * min(cy, cx):
+        return True
+    says = {a: _silhouette_says(sil, a) for a in ("x", "y")} if sil is not None else {}
+    return (says.get("x") == "in") != (says.get("y") == "in")
+
+
 def _silhouette_note(sil: dict | None, a: str) -> str:
     """The warning's words on what the silhouette says of axis `a` (empty where nothing)."""
     if sil is None or _silhouette_says(sil, a) != "in":
@@ -781,14 +795,28 @@ def flip_check(problem) -> dict:
     frame = _READ_IN.get()  # (the frame the map was read in: the hint is relative to it)
     flips = f"{best:.2f} with {a} flipped, {out[f'curl_{b}_flipped']:.2f} with {b} flipped"
     slope = {"y": "q", "x": "p"}
+    decided = flip_decided(out, sil)
+    either = ("both flips are about as integrable and give surfaces inside-out from each "
+              "other, and no silhouette in view says which axis is wrong: keep the one whose "
+              "surface bulges toward the camera where the object does")
     if verdict == "hint":
         try_ = (f"negating the {a} slope ({slope[a]}; {slope[b]} with --gradient-frame "
                 "rowcol)" if frame == GRADIENT_FIELD else flag(negated(frame, a)))
+        if not decided and frame != GRADIENT_FIELD:
+            try_ = f"{try_} or {flag(negated(frame, b))} ({either})"
         warn(f"the normals are more integrable with {a} flipped (relative curl {own:.2f} as "
              f"given, {flips}), not by the margin that "
              "says the frame is wrong (strongly correlated errors on a nearly flat view do "
              f"this too): if the surface looks bent or inside-out, try {try_}",
              FrameHint)
+    elif verdict == "claim" and not decided and frame != GRADIENT_FIELD:
+        read = "" if is_identity(frame) else f" (read in the frame {axis_string(frame)})"
+        warn(f"the normals are far more integrable with x or y flipped (relative curl "
+             f"{own:.2f} as given, {flips}): its frame{read} is probably wrong in x or in y: "
+             f"try {flag(negated(frame, a))} or {flag(negated(frame, b))}; {either}. "
+             "docs/conventions.md lists the frames of common sources. If the frame is right, "
+             "the image itself may be flipped or mirrored (rows or columns reversed by an "
+             "export): flip it back instead", FrameWarning)
     elif verdict == "claim":
         head = (f"the normals are far more integrable with {a} flipped (relative curl "
                 f"{own:.2f} as given, {flips})")
