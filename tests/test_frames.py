@@ -640,3 +640,10 @@ def test_flip_decided_only_by_a_margin_or_the_silhouette():
     assert frames.flip_order(tie, {"x": 0.1, "y": 0.95, "pixels": (80, 80)}) == ("x", "y")
     assert not frames.flip_decided(tie, {"x": 0.1, "y": 0.1, "pixels": (80, 80)})
     assert frames.flip_decided({"curl_y_flipped": 0.68, "curl_x_flipped": 0.0005}, None)
+
+
+def test_a_map_facing_away_is_offered_both_camera_frames():
+    """z away: OpenCV's frame (y down) and Blender's camera space (y up) are both named (only
+    opencv was, and a user's Blender map then went inside-out on the next hint)."""
+    text = frames.facing_hint(None)
+    assert "--normal-frame opencv" in text and "--normal-frame x,y,-z" in text

@@ -235,6 +235,10 @@ def integrate(
                     "outlier_eps / --outlier-eps sets another")
     if solver is not None:
         options["solver"] = solver
+    if "progress" in options and "progress" not in info.options():
+        # (a method without iterations has nothing to report: progress= is accepted by every
+        # method, as the command line's --progress is; frankot_chellappa refused it, a user's)
+        options.pop("progress")
     # (a mistyped option is refused before the input is read and checked: its warnings, e.g.
     # about grazing normals, came first and hid the one line that mattered; progress=True is
     # a bar made in _solve)

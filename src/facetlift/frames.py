@@ -514,9 +514,13 @@ def facing_hint(frame, v: np.ndarray | None = None) -> str:
             swapped = _swapped_orders(frame, np.asarray(v, float))
             if swapped is not None:
                 return f"{swapped}; else {facing_hint(frame)}"
-    if is_identity(frame):
-        return ("the map is probably in a camera frame with z pointing away (OpenCV, "
-                f"Omnidata, Metric3D): try {flag('opencv')}")
+    if is_identity(frame):  # (y down, as OpenCV's, or y up with z alone negated, as
+        # Blender's camera space through a Vector Transform node: only opencv was named, and
+        # a user's Blender map then got an x-flip hint that turned it inside-out)
+        return ("the map is probably in a camera frame with z pointing away: try "
+                f"{flag('opencv')} (OpenCV, Omnidata, Metric3D: y down), or "
+                f"{flag('x,y,-z')} (y up, as Blender's camera space); the frame check after "
+                "the run says if y is wrong")
     # the camera frame's y and z flips, or z alone (the facing says only that z is wrong)
     return (f"as read in the frame {axis_string(frame)}; try that frame with y and z negated, "
             f"as a camera frame has them: {flag(negated(frame, 'yz'))}; or with z alone "

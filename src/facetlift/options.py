@@ -156,9 +156,9 @@ def validate(options: tuple[Option, ...], given: dict, method: str,
         else:  # (a misspelling: discontinuity=True was told the valid list alone, a user's)
             import difflib
 
-            close = {u: difflib.get_close_matches(u, sorted(set(spec) | set(keywords)), n=3,
-                                                  cutoff=0.75)
-                     for u in unknown}
+            close = {u: difflib.get_close_matches(u, sorted((set(spec) | set(keywords))
+                                                            - {u}), n=3, cutoff=0.75)
+                     for u in unknown}  # (not the name itself: "'solver' for 'solver'")
             close = {u: " or ".join(map(repr, m)) for u, m in close.items() if m}
             if close:
                 hint = "; did you mean " + ", ".join(f"{m} for {u!r}"
