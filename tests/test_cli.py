@@ -295,6 +295,16 @@ def test_no_convergence_exits_2_after_writing(tmp_path, capsys):
     assert "did not converge in 1 iterations" in err and "Traceback" not in err
     assert "facetlift: warning:" in err  # the method's own warning, one line
     assert (out / "depth.npy").is_file() and "not converged" in stdout
+    # --json: the one object says so too (only converged false did, a user's check)
+    code, stdout, err = run(capsys, "integrate", npath, "-m", mpath, "-o", tmp_path / "j",
+                            "--solver", "iterative", "--max-iter", "1", "--tol", "0",
+                            "--no-progress", "--json")
+    rec = json.loads(stdout)
+    assert code == 2 and rec["status"] == "solver_error" and rec["exit_code"] == 2
+    code, stdout, _ = run(capsys, "integrate", npath, "-m", mpath, "-o", tmp_path / "k",
+                          "--json")
+    rec = json.loads(stdout)
+    assert code == 0 and rec["status"] == "ok" and rec["exit_code"] == 0
 
 
 @pytest.mark.parametrize("flag, solver, shown", [

@@ -555,10 +555,16 @@ def integrate(normals, gradients, progress, as_json, **flags):
             click.echo(f"wrote {path}")
         click.echo(summary(record))
     hint = _jump_hint(job, info)
+    unconverged = (not record["converged"] and info.get("solver") != "discontinuous"
+                   and not jobs.finished_unconverged(info))  # (exit 2, outputs written)
     if as_json:  # (the warnings and hints as printed: a script can act on a wrong frame)
         out = {k: v for k, v in record.items() if k != "warnings"}
         out["warnings"] = [_as_flags(str(w)) for w in record["warnings"]]
         out["hints"] = [] if hint is None else [hint]
+        # (as a failed command's object has them: an exit code 2 left only converged false
+        # to tell, a user's check)
+        out["status"] = "solver_error" if unconverged else "ok"
+        out["exit_code"] = EXIT_SOLVER if unconverged else EXIT_OK
         click.echo(json.dumps(out))
         _STATE["printed_json"] = True
     blur = info.get("prior_blur") or {}
@@ -580,7 +586,7 @@ def integrate(normals, gradients, progress, as_json, **flags):
             "(--option discontinuity_iter=N)",
             err=True,
         )
-    elif not record["converged"] and not jobs.finished_unconverged(info):
+    elif unconverged:
         raise SolverFailure(
             f"method {info.get('method')!r} did not converge in {info.get('iterations')} "
             "iterations (outputs were written); raise --max-iter or --tol"
