@@ -1261,4 +1261,11 @@ def test_the_jump_hint_names_a_dense_prior_too(capsys):
     sparse = _jump_hint(job, {**info, "prior": {"samples": 10}})
     assert "--discontinuities keeps them" in dense and "dense prior's own noise" in dense
     assert "--discontinuities keeps them" in sparse and "dense prior" not in sparse
+    # a method that cannot keep jumps names the one that can (poisson got no word); a
+    # method option named prior (regularization's, a string) is no depth prior
+    other = _jump_hint(SimpleNamespace(method="poisson", options={}),
+                       {**info, "method": "poisson"})
+    assert "--method dgp --discontinuities keeps them ('poisson' cannot)" in other
+    assert _jump_hint(SimpleNamespace(method="regularization", options={}),
+                      {**info, "method": "regularization", "prior": "laplacian"}) is not None
     capsys.readouterr()

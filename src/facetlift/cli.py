@@ -457,11 +457,13 @@ def _jump_hint(job, info: dict) -> str | None:
     method = _methods.REGISTRY.get(info.get("method") or job.method)
     if share is None or not share > JUMP_HINT_SHARE or method is None:
         return None
-    if not method.discontinuities or "discontinuities" in job.options:
+    if "discontinuities" in job.options:
         return None
     if method.options().get("discontinuities") or info.get("solver") == "discontinuous":
         return None  # (bini keeps jumps by default: the flag would change nothing, a review)
-    if (info.get("prior") or {}).get("relief_warned"):
+    prior = info.get("prior")
+    prior = prior if isinstance(prior, dict) else {}  # (regularization's is its option's name)
+    if prior.get("relief_warned"):
         return None  # (a prior in other units explains it, warned about: an audit)
     ic = info.get("integrability") or {}
     own = ic.get("curl")
@@ -469,14 +471,17 @@ def _jump_hint(job, info: dict) -> str | None:
     if own is not None and (frames.flip_verdict(own, flipped) is not None
                             or not own >= JUMP_HINT_CURL):
         return None  # (a wrong frame explains it; an integrable field has no jump to keep)
-    prior = info.get("prior") or {}
     # (with a dense prior its own noise bends the surface alike: a fresh user's sensor depth,
     # 1 mm of noise at weight 0.5, deviated 11 deg, and only the jumps were named)
     dense = prior.get("samples", 0) > 0.25 * max(int(info.get("input", {}).get("usable", 1)), 1)
     also = (" (or the dense prior's own noise: a lower --prior-weight, e.g. 0.01, or "
             "--prior-blur; docs/fusion.md)" if dense else "")
+    # (a method that cannot keep jumps: the one that can, named; poisson and the others at
+    # the same deviation got no word, a user's check)
+    keep = ("--discontinuities keeps them" if method.discontinuities else
+            f"--method dgp --discontinuities keeps them ({method.name!r} cannot)")
     hint = (f"{share:.1%} of the facets deviate from their normals by more than 10 deg, as "
-            "where a smooth surface bends across depth jumps: --discontinuities keeps them "
+            f"where a smooth surface bends across depth jumps: {keep} "
             f"(slower; docs/perspective.md){also}")
     click.echo(f"hint: {hint}", err=True)
     return hint
