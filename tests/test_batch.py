@@ -226,7 +226,7 @@ def test_cli_batch_with_a_bad_template_is_one_line(tmp_path, capsys):
     code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "o"), "--workers", "1",
                  "--option", "foo=1"])
     err = capsys.readouterr().err
-    assert code == 1 and err.count("\n") == 1 and "unknown option(s) ['foo']" in err
+    assert code == 1 and err.count("\n") == 1 and "unknown option(s) [--option foo]" in err
     assert not (tmp_path / "o").exists()
 
 

@@ -230,7 +230,7 @@ def _one_line_error(err):
     [
         (lambda t, n, m: [t / "missing.png"], "does not exist"),
         (lambda t, n, m: [n, "--method", "nope"], r"--method must be one of"),
-        (lambda t, n, m: [n, "--option", "nope=1"], r"unknown option\(s\) \['nope'\]"),
+        (lambda t, n, m: [n, "--option", "nope=1"], r"unknown option\(s\) \[--option nope\]"),
         (lambda t, n, m: [n, "--option", "novalue"], "expected KEY=VALUE"),
         (lambda t, n, m: [n, "--bogus"], "No such option"),
         (lambda t, n, m: [n, "--solver", "magic"],

@@ -1269,3 +1269,14 @@ def test_the_jump_hint_names_a_dense_prior_too(capsys):
     assert _jump_hint(SimpleNamespace(method="regularization", options={}),
                       {**info, "method": "regularization", "prior": "laplacian"}) is not None
     capsys.readouterr()
+
+
+def test_an_option_the_method_lacks_is_named_as_typed(dome_png, tmp_path, capsys):
+    """--max-iter with poisson was refused as "unknown option(s) ['max_iter']", a name the
+    user had not typed (a user's check): the flag, or --option KEY, as given."""
+    code, _, err = run(capsys, "integrate", dome_png, "--method", "poisson", "--max-iter", 3,
+                       "-o", tmp_path / "o")
+    assert code == 1 and "unknown option(s) [--max-iter] for method 'poisson'" in one_line(err)
+    code, _, err = run(capsys, "integrate", dome_png, "--method", "poisson", "--option",
+                       "max_iter=3", "-o", tmp_path / "o")
+    assert code == 1 and "unknown option(s) [--option max_iter]" in one_line(err)

@@ -983,6 +983,12 @@ def _as_flags(message: str) -> str:
         # about the depth prior (integrate's own `prior`) keeps its name, a review)
         if key.isidentifier() and key not in names and key != "prior":
             names[key] = f"--option {typed}"
+    # (an option the method lacks, given as a flag: named as typed in the unknown list, not
+    # as ['max_iter'], a user's check; the valid list stays the method's option names)
+    head = re.match(r"unknown option\(s\) (\[[^\]]*\])", message)
+    if head is not None:
+        listed = re.sub(r"'(\w+)'", lambda m: names.get(m.group(1), m.group(0)), head.group(1))
+        message = message[:head.start(1)] + listed + message[head.end(1):]
     return re.sub(r"`(\w+)`", lambda m: names.get(m.group(1), m.group(0)), message)
 
 
