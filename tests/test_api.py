@@ -440,3 +440,18 @@ def test_progress_is_accepted_by_every_method():
     with pytest.raises(ValueError, match=r"unknown option\(s\) \['solver'\] for method "
                        r"'poisson'; valid options: \['backend', 'progress'\]$"):
         facetlift.integrate(n, method="poisson", solver="iterative")
+
+
+def test_a_camera_a_method_cannot_take_is_refused_before_the_input_is_checked():
+    """--method kernel with --K printed the input's warnings (grazing normals) and then the
+    refusal (a user's check): the refusal comes first, alone."""
+    import warnings
+
+    n = np.zeros((12, 14, 3))
+    n[..., 2] = 1.0
+    n[3, 4] = [0.0, 0.0, -1.0]  # (back-facing: a warning if the input were checked)
+    K = np.array([[20.0, 0, 6.5], [0, 20.0, 5.5], [0, 0, 1]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=r"method 'kernel' does not support perspective"):
+            facetlift.integrate(n, method="kernel", K=K)

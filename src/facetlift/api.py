@@ -235,6 +235,8 @@ def integrate(
                     "outlier_eps / --outlier-eps sets another")
     if solver is not None:
         options["solver"] = solver
+    if K is not None and not info.perspective:  # (before the input's warnings: a user's)
+        raise _no_perspective(method)
     if "progress" in options and "progress" not in info.options():
         # (a method without iterations has nothing to report: progress= is accepted by every
         # method, as the command line's --progress is; frankot_chellappa refused it, a user's)
@@ -268,6 +270,16 @@ _INTEGRATE_KEYWORDS = ("mask", "method", "pixel_size", "K", "known", "discontinu
                        "solver", "backfacing", "outlier_eps", "normal_frame", "max_memory",
                        "prior", "prior_weight", "confidence", "prior_blur", "prior_outliers",
                        "prior_fit")
+
+
+def _no_perspective(method: str) -> ValueError:
+    """The error for a `K` given to a method without perspective support."""
+    able = sorted(k for k, v in methods.REGISTRY.items() if v.perspective)
+    return ValueError(
+        f"method {method!r} does not support perspective input (`K`); methods that do: "
+        f"{able}; or integrate orthographically (K=None; --orthographic ignores a "
+        "dataset folder's K.txt)"
+    )
 
 
 def _lacks(method: str, what: str) -> ValueError:
@@ -490,12 +502,7 @@ def _solve(problem, method, t0, max_memory, options):
                  f"prepare(..., isolated=facetlift.METHODS[{method!r}].jump_isolated) to "
                  "match")
     if problem.perspective and not info.perspective:
-        able = sorted(k for k, v in methods.REGISTRY.items() if v.perspective)
-        raise ValueError(
-            f"method {method!r} does not support perspective input (`K`); methods that do: "
-            f"{able}; or integrate orthographically (K=None; --orthographic ignores a "
-            "dataset folder's K.txt)"
-        )
+        raise _no_perspective(method)
     for what, given in (("prior", problem.prior is not None),
                         ("confidence", problem.confidence is not None),
                         ("prior_blur", problem.prior_blur > 0)):
