@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import inspect
 import logging
 import time
 import warnings
@@ -266,10 +267,8 @@ def integrate(
 
 
 #: :func:`integrate`'s own keyword arguments, offered where a misspelt one looks like one.
-_INTEGRATE_KEYWORDS = ("mask", "method", "pixel_size", "K", "known", "discontinuities",
-                       "solver", "backfacing", "outlier_eps", "normal_frame", "max_memory",
-                       "prior", "prior_weight", "confidence", "prior_blur", "prior_outliers",
-                       "prior_fit")
+_INTEGRATE_KEYWORDS = tuple(k for k in inspect.signature(integrate).parameters
+                            if k not in ("normals", "options"))
 
 
 def _no_perspective(method: str) -> ValueError:

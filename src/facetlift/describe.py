@@ -370,18 +370,11 @@ UNTOLD = 1.5
 
 
 def _try(frame, axes: str, field: bool) -> str:
-    """What to try where the `axes` ("x", "y" or "xy") are negated: a frame's flag, or for
-    a gradient field (`field`) the slopes to negate (it has no normal frame)."""
+    """:func:`facetlift.frames.flip_advice` for a map read in `frame`, or for a gradient field
+    (`field`)."""
     from . import frames
 
-    if field:  # (in the layout read: rowcol's y slope is p, as integrate's warning says)
-        if len(axes) == 2:
-            return "negating both p and q"
-        own, other = ("q", "p") if axes == "y" else ("p", "q")
-        return f"negating the {axes} slope ({own}; {other} with --gradient-frame rowcol)"
-    for a in axes:
-        frame = frames.negated(frame, a)
-    return frames.flag(frame)
+    return frames.flip_advice(frames.GRADIENT_FIELD if field else frame, axes)
 
 
 def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False) -> dict:
@@ -422,26 +415,22 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
     curls = frames.flip_curls(problem)
     guess.update(curls)
     # (the verdict on the better flip, named, as integrate's warning: info called a map "not
-    # by the margin" that integrate called far more integrable flipped, a user's check)
-    # (where the two flips tie, the silhouette names the axis: a DSINE map, x flipped, was
-    # told y first, and following that advice made it inside-out, a user's check)
-    sil = frames.silhouette(problem)
-    a, b = frames.flip_order(curls, sil)
+    # by the margin" that integrate called far more integrable flipped, a user's check; where
+    # the two flips tie, the silhouette names the axis: a DSINE map, x flipped, was told y
+    # first, and following that advice made it inside-out, a user's check)
+    f = frames.flip_assessment(problem, curls)
+    a, b, says, verdict = f["a"], f["b"], f["says"], f["verdict"]
     own = curls["curl"]
     flipped = min(curls["curl_y_flipped"], curls["curl_x_flipped"])
-    verdict = frames.flip_verdict(own, flipped)
-    says = {axis: frames._silhouette_says(sil, axis) for axis in ("x", "y")}
     from .problem import BACKFACING_FRAME_HINT
 
-    away = problem.counts.get("facing_away", 0.0)  # (the share prepare's warning takes)
-    if verdict == "hint" and away > BACKFACING_FRAME_HINT:  # (as integrate's check)
-        verdict = None
+    away = f["facing_away"]  # (the share prepare's warning takes)
     if verdict == "claim" and says[a] == "in" and says[b] == "out":
         guess["likely"] = (f"{a} flipped: far more integrable with {a} negated, and at the "
                            f"object's silhouette the normals point into it along {a} (try "
                            f"{_try(frame, a, field)}; your estimator's frame is in "
                            "docs/conventions.md)")
-    elif verdict == "claim" and not frames.flip_decided(curls, sil):
+    elif verdict == "claim" and not f["decided"]:
         # (about as integrable flipped either way and no silhouette: both named alike, as
         # integrate's warning; a user's DSINE map with K was told y first, the wrong one)
         guess["likely"] = ("x or y flipped: far more integrable with either negated, and no "
@@ -453,14 +442,13 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
         guess["likely"] = (f"{a} flipped: far more integrable with {a} negated (try "
                            f"{_try(frame, a, field)}, or {_try(frame, b, field)}: inside-out "
                            "from each other; your estimator's frame is in docs/conventions.md)")
-    elif verdict is None and says["x"] == "in" and says["y"] == "in" and (
-            away <= BACKFACING_FRAME_HINT):  # (as integrate's check: frames.flip_check)
+    elif f["inside_out"]:  # (as integrate's check: frames.flip_check)
         guess["likely"] = ("as read, or inside-out: at the mask's edge the normals point into "
                            "the object along x and y (if that edge is its silhouette, try "
                            f"{_try(frame, 'xy', field)}; a concave surface masked alone, a "
                            "bowl's inside or a crater, does this too)")
     elif verdict == "hint":
-        other = ("" if frames.flip_decided(curls, sil) else
+        other = ("" if f["decided"] else
                  f" or {_try(frame, b, field)} (inside-out from each other: no silhouette in "
                  "view says which)")
         guess["likely"] = (f"as read, or {a} flipped: more integrable with {a} negated, not by "

@@ -729,6 +729,50 @@ def flip_decided(curls: dict, sil: dict | None = None) -> bool:
     return (says.get("x") == "in") != (says.get("y") == "in")
 
 
+def flip_assessment(problem, curls: dict | None = None) -> dict:
+    """What the frame check decides from the curls (:func:`flip_curls`, computed where not
+    given) and the silhouette, for :func:`flip_check`'s warnings and ``facetlift info``'s
+    frame guess alike (they drifted apart once, a review): ``curls``, ``sil``, the axes ``a``
+    (named first, :func:`flip_order`) and ``b``, ``says`` (the silhouette's "in" / "out" per
+    axis), ``verdict`` (:func:`flip_verdict` on the better flip; None for a hint where many
+    normals face away, ``facing_away`` > :data:`facetlift.problem.BACKFACING_FRAME_HINT`:
+    another frame or BGR order, which no flip mends), ``decided`` (:func:`flip_decided`),
+    ``facing_away`` (the share) and ``inside_out`` (no verdict, not many facing away, and
+    both axes pointing into the object: :func:`inside_out_check`)."""
+    from .problem import BACKFACING_FRAME_HINT
+
+    curls = flip_curls(problem) if curls is None else curls
+    sil = silhouette(problem)
+    a, b = flip_order(curls, sil)
+    verdict = flip_verdict(curls["curl"], min(curls["curl_y_flipped"], curls["curl_x_flipped"]))
+    share = problem.counts.get("facing_away", 0.0)
+    away = share > BACKFACING_FRAME_HINT
+    if verdict == "hint" and away:
+        # (many normals faced away: prepare's warning asks about another frame or BGR order,
+        # which no flip of x or y mends, and the hint's small margin says little; a BGR map
+        # was also told to try -x,-y,-z, a user's check. A claim stays: an x-flipped map with
+        # a camera turns 7 % away and is told so)
+        verdict = None
+    says = {axis: _silhouette_says(sil, axis) for axis in ("x", "y")}
+    return {"curls": curls, "sil": sil, "a": a, "b": b, "says": says, "verdict": verdict,
+            "decided": flip_decided(curls, sil), "facing_away": share,
+            "inside_out": verdict is None and not away and says["x"] == says["y"] == "in"}
+
+
+def flip_advice(frame, axes: str) -> str:
+    """What to try where the `axes` ("x", "y" or "xy") of a map read in `frame` are negated:
+    that frame's flag, or for a gradient field (:data:`GRADIENT_FIELD`, which has no normal
+    frame) the slopes to negate, in the layout read (rowcol's y slope is p)."""
+    if frame == GRADIENT_FIELD:
+        if len(axes) == 2:
+            return "negating both p and q"
+        own, other = ("q", "p") if axes == "y" else ("p", "q")
+        return f"negating the {axes} slope ({own}; {other} with --gradient-frame rowcol)"
+    for a in axes:
+        frame = negated(frame, a)
+    return flag(frame)
+
+
 def _silhouette_note(sil: dict | None, a: str) -> str:
     """The warning's words on what the silhouette says of axis `a` (empty where nothing)."""
     if sil is None or _silhouette_says(sil, a) != "in":
@@ -749,7 +793,7 @@ def inside_out_check(problem, sil: dict | None = None) -> None:
     frame = _READ_IN.get()
     field = frame == GRADIENT_FIELD  # (no normal frame to name: a review found a crash)
     fix = ("negate both p and q (or give the height's negative)" if field
-           else f"try {flag(negated(negated(frame, 'x'), 'y'))}")
+           else f"try {flip_advice(frame, 'xy')}")
     read = "" if field or is_identity(frame) else f" (read in the frame {axis_string(frame)})"
     kx, ky = sil["pixels"]
     warn(f"the normals{read} point into the object at its mask's edge along both x and y "
@@ -777,37 +821,25 @@ def flip_check(problem) -> dict:
     """
     out = flip_curls(problem)
     own = out["curl"]
-    sil = silhouette(problem)
     # the axis the silhouette says is negated, else the one whose flip is the more integrable,
     # decides and is named first (with a pinhole camera the two flips differ: a review's
     # x-flipped map, 0.65 as given, 0.68 with y and 0.0005 with x flipped, was told to try the
     # y flip); orthographically they tie, and a DSINE map (x flipped) was told y first
-    a, b = flip_order(out, sil)
-    best = out[f"curl_{a}_flipped"]
-    verdict = flip_verdict(own, min(out["curl_y_flipped"], out["curl_x_flipped"]))
-    from .problem import BACKFACING_FRAME_HINT
-
-    away = problem.counts.get("facing_away", 0.0) > BACKFACING_FRAME_HINT
-    if verdict == "hint" and away:
-        # (many normals faced away: prepare's warning asks about another frame or BGR order,
-        # which no flip of x or y mends, and the hint's small margin says little; a BGR map
-        # was also told to try -x,-y,-z, a user's check. A claim stays: an x-flipped map with
-        # a camera turns 7 % away and is told so)
-        verdict = None
-    elif verdict is None and not away:  # (describe's frame guess decides alike)
+    f = flip_assessment(problem, out)
+    a, b, sil, verdict, decided = f["a"], f["b"], f["sil"], f["verdict"], f["decided"]
+    if f["inside_out"]:
         inside_out_check(problem, sil)
+    best = out[f"curl_{a}_flipped"]
     frame = _READ_IN.get()  # (the frame the map was read in: the hint is relative to it)
     flips = f"{best:.2f} with {a} flipped, {out[f'curl_{b}_flipped']:.2f} with {b} flipped"
     slope = {"y": "q", "x": "p"}
-    decided = flip_decided(out, sil)
     either = ("both flips are about as integrable and give surfaces inside-out from each "
               "other, and no silhouette in view says which axis is wrong: keep the one whose "
               "surface bulges toward the camera where the object does")
     if verdict == "hint":
-        try_ = (f"negating the {a} slope ({slope[a]}; {slope[b]} with --gradient-frame "
-                "rowcol)" if frame == GRADIENT_FIELD else flag(negated(frame, a)))
+        try_ = flip_advice(frame, a)
         if not decided and frame != GRADIENT_FIELD:
-            try_ = f"{try_} or {flag(negated(frame, b))} ({either})"
+            try_ = f"{try_} or {flip_advice(frame, b)} ({either})"
         warn(f"the normals are more integrable with {a} flipped (relative curl {own:.2f} as "
              f"given, {flips}), not by the margin that "
              "says the frame is wrong (strongly correlated errors on a nearly flat view do "
@@ -817,7 +849,7 @@ def flip_check(problem) -> dict:
         read = "" if is_identity(frame) else f" (read in the frame {axis_string(frame)})"
         warn(f"the normals are far more integrable with x or y flipped (relative curl "
              f"{own:.2f} as given, {flips}): its frame{read} is probably wrong in x or in y: "
-             f"try {flag(negated(frame, a))} or {flag(negated(frame, b))}; {either}. "
+             f"try {flip_advice(frame, a)} or {flip_advice(frame, b)}; {either}. "
              "docs/conventions.md lists the frames of common sources. If the frame is right, "
              "the image itself may be flipped or mirrored (rows or columns reversed by an "
              "export): flip it back instead", FrameWarning)
@@ -831,8 +863,7 @@ def flip_check(problem) -> dict:
         else:
             read = "" if is_identity(frame) else f" (read in the frame {axis_string(frame)})"
             warn(f"{head}: its frame{read} is probably wrong in {a}{_silhouette_note(sil, a)}: "
-                 "try "
-                 f"{flag(negated(frame, a))}, or {flag(negated(frame, b))} if the surface "
+                 f"try {flip_advice(frame, a)}, or {flip_advice(frame, b)} if the surface "
                  "then comes out inside-out; docs/conventions.md lists the frames of common "
                  "sources. If the frame is right, the image itself may be flipped or mirrored "
                  "(rows or columns reversed by an export): flip it back instead",
