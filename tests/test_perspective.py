@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import facetlift
+from facetlift.camera import K_from_fov
 from facetlift.perspective import (
     log_depth_slopes,
     normals_from_depth,
@@ -391,6 +392,60 @@ def test_fov_gives_a_centred_pinhole_k(tmp_path, capsys):
     assert "--fov 60 deg replaces the K of the dataset folder's K.txt" in err
     np.testing.assert_allclose(np.load(tmp_path / "f2" / "depth.npy"),
                                np.load(tmp_path / "fov" / "depth.npy"), rtol=1e-12)
+
+
+def test_a_fov_in_radians_is_questioned_once(tmp_path, capsys):
+    """An audit: --fov 1.0472 said its "in radians?" warning three times on stderr and twice
+    in --json (the checks before reading the map made a K of their own); once now, as the
+    API says it, also in info and for each batch item."""
+    import json
+
+    from facetlift.cli import main
+
+    np.save(tmp_path / "n.npy", np.dstack([np.zeros((30, 40, 2)), np.ones((30, 40))]))
+    assert main(["integrate", str(tmp_path / "n.npy"), "--fov", "1.0472", "--json", "-s",
+                 "npy", "-o", str(tmp_path / "o")]) == 0
+    out, err = capsys.readouterr()
+    assert err.count("in radians?") == 1, err
+    assert sum("in radians?" in w for w in json.loads(out)["warnings"]) == 1
+    assert main(["info", str(tmp_path / "n.npy"), "--fov", "1.0472"]) == 0
+    out, err = capsys.readouterr()
+    assert (out + err).count("in radians?") == 1, out + err
+    with pytest.warns(UserWarning, match="in radians") as said:
+        K_from_fov((30, 40), 1.0472)
+    assert len(said) == 1
+
+
+def test_an_extreme_fov_is_named_as_a_field_of_view_not_as_a_focal_length_in_mm(tmp_path,
+                                                                               capsys):
+    """An audit: --fov 170 was asked whether its focal lengths (fx 27.99) were in mm. A K from
+    a field of view says what that field of view implies, once, and no mm question; a K
+    typed by hand (a copy of it, or one changed since) is still asked."""
+    from facetlift.cli import main
+
+    n = np.dstack([np.zeros((30, 40, 2)), np.ones((30, 40))])
+    np.save(tmp_path / "n.npy", n)
+    assert main(["integrate", str(tmp_path / "n.npy"), "--fov", "170", "-s", "npy", "-o",
+                 str(tmp_path / "o")]) == 0
+    err = " ".join(capsys.readouterr().err.split())
+    assert err.count("--fov 170 deg is an extreme field of view for a pinhole camera") == 1
+    assert "85 deg off the axis" in err and "fish-eye" in err and "in mm" not in err, err
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        K = K_from_fov((30, 40), 170)
+        facetlift.integrate(n, K=K)
+    texts = [str(w.message) for w in said]
+    assert sum("extreme field of view" in t for t in texts) == 1
+    assert not any("in mm" in t for t in texts), texts
+    for other in (K.copy(), K * [[1.0], [1.0], [1.0]]):  # (not the K_from_fov gave)
+        with pytest.warns(UserWarning, match=r"field of view of 170 deg .*in mm"):
+            facetlift.integrate(n, K=other)
+    K[0, 0] = K[1, 1] = 1.5  # (changed since: no longer that field of view's)
+    with pytest.warns(UserWarning, match=r"fx 1.5, fy 1.5 give a field of view .*in mm"):
+        facetlift.integrate(n, K=K)
+    with warnings.catch_warnings():  # (a wide but ordinary field of view: silent)
+        warnings.simplefilter("error")
+        facetlift.integrate(n, K=K_from_fov((30, 40), 120))
 
 
 def test_info_keeps_the_principal_point_warning_of_a_map_it_cannot_integrate(tmp_path, capsys):

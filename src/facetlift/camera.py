@@ -43,6 +43,7 @@ Perspective slopes
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -294,7 +295,11 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
     point at the image's centre ``((W - 1) / 2, (H - 1) / 2)`` (OpenCV layout). A phone's
     35 mm-equivalent focal length ``f35`` gives ``2 atan(18 / f35)`` across the long side:
     for a portrait photo (H > W) the width's is ``2 atan((W / H) tan(fov_long / 2))``
-    (docs/conventions.md)."""
+    (docs/conventions.md).
+
+    Warns (once per call) where `fov` looks like radians (below :data:`FOV_RADIANS`) or is
+    wider than :data:`facetlift.problem.FOV_WIDE` (what that implies); :func:`facetlift.
+    integrate` then does not ask whether this K's focal lengths are in mm (:func:`fov_of`)."""
     try:
         H, W = (int(v) for v in tuple(shape)[:2])
         ok = len(tuple(shape)) >= 2 and H > 0 and W > 0 and (H, W) == tuple(shape)[:2]
@@ -305,6 +310,50 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
         text = text if len(text) <= 80 else f"{type(shape).__name__} of shape {np.shape(shape)}"
         raise ValueError(f"`shape` must be the image's (H, W), two positive integers; got "
                          f"{text}")
+    value = fov_degrees(fov)
+    f = (W / 2.0) / np.tan(np.radians(value) / 2.0)
+    from ._warnings import warn
+    from .problem import FOV_WIDE
+
+    if value < FOV_RADIANS:  # (a field of view in radians read as degrees: a telescope)
+        warn(f"`fov` {value:g} deg is a telescope's field of view: is it in radians? Give "
+             f"degrees ({np.degrees(value):.4g} deg for {value:g} rad)")
+    elif value > FOV_WIDE:  # (said here, as a field of view: integrate asked a --fov 170
+        # user whether the focal lengths were in mm, an audit)
+        edge = 1.0 / np.cos(np.radians(value) / 2.0) ** 2
+        warn(f"`fov` {value:g} deg is an extreme field of view for a pinhole camera (fx = fy = "
+             f"{f:.4g} pixels for this {W}-pixel-wide image): at the image's left and right "
+             f"edges the rays are {value / 2:g} deg off the axis, where the image is stretched "
+             f"{edge:.0f}x against its centre and a surface facing the camera's axis is seen "
+             "nearly edge-on (its normals turn grazing or back-facing). A lens that wide is a "
+             "fish-eye, which is no pinhole: undistort the image first. The field of view is "
+             "the width's, not the diagonal's (a 35 mm-equivalent focal length f35 gives "
+             "2 atan(18 / f35) across the long side)")
+    K = np.array([[f, 0.0, (W - 1) / 2.0], [0.0, f, (H - 1) / 2.0], [0.0, 0.0, 1.0]])
+    key = id(K)
+    _FROM_FOV[key] = (weakref.ref(K, lambda _: _FROM_FOV.pop(key, None)), K.copy(), value)
+    return K
+
+
+#: :func:`K_from_fov`'s results still alive: id -> (weak reference, the values it returned,
+#: the field of view). Only for :func:`fov_of`: the focal-length check's words.
+_FROM_FOV: dict = {}
+
+
+def fov_of(K) -> float | None:
+    """The field of view (degrees) :func:`K_from_fov` made `K` from, or None for any other K
+    (a copy, or one changed since, included): a K that wide was asked for as a field of view,
+    and :func:`K_from_fov` said what it implies (not a focal length in mm)."""
+    entry = _FROM_FOV.get(id(K))
+    if entry is None or entry[0]() is not K or not np.array_equal(entry[1], K):
+        return None
+    return entry[2]
+
+
+def fov_degrees(fov) -> float:
+    """`fov` as a float, checked as a horizontal field of view in degrees (> 0, < 180), or a
+    ValueError; no warning (:func:`K_from_fov` gives those, once: a command line's checks
+    before reading the map said its radians warning three times, an audit)."""
     try:
         value = float(fov)
     except (TypeError, ValueError):
@@ -312,13 +361,7 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
     if isinstance(fov, bool) or not (np.isfinite(value) and 0.0 < value < 180.0):
         raise ValueError(f"`fov` must be a horizontal field of view in degrees, > 0 and < 180; "
                          f"got {fov!r}")
-    if value < FOV_RADIANS:  # (a field of view in radians read as degrees: a telescope)
-        from ._warnings import warn
-
-        warn(f"`fov` {value:g} deg is a telescope's field of view: is it in radians? Give "
-             f"degrees ({np.degrees(value):.4g} deg for {value:g} rad)")
-    f = (W / 2.0) / np.tan(np.radians(value) / 2.0)
-    return np.array([[f, 0.0, (W - 1) / 2.0], [0.0, f, (H - 1) / 2.0], [0.0, 0.0, 1.0]])
+    return value
 
 
 def make_camera(pixel_size=1.0, K=None) -> Camera:

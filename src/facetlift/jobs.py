@@ -293,9 +293,9 @@ def check_fov(job: Job) -> None:
     with `K` or `orthographic`, which it contradicts (ValueError naming them)."""
     if job.fov is None:
         return
-    from .camera import K_from_fov
+    from .camera import fov_degrees
 
-    K_from_fov((2, 2), job.fov)
+    fov_degrees(job.fov)  # (no warning: K_from_fov gives its own once, with the map's size)
     clash = "K" if job.K is not None else ("orthographic" if job.orthographic else None)
     if clash:
         raise ValueError(f"`fov` {float(job.fov):g} and `{clash}` contradict each other; "

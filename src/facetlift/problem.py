@@ -398,7 +398,7 @@ def prepare(
         raise ValueError(f"`backfacing` must be one of {BACKFACING[:2]}; got {backfacing!r}")
     cam = make_camera(pixel_size, K) if camera is None else camera
     _check_principal_point(cam, H, W)
-    _check_focal_length(cam, H, W)
+    _check_focal_length(cam, H, W, given=K)
     eps = cam.grazing if outlier_eps is None else _check_eps(outlier_eps)
     isolated = _check_isolated(isolated)
 
@@ -817,11 +817,16 @@ def _check_principal_point(cam, H: int, W: int) -> None:
 FOV_WIDE = 150.0
 
 
-def _check_focal_length(cam, H: int, W: int) -> None:
+def _check_focal_length(cam, H: int, W: int, given=None) -> None:
     """A warning where a pinhole camera's field of view exceeds :data:`FOV_WIDE` degrees
-    across the image (the focal length in mm, or a K for an image many times smaller)."""
+    across the image (the focal length in mm, or a K for an image many times smaller); none
+    where `given`, the K as passed, came from :func:`facetlift.camera.K_from_fov`, which
+    said what so wide a field of view implies (a --fov 170 user was asked about mm, an
+    audit)."""
+    from .camera import fov_of
+
     Kc = getattr(cam, "K", None)
-    if Kc is None:
+    if Kc is None or fov_of(given) is not None:
         return
     fx, fy = float(Kc[0, 0]), float(Kc[1, 1])
     # (across the width, as --fov gives it: a portrait image's height sees more, and --fov 140
