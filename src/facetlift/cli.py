@@ -705,6 +705,8 @@ def _info_lines(rec: dict) -> list[str]:
     first = rec.get("first_unusable")
     lines.append(f"  unusable normals: {bad or 'none'}"
                  + (f"; first at (row {first[0]}, col {first[1]})" if first else ""))
+    if rec.get("camera_hint"):
+        lines.append(f"  without a camera: {rec['camera_hint']}")
     jg = rec.get("discontinuity_grazing") or {}
     if jg.get("more_grazing"):
         lines.append(f"  with --discontinuities (dgp): {jg['more_grazing']} more grazing (view "

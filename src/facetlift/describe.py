@@ -153,7 +153,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     """
     from . import frames
     from .jobs import Job, read, recorded_warnings
-    from .problem import UnusableNormalsWarning, prepare
+    from .problem import UnusableNormalsWarning, no_camera_hint, prepare
 
     job = Job(normals=None if path is None else str(path),
               gradients=tuple(str(g) for g in gradients) if gradients else None,
@@ -268,6 +268,9 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
                                         fitted),
         discontinuity_grazing=_jump_grazing(problem),
         holes=_holes(d.mask) if inp.mask is None else 0,
+        # (the unusable-normals warning's hint for a photo integrated without a camera: info
+        # called such a map's frame consistent and said nothing else, an audit)
+        camera_hint=no_camera_hint(counts, inp.K is not None, inp.field) or None,
     )
     return out
 

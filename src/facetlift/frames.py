@@ -188,6 +188,12 @@ def read_in(frame):
         _READ_IN.reset(token)
 
 
+def reading() -> str | None:
+    """The frame given to the enclosing :func:`read_in` (:data:`GRADIENT_FIELD` for normals
+    made from a gradient field), None outside one."""
+    return _READ_IN.get()
+
+
 def to_facetlift(normals: np.ndarray, frame) -> np.ndarray:
     """(..., 3) normals in `frame` -> the facetlift frame (a new array unless the identity)."""
     if is_identity(frame):

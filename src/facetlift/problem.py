@@ -40,6 +40,31 @@ class UnusableNormalsWarning(UserWarning):
 #: the discontinuity benchmark quantised to 8 bits: at most 0.04 %).
 BACKFACING_FRAME_HINT = 0.05
 
+#: Share of the mask's normals dropped as back-facing or grazing without a camera (an
+#: orthographic reading) at or above which the unusable-normals warning and ``info`` add that
+#: a perspective photo's obliquely seen surfaces do that (:func:`no_camera_hint`; an audit: a
+#: neural estimator's indoor scene lost its floor and a side wall, 82k normals, with the
+#: generic warning alone).
+NO_CAMERA_SHARE = 0.05
+
+
+def no_camera_hint(counts: dict, perspective: bool, field: bool = False) -> str:
+    """The hint, or "", that normals dropped as facing away or grazing (`counts`, as
+    :attr:`Problem.counts`) without a camera may be those of a perspective photo's walls and
+    floor: given where no camera (`perspective` False) and no gradient field (`field`,
+    orthographic by nature) and at least :data:`NO_CAMERA_SHARE` of the mask."""
+    dropped = int(counts.get("back-facing", 0)) + int(counts.get("grazing", 0))
+    pixels = int(counts.get("pixels", 0))
+    if perspective or field or not pixels or dropped < NO_CAMERA_SHARE * pixels:
+        return ""
+    return (f"{dropped / pixels:.0%} of the mask's normals face away or graze as read without "
+            "a camera (orthographically, every pixel seen along the same axis): normals of "
+            "surfaces that a perspective camera sees obliquely (the walls and floor of a "
+            "photo) face away under an orthographic reading. If the map is of a photo, give "
+            "its camera: --fov DEG (the horizontal field of view) or --K FILE (in Python "
+            "K=facetlift.camera.K_from_fov(normals.shape[:2], deg) or K=)")
+
+
 #: A blurred prior (``prior_blur``) with a median sample weight above this gets a warning
 #: (docs/fusion.md, "Blurred priors": the benchmark's range is 0.001-0.01).
 BLUR_WEIGHT_WARN = 0.03
@@ -563,10 +588,14 @@ def prepare(
                           f"point (cx {Kc[0, 2]:g}, cy {Kc[1, 2]:g}) is usually near the "
                           f"centre of this {W} x {H} image, its focal lengths fx "
                           f"{Kc[0, 0]:g}, fy {Kc[1, 1]:g} scale with the image")
+        from .frames import GRADIENT_FIELD, reading
+
+        hint = no_camera_hint(counts, cam.perspective, reading() == GRADIENT_FIELD)
         warn(
             f"{sum(int(v.sum()) for v in problems.values())} normal(s) inside the mask cannot be "
             f"used and were treated as missing samples ({what}{rule}); first at "
-            f"(row {r[first]}, col {c[first]}){frame}", UnusableNormalsWarning
+            f"(row {r[first]}, col {c[first]}){frame}{'; ' + hint if hint else ''}",
+            UnusableNormalsWarning
         )
     nf[~front] = np.nan
     pv = pw = None
