@@ -427,6 +427,25 @@ def test_a_misspelt_keyword_of_integrate_is_suggested():
         facetlift.integrate(n, normal_frmae="opencv")
 
 
+def test_fov_is_pointed_to_k_from_fov():
+    """An audit: integrate(n, fov=60), the command line's --fov in Python, was told "unknown
+    option(s) ['fov']" and the method's options alone; the message gives the K to pass (no
+    fov keyword: K is the one camera argument), and a misspelling beside it is still
+    suggested."""
+    n = np.zeros((10, 12, 3))
+    n[..., 2] = 1.0
+    for method in ("dgp", "bini"):
+        with pytest.raises(ValueError, match=r"unknown option\(s\) \['fov'\].*integrate takes "
+                           r"no field of view: give the camera it makes as "
+                           r"K=facetlift\.camera\.K_from_fov\(normals\.shape\[:2\], 60\)"):
+            facetlift.integrate(n, method=method, fov=60)
+    with pytest.raises(ValueError, match=r"did you mean 'max_iter' for 'maxiter'\?; integrate "
+                       r"takes no field of view: .*K_from_fov\(normals\.shape\[:2\], 72\.5\)"):
+        facetlift.integrate(n, fov=72.5, maxiter=3)
+    K = facetlift.camera.K_from_fov(n.shape[:2], 60)  # (what the message says works)
+    facetlift.integrate(n, K=K)
+
+
 def test_progress_is_accepted_by_every_method():
     """progress= is a general argument (the README's, the command line's --progress): a
     method without iterations has nothing to report, and frankot_chellappa refused it (a

@@ -247,7 +247,7 @@ def integrate(
     # a bar made in _solve)
     validate(info.specs(), {**options, "progress": _no_progress}
              if options.get("progress") is True else options, method,
-             keywords=_INTEGRATE_KEYWORDS)
+             keywords=_INTEGRATE_KEYWORDS, hints=_keyword_hints(options))
     normals = frames.checked(normals, mask, frame=normal_frame)
     if prior is not None and not info.prior:
         # (the method refuses the prior in _solve: no outlier check to warn about before)
@@ -269,6 +269,20 @@ def integrate(
 #: :func:`integrate`'s own keyword arguments, offered where a misspelt one looks like one.
 _INTEGRATE_KEYWORDS = tuple(k for k in inspect.signature(integrate).parameters
                             if k not in ("normals", "options"))
+
+
+def _keyword_hints(options: dict) -> dict:
+    """What to give instead of keywords :func:`integrate` has not but users expect (an
+    audit: ``fov=60``, the command line's --fov, was told "unknown option(s) ['fov']" and
+    the method's options alone), for :func:`facetlift.options.validate`."""
+    if "fov" not in options:
+        return {}
+    fov = options["fov"]
+    text = (f"{fov:g}" if isinstance(fov, (int, float)) and not isinstance(fov, bool)
+            else repr(fov))
+    return {"fov": ("integrate takes no field of view: give the camera it makes as "
+                    f"K=facetlift.camera.K_from_fov(normals.shape[:2], {text}) (degrees across "
+                    "the width; the command line's --fov)")}
 
 
 def _no_perspective(method: str) -> ValueError:

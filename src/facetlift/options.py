@@ -136,10 +136,12 @@ def _convert(opt: Option, value):
 
 
 def validate(options: tuple[Option, ...], given: dict, method: str,
-             keywords: tuple[str, ...] = ()) -> dict:
+             keywords: tuple[str, ...] = (), hints: dict | None = None) -> dict:
     """Checked values of every option of `method`: the given ones converted, defaults elsewhere.
     `keywords`: the caller's own keyword arguments, offered too where an unknown name looks
     like one of them (a misspelt ``normal_frame`` was told the method's options alone).
+    `hints`: unknown name -> what to do instead, said where that name is given (a keyword
+    the caller has not but users expect, e.g. integrate's ``fov``).
 
     Raises
     ------
@@ -151,18 +153,21 @@ def validate(options: tuple[Option, ...], given: dict, method: str,
     unknown = sorted(set(given) - set(spec))
     if unknown:
         hint = ""  # (a BiNI user's k: the bilateral sharpness is discontinuity_k for dgp)
-        if "k" in unknown and "discontinuity_k" in spec:
+        hints = hints or {}
+        rest = [u for u in unknown if u not in hints]
+        if "k" in rest and "discontinuity_k" in spec:
             hint = "; BiNI's k is 'discontinuity_k' here (default 4.0, with discontinuities)"
         else:  # (a misspelling: discontinuity=True was told the valid list alone, a user's)
             import difflib
 
             close = {u: difflib.get_close_matches(u, sorted((set(spec) | set(keywords))
                                                             - {u}), n=3, cutoff=0.75)
-                     for u in unknown}  # (not the name itself: "'solver' for 'solver'")
+                     for u in rest}  # (not the name itself: "'solver' for 'solver'")
             close = {u: " or ".join(map(repr, m)) for u, m in close.items() if m}
             if close:
                 hint = "; did you mean " + ", ".join(f"{m} for {u!r}"
                                                      for u, m in close.items()) + "?"
+        hint += "".join(f"; {hints[u]}" for u in unknown if u in hints)
         raise ValueError(
             f"unknown option(s) {unknown} for method {method!r}; valid options: {sorted(spec)}"
             + hint
