@@ -283,6 +283,48 @@ def test_read_K_names_a_transposed_matrix(tmp_path):
         io.read_K(tmp_path / "K.txt")
 
 
+def test_read_K_takes_a_calibration_mat_file(tmp_path):
+    """An audit: --K Calib_Results.mat (DiLiGenT's calibration: the toolbox's KK beside each
+    view's 3x3 rotation Rc_1, ...) failed with "cannot parse ... ('utf-8' codec can't
+    decode ...)". Its KK is read (or K, or the only 3x3 variable), checked as a text file's
+    (a transposed one named so); one without such a variable lists what it holds."""
+    from scipy import io as sio
+
+    KK = np.array([[3772.08, 0, 305.875], [0, 3759.01, 255.125], [0, 0, 1]])
+    rot = np.array([[0.0, 1, 0], [-1, 0, 0], [0, 0, 1]])
+    sio.savemat(tmp_path / "Calib_Results.mat", {"KK": KK, "Rc_1": rot, "fc": [[3772.08],
+                                                 [3759.01]], "cc": [[305.875], [255.125]]})
+    np.testing.assert_array_equal(io.read_K(tmp_path / "Calib_Results.mat"), KK)
+    sio.savemat(tmp_path / "k.mat", {"K": KK, "R": rot})
+    np.testing.assert_array_equal(io.read_K(tmp_path / "k.mat"), KK)
+    sio.savemat(tmp_path / "only.mat", {"intrinsics": KK, "scale": 2.0})
+    np.testing.assert_array_equal(io.read_K(tmp_path / "only.mat"), KK)
+    sio.savemat(tmp_path / "t.mat", {"KK": KK.T})
+    with pytest.raises(ValueError, match=r"^`K`: .*t\.mat: .*last row.*looks transposed"):
+        io.read_K(tmp_path / "t.mat")
+    sio.savemat(tmp_path / "two.mat", {"A": KK, "B": rot})
+    with pytest.raises(ValueError, match=r"must hold the 3x3 intrinsics as KK or K, or one 3x3 "
+                       r"numeric variable; got variables A \(3x3\), B \(3x3\)"):
+        io.read_K(tmp_path / "two.mat")
+    (tmp_path / "bad.mat").write_bytes(b"\xff\xfe not a mat file")
+    with pytest.raises(ValueError, match=r"`K`: .*bad\.mat is not a readable \.mat file"):
+        io.read_K(tmp_path / "bad.mat")
+
+
+def test_a_transposed_K_is_named_so_in_python():
+    """An audit: integrate(..., K=K.T) said "must be upper-triangular ..." without the "looks
+    transposed" hint that read_K gives; a K wrong otherwise gets no such hint."""
+    import facetlift
+
+    n = np.dstack([np.zeros((20, 30, 2)), np.ones((20, 30))])
+    K = np.array([[40.0, 0, 14.5], [0, 40.0, 9.5], [0, 0, 1]])
+    with pytest.raises(ValueError, match=r"upper-triangular.*; it looks transposed .*give its "
+                       "transpose"):
+        facetlift.integrate(n, K=K.T)
+    with pytest.raises(ValueError, match=r"upper-triangular with last row .*\]\]\)?$"):
+        facetlift.integrate(n, K=[[40.0, 0, 14.5], [0, 40.0, 9.5], [0, 0, 2]])
+
+
 @pytest.mark.parametrize(
     "text, match",
     [("1 2 3\n4 5 6\n", r"6 number\(s\).*3x3.*fx fy cx cy"), ("a b c\n", "cannot parse"),

@@ -431,8 +431,12 @@ def check_K(K) -> np.ndarray:
             "intrinsics in other units (normalised, mm) must be converted to pixels"
         )
     if not np.allclose(Km[2], [0, 0, 1]) or Km[1, 0] != 0:
+        # (named as read_K names it: K.T in Python was told the layout alone, an audit)
+        transposed = np.allclose(Km[:, 2], [0, 0, 1]) and np.allclose(np.triu(Km, 1), 0)
         raise ValueError(
             "`K` must be upper-triangular with last row [0, 0, 1] (OpenCV layout "
             f"[[fx, s, cx], [0, fy, cy], [0, 0, 1]]); got {Km.tolist()}"
+            + ("; it looks transposed (a column-vector layout, e.g. MATLAB's): give its "
+               "transpose" if transposed else "")
         )
     return Km

@@ -162,8 +162,9 @@ _JOB_OPTIONS = [
                  help="Pixel width in world units (orthographic): scales depth with x and y."),
     click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Perspective intrinsics: a text file of the 3x3 matrix (OpenCV layout) "
-                 "or of fx fy cx cy (also under a header naming them), JSON, or a (3, 3) "
-                 ".npy. A dataset folder's K.txt is used automatically."),
+                 "or of fx fy cx cy (also under a header naming them), JSON, a (3, 3) "
+                 ".npy, or a .mat file's KK (a calibration's Calib_Results.mat) or K. A "
+                 "dataset folder's K.txt is used automatically."),
     click.option("--fov", type=float, default=None, metavar="DEG",
                  help="Horizontal field of view in degrees (across the width, also for a "
                  "portrait photo), for a camera without a K: fx = fy = (W/2)/tan(fov/2), the "

@@ -26,7 +26,9 @@ def read_K(path) -> np.ndarray:
     ``fx fy cx cy`` (cx a column, cy a row from the top), the four possibly under a header
     naming them in any order (``cx cy fx fy``); or JSON: a 3x3 list, nine or four numbers, or
     an object with ``fx``, ``fy``, ``cx``, ``cy``. A ``.npy`` file holds a (3, 3) array, nine or
-    four numbers likewise.
+    four numbers likewise. A MATLAB ``.mat`` file (v4 to v7) holds it as the variable ``KK``
+    (the calibration toolbox's ``Calib_Results.mat``, DiLiGenT's), ``K``, or its only 3x3
+    numeric variable.
 
     Raises
     ------
@@ -39,11 +41,15 @@ def read_K(path) -> np.ndarray:
     arg = "K"
     p = _existing(path, arg)
     try:
-        if p.suffix.lower() == ".npy":
+        if p.suffix.lower() == ".mat":  # (it was read as text: "'utf-8' codec can't decode")
+            K = _K_mat(p)
+        elif p.suffix.lower() == ".npy":
             K = np.load(p, allow_pickle=False)
         else:
             K = _K_text(p)
         K = np.asarray(K, dtype=float)
+    except _KError as e:  # (the .mat file's own message: its variables, or why unreadable)
+        raise ValueError(str(e)) from None
     except Exception as e:
         if p.suffix.lower() == ".npy":  # (numpy's advice on allow_pickle means nothing here)
             raise ValueError(f"`{arg}`: cannot read {p} as a numpy array of 3x3 (or 9, or 4) "
@@ -62,12 +68,40 @@ def read_K(path) -> np.ndarray:
                          "fx fy cx cy") from None
     try:
         return check_K(K)
+    except ValueError as e:  # (check_K names a transposed K)
+        raise ValueError(f"`{arg}`: {p}: {e}") from None
+
+
+class _KError(ValueError):
+    """A K file's own message, given as it is (not as a parse error)."""
+
+
+#: The names a ``.mat`` file's intrinsics go by, in order: the calibration toolbox's
+#: ``Calib_Results.mat`` (Bouguet's; DiLiGenT's) holds ``KK``.
+MAT_K_NAMES = ("KK", "K")
+
+
+def _K_mat(p: Path) -> np.ndarray:
+    """The intrinsics of a ``.mat`` file (:func:`read_K`): its variable of
+    :data:`MAT_K_NAMES`, or its only 3x3 numeric one; a :class:`_KError` lists the variables
+    otherwise (a calibration's file also holds each view's 3x3 rotation, Rc_1, ...)."""
+    from .images import load_mat
+
+    try:
+        data = load_mat(p, "K", "save KK as a text file (np.savetxt('K.txt', KK))")
     except ValueError as e:
-        hint = ""
-        if np.allclose(K[:, 2], [0, 0, 1]) and np.allclose(np.triu(K, 1), 0) and K[0, 0] > 0:
-            hint = ("; it looks transposed (a column-vector layout, e.g. MATLAB's): give its "
-                    "transpose")
-        raise ValueError(f"`{arg}`: {p}: {e}{hint}") from None
+        raise _KError(str(e)) from None
+    square = {k: np.asarray(v) for k, v in data.items() if not k.startswith("__")
+              and np.shape(v) == (3, 3) and np.asarray(v).dtype.kind in "biuf"}
+    name = next((n for n in MAT_K_NAMES if n in square),
+                next(iter(square)) if len(square) == 1 else None)
+    if name is None:
+        found = {k: "x".join(map(str, np.shape(v))) for k, v in data.items()
+                 if not k.startswith("__")}
+        raise _KError(f"`K`: {p} must hold the 3x3 intrinsics as {' or '.join(MAT_K_NAMES)}, "
+                      "or one 3x3 numeric variable; got variables "
+                      + (", ".join(f"{k} ({v})" for k, v in sorted(found.items())) or "none"))
+    return square[name].astype(float)
 
 
 #: The names a K file's header or JSON object may give its four numbers.
