@@ -509,3 +509,28 @@ def test_flags_of_another_input_kind_or_route_say_what_applies(tmp_path, capsys)
     code, out, _ = run(capsys, "methods", "--help")
     text = " ".join(out.split())
     assert code == 0 and all(f"{c} (" in text for c in REGISTRY["dgp"].capabilities())
+
+
+def test_the_recipes_diligent_mat_command_runs_with_its_camera(tmp_path, capsys, monkeypatch):
+    """docs/recipes.md's line for DiLiGenT's Normal_gt.mat left out the camera (an audit):
+    DiLiGenT is perspective, and a .mat file carries no K. The command as written runs on
+    such files, perspective, with the release's Calib_Results.mat (its KK)."""
+    import shlex
+    from pathlib import Path
+
+    from scipy import io as sio
+
+    text = (Path(__file__).parents[1] / "docs" / "recipes.md").read_text()
+    line = next(ln for ln in text.splitlines()
+                if ln.startswith("facetlift integrate Normal_gt.mat"))
+    argv = shlex.split(line)[1:]
+    r, c = np.mgrid[0:24, 0:30]
+    n = facetlift.normals_from_gradients(0.02 * (c - 15), 0.01 * (r - 12))
+    sio.savemat(tmp_path / "Normal_gt.mat", {"Normal_gt": n})
+    io.write_mask(tmp_path / "mask.png", np.ones((24, 30), bool))
+    sio.savemat(tmp_path / "Calib_Results.mat", {
+        "KK": np.array([[180.0, 0, 14.5], [0, 180.0, 11.5], [0, 0, 1]]), "Rc_1": np.eye(3)})
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run(capsys, *argv, "--json", "-s", "npy", "-o", tmp_path / "o")
+    assert code == 0, err
+    assert json.loads(out)["perspective"] is True
