@@ -534,3 +534,49 @@ def test_the_recipes_diligent_mat_command_runs_with_its_camera(tmp_path, capsys,
     code, out, err = run(capsys, *argv, "--json", "-s", "npy", "-o", tmp_path / "o")
     assert code == 0, err
     assert json.loads(out)["perspective"] is True
+
+
+def test_a_coarser_prior_is_refused_with_its_remedies(tmp_path, capsys):
+    """An audit: a sensor's 128x153 depth beside a 512x612 map was refused ("size 128x153
+    (HxW) but the normal map is 512x612") with no remedy. Where the sizes differ by one
+    integer factor in both axes (to within a pixel), the command line and integrate name the
+    factor, the footprint centres (i + 0.5) * f - 0.5 as point samples and the points file
+    that takes them, or upsampling; the points so written run. Other sizes: as before."""
+    H, W = 24, 30
+    r, c = np.mgrid[0:H, 0:W]
+    depth = 10.0 + 0.02 * c + 0.01 * r
+    n = facetlift.normals_from_gradients(np.full((H, W), -0.02), np.full((H, W), 0.01))
+    np.save(tmp_path / "n.npy", n)
+    f = 3
+    coarse = depth[1::f, 1::f]  # (8 x 10: each block's centre pixel)
+    np.save(tmp_path / "coarse.npy", coarse)
+    for size in ((H, W), (H + 1, W - 1)):  # (exact, and one pixel off after rounding)
+        np.save(tmp_path / "m.npy", np.resize(n, size + (3,)))
+        code, _, err = run(capsys, "integrate", tmp_path / "m.npy", "--prior",
+                           tmp_path / "coarse.npy", "-o", tmp_path / "x")
+        err = " ".join(err.split())
+        assert code == 1 and "--prior: size 8x10 (HxW) but the normal map is " \
+            f"{size[0]}x{size[1]}; it is 3x coarser in both axes" in err, err
+        assert "row (i + 0.5) * 3 - 0.5, col (j + 0.5) * 3 - 0.5" in err
+        assert "--prior points.csv: a header line row,col,depth" in err and "1,1,DEPTH" in err
+        assert f"upsample it to {size[0]}x{size[1]} yourself" in err
+        with pytest.raises(ValueError, match=r"got shape \(8, 10\); it is 3x coarser.*prior="
+                           r"\(rows, cols, depths\)"):
+            facetlift.integrate(np.resize(n, size + (3,)), prior=coarse)
+    for shape in ((6, 10), (8, 11), (8, 12), (24, 29)):  # (another factor per axis, more
+        # than a pixel off, or not coarser)
+        np.save(tmp_path / "other.npy", np.ones(shape))
+        code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "--prior",
+                           tmp_path / "other.npy", "-o", tmp_path / "x")
+        assert code == 1 and "but the normal map is 24x30" in err and "coarser" not in err
+    # the remedy as the message gives it: the block centres as points
+    i, j = np.nonzero(np.isfinite(coarse))
+    rows, cols = (i + 0.5) * f - 0.5, (j + 0.5) * f - 0.5
+    np.testing.assert_array_equal(depth[rows.astype(int), cols.astype(int)], coarse[i, j])
+    lines = ["row,col,depth"] + [f"{a:g},{b:g},{float(d)!r}" for a, b, d in
+                                 zip(rows, cols, coarse[i, j], strict=True)]
+    (tmp_path / "points.csv").write_text("\n".join(lines) + "\n")
+    code, out, err = run(capsys, "integrate", tmp_path / "n.npy", "--prior",
+                         tmp_path / "points.csv", "-s", "npy", "-o", tmp_path / "p")
+    assert code == 0, err
+    np.testing.assert_allclose(np.load(tmp_path / "p" / "depth.npy"), depth, atol=1e-6)

@@ -230,8 +230,12 @@ def read(job: Job) -> Input:
             job.prior_weight_map, arg="prior_weight_map")
     for name, arr in (("prior", prior), ("confidence", conf), ("prior_weight_map", weight)):
         if isinstance(arr, np.ndarray) and arr.shape != n.shape[:2]:
+            from .problem import coarse_prior_hint
+
+            # (a sensor's depth of lower resolution was refused with no remedy, an audit)
+            hint = coarse_prior_hint(arr.shape, n.shape[:2]) if name == "prior" else ""
             raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW) but the normal "
-                             f"map is {n.shape[0]}x{n.shape[1]}")
+                             f"map is {n.shape[0]}x{n.shape[1]}{hint}")
     return Input(normals=n, mask=m, K=K, mask_source=source, prior=prior, prior_weight=weight,
                  confidence=conf, field=bool(field_input))
 

@@ -1195,6 +1195,8 @@ def prior_samples(prior, shape: tuple[int, int],
                 "tuple(np.asarray(points, float).T)" if arr.ndim == 2 and arr.shape[1] in (3, 4)
                 else "; the rows (rows, cols, depths[, weights]) of one array? Give them as "
                 "a tuple, tuple(arr)" if arr.ndim == 2 and arr.shape[0] in (3, 4) else "")
+        if arr.ndim == 2 and not hint:  # (a sensor's map of lower resolution: an audit)
+            hint = coarse_prior_hint(arr.shape, shape)
         raise ValueError(f"`prior` must be an (H, W) depth map of shape {shape} to match "
                          f"`normals` (NaN where unknown) or a (rows, cols, depths) triple; got "
                          f"shape {arr.shape}{hint}")
@@ -1202,6 +1204,40 @@ def prior_samples(prior, shape: tuple[int, int],
     if np.isinf(arr).any():
         raise ValueError("`prior` must not contain inf (use NaN where the depth is unknown)")
     return arr, None
+
+
+def coarse_factor(small, shape) -> int | None:
+    """The integer factor f >= 2 by which an (h, w) map `small` is coarser than `shape`
+    (H, W) in both axes, ``h f`` and ``w f`` each within one pixel of H and W (a sensor's
+    128 x 153 for a 512 x 612 map: 4); None otherwise."""
+    try:
+        (h, w), (H, W) = (int(v) for v in small), (int(v) for v in shape)
+    except (TypeError, ValueError):
+        return None
+    if not (0 < h < H and 0 < w < W):
+        return None
+    f = round(H / h)
+    if f < 2 or round(W / w) != f or abs(h * f - H) > 1 or abs(w * f - W) > 1:
+        return None
+    return f
+
+
+def coarse_prior_hint(small, shape) -> str:
+    """What to do with a prior of size `small` that is :func:`coarse_factor` times coarser
+    than the normal map of size `shape` (a message's tail, "" for other sizes): its pixels as
+    point samples at their footprints' centres (on the DiLiGenT bear a 4x coarse noisy
+    sensor gave 0.159 mm so, 0.376 mm upsampled to a dense map: an audit), or upsampled."""
+    f = coarse_factor(small, shape)
+    if f is None:
+        return ""
+    return (f"; it is {f}x coarser in both axes (a lower-resolution sensor's depth?): give its "
+            f"pixels as point samples at their footprints' centres, its pixel (i, j) at row "
+            f"(i + 0.5) * {f} - 0.5, col (j + 0.5) * {f} - 0.5 of the map: a points file "
+            "(--prior points.csv: a header line row,col,depth, then one sample per line, its "
+            f"pixel (0, 0) as {0.5 * f - 0.5:g},{0.5 * f - 0.5:g},DEPTH) or in Python "
+            "prior=(rows, cols, depths); or upsample it to "
+            f"{shape[0]}x{shape[1]} yourself (with --prior-blur / prior_blur). docs/fusion.md, "
+            "'A depth map of lower resolution'")
 
 
 #: The largest prior weight: at 1e8 the result already meets the prior where given to
