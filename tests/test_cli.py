@@ -24,9 +24,12 @@ def write_input(folder, H=20, W=26, *, alpha=False, name="normals.png"):
     mask = np.ones((H, W), bool)
     mask[6:10, 4:8] = False
     # (not normal_map.png: a map of that name beside mask.png is warned about as a dataset
-    # folder's, integrated without its mask)
+    # folder's, integrated without its mask; and a mask.png beside any other map is warned
+    # about as unread: the mask of such a map lies in a folder of its own)
     npath = io.write_normals(folder / name, n, mask if alpha else None)
-    mpath = io.write_mask(folder / "mask.png", mask)
+    where = folder if name == "normal_map.png" else folder / "masks"
+    where.mkdir(exist_ok=True)
+    mpath = io.write_mask(where / "mask.png", mask)
     return npath, mpath, mask
 
 
@@ -580,3 +583,61 @@ def test_a_coarser_prior_is_refused_with_its_remedies(tmp_path, capsys):
                          tmp_path / "points.csv", "-s", "npy", "-o", tmp_path / "p")
     assert code == 0, err
     np.testing.assert_allclose(np.load(tmp_path / "p" / "depth.npy"), depth, atol=1e-6)
+
+
+def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
+    """An audit: mask.png beside a plain map file was ignored without a word (docs/cli.md said
+    a folder's mask.png was its mask), while only a dataset folder's files are read. integrate
+    names a mask.*, NAME_mask.* or K.txt beside a map file that it does not read, and the
+    flag that reads it (recorded in --json); a batch names each folder's once, not per item;
+    given with --mask / --K, or for a .mat file with its own mask, nothing is said."""
+    from scipy import io as sio
+
+    H, W = 20, 26
+    n = np.dstack([np.zeros((H, W, 2)), np.ones((H, W))])
+    mask = np.zeros((H, W), bool)
+    mask[4:16, 5:20] = True
+    folder = tmp_path / "maps"
+    folder.mkdir()
+    np.save(folder / "obj.npy", n)
+    np.save(folder / "obj2.npy", n)
+    io.write_mask(folder / "mask.png", mask)
+    code, out, err = run(capsys, "integrate", folder / "obj.npy", "--json", "-s", "npy", "-o",
+                         tmp_path / "a")
+    said = [w for w in json.loads(out)["warnings"] if "beside it" in w]
+    assert code == 0 and len(said) == 1 and err.count("beside it") == 1, err
+    assert "obj.npy has mask.png beside it, which this run does not read" in said[0]
+    assert "give --mask to use it" in said[0]
+    assert json.loads(out)["facets"] == H * W  # (as said: not the mask)
+    code, out, err = run(capsys, "integrate", folder / "obj.npy", "--mask", folder / "mask.png",
+                         "--json", "-s", "npy", "-o", tmp_path / "b")
+    assert code == 0 and "beside it" not in err and json.loads(out)["facets"] == mask.sum()
+    # its own NAME_mask and a K.txt: named too (a batch reads the first, a dataset the second)
+    (folder / "mask.png").unlink()
+    io.write_mask(folder / "obj_mask.png", mask)
+    (folder / "K.txt").write_text("40 0 12.5\n0 40 9.5\n0 0 1\n")
+    code, _, err = run(capsys, "integrate", folder / "obj.npy", "-s", "npy", "-o", tmp_path / "c")
+    err = " ".join(err.split())
+    assert code == 0 and "obj.npy has obj_mask.png and K.txt beside it" in err, err
+    assert "give --mask / --K to use them (without K.txt's camera the map is integrated " \
+           "orthographically)" in err
+    code, _, err = run(capsys, "integrate", folder / "obj.npy", "--fov", "60", "--mask",
+                       folder / "obj_mask.png", "-s", "npy", "-o", tmp_path / "d")
+    assert code == 0 and "beside it" not in err
+    # a batch: once per folder, the mask only where a map has none of its own
+    (folder / "K.txt").unlink()
+    io.write_mask(folder / "mask.png", mask)
+    code, _, err = run(capsys, "batch", folder, "-s", "npy", "-o", tmp_path / "batch")
+    assert code == 0 and "beside it," not in err, err
+    assert err.count("holds mask.png beside its normal maps, but it is no map's mask") == 1
+    assert f"give --mask {folder / 'mask.png'} (mask=) to use it for every map" in err
+    # a .mat map: the release's mask.png beside Normal_gt.mat, unless the file holds a mask
+    sio.savemat(tmp_path / "Normal_gt.mat", {"Normal_gt": n})
+    io.write_mask(tmp_path / "mask.png", mask)
+    code, _, err = run(capsys, "integrate", tmp_path / "Normal_gt.mat", "-s", "npy", "-o",
+                       tmp_path / "e")
+    assert code == 0 and "Normal_gt.mat has mask.png beside it" in err
+    sio.savemat(tmp_path / "Normal_gt.mat", {"Normal_gt": n, "mask": mask.astype(np.uint8)})
+    code, _, err = run(capsys, "integrate", tmp_path / "Normal_gt.mat", "-s", "npy", "-o",
+                       tmp_path / "f")
+    assert code == 0 and "beside it" not in err, err

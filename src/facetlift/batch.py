@@ -228,22 +228,37 @@ def _unique(name: str, taken: set) -> str:
     return new
 
 
-def _unused_cameras(found) -> None:
-    """Warn once per folder that holds a ``K.txt`` beside normal-map files: only a dataset
-    folder's (``normal_map.*`` + ``K.txt``) is read, so its maps would be integrated
-    orthographically (a user's rig: 583 mm MADE instead of 1.88 mm, and no word)."""
+def _unused_folder_files(found, template: Job) -> None:
+    """Warn once per folder that holds a ``K.txt`` or a ``mask.*`` beside normal-map files:
+    only a dataset folder's (with ``normal_map.*``) are read, so its maps would be integrated
+    orthographically (a user's rig: 583 mm MADE instead of 1.88 mm, and no word) and
+    without that mask (an audit: docs/cli.md said a folder's mask.png was its maps' mask)."""
     from .io.images import NORMAL_READ_FORMATS
+    from .jobs import unread_files
 
-    folders = sorted({Path(it.path).parent for it in found if Path(it.path).is_file()})
+    by_folder: dict = {}
+    for it in found:
+        if it.error is None and Path(it.path).is_file():
+            by_folder.setdefault(Path(it.path).parent, []).append(it)
+    camera = template.K is None and template.fov is None and not template.orthographic
     # (a dataset folder's own normal_map.* given as a file is warned about by its item,
     # jobs._beside_dataset_files, which names the folder's mask too: not twice)
-    folders = [f for f in folders if (f / "K.txt").is_file()
-               and not _is_dataset(f, NORMAL_READ_FORMATS)]
-    for folder in folders:
-        warnings.warn(
-            f"batch: {folder} holds K.txt beside its normal maps, but only a dataset folder's "
-            "K.txt (with normal_map.*) is read: these maps are integrated orthographically; "
-            f"give --K {folder / 'K.txt'} (K=) to use that camera", stacklevel=3)
+    for folder in sorted(f for f in by_folder if not _is_dataset(f, NORMAL_READ_FORMATS)):
+        # (the mask only where a map of the folder has none of its own, NAME_mask.*)
+        mask = template.mask is None and any(it.mask is None for it in by_folder[folder])
+        unread = unread_files(folder, None, mask=mask, camera=camera)
+        if "K.txt" in unread:
+            warnings.warn(
+                f"batch: {folder} holds K.txt beside its normal maps, but only a dataset "
+                "folder's K.txt (with normal_map.*) is read: these maps are integrated "
+                f"orthographically; give --K {folder / 'K.txt'} (K=) to use that camera",
+                stacklevel=3)
+        for name in (n for n in unread if n != "K.txt"):
+            warnings.warn(
+                f"batch: {folder} holds {name} beside its normal maps, but it is no map's mask: "
+                "only a dataset folder's (with normal_map.*) is read, and NAME_mask.* beside "
+                f"NAME.*; give --mask {folder / name} (mask=) to use it for every map, or name "
+                "it after its map", stacklevel=3)
 
 
 def _is_dataset(folder: Path, formats) -> bool:
@@ -359,7 +374,9 @@ def settings(job: Job) -> dict:
     from . import frames
     from .jobs import jsonable
 
-    out = {k: v for k, v in asdict(job).items() if k not in ("normals", "gradients", "outdir")}
+    # (unread_beside: which warnings are given, not the result)
+    out = {k: v for k, v in asdict(job).items()
+           if k not in ("normals", "gradients", "outdir", "unread_beside")}
     out["options"] = {k: v for k, v in job.options.items() if k not in NEUTRAL_OPTIONS}
     out["save"] = sorted(set(job.save))
     for key in ("fov", "output_frame"):  # (unset: as in a log written before they existed)
@@ -494,8 +511,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     if workers is not None:  # (checked before the output folder is made: an audit)
         _workers(workers, 1)
     found = items(inputs, list_file=list_file)
-    if template.K is None and not template.orthographic:
-        _unused_cameras(found)
+    _unused_folder_files(found, template)
     root = Path(out).resolve()
     prepare_folder(root)  # created and checked before any work
     log_path = root / LOG_NAME if log is None else Path(log)
@@ -517,7 +533,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             continue
         if it.name in kept:
             it = replace(it, name=_unique(it.name, taken))
-        j = template.with_input(it.path, root / it.name)
+        # (the files beside it that it does not read: named once per folder, above)
+        j = replace(template.with_input(it.path, root / it.name), unread_beside=False)
         if it.mask is not None and template.mask is None:
             j = replace(j, mask=it.mask)
         jobs.append((it, j))

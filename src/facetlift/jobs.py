@@ -98,6 +98,10 @@ class Job:
     #: Fail where the input's frame looks wrong (a :class:`facetlift.FrameWarning`), before
     #: any output is written, instead of warning.
     strict: bool = False
+    #: Warn about the files beside a plain map file that the job does not read (``mask.*``,
+    #: ``NAME_mask.*``, ``K.txt``); a batch names them once per folder instead (False for
+    #: its items).
+    unread_beside: bool = True
 
     def with_input(self, path, outdir) -> Job:
         """The same job on another normal-map input (a batch item)."""
@@ -177,6 +181,8 @@ def read(job: Job) -> Input:
             n = frames.to_facetlift(g["normals"], job.normal_frame)
         m = g["mask"]
         source = f"{src.name} mask" if m is not None else "valid normals"
+        if not field_input and job.unread_beside:
+            _unread_beside(src, job, own_mask=m is not None)
     elif src.is_dir():
         ds = io.read_dataset(src, frame=job.normal_frame,
                              prior_scale=None if job.prior else job.prior_scale,
@@ -189,6 +195,8 @@ def read(job: Job) -> Input:
         n, m = io.read_normals(src, frame=job.normal_frame)
         source = "alpha channel" if m is not None else "valid normals"
         _beside_dataset_files(src, job)
+        if job.unread_beside and src.stem.lower() != "normal_map":
+            _unread_beside(src, job)
     if field_input and job.K is not None:
         raise ValueError("`K`: a gradient field is orthographic; --K does not apply")
     if not field_input and job.gradient_frame != Job.gradient_frame:  # (ignored silently: an
@@ -264,6 +272,48 @@ def _beside_dataset_files(src: Path, job: Job) -> None:
         warn(f"{src} lies in a dataset folder whose {' and '.join(unused)} this run does not "
              f"read: only the folder as the input reads them (facetlift integrate {folder}); "
              "or give them with --K / --mask", UserWarning)
+
+
+def unread_files(folder: Path, stem: str | None, *, mask: bool, camera: bool) -> list[str]:
+    """The names of the files in `folder` that a plain map file named `stem` (None: any map
+    of the folder) would be read with if its folder were a dataset, or if it were a batch
+    item, but that ``integrate`` does not read: ``mask.*`` and ``NAME_mask.*`` where
+    `mask`, ``K.txt`` where `camera` (each only where the flags do not give one)."""
+    from .io.dataset import _find
+    from .io.images import MASK_FORMATS
+
+    found = []
+    if mask:
+        for name in ("mask",) + (() if stem is None else (f"{stem}_mask",)):
+            try:
+                p = _find(folder, name, MASK_FORMATS)
+            except ValueError:  # (several of them, or a folder by that name: none is read)
+                p = None
+            if p is not None:
+                found.append(p.name)
+    if camera and (folder / "K.txt").is_file():
+        found.append("K.txt")
+    return found
+
+
+def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
+    """Warn where a plain map file (not a dataset folder's ``normal_map.*``) has beside it a
+    ``mask.*``, its ``NAME_mask.*`` or a ``K.txt`` that the job does not read: only --mask and
+    --K give a plain map its mask and camera (a fresh user's mask.png beside the map was
+    ignored without a word, while docs/cli.md said a folder's mask.png was its mask; an
+    audit). Not for a mask where the map has its own (`own_mask`: a .mat file's)."""
+    unread = unread_files(src.parent, src.stem, mask=job.mask is None and not own_mask,
+                          camera=job.K is None and job.fov is None and not job.orthographic)
+    if not unread:
+        return
+    flags = " / ".join(f for f, given in (
+        ("--mask", any(n != "K.txt" for n in unread)), ("--K", "K.txt" in unread)) if given)
+    warn(f"{src.name} has {' and '.join(unread)} beside it, which this run does not read: a "
+         "normal-map file's mask and camera come only from --mask and --K (a folder is read "
+         f"as a dataset only with normal_map.*); give {flags} to use "
+         f"{'it' if len(unread) == 1 else 'them'}"
+         + (" (without K.txt's camera the map is integrated orthographically)"
+            if "K.txt" in unread else ""), UserWarning)
 
 
 def _from_folder(message: str, job: Job, inp: Input) -> str:
