@@ -509,3 +509,17 @@ def test_flags_of_another_input_kind_or_route_say_what_applies(tmp_path, capsys)
     code, out, _ = run(capsys, "methods", "--help")
     text = " ".join(out.split())
     assert code == 0 and all(f"{c} (" in text for c in REGISTRY["dgp"].capabilities())
+
+
+def test_a_zero_one_map_read_in_a_camera_frame_is_told_of_its_encoding(tmp_path, capsys):
+    """An audit: a [0, 1]-encoded float map with --normal-frame opencv was refused as facing
+    away, with advice to drop the frame; its encoding is named first (integrate and info)."""
+    npath, _, _ = write_input(tmp_path)
+    n, _ = io.read_normals(npath)
+    np.save(tmp_path / "enc.npy", (n + 1) / 2)
+    code, _, err = run(capsys, "integrate", tmp_path / "enc.npy", "--normal-frame", "opencv",
+                       "-o", tmp_path / "out")
+    line = _one_line_error(err)
+    assert code == 1 and r"[0, 1]-encoded" in line and "face away" not in line
+    code, out, _ = run(capsys, "info", tmp_path / "enc.npy", "--normal-frame", "opencv")
+    assert "likely [0, 1]-encoded floats" in out and "face away" not in out

@@ -113,6 +113,20 @@ def test_undecoded_integer_images_as_floats_are_refused_with_the_fix(scale, bits
     assert np.isfinite(facetlift.integrate(plane).depth).all()  # all >= 0 and > 1: a plane
 
 
+@pytest.mark.parametrize("frame", ["opencv", "directx", "x,-y,-z"])
+def test_an_encoding_is_named_before_the_frame_is_applied(frame):
+    """An audit: a [0, 1]-encoded float map with normal_frame='opencv' faced away once its
+    frame was applied and was told to drop the frame; only then was its encoding named (with
+    'directx' it was not refused at all). The encoding checks look at the values as given."""
+    n, _ = bump()
+    with pytest.raises(ValueError, match=r"looks \[0, 1\]-encoded.*n = 2 \* v - 1"):
+        facetlift.integrate((n + 1) / 2, K=[30, 30, 14.5, 11.5], normal_frame=frame)
+    with pytest.raises(ValueError, match=r"undecoded 8-bit normal map"):
+        facetlift.integrate(np.round((n + 1) / 2 * 255), normal_frame=frame)
+    with pytest.raises(ValueError, match="face away"):  # (a map that does face away: as before)
+        facetlift.integrate(n, normal_frame="opencv")
+
+
 def test_unit_normals_facing_up_and_right_are_not_taken_for_an_encoding():
     plane = facetlift.normals_from_gradients(np.full((12, 12), -0.3), np.full((12, 12), -0.2))
     assert (plane >= 0).all()

@@ -28,7 +28,9 @@ Encodings
     :data:`ENCODED_LENGTH_RANGE` (background fill) as NaN. :func:`checked` does the same for
     arrays handed to :func:`facetlift.integrate`, with a warning, and refuses float maps that
     look [0, 1]-encoded (every component in [0, 1] and lengths that are not 1) or that face away
-    from the viewer, naming the fix. Only pixels inside the mask are inspected.
+    from the viewer, naming the fix. Only pixels inside the mask are inspected. The encodings
+    are checked first, on the values as given (before the frame is applied, which negates
+    axes): a [0, 1]-encoded map read in a camera frame faces away, and the frame was blamed.
 
 After a solve, :func:`flip_check` compares how integrable the field is as given and with y or x
 flipped, and warns when a flip is far more consistent; at an object's silhouette
@@ -328,14 +330,23 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
     if n.ndim != 3 or n.shape[-1] != 3 or n.dtype.kind not in "uif":
         return normals
     n = as_float_normals(n, name, mask, hidden)
-    n = to_facetlift(n, frame)
+    read = _READ_IN.get()
+    read = None if read == GRADIENT_FIELD else read  # (such normals never face away)
+    read = read if is_identity(frame) else frame  # (the frame the values were stored in)
+    # the encodings first, on the values as stored (before `frame`, or the reader's frame, is
+    # applied: it negates axes): a [0, 1]-encoded map read with normal_frame='opencv' faced
+    # away and was told to drop the frame before its encoding was named (an audit); with
+    # 'directx' it was not refused at all
     sample = _inside(n, mask, sample=CHECK_SAMPLE)
+    stored = None if sample is None else (
+        sample if not is_identity(frame) else from_facetlift(sample, read))
+    if stored is not None and len(stored) and stored.min() >= 0:  # (only then can the whole
+        inside = _inside(n, mask)  # map be encoded)
+        _check_encoding(inside if not is_identity(frame) else from_facetlift(inside, read),
+                        name)
+    n = to_facetlift(n, frame)
     if sample is not None:
-        read = _READ_IN.get()
-        read = None if read == GRADIENT_FIELD else read  # (such normals never face away)
-        _check_facing(sample, name, read if is_identity(frame) else frame)
-        if len(sample) and sample[:, :2].min() >= 0:  # only then can the whole map be encoded
-            _check_encoding(_inside(n, mask), name)
+        _check_facing(to_facetlift(sample, frame), name, read)
     return n
 
 
@@ -390,9 +401,9 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
         bits = 8 if scale == 255 else 16
         raise ValueError(
             f"`{name}` looks like an undecoded {bits}-bit normal map: every component inside "
-            f"the mask lies in [0, {scale}] and 2 * v / {scale} - 1 is of unit length; decode "
-            f"it first with n = v / {scale} * 2 - 1 (or pass the {bits}-bit integer image "
-            "itself)"
+            f"the mask lies in [0, {scale}] as given and 2 * v / {scale} - 1 is of unit "
+            f"length; decode it first with n = v / {scale} * 2 - 1 (or pass the {bits}-bit "
+            "integer image itself)"
         )
     if len(v) < ENCODING_CHECK_PIXELS or v.min() < 0 or v.max() > 1:
         return
@@ -401,8 +412,9 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
     if np.mean(np.abs(length - 1) > 0.05) < 0.5:
         return  # unit normals that all face up and right: a tilted plane, say
     raise ValueError(
-        f"`{name}` looks [0, 1]-encoded: every component inside the mask lies in [0, 1] (no "
-        "normal faces left or down) and the vectors are not unit length; decode it first "
+        f"`{name}` looks [0, 1]-encoded: every component inside the mask lies in [0, 1] as "
+        "given (none negative, before any normal frame is applied) and the vectors are not "
+        "unit length; decode it first "
         "with n = 2 * v - 1 (or pass the 8/16-bit integer image itself). If these really are "
         "normals, normalise them to unit length"
     )
