@@ -86,6 +86,32 @@ def test_integer_arrays_are_decoded_with_a_warning(tmp_path, dtype):
     np.testing.assert_allclose(a.depth, b.depth, atol=1e-12)
 
 
+def test_a_grey_image_is_refused_inside_the_mask_only():
+    """An audit: a grey image (a height map saved as RGB) handed to integrate ran, ~30 % of
+    it facing away, into garbage; as uint8 or as floats it is refused, naming `normals`."""
+    r, c = np.mgrid[0:24, 0:30]
+    h = (127 + 100 * np.sin(r / 5) * np.cos(c / 7)).astype(np.uint8)
+    grey = np.dstack([h, h, h])
+    for a in (grey, grey / 255.0, grey.astype(np.uint16) * 257):
+        with pytest.raises(ValueError, match=r"`normals`: R = G = B at every pixel of the "
+                           r"image: a grey image \(a height map\?\), not a normal map"):
+            facetlift.integrate(a)
+    n, _ = bump()
+    mask = np.zeros(n.shape[:2], bool)
+    mask[4:20, 5:25] = True
+    v = np.round((n + 1) / 2 * 255).astype(np.uint8)
+    v[~mask] = grey[~mask]  # grey outside the mask: background, not looked at
+    with pytest.warns(UserWarning, match="decoded as"):
+        facetlift.integrate(v, mask)
+    v[mask] = grey[mask]
+    v[~mask] = (128, 128, 255)
+    with pytest.raises(ValueError, match=r"R = G = B at every pixel inside the mask"):
+        facetlift.integrate(v, mask)
+    some = n.copy()
+    some[:3] = 0.5  # (some grey pixels: a map all the same)
+    facetlift.integrate(some)
+
+
 def test_other_unsigned_integers_are_refused():
     with pytest.raises(ValueError, match="integer type uint32; integer normal maps must be"):
         facetlift.integrate(np.zeros((4, 4, 3), np.uint32))

@@ -160,6 +160,47 @@ def test_background_fill_decodes_as_nan(tmp_path):
     assert np.isnan(n[0, 1:]).all() and np.isnan(n[1]).all()  # black too
 
 
+def test_a_grey_image_saved_as_rgb_is_refused(tmp_path, normals):
+    """An audit: a height map saved as RGB (R = G = B everywhere) was integrated, ~30 % of it
+    facing away, into garbage. Only the pixels inside the alpha count; a map with some grey
+    pixels (a background fill) is read."""
+    import imagecodecs
+
+    r, c = np.mgrid[0:24, 0:30]
+    h = (127 + 100 * np.sin(r / 5) * np.cos(c / 7)).astype(np.uint8)
+    grey = np.dstack([h, h, h])
+    for bits, px in ((8, grey), (16, grey.astype(np.uint16) * 257)):
+        (tmp_path / f"grey{bits}.png").write_bytes(imagecodecs.png_encode(px))
+        with pytest.raises(ValueError, match=rf"grey{bits}.png: R = G = B at every pixel of the "
+                           r"image: a grey image \(a height map\?\), not a normal map"):
+            io.read_normals(tmp_path / f"grey{bits}.png")
+    np.save(tmp_path / "grey.npy", grey)
+    with pytest.raises(ValueError, match=r"grey.npy: R = G = B"):
+        io.read_normals(tmp_path / "grey.npy")
+    # inside the alpha only: grey inside it is refused, grey outside it is background
+    n, mask = normals
+    io.write_normals(tmp_path / "n.png", n, mask)
+    px = imagecodecs.png_decode((tmp_path / "n.png").read_bytes())
+    outside = px.copy()
+    outside[~mask, :3] = grey[~mask]
+    (tmp_path / "outside.png").write_bytes(imagecodecs.png_encode(outside))
+    back, alpha = io.read_normals(tmp_path / "outside.png")
+    np.testing.assert_allclose(back[mask], n[mask], atol=4e-3)
+    inside = px.copy()
+    inside[mask, :3] = grey[mask]
+    inside[~mask, :3] = (128, 128, 255)  # (colour outside the alpha does not count)
+    (tmp_path / "inside.png").write_bytes(imagecodecs.png_encode(inside))
+    with pytest.raises(ValueError, match=r"inside.png: R = G = B at every pixel inside the mask"):
+        io.read_normals(tmp_path / "inside.png")
+    # some grey pixels (mid-grey and black fill) in a normal map: read, as before
+    some = px[..., :3].copy()
+    some[~mask] = (127, 127, 127)
+    some[0, :5] = 0
+    (tmp_path / "some.png").write_bytes(imagecodecs.png_encode(some))
+    back, _ = io.read_normals(tmp_path / "some.png")
+    assert np.isfinite(back[1:][mask[1:]]).all() and np.isnan(back[0, :5]).all()
+
+
 def test_nan_normals_written_to_png_read_back_as_nan(tmp_path, normals):
     n, mask = normals
     n = n.copy()

@@ -261,6 +261,49 @@ def decode(pixels: np.ndarray, where=None) -> np.ndarray:
     return n
 
 
+def grey_check(values: np.ndarray, where, what: str) -> None:
+    """Refuse an (H, W, 3) image whose three channels are equal at every pixel among `where`
+    ((H, W) bool: the mask or alpha where known; None: every pixel; non-finite pixels aside),
+    with at least two levels: a grey image saved as RGB (a height map, a photo), not a normal
+    map. Decoded, R = G = B is a vector along (1, 1, 1) or its opposite, or too short to be a
+    normal: an audit's grey height map ran with ~30 % of it facing away and came out as
+    garbage. A map where only some pixels are grey (a background fill) passes; so does one
+    of a single level (one plane, or a fill that the valid-normals rule handles). `what`
+    names the argument (and path) in the message."""
+    v = np.asarray(values)
+    if v.ndim != 3 or v.shape[-1] != 3 or v.dtype.kind not in "uif" or v.size == 0:
+        return
+    flat = v.reshape(-1, 3)
+    sel, inside = None, " of the image"
+    if where is not None:
+        w = np.asarray(where)
+        if w.shape == v.shape[:2]:
+            sel, inside = w.reshape(-1).astype(bool), " inside the mask"
+    if v.dtype.kind == "f":
+        with np.errstate(invalid="ignore"):
+            fin = np.isfinite(flat).all(axis=1)
+        sel = fin if sel is None else sel & fin
+
+    def grey(a):
+        return (a[:, 0] == a[:, 1]) & (a[:, 1] == a[:, 2])
+
+    # (a strided sample first: a normal map shows colour at once, and the full pass is made
+    # only where every sampled pixel is grey)
+    step = max(1, flat.shape[0] // CHECK_SAMPLE)
+    some = flat[::step] if sel is None else flat[::step][sel[::step]]
+    if not grey(some).all():
+        return
+    picked = flat if sel is None else flat[sel]
+    if not picked.size or not grey(picked).all() or picked[:, 0].min() == picked[:, 0].max():
+        return
+    raise ValueError(
+        f"{what}: R = G = B at every pixel{inside}: a grey image (a "
+        "height map?), not a normal map, which stores x, y, z in R, G, B (a flat area facing "
+        "the viewer is (128, 128, 255), bluish). Give the normal map: a height or depth map "
+        "is what facetlift makes from one"
+    )
+
+
 def _srgb_to_linear(v: np.ndarray) -> np.ndarray:
     return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
@@ -316,7 +359,8 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
     Raises
     ------
     ValueError
-        Other unsigned integer types; a float map that looks [0, 1]-encoded or like an
+        Other unsigned integer types; a grey image (R = G = B at every pixel inside the
+        mask, :func:`grey_check`); a float map that looks [0, 1]-encoded or like an
         undecoded 8/16-bit image (values up to 255 or 65535); a map whose
         normals mostly face away from the viewer (a camera frame with z pointing away); a bad
         `frame`.
@@ -329,7 +373,8 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
         return normals  # prepare() says what is wrong with it
     if n.ndim != 3 or n.shape[-1] != 3 or n.dtype.kind not in "uif":
         return normals
-    n = as_float_normals(n, name, mask, hidden)
+    grey_check(n, _where(mask, n.shape[:2], hidden), f"`{name}`")  # (before the decode's
+    n = as_float_normals(n, name, mask, hidden)  # warning)
     read = _READ_IN.get()
     read = None if read == GRADIENT_FIELD else read  # (such normals never face away)
     read = read if is_identity(frame) else frame  # (the frame the values were stored in)
@@ -348,6 +393,25 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
     if sample is not None:
         _check_facing(to_facetlift(sample, frame), name, read)
     return n
+
+
+def _where(mask, shape, hidden=None) -> np.ndarray | None:
+    """(H, W) bool: inside `mask` (nonzero and finite; None: every pixel) and not `hidden`;
+    None where neither is given or the mask cannot be read (prepare refuses it)."""
+    m = None
+    if mask is not None:
+        try:
+            m = np.asarray(mask)
+        except Exception:
+            m = None
+        if m is not None and (m.shape != shape or m.dtype.kind not in "biuf"):
+            m = None
+        elif m is not None:
+            with np.errstate(invalid="ignore"):
+                m = np.where(np.isfinite(m), m, 0) != 0 if m.dtype.kind == "f" else m != 0
+    if hidden is not None:
+        m = ~hidden if m is None else m & ~hidden
+    return m
 
 
 #: The facing check looks at about this many mask pixels, evenly spaced.

@@ -247,7 +247,9 @@ def read_normals(
     ------
     ValueError
         Missing, corrupt or truncated file, wrong number of channels, unsupported pixel type
-        or extension, a bad `frame`. The message names the path.
+        or extension, a bad `frame`; a grey image saved as RGB (R = G = B at every pixel
+        inside the alpha, where there is one: :func:`facetlift.frames.grey_check`). The
+        message names the path.
     """
     arg = "path"
     frame = frames.resolve(frame, y_down)
@@ -260,6 +262,7 @@ def read_normals(
                 _check_png_normals(fh.read(26), p, arg)
         pixels = _decode_image(p, ext, arg)
         rgb, alpha = _split_alpha(pixels, p, arg)
+        frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
         n = _decode_unit(rgb, p, arg, alpha)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
@@ -272,9 +275,11 @@ def read_normals(
             )
         n = np.stack([ch[c] for c in names], axis=-1).astype(np.float64)
         alpha = _alpha_mask(ch[alpha_name]) if alpha_name in ch else None
+        frames.grey_check(n, alpha, f"`{arg}`: {p}")
     else:
         arr = _read_npy(p, arg)
         rgb, alpha = _split_alpha(arr, p, arg)
+        frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
         n = _decode_unit(rgb, p, arg, alpha)  # uint8/uint16 arrays decode like PNG pixels
     return frames.to_facetlift(n, frame), alpha
 
