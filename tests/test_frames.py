@@ -466,6 +466,60 @@ def test_decoded_normals_far_from_unit_length_are_warned_about():
         frames.decode(v)
 
 
+def _bumps_on_a_plane(N=128):
+    """Unit normals of three compact cos^2 bumps on a flat plane (exactly flat between them,
+    as a texture bake's flat areas are), the height, and where the slopes are exactly 0."""
+    r, c = np.mgrid[0:N, 0:N] + 0.5
+    h = np.zeros((N, N))
+    for y0, x0 in ((30, 35), (90, 45), (60, 100)):
+        d2 = ((r - y0) ** 2 + (c - x0) ** 2) / 15**2
+        h += np.where(d2 < 1, 4 * np.cos(np.pi / 2 * np.sqrt(d2)) ** 2, 0)
+    gy, gx = np.gradient(h)
+    return facetlift.normals_from_gradients(gx, -gy), h, (gx == 0) & (gy == 0)
+
+
+@pytest.mark.parametrize("encode", [np.round, np.floor])
+def test_8_bit_flat_areas_decode_to_exactly_zero(encode):
+    """An audit: 8-bit encoders store the component 0 as 128 (round(127.5); some truncate to
+    127), which decodes to +-0.0039: every flat area tilted, and a 1024^2 brick texture's
+    height came out 27 % RMS off. A spike in the x or y histogram at 128 (127) is decoded as
+    exactly 0; the height comes out within 1 %."""
+    n, h, flat = _bumps_on_a_plane()
+    v = np.minimum(encode((n + 1) / 2 * 255), 255).astype(np.uint8)
+    assert flat.mean() > 0.5
+    plain = v / 255 * 2 - 1
+    assert np.abs(plain[flat][:, :2]).min() > 0.0039  # (as decoded before: tilted)
+    d = frames.decode(v)
+    assert (d[flat][:, :2] == 0).all()
+    zero = 128 if encode is np.round else 127
+    np.testing.assert_array_equal(d[v != zero], plain[v != zero])  # (other codes as before)
+
+    def rms(normals):
+        z, t = -facetlift.integrate(normals).depth, h - h.mean()
+        return np.sqrt(np.mean((z - z.mean() - t) ** 2) / np.mean(t**2))
+
+    # (a truncating encoder also biases every other code by half a step: more error left)
+    assert rms(plain) > 0.1 and rms(d) < (0.02 if encode is np.round else 0.3 * rms(plain))
+
+
+def test_8_bit_maps_without_a_flat_plateau_and_16_bit_maps_decode_as_before():
+    """A sphere's normals are spread continuously: no spike at 128, and the decode is
+    bit for bit v / 255 * 2 - 1 (NaN outside the valid lengths); 16 bits never change."""
+    r, c = np.mgrid[0:96, 0:96] + 0.5
+    x, y = (c - 48) / 40, -(r - 48) / 40
+    inside = x**2 + y**2 < 1
+    n = np.dstack([x, y, np.sqrt(np.clip(1 - x**2 - y**2, 0, None))])
+    n[~inside] = 0  # (the background: mid-grey fill, not a normal)
+    flat, _, _ = _bumps_on_a_plane(96)
+    for m, bits in ((n, 8), (n, 16), (flat, 16)):
+        top = 2**bits - 1
+        v = np.round((m + 1) / 2 * top).astype(np.uint8 if bits == 8 else np.uint16)
+        plain = v / top * 2 - 1
+        length = np.linalg.norm(plain, axis=-1)
+        plain[(length < 0.5) | (length > 1.5)] = np.nan
+        np.testing.assert_array_equal(frames.decode(v), plain)
+
+
 def test_an_srgb_encoded_map_is_named_with_the_curve_that_undoes_it():
     """An audit: an 8-bit map passed through an sRGB curve (a colour-managed export) gave 30x
     the depth error, and the warning blamed a missing z. Either way round, the curve that
