@@ -523,3 +523,21 @@ def test_a_zero_one_map_read_in_a_camera_frame_is_told_of_its_encoding(tmp_path,
     assert code == 1 and r"[0, 1]-encoded" in line and "face away" not in line
     code, out, _ = run(capsys, "info", tmp_path / "enc.npy", "--normal-frame", "opencv")
     assert "likely [0, 1]-encoded floats" in out and "face away" not in out
+
+
+def test_a_two_channel_map_with_blue_0_is_told_to_rebuild_z(tmp_path, capsys):
+    """An audit: a BC5 map (B = 0) was told '100 % ... face away ... try --normal-frame
+    opencv' after a warning that z is not stored; integrate and info say z is not stored."""
+    import imagecodecs
+
+    npath, _, _ = write_input(tmp_path)
+    n, _ = io.read_normals(npath)
+    v = np.round((n + 1) / 2 * 255).astype(np.uint8)
+    v[..., 2] = 0
+    (tmp_path / "bc5.png").write_bytes(imagecodecs.png_encode(v))
+    code, _, err = run(capsys, "integrate", tmp_path / "bc5.png", "-o", tmp_path / "out")
+    line = [ln for ln in err.splitlines() if ln.startswith("facetlift: error:")]
+    assert code == 1 and len(line) == 1 and "is z stored" in line[0]
+    assert "sqrt(1 - x^2 - y^2)" in line[0] and "normal-frame" not in line[0]
+    code, out, _ = run(capsys, "info", tmp_path / "bc5.png")
+    assert "likely z not stored" in out and "normal-frame" not in out

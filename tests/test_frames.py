@@ -178,6 +178,35 @@ def test_normals_facing_away_name_the_opencv_frame():
         facetlift.integrate(frames.from_facetlift(n, "opencv"))
 
 
+@pytest.mark.parametrize("blue", [0, 37])
+def test_a_two_channel_map_is_told_that_z_is_not_stored(blue):
+    """An audit: a BC5 map (x, y in R, G; B = 0) was refused as '100 % ... face away ... try
+    --normal-frame opencv', after the decode's right warning that z is not stored. A blue
+    channel of one value over the mask is named as such, with the rebuild, and no frame."""
+    n, _ = bump()
+    v = np.round((n + 1) / 2 * 255).astype(np.uint8)
+    v[..., 2] = blue
+    with pytest.raises(ValueError, match=r"`normals`: z is -?[\d.]+ at every pixel inside the "
+                       r"mask while x and y vary: is z stored\? A two-channel map .* "
+                       r"z = sqrt\(1 - x\^2 - y\^2\).*np\.sqrt\(np\.clip\(1 - ") as e:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            facetlift.integrate(v)
+    assert "normal-frame" not in str(e.value) and "face away" not in str(e.value)
+    # the rebuild it names works
+    d = frames.decode(v)
+    d[..., 2] = np.sqrt(np.clip(1 - d[..., 0]**2 - d[..., 1]**2, 0, 1))
+    assert facetlift.integrate(d).info["mean_deviation"] < 1.0
+    # float normals written as (x, y, -1) may be a camera frame's: the frame comes after
+    with pytest.raises(ValueError, match=r"z is -1 at every pixel .* If z really is that "
+                       r"value, 100% of the normals .* face away .*--normal-frame opencv"):
+        facetlift.integrate(np.dstack([n[..., :2], -np.ones(n.shape[:2])]))
+    # a map facing away with a z that varies: the frame, as before
+    with pytest.raises(ValueError, match="face away") as e:
+        facetlift.integrate(frames.from_facetlift(n, "opencv"))
+    assert "is z stored" not in str(e.value)
+
+
 def test_edge_on_normals_of_an_indoor_view_do_not_count_as_facing_away(tmp_path):
     """A pinhole view of a room: walls parallel to the optical axis have z = 0, stored as 128
     in 8 bits (+-1/255 decoded). Counted by the sign of z, 53 % of a user's correct

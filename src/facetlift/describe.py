@@ -400,6 +400,12 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
         if stored.min() >= 0 and float(np.median(stored[:, :2])) > 0.25:
             guess["likely"] = "[0, 1]-encoded floats: decode with 2 * v - 1"
             return guess
+        missing = frames.z_not_stored(inside) if away is not None and away > 0.5 else None
+        if missing is not None and missing[1]:  # (a two-channel map: no frame to suggest)
+            guess["likely"] = (f"z not stored (z is {float(inside[0, 2]):g} everywhere: a "
+                               "two-channel map, BC5 or RG): rebuild z = sqrt(1 - x^2 - y^2) "
+                               "first (docs/recipes.md)")
+            return guess
         if away is not None and away > 0.5:
             what = ("z flipped" if away > frames.SWAP_RANGE[1] else
                     "z flipped or channels in another order")

@@ -581,11 +581,50 @@ def _check_facing(v: np.ndarray, name: str, frame=None) -> None:
     away = facing_away(v)
     if away is None or away <= 0.5:
         return
+    said = (f"{away:.0%} of the normals inside the mask that are not edge-on face away from "
+            "the viewer (z < 0)")
+    missing = z_not_stored(v)
+    if missing is not None:
+        # (an audit: a two-channel map with B = 0 was told to try --normal-frame opencv,
+        # after the decode's right warning that z is not stored)
+        text, decoded = missing
+        raise ValueError(
+            f"`{name}`: {text}" + ("" if decoded else
+                                   f". If z really is that value, {said}: "
+                                   f"{facing_hint(frame, v)}")
+        )
     raise ValueError(
-        f"`{name}`: {away:.0%} of the normals inside the mask that are not edge-on face away "
-        f"from the viewer (z < 0), {facing_hint(frame, v)}, or see docs/conventions.md for "
+        f"`{name}`: {said}, {facing_hint(frame, v)}, or see docs/conventions.md for "
         "the frame of your source"
     )
+
+
+#: How to rebuild z, in the messages on a map that stores x and y only (docs/recipes.md says
+#: the same).
+REBUILD_Z = ("n, alpha = facetlift.io.read_normals(path); n[..., 2] = np.sqrt(np.clip(1 - "
+             "n[..., 0]**2 - n[..., 1]**2, 0, 1)); facetlift.integrate(n, alpha)")
+
+
+def z_not_stored(v: np.ndarray) -> tuple[str, bool] | None:
+    """``(sentence, decoded)`` where the z of the (k, 3) normals `v` (inside the mask, at
+    least :data:`ENCODING_CHECK_PIXELS`) is one value while x and y vary: a two-channel map
+    (BC5, RG) stores x and y only and fills its blue channel with one value (0 decodes to z =
+    -1: every normal faces away), which is not z. The sentence says so and how to rebuild z
+    (:data:`REBUILD_Z`). `decoded`: every x and y lies on the 16-bit code grid (or is 0), as a
+    decoded 8/16-bit map's do, where no other frame is worth naming; float normals built as
+    (p, q, -1) also have a constant z, and get the frame hint after. None otherwise."""
+    if len(v) < ENCODING_CHECK_PIXELS:
+        return None
+    z = v[:, 2]
+    if z.min() != z.max() or np.ptp(v[:, :2]) == 0:
+        return None
+    with np.errstate(invalid="ignore"):
+        f = (v[:, :2] + 1.0) / 2.0 * 65535.0  # (8-bit codes lie on it too: 65535 = 257 * 255)
+        decoded = bool(((np.abs(f - np.round(f)) < 1e-6) | (v[:, :2] == 0)).all())
+    return (f"z is {float(z[0]):g} at every pixel inside the mask while x and y vary: is z "
+            "stored? A two-channel map (BC5, RG) stores x and y only, and a blue channel filled "
+            "with one value is not z (0 decodes to z = -1, facing away): rebuild z as z = "
+            f"sqrt(1 - x^2 - y^2) first, in Python: {REBUILD_Z}", decoded)
 
 
 #: A map read in some frame with about half its normals facing away has its channels in
