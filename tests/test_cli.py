@@ -641,3 +641,53 @@ def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", tmp_path / "Normal_gt.mat", "-s", "npy", "-o",
                        tmp_path / "f")
     assert code == 0 and "beside it" not in err, err
+
+
+def test_a_zero_one_map_read_in_a_camera_frame_is_told_of_its_encoding(tmp_path, capsys):
+    """An audit: a [0, 1]-encoded float map with --normal-frame opencv was refused as facing
+    away, with advice to drop the frame; its encoding is named first (integrate and info)."""
+    npath, _, _ = write_input(tmp_path)
+    n, _ = io.read_normals(npath)
+    np.save(tmp_path / "enc.npy", (n + 1) / 2)
+    code, _, err = run(capsys, "integrate", tmp_path / "enc.npy", "--normal-frame", "opencv",
+                       "-o", tmp_path / "out")
+    line = _one_line_error(err)
+    assert code == 1 and r"[0, 1]-encoded" in line and "face away" not in line
+    code, out, _ = run(capsys, "info", tmp_path / "enc.npy", "--normal-frame", "opencv")
+    assert "likely [0, 1]-encoded floats" in out and "face away" not in out
+
+
+def test_a_two_channel_map_with_blue_0_is_told_to_rebuild_z(tmp_path, capsys):
+    """An audit: a BC5 map (B = 0) was told '100 % ... face away ... try --normal-frame
+    opencv' after a warning that z is not stored; integrate and info say z is not stored."""
+    import imagecodecs
+
+    npath, _, _ = write_input(tmp_path)
+    n, _ = io.read_normals(npath)
+    v = np.round((n + 1) / 2 * 255).astype(np.uint8)
+    v[..., 2] = 0
+    (tmp_path / "bc5.png").write_bytes(imagecodecs.png_encode(v))
+    code, _, err = run(capsys, "integrate", tmp_path / "bc5.png", "-o", tmp_path / "out")
+    line = [ln for ln in err.splitlines() if ln.startswith("facetlift: error:")]
+    assert code == 1 and len(line) == 1 and "is z stored" in line[0]
+    assert "sqrt(1 - x^2 - y^2)" in line[0] and "normal-frame" not in line[0]
+    code, out, _ = run(capsys, "info", tmp_path / "bc5.png")
+    assert "likely z not stored" in out and "normal-frame" not in out
+
+
+def test_black_pixels_inside_the_object_are_reported(tmp_path, capsys):
+    """An audit: `integrate map.png` with 39 black (0, 0, 0) pixels left NaN holes in the depth
+    and the mesh, and only `info` spoke of holes; integrate says how many and where."""
+    import imagecodecs
+
+    npath, _, _ = write_input(tmp_path)
+    n, _ = io.read_normals(npath)
+    v = np.round((n + 1) / 2 * 255).astype(np.uint8)
+    v[3, 5] = v[12, 20] = v[15, 2] = 0
+    (tmp_path / "black.png").write_bytes(imagecodecs.png_encode(v))
+    code, _, err = run(capsys, "integrate", tmp_path / "black.png", "-s", "npy", "-o",
+                       tmp_path / "out")
+    assert code == 0
+    said = [ln for ln in err.splitlines() if "enclosed by the object" in ln]
+    assert len(said) == 1 and "3 pixel(s)" in said[0] and "(row 3, col 5)" in said[0]
+    assert np.isnan(np.load(tmp_path / "out" / "depth.npy")[[3, 12, 15], [5, 20, 2]]).all()

@@ -86,6 +86,32 @@ def test_integer_arrays_are_decoded_with_a_warning(tmp_path, dtype):
     np.testing.assert_allclose(a.depth, b.depth, atol=1e-12)
 
 
+def test_a_grey_image_is_refused_inside_the_mask_only():
+    """An audit: a grey image (a height map saved as RGB) handed to integrate ran, ~30 % of
+    it facing away, into garbage; as uint8 or as floats it is refused, naming `normals`."""
+    r, c = np.mgrid[0:24, 0:30]
+    h = (127 + 100 * np.sin(r / 5) * np.cos(c / 7)).astype(np.uint8)
+    grey = np.dstack([h, h, h])
+    for a in (grey, grey / 255.0, grey.astype(np.uint16) * 257):
+        with pytest.raises(ValueError, match=r"`normals`: R = G = B at every pixel of the "
+                           r"image: a grey image \(a height map\?\), not a normal map"):
+            facetlift.integrate(a)
+    n, _ = bump()
+    mask = np.zeros(n.shape[:2], bool)
+    mask[4:20, 5:25] = True
+    v = np.round((n + 1) / 2 * 255).astype(np.uint8)
+    v[~mask] = grey[~mask]  # grey outside the mask: background, not looked at
+    with pytest.warns(UserWarning, match="decoded as"):
+        facetlift.integrate(v, mask)
+    v[mask] = grey[mask]
+    v[~mask] = (128, 128, 255)
+    with pytest.raises(ValueError, match=r"R = G = B at every pixel inside the mask"):
+        facetlift.integrate(v, mask)
+    some = n.copy()
+    some[:3] = 0.5  # (some grey pixels: a map all the same)
+    facetlift.integrate(some)
+
+
 def test_other_unsigned_integers_are_refused():
     with pytest.raises(ValueError, match="integer type uint32; integer normal maps must be"):
         facetlift.integrate(np.zeros((4, 4, 3), np.uint32))
@@ -113,6 +139,20 @@ def test_undecoded_integer_images_as_floats_are_refused_with_the_fix(scale, bits
     assert np.isfinite(facetlift.integrate(plane).depth).all()  # all >= 0 and > 1: a plane
 
 
+@pytest.mark.parametrize("frame", ["opencv", "directx", "x,-y,-z"])
+def test_an_encoding_is_named_before_the_frame_is_applied(frame):
+    """An audit: a [0, 1]-encoded float map with normal_frame='opencv' faced away once its
+    frame was applied and was told to drop the frame; only then was its encoding named (with
+    'directx' it was not refused at all). The encoding checks look at the values as given."""
+    n, _ = bump()
+    with pytest.raises(ValueError, match=r"looks \[0, 1\]-encoded.*n = 2 \* v - 1"):
+        facetlift.integrate((n + 1) / 2, K=[30, 30, 14.5, 11.5], normal_frame=frame)
+    with pytest.raises(ValueError, match=r"undecoded 8-bit normal map"):
+        facetlift.integrate(np.round((n + 1) / 2 * 255), normal_frame=frame)
+    with pytest.raises(ValueError, match="face away"):  # (a map that does face away: as before)
+        facetlift.integrate(n, normal_frame="opencv")
+
+
 def test_unit_normals_facing_up_and_right_are_not_taken_for_an_encoding():
     plane = facetlift.normals_from_gradients(np.full((12, 12), -0.3), np.full((12, 12), -0.2))
     assert (plane >= 0).all()
@@ -136,6 +176,35 @@ def test_normals_facing_away_name_the_opencv_frame():
     n, _ = bump()
     with pytest.raises(ValueError, match=r"face away from the viewer.*--normal-frame opencv"):
         facetlift.integrate(frames.from_facetlift(n, "opencv"))
+
+
+@pytest.mark.parametrize("blue", [0, 37])
+def test_a_two_channel_map_is_told_that_z_is_not_stored(blue):
+    """An audit: a BC5 map (x, y in R, G; B = 0) was refused as '100 % ... face away ... try
+    --normal-frame opencv', after the decode's right warning that z is not stored. A blue
+    channel of one value over the mask is named as such, with the rebuild, and no frame."""
+    n, _ = bump()
+    v = np.round((n + 1) / 2 * 255).astype(np.uint8)
+    v[..., 2] = blue
+    with pytest.raises(ValueError, match=r"`normals`: z is -?[\d.]+ at every pixel inside the "
+                       r"mask while x and y vary: is z stored\? A two-channel map .* "
+                       r"z = sqrt\(1 - x\^2 - y\^2\).*np\.sqrt\(np\.clip\(1 - ") as e:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            facetlift.integrate(v)
+    assert "normal-frame" not in str(e.value) and "face away" not in str(e.value)
+    # the rebuild it names works
+    d = frames.decode(v)
+    d[..., 2] = np.sqrt(np.clip(1 - d[..., 0]**2 - d[..., 1]**2, 0, 1))
+    assert facetlift.integrate(d).info["mean_deviation"] < 1.0
+    # float normals written as (x, y, -1) may be a camera frame's: the frame comes after
+    with pytest.raises(ValueError, match=r"z is -1 at every pixel .* If z really is that "
+                       r"value, 100% of the normals .* face away .*--normal-frame opencv"):
+        facetlift.integrate(np.dstack([n[..., :2], -np.ones(n.shape[:2])]))
+    # a map facing away with a z that varies: the frame, as before
+    with pytest.raises(ValueError, match="face away") as e:
+        facetlift.integrate(frames.from_facetlift(n, "opencv"))
+    assert "is z stored" not in str(e.value)
 
 
 def test_edge_on_normals_of_an_indoor_view_do_not_count_as_facing_away(tmp_path):
@@ -424,6 +493,60 @@ def test_decoded_normals_far_from_unit_length_are_warned_about():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         frames.decode(v)
+
+
+def _bumps_on_a_plane(N=128):
+    """Unit normals of three compact cos^2 bumps on a flat plane (exactly flat between them,
+    as a texture bake's flat areas are), the height, and where the slopes are exactly 0."""
+    r, c = np.mgrid[0:N, 0:N] + 0.5
+    h = np.zeros((N, N))
+    for y0, x0 in ((30, 35), (90, 45), (60, 100)):
+        d2 = ((r - y0) ** 2 + (c - x0) ** 2) / 15**2
+        h += np.where(d2 < 1, 4 * np.cos(np.pi / 2 * np.sqrt(d2)) ** 2, 0)
+    gy, gx = np.gradient(h)
+    return facetlift.normals_from_gradients(gx, -gy), h, (gx == 0) & (gy == 0)
+
+
+@pytest.mark.parametrize("encode", [np.round, np.floor])
+def test_8_bit_flat_areas_decode_to_exactly_zero(encode):
+    """An audit: 8-bit encoders store the component 0 as 128 (round(127.5); some truncate to
+    127), which decodes to +-0.0039: every flat area tilted, and a 1024^2 brick texture's
+    height came out 27 % RMS off. A spike in the x or y histogram at 128 (127) is decoded as
+    exactly 0; the height comes out within 1 %."""
+    n, h, flat = _bumps_on_a_plane()
+    v = np.minimum(encode((n + 1) / 2 * 255), 255).astype(np.uint8)
+    assert flat.mean() > 0.5
+    plain = v / 255 * 2 - 1
+    assert np.abs(plain[flat][:, :2]).min() > 0.0039  # (as decoded before: tilted)
+    d = frames.decode(v)
+    assert (d[flat][:, :2] == 0).all()
+    zero = 128 if encode is np.round else 127
+    np.testing.assert_array_equal(d[v != zero], plain[v != zero])  # (other codes as before)
+
+    def rms(normals):
+        z, t = -facetlift.integrate(normals).depth, h - h.mean()
+        return np.sqrt(np.mean((z - z.mean() - t) ** 2) / np.mean(t**2))
+
+    # (a truncating encoder also biases every other code by half a step: more error left)
+    assert rms(plain) > 0.1 and rms(d) < (0.02 if encode is np.round else 0.3 * rms(plain))
+
+
+def test_8_bit_maps_without_a_flat_plateau_and_16_bit_maps_decode_as_before():
+    """A sphere's normals are spread continuously: no spike at 128, and the decode is
+    bit for bit v / 255 * 2 - 1 (NaN outside the valid lengths); 16 bits never change."""
+    r, c = np.mgrid[0:96, 0:96] + 0.5
+    x, y = (c - 48) / 40, -(r - 48) / 40
+    inside = x**2 + y**2 < 1
+    n = np.dstack([x, y, np.sqrt(np.clip(1 - x**2 - y**2, 0, None))])
+    n[~inside] = 0  # (the background: mid-grey fill, not a normal)
+    flat, _, _ = _bumps_on_a_plane(96)
+    for m, bits in ((n, 8), (n, 16), (flat, 16)):
+        top = 2**bits - 1
+        v = np.round((m + 1) / 2 * top).astype(np.uint8 if bits == 8 else np.uint16)
+        plain = v / top * 2 - 1
+        length = np.linalg.norm(plain, axis=-1)
+        plain[(length < 0.5) | (length > 1.5)] = np.nan
+        np.testing.assert_array_equal(frames.decode(v), plain)
 
 
 def test_an_srgb_encoded_map_is_named_with_the_curve_that_undoes_it():

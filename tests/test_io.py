@@ -85,6 +85,52 @@ def test_alpha_the_same_everywhere_is_no_mask(tmp_path, normals, ext, value):
     np.testing.assert_allclose(back, n, atol=2e-5)
 
 
+def test_a_height_in_the_alpha_is_warned_about_and_an_antialiased_edge_is_not(tmp_path):
+    """An audit: a "normal + height" texture (the height in the alpha, many grey levels) had
+    every alpha > 0 pixel taken as the mask without a word; 15 % of it was integrated. An
+    antialiased object edge (in-between levels along the edge, here 61 of them on 7 % of a
+    small image) stays silent; so does the alpha where a mask file replaces it."""
+    import warnings
+
+    import imagecodecs
+
+    H = W = 32
+    px = np.zeros((H, W, 4), np.uint8)
+    px[..., :3] = (128, 128, 255)
+    ss = 16  # (an exact antialiased ellipse: its coverage of each pixel, 1/256 steps)
+    yy, xx = (np.mgrid[0:H * ss, 0:W * ss] + 0.5) / ss
+    inside = (yy - H / 2 - 0.37) ** 2 / 1.3 + (xx - W / 2 - 0.21) ** 2 < 9.3**2
+    coverage = inside.reshape(H, ss, W, ss).mean(axis=(1, 3))
+    px[..., 3] = np.round(coverage * 255)
+    between = (px[..., 3] > 0) & (px[..., 3] < 255)
+    assert between.mean() > 0.05 and np.unique(px[..., 3][between]).size > 16
+    (tmp_path / "aa.png").write_bytes(imagecodecs.png_encode(px))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _, alpha = io.read_normals(tmp_path / "aa.png")
+    np.testing.assert_array_equal(alpha, coverage > 0)
+    # a height in the alpha: 0 on most of the image, smooth bumps elsewhere
+    r, c = np.mgrid[0:H, 0:W]
+    height = 200 * np.exp(-((r - 10) ** 2 + (c - 12) ** 2) / 40) - 20
+    px[..., 3] = np.clip(np.round(height), 0, 255)
+    (tmp_path / "height.png").write_bytes(imagecodecs.png_encode(px))
+    with pytest.warns(UserWarning, match=r"height.png: its alpha channel holds \d+ distinct "
+                      r"levels between 0 and its largest, 180, on \d+% of the pixels.*height "
+                      r".*every pixel with alpha > 0 inside \(\d+ of 1024\).*--mask FILE.*"
+                      r"your own `mask`") as rec:
+        _, alpha = io.read_normals(tmp_path / "height.png")
+    assert len(rec) == 1 and alpha.mean() < 0.3
+    with warnings.catch_warnings():  # (the caller has a mask of its own)
+        warnings.simplefilter("error")
+        io.read_normals(tmp_path / "height.png", check_alpha=False)
+        io.write_mask(tmp_path / "all.png", np.ones((H, W), bool))
+        from facetlift import jobs
+
+        inp = jobs.read(jobs.Job(normals=str(tmp_path / "height.png"),
+                                 mask=str(tmp_path / "all.png")))
+        assert inp.mask.all()
+
+
 @pytest.mark.parametrize(
     "ext, bits, atol", [(".exr", 32, 1e-7), (".npy", 32, 0), (".tif", 32, 1e-7),
                         (".tif", 16, 2e-5), (".tif", 8, 4e-3)]
@@ -158,6 +204,47 @@ def test_background_fill_decodes_as_nan(tmp_path):
     n, _ = io.read_normals(tmp_path / "n.png")
     assert np.isfinite(n[0, 0]).all() and n[0, 0, 2] == 1.0
     assert np.isnan(n[0, 1:]).all() and np.isnan(n[1]).all()  # black too
+
+
+def test_a_grey_image_saved_as_rgb_is_refused(tmp_path, normals):
+    """An audit: a height map saved as RGB (R = G = B everywhere) was integrated, ~30 % of it
+    facing away, into garbage. Only the pixels inside the alpha count; a map with some grey
+    pixels (a background fill) is read."""
+    import imagecodecs
+
+    r, c = np.mgrid[0:24, 0:30]
+    h = (127 + 100 * np.sin(r / 5) * np.cos(c / 7)).astype(np.uint8)
+    grey = np.dstack([h, h, h])
+    for bits, px in ((8, grey), (16, grey.astype(np.uint16) * 257)):
+        (tmp_path / f"grey{bits}.png").write_bytes(imagecodecs.png_encode(px))
+        with pytest.raises(ValueError, match=rf"grey{bits}.png: R = G = B at every pixel of the "
+                           r"image: a grey image \(a height map\?\), not a normal map"):
+            io.read_normals(tmp_path / f"grey{bits}.png")
+    np.save(tmp_path / "grey.npy", grey)
+    with pytest.raises(ValueError, match=r"grey.npy: R = G = B"):
+        io.read_normals(tmp_path / "grey.npy")
+    # inside the alpha only: grey inside it is refused, grey outside it is background
+    n, mask = normals
+    io.write_normals(tmp_path / "n.png", n, mask)
+    px = imagecodecs.png_decode((tmp_path / "n.png").read_bytes())
+    outside = px.copy()
+    outside[~mask, :3] = grey[~mask]
+    (tmp_path / "outside.png").write_bytes(imagecodecs.png_encode(outside))
+    back, alpha = io.read_normals(tmp_path / "outside.png")
+    np.testing.assert_allclose(back[mask], n[mask], atol=4e-3)
+    inside = px.copy()
+    inside[mask, :3] = grey[mask]
+    inside[~mask, :3] = (128, 128, 255)  # (colour outside the alpha does not count)
+    (tmp_path / "inside.png").write_bytes(imagecodecs.png_encode(inside))
+    with pytest.raises(ValueError, match=r"inside.png: R = G = B at every pixel inside the mask"):
+        io.read_normals(tmp_path / "inside.png")
+    # some grey pixels (mid-grey and black fill) in a normal map: read, as before
+    some = px[..., :3].copy()
+    some[~mask] = (127, 127, 127)
+    some[0, :5] = 0
+    (tmp_path / "some.png").write_bytes(imagecodecs.png_encode(some))
+    back, _ = io.read_normals(tmp_path / "some.png")
+    assert np.isfinite(back[1:][mask[1:]]).all() and np.isnan(back[0, :5]).all()
 
 
 def test_nan_normals_written_to_png_read_back_as_nan(tmp_path, normals):

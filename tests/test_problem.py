@@ -303,6 +303,46 @@ def test_one_pixel_domain_from_default_mask():
     assert prob.domain.mask.sum() == 8 and not prob.domain.mask[4, 4]
 
 
+def test_pixels_without_a_normal_enclosed_by_the_object_are_reported_once():
+    """An audit: 39 black (0, 0, 0) pixels of an 8-bit map, NaN once decoded, became holes in
+    the depth and the mesh without a word (the domain without a mask is the valid normals).
+    Small holes surrounded by valid normals are counted and named in the one unusable-normals
+    warning; a background, and a large enclosed hole (a ring's), stay silent."""
+    from facetlift.problem import HOLE_PIXELS, UnusableNormalsWarning
+
+    n = np.full((30, 40, 3), np.nan)
+    n[3:27, 4:36] = [0.0, 0.0, 1.0]  # the object; NaN background around it
+    n[10, 10] = n[20, 30] = np.nan  # two one-pixel holes
+    n[5:8, 20:23] = 0.0  # and a 3 x 3 one of zero vectors
+    with pytest.warns(UnusableNormalsWarning, match=r"^11 pixel\(s\) enclosed by the object "
+                      r"hold no normal .* black \(0, 0, 0\)\) and were left out as holes.*first "
+                      r"at \(row 5, col 20\).*give one \(--mask, mask=\)") as rec:
+        prob = facetlift.prepare(n)
+    assert len(rec) == 1 and prob.counts["holes"] == 11
+    # with other unusable normals: the same, one warning
+    n[15, 15] = [0.0, 0.0, -1.0]
+    with pytest.warns(UnusableNormalsWarning, match=r"1 back-facing.*Also: 11 pixel\(s\) "
+                      r"enclosed") as rec:
+        facetlift.prepare(n)
+    assert len(rec) == 1
+    n[15, 15] = [0.0, 0.0, 1.0]
+    # a hole larger than HOLE_PIXELS (a ring's), a notch open to the background, a mask given:
+    # silent (with a mask, NaN inside it is a missing sample, filled)
+    n[5:8, 20:23] = [0.0, 0.0, 1.0]
+    n[10, 10] = n[20, 30] = [0.0, 0.0, 1.0]
+    side = int(np.ceil(np.sqrt(HOLE_PIXELS + 1)))
+    n[5:5 + side, 5:5 + side] = np.nan
+    n[20:27, 20:22] = np.nan  # (reaches the object's edge: a notch)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        prob = facetlift.prepare(n)
+        assert "holes" not in prob.counts
+        box = np.zeros((30, 40), bool)
+        box[3:27, 4:36] = True
+        n[16, 30] = np.nan
+        assert facetlift.prepare(n, box).counts["missing"] == side**2 + 7 * 2 + 1
+
+
 @pytest.mark.parametrize(
     "pixel_size, match",
     [

@@ -391,21 +391,29 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
     if inside is not None and len(inside):
         away = frames.facing_away(inside)
         guess["facing_away"] = away
+        # the encodings first, on the values as stored (before the frame: a [0, 1] map read
+        # in a camera frame faces away, and the frame was blamed; frames.checked's order)
+        stored = frames.from_facetlift(inside, frame)
+        scale = frames.encoded_scale(stored)
+        if scale is not None:
+            guess["likely"] = (f"undecoded {8 if scale == 255 else 16}-bit values as floats: "
+                               f"decode with v / {scale} * 2 - 1")
+            return guess
+        # (all >= 0, x and y around the encoding's 0.5: a flat view has them all near 0)
+        if stored.min() >= 0 and float(np.median(stored[:, :2])) > 0.25:
+            guess["likely"] = "[0, 1]-encoded floats: decode with 2 * v - 1"
+            return guess
+        missing = frames.z_not_stored(inside) if away is not None and away > 0.5 else None
+        if missing is not None and missing[1]:  # (a two-channel map: no frame to suggest)
+            guess["likely"] = (f"z not stored (z is {float(inside[0, 2]):g} everywhere: a "
+                               "two-channel map, BC5 or RG): rebuild z = sqrt(1 - x^2 - y^2) "
+                               "first (docs/recipes.md)")
+            return guess
         if away is not None and away > 0.5:
             what = ("z flipped" if away > frames.SWAP_RANGE[1] else
                     "z flipped or channels in another order")
             guess["likely"] = (f"{what}: the normals face away from the viewer as read "
                                f"({frames.facing_hint(frame, inside)})")
-            return guess
-        lo = inside[:, :2].min()
-        scale = frames.encoded_scale(inside)
-        if scale is not None:
-            guess["likely"] = (f"undecoded {8 if scale == 255 else 16}-bit values as floats: "
-                               f"decode with v / {scale} * 2 - 1")
-            return guess
-        # (all of x and y >= 0, around the encoding's 0.5: a flat view has them all near 0)
-        if lo >= 0 and float(np.median(inside[:, :2])) > 0.25:
-            guess["likely"] = "[0, 1]-encoded floats: decode with 2 * v - 1"
             return guess
     if problem is None:
         try:

@@ -28,7 +28,9 @@ Encodings
     :data:`ENCODED_LENGTH_RANGE` (background fill) as NaN. :func:`checked` does the same for
     arrays handed to :func:`facetlift.integrate`, with a warning, and refuses float maps that
     look [0, 1]-encoded (every component in [0, 1] and lengths that are not 1) or that face away
-    from the viewer, naming the fix. Only pixels inside the mask are inspected.
+    from the viewer, naming the fix. Only pixels inside the mask are inspected. The encodings
+    are checked first, on the values as given (before the frame is applied, which negates
+    axes): a [0, 1]-encoded map read in a camera frame faces away, and the frame was blamed.
 
 After a solve, :func:`flip_check` compares how integrable the field is as given and with y or x
 flipped, and warns when a flip is far more consistent; at an object's silhouette
@@ -235,19 +237,40 @@ def resolve(frame, y_down: bool, name: str = "frame") -> str | None:
     )
 
 
+#: An 8-bit code that decodes next to 0 (127 or 128) is decoded as exactly 0 in the x or y
+#: channel where it is a plateau of that channel's histogram (:func:`decode`): at least
+#: ZERO_PLATEAU_SHARE of the pixels seen hold it, and at least ZERO_PLATEAU_RATIO times as
+#: many as hold each of its two neighbouring codes.
+ZERO_PLATEAU_SHARE, ZERO_PLATEAU_RATIO = 0.005, 8
+
+
 def decode(pixels: np.ndarray, where=None) -> np.ndarray:
     """uint8/uint16 pixels -> float64 normals ``v / max * 2 - 1``; NaN where the decoded
     length is outside :data:`ENCODED_LENGTH_RANGE` (background fill, not a normal). A warning
     where many of them (among `where`, (H, W) bool: the mask or alpha, where known) are
-    longer than unit length (:data:`UNIT_TOLERANCE`): z not stored."""
+    longer than unit length (:data:`UNIT_TOLERANCE`): z not stored.
+
+    8-bit flat areas (uint8 only): the component 0 falls exactly between two codes, 127 and
+    128 (``0.5 * 255 = 127.5``); encoders write it as round(127.5) = 128 (some truncate to
+    127), which decodes to +0.0039 (-0.0039), and every flat area tilts by that: an audit's
+    1024^2 brick texture came out with 27 % RMS height error (13.5 % at 512^2) instead of
+    about 1 %. A spike in a channel's histogram at one of these codes is a point mass at 0:
+    the flat surfaces facing along an axis, which a continuous spread of normals (a sphere)
+    never makes. So in the x and y channels, among the pixels seen (valid, inside `where`),
+    a code 128 or 127 held by at least :data:`ZERO_PLATEAU_SHARE` of them and by at least
+    :data:`ZERO_PLATEAU_RATIO` times as many as each neighbouring code is decoded as exactly
+    0. Other maps decode bit for bit as ``v / 255 * 2 - 1``; 16-bit maps always do (their
+    step, 3e-5, tilts little)."""
     maxval = float(np.iinfo(pixels.dtype).max)
     n = pixels.astype(np.float64) / maxval * 2.0 - 1.0
     length = np.sqrt(np.einsum("...i,...i->...", n, n))
     lo, hi = ENCODED_LENGTH_RANGE
     bad = (length < lo) | (length > hi)
-    n[bad] = np.nan
     where = None if where is None else np.asarray(where)
     seen = ~bad if where is None or where.shape != bad.shape else ~bad & where.astype(bool)
+    if pixels.dtype == np.uint8:
+        _zero_plateaus(n, pixels, seen)
+    n[bad] = np.nan
     # (longer only: averaging, resizing and noise shorten vectors, which renormalising fixes)
     off = length[seen] > 1.0 + UNIT_TOLERANCE
     if off.size and off.mean() > UNIT_SHARE:
@@ -263,6 +286,69 @@ def decode(pixels: np.ndarray, where=None) -> np.ndarray:
              + " facetlift renormalises each vector, which is right only where it points the "
              "right way", FrameWarning)
     return n
+
+
+def _zero_plateaus(n: np.ndarray, pixels: np.ndarray, seen: np.ndarray) -> None:
+    """Set the x and y of `n` (the decoded uint8 `pixels`) to exactly 0 where their code is
+    a plateau at 128 or 127 among the `seen` pixels (:func:`decode`)."""
+    k = int(np.count_nonzero(seen))
+    if k == 0:
+        return
+    every = k == seen.size  # (then no mask to apply: a pass less per code)
+    for ch in (0, 1):
+        codes = pixels[..., ch]
+        # (the four codes around 127.5 alone: a histogram of a 4096^2 map took 0.4 s)
+        counts = {c: int(np.count_nonzero(codes == c if every else (codes == c) & seen))
+                  for c in (126, 127, 128, 129)}
+        for code in (128, 127):
+            c = counts[code]
+            if (c >= ZERO_PLATEAU_SHARE * k
+                    and c >= ZERO_PLATEAU_RATIO * max(counts[code - 1], counts[code + 1])):
+                n[..., ch][codes == code] = 0.0
+                break  # (both cannot be: each would hold 8 times the other)
+
+
+def grey_check(values: np.ndarray, where, what: str) -> None:
+    """Refuse an (H, W, 3) image whose three channels are equal at every pixel among `where`
+    ((H, W) bool: the mask or alpha where known; None: every pixel; non-finite pixels aside),
+    with at least two levels: a grey image saved as RGB (a height map, a photo), not a normal
+    map. Decoded, R = G = B is a vector along (1, 1, 1) or its opposite, or too short to be a
+    normal: an audit's grey height map ran with ~30 % of it facing away and came out as
+    garbage. A map where only some pixels are grey (a background fill) passes; so does one
+    of a single level (one plane, or a fill that the valid-normals rule handles). `what`
+    names the argument (and path) in the message."""
+    v = np.asarray(values)
+    if v.ndim != 3 or v.shape[-1] != 3 or v.dtype.kind not in "uif" or v.size == 0:
+        return
+    flat = v.reshape(-1, 3)
+    sel, inside = None, " of the image"
+    if where is not None:
+        w = np.asarray(where)
+        if w.shape == v.shape[:2]:
+            sel, inside = w.reshape(-1).astype(bool), " inside the mask"
+    def pick(rows):  # (the pixels of `rows` that count)
+        a, s = flat[rows], None if sel is None else sel[rows]
+        if v.dtype.kind == "f":
+            fin = np.isfinite(a).all(axis=1)
+            s = fin if s is None else s & fin
+        return a if s is None else a[s]
+
+    def grey(a):
+        return bool(((a[:, 0] == a[:, 1]) & (a[:, 1] == a[:, 2])).all())
+
+    # (a strided sample first: a normal map shows colour at once, and the full pass is made
+    # only where every sampled pixel is grey)
+    if not grey(pick(slice(None, None, max(1, flat.shape[0] // CHECK_SAMPLE)))):
+        return
+    picked = pick(slice(None))
+    if not picked.size or not grey(picked) or picked[:, 0].min() == picked[:, 0].max():
+        return
+    raise ValueError(
+        f"{what}: R = G = B at every pixel{inside}: a grey image (a "
+        "height map?), not a normal map, which stores x, y, z in R, G, B (a flat area facing "
+        "the viewer is (128, 128, 255), bluish). Give the normal map: a height or depth map "
+        "is what facetlift makes from one"
+    )
 
 
 def _srgb_to_linear(v: np.ndarray) -> np.ndarray:
@@ -320,7 +406,8 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
     Raises
     ------
     ValueError
-        Other unsigned integer types; a float map that looks [0, 1]-encoded or like an
+        Other unsigned integer types; a grey image (R = G = B at every pixel inside the
+        mask, :func:`grey_check`); a float map that looks [0, 1]-encoded or like an
         undecoded 8/16-bit image (values up to 255 or 65535); a map whose
         normals mostly face away from the viewer (a camera frame with z pointing away); a bad
         `frame`.
@@ -333,16 +420,45 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
         return normals  # prepare() says what is wrong with it
     if n.ndim != 3 or n.shape[-1] != 3 or n.dtype.kind not in "uif":
         return normals
-    n = as_float_normals(n, name, mask, hidden)
-    n = to_facetlift(n, frame)
+    grey_check(n, _where(mask, n.shape[:2], hidden), f"`{name}`")  # (before the decode's
+    n = as_float_normals(n, name, mask, hidden)  # warning)
+    read = _READ_IN.get()
+    read = None if read == GRADIENT_FIELD else read  # (such normals never face away)
+    read = read if is_identity(frame) else frame  # (the frame the values were stored in)
+    # the encodings first, on the values as stored (before `frame`, or the reader's frame, is
+    # applied: it negates axes): a [0, 1]-encoded map read with normal_frame='opencv' faced
+    # away and was told to drop the frame before its encoding was named (an audit); with
+    # 'directx' it was not refused at all
     sample = _inside(n, mask, sample=CHECK_SAMPLE)
+    stored = None if sample is None else (
+        sample if not is_identity(frame) else from_facetlift(sample, read))
+    if stored is not None and len(stored) and stored.min() >= 0:  # (only then can the whole
+        inside = _inside(n, mask)  # map be encoded)
+        _check_encoding(inside if not is_identity(frame) else from_facetlift(inside, read),
+                        name)
+    n = to_facetlift(n, frame)
     if sample is not None:
-        read = _READ_IN.get()
-        read = None if read == GRADIENT_FIELD else read  # (such normals never face away)
-        _check_facing(sample, name, read if is_identity(frame) else frame)
-        if len(sample) and sample[:, :2].min() >= 0:  # only then can the whole map be encoded
-            _check_encoding(_inside(n, mask), name)
+        _check_facing(to_facetlift(sample, frame), name, read)
     return n
+
+
+def _where(mask, shape, hidden=None) -> np.ndarray | None:
+    """(H, W) bool: inside `mask` (nonzero and finite; None: every pixel) and not `hidden`;
+    None where neither is given or the mask cannot be read (prepare refuses it)."""
+    m = None
+    if mask is not None:
+        try:
+            m = np.asarray(mask)
+        except Exception:
+            m = None
+        if m is not None and (m.shape != shape or m.dtype.kind not in "biuf"):
+            m = None
+        elif m is not None:
+            with np.errstate(invalid="ignore"):
+                m = np.where(np.isfinite(m), m, 0) != 0 if m.dtype.kind == "f" else m != 0
+    if hidden is not None:
+        m = ~hidden if m is None else m & ~hidden
+    return m
 
 
 #: The facing check looks at about this many mask pixels, evenly spaced.
@@ -396,9 +512,9 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
         bits = 8 if scale == 255 else 16
         raise ValueError(
             f"`{name}` looks like an undecoded {bits}-bit normal map: every component inside "
-            f"the mask lies in [0, {scale}] and 2 * v / {scale} - 1 is of unit length; decode "
-            f"it first with n = v / {scale} * 2 - 1 (or pass the {bits}-bit integer image "
-            "itself)"
+            f"the mask lies in [0, {scale}] as given and 2 * v / {scale} - 1 is of unit "
+            f"length; decode it first with n = v / {scale} * 2 - 1 (or pass the {bits}-bit "
+            "integer image itself)"
         )
     if len(v) < ENCODING_CHECK_PIXELS or v.min() < 0 or v.max() > 1:
         return
@@ -407,8 +523,9 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
     if np.mean(np.abs(length - 1) > 0.05) < 0.5:
         return  # unit normals that all face up and right: a tilted plane, say
     raise ValueError(
-        f"`{name}` looks [0, 1]-encoded: every component inside the mask lies in [0, 1] (no "
-        "normal faces left or down) and the vectors are not unit length; decode it first "
+        f"`{name}` looks [0, 1]-encoded: every component inside the mask lies in [0, 1] as "
+        "given (none negative, before any normal frame is applied) and the vectors are not "
+        "unit length; decode it first "
         "with n = 2 * v - 1 (or pass the 8/16-bit integer image itself). If these really are "
         "normals, normalise them to unit length"
     )
@@ -473,11 +590,50 @@ def _check_facing(v: np.ndarray, name: str, frame=None) -> None:
     away = facing_away(v)
     if away is None or away <= 0.5:
         return
+    said = (f"{away:.0%} of the normals inside the mask that are not edge-on face away from "
+            "the viewer (z < 0)")
+    missing = z_not_stored(v)
+    if missing is not None:
+        # (an audit: a two-channel map with B = 0 was told to try --normal-frame opencv,
+        # after the decode's right warning that z is not stored)
+        text, decoded = missing
+        raise ValueError(
+            f"`{name}`: {text}" + ("" if decoded else
+                                   f". If z really is that value, {said}: "
+                                   f"{facing_hint(frame, v)}")
+        )
     raise ValueError(
-        f"`{name}`: {away:.0%} of the normals inside the mask that are not edge-on face away "
-        f"from the viewer (z < 0), {facing_hint(frame, v)}, or see docs/conventions.md for "
+        f"`{name}`: {said}, {facing_hint(frame, v)}, or see docs/conventions.md for "
         "the frame of your source"
     )
+
+
+#: How to rebuild z, in the messages on a map that stores x and y only (docs/recipes.md says
+#: the same).
+REBUILD_Z = ("n, alpha = facetlift.io.read_normals(path); n[..., 2] = np.sqrt(np.clip(1 - "
+             "n[..., 0]**2 - n[..., 1]**2, 0, 1)); facetlift.integrate(n, alpha)")
+
+
+def z_not_stored(v: np.ndarray) -> tuple[str, bool] | None:
+    """``(sentence, decoded)`` where the z of the (k, 3) normals `v` (inside the mask, at
+    least :data:`ENCODING_CHECK_PIXELS`) is one value while x and y vary: a two-channel map
+    (BC5, RG) stores x and y only and fills its blue channel with one value (0 decodes to z =
+    -1: every normal faces away), which is not z. The sentence says so and how to rebuild z
+    (:data:`REBUILD_Z`). `decoded`: every x and y lies on the 16-bit code grid (or is 0), as a
+    decoded 8/16-bit map's do, where no other frame is worth naming; float normals built as
+    (p, q, -1) also have a constant z, and get the frame hint after. None otherwise."""
+    if len(v) < ENCODING_CHECK_PIXELS:
+        return None
+    z = v[:, 2]
+    if z.min() != z.max() or np.ptp(v[:, :2]) == 0:
+        return None
+    with np.errstate(invalid="ignore"):
+        f = (v[:, :2] + 1.0) / 2.0 * 65535.0  # (8-bit codes lie on it too: 65535 = 257 * 255)
+        decoded = bool(((np.abs(f - np.round(f)) < 1e-6) | (v[:, :2] == 0)).all())
+    return (f"z is {float(z[0]):g} at every pixel inside the mask while x and y vary: is z "
+            "stored? A two-channel map (BC5, RG) stores x and y only, and a blue channel filled "
+            "with one value is not z (0 decodes to z = -1, facing away): rebuild z as z = "
+            f"sqrt(1 - x^2 - y^2) first, in Python: {REBUILD_Z}", decoded)
 
 
 #: A map read in some frame with about half its normals facing away has its channels in

@@ -192,7 +192,8 @@ def read(job: Job) -> Input:
         prior, conf = ds["prior"], ds["confidence"]
         source = "dataset mask" if m is not None else "valid normals"
     else:
-        n, m = io.read_normals(src, frame=job.normal_frame)
+        # (no word on an alpha that --mask replaces)
+        n, m = io.read_normals(src, frame=job.normal_frame, check_alpha=job.mask is None)
         source = "alpha channel" if m is not None else "valid normals"
         _beside_dataset_files(src, job)
         if job.unread_beside and src.stem.lower() != "normal_map":

@@ -361,7 +361,8 @@ def prepare(
         missing sample inside the mask. Pixels outside the mask may hold anything.
     mask : (H, W) array_like of bool, optional
         Integration domain. Default: pixels whose normal is finite and non-zero (an isolated
-        one, without such a neighbour, is left out with a warning).
+        one, without such a neighbour, is left out with a warning; small holes of pixels
+        without one inside the object are counted and warned about, :data:`HOLE_PIXELS`).
     known : (H, W) array_like of bool, optional
         Pixels whose normal is given; the others in the mask are missing samples.
     pixel_size : float
@@ -441,7 +442,9 @@ def prepare(
             "(first at row {r}, col {c}); without a mask the domain is the finite, non-zero "
             "normals, so NaN ones are outside it: give a mask to make them missing samples "
             "inside it")
+        holes = enclosed_holes(m)
     else:
+        holes = None
         m = _bool_image(mask, "mask", (H, W))
         if not m.any():
             raise ValueError("`mask` is empty: no pixel to integrate")
@@ -523,10 +526,12 @@ def prepare(
         counts["zero_confidence"] = int(counts_zero.sum())
     counts["usable"] = int(usable.sum())
     counts["outlier_eps"] = float(eps)
+    if holes is not None and holes.any():
+        counts["holes"] = int(holes.sum())
     if not usable.any():  # (an error alone: no warning about the same normals first)
         # (the counts in words, not a dict: a user's check)
         said = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items()
-                         if k not in ("pixels", "usable") and isinstance(v, int) and v)
+                         if k not in ("pixels", "usable", "holes") and isinstance(v, int) and v)
         said = f"{counts['pixels']} pixel(s): {said or 'none usable'}"
         if "grazing" in counts and counts["grazing"]:
             said += (f"; grazing: view cosine < {counts['outlier_eps']:.4g}, outlier_eps / "
@@ -545,6 +550,12 @@ def prepare(
     elif mask is not None and known is None:
         _flat_mask_check(n, m)
     problems = {k: v for k, v in bad.items() if v.any()}
+    # (pixels without a normal enclosed by the object, where the domain is the valid normals:
+    # left out as holes; told in the same warning, once: an audit's 39 black pixels became
+    # NaN holes in the depth and the mesh without a word)
+    hole_note = "" if "holes" not in counts else _holes_note(holes)
+    if hole_note and not problems:
+        warn(hole_note[0].upper() + hole_note[1:], UnusableNormalsWarning)
     if problems:
         first = int(np.flatnonzero(np.logical_or.reduce(list(problems.values())))[0])
         counts["first_unusable"] = [int(r[first]), int(c[first])]
@@ -594,8 +605,8 @@ def prepare(
         warn(
             f"{sum(int(v.sum()) for v in problems.values())} normal(s) inside the mask cannot be "
             f"used and were treated as missing samples ({what}{rule}); first at "
-            f"(row {r[first]}, col {c[first]}){frame}{'; ' + hint if hint else ''}",
-            UnusableNormalsWarning
+            f"(row {r[first]}, col {c[first]}){frame}{'; ' + hint if hint else ''}"
+            + (f". Also: {hole_note}" if hole_note else ""), UnusableNormalsWarning
         )
     nf[~front] = np.nan
     pv = pw = None
@@ -1598,6 +1609,53 @@ def _check_eps(value) -> float:
     from .options import Option
 
     return Option("outlier_eps", None, "", low=0.0, high=1.0, high_open=True).check(value)
+
+
+#: Without a mask, the pixels without a valid normal (not finite, zero length: an 8/16-bit
+#: pixel whose decoded length is far from 1, such as black (0, 0, 0), reads as NaN) are
+#: outside the domain, as a background is. Those in a component (8-connected) of at most
+#: HOLE_PIXELS pixels that does not touch the image's border, so that every pixel around it
+#: has a valid normal, are inside the object: they are counted (``counts["holes"]``) and
+#: named in the unusable-normals warning (:func:`enclosed_holes`). Larger enclosed regions
+#: are taken for real holes (a ring's), and stay silent.
+HOLE_PIXELS = 64
+
+
+def enclosed_holes(m: np.ndarray, max_pixels: int = HOLE_PIXELS) -> np.ndarray:
+    """(H, W) bool: the pixels outside the domain `m` (H, W) bool that lie in a component
+    (8-connected) of at most `max_pixels` pixels not touching the image's border: small holes
+    fully surrounded by the domain (:data:`HOLE_PIXELS`). Found within the domain's bounding
+    box, which a hole cannot leave."""
+    from scipy import ndimage
+
+    out = np.zeros_like(m, dtype=bool)
+    rows, cols = np.flatnonzero(m.any(axis=1)), np.flatnonzero(m.any(axis=0))
+    if rows.size < 3 or cols.size < 3:
+        return out
+    box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
+    gaps = ~m[box]
+    if not gaps[1:-1, 1:-1].any():
+        return out
+    labels, k = ndimage.label(gaps, structure=np.ones((3, 3), bool))
+    sizes = np.bincount(labels.ravel(), minlength=k + 1)
+    ok = sizes <= max_pixels
+    # (a component on the box's edge reaches the outside, or the image's border)
+    ok[np.unique(np.r_[labels[0], labels[-1], labels[:, 0], labels[:, -1]])] = False
+    ok[0] = False
+    out[box] = ok[labels]
+    return out
+
+
+def _holes_note(holes: np.ndarray) -> str:
+    """The warning's words on the enclosed pixels without a normal (:func:`enclosed_holes`)."""
+    rr, cc = np.nonzero(holes)
+    return (f"{int(holes.sum())} pixel(s) enclosed by the object hold no normal (not finite or "
+            "zero length; in an 8/16-bit file, a pixel whose decoded length is far from 1, "
+            "such as black (0, 0, 0)) and were left out as holes, NaN in the depth and the "
+            f"mesh (holes of at most {HOLE_PIXELS} pixels surrounded by valid normals); first "
+            f"at (row {rr[0]}, col {cc[0]}). Without a mask the domain is the valid normals: "
+            "give one (--mask, mask=) to integrate such pixels as missing samples, filled from "
+            "their neighbours")
 
 
 def _without_lone_pixels(m: np.ndarray, refused: str, left_out: str) -> np.ndarray:

@@ -221,8 +221,10 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                ": integrate one by its path, or all of them with `facetlift batch "
                f"{f} -o OUT`" if maps else "")
         )
-    normals, alpha = read_normals(npath, frame=frame, y_down=y_down)
     mpath = _find(f, "mask", formats["mask"])
+    # (the folder's mask replaces the map's alpha: no word on the alpha then)
+    normals, alpha = read_normals(npath, frame=frame, y_down=y_down,
+                                  check_alpha=mpath is None)
     mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
     kpath = _find(f, "K", formats["K"])
     K = read_K(kpath) if kpath is not None else None

@@ -185,7 +185,7 @@ def _decode_unit(pixels: np.ndarray, path: Path, arg: str, where=None) -> np.nda
     )
 
 
-def _split_alpha(pixels: np.ndarray, path: Path, arg: str):
+def _split_alpha(pixels: np.ndarray, path: Path, arg: str, check: bool = True):
     if pixels.ndim != 3 or pixels.shape[-1] not in (3, 4) or min(pixels.shape[:2]) < 1:
         channels = pixels.shape[-1] if pixels.ndim == 3 else (1 if pixels.ndim == 2 else None)
         raise ValueError(
@@ -198,16 +198,62 @@ def _split_alpha(pixels: np.ndarray, path: Path, arg: str):
                else "")
         )
     if pixels.shape[-1] == 4:
-        return pixels[..., :3], _alpha_mask(pixels[..., 3])
+        return pixels[..., :3], _alpha_mask(pixels[..., 3], path, arg, check)
     return pixels, None
 
 
-def _alpha_mask(alpha: np.ndarray) -> np.ndarray | None:
+def _alpha_mask(alpha: np.ndarray, path=None, arg: str = "path",
+                check: bool = True) -> np.ndarray | None:
     """``alpha > 0``, or None where that is the same everywhere: an opaque export (editors and
     OpenCV write alpha 255 over the background too) or a fully transparent one hold no mask,
-    and the valid-normals rule decides (as for a mask file, :func:`read_mask`)."""
+    and the valid-normals rule decides (as for a mask file, :func:`read_mask`). With `check`,
+    an alpha that looks like data rather than a mask is warned about (:func:`_alpha_levels`)."""
     m = alpha > 0
-    return None if (m == m.flat[0]).all() else m
+    if (m == m.flat[0]).all():
+        return None
+    if check:
+        _alpha_levels(alpha, m, path, arg)
+    return m
+
+
+#: An alpha that makes the mask (:func:`_alpha_mask`) is warned about as holding data (a
+#: height, as "normal + height" textures pack it) where its values strictly between 0 and its
+#: largest, on pixels more than ALPHA_EDGE pixels from a transparent one and from one at the
+#: largest value (an antialiased edge's in-between values lie between the two, along the
+#: edge), cover more than ALPHA_DATA_SHARE of the image in more than ALPHA_DATA_LEVELS
+#: distinct values. (An audit: such a map integrated 15 % of its pixels, without a word.)
+ALPHA_DATA_SHARE, ALPHA_DATA_LEVELS, ALPHA_EDGE = 0.05, 16, 2
+
+
+def _alpha_levels(alpha: np.ndarray, m: np.ndarray, p, arg: str) -> None:
+    """Warn where the alpha that makes the mask `m` (``alpha > 0``) holds many grey levels
+    away from its edge (:data:`ALPHA_DATA_SHARE`): a height or other data in the alpha, of
+    which every non-zero pixel is taken as inside. An antialiased object edge (a pixel or two
+    wide, between the transparent and the opaque pixels) is no such sign."""
+    from scipy import ndimage
+
+    a = np.asarray(alpha)
+    with np.errstate(invalid="ignore"):
+        top = a.max()
+        between = m & (a < top)
+    if between.sum() <= ALPHA_DATA_SHARE * a.size:  # (quick: most alphas are 0 and the max)
+        return
+    edge = ndimage.binary_dilation(~m | (a == top), iterations=ALPHA_EDGE)
+    away = between & ~edge
+    if away.sum() <= ALPHA_DATA_SHARE * a.size:
+        return
+    levels = np.unique(a[away]).size
+    if levels <= ALPHA_DATA_LEVELS:
+        return
+    warn(f"`{arg}`: {p}: its alpha channel holds {levels} distinct levels between 0 and its "
+         f"largest, {top:g}, on {away.mean():.0%} of the pixels, away from its edge (a height "
+         "or other data packed in the alpha, as 'normal + height' textures do, or a wide "
+         "blurred edge?): the alpha is "
+         f"taken as the mask, every pixel with alpha > 0 inside ({int(m.sum())} of {m.size}) "
+         "and the others left out. If the alpha is no mask, give one instead, which replaces "
+         "it: --mask FILE (e.g. an image of the map's size, white where to integrate), or in "
+         "Python your own `mask` to facetlift.integrate (None: every pixel with a valid "
+         "normal)")
 
 
 # --------------------------------------------------------------------------------------------
@@ -215,7 +261,7 @@ def _alpha_mask(alpha: np.ndarray) -> np.ndarray | None:
 
 
 def read_normals(
-    path, *, frame: str | None = None, y_down: bool = False
+    path, *, frame: str | None = None, y_down: bool = False, check_alpha: bool = True
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Read a normal map.
 
@@ -232,6 +278,10 @@ def read_normals(
         (:mod:`facetlift.frames`); the normals are converted to facetlift's.
     y_down : bool
         Alias of ``frame="directx"``: the file stores y pointing *down*.
+    check_alpha : bool
+        Warn where the alpha that makes `alpha_mask` holds many grey levels away from its
+        edge (:func:`_alpha_levels`: a height packed in the alpha, all of it > 0 taken as
+        inside). False where the caller has a mask of its own, which replaces the alpha.
 
     Returns
     -------
@@ -247,7 +297,9 @@ def read_normals(
     ------
     ValueError
         Missing, corrupt or truncated file, wrong number of channels, unsupported pixel type
-        or extension, a bad `frame`. The message names the path.
+        or extension, a bad `frame`; a grey image saved as RGB (R = G = B at every pixel
+        inside the alpha, where there is one: :func:`facetlift.frames.grey_check`). The
+        message names the path.
     """
     arg = "path"
     frame = frames.resolve(frame, y_down)
@@ -259,7 +311,8 @@ def read_normals(
             with open(p, "rb") as fh:
                 _check_png_normals(fh.read(26), p, arg)
         pixels = _decode_image(p, ext, arg)
-        rgb, alpha = _split_alpha(pixels, p, arg)
+        rgb, alpha = _split_alpha(pixels, p, arg, check_alpha)
+        frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
         n = _decode_unit(rgb, p, arg, alpha)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
@@ -271,10 +324,13 @@ def read_normals(
                 "HALF or FLOAT, holding the components themselves"
             )
         n = np.stack([ch[c] for c in names], axis=-1).astype(np.float64)
-        alpha = _alpha_mask(ch[alpha_name]) if alpha_name in ch else None
+        alpha = (_alpha_mask(ch[alpha_name], p, arg, check_alpha) if alpha_name in ch
+                 else None)
+        frames.grey_check(n, alpha, f"`{arg}`: {p}")
     else:
         arr = _read_npy(p, arg)
-        rgb, alpha = _split_alpha(arr, p, arg)
+        rgb, alpha = _split_alpha(arr, p, arg, check_alpha)
+        frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
         n = _decode_unit(rgb, p, arg, alpha)  # uint8/uint16 arrays decode like PNG pixels
     return frames.to_facetlift(n, frame), alpha
 
