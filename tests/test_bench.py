@@ -306,6 +306,29 @@ def test_tabletop_scenes_take_every_mesh_in_turn(tmp_path):
     assert not [g for g, _, _ in D.scenes(ctx) if g == "tabletop"]
 
 
+def test_room_scenes_take_every_mesh_in_turn(tmp_path):
+    """The room group's scenes: two and three meshes in turn, every mesh once before any comes
+    again; named by their meshes and index; none with disc_rooms=0."""
+    from facetlift.bench import discontinuities as D
+    from facetlift.bench.core import Context, Settings
+
+    m = list("abcdefghijkl")
+    picks = [D.room_meshes(m, i) for i in range(6)]
+    assert [len(p) for p in picks] == [2, 3, 2, 3, 2, 3]
+    first = [x for p in picks[:5] for x in p]
+    assert first == m
+    assert D.room_meshes(["a", "b"], 1) == ["a", "b"]
+    data = tmp_path / "data"
+    (data / "meshes").mkdir(parents=True)
+    for name in ("one", "two", "three"):
+        (data / "meshes" / f"{name}.ply").write_text("")  # (listed, never loaded here)
+    ctx = Context(out=tmp_path, settings=Settings(disc_rooms=2, disc_tabletop=0), data=data)
+    names = [n for g, n, _ in D.scenes(ctx) if g == "room"]
+    assert names == ["one+three@room0", "two+one+three@room1"]
+    ctx = Context(out=tmp_path, settings=Settings(disc_rooms=0), data=data)
+    assert not [g for g, _, _ in D.scenes(ctx) if g == "room"]
+
+
 def test_a_tabletop_scene_renders(tmp_path):
     """The tabletop group's loader renders its scene with the benchmark's pinhole camera (two
     small meshes, a small image) and caches it."""
@@ -320,7 +343,7 @@ def test_a_tabletop_scene_renders(tmp_path):
     trimesh.creation.box((1.0, 1.4, 0.8)).export(data / "meshes" / "box.ply")
     settings = Settings(disc_tabletop=1, disc_resolution=(48, 56), disc_samples=1,
                         disc_views=(), disc_wide_views=(), disc_ortho_views=(), disc_analytic=(),
-                        disc_vessels=())
+                        disc_vessels=(), disc_rooms=0)
     ctx = Context(out=tmp_path / "out", settings=settings, data=data)
     [(group, name, load)] = D.scenes(ctx)
     gt = load()

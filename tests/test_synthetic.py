@@ -410,6 +410,44 @@ def test_tabletop_sets_objects_on_a_table_that_they_occlude():
         synthetic.tabletop([])
 
 
+def test_room_stands_objects_on_a_floor_between_walls():
+    """synthetic.room: objects rest on the floor y = 0 inside the room, no two bounding boxes
+    meet; seen from room_view from inside (fill > 1) the bare room's floor and two walls meet
+    in creases that are no jumps, and the objects add jumps along their outlines; the same
+    seed gives the same scene."""
+    K = np.array([[120.0, 0.0, 63.5], [0.0, 120.0, 47.5], [0.0, 0.0, 1.0]])
+    parts = [trimesh.creation.icosphere(subdivisions=3), trimesh.creation.box((1.0, 1.4, 0.8))]
+    scene = synthetic.room(parts, seed=1)
+    assert isinstance(scene, trimesh.Trimesh)
+    np.testing.assert_array_equal(synthetic.room(parts, seed=1).vertices, scene.vertices)
+    assert not np.array_equal(synthetic.room(parts, seed=3).vertices, scene.vertices)
+    assert scene.bounds[0, 1] == pytest.approx(-0.02)  # the floor's underside
+    assert scene.bounds[1, 1] == pytest.approx(2.0)  # the walls' top
+    # (the objects are the first 3 x 12 ... faces: split off by connected pieces instead)
+    pieces = [p for p in scene.split(only_watertight=False) if p.bounds[1, 1] < 1.99
+              and p.bounds[0, 1] > -0.01]
+    assert len(pieces) == 3  # ball, box and the extra box
+    for i, a in enumerate(pieces):
+        assert a.bounds[0, 1] == pytest.approx(0.0, abs=1e-9)
+        assert np.all(np.abs(a.bounds[:, [0, 2]]) < 2.0)
+        for b in pieces[:i]:
+            assert not (np.all(a.bounds[0] < b.bounds[1]) and np.all(b.bounds[0] < a.bounds[1]))
+    bare = synthetic.render_perspective(synthetic.room([], boxes=0, seed=0), K, (96, 128),
+                                        view=synthetic.room_view(0), distance=10.0, fill=1.8)
+    right, down = synthetic.jump_edges(bare)
+    assert bare.mask.mean() > 0.6 and right.sum() + down.sum() == 0
+    faces = np.unique(np.round(bare.normals[bare.mask], 3), axis=0)
+    assert len(faces) == 3  # floor, back wall, side wall
+    gt = synthetic.render_perspective(scene, K, (96, 128), view=synthetic.room_view(1),
+                                      distance=10.0, fill=1.8)
+    right, down = synthetic.jump_edges(gt)
+    assert right.sum() + down.sum() > 20
+    with pytest.raises(ValueError, match="no free place"):
+        synthetic.room(parts * 10, size=2.0)
+    with pytest.raises(ValueError, match="fill"):
+        synthetic.render_perspective(scene, K, (96, 128), fill=4.5)
+
+
 def test_quantize():
     rng = np.random.default_rng(3)
     n = rng.standard_normal((20, 20, 3))

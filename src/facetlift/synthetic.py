@@ -50,6 +50,9 @@ __all__ = [
     "remove_samples",
     "render_mesh",
     "render_perspective",
+    "ROOM_ELEVATIONS",
+    "room",
+    "room_view",
     "tabletop",
     "vessel",
     "vessel_view",
@@ -472,6 +475,80 @@ def _tabletop_parts(meshes, seed, spacing, behind, margin):
     return parts, table
 
 
+#: Camera elevations (degrees below the horizontal) of :func:`room_view`, by seed in turn:
+#: from eye level, where the floor recedes steeply and the walls face the camera, to above.
+ROOM_ELEVATIONS = (8.0, 16.0, 24.0)
+
+
+def room_view(seed: int = 0) -> tuple[float, float, float]:
+    """The view of :func:`room` scene `seed` (the direction the rays travel, toward -z):
+    :data:`ROOM_ELEVATIONS` below the horizontal in turn, turned 20 degrees toward its side
+    wall (render with ``view=room_view(seed)``)."""
+    side = -1.0 if seed % 2 == 0 else 1.0  # (the wall's side: left for even seeds)
+    el = np.radians(ROOM_ELEVATIONS[seed % len(ROOM_ELEVATIONS)])
+    az = np.radians(20.0)
+    return (float(side * np.sin(az) * np.cos(el)), float(-np.sin(el)),
+            float(-np.cos(az) * np.cos(el)))
+
+
+def room(meshes, *, seed: int = 0, size: float = 4.0, height: float = 2.0, boxes: int = 1,
+         radius=(0.35, 0.6)):
+    """The corner of a room with objects standing on its floor, as one triangle mesh (y up):
+    the scenes of a photo that a monocular normal estimator is run on.
+
+    A square floor of side `size` (y = 0), a back wall (z = -size/2) and one side wall
+    (x = -size/2 for even seeds, +size/2 for odd ones), both `height` high, all thin boxes;
+    on the floor each mesh, centred, scaled to a random radius in `radius`, turned about the
+    vertical at random and resting with its lowest point on it, and `boxes` boxes of random
+    sides (0.3-0.8) turned about the vertical; positions drawn at random on the floor (seeded)
+    until no two bounding boxes meet and none reaches a wall. Seen from
+    :func:`room_view` (``seed``), the walls and the floor meet in creases that are no jumps
+    (concave, depth continuous), the boxes stand on the floor along creases, and every
+    object hides the floor or a wall behind it (jumps fading where it stands).
+
+    Returns
+    -------
+    trimesh.Trimesh
+    """
+    import trimesh
+
+    rng = np.random.default_rng(seed)
+    half = size / 2.0
+    parts = []
+    for mesh in meshes:
+        m = _load_mesh(mesh).copy()
+        m.apply_translation(-m.bounds.mean(axis=0))
+        m.apply_scale(rng.uniform(*radius) / np.linalg.norm(m.vertices, axis=1).max())
+        parts.append(m)
+    for _ in range(boxes):
+        parts.append(trimesh.creation.box(extents=rng.uniform(0.3, 0.8, size=3)))
+    placed = []
+    for m in parts:
+        m.apply_transform(trimesh.transformations.rotation_matrix(rng.uniform(-np.pi, np.pi),
+                                                                  [0.0, 1.0, 0.0]))
+        lo, hi = m.bounds
+        for _ in range(200):  # (a free spot: boxes that do not meet, off the walls)
+            x = rng.uniform(-half + 0.1 - lo[0], half - 0.1 - hi[0])
+            z = rng.uniform(-half + 0.1 - lo[2], half - 0.1 - hi[2])
+            a, b = lo + [x, -lo[1], z], hi + [x, -lo[1], z]
+            if all(np.any(a >= q[1]) or np.any(b <= q[0]) for q in placed):
+                break
+        else:
+            raise ValueError(f"room: no free place on a floor of side {size:g} for "
+                             f"{len(parts)} objects; pass fewer or a larger `size`")
+        m.apply_translation([x, -lo[1], z])
+        placed.append(m.bounds)
+    t = 0.02
+    floor = trimesh.creation.box(extents=[size, t, size])
+    floor.apply_translation([0.0, -t / 2, 0.0])
+    back = trimesh.creation.box(extents=[size, height, t])
+    back.apply_translation([0.0, height / 2, -half - t / 2])
+    side = trimesh.creation.box(extents=[t, height, size])
+    side.apply_translation([(-1.0 if seed % 2 == 0 else 1.0) * (half + t / 2), height / 2,
+                            0.0])
+    return trimesh.util.concatenate(parts + [floor, back, side])
+
+
 #: The kinds of :func:`vessel`.
 VESSELS = ("cup", "bowl", "goblet", "vase")
 
@@ -803,7 +880,9 @@ def render_perspective(
         Distance of the object's centre from the camera, in the output depth units
         (default 1,500 like DiLiGenT, in mm).
     fill : float
-        Fraction of the shorter image side the object's bounding sphere spans, in (0, 1].
+        Fraction of the shorter image side the object's bounding sphere spans, in (0, 4]:
+        above 1 the image shows a part of the mesh (a room seen from inside it,
+        :func:`room`; the camera must not sit inside a closed surface).
     samples : int
         Rays per pixel side for the normals (1: the centre ray only).
     name : str, optional
@@ -835,8 +914,8 @@ def render_perspective(
     K = check_K(K)
     if not (np.isfinite(distance) and distance > 0):
         raise ValueError(f"`distance` must be a positive number; got {distance!r}")
-    if not (0 < fill <= 1):
-        raise ValueError(f"`fill` must be in (0, 1]; got {fill!r}")
+    if not (0 < fill <= 4):
+        raise ValueError(f"`fill` must be in (0, 4]; got {fill!r}")
     if isinstance(samples, bool) or int(samples) != samples or samples < 1:
         raise ValueError(f"`samples` must be an integer >= 1; got {samples!r}")
     label, m, frame, P = _mesh_in_view(mesh, view, name)

@@ -60,6 +60,8 @@ class Settings:
     disc_tabletop: int = 8  # scenes of several meshes on a table (0: none)
     disc_vessels: tuple = ("cup", "bowl", "goblet", "vase")  # synthetic.vessel kinds
     disc_vessel_elevations: tuple = (20.0, 35.0, 50.0)  # camera degrees above the horizontal
+    disc_rooms: int = 6  # room corners with objects on the floor, seen from inside (0: none)
+    disc_room_resolution: tuple = (256, 306)  # (a phone photo's field of view, 54 degrees)
     disc_conditions: tuple = ("exact", "16bit", "8bit", "noise3")
     disc_k_sweep: tuple = (2.0, 8.0)
     disc_sweep_conditions: tuple = ("exact", "8bit")
@@ -99,6 +101,7 @@ class Settings:
             disc_analytic=("occluder", "fold"),
             disc_tabletop=0,
             disc_vessels=(),
+            disc_rooms=0,
             disc_conditions=("exact", "8bit"),
             disc_k_sweep=(),
             disc_meshes=2,

@@ -139,6 +139,22 @@ TABLE_VERSION = 2
 VESSEL_VERSION = 3
 
 
+#: How much of the image's shorter side a :func:`facetlift.synthetic.room` scene's bounding
+#: sphere would span: above 1, the camera sees a part of the room from inside it.
+ROOM_FILL = 1.8
+
+#: Version of the room scenes in the render cache's keys (2: three camera elevations).
+ROOM_VERSION = 2
+
+
+def room_meshes(meshes: list, i: int) -> list:
+    """The meshes of the `i`-th room scene: the next two (even `i`) or three of `meshes` in
+    turn (every mesh once before any comes again; never more than there are)."""
+    size = [min(2 + j % 2, len(meshes)) for j in range(i + 1)]
+    start = sum(size[:-1])
+    return [meshes[(start + j) % len(meshes)] for j in range(size[-1])]
+
+
 def tabletop_meshes(meshes: list, i: int) -> list:
     """The meshes of the `i`-th tabletop scene: the next two of `meshes` in turn, every third
     scene three (every mesh once before any comes again; never more than there are)."""
@@ -149,8 +165,10 @@ def tabletop_meshes(meshes: list, i: int) -> list:
 
 def scenes(ctx: Context) -> list[tuple[str, str, object]]:
     """(group, name, loader) of every synthetic scene; groups ``perspective``, ``wide``,
-    ``tabletop`` (several meshes on a table, DiLiGenT's camera), ``vessel`` (open vessels seen
-    from above the rim, :func:`facetlift.synthetic.vessel`) and ``ortho``."""
+    ``tabletop`` (several meshes on a table, DiLiGenT's camera), ``room`` (the corner of a room
+    with objects on its floor, seen from inside with a 54-degree camera,
+    :func:`facetlift.synthetic.room`), ``vessel`` (open vessels seen from above the rim,
+    :func:`facetlift.synthetic.vessel`) and ``ortho``."""
     s = ctx.settings
     meshes = ctx.meshes(s.disc_meshes)
     res = tuple(s.disc_resolution)
@@ -185,6 +203,16 @@ def scenes(ctx: Context) -> list[tuple[str, str, object]]:
             lambda pick=pick, i=i, name=name: synthetic.render_perspective(
                 synthetic.tabletop([load_mesh(p) for p in pick], seed=i), _pinhole(res), res,
                 view=synthetic.TABLE_VIEW, fill=TABLE_FILL, samples=s.disc_samples, name=name))
+    rres = tuple(s.disc_room_resolution)
+    rtag = f"{rres[0]}x{rres[1]}_s{s.disc_samples}"
+    for i in range(s.disc_rooms if meshes else 0):
+        pick = room_meshes(meshes, i)
+        name = "+".join(p.stem for p in pick) + f"@room{i}"
+        add("room", name, f"room{ROOM_VERSION}_{i}_{name}_f{ROOM_FILL:g}_{rtag}",
+            lambda pick=pick, i=i, name=name: synthetic.render_perspective(
+                synthetic.room([load_mesh(p) for p in pick], seed=i),
+                _pinhole(rres, WIDE_F * rres[1] / 612.0), rres, view=synthetic.room_view(i),
+                fill=ROOM_FILL, distance=WIDE_DISTANCE, samples=s.disc_samples, name=name))
     for kind in s.disc_vessels:
         for elev in s.disc_vessel_elevations:
             name = f"{kind}@e{elev:g}"
@@ -475,7 +503,7 @@ def discontinuities(ctx: Context) -> None:
         write_csv(ctx.out / "discontinuities_real.csv", real)
     n_scenes = len({(r["group"], r["scene"]) for r in rows})
     text = [f"{n_scenes} synthetic scenes x {len(ctx.settings.disc_conditions)} conditions; "
-            "error = MADE for the pinhole groups (perspective, wide, tabletop, vessel), the "
+            "error = MADE for the pinhole groups (perspective, wide, tabletop, room, vessel), the "
             "paper's normalised error in % for ortho; vs_oracle = mean error / the oracle's "
             "mean error.\n",
             md_table(table, ["group", "condition", "method", "scenes", "mean_error",
