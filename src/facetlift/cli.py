@@ -246,9 +246,17 @@ _JOB_OPTIONS = [
                  "vertex depth + mask, ply/obj = mesh, png = shaded preview, report = one PNG "
                  "with shading, depth, deviation and discontinuity panels (needs "
                  "facetlift[plot]), discontinuities = where the surface is cut by depth jumps "
-                 "(with --discontinuities), height = a 16-bit height map PNG scaled to 0..1 "
-                 "(its depth range in --json's depth_range), points = a PLY point cloud "
+                 "(with --discontinuities), height = a 16-bit grey height map PNG scaled to "
+                 "0..1 (alpha only where pixels are outside the mask; its range in the "
+                 "summary and --json's depth_range; see --height-range), height-exr = the "
+                 "heights themselves as float32 EXR (channel Y), points = a PLY point cloud "
                  "(a point per pixel with the input's normal). Default: npy, ply, png."),
+    click.option("--height-range", "height_range", nargs=2, type=float, default=None,
+                 metavar="LOW HIGH",
+                 help="The heights (in the depth's units: texels with --pixel-size 1) that "
+                 "height.png writes as 0 and 65535, the same for every map of a texture set; "
+                 "heights outside are clipped, with a warning counting them. Default: each "
+                 "map's own lowest and highest."),
     click.option("--quads", is_flag=True,
                  help="Write quad meshes (the PLY default; OBJ defaults to triangles)."),
     click.option("--triangles", is_flag=True,
@@ -287,7 +295,8 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               fov=None, orthographic=False, backfacing="missing", outlier_eps=None,
               solver=None,
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
-              save=(), quads=False, triangles=False, output_frame=None, outdir=None,
+              save=(), height_range=None, quads=False, triangles=False, output_frame=None,
+              outdir=None,
               max_memory=None, prior=None,
               prior_scale=None, prior_weight=None, prior_weight_map=None, confidence=None,
               prior_blur=None, prior_outliers=None, prior_fit=None, no_prior=False,
@@ -342,6 +351,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         mat_keys=_split(mat_keys), method=method, pixel_size=pixel_size,
         backfacing=backfacing, outlier_eps=outlier_eps, options=opts,
         save=tuple(save) or DEFAULT_SAVE,
+        height_range=None if height_range is None else tuple(height_range),
         triangles=True if triangles else (False if quads else None),
         output_frame=None if output_frame is None or frames.is_identity(output_frame)
         else output_frame,
@@ -426,6 +436,10 @@ def summary(record: dict) -> str:
     dev = record.get("mean_deviation")
     if dev is not None:
         parts.append(f"mean deviation {dev:.2f} deg")
+    span = record.get("depth_range")
+    if "height" in record.get("outputs", {}) and span:  # (the displacement scale, without
+        # --json: a texture artist's check)
+        parts.append(f"height.png 0..65535 = height {0.0 - span[0]:.6g} to {0.0 - span[1]:.6g}")
     parts.append(f"{record['timings']['integrate']:.2f} s")
     return ", ".join(parts)
 

@@ -10,6 +10,7 @@ normal maps       PNG 8/16 bit, TIFF, OpenEXR, ``.npy``  imagecodecs (libpng), t
 masks             PNG, TIFF, ``.npy``                    imagecodecs, tifffile
 intrinsics ``K``  text, 3 x 3                            numpy
 depth maps        ``.npy``, OpenEXR, TIFF, ``.npz``      numpy, OpenEXR, tifffile
+height maps       PNG 16 bit, OpenEXR                    imagecodecs, OpenEXR
 meshes            PLY (binary), OBJ; quads or triangles  meshio
 previews          PNG                                    imagecodecs; matplotlib for colormaps
 reports           PNG (panels)                           matplotlib
@@ -56,12 +57,13 @@ from .images import (
     write_normals,
 )
 from .meshes import MESH_FORMATS, write_mesh, write_points
-from .preview import shade, write_discontinuities, write_height, write_preview
+from .preview import HEIGHT_FORMATS, shade, write_discontinuities, write_height, write_preview
 from .report import write_report
 from .surface import SURFACE_FORMATS, load_surface, save_surface
 
 __all__ = [
     "DEPTH_FORMATS",
+    "HEIGHT_FORMATS",
     "ENCODED_LENGTH_RANGE",
     "MASK_FORMATS",
     "MESH_FORMATS",
