@@ -855,6 +855,51 @@ def test_height_map_png_is_16_bit_scaled_to_the_depth_range(tmp_path, capsys):
     assert rec["depth_range"] == [np.nanmax(d), np.nanmin(d)]
 
 
+def test_a_two_channel_map_is_read_with_encoding_xy(tmp_path):
+    """BC5 / RG maps store x, y alone: encoding="xy" reads R, G (8 and 16 bit, float EXR
+    with R, G only), rebuilds z facing the viewer (also in a frame that negates z), ignores
+    B, and reads black or white fill as no normal."""
+    import imagecodecs
+    import OpenEXR
+
+    n, mask = bump_normals()
+    for dtype in (np.uint8, np.uint16):
+        top = np.iinfo(dtype).max
+        v = np.round((n + 1) / 2 * top).astype(dtype)
+        (tmp_path / "full.png").write_bytes(imagecodecs.png_encode(v))
+        v[..., 2] = 0
+        v[0, 0] = 0  # (black fill)
+        v[0, 1] = top  # (white fill)
+        (tmp_path / "xy.png").write_bytes(imagecodecs.png_encode(v))
+        full, _ = io.read_normals(tmp_path / "full.png")
+        xy, alpha = io.read_normals(tmp_path / "xy.png", encoding="xy")
+        assert alpha is None and np.isnan(xy[0, :2]).all() and np.isfinite(xy[1:]).all()
+        unit = full / np.linalg.norm(full, axis=-1, keepdims=True)
+        step = 2.0 / top
+        assert np.abs(xy[1:] - unit[1:]).max() < (8 if dtype == np.uint8 else 40) * step
+        np.testing.assert_allclose(np.linalg.norm(xy[1:], axis=-1), 1.0)
+        v[..., 2] = 77  # (B ignored)
+        (tmp_path / "xy77.png").write_bytes(imagecodecs.png_encode(v))
+        np.testing.assert_array_equal(io.read_normals(tmp_path / "xy77.png", encoding="xy")[0],
+                                      xy)
+    # a frame negating z (a camera frame): z is rebuilt facing the viewer all the same
+    cv, _ = io.read_normals(tmp_path / "xy.png", encoding="xy", frame="opencv")
+    np.testing.assert_allclose(cv[1:] * [1, -1, 1], xy[1:])
+    with pytest.raises(ValueError, match=r"the frame 'z,x,y' reads z from the second"):
+        io.read_normals(tmp_path / "xy.png", encoding="xy", frame="z,x,y")
+    with pytest.raises(ValueError, match=r"`encoding` must be one of \['xyz', 'xy'\]"):
+        io.read_normals(tmp_path / "xy.png", encoding="rg")
+    # an EXR with R and G alone: floats as stored
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"R": n[..., 0].astype(np.float32),
+                               "G": n[..., 1].astype(np.float32)}) as f:
+        f.write(str(tmp_path / "rg.exr"))
+    rg, _ = io.read_normals(tmp_path / "rg.exr", encoding="xy")
+    np.testing.assert_allclose(rg, n, atol=1e-6)
+    with pytest.raises(ValueError, match=r"must have channels R, G, B or X, Y, Z"):
+        io.read_normals(tmp_path / "rg.exr")
+
+
 def _ripples(H=24, W=30):
     """Normals whose surface covers the whole image (no mask), and that surface."""
     yy, xx = np.mgrid[0:H, 0:W]

@@ -22,7 +22,8 @@ Integer normal maps are decoded per channel as ``n = v / maxval * 2 - 1`` (``max
 see :mod:`facetlift.conventions`). Pillow is not used for PNG because it silently reduces
 16-bit RGB PNGs to 8 bits. A pixel of an integer map whose decoded vector has a length outside
 :data:`ENCODED_LENGTH_RANGE` does not encode a normal (black, white or mid-grey background
-fill) and decodes as NaN, i.e. a missing sample.
+fill) and decodes as NaN, i.e. a missing sample. A two-channel map (BC5, "RG") is read with
+``encoding="xy"``: R, G = x, y, and z is rebuilt (:func:`facetlift.frames.decode_xy`).
 
 Every writer is atomic: it writes a temporary file in the target directory, flushes it to disk
 and renames it over the target, so a failed write never leaves a partial file behind.
