@@ -385,6 +385,8 @@ def settings(job: Job) -> dict:
             out.pop(key, None)
     if not out.get("strict"):  # (off: as in a log written before it existed)
         out.pop("strict", None)
+    if out.get("normal_encoding") == "xyz":  # (the default: as before it existed)
+        out.pop("normal_encoding", None)
     if out.get("prior_weight") is None:  # (the default, as the result takes it: 1, as logs
         # before the blurred prior's own default recorded it, or that one; a review)
         from .problem import default_prior_weight
@@ -640,6 +642,7 @@ def check_template(job: Job, local: bool = True) -> None:
     validate(info.specs(), opts, job.method)
     if job.normal_frame is not None:
         frames.parse(job.normal_frame)
+    frames.normal_encoding(job.normal_encoding, "normal_encoding")
     if job.output_frame is not None:
         frames.parse(job.output_frame, "output_frame")
     from .jobs import check_fov

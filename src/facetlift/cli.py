@@ -150,6 +150,11 @@ _JOB_OPTIONS = [
                  "away), or an axis string such "
                  "as 'x,-y,-z' (docs/conventions.md lists common sources)."),
     click.option("--y-down", is_flag=True, help="Alias of --normal-frame directx."),
+    click.option("--normal-encoding", "normal_encoding", type=click.Choice(["xyz", "xy"]),
+                 default="xyz", show_default=True,
+                 help="How the map stores its normals: xyz = x, y, z in R, G, B; xy = a "
+                 "two-channel map (BC5, RG, as game engines compress normal maps): x and y in "
+                 "R and G, z rebuilt as sqrt(1 - x^2 - y^2) facing the viewer, B ignored."),
     click.option("--gradient-frame", default="xy", show_default=True,
                  help="Layout of a gradient field: xy (p = dz/dx right, q = dz/dy up) or "
                  "rowcol (aliases queau, matlab: p = dz/d(row) down, q = dz/d(col))."),
@@ -291,7 +296,8 @@ def _job_options(f):
 
 
 def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_down=False,
-              gradient_frame="xy", mat_keys=None, method="dgp", pixel_size=1.0, K=None,
+              normal_encoding="xyz", gradient_frame="xy", mat_keys=None, method="dgp",
+              pixel_size=1.0, K=None,
               fov=None, orthographic=False, backfacing="missing", outlier_eps=None,
               solver=None,
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
@@ -347,7 +353,8 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         normals=None if normals is None else str(normals),
         gradients=tuple(str(g) for g in gradients) if gradients else None,
         mask=None if mask is None else str(mask), K=None if K is None else str(K), fov=fov,
-        orthographic=orthographic, normal_frame=frame, gradient_frame=gradient_frame,
+        orthographic=orthographic, normal_frame=frame, normal_encoding=normal_encoding,
+        gradient_frame=gradient_frame,
         mat_keys=_split(mat_keys), method=method, pixel_size=pixel_size,
         backfacing=backfacing, outlier_eps=outlier_eps, options=opts,
         save=tuple(save) or DEFAULT_SAVE,
@@ -628,6 +635,9 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--normal-frame", "normal_frame", metavar="FRAME",
               help="Read the map in this frame (as for 'integrate').")
 @click.option("--y-down", is_flag=True, help="Alias of --normal-frame directx.")
+@click.option("--normal-encoding", "normal_encoding", type=click.Choice(["xyz", "xy"]),
+              default="xyz", show_default=True,
+              help="xy: a two-channel map (BC5, RG), z rebuilt; as for 'integrate'.")
 @click.option("--gradient-frame", "gradient_frame", default="xy", show_default=True,
               help="Layout of a gradient field (--gradients or a .mat input), as for "
               "'integrate'.")
@@ -644,8 +654,8 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="A confidence map to check against the map, as for 'integrate'.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def info(normals, gradients, mask, K, fov, normal_frame, y_down, gradient_frame, mat_keys,
-         prior, prior_scale, prior_fit, confidence, as_json):
+def info(normals, gradients, mask, K, fov, normal_frame, y_down, normal_encoding,
+         gradient_frame, mat_keys, prior, prior_scale, prior_fit, confidence, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
     encoding, mask and components, unusable normals, K, and the memory planner's estimate of
     the peak memory the default integration would need (the figure --max-memory is checked
@@ -668,7 +678,8 @@ def info(normals, gradients, mask, K, fov, normal_frame, y_down, gradient_frame,
         check_fov(Job(K=None if K is None else str(K), fov=fov))
     rec = describe(normals, gradients=gradients, mask=mask, K=K, fov=fov,
                    normal_frame=frames.resolve(normal_frame, y_down, "normal_frame"),
-                   mat_keys=_split(mat_keys), gradient_frame=gradient_frame,
+                   normal_encoding=normal_encoding, mat_keys=_split(mat_keys),
+                   gradient_frame=gradient_frame,
                    prior_scale=prior_scale, prior=prior, confidence=confidence,
                    prior_fit=prior_fit)
     # (for preflight scripts: as integrate would fail, on the map or on a folder's files)

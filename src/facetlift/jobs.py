@@ -62,6 +62,9 @@ class Job:
     fov: float | None = None
     orthographic: bool = False
     normal_frame: str | None = None
+    #: How the normal map stores its normals: "xyz" (R, G, B) or "xy" (a two-channel map,
+    #: BC5 or RG: z rebuilt; facetlift.frames.NORMAL_ENCODINGS).
+    normal_encoding: str = "xyz"
     gradient_frame: str = "xy"
     mat_keys: tuple | None = None
     method: str = "dgp"
@@ -173,16 +176,26 @@ def read(job: Job) -> Input:
     folder = not field_input and src.is_dir()  # (a dataset folder may hold its own prior)
     if job.prior is None and not folder:  # (the prior's own flags refused before the map is
         _no_prior_checks(job)  # read; a folder's, once it is read)
+    encoding = frames.normal_encoding(job.normal_encoding, "normal_encoding")
+    if job.gradients and encoding != "xyz":
+        raise ValueError(f"`normal_encoding` {encoding!r} applies to a normal map; a gradient "
+                         "field (--gradients P Q) stores slopes: leave it out")
     if job.gradients:
         g = read_gradients(*job.gradients)
         n, m, source = _normals_from_field(g, job), g["mask"], "valid gradients"
     elif is_mat(src):
         g = read_mat(src, job.mat_keys)
         field_input = "p" in g
+        if field_input and encoding != "xyz":
+            raise ValueError(f"`normal_encoding` {encoding!r} applies to a normal map; {src} "
+                             "holds a gradient field (p, q), which stores slopes: leave it out")
         if field_input:
             n = _normals_from_field(g, job)
         else:
-            n = frames.to_facetlift(g["normals"], job.normal_frame)
+            n = g["normals"]
+            if encoding == "xy":
+                n = frames.decode_xy(n, frame=job.normal_frame)
+            n = frames.to_facetlift(n, job.normal_frame)
         m = g["mask"]
         source = f"{src.name} mask" if m is not None else "valid normals"
         if not field_input and job.unread_beside:
@@ -191,13 +204,15 @@ def read(job: Job) -> Input:
         ds = io.read_dataset(src, frame=job.normal_frame,
                              prior_scale=None if job.prior else job.prior_scale,
                              with_prior=job.dataset_prior and job.prior is None,
-                             with_confidence=job.dataset_confidence and job.confidence is None)
+                             with_confidence=job.dataset_confidence and job.confidence is None,
+                             encoding=encoding)
         n, m, K = ds["normals"], ds["mask"], ds["K"]
         prior, conf = ds["prior"], ds["confidence"]
         source = "dataset mask" if m is not None else "valid normals"
     else:
         # (no word on an alpha that --mask replaces)
-        n, m = io.read_normals(src, frame=job.normal_frame, check_alpha=job.mask is None)
+        n, m = io.read_normals(src, frame=job.normal_frame, check_alpha=job.mask is None,
+                               encoding=encoding)
         source = "alpha channel" if m is not None else "valid normals"
         _beside_dataset_files(src, job)
         if job.unread_beside and src.stem.lower() != "normal_map":
