@@ -341,7 +341,14 @@ def test_fov_and_output_frame_in_templates_and_resume_settings(tmp_path):
     with pytest.raises(ValueError, match="`fov` 60 and `K` contradict"):
         read(Job(normals=str(tmp_path / "in" / "m0.png"), K=str(tmp_path / "K.txt"), fov=60.0))
     plain = fb.settings(Job())
-    assert "fov" not in plain and "output_frame" not in plain
+    assert "fov" not in plain and "output_frame" not in plain and "height_range" not in plain
+    assert fb.settings(Job(height_range=(-1, 2)))["height_range"] == [-1, 2]
+    assert "normal_encoding" not in plain
+    assert fb.settings(Job(normal_encoding="xy"))["normal_encoding"] == "xy"
+    with pytest.raises(ValueError, match="`normal_encoding` must be one of"):
+        fb.check_template(Job(normal_encoding="rg"))
+    with pytest.raises(ValueError, match="`height_range` must be two finite numbers"):
+        fb.check_template(Job(height_range=(2, -1)))
     a, b, c = (fb.settings(Job(output_frame=f)) for f in ("opencv", "OpenCV", "x,-y,-z"))
     assert a == b == c and a["output_frame"] == "x,-y,-z"
     assert fb.settings(Job(output_frame="opengl")) == plain

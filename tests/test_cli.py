@@ -671,8 +671,48 @@ def test_a_two_channel_map_with_blue_0_is_told_to_rebuild_z(tmp_path, capsys):
     line = [ln for ln in err.splitlines() if ln.startswith("facetlift: error:")]
     assert code == 1 and len(line) == 1 and "is z stored" in line[0]
     assert "sqrt(1 - x^2 - y^2)" in line[0] and "normal-frame" not in line[0]
+    assert "--normal-encoding xy" in line[0]  # (the flag that reads it, a texture audit)
     code, out, _ = run(capsys, "info", tmp_path / "bc5.png")
     assert "likely z not stored" in out and "normal-frame" not in out
+    assert "--normal-encoding xy" in out
+
+
+def test_a_two_channel_map_integrates_with_normal_encoding_xy(tmp_path, capsys):
+    """A texture artist's BC5 map (x, y in R, G; B = 0) was refused with a recipe in Python
+    only: --normal-encoding xy reads R, G as x, y and rebuilds z, and the height is that of
+    the three-channel original to within the 8 bits; info reads it so too."""
+    import imagecodecs
+
+    r, c = np.mgrid[0:40, 0:48] + 0.5
+    # (h = 2 sin(c / 4) cos(r / 6), y up: an integrable field, so both give one height)
+    p = 0.5 * np.cos(c / 4) * np.cos(r / 6)
+    q = (2 / 6) * np.sin(c / 4) * np.sin(r / 6)
+    n = facetlift.normals_from_gradients(p, q)
+    v = np.round((n + 1) / 2 * 255).astype(np.uint8)
+    (tmp_path / "full.png").write_bytes(imagecodecs.png_encode(v))
+    v[..., 2] = 0
+    (tmp_path / "bc5.png").write_bytes(imagecodecs.png_encode(v))
+    code, _, err = run(capsys, "integrate", tmp_path / "full.png", "-s", "npy", "-o",
+                       tmp_path / "full")
+    assert code == 0, err
+    code, _, err = run(capsys, "integrate", tmp_path / "bc5.png", "-s", "npy", "-o",
+                       tmp_path / "xy", "--normal-encoding", "xy")
+    assert code == 0 and "warning" not in err, err
+    a, b = np.load(tmp_path / "full" / "depth.npy"), np.load(tmp_path / "xy" / "depth.npy")
+    assert np.isfinite(b).all() and np.abs(a - b).max() < 0.005 * np.ptp(a)
+    # without the flag: refused, the flag named (test above)
+    code, _, err = run(capsys, "integrate", tmp_path / "bc5.png", "-o", tmp_path / "no")
+    line = [ln for ln in err.splitlines() if ln.startswith("facetlift: error:")]
+    assert code == 1 and len(line) == 1 and "--normal-encoding xy" in line[0]
+    code, out, _ = run(capsys, "info", tmp_path / "bc5.png", "--normal-encoding", "xy")
+    assert code == 0 and "z = sqrt(1 - x^2 - y^2)" in out and "z not stored" not in out
+    # a gradient field stores slopes: the encoding does not apply
+    np.save(tmp_path / "p.npy", p)
+    np.save(tmp_path / "q.npy", q)
+    code, _, err = run(capsys, "integrate", "--gradients", tmp_path / "p.npy",
+                       tmp_path / "q.npy", "--normal-encoding", "xy", "-o", tmp_path / "g")
+    assert code == 1 and "--normal-encoding 'xy' applies to a normal map" in (
+        _one_line_error(err))
 
 
 def test_black_pixels_inside_the_object_are_reported(tmp_path, capsys):

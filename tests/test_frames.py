@@ -188,15 +188,18 @@ def test_a_two_channel_map_is_told_that_z_is_not_stored(blue):
     v[..., 2] = blue
     with pytest.raises(ValueError, match=r"`normals`: z is -?[\d.]+ at every pixel inside the "
                        r"mask while x and y vary: is z stored\? A two-channel map .* "
-                       r"z = sqrt\(1 - x\^2 - y\^2\).*np\.sqrt\(np\.clip\(1 - ") as e:
+                       r"z = sqrt\(1 - x\^2 - y\^2\) must be rebuilt: read it with "
+                       r"--normal-encoding xy \(facetlift\.io\.read_normals\(path, "
+                       r"encoding='xy'\).*np\.sqrt\(np\.clip\(1 - ") as e:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             facetlift.integrate(v)
     assert "normal-frame" not in str(e.value) and "face away" not in str(e.value)
-    # the rebuild it names works
+    # the rebuild it names works, and so does the encoding
     d = frames.decode(v)
     d[..., 2] = np.sqrt(np.clip(1 - d[..., 0]**2 - d[..., 1]**2, 0, 1))
     assert facetlift.integrate(d).info["mean_deviation"] < 1.0
+    np.testing.assert_allclose(frames.decode_xy(v), d, rtol=0, atol=1e-12)
     # float normals written as (x, y, -1) may be a camera frame's: the frame comes after
     with pytest.raises(ValueError, match=r"z is -1 at every pixel .* If z really is that "
                        r"value, 100% of the normals .* face away .*--normal-frame opencv"):
@@ -482,7 +485,8 @@ def test_decoded_normals_far_from_unit_length_are_warned_about():
             warnings.simplefilter("error")
             frames.decode(v)
         v[..., 2] = top
-        with pytest.warns(UserWarning, match=r"longer than unit length .* is z stored"):
+        with pytest.warns(UserWarning, match=r"longer than unit length .* is z stored .*"
+                          r"--normal-encoding xy"):
             frames.decode(v)
         # ... only among the pixels that count (a review: an alpha-0 background warned)
         with warnings.catch_warnings():

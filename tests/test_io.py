@@ -1,6 +1,7 @@
 """Round trips and error paths of facetlift.io."""
 
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -843,8 +844,8 @@ def test_height_map_png_is_16_bit_scaled_to_the_depth_range(tmp_path, capsys):
     h = img[..., 0] / 65535.0
     np.testing.assert_allclose(h[mask], (low - s.depth[mask]) / (low - high), atol=1e-5)
     assert h[mask].min() == 0.0 and h[mask].max() == 1.0
-    with pytest.raises(ValueError, match="height map"):
-        io.write_height(tmp_path / "h.exr", s)
+    with pytest.raises(ValueError, match=r"unsupported height map format '.tif'.*\.png, \.exr"):
+        io.write_height(tmp_path / "h.tif", s)
     io.write_normals(tmp_path / "n.png", np.where(mask[..., None], n, np.nan), mask)
     code = main(["integrate", str(tmp_path / "n.png"), "-o", str(tmp_path / "o"), "-s",
                  "height", "-s", "npy", "--json"])
@@ -852,6 +853,158 @@ def test_height_map_png_is_16_bit_scaled_to_the_depth_range(tmp_path, capsys):
     rec = json.loads(capsys.readouterr().out)
     d = np.load(tmp_path / "o" / "depth.npy")
     assert rec["depth_range"] == [np.nanmax(d), np.nanmin(d)]
+
+
+def test_a_two_channel_map_is_read_with_encoding_xy(tmp_path):
+    """BC5 / RG maps store x, y alone: encoding="xy" reads R, G (8 and 16 bit, float EXR
+    with R, G only), rebuilds z facing the viewer (also in a frame that negates z), ignores
+    B, and reads black or white fill as no normal."""
+    import imagecodecs
+    import OpenEXR
+
+    n, mask = bump_normals()
+    for dtype in (np.uint8, np.uint16):
+        top = np.iinfo(dtype).max
+        v = np.round((n + 1) / 2 * top).astype(dtype)
+        (tmp_path / "full.png").write_bytes(imagecodecs.png_encode(v))
+        v[..., 2] = 0
+        v[0, 0] = 0  # (black fill)
+        v[0, 1] = top  # (white fill)
+        (tmp_path / "xy.png").write_bytes(imagecodecs.png_encode(v))
+        full, _ = io.read_normals(tmp_path / "full.png")
+        xy, alpha = io.read_normals(tmp_path / "xy.png", encoding="xy")
+        assert alpha is None and np.isnan(xy[0, :2]).all() and np.isfinite(xy[1:]).all()
+        unit = full / np.linalg.norm(full, axis=-1, keepdims=True)
+        step = 2.0 / top
+        assert np.abs(xy[1:] - unit[1:]).max() < (8 if dtype == np.uint8 else 40) * step
+        np.testing.assert_allclose(np.linalg.norm(xy[1:], axis=-1), 1.0)
+        v[..., 2] = 77  # (B ignored)
+        (tmp_path / "xy77.png").write_bytes(imagecodecs.png_encode(v))
+        np.testing.assert_array_equal(io.read_normals(tmp_path / "xy77.png", encoding="xy")[0],
+                                      xy)
+    # a frame negating z (a camera frame): z is rebuilt facing the viewer all the same
+    cv, _ = io.read_normals(tmp_path / "xy.png", encoding="xy", frame="opencv")
+    np.testing.assert_allclose(cv[1:] * [1, -1, 1], xy[1:])
+    with pytest.raises(ValueError, match=r"the frame 'z,x,y' reads z from the second"):
+        io.read_normals(tmp_path / "xy.png", encoding="xy", frame="z,x,y")
+    with pytest.raises(ValueError, match=r"`encoding` must be one of \['xyz', 'xy'\]"):
+        io.read_normals(tmp_path / "xy.png", encoding="rg")
+    # an EXR with R and G alone: floats as stored
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"R": n[..., 0].astype(np.float32),
+                               "G": n[..., 1].astype(np.float32)}) as f:
+        f.write(str(tmp_path / "rg.exr"))
+    rg, _ = io.read_normals(tmp_path / "rg.exr", encoding="xy")
+    np.testing.assert_allclose(rg, n, atol=1e-6)
+    with pytest.raises(ValueError, match=r"must have channels R, G, B or X, Y, Z"):
+        io.read_normals(tmp_path / "rg.exr")
+
+
+def _ripples(H=24, W=30):
+    """Normals whose surface covers the whole image (no mask), and that surface."""
+    yy, xx = np.mgrid[0:H, 0:W]
+    n = facetlift.normals_from_gradients(0.1 * np.cos(xx / 4.0), 0.05 * np.sin(yy / 5.0))
+    return n, facetlift.integrate(n)
+
+
+def test_a_height_map_covering_the_image_is_plain_grey(tmp_path):
+    """An artist's audit: height.png was grey + alpha with the alpha 65535 everywhere where
+    no pixel was outside; it is one grey channel then, the same values, and keeps its alpha
+    where pixels are outside."""
+    import imagecodecs
+
+    _, s = _ripples()
+    path, (low, high) = io.write_height(tmp_path / "h.png", s)
+    img = imagecodecs.png_decode(path.read_bytes())
+    assert img.dtype == np.uint16 and img.shape == (24, 30)
+    assert img.min() == 0 and img.max() == 65535
+    np.testing.assert_allclose(img / 65535.0, (low - s.depth) / (low - high), atol=1e-5)
+    assert (low, high) == (np.max(s.depth), np.min(s.depth))
+
+
+def test_height_exr_holds_the_heights_and_round_trips(tmp_path):
+    """height.exr: the heights themselves (-depth, not scaled), float32, one channel Y (the
+    OpenEXR luminance a viewer shows as grey), NaN outside the mask; read back by the depth
+    reader, and written by -s height-exr."""
+    import OpenEXR
+
+    from facetlift.cli import main
+
+    n, mask = bump_normals()
+    s = facetlift.integrate(n, mask)
+    path, scale = io.write_height(tmp_path / "h.exr", s)
+    assert scale is None
+    with OpenEXR.File(str(path), separate_channels=True) as f:
+        ch = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
+    assert list(ch) == ["Y"] and ch["Y"].dtype == np.float32
+    back = io.read_depth(path)
+    np.testing.assert_array_equal(np.isnan(back), ~mask)
+    np.testing.assert_allclose(back[mask], -s.depth[mask], rtol=1e-6, atol=1e-6)
+    with pytest.raises(ValueError, match=r"`height_range` .* applies to the 16-bit PNG"):
+        io.write_height(tmp_path / "h2.exr", s, height_range=(0, 1))
+    io.write_normals(tmp_path / "n.png", np.where(mask[..., None], n, np.nan), mask)
+    code = main(["integrate", str(tmp_path / "n.png"), "-o", str(tmp_path / "o"), "-s",
+                 "height-exr", "-s", "npy"])
+    assert code == 0
+    d = np.load(tmp_path / "o" / "depth.npy")
+    h = io.read_depth(tmp_path / "o" / "height.exr")
+    np.testing.assert_array_equal(np.isnan(h), np.isnan(d))
+    np.testing.assert_allclose(h[~np.isnan(d)], -d[~np.isnan(d)], rtol=1e-6, atol=1e-6)
+
+
+def test_a_fixed_height_range_scales_every_map_alike_and_counts_what_it_clips(tmp_path,
+                                                                              capsys):
+    """A texture set was normalised map by map (one overshooting pixel set each map's
+    scale): `height_range` fixes the heights of 0 and 65535, clips the rest with a warning
+    that counts them, and the record's depth_range and the summary give the range used."""
+    import json
+
+    import imagecodecs
+
+    from facetlift.cli import main
+
+    n, s = _ripples()
+    h = -s.depth
+    lo, hi = float(np.percentile(h, 10)), float(np.percentile(h, 90))
+    below, above = int((h < lo).sum()), int((h > hi).sum())
+    with pytest.warns(UserWarning, match=rf"`height_range` \[{lo:g}, {hi:g}\]: "
+                      rf"{below + above} of the 720 pixels inside .* \({below} below, "
+                      rf"{above} above; .* clipped to 0 or 65535 in h.png"):
+        path, (low, high) = io.write_height(tmp_path / "h.png", s, height_range=(lo, hi))
+    assert (low, high) == (-lo, -hi)
+    img = imagecodecs.png_decode(path.read_bytes()).astype(float)
+    want = np.clip((h - lo) / (hi - lo), 0, 1) * 65535
+    assert np.abs(img - want).max() <= 0.5 + 1e-6
+    # inside the range: no warning, and the same heights give the same values in any map
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _, same = io.write_height(tmp_path / "wide.png", s, height_range=(-10.0, 10.0))
+    assert same == (10.0, -10.0)
+    for bad in ((1.0, 1.0), (2.0, 1.0), (0.0, np.inf), (1.0,), "ab"):
+        with pytest.raises(ValueError, match=r"`height_range` must be two finite numbers "
+                           r"LOW < HIGH"):
+            io.write_height(tmp_path / "bad.png", s, height_range=bad)
+    # the command line: --height-range, the range in the record and the summary line
+    io.write_normals(tmp_path / "n.png", n)
+    code = main(["integrate", str(tmp_path / "n.png"), "-o", str(tmp_path / "o"), "-s",
+                 "height", "--height-range", "-2", "2.5", "--json"])
+    assert code == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["depth_range"] == [2.0, -2.5]
+    code = main(["integrate", str(tmp_path / "n.png"), "-o", str(tmp_path / "o2"), "-s",
+                 "height", "--height-range", "-0.1", "0.1"])
+    out, err = capsys.readouterr()
+    assert code == 0 and "height.png 0..65535 = height -0.1 to 0.1" in out
+    assert "--height-range [-0.1, 0.1]: " in err and "clipped to 0 or 65535" in err
+    code = main(["integrate", str(tmp_path / "n.png"), "-o", str(tmp_path / "o3"), "-s",
+                 "npy", "--height-range", "2", "-2"])
+    assert code == 1 and "--height-range must be two finite numbers LOW < HIGH" in (
+        capsys.readouterr().err)
+    assert not (tmp_path / "o3").exists()
+    code = main(["integrate", str(tmp_path / "n.png"), "-o", str(tmp_path / "o4"), "-s",
+                 "npy", "--height-range", "-2", "2"])
+    assert code == 0 and "applies to height.png (save 'height'), which is not saved" in (
+        capsys.readouterr().err)
 
 
 def test_write_normals_keeps_the_direction_of_any_length_and_decodes_integers(tmp_path):

@@ -379,11 +379,14 @@ def settings(job: Job) -> dict:
            if k not in ("normals", "gradients", "outdir", "unread_beside")}
     out["options"] = {k: v for k, v in job.options.items() if k not in NEUTRAL_OPTIONS}
     out["save"] = sorted(set(job.save))
-    for key in ("fov", "output_frame"):  # (unset: as in a log written before they existed)
+    for key in ("fov", "output_frame", "height_range"):  # (unset: as in a log written before
+        # they existed)
         if out.get(key) is None:
             out.pop(key, None)
     if not out.get("strict"):  # (off: as in a log written before it existed)
         out.pop("strict", None)
+    if out.get("normal_encoding") == "xyz":  # (the default: as before it existed)
+        out.pop("normal_encoding", None)
     if out.get("prior_weight") is None:  # (the default, as the result takes it: 1, as logs
         # before the blurred prior's own default recorded it, or that one; a review)
         from .problem import default_prior_weight
@@ -639,6 +642,7 @@ def check_template(job: Job, local: bool = True) -> None:
     validate(info.specs(), opts, job.method)
     if job.normal_frame is not None:
         frames.parse(job.normal_frame)
+    frames.normal_encoding(job.normal_encoding, "normal_encoding")
     if job.output_frame is not None:
         frames.parse(job.output_frame, "output_frame")
     from .jobs import check_fov
@@ -656,6 +660,10 @@ def check_template(job: Job, local: bool = True) -> None:
             able = sorted(k for k, v in methods.REGISTRY.items() if v.prior_blur)
             raise ValueError(f"method {job.method!r} does not take a `prior_blur`; methods "
                              f"that do: {able}")
+    if job.height_range is not None:
+        from .io.preview import check_height_range
+
+        check_height_range(job.height_range)
     save = (job.save,) if isinstance(job.save, str) else tuple(job.save or ())
     unknown = [s for s in save if s not in OUTPUTS]
     if unknown:

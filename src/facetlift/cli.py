@@ -150,6 +150,11 @@ _JOB_OPTIONS = [
                  "away), or an axis string such "
                  "as 'x,-y,-z' (docs/conventions.md lists common sources)."),
     click.option("--y-down", is_flag=True, help="Alias of --normal-frame directx."),
+    click.option("--normal-encoding", "normal_encoding", type=click.Choice(["xyz", "xy"]),
+                 default="xyz", show_default=True,
+                 help="How the map stores its normals: xyz = x, y, z in R, G, B; xy = a "
+                 "two-channel map (BC5, RG, as game engines compress normal maps): x and y in "
+                 "R and G, z rebuilt as sqrt(1 - x^2 - y^2) facing the viewer, B ignored."),
     click.option("--gradient-frame", default="xy", show_default=True,
                  help="Layout of a gradient field: xy (p = dz/dx right, q = dz/dy up) or "
                  "rowcol (aliases queau, matlab: p = dz/d(row) down, q = dz/d(col))."),
@@ -246,9 +251,17 @@ _JOB_OPTIONS = [
                  "vertex depth + mask, ply/obj = mesh, png = shaded preview, report = one PNG "
                  "with shading, depth, deviation and discontinuity panels (needs "
                  "facetlift[plot]), discontinuities = where the surface is cut by depth jumps "
-                 "(with --discontinuities), height = a 16-bit height map PNG scaled to 0..1 "
-                 "(its depth range in --json's depth_range), points = a PLY point cloud "
+                 "(with --discontinuities), height = a 16-bit grey height map PNG scaled to "
+                 "0..1 (alpha only where pixels are outside the mask; its range in the "
+                 "summary and --json's depth_range; see --height-range), height-exr = the "
+                 "heights themselves as float32 EXR (channel Y), points = a PLY point cloud "
                  "(a point per pixel with the input's normal). Default: npy, ply, png."),
+    click.option("--height-range", "height_range", nargs=2, type=float, default=None,
+                 metavar="LOW HIGH",
+                 help="The heights (in the depth's units: texels with --pixel-size 1) that "
+                 "height.png writes as 0 and 65535, the same for every map of a texture set; "
+                 "heights outside are clipped, with a warning counting them. Default: each "
+                 "map's own lowest and highest."),
     click.option("--quads", is_flag=True,
                  help="Write quad meshes (the PLY default; OBJ defaults to triangles)."),
     click.option("--triangles", is_flag=True,
@@ -283,11 +296,13 @@ def _job_options(f):
 
 
 def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_down=False,
-              gradient_frame="xy", mat_keys=None, method="dgp", pixel_size=1.0, K=None,
+              normal_encoding="xyz", gradient_frame="xy", mat_keys=None, method="dgp",
+              pixel_size=1.0, K=None,
               fov=None, orthographic=False, backfacing="missing", outlier_eps=None,
               solver=None,
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
-              save=(), quads=False, triangles=False, output_frame=None, outdir=None,
+              save=(), height_range=None, quads=False, triangles=False, output_frame=None,
+              outdir=None,
               max_memory=None, prior=None,
               prior_scale=None, prior_weight=None, prior_weight_map=None, confidence=None,
               prior_blur=None, prior_outliers=None, prior_fit=None, no_prior=False,
@@ -338,10 +353,12 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         normals=None if normals is None else str(normals),
         gradients=tuple(str(g) for g in gradients) if gradients else None,
         mask=None if mask is None else str(mask), K=None if K is None else str(K), fov=fov,
-        orthographic=orthographic, normal_frame=frame, gradient_frame=gradient_frame,
+        orthographic=orthographic, normal_frame=frame, normal_encoding=normal_encoding,
+        gradient_frame=gradient_frame,
         mat_keys=_split(mat_keys), method=method, pixel_size=pixel_size,
         backfacing=backfacing, outlier_eps=outlier_eps, options=opts,
         save=tuple(save) or DEFAULT_SAVE,
+        height_range=None if height_range is None else tuple(height_range),
         triangles=True if triangles else (False if quads else None),
         output_frame=None if output_frame is None or frames.is_identity(output_frame)
         else output_frame,
@@ -426,6 +443,10 @@ def summary(record: dict) -> str:
     dev = record.get("mean_deviation")
     if dev is not None:
         parts.append(f"mean deviation {dev:.2f} deg")
+    span = record.get("depth_range")
+    if "height" in record.get("outputs", {}) and span:  # (the displacement scale, without
+        # --json: a texture artist's check)
+        parts.append(f"height.png 0..65535 = height {0.0 - span[0]:.6g} to {0.0 - span[1]:.6g}")
     parts.append(f"{record['timings']['integrate']:.2f} s")
     return ", ".join(parts)
 
@@ -614,6 +635,9 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--normal-frame", "normal_frame", metavar="FRAME",
               help="Read the map in this frame (as for 'integrate').")
 @click.option("--y-down", is_flag=True, help="Alias of --normal-frame directx.")
+@click.option("--normal-encoding", "normal_encoding", type=click.Choice(["xyz", "xy"]),
+              default="xyz", show_default=True,
+              help="xy: a two-channel map (BC5, RG), z rebuilt; as for 'integrate'.")
 @click.option("--gradient-frame", "gradient_frame", default="xy", show_default=True,
               help="Layout of a gradient field (--gradients or a .mat input), as for "
               "'integrate'.")
@@ -630,8 +654,8 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="A confidence map to check against the map, as for 'integrate'.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def info(normals, gradients, mask, K, fov, normal_frame, y_down, gradient_frame, mat_keys,
-         prior, prior_scale, prior_fit, confidence, as_json):
+def info(normals, gradients, mask, K, fov, normal_frame, y_down, normal_encoding,
+         gradient_frame, mat_keys, prior, prior_scale, prior_fit, confidence, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
     encoding, mask and components, unusable normals, K, and the memory planner's estimate of
     the peak memory the default integration would need (the figure --max-memory is checked
@@ -654,7 +678,8 @@ def info(normals, gradients, mask, K, fov, normal_frame, y_down, gradient_frame,
         check_fov(Job(K=None if K is None else str(K), fov=fov))
     rec = describe(normals, gradients=gradients, mask=mask, K=K, fov=fov,
                    normal_frame=frames.resolve(normal_frame, y_down, "normal_frame"),
-                   mat_keys=_split(mat_keys), gradient_frame=gradient_frame,
+                   normal_encoding=normal_encoding, mat_keys=_split(mat_keys),
+                   gradient_frame=gradient_frame,
                    prior_scale=prior_scale, prior=prior, confidence=confidence,
                    prior_fit=prior_fit)
     # (for preflight scripts: as integrate would fail, on the map or on a folder's files)

@@ -111,8 +111,9 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
 
 
 def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
-             mat_keys=None, gradient_frame: str = "xy", prior_scale=None, prior=None,
-             confidence=None, prior_fit=None, fov=None) -> dict:
+             normal_encoding: str = "xyz", mat_keys=None, gradient_frame: str = "xy",
+             prior_scale=None, prior=None, confidence=None, prior_fit=None,
+             fov=None) -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
     encoding, mask and components, unusable normals (with the first one's location), K, a
     dataset folder's depth prior and normal confidence (``prior`` / ``confidence``: known
@@ -132,6 +133,9 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         Horizontal field of view in degrees instead of `K` (as for ``integrate``).
     normal_frame : str, optional
         The frame to read it in (default facetlift's).
+    normal_encoding : {"xyz", "xy"}
+        How the map stores its normals (as for ``integrate``; ``"xy"``: a two-channel map,
+        z rebuilt, :func:`facetlift.io.read_normals`).
     gradient_frame : str
         The layout of a gradient field in a ``.mat`` input (as for ``integrate``).
     prior_scale : float, optional
@@ -159,6 +163,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
               gradients=tuple(str(g) for g in gradients) if gradients else None,
               mask=None if mask is None else str(mask),
               K=None if K is None else str(K), normal_frame=normal_frame,
+              normal_encoding=normal_encoding,
               mat_keys=None if mat_keys is None else tuple(mat_keys),
               gradient_frame=gradient_frame, prior_scale=prior_scale,
               prior=None if prior is None else str(prior),
@@ -189,6 +194,8 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
            "warnings": unread + [str(w.message) for w in read_caught]}
     if unread:
         out["refused"] = unread[0].split(": ", 1)[1]
+    if out.get("encoding") and frames.normal_encoding(normal_encoding) == "xy":
+        out["encoding"] += " on R and G alone (xy), z = sqrt(1 - x^2 - y^2)"
     # (a gradient field in the other layout: no frame of the normals made from it is right)
     layout = next((w.message.other for w in read_caught
                    if isinstance(w.message, frames.LayoutWarning)), None)
@@ -406,8 +413,8 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
         missing = frames.z_not_stored(inside) if away is not None and away > 0.5 else None
         if missing is not None and missing[1]:  # (a two-channel map: no frame to suggest)
             guess["likely"] = (f"z not stored (z is {float(inside[0, 2]):g} everywhere: a "
-                               "two-channel map, BC5 or RG): rebuild z = sqrt(1 - x^2 - y^2) "
-                               "first (docs/recipes.md)")
+                               "two-channel map, BC5 or RG): read it with --normal-encoding xy, "
+                               "which rebuilds z = sqrt(1 - x^2 - y^2) (docs/recipes.md)")
             return guess
         if away is not None and away > 0.5:
             what = ("z flipped" if away > frames.SWAP_RANGE[1] else

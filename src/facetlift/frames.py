@@ -32,6 +32,11 @@ Encodings
     are checked first, on the values as given (before the frame is applied, which negates
     axes): a [0, 1]-encoded map read in a camera frame faces away, and the frame was blamed.
 
+    A two-channel map (BC5, "RG", the ``"xy"`` of :data:`NORMAL_ENCODINGS`) stores x and y
+    alone; :func:`decode_xy` reads them and rebuilds z facing the viewer. Read as an ``"xyz"``
+    map, its one-valued blue channel is refused or warned about, naming the encoding
+    (:func:`z_not_stored`).
+
 After a solve, :func:`flip_check` compares how integrable the field is as given and with y or x
 flipped, and warns when a flip is far more consistent; at an object's silhouette
 (:func:`silhouette`) it also tells which axis is wrong, and an inside-out map (both axes
@@ -282,9 +287,74 @@ def decode(pixels: np.ndarray, where=None) -> np.ndarray:
         warn(f"{off.mean():.0%} of the decoded normals are longer than unit length (by more "
              f"than {UNIT_TOLERANCE:.0%}, median length {np.median(length[seen]):.3g}): "
              + (gamma or "is z stored (a blue channel fixed at one value, as two-channel maps "
-                "are often filled, must be rebuilt as z = sqrt(1 - x^2 - y^2) first)?")
+                "are often filled, must be rebuilt as z = sqrt(1 - x^2 - y^2) first: "
+                "--normal-encoding xy, encoding='xy' in facetlift.io.read_normals)?")
              + " facetlift renormalises each vector, which is right only where it points the "
              "right way", FrameWarning)
+    return n
+
+
+#: How a normal map stores its normals: ``"xyz"`` (the default), x, y, z in its first three
+#: channels (R, G, B); ``"xy"``, a two-channel map (BC5, "RG", as game engines compress
+#: tangent-space maps), x and y in R and G alone, z rebuilt by :func:`decode_xy` and B, if
+#: any, ignored.
+NORMAL_ENCODINGS = ("xyz", "xy")
+
+
+def normal_encoding(encoding, name: str = "encoding") -> str:
+    """`encoding` checked against :data:`NORMAL_ENCODINGS` (None: ``"xyz"``); a ValueError
+    naming `name` and the choices otherwise."""
+    if encoding is None:
+        return "xyz"
+    if not isinstance(encoding, str) or encoding.strip().lower() not in NORMAL_ENCODINGS:
+        raise ValueError(f"`{name}` must be one of {list(NORMAL_ENCODINGS)} ('xyz': x, y, z in "
+                         "R, G, B; 'xy': a two-channel map, BC5 or RG, z rebuilt); got "
+                         f"{encoding!r}")
+    return encoding.strip().lower()
+
+
+def decode_xy(values: np.ndarray, where=None, frame=None) -> np.ndarray:
+    """(H, W, 3) normals in the map's own frame from an (H, W, C) map (C >= 2) that stores x
+    and y alone in its first two channels (:data:`NORMAL_ENCODINGS` ``"xy"``), its other
+    channels ignored: uint8/uint16 decoded as ``v / max * 2 - 1`` (8-bit zero plateaus as in
+    :func:`decode`), floats as stored; z rebuilt as ``sqrt(max(0, 1 - x^2 - y^2))``, with the
+    sign that faces the viewer once `frame` is applied (a two-channel map cannot store z's
+    sign, and a tangent-space map faces out of its surface). An integer pixel whose x, y are
+    longer than unit length (by more than :data:`UNIT_TOLERANCE`: black or white fill, 1.41)
+    holds no normal and is NaN. `where` ((H, W) bool, the mask or alpha) selects the pixels
+    the zero plateaus are counted on.
+
+    Raises
+    ------
+    ValueError
+        A `frame` that reads facetlift's z from the first or second channel, which hold x
+        and y here.
+    """
+    channels, signs = parse(frame)
+    if channels[2] != 2:
+        raise ValueError(f"a two-channel ('xy') map stores x and y in its first two channels "
+                         f"and z is rebuilt as the third, but the frame {axis_string(frame)!r} "
+                         "reads z from the "
+                         f"{('first', 'second')[channels[2]]}: give a frame whose z is the "
+                         "third channel (e.g. 'y,x,z' swaps x and y)")
+    v = np.asarray(values)
+    n = np.empty(v.shape[:2] + (3,))
+    encoded = v.dtype in ENCODED_DTYPES
+    bad = None
+    if encoded:
+        n[..., :2] = v[..., :2] / float(np.iinfo(v.dtype).max) * 2.0 - 1.0  # (as decode)
+        bad = np.einsum("...i,...i->...", n[..., :2], n[..., :2]) > (1.0 + UNIT_TOLERANCE) ** 2
+        where = None if where is None else np.asarray(where)
+        seen = ~bad if where is None or where.shape != bad.shape else ~bad & where.astype(bool)
+        if v.dtype == np.uint8:
+            _zero_plateaus(n, v, seen)
+    else:
+        n[..., :2] = v[..., :2]
+    r2 = np.einsum("...i,...i->...", n[..., :2], n[..., :2])
+    n[..., 2] = np.sqrt(np.clip(1.0 - r2, 0.0, None))
+    n[..., 2] *= signs[2]
+    if bad is not None:
+        n[bad] = np.nan
     return n
 
 
@@ -608,10 +678,12 @@ def _check_facing(v: np.ndarray, name: str, frame=None) -> None:
     )
 
 
-#: How to rebuild z, in the messages on a map that stores x and y only (docs/recipes.md says
-#: the same).
-REBUILD_Z = ("n, alpha = facetlift.io.read_normals(path); n[..., 2] = np.sqrt(np.clip(1 - "
-             "n[..., 0]**2 - n[..., 1]**2, 0, 1)); facetlift.integrate(n, alpha)")
+#: How to read a map that stores x and y only, in the messages on one read as x, y, z
+#: (docs/recipes.md says the same): the encoding's flag and argument, and for an array in
+#: Python the rebuild itself.
+REBUILD_Z = ("read it with --normal-encoding xy (facetlift.io.read_normals(path, "
+             "encoding='xy') in Python), which rebuilds z; for decoded normals n in an array: "
+             "n[..., 2] = np.sqrt(np.clip(1 - n[..., 0]**2 - n[..., 1]**2, 0, 1))")
 
 
 def z_not_stored(v: np.ndarray) -> tuple[str, bool] | None:
@@ -632,8 +704,8 @@ def z_not_stored(v: np.ndarray) -> tuple[str, bool] | None:
         decoded = bool(((np.abs(f - np.round(f)) < 1e-6) | (v[:, :2] == 0)).all())
     return (f"z is {float(z[0]):g} at every pixel inside the mask while x and y vary: is z "
             "stored? A two-channel map (BC5, RG) stores x and y only, and a blue channel filled "
-            "with one value is not z (0 decodes to z = -1, facing away): rebuild z as z = "
-            f"sqrt(1 - x^2 - y^2) first, in Python: {REBUILD_Z}", decoded)
+            "with one value is not z (0 decodes to z = -1, facing away): z = sqrt(1 - x^2 - "
+            f"y^2) must be rebuilt: {REBUILD_Z}", decoded)
 
 
 #: A map read in some frame with about half its normals facing away has its channels in

@@ -35,6 +35,7 @@ OUTPUTS = {
     "report": "report.png",
     "discontinuities": "discontinuities.png",
     "height": "height.png",
+    "height-exr": "height.exr",
     "points": "points.ply",
 }
 DEFAULT_SAVE = ("npy", "ply", "png")
@@ -61,6 +62,9 @@ class Job:
     fov: float | None = None
     orthographic: bool = False
     normal_frame: str | None = None
+    #: How the normal map stores its normals: "xyz" (R, G, B) or "xy" (a two-channel map,
+    #: BC5 or RG: z rebuilt; facetlift.frames.NORMAL_ENCODINGS).
+    normal_encoding: str = "xyz"
     gradient_frame: str = "xy"
     mat_keys: tuple | None = None
     method: str = "dgp"
@@ -70,6 +74,9 @@ class Job:
     options: dict = field(default_factory=dict)
     save: tuple = DEFAULT_SAVE
     triangles: bool | None = None
+    #: The heights written as 0 and 65535 in height.png, ``(low, high)`` in the depth's units
+    #: (facetlift.io.write_height); None: each map's own lowest and highest.
+    height_range: tuple | None = None
     #: Frame of the mesh's and the point cloud's coordinates (and the points' normals):
     #: None for facetlift's (x right, y up, z toward the viewer), "opencv" for the camera
     #: frame of OpenCV and COLMAP, or any frame a normal map may be in (facetlift.frames).
@@ -169,16 +176,26 @@ def read(job: Job) -> Input:
     folder = not field_input and src.is_dir()  # (a dataset folder may hold its own prior)
     if job.prior is None and not folder:  # (the prior's own flags refused before the map is
         _no_prior_checks(job)  # read; a folder's, once it is read)
+    encoding = frames.normal_encoding(job.normal_encoding, "normal_encoding")
+    if job.gradients and encoding != "xyz":
+        raise ValueError(f"`normal_encoding` {encoding!r} applies to a normal map; a gradient "
+                         "field (--gradients P Q) stores slopes: leave it out")
     if job.gradients:
         g = read_gradients(*job.gradients)
         n, m, source = _normals_from_field(g, job), g["mask"], "valid gradients"
     elif is_mat(src):
         g = read_mat(src, job.mat_keys)
         field_input = "p" in g
+        if field_input and encoding != "xyz":
+            raise ValueError(f"`normal_encoding` {encoding!r} applies to a normal map; {src} "
+                             "holds a gradient field (p, q), which stores slopes: leave it out")
         if field_input:
             n = _normals_from_field(g, job)
         else:
-            n = frames.to_facetlift(g["normals"], job.normal_frame)
+            n = g["normals"]
+            if encoding == "xy":
+                n = frames.decode_xy(n, frame=job.normal_frame)
+            n = frames.to_facetlift(n, job.normal_frame)
         m = g["mask"]
         source = f"{src.name} mask" if m is not None else "valid normals"
         if not field_input and job.unread_beside:
@@ -187,13 +204,15 @@ def read(job: Job) -> Input:
         ds = io.read_dataset(src, frame=job.normal_frame,
                              prior_scale=None if job.prior else job.prior_scale,
                              with_prior=job.dataset_prior and job.prior is None,
-                             with_confidence=job.dataset_confidence and job.confidence is None)
+                             with_confidence=job.dataset_confidence and job.confidence is None,
+                             encoding=encoding)
         n, m, K = ds["normals"], ds["mask"], ds["K"]
         prior, conf = ds["prior"], ds["confidence"]
         source = "dataset mask" if m is not None else "valid normals"
     else:
         # (no word on an alpha that --mask replaces)
-        n, m = io.read_normals(src, frame=job.normal_frame, check_alpha=job.mask is None)
+        n, m = io.read_normals(src, frame=job.normal_frame, check_alpha=job.mask is None,
+                               encoding=encoding)
         source = "alpha channel" if m is not None else "valid normals"
         _beside_dataset_files(src, job)
         if job.unread_beside and src.stem.lower() != "normal_map":
@@ -448,6 +467,23 @@ def _check_outputs(save, job: Job, local: bool = True) -> None:
             )
 
 
+def check_height_range(job: Job, save=None) -> None:
+    """A job's `height_range` checked (:func:`facetlift.io.preview.check_height_range`,
+    ValueError naming it), and a warning where `save` (default the job's) writes no height
+    PNG for it to apply to."""
+    if job.height_range is None:
+        return
+    from .io.preview import check_height_range as check
+
+    check(job.height_range)
+    save = job.save or DEFAULT_SAVE if save is None else save
+    if "height" not in save:  # (accepted and ignored: as output_frame without a mesh)
+        warn(f"`height_range` {list(job.height_range)} applies to height.png (save "
+             "'height'), which is not saved: "
+             + ("height.exr holds the heights themselves" if "height-exr" in save
+                else "nothing is scaled by it"))
+
+
 def run(job: Job, *, progress=None, on_warning=None) -> dict:
     """Run `job`: outputs written as one set; returns its record.
 
@@ -492,6 +528,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
             warn(f"`output_frame` {job.output_frame!r} applies to the mesh and point outputs "
                  "(ply, obj, points), none of which is saved: depth maps stay in facetlift's "
                  "convention (depth along the viewing axis)")
+    check_height_range(job, save)
     src = job.source
     outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)
     names = [OUTPUTS[s] for s in save]
@@ -537,7 +574,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         for kind, name in zip(save, names, strict=True):
             try:
                 _write(surface, kind, out.path(name), inp.normals, job.triangles,
-                       job.output_frame)
+                       job.output_frame, job.height_range)
             except OSError as e:  # (say which and where: the file written is a staging one)
                 if e.errno is None:
                     raise
@@ -563,7 +600,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                    f"fov {float(job.fov):g} deg" if job.fov is not None else
                    "K" if job.K is not None else "the folder's K.txt"),
         # (the depth of height.png's 0 and 65535, as io.write_height scales it)
-        "depth_range": _depth_range(surface),
+        "depth_range": _depth_range(surface, job.height_range if "height" in save else None),
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),
         "converged": bool(sinfo.get("converged", True)),
         # (how many mask pixels had no usable normal, by reason: a batch's missing normals
@@ -608,14 +645,18 @@ def _normal_counts(info: dict) -> dict:
             if isinstance(counts.get(k), (int, np.integer))}
 
 
-def _depth_range(surface) -> list | None:
-    """``[largest, smallest]`` finite depth (height.png's 0 and 65535), None without one."""
+def _depth_range(surface, height_range=None) -> list | None:
+    """The depth of height.png's 0 and 65535: ``[largest, smallest]`` finite depth (None
+    without one), or those of `height_range`'s heights."""
+    if height_range is not None:  # ("0.0 -": a height of 0 is depth 0.0, not -0.0)
+        return [0.0 - float(height_range[0]), 0.0 - float(height_range[1])]
     d = np.asarray(surface.depth, dtype=float)
     ok = np.isfinite(d)
     return [float(d[ok].max()), float(d[ok].min())] if ok.any() else None
 
 
-def _write(surface, kind: str, path: Path, normals, triangles, frame=None) -> None:
+def _write(surface, kind: str, path: Path, normals, triangles, frame=None,
+           height_range=None) -> None:
     from . import frames, io
 
     if kind == "report":
@@ -624,6 +665,8 @@ def _write(surface, kind: str, path: Path, normals, triangles, frame=None) -> No
     elif kind == "discontinuities":
         io.write_discontinuities(path, surface)
     elif kind == "height":
+        io.write_height(path, surface, height_range=height_range)
+    elif kind == "height-exr":  # (the heights themselves: no range applies)
         io.write_height(path, surface)
     elif kind == "points":  # (one point per pixel centre, with the input's normal there)
         pn = _point_normals(surface, normals)

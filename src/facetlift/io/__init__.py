@@ -10,6 +10,7 @@ normal maps       PNG 8/16 bit, TIFF, OpenEXR, ``.npy``  imagecodecs (libpng), t
 masks             PNG, TIFF, ``.npy``                    imagecodecs, tifffile
 intrinsics ``K``  text, 3 x 3                            numpy
 depth maps        ``.npy``, OpenEXR, TIFF, ``.npz``      numpy, OpenEXR, tifffile
+height maps       PNG 16 bit, OpenEXR                    imagecodecs, OpenEXR
 meshes            PLY (binary), OBJ; quads or triangles  meshio
 previews          PNG                                    imagecodecs; matplotlib for colormaps
 reports           PNG (panels)                           matplotlib
@@ -21,7 +22,8 @@ Integer normal maps are decoded per channel as ``n = v / maxval * 2 - 1`` (``max
 see :mod:`facetlift.conventions`). Pillow is not used for PNG because it silently reduces
 16-bit RGB PNGs to 8 bits. A pixel of an integer map whose decoded vector has a length outside
 :data:`ENCODED_LENGTH_RANGE` does not encode a normal (black, white or mid-grey background
-fill) and decodes as NaN, i.e. a missing sample.
+fill) and decodes as NaN, i.e. a missing sample. A two-channel map (BC5, "RG") is read with
+``encoding="xy"``: R, G = x, y, and z is rebuilt (:func:`facetlift.frames.decode_xy`).
 
 Every writer is atomic: it writes a temporary file in the target directory, flushes it to disk
 and renames it over the target, so a failed write never leaves a partial file behind.
@@ -56,12 +58,13 @@ from .images import (
     write_normals,
 )
 from .meshes import MESH_FORMATS, write_mesh, write_points
-from .preview import shade, write_discontinuities, write_height, write_preview
+from .preview import HEIGHT_FORMATS, shade, write_discontinuities, write_height, write_preview
 from .report import write_report
 from .surface import SURFACE_FORMATS, load_surface, save_surface
 
 __all__ = [
     "DEPTH_FORMATS",
+    "HEIGHT_FORMATS",
     "ENCODED_LENGTH_RANGE",
     "MASK_FORMATS",
     "MESH_FORMATS",

@@ -173,13 +173,13 @@ def _dataset_formats() -> dict[str, tuple[str, ...]]:
 
 def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                  prior_scale: float | None = None, with_prior: bool = True,
-                 with_confidence: bool = True) -> dict:
+                 with_confidence: bool = True, encoding: str = "xyz") -> dict:
     """Read a folder in the BiNI / DiLiGenT layout.
 
     The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
     ``mask.png`` (or ``.tif``, ``.tiff``, ``.npy``) and, for a perspective camera, ``K.txt``.
     Without ``K.txt`` the view is orthographic. Pixels outside the mask may hold anything.
-    `frame` and `y_down` are those of :func:`~facetlift.io.read_normals`. A depth prior
+    `frame`, `y_down` and `encoding` are those of :func:`~facetlift.io.read_normals`. A depth prior
     ``prior_depth.*`` and a normal confidence ``confidence.*`` (``.npy``, ``.exr``, ``.tif``,
     ``.png``; the prior also as a points file, ``.csv`` or ``.txt``, returned as a map, or
     as its points with their weights where it has a weight column; docs/fusion.md) are
@@ -224,7 +224,7 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     mpath = _find(f, "mask", formats["mask"])
     # (the folder's mask replaces the map's alpha: no word on the alpha then)
     normals, alpha = read_normals(npath, frame=frame, y_down=y_down,
-                                  check_alpha=mpath is None)
+                                  check_alpha=mpath is None, encoding=encoding)
     mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
     kpath = _find(f, "K", formats["K"])
     K = read_K(kpath) if kpath is not None else None

@@ -118,12 +118,13 @@ def _read_exr(path: Path, arg: str) -> dict[str, np.ndarray]:
         ) from None
 
 
-def _exr_normal_channels(ch: dict, p: Path, arg: str) -> tuple[tuple[str, ...], str]:
-    """The three channels of an EXR normal map (R, G, B or X, Y, Z) and its alpha's name. A
-    multilayer file (Blender's: ``ViewLayer.Normal.X``, ...) without such bare channels gives
-    its one layer whose name holds "normal" (case aside); otherwise the message lists the
-    layers that could be it."""
-    for names in (("R", "G", "B"), ("X", "Y", "Z")):
+def _exr_normal_channels(ch: dict, p: Path, arg: str,
+                         count: int = 3) -> tuple[tuple[str, ...], str]:
+    """The `count` channels of an EXR normal map (R, G, B or X, Y, Z; the first two for a
+    two-channel map) and its alpha's name. A multilayer file (Blender's:
+    ``ViewLayer.Normal.X``, ...) without such bare channels gives its one layer whose name
+    holds "normal" (case aside); otherwise the message lists the layers that could be it."""
+    for names in (("R", "G", "B")[:count], ("X", "Y", "Z")[:count]):
         if all(c in ch for c in names):
             return names, "A"
     layers = {}  # layer -> its channels' last names
@@ -132,18 +133,20 @@ def _exr_normal_channels(ch: dict, p: Path, arg: str) -> tuple[tuple[str, ...], 
         if layer:
             layers.setdefault(layer, set()).add(last)
     found = [(layer, axes) for layer, have in sorted(layers.items())
-             for axes in (("X", "Y", "Z"), ("R", "G", "B")) if set(axes) <= have]
+             for axes in (("X", "Y", "Z")[:count], ("R", "G", "B")[:count])
+             if set(axes) <= have]
     normal = [(layer, axes) for layer, axes in found if "normal" in layer.lower()]
     if len(normal) == 1:
         layer, axes = normal[0]
         return tuple(f"{layer}.{a}" for a in axes), f"{layer}.A"
     which = ("; a multilayer file needs one layer named normal with them, and its layers "
-             f"with three components are {', '.join(layer for layer, _ in found)}"
+             f"with {('two', 'three')[count - 2]} components are "
+             f"{', '.join(layer for layer, _ in found)}"
              + (" (more than one named normal: save the one you mean alone)"
                 if len(normal) > 1 else ": save the normal pass alone, or as its own file")
              if found else "")
-    raise ValueError(f"`{arg}`: {p} must have channels R, G, B or X, Y, Z; got {sorted(ch)}"
-                     f"{which}")
+    want = "R, G, B or X, Y, Z" if count == 3 else "R, G or X, Y (a two-channel map)"
+    raise ValueError(f"`{arg}`: {p} must have channels {want}; got {sorted(ch)}{which}")
 
 
 def _read_npy(path: Path, arg: str) -> np.ndarray:
@@ -172,9 +175,14 @@ def _check_png_normals(data: bytes, path: Path, arg: str) -> None:
         )
 
 
-def _decode_unit(pixels: np.ndarray, path: Path, arg: str, where=None) -> np.ndarray:
+def _decode_unit(pixels: np.ndarray, path: Path, arg: str, where=None, encoding: str = "xyz",
+                 frame=None) -> np.ndarray:
     """uint8/uint16 -> [-1, 1] per channel (:func:`facetlift.frames.decode`, its unit-length
-    check among `where`, the alpha mask); float passes through; other dtypes are refused."""
+    check among `where`, the alpha mask); float passes through; other dtypes are refused.
+    `encoding` ``"xy"``: x and y alone, z rebuilt to face the viewer in `frame`
+    (:func:`facetlift.frames.decode_xy`)."""
+    if encoding == "xy" and (pixels.dtype in frames.ENCODED_DTYPES or pixels.dtype.kind == "f"):
+        return frames.decode_xy(pixels, where=where, frame=frame)
     if pixels.dtype in frames.ENCODED_DTYPES:
         return frames.decode(pixels, where=where)
     if pixels.dtype.kind == "f":
@@ -261,7 +269,8 @@ def _alpha_levels(alpha: np.ndarray, m: np.ndarray, p, arg: str) -> None:
 
 
 def read_normals(
-    path, *, frame: str | None = None, y_down: bool = False, check_alpha: bool = True
+    path, *, frame: str | None = None, y_down: bool = False, check_alpha: bool = True,
+    encoding: str = "xyz",
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Read a normal map.
 
@@ -282,6 +291,14 @@ def read_normals(
         Warn where the alpha that makes `alpha_mask` holds many grey levels away from its
         edge (:func:`_alpha_levels`: a height packed in the alpha, all of it > 0 taken as
         inside). False where the caller has a mask of its own, which replaces the alpha.
+    encoding : {"xyz", "xy"}
+        ``"xyz"`` (default): x, y, z in R, G, B. ``"xy"``: a two-channel map (BC5, "RG", as
+        game engines compress tangent-space maps) storing x and y alone in R and G (8/16-bit
+        values decoded as ``v / max * 2 - 1``, floats as stored; EXR channels R, G or X, Y);
+        z is rebuilt as ``sqrt(max(0, 1 - x^2 - y^2))``, facing the viewer, and B, if any,
+        is ignored (:func:`facetlift.frames.decode_xy`). An integer pixel whose x, y are
+        longer than unit length (black or white fill) holds no normal; a mid-grey fill reads
+        as a flat normal, so such a map needs its mask.
 
     Returns
     -------
@@ -297,13 +314,14 @@ def read_normals(
     ------
     ValueError
         Missing, corrupt or truncated file, wrong number of channels, unsupported pixel type
-        or extension, a bad `frame`; a grey image saved as RGB (R = G = B at every pixel
-        inside the alpha, where there is one: :func:`facetlift.frames.grey_check`). The
-        message names the path.
+        or extension, a bad `frame` or `encoding`; a grey image saved as RGB (R = G = B at
+        every pixel inside the alpha, where there is one: :func:`facetlift.frames.grey_check`).
+        The message names the path.
     """
     arg = "path"
     frame = frames.resolve(frame, y_down)
     frames.parse(frame)
+    encoding = frames.normal_encoding(encoding)
     p = _existing(path, arg)
     ext = _suffix(p, NORMAL_READ_FORMATS, "normal map", arg, reading_map=True)
     if ext in (".png", ".tif", ".tiff"):
@@ -313,10 +331,10 @@ def read_normals(
         pixels = _decode_image(p, ext, arg)
         rgb, alpha = _split_alpha(pixels, p, arg, check_alpha)
         frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
-        n = _decode_unit(rgb, p, arg, alpha)
+        n = _decode_unit(rgb, p, arg, alpha, encoding, frame)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
-        names, alpha_name = _exr_normal_channels(ch, p, arg)
+        names, alpha_name = _exr_normal_channels(ch, p, arg, 2 if encoding == "xy" else 3)
         ints = [c for c in names if ch[c].dtype.kind in "iu"]
         if ints:
             raise ValueError(
@@ -327,11 +345,14 @@ def read_normals(
         alpha = (_alpha_mask(ch[alpha_name], p, arg, check_alpha) if alpha_name in ch
                  else None)
         frames.grey_check(n, alpha, f"`{arg}`: {p}")
+        if encoding == "xy":
+            n = frames.decode_xy(n, frame=frame)
     else:
         arr = _read_npy(p, arg)
         rgb, alpha = _split_alpha(arr, p, arg, check_alpha)
         frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
-        n = _decode_unit(rgb, p, arg, alpha)  # uint8/uint16 arrays decode like PNG pixels
+        # (uint8/uint16 arrays decode like PNG pixels)
+        n = _decode_unit(rgb, p, arg, alpha, encoding, frame)
     return frames.to_facetlift(n, frame), alpha
 
 

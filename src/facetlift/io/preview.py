@@ -6,8 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .._warnings import warn
 from ._paths import _suffix
-from .images import _write_png
+from .images import _write_exr, _write_png
 
 #: The most pixels a preview's shorter side is enlarged to (`min_size`), and the longest
 #: side an enlargement may make (a long thin map is enlarged less).
@@ -194,36 +195,106 @@ def write_discontinuities(path, surface, *, min_size: int = 256) -> Path:
     return p
 
 
-def write_height(path, surface) -> tuple[Path, tuple[float, float]]:
-    """Write the surface's height (``-depth``) as a 16-bit grey + alpha PNG, scaled to 0..1
-    over the domain: 0 at its lowest point (the largest depth), 65535 at its highest, alpha 0
-    outside the mask. For displacement and height maps of game engines and texture tools
-    (a texture artist's check: only a shaded 8-bit preview and float depth existed).
+#: The formats :func:`write_height` writes: a 16-bit grey PNG scaled to 0..65535, and an
+#: OpenEXR file of the heights themselves (float32).
+HEIGHT_FORMATS = (".png", ".exr")
 
-    Returns the path and ``(low, high)``, the depth of the values 0 and 65535, in the
-    depth's units (texels for a texture integrated with ``pixel_size=1``): the displacement
-    scale is ``low - high``. A flat surface is written as 0 everywhere.
+
+def check_height_range(value, name: str = "height_range") -> tuple[float, float] | None:
+    """`value` checked as the heights of a height PNG's 0 and 65535, ``(low, high)``: two
+    finite numbers, low below high; None passes (the map's own range). ValueError naming
+    `name` otherwise."""
+    if value is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in value)
+    except (TypeError, ValueError):
+        lo = hi = None
+    if lo is None or not (np.isfinite(lo) and np.isfinite(hi)) or not lo < hi:
+        raise ValueError(f"`{name}` must be two finite numbers LOW < HIGH, the heights (in the "
+                         f"surface's depth units) written as 0 and 65535; got {value!r}")
+    return lo, hi
+
+
+def write_height(path, surface, *, height_range=None) -> tuple[Path, tuple[float, float] | None]:
+    """Write the surface's height (``-depth``), for the displacement and height maps of game
+    engines and texture tools (a texture artist's check: only a shaded 8-bit preview and
+    float depth existed).
+
+    ``.png``: 16-bit grey, scaled to 0..1 over the domain (0 at its lowest point, the largest
+    depth; 65535 at its highest), or over `height_range`; with an alpha channel (0 outside
+    the mask) only where the surface leaves pixels out: a map covering the image is plain
+    grey, the one channel height-map imports expect (an artist's audit: an alpha of 65535
+    everywhere was written, which says nothing). ``.exr``: the heights themselves, float32, in
+    the depth's units, NaN outside the mask, one channel named ``Y`` (OpenEXR's luminance:
+    viewers and compositors show a lone ``Y`` as grey; ``depth.exr``'s is ``Z``).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.png`` or ``.exr`` (:data:`HEIGHT_FORMATS`).
+    surface : facetlift.Surface
+    height_range : (float, float), optional
+        PNG only: the heights written as 0 and 65535, in the depth's units (texels for a
+        texture integrated with ``pixel_size=1``), the same for every map of a texture set;
+        heights outside are clipped, with a warning counting them. Default: the map's own
+        lowest and highest (one overshooting pixel then sets the scale).
+
+    Returns
+    -------
+    path : Path
+    range : (float, float) or None
+        PNG: ``(low, high)``, the depth of the values 0 and 65535 (the displacement scale is
+        ``low - high``); a flat surface is written as 0 everywhere. None for EXR, whose
+        values are the heights.
 
     Raises
     ------
     ValueError
-        A path that is not ``.png``; a surface without a finite depth.
+        A path that is neither ``.png`` nor ``.exr``; a surface without a finite depth; a bad
+        `height_range`, or one given for EXR.
     """
     p = Path(path)
-    _suffix(p, (".png",), "height map", "path")
+    ext = _suffix(p, HEIGHT_FORMATS, "height map", "path")
+    given = check_height_range(height_range)
     depth = np.asarray(surface.depth, dtype=float)
     inside = np.isfinite(depth)
     if not inside.any():
         raise ValueError("the surface has no finite depth to write as a height map")
-    low, high = float(np.nanmax(depth)), float(np.nanmin(depth))
+    if ext == ".exr":
+        if given is not None:
+            raise ValueError(f"`height_range` {height_range!r} applies to the 16-bit PNG; "
+                             f"{p.name} holds the heights themselves: leave it out")
+        _write_exr(p, {"Y": np.negative(depth, dtype=np.float32)})
+        return p, None
+    if given is None:
+        low, high = float(np.nanmax(depth)), float(np.nanmin(depth))
+    else:  # (depths: height = -depth; "0.0 -" keeps a height of 0 from becoming -0.0)
+        low, high = 0.0 - given[0], 0.0 - given[1]
     span = low - high
-    img = np.zeros(depth.shape + (2,), dtype=np.uint16)
+    whole = bool(inside.all())
+    img = np.zeros(depth.shape if whole else depth.shape + (2,), dtype=np.uint16)
+    grey = img if whole else img[..., 0]
+    below = above = 0
     if span > 0:  # (row by row: no full-size float temporaries beside the depth)
         for r in range(depth.shape[0]):
             row = np.subtract(low, depth[r])
             row *= 65535.0 / span
+            if given is not None:
+                with np.errstate(invalid="ignore"):
+                    below += int(np.count_nonzero(row < -0.5))
+                    above += int(np.count_nonzero(row > 65535.5))
+                np.clip(row, 0.0, 65535.0, out=row)
             np.rint(row, out=row)
-            img[r, :, 0] = np.nan_to_num(row)
-    img[..., 1][inside] = 65535
+            grey[r] = np.nan_to_num(row)
+    if below or above:
+        k = int(inside.sum())
+        warn(f"`height_range` [{given[0]:g}, {given[1]:g}]: {below + above} of the "
+             f"{k} pixels inside ({(below + above) / k:.2%}) have heights outside it "
+             f"({below} below, {above} above; the heights span {-np.nanmax(depth):.6g} to "
+             f"{-np.nanmin(depth):.6g}) and are clipped to 0 or 65535 in {p.name}: "
+             "widen the range to keep them", UserWarning)
+    if not whole:
+        img[..., 1][inside] = 65535
     _write_png(p, img)
     return p, (low, high)
