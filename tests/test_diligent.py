@@ -207,3 +207,22 @@ def test_batch_names_items_after_the_folders(tmp_path, capsys):
     assert "Calib_Results.mat" in [name for name, *_ in before]
     scipy_io.savemat(root / "Calib_Results.mat", {"KK": KK * [[1.01], [1.01], [1]]})
     assert fb.fingerprint(fb.items([root / "bearPNG"])[0]) != before
+
+
+def test_the_recipes_diligent_folder_lines_run_as_written(tmp_path, capsys, monkeypatch):
+    """docs/recipes.md gives the release's folders to integrate and batch as they are."""
+    import shlex
+    from pathlib import Path
+
+    text = (Path(__file__).parents[1] / "docs" / "recipes.md").read_text()
+    lines = [ln.split("#")[0] for ln in text.splitlines()
+             if ln.startswith(("facetlift integrate DiLiGenT/", "facetlift batch DiLiGenT/"))]
+    assert len(lines) == 2
+    diligent(tmp_path / "DiLiGenT" / "pmsData")
+    monkeypatch.chdir(tmp_path)
+    for line in lines:
+        code, _, err = run(capsys, *shlex.split(line)[1:])
+        assert code == 0 and "warning" not in err, err
+    assert (tmp_path / "bear_out" / "depth.npy").is_file()
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
+        "batch.jsonl", "bearPNG", "catPNG"]
