@@ -149,8 +149,14 @@ def test_a_folder_without_a_normal_map_names_maps_not_depths_nor_photographs(tmp
     with pytest.raises(ValueError, match=r"other files that may be normal maps \(001.png, "
                                          r"002.png, est.npy\): integrate one by its path") as e:
         io.read_dataset(f)
-    assert "depth_gt" not in str(e.value) and "mask" not in str(e.value)
-    assert "batch" not in str(e.value)
+    # a batch of the folder is not offered: it would run the depth map as a normal map
+    assert "or all of them with `facetlift batch" not in str(e.value)
+    assert str(e.value).endswith(f"`facetlift batch {f}` would run depth_gt.npy as normal "
+                                 "maps too: give it the maps by name")
+    (f / "depth_gt.npy").unlink()  # (only maps: the batch is offered, a user's check)
+    with pytest.raises(ValueError, match=r"\(001.png, 002.png, est.npy\).*or all of them "
+                                         r"with `facetlift batch"):
+        io.read_dataset(f)
 
 
 def test_integrate_a_diligent_folder(tmp_path, capsys):

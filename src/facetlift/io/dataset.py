@@ -409,7 +409,24 @@ def _no_normals(f: Path) -> str:
     named = f"{', '.join(maps[:3])}{', ...' if len(maps) > 3 else ''}"
     mat = " (a .mat file with --mat-keys where it holds several arrays)" if any(
         m.lower().endswith(".mat") for m in maps[:3]) else ""
+    # (a batch of the folder runs every such file: offered only where those are the maps)
+    extra = [n for n in _batch_would_run(f) if n not in maps]
+    batch = (f", or all of them with `facetlift batch {f} -o OUT`" if not extra else
+             f"; `facetlift batch {f}` would run {', '.join(extra[:3])}"
+             f"{', ...' if len(extra) > 3 else ''} as normal maps too: give it the maps by "
+             "name")
     return (f"`folder`: {f} has no normal_map file ({looked})"
             + (f"; it holds other files that may be normal maps ({named}): integrate one by "
-               f"its path (facetlift integrate {f / maps[0]}){mat}" if maps else ""))
+               f"its path (facetlift integrate {f / maps[0]}){mat}{batch}" if maps else ""))
 
+
+def _batch_would_run(f: Path) -> list[str]:
+    """The files of `f` that ``facetlift batch`` makes items of (facetlift.batch.items): a
+    map's extension, and no ``mask.*``, no ``X_mask.*`` beside an ``X.*`` and no camera
+    file."""
+    kinds = NORMAL_READ_FORMATS + (".mat",)
+    files = [p for p in f.iterdir() if p.is_file() and p.suffix.lower() in kinds]
+    stems = {p.stem for p in files}
+    return sorted(p.name for p in files if p.stem.lower() != "mask"
+                  and p.name not in CAMERA_FILES
+                  and not (p.stem.endswith("_mask") and p.stem[:-len("_mask")] in stems))
