@@ -631,12 +631,17 @@ def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
     assert code == 0 and "beside it," not in err, err
     assert err.count("holds mask.png beside its normal maps, but it is no map's mask") == 1
     assert f"give --mask {folder / 'mask.png'} (mask=) to use it for every map" in err
-    # a .mat map: the release's mask.png beside Normal_gt.mat, unless the file holds a mask
+    # a .mat map: the release's mask.png beside Normal_gt.mat (a DiLiGenT folder, read as
+    # one when given as the folder: tests/test_diligent.py), unless the file holds a mask
     sio.savemat(tmp_path / "Normal_gt.mat", {"Normal_gt": n})
     io.write_mask(tmp_path / "mask.png", mask)
     code, _, err = run(capsys, "integrate", tmp_path / "Normal_gt.mat", "-s", "npy", "-o",
                        tmp_path / "e")
-    assert code == 0 and "Normal_gt.mat has mask.png beside it" in err
+    assert code == 0 and "Normal_gt.mat lies in a dataset folder whose mask.png (its mask)" in err
+    sio.savemat(tmp_path / "obj.mat", {"N": n})
+    code, _, err = run(capsys, "integrate", tmp_path / "obj.mat", "-s", "npy", "-o",
+                       tmp_path / "e2")
+    assert code == 0 and "obj.mat has mask.png beside it" in err
     sio.savemat(tmp_path / "Normal_gt.mat", {"Normal_gt": n, "mask": mask.astype(np.uint8)})
     code, _, err = run(capsys, "integrate", tmp_path / "Normal_gt.mat", "-s", "npy", "-o",
                        tmp_path / "f")

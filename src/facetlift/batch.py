@@ -57,15 +57,19 @@ _COMMENT = re.compile(r"(^|\s)#.*$")
 
 
 def items(inputs, *, list_file=None) -> list[Item]:
-    """The batch items of `inputs`: normal-map files, dataset folders (with ``normal_map.*``),
-    folders of either (one level), glob patterns, and the lines of `list_file` (one path or
-    pattern per line, relative to the list file's folder; ``#`` at the start of a line or
-    after a space starts a comment).
+    """The batch items of `inputs`: normal-map files, dataset folders (with ``normal_map.*``,
+    or DiLiGenT's ``Normal_gt.mat``), folders of either (one level), glob patterns, and the
+    lines of `list_file` (one path or pattern per line, relative to the list file's folder;
+    ``#`` at the start of a line or after a space starts a comment).
 
     A file ``<stem>_mask.<ext>`` next to a normal map ``<stem>.<ext>`` is its mask, and is not
     an item unless named explicitly. Output names are the file stems or folder names; inputs
     sharing a stem (``a.png``, ``a.npy``) are named with their extension (``a_png``,
-    ``a_npy``), and what still collides gets ``-2``, ``-3`` ... Paths are made absolute but
+    ``a_npy``), and what still collides gets ``-2``, ``-3`` ... A dataset folder is named
+    after the folder (DiLiGenT's ``bearPNG/``, not its ``Normal_gt.mat``: an audit's objects
+    came out as ``Normal_gt``, ``Normal_gt-2`` ...), and a folder's camera file
+    (``Calib_Results.mat``, :data:`facetlift.io.dataset.CAMERA_FILES`) is no item unless
+    named explicitly. Paths are made absolute but
     not resolved: two links to one file are two items.
 
     An input that does not exist, or a pattern that matches nothing, is an item with its
@@ -77,6 +81,7 @@ def items(inputs, *, list_file=None) -> list[Item]:
     ValueError
         No normal map found at all (every input missing, or none holds a map).
     """
+    from .io.dataset import CAMERA_FILES, is_dataset
     from .io.images import MASK_FORMATS, NORMAL_READ_FORMATS
 
     if isinstance(inputs, (str, os.PathLike)):  # (one input: a str was read letter by letter)
@@ -106,20 +111,24 @@ def items(inputs, *, list_file=None) -> list[Item]:
         if not p.exists():
             absent.append((spec, f"`inputs`: {p} does not exist"))
             continue
-        if p.is_dir() and not _is_dataset(p, NORMAL_READ_FORMATS):
+        if p.is_dir() and not is_dataset(p):
             kinds = NORMAL_READ_FORMATS + (".mat",)
             children = sorted(p.iterdir())
-            folders = {c: _is_dataset(c, NORMAL_READ_FORMATS) for c in children if c.is_dir()}
+            folders = {c: is_dataset(c) for c in children if c.is_dir()}
+            # (DiLiGenT's Calib_Results.mat beside its object folders is their camera: it
+            # ran as a normal map and failed, an audit)
             paths += [(c, False) for c in children if folders.get(c)
-                      or (c.is_file() and c.suffix.lower() in kinds)]
+                      or (c.is_file() and c.suffix.lower() in kinds
+                          and c.name not in CAMERA_FILES)]
             deeper = [c.name for c, dataset in folders.items()
                       if not dataset and _holds_maps(c)]
             if deeper:  # (a user's folder of days, each a folder of maps: silently skipped)
                 warnings.warn(
                     f"batch: {p}: skipped {len(deeper)} subfolder(s) holding maps but no "
-                    f"normal_map.* ({', '.join(deeper[:3])}{', ...' if len(deeper) > 3 else ''})"
-                    f": a folder is read one level deep; name each as an input (facetlift "
-                    f"batch {p / deeper[0]} ...)", stacklevel=2)
+                    f"normal_map.* or Normal_gt.mat ({', '.join(deeper[:3])}"
+                    f"{', ...' if len(deeper) > 3 else ''}): a folder is read one level "
+                    f"deep; name each as an input (facetlift batch {p / deeper[0]} ...)",
+                    stacklevel=2)
         else:
             paths.append((p, True))
     found, seen, lone = [], set(), []
@@ -180,6 +189,7 @@ def _holds_maps(folder: Path) -> bool:
     """Whether `folder` (not hidden, no facetlift output folder) holds a file that may be a
     normal map: an extension of one, and neither a mask nor an output's name; False where it
     cannot be listed."""
+    from .io.dataset import CAMERA_FILES
     from .io.images import NORMAL_READ_FORMATS
 
     if folder.name.startswith(".") or folder.name.endswith("_facetlift"):
@@ -194,7 +204,7 @@ def _holds_maps(folder: Path) -> bool:
         return False
     return any(Path(n).suffix.lower() in kinds and Path(n).stem not in OUTPUT_STEMS
                and Path(n).stem.lower() != "mask" and not Path(n).stem.endswith("_mask")
-               for n in names)
+               and n not in CAMERA_FILES for n in names)
 
 
 def _grey(p: Path) -> bool:
@@ -233,7 +243,7 @@ def _unused_folder_files(found, template: Job) -> None:
     only a dataset folder's (with ``normal_map.*``) are read, so its maps would be integrated
     orthographically (a user's rig: 583 mm MADE instead of 1.88 mm, and no word) and
     without that mask (an audit: docs/cli.md said a folder's mask.png was its maps' mask)."""
-    from .io.images import NORMAL_READ_FORMATS
+    from .io.dataset import is_dataset
     from .jobs import unread_files
 
     by_folder: dict = {}
@@ -243,27 +253,23 @@ def _unused_folder_files(found, template: Job) -> None:
     camera = template.K is None and template.fov is None and not template.orthographic
     # (a dataset folder's own normal_map.* given as a file is warned about by its item,
     # jobs._beside_dataset_files, which names the folder's mask too: not twice)
-    for folder in sorted(f for f in by_folder if not _is_dataset(f, NORMAL_READ_FORMATS)):
+    for folder in sorted(f for f in by_folder if not is_dataset(f)):
         # (the mask only where a map of the folder has none of its own, NAME_mask.*)
         mask = template.mask is None and any(it.mask is None for it in by_folder[folder])
         unread = unread_files(folder, None, mask=mask, camera=camera)
         if "K.txt" in unread:
             warnings.warn(
                 f"batch: {folder} holds K.txt beside its normal maps, but only a dataset "
-                "folder's K.txt (with normal_map.*) is read: these maps are integrated "
-                f"orthographically; give --K {folder / 'K.txt'} (K=) to use that camera",
+                "folder's K.txt (with normal_map.* or Normal_gt.mat) is read: these maps are "
+                f"integrated orthographically; give --K {folder / 'K.txt'} (K=) to use that "
+                "camera",
                 stacklevel=3)
         for name in (n for n in unread if n != "K.txt"):
             warnings.warn(
                 f"batch: {folder} holds {name} beside its normal maps, but it is no map's mask: "
-                "only a dataset folder's (with normal_map.*) is read, and NAME_mask.* beside "
-                f"NAME.*; give --mask {folder / name} (mask=) to use it for every map, or name "
-                "it after its map", stacklevel=3)
-
-
-def _is_dataset(folder: Path, formats) -> bool:
-    # (os.path.isfile: False for a folder that cannot be read, where Path.is_file raises)
-    return any(os.path.isfile(folder / f"normal_map{ext}") for ext in formats)
+                "only a dataset folder's (with normal_map.* or Normal_gt.mat) is read, and "
+                f"NAME_mask.* beside NAME.*; give --mask {folder / name} (mask=) to use it for "
+                "every map, or name it after its map", stacklevel=3)
 
 
 class _Listing:
@@ -407,8 +413,13 @@ def fingerprint(item: Item) -> list:
     folder: of each file in it) and of its mask file; ``--resume`` runs an item again when
     they changed (a map replaced under the same name)."""
     files = [Path(item.path)]
-    if files[0].is_dir():
-        files = sorted(f for f in files[0].iterdir() if f.is_file())
+    if files[0].is_dir():  # (and a DiLiGenT folder's camera file in its parent)
+        from .io.dataset import camera_files
+
+        folder = files[0]
+        files = sorted(f for f in folder.iterdir() if f.is_file())
+        with contextlib.suppress(ValueError):  # (the item's own reading says why)
+            files += [c for c in camera_files(folder) if c.parent != folder]
     if item.mask is not None:
         files.append(Path(item.mask))
     out = []
@@ -692,9 +703,10 @@ def log_record(rec: dict) -> dict:
 
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
             "shape", "facets", "mask_source", "converged", "warnings", "resumed", "settings",
-            "input_stamp", "perspective", "depth_range", "normals")
+            "input_stamp", "perspective", "camera", "depth_range", "normals")
     # (mask_source: whether NAME_mask.png was used, a user asked; perspective: whether a
-    # camera was used, a dataset folder's K.txt included; depth_range: height.png's scale;
+    # camera was used, a dataset folder's K.txt included; camera: which, a DiLiGenT folder's
+    # being its parent's Calib_Results.mat; depth_range: height.png's scale;
     # normals: the mask's pixels without a usable normal, by reason)
     return jsonable({k: rec[k] for k in keep if k in rec})
 

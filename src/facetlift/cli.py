@@ -57,6 +57,7 @@ def cli(verbose, debug):
       facetlift integrate normal_map.png --mask mask.png
       facetlift integrate data/bear/ -o bear_out --save exr --save ply
       facetlift methods
+      facetlift evaluate bear_out/depth.npy --gt depth_gt.npz --mask mask.png --K K.txt
       facetlift bench --quick -o bench_out
 
     Run 'facetlift COMMAND --help' for the options of a command.
@@ -921,6 +922,103 @@ def methods(as_json, markdown):
 
 def _split(text):
     return None if not text else tuple(t.strip() for t in text.split(",") if t.strip())
+
+
+#: The arrays of a ground truth's ``.npz`` looked for, in order (else its only one): BiNI's
+#: DiLiGenT ``depth_gt.npz`` holds ``depth_gt``.
+GT_NPZ_NAMES = ("depth_gt", "depth")
+
+
+@cli.command(context_settings=CONTEXT)
+@click.argument("result", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--gt", "gt", required=True,
+              type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Ground-truth depth map: .npy, .npz (its depth_gt or depth array, or its "
+              "only one), .exr (channel Z or its only one) or .tif; NaN where undefined.")
+@click.option("-m", "--mask", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="The pixels to score (PNG/TIFF/npy, nonzero = inside). Default: where both "
+              "depths are finite.")
+@click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="The result's camera, as for 'integrate': score it as a perspective depth "
+              "(a surface .npz keeps its own). Without one the result is orthographic.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def evaluate(result, gt, mask, K, as_json):
+    """Score a result RESULT (depth.npy, .exr, .tif or surface.npz, as integrate writes them)
+    against a ground-truth depth map: MADE (BiNI's: the result times the median of GT /
+    RESULT, then the mean absolute error), that scale, the RMSE after it, the mean absolute
+    error without a scale (for metric depth, e.g. a result fused with a depth prior) and, for
+    an orthographic result, the paper's normalised error (facetlift.metrics.evaluate).
+
+    \b
+    Examples:
+      facetlift evaluate out/depth.npy --gt bear/depth_gt.npz -m bear/mask.png --K bear/K.txt
+      facetlift evaluate out/surface.npz --gt gt.exr --json
+    """
+    import numpy as np
+
+    from . import io, metrics
+
+    est = io.read_depth(result, arg="result")
+    camera = None
+    if result.suffix.lower() == ".npz":  # (a surface's: its camera, NaN when orthographic)
+        with np.load(result, allow_pickle=False) as z:
+            stored = np.asarray(z["K"], dtype=float) if "K" in z.files else None
+        if stored is not None and stored.shape == (3, 3) and np.isfinite(stored).all():
+            camera = stored
+    if K is not None:
+        given = io.read_K(K)
+        if camera is not None and not np.allclose(given, camera, rtol=1e-6):
+            raise ValueError(f"`K`: {K} differs from the camera {result} was integrated with "
+                             f"({camera.tolist()}); leave --K out to use the surface's own")
+        camera = given
+    truth = io.read_depth(gt, npz_names=GT_NPZ_NAMES, arg="gt")
+    if truth.shape != est.shape:
+        raise ValueError(f"`gt`: {gt} is {truth.shape[0]}x{truth.shape[1]} (HxW) but `result` "
+                         f"{result} is {est.shape[0]}x{est.shape[1]}: give the ground truth of "
+                         "the same view and crop")
+    sel = None if mask is None else io.read_mask(mask, est.shape)
+    perspective = camera is not None
+    try:
+        rec = metrics.evaluate(est, truth, sel, perspective=perspective)
+    except ValueError as e:  # (the library's arguments, named as the command's)
+        raise ValueError(str(e).replace("`estimate`", "`result`").replace("`truth`", "`gt`")
+                         ) from None
+    if not perspective and rec["scale"] is not None and K is None:
+        rec["notes"].append("the result's depths are all > 0, as a perspective result's are "
+                            "(an orthographic one has mean 0): give --K to score it as one")
+    rec = {"result": str(result), "gt": str(gt),
+           "mask": "where both are finite" if mask is None else str(mask), **rec}
+    if as_json:
+        click.echo(json.dumps(jsonable(dict(rec, status="ok", exit_code=EXIT_OK))))
+        _STATE["printed_json"] = True
+        return EXIT_OK
+    for line in _evaluate_lines(rec, K):
+        click.echo(line)
+    return EXIT_OK
+
+
+def _evaluate_lines(rec: dict, K) -> list[str]:
+    """``facetlift evaluate``'s text: one line per measure, '-' where it does not apply (the
+    notes say why)."""
+    def num(v):
+        return "-" if v is None else f"{v:.6g}"
+
+    camera = ("perspective" + (f" (--K {K})" if K is not None else " (the surface's camera)")
+              if rec["perspective"] else "orthographic")
+    uncovered = (f"; {rec['uncovered']} mask pixels left out, where a depth is undefined"
+                 if rec["uncovered"] else "")
+    ne = rec["normalized_error"]
+    lines = [f"{rec['result']} against {rec['gt']}: {rec['pixels']} pixels (mask: "
+             f"{rec['mask']}{uncovered}), {camera}",
+             f"  MADE:              {num(rec['made'])} (the ground truth's units, after the "
+             "median scale)",
+             f"  scale:             {num(rec['scale'])} (median of GT / RESULT)",
+             f"  RMSE after scale:  {num(rec['rmse_scaled'])}",
+             f"  MAE, no scale:     {num(rec['mae'])} (as stored: for metric depth)",
+             "  normalised error:  "
+             + ("-" if ne is None else f"{100 * ne:.4g} % of the ground truth's depth range "
+                "(offset-aligned per piece)")]
+    return lines + [f"  note: {n}" for n in rec["notes"]]
 
 
 @cli.command("bench", context_settings=CONTEXT)

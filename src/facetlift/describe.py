@@ -322,10 +322,9 @@ def _jump_grazing(problem) -> dict:
 
 def _file_facts(src: Path) -> dict:
     """Format, pixel type and bit depth of the file as stored (without decoding it)."""
-    from .io.dataset import _find
-    from .io.images import NORMAL_READ_FORMATS
+    from .io.dataset import normals_file
 
-    f = _find(src, "normal_map", NORMAL_READ_FORMATS) if src.is_dir() else src
+    f = normals_file(src) if src.is_dir() else src  # (normal_map.*, or Normal_gt.mat)
     facts = {"file": str(f), "format": f.suffix.lower().lstrip(".")}
     ext = f.suffix.lower()
     try:

@@ -137,6 +137,9 @@ class Input:
     confidence: np.ndarray | None = None
     #: The normals were made from a gradient field (its hints speak of p and q).
     field: bool = False
+    #: The dataset folder's camera file the K came from (K.txt, or DiLiGenT's
+    #: Calib_Results.mat, perhaps the parent's), for the summary; None otherwise.
+    K_file: str | None = None
 
 
 def default_outdir(src: Path) -> Path:
@@ -168,10 +171,11 @@ def read(job: Job) -> Input:
         Unreadable or inconsistent input (the message names the file and the argument).
     """
     from . import frames, io
+    from .io.dataset import DILIGENT_NORMALS
     from .io.gradients import is_mat, read_gradients, read_mat
 
     src = job.source
-    K = prior = conf = None
+    K = prior = conf = K_file = None
     field_input = bool(job.gradients)
     folder = not field_input and src.is_dir()  # (a dataset folder may hold its own prior)
     if job.prior is None and not folder:  # (the prior's own flags refused before the map is
@@ -198,7 +202,9 @@ def read(job: Job) -> Input:
             n = frames.to_facetlift(n, job.normal_frame)
         m = g["mask"]
         source = f"{src.name} mask" if m is not None else "valid normals"
-        if not field_input and job.unread_beside:
+        if not field_input and src.name == DILIGENT_NORMALS:  # (its folder's files)
+            _beside_dataset_files(src, job, own_mask=m is not None)
+        elif not field_input and job.unread_beside:
             _unread_beside(src, job, own_mask=m is not None)
     elif src.is_dir():
         ds = io.read_dataset(src, frame=job.normal_frame,
@@ -208,6 +214,7 @@ def read(job: Job) -> Input:
                              encoding=encoding)
         n, m, K = ds["normals"], ds["mask"], ds["K"]
         prior, conf = ds["prior"], ds["confidence"]
+        K_file = ds["K_file"]
         source = "dataset mask" if m is not None else "valid normals"
     else:
         # (no word on an alpha that --mask replaces)
@@ -236,7 +243,8 @@ def read(job: Job) -> Input:
         from .camera import K_from_fov
 
         if K is not None:  # (documented, but replaced in silence: an audit)
-            warn(f"`fov` {float(job.fov):g} deg replaces the K of the dataset folder's K.txt "
+            name = "K.txt" if K_file is None else _camera_name(K_file, src)
+            warn(f"`fov` {float(job.fov):g} deg replaces the K of the dataset folder's {name} "
                  f"(fx {K[0, 0]:g}, cx {K[0, 2]:g}, cy {K[1, 2]:g}); leave --fov out to use it")
 
         K = K_from_fov(n.shape[:2], job.fov)
@@ -265,28 +273,43 @@ def read(job: Job) -> Input:
             raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW) but the normal "
                              f"map is {n.shape[0]}x{n.shape[1]}{hint}")
     return Input(normals=n, mask=m, K=K, mask_source=source, prior=prior, prior_weight=weight,
-                 confidence=conf, field=bool(field_input))
+                 confidence=conf, field=bool(field_input),
+                 K_file=None if K_file is None or job.K is not None or job.fov is not None
+                 else _camera_name(K_file, src))
 
 
-def _beside_dataset_files(src: Path, job: Job) -> None:
+def _camera_name(path: Path, folder: Path) -> str:
+    """A dataset folder's camera file as the summary names it: ``K.txt``, or
+    ``../Calib_Results.mat`` where it is the parent's."""
+    return path.name if path.parent == folder else f"../{path.name}"
+
+
+def _beside_dataset_files(src: Path, job: Job, own_mask: bool = False) -> None:
     """Warn where a normal map given by its path lies in a dataset folder (``normal_map.*``
-    beside ``K.txt`` or ``mask.*``) whose files the job does not use: only the folder as the
-    input reads them (a user's ``integrate bear/normal_map.png`` ran orthographically on the
-    valid normals, without the folder's K and mask, and no word; an audit)."""
-    from .io.dataset import _find
+    beside ``K.txt`` or ``mask.*``, or DiLiGenT's ``Normal_gt.mat`` beside ``mask.png`` and
+    with a camera file there or in its parent) whose files the job does not use: only the
+    folder as the input reads them (a user's ``integrate bear/normal_map.png`` ran
+    orthographically on the valid normals, without the folder's K and mask, and no word; an
+    audit). Not the mask where the map has its own (`own_mask`: a .mat file's)."""
+    from .io.dataset import DILIGENT_NORMALS, _find, camera_files
     from .io.images import MASK_FORMATS
 
     folder = src.parent
-    if src.stem.lower() != "normal_map":
+    if src.stem.lower() != "normal_map" and src.name != DILIGENT_NORMALS:
         return
     unused = []
-    if job.K is None and job.fov is None and not job.orthographic and (folder / "K.txt").is_file():
-        unused.append("K.txt (its camera: the map is integrated orthographically)")
+    try:
+        cameras = camera_files(folder)
+    except ValueError:  # (a folder named K.txt: the folder's own reading would say so)
+        cameras = []
+    if job.K is None and job.fov is None and not job.orthographic and cameras:
+        name = cameras[0].name if cameras[0].parent == folder else f"../{cameras[0].name}"
+        unused.append(f"{name} (its camera: the map is integrated orthographically)")
     try:
         mpath = _find(folder, "mask", MASK_FORMATS)
     except ValueError:  # (several mask files: the folder's own reading would say so)
         mpath = None
-    if job.mask is None and mpath is not None:
+    if job.mask is None and not own_mask and mpath is not None:
         unused.append(f"{mpath.name} (its mask)")
     if unused:
         warn(f"{src} lies in a dataset folder whose {' and '.join(unused)} this run does not "
@@ -330,7 +353,7 @@ def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
         ("--mask", any(n != "K.txt" for n in unread)), ("--K", "K.txt" in unread)) if given)
     warn(f"{src.name} has {' and '.join(unread)} beside it, which this run does not read: a "
          "normal-map file's mask and camera come only from --mask and --K (a folder is read "
-         f"as a dataset only with normal_map.*); give {flags} to use "
+         f"as a dataset only with normal_map.* or Normal_gt.mat); give {flags} to use "
          f"{'it' if len(unread) == 1 else 'them'}"
          + (" (without K.txt's camera the map is integrated orthographically)"
             if "K.txt" in unread else ""), UserWarning)
@@ -598,7 +621,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         # (where the camera came from, for the summary: K, a field of view, a dataset's K.txt)
         "camera": ("orthographic" if surface.K is None else
                    f"fov {float(job.fov):g} deg" if job.fov is not None else
-                   "K" if job.K is not None else "the folder's K.txt"),
+                   "K" if job.K is not None else f"the folder's {inp.K_file or 'K.txt'}"),
         # (the depth of height.png's 0 and 65535, as io.write_height scales it)
         "depth_range": _depth_range(surface, job.height_range if "height" in save else None),
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),

@@ -16,6 +16,7 @@ __all__ = [
     "align",
     "angular_error",
     "diagnose",
+    "evaluate",
     "facet_normals",
     "input_deviation",
     "made",
@@ -163,7 +164,12 @@ def made(estimate, truth, mask=None) -> tuple[float, np.ndarray]:
     error : (H, W) float
         ``|scale * estimate - truth|``, NaN outside the mask.
     """
-    est, gt, m = _pair(estimate, truth, mask)
+    value, err, _ = _made(*_pair(estimate, truth, mask))
+    return value, err
+
+
+def _made(est, gt, m) -> tuple[float, np.ndarray, float]:
+    """:func:`made` on checked pixels (:func:`_pair`), with its median scale."""
     for which, a in (("`estimate`", est), ("`truth`", gt)):
         if np.any(a[m] <= 0):  # (an orthographic depth has mean 0)
             raise ValueError(f"made: {which} has depths <= 0 inside the mask; MADE compares "
@@ -175,7 +181,97 @@ def made(estimate, truth, mask=None) -> tuple[float, np.ndarray]:
         raise ValueError("`estimate` gives no finite scale to `truth` (zero or NaN depths)")
     err = np.full(gt.shape, np.nan)
     err[m] = np.abs(scale * est[m] - gt[m])
-    return float(np.nanmean(err[m])), err
+    return float(np.nanmean(err[m])), err, scale
+
+
+def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None) -> dict:
+    """Score a result against a ground-truth depth map: what ``facetlift evaluate`` prints.
+
+    Every measure is one of this module's, over the same pixels: :func:`made` (BiNI's: the
+    estimate times ``scale = median(truth / estimate)``, then the mean absolute error), that
+    scale, the RMSE of the same scaled estimate, the mean absolute error without any scale or
+    offset (for a metric result, e.g. one fused with a depth prior: a result up to scale
+    scores its scale error here), and, for an orthographic result, :func:`normalized_error`
+    (the paper's: each 8-connected piece shifted by its mean difference, divided by the
+    truth's depth range).
+
+    Parameters
+    ----------
+    estimate : (H, W) array_like of float, or facetlift.Surface
+        The result's depth, NaN where undefined.
+    truth : (H, W) array_like of float
+        Ground-truth depth in its units (mm for DiLiGenT), NaN where undefined.
+    mask : (H, W) array_like of bool, optional
+        The pixels to score; default: where both are finite. Mask pixels where either is
+        undefined are left out, and counted (``uncovered``).
+    perspective : bool, optional
+        Whether the result is a perspective depth (a camera's z, defined up to scale). Default:
+        a Surface's camera says; an array is taken as orthographic (a height, defined up to an
+        offset per piece).
+
+    Returns
+    -------
+    dict
+        ``pixels`` (the number scored), ``uncovered`` (mask pixels left out: the estimate or
+        the truth undefined there; 0 without a mask), ``perspective``, ``made``, ``scale``,
+        ``rmse_scaled``, ``mae`` (unaligned), ``normalized_error`` (a fraction; None for a
+        perspective result), and ``notes``: why a measure is None. ``made``, ``scale`` and
+        ``rmse_scaled`` are None for an orthographic result with depths <= 0 (its depth has
+        mean 0: no scale applies).
+
+    Raises
+    ------
+    ValueError
+        Shapes that differ; no pixel where the mask, the estimate and the truth are all
+        defined (with how many each has); depths <= 0 where a scale is needed: in a
+        perspective result, or in the truth of one.
+    """
+    if perspective is None:
+        perspective = getattr(estimate, "K", None) is not None
+    est = np.asarray(_depth_of(estimate), dtype=float)
+    gt = np.asarray(_depth_of(truth), dtype=float)
+    if est.ndim == 2 and gt.shape == est.shape:  # (else _pair names the shapes)
+        sel = np.ones(est.shape, bool) if mask is None else np.asarray(mask, bool)
+        if sel.shape == est.shape and not (sel & np.isfinite(est) & np.isfinite(gt)).any():
+            both = int((np.isfinite(est) & np.isfinite(gt)).sum())
+            raise ValueError(
+                "no pixel where `mask`, `estimate` and `truth` are all defined: "
+                + (f"`mask` has {int(sel.sum())} pixels, " if mask is not None else "")
+                + f"`estimate` {int(np.isfinite(est).sum())} finite, `truth` "
+                f"{int(np.isfinite(gt).sum())} finite, {both} both; are they of the same view "
+                "and crop?")
+    est, gt, m = _pair(est, gt, mask)
+    out = {"pixels": int(m.sum()),
+           "uncovered": 0 if mask is None else int(np.asarray(mask, bool).sum() - m.sum()),
+           "perspective": bool(perspective), "made": None, "scale": None,
+           "rmse_scaled": None, "mae": float(np.mean(np.abs(est[m] - gt[m]))),
+           "normalized_error": None, "notes": []}
+    bad = {which: int((a[m] <= 0).sum()) for which, a in (("estimate", est), ("truth", gt))}
+    if perspective and any(bad.values()):
+        which = "estimate" if bad["estimate"] else "truth"
+        raise ValueError(
+            f"`{which}` has {bad[which]} depths <= 0 of the {out['pixels']} scored: a "
+            "perspective result is scored after a median scale, which needs z-depths > 0 in "
+            "both" + (" (0 where undefined? store NaN there, or give a mask)"
+                      if which == "truth" else " (an orthographic result? score it without "
+                      "a camera)"))
+    if any(bad.values()):
+        out["notes"].append(
+            f"no scale: the {' and the '.join(k for k, v in bad.items() if v)} "
+            f"{'have' if all(bad.values()) else 'has'} depths <= 0, as an orthographic depth "
+            "(mean 0, defined up to an offset) has; MADE needs z-depths > 0")
+    else:
+        out["made"], err, out["scale"] = _made(est, gt, m)
+        out["rmse_scaled"] = float(np.sqrt(np.mean(err[m] ** 2)))
+    if perspective:
+        out["notes"].append("no normalised error: a perspective result is scored after a "
+                            "scale (MADE), not an offset")
+    else:
+        try:
+            out["normalized_error"], _ = normalized_error(est, gt, m)
+        except ValueError as e:  # (a flat truth: zero depth range)
+            out["notes"].append(f"no normalised error: {e}")
+    return out
 
 
 def facet_normals(vertex_depth, *, pixel_size: float = 1.0, K=None, camera=None) -> np.ndarray:

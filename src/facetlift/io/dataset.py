@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -154,21 +155,152 @@ def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
 def dataset_files(folder, *, with_prior: bool = True, with_confidence: bool = True
                   ) -> list[Path]:
     """The files of `folder` that :func:`read_dataset` reads (its normal map, mask, K and,
-    where wanted, prior and confidence): what a job's outputs must not overwrite. Its other
-    files, an earlier run's outputs among them, are not inputs. Where a name is ambiguous
-    (two ``mask`` files) every candidate counts (read_dataset refuses the folder anyway)."""
+    where wanted, prior and confidence; a DiLiGenT folder's ``Normal_gt.mat`` and its
+    parent's camera file too): what a job's outputs must not overwrite, and what a batch's
+    ``--resume`` looks at. Its other files, an earlier run's outputs among them, are not
+    inputs. Where a name is ambiguous (two ``mask`` files) every candidate counts
+    (read_dataset refuses the folder anyway)."""
     f = Path(folder)
     skip = {"prior_depth": not with_prior, "confidence": not with_confidence}
-    return [f / f"{stem}{ext}" for stem, formats in _dataset_formats().items()
-            if not skip.get(stem) for ext in formats if (f / f"{stem}{ext}").is_file()]
+    own = [f / f"{stem}{ext}" for stem, formats in _dataset_formats().items()
+           if not skip.get(stem) for ext in formats if (f / f"{stem}{ext}").is_file()]
+    return own + [p for p in camera_files(f) if p.parent != f]
 
 
 def _dataset_formats() -> dict[str, tuple[str, ...]]:
     """The files a dataset folder may hold, ``stem -> extensions`` (:func:`read_dataset`)."""
     from .images import PRIOR_FORMATS, PRIOR_POINT_FORMATS
 
-    return {"normal_map": NORMAL_READ_FORMATS, "mask": MASK_FORMATS, "K": (".txt",),
+    return {"normal_map": NORMAL_READ_FORMATS, "Normal_gt": (".mat",), "mask": MASK_FORMATS,
+            "K": (".txt",), "Calib_Results": (".mat",),
             "prior_depth": PRIOR_FORMATS + PRIOR_POINT_FORMATS, "confidence": PRIOR_FORMATS}
+
+
+#: The DiLiGenT release's ground-truth normals: ``<obj>PNG/Normal_gt.mat``, variable
+#: ``Normal_gt``, (H, W, 3) in facetlift's frame (x right, y up, z toward the camera; BiNI's
+#: ``normal_map.png`` files of DiLiGenT objects were made from them and verify so against
+#: the depth, ../shared/data/SOURCES.md), (0, 0, 0) outside the object. A folder holding it
+#: is in the DiLiGenT layout.
+DILIGENT_NORMALS = "Normal_gt.mat"
+#: The camera files of a dataset folder, in the order looked for: BiNI's ``K.txt`` and the
+#: calibration toolbox's ``Calib_Results.mat`` (DiLiGenT's, variable ``KK``; :func:`read_K`).
+CAMERA_FILES = ("K.txt", "Calib_Results.mat")
+
+
+def normals_file(folder) -> Path | None:
+    """The normal map :func:`read_dataset` reads from `folder`: its ``normal_map.*``, else its
+    ``Normal_gt.mat`` (:data:`DILIGENT_NORMALS`), else None. A ValueError naming `folder`
+    where it holds several ``normal_map.*``."""
+    f = Path(folder)
+    found = _find(f, "normal_map", NORMAL_READ_FORMATS)
+    if found is None and os.path.isfile(f / DILIGENT_NORMALS):
+        return f / DILIGENT_NORMALS
+    return found
+
+
+def is_dataset(folder) -> bool:
+    """Whether `folder` is a dataset folder (:func:`read_dataset`): it holds a
+    ``normal_map.*`` or a ``Normal_gt.mat``. False where it cannot be read."""
+    f = Path(folder)
+    # (os.path.isfile: False for a folder that cannot be read, where Path.is_file raises)
+    return any(os.path.isfile(f / f"normal_map{ext}") for ext in NORMAL_READ_FORMATS) \
+        or os.path.isfile(f / DILIGENT_NORMALS)
+
+
+def camera_files(folder) -> list[Path]:
+    """The camera files :func:`read_dataset` reads for `folder` (:data:`CAMERA_FILES`): the
+    folder's own (both where it has both, which must agree), else, in the DiLiGenT layout
+    only (a ``Normal_gt.mat`` in the folder), its parent's: the release keeps one
+    ``Calib_Results.mat`` beside its object folders. Not a BiNI folder's parent: a BiNI
+    folder without ``K.txt`` is orthographic, and a camera file above it must not make it
+    perspective without a word. An empty list: orthographic."""
+    f = Path(folder)
+    for where in (f, f.parent) if os.path.isfile(f / DILIGENT_NORMALS) else (f,):
+        found = [where / name for name in CAMERA_FILES if (where / name).exists()]
+        for p in found:
+            if not p.is_file():
+                raise ValueError(f"`folder`: {p} is not a file")
+        if found:
+            return found
+    return []
+
+
+def _read_camera(paths: list[Path]) -> np.ndarray | None:
+    """The K of a dataset folder's camera files (:func:`camera_files`); where there are two
+    (K.txt beside Calib_Results.mat) they must agree: which one was meant, otherwise?"""
+    Ks = [read_K(p) for p in paths]
+    if len(Ks) > 1 and not np.allclose(Ks[0], Ks[1], rtol=1e-6, atol=1e-6):
+        raise ValueError(f"`folder`: {paths[0]} and {paths[1]} hold different intrinsics "
+                         f"({Ks[0].tolist()} and {Ks[1].tolist()}); keep one, or give the "
+                         "camera with --K (K= in Python)")
+    return Ks[0] if Ks else None
+
+
+def _read_mat_normals(p: Path, frame: str | None, encoding: str = "xyz") -> np.ndarray:
+    """The (H, W, 3) normals of a DiLiGenT ``Normal_gt.mat``: its variable ``Normal_gt``, or
+    its only (H, W, 3) numeric one, converted from `frame` (z rebuilt first with
+    ``encoding="xy"``, as :func:`facetlift.io.read_normals` does)."""
+    from .. import frames
+    from .images import load_mat
+
+    data = load_mat(p, "folder", "pass the normals to facetlift.integrate")
+    maps = {k: np.asarray(v) for k, v in data.items() if not k.startswith("__")
+            and np.ndim(v) == 3 and np.shape(v)[-1] == 3 and np.asarray(v).dtype.kind in "biuf"}
+    name = "Normal_gt" if "Normal_gt" in maps else (next(iter(maps)) if len(maps) == 1
+                                                    else None)
+    if name is None:
+        found = {k: "x".join(map(str, np.shape(v))) for k, v in data.items()
+                 if not k.startswith("__")}
+        raise ValueError(f"`folder`: {p} must hold the normals as Normal_gt, or one (H, W, 3) "
+                         "numeric variable; got variables "
+                         + (", ".join(f"{k} ({v})" for k, v in sorted(found.items())) or "none")
+                         + ": integrate it by its path with --mat-keys NAME")
+    n = maps[name].astype(np.float64)
+    if encoding == "xy":
+        n = frames.decode_xy(n, frame=frame)
+    return frames.to_facetlift(n, frame)
+
+
+def _other_maps(f: Path) -> list[str]:
+    """The files of `f` that may be normal maps by name and header, for read_dataset's error:
+    not its masks, priors, confidences or camera files, not facetlift's outputs, and not a
+    one-channel image or a 2-d array (a depth map: an audit's ``depth_gt.npy`` was listed as a
+    map to integrate)."""
+    from ..jobs import OUTPUT_STEMS
+
+    other = {"mask", "prior_depth", "confidence"} | OUTPUT_STEMS
+    cameras = {name.lower() for name in CAMERA_FILES}
+    out = []
+    for p in sorted(f.iterdir()):
+        ext = p.suffix.lower()
+        if (not p.is_file() or ext not in NORMAL_READ_FORMATS + (".mat",)
+                or p.stem.lower() in other or p.stem.endswith("_mask")
+                or p.name.lower() in cameras or p.stem.lower().startswith("depth")
+                or _one_channel(p)):
+            continue
+        out.append(p.name)
+    return out
+
+
+def _one_channel(p: Path) -> bool:
+    """Whether `p` is a one-channel (or grey + alpha) PNG, a one-sample TIFF or a 2-d
+    ``.npy``, from its header: a mask or a depth map, no normal map."""
+    try:
+        ext = p.suffix.lower()
+        if ext == ".png":
+            with open(p, "rb") as fh:
+                head = fh.read(26)
+            return len(head) == 26 and head[25] in (0, 4)
+        if ext == ".npy":
+            return np.load(p, mmap_mode="r", allow_pickle=False).ndim == 2
+        if ext in (".tif", ".tiff"):
+            import tifffile
+
+            with tifffile.TiffFile(p) as t:
+                return t.pages[0].samplesperpixel in (1, 2)
+    except Exception:  # (unreadable: not for this message to say)
+        pass
+    return False
 
 
 def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
@@ -177,9 +309,18 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     """Read a folder in the BiNI / DiLiGenT layout.
 
     The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
-    ``mask.png`` (or ``.tif``, ``.tiff``, ``.npy``) and, for a perspective camera, ``K.txt``.
-    Without ``K.txt`` the view is orthographic. Pixels outside the mask may hold anything.
-    `frame`, `y_down` and `encoding` are those of :func:`~facetlift.io.read_normals`. A depth prior
+    ``mask.png`` (or ``.tif``, ``.tiff``, ``.npy``) and, for a perspective camera, ``K.txt``
+    or ``Calib_Results.mat`` (its ``KK``; where it has both, they must agree). Without one the
+    view is orthographic. Pixels outside the mask may hold anything.
+
+    The DiLiGenT release's object folders (``<obj>PNG/``) are read as they are: without a
+    ``normal_map.*``, the normals are those of ``Normal_gt.mat`` (:data:`DILIGENT_NORMALS`,
+    in facetlift's frame), and without a camera file of its own, such a folder's camera is
+    its parent's ``K.txt`` or ``Calib_Results.mat``, where the release keeps it
+    (:func:`camera_files`; a BiNI folder without ``K.txt`` stays orthographic).
+
+    `frame`, `y_down` and `encoding` are those of
+    :func:`~facetlift.io.read_normals`. A depth prior
     ``prior_depth.*`` and a normal confidence ``confidence.*`` (``.npy``, ``.exr``, ``.tif``,
     ``.png``; the prior also as a points file, ``.csv`` or ``.txt``, returned as a map, or
     as its points with their weights where it has a weight column; docs/fusion.md) are
@@ -191,7 +332,8 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     -------
     dict
         ``normals`` (H, W, 3) float64, ``mask`` (H, W) bool (the mask file, else the normal
-        map's alpha channel, else None), ``K`` (3, 3) or None, ``prior`` (H, W) depth with
+        map's alpha channel, else None), ``K`` (3, 3) or None, ``K_file`` the camera file
+        it came from (a Path) or None, ``prior`` (H, W) depth with
         NaN where unknown, or None, and ``confidence`` (H, W) or None. The command line uses
         the last two (``facetlift integrate FOLDER``); pass them to
         :func:`facetlift.integrate` as ``prior=`` and ``confidence=`` to do the same.
@@ -205,29 +347,20 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     if not f.is_dir():
         raise ValueError(f"`folder`: {f} is not a directory")
     formats = _dataset_formats()
-    npath = _find(f, "normal_map", formats["normal_map"])
+    npath = normals_file(f)
     if npath is None:
-        from ..jobs import OUTPUT_STEMS
-
-        # (the folder's other files, and facetlift's outputs)
-        other = {"mask", "prior_depth", "confidence"} | OUTPUT_STEMS
-        maps = sorted(p.name for p in f.iterdir()
-                      if p.is_file() and p.suffix.lower() in NORMAL_READ_FORMATS
-                      and p.stem.lower() not in other and not p.stem.endswith("_mask"))
-        raise ValueError(
-            f"`folder`: {f} has no normal_map file (looked for normal_map with extension "
-            f"{', '.join(NORMAL_READ_FORMATS)})"
-            + (f"; it holds other maps ({', '.join(maps[:3])}{', ...' if len(maps) > 3 else ''})"
-               ": integrate one by its path, or all of them with `facetlift batch "
-               f"{f} -o OUT`" if maps else "")
-        )
+        raise ValueError(_no_normals(f))
     mpath = _find(f, "mask", formats["mask"])
-    # (the folder's mask replaces the map's alpha: no word on the alpha then)
-    normals, alpha = read_normals(npath, frame=frame, y_down=y_down,
-                                  check_alpha=mpath is None, encoding=encoding)
+    if npath.suffix.lower() == ".mat":
+        from .. import frames
+
+        normals, alpha = _read_mat_normals(npath, frames.resolve(frame, y_down), encoding), None
+    else:  # (the folder's mask replaces the map's alpha: no word on the alpha then)
+        normals, alpha = read_normals(npath, frame=frame, y_down=y_down,
+                                      check_alpha=mpath is None, encoding=encoding)
     mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
-    kpath = _find(f, "K", formats["K"])
-    K = read_K(kpath) if kpath is not None else None
+    kpaths = camera_files(f)
+    K = _read_camera(kpaths)
     from ..problem import prior_image, prior_samples
     from .images import read_prior, read_weights
 
@@ -260,4 +393,45 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
         if not isinstance(extra[name], tuple) and extra[name].shape != (H, W):
             raise ValueError(f"`{name}`: {path} is {extra[name].shape[0]}x"
                              f"{extra[name].shape[1]} (HxW) but the normal map is {H}x{W}; {skip}")
-    return {"normals": normals, "mask": mask, "K": K, **extra}
+    return {"normals": normals, "mask": mask, "K": K,
+            "K_file": kpaths[0] if kpaths else None, **extra}
+
+
+def _no_normals(f: Path) -> str:
+    """read_dataset's message for a folder without a normal map: the maps it may mean (not
+    its depth maps, which an audit saw offered as maps, with a `facetlift batch` of the
+    folder that would have run them as normal maps), or, in a photometric-stereo folder,
+    that its images are photographs."""
+    looked = (f"looked for normal_map with extension {', '.join(NORMAL_READ_FORMATS)}, or "
+              f"DiLiGenT's {DILIGENT_NORMALS}")
+    if (f / "light_directions.txt").is_file():  # (DiLiGenT's 001.png ... are photographs)
+        return (f"`folder`: {f} has no normal_map file ({looked}): it looks like a photometric "
+                "stereo folder (light_directions.txt), whose images are photographs, not "
+                "normal maps; save the estimated normals there as normal_map.png (or .npy, "
+                "(H, W, 3) floats, x right, y up, z toward the camera) and give the folder "
+                "again, or integrate the normal map by its path")
+    maps = _other_maps(f)
+    named = f"{', '.join(maps[:3])}{', ...' if len(maps) > 3 else ''}"
+    mat = " (a .mat file with --mat-keys where it holds several arrays)" if any(
+        m.lower().endswith(".mat") for m in maps[:3]) else ""
+    # (a batch of the folder runs every such file: offered only where those are the maps)
+    extra = [n for n in _batch_would_run(f) if n not in maps]
+    batch = (f", or all of them with `facetlift batch {f} -o OUT`" if not extra else
+             f"; `facetlift batch {f}` would run {', '.join(extra[:3])}"
+             f"{', ...' if len(extra) > 3 else ''} as normal maps too: give it the maps by "
+             "name")
+    return (f"`folder`: {f} has no normal_map file ({looked})"
+            + (f"; it holds other files that may be normal maps ({named}): integrate one by "
+               f"its path (facetlift integrate {f / maps[0]}){mat}{batch}" if maps else ""))
+
+
+def _batch_would_run(f: Path) -> list[str]:
+    """The files of `f` that ``facetlift batch`` makes items of (facetlift.batch.items): a
+    map's extension, and no ``mask.*``, no ``X_mask.*`` beside an ``X.*`` and no camera
+    file."""
+    kinds = NORMAL_READ_FORMATS + (".mat",)
+    files = [p for p in f.iterdir() if p.is_file() and p.suffix.lower() in kinds]
+    stems = {p.stem for p in files}
+    return sorted(p.name for p in files if p.stem.lower() != "mask"
+                  and p.name not in CAMERA_FILES
+                  and not (p.stem.endswith("_mask") and p.stem[:-len("_mask")] in stems))

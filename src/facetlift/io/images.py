@@ -446,10 +446,12 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
 
 
 def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = (),
-               mat_names: tuple[str, ...] = ()) -> np.ndarray:
+               mat_names: tuple[str, ...] = (), npz_names: tuple[str, ...] = ("depth",)
+               ) -> np.ndarray:
     """One (H, W) array as stored: ``.npy``, OpenEXR (its channel named in `prefer`, or its
-    only channel), TIFF or a MATLAB ``.mat`` file (its variable named in `mat_names`, or its
-    only (H, W) one). Shared by :func:`read_depth` and the gradient readers."""
+    only channel), TIFF, a MATLAB ``.mat`` file (its variable named in `mat_names`, or its
+    only (H, W) one) or a ``.npz`` archive (its array named first in `npz_names`, or its only
+    one). Shared by :func:`read_depth` and the gradient readers."""
     p = _existing(path, arg)
     ext = _suffix(p, formats, what, arg)
     if ext == ".npy":
@@ -457,7 +459,7 @@ def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = (),
     elif ext == ".mat":
         a = _read_mat_plane(p, arg, mat_names, what)
     elif ext == ".npz":  # (Surface.save's archive: its depth)
-        a = _read_npz_depth(p, arg)
+        a = _read_npz_depth(p, arg, npz_names)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
         name = next((c for c in prefer if c in ch), next(iter(ch)) if len(ch) == 1 else None)
@@ -507,9 +509,9 @@ def _read_mat_plane(p: Path, arg: str, names: tuple[str, ...], what: str) -> np.
     return plane[name]
 
 
-def _read_npz_depth(p: Path, arg: str) -> np.ndarray:
-    """The ``depth`` array of an ``.npz`` archive (:meth:`facetlift.Surface.save`'s), or its
-    only array."""
+def _read_npz_depth(p: Path, arg: str, wanted: tuple[str, ...] = ("depth",)) -> np.ndarray:
+    """The array of an ``.npz`` archive named first in `wanted` (a
+    :meth:`facetlift.Surface.save` archive's ``depth``), or its only array."""
     names = None
     try:
         z = np.load(p, allow_pickle=False)
@@ -517,20 +519,26 @@ def _read_npz_depth(p: Path, arg: str) -> np.ndarray:
             return np.asarray(z)
         with z:
             names = sorted(z.files)
-            name = "depth" if "depth" in names else (names[0] if len(names) == 1 else None)
+            name = next((n for n in wanted if n in names),
+                        names[0] if len(names) == 1 else None)
             if name is not None:
                 return np.asarray(z[name])
     except (OSError, EOFError, ValueError, zipfile.BadZipFile) as e:
         raise ValueError(f"`{arg}`: {p} is not a readable .npz archive ({e})") from None
-    raise ValueError(f"`{arg}`: {p} must hold an array named 'depth' or a single array; got "
-                     f"{names}")
+    raise ValueError(f"`{arg}`: {p} must hold an array named "
+                     f"{' or '.join(repr(n) for n in wanted)} or a single array; got {names}")
 
 
-def read_depth(path) -> np.ndarray:
+def read_depth(path, *, npz_names: tuple[str, ...] = ("depth",), arg: str = "path"
+               ) -> np.ndarray:
     """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF) or
-    the ``depth`` of a :meth:`facetlift.Surface.save` ``.npz``."""
-    return read_plane(path, DEPTH_FORMATS + (".npz",), "depth", "path",
-                      prefer=("Z",)).astype(np.float64)
+    the ``depth`` of a :meth:`facetlift.Surface.save` ``.npz``.
+
+    `npz_names`: the arrays of a ``.npz`` looked for, in order (else its only one): a
+    ground truth's, e.g. ``("depth_gt", "depth")`` for BiNI's DiLiGenT ``depth_gt.npz``.
+    `arg`: the argument the messages name."""
+    return read_plane(path, DEPTH_FORMATS + (".npz",), "depth", arg, prefer=("Z",),
+                      npz_names=tuple(npz_names)).astype(np.float64)
 
 
 # --------------------------------------------------------------------------------------------

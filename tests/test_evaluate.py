@@ -1,0 +1,191 @@
+"""facetlift.metrics.evaluate and 'facetlift evaluate': a result scored against a ground-truth
+depth map with the measures of facetlift.metrics (MADE and its scale, the RMSE after it, the
+unaligned mean absolute error, the paper's normalised error for orthographic results), and the
+refusals: shapes that differ, no common pixel, depths <= 0 where a scale is needed."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import facetlift
+from facetlift import io, metrics
+from facetlift.cli import main
+
+BEAR = Path(__file__).parents[1] / ".." / "shared" / "data" / "normal_maps" / "diligent_bear"
+K = np.array([[40.0, 0.0, 12.5], [0.0, 40.0, 9.5], [0.0, 0.0, 1.0]])
+
+
+def scene(H=20, W=26):
+    """A ground truth in mm (a tilted bump about 1500 mm away, NaN in one corner) and an
+    estimate up to scale with a small error; the mask leaves the border out."""
+    r, c = np.mgrid[0:H, 0:W]
+    gt = 1500.0 + 2.0 * c + 20.0 * np.exp(-((c - W / 2) ** 2 + (r - H / 2) ** 2) / 30)
+    gt[:3, :3] = np.nan
+    est = gt / 1500.0 + 1e-4 * np.sin(r + 2 * c)
+    mask = np.zeros((H, W), bool)
+    mask[1:-1, 1:-1] = True
+    return est, gt, mask
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_perspective_measures_are_the_metrics_modules(tmp_path):
+    est, gt, mask = scene()
+    rec = metrics.evaluate(est, gt, mask, perspective=True)
+    m = mask & np.isfinite(gt)
+    scale = np.median(gt[m] / est[m])
+    assert rec["pixels"] == m.sum() and rec["uncovered"] == (mask & ~m).sum() == 4
+    assert rec["scale"] == pytest.approx(scale, rel=1e-12)
+    assert rec["made"] == pytest.approx(metrics.made(est, gt, mask)[0], rel=1e-12)
+    assert rec["made"] == pytest.approx(np.mean(np.abs(scale * est[m] - gt[m])), rel=1e-12)
+    assert rec["rmse_scaled"] == pytest.approx(
+        np.sqrt(np.mean((scale * est[m] - gt[m]) ** 2)), rel=1e-12)
+    assert rec["mae"] == pytest.approx(np.mean(np.abs(est[m] - gt[m])), rel=1e-12)
+    assert rec["normalized_error"] is None and "no normalised error" in rec["notes"][0]
+    # a metric result (e.g. fused with a prior): the unaligned error is the one that says so
+    exact = metrics.evaluate(gt, gt, perspective=True)
+    assert exact["mae"] == 0 and exact["made"] == 0 and exact["scale"] == 1
+    assert exact["pixels"] == np.isfinite(gt).sum() and exact["uncovered"] == 0
+    # a Surface says its own camera
+    s = facetlift.integrate(facetlift.normals_from_gradients(np.zeros((20, 26)),
+                                                             np.zeros((20, 26))), K=K)
+    assert metrics.evaluate(s, np.full((20, 26), 1000.0))["perspective"] is True
+
+
+def test_orthographic_measures_and_when_no_scale_applies():
+    _, gt, mask = scene()
+    est = gt - gt[mask & np.isfinite(gt)].mean()  # (an orthographic depth: mean 0)
+    rec = metrics.evaluate(est, gt, mask)
+    assert rec["perspective"] is False
+    assert rec["normalized_error"] == pytest.approx(0, abs=1e-12)
+    assert rec["mae"] == pytest.approx(1500.0 + 2.0 * 13, rel=0.05)  # (no offset applied)
+    assert rec["made"] is rec["scale"] is rec["rmse_scaled"] is None
+    assert "no scale: the estimate has depths <= 0" in rec["notes"][0]
+    est2 = est + 0.5 * np.cos(np.arange(est.shape[1]))
+    ne, _ = metrics.normalized_error(est2, gt, mask)
+    assert metrics.evaluate(est2, gt, mask)["normalized_error"] == pytest.approx(ne, rel=1e-12)
+    flat = np.full(gt.shape, 3.0)
+    rec = metrics.evaluate(flat + 1, flat)  # (a flat truth: no normalised error, said why)
+    assert rec["normalized_error"] is None and "zero depth range" in rec["notes"][0]
+    assert rec["made"] == 0 and rec["scale"] == 0.75
+
+
+def test_refusals_name_what_is_wrong():
+    est, gt, mask = scene()
+    with pytest.raises(ValueError, match=r"`truth` must have the shape of `estimate`"):
+        metrics.evaluate(est, gt[:-1])
+    with pytest.raises(ValueError, match=r"no pixel where `mask`, `estimate` and `truth` are "
+                                         r"all defined: `mask` has 4 pixels, `estimate` 511 "
+                                         r"finite, `truth` 511 finite, 511 both"):
+        sel = np.zeros_like(mask)
+        sel[:2, :2] = True
+        metrics.evaluate(est, gt, sel)
+    with pytest.raises(ValueError, match=r"`estimate` has 184 depths <= 0 of the 428 scored: a "
+                                         r"perspective result is scored after a median scale"):
+        metrics.evaluate(est - est[mask & np.isfinite(gt)].mean(), gt, mask, perspective=True)
+    gt0 = np.where(np.isfinite(gt), gt, 0.0)
+    with pytest.raises(ValueError, match=r"`truth` has 9 depths <= 0 .*0 where undefined\? "
+                                         r"store NaN there, or give a mask"):
+        metrics.evaluate(np.where(np.isfinite(est), est, 1.0), gt0, perspective=True)
+
+
+def test_read_depth_takes_a_ground_truths_npz_array(tmp_path):
+    _, gt, _ = scene()
+    np.savez(tmp_path / "gt.npz", depth_gt=gt, other=np.zeros(3))
+    with pytest.raises(ValueError, match=r"`path`: .*gt.npz must hold an array named 'depth' "
+                                         r"or a single array"):
+        io.read_depth(tmp_path / "gt.npz")
+    got = io.read_depth(tmp_path / "gt.npz", npz_names=("depth_gt", "depth"), arg="gt")
+    np.testing.assert_array_equal(got, gt)
+
+
+def test_cli_evaluate(tmp_path, capsys):
+    est, gt, mask = scene()
+    np.save(tmp_path / "depth.npy", est)
+    np.savez(tmp_path / "depth_gt.npz", depth_gt=gt.astype(np.float32))
+    io.write_mask(tmp_path / "mask.png", mask)
+    np.savetxt(tmp_path / "K.txt", K)
+    args = ("evaluate", tmp_path / "depth.npy", "--gt", tmp_path / "depth_gt.npz",
+            "-m", tmp_path / "mask.png", "--K", tmp_path / "K.txt")
+    code, out, err = run(capsys, *args)
+    assert code == 0 and err == "", err
+    rec = metrics.evaluate(est, gt.astype(np.float32), mask, perspective=True)
+    assert f"428 pixels (mask: {tmp_path / 'mask.png'}; 4 mask pixels left out" in out
+    assert f"perspective (--K {tmp_path / 'K.txt'})" in out
+    assert f"MADE:              {rec['made']:.6g} (the ground truth's units" in out
+    assert f"scale:             {rec['scale']:.6g}" in out and "normalised error:  -" in out
+    code, out, err = run(capsys, *args, "--json")
+    got = json.loads(out)
+    assert code == 0 and got["status"] == "ok" and got["perspective"] is True
+    assert got["made"] == pytest.approx(rec["made"]) and got["pixels"] == 428
+    # without --K: orthographic, with the paper's error, and a note on the positive depths
+    code, out, _ = run(capsys, *args[:-2])
+    assert code == 0 and "orthographic" in out and "% of the ground truth's depth range" in out
+    assert "give --K to score it as one" in out
+    # a surface .npz keeps its camera; a --K that differs from it is refused
+    s = facetlift.integrate(facetlift.normals_from_gradients(np.full((20, 26), 0.01),
+                                                             np.zeros((20, 26))), K=K)
+    s.save(tmp_path / "surface.npz")
+    code, out, err = run(capsys, "evaluate", tmp_path / "surface.npz", "--gt",
+                         tmp_path / "depth_gt.npz", "--json")
+    assert code == 0 and json.loads(out)["perspective"] is True, err
+    K2 = K.copy()
+    K2[0, 0] = 41
+    np.savetxt(tmp_path / "K2.txt", K2)
+    code, _, err = run(capsys, "evaluate", tmp_path / "surface.npz", "--gt",
+                       tmp_path / "depth_gt.npz", "--K", tmp_path / "K2.txt")
+    assert code == 1 and "--K: " in err and "differs from the camera" in err
+
+
+def test_cli_evaluate_refusals(tmp_path, capsys):
+    est, gt, mask = scene()
+    np.save(tmp_path / "depth.npy", est)
+    np.save(tmp_path / "small.npy", gt[:-2])
+    np.save(tmp_path / "gt.npy", gt)
+    np.savetxt(tmp_path / "K.txt", K)
+    code, out, err = run(capsys, "evaluate", tmp_path / "depth.npy", "--gt",
+                         tmp_path / "small.npy", "--json")
+    assert code == 1 and "--gt: " in err and "is 18x26 (HxW) but RESULT" in err
+    assert json.loads(out)["status"] == "error"
+    np.save(tmp_path / "away.npy", np.where(mask, np.nan, est))
+    code, _, err = run(capsys, "evaluate", tmp_path / "away.npy", "--gt", tmp_path / "gt.npy",
+                       "-m", tmp_path / "gt.npy")
+    assert code == 1  # (a mask of floats: read as nonzero = inside)
+    io.write_mask(tmp_path / "mask.png", mask)
+    code, _, err = run(capsys, "evaluate", tmp_path / "away.npy", "--gt", tmp_path / "gt.npy",
+                       "-m", tmp_path / "mask.png")
+    assert code == 1 and "no pixel where -m, RESULT and --gt are all defined" in err
+    assert "-m has 432 pixels, RESULT 83 finite, --gt 511 finite, 83 both" in err
+    np.save(tmp_path / "ortho.npy", est - 1.0)
+    code, _, err = run(capsys, "evaluate", tmp_path / "ortho.npy", "--gt", tmp_path / "gt.npy",
+                       "--K", tmp_path / "K.txt")
+    assert code == 1 and "RESULT has" in err and "depths <= 0" in err
+    assert "an orthographic result? score it without a camera" in err
+    code, _, err = run(capsys, "evaluate", tmp_path / "depth.npy")
+    assert code == 1 and "--gt" in err
+
+
+def test_the_bear_integrated_and_evaluated(tmp_path, capsys):
+    """The shared DiLiGenT bear, integrated smoothly with its camera, scores BiNI's MADE in
+    mm (0.468 here; BiNI's own, with jumps, 0.334)."""
+    if not BEAR.is_dir():
+        pytest.skip(f"{BEAR} not present")
+    data = io.read_dataset(BEAR)
+    s = facetlift.integrate(data["normals"], data["mask"], K=data["K"])
+    s.save(tmp_path / "depth.npy")
+    code, out, err = run(capsys, "evaluate", tmp_path / "depth.npy", "--gt",
+                         BEAR / "depth_gt.npz", "-m", BEAR / "mask.png", "--K", BEAR / "K.txt",
+                         "--json")
+    assert code == 0, err
+    rec = json.loads(out)
+    assert rec["pixels"] == data["mask"].sum() and rec["uncovered"] == 0
+    assert 0.3 < rec["made"] < 0.6 and 1400 < rec["scale"] < 1600
+    assert rec["rmse_scaled"] > rec["made"]
