@@ -860,13 +860,13 @@ FOV_WIDE = 150.0
 def _check_focal_length(cam, H: int, W: int, given=None) -> None:
     """A warning where a pinhole camera's field of view exceeds :data:`FOV_WIDE` degrees
     across the image (the focal length in mm, or a K for an image many times smaller); none
-    where `given`, the K as passed, came from :func:`facetlift.camera.K_from_fov`, which
-    said what so wide a field of view implies (a --fov 170 user was asked about mm, an
-    audit)."""
+    where `given`, the K as passed, came from :func:`facetlift.camera.K_from_fov` for this
+    H x W image, which said what so wide a field of view implies (a --fov 170 user was asked
+    about mm, an audit); a K it made for another size is checked like any other."""
     from .camera import fov_of
 
     Kc = getattr(cam, "K", None)
-    if Kc is None or fov_of(given) is not None:
+    if Kc is None or fov_of(given, (H, W)) is not None:
         return
     fx, fy = float(Kc[0, 0]), float(Kc[1, 1])
     # (across the width, as --fov gives it: a portrait image's height sees more, and --fov 140
