@@ -585,6 +585,28 @@ def test_a_coarser_prior_is_refused_with_its_remedies(tmp_path, capsys):
     np.testing.assert_allclose(np.load(tmp_path / "p" / "depth.npy"), depth, atol=1e-6)
 
 
+def test_a_dataset_folders_coarser_prior_depth_gets_the_same_remedy(tmp_path, capsys):
+    """A review: a folder's 8x10 prior_depth.npy beside its 24x30 normal_map.npy was refused
+    by the folder's own size check, which named no factor, while --prior did; it says the
+    factor and the remedy now, and still how to leave the file unread. A confidence map of
+    that size is no prior: no such hint."""
+    H, W = 24, 30
+    n = np.dstack([np.zeros((H, W, 2)), np.ones((H, W))])
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", n)
+    np.save(folder / "prior_depth.npy", np.full((8, 10), 10.0))
+    code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "o")
+    err = " ".join(err.split())
+    assert code == 1 and "is 8x10 (HxW) but the normal map is 24x30; it is 3x coarser in both " \
+        "axes" in err, err
+    assert "row (i + 0.5) * 3 - 0.5" in err and "--no-prior" in err, err
+    (folder / "prior_depth.npy").unlink()
+    np.save(folder / "confidence.npy", np.ones((8, 10)))
+    code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "o")
+    assert code == 1 and "but the normal map is 24x30" in err and "3x coarser" not in err, err
+
+
 def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
     """An audit: mask.png beside a plain map file was ignored without a word (docs/cli.md said
     a folder's mask.png was its mask), while only a dataset folder's files are read. integrate
