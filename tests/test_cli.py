@@ -607,6 +607,37 @@ def test_a_dataset_folders_coarser_prior_depth_gets_the_same_remedy(tmp_path, ca
     assert code == 1 and "but the normal map is 24x30" in err and "3x coarser" not in err, err
 
 
+def test_info_and_integrate_count_the_same_holes(tmp_path, capsys):
+    """A review: on an 8-bit map with a 100-pixel and a 9-pixel black hole inside the object,
+    info said "holes: 109" (its own 4-connected fill, any size) where integrate counted and
+    warned 9 (8-connected gaps of at most HOLE_PIXELS). Both come from problem.enclosed_gaps
+    now: the small ones as holes, warned by integrate, the larger ones apart, no warning; the
+    job record (batch.jsonl, integrate --json) keeps both."""
+    from facetlift.problem import HOLE_PIXELS
+
+    H, W = 40, 50
+    r, c = np.mgrid[0:H, 0:W] + 0.5
+    n = facetlift.normals_from_gradients(0.2 * np.cos(c / 8), 0.1 * np.sin(r / 9))
+    n[5:15, 5:15] = np.nan  # 100 pixels: a real hole, taken for one
+    n[25:28, 30:33] = np.nan  # 9 pixels: black fill inside the object
+    assert 9 <= HOLE_PIXELS < 100
+    path = io.write_normals(tmp_path / "holes.png", n, bits=8)
+    code, out, _ = run(capsys, "info", path, "--json")
+    rec = json.loads(out)
+    assert code == 0 and rec["holes"] == 9 and rec["larger_holes"] == 100, rec
+    assert rec["counts"]["holes"] == 9 and rec["counts"]["larger_holes"] == 100
+    code, out, _ = run(capsys, "info", path)
+    assert "holes: 9 pixels enclosed by the object" in out, out
+    assert "larger holes: 100 pixels" in out, out
+    code, out, err = run(capsys, "integrate", path, "--json", "-s", "npy", "-o", tmp_path / "o")
+    got = json.loads(out)
+    assert code == 0 and got["info"]["input"]["holes"] == 9, err
+    assert got["info"]["input"]["larger_holes"] == 100
+    assert got["normals"]["holes"] == 9 and got["normals"]["larger_holes"] == 100
+    err = " ".join(err.split())
+    assert "9 pixel(s) enclosed by the object hold no normal" in err and "109" not in err, err
+
+
 def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
     """An audit: mask.png beside a plain map file was ignored without a word (docs/cli.md said
     a folder's mask.png was its mask), while only a dataset folder's files are read. integrate

@@ -595,14 +595,18 @@ def _strict_check(caught, surface) -> None:
                          "above says what to try); nothing was written")
 
 
-#: The counts of info["input"] a job record keeps (``normals``), in this order.
+#: The counts of info["input"] a job record keeps (``normals``: batch.jsonl and
+#: ``integrate --json``), in this order. ``holes`` and ``larger_holes`` (without a mask, the
+#: pixels enclosed by the object without a valid normal, :func:`facetlift.problem.
+#: enclosed_gaps`) lie outside the mask and are not among its ``pixels``: they are there so a
+#: batch's log says where its depths have holes, as ``info`` and integrate's warning do.
 NORMAL_COUNTS = ("pixels", "usable", "missing", "non-finite", "zero-length", "back-facing",
-                 "grazing", "isolated", "zero_confidence")
+                 "grazing", "isolated", "zero_confidence", "holes", "larger_holes")
 
 
 def _normal_counts(info: dict) -> dict:
-    """Pixels of the mask and how many had a usable normal or none, by reason (those of
-    :data:`NORMAL_COUNTS` that the method's info has)."""
+    """Pixels of the mask and how many had a usable normal or none, by reason, and the
+    enclosed holes outside it (those of :data:`NORMAL_COUNTS` that the method's info has)."""
     counts = info.get("input") or {}
     return {k: int(counts[k]) for k in NORMAL_COUNTS
             if isinstance(counts.get(k), (int, np.integer))}
