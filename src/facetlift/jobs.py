@@ -253,26 +253,26 @@ def _beside_dataset_files(src: Path, job: Job) -> None:
     """Warn where a normal map given by its path lies in a dataset folder (``normal_map.*``
     beside ``K.txt`` or ``mask.*``) whose files the job does not use: only the folder as the
     input reads them (a user's ``integrate bear/normal_map.png`` ran orthographically on the
-    valid normals, without the folder's K and mask, and no word; an audit)."""
-    from .io.dataset import _find
-    from .io.images import MASK_FORMATS
-
-    folder = src.parent
+    valid normals, without the folder's K and mask, and no word; an audit). The files are
+    :func:`unread_files`'s, as for any other map (this had its own copy of the lookup)."""
     if src.stem.lower() != "normal_map":
         return
-    unused = []
-    if job.K is None and job.fov is None and not job.orthographic and (folder / "K.txt").is_file():
-        unused.append("K.txt (its camera: the map is integrated orthographically)")
-    try:
-        mpath = _find(folder, "mask", MASK_FORMATS)
-    except ValueError:  # (several mask files: the folder's own reading would say so)
-        mpath = None
-    if job.mask is None and mpath is not None:
-        unused.append(f"{mpath.name} (its mask)")
+    folder = src.parent
+    unread = unread_files(folder, None, mask=job.mask is None, camera=camera_unset(job))
+    unused = (["K.txt (its camera: the map is integrated orthographically)"]
+              if "K.txt" in unread else [])
+    unused += [f"{name} (its mask)" for name in unread if name != "K.txt"]
     if unused:
         warn(f"{src} lies in a dataset folder whose {' and '.join(unused)} this run does not "
              f"read: only the folder as the input reads them (facetlift integrate {folder}); "
              "or give them with --K / --mask", UserWarning)
+
+
+def camera_unset(job: Job) -> bool:
+    """Whether `job` leaves the camera unset (no --K, no --fov, no --orthographic), so that
+    a ``K.txt`` beside its map, which only a dataset folder's reading takes, is one it misses
+    (the one condition of the warnings on unread files, which wrote it out three times)."""
+    return job.K is None and job.fov is None and not job.orthographic
 
 
 def unread_files(folder: Path, stem: str | None, *, mask: bool, camera: bool) -> list[str]:
@@ -304,7 +304,7 @@ def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
     ignored without a word, while docs/cli.md said a folder's mask.png was its mask; an
     audit). Not for a mask where the map has its own (`own_mask`: a .mat file's)."""
     unread = unread_files(src.parent, src.stem, mask=job.mask is None and not own_mask,
-                          camera=job.K is None and job.fov is None and not job.orthographic)
+                          camera=camera_unset(job))
     if not unread:
         return
     flags = " / ".join(f for f, given in (
