@@ -696,6 +696,34 @@ def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
     assert code == 0 and "beside it" not in err, err
 
 
+def test_another_map_in_a_dataset_folder_is_told_it_is_not_the_folders_map(tmp_path, capsys):
+    """A review: other.png beside a dataset folder's normal_map.png and mask.png was told "a
+    folder is read as a dataset only with normal_map.*", as if integrating the folder would
+    read this map with them. In a dataset folder the warning says this file is not the
+    folder's normal_map.*; in a folder without one, as before."""
+    H, W = 20, 26
+    n = np.dstack([np.zeros((H, W, 2)), np.ones((H, W))])
+    mask = np.zeros((H, W), bool)
+    mask[4:16, 5:20] = True
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    io.write_normals(folder / "normal_map.png", n)
+    io.write_normals(folder / "other.png", n)
+    io.write_mask(folder / "mask.png", mask)
+    code, _, err = run(capsys, "integrate", folder / "other.png", "-s", "npy", "-o",
+                       tmp_path / "a")
+    err = " ".join(err.split())
+    assert code == 0 and "other.png has mask.png beside it" in err, err
+    assert f"(other.png is not this folder's normal_map.png, the map that integrating the " \
+           f"folder ({folder}) reads as a dataset)" in err, err
+    assert "only with normal_map.*" not in err
+    (folder / "normal_map.png").unlink()
+    code, _, err = run(capsys, "integrate", folder / "other.png", "-s", "npy", "-o",
+                       tmp_path / "b")
+    err = " ".join(err.split())
+    assert code == 0 and "a folder is read as a dataset only with normal_map.*" in err, err
+
+
 def test_a_zero_one_map_read_in_a_camera_frame_is_told_of_its_encoding(tmp_path, capsys):
     """An audit: a [0, 1]-encoded float map with --normal-frame opencv was refused as facing
     away, with advice to drop the frame; its encoding is named first (integrate and info)."""

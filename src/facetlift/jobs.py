@@ -303,15 +303,25 @@ def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
     --K give a plain map its mask and camera (a fresh user's mask.png beside the map was
     ignored without a word, while docs/cli.md said a folder's mask.png was its mask; an
     audit). Not for a mask where the map has its own (`own_mask`: a .mat file's)."""
+    from .io.images import NORMAL_READ_FORMATS
+
     unread = unread_files(src.parent, src.stem, mask=job.mask is None and not own_mask,
                           camera=camera_unset(job))
     if not unread:
         return
     flags = " / ".join(f for f, given in (
         ("--mask", any(n != "K.txt" for n in unread)), ("--K", "K.txt" in unread)) if given)
+    folder = src.parent
+    own = [folder / f"normal_map{ext}" for ext in NORMAL_READ_FORMATS
+           if (folder / f"normal_map{ext}").is_file()]
+    # (in a dataset folder, "only with normal_map.*" read as if integrating the folder would
+    # read this map with them: it reads the folder's normal_map.*, a review)
+    why = (f"{src.name} is not this folder's {own[0].name}, the map that integrating the "
+           f"folder ({folder}) reads as a dataset" if own and own[0].name != src.name
+           else "a folder is read as a dataset only with normal_map.*")
     warn(f"{src.name} has {' and '.join(unread)} beside it, which this run does not read: a "
-         "normal-map file's mask and camera come only from --mask and --K (a folder is read "
-         f"as a dataset only with normal_map.*); give {flags} to use "
+         f"normal-map file's mask and camera come only from --mask and --K ({why}); give "
+         f"{flags} to use "
          f"{'it' if len(unread) == 1 else 'them'}"
          + (" (without K.txt's camera the map is integrated orthographically)"
             if "K.txt" in unread else ""), UserWarning)
