@@ -585,6 +585,59 @@ def test_a_coarser_prior_is_refused_with_its_remedies(tmp_path, capsys):
     np.testing.assert_allclose(np.load(tmp_path / "p" / "depth.npy"), depth, atol=1e-6)
 
 
+def test_a_dataset_folders_coarser_prior_depth_gets_the_same_remedy(tmp_path, capsys):
+    """A review: a folder's 8x10 prior_depth.npy beside its 24x30 normal_map.npy was refused
+    by the folder's own size check, which named no factor, while --prior did; it says the
+    factor and the remedy now, and still how to leave the file unread. A confidence map of
+    that size is no prior: no such hint."""
+    H, W = 24, 30
+    n = np.dstack([np.zeros((H, W, 2)), np.ones((H, W))])
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", n)
+    np.save(folder / "prior_depth.npy", np.full((8, 10), 10.0))
+    code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "o")
+    err = " ".join(err.split())
+    assert code == 1 and "is 8x10 (HxW) but the normal map is 24x30; it is 3x coarser in both " \
+        "axes" in err, err
+    assert "row (i + 0.5) * 3 - 0.5" in err and "--no-prior" in err, err
+    (folder / "prior_depth.npy").unlink()
+    np.save(folder / "confidence.npy", np.ones((8, 10)))
+    code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "o")
+    assert code == 1 and "but the normal map is 24x30" in err and "3x coarser" not in err, err
+
+
+def test_info_and_integrate_count_the_same_holes(tmp_path, capsys):
+    """A review: on an 8-bit map with a 100-pixel and a 9-pixel black hole inside the object,
+    info said "holes: 109" (its own 4-connected fill, any size) where integrate counted and
+    warned 9 (8-connected gaps of at most HOLE_PIXELS). Both come from problem.enclosed_gaps
+    now: the small ones as holes, warned by integrate, the larger ones apart, no warning; the
+    job record (batch.jsonl, integrate --json) keeps both."""
+    from facetlift.problem import HOLE_PIXELS
+
+    H, W = 40, 50
+    r, c = np.mgrid[0:H, 0:W] + 0.5
+    n = facetlift.normals_from_gradients(0.2 * np.cos(c / 8), 0.1 * np.sin(r / 9))
+    n[5:15, 5:15] = np.nan  # 100 pixels: a real hole, taken for one
+    n[25:28, 30:33] = np.nan  # 9 pixels: black fill inside the object
+    assert 9 <= HOLE_PIXELS < 100
+    path = io.write_normals(tmp_path / "holes.png", n, bits=8)
+    code, out, _ = run(capsys, "info", path, "--json")
+    rec = json.loads(out)
+    assert code == 0 and rec["holes"] == 9 and rec["larger_holes"] == 100, rec
+    assert rec["counts"]["holes"] == 9 and rec["counts"]["larger_holes"] == 100
+    code, out, _ = run(capsys, "info", path)
+    assert "holes: 9 pixels enclosed by the object" in out, out
+    assert "larger holes: 100 pixels" in out, out
+    code, out, err = run(capsys, "integrate", path, "--json", "-s", "npy", "-o", tmp_path / "o")
+    got = json.loads(out)
+    assert code == 0 and got["info"]["input"]["holes"] == 9, err
+    assert got["info"]["input"]["larger_holes"] == 100
+    assert got["normals"]["holes"] == 9 and got["normals"]["larger_holes"] == 100
+    err = " ".join(err.split())
+    assert "9 pixel(s) enclosed by the object hold no normal" in err and "109" not in err, err
+
+
 def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
     """An audit: mask.png beside a plain map file was ignored without a word (docs/cli.md said
     a folder's mask.png was its mask), while only a dataset folder's files are read. integrate
@@ -646,6 +699,34 @@ def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", tmp_path / "Normal_gt.mat", "-s", "npy", "-o",
                        tmp_path / "f")
     assert code == 0 and "beside it" not in err, err
+
+
+def test_another_map_in_a_dataset_folder_is_told_it_is_not_the_folders_map(tmp_path, capsys):
+    """A review: other.png beside a dataset folder's normal_map.png and mask.png was told "a
+    folder is read as a dataset only with normal_map.*", as if integrating the folder would
+    read this map with them. In a dataset folder the warning says this file is not the
+    folder's normal_map.*; in a folder without one, as before."""
+    H, W = 20, 26
+    n = np.dstack([np.zeros((H, W, 2)), np.ones((H, W))])
+    mask = np.zeros((H, W), bool)
+    mask[4:16, 5:20] = True
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    io.write_normals(folder / "normal_map.png", n)
+    io.write_normals(folder / "other.png", n)
+    io.write_mask(folder / "mask.png", mask)
+    code, _, err = run(capsys, "integrate", folder / "other.png", "-s", "npy", "-o",
+                       tmp_path / "a")
+    err = " ".join(err.split())
+    assert code == 0 and "other.png has mask.png beside it" in err, err
+    assert f"(other.png is not this folder's normal_map.png, the map that integrating the " \
+           f"folder ({folder}) reads as a dataset)" in err, err
+    assert "only with normal_map.*" not in err
+    (folder / "normal_map.png").unlink()
+    code, _, err = run(capsys, "integrate", folder / "other.png", "-s", "npy", "-o",
+                       tmp_path / "b")
+    err = " ".join(err.split())
+    assert code == 0 and "a folder is read as a dataset only with normal_map.*" in err, err
 
 
 def test_a_zero_one_map_read_in_a_camera_frame_is_told_of_its_encoding(tmp_path, capsys):

@@ -112,6 +112,37 @@ def test_a_grey_image_is_refused_inside_the_mask_only():
     facetlift.integrate(some)
 
 
+def test_the_grey_check_samples_first_on_a_large_image_and_decides_on_every_pixel():
+    """A review: the grey check's fast path (a strided sample of about CHECK_SAMPLE pixels,
+    the full pass only where every sampled pixel is grey) had no test. At 400 x 400 the
+    stride is 2 (300 x 300 would be 1: no sampling). A grey image is refused; a normal map
+    with a few grey pixels passes; a grey image whose colour lies only on pixels the sample
+    skips passes too (the sample alone never refuses); grey inside the mask, colour outside:
+    refused."""
+    H = W = 400
+    assert H * W // frames.CHECK_SAMPLE == 2
+    r, c = np.mgrid[0:H, 0:W]
+    h = (127 + 100 * np.sin(r / 25) * np.cos(c / 35)).astype(np.uint8)
+    grey = np.dstack([h, h, h])
+    with pytest.raises(ValueError, match=r"`normals`: R = G = B at every pixel of the image"):
+        frames.grey_check(grey, None, "`normals`")
+    n = np.round((facetlift.normals_from_gradients(0.3 * np.cos(c / 30), 0.2 * np.sin(r / 40))
+                  + 1) / 2 * 255).astype(np.uint8)
+    some = n.copy()
+    some[:2, :5] = grey[:2, :5]  # (a few grey pixels: a fill)
+    frames.grey_check(some, None, "`normals`")
+    only = grey.copy()  # (colour on odd flat indices alone: never in the sample)
+    only.reshape(-1, 3)[1::2 * 997] = (10, 200, 30)
+    assert (only.reshape(-1, 3)[::2] == only.reshape(-1, 3)[::2, :1]).all()
+    frames.grey_check(only, None, "`normals`")
+    mask = np.zeros((H, W), bool)
+    mask[50:350, 60:340] = True
+    inside = np.where(mask[..., None], grey, n)
+    with pytest.raises(ValueError, match=r"R = G = B at every pixel inside the mask"):
+        frames.grey_check(inside, mask, "`normals`")
+    frames.grey_check(inside, None, "`normals`")  # (the colour outside counts without one)
+
+
 def test_other_unsigned_integers_are_refused():
     with pytest.raises(ValueError, match="integer type uint32; integer normal maps must be"):
         facetlift.integrate(np.zeros((4, 4, 3), np.uint32))
@@ -551,6 +582,29 @@ def test_8_bit_maps_without_a_flat_plateau_and_16_bit_maps_decode_as_before():
         length = np.linalg.norm(plain, axis=-1)
         plain[(length < 0.5) | (length > 1.5)] = np.nan
         np.testing.assert_array_equal(frames.decode(v), plain)
+
+
+def test_8_bit_zero_plateaus_are_counted_inside_where_only():
+    """A review: the plateau counts of the 8-bit decode use only the pixels inside `where`
+    (the mask or alpha), and no test said so. A map whose x and y spread continuously inside
+    the mask (128 no more common than 127 or 129) beside a flat (128, 128, 255) background
+    outside it: with the mask, 128 decodes as before inside (+0.0039); without it, the
+    background's plateau makes it 0."""
+    H, W = 40, 60
+    r, c = np.mgrid[0:H, 0:W]
+    mask = c < 30
+    v = np.zeros((H, W, 3), np.uint8)
+    v[..., 0] = np.where(mask, 113 + c, 128)  # (113..142 inside: 40 pixels per code)
+    v[..., 1] = np.where(mask, 108 + r, 128)  # (108..147)
+    x, y = v[..., 0] / 255 * 2 - 1, v[..., 1] / 255 * 2 - 1
+    v[..., 2] = np.round((np.sqrt(1 - x**2 - y**2) + 1) / 2 * 255)
+    plain = v / 255 * 2 - 1
+    at = mask & (v[..., 0] == 128)
+    assert at.sum() == 40 and np.allclose(plain[at][:, 0], 1 / 255)
+    d = frames.decode(v, where=mask)
+    np.testing.assert_array_equal(d[mask], plain[mask])  # (bit for bit: no plateau inside)
+    every = frames.decode(v)  # (without the mask: the background's plateau counts)
+    assert (every[at][:, 0] == 0).all() and (every[~mask][:, :2] == 0).all()
 
 
 def test_an_srgb_encoded_map_is_named_with_the_curve_that_undoes_it():

@@ -132,6 +132,26 @@ def test_a_height_in_the_alpha_is_warned_about_and_an_antialiased_edge_is_not(tm
         assert inp.mask.all()
 
 
+def test_a_height_in_a_float_alpha_with_nan_is_warned_about(tmp_path):
+    """A review: the check took the alpha's largest value with max(), NaN for a float alpha
+    holding one NaN, and a height in such an alpha went unwarned. NaN alpha is transparent
+    (outside the mask, as alpha > 0 makes it), and the largest is the mask's."""
+    H = W = 32
+    r, c = np.mgrid[0:H, 0:W]
+    height = np.clip(0.8 * np.exp(-((r - 10) ** 2 + (c - 12) ** 2) / 40) - 0.08, 0, None)
+    px = np.zeros((H, W, 4))
+    px[..., 2] = 1.0
+    px[..., 3] = height
+    px[0, 0, 3] = px[12, 12, 3] = np.nan  # (one in the background, one in the bump)
+    np.save(tmp_path / "h.npy", px)
+    with pytest.warns(UserWarning, match=r"h.npy: its alpha channel holds \d+ distinct levels "
+                      r"between 0 and its largest, 0.72, on \d+% of the pixels") as rec:
+        _, alpha = io.read_normals(tmp_path / "h.npy")
+    assert len(rec) == 1
+    assert not alpha[0, 0] and not alpha[12, 12]  # (NaN: transparent)
+    np.testing.assert_array_equal(alpha, np.nan_to_num(px[..., 3]) > 0)
+
+
 @pytest.mark.parametrize(
     "ext, bits, atol", [(".exr", 32, 1e-7), (".npy", 32, 0), (".tif", 32, 1e-7),
                         (".tif", 16, 2e-5), (".tif", 8, 4e-3)]

@@ -448,6 +448,20 @@ def test_an_extreme_fov_is_named_as_a_field_of_view_not_as_a_focal_length_in_mm(
         facetlift.integrate(n, K=K_from_fov((30, 40), 120))
 
 
+def test_a_K_from_fov_for_another_image_size_is_still_asked_about_mm():
+    """A review: the registry of K_from_fov matched a K by id only, so a K made for a 30 x 40
+    image and used on a 300 x 400 map (fx 16.8, 170 deg across it) was not asked whether it is
+    for a much smaller image; the same K on its own size still is not."""
+    n = np.dstack([np.zeros((300, 400, 2)), np.ones((300, 400))])
+    K = K_from_fov((30, 40), 100)
+    with pytest.warns(UserWarning, match=r"fx 16.78\d*, fy 16.78\d* give a field of view .*in mm "
+                                         r"\(or for a much smaller image\)"):
+        facetlift.integrate(n, K=K)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        facetlift.integrate(n[:30, :40], K=K)
+
+
 def test_info_keeps_the_principal_point_warning_of_a_map_it_cannot_integrate(tmp_path, capsys):
     """A review: `info` dropped the warnings that came before the refusal, and a K for another
     image is what makes a map unusable."""

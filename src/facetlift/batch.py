@@ -244,13 +244,13 @@ def _unused_folder_files(found, template: Job) -> None:
     orthographically (a user's rig: 583 mm MADE instead of 1.88 mm, and no word) and
     without that mask (an audit: docs/cli.md said a folder's mask.png was its maps' mask)."""
     from .io.dataset import is_dataset
-    from .jobs import unread_files
+    from .jobs import camera_unset, unread_files
 
     by_folder: dict = {}
     for it in found:
         if it.error is None and Path(it.path).is_file():
             by_folder.setdefault(Path(it.path).parent, []).append(it)
-    camera = template.K is None and template.fov is None and not template.orthographic
+    camera = camera_unset(template)
     # (a dataset folder's own normal_map.* given as a file is warned about by its item,
     # jobs._beside_dataset_files, which names the folder's mask too: not twice)
     for folder in sorted(f for f in by_folder if not is_dataset(f)):

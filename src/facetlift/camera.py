@@ -299,7 +299,8 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
 
     Warns (once per call) where `fov` looks like radians (below :data:`FOV_RADIANS`) or is
     wider than :data:`facetlift.problem.FOV_WIDE` (what that implies); :func:`facetlift.
-    integrate` then does not ask whether this K's focal lengths are in mm (:func:`fov_of`)."""
+    integrate` then does not ask whether this K's focal lengths are in mm (:func:`fov_of`),
+    unless the map is of another size than `shape`."""
     try:
         H, W = (int(v) for v in tuple(shape)[:2])
         ok = len(tuple(shape)) >= 2 and H > 0 and W > 0 and (H, W) == tuple(shape)[:2]
@@ -331,21 +332,29 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
              "2 atan(18 / f35) across the long side)")
     K = np.array([[f, 0.0, (W - 1) / 2.0], [0.0, f, (H - 1) / 2.0], [0.0, 0.0, 1.0]])
     key = id(K)
-    _FROM_FOV[key] = (weakref.ref(K, lambda _: _FROM_FOV.pop(key, None)), K.copy(), value)
+    _FROM_FOV[key] = (weakref.ref(K, lambda _: _FROM_FOV.pop(key, None)), K.copy(), value,
+                      (H, W))
     return K
 
 
 #: :func:`K_from_fov`'s results still alive: id -> (weak reference, the values it returned,
-#: the field of view). Only for :func:`fov_of`: the focal-length check's words.
+#: the field of view, the (H, W) it was made for). Only for :func:`fov_of`: the
+#: focal-length check's words.
 _FROM_FOV: dict = {}
 
 
-def fov_of(K) -> float | None:
-    """The field of view (degrees) :func:`K_from_fov` made `K` from, or None for any other K
-    (a copy, or one changed since, included): a K that wide was asked for as a field of view,
-    and :func:`K_from_fov` said what it implies (not a focal length in mm)."""
+def fov_of(K, shape) -> float | None:
+    """The field of view (degrees) :func:`K_from_fov` made `K` from for an image of `shape`
+    (H, W), or None for any other K (a copy, one changed since, or one made for another
+    image's size included): a K that wide was asked for as a field of view, and
+    :func:`K_from_fov` said what it implies (not a focal length in mm). The size matters: a
+    K made for a 30 x 40 image used on a 300 x 400 one is a K for a much smaller image, which
+    the focal-length check exists to ask about (a review: matched by id only, it was silent).
+    """
     entry = _FROM_FOV.get(id(K))
     if entry is None or entry[0]() is not K or not np.array_equal(entry[1], K):
+        return None
+    if entry[3] != tuple(int(v) for v in tuple(shape)[:2]):
         return None
     return entry[2]
 

@@ -695,6 +695,8 @@ def info(normals, gradients, mask, K, fov, normal_frame, y_down, normal_encoding
 
 
 def _info_lines(rec: dict) -> list[str]:
+    from .problem import HOLE_PIXELS
+
     H, W = rec["shape"]
     kind = ", ".join(f"{k} {rec[k]}" for k in ("format", "bit_depth", "channels", "dtype")
                      if rec.get(k) is not None)
@@ -723,10 +725,18 @@ def _info_lines(rec: dict) -> list[str]:
     c = rec["counts"]
     lines.append(f"  mask: {rec['mask_pixels']} pixels ({rec['mask_source']}), "
                  f"{rec['components']} component(s)")
+    # (both as integrate counts them, problem.enclosed_gaps: the small ones are what its
+    # warning names, the larger ones taken for real holes)
     if rec.get("holes"):
-        lines.append(f"  holes: {rec['holes']} pixels enclosed by the object have no valid "
-                     "normal and are outside the domain (a real hole, or NaN / background fill "
-                     "inside: a mask, --mask, integrates across those as missing samples)")
+        lines.append(f"  holes: {rec['holes']} pixels enclosed by the object, in holes of at "
+                     f"most {HOLE_PIXELS} pixels, have no valid normal and are left out (NaN / "
+                     "background fill inside, or a small real hole: a mask, --mask, integrates "
+                     "across those as missing samples)")
+    if rec.get("larger_holes"):
+        lines.append(f"  larger holes: {rec['larger_holes']} pixels in enclosed regions of more "
+                     f"than {HOLE_PIXELS} pixels without a valid normal, left out as real holes "
+                     "(a ring's; if they are NaN / background fill inside the object, a mask, "
+                     "--mask, integrates across them as missing samples)")
     bad = ", ".join(f"{c[k]} {k}" for k in ("missing", "non-finite", "zero-length",
                                             "back-facing", "grazing") if c.get(k))
     first = rec.get("first_unusable")

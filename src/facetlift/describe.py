@@ -274,7 +274,11 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         estimate_discontinuities=_twice(estimate(problem, "dgp", discontinuities=True),
                                         fitted),
         discontinuity_grazing=_jump_grazing(problem),
-        holes=_holes(d.mask) if inp.mask is None else 0,
+        # (prepare's holes, as integrate counts and warns them: info's own fill of any size
+        # said 109 where integrate said 9, a review; none with a mask, inside which such
+        # pixels are missing samples)
+        holes=counts.get("holes", 0),
+        larger_holes=counts.get("larger_holes", 0),
         # (the unusable-normals warning's hint for a photo integrated without a camera: info
         # called such a map's frame consistent and said nothing else, an audit)
         camera_hint=no_camera_hint(counts, inp.K is not None, inp.field) or None,
@@ -289,15 +293,6 @@ def _twice(est: dict, fitted: bool) -> dict:
         lo, hi = est["seconds"]
         est["seconds"] = [2.0 * lo, hi * (1.0 + PRIOR_SLOWER)]
     return est
-
-
-def _holes(mask) -> int:
-    """Pixels enclosed by the domain but outside it: a real hole (a ring's), or, without a
-    mask, normals that are NaN or background fill inside the object, which are left out (no
-    missing samples; a user's map with 20 % NaN inside read as 'unusable normals: none')."""
-    from scipy import ndimage
-
-    return int((ndimage.binary_fill_holes(mask) & ~mask).sum())
 
 
 def _jump_grazing(problem) -> dict:

@@ -512,20 +512,24 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
     return n
 
 
+def _mask_pixels(mask, shape) -> np.ndarray | None:
+    """(H, W) bool: the pixels of a given `mask` (nonzero and finite), None where it cannot
+    be read as one of `shape` (prepare refuses it, with the words). The checks' one reading
+    of a mask (:func:`_where` and :func:`_inside` each had a copy)."""
+    try:
+        m = np.asarray(mask)
+    except Exception:
+        return None
+    if m.shape != shape or m.dtype.kind not in "biuf":
+        return None
+    with np.errstate(invalid="ignore"):
+        return np.where(np.isfinite(m), m, 0) != 0 if m.dtype.kind == "f" else m != 0
+
+
 def _where(mask, shape, hidden=None) -> np.ndarray | None:
     """(H, W) bool: inside `mask` (nonzero and finite; None: every pixel) and not `hidden`;
     None where neither is given or the mask cannot be read (prepare refuses it)."""
-    m = None
-    if mask is not None:
-        try:
-            m = np.asarray(mask)
-        except Exception:
-            m = None
-        if m is not None and (m.shape != shape or m.dtype.kind not in "biuf"):
-            m = None
-        elif m is not None:
-            with np.errstate(invalid="ignore"):
-                m = np.where(np.isfinite(m), m, 0) != 0 if m.dtype.kind == "f" else m != 0
+    m = None if mask is None else _mask_pixels(mask, shape)
     if hidden is not None:
         m = ~hidden if m is None else m & ~hidden
     return m
@@ -538,17 +542,9 @@ CHECK_SAMPLE = 2**16
 def _inside(n: np.ndarray, mask, sample: int | None = None) -> np.ndarray | None:
     """(k, 3) finite normals inside `mask` (None when `mask` cannot be read: prepare refuses),
     every pixel or about `sample` of them, evenly spaced."""
-    if mask is None:
-        m = None
-    else:
-        try:
-            m = np.asarray(mask)
-        except Exception:
-            return None
-        if m.shape != n.shape[:2] or m.dtype.kind not in "biuf":
-            return None
-        with np.errstate(invalid="ignore"):
-            m = np.where(np.isfinite(m), m, 0) != 0 if m.dtype.kind == "f" else m != 0
+    m = None if mask is None else _mask_pixels(mask, n.shape[:2])
+    if mask is not None and m is None:
+        return None
     flat = n.reshape(-1, 3)
     if sample is not None and m is None:
         v = flat[:: max(1, flat.shape[0] // sample)]

@@ -302,7 +302,7 @@ def _beside_dataset_files(src: Path, job: Job, own_mask: bool = False) -> None:
         cameras = camera_files(folder)
     except ValueError:  # (a folder named K.txt: the folder's own reading would say so)
         cameras = []
-    if job.K is None and job.fov is None and not job.orthographic and cameras:
+    if camera_unset(job) and cameras:
         name = cameras[0].name if cameras[0].parent == folder else f"../{cameras[0].name}"
         unused.append(f"{name} (its camera: the map is integrated orthographically)")
     try:
@@ -315,6 +315,13 @@ def _beside_dataset_files(src: Path, job: Job, own_mask: bool = False) -> None:
         warn(f"{src} lies in a dataset folder whose {' and '.join(unused)} this run does not "
              f"read: only the folder as the input reads them (facetlift integrate {folder}); "
              "or give them with --K / --mask", UserWarning)
+
+
+def camera_unset(job: Job) -> bool:
+    """Whether `job` leaves the camera unset (no --K, no --fov, no --orthographic), so that
+    a ``K.txt`` beside its map, which only a dataset folder's reading takes, is one it misses
+    (the one condition of the warnings on unread files, which wrote it out three times)."""
+    return job.K is None and job.fov is None and not job.orthographic
 
 
 def unread_files(folder: Path, stem: str | None, *, mask: bool, camera: bool) -> list[str]:
@@ -345,15 +352,25 @@ def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
     --K give a plain map its mask and camera (a fresh user's mask.png beside the map was
     ignored without a word, while docs/cli.md said a folder's mask.png was its mask; an
     audit). Not for a mask where the map has its own (`own_mask`: a .mat file's)."""
+    from .io.images import NORMAL_READ_FORMATS
+
     unread = unread_files(src.parent, src.stem, mask=job.mask is None and not own_mask,
-                          camera=job.K is None and job.fov is None and not job.orthographic)
+                          camera=camera_unset(job))
     if not unread:
         return
     flags = " / ".join(f for f, given in (
         ("--mask", any(n != "K.txt" for n in unread)), ("--K", "K.txt" in unread)) if given)
+    folder = src.parent
+    own = [folder / f"normal_map{ext}" for ext in NORMAL_READ_FORMATS
+           if (folder / f"normal_map{ext}").is_file()]
+    # (in a dataset folder, "only with normal_map.*" read as if integrating the folder would
+    # read this map with them: it reads the folder's normal_map.*, a review)
+    why = (f"{src.name} is not this folder's {own[0].name}, the map that integrating the "
+           f"folder ({folder}) reads as a dataset" if own and own[0].name != src.name
+           else "a folder is read as a dataset only with normal_map.* or Normal_gt.mat")
     warn(f"{src.name} has {' and '.join(unread)} beside it, which this run does not read: a "
-         "normal-map file's mask and camera come only from --mask and --K (a folder is read "
-         f"as a dataset only with normal_map.* or Normal_gt.mat); give {flags} to use "
+         f"normal-map file's mask and camera come only from --mask and --K ({why}); give "
+         f"{flags} to use "
          f"{'it' if len(unread) == 1 else 'them'}"
          + (" (without K.txt's camera the map is integrated orthographically)"
             if "K.txt" in unread else ""), UserWarning)
@@ -655,14 +672,18 @@ def _strict_check(caught, surface) -> None:
                          "above says what to try); nothing was written")
 
 
-#: The counts of info["input"] a job record keeps (``normals``), in this order.
+#: The counts of info["input"] a job record keeps (``normals``: batch.jsonl and
+#: ``integrate --json``), in this order. ``holes`` and ``larger_holes`` (without a mask, the
+#: pixels enclosed by the object without a valid normal, :func:`facetlift.problem.
+#: enclosed_gaps`) lie outside the mask and are not among its ``pixels``: they are there so a
+#: batch's log says where its depths have holes, as ``info`` and integrate's warning do.
 NORMAL_COUNTS = ("pixels", "usable", "missing", "non-finite", "zero-length", "back-facing",
-                 "grazing", "isolated", "zero_confidence")
+                 "grazing", "isolated", "zero_confidence", "holes", "larger_holes")
 
 
 def _normal_counts(info: dict) -> dict:
-    """Pixels of the mask and how many had a usable normal or none, by reason (those of
-    :data:`NORMAL_COUNTS` that the method's info has)."""
+    """Pixels of the mask and how many had a usable normal or none, by reason, and the
+    enclosed holes outside it (those of :data:`NORMAL_COUNTS` that the method's info has)."""
     counts = info.get("input") or {}
     return {k: int(counts[k]) for k in NORMAL_COUNTS
             if isinstance(counts.get(k), (int, np.integer))}

@@ -362,7 +362,8 @@ def prepare(
     mask : (H, W) array_like of bool, optional
         Integration domain. Default: pixels whose normal is finite and non-zero (an isolated
         one, without such a neighbour, is left out with a warning; small holes of pixels
-        without one inside the object are counted and warned about, :data:`HOLE_PIXELS`).
+        without one inside the object are counted and warned about, larger ones counted
+        apart, :data:`HOLE_PIXELS`).
     known : (H, W) array_like of bool, optional
         Pixels whose normal is given; the others in the mask are missing samples.
     pixel_size : float
@@ -442,9 +443,9 @@ def prepare(
             "(first at row {r}, col {c}); without a mask the domain is the finite, non-zero "
             "normals, so NaN ones are outside it: give a mask to make them missing samples "
             "inside it")
-        holes = enclosed_holes(m)
+        holes, larger_holes = enclosed_gaps(m)
     else:
-        holes = None
+        holes = larger_holes = None
         m = _bool_image(mask, "mask", (H, W))
         if not m.any():
             raise ValueError("`mask` is empty: no pixel to integrate")
@@ -528,10 +529,13 @@ def prepare(
     counts["outlier_eps"] = float(eps)
     if holes is not None and holes.any():
         counts["holes"] = int(holes.sum())
+    if larger_holes is not None and larger_holes.any():  # (no warning: a ring's own hole)
+        counts["larger_holes"] = int(larger_holes.sum())
     if not usable.any():  # (an error alone: no warning about the same normals first)
         # (the counts in words, not a dict: a user's check)
         said = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in counts.items()
-                         if k not in ("pixels", "usable", "holes") and isinstance(v, int) and v)
+                         if k not in ("pixels", "usable", "holes", "larger_holes")
+                         and isinstance(v, int) and v)
         said = f"{counts['pixels']} pixel(s): {said or 'none usable'}"
         if "grazing" in counts and counts["grazing"]:
             said += (f"; grazing: view cosine < {counts['outlier_eps']:.4g}, outlier_eps / "
@@ -860,13 +864,13 @@ FOV_WIDE = 150.0
 def _check_focal_length(cam, H: int, W: int, given=None) -> None:
     """A warning where a pinhole camera's field of view exceeds :data:`FOV_WIDE` degrees
     across the image (the focal length in mm, or a K for an image many times smaller); none
-    where `given`, the K as passed, came from :func:`facetlift.camera.K_from_fov`, which
-    said what so wide a field of view implies (a --fov 170 user was asked about mm, an
-    audit)."""
+    where `given`, the K as passed, came from :func:`facetlift.camera.K_from_fov` for this
+    H x W image, which said what so wide a field of view implies (a --fov 170 user was asked
+    about mm, an audit); a K it made for another size is checked like any other."""
     from .camera import fov_of
 
     Kc = getattr(cam, "K", None)
-    if Kc is None or fov_of(given) is not None:
+    if Kc is None or fov_of(given, (H, W)) is not None:
         return
     fx, fy = float(Kc[0, 0]), float(Kc[1, 1])
     # (across the width, as --fov gives it: a portrait image's height sees more, and --fov 140
@@ -1613,37 +1617,49 @@ def _check_eps(value) -> float:
 
 #: Without a mask, the pixels without a valid normal (not finite, zero length: an 8/16-bit
 #: pixel whose decoded length is far from 1, such as black (0, 0, 0), reads as NaN) are
-#: outside the domain, as a background is. Those in a component (8-connected) of at most
-#: HOLE_PIXELS pixels that does not touch the image's border, so that every pixel around it
-#: has a valid normal, are inside the object: they are counted (``counts["holes"]``) and
-#: named in the unusable-normals warning (:func:`enclosed_holes`). Larger enclosed regions
-#: are taken for real holes (a ring's), and stay silent.
+#: outside the domain, as a background is. Those in a component (8-connected) that does not
+#: touch the image's border, so that every pixel around it has a valid normal, are enclosed
+#: by the object (:func:`enclosed_gaps`). Components of at most HOLE_PIXELS pixels are inside
+#: the object: they are counted (``counts["holes"]``) and named in the unusable-normals
+#: warning. Larger ones are taken for real holes (a ring's): counted apart
+#: (``counts["larger_holes"]``, ``info``'s "larger holes"), with no warning.
 HOLE_PIXELS = 64
 
 
-def enclosed_holes(m: np.ndarray, max_pixels: int = HOLE_PIXELS) -> np.ndarray:
-    """(H, W) bool: the pixels outside the domain `m` (H, W) bool that lie in a component
-    (8-connected) of at most `max_pixels` pixels not touching the image's border: small holes
-    fully surrounded by the domain (:data:`HOLE_PIXELS`). Found within the domain's bounding
-    box, which a hole cannot leave."""
+def enclosed_gaps(m: np.ndarray, max_pixels: int = HOLE_PIXELS
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(small, larger), each (H, W) bool: the pixels outside the domain `m` (H, W) bool that
+    lie in a component (8-connected) not touching the image's border, fully surrounded by the
+    domain, split by its size: at most `max_pixels` pixels (:data:`HOLE_PIXELS`), and more.
+    Found within the domain's bounding box, which a hole cannot leave. The one definition of
+    a hole that ``integrate`` (:func:`prepare`) and ``info`` report (info's own 4-connected
+    fill of any size said 109 holes where integrate counted 9, a review)."""
     from scipy import ndimage
 
-    out = np.zeros_like(m, dtype=bool)
+    small = np.zeros_like(m, dtype=bool)
+    larger = np.zeros_like(m, dtype=bool)
     rows, cols = np.flatnonzero(m.any(axis=1)), np.flatnonzero(m.any(axis=0))
     if rows.size < 3 or cols.size < 3:
-        return out
+        return small, larger
     box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
     gaps = ~m[box]
     if not gaps[1:-1, 1:-1].any():
-        return out
+        return small, larger
     labels, k = ndimage.label(gaps, structure=np.ones((3, 3), bool))
     sizes = np.bincount(labels.ravel(), minlength=k + 1)
-    ok = sizes <= max_pixels
+    enclosed = np.ones(k + 1, bool)
     # (a component on the box's edge reaches the outside, or the image's border)
-    ok[np.unique(np.r_[labels[0], labels[-1], labels[:, 0], labels[:, -1]])] = False
-    ok[0] = False
-    out[box] = ok[labels]
-    return out
+    enclosed[np.unique(np.r_[labels[0], labels[-1], labels[:, 0], labels[:, -1]])] = False
+    enclosed[0] = False
+    small[box] = (enclosed & (sizes <= max_pixels))[labels]
+    larger[box] = (enclosed & (sizes > max_pixels))[labels]
+    return small, larger
+
+
+def enclosed_holes(m: np.ndarray, max_pixels: int = HOLE_PIXELS) -> np.ndarray:
+    """(H, W) bool: the small holes of :func:`enclosed_gaps`, components of at most
+    `max_pixels` pixels outside the domain `m` fully surrounded by it."""
+    return enclosed_gaps(m, max_pixels)[0]
 
 
 def _holes_note(holes: np.ndarray) -> str:

@@ -391,8 +391,14 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
         except ValueError as e:
             raise ValueError(f"{e}; {skip}") from None
         if not isinstance(extra[name], tuple) and extra[name].shape != (H, W):
+            from ..problem import coarse_prior_hint
+
+            # (a sensor's coarser depth as the folder's prior_depth.* got no remedy, which
+            # --prior gives it: a review)
+            hint = coarse_prior_hint(extra[name].shape, (H, W)) if name == "prior" else ""
             raise ValueError(f"`{name}`: {path} is {extra[name].shape[0]}x"
-                             f"{extra[name].shape[1]} (HxW) but the normal map is {H}x{W}; {skip}")
+                             f"{extra[name].shape[1]} (HxW) but the normal map is {H}x{W}"
+                             f"{hint}; {skip}")
     return {"normals": normals, "mask": mask, "K": K,
             "K_file": kpaths[0] if kpaths else None, **extra}
 

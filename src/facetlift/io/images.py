@@ -242,7 +242,10 @@ def _alpha_levels(alpha: np.ndarray, m: np.ndarray, p, arg: str) -> None:
 
     a = np.asarray(alpha)
     with np.errstate(invalid="ignore"):
-        top = a.max()
+        # (the largest over the mask: a NaN alpha is transparent, as ``alpha > 0`` makes it;
+        # a.max() was NaN with one NaN pixel, and a height with NaN where the texture had
+        # none was never warned about, a review)
+        top = np.where(m, a, 0).max()
         between = m & (a < top)
     if between.sum() <= ALPHA_DATA_SHARE * a.size:  # (quick: most alphas are 0 and the max)
         return
