@@ -555,15 +555,17 @@ def test_8_bit_flat_areas_decode_to_exactly_zero(encode):
     assert np.abs(plain[flat][:, :2]).min() > 0.0039  # (as decoded before: tilted)
     d = frames.decode(v)
     assert (d[flat][:, :2] == 0).all()
-    zero = 128 if encode is np.round else 127
-    np.testing.assert_array_equal(d[v != zero], plain[v != zero])  # (other codes as before)
+    if encode is np.round:
+        np.testing.assert_array_equal(d[v != 128], plain[v != 128])  # (other codes as before)
+    else:  # a truncating encoder: every code read at the middle of its step (a second audit:
+        # with 127 alone read as 0 the sloped texels kept half a code of bias, 2.7 % RMS)
+        np.testing.assert_allclose(d, (v + 0.5) / 255 * 2 - 1, rtol=0, atol=1e-15)
 
     def rms(normals):
         z, t = -facetlift.integrate(normals).depth, h - h.mean()
         return np.sqrt(np.mean((z - z.mean() - t) ** 2) / np.mean(t**2))
 
-    # (a truncating encoder also biases every other code by half a step: more error left)
-    assert rms(plain) > 0.1 and rms(d) < (0.02 if encode is np.round else 0.3 * rms(plain))
+    assert rms(plain) > 0.1 and rms(d) < 0.02
 
 
 def test_8_bit_maps_without_a_flat_plateau_and_16_bit_maps_decode_as_before():

@@ -264,8 +264,11 @@ def decode(pixels: np.ndarray, where=None) -> np.ndarray:
     never makes. So in the x and y channels, among the pixels seen (valid, inside `where`),
     a code 128 or 127 held by at least :data:`ZERO_PLATEAU_SHARE` of them and by at least
     :data:`ZERO_PLATEAU_RATIO` times as many as each neighbouring code is decoded as exactly
-    0. Other maps decode bit for bit as ``v / 255 * 2 - 1``; 16-bit maps always do (their
-    step, 3e-5, tilts little)."""
+    0. A plateau at 127 says more: the encoder truncates, so every code ``v`` stands for
+    ``[v, v + 1)`` and the whole map decodes as ``(v + 0.5) / 255 * 2 - 1`` (its plateau then
+    0; with 127 alone read as 0, the sloped texels of a second audit's truncated brick texture
+    kept half a code of bias, 2.7 % RMS height error against 0.57 %). Other maps decode bit for
+    bit as ``v / 255 * 2 - 1``; 16-bit maps always do (their step, 3e-5, tilts little)."""
     maxval = float(np.iinfo(pixels.dtype).max)
     n = pixels.astype(np.float64) / maxval * 2.0 - 1.0
     length = np.sqrt(np.einsum("...i,...i->...", n, n))
@@ -360,11 +363,13 @@ def decode_xy(values: np.ndarray, where=None, frame=None) -> np.ndarray:
 
 def _zero_plateaus(n: np.ndarray, pixels: np.ndarray, seen: np.ndarray) -> None:
     """Set the x and y of `n` (the decoded uint8 `pixels`) to exactly 0 where their code is
-    a plateau at 128 or 127 among the `seen` pixels (:func:`decode`)."""
+    a plateau at 128 among the `seen` pixels, or decode every channel as a truncating
+    encoder's, ``(v + 0.5) / 255 * 2 - 1``, where one is a plateau at 127 (:func:`decode`)."""
     k = int(np.count_nonzero(seen))
     if k == 0:
         return
     every = k == seen.size  # (then no mask to apply: a pass less per code)
+    rounded = []
     for ch in (0, 1):
         codes = pixels[..., ch]
         # (the four codes around 127.5 alone: a histogram of a 4096^2 map took 0.4 s)
@@ -374,8 +379,14 @@ def _zero_plateaus(n: np.ndarray, pixels: np.ndarray, seen: np.ndarray) -> None:
             c = counts[code]
             if (c >= ZERO_PLATEAU_SHARE * k
                     and c >= ZERO_PLATEAU_RATIO * max(counts[code - 1], counts[code + 1])):
-                n[..., ch][codes == code] = 0.0
+                if code == 127:  # (a truncating encoder: every code half a step low)
+                    c3 = min(n.shape[-1], pixels.shape[-1])
+                    n[..., :c3] = (pixels[..., :c3] + 0.5) * (2.0 / 255.0) - 1.0
+                    return
+                rounded.append(ch)
                 break  # (both cannot be: each would hold 8 times the other)
+    for ch in rounded:
+        n[..., ch][pixels[..., ch] == 128] = 0.0
 
 
 def grey_check(values: np.ndarray, where, what: str) -> None:

@@ -976,17 +976,25 @@ def _supersampled_normals(cam_mesh, K, H, W, s):
 
 
 def quantize(normals, bits: int) -> np.ndarray:
-    """Normals as stored in an integer image and decoded again: ``round((n + 1) / 2 * max)``,
-    then ``v / max * 2 - 1`` (not renormalised; :func:`facetlift.prepare` does that).
+    """Normals as stored in an integer image and read back: ``round((n + 1) / 2 * max)``, then
+    decoded as facetlift's reader decodes a PNG (:func:`facetlift.frames.decode`: ``v / max *
+    2 - 1``, and an 8-bit zero plateau, code 128 in a flat area, read as exactly 0); not
+    renormalised (:func:`facetlift.prepare` does that).
 
     `bits` is 8 or 16; NaN stays NaN.
     """
+    from .frames import decode
+
     if bits not in (8, 16):
         raise ValueError(f"`bits` must be 8 or 16; got {bits!r}")
     n = _check_normals(normals)
-    top = 2.0**bits - 1
+    top = 2**bits - 1
+    finite = np.isfinite(n).all(axis=-1)
     with np.errstate(invalid="ignore"):
-        return np.round((np.clip(n, -1, 1) + 1) / 2 * top) / top * 2 - 1
+        codes = np.round((np.clip(np.where(finite[..., None], n, 0.0), -1, 1) + 1) / 2 * top)
+    out = decode(codes.astype(np.uint8 if bits == 8 else np.uint16), where=finite)
+    out[~finite] = np.nan
+    return out
 
 
 def jump_edges(gt: GroundTruth, *, tol: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
