@@ -610,10 +610,12 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
         typical = float(np.median(prior[0][prior[0] > 0])) if samples else 0.0
         # (a user at 0.01 was told to lower it to 0.01)
         lower = ("A lower prior_weight (--prior-weight; 0.01 did best for a dense prior with "
-                 "noise of 1-3 pixel footprints, docs/fusion.md)" if typical > TORN_BEST * 1.01
+                 "noise of 1-3 pixel footprints, 0.001 for a 4x coarse sensor about 7 "
+                 "footprints noisy, docs/fusion.md)" if typical > TORN_BEST * 1.01
                  else f"A prior_weight below its {typical:g} (--prior-weight; {TORN_BEST:g} did "
-                 "best for a dense prior with noise of 1-3 pixel footprints, docs/fusion.md: "
-                 "this one may be noisier, or not aligned with the normals)")
+                 "best for a dense prior with noise of 1-3 pixel footprints, 0.001 for a 4x "
+                 "coarse sensor about 7 footprints noisy, docs/fusion.md: this one may be "
+                 "noisier, or not aligned with the normals)")
         warn(f"discontinuities with a depth prior: {info['cut_corners']:.0%} of the facet "
              f"corners were cut, {pieces:,} pieces ({samples:,} prior samples): where the "
              "prior disagrees "
