@@ -466,6 +466,16 @@ def summary(record: dict) -> str:
 #: to keep; every render above with jumps is at 0.04 or more with exact normals (0.12 and
 #: more where the discontinuity route halves the error), the DiLiGenT bear at 0.22.
 JUMP_HINT_SHARE, JUMP_HINT_CURL = 0.002, 0.02
+#: Where the flipped field's relative curl is below this fraction of the field's own (and the
+#: own above :data:`facetlift.frames.FLIP_MIN_CURL`), short of the frame check's hint
+#: (:data:`facetlift.frames.FLIP_HINT`), the jump hint names the frame first: a second audit's
+#: y-down brick texture read 0.94 as given and 0.74 flipped (0.79; a sampling artefact since
+#: mended, :func:`facetlift.frames._strided`), was told only of --discontinuities, and
+#: following it gave an inside-out result (61 % height error, 0.6 % in its frame). In their
+#: right frame the discontinuity benchmark's 80 cached renders (exact, 8-bit, 3-deg noise,
+#: smoothed noise, 2 % outliers; 2026-12-06) came to 0.88 at the least (wide tray_bottom
+#: with outliers), 0.94 without outliers.
+JUMP_FRAME_RATIO = 0.85
 
 
 def _jump_hint(job, info: dict) -> str | None:
@@ -473,7 +483,8 @@ def _jump_hint(job, info: dict) -> str | None:
     jumps, but did not (its own default, e.g. bini's, or the option given), deviates from its
     normals in the way bent-across jumps do (:data:`JUMP_HINT_SHARE`); not where the map
     seems read in the wrong frame (that warning explains the deviation); None where there is
-    no hint."""
+    no hint. Where the field is more integrable flipped (:data:`JUMP_FRAME_RATIO`) it names
+    the frame to try first, and the jumps only if the frame is right."""
     from . import frames
 
     share = info.get("deviation_over_10")
@@ -503,11 +514,43 @@ def _jump_hint(job, info: dict) -> str | None:
     # the same deviation got no word, a user's check)
     keep = ("--discontinuities keeps them" if method.discontinuities else
             f"--method dgp --discontinuities keeps them ({method.name!r} cannot)")
-    hint = (f"{share:.1%} of the facets deviate from their normals by more than 10 deg, as "
-            f"where a smooth surface bends across depth jumps: {keep} "
-            f"(slower; docs/perspective.md){also}")
+    head = f"{share:.1%} of the facets deviate from their normals by more than 10 deg"
+    frame = _frame_first(job, ic) if own is not None else None
+    if frame is None:
+        hint = (f"{head}, as where a smooth surface bends across depth jumps: {keep} "
+                f"(slower; docs/perspective.md){also}")
+    else:
+        hint = (f"{head}{frame}. If the frame is right, a smooth surface bent across depth "
+                f"jumps does this too: {keep} (slower; docs/perspective.md){also}")
     click.echo(f"hint: {hint}", err=True)
     return hint
+
+
+def _frame_first(job, ic: dict) -> str | None:
+    """:func:`_jump_hint`'s words on the frame where the field's relative curls `ic`
+    (``info["integrability"]``) say it is more integrable flipped (:data:`JUMP_FRAME_RATIO`),
+    naming the flag to try as the frame check does (:func:`facetlift.frames.flip_advice`);
+    None otherwise."""
+    from . import frames
+
+    own = ic["curl"]
+    a, b = frames.flip_order(ic)
+    flipped = ic[f"curl_{a}_flipped"]
+    if not (own > frames.FLIP_MIN_CURL and flipped < JUMP_FRAME_RATIO * own):
+        return None
+    read = frames.GRADIENT_FIELD if getattr(job, "gradients", None) else getattr(
+        job, "normal_frame", None)
+    try_ = frames.flip_advice(read, a)
+    if not frames.flip_decided(ic) and read != frames.GRADIENT_FIELD:
+        try_ = (f"{try_} (or {frames.flip_advice(read, b)}: the two flips give surfaces "
+                "inside-out from each other; keep the one that bulges where the object does)")
+    field = read == frames.GRADIENT_FIELD
+    like = (", as a map whose y runs down (DirectX's, most game engines') read as y up does"
+            if a == "y" and not field else "")
+    return (f", and the {'field' if field else 'map'} is more integrable with {a} flipped "
+            f"(relative curl {own:.2f} as given, {flipped:.2f} flipped; short of the frame "
+            f"warning's margin): check its frame first{like}: try {try_}; docs/conventions.md "
+            "lists the frames of common sources")
 
 
 class _FieldFile(click.Path):
