@@ -395,8 +395,14 @@ def summary(record: dict) -> str:
     """The one-line text summary of a job's record."""
     info = record["info"]
     H, W = record["shape"]
+    source = record["mask_source"]
+    many = record.get("components") or 1
+    if source == "alpha channel" and many > 1:  # (a height in the alpha splits the mask in
+        # one piece per brick, each at mean depth 0; the warning may not fire, a second audit)
+        source = (f"alpha channel, {many} components integrated apart, their depths "
+                  "unrelated: a height packed in the alpha? --mask replaces it")
     parts = [
-        f"{H}x{W} pixels, {record['facets']} facets (mask: {record['mask_source']})",
+        f"{H}x{W} pixels, {record['facets']} facets (mask: {source})",
         (f"perspective ({record.get('camera', 'K')})" if record.get("perspective")
          else "orthographic"),
         f"method {info.get('method')}" + (f" ({info['solver']})" if "solver" in info else ""),

@@ -540,7 +540,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
     Returns
     -------
     dict
-        ``input``, ``outputs`` (kind -> path), ``shape``, ``facets``, ``mask_source``,
+        ``input``, ``outputs`` (kind -> path), ``shape``, ``facets``, ``components`` (the
+        mask's connected components), ``mask_source``,
         ``perspective``, ``mean_deviation`` (degrees), ``converged``, ``warnings`` (messages),
         ``info`` (JSON-ready ``Surface.info``) and ``timings`` (seconds per phase).
 
@@ -633,6 +634,9 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "outputs": written,
         "shape": [H, W],
         "facets": int(surface.mask.sum()),
+        # (its connected components, each with a constant of its own: an alpha holding a
+        # height splits into one per brick, all at mean depth 0, a second audit)
+        "components": _components(surface.mask),
         "mask_source": inp.mask_source,
         "perspective": surface.K is not None,
         # (where the camera came from, for the summary: K, a field of view, a dataset's K.txt)
@@ -651,6 +655,13 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "timings": {"read": t_read, "integrate": t_integrate,
                     "write": time.perf_counter() - t2, "total": time.perf_counter() - t0},
     }
+
+
+def _components(mask) -> int:
+    """The connected components of `mask`, as the integration's domain counts them."""
+    from .domain import Domain
+
+    return Domain(mask).n_components
 
 
 def _strict_check(caught, surface) -> None:
