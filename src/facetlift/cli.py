@@ -999,14 +999,17 @@ GT_NPZ_NAMES = ("depth_gt", "depth")
               "depths are finite.")
 @click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="The result's camera, as for 'integrate': score it as a perspective depth "
-              "(a surface .npz keeps its own). Without one the result is orthographic.")
+              "(a surface .npz keeps its own). Without one no camera is given and the result "
+              "is scored as orthographic.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def evaluate(result, gt, mask, K, as_json):
     """Score a result RESULT (depth.npy, .exr, .tif or surface.npz, as integrate writes them)
     against a ground-truth depth map: MADE (BiNI's: the result times the median of GT /
     RESULT, then the mean absolute error), that scale, the RMSE after it, the mean absolute
     error without a scale (for metric depth, e.g. a result fused with a depth prior) and, for
-    an orthographic result, the paper's normalised error (facetlift.metrics.evaluate).
+    an orthographic result, the paper's normalised error (facetlift.metrics.evaluate), which
+    needs the result in the ground truth's units: integrate with --pixel-size, the world
+    width of a pixel (a warning says where the depth ranges differ).
 
     \b
     Examples:
@@ -1051,19 +1054,22 @@ def evaluate(result, gt, mask, K, as_json):
         click.echo(json.dumps(jsonable(dict(rec, status="ok", exit_code=EXIT_OK))))
         _STATE["printed_json"] = True
         return EXIT_OK
-    for line in _evaluate_lines(rec, K):
+    for line in _evaluate_lines(rec, K, surface=result.suffix.lower() == ".npz"):
         click.echo(line)
     return EXIT_OK
 
 
-def _evaluate_lines(rec: dict, K) -> list[str]:
+def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
     """``facetlift evaluate``'s text: one line per measure, '-' where it does not apply (the
-    notes say why)."""
+    notes say why). `surface`: the result is a surface .npz, which says its camera (a depth
+    file without --K says none: not "orthographic", a perspective depth.npy was labelled so,
+    an audit)."""
     def num(v):
         return "-" if v is None else f"{v:.6g}"
 
     camera = ("perspective" + (f" (--K {K})" if K is not None else " (the surface's camera)")
-              if rec["perspective"] else "orthographic")
+              if rec["perspective"] else "orthographic (the surface's camera)" if surface
+              else "no camera given: scored as orthographic (up to an offset per piece)")
     uncovered = (f"; {rec['uncovered']} mask pixels left out, where a depth is undefined"
                  if rec["uncovered"] else "")
     ne = rec["normalized_error"]
