@@ -962,6 +962,36 @@ def test_a_two_channel_map_is_read_with_encoding_xy(tmp_path):
         io.read_normals(tmp_path / "rg.exr")
 
 
+def test_a_two_channel_npy_or_tiff_is_read_with_encoding_xy(tmp_path):
+    """A second audit: --normal-encoding xy took a two-channel EXR but refused an (H, W, 2)
+    .npy and a two-channel float TIFF as "must be an (H, W, 3) RGB or (H, W, 4) RGBA normal
+    map", without naming the flag. They are read (floats as stored, 16-bit decoded); without
+    the flag the refusal names it; a two-channel PNG, grey + alpha, is refused for xy too,
+    saying why."""
+    import imagecodecs
+    import tifffile
+
+    n, _ = bump_normals()
+    np.save(tmp_path / "xy.npy", n[..., :2])
+    tifffile.imwrite(tmp_path / "xy.tif", n[..., :2].astype(np.float32))
+    tifffile.imwrite(tmp_path / "xy16.tif", np.round((n[..., :2] + 1) / 2 * 65535)
+                     .astype(np.uint16), photometric="minisblack", planarconfig="contig")
+    for name, atol in (("xy.npy", 1e-12), ("xy.tif", 1e-6), ("xy16.tif", 1e-3)):
+        got, alpha = io.read_normals(tmp_path / name, encoding="xy")
+        assert alpha is None
+        np.testing.assert_allclose(got, n, atol=atol, err_msg=name)
+        with pytest.raises(ValueError, match=r"got shape \(\d+, \d+, 2\) \(2 channel\(s\)\); a "
+                           r"two-channel map storing x and y alone \(BC5, RG\) is read with "
+                           r"--normal-encoding xy \(encoding='xy'\)"):
+            io.read_normals(tmp_path / name)
+    la = np.round((n[..., :2] + 1) / 2 * 255).astype(np.uint8)
+    (tmp_path / "la.png").write_bytes(imagecodecs.png_encode(la))
+    with pytest.raises(ValueError, match=r"or \(H, W, 2\) x, y with --normal-encoding xy "
+                       r"\(.npy or TIFF\); got shape .*a two-channel PNG is grey \+ alpha, not "
+                       r"x, y \(PNG has no two-colour format\): store x, y in R and G of an RGB"):
+        io.read_normals(tmp_path / "la.png", encoding="xy")
+
+
 def _ripples(H=24, W=30):
     """Normals whose surface covers the whole image (no mask), and that surface."""
     yy, xx = np.mgrid[0:H, 0:W]

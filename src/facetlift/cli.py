@@ -155,7 +155,9 @@ _JOB_OPTIONS = [
                  default="xyz", show_default=True,
                  help="How the map stores its normals: xyz = x, y, z in R, G, B; xy = a "
                  "two-channel map (BC5, RG, as game engines compress normal maps): x and y in "
-                 "R and G, z rebuilt as sqrt(1 - x^2 - y^2) facing the viewer, B ignored."),
+                 "R and G, z rebuilt as sqrt(1 - x^2 - y^2) facing the viewer, B ignored; "
+                 "from RGB(A) PNG/TIFF/npy, two-channel TIFF/npy (H, W, 2) or EXR R, G (a "
+                 "two-channel PNG is grey + alpha)."),
     click.option("--gradient-frame", default="xy", show_default=True,
                  help="Layout of a gradient field: xy (p = dz/dx right, q = dz/dy up) or "
                  "rowcol (aliases queau, matlab: p = dz/d(row) down, q = dz/d(col))."),

@@ -336,8 +336,8 @@ def _file_facts(src: Path) -> dict:
             import tifffile
 
             with tifffile.TiffFile(f) as t:
-                page = t.pages[0]
-                facts.update(dtype=str(page.dtype), stored_shape=list(page.shape),
+                page = t.pages[0]  # (the series' shape: a two-channel page's was (W, 2))
+                facts.update(dtype=str(page.dtype), stored_shape=list(t.series[0].shape),
                              encoding="v / max * 2 - 1" if page.dtype.kind == "u"
                              else "as stored")
         elif ext == ".exr":

@@ -193,17 +193,37 @@ def _decode_unit(pixels: np.ndarray, path: Path, arg: str, where=None, encoding:
     )
 
 
-def _split_alpha(pixels: np.ndarray, path: Path, arg: str, check: bool = True):
+def _split_alpha(pixels: np.ndarray, path: Path, arg: str, check: bool = True,
+                 encoding: str = "xyz"):
+    """``(colour channels, alpha mask or None)`` of a normal map's pixels: (H, W, 3) or
+    (H, W, 4), or with `encoding` ``"xy"`` also (H, W, 2) from a .npy or TIFF file (x, y
+    alone, no alpha). A two-channel PNG is grey + alpha (PNG has no two-colour format): refused
+    for ``"xy"`` too, saying so; a two-channel array without ``"xy"`` is refused naming it."""
+    png = path.suffix.lower() == ".png"
+    two = pixels.ndim == 3 and pixels.shape[-1] == 2 and min(pixels.shape[:2]) >= 1
+    if two and encoding == "xy" and not png:
+        return pixels, None
     if pixels.ndim != 3 or pixels.shape[-1] not in (3, 4) or min(pixels.shape[:2]) < 1:
         channels = pixels.shape[-1] if pixels.ndim == 3 else (1 if pixels.ndim == 2 else None)
+        if two and png:  # (a two-channel (x, y) map saved as PNG: its grey and alpha)
+            why = ("; a two-channel PNG is grey + alpha, not x, y (PNG has no two-colour "
+                   "format): store x, y in R and G of an RGB PNG (B is ignored with "
+                   "--normal-encoding xy, encoding='xy'), or as a two-channel .npy, TIFF or "
+                   "EXR file")
+        elif two:
+            why = ("; a two-channel map storing x and y alone (BC5, RG) is read with "
+                   "--normal-encoding xy (encoding='xy'), which rebuilds z")
+        else:
+            why = ("; it looks channel-first (3 or 4, H, W): transpose it to (H, W, 3), e.g. "
+                   "numpy.moveaxis(a, 0, -1)"
+                   if pixels.ndim == 3 and pixels.shape[0] in (3, 4) and pixels.shape[-1] > 4
+                   else "")
         raise ValueError(
-            f"`{arg}`: {path} must be an (H, W, 3) RGB or (H, W, 4) RGBA normal map; got "
-            f"shape {pixels.shape}"
-            + (f" ({channels} channel(s))" if channels is not None else "")
-            + ("; it looks channel-first (3 or 4, H, W): transpose it to (H, W, 3), e.g. "
-               "numpy.moveaxis(a, 0, -1)"
-               if pixels.ndim == 3 and pixels.shape[0] in (3, 4) and pixels.shape[-1] > 4
-               else "")
+            f"`{arg}`: {path} must be an (H, W, 3) RGB or (H, W, 4) RGBA normal map"
+            + (", or (H, W, 2) x, y with --normal-encoding xy (.npy or TIFF)"
+               if encoding == "xy" else "")
+            + f"; got shape {pixels.shape}"
+            + (f" ({channels} channel(s))" if channels is not None else "") + why
         )
     if pixels.shape[-1] == 4:
         return pixels[..., :3], _alpha_mask(pixels[..., 3], path, arg, check)
@@ -318,7 +338,9 @@ def read_normals(
     encoding : {"xyz", "xy"}
         ``"xyz"`` (default): x, y, z in R, G, B. ``"xy"``: a two-channel map (BC5, "RG", as
         game engines compress tangent-space maps) storing x and y alone in R and G (8/16-bit
-        values decoded as ``v / max * 2 - 1``, floats as stored; EXR channels R, G or X, Y);
+        values decoded as ``v / max * 2 - 1``, floats as stored; EXR channels R, G or X, Y;
+        an (H, W, 2) .npy or two-channel TIFF, or the first two channels of an RGB(A) file:
+        a two-channel PNG is grey + alpha and is refused);
         z is rebuilt as ``sqrt(max(0, 1 - x^2 - y^2))``, facing the viewer, and B, if any,
         is ignored (:func:`facetlift.frames.decode_xy`). An integer pixel whose x, y are
         longer than unit length (black or white fill) holds no normal; a mid-grey fill reads
@@ -353,8 +375,9 @@ def read_normals(
             with open(p, "rb") as fh:
                 _check_png_normals(fh.read(26), p, arg)
         pixels = _decode_image(p, ext, arg)
-        rgb, alpha = _split_alpha(pixels, p, arg, check_alpha)
-        frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
+        rgb, alpha = _split_alpha(pixels, p, arg, check_alpha, encoding)
+        if rgb.shape[-1] == 3:  # (R = G = B: no two-channel map's sign)
+            frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
         n = _decode_unit(rgb, p, arg, alpha, encoding, frame)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
@@ -373,8 +396,9 @@ def read_normals(
             n = frames.decode_xy(n, frame=frame)
     else:
         arr = _read_npy(p, arg)
-        rgb, alpha = _split_alpha(arr, p, arg, check_alpha)
-        frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
+        rgb, alpha = _split_alpha(arr, p, arg, check_alpha, encoding)
+        if rgb.shape[-1] == 3:
+            frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
         # (uint8/uint16 arrays decode like PNG pixels)
         n = _decode_unit(rgb, p, arg, alpha, encoding, frame)
     return frames.to_facetlift(n, frame), alpha
