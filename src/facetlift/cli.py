@@ -756,7 +756,10 @@ def _info_lines(rec: dict) -> list[str]:
         lines.append(f"  encoding: {rec['encoding']}")
     frame = rec.get("frame", {})
     lines.append(f"  frame: read as {frame.get('as_read')}; likely {frame.get('likely', '?')}")
-    lines.append(f"  camera: {rec['projection']}" + (f", K = {rec['K']}" if rec["K"] else ""))
+    source = rec.get("camera")
+    lines.append(f"  camera: {rec['projection']}"
+                 + (f" ({source})" if rec["K"] and source not in (None, "orthographic") else "")
+                 + (f", K = {rec['K']}" if rec["K"] else ""))
     for name, what in (("prior", "depth prior"), ("confidence", "normal confidence")):
         if rec.get(name):  # (--prior / --confidence, or a dataset folder's own files)
             got = rec[name]
@@ -898,7 +901,8 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     try:
         records = run_batch(inputs, outdir, job=job, workers=workers, scheduler=scheduler,
                             resume=resume, progress=_show_progress(progress),
-                            list_file=list_file, on_record=stream)
+                            list_file=list_file, on_record=stream,
+                            wording=lambda m: _as_flags(" ".join(m.split())))
     except (KeyboardInterrupt, click.exceptions.Abort, Terminated, WorkersDied):
         # (stopped from outside, or its workers died: what this run finished is said first)
         if known:

@@ -156,7 +156,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         As the readers (unreadable file, bad frame).
     """
     from . import frames
-    from .jobs import Job, read, recorded_warnings
+    from .jobs import Job, camera_source, read, recorded_warnings
     from .problem import UnusableNormalsWarning, no_camera_hint, prepare
 
     job = Job(normals=None if path is None else str(path),
@@ -203,7 +203,10 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     H, W = n.shape[:2]
     where = dict(shape=[H, W], mask_source=inp.mask_source,
                  K=None if inp.K is None else inp.K.tolist(),
-                 projection="perspective" if inp.K is not None else "orthographic")
+                 projection="perspective" if inp.K is not None else "orthographic",
+                 # (where K came from, as integrate's summary says: a DiLiGenT folder's is
+                 # its parent's Calib_Results.mat, which info did not name, a second audit)
+                 camera=camera_source(job, inp))
 
     def unusable(e: ValueError) -> dict:  # (integrate would refuse it: why, and the frame)
         out.update(usable=False, problem=str(e),

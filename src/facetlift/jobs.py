@@ -278,6 +278,17 @@ def read(job: Job) -> Input:
                  else _camera_name(K_file, src))
 
 
+def camera_source(job: Job, inp: Input) -> str:
+    """Where the camera of `job` read as `inp` (:func:`read`) came from, as the summaries
+    name it: "orthographic" without one, "K" (given), "fov D deg", or "the folder's K.txt"
+    (a DiLiGenT folder's "../Calib_Results.mat"); integrate's and info's alike."""
+    if inp.K is None:
+        return "orthographic"
+    if job.fov is not None:
+        return f"fov {float(job.fov):g} deg"
+    return "K" if job.K is not None else f"the folder's {inp.K_file or 'K.txt'}"
+
+
 def _camera_name(path: Path, folder: Path) -> str:
     """A dataset folder's camera file as the summary names it: ``K.txt``, or
     ``../Calib_Results.mat`` where it is the parent's."""
@@ -640,9 +651,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "mask_source": inp.mask_source,
         "perspective": surface.K is not None,
         # (where the camera came from, for the summary: K, a field of view, a dataset's K.txt)
-        "camera": ("orthographic" if surface.K is None else
-                   f"fov {float(job.fov):g} deg" if job.fov is not None else
-                   "K" if job.K is not None else f"the folder's {inp.K_file or 'K.txt'}"),
+        "camera": camera_source(job, inp) if surface.K is not None else "orthographic",
         # (the depth of height.png's 0 and 65535, as io.write_height scales it)
         "depth_range": _depth_range(surface, job.height_range if "height" in save else None),
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),
