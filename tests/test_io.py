@@ -1044,6 +1044,26 @@ def test_height_exr_holds_the_heights_and_round_trips(tmp_path):
     np.testing.assert_allclose(h[~np.isnan(d)], -d[~np.isnan(d)], rtol=1e-6, atol=1e-6)
 
 
+def test_a_symmetric_height_range_puts_each_maps_mean_height_at_mid_grey(tmp_path,
+                                                                          brick_texture):
+    """docs/cli.md's --height-range (a second audit asked what a set's range is relative
+    to): each map's heights have mean 0 (the gauge, mean depth 0), so two maps of a set, one
+    with deeper grooves, differ in their groove bottoms' heights; a symmetric range -R R
+    gives both the same texels per code and their mean height at mid-grey."""
+    import imagecodecs
+
+    means = []
+    for depth in (4.0, 6.0):
+        _, n = brick_texture(size=128, brick=(64, 32), depth=depth)
+        s = facetlift.integrate(n)
+        assert np.mean(s.depth) == pytest.approx(0, abs=1e-9)
+        path, _ = io.write_height(tmp_path / f"h{depth:g}.png", s, height_range=(-8.0, 8.0))
+        img = imagecodecs.png_decode(path.read_bytes()).astype(float)
+        np.testing.assert_allclose(img, (-s.depth + 8.0) / 16.0 * 65535, atol=0.5 + 1e-6)
+        means.append(img.mean())
+    np.testing.assert_allclose(means, 32767.5, atol=0.5)
+
+
 def test_a_fixed_height_range_scales_every_map_alike_and_counts_what_it_clips(tmp_path,
                                                                               capsys):
     """A texture set was normalised map by map (one overshooting pixel set each map's
