@@ -305,7 +305,8 @@ def test_info_on_the_bear(capsys):
     code, out, err = run(capsys, "info", BEAR)
     assert code == 0, err
     assert "512x612 pixels (format png, bit_depth 16, channels RGB)" in out
-    assert "encoding: v / 65535 * 2 - 1" in out and "perspective, K = [[3772" in out
+    assert "encoding: v / 65535 * 2 - 1" in out
+    assert "perspective (the folder's K.txt), K = [[3772" in out
     assert "likely as read (consistent)" in out and "1 component(s)" in out
     assert re.search(r"default integration \(estimate\): peak about \d+ MiB above the input "
                      r"\(dgp-pcg route; within the [0-9.]+ [MG]iB allowed here\), "
