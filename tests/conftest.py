@@ -6,7 +6,8 @@ sampled with the facetlift conventions: pixel ``(r, c)`` has its centre at
 ``x = x0 + j h``, ``y = y0 - i h``, where ``(x0, y0)`` is the world position of vertex (0, 0).
 
 Fixtures: ``make_plane(p, q)``, ``saddle`` (x^2 - y^2), ``wave`` (sin x cos y) and
-``rel_err(estimate, truth)``.
+``rel_err(estimate, truth)``;  ``brick_texture``
+(:func:`bricks`: a brick texture's height and normals).
 """
 
 from __future__ import annotations
@@ -90,6 +91,41 @@ def relative_error(estimate, truth) -> float:
     d = estimate[ok] - truth[ok]
     span = np.ptp(truth[ok])
     return float(np.abs(d - d.mean()).max() / (span if span > 0 else 1.0))
+
+
+def bricks(size=512, brick=(128, 64), depth=6.0, bevel=(1.5, 7.0), heights=None):
+    """A brick texture (a second audit's): ``(height, normals)``, (H, W) and (H, W, 3) in the
+    facetlift frame, `size` texels square, bricks `brick` = (width, height) texels in rows
+    offset by half a brick, grooves `depth` texels deep whose flat bottom ends `bevel[0]`
+    texels from the joint and whose smooth bevel `bevel[1]`. `heights`: per brick row, a
+    factor of `depth` for its faces (different heights: a displacement map that a mask cannot
+    be)."""
+    bw, bh = brick
+    w0, w1 = bevel
+
+    def smooth(t):
+        t = np.clip(t, 0, 1)
+        return t * t * t * (t * (6 * t - 15) + 10)
+
+    def height(x, down):
+        row = np.floor(down / bh)
+        u = np.mod(x - np.where(row % 2 == 1, bw / 2, 0.0), bw)
+        v = np.mod(down, bh)
+        level = 1.0 if heights is None else np.asarray(heights)[row.astype(int) % len(heights)]
+        return (depth * level * smooth((np.minimum(u, bw - u) - w0) / (w1 - w0))
+                * smooth((np.minimum(v, bh - v) - w0) / (w1 - w0)))
+
+    r, c = np.indices((size, size)).astype(float)
+    x, down, e = c + 0.5, r + 0.5, 1e-5
+    p = (height(x + e, down) - height(x - e, down)) / (2 * e)
+    q = -(height(x, down + e) - height(x, down - e)) / (2 * e)  # (y up: rows run down)
+    return height(x, down), facetlift.normals_from_gradients(p, q)
+
+
+@pytest.fixture
+def brick_texture():
+    """:func:`bricks`."""
+    return bricks
 
 
 @pytest.fixture

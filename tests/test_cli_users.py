@@ -305,7 +305,8 @@ def test_info_on_the_bear(capsys):
     code, out, err = run(capsys, "info", BEAR)
     assert code == 0, err
     assert "512x612 pixels (format png, bit_depth 16, channels RGB)" in out
-    assert "encoding: v / 65535 * 2 - 1" in out and "perspective, K = [[3772" in out
+    assert "encoding: v / 65535 * 2 - 1" in out
+    assert "perspective (the folder's K.txt), K = [[3772" in out
     assert "likely as read (consistent)" in out and "1 component(s)" in out
     assert re.search(r"default integration \(estimate\): peak about \d+ MiB above the input "
                      r"\(dgp-pcg route; within the [0-9.]+ [MG]iB allowed here\), "
@@ -1268,6 +1269,39 @@ def test_the_jump_hint_names_a_dense_prior_too(capsys):
     assert "--method dgp --discontinuities keeps them ('poisson' cannot)" in other
     assert _jump_hint(SimpleNamespace(method="regularization", options={}),
                       {**info, "method": "regularization", "prior": "laplacian"}) is not None
+    capsys.readouterr()
+
+
+def test_the_jump_hint_names_the_frame_first_where_a_flip_is_more_integrable(capsys):
+    """A second audit: a y-down texture read as y up (relative curl 0.94 as given, 0.74
+    flipped: short of the frame check's margins) was told only that --discontinuities keeps
+    its jumps, and following it gave an inside-out result (61 % height error against 0.6 %).
+    Where the flipped field is clearly more integrable the hint names the frame to try first,
+    as the frame check words it; an object with jumps in its right frame (flipped 0.9 of its
+    own curl or more) keeps the hint as it was."""
+    from types import SimpleNamespace
+
+    from facetlift.cli import _jump_hint
+
+    job = SimpleNamespace(method="dgp", options={}, normal_frame=None, gradients=None)
+    info = {"method": "dgp", "deviation_over_10": 0.052, "input": {"usable": 1000},
+            "integrability": {"curl": 0.936, "curl_y_flipped": 0.736, "curl_x_flipped": 0.736}}
+    hint = _jump_hint(job, info)
+    frame, jumps = hint.split("If the frame is right")
+    assert "more integrable with y flipped (relative curl 0.94 as given, 0.74" in frame
+    assert "check its frame first" in frame and "try --normal-frame directx" in frame
+    assert "--normal-frame=-x,y,z" in frame  # (undecided: the other flip, inside-out)
+    assert "--discontinuities keeps them" in jumps
+    # read in DirectX already: the flip back is the default frame
+    dx = _jump_hint(SimpleNamespace(**{**vars(job), "normal_frame": "directx"}), info)
+    assert "try the default frame (no --normal-frame" in dx
+    # a gradient field names the slope, not a frame
+    field = _jump_hint(SimpleNamespace(**{**vars(job), "gradients": ("p", "q")}), info)
+    assert "the field is more integrable" in field and "negating the y slope" in field
+    for flipped in (0.9, 1.2):  # (the right frame: as before)
+        plain = _jump_hint(job, {**info, "integrability": {
+            "curl": 0.936, "curl_y_flipped": flipped * 0.936, "curl_x_flipped": 1.0}})
+        assert "frame" not in plain and "--discontinuities keeps them" in plain
     capsys.readouterr()
 
 

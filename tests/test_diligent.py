@@ -172,9 +172,35 @@ def test_integrate_a_diligent_folder(tmp_path, capsys):
                                rtol=1e-9)
     code, stdout, err = run(capsys, "integrate", tmp_path / "bearPNG", "-o", out)
     assert code == 0 and "perspective (the folder's ../Calib_Results.mat)" in stdout, err
+    # info says where K came from, as integrate does (a second audit: it gave K alone)
     code, stdout, err = run(capsys, "info", tmp_path / "bearPNG")
     assert code == 0, err
-    assert "(format mat)" in stdout and "camera: perspective, K = [[300.0" in stdout
+    assert "(format mat)" in stdout
+    assert ("camera: perspective (the folder's ../Calib_Results.mat), K = [[300.0"
+            in stdout)
+    code, stdout, err = run(capsys, "info", tmp_path / "bearPNG", "--json")
+    assert code == 0 and json.loads(stdout)["camera"] == "the folder's ../Calib_Results.mat"
+    code, stdout, err = run(capsys, "info", tmp_path / "bearPNG", "--K",
+                            tmp_path / "Calib_Results.mat", "--json")
+    assert code == 0 and json.loads(stdout)["camera"] == "K", err
+    code, stdout, err = run(capsys, "info", tmp_path / "bearPNG", "--fov", "40")
+    assert code == 0 and "camera: perspective (fov 40 deg), K = " in stdout, err
+
+
+def test_a_corrupt_normal_gt_is_worded_alike_on_stderr_and_in_the_log(tmp_path, capsys):
+    """A second audit: a batch item whose Normal_gt.mat is corrupt was "NORMALS: ..." on
+    stderr and "`folder`: ..." in batch.jsonl; the command line's log words its errors and
+    warnings as its stderr does (the library's batch keeps the Python names)."""
+    diligent(tmp_path / "pmsData", ("bearPNG",))
+    bad = tmp_path / "pmsData" / "bearPNG" / "Normal_gt.mat"
+    bad.write_bytes(bad.read_bytes()[:200])
+    code, _, err = run(capsys, "batch", tmp_path / "pmsData", "-o", tmp_path / "out")
+    assert code == 1
+    said = err.split("facetlift: error: bearPNG (error): ", 1)[1].splitlines()[0]
+    rec = json.loads((tmp_path / "out" / "batch.jsonl").read_text().splitlines()[0])
+    assert rec["error"] == said and said.startswith("NORMALS: ") and "Normal_gt.mat" in said
+    recs = fb.batch([tmp_path / "pmsData"], tmp_path / "lib")
+    assert recs[0]["error"].startswith("`folder`: ")
 
 
 def test_normal_gt_given_by_its_path_names_the_folders_files(tmp_path, capsys):

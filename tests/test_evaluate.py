@@ -78,6 +78,41 @@ def test_orthographic_measures_and_when_no_scale_applies():
     assert rec["made"] == 0 and rec["scale"] == 0.75
 
 
+def test_an_orthographic_result_in_other_units_is_warned_about():
+    """A second audit: the DiLiGenT bear integrated orthographically in pixels spans 2.3
+    times its truth in mm and scored a normalised error of 26.5 % without a word (2.3 % with
+    --pixel-size 0.397). Where the depth ranges (1st to 99th percentile) differ by more than
+    1.5 x the warning names the pixel size and the factor; a smaller range names depth jumps
+    too; a right one is silent; positive depths are told of the camera."""
+    import warnings
+
+    _, gt, mask = scene()
+    m = mask & np.isfinite(gt)
+    est = gt - gt[m].mean()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rec = metrics.evaluate(est, gt, mask)
+    assert rec["range_ratio"] == pytest.approx(1.0)
+    with pytest.warns(UserWarning) as caught:
+        rec = metrics.evaluate(2.3 * est, gt, mask)
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1, said  # (not again as the offset errors' spread warning)
+    assert rec["range_ratio"] == pytest.approx(2.3)
+    assert ("depth range (1st to 99th percentile over the 428 pixels scored) is 2.3 times the "
+            "ground truth's") in said[0]
+    assert "--pixel-size on the command line" in said[0] and "about 0.435 times" in said[0]
+    assert "depth jumps" not in said[0]
+    with pytest.warns(UserWarning, match=r"is 0.5 times .*--pixel-size.*flattened across "
+                                          r"depth jumps"):
+        metrics.evaluate(0.5 * est, gt, mask)
+    with pytest.warns(UserWarning, match=r"Its depths are all > 0, as a perspective "
+                                          r"result's are .*--K on the command line"):
+        assert metrics.evaluate(gt / 1500, gt, mask)["made"] is not None
+    assert metrics.evaluate(gt, gt, mask, perspective=True)["range_ratio"] is None
+    flat = np.full(gt.shape, 3.0)
+    assert metrics.evaluate(flat - 3, flat)["range_ratio"] is None  # (a flat truth: none)
+
+
 def test_refusals_name_what_is_wrong():
     est, gt, mask = scene()
     with pytest.raises(ValueError, match=r"`truth` must have the shape of `estimate`"):
@@ -126,10 +161,21 @@ def test_cli_evaluate(tmp_path, capsys):
     got = json.loads(out)
     assert code == 0 and got["status"] == "ok" and got["perspective"] is True
     assert got["made"] == pytest.approx(rec["made"]) and got["pixels"] == 428
-    # without --K: orthographic, with the paper's error, and a note on the positive depths
-    code, out, _ = run(capsys, *args[:-2])
-    assert code == 0 and "orthographic" in out and "% of the ground truth's depth range" in out
+    # without --K: no camera given, scored as orthographic with the paper's error, MADE
+    # where the depths are all > 0, a note on them and a warning on the ranges (an audit: it
+    # said "orthographic" and the docs said MADE is then "-")
+    code, out, err = run(capsys, *args[:-2])
+    assert code == 0 and "% of the ground truth's depth range" in out
+    assert "no camera given: scored as orthographic (up to an offset per piece)" in out
+    assert f"MADE:              {rec['made']:.6g}" in out
     assert "give --K to score it as one" in out
+    assert "facetlift: warning: the result's depth range" in err and "--K on the" in err
+    # an orthographic result in pixels against a truth in mm: the warning names --pixel-size
+    np.save(tmp_path / "pixels.npy", 2.3 * (gt - np.nanmean(gt[mask])))
+    code, out, err = run(capsys, "evaluate", tmp_path / "pixels.npy", "--gt",
+                         tmp_path / "depth_gt.npz", "-m", tmp_path / "mask.png", "--json")
+    assert code == 0 and json.loads(out)["range_ratio"] == pytest.approx(2.3, rel=1e-4)
+    assert "is 2.3 times the ground truth's" in err and "--pixel-size" in err
     # a surface .npz keeps its camera; a --K that differs from it is refused
     s = facetlift.integrate(facetlift.normals_from_gradients(np.full((20, 26), 0.01),
                                                              np.zeros((20, 26))), K=K)

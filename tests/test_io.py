@@ -1,5 +1,6 @@
 """Round trips and error paths of facetlift.io."""
 
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -130,6 +131,47 @@ def test_a_height_in_the_alpha_is_warned_about_and_an_antialiased_edge_is_not(tm
         inp = jobs.read(jobs.Job(normals=str(tmp_path / "height.png"),
                                  mask=str(tmp_path / "all.png")))
         assert inp.mask.all()
+
+
+def test_a_height_on_bevelled_bricks_in_the_alpha_is_warned_about(tmp_path, brick_texture):
+    """A second audit: bricks whose alpha is 0 in the groove bottoms and 255 on the faces,
+    with 6-texel bevels, have their in-between values within 2 px of both on all but 4.4 % of
+    the pixels (6 levels) and went unwarned; the middles of ramps wider than an antialiased
+    edge count too. A feathered edge (a mask blurred with sigma 3 px) is such a ramp and is
+    warned about (its soft band is taken as inside, past the object); flat translucent areas
+    with antialiased edges are not, nor is a 1-px-feathered edge on a small share."""
+    import imagecodecs
+    from scipy import ndimage
+
+    h, n = brick_texture(size=256)
+    px = np.round((n * [1, -1, 1] + 1) / 2 * 255).astype(np.uint8)
+
+    def read(name, alpha):
+        (tmp_path / name).write_bytes(imagecodecs.png_encode(
+            np.ascontiguousarray(np.dstack([px, np.round(alpha).astype(np.uint8)]))))
+        with warnings.catch_warnings(record=True) as rec:
+            warnings.simplefilter("always")
+            io.read_normals(tmp_path / name, frame="directx")
+        return [str(w.message) for w in rec if "alpha channel" in str(w.message)]
+
+    said = read("bricks.png", h / h.max() * 255)
+    assert len(said) == 1 and re.search(r"holds 1\d distinct levels between 0 and its largest, "
+                                        r"255, on 1\d% of the pixels, away from its edge or on "
+                                        r"ramps wider than an antialiased edge \(a height", said[0])
+    ss = 8  # (an antialiased ellipse 140 px across: its exact coverage)
+    yy, xx = (np.mgrid[0:256 * ss, 0:256 * ss] + 0.5) / ss
+
+    def cover(radius):
+        inside = (yy - 128.37) ** 2 / 2.3 + (xx - 128.21) ** 2 < radius**2
+        return inside.reshape(256, ss, 256, ss).mean(axis=(1, 3))
+
+    outer, inner = cover(70.3), cover(40)
+    assert read("aa.png", outer * 255) == []
+    assert read("translucent.png", outer * 255 - inner * 127) == []  # (128 inside, AA edges)
+    assert read("feather1.png", ndimage.gaussian_filter((outer > 0.5) * 255.0, 1)) == []
+    said = read("feather3.png", ndimage.gaussian_filter((outer > 0.5) * 255.0, 3))
+    assert len(said) == 1 and "or a feathered edge, whose whole soft band" in said[0]
+    assert "its alpha thresholded at half its largest" in said[0]
 
 
 def test_a_height_in_a_float_alpha_with_nan_is_warned_about(tmp_path):
@@ -920,6 +962,36 @@ def test_a_two_channel_map_is_read_with_encoding_xy(tmp_path):
         io.read_normals(tmp_path / "rg.exr")
 
 
+def test_a_two_channel_npy_or_tiff_is_read_with_encoding_xy(tmp_path):
+    """A second audit: --normal-encoding xy took a two-channel EXR but refused an (H, W, 2)
+    .npy and a two-channel float TIFF as "must be an (H, W, 3) RGB or (H, W, 4) RGBA normal
+    map", without naming the flag. They are read (floats as stored, 16-bit decoded); without
+    the flag the refusal names it; a two-channel PNG, grey + alpha, is refused for xy too,
+    saying why."""
+    import imagecodecs
+    import tifffile
+
+    n, _ = bump_normals()
+    np.save(tmp_path / "xy.npy", n[..., :2])
+    tifffile.imwrite(tmp_path / "xy.tif", n[..., :2].astype(np.float32))
+    tifffile.imwrite(tmp_path / "xy16.tif", np.round((n[..., :2] + 1) / 2 * 65535)
+                     .astype(np.uint16), photometric="minisblack", planarconfig="contig")
+    for name, atol in (("xy.npy", 1e-12), ("xy.tif", 1e-6), ("xy16.tif", 1e-3)):
+        got, alpha = io.read_normals(tmp_path / name, encoding="xy")
+        assert alpha is None
+        np.testing.assert_allclose(got, n, atol=atol, err_msg=name)
+        with pytest.raises(ValueError, match=r"got shape \(\d+, \d+, 2\) \(2 channel\(s\)\); a "
+                           r"two-channel map storing x and y alone \(BC5, RG\) is read with "
+                           r"--normal-encoding xy \(encoding='xy'\)"):
+            io.read_normals(tmp_path / name)
+    la = np.round((n[..., :2] + 1) / 2 * 255).astype(np.uint8)
+    (tmp_path / "la.png").write_bytes(imagecodecs.png_encode(la))
+    with pytest.raises(ValueError, match=r"or \(H, W, 2\) x, y with --normal-encoding xy "
+                       r"\(.npy or TIFF\); got shape .*a two-channel PNG is grey \+ alpha, not "
+                       r"x, y \(PNG has no two-colour format\): store x, y in R and G of an RGB"):
+        io.read_normals(tmp_path / "la.png", encoding="xy")
+
+
 def _ripples(H=24, W=30):
     """Normals whose surface covers the whole image (no mask), and that surface."""
     yy, xx = np.mgrid[0:H, 0:W]
@@ -970,6 +1042,26 @@ def test_height_exr_holds_the_heights_and_round_trips(tmp_path):
     h = io.read_depth(tmp_path / "o" / "height.exr")
     np.testing.assert_array_equal(np.isnan(h), np.isnan(d))
     np.testing.assert_allclose(h[~np.isnan(d)], -d[~np.isnan(d)], rtol=1e-6, atol=1e-6)
+
+
+def test_a_symmetric_height_range_puts_each_maps_mean_height_at_mid_grey(tmp_path,
+                                                                          brick_texture):
+    """docs/cli.md's --height-range (a second audit asked what a set's range is relative
+    to): each map's heights have mean 0 (the gauge, mean depth 0), so two maps of a set, one
+    with deeper grooves, differ in their groove bottoms' heights; a symmetric range -R R
+    gives both the same texels per code and their mean height at mid-grey."""
+    import imagecodecs
+
+    means = []
+    for depth in (4.0, 6.0):
+        _, n = brick_texture(size=128, brick=(64, 32), depth=depth)
+        s = facetlift.integrate(n)
+        assert np.mean(s.depth) == pytest.approx(0, abs=1e-9)
+        path, _ = io.write_height(tmp_path / f"h{depth:g}.png", s, height_range=(-8.0, 8.0))
+        img = imagecodecs.png_decode(path.read_bytes()).astype(float)
+        np.testing.assert_allclose(img, (-s.depth + 8.0) / 16.0 * 65535, atol=0.5 + 1e-6)
+        means.append(img.mean())
+    np.testing.assert_allclose(means, 32767.5, atol=0.5)
 
 
 def test_a_fixed_height_range_scales_every_map_alike_and_counts_what_it_clips(tmp_path,

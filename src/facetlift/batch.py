@@ -444,7 +444,8 @@ def _complete(rec: dict, asked: dict, stamp: list | None = None) -> bool:
 
 def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
           scheduler=None, resume: bool = False, progress: bool = False,
-          list_file=None, log=None, on_record=None, **job_options) -> list[dict]:
+          list_file=None, log=None, on_record=None, wording=None,
+          **job_options) -> list[dict]:
     """Integrate many normal maps, each into ``out/<name>/``.
 
     Parameters
@@ -480,6 +481,11 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     on_record : callable, optional
         Called with each item's record as soon as it is known: the resumed ones first, then
         each finished one as it finishes (in the order they finish), after its log line.
+    wording : callable, optional
+        ``wording(message) -> str``, applied to each finished item's error and warnings before
+        its log line: the command line's names its flags, as on its stderr (a second audit:
+        a corrupt Normal_gt.mat was "NORMALS: ..." on stderr and "`folder`: ..." in the log).
+        Default: the library's words, naming Python arguments.
 
     Returns
     -------
@@ -563,6 +569,10 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         def done(it: Item, rec: dict) -> None:
             rec = dict(rec, item=it.path, name=it.name, settings=asked,
                        input_stamp=stamps[it.path])
+            if wording is not None:
+                rec["warnings"] = [wording(str(w)) for w in rec.get("warnings") or ()]
+                if rec.get("error") is not None:
+                    rec["error"] = wording(str(rec["error"]))
             results[it.path] = rec
             fh.write(json.dumps(log_record(rec)) + "\n")
             fh.flush()

@@ -155,7 +155,9 @@ _JOB_OPTIONS = [
                  default="xyz", show_default=True,
                  help="How the map stores its normals: xyz = x, y, z in R, G, B; xy = a "
                  "two-channel map (BC5, RG, as game engines compress normal maps): x and y in "
-                 "R and G, z rebuilt as sqrt(1 - x^2 - y^2) facing the viewer, B ignored."),
+                 "R and G, z rebuilt as sqrt(1 - x^2 - y^2) facing the viewer, B ignored; "
+                 "from RGB(A) PNG/TIFF/npy, two-channel TIFF/npy (H, W, 2) or EXR R, G (a "
+                 "two-channel PNG is grey + alpha)."),
     click.option("--gradient-frame", default="xy", show_default=True,
                  help="Layout of a gradient field: xy (p = dz/dx right, q = dz/dy up) or "
                  "rowcol (aliases queau, matlab: p = dz/d(row) down, q = dz/d(col))."),
@@ -395,8 +397,14 @@ def summary(record: dict) -> str:
     """The one-line text summary of a job's record."""
     info = record["info"]
     H, W = record["shape"]
+    source = record["mask_source"]
+    many = record.get("components") or 1
+    if source == "alpha channel" and many > 1:  # (a height in the alpha splits the mask in
+        # one piece per brick, each at mean depth 0; the warning may not fire, a second audit)
+        source = (f"alpha channel, {many} components integrated apart, their depths "
+                  "unrelated: a height packed in the alpha? --mask replaces it")
     parts = [
-        f"{H}x{W} pixels, {record['facets']} facets (mask: {record['mask_source']})",
+        f"{H}x{W} pixels, {record['facets']} facets (mask: {source})",
         (f"perspective ({record.get('camera', 'K')})" if record.get("perspective")
          else "orthographic"),
         f"method {info.get('method')}" + (f" ({info['solver']})" if "solver" in info else ""),
@@ -466,6 +474,16 @@ def summary(record: dict) -> str:
 #: to keep; every render above with jumps is at 0.04 or more with exact normals (0.12 and
 #: more where the discontinuity route halves the error), the DiLiGenT bear at 0.22.
 JUMP_HINT_SHARE, JUMP_HINT_CURL = 0.002, 0.02
+#: Where the flipped field's relative curl is below this fraction of the field's own (and the
+#: own above :data:`facetlift.frames.FLIP_MIN_CURL`), short of the frame check's hint
+#: (:data:`facetlift.frames.FLIP_HINT`), the jump hint names the frame first: a second audit's
+#: y-down brick texture read 0.94 as given and 0.74 flipped (0.79; a sampling artefact since
+#: mended, :func:`facetlift.frames._strided`), was told only of --discontinuities, and
+#: following it gave an inside-out result (61 % height error, 0.6 % in its frame). In their
+#: right frame the discontinuity benchmark's 80 cached renders (exact, 8-bit, 3-deg noise,
+#: smoothed noise, 2 % outliers; 2026-12-06) came to 0.88 at the least (wide tray_bottom
+#: with outliers), 0.94 without outliers.
+JUMP_FRAME_RATIO = 0.85
 
 
 def _jump_hint(job, info: dict) -> str | None:
@@ -473,7 +491,8 @@ def _jump_hint(job, info: dict) -> str | None:
     jumps, but did not (its own default, e.g. bini's, or the option given), deviates from its
     normals in the way bent-across jumps do (:data:`JUMP_HINT_SHARE`); not where the map
     seems read in the wrong frame (that warning explains the deviation); None where there is
-    no hint."""
+    no hint. Where the field is more integrable flipped (:data:`JUMP_FRAME_RATIO`) it names
+    the frame to try first, and the jumps only if the frame is right."""
     from . import frames
 
     share = info.get("deviation_over_10")
@@ -503,11 +522,43 @@ def _jump_hint(job, info: dict) -> str | None:
     # the same deviation got no word, a user's check)
     keep = ("--discontinuities keeps them" if method.discontinuities else
             f"--method dgp --discontinuities keeps them ({method.name!r} cannot)")
-    hint = (f"{share:.1%} of the facets deviate from their normals by more than 10 deg, as "
-            f"where a smooth surface bends across depth jumps: {keep} "
-            f"(slower; docs/perspective.md){also}")
+    head = f"{share:.1%} of the facets deviate from their normals by more than 10 deg"
+    frame = _frame_first(job, ic) if own is not None else None
+    if frame is None:
+        hint = (f"{head}, as where a smooth surface bends across depth jumps: {keep} "
+                f"(slower; docs/perspective.md){also}")
+    else:
+        hint = (f"{head}{frame}. If the frame is right, a smooth surface bent across depth "
+                f"jumps does this too: {keep} (slower; docs/perspective.md){also}")
     click.echo(f"hint: {hint}", err=True)
     return hint
+
+
+def _frame_first(job, ic: dict) -> str | None:
+    """:func:`_jump_hint`'s words on the frame where the field's relative curls `ic`
+    (``info["integrability"]``) say it is more integrable flipped (:data:`JUMP_FRAME_RATIO`),
+    naming the flag to try as the frame check does (:func:`facetlift.frames.flip_advice`);
+    None otherwise."""
+    from . import frames
+
+    own = ic["curl"]
+    a, b = frames.flip_order(ic)
+    flipped = ic[f"curl_{a}_flipped"]
+    if not (own > frames.FLIP_MIN_CURL and flipped < JUMP_FRAME_RATIO * own):
+        return None
+    read = frames.GRADIENT_FIELD if getattr(job, "gradients", None) else getattr(
+        job, "normal_frame", None)
+    try_ = frames.flip_advice(read, a)
+    if not frames.flip_decided(ic) and read != frames.GRADIENT_FIELD:
+        try_ = (f"{try_} (or {frames.flip_advice(read, b)}: the two flips give surfaces "
+                "inside-out from each other; keep the one that bulges where the object does)")
+    field = read == frames.GRADIENT_FIELD
+    like = (", as a map whose y runs down (DirectX's, most game engines') read as y up does"
+            if a == "y" and not field else "")
+    return (f", and the {'field' if field else 'map'} is more integrable with {a} flipped "
+            f"(relative curl {own:.2f} as given, {flipped:.2f} flipped; short of the frame "
+            f"warning's margin): check its frame first{like}: try {try_}; docs/conventions.md "
+            "lists the frames of common sources")
 
 
 class _FieldFile(click.Path):
@@ -705,7 +756,10 @@ def _info_lines(rec: dict) -> list[str]:
         lines.append(f"  encoding: {rec['encoding']}")
     frame = rec.get("frame", {})
     lines.append(f"  frame: read as {frame.get('as_read')}; likely {frame.get('likely', '?')}")
-    lines.append(f"  camera: {rec['projection']}" + (f", K = {rec['K']}" if rec["K"] else ""))
+    source = rec.get("camera")
+    lines.append(f"  camera: {rec['projection']}"
+                 + (f" ({source})" if rec["K"] and source not in (None, "orthographic") else "")
+                 + (f", K = {rec['K']}" if rec["K"] else ""))
     for name, what in (("prior", "depth prior"), ("confidence", "normal confidence")):
         if rec.get(name):  # (--prior / --confidence, or a dataset folder's own files)
             got = rec[name]
@@ -847,7 +901,8 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     try:
         records = run_batch(inputs, outdir, job=job, workers=workers, scheduler=scheduler,
                             resume=resume, progress=_show_progress(progress),
-                            list_file=list_file, on_record=stream)
+                            list_file=list_file, on_record=stream,
+                            wording=lambda m: _as_flags(" ".join(m.split())))
     except (KeyboardInterrupt, click.exceptions.Abort, Terminated, WorkersDied):
         # (stopped from outside, or its workers died: what this run finished is said first)
         if known:
@@ -950,14 +1005,17 @@ GT_NPZ_NAMES = ("depth_gt", "depth")
               "depths are finite.")
 @click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="The result's camera, as for 'integrate': score it as a perspective depth "
-              "(a surface .npz keeps its own). Without one the result is orthographic.")
+              "(a surface .npz keeps its own). Without one no camera is given and the result "
+              "is scored as orthographic.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def evaluate(result, gt, mask, K, as_json):
     """Score a result RESULT (depth.npy, .exr, .tif or surface.npz, as integrate writes them)
     against a ground-truth depth map: MADE (BiNI's: the result times the median of GT /
     RESULT, then the mean absolute error), that scale, the RMSE after it, the mean absolute
     error without a scale (for metric depth, e.g. a result fused with a depth prior) and, for
-    an orthographic result, the paper's normalised error (facetlift.metrics.evaluate).
+    an orthographic result, the paper's normalised error (facetlift.metrics.evaluate), which
+    needs the result in the ground truth's units: integrate with --pixel-size, the world
+    width of a pixel (a warning says where the depth ranges differ).
 
     \b
     Examples:
@@ -1002,19 +1060,22 @@ def evaluate(result, gt, mask, K, as_json):
         click.echo(json.dumps(jsonable(dict(rec, status="ok", exit_code=EXIT_OK))))
         _STATE["printed_json"] = True
         return EXIT_OK
-    for line in _evaluate_lines(rec, K):
+    for line in _evaluate_lines(rec, K, surface=result.suffix.lower() == ".npz"):
         click.echo(line)
     return EXIT_OK
 
 
-def _evaluate_lines(rec: dict, K) -> list[str]:
+def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
     """``facetlift evaluate``'s text: one line per measure, '-' where it does not apply (the
-    notes say why)."""
+    notes say why). `surface`: the result is a surface .npz, which says its camera (a depth
+    file without --K says none: not "orthographic", a perspective depth.npy was labelled so,
+    an audit)."""
     def num(v):
         return "-" if v is None else f"{v:.6g}"
 
     camera = ("perspective" + (f" (--K {K})" if K is not None else " (the surface's camera)")
-              if rec["perspective"] else "orthographic")
+              if rec["perspective"] else "orthographic (the surface's camera)" if surface
+              else "no camera given: scored as orthographic (up to an offset per piece)")
     uncovered = (f"; {rec['uncovered']} mask pixels left out, where a depth is undefined"
                  if rec["uncovered"] else "")
     ne = rec["normalized_error"]

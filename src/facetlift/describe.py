@@ -156,7 +156,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         As the readers (unreadable file, bad frame).
     """
     from . import frames
-    from .jobs import Job, read, recorded_warnings
+    from .jobs import Job, camera_source, read, recorded_warnings
     from .problem import UnusableNormalsWarning, no_camera_hint, prepare
 
     job = Job(normals=None if path is None else str(path),
@@ -203,7 +203,10 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     H, W = n.shape[:2]
     where = dict(shape=[H, W], mask_source=inp.mask_source,
                  K=None if inp.K is None else inp.K.tolist(),
-                 projection="perspective" if inp.K is not None else "orthographic")
+                 projection="perspective" if inp.K is not None else "orthographic",
+                 # (where K came from, as integrate's summary says: a DiLiGenT folder's is
+                 # its parent's Calib_Results.mat, which info did not name, a second audit)
+                 camera=camera_source(job, inp))
 
     def unusable(e: ValueError) -> dict:  # (integrate would refuse it: why, and the frame)
         out.update(usable=False, problem=str(e),
@@ -336,8 +339,8 @@ def _file_facts(src: Path) -> dict:
             import tifffile
 
             with tifffile.TiffFile(f) as t:
-                page = t.pages[0]
-                facts.update(dtype=str(page.dtype), stored_shape=list(page.shape),
+                page = t.pages[0]  # (the series' shape: a two-channel page's was (W, 2))
+                facts.update(dtype=str(page.dtype), stored_shape=list(t.series[0].shape),
                              encoding="v / max * 2 - 1" if page.dtype.kind == "u"
                              else "as stored")
         elif ext == ".exr":

@@ -278,6 +278,17 @@ def read(job: Job) -> Input:
                  else _camera_name(K_file, src))
 
 
+def camera_source(job: Job, inp: Input) -> str:
+    """Where the camera of `job` read as `inp` (:func:`read`) came from, as the summaries
+    name it: "orthographic" without one, "K" (given), "fov D deg", or "the folder's K.txt"
+    (a DiLiGenT folder's "../Calib_Results.mat"); integrate's and info's alike."""
+    if inp.K is None:
+        return "orthographic"
+    if job.fov is not None:
+        return f"fov {float(job.fov):g} deg"
+    return "K" if job.K is not None else f"the folder's {inp.K_file or 'K.txt'}"
+
+
 def _camera_name(path: Path, folder: Path) -> str:
     """A dataset folder's camera file as the summary names it: ``K.txt``, or
     ``../Calib_Results.mat`` where it is the parent's."""
@@ -540,7 +551,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
     Returns
     -------
     dict
-        ``input``, ``outputs`` (kind -> path), ``shape``, ``facets``, ``mask_source``,
+        ``input``, ``outputs`` (kind -> path), ``shape``, ``facets``, ``components`` (the
+        mask's connected components), ``mask_source``,
         ``perspective``, ``mean_deviation`` (degrees), ``converged``, ``warnings`` (messages),
         ``info`` (JSON-ready ``Surface.info``) and ``timings`` (seconds per phase).
 
@@ -633,12 +645,13 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "outputs": written,
         "shape": [H, W],
         "facets": int(surface.mask.sum()),
+        # (its connected components, each with a constant of its own: an alpha holding a
+        # height splits into one per brick, all at mean depth 0, a second audit)
+        "components": _components(surface.mask),
         "mask_source": inp.mask_source,
         "perspective": surface.K is not None,
         # (where the camera came from, for the summary: K, a field of view, a dataset's K.txt)
-        "camera": ("orthographic" if surface.K is None else
-                   f"fov {float(job.fov):g} deg" if job.fov is not None else
-                   "K" if job.K is not None else f"the folder's {inp.K_file or 'K.txt'}"),
+        "camera": camera_source(job, inp) if surface.K is not None else "orthographic",
         # (the depth of height.png's 0 and 65535, as io.write_height scales it)
         "depth_range": _depth_range(surface, job.height_range if "height" in save else None),
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),
@@ -651,6 +664,13 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "timings": {"read": t_read, "integrate": t_integrate,
                     "write": time.perf_counter() - t2, "total": time.perf_counter() - t0},
     }
+
+
+def _components(mask) -> int:
+    """The connected components of `mask`, as the integration's domain counts them."""
+    from .domain import Domain
+
+    return Domain(mask).n_components
 
 
 def _strict_check(caught, surface) -> None:

@@ -96,7 +96,11 @@ def normalized_error(estimate, truth, mask=None) -> tuple[float, np.ndarray]:
     ValueError
         Shape mismatch, no common pixel, or a flat ground truth (zero depth range).
     """
-    aligned, gt, m = _offset_aligned(estimate, truth, mask)
+    return _normalized(*_offset_aligned(estimate, truth, mask))
+
+
+def _normalized(aligned, gt, m) -> tuple[float, np.ndarray]:
+    """:func:`normalized_error` of an offset-aligned estimate (:func:`_offset_aligned`)."""
     rng = float(gt[m].max() - gt[m].min())
     if rng <= 0:
         raise ValueError("`truth` has zero depth range on the mask: the error is undefined")
@@ -124,13 +128,64 @@ def mae(estimate, truth, mask=None) -> float:
 SCALE_MISMATCH = 10.0
 
 
-def _offset_aligned(estimate, truth, mask):
+#: :func:`evaluate` of an orthographic result warns where the result's depth range (1st to
+#: 99th percentile over the pixels scored) is more than this many times the truth's, or this
+#: many times less: the normalised error then compares two units. A second audit: the DiLiGenT
+#: bear integrated orthographically in pixels spans 105 units, its truth 44 mm (2.3 x), and
+#: scored 26.5 % without a word; with --pixel-size 0.397 (mm per pixel) 2.3 %, its range
+#: 0.94 of the truth's (1.00 with --discontinuities). On the discontinuity benchmark's 12
+#: orthographic renders in their units (exact and 3-deg noise, smooth and with
+#: --discontinuities, 2026-12-06) no result spans more than 1.13 times the truth; smooth
+#: results flattened across depth jumps span less (fandisk 0.47, mountain 0.54, spot 0.66),
+#: and a view whose depth is made by jumps alone (featuretype's plates) 0.005: below, the
+#: warning names the jumps too.
+RANGE_MISMATCH = 1.5
+
+
+def _offset_aligned(estimate, truth, mask, check: bool = True):
     """``(aligned, truth, mask)`` of :func:`align` for the offset-aligned errors, with
-    :func:`_scale_check`."""
+    :func:`_scale_check` (unless not `check`: :func:`evaluate` has said it its own way)."""
     aligned, m = align(estimate, truth, mask)
     gt = np.asarray(_depth_of(truth), dtype=float)
-    _scale_check(aligned, gt, m)
+    if check:
+        _scale_check(aligned, gt, m)
     return aligned, gt, m
+
+
+def _range_ratio(est, gt, m) -> float | None:
+    """The estimate's depth range over the truth's, each from the 1st to the 99th percentile
+    over `m` (a few outliers do not make the range); None where the truth's is 0."""
+    lo, hi = np.percentile(est[m], [1, 99])
+    glo, ghi = np.percentile(gt[m], [1, 99])
+    flat = ghi - glo <= 1e-9 * max(1.0, abs(glo), abs(ghi))  # (rounding in a flat truth)
+    return None if flat else float((hi - lo) / (ghi - glo))
+
+
+def _range_check(est, gt, m) -> float | None:
+    """:func:`evaluate`'s warning on an orthographic result in other units than the truth
+    (:data:`RANGE_MISMATCH`); the ratio of the ranges (:func:`_range_ratio`)."""
+    from ._warnings import warn
+
+    ratio = _range_ratio(est, gt, m)
+    if ratio is None or 1.0 / RANGE_MISMATCH <= ratio <= RANGE_MISMATCH:
+        return ratio
+    head = (f"the result's depth range (1st to 99th percentile over the {int(m.sum())} pixels "
+            f"scored) is {ratio:.3g} times the ground truth's: the normalised error compares "
+            "them as stored, in units that then differ, and means little")
+    if (est[m] > 0).all():  # (positive depths: a perspective result, up to scale)
+        warn(f"{head}. Its depths are all > 0, as a perspective result's are (defined up to "
+             "scale, median depth 1): score it with its camera (perspective=True; --K on the "
+             "command line), after a median scale (MADE)")
+    else:
+        jumps = ("; or, if the units are right, the result is flattened across depth jumps "
+                 "(a smooth one bends across them: discontinuities=True, --discontinuities, "
+                 "keeps those the normals show)" if ratio < 1 else "")
+        warn(f"{head}. An orthographic result's depth is in the units of the pixel size it "
+             "was integrated with (pixel_size; --pixel-size on the command line: the world "
+             "width of a pixel, 1 by default, so depth in pixels): integrate again with the "
+             f"ground truth's, about {1.0 / ratio:.3g} times the one used (e.g. --pixel-size "
+             f"{1.0 / ratio:.3g} where it was 1){jumps}")
+    return ratio
 
 
 def _scale_check(est, gt, m) -> None:
@@ -215,9 +270,12 @@ def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None) -> 
         ``pixels`` (the number scored), ``uncovered`` (mask pixels left out: the estimate or
         the truth undefined there; 0 without a mask), ``perspective``, ``made``, ``scale``,
         ``rmse_scaled``, ``mae`` (unaligned), ``normalized_error`` (a fraction; None for a
-        perspective result), and ``notes``: why a measure is None. ``made``, ``scale`` and
-        ``rmse_scaled`` are None for an orthographic result with depths <= 0 (its depth has
-        mean 0: no scale applies).
+        perspective result), ``range_ratio`` (an orthographic result's depth range over the
+        truth's, 1st to 99th percentile; None for a perspective one or a flat truth: beyond
+        :data:`RANGE_MISMATCH` a warning says the units differ, and names the pixel size),
+        and ``notes``: why a measure is None. ``made``, ``scale`` and ``rmse_scaled`` are None
+        where the result or the truth has depths <= 0 (an orthographic depth has mean 0: no
+        scale applies); they are given for an orthographic result whose depths are all > 0.
 
     Raises
     ------
@@ -245,7 +303,7 @@ def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None) -> 
            "uncovered": 0 if mask is None else int(np.asarray(mask, bool).sum() - m.sum()),
            "perspective": bool(perspective), "made": None, "scale": None,
            "rmse_scaled": None, "mae": float(np.mean(np.abs(est[m] - gt[m]))),
-           "normalized_error": None, "notes": []}
+           "normalized_error": None, "range_ratio": None, "notes": []}
     bad = {which: int((a[m] <= 0).sum()) for which, a in (("estimate", est), ("truth", gt))}
     if perspective and any(bad.values()):
         which = "estimate" if bad["estimate"] else "truth"
@@ -267,8 +325,10 @@ def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None) -> 
         out["notes"].append("no normalised error: a perspective result is scored after a "
                             "scale (MADE), not an offset")
     else:
-        try:
-            out["normalized_error"], _ = normalized_error(est, gt, m)
+        out["range_ratio"] = ratio = _range_check(est, gt, m)
+        off = ratio is not None and not 1.0 / RANGE_MISMATCH <= ratio <= RANGE_MISMATCH
+        try:  # (where the ranges differ, said above: not again as a spread)
+            out["normalized_error"], _ = _normalized(*_offset_aligned(est, gt, m, not off))
         except ValueError as e:  # (a flat truth: zero depth range)
             out["notes"].append(f"no normalised error: {e}")
     return out

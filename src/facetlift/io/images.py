@@ -193,17 +193,37 @@ def _decode_unit(pixels: np.ndarray, path: Path, arg: str, where=None, encoding:
     )
 
 
-def _split_alpha(pixels: np.ndarray, path: Path, arg: str, check: bool = True):
+def _split_alpha(pixels: np.ndarray, path: Path, arg: str, check: bool = True,
+                 encoding: str = "xyz"):
+    """``(colour channels, alpha mask or None)`` of a normal map's pixels: (H, W, 3) or
+    (H, W, 4), or with `encoding` ``"xy"`` also (H, W, 2) from a .npy or TIFF file (x, y
+    alone, no alpha). A two-channel PNG is grey + alpha (PNG has no two-colour format): refused
+    for ``"xy"`` too, saying so; a two-channel array without ``"xy"`` is refused naming it."""
+    png = path.suffix.lower() == ".png"
+    two = pixels.ndim == 3 and pixels.shape[-1] == 2 and min(pixels.shape[:2]) >= 1
+    if two and encoding == "xy" and not png:
+        return pixels, None
     if pixels.ndim != 3 or pixels.shape[-1] not in (3, 4) or min(pixels.shape[:2]) < 1:
         channels = pixels.shape[-1] if pixels.ndim == 3 else (1 if pixels.ndim == 2 else None)
+        if two and png:  # (a two-channel (x, y) map saved as PNG: its grey and alpha)
+            why = ("; a two-channel PNG is grey + alpha, not x, y (PNG has no two-colour "
+                   "format): store x, y in R and G of an RGB PNG (B is ignored with "
+                   "--normal-encoding xy, encoding='xy'), or as a two-channel .npy, TIFF or "
+                   "EXR file")
+        elif two:
+            why = ("; a two-channel map storing x and y alone (BC5, RG) is read with "
+                   "--normal-encoding xy (encoding='xy'), which rebuilds z")
+        else:
+            why = ("; it looks channel-first (3 or 4, H, W): transpose it to (H, W, 3), e.g. "
+                   "numpy.moveaxis(a, 0, -1)"
+                   if pixels.ndim == 3 and pixels.shape[0] in (3, 4) and pixels.shape[-1] > 4
+                   else "")
         raise ValueError(
-            f"`{arg}`: {path} must be an (H, W, 3) RGB or (H, W, 4) RGBA normal map; got "
-            f"shape {pixels.shape}"
-            + (f" ({channels} channel(s))" if channels is not None else "")
-            + ("; it looks channel-first (3 or 4, H, W): transpose it to (H, W, 3), e.g. "
-               "numpy.moveaxis(a, 0, -1)"
-               if pixels.ndim == 3 and pixels.shape[0] in (3, 4) and pixels.shape[-1] > 4
-               else "")
+            f"`{arg}`: {path} must be an (H, W, 3) RGB or (H, W, 4) RGBA normal map"
+            + (", or (H, W, 2) x, y with --normal-encoding xy (.npy or TIFF)"
+               if encoding == "xy" else "")
+            + f"; got shape {pixels.shape}"
+            + (f" ({channels} channel(s))" if channels is not None else "") + why
         )
     if pixels.shape[-1] == 4:
         return pixels[..., :3], _alpha_mask(pixels[..., 3], path, arg, check)
@@ -226,18 +246,31 @@ def _alpha_mask(alpha: np.ndarray, path=None, arg: str = "path",
 
 #: An alpha that makes the mask (:func:`_alpha_mask`) is warned about as holding data (a
 #: height, as "normal + height" textures pack it) where its values strictly between 0 and its
-#: largest, on pixels more than ALPHA_EDGE pixels from a transparent one and from one at the
-#: largest value (an antialiased edge's in-between values lie between the two, along the
-#: edge), cover more than ALPHA_DATA_SHARE of the image in more than ALPHA_DATA_LEVELS
-#: distinct values. (An audit: such a map integrated 15 % of its pixels, without a word.)
-ALPHA_DATA_SHARE, ALPHA_DATA_LEVELS, ALPHA_EDGE = 0.05, 16, 2
+#: largest cover more than ALPHA_DATA_SHARE of the image in more than ALPHA_DATA_LEVELS
+#: distinct values, counting the pixels more than ALPHA_EDGE pixels from a transparent one and
+#: from one at the largest value, and those ALPHA_RAMP pixels or more (Euclidean) from any
+#: flat pixel (one whose 3 x 3 neighbours all share its value): the middle of a ramp wider
+#: than an antialiased edge's band. (An audit: such a map integrated 15 % of its pixels,
+#: without a word; a second: bricks with 6-texel bevels, 0 in the grooves and the largest on
+#: the faces, had their in-between values within 2 px of both on all but 4.4 % of the pixels,
+#: in 6 levels, and went unwarned; their ramps' middles add 8 % in 11 levels.) Measured
+#: (2026-12-06): exact antialiased edges (an ellipse's coverage, 32^2 and 256^2) come 2.24 px
+#: at most from a flat pixel, edges blurred by a 2-px box 2.83, by a 3-px box 3.6 on 0.9 % of
+#: a 256^2 image; ramps of 5 in-between pixels or more reach 3. A feathered edge (a mask
+#: blurred with a Gaussian of sigma 3 px) is a ramp too and warned about where it covers that
+#: share (13 % of a 256^2 image with an ellipse 140 px across; sigma 1 px: 2.7 %): every
+#: pixel of its soft band is taken as inside, past the object. The levels: an alpha of
+#: flat translucent areas (one or two values, besides 0 and its largest, with antialiased
+#: edges) stays silent; a height has more, even bricks of three face heights.
+ALPHA_DATA_SHARE, ALPHA_DATA_LEVELS, ALPHA_EDGE, ALPHA_RAMP = 0.05, 2, 2, 3
 
 
 def _alpha_levels(alpha: np.ndarray, m: np.ndarray, p, arg: str) -> None:
     """Warn where the alpha that makes the mask `m` (``alpha > 0``) holds many grey levels
-    away from its edge (:data:`ALPHA_DATA_SHARE`): a height or other data in the alpha, of
-    which every non-zero pixel is taken as inside. An antialiased object edge (a pixel or two
-    wide, between the transparent and the opaque pixels) is no such sign."""
+    away from its edge or on wide ramps (:data:`ALPHA_DATA_SHARE`): a height or other data in
+    the alpha, or a feathered edge, of which every non-zero pixel is taken as inside. An
+    antialiased object edge (a pixel or two wide, between the transparent and the opaque
+    pixels) is no such sign."""
     from scipy import ndimage
 
     a = np.asarray(alpha)
@@ -250,21 +283,29 @@ def _alpha_levels(alpha: np.ndarray, m: np.ndarray, p, arg: str) -> None:
     if between.sum() <= ALPHA_DATA_SHARE * a.size:  # (quick: most alphas are 0 and the max)
         return
     edge = ndimage.binary_dilation(~m | (a == top), iterations=ALPHA_EDGE)
-    away = between & ~edge
+    v = np.where(m, a, 0)  # (transparent, NaN included, as one flat value)
+    flat = ((ndimage.maximum_filter(v, 3, mode="nearest") == v)
+            & (ndimage.minimum_filter(v, 3, mode="nearest") == v))
+    k = int(np.ceil(ALPHA_RAMP)) - 1  # (no flat pixel nearer than ALPHA_RAMP: a disk's
+    r, c = np.indices((2 * k + 1, 2 * k + 1)) - k  # dilation, a sixth of an exact
+    near = r * r + c * c < ALPHA_RAMP**2  # distance's time at 4096^2)
+    ramp = ndimage.maximum_filter(flat.view(np.uint8), footprint=near, mode="constant") == 0
+    away = between & (~edge | ramp)
     if away.sum() <= ALPHA_DATA_SHARE * a.size:
         return
     levels = np.unique(a[away]).size
     if levels <= ALPHA_DATA_LEVELS:
         return
     warn(f"`{arg}`: {p}: its alpha channel holds {levels} distinct levels between 0 and its "
-         f"largest, {top:g}, on {away.mean():.0%} of the pixels, away from its edge (a height "
-         "or other data packed in the alpha, as 'normal + height' textures do, or a wide "
-         "blurred edge?): the alpha is "
+         f"largest, {top:g}, on {away.mean():.0%} of the pixels, away from its edge or on "
+         "ramps wider than an antialiased edge (a height or other data packed in the alpha, "
+         "as 'normal + height' textures do, or a feathered edge, whose whole soft band then "
+         "counts as inside?): the alpha is "
          f"taken as the mask, every pixel with alpha > 0 inside ({int(m.sum())} of {m.size}) "
          "and the others left out. If the alpha is no mask, give one instead, which replaces "
-         "it: --mask FILE (e.g. an image of the map's size, white where to integrate), or in "
-         "Python your own `mask` to facetlift.integrate (None: every pixel with a valid "
-         "normal)")
+         "it: --mask FILE (e.g. an image of the map's size, white where to integrate; for a "
+         "feathered edge, its alpha thresholded at half its largest), or in Python your own "
+         "`mask` to facetlift.integrate (None: every pixel with a valid normal)")
 
 
 # --------------------------------------------------------------------------------------------
@@ -297,7 +338,9 @@ def read_normals(
     encoding : {"xyz", "xy"}
         ``"xyz"`` (default): x, y, z in R, G, B. ``"xy"``: a two-channel map (BC5, "RG", as
         game engines compress tangent-space maps) storing x and y alone in R and G (8/16-bit
-        values decoded as ``v / max * 2 - 1``, floats as stored; EXR channels R, G or X, Y);
+        values decoded as ``v / max * 2 - 1``, floats as stored; EXR channels R, G or X, Y;
+        an (H, W, 2) .npy or two-channel TIFF, or the first two channels of an RGB(A) file:
+        a two-channel PNG is grey + alpha and is refused);
         z is rebuilt as ``sqrt(max(0, 1 - x^2 - y^2))``, facing the viewer, and B, if any,
         is ignored (:func:`facetlift.frames.decode_xy`). An integer pixel whose x, y are
         longer than unit length (black or white fill) holds no normal; a mid-grey fill reads
@@ -332,8 +375,9 @@ def read_normals(
             with open(p, "rb") as fh:
                 _check_png_normals(fh.read(26), p, arg)
         pixels = _decode_image(p, ext, arg)
-        rgb, alpha = _split_alpha(pixels, p, arg, check_alpha)
-        frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
+        rgb, alpha = _split_alpha(pixels, p, arg, check_alpha, encoding)
+        if rgb.shape[-1] == 3:  # (R = G = B: no two-channel map's sign)
+            frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
         n = _decode_unit(rgb, p, arg, alpha, encoding, frame)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
@@ -352,8 +396,9 @@ def read_normals(
             n = frames.decode_xy(n, frame=frame)
     else:
         arr = _read_npy(p, arg)
-        rgb, alpha = _split_alpha(arr, p, arg, check_alpha)
-        frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
+        rgb, alpha = _split_alpha(arr, p, arg, check_alpha, encoding)
+        if rgb.shape[-1] == 3:
+            frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
         # (uint8/uint16 arrays decode like PNG pixels)
         n = _decode_unit(rgb, p, arg, alpha, encoding, frame)
     return frames.to_facetlift(n, frame), alpha
