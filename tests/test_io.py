@@ -1180,3 +1180,28 @@ def test_write_normals_checks_bits_first_and_never_refuses_a_frame(tmp_path):
         warnings.simplefilter("always")
         io.write_normals(tmp_path / "b.png", v, mask)
     assert not [w for w in caught if "longer than unit length" in str(w.message)]
+
+
+def test_surface_save_height_png_writes_the_height_map_not_a_preview(tmp_path):
+    """An audit: a texture artist's ``surface.save("height.png")`` got an 8-bit shaded
+    preview. height.png (as the command line's --save height names it) is the 16-bit height
+    map; other .png names stay previews."""
+    import imagecodecs
+
+    r, c = np.mgrid[0:24, 0:30]
+    h = np.sin(c / 5.0) + 0.5 * np.cos(r / 4.0)
+    p, q = np.gradient(h, axis=1), -np.gradient(h, axis=0)
+    n = np.dstack([-p, -q, np.ones_like(h)])
+    s = facetlift.integrate(n)
+    out = s.save(tmp_path / "height.png")
+    a = imagecodecs.png_decode(out.read_bytes())
+    assert a.dtype == np.uint16 and a.ndim == 2 and a.min() == 0 and a.max() == 65535
+    # (the height, -depth, scaled: increasing with the height)
+    assert np.corrcoef(a.ravel().astype(float), s.height.ravel())[0, 1] > 0.999
+    s.save(tmp_path / "displacement.png", height_range=(-5.0, 5.0))
+    b = imagecodecs.png_decode((tmp_path / "displacement.png").read_bytes())
+    assert b.dtype == np.uint16 and 20000 < b.mean() < 45000
+    prev = imagecodecs.png_decode(s.save(tmp_path / "look.png").read_bytes())
+    assert prev.dtype == np.uint8 and prev.ndim == 3
+    with pytest.raises(ValueError, match="takes only `height_range`"):
+        s.save(tmp_path / "height.png", light=(0, 0, 1))

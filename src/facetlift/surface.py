@@ -209,9 +209,11 @@ class Surface:
         depth jumps the cut edges ``cuts_right``, ``cuts_down``, the ``discontinuities``
         map and the split mesh (``split_*``; :func:`facetlift.io.load_surface` reads it all
         back); ``.ply``/``.obj``: the mesh, split at the jumps (``.ply`` quads and ``.obj``
-        triangles unless ``triangles=`` says otherwise); ``.png``: a shaded preview (any
-        ``.png`` name: the map of the jumps is :func:`facetlift.io.write_discontinuities`, as
-        ``--save discontinuities`` writes it). ``frame=`` writes a mesh in another frame
+        triangles unless ``triangles=`` says otherwise); ``.png``: a shaded preview (the map
+        of the jumps is :func:`facetlift.io.write_discontinuities`, as ``--save
+        discontinuities`` writes it), but ``height.png`` (also ``heightmap``, ``height_map``,
+        ``displacement``) the 16-bit height map of ``--save height`` (keyword
+        ``height_range``). ``frame=`` writes a mesh in another frame
         (:meth:`to_mesh`). Files are written atomically. Returns the path written.
         """
         from . import io

@@ -15,6 +15,13 @@ from .preview import write_preview
 SURFACE_FORMATS = DEPTH_FORMATS + (".npz",) + MESH_FORMATS + (".png",)
 
 
+#: ``.png`` names that :func:`save_surface` writes as a 16-bit height map
+#: (:func:`~facetlift.io.preview.write_height`), as ``--save height`` names its file, not as a
+#: shaded preview: a texture artist's ``surface.save("height.png")`` got an 8-bit shaded
+#: picture (an audit).
+HEIGHT_STEMS = ("height", "heightmap", "height_map", "displacement")
+
+
 def save_surface(surface, path, **kwargs) -> Path:
     """Write `surface` in the format given by the extension of `path`.
 
@@ -27,7 +34,10 @@ def save_surface(surface, path, **kwargs) -> Path:
     (:func:`write_mesh`, split at the jumps where there are any; keyword ``triangles``: True
     splits each quad in two, False keeps quads; default quads for PLY and triangles for OBJ,
     since OBJ readers such as Open3D's take triangles only); ``.png``: a shaded preview
-    (:func:`write_preview`, keywords forwarded). Returns the path written.
+    (:func:`write_preview`, keywords forwarded), except ``height.png`` and the other names of
+    :data:`HEIGHT_STEMS`: the 16-bit height map of ``--save height``
+    (:func:`~facetlift.io.preview.write_height`, keyword ``height_range``). Returns the path
+    written.
 
     Raises
     ------
@@ -67,6 +77,13 @@ def save_surface(surface, path, **kwargs) -> Path:
         triangles = ext == ".obj" if triangles is None else triangles  # (to_mesh checks it)
         verts, faces = surface.to_mesh(triangles=triangles, frame=kwargs.get("frame"))
         return write_mesh(p, verts, faces)
+    if p.stem.lower() in HEIGHT_STEMS:  # (the command line's height.png: the same here)
+        extra = sorted(set(kwargs) - {"height_range"})
+        if extra:
+            raise ValueError(f"{p.name} (a height map) takes only `height_range`; got {extra}")
+        from .preview import write_height
+
+        return write_height(p, surface, **kwargs)[0]
     preview_kw = {"light", "colormap", "min_size", "background"}
     extra = sorted(set(kwargs) - preview_kw)
     if extra:
