@@ -102,8 +102,9 @@ def test_an_alpha_mask_in_several_components_is_named_in_the_summary(tmp_path, c
     code, out, err = run(capsys, "integrate", tmp_path / "three.png", "-s", "npy",
                          "-o", tmp_path / "a")
     assert code == 0, err
-    assert ("(mask: alpha channel, 3 components integrated apart, their depths unrelated: a "
-            "height packed in the alpha? --mask replaces it)") in out
+    # (a 0/255 alpha of separate pieces, an atlas's, is a mask: counted, no question; a
+    # review)
+    assert "(mask: alpha channel, 3 components integrated apart, their depths unrelated)" in out
     code, out, err = run(capsys, "integrate", tmp_path / "one.png", "-s", "npy",
                          "-o", tmp_path / "b")
     assert code == 0 and "(mask: alpha channel)" in out
@@ -111,6 +112,15 @@ def test_an_alpha_mask_in_several_components_is_named_in_the_summary(tmp_path, c
     code, out, err = run(capsys, "integrate", tmp_path / "three.png", "--mask",
                          tmp_path / "m.png", "-s", "npy", "-o", tmp_path / "c")
     assert code == 0 and "components" not in out
+    # an alpha with a height's levels (the alpha check warned): asked
+    r, c = np.mgrid[0:32, 0:32]
+    px[..., 3] = np.where((r % 16 < 2) | (c % 16 < 2), 0,
+                          np.clip(np.minimum(r % 16, c % 16) * 40, 0, 255)).astype(np.uint8)
+    (tmp_path / "height.png").write_bytes(imagecodecs.png_encode(px))
+    code, out, err = run(capsys, "integrate", tmp_path / "height.png", "-s", "npy",
+                         "-o", tmp_path / "d")
+    assert code == 0 and "its alpha channel holds" in err, err
+    assert "their depths unrelated: a height packed in the alpha? --mask replaces it" in out
 
 
 def test_default_outdir_is_beside_a_link_not_its_target(tmp_path, capsys):
@@ -719,6 +729,15 @@ def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", tmp_path / "Normal_gt.mat", "-s", "npy", "-o",
                        tmp_path / "e")
     assert code == 0 and "Normal_gt.mat lies in a dataset folder whose mask.png (its mask)" in err
+    assert "only the folder as the input reads them" in " ".join(err.split())
+    # (with a normal_map.* beside it the folder reads that one: not told to integrate the
+    # folder for this map, a review)
+    io.write_normals(tmp_path / "normal_map.png", n)
+    code, _, err = run(capsys, "integrate", tmp_path / "Normal_gt.mat", "-s", "npy", "-o",
+                       tmp_path / "e1")
+    err = " ".join(err.split())
+    assert code == 0 and "reads them with its normal_map.png, not this map" in err, err
+    (tmp_path / "normal_map.png").unlink()
     sio.savemat(tmp_path / "obj.mat", {"N": n})
     code, _, err = run(capsys, "integrate", tmp_path / "obj.mat", "-s", "npy", "-o",
                        tmp_path / "e2")

@@ -851,3 +851,20 @@ def test_a_texture_whose_period_is_a_multiple_of_the_curl_sample_stride_is_told(
 
     with pytest.warns(FrameWarning, match=r"x or y flipped.*--normal-frame directx"):
         frames.flip_check(p)
+
+
+def test_8_bit_maps_with_one_channel_inverted_zero_both_plateaus():
+    """A review: a rounding encoder's map converted between OpenGL and DirectX by inverting
+    green (255 - v) has x's plateau at 128 and y's at 127; read as a truncating encoder's
+    (every code half a step up) it tilted every flat area by a whole code. Both plateaus are
+    zero, every other code as decoded."""
+    n, h, flat = _bumps_on_a_plane()
+    v = np.minimum(np.round((n + 1) / 2 * 255), 255).astype(np.uint8)
+    v[..., 1] = 255 - v[..., 1]  # (green inverted: y down)
+    d = frames.decode(v)
+    assert (d[flat][:, :2] == 0).all()
+    plain = v / 255 * 2 - 1
+    keep = (v[..., 0] != 128)
+    np.testing.assert_array_equal(d[keep][:, 0], plain[keep][:, 0])
+    keep = (v[..., 1] != 127)
+    np.testing.assert_array_equal(d[keep][:, 1], plain[keep][:, 1])

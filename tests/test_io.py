@@ -167,6 +167,13 @@ def test_a_height_on_bevelled_bricks_in_the_alpha_is_warned_about(tmp_path, bric
 
     outer, inner = cover(70.3), cover(40)
     assert read("aa.png", outer * 255) == []
+    for width, diagonal in ((2, True), (3, True), (4, True), (2, False)):  # (a review: a
+        # chain-link fence's antialiased wires, 45 degrees, counted as ramps once)
+        d1, d2 = (xx + yy, xx - yy) if diagonal else (xx * np.sqrt(2), yy * np.sqrt(2))
+        d1, d2 = np.mod(d1 / np.sqrt(2), 12), np.mod(d2 / np.sqrt(2), 12)
+        on = (np.minimum(d1, 12 - d1) < width / 2) | (np.minimum(d2, 12 - d2) < width / 2)
+        assert read(f"wires{width}{diagonal}.png",
+                    on.reshape(256, ss, 256, ss).mean(axis=(1, 3)) * 255) == [], width
     assert read("translucent.png", outer * 255 - inner * 127) == []  # (128 inside, AA edges)
     assert read("feather1.png", ndimage.gaussian_filter((outer > 0.5) * 255.0, 1)) == []
     said = read("feather3.png", ndimage.gaussian_filter((outer > 0.5) * 255.0, 3))

@@ -401,8 +401,11 @@ def summary(record: dict) -> str:
     many = record.get("components") or 1
     if source == "alpha channel" and many > 1:  # (a height in the alpha splits the mask in
         # one piece per brick, each at mean depth 0; the warning may not fire, a second audit)
-        source = (f"alpha channel, {many} components integrated apart, their depths "
-                  "unrelated: a height packed in the alpha? --mask replaces it")
+        source = f"alpha channel, {many} components integrated apart, their depths unrelated"
+        if any("its alpha channel holds" in w for w in record.get("warnings", ())):
+            # (asked only where the alpha looked like data: a 0/255 alpha of separate pieces,
+            # an atlas's or leaf cards', is a mask, a review)
+            source += ": a height packed in the alpha? --mask replaces it"
     parts = [
         f"{H}x{W} pixels, {record['facets']} facets (mask: {source})",
         (f"perspective ({record.get('camera', 'K')})" if record.get("perspective")

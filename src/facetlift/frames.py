@@ -363,13 +363,16 @@ def decode_xy(values: np.ndarray, where=None, frame=None) -> np.ndarray:
 
 def _zero_plateaus(n: np.ndarray, pixels: np.ndarray, seen: np.ndarray) -> None:
     """Set the x and y of `n` (the decoded uint8 `pixels`) to exactly 0 where their code is
-    a plateau at 128 among the `seen` pixels, or decode every channel as a truncating
-    encoder's, ``(v + 0.5) / 255 * 2 - 1``, where one is a plateau at 127 (:func:`decode`)."""
+    a plateau at 128 or 127 among the `seen` pixels, or, where every plateau is at 127, decode
+    every channel as a truncating encoder's, ``(v + 0.5) / 255 * 2 - 1`` (:func:`decode`). A
+    128 in one channel and a 127 in the other is a rounding encoder's map with one channel
+    inverted (OpenGL <-> DirectX by 255 - v): both plateaus are 0, the rest as decoded (read
+    as truncated, every flat area tilted by a whole code, a review: 2 % -> 11 % RMS)."""
     k = int(np.count_nonzero(seen))
     if k == 0:
         return
     every = k == seen.size  # (then no mask to apply: a pass less per code)
-    rounded = []
+    plateaus = {}
     for ch in (0, 1):
         codes = pixels[..., ch]
         # (the four codes around 127.5 alone: a histogram of a 4096^2 map took 0.4 s)
@@ -379,14 +382,18 @@ def _zero_plateaus(n: np.ndarray, pixels: np.ndarray, seen: np.ndarray) -> None:
             c = counts[code]
             if (c >= ZERO_PLATEAU_SHARE * k
                     and c >= ZERO_PLATEAU_RATIO * max(counts[code - 1], counts[code + 1])):
-                if code == 127:  # (a truncating encoder: every code half a step low)
-                    c3 = min(n.shape[-1], pixels.shape[-1])
-                    n[..., :c3] = (pixels[..., :c3] + 0.5) * (2.0 / 255.0) - 1.0
-                    return
-                rounded.append(ch)
+                plateaus[ch] = code
                 break  # (both cannot be: each would hold 8 times the other)
-    for ch in rounded:
-        n[..., ch][pixels[..., ch] == 128] = 0.0
+    if plateaus and all(code == 127 for code in plateaus.values()):
+        # (a truncating encoder: every code half a step low; in place, no float64 temporary
+        # of the map's size)
+        c3 = min(n.shape[-1], pixels.shape[-1])
+        np.add(pixels[..., :c3], 0.5, out=n[..., :c3])
+        n[..., :c3] *= 2.0 / 255.0
+        n[..., :c3] -= 1.0
+        return
+    for ch, code in plateaus.items():
+        n[..., ch][pixels[..., ch] == code] = 0.0
 
 
 def grey_check(values: np.ndarray, where, what: str) -> None:

@@ -323,9 +323,19 @@ def _beside_dataset_files(src: Path, job: Job, own_mask: bool = False) -> None:
     if job.mask is None and not own_mask and mpath is not None:
         unused.append(f"{mpath.name} (its mask)")
     if unused:
+        from .io.dataset import normals_file
+
+        try:
+            own = normals_file(folder)
+        except ValueError:  # (the folder's own reading would say what is wrong with it)
+            own = None
+        # (a folder holding both normal_map.* and Normal_gt.mat reads the first: told to
+        # integrate the folder, this map's user would get the other, a review)
+        how = (f"only the folder as the input reads them (facetlift integrate {folder})"
+               if own is None or own.name == src.name else
+               f"the folder as the input reads them with its {own.name}, not this map")
         warn(f"{src} lies in a dataset folder whose {' and '.join(unused)} this run does not "
-             f"read: only the folder as the input reads them (facetlift integrate {folder}); "
-             "or give them with --K / --mask", UserWarning)
+             f"read: {how}; or give them with --K / --mask", UserWarning)
 
 
 def camera_unset(job: Job) -> bool:
@@ -667,10 +677,12 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
 
 
 def _components(mask) -> int:
-    """The connected components of `mask`, as the integration's domain counts them."""
-    from .domain import Domain
+    """The connected components of `mask`, as the integration's domain counts them (facets
+    sharing a corner: 8-connected), by one labelling (a whole Domain was built for it, 0.22 s
+    and 90 MB at 4096^2, a review)."""
+    from scipy import ndimage
 
-    return Domain(mask).n_components
+    return int(ndimage.label(mask, structure=np.ones((3, 3), bool))[1])
 
 
 def _strict_check(caught, surface) -> None:

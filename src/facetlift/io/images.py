@@ -248,21 +248,23 @@ def _alpha_mask(alpha: np.ndarray, path=None, arg: str = "path",
 #: height, as "normal + height" textures pack it) where its values strictly between 0 and its
 #: largest cover more than ALPHA_DATA_SHARE of the image in more than ALPHA_DATA_LEVELS
 #: distinct values, counting the pixels more than ALPHA_EDGE pixels from a transparent one and
-#: from one at the largest value, and those ALPHA_RAMP pixels or more (Euclidean) from any
-#: flat pixel (one whose 3 x 3 neighbours all share its value): the middle of a ramp wider
-#: than an antialiased edge's band. (An audit: such a map integrated 15 % of its pixels,
-#: without a word; a second: bricks with 6-texel bevels, 0 in the grooves and the largest on
-#: the faces, had their in-between values within 2 px of both on all but 4.4 % of the pixels,
-#: in 6 levels, and went unwarned; their ramps' middles add 8 % in 11 levels.) Measured
-#: (2026-12-06): exact antialiased edges (an ellipse's coverage, 32^2 and 256^2) come 2.24 px
-#: at most from a flat pixel, edges blurred by a 2-px box 2.83, by a 3-px box 3.6 on 0.9 % of
-#: a 256^2 image; ramps of 5 in-between pixels or more reach 3. A feathered edge (a mask
-#: blurred with a Gaussian of sigma 3 px) is a ramp too and warned about where it covers that
-#: share (13 % of a 256^2 image with an ellipse 140 px across; sigma 1 px: 2.7 %): every
-#: pixel of its soft band is taken as inside, past the object. The levels: an alpha of
-#: flat translucent areas (one or two values, besides 0 and its largest, with antialiased
-#: edges) stays silent; a height has more, even bricks of three face heights.
-ALPHA_DATA_SHARE, ALPHA_DATA_LEVELS, ALPHA_EDGE, ALPHA_RAMP = 0.05, 2, 2, 3
+#: from one at the largest value, and those ALPHA_RAMP pixels or more (Euclidean) from every
+#: transparent pixel and every one at the largest value: the middle of a ramp wider than an
+#: antialiased edge's band. (An audit: such a map integrated 15 % of its pixels, without a
+#: word; a second: bricks with 5.5-texel bevels, 0 in the grooves and the largest on the
+#: faces, had their in-between values within 2 px of both on all but 4.4 % of the pixels, in 6
+#: levels, and went unwarned; their ramps' middles add 8 %, in 11 levels. A first ramp rule,
+#: distances from any locally flat pixel, counted the middles of antialiased diagonal wires
+#: 2-4 px wide, a chain-link fence's or a hair card's alpha: a review.) Measured
+#: (2026-12-05): an antialiased ellipse's edge (exact coverage), the same edge blurred by a 2-
+#: or 3-px box, and antialiased wires 1-6 px wide every 8-16 px, axis-aligned and at 45°,
+#: have no in-between pixel 2 px from both extremes: silent. A feathered edge (a mask blurred
+#: with a Gaussian of sigma 3 px) is a ramp too and warned about where it covers that share
+#: (an ellipse 140 px across in a 256^2 image): every pixel of its soft band is taken as
+#: inside, past the object; sigma 1 px stays silent. The levels: an alpha of flat translucent
+#: areas (one or two values, besides 0 and its largest, with antialiased edges) stays silent;
+#: a height has more, even bricks of three face heights.
+ALPHA_DATA_SHARE, ALPHA_DATA_LEVELS, ALPHA_EDGE, ALPHA_RAMP = 0.05, 2, 2, 2
 
 
 def _alpha_levels(alpha: np.ndarray, m: np.ndarray, p, arg: str) -> None:
@@ -283,13 +285,14 @@ def _alpha_levels(alpha: np.ndarray, m: np.ndarray, p, arg: str) -> None:
     if between.sum() <= ALPHA_DATA_SHARE * a.size:  # (quick: most alphas are 0 and the max)
         return
     edge = ndimage.binary_dilation(~m | (a == top), iterations=ALPHA_EDGE)
-    v = np.where(m, a, 0)  # (transparent, NaN included, as one flat value)
-    flat = ((ndimage.maximum_filter(v, 3, mode="nearest") == v)
-            & (ndimage.minimum_filter(v, 3, mode="nearest") == v))
-    k = int(np.ceil(ALPHA_RAMP)) - 1  # (no flat pixel nearer than ALPHA_RAMP: a disk's
-    r, c = np.indices((2 * k + 1, 2 * k + 1)) - k  # dilation, a sixth of an exact
-    near = r * r + c * c < ALPHA_RAMP**2  # distance's time at 4096^2)
-    ramp = ndimage.maximum_filter(flat.view(np.uint8), footprint=near, mode="constant") == 0
+    # (a ramp's middle: no transparent pixel and none at the largest value nearer than
+    # ALPHA_RAMP; measured from any locally flat pixel instead, the middles of antialiased
+    # diagonal wires 2-4 px wide, a chain-link fence's alpha, counted, a review)
+    extreme = ~m | (a == top)
+    k = int(np.ceil(ALPHA_RAMP)) - 1  # (a disk's dilation, a sixth of an exact distance's
+    r, c = np.indices((2 * k + 1, 2 * k + 1)) - k  # time at 4096^2)
+    near = r * r + c * c < ALPHA_RAMP**2
+    ramp = ndimage.maximum_filter(extreme.view(np.uint8), footprint=near, mode="constant") == 0
     away = between & (~edge | ramp)
     if away.sum() <= ALPHA_DATA_SHARE * a.size:
         return
