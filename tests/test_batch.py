@@ -277,7 +277,8 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
     assert set(recs[0]) - {"resumed"} <= set(recs[2]) | {"outputs", "mean_deviation",
                                                          "shape", "facets", "converged",
                                                          "mask_source", "perspective",
-                                                         "camera", "depth_range", "normals"}
+                                                         "camera", "depth_range", "normals",
+                                                         "evaluation"}
     code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "1",
                  "-s", "npy", "--progress"])
     assert code == 1 and "batch:" in capsys.readouterr().err  # the bar, on stderr

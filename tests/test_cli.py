@@ -864,3 +864,43 @@ def test_black_pixels_inside_the_object_are_reported(tmp_path, capsys):
     said = [ln for ln in err.splitlines() if "enclosed by the object" in ln]
     assert len(said) == 1 and "3 pixel(s)" in said[0] and "(row 3, col 5)" in said[0]
     assert np.isnan(np.load(tmp_path / "out" / "depth.npy")[[3, 12, 15], [5, 20, 2]]).all()
+
+
+def test_a_dataset_folders_ground_truth_is_scored(tmp_path, capsys):
+    """A dataset folder holding depth_gt.* (BiNI's DiLiGenT folders hold depth_gt.npz) is
+    scored with facetlift evaluate's measures: the summary gives BiNI's MADE, --json and
+    batch.jsonl the record's evaluation, and a batch its mean over the items that have one,
+    so that methods compare on a benchmark's folders in one run. A ground truth that cannot
+    be scored (another size) is warned about; the job still succeeds."""
+    H, W, f = 40, 48, 200.0
+    c = np.mgrid[0:H, 0:W][1].astype(float)
+    K = np.array([[f, 0, (W - 1) / 2], [0, f, (H - 1) / 2], [0, 0, 1.0]])
+    depth = 10.0 / (1.0 - 2.0 * (c - K[0, 2]) / f)  # (a tilted plane z = 10 + 2 X)
+    n = np.dstack([np.full((H, W), -2.0), np.zeros((H, W)), np.ones((H, W))])
+    n = n * [1, -1, -1] * -1  # (the plane's normal toward the camera, facetlift frame)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    for name in ("a", "b"):
+        d = tmp_path / name
+        d.mkdir()
+        np.save(d / "normal_map.npy", n)
+        np.savetxt(d / "K.txt", K)
+    np.savez(tmp_path / "a" / "depth_gt.npz", depth_gt=depth)
+    code, out, err = run(capsys, "integrate", tmp_path / "a", "-s", "npy", "--json", "-o",
+                         tmp_path / "out_a")
+    rec = json.loads(out)
+    assert code == 0, err
+    ev = rec["evaluation"]
+    assert ev["gt"] == "depth_gt.npz" and ev["perspective"] and ev["pixels"] == H * W
+    assert ev["made"] < 1e-3 * depth.mean(), ev
+    code, out, err = run(capsys, "integrate", tmp_path / "a", "-s", "npy", "-o",
+                         tmp_path / "out_a2")
+    assert re.search(r"MADE [\d.e-]+ against depth_gt\.npz \(BiNI's: after the median scale",
+                     out), out
+    np.save(tmp_path / "b" / "depth_gt.npy", depth[:20])  # (another size)
+    code, out, err = run(capsys, "batch", tmp_path / "a", tmp_path / "b", "-s", "npy", "-o",
+                         tmp_path / "batch")
+    said = " ".join((out + err).split())
+    assert code == 0 and "depth_gt.npy in" in said and "not scored" in said, said
+    assert re.search(r"mean MADE [\d.e-]+ over the 1 with a depth_gt file", said), said
+    logged = [json.loads(line) for line in (tmp_path / "batch" / "batch.jsonl").open()]
+    assert sorted(bool(r.get("evaluation")) for r in logged) == [False, True]

@@ -713,11 +713,12 @@ def log_record(rec: dict) -> dict:
 
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
             "shape", "facets", "mask_source", "converged", "warnings", "resumed", "settings",
-            "input_stamp", "perspective", "camera", "depth_range", "normals")
+            "input_stamp", "perspective", "camera", "depth_range", "normals", "evaluation")
     # (mask_source: whether NAME_mask.png was used, a user asked; perspective: whether a
     # camera was used, a dataset folder's K.txt included; camera: which, a DiLiGenT folder's
     # being its parent's Calib_Results.mat; depth_range: height.png's scale;
-    # normals: the mask's pixels without a usable normal, by reason)
+    # normals: the mask's pixels without a usable normal, by reason; evaluation: the scores
+    # against a dataset folder's depth_gt.*)
     return jsonable({k: rec[k] for k in keep if k in rec})
 
 

@@ -459,6 +459,14 @@ def summary(record: dict) -> str:
     if "height" in record.get("outputs", {}) and span:  # (the displacement scale, without
         # --json: a texture artist's check)
         parts.append(f"height.png 0..65535 = height {0.0 - span[0]:.6g} to {0.0 - span[1]:.6g}")
+    ev = record.get("evaluation")
+    if ev:  # (a dataset folder's depth_gt.*, scored as facetlift evaluate scores it)
+        if ev.get("made") is not None:
+            parts.append(f"MADE {ev['made']:.4g} against {ev['gt']} (BiNI's: after the median "
+                         f"scale {ev['scale']:.4g})")
+        elif ev.get("normalized_error") is not None:
+            parts.append(f"normalised error {100 * ev['normalized_error']:.3g} % against "
+                         f"{ev['gt']}")
     parts.append(f"{record['timings']['integrate']:.2f} s")
     return ", ".join(parts)
 
@@ -927,9 +935,15 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     if warned:  # (those earlier ones' warnings were not printed now: in the log)
         said.append(f"{len(warned)} with warnings"
                     + (f", {sum(warned)} of those in the log only" if any(warned) else ""))
+    scored = [r["evaluation"]["made"] for r in records if r["status"] == "ok"
+              and (r.get("evaluation") or {}).get("made") is not None]
     line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
             + (f" ({'; '.join(said)})" if said else "")
             + (f", {len(failed)} failed" if failed else "")
+            # (the items whose dataset folder holds a depth_gt.*: a method compared on a
+            # benchmark's folders in one line, as BiNI's evaluation prints it)
+            + (f"; mean MADE {sum(scored) / len(scored):.4g} over the {len(scored)} with a "
+               "depth_gt file" if scored else "")
             + f" (log: {outdir / LOG_NAME}), {time.perf_counter() - t0:.1f} s")
     click.echo(line, err=as_json)
     return EXIT_INPUT if failed else EXIT_OK

@@ -642,6 +642,10 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                     raise
                 raise OSError(e.errno, f"{e.strerror} (writing {name} for {outdir}; nothing "
                                        "was written there)") from e
+        # (a dataset folder's depth_gt.*, as BiNI's DiLiGenT folders hold it: scored by
+        # facetlift evaluate's measures, so a batch over such folders compares methods; here,
+        # where its warning is the record's)
+        evaluation = _evaluate_against_gt(src, surface)
         stale = [n for n in OUTPUTS.values() if n not in names and (outdir / n).is_file()]
         if stale:  # (left as they are: the folder is the user's; said, so none is mistaken)
             warnings.warn(f"the output folder {outdir} also holds {', '.join(stale)} from an "
@@ -665,6 +669,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         # (the depth of height.png's 0 and 65535, as io.write_height scales it)
         "depth_range": _depth_range(surface, job.height_range if "height" in save else None),
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),
+        "evaluation": evaluation,
         "converged": bool(sinfo.get("converged", True)),
         # (how many mask pixels had no usable normal, by reason: a batch's missing normals
         # were nowhere in batch.jsonl, a photometric-stereo user's check)
@@ -674,6 +679,36 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "timings": {"read": t_read, "integrate": t_integrate,
                     "write": time.perf_counter() - t2, "total": time.perf_counter() - t0},
     }
+
+
+#: Ground-truth depth files a dataset folder may hold (BiNI's DiLiGenT folders:
+#: ``depth_gt.npz`` with the array ``depth_gt``), scored in the job's record.
+GT_NAMES = ("depth_gt.npz", "depth_gt.npy", "depth_gt.exr", "depth_gt.tif", "depth_gt.tiff")
+
+
+def _evaluate_against_gt(src: Path, surface) -> dict | None:
+    """The record's ``evaluation``: :func:`facetlift.metrics.evaluate` of `surface` against
+    the first of :data:`GT_NAMES` in the dataset folder `src` (``gt``: its name), or None
+    where `src` is no folder or holds none. A ground truth that cannot be scored (another
+    size, unreadable) is warned about and gives None: it never fails the job."""
+    if not Path(src).is_dir():
+        return None
+    gt = next((Path(src) / n for n in GT_NAMES if (Path(src) / n).is_file()), None)
+    if gt is None:
+        return None
+    from . import io, metrics
+
+    try:
+        truth = io.read_depth(gt, npz_names=("depth_gt", "depth"), arg="ground truth")
+        with warnings.catch_warnings():  # (the units note is evaluate's, for its command)
+            warnings.simplefilter("ignore")
+            scores = metrics.evaluate(surface, truth, surface.mask)
+    except ValueError as e:
+        warn(f"{gt.name} in {src}: not scored ({e})")
+        return None
+    keep = ("pixels", "uncovered", "perspective", "made", "scale", "rmse_scaled", "mae",
+            "normalized_error")
+    return {"gt": gt.name, **{k: jsonable(scores.get(k)) for k in keep}}
 
 
 def _components(mask) -> int:
