@@ -700,9 +700,9 @@ def _evaluate_against_gt(src: Path, surface) -> dict | None:
 
     try:
         truth = io.read_depth(gt, npz_names=("depth_gt", "depth"), arg="ground truth")
-        with warnings.catch_warnings():  # (the units note is evaluate's, for its command)
-            warnings.simplefilter("ignore")
-            scores = metrics.evaluate(surface, truth, surface.mask)
+        # (its warnings, e.g. an orthographic result's range unlike the truth's: --pixel-size,
+        # are the job's too)
+        scores = metrics.evaluate(surface, truth, surface.mask)
     except ValueError as e:
         warn(f"{gt.name} in {src}: not scored ({e})")
         return None
