@@ -729,14 +729,16 @@ def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", tmp_path / "Normal_gt.mat", "-s", "npy", "-o",
                        tmp_path / "e")
     assert code == 0 and "Normal_gt.mat lies in a dataset folder whose mask.png (its mask)" in err
-    assert "only the folder as the input reads them" in " ".join(err.split())
+    said = " ".join(err.split())
+    assert "only the folder as the input reads it" in said and "or give it with --mask" in said
+    assert "--K" not in said  # (no camera file here: only the flag of the file named)
     # (with a normal_map.* beside it the folder reads that one: not told to integrate the
     # folder for this map, a review)
     io.write_normals(tmp_path / "normal_map.png", n)
     code, _, err = run(capsys, "integrate", tmp_path / "Normal_gt.mat", "-s", "npy", "-o",
                        tmp_path / "e1")
     err = " ".join(err.split())
-    assert code == 0 and "reads them with its normal_map.png, not this map" in err, err
+    assert code == 0 and "reads it with its normal_map.png, not this map" in err, err
     (tmp_path / "normal_map.png").unlink()
     sio.savemat(tmp_path / "obj.mat", {"N": n})
     code, _, err = run(capsys, "integrate", tmp_path / "obj.mat", "-s", "npy", "-o",
@@ -901,6 +903,7 @@ def test_a_dataset_folders_ground_truth_is_scored(tmp_path, capsys):
                          tmp_path / "batch")
     said = " ".join((out + err).split())
     assert code == 0 and "depth_gt.npy in" in said and "not scored" in said, said
-    assert re.search(r"mean MADE [\d.e-]+ over the 1 with a depth_gt file", said), said
+    assert re.search(r"mean MADE [\d.e-]+ over the 1 with a depth_gt file scored by it",
+                     said), said
     logged = [json.loads(line) for line in (tmp_path / "batch" / "batch.jsonl").open()]
     assert sorted(bool(r.get("evaluation")) for r in logged) == [False, True]

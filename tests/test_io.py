@@ -1210,5 +1210,25 @@ def test_surface_save_height_png_writes_the_height_map_not_a_preview(tmp_path):
     assert b.dtype == np.uint16 and 20000 < b.mean() < 45000
     prev = imagecodecs.png_decode(s.save(tmp_path / "look.png").read_bytes())
     assert prev.dtype == np.uint8 and prev.ndim == 3
+    # per object too (a user's check: tent_height.png was a silent preview)
+    c = imagecodecs.png_decode(s.save(tmp_path / "tent_height.png").read_bytes())
+    assert c.dtype == np.uint16 and c.ndim == 2
+    with pytest.warns(UserWarning, match="shaded preview of the surface unless it is named"):
+        d = imagecodecs.png_decode(s.save(tmp_path / "height_look.png").read_bytes())
+    assert d.dtype == np.uint8
     with pytest.raises(ValueError, match="takes only `height_range`"):
         s.save(tmp_path / "height.png", light=(0, 0, 1))
+
+
+def test_a_two_channel_exr_without_the_encoding_is_told_of_it(tmp_path):
+    """A user's check: an EXR holding R and G only, read without --normal-encoding xy, was
+    refused naming the channels it lacks but not the flag (a two-channel .npy or TIFF
+    named it)."""
+    from facetlift.io.images import _write_exr
+
+    x = np.linspace(-0.3, 0.3, 24)[None, :] * np.ones((20, 1))
+    _write_exr(tmp_path / "xy.exr", {"R": x, "G": 0.5 * x})
+    with pytest.raises(ValueError, match=r"two-channel .* --normal-encoding xy"):
+        io.read_normals(tmp_path / "xy.exr")
+    n, _ = io.read_normals(tmp_path / "xy.exr", encoding="xy")
+    assert n.shape == (20, 24, 3) and np.allclose(np.linalg.norm(n, axis=-1), 1.0)

@@ -935,15 +935,25 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     if warned:  # (those earlier ones' warnings were not printed now: in the log)
         said.append(f"{len(warned)} with warnings"
                     + (f", {sum(warned)} of those in the log only" if any(warned) else ""))
-    scored = [r["evaluation"]["made"] for r in records if r["status"] == "ok"
-              and (r.get("evaluation") or {}).get("made") is not None]
+    evals = [r["evaluation"] for r in records if r["status"] == "ok" and r.get("evaluation")]
+    made = [e["made"] for e in evals if e.get("made") is not None]
+    # (an orthographic result is scored by the normalised error where it has no MADE: both
+    # means, each over its own items, a user's check of a mixed batch)
+    normalised = [e["normalized_error"] for e in evals
+                  if e.get("made") is None and e.get("normalized_error") is not None]
+    scored = []
+    if made:
+        scored.append(f"mean MADE {sum(made) / len(made):.4g} over the {len(made)} with a "
+                      "depth_gt file scored by it")
+    if normalised:
+        scored.append(f"mean normalised error {100 * sum(normalised) / len(normalised):.3g} % "
+                      f"over the {len(normalised)} orthographic one(s) with a depth_gt file")
     line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
             + (f" ({'; '.join(said)})" if said else "")
             + (f", {len(failed)} failed" if failed else "")
             # (the items whose dataset folder holds a depth_gt.*: a method compared on a
             # benchmark's folders in one line, as BiNI's evaluation prints it)
-            + (f"; mean MADE {sum(scored) / len(scored):.4g} over the {len(scored)} with a "
-               "depth_gt file" if scored else "")
+            + ("; " + "; ".join(scored) if scored else "")
             + f" (log: {outdir / LOG_NAME}), {time.perf_counter() - t0:.1f} s")
     click.echo(line, err=as_json)
     return EXIT_INPUT if failed else EXIT_OK

@@ -331,11 +331,17 @@ def _beside_dataset_files(src: Path, job: Job, own_mask: bool = False) -> None:
             own = None
         # (a folder holding both normal_map.* and Normal_gt.mat reads the first: told to
         # integrate the folder, this map's user would get the other, a review)
-        how = (f"only the folder as the input reads them (facetlift integrate {folder})"
+        them = "them" if len(unused) > 1 else "it"
+        how = (f"only the folder as the input reads {them} (facetlift integrate {folder})"
                if own is None or own.name == src.name else
-               f"the folder as the input reads them with its {own.name}, not this map")
+               f"the folder as the input reads {them} with its {own.name}, not this map")
+        # (the flags of the files named only: '--K / --mask' for a lone mask.png, a user's
+        # check)
+        flags = " / ".join(flag for flag, given in (
+            ("--K", any("camera" in u for u in unused)),
+            ("--mask", any("its mask" in u for u in unused))) if given)
         warn(f"{src} lies in a dataset folder whose {' and '.join(unused)} this run does not "
-             f"read: {how}; or give them with --K / --mask", UserWarning)
+             f"read: {how}; or give {them} with {flags}", UserWarning)
 
 
 def camera_unset(job: Job) -> bool:
@@ -700,6 +706,10 @@ def _evaluate_against_gt(src: Path, surface) -> dict | None:
 
     try:
         truth = io.read_depth(gt, npz_names=("depth_gt", "depth"), arg="ground truth")
+        if truth.shape != surface.depth.shape:  # (said in the command line's words, not
+            # evaluate's `truth` and `estimate`, a user's check)
+            raise ValueError(f"it is {truth.shape[0]}x{truth.shape[1]} (HxW), the normal map "
+                             f"{surface.depth.shape[0]}x{surface.depth.shape[1]}")
         # (its warnings, e.g. an orthographic result's range unlike the truth's: --pixel-size,
         # are the job's too)
         scores = metrics.evaluate(surface, truth, surface.mask)

@@ -146,6 +146,12 @@ def _exr_normal_channels(ch: dict, p: Path, arg: str,
                 if len(normal) > 1 else ": save the normal pass alone, or as its own file")
              if found else "")
     want = "R, G, B or X, Y, Z" if count == 3 else "R, G or X, Y (a two-channel map)"
+    if count == 3 and not which and any(all(c in ch for c in two) for two in (("R", "G"),
+                                                                               ("X", "Y"))):
+        # (x and y alone: a two-channel map, read with the encoding that rebuilds z; named as
+        # for a two-channel .npy or TIFF, a user's check)
+        which = ("; x and y alone are a two-channel (BC5/RG) map: read it with "
+                 "--normal-encoding xy (encoding='xy'), which rebuilds z")
     raise ValueError(f"`{arg}`: {p} must have channels {want}; got {sorted(ch)}{which}")
 
 

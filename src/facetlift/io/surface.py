@@ -34,8 +34,9 @@ def save_surface(surface, path, **kwargs) -> Path:
     (:func:`write_mesh`, split at the jumps where there are any; keyword ``triangles``: True
     splits each quad in two, False keeps quads; default quads for PLY and triangles for OBJ,
     since OBJ readers such as Open3D's take triangles only); ``.png``: a shaded preview
-    (:func:`write_preview`, keywords forwarded), except ``height.png`` and the other names of
-    :data:`HEIGHT_STEMS`: the 16-bit height map of ``--save height``
+    (:func:`write_preview`, keywords forwarded), except ``height.png``, the other names of
+    :data:`HEIGHT_STEMS` and names ending in ``_height`` (``bear_height.png``; or ``-``): the
+    16-bit height map of ``--save height``
     (:func:`~facetlift.io.preview.write_height`, keyword ``height_range``). Returns the path
     written.
 
@@ -77,7 +78,10 @@ def save_surface(surface, path, **kwargs) -> Path:
         triangles = ext == ".obj" if triangles is None else triangles  # (to_mesh checks it)
         verts, faces = surface.to_mesh(triangles=triangles, frame=kwargs.get("frame"))
         return write_mesh(p, verts, faces)
-    if p.stem.lower() in HEIGHT_STEMS:  # (the command line's height.png: the same here)
+    stem = p.stem.lower()
+    if stem in HEIGHT_STEMS or stem.endswith(tuple(f"{sep}{h}" for h in HEIGHT_STEMS
+                                                   for sep in "_-")):
+        # (the command line's height.png, also per object: bear_height.png; a user's check)
         extra = sorted(set(kwargs) - {"height_range"})
         if extra:
             raise ValueError(f"{p.name} (a height map) takes only `height_range`; got {extra}")
@@ -88,7 +92,13 @@ def save_surface(surface, path, **kwargs) -> Path:
     extra = sorted(set(kwargs) - preview_kw)
     if extra:
         raise ValueError(f".png output takes only {sorted(preview_kw)}; got {extra}")
-    if "depth" in p.stem.lower():  # (a user's trap: "depth.png" held no depth)
+    if "height" in stem or "displacement" in stem:  # (not one of the names above)
+        from .._warnings import warn
+
+        warn(f"{p.name}: a .png is a shaded preview of the surface unless it is named "
+             f"{', '.join(h + '.png' for h in HEIGHT_STEMS)} or ends with _height.png (or "
+             "-height.png): those are the 16-bit height map (io.write_height)")
+    if "depth" in stem:  # (a user's trap: "depth.png" held no depth)
         from .._warnings import warn
 
         warn(f"{p.name}: a .png is a shaded preview of the surface, not its depth; write "
