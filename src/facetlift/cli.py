@@ -1108,9 +1108,11 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
     ne = rec["normalized_error"]
     lines = [f"{rec['result']} against {rec['gt']}: {rec['pixels']} pixels (mask: "
              f"{rec['mask']}{uncovered}), {camera}",
-             f"  MADE:              {num(rec['made'])} (the ground truth's units, after the "
-             "median scale)",
-             f"  scale:             {num(rec['scale'])} (median of GT / RESULT)",
+             f"  MADE:              {num(rec['made'])}"
+             + (" (the ground truth's units, after the median scale)"
+                if rec["made"] is not None else ""),
+             f"  scale:             {num(rec['scale'])}"
+             + (" (median of GT / RESULT)" if rec["scale"] is not None else ""),
              f"  RMSE after scale:  {num(rec['rmse_scaled'])}",
              f"  MAE, no scale:     {num(rec['mae'])} (as stored: for metric depth)",
              "  normalised error:  "
