@@ -81,7 +81,7 @@ def items(inputs, *, list_file=None) -> list[Item]:
     ValueError
         No normal map found at all (every input missing, or none holds a map).
     """
-    from .io.dataset import CAMERA_FILES, is_dataset
+    from .io.dataset import CAMERA_FILES, is_dataset, one_channel
     from .io.images import MASK_FORMATS, NORMAL_READ_FORMATS
 
     if isinstance(inputs, (str, os.PathLike)):  # (one input: a str was read letter by letter)
@@ -143,7 +143,7 @@ def items(inputs, *, list_file=None) -> list[Item]:
         if key in seen or (_is_mask_file(p, NORMAL_READ_FORMATS, files) and (
                 not explicit or given.intersection(_maps_of(p, NORMAL_READ_FORMATS, files)))):
             continue
-        if not explicit and p.stem.endswith("_mask") and _grey(p):
+        if not explicit and p.stem.endswith("_mask") and one_channel(p):
             lone.append(p.name)  # (a grey X_mask.* without its map X.*: a mask, no item)
             continue
         seen.add(key)
@@ -205,23 +205,6 @@ def _holds_maps(folder: Path) -> bool:
     return any(Path(n).suffix.lower() in kinds and Path(n).stem not in OUTPUT_STEMS
                and Path(n).stem.lower() != "mask" and not Path(n).stem.endswith("_mask")
                and n not in CAMERA_FILES for n in names)
-
-
-def _grey(p: Path) -> bool:
-    """Whether `p` is a one-channel (or grey + alpha) PNG or a 2-d ``.npy``, from its header:
-    a mask, not a normal map (other files: False)."""
-    try:
-        if p.suffix.lower() == ".png":
-            with open(p, "rb") as fh:
-                head = fh.read(26)
-            return len(head) == 26 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[25] in (0, 4)
-        if p.suffix.lower() == ".npy":
-            import numpy as np
-
-            return np.load(p, mmap_mode="r").ndim == 2
-    except (OSError, ValueError):
-        pass
-    return False
 
 
 def _stem(p: Path) -> str:

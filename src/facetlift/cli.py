@@ -1016,11 +1016,6 @@ def _split(text):
     return None if not text else tuple(t.strip() for t in text.split(",") if t.strip())
 
 
-#: The arrays of a ground truth's ``.npz`` looked for, in order (else its only one): BiNI's
-#: DiLiGenT ``depth_gt.npz`` holds ``depth_gt``.
-GT_NPZ_NAMES = ("depth_gt", "depth")
-
-
 @cli.command(context_settings=CONTEXT)
 @click.argument("result", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--gt", "gt", required=True,
@@ -1066,6 +1061,8 @@ def evaluate(result, gt, mask, K, as_json):
             raise ValueError(f"`K`: {K} differs from the camera {result} was integrated with "
                              f"({camera.tolist()}); leave --K out to use the surface's own")
         camera = given
+    from .jobs import GT_NPZ_NAMES
+
     truth = io.read_depth(gt, npz_names=GT_NPZ_NAMES, arg="gt")
     if truth.shape != est.shape:
         raise ValueError(f"`gt`: {gt} is {truth.shape[0]}x{truth.shape[1]} (HxW) but `result` "

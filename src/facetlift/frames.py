@@ -274,8 +274,7 @@ def decode(pixels: np.ndarray, where=None) -> np.ndarray:
     length = np.sqrt(np.einsum("...i,...i->...", n, n))
     lo, hi = ENCODED_LENGTH_RANGE
     bad = (length < lo) | (length > hi)
-    where = None if where is None else np.asarray(where)
-    seen = ~bad if where is None or where.shape != bad.shape else ~bad & where.astype(bool)
+    seen = _seen(bad, where)
     if pixels.dtype == np.uint8:
         _zero_plateaus(n, pixels, seen)
     n[bad] = np.nan
@@ -347,8 +346,7 @@ def decode_xy(values: np.ndarray, where=None, frame=None) -> np.ndarray:
     if encoded:
         n[..., :2] = v[..., :2] / float(np.iinfo(v.dtype).max) * 2.0 - 1.0  # (as decode)
         bad = np.einsum("...i,...i->...", n[..., :2], n[..., :2]) > (1.0 + UNIT_TOLERANCE) ** 2
-        where = None if where is None else np.asarray(where)
-        seen = ~bad if where is None or where.shape != bad.shape else ~bad & where.astype(bool)
+        seen = _seen(bad, where)
         if v.dtype == np.uint8:
             _zero_plateaus(n, v, seen)
     else:
@@ -359,6 +357,13 @@ def decode_xy(values: np.ndarray, where=None, frame=None) -> np.ndarray:
     if bad is not None:
         n[bad] = np.nan
     return n
+
+
+def _seen(bad: np.ndarray, where) -> np.ndarray:
+    """The pixels a decode's checks count: a valid length (not `bad`), inside `where` ((H, W)
+    bool, the mask or alpha) where it is given with the map's shape."""
+    where = None if where is None else np.asarray(where)
+    return ~bad if where is None or where.shape != bad.shape else ~bad & where.astype(bool)
 
 
 def _zero_plateaus(n: np.ndarray, pixels: np.ndarray, seen: np.ndarray) -> None:
@@ -512,18 +517,18 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
     n = as_float_normals(n, name, mask, hidden)  # warning)
     read = _READ_IN.get()
     read = None if read == GRADIENT_FIELD else read  # (such normals never face away)
+    # (the reader's frame, already applied, to undo for the values as stored; none where
+    # `frame` is still to be applied)
+    undo = read if is_identity(frame) else None
     read = read if is_identity(frame) else frame  # (the frame the values were stored in)
     # the encodings first, on the values as stored (before `frame`, or the reader's frame, is
     # applied: it negates axes): a [0, 1]-encoded map read with normal_frame='opencv' faced
     # away and was told to drop the frame before its encoding was named (an audit); with
     # 'directx' it was not refused at all
     sample = _inside(n, mask, sample=CHECK_SAMPLE)
-    stored = None if sample is None else (
-        sample if not is_identity(frame) else from_facetlift(sample, read))
+    stored = None if sample is None else from_facetlift(sample, undo)
     if stored is not None and len(stored) and stored.min() >= 0:  # (only then can the whole
-        inside = _inside(n, mask)  # map be encoded)
-        _check_encoding(inside if not is_identity(frame) else from_facetlift(inside, read),
-                        name)
+        _check_encoding(from_facetlift(_inside(n, mask), undo), name)  # map be encoded)
     n = to_facetlift(n, frame)
     if sample is not None:
         _check_facing(to_facetlift(sample, frame), name, read)

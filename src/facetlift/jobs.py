@@ -313,14 +313,17 @@ def _beside_dataset_files(src: Path, job: Job, own_mask: bool = False) -> None:
         cameras = camera_files(folder)
     except ValueError:  # (a folder named K.txt: the folder's own reading would say so)
         cameras = []
-    if camera_unset(job) and cameras:
-        name = cameras[0].name if cameras[0].parent == folder else f"../{cameras[0].name}"
-        unused.append(f"{name} (its camera: the map is integrated orthographically)")
-    try:
-        mpath = _find(folder, "mask", MASK_FORMATS)
-    except ValueError:  # (several mask files: the folder's own reading would say so)
-        mpath = None
-    if job.mask is None and not own_mask and mpath is not None:
+    camera = camera_unset(job) and bool(cameras)
+    if camera:
+        unused.append(f"{_camera_name(cameras[0], folder)} (its camera: the map is integrated "
+                      "orthographically)")
+    mpath = None
+    if job.mask is None and not own_mask:
+        try:
+            mpath = _find(folder, "mask", MASK_FORMATS)
+        except ValueError:  # (several mask files: the folder's own reading would say so)
+            pass
+    if mpath is not None:
         unused.append(f"{mpath.name} (its mask)")
     if unused:
         from .io.dataset import normals_file
@@ -337,9 +340,8 @@ def _beside_dataset_files(src: Path, job: Job, own_mask: bool = False) -> None:
                f"the folder as the input reads {them} with its {own.name}, not this map")
         # (the flags of the files named only: '--K / --mask' for a lone mask.png, a user's
         # check)
-        flags = " / ".join(flag for flag, given in (
-            ("--K", any("camera" in u for u in unused)),
-            ("--mask", any("its mask" in u for u in unused))) if given)
+        flags = " / ".join(flag for flag, given in (("--K", camera),
+                                                     ("--mask", mpath is not None)) if given)
         warn(f"{src} lies in a dataset folder whose {' and '.join(unused)} this run does not "
              f"read: {how}; or give {them} with {flags}", UserWarning)
 
@@ -691,6 +693,10 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
 #: ``depth_gt.npz`` with the array ``depth_gt``), scored in the job's record.
 GT_NAMES = ("depth_gt.npz", "depth_gt.npy", "depth_gt.exr", "depth_gt.tif", "depth_gt.tiff")
 
+#: The arrays of a ground truth's ``.npz`` looked for, in order (BiNI's ``depth_gt``; a
+#: :meth:`facetlift.Surface.save` archive's ``depth``): ``facetlift evaluate --gt`` too.
+GT_NPZ_NAMES = ("depth_gt", "depth")
+
 
 def _evaluate_against_gt(src: Path, surface) -> dict | None:
     """The record's ``evaluation``: :func:`facetlift.metrics.evaluate` of `surface` against
@@ -705,7 +711,7 @@ def _evaluate_against_gt(src: Path, surface) -> dict | None:
     from . import io, metrics
 
     try:
-        truth = io.read_depth(gt, npz_names=("depth_gt", "depth"), arg="ground truth")
+        truth = io.read_depth(gt, npz_names=GT_NPZ_NAMES, arg="ground truth")
         if truth.shape != surface.depth.shape:  # (said in the command line's words, not
             # evaluate's `truth` and `estimate`, a user's check)
             raise ValueError(f"it is {truth.shape[0]}x{truth.shape[1]} (HxW), the normal map "
@@ -727,7 +733,9 @@ def _components(mask) -> int:
     and 90 MB at 4096^2, a review)."""
     from scipy import ndimage
 
-    return int(ndimage.label(mask, structure=np.ones((3, 3), bool))[1])
+    from .domain import _EIGHT
+
+    return int(ndimage.label(mask, structure=_EIGHT)[1])
 
 
 def _strict_check(caught, surface) -> None:

@@ -276,21 +276,22 @@ def _other_maps(f: Path) -> list[str]:
         if (not p.is_file() or ext not in NORMAL_READ_FORMATS + (".mat",)
                 or p.stem.lower() in other or p.stem.endswith("_mask")
                 or p.name.lower() in cameras or p.stem.lower().startswith("depth")
-                or _one_channel(p)):
+                or one_channel(p)):
             continue
         out.append(p.name)
     return out
 
 
-def _one_channel(p: Path) -> bool:
-    """Whether `p` is a one-channel (or grey + alpha) PNG, a one-sample TIFF or a 2-d
-    ``.npy``, from its header: a mask or a depth map, no normal map."""
+def one_channel(p: Path) -> bool:
+    """Whether `p` is a one-channel (or grey + alpha) PNG, a one- or two-sample TIFF or a
+    2-d ``.npy``, from its header: a mask or a depth map, no normal map (unreadable or other
+    files: False). Also what a batch takes ``X_mask.*`` beside ``X.*`` by."""
     try:
         ext = p.suffix.lower()
         if ext == ".png":
             with open(p, "rb") as fh:
                 head = fh.read(26)
-            return len(head) == 26 and head[25] in (0, 4)
+            return len(head) == 26 and head[:8] == b"\x89PNG\r\n\x1a\n" and head[25] in (0, 4)
         if ext == ".npy":
             return np.load(p, mmap_mode="r", allow_pickle=False).ndim == 2
         if ext in (".tif", ".tiff"):
@@ -432,12 +433,18 @@ def _no_normals(f: Path) -> str:
 
 
 def _batch_would_run(f: Path) -> list[str]:
-    """The files of `f` that ``facetlift batch`` makes items of (facetlift.batch.items): a
-    map's extension, and no ``mask.*``, no ``X_mask.*`` beside an ``X.*`` and no camera
-    file."""
-    kinds = NORMAL_READ_FORMATS + (".mat",)
-    files = [p for p in f.iterdir() if p.is_file() and p.suffix.lower() in kinds]
-    stems = {p.stem for p in files}
-    return sorted(p.name for p in files if p.stem.lower() != "mask"
-                  and p.name not in CAMERA_FILES
-                  and not (p.stem.endswith("_mask") and p.stem[:-len("_mask")] in stems))
+    """The names of the files of `f` that ``facetlift batch`` makes items of: its own
+    :func:`facetlift.batch.items` (a copy of its filter could drift from it), quietly; none
+    where it finds none."""
+    import warnings
+
+    from ..batch import items
+
+    try:
+        with warnings.catch_warnings():  # (its notes on subfolders are for a batch's run)
+            warnings.simplefilter("ignore")
+            found = items([f])
+    except ValueError:  # (no map at all)
+        return []
+    return sorted(Path(it.path).name for it in found
+                  if it.error is None and Path(it.path).is_file())
