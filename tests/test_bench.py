@@ -105,6 +105,49 @@ def test_quick_discontinuities(quick):
     assert all(r["status"] == "ok" for r in real if r["method"].startswith("dgp"))
 
 
+def test_quick_heldout(quick):
+    """The held-out experiment runs the development benchmark's columns and oracle on its own
+    scenes (one random view per mesh in --quick), into its own files."""
+    out = quick[2]
+    runs = _rows(out / "heldout_runs.csv")
+    keys = {(r["scene"], r["condition"]) for r in runs}
+    assert len(keys) >= 2 and {r["group"] for r in runs} == {"heldout"}
+    assert all(k[0].endswith("@h0") for k in keys)
+    by = {(r["scene"], r["condition"], r["method"]): r for r in runs}
+    for key in keys:
+        assert by[key + ("oracle",)]["status"] == "ok"
+        assert by[key + ("dgp-disc",)]["converged"] == "True"
+    assert "held-out views" in (out / "report.md").read_text()
+
+
+def test_heldout_views_are_drawn_from_the_seed(tmp_path):
+    """Each mesh's held-out views come from the seed and its name: the same again for the same
+    seed, the first n - 1 of n views those of n - 1, other views for another seed or mesh;
+    unit directions from a camera inside the elevation band, fill inside its band."""
+    from facetlift.bench import discontinuities as D
+    from facetlift.bench.core import Context, Settings
+
+    views = D.heldout_views("bunny", 5, 7)
+    assert views == D.heldout_views("bunny", 5, 7)
+    assert views[:4] == D.heldout_views("bunny", 4, 7)
+    assert views != D.heldout_views("bunny", 5, 8) and views != D.heldout_views("cow", 5, 7)
+    lo, hi = np.sin(np.radians(D.HELDOUT_ELEVATION))
+    for d, fill in views:
+        assert np.linalg.norm(d) == pytest.approx(1.0)
+        assert lo <= -d[1] <= hi  # (the rays travel down from a camera above)
+        assert D.HELDOUT_FILL[0] <= fill <= D.HELDOUT_FILL[1]
+    data = tmp_path / "data"
+    (data / "meshes").mkdir(parents=True)
+    for name in ("one", "two"):
+        (data / "meshes" / f"{name}.ply").write_text("")  # (listed, never loaded here)
+    ctx = Context(out=tmp_path, settings=Settings(heldout_views=2), data=data)
+    assert [(g, n) for g, n, _ in D.heldout_scenes(ctx)] == [
+        ("heldout", "one@h0"), ("heldout", "one@h1"), ("heldout", "two@h0"),
+        ("heldout", "two@h1")]
+    ctx = Context(out=tmp_path, settings=Settings(heldout_views=2), data=data, models=["two"])
+    assert [n for _, n, _ in D.heldout_scenes(ctx)] == ["two@h0", "two@h1"]
+
+
 @pytest.mark.parametrize("name", ["steps", "plateau", "occluder"])
 def test_placed_oracle_removes_the_pieces_offsets(name):
     """The analytic jump scenes' pieces touch nowhere, so the occlusion rule (smallest jump
@@ -195,7 +238,8 @@ def test_bench_input_errors(tmp_path):
                   progress=False)
     with pytest.raises(ValueError, match="`conditions`: none given"):
         run_bench(tmp_path, experiments=["discontinuities"], conditions=",", progress=False)
-    with pytest.raises(ValueError, match="`conditions` applies to the discontinuities"):
+    with pytest.raises(ValueError, match="`conditions` applies to the discontinuities and "
+                                         "heldout"):
         run_bench(tmp_path, experiments=["fig4"], conditions=["smooth3"], progress=False)
 
 

@@ -1129,7 +1129,7 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
                    "goblet, vase).")
 @click.option("--experiments", default=None,  # facetlift.bench.EXPERIMENTS (a test checks)
               help="Comma-separated subset of: table1, fig4, fig5, maps, fig9, fig10, bear, "
-                   "discontinuities, fusion.")
+                   "discontinuities, heldout, fusion.")
 @click.option("--mesh", "meshes", multiple=True, type=click.Path(exists=True, dir_okay=False),
               help="Add a mesh to the Fig. 9 models (repeatable).")
 @click.option("--normal-map", "normal_maps", multiple=True,
@@ -1138,7 +1138,8 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
 @click.option("--data", "data_dir", default=None, type=click.Path(exists=True, file_okay=False),
               help="Data folder with meshes/ and normal_maps/ (default: $FACETLIFT_DATA).")
 @click.option("--conditions", default=None,
-              help="Comma-separated normal conditions of the discontinuities experiment "
+              help="Comma-separated normal conditions of the discontinuities and heldout "
+                   "experiments "
                    "(default exact,16bit,8bit,noise3, with --quick exact,8bit; also smooth3: "
                    "spatially correlated errors of 3 degrees RMS, outliers: 2 % of the "
                    "normals rotated by up to 45 degrees, blur1.5: the normal map blurred by "

@@ -69,6 +69,9 @@ class Settings:
     disc_samples: int = 3
     disc_real_stride: int = 1
     disc_min_pixels: int = 200
+    # the held-out views (facetlift.bench.discontinuities.heldout): random views per mesh
+    heldout_views: int = 3
+    heldout_seed: int = 20261205
     # the fusion benchmark (facetlift.bench.fusion), on the discontinuity scenes
     fusion_groups: tuple = ("perspective", "ortho")
     fusion_fractions: tuple = (0.001, 0.01, 0.05)
@@ -108,6 +111,7 @@ class Settings:
             disc_samples=1,
             disc_real_stride=8,
             disc_min_pixels=50,
+            heldout_views=1,
             fusion_fractions=(0.01,),
             fusion_columns=("dgp", "dgp-disc"),
             fusion_coarse_weights=(),

@@ -25,6 +25,7 @@ EXPERIMENT_FUNCTIONS = {
     "fig10": real.fig10,
     "bear": real.bear,
     "discontinuities": discontinuities.discontinuities,
+    "heldout": discontinuities.heldout,
     "fusion": fusion.fusion,
 }
 EXPERIMENTS = tuple(EXPERIMENT_FUNCTIONS)
@@ -128,9 +129,10 @@ def run_bench(
         if bad or not conditions:
             raise ValueError(f"`conditions`: {f'unknown {bad}' if bad else 'none given'}; "
                              f"valid: {list(CONDITIONS)}")
-        if "discontinuities" not in exps:
-            raise ValueError("`conditions` applies to the discontinuities experiment only, "
-                             f"which is not among the experiments {list(exps)}")
+        if not {"discontinuities", "heldout"} & set(exps):
+            raise ValueError("`conditions` applies to the discontinuities and heldout "
+                             "experiments only, neither of which is among the experiments "
+                             f"{list(exps)}")
         s.disc_conditions = conditions
     bad = [e for e in exps if e not in EXPERIMENTS]
     if bad:
