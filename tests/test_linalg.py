@@ -500,3 +500,23 @@ def test_threaded_calls_leave_the_process_blas_threads_as_they_were():
                 assert all(n == 1 for n in threads())
             assert all(n == 2 for n in threads())
         assert threads() == before
+
+
+@pytest.mark.parametrize("m", [0, 1, 2047, 2048, 2049, 10_000])
+@pytest.mark.parametrize("shape", [(4,), (4, 3)])
+def test_rowwise_products_equal_matmul_in_every_row_block(m, shape):
+    """The row-blocked product (each block one BLAS call below the threading threshold) is
+    numpy's product, whatever the number of rows and blocks; into `out` where given."""
+    from facetlift.linalg import dense
+
+    rng = np.random.default_rng(m)
+    a, b = rng.standard_normal((m, 4)), rng.standard_normal(shape)
+    got = dense.rowwise(a, b)
+    assert got.shape == (m,) + shape[1:]
+    np.testing.assert_allclose(got, a @ b, rtol=1e-14, atol=1e-14)
+    out = np.empty_like(got)
+    assert dense.rowwise(a, b, out=out) is out
+    np.testing.assert_array_equal(out, got)
+    v = rng.standard_normal(m)
+    assert dense.dot(v, v) == pytest.approx(float(v @ v), rel=1e-12, abs=1e-300)
+    assert dense.norm(v) == pytest.approx(float(np.linalg.norm(v)), rel=1e-12, abs=1e-300)

@@ -8,12 +8,12 @@ products on vectors of this size cost more in thread wake-ups than they save (me
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
+from .dense import dot, norm  # noqa: F401  (norm: imported from here elsewhere)
 from .matvec import parallel
 
 
@@ -52,17 +52,7 @@ class CGInfo:
         return self.residuals[-1] if self.residuals else 0.0
 
 
-def _dot(u, v) -> float:
-    return float(np.einsum("i,i->", u, v))
-
-
-def norm(v) -> float:
-    """The 2-norm of a vector, on the calling thread. ``numpy.linalg.norm`` goes to BLAS,
-    which splits a long dot product across its threads: on the 2-core VM with the other
-    core busy each such call waited for a time slice (6 ms for 66k numbers in a profile of
-    the discontinuity route with a depth prior, 0.6 s of its 4.1 s; three per reweighting),
-    where this takes 0.04 ms loaded or idle."""
-    return math.sqrt(max(_dot(v, v), 0.0))
+_dot = dot  # (the inner products of :func:`cg`)
 
 
 #: A residual this many times the smallest one so far means that CG has lost its way: the

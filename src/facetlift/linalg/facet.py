@@ -63,6 +63,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .cg import CGInfo, cg
+from .dense import norm
 from .spectral import BoxPreconditioner
 
 #: Weak facets in 8-connected clusters of at least this many facets (a band along a rim, a
@@ -450,8 +451,8 @@ def solve(
     # (_factorize_first); a start already within rtol needs neither
     cached = pre.direct is not None and pre.direct[0] is K
     if cached or _factorize_first(K, pre):
-        bn = float(np.linalg.norm(b)) or 1.0
-        start = 1.0 if x0 is None else float(np.linalg.norm(b - K @ x0)) / bn
+        bn = norm(b) or 1.0
+        start = 1.0 if x0 is None else norm(b - K @ x0) / bn
         if start <= rtol:
             return x0, CGInfo(converged=True, residuals=[start])
         done = _direct(K, b, pre, CGInfo(residuals=[start]), rtol)
@@ -644,8 +645,8 @@ def _direct(K, b, pre, info: CGInfo, rtol: float):
         pre.direct = None
         pre.direct_failed = True  # (not again for this matrix: refresh() clears it)
         return None
-    bn = float(np.linalg.norm(b)) or 1.0
-    info.residuals.append(float(np.linalg.norm(b - K @ x)) / bn)
+    bn = norm(b) or 1.0
+    info.residuals.append(norm(b - K @ x) / bn)
     info.converged = info.residuals[-1] <= rtol
     return x, info
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..._warnings import warn
+from ...linalg.dense import rowwise
 from ...operators.stencil import E_X, E_Y, grid_slopes
 
 
@@ -45,7 +46,7 @@ def flatten(domain, z, empty):
 def facet_slopes(domain, z):
     """Current (e_x . z_f, e_y . z_f) of every facet: h times its least-squares slopes."""
     zf = z[domain.corners]
-    return zf @ E_X, zf @ E_Y
+    return rowwise(zf, E_X), rowwise(zf, E_Y)
 
 
 def average_deviation(domain, z, bx, by, target, h=1.0) -> float:

@@ -108,7 +108,7 @@ from ..._progress import announce
 from ...conventions import CORNER_OFFSETS
 from ...errors import SolverError
 from ...linalg.amg import balanced, block_aggregates, hierarchy, refresh, vcycle
-from ...linalg.cg import norm
+from ...linalg.dense import dot, norm, rowwise
 from ...memory import factorization_fits
 from ...operators.stencil import (
     CENTRE_BLOCK,
@@ -559,7 +559,7 @@ class GlueInverse:
         self.w = w
         self.d = np.add(w, scale)  # (m, 4): 1 / (scale + w), in one array
         np.reciprocal(self.d, out=self.d)
-        self.c = np.broadcast_to(alpha / (1.0 - alpha * (self.d @ _ONES)), (len(w),))
+        self.c = np.broadcast_to(alpha / (1.0 - alpha * rowwise(self.d, _ONES)), (len(w),))
         self.other = np.flatnonzero(~target)
         self.M_other = None
         if self.other.size:
@@ -864,23 +864,23 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         for s0 in range(0, m, ENERGY_BLOCK):
             s1 = min(s0 + ENERGY_BLOCK, m)
             yb = y[s0:s1]
-            st = yb @ slope_twist  # (b, 3): x-slope, y-slope and twist residuals
+            st = rowwise(yb, slope_twist)  # (b, 3): x-slope, y-slope and twist residuals
             st[:, 0] -= bx[s0:s1]
             st[:, 1] -= by[s0:s1]
             if not all_target:
                 st[~target[s0:s1], :2] = 0.0
             gap = np.subtract(yb, zc[s0:s1])
             gap *= gap
-            total += float(np.dot(w[s0:s1].reshape(-1), gap.reshape(-1)))
+            total += dot(w[s0:s1].reshape(-1), gap.reshape(-1))
             st *= st
             if fusion is None:  # (no prior either)
                 total += float(st.sum())
                 continue
-            total += float(np.dot(fusion[0][s0:s1], st.sum(axis=1)))
+            total += dot(fusion[0][s0:s1], st.sum(axis=1))
             if prior is not None:
                 t = prior[1][s0:s1]
-                total += float(np.sum(fusion[1][s0:s1] * (yb @ _QUARTER - t) ** 2 + (
-                    (1.0 - PRIOR_OWN) * prior[0][s0:s1] * (zc[s0:s1] @ _QUARTER - t) ** 2)))
+                total += float(np.sum(fusion[1][s0:s1] * (rowwise(yb, _QUARTER) - t) ** 2 + (
+                    (1.0 - PRIOR_OWN) * prior[0][s0:s1] * (rowwise(zc[s0:s1], _QUARTER) - t) ** 2)))
         return total
 
     slopes = (bx, by) if EVIDENCE == "residual" else None
@@ -1030,7 +1030,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     if max_iter > 0:
         announce(callback, "reweighting")
     for it in range(1, max_iter + 1):
-        step = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes) - w
+        step = bilateral_weights(rowwise(y, _QUARTER), nb, normal_scale, k, slopes) - w
         if it > SETTLE_AFTER:
             step *= DECAY ** (it - SETTLE_AFTER)
         w = w + step
@@ -1065,7 +1065,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             near = (cut | grid[pr, pc + 1] | grid[pr + 2, pc + 1] | grid[pr + 1, pc]
                     | grid[pr + 1, pc + 2])
             # (formed in place: one (m, 4) array, 134 MB at 2048^2)
-            step = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
+            step = bilateral_weights(rowwise(y, _QUARTER), nb, normal_scale, k, slopes)
             step -= w
             unsettled = float((np.abs(step) > CUT).mean())  # (own weight - w, for this y)
             step[(step >= -tol) | ~near[:, None]] = 0.0
@@ -1091,7 +1091,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
     # (the settled weights' own diagnostics, before the final solve changes the energy; the
     # growth phase's last check has them when it ended on a look at this y)
     if unsettled is None:
-        own = bilateral_weights(y @ _QUARTER, nb, normal_scale, k, slopes)
+        own = bilateral_weights(rowwise(y, _QUARTER), nb, normal_scale, k, slopes)
         unsettled = float((np.abs(own - w) > CUT).mean())
         del own  # (freed before the final solve)
     slow = amg["slow"]

@@ -15,6 +15,7 @@ import numpy as np
 from ... import linalg
 from ..._warnings import warn
 from ...errors import ConvergenceWarning
+from ...linalg.dense import rowwise
 from ...linalg.facet import FacetPreconditioner, thin
 from ...linalg.spectral import RectangleSolver
 from ...operators.stencil import (
@@ -39,8 +40,8 @@ def local_shaping(domain, z, bx, by, target):
     """
     zf = z[domain.corners]
     centre = zf.mean(axis=1)
-    gx = np.where(target, bx, zf @ E_X)
-    gy = np.where(target, by, zf @ E_Y)
+    gx = np.where(target, bx, rowwise(zf, E_X))
+    gy = np.where(target, by, rowwise(zf, E_Y))
     projected = centre[:, None] + gx[:, None] * E_X + gy[:, None] * E_Y
     return projected, centre
 
