@@ -367,6 +367,22 @@ def test_info_detects_flips_encodings_and_counts(tmp_path, capsys):
     assert code == 1 and json.loads(out)["problem"]
 
 
+def test_info_names_the_flag_where_an_input_cannot_be_integrated(tmp_path, capsys):
+    # a photometric-stereo user's confidence from residuals, shifted below 0: info said
+    # `confidence` (the Python argument) where integrate says --confidence (an audit)
+    io.write_normals(tmp_path / "n.npy", dome())
+    conf = np.full((20, 24), 0.5)
+    conf[3, 4] = -0.1
+    np.save(tmp_path / "c.npy", conf)
+    code, out, _ = run(capsys, "info", tmp_path / "n.npy", "--confidence", tmp_path / "c.npy")
+    line = [x for x in out.splitlines() if "cannot be integrated as read" in x]
+    assert code == 1 and len(line) == 1
+    assert "--confidence must be finite" in line[0] and "`confidence`" not in line[0]
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "--confidence",
+                       tmp_path / "c.npy", "-o", tmp_path / "out")
+    assert code == 1 and "--confidence must be finite" in one_line(err)
+
+
 def test_info_says_when_the_frame_check_cannot_tell(tmp_path, capsys):
     """A texture artist's y-down 8-bit detail map (slopes under 1 deg) was called 'as read
     (consistent)'; integrated as read it was 44 % off."""

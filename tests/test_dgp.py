@@ -382,6 +382,23 @@ def test_component_without_usable_normal_warns_and_is_flat(make_plane):
     assert np.ptp(flat) <= 1e-9 * (np.nanmax(s.depth) - np.nanmin(s.depth))
 
 
+@pytest.mark.parametrize("kw", [{}, {"discontinuities": True}, {"solver": "iterative"},
+                                {"method": "poisson"}])
+def test_component_without_usable_normal_is_named_by_its_pixel_in_the_image(make_plane, kw):
+    # a part of a photometric-stereo mask shadowed under every light: the warning said
+    # "component 1" (an internal numbering) and now names its size and first pixel in the
+    # image's rows and columns, not those of the mask's bounding box (an audit)
+    mask = np.zeros((30, 40), bool)
+    mask[5:25, 6:20] = True
+    mask[12:16, 30:35] = True
+    normals = make_plane(0.3, 0.1).normals(mask.shape)
+    normals[12:16, 30:35] = np.nan
+    with pytest.warns(UserWarning, match=r"1 connected component\(s\) have no usable normal "
+                      r"\(e\.g\. the one of 20 pixel\(s\) whose first pixel is at row 12, "
+                      r"col 30\)"):
+        facetlift.integrate(normals, mask, **kw)
+
+
 # ------------------------------------------------------------------------------------------
 # the paper's local/global loop
 

@@ -837,7 +837,8 @@ def _flat_where_no_normal(problem: Problem, result):
 
     d = problem.domain
     empty = empty_components(d, problem.usable,
-                             problem.prior_components if problem.has_prior else None)
+                             problem.prior_components if problem.has_prior else None,
+                             problem.extras.get("offset", (0, 0)))
     if empty.size:
         values = np.array(result.values, dtype=float, copy=True)
         values[np.isin(d.facet_component, empty)] = 0.0

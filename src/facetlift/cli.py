@@ -785,7 +785,8 @@ def _info_lines(rec: dict) -> list[str]:
                             if got.get("fit") else ""))
     lines += [f"  warning: {_as_flags(w)}" for w in rec.get("warnings", [])]
     if not rec["usable"]:
-        lines.append(f"  cannot be integrated as read: {rec['problem']}")
+        # (named by the flags, as its warnings and integrate's error are: an audit)
+        lines.append(f"  cannot be integrated as read: {_as_flags(rec['problem'])}")
         return lines
     c = rec["counts"]
     lines.append(f"  mask: {rec['mask_pixels']} pixels ({rec['mask_source']}), "

@@ -426,7 +426,7 @@ def run(
                              "between reweightings); got discontinuity_iter=0")
         blur, prior = blurred()
     if discontinuities:
-        empty_components(domain, target)
+        empty_components(domain, target, offset=problem.extras.get("offset", (0, 0)))
         given = target  # (the input's own normals: the deviation is measured on them)
         scale = normal_scale(problem)
         cosines = problem.view_cosines
@@ -520,12 +520,13 @@ def run(
         result = MethodResult(values=copies.mean(axis=1), info=info, extras=extras)
     elif solver == "direct":  # both loops share this fixed point
         z, info = solve_direct(domain, bx, by, target, backend, flat_weight, weights, h=s,
-                               prior=prior, progress=progress, blur=blur)
+                               prior=prior, progress=progress, blur=blur,
+                               offset=problem.extras.get("offset", (0, 0)))
         result = MethodResult(vertex_values=z, info=info)
     else:
         z, info = solve_iterative(
             domain, bx, by, target, s, mean_subtraction, max_iter, tol, backend, progress,
-            weights=weights, prior=prior,
+            weights=weights, prior=prior, offset=problem.extras.get("offset", (0, 0)),
         )
         result = MethodResult(vertex_values=z, info=info)
     if blur is not None:

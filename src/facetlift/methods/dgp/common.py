@@ -21,17 +21,27 @@ def targets(problem):
     return np.where(target, gx, 0.0), np.where(target, gy, 0.0), target
 
 
-def empty_components(domain, target, fixed=None):
+def empty_components(domain, target, fixed=None, offset=(0, 0)):
     """Indices of the components without any target normal, nor a place fixed by a prior
-    where `fixed` (n_components,) bool is given (warned about: they come out flat)."""
+    where `fixed` (n_components,) bool is given (warned about: they come out flat). The
+    warning names one by its size and first pixel, in the image's rows and columns: `offset`
+    is the (row, col) of `domain` in the image (a problem cropped to its mask's box,
+    :func:`facetlift.api.crop`)."""
     have = np.bincount(domain.facet_component[target], minlength=domain.n_components) > 0
     if fixed is not None:
         have |= np.asarray(fixed, bool)
     empty = np.flatnonzero(~have)
     if empty.size:
+        # (named by a pixel and its size: "component 1" of an internal numbering told a
+        # photometric-stereo user with a fully shadowed part nothing to look for, an audit)
+        first = int(domain.first_facets[empty[0]])
+        r = int(domain.pixels[0][first]) + int(offset[0])
+        c = int(domain.pixels[1][first]) + int(offset[1])
+        size = int(domain.component_sizes[empty[0]])
         warn(
-            f"{empty.size} connected component(s) have no usable normal (e.g. component "
-            f"{empty[0] + 1}); they are reconstructed flat"
+            f"{empty.size} connected component(s) have no usable normal (e.g. the one of "
+            f"{size} pixel(s) whose first pixel is at row {r}, col {c}); they are "
+            "reconstructed flat"
         )
     return empty
 

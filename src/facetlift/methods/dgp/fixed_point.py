@@ -75,7 +75,7 @@ def _multigrid_trial(K, rhs, progress, rtol=RTOL):
 
 def solve_direct(
     domain, bx, by, target, backend="auto", flat_weight=1e-9, weights=None, *, h=1.0,
-    prior=None, progress=None, blur=None, rtol=None,
+    prior=None, progress=None, blur=None, rtol=None, offset=(0, 0),
 ):
     """The fixed point of the local/global loop in one sparse solve.
 
@@ -94,7 +94,7 @@ def solve_direct(
     """
     t0 = time.perf_counter()
     tight = RTOL if rtol is None else float(rtol)
-    empty = empty_components(domain, target)
+    empty = empty_components(domain, target, offset=offset)
     fixed = None
     if prior is not None:
         pw, pt, fixed = prior

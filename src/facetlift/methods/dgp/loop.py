@@ -48,7 +48,7 @@ def local_shaping(domain, z, bx, by, target):
 
 def solve_iterative(
     domain, bx, by, target, h, mean_subtraction=True, max_iter=5000, tol=1e-3,
-    backend="auto", progress=None, *, weights=None, prior=None,
+    backend="auto", progress=None, *, weights=None, prior=None, offset=(0, 0),
 ):
     """The paper's local/global loop from the flat mesh; returns vertex values and info.
 
@@ -57,7 +57,7 @@ def solve_iterative(
     Either needs the mean-subtracted global step.
     """
     t0 = time.perf_counter()
-    empty_components(domain, target)
+    empty_components(domain, target, offset=offset)
     factor = valence = None
     fused = weights is not None or prior is not None
     if fused and not mean_subtraction:
