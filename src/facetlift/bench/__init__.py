@@ -16,6 +16,8 @@ and Markdown tables and PNG figures into one output folder:
             pinhole, wide-angle, tabletop (several objects), vessel (open vessels seen from
             above the rim) and orthographic scenes with jumps x 4 normal conditions,
             against BiNI and the oracle with the true jumps cut; and the real normal maps
+``heldout`` the same runs on every mesh from random views drawn from a seed (a test set no
+            default was chosen on; ``Settings.heldout_views``, ``heldout_seed``)
 
 A method whose module is missing or that raises is recorded as ``unavailable`` / ``failed`` in
 the tables; the run goes on. Every file is written atomically.
