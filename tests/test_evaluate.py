@@ -219,6 +219,36 @@ def test_cli_evaluate_refusals(tmp_path, capsys):
     assert code == 1 and "--gt" in err
 
 
+def test_cli_evaluate_a_16bit_png_ground_truth(tmp_path, capsys):
+    """A ground truth in 16-bit PNG counts (a sensor's, a dataset's millimetres) with
+    --gt-scale scores as the same depth given as floats; without the scale it is refused with
+    the flag named; 0 counts are undefined; --gt-scale multiplies a float ground truth too."""
+    import imagecodecs
+
+    est, gt, mask = scene()
+    np.save(tmp_path / "depth.npy", est)
+    io.write_mask(tmp_path / "mask.png", mask)
+    np.savetxt(tmp_path / "K.txt", K)
+    counts = np.where(np.isfinite(gt), np.round(gt * 1000), 0).astype(np.uint16)
+    (tmp_path / "gt.png").write_bytes(imagecodecs.png_encode(counts))
+    np.save(tmp_path / "gt_mm.npy", np.where(counts > 0, counts, np.nan).astype(float))
+    base = ("evaluate", tmp_path / "depth.npy", "-m", tmp_path / "mask.png", "--K",
+            tmp_path / "K.txt", "--json")
+    code, out, err = run(capsys, *base, "--gt", tmp_path / "gt.png", "--gt-scale", "0.001")
+    assert code == 0, err
+    got = json.loads(out)
+    want = metrics.evaluate(est, np.where(counts > 0, counts * 0.001, np.nan), mask,
+                            perspective=True)
+    assert got["made"] == pytest.approx(want["made"]) and got["pixels"] == want["pixels"]
+    code, out, err = run(capsys, *base, "--gt", tmp_path / "gt_mm.npy", "--gt-scale", "0.001")
+    assert code == 0 and json.loads(out)["made"] == pytest.approx(want["made"]), err
+    code, _, err = run(capsys, *base, "--gt", tmp_path / "gt.png")
+    assert code == 1 and "--gt: " in err and "with --gt-scale" in err
+    assert "in Python" not in err
+    code, _, err = run(capsys, *base, "--gt", tmp_path / "gt.png", "--gt-scale", "-1")
+    assert code == 1 and "--gt-scale must be a positive number" in err
+
+
 def test_the_bear_integrated_and_evaluated(tmp_path, capsys):
     """The shared DiLiGenT bear, integrated smoothly with its camera, scores BiNI's MADE in
     mm (0.468 here; BiNI's own, with jumps, 0.334)."""

@@ -1022,7 +1022,11 @@ def _split(text):
 @click.option("--gt", "gt", required=True,
               type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Ground-truth depth map: .npy, .npz (its depth_gt or depth array, or its "
-              "only one), .exr (channel Z or its only one) or .tif; NaN where undefined.")
+              "only one), .exr (channel Z or its only one), .tif, or a 16-bit PNG with "
+              "--gt-scale; NaN (0 in a PNG or an integer TIFF) where undefined.")
+@click.option("--gt-scale", "gt_scale", type=float, default=None, metavar="S",
+              help="Depth units per count of a 16-bit PNG ground truth (e.g. 0.001 for "
+              "millimetres in metres); multiplies other formats too.")
 @click.option("-m", "--mask", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="The pixels to score (PNG/TIFF/npy, nonzero = inside). Default: where both "
               "depths are finite.")
@@ -1031,7 +1035,7 @@ def _split(text):
               "(a surface .npz keeps its own). Without one no camera is given and the result "
               "is scored as orthographic.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def evaluate(result, gt, mask, K, as_json):
+def evaluate(result, gt, mask, K, as_json, gt_scale=None):
     """Score a result RESULT (depth.npy, .exr, .tif or surface.npz, as integrate writes them)
     against a ground-truth depth map: MADE (BiNI's: the result times the median of GT /
     RESULT, then the mean absolute error), that scale, the RMSE after it, the mean absolute
@@ -1064,7 +1068,14 @@ def evaluate(result, gt, mask, K, as_json):
         camera = given
     from .jobs import GT_NPZ_NAMES
 
-    truth = io.read_depth(gt, npz_names=GT_NPZ_NAMES, arg="gt")
+    if gt.suffix.lower() == ".png":  # (a sensor's or a dataset's 16-bit counts)
+        truth = io.read_prior(gt, gt_scale, arg="gt", scale_arg="gt_scale")
+    else:
+        truth = io.read_depth(gt, npz_names=GT_NPZ_NAMES, arg="gt")
+        if gt_scale is not None:
+            if not (np.isfinite(gt_scale) and gt_scale > 0):
+                raise ValueError(f"`gt_scale` must be a positive number; got {gt_scale!r}")
+            truth = truth * gt_scale
     if truth.shape != est.shape:
         raise ValueError(f"`gt`: {gt} is {truth.shape[0]}x{truth.shape[1]} (HxW) but `result` "
                          f"{result} is {est.shape[0]}x{est.shape[1]}: give the ground truth of "

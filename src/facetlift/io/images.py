@@ -789,7 +789,8 @@ _POINT_COLUMNS = {"row": "row", "r": "row", "y": "row", "v": "row",
                   "weight": "weight", "weights": "weight", "confidence": "weight"}
 
 
-def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
+def read_prior(path, scale: float | None = None, *, arg: str = "prior",
+               scale_arg: str = "prior_scale"):
     """A depth prior: an (H, W) map, NaN where unknown, or from a points file a ``(rows,
     cols, depths)`` triple (:func:`facetlift.integrate`'s other form of `prior`).
 
@@ -812,6 +813,9 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
     is required: ``row col depth`` and ``u v depth`` files look alike, and one read as the
     other transposes every sample.
 
+    `arg` and `scale_arg` are the names the messages give the file and the scale (a ground
+    truth read alike: ``facetlift evaluate --gt --gt-scale``).
+
     Raises
     ------
     ValueError
@@ -821,7 +825,7 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
     """
     p = _existing(path, arg)
     if scale is not None and not (np.isfinite(scale) and scale > 0):
-        raise ValueError(f"`prior_scale` must be a positive number; got {scale!r}")
+        raise ValueError(f"`{scale_arg}` must be a positive number; got {scale!r}")
     if p.suffix.lower() in PRIOR_POINT_FORMATS:
         rows, cols, depths, *weights = _read_points(p, arg)
         return (rows, cols, depths if scale is None else depths * float(scale), *weights)
@@ -833,9 +837,10 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior"):
             raise ValueError(f"`{arg}`: {p} must be a single-channel 16-bit PNG (depth / scale); "
                              f"got dtype {a.dtype}, shape {a.shape}")
         if scale is None:
+            flag = "--" + scale_arg.replace("_", "-")
+            where = f"{scale_arg}= in Python; " if scale_arg == "prior_scale" else ""
             raise ValueError(f"`{arg}`: {p} is a 16-bit PNG: give its depth units per count "
-                             "with --prior-scale (prior_scale= in Python; e.g. 0.001 for "
-                             "millimetres in metres)")
+                             f"with {flag} ({where}e.g. 0.001 for millimetres in metres)")
         return np.where(a > 0, a * float(scale), np.nan)
     a = read_plane(p, maps, "depth prior", arg, prefer=("Z",), mat_names=MAT_PRIOR_NAMES)
     zero_unknown = a.dtype.kind in "ui"
