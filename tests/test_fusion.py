@@ -629,12 +629,21 @@ def test_dataset_folder_picks_up_prior_and_confidence(tmp_path, capsys):
     out = np.load(tmp_path / "o" / "depth.npy")
     assert np.abs(out[sel] - prior[sel]).max() < 1e-3
     assert rec["info"]["prior"]["gauge"] is None  # (every component fixed: no gauge applied)
-    # the text summary says that a prior and a confidence map were used (read silently)
+    assert rec["prior_file"] == "the folder's prior_depth.npy"
+    assert rec["confidence_file"] == "the folder's confidence.npy"
+    # the text summary says that a prior and a confidence map were used, and which files
+    # (read without asking: a stray confidence.npy changed results unsaid, an audit)
     code = main(["integrate", str(folder), "-s", "npy", "--prior-weight", "1e6",
                  "-o", str(tmp_path / "t")])
     out = capsys.readouterr().out
-    assert code == 0 and f"depth prior: {int(sel.sum())} samples fixing 1 of 1" in out
-    assert "confidence map" in out
+    assert code == 0 and (f"depth prior (the folder's prior_depth.npy): {int(sel.sum())} "
+                          "samples fixing 1 of 1") in out
+    assert "confidence map (the folder's confidence.npy, 9 at 0)" in out
+    code = main(["integrate", str(folder / "normal_map.npy"), "-s", "npy", "--confidence",
+                 str(folder / "confidence.npy"), "--json", "-o", str(tmp_path / "g")])
+    rec = json.loads(capsys.readouterr().out)
+    assert code == 0 and rec["confidence_file"] == str(folder / "confidence.npy")
+    assert rec["prior_file"] is None
     # --no-prior / --no-confidence leave the folder's files unused (there was no way to)
     code = main(["integrate", str(folder), "-s", "npy", "--no-prior", "--no-confidence",
                  "--json", "-o", str(tmp_path / "n")])

@@ -423,7 +423,8 @@ def summary(record: dict) -> str:
                      "see the warning)")
     elif isinstance(prior, dict):  # (also a dataset folder's prior_depth file, read silently)
         outside = prior.get("outside_mask") or 0
-        parts.append(f"depth prior: {prior.get('samples')} samples fixing "
+        named = f" ({record['prior_file']})" if record.get("prior_file") else ""
+        parts.append(f"depth prior{named}: {prior.get('samples')} samples fixing "
                      f"{len(prior.get('prior_components', []))} of "
                      f"{prior.get('components')} components"
                      + (f" ({outside} outside the mask, unused)" if outside else ""))
@@ -451,7 +452,9 @@ def summary(record: dict) -> str:
         parts.append(f"{unusable} unusable")
     if "zero_confidence" in counts:
         zero = counts.get("zero_confidence") or 0
-        parts.append("confidence map" + (f" ({zero} at 0)" if zero else ""))
+        named = [record["confidence_file"]] if record.get("confidence_file") else []
+        named += [f"{zero} at 0"] if zero else []
+        parts.append("confidence map" + (f" ({', '.join(named)})" if named else ""))
     dev = record.get("mean_deviation")
     if dev is not None:
         parts.append(f"mean deviation {dev:.2f} deg")

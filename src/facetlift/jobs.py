@@ -140,6 +140,10 @@ class Input:
     #: The dataset folder's camera file the K came from (K.txt, or DiLiGenT's
     #: Calib_Results.mat, perhaps the parent's), for the summary; None otherwise.
     K_file: str | None = None
+    #: Where the prior and the confidence came from, for the summary and the record: the
+    #: file given (--prior, --confidence) or "the folder's <name>"; None without one.
+    prior_file: str | None = None
+    confidence_file: str | None = None
 
 
 def default_outdir(src: Path) -> Path:
@@ -176,6 +180,7 @@ def read(job: Job) -> Input:
 
     src = job.source
     K = prior = conf = K_file = None
+    files = {"prior": None, "confidence": None}
     field_input = bool(job.gradients)
     folder = not field_input and src.is_dir()  # (a dataset folder may hold its own prior)
     if job.prior is None and not folder:  # (the prior's own flags refused before the map is
@@ -215,6 +220,10 @@ def read(job: Job) -> Input:
         n, m, K = ds["normals"], ds["mask"], ds["K"]
         prior, conf = ds["prior"], ds["confidence"]
         K_file = ds["K_file"]
+        for name in files:  # (named in the summary: a stray confidence.npy changed results
+            # unsaid, an audit)
+            if ds.get(f"{name}_file") is not None:
+                files[name] = f"the folder's {Path(ds[f'{name}_file']).name}"
         source = "dataset mask" if m is not None else "valid normals"
     else:
         # (no word on an alpha that --mask replaces)
@@ -252,10 +261,12 @@ def read(job: Job) -> Input:
         K = None
     if job.prior is not None:
         prior = io.read_prior(job.prior, job.prior_scale)
+        files["prior"] = str(job.prior)
     elif prior is None and folder:
         _no_prior_checks(job)
     if job.confidence is not None:
         conf = io.read_weights(job.confidence, arg="confidence")
+        files["confidence"] = str(job.confidence)
     weight = job.prior_weight
     if job.prior_weight_map is not None:  # (times --prior-weight: an 8-bit map reaches 100)
         # (its values are checked where the prior has a sample, as integrate's prior_weight:
@@ -275,7 +286,9 @@ def read(job: Job) -> Input:
     return Input(normals=n, mask=m, K=K, mask_source=source, prior=prior, prior_weight=weight,
                  confidence=conf, field=bool(field_input),
                  K_file=None if K_file is None or job.K is not None or job.fov is not None
-                 else _camera_name(K_file, src))
+                 else _camera_name(K_file, src),
+                 prior_file=files["prior"] if prior is not None else None,
+                 confidence_file=files["confidence"] if conf is not None else None)
 
 
 def camera_source(job: Job, inp: Input) -> str:
@@ -674,6 +687,10 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         "perspective": surface.K is not None,
         # (where the camera came from, for the summary: K, a field of view, a dataset's K.txt)
         "camera": camera_source(job, inp) if surface.K is not None else "orthographic",
+        # (the files the prior and the confidence came from: a dataset folder's are read
+        # without asking)
+        "prior_file": inp.prior_file,
+        "confidence_file": inp.confidence_file,
         # (the depth of height.png's 0 and 65535, as io.write_height scales it)
         "depth_range": _depth_range(surface, job.height_range if "height" in save else None),
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),

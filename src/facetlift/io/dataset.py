@@ -335,9 +335,11 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
         ``normals`` (H, W, 3) float64, ``mask`` (H, W) bool (the mask file, else the normal
         map's alpha channel, else None), ``K`` (3, 3) or None, ``K_file`` the camera file
         it came from (a Path) or None, ``prior`` (H, W) depth with
-        NaN where unknown, or None, and ``confidence`` (H, W) or None. The command line uses
-        the last two (``facetlift integrate FOLDER``); pass them to
-        :func:`facetlift.integrate` as ``prior=`` and ``confidence=`` to do the same.
+        NaN where unknown, or None, and ``confidence`` (H, W) or None; ``prior_file`` and
+        ``confidence_file`` the files these came from (Paths) or None. The command line
+        uses them (``facetlift integrate FOLDER``, which names the files in its summary);
+        pass them to :func:`facetlift.integrate` as ``prior=`` and ``confidence=`` to do
+        the same.
 
     Raises
     ------
@@ -374,6 +376,7 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
              lambda p: read_weights(p, arg="confidence"))):
         path = _find(f, stem, formats[stem]) if wanted else None
         extra[name] = None
+        extra[f"{name}_file"] = path
         if path is None:
             continue
         skip = f"or leave the folder's {name} unread with --no-{name} (with_{name}=False in Python)"
