@@ -1029,8 +1029,11 @@ def _split(text):
               help="The result's camera, as for 'integrate': score it as a perspective depth "
               "(a surface .npz keeps its own). Without one no camera is given and the result "
               "is scored as orthographic.")
+@click.option("--fov", "fov", type=float, default=None, metavar="DEG",
+              help="Instead of --K: the horizontal field of view the result was integrated "
+              "with (integrate's --fov), for a camera without a K file.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def evaluate(result, gt, mask, K, as_json):
+def evaluate(result, gt, mask, K, fov, as_json):
     """Score a result RESULT (depth.npy, .exr, .tif or surface.npz, as integrate writes them)
     against a ground-truth depth map: MADE (BiNI's: the result times the median of GT /
     RESULT, then the mean absolute error), that scale, the RMSE after it, the mean absolute
@@ -1043,12 +1046,19 @@ def evaluate(result, gt, mask, K, as_json):
     Examples:
       facetlift evaluate out/depth.npy --gt bear/depth_gt.npz -m bear/mask.png --K bear/K.txt
       facetlift evaluate out/surface.npz --gt gt.exr --json
+      facetlift evaluate out/depth.npy --gt depth_gt.npy --fov 60
     """
     import numpy as np
 
     from . import io, metrics
 
+    if fov is not None and K is not None:
+        raise ValueError(f"`fov` {fov:g} and `K` contradict each other; give one")
     est = io.read_depth(result, arg="result")
+    if fov is not None:  # (integrate took --fov, evaluate only --K: a fov user had no K file)
+        from .camera import K_from_fov
+
+        K_fov = K_from_fov(est.shape, fov)
     camera = None
     if result.suffix.lower() == ".npz":  # (a surface's: its camera, NaN when orthographic)
         with np.load(result, allow_pickle=False) as z:
@@ -1061,6 +1071,12 @@ def evaluate(result, gt, mask, K, as_json):
             raise ValueError(f"`K`: {K} differs from the camera {result} was integrated with "
                              f"({camera.tolist()}); leave --K out to use the surface's own")
         camera = given
+    if fov is not None:
+        if camera is not None and not np.allclose(K_fov, camera, rtol=1e-6):
+            raise ValueError(f"`fov` {fov:g} differs from the camera {result} was integrated "
+                             f"with ({camera.tolist()}); leave --fov out to use the surface's "
+                             "own")
+        camera = K_fov
     from .jobs import GT_NPZ_NAMES
 
     truth = io.read_depth(gt, npz_names=GT_NPZ_NAMES, arg="gt")
@@ -1077,14 +1093,16 @@ def evaluate(result, gt, mask, K, as_json):
                          ) from None
     if not perspective and rec["scale"] is not None and K is None:
         rec["notes"].append("the result's depths are all > 0, as a perspective result's are "
-                            "(an orthographic one has mean 0): give --K to score it as one")
+                            "(an orthographic one has mean 0): give --K to score it as one "
+                            "(or --fov, as integrate took it)")
     rec = {"result": str(result), "gt": str(gt),
            "mask": "where both are finite" if mask is None else str(mask), **rec}
     if as_json:
         click.echo(json.dumps(jsonable(dict(rec, status="ok", exit_code=EXIT_OK))))
         _STATE["printed_json"] = True
         return EXIT_OK
-    for line in _evaluate_lines(rec, K, surface=result.suffix.lower() == ".npz"):
+    for line in _evaluate_lines(rec, K if fov is None else f"fov {fov:g} deg",
+                                surface=result.suffix.lower() == ".npz"):
         click.echo(line)
     return EXIT_OK
 
@@ -1097,7 +1115,8 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
     def num(v):
         return "-" if v is None else f"{v:.6g}"
 
-    camera = ("perspective" + (f" (--K {K})" if K is not None else " (the surface's camera)")
+    given = (f"--{K}" if str(K).startswith("fov ") else f"--K {K}") if K is not None else None
+    camera = ("perspective" + (f" ({given})" if K is not None else " (the surface's camera)")
               if rec["perspective"] else "orthographic (the surface's camera)" if surface
               else "no camera given: scored as orthographic (up to an offset per piece)")
     uncovered = (f"; {rec['uncovered']} mask pixels left out, where a depth is undefined"
