@@ -364,6 +364,23 @@ def test_cli_summary_and_info_with_prior_fit(tmp_path, capsys):
     assert fitted["estimate"]["seconds"] == pytest.approx([2 * lo, 3 * hi])
 
 
+def test_a_progress_callable_hears_the_fit_and_the_second_run():
+    """The fit between the two runs took most of an audit's 1280 x 720 run under a bar
+    that still read 'integrating' and then counted again from 0: it is a stage now."""
+    n, depth, mask, _ = steps()
+    stages = []
+
+    def progress(iteration, value):
+        pass
+
+    progress.stage = stages.append
+    prior = np.where(mask, 0.37 * depth + 40.0, np.nan)
+    facetlift.integrate(n, mask, prior=prior, prior_weight=0.01, prior_fit="affine",
+                        progress=progress)
+    assert "fitting the prior" in stages and "integrating with the prior" in stages
+    assert stages.index("fitting the prior") < stages.index("integrating with the prior")
+
+
 def test_cli_a_16_bit_disparity_png_needs_no_prior_scale_with_prior_fit(tmp_path, capsys):
     """A monocular network's disparity saved as a 16-bit PNG (min-max normalised) has no units:
     with --prior-fit its scale is fitted, yet the command refused it for want of a
