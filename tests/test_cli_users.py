@@ -1288,6 +1288,28 @@ def test_the_jump_hint_names_a_dense_prior_too(capsys):
     capsys.readouterr()
 
 
+def test_a_mesh_torn_by_a_dense_prior_given_pixel_by_pixel_gets_a_hint(capsys):
+    """--discontinuities with a monocular disparity fitted and given pixel by pixel split an
+    audit's 960 x 540 room into 21,808 more pieces, and the summary only counted them: a
+    hint now names --prior-blur, a lower weight and the silhouette's band. Not for a blurred
+    prior, a sparse one, a smooth run, or a few pieces."""
+    from types import SimpleNamespace
+
+    from facetlift.cli import _torn_hint
+
+    job = SimpleNamespace(method="dgp", options={})
+    info = {"solver": "discontinuous", "cut_pieces": 21808,
+            "input": {"pixels": 432944, "usable": 432944}, "prior": {"samples": 432944}}
+    hint = _torn_hint(job, info)
+    assert hint is not None and "21808 more pieces" in hint and "--prior-blur" in hint
+    assert "hint: the cuts split the mesh" in capsys.readouterr().err
+    assert _torn_hint(job, {**info, "prior_blur": {"sigma": 3.0}}) is None
+    assert _torn_hint(job, {**info, "prior": {"samples": 4000}}) is None
+    assert _torn_hint(job, {**info, "solver": "direct"}) is None
+    assert _torn_hint(job, {**info, "cut_pieces": 817}) is None
+    assert _torn_hint(job, {k: v for k, v in info.items() if k != "prior"}) is None
+
+
 def test_the_jump_hint_names_the_frame_first_where_a_flip_is_more_integrable(capsys):
     """A second audit: a y-down texture read as y up (relative curl 0.94 as given, 0.74
     flipped: short of the frame check's margins) was told only that --discontinuities keeps

@@ -265,3 +265,30 @@ def test_the_bear_integrated_and_evaluated(tmp_path, capsys):
     assert rec["pixels"] == data["mask"].sum() and rec["uncovered"] == 0
     assert 0.3 < rec["made"] < 0.6 and 1400 < rec["scale"] < 1600
     assert rec["rmse_scaled"] > rec["made"]
+
+
+def test_evaluate_takes_the_field_of_view_integrate_took(tmp_path, capsys):
+    """A photo's user integrates with --fov and has no K file: evaluate took only --K, and
+    scored the perspective result as orthographic (an audit). --fov is the camera now, refused
+    beside --K and where a surface .npz keeps another camera."""
+    from facetlift.camera import K_from_fov
+
+    r, c = np.indices((40, 60))
+    gt = 2.0 + 0.01 * r + 0.005 * c
+    np.save(tmp_path / "gt.npy", gt)
+    np.save(tmp_path / "depth.npy", gt / np.median(gt))
+    args = ("evaluate", tmp_path / "depth.npy", "--gt", tmp_path / "gt.npy")
+    code, out, err = run(capsys, *args, "--fov", "60", "--json")
+    got = json.loads(out)
+    assert code == 0 and got["perspective"] is True, err
+    assert got["made"] == pytest.approx(0, abs=1e-9)
+    code, out, _ = run(capsys, *args, "--fov", "60")
+    assert code == 0 and "perspective (--fov 60 deg)" in out
+    np.savetxt(tmp_path / "K.txt", K_from_fov((40, 60), 60))
+    code, _, err = run(capsys, *args, "--fov", "60", "--K", tmp_path / "K.txt")
+    assert code == 1 and "contradict" in err
+    s = facetlift.Surface.from_depth(gt, np.ones(gt.shape, bool), K=K_from_fov((40, 60), 50))
+    s.save(tmp_path / "s.npz")
+    code, _, err = run(capsys, "evaluate", tmp_path / "s.npz", "--gt", tmp_path / "gt.npy",
+                       "--fov", "60")
+    assert code == 1 and "differs from the camera" in err

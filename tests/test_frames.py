@@ -3,6 +3,7 @@ integrate(normal_frame=...) and integrate_gradients."""
 
 from __future__ import annotations
 
+import json
 import warnings
 
 import numpy as np
@@ -868,3 +869,39 @@ def test_8_bit_maps_with_one_channel_inverted_zero_both_plateaus():
     np.testing.assert_array_equal(d[keep][:, 0], plain[keep][:, 0])
     keep = (v[..., 1] != 127)
     np.testing.assert_array_equal(d[keep][:, 1], plain[keep][:, 1])
+
+
+def test_a_y_down_map_over_a_floor_is_told_to_flip_y(tmp_path, capsys):
+    """A y-down (DirectX) map of an indoor view read as y up, with a camera: its floor faces
+    away from the camera, and the warning asked about BGR order, world frames and K, never
+    about y, while negating y turns every normal back toward the camera (an audit's
+    estimator map, 19 % facing away). Now the warning and info name the y flip's frame."""
+    from facetlift.cli import main
+    from facetlift.problem import UnusableNormalsWarning
+
+    H, W = 90, 120
+    K = np.array([[100.0, 0, 59.5], [0, 100.0, 44.5], [0, 0, 1]])
+    n = np.zeros((H, W, 3))
+    n[..., 2] = 1.0  # a back wall facing the camera
+    n[60:, :] = (0.0, 1.0, 0.0)  # the floor below the horizon (row 44.5) faces up
+    stored = n * [1, -1, 1]  # (written y down)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        s = facetlift.integrate(stored, K=K)
+    said = [str(w.message) for w in rec if issubclass(w.category, UnusableNormalsWarning)]
+    assert said and "with y negated" in said[0] and "--normal-frame directx" in said[0], said
+    assert "BGR" not in said[0]
+    assert s.info["input"]["facing_away_flip"][0] == "y"
+    with warnings.catch_warnings(record=True) as rec:  # (read in its frame: no word)
+        warnings.simplefilter("always")
+        facetlift.integrate(stored, K=K, normal_frame="directx")
+    assert not [w for w in rec if issubclass(w.category, UnusableNormalsWarning)]
+    # info says the same; without a camera no flip changes which normals face away
+    np.save(tmp_path / "n.npy", stored)
+    np.savetxt(tmp_path / "K.txt", K)
+    assert main(["info", str(tmp_path / "n.npy"), "--K", str(tmp_path / "K.txt"), "--json"]) == 0
+    likely = json.loads(capsys.readouterr().out)["frame"]["likely"]
+    assert likely.startswith("y flipped") and "directx" in likely, likely
+    assert facetlift.problem._flip_mends_facing(
+        facetlift.camera.Orthographic(), np.zeros(3, int), np.zeros(3, int),
+        np.array([[0.0, 0, -1]] * 3), np.ones(3, bool), 1.0) is None

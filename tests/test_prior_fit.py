@@ -364,6 +364,57 @@ def test_cli_summary_and_info_with_prior_fit(tmp_path, capsys):
     assert fitted["estimate"]["seconds"] == pytest.approx([2 * lo, 3 * hi])
 
 
+def test_a_progress_callable_hears_the_fit_and_the_second_run():
+    """The fit between the two runs took most of an audit's 1280 x 720 run under a bar
+    that still read 'integrating' and then counted again from 0: it is a stage now."""
+    n, depth, mask, _ = steps()
+    stages = []
+
+    def progress(iteration, value):
+        pass
+
+    progress.stage = stages.append
+    prior = np.where(mask, 0.37 * depth + 40.0, np.nan)
+    facetlift.integrate(n, mask, prior=prior, prior_weight=0.01, prior_fit="affine",
+                        progress=progress)
+    assert "fitting the prior" in stages and "integrating with the prior" in stages
+    assert stages.index("fitting the prior") < stages.index("integrating with the prior")
+
+
+def test_cli_a_16_bit_disparity_png_needs_no_prior_scale_with_prior_fit(tmp_path, capsys):
+    """A monocular network's disparity saved as a 16-bit PNG (min-max normalised) has no units:
+    with --prior-fit its scale is fitted, yet the command refused it for want of a
+    --prior-scale (an audit); without --prior-fit the refusal names --prior-fit."""
+    import json
+
+    import imagecodecs
+
+    from facetlift.cli import main
+
+    n, depth, mask, K, comp = spheres()
+    np.save(tmp_path / "n.npy", n)
+    np.save(tmp_path / "m.npy", mask)
+    np.savetxt(tmp_path / "K.txt", K)
+    disp = np.where(mask, 1.0 / depth, np.nan)
+    lo, hi = np.nanmin(disp), np.nanmax(disp)
+    png = np.where(mask, np.round(1 + (disp - lo) / (hi - lo) * 65534), 0).astype(np.uint16)
+    (tmp_path / "mono.png").write_bytes(imagecodecs.png_encode(png))
+    base = ["integrate", str(tmp_path / "n.npy"), "-m", str(tmp_path / "m.npy"), "--K",
+            str(tmp_path / "K.txt"), "--prior", str(tmp_path / "mono.png"), "--prior-weight",
+            "0.01", "--save", "npy"]
+    assert main([*base, "-o", str(tmp_path / "a")]) == 1
+    assert "--prior-fit affine or disparity" in capsys.readouterr().err
+    assert main([*base, "--prior-fit", "disparity", "-o", str(tmp_path / "b"), "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert rec["info"]["prior"]["fit"]["used"]
+    # a given --prior-scale still counts (here it cannot change the fitted result's shape)
+    assert main([*base, "--prior-fit", "disparity", "--prior-scale", "0.001", "-o",
+                 str(tmp_path / "c")]) == 0
+    capsys.readouterr()
+    a, b = np.load(tmp_path / "b" / "depth.npy"), np.load(tmp_path / "c" / "depth.npy")
+    assert np.nanmax(np.abs(a - b) / b) < 1e-3
+
+
 @pytest.mark.parametrize("name", ["occluder", "steps", "tent"])
 @pytest.mark.parametrize("discontinuities", [False, True])
 def test_sparse_samples_are_fitted_by_their_nearest_neighbours(name, discontinuities):

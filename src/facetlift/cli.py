@@ -548,6 +548,40 @@ def _jump_hint(job, info: dict) -> str | None:
     return hint
 
 
+#: Share of the mask's pixels that the pieces a dense prior's cuts add must pass (and
+#: :data:`TORN_MIN` pieces) for :func:`_torn_hint`: the DiLiGenT bear with a sensor's 1 mm of
+#: noise at weight 0.01 and 0.1 had 138 and 243 pieces (0.3 and 0.6 % of its 40,670 pixels,
+#: errors 0.050 and 0.132 mm), with 3 mm at 0.1 8,757 (21 %, 1.575 mm; docs/fusion.md); an
+#: audit's 960 x 540 room with a monocular disparity fitted and given pixel by pixel 21,808
+#: (5 %), the same prior blurred (--prior-blur 3) 817.
+TORN_SHARE = 0.02
+TORN_MIN = 200
+
+
+def _torn_hint(job, info: dict) -> str | None:
+    """The hint (also printed) where --discontinuities with a dense prior given pixel by
+    pixel tore the mesh into many pieces (:data:`TORN_SHARE`): the prior's noise, or a
+    network's blur at the silhouettes, cut as depth jumps; the summary said only how many
+    pieces (an audit: 21,808 without a word). None otherwise."""
+    cut = info.get("cut_pieces") or 0
+    prior = info.get("prior")
+    if info.get("solver") != "discontinuous" or not isinstance(prior, dict):
+        return None
+    pixels = int((info.get("input") or {}).get("pixels") or 0)
+    usable = max(int((info.get("input") or {}).get("usable") or 1), 1)
+    dense = (prior.get("samples") or 0) > 0.25 * usable
+    if not dense or info.get("prior_blur") or cut < max(TORN_MIN, TORN_SHARE * pixels):
+        return None
+    hint = (f"the cuts split the mesh into {cut} more pieces ({cut / max(pixels, 1):.1%} of the "
+            "mask's pixels): a dense prior given pixel by pixel is cut where its noise or its "
+            "blur disagrees with the normals. A coarse or blurred map (a monocular network's) "
+            "wants --prior-blur SIGMA (its weight then 0.003), a noisy sensor a lower "
+            "--prior-weight (0.001-0.01), and a band of foreground and background blended at "
+            "the silhouette zero weight (--prior-weight-map); docs/fusion.md")
+    click.echo(f"hint: {hint}", err=True)
+    return hint
+
+
 def _frame_first(job, ic: dict) -> str | None:
     """:func:`_jump_hint`'s words on the frame where the field's relative curls `ic`
     (``info["integrability"]``) say it is more integrable flipped (:data:`JUMP_FRAME_RATIO`),
@@ -648,12 +682,13 @@ def integrate(normals, gradients, progress, as_json, **flags):
             click.echo(f"wrote {path}")
         click.echo(summary(record))
     hint = _jump_hint(job, info)
+    torn = _torn_hint(job, info)
     unconverged = (not record["converged"] and info.get("solver") != "discontinuous"
                    and not jobs.finished_unconverged(info))  # (exit 2, outputs written)
     if as_json:  # (the warnings and hints as printed: a script can act on a wrong frame)
         out = {k: v for k, v in record.items() if k != "warnings"}
         out["warnings"] = [_as_flags(str(w)) for w in record["warnings"]]
-        out["hints"] = [] if hint is None else [hint]
+        out["hints"] = [h for h in (hint, torn) if h is not None]
         # (as a failed command's object has them: an exit code 2 left only converged false
         # to tell, a user's check)
         out["status"] = "solver_error" if unconverged else "ok"
@@ -1037,8 +1072,11 @@ def _split(text):
               help="The result's camera, as for 'integrate': score it as a perspective depth "
               "(a surface .npz keeps its own). Without one no camera is given and the result "
               "is scored as orthographic.")
+@click.option("--fov", "fov", type=float, default=None, metavar="DEG",
+              help="Instead of --K: the horizontal field of view the result was integrated "
+              "with (integrate's --fov), for a camera without a K file.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def evaluate(result, gt, mask, K, as_json, gt_scale=None):
+def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
     """Score a result RESULT (depth.npy, .exr, .tif or surface.npz, as integrate writes them)
     against a ground-truth depth map: MADE (BiNI's: the result times the median of GT /
     RESULT, then the mean absolute error), that scale, the RMSE after it, the mean absolute
@@ -1051,12 +1089,19 @@ def evaluate(result, gt, mask, K, as_json, gt_scale=None):
     Examples:
       facetlift evaluate out/depth.npy --gt bear/depth_gt.npz -m bear/mask.png --K bear/K.txt
       facetlift evaluate out/surface.npz --gt gt.exr --json
+      facetlift evaluate out/depth.npy --gt depth_gt.npy --fov 60
     """
     import numpy as np
 
     from . import io, metrics
 
+    if fov is not None and K is not None:
+        raise ValueError(f"`fov` {fov:g} and `K` contradict each other; give one")
     est = io.read_depth(result, arg="result")
+    if fov is not None:  # (integrate took --fov, evaluate only --K: a fov user had no K file)
+        from .camera import K_from_fov
+
+        K_fov = K_from_fov(est.shape, fov)
     camera = None
     if result.suffix.lower() == ".npz":  # (a surface's: its camera, NaN when orthographic)
         with np.load(result, allow_pickle=False) as z:
@@ -1069,6 +1114,12 @@ def evaluate(result, gt, mask, K, as_json, gt_scale=None):
             raise ValueError(f"`K`: {K} differs from the camera {result} was integrated with "
                              f"({camera.tolist()}); leave --K out to use the surface's own")
         camera = given
+    if fov is not None:
+        if camera is not None and not np.allclose(K_fov, camera, rtol=1e-6):
+            raise ValueError(f"`fov` {fov:g} differs from the camera {result} was integrated "
+                             f"with ({camera.tolist()}); leave --fov out to use the surface's "
+                             "own")
+        camera = K_fov
     from .jobs import GT_NPZ_NAMES
 
     if gt.suffix.lower() == ".png":  # (a sensor's or a dataset's 16-bit counts)
@@ -1092,14 +1143,16 @@ def evaluate(result, gt, mask, K, as_json, gt_scale=None):
                          ) from None
     if not perspective and rec["scale"] is not None and K is None:
         rec["notes"].append("the result's depths are all > 0, as a perspective result's are "
-                            "(an orthographic one has mean 0): give --K to score it as one")
+                            "(an orthographic one has mean 0): give --K to score it as one "
+                            "(or --fov, as integrate took it)")
     rec = {"result": str(result), "gt": str(gt),
            "mask": "where both are finite" if mask is None else str(mask), **rec}
     if as_json:
         click.echo(json.dumps(jsonable(dict(rec, status="ok", exit_code=EXIT_OK))))
         _STATE["printed_json"] = True
         return EXIT_OK
-    for line in _evaluate_lines(rec, K, surface=result.suffix.lower() == ".npz"):
+    for line in _evaluate_lines(rec, K if fov is None else f"fov {fov:g} deg",
+                                surface=result.suffix.lower() == ".npz"):
         click.echo(line)
     return EXIT_OK
 
@@ -1112,7 +1165,8 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
     def num(v):
         return "-" if v is None else f"{v:.6g}"
 
-    camera = ("perspective" + (f" (--K {K})" if K is not None else " (the surface's camera)")
+    given = (f"--{K}" if str(K).startswith("fov ") else f"--K {K}") if K is not None else None
+    camera = ("perspective" + (f" ({given})" if K is not None else " (the surface's camera)")
               if rec["perspective"] else "orthographic (the surface's camera)" if surface
               else "no camera given: scored as orthographic (up to an offset per piece)")
     uncovered = (f"; {rec['uncovered']} mask pixels left out, where a depth is undefined"

@@ -471,7 +471,13 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
                            f"too); if the surface looks wrong, try {_try(frame, a, field)}"
                            f"{other}")
     else:
-        if away > BACKFACING_FRAME_HINT:
+        mend = problem.counts.get("facing_away_flip")
+        if mend is not None:  # (as prepare's warning: a y-down map over a floor, an audit)
+            guess["likely"] = (f"{mend[0]} flipped: {away:.0%} of the normals face away from "
+                               f"the camera as read, {mend[1]:.1%} with {mend[0]} negated (try "
+                               f"{_try(frame, mend[0], field)}; your estimator's frame is in "
+                               "docs/conventions.md)")
+        elif away > BACKFACING_FRAME_HINT:
             guess["likely"] = (f"another frame? {away:.0%} of the normals face away from the "
                                "camera (a world-frame export, or channels in BGR order?): see "
                                "docs/conventions.md")

@@ -213,7 +213,7 @@ def read(job: Job) -> Input:
             _unread_beside(src, job, own_mask=m is not None)
     elif src.is_dir():
         ds = io.read_dataset(src, frame=job.normal_frame,
-                             prior_scale=None if job.prior else job.prior_scale,
+                             prior_scale=None if job.prior else _prior_scale(job),
                              with_prior=job.dataset_prior and job.prior is None,
                              with_confidence=job.dataset_confidence and job.confidence is None,
                              encoding=encoding)
@@ -260,7 +260,7 @@ def read(job: Job) -> Input:
     if job.orthographic:
         K = None
     if job.prior is not None:
-        prior = io.read_prior(job.prior, job.prior_scale)
+        prior = io.read_prior(job.prior, _prior_scale(job))
         files["prior"] = str(job.prior)
     elif prior is None and folder:
         _no_prior_checks(job)
@@ -753,6 +753,16 @@ def _components(mask) -> int:
     from .domain import _EIGHT
 
     return int(ndimage.label(mask, structure=_EIGHT)[1])
+
+
+def _prior_scale(job: Job) -> float | None:
+    """The depth units per count of a 16-bit PNG prior: ``--prior-scale``, or 1 where
+    ``--prior-fit`` aligns the prior (affine, scale, disparity), whose scale the fit takes
+    whatever it is (a monocular network's 16-bit disparity PNG was refused for want of a
+    --prior-scale that cannot matter, an audit)."""
+    if job.prior_scale is None and job.prior_fit not in (None, "none"):
+        return 1.0
+    return job.prior_scale
 
 
 def _strict_check(caught, surface) -> None:

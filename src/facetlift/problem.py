@@ -29,6 +29,27 @@ from .frames import EDGE_ON
 #: ``backfacing=`` choices: treat such normals as missing samples, or raise.
 BACKFACING = ("missing", "error", "outlier")
 
+def _flip_mends_facing(cam, r, c, nf, clear, away: float):
+    """``(axis, share)`` where many normals face away from a pinhole camera (``away`` above
+    :data:`BACKFACING_FRAME_HINT`) and negating x or y alone turns all but a few of them
+    toward it (the share facing away then: at most that threshold and a quarter of
+    ``away``): a map read with y (or x) the wrong way round. None otherwise, and always
+    without a camera, whose view cosine is n_z whatever x and y are."""
+    if not away > BACKFACING_FRAME_HINT or not getattr(cam, "perspective", False):
+        return None
+    k = np.flatnonzero(clear)
+    if k.size == 0:
+        return None
+    shares = {}
+    for axis, sign in (("y", (1.0, -1.0, 1.0)), ("x", (-1.0, 1.0, 1.0))):
+        with np.errstate(invalid="ignore"):
+            cf = cam.view_cosine(r[k], c[k], nf[k] * np.array(sign), unit=True)
+        shares[axis] = float(np.mean(cf < 0))
+    axis = min(shares, key=shares.get)
+    share = shares[axis]
+    return (axis, share) if share <= min(BACKFACING_FRAME_HINT, away / 4) else None
+
+
 class UnusableNormalsWarning(UserWarning):
     """Normals inside the mask that were treated as missing samples (non-finite, zero-length,
     back-facing, grazing, isolated), with their counts and the first one's place."""
@@ -583,7 +604,19 @@ def prepare(
         clear = ok & (np.abs(cos) > EDGE_ON)
         away = int((clear & (cos < 0)).sum()) / max(int(clear.sum()), 1)
         counts["facing_away"] = away  # (for info's frame guess: the same share)
-        if away > BACKFACING_FRAME_HINT:
+        mended = _flip_mends_facing(cam, r, c, nf, clear, away)
+        if mended is not None:
+            counts["facing_away_flip"] = list(mended)  # (info's frame guess names it too)
+        if mended is not None:
+            # (a y-down map with a camera over a floor: its floor faces away, and the warning
+            # asked about BGR order, world frames and K, never about y; an audit)
+            from .frames import flip_advice, reading
+
+            frame = (f"; {away:.0%} of the normals face away from the camera, and with "
+                     f"{mended[0]} negated {mended[1]:.1%} would: the map's {mended[0]} axis "
+                     f"probably runs the other way: try {flip_advice(reading(), mended[0])}; "
+                     "docs/conventions.md lists the frames of common sources")
+        elif away > BACKFACING_FRAME_HINT:
             frame = (f"; {away:.0%} of the normals face away from the "
                      "camera, far more than noise or quantisation turn away: is the map in "
                      "another frame (world coordinates, a rotated export) or in BGR channel "

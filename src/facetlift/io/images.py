@@ -840,7 +840,11 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior",
             flag = "--" + scale_arg.replace("_", "-")
             where = f"{scale_arg}= in Python; " if scale_arg == "prior_scale" else ""
             raise ValueError(f"`{arg}`: {p} is a 16-bit PNG: give its depth units per count "
-                             f"with {flag} ({where}e.g. 0.001 for millimetres in metres)")
+                             f"with {flag} ({where}e.g. 0.001 for millimetres in metres)"
+                             + ("; a relative depth or disparity (a monocular network's) has "
+                                "none: give --prior-fit affine or disparity instead, which takes "
+                                "its scale from the normals (in Python any scale, e.g. 1, and "
+                                "integrate's prior_fit=)" if scale_arg == "prior_scale" else ""))
         return np.where(a > 0, a * float(scale), np.nan)
     a = read_plane(p, maps, "depth prior", arg, prefer=("Z",), mat_names=MAT_PRIOR_NAMES)
     zero_unknown = a.dtype.kind in "ui"
