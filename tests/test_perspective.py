@@ -204,6 +204,36 @@ def test_discontinuity_route_uses_its_own_grazing_rule_on_every_camera():
     assert own.info["input"]["grazing"] == 0
 
 
+def test_discontinuity_route_keeps_a_surface_seen_edge_on():
+    """The route's grazing rule drops rims, not surfaces: where it would drop more than
+    JUMP_GRAZING_SHARE of a component's normals (a plane seen nearly edge-on, view cosine
+    0.03), the component keeps them and integrates to its slope; a strip of such normals
+    along a component's edge (a rim, 2 of 32 columns) is still dropped; an explicit
+    outlier_eps applies as given."""
+    from facetlift.methods import JUMP_GRAZING, JUMP_GRAZING_SHARE
+
+    H, W = 24, 70
+    n = np.zeros((H, W, 3))
+    mask = np.zeros((H, W), bool)
+    steep = np.array([-np.sqrt(1 - 0.03 ** 2), 0.0, 0.03])  # (height rises 33.3 per pixel)
+    n[:, :32] = [0.0, 0.0, 1.0]
+    n[:, 30:32] = steep  # a rim: 2 columns of the left component
+    n[:, 40:] = steep  # a surface seen edge-on: the whole right component
+    mask[:, :32] = mask[:, 40:] = True
+    assert 0.03 < JUMP_GRAZING and 2 / 32 < JUMP_GRAZING_SHARE
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        s = facetlift.integrate(n, mask, discontinuities=True)
+    got = s.info["input"]
+    assert got["grazing"] == 2 * H and got["grazing_kept"] == 30 * H
+    slope = -steep[0] / steep[2]
+    np.testing.assert_allclose(np.diff(s.height[:, 40:], axis=1), slope, rtol=1e-6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        own = facetlift.integrate(n, mask, discontinuities=True, outlier_eps=JUMP_GRAZING)
+    assert own.info["input"]["grazing"] == 32 * H and "grazing_kept" not in own.info["input"]
+
+
 def test_quantised_normals():
     """8-bit normals (as in DiLiGenT PNGs): error grows but stays small."""
     n, mask, K, gt = sphere_scene(min_cos=0.2)

@@ -222,7 +222,7 @@ def integrate(
             outlier_eps=outlier_eps, normal_frame=normal_frame, max_memory=max_memory,
             prior=prior, prior_weight=prior_weight, confidence=confidence,
             prior_blur=prior_blur, prior_outliers=prior_outliers, **options)
-    note = isolated = None
+    note = isolated = share = None
     if discontinuities is not None and not _check_discontinuities(info, discontinuities):
         if "discontinuities" in info.options():  # (an explicit False, e.g. for "bini")
             options["discontinuities"] = False
@@ -231,6 +231,7 @@ def integrate(
         isolated = info.jump_isolated
         if outlier_eps is None and info.jump_grazing is not None:
             outlier_eps = info.jump_grazing
+            share = info.jump_grazing_share
             note = (f"the rule of {method!r} with discontinuities=True, cos "
                     f"{np.degrees(np.arccos(outlier_eps)):.3g} deg; "
                     "outlier_eps / --outlier-eps sets another")
@@ -257,7 +258,7 @@ def integrate(
         normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
         outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight, confidence=confidence,
         grazing_note=note, prior_blur=prior_blur, prior_outliers=prior_outliers,
-        isolated=isolated,
+        isolated=isolated, grazing_share=share,
     )
     # (the flip check's hint is relative to the frame given; none given: the caller's, e.g.
     # a reader's, stays)

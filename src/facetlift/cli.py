@@ -1213,9 +1213,12 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
                    "spatially correlated errors of 3 degrees RMS, outliers: 2 % of the "
                    "normals rotated by up to 45 degrees, blur1.5: the normal map blurred by "
                    "a Gaussian of 1.5 px, soft occlusion boundaries).")
+@click.option("--heldout-seed", "heldout_seed", type=int, default=None, metavar="N",
+              help="Seed of the heldout experiment's random views (a new one draws a fresh "
+                   "test set).")
 @click.option("--no-progress", is_flag=True, help="No progress bars.")
 def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_dir, conditions,
-          no_progress):
+          no_progress, heldout_seed):
     """Reproduce the paper's experiments (Table 1, Figs. 4-10) into a folder."""
     from .bench import run_bench
 
@@ -1223,7 +1226,8 @@ def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_di
         path = run_bench(out, quick=quick, methods=_split(methods), models=_split(models),
                          experiments=_split(experiments), extra_meshes=meshes,
                          extra_normal_maps=normal_maps, data_dir=data_dir,
-                         conditions=_split(conditions), progress=not no_progress)
+                         conditions=_split(conditions), progress=not no_progress,
+                         heldout_seed=heldout_seed)
     except ValueError as e:
         raise click.UsageError(str(e)) from None
     click.echo(f"wrote {path / 'report.md'}")

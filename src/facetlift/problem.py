@@ -50,6 +50,29 @@ def _flip_mends_facing(cam, r, c, nf, clear, away: float):
     return (axis, share) if share <= min(BACKFACING_FRAME_HINT, away / 4) else None
 
 
+#: View cosine below which a grazing normal is dropped even where :func:`prepare`'s
+#: `grazing_share` keeps a component's edge-on surface: the pinhole cameras' default (slopes
+#: up to 255 footprints per pixel).
+GRAZING_FLOOR = 1.0 / 255.0
+
+
+def _edge_on_kept(domain, front, grazing, cos, share):
+    """The grazing normals (facet mask) that `share` keeps: those at or above
+    :data:`GRAZING_FLOOR` in the components where the grazing rule would drop more than
+    `share` of the front-facing normals (a surface seen edge-on, not a rim); None where it
+    keeps none."""
+    if share is None or not grazing.any():
+        return None
+    comp = domain.facet_component
+    nc = domain.n_components
+    dropped = np.bincount(comp[grazing], minlength=nc)
+    broad = dropped > share * np.bincount(comp[front], minlength=nc)
+    if not broad.any():
+        return None
+    kept = grazing & broad[comp] & (cos >= GRAZING_FLOOR)
+    return kept if kept.any() else None
+
+
 class UnusableNormalsWarning(UserWarning):
     """Normals inside the mask that were treated as missing samples (non-finite, zero-length,
     back-facing, grazing, isolated), with their counts and the first one's place."""
@@ -372,6 +395,7 @@ def prepare(
     prior_blur=None,
     prior_outliers: str = "remove",
     isolated: tuple[float, float] | None = None,
+    grazing_share: float | None = None,
 ) -> Problem:
     """Check user inputs and build a :class:`Problem`.
 
@@ -417,6 +441,12 @@ def prepare(
         "remove" (default): samples of a sparse prior that disagree with every neighbouring
         sample along the normals are left out, counted and named in a warning
         (:mod:`facetlift.prior_outliers`); "keep": every sample is used.
+    grazing_share : float in (0, 1], optional
+        The most of a connected component's front-facing normals the grazing rule may drop:
+        in a component where `outlier_eps` would drop more, a surface seen edge-on rather
+        than a rim, only those below :data:`GRAZING_FLOOR` are dropped (counted in
+        ``counts["grazing_kept"]``). None: no limit. :func:`facetlift.integrate` passes the
+        discontinuity route's (``MethodInfo.jump_grazing_share``).
     isolated : (deviation, agreement) in degrees, optional
         Front-facing normals more than `deviation` from the median of their eight
         neighbours, which agree with that median within `agreement` (all but the farthest),
@@ -524,6 +554,9 @@ def prepare(
         bad["isolated"] = isolated_normals(domain, nf, among, *isolated)
         front &= ~bad["isolated"]
     bad["grazing"] = front & ((cos < eps) | (cos == 0))
+    kept = _edge_on_kept(domain, front, bad["grazing"], cos, grazing_share)
+    if kept is not None:
+        bad["grazing"] &= ~kept
     usable = front & ~bad["grazing"]
     if conf is not None:
         # (a normal of confidence 0 is missing whatever it is, also a grazing one: it is then
@@ -548,6 +581,8 @@ def prepare(
         counts["zero_confidence"] = int(counts_zero.sum())
     counts["usable"] = int(usable.sum())
     counts["outlier_eps"] = float(eps)
+    if kept is not None:
+        counts["grazing_kept"] = int(kept.sum())
     if holes is not None and holes.any():
         counts["holes"] = int(holes.sum())
     if larger_holes is not None and larger_holes.any():  # (no warning: a ring's own hole)

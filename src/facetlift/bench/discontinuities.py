@@ -332,7 +332,8 @@ def oracle(gt, normals) -> tuple[float, float, float, float]:
         # jump_isolated)
         route = methods.get("dgp")
         problem = prepare(normals, gt.mask, pixel_size=gt.pixel_size, K=gt.K,
-                          outlier_eps=route.jump_grazing, isolated=route.jump_isolated)
+                          outlier_eps=route.jump_grazing, isolated=route.jump_isolated,
+                          grazing_share=route.jump_grazing_share)
         bx, by, target = targets(problem)
         right, down = synthetic.jump_edges(gt)
         mesh = split(problem.domain, right, down)

@@ -72,6 +72,7 @@ def run_bench(
     data_dir=None,
     conditions=None,
     progress: bool = True,
+    heldout_seed: int | None = None,
 ) -> Path:
     """Run the experiments and write tables and figures into `out_dir`.
 
@@ -101,6 +102,9 @@ def run_bench(
         those of them it has.
     progress : bool
         Show tqdm progress bars.
+    heldout_seed : int, optional
+        Seed of the ``heldout`` experiment's random views (default
+        ``Settings.heldout_seed``): a new one draws a fresh test set.
 
     Returns
     -------
@@ -134,6 +138,11 @@ def run_bench(
                              "experiments only, neither of which is among the experiments "
                              f"{list(exps)}")
         s.disc_conditions = conditions
+    if heldout_seed is not None:
+        if "heldout" not in exps:
+            raise ValueError("`heldout_seed` applies to the heldout experiment only, which is "
+                             f"not among the experiments {list(exps)}")
+        s.heldout_seed = int(heldout_seed)
     bad = [e for e in exps if e not in EXPERIMENTS]
     if bad:
         raise ValueError(f"`experiments`: unknown {bad}; valid: {list(EXPERIMENTS)}")

@@ -29,6 +29,16 @@ from ..options import Option
 #: 0.025 -> 0.046 mm MADE (its neck's fading ends keep a few more normals).
 JUMP_GRAZING = 0.0436194
 
+#: The grazing rule above is for rims: the narrow strips where a surface turns away from the
+#: camera. Where it would drop more than this share of a connected component's front-facing
+#: normals, the component is a surface seen edge-on, not a rim, and its normals are kept down
+#: to the pinhole default (:data:`facetlift.problem.GRAZING_FLOOR`). On the 85 renders of the
+#: discontinuity benchmark the rule drops at most 0.63 % of a scene's normals (rim bands one
+#: or two pixels wide); on random views of the flat ``tray_bottom`` it dropped 52 % of the
+#: tray seen nearly edge-on, and the route's MADE was 11.2 and 19.9 mm where BiNI, which keeps
+#: them, had 2.6 and 8.5 (docs/results.md, "Discontinuities: held-out views").
+JUMP_GRAZING_SHARE = 0.1
+
 #: Isolated normals of ``discontinuities=True``: a normal more than 15 deg from the median of
 #: its eight neighbours, which agree with that median within 10 deg (all but the farthest), is
 #: a missing sample, filled like one. An outlier (a photometric stereo's shadow or highlight)
@@ -86,6 +96,9 @@ class MethodInfo:
     #: Grazing threshold (view cosine) that ``discontinuities=True`` uses for every camera
     #: when the caller gives no ``outlier_eps``; None: the camera's own default.
     jump_grazing: float | None = None
+    #: The most of a component's front-facing normals that rule may drop
+    #: (:data:`JUMP_GRAZING_SHARE`); None: no limit.
+    jump_grazing_share: float | None = None
     #: ``(deviation, agreement)`` in degrees: with ``discontinuities=True``, a normal farther
     #: than `deviation` from the median of its eight neighbours, which agree within
     #: `agreement`, is a missing sample (:func:`facetlift.problem.isolated_normals`); None: kept.
@@ -144,6 +157,7 @@ register(
         # normals whose huge, unreliable slopes would bridge it (docs/results.md,
         # "Discontinuities: the grazing rule"; JUMP_GRAZING)
         jump_grazing=JUMP_GRAZING,
+        jump_grazing_share=JUMP_GRAZING_SHARE,
         # an isolated outlier (a shadow's or a highlight's normal) bends the surface around it
         # and can join pieces across a jump (docs/results.md, "Discontinuities: isolated
         # normals"; JUMP_ISOLATED)
