@@ -232,6 +232,22 @@ def test_discontinuity_route_keeps_a_surface_seen_edge_on():
         warnings.simplefilter("ignore")
         own = facetlift.integrate(n, mask, discontinuities=True, outlier_eps=JUMP_GRAZING)
     assert own.info["input"]["grazing"] == 32 * H and "grazing_kept" not in own.info["input"]
+    # the same surface with 3 deg of noise: its normals disagree with their neighbours by
+    # more than EDGE_ON_SPREAD, and near edge-on that is hundreds of footprints of slope, so
+    # the rule drops them as before
+    from facetlift.problem import EDGE_ON_SPREAD
+    from facetlift.synthetic import add_angular_noise
+
+    noisy = n.copy()
+    noisy[:, 40:] = add_angular_noise(n[:, 40:], 3.0, np.random.default_rng(5))
+    cos = noisy[:, 40:, 2] / np.linalg.norm(noisy[:, 40:], axis=-1)
+    graze = int(((cos > 0) & (cos < JUMP_GRAZING)).sum())
+    assert graze > 0.1 * 30 * H and EDGE_ON_SPREAD < 3.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        s = facetlift.integrate(noisy, mask, discontinuities=True)
+    assert "grazing_kept" not in s.info["input"]
+    assert s.info["input"]["grazing"] == 2 * H + graze
 
 
 def test_quantised_normals():
