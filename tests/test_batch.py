@@ -278,7 +278,8 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
                                                          "shape", "facets", "converged",
                                                          "mask_source", "perspective",
                                                          "camera", "depth_range", "normals",
-                                                         "evaluation"}
+                                                         "evaluation", "prior_file",
+                                                         "confidence_file"}
     code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "1",
                  "-s", "npy", "--progress"])
     assert code == 1 and "batch:" in capsys.readouterr().err  # the bar, on stderr
@@ -800,3 +801,111 @@ def test_workers_that_cannot_import_a_stdin_script_are_named(monkeypatch):
     assert "read from stdin" in fb._no_script_file()
     main.__file__ = "/tmp/run.py"
     assert fb._no_script_file() is None
+
+
+def _frames(folder, n=2, H=32, W=40):
+    """A video's frames as a monocular-depth workflow leaves them: `n` normal maps
+    frame_00i.png (16-bit RGB), each with its relative depth frame_00i_prior_depth.png (grey
+    16-bit counts, an affine function of the true depth, as a network's) and its
+    frame_00i_confidence.png (grey 8-bit); their in-process depths without a prior. (At
+    16 x 18 the fit finds no scale and leaves the prior out.)"""
+    depths = maps(folder, n=n, H=H, W=W)
+    for i in range(n):
+        (folder / f"m{i}.png").rename(folder / f"frame_00{i}.png")
+        d = depths[f"m{i}"]
+        counts = 2000 + 40000 * (d - d.min()) / np.ptp(d)
+        _png(folder / f"frame_00{i}_prior_depth.png", counts.astype(np.uint16))
+        _png(folder / f"frame_00{i}_confidence.png", np.full((H, W), 200, np.uint8))
+    return depths
+
+
+def _png(path, array):
+    import imagecodecs
+
+    Path(path).write_bytes(imagecodecs.png_encode(array))
+
+
+def test_a_folder_of_frames_pairs_each_map_with_its_own_prior_and_confidence(tmp_path,
+                                                                            capsys):
+    """An audit of a video workflow (per-frame normals from a network, per-frame monocular
+    depth): `facetlift batch FOLDER` ran the grey 16-bit frame_000_prior_depth.png files as
+    normal maps ("must be an (H, W, 3) RGB ...", exit 1) and integrated each frame without
+    its prior. NAME_prior_depth.* and NAME_confidence.* beside NAME.* are that map's own, as
+    NAME_mask.* is (a dataset folder's prior_depth.* and confidence.*), no items; the record
+    names them; --prior-fit aligns each frame's own (a 16-bit relative PNG needs no
+    --prior-scale with it); --no-prior / --no-confidence leave them unread; --prior given for
+    the whole batch takes precedence over them, with one warning."""
+    folder = tmp_path / "frames"
+    _frames(folder)
+    found = fb.items([folder])
+    assert [it.name for it in found] == ["frame_000", "frame_001"]
+    assert found[0].prior == str(folder / "frame_000_prior_depth.png")
+    assert found[1].confidence == str(folder / "frame_001_confidence.png")
+    # (a shell-expanded *.png names them with their maps: still theirs)
+    assert [it.name for it in fb.items(sorted(folder.glob("*.png")))] == ["frame_000",
+                                                                          "frame_001"]
+    code = main(["batch", str(folder), "-o", str(tmp_path / "o"), "--workers", "1",
+                 "-s", "npy", "--prior-fit", "affine", "--json", "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    recs = {r["name"]: r for r in map(json.loads, out.splitlines())}
+    assert sorted(recs) == ["frame_000", "frame_001"]
+    for i in range(2):
+        rec = recs[f"frame_00{i}"]
+        assert rec["status"] == "ok", rec
+        assert rec["prior_file"] == str(folder / f"frame_00{i}_prior_depth.png")
+        assert rec["confidence_file"] == str(folder / f"frame_00{i}_confidence.png")
+        # (its own files count as its inputs: --resume runs it again where one changed)
+        assert [f[0] for f in rec["input_stamp"]] == [
+            f"frame_00{i}.png", f"frame_00{i}_prior_depth.png", f"frame_00{i}_confidence.png"]
+    # in Python alike, each item's prior fitted
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        recs = facetlift.batch([folder], tmp_path / "p", workers=1, save=("npy",),
+                               prior_fit="affine")
+    assert all(r["status"] == "ok" and r["info"]["prior"]["fit"]["used"] and not r["warnings"]
+               for r in recs), recs
+    # --no-prior / --no-confidence: the normals alone, the files still no items
+    code = main(["batch", str(folder), "-o", str(tmp_path / "n"), "--workers", "1",
+                 "-s", "npy", "--no-prior", "--no-confidence", "--json", "--no-progress"])
+    out, err = capsys.readouterr()
+    recs = [json.loads(line) for line in out.splitlines()]
+    assert code == 0 and len(recs) == 2, err
+    assert all(r["prior_file"] is None and r["confidence_file"] is None for r in recs)
+    # one --prior for the whole batch takes precedence, and says so once
+    np.save(tmp_path / "scene.npy", np.full((32, 40), 5.0))
+    code = main(["batch", str(folder), "-o", str(tmp_path / "s"), "--workers", "1",
+                 "-s", "npy", "--prior", str(tmp_path / "scene.npy"), "--json",
+                 "--no-progress"])
+    out, err = capsys.readouterr()
+    recs = [json.loads(line) for line in out.splitlines()]
+    assert code == 0, err
+    assert all(r["prior_file"] == str(tmp_path / "scene.npy") for r in recs)
+    assert all(r["confidence_file"].endswith("_confidence.png") for r in recs)
+    said = [line for line in err.splitlines() if "in place of the NAME_prior_depth.*" in line]
+    assert len(said) == 1 and "--prior " in said[0] and "2 item(s)" in said[0], err
+    assert "leave --prior out" in said[0]
+
+
+def test_a_frames_own_prior_that_cannot_be_read_names_the_file_and_no_prior(tmp_path, capsys):
+    """A frame's own prior refused (a 16-bit PNG without --prior-scale or --prior-fit, or of
+    another size) names the file and --no-prior, which the user may not know applies to
+    files found beside the maps; two priors beside one map are an error of that item."""
+    folder = tmp_path / "frames"
+    _frames(folder, n=1)
+    code = main(["batch", str(folder), "-o", str(tmp_path / "o"), "--workers", "1",
+                 "-s", "npy", "--no-progress"])
+    err = " ".join(capsys.readouterr().err.split())
+    assert code == 1 and "frame_000_prior_depth.png is a 16-bit PNG" in err, err
+    assert "--prior-scale" in err and "--no-prior" in err
+    np.save(folder / "frame_000_prior_depth.npy", np.ones((16, 20)))
+    (folder / "frame_000_prior_depth.png").unlink()
+    code = main(["batch", str(folder), "-o", str(tmp_path / "o"), "--workers", "1",
+                 "-s", "npy", "--no-progress"])
+    err = " ".join(capsys.readouterr().err.split())
+    assert code == 1 and "size 16x20 (HxW) (frame_000_prior_depth.npy) but the normal map is " \
+        "32x40" in err and "2x coarser" in err and "--no-prior" in err, err
+    _png(folder / "frame_000_prior_depth.png", np.ones((32, 40), np.uint16))
+    (only,) = fb.items([folder])
+    assert "frame_000_prior_depth.npy and frame_000_prior_depth.png" in only.error
+
