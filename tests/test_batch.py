@@ -740,9 +740,12 @@ def test_mask_rules_with_several_maps_of_one_stem_and_capital_mask(tmp_path):
     io.write_mask(d / "m0_mask.png", np.ones((16, 18)))
     found = fb.items([d / "m0.png", d / "m0_mask.png"])
     assert [it.name for it in found] == ["m0"] and found[0].mask.endswith("m0_mask.png")
-    # "_MASK" is not the mask suffix: an item of its own, not dropped in silence
+    # "_MASK" is not the mask suffix: not dropped in silence (a grey file that pairs with no
+    # map: skipped with the warning that names such files; an item where named)
     io.write_mask(d / "x_MASK.png", np.ones((16, 18)))
-    assert "x_MASK" in [it.name for it in fb.items([d])]
+    with pytest.warns(UserWarning, match=r"skipped 1 one-channel file\(s\).*\(x_MASK.png\)"):
+        assert "x_MASK" not in [it.name for it in fb.items([d])]
+    assert [it.name for it in fb.items([d / "x_MASK.png"])] == ["x_MASK"]
 
 
 def test_a_template_takes_progress_true_as_integrate_does():
@@ -908,4 +911,34 @@ def test_a_frames_own_prior_that_cannot_be_read_names_the_file_and_no_prior(tmp_
     _png(folder / "frame_000_prior_depth.png", np.ones((32, 40), np.uint16))
     (only,) = fb.items([folder])
     assert "frame_000_prior_depth.npy and frame_000_prior_depth.png" in only.error
+
+def test_lone_one_channel_files_are_skipped_with_one_warning(tmp_path, capsys):
+    """The same audit: a stray depth map and a grey image in a folder of frames ran as
+    normal maps, each a failed item ("must be an (H, W, 3) RGB ..."), and the batch exited 1.
+    A one-channel image or 2-d array that pairs with no map is skipped now, all named in one
+    warning (a prior named after no map too, with its rename); not a two-sample TIFF
+    (--normal-encoding xy reads it), and not one named explicitly."""
+    import tifffile
+
+    folder = tmp_path / "frames"
+    _frames(folder, n=1)
+    _png(folder / "stray_depth.png", np.full((16, 18), 7, np.uint16))
+    _png(folder / "grey.png", np.full((16, 18), 90, np.uint8))
+    np.save(folder / "disparity.npy", np.ones((16, 18)))
+    _png(folder / "frame_009_prior_depth.png", np.ones((16, 18), np.uint16))
+    n, _ = io.read_normals(folder / "frame_000.png")
+    tifffile.imwrite(folder / "rg.tif", n[..., :2].astype(np.float32), photometric="minisblack",
+                     planarconfig="contig")
+    with pytest.warns(UserWarning, match=r"skipped 4 one-channel file\(s\) that pair with no "
+                      r"normal map \(disparity.npy, frame_009_prior_depth.png, grey.png, "
+                      r"stray_depth.png\).*frame_009_prior_depth.png has no map frame_009") as w:
+        found = fb.items([folder])
+    assert len([x for x in w if "one-channel" in str(x.message)]) == 1
+    assert [it.name for it in found] == ["frame_000", "rg"]
+    assert [it.name for it in fb.items([folder / "grey.png"])] == ["grey"]
+    code = main(["batch", str(folder), "-o", str(tmp_path / "o"), "--workers", "1", "-s", "npy",
+                 "--normal-encoding", "xy", "--no-prior", "--no-progress"])
+    out, err = capsys.readouterr()
+    assert "skipped 4 one-channel file(s)" in err and "must be an (H, W, 3)" not in err, err
+    assert code == 0 and "batch: 2 of 2 succeeded" in out, err
 

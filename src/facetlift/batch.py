@@ -72,8 +72,10 @@ def items(inputs, *, list_file=None) -> list[Item]:
     an item unless named explicitly; so are ``<stem>_prior_depth.<ext>`` and
     ``<stem>_confidence.<ext>`` its depth prior and normal confidence (:func:`companions`: the
     formats of a dataset folder's ``prior_depth.*`` and ``confidence.*``; two of one kind
-    make the item an error: which was meant?). Output names are the file stems or folder
-    names; inputs sharing a stem (``a.png``, ``a.npy``) are named with their extension (``a_png``,
+    make the item an error: which was meant?). A one-channel image or 2-d array that pairs
+    with no map (a stray depth map, a grey image: no normal map) is skipped with one warning
+    naming them, unless named explicitly. Output names are the file stems or folder names; inputs
+    sharing a stem (``a.png``, ``a.npy``) are named with their extension (``a_png``,
     ``a_npy``), and what still collides gets ``-2``, ``-3`` ... A dataset folder is named
     after the folder (DiLiGenT's ``bearPNG/``, not its ``Normal_gt.mat``: an audit's objects
     came out as ``Normal_gt``, ``Normal_gt-2`` ...), and a folder's camera file
@@ -140,7 +142,7 @@ def items(inputs, *, list_file=None) -> list[Item]:
                     stacklevel=2)
         else:
             paths.append((p, True))
-    found, seen, lone = [], set(), []
+    found, seen, lone, grey = [], set(), [], []
     given = {os.path.abspath(p) for p, _ in paths}
     files = _Listing()  # (each folder listed once: a lookup per file was quadratic)
     for p, explicit in paths:
@@ -155,6 +157,9 @@ def items(inputs, *, list_file=None) -> list[Item]:
         if not explicit and p.stem.endswith("_mask") and one_channel(p):
             lone.append(p.name)  # (a grey X_mask.* without its map X.*: a mask, no item)
             continue
+        if not explicit and _grey(p):  # (a video's frame_000_prior_depth.png ran as a map
+            grey.append(p.name)  # without its frame_000.png, and a stray depth map: both
+            continue  # failed as "(H, W, 3) RGB" maps and the batch exited 1, an audit)
         seen.add(key)
         found.append((p, key))
     if lone:  # (a user's obj_normal.png + obj_mask.png: the mask ran as a map and failed)
@@ -163,6 +168,18 @@ def items(inputs, *, list_file=None) -> list[Item]:
             f"name beside them ({', '.join(lone[:3])}{', ...' if len(lone) > 3 else ''}): "
             "NAME_mask.* is the mask of NAME.*: rename it after its map (obj_normal.png pairs "
             "with obj_normal_mask.png)", stacklevel=2)
+    if grey:
+        named = [n for n in grey if _companion(Path(n).stem) is not None]
+        warnings.warn(
+            f"batch: skipped {len(grey)} one-channel file(s) that pair with no normal map "
+            f"({', '.join(grey[:5])}{', ...' if len(grey) > 5 else ''}): a normal map has "
+            "three channels (a grey image or a depth map is none); NAME_mask.*, "
+            "NAME_prior_depth.* and NAME_confidence.* beside a map NAME.* are its mask, depth "
+            "prior and confidence"
+            + (f" ({named[0]} has no map {_companion(Path(named[0]).stem)[0]}.* beside it: "
+               "rename it after its map)" if named else "")
+            + "; give such a file to every map with --mask, --prior or --confidence",
+            stacklevel=2)
     names: dict[str, set] = {}
     for p, _ in found:
         names.setdefault(_stem(p), set()).add(p.name)
@@ -375,6 +392,26 @@ def _maps_of(p: Path, formats, files: _Listing) -> list:
     kinds = {e.lower() for e in formats + (".mat",)}
     return [os.path.abspath(c) for c in files.stem(p.parent, stem)
             if c.suffix.lower() in kinds]
+
+
+def _grey(p: Path) -> bool:
+    """Whether `p` is a one-channel image or array by its header
+    (:func:`facetlift.io.dataset.one_channel`: a grey or grey + alpha PNG, a 2-d ``.npy``, a
+    one-sample TIFF), which no normal map is; not a two-sample TIFF, which
+    ``--normal-encoding xy`` reads as one."""
+    from .io.dataset import one_channel
+
+    if not p.is_file() or not one_channel(p):
+        return False
+    if p.suffix.lower() in (".tif", ".tiff"):
+        try:
+            import tifffile
+
+            with tifffile.TiffFile(p) as t:
+                return t.pages[0].samplesperpixel == 1
+        except Exception:  # (one_channel read it: not for here to say)
+            return False
+    return True
 
 
 def run_item(job: Job, threads: int | None = None) -> dict:
