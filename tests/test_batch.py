@@ -942,3 +942,34 @@ def test_lone_one_channel_files_are_skipped_with_one_warning(tmp_path, capsys):
     assert "skipped 4 one-channel file(s)" in err and "must be an (H, W, 3)" not in err, err
     assert code == 0 and "batch: 2 of 2 succeeded" in out, err
 
+def test_batch_records_carry_integrate_s_hints_and_the_summary_counts_them(tmp_path, capsys):
+    """The same audit: integrate --json has `hints` (the smooth surface bent across depth
+    jumps: --discontinuities), a batch's records had none, so a batch of maps with jumps said
+    nothing. Each record has integrate's hints now (the same words), and the batch says how
+    many items got some and shows the first once, not a line per item."""
+    gt = facetlift.synthetic.analytic("occluder", 64)
+    (tmp_path / "in").mkdir()
+    for name in ("a", "b", "c"):
+        np.save(tmp_path / "in" / f"{name}.npy", gt.normals)
+    code = main(["integrate", str(tmp_path / "in" / "a.npy"), "-o", str(tmp_path / "one"),
+                 "-s", "npy", "--json"])
+    want = json.loads(capsys.readouterr().out)["hints"]
+    assert code == 0 and len(want) == 1 and "--discontinuities" in want[0]
+    code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "o"), "--workers", "1",
+                 "-s", "npy", "--json", "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    recs = [json.loads(line) for line in out.splitlines()]
+    assert [r["hints"] for r in recs] == [want] * 3
+    log = [json.loads(line) for line in (tmp_path / "o" / fb.LOG_NAME).read_text().splitlines()]
+    assert [r["hints"] for r in log] == [want] * 3
+    shown = [line for line in err.splitlines() if line.startswith("hint: ")]
+    assert len(shown) == 1 and "3 item(s) have hints" in shown[0] and want[0] in shown[0], err
+    assert "(3 with hints)" in err.splitlines()[-1], err
+    # with --discontinuities none applies: no word
+    code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "d"), "--workers", "1",
+                 "-s", "npy", "--discontinuities", "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 0 and "hint" not in out + err, out + err
+    assert all(json.loads(line)["hints"] == [] for line in
+               (tmp_path / "d" / fb.LOG_NAME).read_text().splitlines())

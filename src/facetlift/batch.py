@@ -5,7 +5,8 @@ Items run on the Dask local scheduler with one process per worker (``workers=N``
 ``dask.distributed`` cluster (``scheduler="tcp://host:8786"`` or a ``Client``). A failing item
 never stops the others: its record says why. Every finished item appends one JSON line to the
 log (``OUT/batch.jsonl``): ``item``, ``name``, ``status``, ``error``, ``exit``, ``outputs``,
-``mean_deviation``, ``seconds``. ``resume=True`` skips the items whose last record is ``ok``
+``mean_deviation``, ``seconds``, ``hints`` (:mod:`facetlift.hints`, as ``integrate --json``
+has them) and more (:func:`log_record`). ``resume=True`` skips the items whose last record is ``ok``
 and whose outputs are all there.
 
 Dask comes with the ``batch`` extra (``pip install 'facetlift[batch]'``) and is imported only
@@ -449,6 +450,16 @@ def run_item(job: Job, threads: int | None = None) -> dict:
     except Exception as e:
         rec.update(status="bug", error=f"{type(e).__name__}: {e}", exit=3)
     rec["seconds"] = time.perf_counter() - t0
+    # (integrate --json's hints, where they apply: a batch's records had none, an audit of a
+    # video's frames; facetlift.hints words them with the command line's flags)
+    rec["hints"] = []
+    if isinstance(rec.get("info"), dict):
+        from .hints import job_hints
+
+        try:
+            rec["hints"] = job_hints(job, rec["info"])
+        except Exception:  # pragma: no cover - (a hint never fails a finished item)
+            pass
     if "warnings" not in rec:  # (a successful run's record has its own, in order)
         rec["warnings"] = list(dict.fromkeys(str(w.message) for w in caught))
     rec.setdefault("mean_deviation", None)
@@ -824,13 +835,13 @@ def log_record(rec: dict) -> dict:
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
             "shape", "facets", "mask_source", "converged", "warnings", "resumed", "settings",
             "input_stamp", "perspective", "camera", "prior_file", "confidence_file",
-            "depth_range", "normals", "evaluation")
+            "depth_range", "normals", "evaluation", "hints")
     # (mask_source: whether NAME_mask.png was used, a user asked; perspective: whether a
     # camera was used, a dataset folder's K.txt included; camera: which, a DiLiGenT folder's
     # being its parent's Calib_Results.mat; depth_range: height.png's scale;
     # normals: the mask's pixels without a usable normal, by reason; evaluation: the scores
     # against a dataset folder's depth_gt.*; prior_file, confidence_file: which files, a
-    # frame's own NAME_prior_depth.* among them)
+    # frame's own NAME_prior_depth.* among them; hints: integrate --json's)
     return jsonable({k: rec[k] for k in keep if k in rec})
 
 
