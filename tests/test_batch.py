@@ -278,7 +278,8 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
                                                          "shape", "facets", "converged",
                                                          "mask_source", "perspective",
                                                          "camera", "depth_range", "normals",
-                                                         "evaluation"}
+                                                         "evaluation", "prior_file",
+                                                         "confidence_file"}
     code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "1",
                  "-s", "npy", "--progress"])
     assert code == 1 and "batch:" in capsys.readouterr().err  # the bar, on stderr
@@ -739,9 +740,12 @@ def test_mask_rules_with_several_maps_of_one_stem_and_capital_mask(tmp_path):
     io.write_mask(d / "m0_mask.png", np.ones((16, 18)))
     found = fb.items([d / "m0.png", d / "m0_mask.png"])
     assert [it.name for it in found] == ["m0"] and found[0].mask.endswith("m0_mask.png")
-    # "_MASK" is not the mask suffix: an item of its own, not dropped in silence
+    # "_MASK" is not the mask suffix: not dropped in silence (a grey file that pairs with no
+    # map: skipped with the warning that names such files; an item where named)
     io.write_mask(d / "x_MASK.png", np.ones((16, 18)))
-    assert "x_MASK" in [it.name for it in fb.items([d])]
+    with pytest.warns(UserWarning, match=r"skipped 1 one-channel file\(s\).*\(x_MASK.png\)"):
+        assert "x_MASK" not in [it.name for it in fb.items([d])]
+    assert [it.name for it in fb.items([d / "x_MASK.png"])] == ["x_MASK"]
 
 
 def test_a_template_takes_progress_true_as_integrate_does():
@@ -800,3 +804,172 @@ def test_workers_that_cannot_import_a_stdin_script_are_named(monkeypatch):
     assert "read from stdin" in fb._no_script_file()
     main.__file__ = "/tmp/run.py"
     assert fb._no_script_file() is None
+
+
+def _frames(folder, n=2, H=32, W=40):
+    """A video's frames as a monocular-depth workflow leaves them: `n` normal maps
+    frame_00i.png (16-bit RGB), each with its relative depth frame_00i_prior_depth.png (grey
+    16-bit counts, an affine function of the true depth, as a network's) and its
+    frame_00i_confidence.png (grey 8-bit); their in-process depths without a prior. (At
+    16 x 18 the fit finds no scale and leaves the prior out.)"""
+    depths = maps(folder, n=n, H=H, W=W)
+    for i in range(n):
+        (folder / f"m{i}.png").rename(folder / f"frame_00{i}.png")
+        d = depths[f"m{i}"]
+        counts = 2000 + 40000 * (d - d.min()) / np.ptp(d)
+        _png(folder / f"frame_00{i}_prior_depth.png", counts.astype(np.uint16))
+        _png(folder / f"frame_00{i}_confidence.png", np.full((H, W), 200, np.uint8))
+    return depths
+
+
+def _png(path, array):
+    import imagecodecs
+
+    Path(path).write_bytes(imagecodecs.png_encode(array))
+
+
+def test_a_folder_of_frames_pairs_each_map_with_its_own_prior_and_confidence(tmp_path,
+                                                                            capsys):
+    """An audit of a video workflow (per-frame normals from a network, per-frame monocular
+    depth): `facetlift batch FOLDER` ran the grey 16-bit frame_000_prior_depth.png files as
+    normal maps ("must be an (H, W, 3) RGB ...", exit 1) and integrated each frame without
+    its prior. NAME_prior_depth.* and NAME_confidence.* beside NAME.* are that map's own, as
+    NAME_mask.* is (a dataset folder's prior_depth.* and confidence.*), no items; the record
+    names them; --prior-fit aligns each frame's own (a 16-bit relative PNG needs no
+    --prior-scale with it); --no-prior / --no-confidence leave them unread; --prior given for
+    the whole batch takes precedence over them, with one warning."""
+    folder = tmp_path / "frames"
+    _frames(folder)
+    found = fb.items([folder])
+    assert [it.name for it in found] == ["frame_000", "frame_001"]
+    assert found[0].prior == str(folder / "frame_000_prior_depth.png")
+    assert found[1].confidence == str(folder / "frame_001_confidence.png")
+    # (a shell-expanded *.png names them with their maps: still theirs)
+    assert [it.name for it in fb.items(sorted(folder.glob("*.png")))] == ["frame_000",
+                                                                          "frame_001"]
+    code = main(["batch", str(folder), "-o", str(tmp_path / "o"), "--workers", "1",
+                 "-s", "npy", "--prior-fit", "affine", "--json", "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    recs = {r["name"]: r for r in map(json.loads, out.splitlines())}
+    assert sorted(recs) == ["frame_000", "frame_001"]
+    for i in range(2):
+        rec = recs[f"frame_00{i}"]
+        assert rec["status"] == "ok", rec
+        assert rec["prior_file"] == str(folder / f"frame_00{i}_prior_depth.png")
+        assert rec["confidence_file"] == str(folder / f"frame_00{i}_confidence.png")
+        # (its own files count as its inputs: --resume runs it again where one changed)
+        assert [f[0] for f in rec["input_stamp"]] == [
+            f"frame_00{i}.png", f"frame_00{i}_prior_depth.png", f"frame_00{i}_confidence.png"]
+    # in Python alike, each item's prior fitted
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        recs = facetlift.batch([folder], tmp_path / "p", workers=1, save=("npy",),
+                               prior_fit="affine")
+    assert all(r["status"] == "ok" and r["info"]["prior"]["fit"]["used"] and not r["warnings"]
+               for r in recs), recs
+    # --no-prior / --no-confidence: the normals alone, the files still no items
+    code = main(["batch", str(folder), "-o", str(tmp_path / "n"), "--workers", "1",
+                 "-s", "npy", "--no-prior", "--no-confidence", "--json", "--no-progress"])
+    out, err = capsys.readouterr()
+    recs = [json.loads(line) for line in out.splitlines()]
+    assert code == 0 and len(recs) == 2, err
+    assert all(r["prior_file"] is None and r["confidence_file"] is None for r in recs)
+    # one --prior for the whole batch takes precedence, and says so once
+    np.save(tmp_path / "scene.npy", np.full((32, 40), 5.0))
+    code = main(["batch", str(folder), "-o", str(tmp_path / "s"), "--workers", "1",
+                 "-s", "npy", "--prior", str(tmp_path / "scene.npy"), "--json",
+                 "--no-progress"])
+    out, err = capsys.readouterr()
+    recs = [json.loads(line) for line in out.splitlines()]
+    assert code == 0, err
+    assert all(r["prior_file"] == str(tmp_path / "scene.npy") for r in recs)
+    assert all(r["confidence_file"].endswith("_confidence.png") for r in recs)
+    said = [line for line in err.splitlines() if "in place of the NAME_prior_depth.*" in line]
+    assert len(said) == 1 and "--prior " in said[0] and "2 item(s)" in said[0], err
+    assert "leave --prior out" in said[0]
+
+
+def test_a_frames_own_prior_that_cannot_be_read_names_the_file_and_no_prior(tmp_path, capsys):
+    """A frame's own prior refused (a 16-bit PNG without --prior-scale or --prior-fit, or of
+    another size) names the file and --no-prior, which the user may not know applies to
+    files found beside the maps; two priors beside one map are an error of that item."""
+    folder = tmp_path / "frames"
+    _frames(folder, n=1)
+    code = main(["batch", str(folder), "-o", str(tmp_path / "o"), "--workers", "1",
+                 "-s", "npy", "--no-progress"])
+    err = " ".join(capsys.readouterr().err.split())
+    assert code == 1 and "frame_000_prior_depth.png is a 16-bit PNG" in err, err
+    assert "--prior-scale" in err and "--no-prior" in err
+    np.save(folder / "frame_000_prior_depth.npy", np.ones((16, 20)))
+    (folder / "frame_000_prior_depth.png").unlink()
+    code = main(["batch", str(folder), "-o", str(tmp_path / "o"), "--workers", "1",
+                 "-s", "npy", "--no-progress"])
+    err = " ".join(capsys.readouterr().err.split())
+    assert code == 1 and "size 16x20 (HxW) (frame_000_prior_depth.npy) but the normal map is " \
+        "32x40" in err and "2x coarser" in err and "--no-prior" in err, err
+    _png(folder / "frame_000_prior_depth.png", np.ones((32, 40), np.uint16))
+    (only,) = fb.items([folder])
+    assert "frame_000_prior_depth.npy and frame_000_prior_depth.png" in only.error
+
+def test_lone_one_channel_files_are_skipped_with_one_warning(tmp_path, capsys):
+    """The same audit: a stray depth map and a grey image in a folder of frames ran as
+    normal maps, each a failed item ("must be an (H, W, 3) RGB ..."), and the batch exited 1.
+    A one-channel image or 2-d array that pairs with no map is skipped now, all named in one
+    warning (a prior named after no map too, with its rename); not a two-sample TIFF
+    (--normal-encoding xy reads it), and not one named explicitly."""
+    import tifffile
+
+    folder = tmp_path / "frames"
+    _frames(folder, n=1)
+    _png(folder / "stray_depth.png", np.full((16, 18), 7, np.uint16))
+    _png(folder / "grey.png", np.full((16, 18), 90, np.uint8))
+    np.save(folder / "disparity.npy", np.ones((16, 18)))
+    _png(folder / "frame_009_prior_depth.png", np.ones((16, 18), np.uint16))
+    n, _ = io.read_normals(folder / "frame_000.png")
+    tifffile.imwrite(folder / "rg.tif", n[..., :2].astype(np.float32), photometric="minisblack",
+                     planarconfig="contig")
+    with pytest.warns(UserWarning, match=r"skipped 4 one-channel file\(s\) that pair with no "
+                      r"normal map \(disparity.npy, frame_009_prior_depth.png, grey.png, "
+                      r"stray_depth.png\).*frame_009_prior_depth.png has no map frame_009") as w:
+        found = fb.items([folder])
+    assert len([x for x in w if "one-channel" in str(x.message)]) == 1
+    assert [it.name for it in found] == ["frame_000", "rg"]
+    assert [it.name for it in fb.items([folder / "grey.png"])] == ["grey"]
+    code = main(["batch", str(folder), "-o", str(tmp_path / "o"), "--workers", "1", "-s", "npy",
+                 "--normal-encoding", "xy", "--no-prior", "--no-progress"])
+    out, err = capsys.readouterr()
+    assert "skipped 4 one-channel file(s)" in err and "must be an (H, W, 3)" not in err, err
+    assert code == 0 and "batch: 2 of 2 succeeded" in out, err
+
+def test_batch_records_carry_integrate_s_hints_and_the_summary_counts_them(tmp_path, capsys):
+    """The same audit: integrate --json has `hints` (the smooth surface bent across depth
+    jumps: --discontinuities), a batch's records had none, so a batch of maps with jumps said
+    nothing. Each record has integrate's hints now (the same words), and the batch says how
+    many items got some and shows the first once, not a line per item."""
+    gt = facetlift.synthetic.analytic("occluder", 64)
+    (tmp_path / "in").mkdir()
+    for name in ("a", "b", "c"):
+        np.save(tmp_path / "in" / f"{name}.npy", gt.normals)
+    code = main(["integrate", str(tmp_path / "in" / "a.npy"), "-o", str(tmp_path / "one"),
+                 "-s", "npy", "--json"])
+    want = json.loads(capsys.readouterr().out)["hints"]
+    assert code == 0 and len(want) == 1 and "--discontinuities" in want[0]
+    code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "o"), "--workers", "1",
+                 "-s", "npy", "--json", "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    recs = [json.loads(line) for line in out.splitlines()]
+    assert [r["hints"] for r in recs] == [want] * 3
+    log = [json.loads(line) for line in (tmp_path / "o" / fb.LOG_NAME).read_text().splitlines()]
+    assert [r["hints"] for r in log] == [want] * 3
+    shown = [line for line in err.splitlines() if line.startswith("hint: ")]
+    assert len(shown) == 1 and "3 item(s) have hints" in shown[0] and want[0] in shown[0], err
+    assert "(3 with hints)" in err.splitlines()[-1], err
+    # with --discontinuities none applies: no word
+    code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "d"), "--workers", "1",
+                 "-s", "npy", "--discontinuities", "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 0 and "hint" not in out + err, out + err
+    assert all(json.loads(line)["hints"] == [] for line in
+               (tmp_path / "d" / fb.LOG_NAME).read_text().splitlines())

@@ -623,6 +623,40 @@ def test_a_coarser_prior_is_refused_with_its_remedies(tmp_path, capsys):
     np.testing.assert_allclose(np.load(tmp_path / "p" / "depth.npy"), depth, atol=1e-6)
 
 
+def test_a_prior_of_another_size_is_told_to_be_resized_and_declared_blurred(tmp_path, capsys):
+    """An audit of a video workflow: Depth Anything's 518 x 518 depth beside a 540 x 960
+    frame got only "size 518x518 (HxW) but the normal map is 540x960". A size that is no
+    whole factor of the map's is told what to do: resize it to the map's size, --prior-blur
+    about 1.1 x the factor it was enlarged by (docs/fusion.md), its aspect's resize undone,
+    and --prior-fit for a network's relative depth; in Python and for a dataset folder's
+    prior_depth.* alike. One made smaller gets no blur to declare."""
+    H, W = 54, 96  # (540 x 960 / 10: the same ratios, a small file)
+    n = np.dstack([np.zeros((H, W, 2)), np.ones((H, W))])
+    np.save(tmp_path / "n.npy", n)
+    np.save(tmp_path / "mono.npy", np.ones((52, 52)))
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "--prior", tmp_path / "mono.npy",
+                       "-o", tmp_path / "x")
+    err = " ".join(err.split())
+    assert code == 1 and "--prior: size 52x52 (HxW) but the normal map is 54x96; resize it to " \
+        "54x96, the normal map's size, with any image tool" in err, err
+    assert "--prior-blur / prior_blur about 2 to say it is blurred (1.1 x the 1.8x" in err
+    assert "its width/height (1) is not the map's (1.78): undo the resize" in err
+    assert "--prior-fit affine or disparity" in err and "'A monocular depth map'" in err
+    assert "coarser" not in err
+    with pytest.raises(ValueError, match=r"got shape \(52, 52\); resize it to 54x96"):
+        facetlift.integrate(n, prior=np.ones((52, 52)))
+    with pytest.raises(ValueError, match=r"resize it to 54x96, the normal map's size, with any "
+                       r"image tool \(bilinear\); a monocular"):  # (made smaller: no blur)
+        facetlift.integrate(n, prior=np.ones((108, 192)))
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", n)
+    np.save(folder / "prior_depth.npy", np.ones((52, 52)))
+    code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "o")
+    err = " ".join(err.split())
+    assert code == 1 and "resize it to 54x96" in err and "--no-prior" in err, err
+
+
 def test_a_dataset_folders_coarser_prior_depth_gets_the_same_remedy(tmp_path, capsys):
     """A review: a folder's 8x10 prior_depth.npy beside its 24x30 normal_map.npy was refused
     by the folder's own size check, which named no factor, while --prior did; it says the

@@ -149,11 +149,15 @@ def test_a_folder_without_a_normal_map_names_maps_not_depths_nor_photographs(tmp
     with pytest.raises(ValueError, match=r"other files that may be normal maps \(001.png, "
                                          r"002.png, est.npy\): integrate one by its path") as e:
         io.read_dataset(f)
-    # a batch of the folder is not offered: it would run the depth map as a normal map
+    # a batch of the folder is not offered where it would run a depth map as a normal map
+    # (an RGB rendering of it: a batch skips only one-channel files, depth_gt.npy among them)
+    io.write_normals(f / "depth_vis.png", bump()[0])
+    with pytest.raises(ValueError) as e:
+        io.read_dataset(f)
     assert "or all of them with `facetlift batch" not in str(e.value)
-    assert str(e.value).endswith(f"`facetlift batch {f}` would run depth_gt.npy as normal "
+    assert str(e.value).endswith(f"`facetlift batch {f}` would run depth_vis.png as normal "
                                  "maps too: give it the maps by name")
-    (f / "depth_gt.npy").unlink()  # (only maps: the batch is offered, a user's check)
+    (f / "depth_vis.png").unlink()  # (only maps: the batch is offered, a user's check)
     with pytest.raises(ValueError, match=r"\(001.png, 002.png, est.npy\).*or all of them "
                                          r"with `facetlift batch"):
         io.read_dataset(f)

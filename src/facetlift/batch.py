@@ -5,7 +5,8 @@ Items run on the Dask local scheduler with one process per worker (``workers=N``
 ``dask.distributed`` cluster (``scheduler="tcp://host:8786"`` or a ``Client``). A failing item
 never stops the others: its record says why. Every finished item appends one JSON line to the
 log (``OUT/batch.jsonl``): ``item``, ``name``, ``status``, ``error``, ``exit``, ``outputs``,
-``mean_deviation``, ``seconds``. ``resume=True`` skips the items whose last record is ``ok``
+``mean_deviation``, ``seconds``, ``hints`` (:mod:`facetlift.hints`, as ``integrate --json``
+has them) and more (:func:`log_record`). ``resume=True`` skips the items whose last record is ``ok``
 and whose outputs are all there.
 
 Dask comes with the ``batch`` extra (``pip install 'facetlift[batch]'``) and is imported only
@@ -20,6 +21,7 @@ written, exit 2); ``bug`` (any other exception, exit 3).
 from __future__ import annotations
 
 import contextlib
+import functools
 import glob
 import json
 import os
@@ -47,6 +49,11 @@ class Item:
     path: str
     name: str
     mask: str | None = None
+    #: The map's own depth prior and normal confidence: ``NAME_prior_depth.*`` and
+    #: ``NAME_confidence.*`` beside ``NAME.*`` (a video's frames, each with its monocular
+    #: depth), as a dataset folder's ``prior_depth.*`` and ``confidence.*``.
+    prior: str | None = None
+    confidence: str | None = None
     #: Why the input cannot run (it does not exist, a pattern matches nothing): the batch
     #: records it as a failed item and runs the others.
     error: str | None = None
@@ -63,7 +70,12 @@ def items(inputs, *, list_file=None) -> list[Item]:
     ``#`` at the start of a line or after a space starts a comment).
 
     A file ``<stem>_mask.<ext>`` next to a normal map ``<stem>.<ext>`` is its mask, and is not
-    an item unless named explicitly. Output names are the file stems or folder names; inputs
+    an item unless named explicitly; so are ``<stem>_prior_depth.<ext>`` and
+    ``<stem>_confidence.<ext>`` its depth prior and normal confidence (:func:`companions`: the
+    formats of a dataset folder's ``prior_depth.*`` and ``confidence.*``; two of one kind
+    make the item an error: which was meant?). A one-channel image or 2-d array that pairs
+    with no map (a stray depth map, a grey image: no normal map) is skipped with one warning
+    naming them, unless named explicitly. Output names are the file stems or folder names; inputs
     sharing a stem (``a.png``, ``a.npy``) are named with their extension (``a_png``,
     ``a_npy``), and what still collides gets ``-2``, ``-3`` ... A dataset folder is named
     after the folder (DiLiGenT's ``bearPNG/``, not its ``Normal_gt.mat``: an audit's objects
@@ -131,7 +143,7 @@ def items(inputs, *, list_file=None) -> list[Item]:
                     stacklevel=2)
         else:
             paths.append((p, True))
-    found, seen, lone = [], set(), []
+    found, seen, lone, grey = [], set(), [], []
     given = {os.path.abspath(p) for p, _ in paths}
     files = _Listing()  # (each folder listed once: a lookup per file was quadratic)
     for p, explicit in paths:
@@ -146,6 +158,9 @@ def items(inputs, *, list_file=None) -> list[Item]:
         if not explicit and p.stem.endswith("_mask") and one_channel(p):
             lone.append(p.name)  # (a grey X_mask.* without its map X.*: a mask, no item)
             continue
+        if not explicit and _grey(p):  # (a video's frame_000_prior_depth.png ran as a map
+            grey.append(p.name)  # without its frame_000.png, and a stray depth map: both
+            continue  # failed as "(H, W, 3) RGB" maps and the batch exited 1, an audit)
         seen.add(key)
         found.append((p, key))
     if lone:  # (a user's obj_normal.png + obj_mask.png: the mask ran as a map and failed)
@@ -154,6 +169,18 @@ def items(inputs, *, list_file=None) -> list[Item]:
             f"name beside them ({', '.join(lone[:3])}{', ...' if len(lone) > 3 else ''}): "
             "NAME_mask.* is the mask of NAME.*: rename it after its map (obj_normal.png pairs "
             "with obj_normal_mask.png)", stacklevel=2)
+    if grey:
+        named = [n for n in grey if _companion(Path(n).stem) is not None]
+        warnings.warn(
+            f"batch: skipped {len(grey)} one-channel file(s) that pair with no normal map "
+            f"({', '.join(grey[:5])}{', ...' if len(grey) > 5 else ''}): a normal map has "
+            "three channels (a grey image or a depth map is none); NAME_mask.*, "
+            "NAME_prior_depth.* and NAME_confidence.* beside a map NAME.* are its mask, depth "
+            "prior and confidence"
+            + (f" ({named[0]} has no map {_companion(Path(named[0]).stem)[0]}.* beside it: "
+               "rename it after its map)" if named else "")
+            + "; give such a file to every map with --mask, --prior or --confidence",
+            stacklevel=2)
     names: dict[str, set] = {}
     for p, _ in found:
         names.setdefault(_stem(p), set()).add(p.name)
@@ -165,11 +192,22 @@ def items(inputs, *, list_file=None) -> list[Item]:
         name = _stem(p) if len(names[_stem(p)]) == 1 else p.name.replace(".", "_")
         name = _unique(name, taken)
         mask = None
+        own = {}
+        error = None
         if p.is_file():  # (X_mask with any case of a mask extension)
             kinds = {e.lower() for e in MASK_FORMATS}
             mask = next((str(m) for m in sorted(files.stem(p.parent, f"{p.stem}_mask"))
                          if m.suffix.lower() in kinds), None)
-        out.append(Item(path=key, name=name, mask=mask))
+            for field, suffix, formats in companions():  # (its prior and confidence alike)
+                kinds = {e.lower() for e in formats}
+                them = sorted(m for m in files.stem(p.parent, f"{p.stem}{suffix}")
+                              if m.suffix.lower() in kinds)
+                own[field] = os.path.abspath(them[0]) if them else None
+                if len(them) > 1 and error is None:  # (as a dataset folder's two of a kind:
+                    # which one was meant?)
+                    error = (f"`inputs`: {p.parent} holds {' and '.join(m.name for m in them)} "
+                             f"beside {p.name}, each of them its {field}: keep one")
+        out.append(Item(path=key, name=name, mask=mask, error=error, **own))
     if not out:
         if absent:
             more = f" (and {len(absent) - 1} more such input(s))" if len(absent) > 1 else ""
@@ -182,6 +220,38 @@ def items(inputs, *, list_file=None) -> list[Item]:
             # (the log's name; no folder is made: a pattern's is "pattern")
             name = "pattern" if _GLOB & set(spec) else (Path(spec).name or "input")
             out.append(Item(path=key, name=_unique(name, taken), error=why))
+    return out
+
+
+def _own_files(found: list[Item], template: Job) -> list[Item]:
+    """`found` with each item's own prior and confidence (``NAME_prior_depth.*``,
+    ``NAME_confidence.*``) kept only where `template` takes them: not with ``--no-prior`` /
+    ``--no-confidence`` (asked for: no word), nor where ``--prior`` / ``--confidence`` gives
+    one file for every item, which takes precedence, as over a dataset folder's own, with one
+    warning naming the items' files it leaves unread (a per-frame depth replaced by one
+    file must not pass unsaid)."""
+    out = []
+    unread: dict = {"prior": [], "confidence": []}
+    for it in found:
+        for field, given, wanted in (
+                ("prior", template.prior, template.dataset_prior),
+                ("confidence", template.confidence, template.dataset_confidence)):
+            own = getattr(it, field)
+            if own is None:
+                continue
+            if given is not None:
+                unread[field].append(Path(own).name)
+            if given is not None or not wanted:
+                it = replace(it, **{field: None})
+        out.append(it)
+    for field, names in unread.items():
+        if names:
+            stem = "prior_depth" if field == "prior" else "confidence"
+            warnings.warn(
+                f"batch: `{field}` {getattr(template, field)} is used for every item, in place "
+                f"of the NAME_{stem}.* files of {len(names)} item(s) ({', '.join(names[:3])}"
+                f"{', ...' if len(names) > 3 else ''}): leave `{field}` out to give each map "
+                "its own", stacklevel=3)
     return out
 
 
@@ -203,7 +273,7 @@ def _holds_maps(folder: Path) -> bool:
     if "batch.jsonl" in names:
         return False
     return any(Path(n).suffix.lower() in kinds and Path(n).stem not in OUTPUT_STEMS
-               and Path(n).stem.lower() != "mask" and not Path(n).stem.endswith("_mask")
+               and Path(n).stem.lower() != "mask" and _companion(Path(n).stem) is None
                and n not in CAMERA_FILES for n in names)
 
 
@@ -275,8 +345,9 @@ class _Listing:
 
 def _is_mask_file(p: Path, formats, files: _Listing) -> bool:
     """``mask.*``, or ``X_mask.*`` beside a normal map ``X.*`` (``_mask`` as written, the
-    extension in any case): a mask, not an item, in a folder or a pattern's matches (named
-    explicitly, only where ``X.*`` is named too: :func:`items`)."""
+    extension in any case), or ``X_prior_depth.*`` / ``X_confidence.*`` beside it
+    (:func:`companions`): a map's mask, prior or confidence, not an item, in a folder or a
+    pattern's matches (named explicitly, only where ``X.*`` is named too: :func:`items`)."""
     if not p.is_file():
         return False
     if p.stem.lower() == "mask":
@@ -284,13 +355,64 @@ def _is_mask_file(p: Path, formats, files: _Listing) -> bool:
     return bool(_maps_of(p, formats, files))
 
 
+@functools.cache
+def companions() -> tuple:
+    """The files beside a normal map ``NAME.*`` that are its own, as ``(field, suffix,
+    formats)``: the :class:`Item` and :class:`facetlift.jobs.Job` field, the stem's suffix
+    and the extensions of a dataset folder's ``prior_depth.*`` and ``confidence.*``
+    (:func:`facetlift.io.dataset.dataset_files`), named after one map of a folder of maps (a
+    video's frames, each with its monocular depth). ``NAME_mask.*`` is looked for apart
+    (:func:`items`), as before these."""
+    from .io.dataset import _dataset_formats
+
+    formats = _dataset_formats()
+    return (("prior", "_prior_depth", formats["prior_depth"]),
+            ("confidence", "_confidence", formats["confidence"]))
+
+
+
+def _companion(stem: str) -> tuple[str, str] | None:
+    """``(X, suffix)`` where `stem` is ``X_mask``, ``X_prior_depth`` or ``X_confidence`` (a
+    non-empty X), else None."""
+    for suffix in ("_mask",) + tuple(s for _, s, _ in companions()):
+        if stem.endswith(suffix) and len(stem) > len(suffix):
+            return stem[:-len(suffix)], suffix
+    return None
+
+
 def _maps_of(p: Path, formats, files: _Listing) -> list:
-    """The absolute paths of the normal maps ``X.*`` that ``X_mask.*`` may belong to."""
-    if not p.stem.endswith("_mask"):
+    """The absolute paths of the normal maps ``X.*`` that ``X_mask.*`` (or
+    ``X_prior_depth.*``, ``X_confidence.*`` of their formats) may belong to."""
+    pair = _companion(p.stem)
+    if pair is None:
+        return []
+    stem, suffix = pair
+    allowed = next((f for _, s, f in companions() if s == suffix), None)
+    if allowed is not None and p.suffix.lower() not in {e.lower() for e in allowed}:
         return []
     kinds = {e.lower() for e in formats + (".mat",)}
-    return [os.path.abspath(c) for c in files.stem(p.parent, p.stem[:-len("_mask")])
+    return [os.path.abspath(c) for c in files.stem(p.parent, stem)
             if c.suffix.lower() in kinds]
+
+
+def _grey(p: Path) -> bool:
+    """Whether `p` is a one-channel image or array by its header
+    (:func:`facetlift.io.dataset.one_channel`: a grey or grey + alpha PNG, a 2-d ``.npy``, a
+    one-sample TIFF), which no normal map is; not a two-sample TIFF, which
+    ``--normal-encoding xy`` reads as one."""
+    from .io.dataset import one_channel
+
+    if not p.is_file() or not one_channel(p):
+        return False
+    if p.suffix.lower() in (".tif", ".tiff"):
+        try:
+            import tifffile
+
+            with tifffile.TiffFile(p) as t:
+                return t.pages[0].samplesperpixel == 1
+        except Exception:  # (one_channel read it: not for here to say)
+            return False
+    return True
 
 
 def run_item(job: Job, threads: int | None = None) -> dict:
@@ -328,6 +450,16 @@ def run_item(job: Job, threads: int | None = None) -> dict:
     except Exception as e:
         rec.update(status="bug", error=f"{type(e).__name__}: {e}", exit=3)
     rec["seconds"] = time.perf_counter() - t0
+    # (integrate --json's hints, where they apply: a batch's records had none, an audit of a
+    # video's frames; facetlift.hints words them with the command line's flags)
+    rec["hints"] = []
+    if isinstance(rec.get("info"), dict):
+        from .hints import job_hints
+
+        try:
+            rec["hints"] = job_hints(job, rec["info"])
+        except Exception:  # pragma: no cover - (a hint never fails a finished item)
+            pass
     if "warnings" not in rec:  # (a successful run's record has its own, in order)
         rec["warnings"] = list(dict.fromkeys(str(w.message) for w in caught))
     rec.setdefault("mean_deviation", None)
@@ -364,8 +496,9 @@ def settings(job: Job) -> dict:
     from .jobs import jsonable
 
     # (unread_beside: which warnings are given, not the result)
+    # (beside: which of an item's files came from beside its map, the item's own)
     out = {k: v for k, v in asdict(job).items()
-           if k not in ("normals", "gradients", "outdir", "unread_beside")}
+           if k not in ("normals", "gradients", "outdir", "unread_beside", "beside")}
     out["options"] = {k: v for k, v in job.options.items() if k not in NEUTRAL_OPTIONS}
     out["save"] = sorted(set(job.save))
     for key in ("fov", "output_frame", "height_range"):  # (unset: as in a log written before
@@ -403,8 +536,8 @@ def fingerprint(item: Item) -> list:
         files = sorted(f for f in folder.iterdir() if f.is_file())
         with contextlib.suppress(ValueError):  # (the item's own reading says why)
             files += [c for c in camera_files(folder) if c.parent != folder]
-    if item.mask is not None:
-        files.append(Path(item.mask))
+    # (its mask, prior and confidence beside it: a frame's depth replaced is a new input)
+    files += [Path(f) for f in (item.mask, item.prior, item.confidence) if f is not None]
     out = []
     for f in files:
         try:
@@ -513,7 +646,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     check_template(template, local=scheduler is None)
     if workers is not None:  # (checked before the output folder is made: an audit)
         _workers(workers, 1)
-    found = items(inputs, list_file=list_file)
+    found = _own_files(items(inputs, list_file=list_file), template)
     _unused_folder_files(found, template)
     root = Path(out).resolve()
     prepare_folder(root)  # created and checked before any work
@@ -540,6 +673,11 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         j = replace(template.with_input(it.path, root / it.name), unread_beside=False)
         if it.mask is not None and template.mask is None:
             j = replace(j, mask=it.mask)
+        # (its own prior and confidence, NAME_prior_depth.* and NAME_confidence.*: where the
+        # template takes them, _own_files left them on the item)
+        own = {k: getattr(it, k) for k in ("prior", "confidence") if getattr(it, k)}
+        if own:
+            j = replace(j, beside=tuple(own), **own)
         jobs.append((it, j))
     n_workers = _workers(workers, len(jobs))
     if on_record is not None:
@@ -696,12 +834,14 @@ def log_record(rec: dict) -> dict:
 
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
             "shape", "facets", "mask_source", "converged", "warnings", "resumed", "settings",
-            "input_stamp", "perspective", "camera", "depth_range", "normals", "evaluation")
+            "input_stamp", "perspective", "camera", "prior_file", "confidence_file",
+            "depth_range", "normals", "evaluation", "hints")
     # (mask_source: whether NAME_mask.png was used, a user asked; perspective: whether a
     # camera was used, a dataset folder's K.txt included; camera: which, a DiLiGenT folder's
     # being its parent's Calib_Results.mat; depth_range: height.png's scale;
     # normals: the mask's pixels without a usable normal, by reason; evaluation: the scores
-    # against a dataset folder's depth_gt.*)
+    # against a dataset folder's depth_gt.*; prior_file, confidence_file: which files, a
+    # frame's own NAME_prior_depth.* among them; hints: integrate --json's)
     return jsonable({k: rec[k] for k in keep if k in rec})
 
 

@@ -25,6 +25,7 @@ from . import __version__
 from . import methods as _methods
 from ._progress import progress_bar as _progress_bar
 from .errors import SolverError
+from .hints import jump_hint, torn_hint
 from .jobs import DEFAULT_SAVE, OUTPUTS, jsonable
 
 log = logging.getLogger(__name__)
@@ -474,139 +475,21 @@ def summary(record: dict) -> str:
     return ", ".join(parts)
 
 
-#: Share of the facets deviating by more than 10 degrees from their normals above which a
-#: smooth result gets the hint to keep depth jumps (:func:`_jump_hint`). Measured on the
-#: discontinuity benchmark's 63 renders at exact, 8-bit and 3-deg-noise normals, smooth dgp
-#: (192 scene-conditions, 2026-12-04): above it on all 84 where the discontinuity route more
-#: than halves the error (0.50-63 %; the DiLiGenT bear 0.49 %, 18x better with jumps) and on
-#: every one where it helps by 20 % or more; below on the flat, nearly jump-free views (at
-#: most 0.1 %, with noise); 12 of the 165 hinted are ones where that route is worse by more
-#: than 1 % (fandisk orthographic, featuretype@left, mountain@left, wide mountain@front).
-#: And only where the field is not integrable to within JUMP_HINT_CURL (its relative curl,
-#: ``info["integrability"]["curl"]``): the demo's creased roofs deviate by 10 deg on 0.7 % of
-#: the facets at their creases, but their exact field is integrable (0.004) and has no jump
-#: to keep; every render above with jumps is at 0.04 or more with exact normals (0.12 and
-#: more where the discontinuity route halves the error), the DiLiGenT bear at 0.22.
-JUMP_HINT_SHARE, JUMP_HINT_CURL = 0.002, 0.02
-#: Where the flipped field's relative curl is below this fraction of the field's own (and the
-#: own above :data:`facetlift.frames.FLIP_MIN_CURL`), short of the frame check's hint
-#: (:data:`facetlift.frames.FLIP_HINT`), the jump hint names the frame first: a second audit's
-#: y-down brick texture read 0.94 as given and 0.74 flipped (0.79; a sampling artefact since
-#: mended, :func:`facetlift.frames._strided`), was told only of --discontinuities, and
-#: following it gave an inside-out result (61 % height error, 0.6 % in its frame). In their
-#: right frame the discontinuity benchmark's 80 cached renders (exact, 8-bit, 3-deg noise,
-#: smoothed noise, 2 % outliers; 2026-12-06) came to 0.88 at the least (wide tray_bottom
-#: with outliers), 0.94 without outliers.
-JUMP_FRAME_RATIO = 0.85
-
-
+# (the hints' words and rules are facetlift.hints', shared with a batch's records)
 def _jump_hint(job, info: dict) -> str | None:
-    """The hint (also printed) where a smooth integration by a method that can keep depth
-    jumps, but did not (its own default, e.g. bini's, or the option given), deviates from its
-    normals in the way bent-across jumps do (:data:`JUMP_HINT_SHARE`); not where the map
-    seems read in the wrong frame (that warning explains the deviation); None where there is
-    no hint. Where the field is more integrable flipped (:data:`JUMP_FRAME_RATIO`) it names
-    the frame to try first, and the jumps only if the frame is right."""
-    from . import frames
-
-    share = info.get("deviation_over_10")
-    method = _methods.REGISTRY.get(info.get("method") or job.method)
-    if share is None or not share > JUMP_HINT_SHARE or method is None:
-        return None
-    if "discontinuities" in job.options:
-        return None
-    if method.options().get("discontinuities") or info.get("solver") == "discontinuous":
-        return None  # (bini keeps jumps by default: the flag would change nothing, a review)
-    prior = info.get("prior")
-    prior = prior if isinstance(prior, dict) else {}  # (regularization's is its option's name)
-    if prior.get("relief_warned"):
-        return None  # (a prior in other units explains it, warned about: an audit)
-    ic = info.get("integrability") or {}
-    own = ic.get("curl")
-    flipped = min(ic.get("curl_y_flipped", float("inf")), ic.get("curl_x_flipped", float("inf")))
-    if own is not None and (frames.flip_verdict(own, flipped) is not None
-                            or not own >= JUMP_HINT_CURL):
-        return None  # (a wrong frame explains it; an integrable field has no jump to keep)
-    # (with a dense prior its own noise bends the surface alike: a fresh user's sensor depth,
-    # 1 mm of noise at weight 0.5, deviated 11 deg, and only the jumps were named)
-    dense = prior.get("samples", 0) > 0.25 * max(int(info.get("input", {}).get("usable", 1)), 1)
-    also = (" (or the dense prior's own noise: a lower --prior-weight, e.g. 0.01, or "
-            "--prior-blur; docs/fusion.md)" if dense else "")
-    # (a method that cannot keep jumps: the one that can, named; poisson and the others at
-    # the same deviation got no word, a user's check)
-    keep = ("--discontinuities keeps them" if method.discontinuities else
-            f"--method dgp --discontinuities keeps them ({method.name!r} cannot)")
-    head = f"{share:.1%} of the facets deviate from their normals by more than 10 deg"
-    frame = _frame_first(job, ic) if own is not None else None
-    if frame is None:
-        hint = (f"{head}, as where a smooth surface bends across depth jumps: {keep} "
-                f"(slower; docs/perspective.md){also}")
-    else:
-        hint = (f"{head}{frame}. If the frame is right, a smooth surface bent across depth "
-                f"jumps does this too: {keep} (slower; docs/perspective.md){also}")
-    click.echo(f"hint: {hint}", err=True)
-    return hint
-
-
-#: Share of the mask's pixels that the pieces a dense prior's cuts add must pass (and
-#: :data:`TORN_MIN` pieces) for :func:`_torn_hint`: the DiLiGenT bear with a sensor's 1 mm of
-#: noise at weight 0.01 and 0.1 had 138 and 243 pieces (0.3 and 0.6 % of its 40,670 pixels,
-#: errors 0.050 and 0.132 mm), with 3 mm at 0.1 8,757 (21 %, 1.575 mm; docs/fusion.md); an
-#: audit's 960 x 540 room with a monocular disparity fitted and given pixel by pixel 21,808
-#: (5 %), the same prior blurred (--prior-blur 3) 817.
-TORN_SHARE = 0.02
-TORN_MIN = 200
+    """:func:`facetlift.hints.jump_hint`, printed as a ``hint:`` line on stderr."""
+    return _echo_hint(jump_hint(job, info))
 
 
 def _torn_hint(job, info: dict) -> str | None:
-    """The hint (also printed) where --discontinuities with a dense prior given pixel by
-    pixel tore the mesh into many pieces (:data:`TORN_SHARE`): the prior's noise, or a
-    network's blur at the silhouettes, cut as depth jumps; the summary said only how many
-    pieces (an audit: 21,808 without a word). None otherwise."""
-    cut = info.get("cut_pieces") or 0
-    prior = info.get("prior")
-    if info.get("solver") != "discontinuous" or not isinstance(prior, dict):
-        return None
-    pixels = int((info.get("input") or {}).get("pixels") or 0)
-    usable = max(int((info.get("input") or {}).get("usable") or 1), 1)
-    dense = (prior.get("samples") or 0) > 0.25 * usable
-    if not dense or info.get("prior_blur") or cut < max(TORN_MIN, TORN_SHARE * pixels):
-        return None
-    hint = (f"the cuts split the mesh into {cut} more pieces ({cut / max(pixels, 1):.1%} of the "
-            "mask's pixels): a dense prior given pixel by pixel is cut where its noise or its "
-            "blur disagrees with the normals. A coarse or blurred map (a monocular network's) "
-            "wants --prior-blur SIGMA (its weight then 0.003), a noisy sensor a lower "
-            "--prior-weight (0.001-0.01), and a band of foreground and background blended at "
-            "the silhouette zero weight (--prior-weight-map); docs/fusion.md")
-    click.echo(f"hint: {hint}", err=True)
+    """:func:`facetlift.hints.torn_hint`, printed as a ``hint:`` line on stderr."""
+    return _echo_hint(torn_hint(job, info))
+
+
+def _echo_hint(hint: str | None) -> str | None:
+    if hint is not None:
+        click.echo(f"hint: {hint}", err=True)
     return hint
-
-
-def _frame_first(job, ic: dict) -> str | None:
-    """:func:`_jump_hint`'s words on the frame where the field's relative curls `ic`
-    (``info["integrability"]``) say it is more integrable flipped (:data:`JUMP_FRAME_RATIO`),
-    naming the flag to try as the frame check does (:func:`facetlift.frames.flip_advice`);
-    None otherwise."""
-    from . import frames
-
-    own = ic["curl"]
-    a, b = frames.flip_order(ic)
-    flipped = ic[f"curl_{a}_flipped"]
-    if not (own > frames.FLIP_MIN_CURL and flipped < JUMP_FRAME_RATIO * own):
-        return None
-    read = frames.GRADIENT_FIELD if getattr(job, "gradients", None) else getattr(
-        job, "normal_frame", None)
-    try_ = frames.flip_advice(read, a)
-    if not frames.flip_decided(ic) and read != frames.GRADIENT_FIELD:
-        try_ = (f"{try_} (or {frames.flip_advice(read, b)}: the two flips give surfaces "
-                "inside-out from each other; keep the one that bulges where the object does)")
-    field = read == frames.GRADIENT_FIELD
-    like = (", as a map whose y runs down (DirectX's, most game engines') read as y up does"
-            if a == "y" and not field else "")
-    return (f", and the {'field' if field else 'map'} is more integrable with {a} flipped "
-            f"(relative curl {own:.2f} as given, {flipped:.2f} flipped; short of the frame "
-            f"warning's margin): check its frame first{like}: try {try_}; docs/conventions.md "
-            "lists the frames of common sources")
 
 
 class _FieldFile(click.Path):
@@ -987,6 +870,13 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
     if normalised:
         scored.append(f"mean normalised error {100 * sum(normalised) / len(normalised):.3g} % "
                       f"over the {len(normalised)} orthographic one(s) with a depth_gt file")
+    # (integrate's hints, in each record's "hints": counted, and the first shown once, not
+    # one line per item of a long batch)
+    hinted = [r for r in records if r["status"] == "ok" and r.get("hints")]
+    if hinted:
+        said.append(f"{len(hinted)} with hints")
+        click.echo(f"hint: {len(hinted)} item(s) have hints in their records ({outdir / LOG_NAME}"
+                   f', "hints"); {hinted[0]["name"]}\'s: {hinted[0]["hints"][0]}', err=True)
     line = (f"batch: {len(records) - len(failed)} of {len(records)} succeeded"
             + (f" ({'; '.join(said)})" if said else "")
             + (f", {len(failed)} failed" if failed else "")

@@ -109,6 +109,10 @@ class Job:
     #: ``NAME_mask.*``, ``K.txt``); a batch names them once per folder instead (False for
     #: its items).
     unread_beside: bool = True
+    #: Which of ``prior`` and ``confidence`` a batch found beside the map, as
+    #: ``NAME_prior_depth.*`` and ``NAME_confidence.*`` (not given by the user): their
+    #: errors name the file and what leaves it unread (``dataset_prior=False``, --no-prior).
+    beside: tuple = ()
 
     def with_input(self, path, outdir) -> Job:
         """The same job on another normal-map input (a batch item)."""
@@ -260,12 +264,14 @@ def read(job: Job) -> Input:
     if job.orthographic:
         K = None
     if job.prior is not None:
-        prior = io.read_prior(job.prior, _prior_scale(job))
+        with _beside_file(job, "prior"):
+            prior = io.read_prior(job.prior, _prior_scale(job))
         files["prior"] = str(job.prior)
     elif prior is None and folder:
         _no_prior_checks(job)
     if job.confidence is not None:
-        conf = io.read_weights(job.confidence, arg="confidence")
+        with _beside_file(job, "confidence"):
+            conf = io.read_weights(job.confidence, arg="confidence")
         files["confidence"] = str(job.confidence)
     weight = job.prior_weight
     if job.prior_weight_map is not None:  # (times --prior-weight: an 8-bit map reaches 100)
@@ -281,14 +287,42 @@ def read(job: Job) -> Input:
 
             # (a sensor's depth of lower resolution was refused with no remedy, an audit)
             hint = coarse_prior_hint(arr.shape, n.shape[:2]) if name == "prior" else ""
-            raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW) but the normal "
-                             f"map is {n.shape[0]}x{n.shape[1]}{hint}")
+            # (a batch's NAME_prior_depth.*: the file named, and how to leave it unread)
+            own = f" ({Path(getattr(job, name)).name})" if name in job.beside else ""
+            raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW){own} but the "
+                             f"normal map is {n.shape[0]}x{n.shape[1]}{hint}"
+                             f"{_beside_tail(job, name)}")
     return Input(normals=n, mask=m, K=K, mask_source=source, prior=prior, prior_weight=weight,
                  confidence=conf, field=bool(field_input),
                  K_file=None if K_file is None or job.K is not None or job.fov is not None
                  else _camera_name(K_file, src),
                  prior_file=files["prior"] if prior is not None else None,
                  confidence_file=files["confidence"] if conf is not None else None)
+
+
+def _beside_tail(job: Job, name: str) -> str:
+    """The tail of a message on `name` ("prior", "confidence") where a batch found it beside
+    the map (``NAME_prior_depth.*``, ``NAME_confidence.*``; ``job.beside``): what leaves such
+    files unread, as a dataset folder's message says it; "" otherwise."""
+    if name not in job.beside:
+        return ""
+    stem = "prior_depth" if name == "prior" else "confidence"
+    return (f"; or leave the maps' NAME_{stem}.* files unread with --no-{name} "
+            f"(dataset_{name}=False in Python)")
+
+
+@contextlib.contextmanager
+def _beside_file(job: Job, name: str):
+    """A ValueError of its block with :func:`_beside_tail` added, where a batch found the
+    file `name` beside the map: the user gave no such flag, and the message names the file
+    (:func:`facetlift.io.read_prior` and ``read_weights`` do) but not the way out."""
+    try:
+        yield
+    except ValueError as e:
+        tail = _beside_tail(job, name)
+        if not tail:
+            raise
+        raise ValueError(f"{e}{tail}") from None
 
 
 def camera_source(job: Job, inp: Input) -> str:
@@ -431,15 +465,25 @@ def _from_folder(message: str, job: Job, inp: Input) -> str:
         able = methods.get(job.method)
     except (KeyError, ValueError):
         return message
+    # (a batch's NAME_prior_depth.* beside the map alike: --no-prior leaves those out too)
+    own = [w for w in ("prior", "confidence") if w in job.beside]
     files = [(stem, flag) for what, given, stem, flag in (
-        ("prior", job.prior is None and inp.prior is not None, "prior_depth", "--no-prior"),
-        ("confidence", job.confidence is None and inp.confidence is not None, "confidence",
-         "--no-confidence")) if given and not getattr(able, what, True)]
+        ("prior", (job.prior is None or "prior" in own) and inp.prior is not None,
+         "prior_depth", "--no-prior"),
+        ("confidence", (job.confidence is None or "confidence" in own)
+         and inp.confidence is not None, "confidence", "--no-confidence"))
+        if given and not getattr(able, what, True)]
     if not files:
         return message
-    named = " and ".join(f"{stem}.*" for stem, _ in files)
+    plural = "s" if len(files) > 1 else ""
+    if own:
+        what = (" and ".join(f"NAME_{stem}.*" for stem, _ in files)
+                + f" file{plural} beside the map")
+    else:
+        what = ("the dataset folder's " + " and ".join(f"{stem}.*" for stem, _ in files)
+                + f" file{plural}")
     flags = " ".join(flag for _, flag in files)
-    return (f"{message} (the dataset folder's {named} file{'s' if len(files) > 1 else ''}, "
+    return (f"{message} ({what}, "
             f"which this method does not take: {flags} leave{'s' if len(files) == 1 else ''} "
             f"{'it' if len(files) == 1 else 'them'} out)")
 

@@ -1332,13 +1332,14 @@ def coarse_factor(small, shape) -> int | None:
 
 
 def coarse_prior_hint(small, shape) -> str:
-    """What to do with a prior of size `small` that is :func:`coarse_factor` times coarser
-    than the normal map of size `shape` (a message's tail, "" for other sizes): its pixels as
-    point samples at their footprints' centres (on the DiLiGenT bear a 4x coarse noisy
-    sensor gave 0.159 mm so, 0.376 mm upsampled to a dense map: an audit), or upsampled."""
+    """What to do with a prior of size `small` where the normal map is of size `shape` (a
+    message's tail): where it is :func:`coarse_factor` times coarser, its pixels as point
+    samples at their footprints' centres (on the DiLiGenT bear a 4x coarse noisy sensor gave
+    0.159 mm so, 0.376 mm upsampled to a dense map: an audit), or upsampled; of any other
+    size, :func:`resize_prior_hint`; "" where `small` is no (h, w) size."""
     f = coarse_factor(small, shape)
     if f is None:
-        return ""
+        return resize_prior_hint(small, shape)
     return (f"; it is {f}x coarser in both axes (a lower-resolution sensor's depth?): give its "
             f"pixels as point samples at their footprints' centres, its pixel (i, j) at row "
             f"(i + 0.5) * {f} - 0.5, col (j + 0.5) * {f} - 0.5 of the map: a points file "
@@ -1347,6 +1348,40 @@ def coarse_prior_hint(small, shape) -> str:
             "prior=(rows, cols, depths); or upsample it to "
             f"{shape[0]}x{shape[1]} yourself (with --prior-blur / prior_blur). docs/fusion.md, "
             "'A depth map of lower resolution'")
+
+
+def resize_prior_hint(small, shape) -> str:
+    """What to do with a dense prior of size `small` (h, w) whose size is no whole factor of
+    the map's `shape` (H, W): resize it to the map's size with any image tool and say how
+    blurred it then is (``prior_blur``, about 1.1 times the factor it was enlarged by, as for
+    a map upsampled from a coarse grid: docs/fusion.md "Blurred priors"), and, for a
+    monocular network's relative output (Depth Anything's 518 x 518 beside a 540 x 960 frame:
+    an audit's, refused with the two sizes only), ``prior_fit``; where its aspect differs,
+    that the network's own resize is what to undo. "" where the sizes are not two numbers
+    each."""
+    try:
+        (h, w), (H, W) = (int(v) for v in small), (int(v) for v in shape)
+    except (TypeError, ValueError):
+        return ""
+    if min(h, w, H, W) <= 0:
+        return ""
+    f = max(H / h, W / w)
+    if f > 1.05:
+        blur = (f", and give --prior-blur / prior_blur about {1.1 * f:.2g} to say it is blurred "
+                f"(1.1 x the {f:.2g}x it is enlarged by; more for a network's output, softer "
+                "than its pixels; --prior-weight then defaults to 0.003)")
+    else:  # (made smaller: no blur of its making to declare)
+        blur = ""
+    aspect = ""
+    if abs((w / h) / (W / H) - 1) > 0.02:
+        aspect = (f"; its width/height ({w / h:.3g}) is not the map's ({W / H:.3g}): undo the "
+                  "resize that made it (stretch it back where the frame was squashed to the "
+                  "network's input, put it in place where the frame was cropped)")
+    return (f"; resize it to {H}x{W}, the normal map's size, with any image tool (bilinear)"
+            f"{blur}"
+            f"{aspect}; a monocular network's relative depth or disparity also wants "
+            "--prior-fit affine or disparity (prior_fit=), which fits its scale and shift to "
+            "the normals. docs/fusion.md, 'A monocular depth map' and 'Blurred priors'")
 
 
 #: The largest prior weight: at 1e8 the result already meets the prior where given to
