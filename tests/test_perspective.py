@@ -232,6 +232,12 @@ def test_discontinuity_route_keeps_a_surface_seen_edge_on():
         warnings.simplefilter("ignore")
         own = facetlift.integrate(n, mask, discontinuities=True, outlier_eps=JUMP_GRAZING)
     assert own.info["input"]["grazing"] == 32 * H and "grazing_kept" not in own.info["input"]
+    # info's count of what the route would drop (prepare + grazing_between) says the same
+    from facetlift.problem import prepare
+
+    p = prepare(n, mask, outlier_eps=0.01)
+    assert p.grazing_between(0.01, JUMP_GRAZING) == 32 * H
+    assert p.grazing_between(0.01, JUMP_GRAZING, share=JUMP_GRAZING_SHARE) == 2 * H
     # the same surface with 3 deg of noise: its normals disagree with their neighbours by
     # more than EDGE_ON_SPREAD, and near edge-on that is hundreds of footprints of slope, so
     # the rule drops them as before

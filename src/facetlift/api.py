@@ -498,7 +498,8 @@ def _solve(problem, method, t0, max_memory, options):
             and eps != jump and not problem.extras.get("outlier_eps_given", True)):
         # (integrate applies the route's own threshold; prepare + solve took the camera's:
         # told where some normal lies between the two, either way)
-        between = problem.grazing_between(eps, jump)
+        between = problem.grazing_between(
+            eps, jump, share=info.jump_grazing_share if eps < jump else None)
         bear_note = " (the DiLiGenT bear with the pinhole default: 0.28 mm MADE against 0.046)"
         if between:
             warn(f"discontinuities=True on a problem prepared with the camera's grazing "

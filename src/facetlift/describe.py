@@ -311,7 +311,9 @@ def _jump_grazing(problem) -> dict:
         return {}
     iso = None if route.jump_isolated is None else problem.isolated(route.jump_isolated)
     camera = problem.counts.get("outlier_eps", eps)
-    between = problem.grazing_between(camera, eps, without=iso)
+    # (the route's edge-on share applies where its threshold is the larger one)
+    between = problem.grazing_between(camera, eps, without=iso,
+                                      share=route.jump_grazing_share if camera < eps else None)
     return {"outlier_eps": float(eps), "more_grazing": between if camera < eps else 0,
             "fewer_grazing": between if camera > eps else 0,
             "isolated": 0 if iso is None else int(iso.sum()),

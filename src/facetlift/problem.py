@@ -231,11 +231,12 @@ class Problem:
         n = np.where(self.usable[:, None], self.normals, [0.0, 0.0, 1.0])
         return np.where(self.usable, self.camera.view_cosine(r, c, n, unit=True), 0.0)
 
-    def grazing_between(self, a: float, b: float, without=None) -> int:
+    def grazing_between(self, a: float, b: float, without=None, share=None) -> int:
         """How many given normals (front-facing, not missing for another reason, confidence
         above 0, not in `without` (m,) bool) have a view cosine between the thresholds `a`
         and `b` (the larger excluded): those that one grazing threshold drops and the other
-        keeps."""
+        keeps. With `share` (:func:`prepare`'s `grazing_share`, for the larger threshold)
+        the normals of an edge-on surface that it keeps are not counted."""
         given = self._given()
         if without is not None:
             given = given & ~without
@@ -243,7 +244,12 @@ class Problem:
         n = np.where(given[:, None], self.normals, [0.0, 0.0, 1.0])
         cos = self.camera.view_cosine(r, c, n, unit=True)
         lo, hi = sorted((a, b))
-        return int(np.sum(given & (cos >= lo) & (cos < hi)))
+        between = given & (cos >= lo) & (cos < hi)
+        kept = _edge_on_kept(self.domain, given, given & ((cos < hi) | (cos == 0)), cos,
+                             share, n)
+        if kept is not None:
+            between &= ~kept
+        return int(between.sum())
 
     def isolated(self, rule) -> np.ndarray:
         """(m,) bool: the normals that :func:`isolated_normals` of `rule` ``(deviation,
