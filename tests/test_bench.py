@@ -240,6 +240,8 @@ def test_bench_input_errors(tmp_path):
         run_bench(tmp_path, experiments=["discontinuities"], conditions=",", progress=False)
     with pytest.raises(ValueError, match="`heldout_seed` applies to the heldout"):
         run_bench(tmp_path, experiments=["fig4"], heldout_seed=3, progress=False)
+    with pytest.raises(ValueError, match="`heldout_seed` must be >= 0"):
+        run_bench(tmp_path, experiments=["heldout"], heldout_seed=-1, progress=False)
     with pytest.raises(ValueError, match="`conditions` applies to the discontinuities and "
                                          "heldout"):
         run_bench(tmp_path, experiments=["fig4"], conditions=["smooth3"], progress=False)

@@ -749,6 +749,23 @@ def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", folder / "obj.npy", "--fov", "60", "--mask",
                        folder / "obj_mask.png", "-s", "npy", "-o", tmp_path / "d")
     assert code == 0 and "beside it" not in err
+    # a batch item's own prior and confidence: batch reads them, integrate names them (it
+    # said nothing, a review)
+    np.save(folder / "obj_prior_depth.npy", np.full((H, W), 5.0))
+    np.save(folder / "obj_confidence.npy", np.ones((H, W)))
+    code, _, err = run(capsys, "integrate", folder / "obj.npy", "--mask", folder / "obj_mask.png",
+                       "--K", folder / "K.txt", "-s", "npy", "-o", tmp_path / "e")
+    err = " ".join(err.split())
+    assert code == 0 and ("obj.npy has obj_prior_depth.npy and obj_confidence.npy beside "
+                          "it") in err, err
+    assert "give --prior / --confidence to use them" in err and "facetlift batch pairs" in err
+    code, _, err = run(capsys, "integrate", folder / "obj.npy", "--mask", folder / "obj_mask.png",
+                       "--K", folder / "K.txt", "--prior", folder / "obj_prior_depth.npy",
+                       "--confidence", folder / "obj_confidence.npy", "-s", "npy", "-o",
+                       tmp_path / "f")
+    assert code == 0 and "beside it" not in err, err
+    (folder / "obj_prior_depth.npy").unlink()
+    (folder / "obj_confidence.npy").unlink()
     # a batch: once per folder, the mask only where a map has none of its own
     (folder / "K.txt").unlink()
     io.write_mask(folder / "mask.png", mask)

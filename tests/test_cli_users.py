@@ -345,6 +345,22 @@ def test_info_counts_grazing_normals_the_discontinuity_route_keeps(tmp_path, cap
     assert "more grazing" not in out
 
 
+def test_info_counts_an_edge_on_surface_the_discontinuity_route_keeps(tmp_path, capsys):
+    """A component seen nearly edge-on (view cosine 0.03 everywhere) beside a flat one: the
+    camera's rule and the route's threshold drop it, the route's edge-on share keeps it, and
+    info says so (it counted those as dropped, a review)."""
+    n = np.zeros((20, 50, 3))
+    n[:, :20] = [0.0, 0.0, 1.0]
+    n[:, 30:] = [-np.sqrt(1 - 0.03 ** 2), 0.0, 0.03]
+    n[:, 20:30] = np.nan
+    np.save(tmp_path / "edge.npy", n)
+    code, out, _ = run(capsys, "info", tmp_path / "edge.npy", "--json")
+    rec = json.loads(out)
+    assert code == 0 and rec["discontinuity_grazing"]["grazing_kept"] == 20 * 20
+    out = run(capsys, "info", tmp_path / "edge.npy")[1]
+    assert "with --discontinuities (dgp): 400 grazing ones kept as a surface seen edge-on" in out
+
+
 def test_info_detects_flips_encodings_and_counts(tmp_path, capsys):
     n = dome(40, 48)
     n[3, 5] = [0.0, 0.0, -1.0]

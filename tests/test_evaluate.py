@@ -242,6 +242,14 @@ def test_cli_evaluate_a_16bit_png_ground_truth(tmp_path, capsys):
     assert got["made"] == pytest.approx(want["made"]) and got["pixels"] == want["pixels"]
     code, out, err = run(capsys, *base, "--gt", tmp_path / "gt_mm.npy", "--gt-scale", "0.001")
     assert code == 0 and json.loads(out)["made"] == pytest.approx(want["made"]), err
+    # the same counts in an integer TIFF: 0 is undefined there too (the help said so, the
+    # code scored them as depth 0, a review)
+    import tifffile
+
+    tifffile.imwrite(tmp_path / "gt.tif", counts)
+    code, out, err = run(capsys, *base, "--gt", tmp_path / "gt.tif", "--gt-scale", "0.001")
+    assert code == 0 and json.loads(out)["made"] == pytest.approx(want["made"]), err
+    assert json.loads(out)["pixels"] == want["pixels"]
     code, _, err = run(capsys, *base, "--gt", tmp_path / "gt.png")
     assert code == 1 and "--gt: " in err and "with --gt-scale" in err
     assert "in Python" not in err

@@ -411,6 +411,11 @@ def test_cli_a_16_bit_disparity_png_needs_no_prior_scale_with_prior_fit(tmp_path
     assert main([*base, "--prior-fit", "disparity", "--prior-scale", "0.001", "-o",
                  str(tmp_path / "c")]) == 0
     capsys.readouterr()
+    # info reads the prior as integrate does (it refused the same flags, a review)
+    info = ["info", str(tmp_path / "n.npy"), "-m", str(tmp_path / "m.npy"), "--K",
+            str(tmp_path / "K.txt"), "--prior", str(tmp_path / "mono.png")]
+    assert main([*info, "--prior-fit", "disparity"]) == 0, capsys.readouterr().err
+    capsys.readouterr()
     a, b = np.load(tmp_path / "b" / "depth.npy"), np.load(tmp_path / "c" / "depth.npy")
     assert np.nanmax(np.abs(a - b) / b) < 1e-3
 

@@ -254,16 +254,17 @@ def integrate(
         # (the method refuses the prior in _solve: no outlier check to warn about before)
         check_prior_outliers(prior_outliers)
         prior_outliers = "keep"
-    problem = prepare(
-        normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
-        outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight, confidence=confidence,
-        grazing_note=note, prior_blur=prior_blur, prior_outliers=prior_outliers,
-        isolated=isolated, grazing_share=share,
-    )
-    # (the flip check's hint is relative to the frame given; none given: the caller's, e.g.
-    # a reader's, stays)
+    # (the flip check's hint and prepare's facing-away advice are relative to the frame
+    # given; none given: the caller's, e.g. a reader's, stays. prepare outside it advised the
+    # frame already given, a review)
     with (contextlib.nullcontext() if frames.is_identity(normal_frame)
           else frames.read_in(normal_frame)):
+        problem = prepare(
+            normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
+            outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight,
+            confidence=confidence, grazing_note=note, prior_blur=prior_blur,
+            prior_outliers=prior_outliers, isolated=isolated, grazing_share=share,
+        )
         return _solve(problem, method, t0, max_memory, options)
 
 
@@ -457,7 +458,8 @@ def solve(problem: Problem, method: str = "dgp", /, *, max_memory=None, **option
     `max_memory` (:func:`facetlift.memory.plan`); see :func:`integrate` for what is raised.
     The normals `problem` treats as grazing were decided when it was prepared: the
     discontinuity route's own threshold (``MethodInfo.jump_grazing``, cos 87.5 deg for "dgp")
-    is applied by :func:`integrate`, so prepare with ``outlier_eps=`` to match it here (a
+    is applied by :func:`integrate`, so prepare with ``outlier_eps=`` to match it here, and
+    with ``grazing_share=`` (``MethodInfo.jump_grazing_share``) for its edge-on surfaces (a
     problem prepared with the camera's own threshold gets a warning where some normal lies
     between the two, either way). Likewise the route's isolated normals
     (``MethodInfo.jump_isolated``): prepare with ``isolated=`` to drop them here (a problem
@@ -507,8 +509,8 @@ def _solve(problem, method, t0, max_memory, options):
                  f"{np.degrees(np.arccos(jump)):.3g} deg, which would treat {between} "
                  f"{'more' if eps < jump else 'fewer'} normal(s) as missing here"
                  f"{bear_note if eps < jump else ''}; "
-                 f"prepare(..., outlier_eps=facetlift.METHODS[{method!r}].jump_grazing) to "
-                 "match")
+                 f"prepare(..., outlier_eps=facetlift.METHODS[{method!r}].jump_grazing, "
+                 f"grazing_share=facetlift.METHODS[{method!r}].jump_grazing_share) to match")
     if (values.get("discontinuities") and info.jump_isolated is not None
             and not problem.extras.get("isolated_given", True)):
         # (integrate drops the route's isolated normals; prepare + solve kept them: said)

@@ -739,6 +739,10 @@ def _info_lines(rec: dict) -> list[str]:
     if jg.get("fewer_grazing"):
         lines.append(f"  with --discontinuities (dgp): {jg['fewer_grazing']} of the grazing ones "
                      f"kept (its rule is a view cosine < {jg['outlier_eps']:.4g})")
+    if jg.get("grazing_kept"):
+        lines.append(f"  with --discontinuities (dgp): {jg['grazing_kept']} grazing ones kept as "
+                     "a surface seen edge-on (more than a tenth of their component, and "
+                     "neighbours agree: not a rim)")
     if jg.get("isolated"):
         from .problem import isolated_rule_text
 
@@ -1015,7 +1019,7 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
     if gt.suffix.lower() == ".png":  # (a sensor's or a dataset's 16-bit counts)
         truth = io.read_prior(gt, gt_scale, arg="gt", scale_arg="gt_scale")
     else:
-        truth = io.read_depth(gt, npz_names=GT_NPZ_NAMES, arg="gt")
+        truth = io.read_depth(gt, npz_names=GT_NPZ_NAMES, arg="gt", zero_unknown=True)
         if gt_scale is not None:
             if not (np.isfinite(gt_scale) and gt_scale > 0):
                 raise ValueError(f"`gt_scale` must be a positive number; got {gt_scale!r}")
@@ -1103,7 +1107,8 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
                    "spatially correlated errors of 3 degrees RMS, outliers: 2 % of the "
                    "normals rotated by up to 45 degrees, blur1.5: the normal map blurred by "
                    "a Gaussian of 1.5 px, soft occlusion boundaries).")
-@click.option("--heldout-seed", "heldout_seed", type=int, default=None, metavar="N",
+@click.option("--heldout-seed", "heldout_seed", type=click.IntRange(min=0), default=None,
+              metavar="N",
               help="Seed of the heldout experiment's random views (a new one draws a fresh "
                    "test set).")
 @click.option("--no-progress", is_flag=True, help="No progress bars.")

@@ -167,7 +167,9 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
               mat_keys=None if mat_keys is None else tuple(mat_keys),
               gradient_frame=gradient_frame, prior_scale=prior_scale,
               prior=None if prior is None else str(prior),
-              confidence=None if confidence is None else str(confidence), fov=fov)
+              confidence=None if confidence is None else str(confidence), fov=fov,
+              prior_fit=prior_fit)  # (a 16-bit relative PNG then needs no scale, as in
+    # integrate: info refused it, a review)
     src = job.source
     unread = []
     with recorded_warnings() as read_caught:  # (a gradient layout's, ...)
@@ -314,8 +316,10 @@ def _jump_grazing(problem) -> dict:
     # (the route's edge-on share applies where its threshold is the larger one)
     between = problem.grazing_between(camera, eps, without=iso,
                                       share=route.jump_grazing_share if camera < eps else None)
+    share = route.jump_grazing_share
+    kept = 0 if share is None else problem.edge_on_kept(eps, share, without=iso)
     return {"outlier_eps": float(eps), "more_grazing": between if camera < eps else 0,
-            "fewer_grazing": between if camera > eps else 0,
+            "fewer_grazing": between if camera > eps else 0, "grazing_kept": kept,
             "isolated": 0 if iso is None else int(iso.sum()),
             "isolated_rule": route.jump_isolated}
 

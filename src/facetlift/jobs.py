@@ -400,15 +400,29 @@ def camera_unset(job: Job) -> bool:
     return job.K is None and job.fov is None and not job.orthographic
 
 
-def unread_files(folder: Path, stem: str | None, *, mask: bool, camera: bool) -> list[str]:
+def unread_files(folder: Path, stem: str | None, *, mask: bool, camera: bool,
+                 prior: bool = False, confidence: bool = False) -> list[str]:
     """The names of the files in `folder` that a plain map file named `stem` (None: any map
     of the folder) would be read with if its folder were a dataset, or if it were a batch
     item, but that ``integrate`` does not read: ``mask.*`` and ``NAME_mask.*`` where
-    `mask`, ``K.txt`` where `camera` (each only where the flags do not give one)."""
+    `mask`, ``K.txt`` where `camera`, a batch item's ``NAME_prior_depth.*`` and
+    ``NAME_confidence.*`` where `prior` and `confidence` (each only where the flags do not
+    give one)."""
+    from .batch import companions
     from .io.dataset import _find
     from .io.images import MASK_FORMATS
 
     found = []
+    wanted = {"prior": prior, "confidence": confidence}
+    for kind, suffix, formats in (companions() if stem is not None else ()):
+        if not wanted[kind]:
+            continue
+        try:
+            p = _find(folder, f"{stem}{suffix}", formats)
+        except ValueError:  # (several of them: none is read, batch says so)
+            p = None
+        if p is not None:
+            found.append(p.name)
     if mask:
         for name in ("mask",) + (() if stem is None else (f"{stem}_mask",)):
             try:
@@ -431,11 +445,18 @@ def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
     from .io.images import NORMAL_READ_FORMATS
 
     unread = unread_files(src.parent, src.stem, mask=job.mask is None and not own_mask,
-                          camera=camera_unset(job))
+                          camera=camera_unset(job), prior=job.prior is None,
+                          confidence=job.confidence is None)
     if not unread:
         return
+    # (a batch item's own prior and confidence, read by batch, not by integrate: a review)
+    stems = {"_prior_depth": "--prior", "_confidence": "--confidence"}
+    paired = {n: f for n in unread for k, f in stems.items()
+              if Path(n).stem == f"{src.stem}{k}"}
     flags = " / ".join(f for f, given in (
-        ("--mask", any(n != "K.txt" for n in unread)), ("--K", "K.txt" in unread)) if given)
+        ("--mask", any(n != "K.txt" and n not in paired for n in unread)),
+        ("--K", "K.txt" in unread), ("--prior", "--prior" in paired.values()),
+        ("--confidence", "--confidence" in paired.values())) if given)
     folder = src.parent
     own = [folder / f"normal_map{ext}" for ext in NORMAL_READ_FORMATS
            if (folder / f"normal_map{ext}").is_file()]
@@ -445,7 +466,10 @@ def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
            f"folder ({folder}) reads as a dataset" if own and own[0].name != src.name
            else "a folder is read as a dataset only with normal_map.* or Normal_gt.mat")
     warn(f"{src.name} has {' and '.join(unread)} beside it, which this run does not read: a "
-         f"normal-map file's mask and camera come only from --mask and --K ({why}); give "
+         f"normal-map file's mask and camera come only from --mask and --K"
+         + (", its prior and confidence from --prior and --confidence (facetlift batch "
+            "pairs NAME_prior_depth.* and NAME_confidence.* with NAME.*)" if paired else "")
+         + f" ({why}); give "
          f"{flags} to use "
          f"{'it' if len(unread) == 1 else 'them'}"
          + (" (without K.txt's camera the map is integrated orthographically)"

@@ -70,7 +70,8 @@ def _edge_on_kept(domain, front, grazing, cos, share, nf):
     """The grazing normals (facet mask) that `share` keeps: those at or above
     :data:`GRAZING_FLOOR` in the components where the grazing rule would drop more than
     `share` of the front-facing normals (a surface seen edge-on, not a rim) and where
-    neighbouring ones agree (:data:`EDGE_ON_SPREAD`); None where it keeps none."""
+    neighbouring ones (8-neighbours, as the components are connected) agree within a median
+    angle of :data:`EDGE_ON_SPREAD`; None where it keeps none."""
     if share is None or not grazing.any():
         return None
     comp = domain.facet_component
@@ -82,20 +83,33 @@ def _edge_on_kept(domain, front, grazing, cos, share, nf):
     kept = grazing & broad[comp] & (cos >= GRAZING_FLOOR)
     if not kept.any():
         return None
-    # (the angles between neighbouring candidates, per component: their median says noise)
-    H, W = domain.shape
-    idx = np.full((H, W), -1, np.int64)
+    # (the angles between neighbouring candidates, and their median per component in one
+    # sort: a loop over components cost minutes on a map with thousands of speckles)
     r, c = domain.pixels
-    idx[r, c] = np.where(kept, np.arange(r.size), -1)
-    pairs = [(idx[:, :-1], idx[:, 1:]), (idx[:-1], idx[1:])]
+    rows = np.flatnonzero(kept)
+    r0, c0 = int(r[kept].min()), int(c[kept].min())
+    box = (int(r[kept].max()) - r0 + 1, int(c[kept].max()) - c0 + 1)
+    idx = np.full(box, -1, np.int64)  # (over the kept normals' box only)
+    idx[r[rows] - r0, c[rows] - c0] = rows
+    pairs = [(idx[:, :-1], idx[:, 1:]), (idx[:-1], idx[1:]),
+             (idx[:-1, :-1], idx[1:, 1:]), (idx[:-1, 1:], idx[1:, :-1])]
     a = np.concatenate([x[(x >= 0) & (y >= 0)] for x, y in pairs])
     b = np.concatenate([y[(x >= 0) & (y >= 0)] for x, y in pairs])
+    del idx, pairs
     with np.errstate(invalid="ignore"):
         angle = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", nf[a], nf[b]), -1, 1)))
-    for k in np.flatnonzero(broad):
-        at = comp[a] == k
-        if not at.any() or np.median(angle[at]) > EDGE_ON_SPREAD:
-            kept &= comp != k
+    group = comp[a]
+    order = np.lexsort((angle, group))
+    angle, group = angle[order], group[order]
+    count = np.bincount(group, minlength=nc)
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    has = count > 0
+    median = np.full(nc, np.inf)
+    lo = start[has] + (count[has] - 1) // 2
+    hi = start[has] + count[has] // 2
+    median[has] = 0.5 * (angle[lo] + angle[hi])
+    noisy = ~(median <= EDGE_ON_SPREAD)  # (no pair at all: not shown to be a surface)
+    kept &= ~noisy[comp]
     return kept if kept.any() else None
 
 
@@ -250,6 +264,20 @@ class Problem:
         if kept is not None:
             between &= ~kept
         return int(between.sum())
+
+    def edge_on_kept(self, eps: float, share: float, without=None) -> int:
+        """How many given normals (as :meth:`grazing_between` takes them) a grazing threshold
+        `eps` with :func:`prepare`'s `grazing_share` `share` keeps as a surface seen edge-on
+        (``counts["grazing_kept"]`` of a problem prepared so)."""
+        given = self._given()
+        if without is not None:
+            given = given & ~without
+        r, c = self.domain.pixels
+        n = np.where(given[:, None], self.normals, [0.0, 0.0, 1.0])
+        cos = self.camera.view_cosine(r, c, n, unit=True)
+        kept = _edge_on_kept(self.domain, given, given & ((cos < eps) | (cos == 0)), cos,
+                             share, n)
+        return 0 if kept is None else int(kept.sum())
 
     def isolated(self, rule) -> np.ndarray:
         """(m,) bool: the normals that :func:`isolated_normals` of `rule` ``(deviation,
@@ -476,9 +504,12 @@ def prepare(
     grazing_share : float in (0, 1], optional
         The most of a connected component's front-facing normals the grazing rule may drop:
         in a component where `outlier_eps` would drop more, a surface seen edge-on rather
-        than a rim, only those below :data:`GRAZING_FLOOR` are dropped (counted in
-        ``counts["grazing_kept"]``). None: no limit. :func:`facetlift.integrate` passes the
-        discontinuity route's (``MethodInfo.jump_grazing_share``).
+        than a rim, only those below :data:`GRAZING_FLOOR` are dropped where neighbouring
+        normals agree within :data:`EDGE_ON_SPREAD` (counted in ``counts["grazing_kept"]``;
+        noisy ones are all dropped). None: no limit. :func:`facetlift.integrate` passes the
+        discontinuity route's (``MethodInfo.jump_grazing_share``): prepare with
+        ``outlier_eps=METHODS["dgp"].jump_grazing, grazing_share=METHODS["dgp"].
+        jump_grazing_share`` for :func:`facetlift.solve` to do as it does.
     isolated : (deviation, agreement) in degrees, optional
         Front-facing normals more than `deviation` from the median of their eight
         neighbours, which agree with that median within `agreement` (all but the farthest),
@@ -511,6 +542,10 @@ def prepare(
     _check_focal_length(cam, H, W, given=K)
     eps = cam.grazing if outlier_eps is None else _check_eps(outlier_eps)
     isolated = _check_isolated(isolated)
+    if grazing_share is not None and not (isinstance(grazing_share, (int, float, np.number))
+                                          and 0.0 < float(grazing_share) <= 1.0):
+        raise ValueError(f"`grazing_share` must be a number in (0, 1] or None; got "
+                         f"{grazing_share!r}")
 
     if mask is None:
         with np.errstate(over="ignore", invalid="ignore"):
@@ -586,7 +621,9 @@ def prepare(
         bad["isolated"] = isolated_normals(domain, nf, among, *isolated)
         front &= ~bad["isolated"]
     bad["grazing"] = front & ((cos < eps) | (cos == 0))
-    kept = _edge_on_kept(domain, front, bad["grazing"], cos, grazing_share, nf)
+    # (normals of confidence 0 are missing whatever they are: not in the share either)
+    among = front if conf is None else front & (conf > 0)
+    kept = _edge_on_kept(domain, among, bad["grazing"] & among, cos, grazing_share, nf)
     if kept is not None:
         bad["grazing"] &= ~kept
     usable = front & ~bad["grazing"]
@@ -674,7 +711,6 @@ def prepare(
         mended = _flip_mends_facing(cam, r, c, nf, clear, away)
         if mended is not None:
             counts["facing_away_flip"] = list(mended)  # (info's frame guess names it too)
-        if mended is not None:
             # (a y-down map with a camera over a floor: its floor faces away, and the warning
             # asked about BGR order, world frames and K, never about y; an audit)
             from .frames import flip_advice, reading

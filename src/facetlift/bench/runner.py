@@ -142,6 +142,8 @@ def run_bench(
         if "heldout" not in exps:
             raise ValueError("`heldout_seed` applies to the heldout experiment only, which is "
                              f"not among the experiments {list(exps)}")
+        if int(heldout_seed) < 0:
+            raise ValueError(f"`heldout_seed` must be >= 0; got {heldout_seed}")
         s.heldout_seed = int(heldout_seed)
     bad = [e for e in exps if e not in EXPERIMENTS]
     if bad:

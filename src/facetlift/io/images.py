@@ -586,16 +586,22 @@ def _read_npz_depth(p: Path, arg: str, wanted: tuple[str, ...] = ("depth",)) -> 
                      f"{' or '.join(repr(n) for n in wanted)} or a single array; got {names}")
 
 
-def read_depth(path, *, npz_names: tuple[str, ...] = ("depth",), arg: str = "path"
-               ) -> np.ndarray:
+def read_depth(path, *, npz_names: tuple[str, ...] = ("depth",), arg: str = "path",
+               zero_unknown: bool = False) -> np.ndarray:
     """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF) or
     the ``depth`` of a :meth:`facetlift.Surface.save` ``.npz``.
 
     `npz_names`: the arrays of a ``.npz`` looked for, in order (else its only one): a
     ground truth's, e.g. ``("depth_gt", "depth")`` for BiNI's DiLiGenT ``depth_gt.npz``.
-    `arg`: the argument the messages name."""
-    return read_plane(path, DEPTH_FORMATS + (".npz",), "depth", arg, prefer=("Z",),
-                      npz_names=tuple(npz_names)).astype(np.float64)
+    `arg`: the argument the messages name. `zero_unknown`: in an integer array (a sensor's
+    16-bit TIFF) 0 means no depth and becomes NaN."""
+    a = read_plane(path, DEPTH_FORMATS + (".npz",), "depth", arg, prefer=("Z",),
+                   npz_names=tuple(npz_names))
+    integer = a.dtype.kind in "ui"
+    a = a.astype(np.float64)
+    if zero_unknown and integer:
+        a[a == 0] = np.nan
+    return a
 
 
 # --------------------------------------------------------------------------------------------
