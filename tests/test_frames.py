@@ -896,6 +896,13 @@ def test_a_y_down_map_over_a_floor_is_told_to_flip_y(tmp_path, capsys):
         warnings.simplefilter("always")
         facetlift.integrate(stored, K=K, normal_frame="directx")
     assert not [w for w in rec if issubclass(w.category, UnusableNormalsWarning)]
+    # a y-up map given as directx from Python: the advice is to drop that frame, not to give
+    # it (prepare ran outside the frame's context and advised the frame given, a review)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        facetlift.integrate(n, K=K, normal_frame="directx")
+    said = [str(w.message) for w in rec if issubclass(w.category, UnusableNormalsWarning)]
+    assert said and "with y negated" in said[0] and "--normal-frame directx" not in said[0]
     # info says the same; without a camera no flip changes which normals face away
     np.save(tmp_path / "n.npy", stored)
     np.savetxt(tmp_path / "K.txt", K)
