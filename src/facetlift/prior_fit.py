@@ -378,6 +378,10 @@ def _prior_blur(prior_img, z, surface, lab, ok, given, kind, perspective, w_img,
     pairs (:data:`BLUR_PAIRS`). Returns ``(sigma, z blurred by it)``."""
     from .operators.blur import PlaneBlur
 
+    if perspective and kind == "scale":  # (no fit by pairs to compare the blurs through:
+        # the `given` one, without the five blurs that decided nothing)
+        return given, (z if given == 0 else
+                       PlaneBlur(surface.mask, given)(np.where(surface.mask, z, 0.0)))
     P = np.where(ok, prior_img, np.nan)
     lo, mid, hi = np.nanpercentile(P, [5, 50, 95])
     # (a dense prior's blurs compared on a sample of its pairs: each sample has at most two
