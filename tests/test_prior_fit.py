@@ -228,6 +228,52 @@ def test_a_blurred_prior_given_pixel_by_pixel_is_compared_through_its_blur():
     assert got == pytest.approx(true, rel=2e-2)
 
 
+@pytest.mark.parametrize("kind", ["affine", "disparity"])
+def test_a_dense_priors_blur_is_chosen_on_a_sample_of_its_pairs(monkeypatch, kind):
+    """A dense prior's blur candidates are compared on a seeded sample of its pairs
+    (BLUR_PAIRS, forced here on a small map): a prior blurred by a candidate's 4 px, given
+    pixel by pixel, gets that blur as with every pair, and then the very same fit, which runs
+    on all pairs; the sample is the same for every candidate and both distances, and from one
+    call to the next."""
+    from facetlift.operators.blur import PlaneBlur
+
+    n, depth, mask, K, comp = spheres()
+    D = np.where(mask, PlaneBlur(mask, 4.0)(np.where(mask, depth, 0.0)), np.nan)
+    prior = 0.5 * D + 300.0 if kind == "affine" else 3.0 / D + 0.01
+    kw = {"K": K, "prior": prior, "prior_weight": 0.01, "prior_fit": kind}
+    full = run(n, mask, **kw).info["prior"]["fit"]
+    seen = []
+    by_pairs = prior_fit._by_pairs
+
+    def spy(*a, sample=None, **k):
+        seen.append(None if sample is None else sample.copy())
+        return by_pairs(*a, sample=sample, **k)
+
+    monkeypatch.setattr(prior_fit, "_by_pairs", spy)
+    monkeypatch.setattr(prior_fit, "BLUR_PAIRS", int(0.5 * mask.sum()))  # (about 1 in 4)
+    fits = [run(n, mask, **kw).info["prior"]["fit"] for _ in range(2)]
+    calls = len(seen) // 2  # (per run: the blurs at two distances, then the chosen one's fit)
+    assert len(seen) == 2 * calls and calls >= 2 * 4 + 1
+    assert seen[calls - 1] is None and seen[-1] is None  # (the chosen blur's fit: every pair)
+    sampled = [s for s in seen if s is not None]
+    assert len(sampled) == 2 * (calls - 1) and 0.2 < sampled[0].mean() < 0.3
+    assert all(np.array_equal(s, sampled[0]) for s in sampled)
+    assert full["blur"] == fits[0]["blur"] == 4.0
+    for key in ("scale", "shift", "scale_error", "samples", "blur"):
+        assert fits[0][key] == fits[1][key] == full[key]
+
+
+def test_one_group_moments_are_the_bincounts():
+    rng = np.random.default_rng(3)
+    x, y, w = rng.normal(size=(3, 1000))
+    k = np.zeros(1000, dtype=np.int64)
+    many = np.stack([np.bincount(k, weights=v, minlength=1)
+                     for v in (w, w * x, w * y, w * x * x, w * x * y)])
+    np.testing.assert_allclose(prior_fit._moments(x, y, k, w, 1, quick=True), many,
+                               rtol=1e-12)
+    assert np.array_equal(prior_fit._moments(x, y, k, w, 1), many)  # (the fits reported)
+
+
 def test_points_and_weight_maps():
     n, depth, mask, part = steps()
     rng = np.random.default_rng(2)

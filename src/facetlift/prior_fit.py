@@ -82,6 +82,13 @@ BLUR_CANDIDATES = (0.0, 1.0, 2.0, 4.0, 8.0, 16.0)
 #: two fits' relief ratio) another blur must bring them to replace the ``prior_blur`` given.
 CHECK_DISTANCE, BLUR_BETTER = 8, 0.02
 
+#: :func:`_prior_blur` compares the blurs on about this many pairs at most: the pairs whose
+#: first pixel lies in a seeded random sample of the samples, the same for every blur and both
+#: distances; the blur chosen is then fitted on all pairs. A dense 1280 x 720 prior has about
+#: 1.5 M pairs, and the 12 comparisons on all of them took 7-16 s of the fit
+#: (docs/fusion.md, "A monocular depth map").
+BLUR_PAIRS = 200_000
+
 #: Compare the prior with the normals-only surface blurred (:func:`_prior_blur`); False
 #: compares them as they are (for measurements).
 MATCH_BLUR = True
@@ -315,7 +322,7 @@ def _nearest_pairs(ok, lab, surface):
 
 
 def _by_pairs(prior_img, z, surface, lab, kind, perspective, w_img, side, distance,
-              error: bool = True):
+              error: bool = True, sample=None):
     """The scale from differences between samples `distance` pixels apart in one piece, with
     no cut between them (:func:`_pairs`): the normals-only surface enters only through such
     local differences, so neither the pieces' offsets nor a sub-region's level that a jump it
@@ -325,7 +332,8 @@ def _by_pairs(prior_img, z, surface, lab, kind, perspective, w_img, side, distan
     c)``, ``m`` the pair's mean prior; then ``a`` so that the main piece agrees with `surface`
     in the median (:func:`_levels`). Returns a dict (``scale``, ``shift``, ``error``,
     ``samples``, ``down``) or None. `error`: with the jackknife's relative standard error
-    (else inf)."""
+    (else inf). `sample`: a flat bool over the pixels, the pairs whose first pixel it holds
+    are fitted (all of them where that leaves too few; :data:`BLUR_PAIRS`)."""
     if perspective and kind == "scale":
         return None
     W = prior_img.shape[1]
@@ -338,18 +346,25 @@ def _by_pairs(prior_img, z, surface, lab, kind, perspective, w_img, side, distan
         i, j = _nearest_pairs(ok, lab, surface)
     if i.size < 6 * MIN_SAMPLES:
         return None
+    if sample is not None:
+        keep = sample[i]
+        if keep.sum() >= 6 * MIN_SAMPLES:
+            i, j = i[keep], j[keep]
     P = prior_img.ravel()
     dP, du, m = P[j] - P[i], u[j] - u[i], 0.5 * (P[i] + P[j])
     wv = np.minimum(w_img.ravel()[i], w_img.ravel()[j])
     wv = wv / wv.mean()
-    tw = -(-W // side)
-    _, tv = np.unique((i // W // side) * tw + (i % W) // side, return_inverse=True)
+    tv = None
+    if error:  # (the tiles of the jackknife)
+        tw = -(-W // side)
+        _, tv = np.unique((i // W // side) * tw + (i % W) // side, return_inverse=True)
     if perspective:
         sign = -1.0 if kind == "disparity" else 1.0
         yv, xv = dP - sign * m * du, sign * du  # = c * xv
     else:
         yv, xv = dP, du  # = alpha * xv
-    rfit = _robust(xv, yv, np.zeros(yv.size, dtype=np.int64), tv, wv, "scale", error=error)
+    rfit = _robust(xv, yv, np.zeros(yv.size, dtype=np.int64), tv, wv, "scale", error=error,
+                   quick=not error)
     return _levels(rfit["theta"], rfit, prior_img, surface, lab, kind, perspective, ok, i.size)
 
 
@@ -360,11 +375,21 @@ def _prior_blur(prior_img, z, surface, lab, ok, given, kind, perspective, w_img,
     more than the far ones, so the two fits' scales part; the blur where they agree best,
     over :data:`BLUR_CANDIDATES` and the `given` ``prior_blur`` (kept unless another agrees
     better by :data:`BLUR_BETTER`). A coarse prior given pixel by pixel came out 1.5-3x off
-    on the benchmark (docs/fusion.md). Returns ``(sigma, z blurred by it)``."""
+    on the benchmark (docs/fusion.md). A dense prior's blurs are compared on a sample of its
+    pairs (:data:`BLUR_PAIRS`). Returns ``(sigma, z blurred by it)``."""
     from .operators.blur import PlaneBlur
 
+    if perspective and kind == "scale":  # (no fit by pairs to compare the blurs through:
+        # the `given` one, without the five blurs that decided nothing)
+        return given, (z if given == 0 else
+                       PlaneBlur(surface.mask, given)(np.where(surface.mask, z, 0.0)))
     P = np.where(ok, prior_img, np.nan)
     lo, mid, hi = np.nanpercentile(P, [5, 50, 95])
+    # (a dense prior's blurs compared on a sample of its pairs: each sample has at most two
+    # partners at a distance, one along its row and one along its column)
+    n = int(ok.sum())
+    sample = (None if 2 * n <= BLUR_PAIRS else
+              np.random.default_rng(0).random(ok.size) < BLUR_PAIRS / (2 * n))
     found, blurred = {}, {}
     longest = max(surface.mask.shape) / 8
     for sigma in sorted({*BLUR_CANDIDATES, given}):
@@ -375,7 +400,7 @@ def _prior_blur(prior_img, z, surface, lab, ok, given, kind, perspective, w_img,
         reliefs = []
         for d in (PAIR_DISTANCE, CHECK_DISTANCE):
             got = _by_pairs(P, zs, surface, lab, kind, perspective, w_img, side, d,
-                            error=False)
+                            error=False, sample=sample)
             if got is None or not got["scale"] > 0:
                 break
             a, b = got["scale"], got["shift"]
@@ -464,28 +489,32 @@ def _num(v):
     return None if v is None or not np.isfinite(v) else float(v)
 
 
-def _robust(x, y, k, tile, om, model, error: bool = True):
+def _robust(x, y, k, tile, om, model, error: bool = True, quick: bool = False):
     """The piece model `model` fitted to ``y`` on ``x`` with Huber weights: a dict of
     ``theta`` (the scale parameter: ``alpha`` of "offset" ``y = alpha x + gamma_k``, the main
     piece's ``s`` of "slope" ``y = s_k x + beta`` and "scale" ``y = s_k x``), ``common``,
     ``each`` (K,), ``main``, ``error`` (theta's relative standard error, a jackknife over the
-    tiles `tile`: each tile left out in turn) and ``rob`` (Huber weights)."""
+    tiles `tile`: each tile left out in turn) and ``rob`` (Huber weights). `quick`: one
+    group's sums by :func:`_moments`' quicker path (:func:`_prior_blur`'s comparisons; the
+    fits reported keep the bincounts' arithmetic, the same numbers to the last bit)."""
     K = int(k.max()) + 1
     main = int(np.argmax(np.bincount(k, weights=om, minlength=K)))
     rob = np.ones_like(om)
     for _ in range(ROUNDS + 1):
-        common, each = _params(_moments(x, y, k, om * rob, K), model)
-        res = y - (common * x + each[k] if model == "offset" else each[k] * x + common)
-        sigma = 1.4826 * float(np.median(np.abs(res)))
+        common, each = _params(_moments(x, y, k, om * rob, K, quick), model)
+        ek = each[0] if K == 1 else each[k]  # (one group: no gather)
+        res = y - (common * x + ek if model == "offset" else ek * x + common)
+        ares = np.abs(res, out=res)
+        sigma = 1.4826 * float(np.median(ares))
         if not sigma > 0:
             break
-        new = np.minimum(1.0, HUBER * sigma / np.maximum(np.abs(res), 1e-300))
-        done = np.allclose(new, rob, atol=1e-3)
+        new = np.minimum(1.0, HUBER * sigma / np.maximum(ares, 1e-300, out=ares))
+        done = bool(np.all(np.abs(new - rob) <= 1e-3 + 1e-5 * rob))  # (np.allclose's test)
         rob = new
         if done:
             break
     w = om * rob
-    Mk = _moments(x, y, k, w, K)
+    Mk = _moments(x, y, k, w, K, quick)
     common, each = _params(Mk, model)
     theta = common if model == "offset" else each[main]
     return {"theta": float(theta), "common": float(common), "each": each, "main": main,
@@ -531,8 +560,14 @@ def _jackknife(x, y, k, tile, w, Mk, model, main, theta) -> float:
     return float(np.sqrt((n - 1) / n * np.sum((th - th.mean()) ** 2)) / abs(theta))
 
 
-def _moments(x, y, k, w, K):
-    """(5, K): the weighted sums 1, x, y, x x, x y per group `k`."""
+def _moments(x, y, k, w, K, quick: bool = False):
+    """(5, K): the weighted sums 1, x, y, x x, x y per group `k`. `quick` with one group: by
+    einsum, 3-8x faster than bincounts, equal up to rounding."""
+    if quick and K == 1:  # (without BLAS too, whose threads made a dot product of 2e5
+        # take 8 ms on a busy 2-core machine)
+        return np.array([[w.sum()]] + [[np.einsum(s, *v)] for s, v in (
+            ("i,i->", (w, x)), ("i,i->", (w, y)), ("i,i,i->", (w, x, x)),
+            ("i,i,i->", (w, x, y)))])
     return np.stack([np.bincount(k, weights=v, minlength=K)
                      for v in (w, w * x, w * y, w * x * x, w * x * y)])
 
