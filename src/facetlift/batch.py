@@ -370,7 +370,6 @@ def companions() -> tuple:
             ("confidence", "_confidence", formats["confidence"]))
 
 
-
 def _companion(stem: str) -> tuple[str, str] | None:
     """``(X, suffix)`` where `stem` is ``X_mask``, ``X_prior_depth`` or ``X_confidence`` (a
     non-empty X), else None."""

@@ -251,16 +251,9 @@ class Problem:
         and `b` (the larger excluded): those that one grazing threshold drops and the other
         keeps. With `share` (:func:`prepare`'s `grazing_share`, for the larger threshold)
         the normals of an edge-on surface that it keeps are not counted."""
-        given = self._given()
-        if without is not None:
-            given = given & ~without
-        r, c = self.domain.pixels
-        n = np.where(given[:, None], self.normals, [0.0, 0.0, 1.0])
-        cos = self.camera.view_cosine(r, c, n, unit=True)
         lo, hi = sorted((a, b))
+        given, cos, kept = self._edge_on(hi, share, without)
         between = given & (cos >= lo) & (cos < hi)
-        kept = _edge_on_kept(self.domain, given, given & ((cos < hi) | (cos == 0)), cos,
-                             share, n)
         if kept is not None:
             between &= ~kept
         return int(between.sum())
@@ -269,6 +262,12 @@ class Problem:
         """How many given normals (as :meth:`grazing_between` takes them) a grazing threshold
         `eps` with :func:`prepare`'s `grazing_share` `share` keeps as a surface seen edge-on
         (``counts["grazing_kept"]`` of a problem prepared so)."""
+        kept = self._edge_on(eps, share, without)[2]
+        return 0 if kept is None else int(kept.sum())
+
+    def _edge_on(self, eps: float, share, without=None):
+        """(given, view cosines, kept or None) of the given normals not in `without`, and
+        those a grazing threshold `eps` with `share` keeps (:func:`_edge_on_kept`)."""
         given = self._given()
         if without is not None:
             given = given & ~without
@@ -277,7 +276,7 @@ class Problem:
         cos = self.camera.view_cosine(r, c, n, unit=True)
         kept = _edge_on_kept(self.domain, given, given & ((cos < eps) | (cos == 0)), cos,
                              share, n)
-        return 0 if kept is None else int(kept.sum())
+        return given, cos, kept
 
     def isolated(self, rule) -> np.ndarray:
         """(m,) bool: the normals that :func:`isolated_normals` of `rule` ``(deviation,
