@@ -973,3 +973,30 @@ def test_batch_records_carry_integrate_s_hints_and_the_summary_counts_them(tmp_p
     assert code == 0 and "hint" not in out + err, out + err
     assert all(json.loads(line)["hints"] == [] for line in
                (tmp_path / "d" / fb.LOG_NAME).read_text().splitlines())
+
+
+def test_two_priors_beside_a_map_fail_only_where_one_would_be_read(tmp_path):
+    """Two NAME_prior_depth.* beside NAME.*: the item fails (which one was meant?), naming
+    --no-prior; with --no-prior, or a --prior for every item, neither is read and the item
+    runs (it failed all the same, a review); two confidences keep failing it."""
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    n = np.dstack([np.zeros((6, 7, 2)), np.ones((6, 7))])
+    np.save(folder / "a.npy", n)
+    np.save(folder / "a_prior_depth.npy", np.ones((6, 7)))
+    import tifffile
+
+    tifffile.imwrite(folder / "a_prior_depth.tif", np.ones((6, 7), np.float32))
+    (it,) = fb.items([folder])
+    assert it.error and "keep one" in it.error and "--no-prior" in it.error
+    (kept,) = fb._own_files([it], Job(dataset_prior=False))
+    assert kept.error is None and kept.prior is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        (given,) = fb._own_files([it], Job(prior=str(folder / "a_prior_depth.npy")))
+    assert given.error is None
+    np.save(folder / "a_confidence.npy", np.ones((6, 7)))
+    tifffile.imwrite(folder / "a_confidence.tif", np.ones((6, 7), np.float32))
+    (both,) = fb.items([folder])
+    (left,) = fb._own_files([both], Job(dataset_prior=False))
+    assert left.error and "its confidence: keep one" in left.error

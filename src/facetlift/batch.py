@@ -57,6 +57,10 @@ class Item:
     #: Why the input cannot run (it does not exist, a pattern matches nothing): the batch
     #: records it as a failed item and runs the others.
     error: str | None = None
+    #: ``(field, message)`` for each field (``"prior"``, ``"confidence"``) of which two files
+    #: lie beside the map: the `error` is the first's, and goes where the batch reads
+    #: neither (:func:`_own_files`).
+    ambiguous: tuple = ()
 
 
 #: A list file's comment: from a ``#`` at the start of a line or after white space.
@@ -194,6 +198,7 @@ def items(inputs, *, list_file=None) -> list[Item]:
         mask = None
         own = {}
         error = None
+        ambiguous = []
         if p.is_file():  # (X_mask with any case of a mask extension)
             kinds = {e.lower() for e in MASK_FORMATS}
             mask = next((str(m) for m in sorted(files.stem(p.parent, f"{p.stem}_mask"))
@@ -203,11 +208,15 @@ def items(inputs, *, list_file=None) -> list[Item]:
                 them = sorted(m for m in files.stem(p.parent, f"{p.stem}{suffix}")
                               if m.suffix.lower() in kinds)
                 own[field] = os.path.abspath(them[0]) if them else None
-                if len(them) > 1 and error is None:  # (as a dataset folder's two of a kind:
-                    # which one was meant?)
-                    error = (f"`inputs`: {p.parent} holds {' and '.join(m.name for m in them)} "
-                             f"beside {p.name}, each of them its {field}: keep one")
-        out.append(Item(path=key, name=name, mask=mask, error=error, **own))
+                if len(them) > 1:  # (as a dataset folder's two of a kind: which one was meant?)
+                    flag = "--no-prior" if field == "prior" else "--no-confidence"
+                    ambiguous.append((field, (
+                        f"`inputs`: {p.parent} holds {' and '.join(m.name for m in them)} "
+                        f"beside {p.name}, each of them its {field}: keep one ({flag} reads "
+                        "neither)")))
+                    error = error or ambiguous[0][1]
+        out.append(Item(path=key, name=name, mask=mask, error=error,
+                        ambiguous=tuple(ambiguous), **own))
     if not out:
         if absent:
             more = f" (and {len(absent) - 1} more such input(s))" if len(absent) > 1 else ""
@@ -243,6 +252,10 @@ def _own_files(found: list[Item], template: Job) -> list[Item]:
                 unread[field].append(Path(own).name)
             if given is not None or not wanted:
                 it = replace(it, **{field: None})
+                if any(f == field for f, _ in it.ambiguous):  # (two files of which neither
+                    # is read: no error then, unless the other kind is ambiguous too, a review)
+                    rest = tuple(a for a in it.ambiguous if a[0] != field)
+                    it = replace(it, ambiguous=rest, error=rest[0][1] if rest else None)
         out.append(it)
     for field, names in unread.items():
         if names:
