@@ -914,6 +914,8 @@ def test_a_prior_that_fights_the_normals_is_warned_about():
 def test_samples_far_from_the_surface_are_counted_and_warned_about():
     """A LiDAR user's occluded and flying points (154 of 2,900, up to 0.69 m off) went without
     a word; exact samples give no such warning."""
+    from scipy import ndimage
+
     from facetlift import synthetic
 
     gt = synthetic.analytic("sphere", 64)
@@ -934,6 +936,19 @@ def test_samples_far_from_the_surface_are_counted_and_warned_about():
                                 prior=(r, c, z), prior_weight=0.01, prior_outliers="keep")
     assert s.info["prior"]["far_samples"] == 3
     assert tuple(s.info["prior"]["farthest_sample"]) in set(zip(r[:3], c[:3], strict=True))
+    # a dense map with a band of far samples: the warning names the silhouette band and the
+    # prior's blur too (it spoke only of sensors' points and SfM to a monocular user, an
+    # audit); the sparse samples above are not told of it
+    dense = gt.depth.copy()
+    dense[gt.mask & ~ndimage.binary_erosion(gt.mask)] += 2.0 * span
+    with pytest.warns(UserWarning, match=r"lie far from the surface.*a band along the "
+                                         r"silhouettes.*--prior-blur"):
+        facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size, prior=dense,
+                            prior_weight=0.01, prior_outliers="keep")
+    with pytest.warns(UserWarning) as rec:
+        facetlift.integrate(gt.normals, gt.mask, pixel_size=gt.pixel_size, prior=(r, c, z),
+                            prior_weight=0.01, prior_outliers="keep")
+    assert not any("silhouettes" in str(w.message) for w in rec)
 
 
 def test_points_crowded_into_a_few_pixels_are_warned_about():

@@ -565,7 +565,8 @@ def _solve(problem, method, t0, max_memory, options):
         out["prior"] = prior_info(problem, surface)
         blurred = problem.prior_blur > 0 and not (out.get("prior_blur") or {}).get("fallback")
         _far_samples_check(out["prior"], blurred, out.get("solver") == "discontinuous"
-                           or not getattr(info, "discontinuities", False))
+                           or not getattr(info, "discontinuities", False),
+                           dense=out["prior"].get("samples", 0) > 0.25 * problem.domain.n_facets)
         _prior_fight_check(out.get("mean_deviation"), out.get("solver") == "discontinuous",
                            problem.camera.projection == "orthographic")
     seconds = dict(out.get("seconds", {}))
@@ -650,9 +651,11 @@ def _prior_fight_check(deviation, discontinuities: bool, orthographic: bool = Fa
 FAR, FAR_FLOOR = 10.0, 0.02
 
 
-def _far_samples_check(info: dict, blurred: bool, discontinuities: bool = True) -> None:
+def _far_samples_check(info: dict, blurred: bool, discontinuities: bool = True,
+                       dense: bool = False) -> None:
     """The far-samples warning (:data:`FAR`); `discontinuities`: the route cut jumps, or the
-    method cannot (no hint to do so)."""
+    method cannot (no hint to do so); `dense`: a depth map, not points (a network's blend of
+    foreground and background at the silhouettes is the likelier cause)."""
     far = info.get("far_samples", 0)
     # (the smooth route bends over a depth jump and leaves exact samples there far from it:
     # 1-2 of 12 renders with 5 % exact or noisy samples on the fusion benchmark)
@@ -660,11 +663,18 @@ def _far_samples_check(info: dict, blurred: bool, discontinuities: bool = True) 
              "surface bends over (discontinuities=True, --discontinuities, cuts it)")
     if far and not blurred:  # (a blurred prior's samples differ from the surface by design)
         r, c = info["farthest_sample"]
+        # (a dense map's far samples are mostly its silhouettes, where a monocular network
+        # blends foreground and background: the warning spoke only of sensors' flying points
+        # and SfM, an audit)
+        band = ("; in a dense map (a monocular network's), mostly a band along the "
+                "silhouettes where it blends foreground and background: give the prior's blur "
+                "(prior_blur, --prior-blur) or zero weight on that band (prior_weight map, "
+                "--prior-weight-map; docs/fusion.md, 'A monocular depth map')" if dense else "")
         warn(f"prior: {far} of the {info['samples']} samples lie far from the surface returned "
              f"(more than {info['far_threshold']:.3g} from it, {FAR:g} times the median "
              f"distance or more; the farthest {info['farthest_distance']:.3g} at (row {r}, col "
              f"{c})): outliers, such as a depth sensor's occluded or flying points or "
-             f"mismatched SfM points, or samples on a depth jump's edge{jumps}? Outliers "
+             f"mismatched SfM points, or samples on a depth jump's edge{jumps}{band}? Outliers "
              "pull the surface with them: remove them and run again (docs/fusion.md, "
              "'Outlier samples'; info['prior'], --json)")
 
