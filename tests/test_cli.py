@@ -710,6 +710,14 @@ def test_info_and_integrate_count_the_same_holes(tmp_path, capsys):
     assert "9 pixel(s) enclosed by the object hold no normal" in err and "109" not in err, err
 
 
+def _flat_map_and_box(H, W):
+    """A flat normal map (every normal (0, 0, 1)) and a box mask inside it, rows 4-15 and
+    columns 5-19."""
+    mask = np.zeros((H, W), bool)
+    mask[4:16, 5:20] = True
+    return np.dstack([np.zeros((H, W, 2)), np.ones((H, W))]), mask
+
+
 def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
     """An audit: mask.png beside a plain map file was ignored without a word (docs/cli.md said
     a folder's mask.png was its mask), while only a dataset folder's files are read. integrate
@@ -719,9 +727,7 @@ def test_a_mask_beside_a_plain_map_is_named_as_unread(tmp_path, capsys):
     from scipy import io as sio
 
     H, W = 20, 26
-    n = np.dstack([np.zeros((H, W, 2)), np.ones((H, W))])
-    mask = np.zeros((H, W), bool)
-    mask[4:16, 5:20] = True
+    n, mask = _flat_map_and_box(H, W)
     folder = tmp_path / "maps"
     folder.mkdir()
     np.save(folder / "obj.npy", n)
@@ -807,9 +813,7 @@ def test_another_map_in_a_dataset_folder_is_told_it_is_not_the_folders_map(tmp_p
     read this map with them. In a dataset folder the warning says this file is not the
     folder's normal_map.*; in a folder without one, as before."""
     H, W = 20, 26
-    n = np.dstack([np.zeros((H, W, 2)), np.ones((H, W))])
-    mask = np.zeros((H, W), bool)
-    mask[4:16, 5:20] = True
+    n, mask = _flat_map_and_box(H, W)
     folder = tmp_path / "ds"
     folder.mkdir()
     io.write_normals(folder / "normal_map.png", n)

@@ -209,11 +209,10 @@ def items(inputs, *, list_file=None) -> list[Item]:
                               if m.suffix.lower() in kinds)
                 own[field] = os.path.abspath(them[0]) if them else None
                 if len(them) > 1:  # (as a dataset folder's two of a kind: which one was meant?)
-                    flag = "--no-prior" if field == "prior" else "--no-confidence"
                     ambiguous.append((field, (
                         f"`inputs`: {p.parent} holds {' and '.join(m.name for m in them)} "
-                        f"beside {p.name}, each of them its {field}: keep one ({flag} reads "
-                        "neither)")))
+                        f"beside {p.name}, each of them its {field}: keep one (--no-{field} "
+                        "reads neither)")))
                     error = error or ambiguous[0][1]
         out.append(Item(path=key, name=name, mask=mask, error=error,
                         ambiguous=tuple(ambiguous), **own))

@@ -991,29 +991,24 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
 
     if fov is not None and K is not None:
         raise ValueError(f"`fov` {fov:g} and `K` contradict each other; give one")
+    if gt_scale is not None and not (np.isfinite(gt_scale) and gt_scale > 0):
+        raise ValueError(f"`gt_scale` must be a positive number; got {gt_scale!r}")
     est = io.read_depth(result, arg="result")
-    if fov is not None:  # (integrate took --fov, evaluate only --K: a fov user had no K file)
-        from .camera import K_from_fov
-
-        K_fov = K_from_fov(est.shape, fov)
     camera = None
     if result.suffix.lower() == ".npz":  # (a surface's: its camera, NaN when orthographic)
         with np.load(result, allow_pickle=False) as z:
             stored = np.asarray(z["K"], dtype=float) if "K" in z.files else None
         if stored is not None and stored.shape == (3, 3) and np.isfinite(stored).all():
             camera = stored
-    if K is not None:
-        given = io.read_K(K)
+    if K is not None or fov is not None:  # (integrate took --fov too: a fov user had no K file)
+        from .camera import K_from_fov
+
+        given, named, flag = ((io.read_K(K), f"`K`: {K}", "--K") if K is not None
+                              else (K_from_fov(est.shape, fov), f"`fov` {fov:g}", "--fov"))
         if camera is not None and not np.allclose(given, camera, rtol=1e-6):
-            raise ValueError(f"`K`: {K} differs from the camera {result} was integrated with "
-                             f"({camera.tolist()}); leave --K out to use the surface's own")
+            raise ValueError(f"{named} differs from the camera {result} was integrated with "
+                             f"({camera.tolist()}); leave {flag} out to use the surface's own")
         camera = given
-    if fov is not None:
-        if camera is not None and not np.allclose(K_fov, camera, rtol=1e-6):
-            raise ValueError(f"`fov` {fov:g} differs from the camera {result} was integrated "
-                             f"with ({camera.tolist()}); leave --fov out to use the surface's "
-                             "own")
-        camera = K_fov
     from .jobs import GT_NPZ_NAMES
 
     if gt.suffix.lower() == ".png":  # (a sensor's or a dataset's 16-bit counts)
@@ -1021,8 +1016,6 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
     else:
         truth = io.read_depth(gt, npz_names=GT_NPZ_NAMES, arg="gt", zero_unknown=True)
         if gt_scale is not None:
-            if not (np.isfinite(gt_scale) and gt_scale > 0):
-                raise ValueError(f"`gt_scale` must be a positive number; got {gt_scale!r}")
             truth = truth * gt_scale
     if truth.shape != est.shape:
         raise ValueError(f"`gt`: {gt} is {truth.shape[0]}x{truth.shape[1]} (HxW) but `result` "

@@ -450,9 +450,10 @@ def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
     if not unread:
         return
     # (a batch item's own prior and confidence, read by batch, not by integrate: a review)
-    stems = {"_prior_depth": "--prior", "_confidence": "--confidence"}
-    paired = {n: f for n in unread for k, f in stems.items()
-              if Path(n).stem == f"{src.stem}{k}"}
+    from .batch import companions
+
+    stems = {f"{src.stem}{suffix}": f"--{kind}" for kind, suffix, _ in companions()}
+    paired = {n: stems[Path(n).stem] for n in unread if Path(n).stem in stems}
     flags = " / ".join(f for f, given in (
         ("--mask", any(n != "K.txt" and n not in paired for n in unread)),
         ("--K", "K.txt" in unread), ("--prior", "--prior" in paired.values()),

@@ -29,6 +29,7 @@ from .frames import EDGE_ON
 #: ``backfacing=`` choices: treat such normals as missing samples, or raise.
 BACKFACING = ("missing", "error", "outlier")
 
+
 def _flip_mends_facing(cam, r, c, nf, clear, away: float):
     """``(axis, share)`` where many normals face away from a pinhole camera (``away`` above
     :data:`BACKFACING_FRAME_HINT`) and negating x or y alone turns all but a few of them
@@ -85,12 +86,11 @@ def _edge_on_kept(domain, front, grazing, cos, share, nf):
         return None
     # (the angles between neighbouring candidates, and their median per component in one
     # sort: a loop over components cost minutes on a map with thousands of speckles)
-    r, c = domain.pixels
     rows = np.flatnonzero(kept)
-    r0, c0 = int(r[kept].min()), int(c[kept].min())
-    box = (int(r[kept].max()) - r0 + 1, int(c[kept].max()) - c0 + 1)
-    idx = np.full(box, -1, np.int64)  # (over the kept normals' box only)
-    idx[r[rows] - r0, c[rows] - c0] = rows
+    r, c = domain.pixels[0][rows], domain.pixels[1][rows]
+    r0, c0 = int(r.min()), int(c.min())
+    idx = np.full((int(r.max()) - r0 + 1, int(c.max()) - c0 + 1), -1, np.int64)
+    idx[r - r0, c - c0] = rows  # (over the kept normals' box only)
     pairs = [(idx[:, :-1], idx[:, 1:]), (idx[:-1], idx[1:]),
              (idx[:-1, :-1], idx[1:, 1:]), (idx[:-1, 1:], idx[1:, :-1])]
     a = np.concatenate([x[(x >= 0) & (y >= 0)] for x, y in pairs])
