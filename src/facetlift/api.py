@@ -37,6 +37,7 @@ def integrate(
     backfacing: str = "missing",
     outlier_eps: float | None = None,
     normal_frame: str | None = None,
+    normal_rotation=None,
     max_memory=None,
     prior=None,
     prior_weight=None,
@@ -87,6 +88,15 @@ def integrate(
         The frame `normals` are given in: ``"opengl"`` (the default, facetlift's own),
         ``"directx"`` (alias ``"y_down"``), ``"opencv"`` or an axis string such as
         ``"x,-y,-z"`` (:mod:`facetlift.frames`).
+    normal_rotation : (3, 3) array_like, optional
+        For normals given in world space (Blender's Normal pass, a multi-view pipeline's):
+        the rotation from world to the camera frame named by `normal_frame`, applied at every
+        pixel (``n_cam = R @ n_world``) before the frame and before the checks that look at
+        which way the normals face. A 3x4 or 4x4 pose gives its upper-left 3x3. Blender:
+        ``camera.matrix_world.to_3x3().transposed()`` with the default frame; COLMAP: the
+        image's world-to-camera ``R`` with ``normal_frame="opencv"`` (docs/conventions.md,
+        "Normals in world space"). It must be a proper rotation (orthonormal within
+        ``facetlift.frames.ROTATION_TOLERANCE``, determinant +1). NaN normals stay missing.
     max_memory : int, float or str, optional
         Refuse the job (MemoryLimitError) if its estimated peak memory exceeds this many bytes
         (or a size such as ``"8G"``). Default: the available physical memory minus a margin,
@@ -172,7 +182,8 @@ def integrate(
         option value, an option that does not apply to the chosen route, or input the method
         cannot take (perspective, discontinuities), unsigned integers other than uint8/uint16,
         or normals that look [0, 1]-encoded or face away from the viewer
-        (:func:`facetlift.frames.checked`); a `prior` or `confidence` of the wrong shape,
+        (:func:`facetlift.frames.checked`); a `normal_rotation` that is no rotation
+        (:func:`facetlift.frames.check_rotation`); a `prior` or `confidence` of the wrong shape,
         negative weights, a prior without a finite sample in the mask, non-positive
         perspective prior depth in a map (points of a ``(rows, cols, depths)`` prior with one
         are left out with a warning, unless every one is), or a prior / confidence for a
@@ -204,6 +215,8 @@ def integrate(
     """
     t0 = time.perf_counter()
     info = methods.get(method)
+    if normal_rotation is not None:  # (before the input's checks: its error alone)
+        normal_rotation = frames.check_rotation(normal_rotation)
     if isinstance(prior, str):  # a method option named "prior" (regularization's smoothness
         if "prior" not in info.options():  # prior, a string), not a depth prior
             raise ValueError(
@@ -219,9 +232,10 @@ def integrate(
         return _integrate_fitted(
             fit_kind, normals, mask, method=method, pixel_size=pixel_size, K=K, known=known,
             discontinuities=discontinuities, solver=solver, backfacing=backfacing,
-            outlier_eps=outlier_eps, normal_frame=normal_frame, max_memory=max_memory,
-            prior=prior, prior_weight=prior_weight, confidence=confidence,
-            prior_blur=prior_blur, prior_outliers=prior_outliers, **options)
+            outlier_eps=outlier_eps, normal_frame=normal_frame,
+            normal_rotation=normal_rotation, max_memory=max_memory, prior=prior,
+            prior_weight=prior_weight, confidence=confidence, prior_blur=prior_blur,
+            prior_outliers=prior_outliers, **options)
     note = isolated = share = None
     if discontinuities is not None and not _check_discontinuities(info, discontinuities):
         if "discontinuities" in info.options():  # (an explicit False, e.g. for "bini")
@@ -249,7 +263,7 @@ def integrate(
     validate(info.specs(), {**options, "progress": _no_progress}
              if options.get("progress") is True else options, method,
              keywords=_INTEGRATE_KEYWORDS, hints=_keyword_hints(options))
-    normals = frames.checked(normals, mask, frame=normal_frame)
+    normals = frames.checked(normals, mask, frame=normal_frame, rotation=normal_rotation)
     if prior is not None and not info.prior:
         # (the method refuses the prior in _solve: no outlier check to warn about before)
         check_prior_outliers(prior_outliers)
@@ -257,8 +271,9 @@ def integrate(
     # (the flip check's hint and prepare's facing-away advice are relative to the frame
     # given; none given: the caller's, e.g. a reader's, stays. prepare outside it advised the
     # frame already given, a review)
+    # (and the words on world-space normals: whether a rotation was given)
     with (contextlib.nullcontext() if frames.is_identity(normal_frame)
-          else frames.read_in(normal_frame)):
+          else frames.read_in(normal_frame)), frames.rotation_given(normal_rotation is not None):
         problem = prepare(
             normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
             outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight,
@@ -415,11 +430,16 @@ def integrate_gradients(
     ------
     ValueError
         As :func:`integrate`; also shapes that differ, a bad `gradient_frame`, or `K` /
-        `normal_frame` (they do not apply to a gradient field).
+        `normal_frame` / `normal_rotation` (they do not apply to a gradient field).
     """
     for key in ("K", "normal_frame"):
         if kwargs.get(key) is not None:
             raise ValueError(f"`{key}` does not apply to a gradient field (orthographic slopes)")
+    if kwargs.get("normal_rotation") is not None:
+        raise ValueError("`normal_rotation` does not apply to a gradient field: its slopes are "
+                         "of the height over the image plane, which has no world frame to "
+                         "turn from (rotate normals, not slopes: facetlift.integrate(normals, "
+                         "normal_rotation=R))")
     px, qy = frames.gradients_to_facetlift(p, q, gradient_frame)
     frames.layout_check(p, q, gradient_frame, mask)  # (warns when the other layout fits)
     normals = normals_from_gradients(px, qy)

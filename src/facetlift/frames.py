@@ -242,6 +242,120 @@ def resolve(frame, y_down: bool, name: str = "frame") -> str | None:
     )
 
 
+# --------------------------------------------------------------------------------------------
+# normals given in world space: a rotation into the camera frame
+
+#: How far ``R R^T`` may be from the identity (largest entry) for `R` to count as a rotation
+#: (:func:`check_rotation`): a matrix written out to 6 decimals is orthonormal to about 1e-6.
+ROTATION_TOLERANCE = 1e-3
+
+
+def check_rotation(matrix, name: str = "normal_rotation") -> np.ndarray:
+    """`matrix` checked as a rotation: a (3, 3) float array, the upper-left 3x3 of a 3x3, 3x4
+    or 4x4 matrix (a camera pose's translation is not needed to turn normals).
+
+    Parameters
+    ----------
+    matrix : array_like
+        A proper rotation, for :func:`facetlift.integrate`'s ``normal_rotation`` the one from
+        world to the camera frame the normals are to be read in (``n_cam = R @ n_world``).
+    name : str
+        The argument (or flag and file) that gave it, for the errors.
+
+    Raises
+    ------
+    ValueError
+        Another shape, non-finite or non-numeric entries, a matrix that is not orthonormal
+        (within :data:`ROTATION_TOLERANCE`: a scaled camera's pose, a projection matrix) or a
+        reflection (determinant -1), each naming `name` and what was found.
+    """
+    try:
+        m = np.asarray(matrix, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"`{name}` must be a 3x3 rotation matrix (or a 3x4 / 4x4 pose, of "
+                         f"which the upper-left 3x3 is used) of numbers; got "
+                         f"{type(matrix).__name__}") from None
+    if m.shape not in ((3, 3), (3, 4), (4, 4)):
+        raise ValueError(f"`{name}` must be a 3x3 rotation matrix, or a 3x4 or 4x4 pose of "
+                         f"which the upper-left 3x3 is used; got shape {m.shape}")
+    R = m[:3, :3]
+    if not np.isfinite(R).all():
+        raise ValueError(f"`{name}` has non-finite entries in its rotation (the upper-left "
+                         f"3x3): {R.tolist()}")
+    off = float(np.abs(R @ R.T - np.eye(3)).max())
+    if off > ROTATION_TOLERANCE:
+        s = np.linalg.svd(R, compute_uv=False)
+        raise ValueError(
+            f"`{name}` is not a rotation: R R^T differs from the identity by up to {off:.3g} "
+            f"(tolerance {ROTATION_TOLERANCE:g}; R's singular values are {s.min():.4g} to "
+            f"{s.max():.4g}, a rotation's are all 1). A scaled camera object's matrix "
+            "(Blender's matrix_world with a scale)? Give its rotation alone (in Blender "
+            "matrix_world.to_quaternion().to_matrix()); a projection matrix K [R | t] is not a "
+            "pose either")
+    if np.linalg.det(R) < 0:
+        raise ValueError(
+            f"`{name}` is a reflection (determinant -1), not a rotation: it flips an odd "
+            "number of axes. Give the proper rotation, and name the axes your normals or "
+            "camera negate as the frame (normal_frame, --normal-frame: e.g. 'opencv' for y "
+            "down and z away, or an axis string such as 'x,-y,z')")
+    return R.copy()
+
+
+def axes_matrix(frame, name: str = "normal_frame") -> np.ndarray:
+    """The (3, 3) signed permutation ``P`` with ``to_facetlift(n, frame) = P @ n``."""
+    parse(frame, name)
+    return np.array(to_facetlift(np.eye(3), frame)).T
+
+
+def rotation_in_facetlift(R: np.ndarray, frame) -> np.ndarray:
+    """A rotation `R` from world to the camera frame `frame` as the rotation that takes
+    normals already converted from `frame` (:func:`to_facetlift`: the world vectors with
+    `frame`'s axis map applied, as a reader gives them) to the camera's facetlift frame:
+    ``P R P^T``, where ``P`` is `frame`'s axis map (:func:`axes_matrix`)."""
+    P = axes_matrix(frame)
+    return P @ R @ P.T
+
+
+def rotate(normals: np.ndarray, R: np.ndarray | None) -> np.ndarray:
+    """(..., 3) normals turned by `R` (``R @ n`` at every pixel; a new array; NaN stays NaN,
+    a missing sample); unchanged where `R` is None."""
+    if R is None:
+        return normals
+    return np.einsum("ij,...j->...i", R, np.asarray(normals, dtype=float))
+
+
+#: Whether :func:`facetlift.integrate` was given a rotation (``normal_rotation``), for the
+#: words of the facing-away warnings made where no argument says so (:func:`world_note`).
+_ROTATED: contextvars.ContextVar = contextvars.ContextVar("facetlift_rotated", default=False)
+
+
+@contextlib.contextmanager
+def rotation_given(given: bool):
+    """Within it, the normals checked were (`given`) or were not turned from world space by a
+    rotation: :func:`world_note` words its question so."""
+    token = _ROTATED.set(bool(given))
+    try:
+        yield
+    finally:
+        _ROTATED.reset(token)
+
+
+def world_note(rotated: bool | None = None) -> str:
+    """The facing-away messages' words on world-space normals: where no rotation was given
+    (`rotated` False), that such normals need the camera's
+    rotation; where one was, that it may be the wrong one or inverted (:func:`rotation_given`
+    says which where `rotated` is None)."""
+    rotated = _ROTATED.get() if rotated is None else rotated
+    if rotated:
+        return ("is the rotation given that of this view, and the right way round "
+                "(--world-to-camera, normal_rotation=, takes world to camera; Blender's "
+                "matrix_world is camera to world: --camera-to-world)?")
+    return ("if the normals are in world space (a Blender Normal pass, a multi-view "
+            "pipeline's), give the camera's rotation: --world-to-camera FILE or "
+            "--camera-to-world FILE (normal_rotation=R, world to camera, in Python; "
+            "docs/conventions.md)")
+
+
 #: An 8-bit code that decodes next to 0 (127 or 128) is decoded as exactly 0 in the x or y
 #: channel where it is a plateau of that channel's histogram (:func:`decode`): at least
 #: ZERO_PLATEAU_SHARE of the pixels seen hold it, and at least ZERO_PLATEAU_RATIO times as
@@ -484,9 +598,13 @@ def _gamma_hint(v: np.ndarray, share: float) -> str | None:
     return None
 
 
-def checked(normals, mask=None, *, frame=None, name: str = "normals"):
+def checked(normals, mask=None, *, frame=None, name: str = "normals", rotation=None):
     """Normals as :func:`facetlift.integrate` receives them -> float normals in the facetlift
     frame, after the safety nets (see the module docstring).
+
+    `rotation` (3, 3), where given, turns world-space normals into the camera frame `frame`
+    (``R @ n``, :func:`check_rotation`): after the encoding checks, which look at the values
+    as stored, and before the facing check, which looks at the camera's.
 
     Arrays that are not (H, W, 3) numbers pass through unchanged, for
     :func:`facetlift.prepare` to refuse with its own message.
@@ -502,10 +620,11 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
         Other unsigned integer types; a grey image (R = G = B at every pixel inside the
         mask, :func:`grey_check`); a float map that looks [0, 1]-encoded or like an
         undecoded 8/16-bit image (values up to 255 or 65535); a map whose
-        normals mostly face away from the viewer (a camera frame with z pointing away); a bad
-        `frame`.
+        normals mostly face away from the viewer (a camera frame with z pointing away, or
+        world-space normals); a bad `frame` or `rotation`.
     """
     parse(frame)
+    turn = None if rotation is None else rotation_in_facetlift(check_rotation(rotation), frame)
     normals, hidden = masked_pixels(normals)
     try:
         n = np.asarray(normals)
@@ -529,9 +648,10 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals"):
     stored = None if sample is None else from_facetlift(sample, undo)
     if stored is not None and len(stored) and stored.min() >= 0:  # (only then can the whole
         _check_encoding(from_facetlift(_inside(n, mask), undo), name)  # map be encoded)
-    n = to_facetlift(n, frame)
+    n = rotate(to_facetlift(n, frame), turn)
     if sample is not None:
-        _check_facing(to_facetlift(sample, frame), name, read)
+        _check_facing(rotate(to_facetlift(sample, frame), turn), name, read,
+                      rotated=turn is not None)
     return n
 
 
@@ -673,7 +793,7 @@ def as_float_normals(n: np.ndarray, name: str, mask=None, hidden=None) -> np.nda
     return n
 
 
-def _check_facing(v: np.ndarray, name: str, frame=None) -> None:
+def _check_facing(v: np.ndarray, name: str, frame=None, rotated: bool = False) -> None:
     if len(v) < ENCODING_CHECK_PIXELS:
         return
     away = facing_away(v)
@@ -689,10 +809,10 @@ def _check_facing(v: np.ndarray, name: str, frame=None) -> None:
         raise ValueError(
             f"`{name}`: {text}" + ("" if decoded else
                                    f". If z really is that value, {said}: "
-                                   f"{facing_hint(frame, v)}")
+                                   f"{facing_hint(frame, v, rotated)}")
         )
     raise ValueError(
-        f"`{name}`: {said}, {facing_hint(frame, v)}, or see docs/conventions.md for "
+        f"`{name}`: {said}, {facing_hint(frame, v, rotated)}, or see docs/conventions.md for "
         "the frame of your source"
     )
 
@@ -755,18 +875,34 @@ def _swapped_orders(frame, v: np.ndarray) -> str | None:
             "says if it is wrong)")
 
 
-def facing_hint(frame, v: np.ndarray | None = None) -> str:
+#: Where the normals of a map that faces away would still face away by more than this share
+#: with z negated (as every frame a hint names for a camera-frame map does; prepare's
+#: :data:`facetlift.problem.BACKFACING_FRAME_HINT`), and no channel order explains them, the
+#: hint asks about world-space normals (:func:`world_note`).
+WORLD_AWAY = 0.05
+
+
+def facing_hint(frame, v: np.ndarray | None = None, rotated: bool = False) -> str:
     """What to try for a map that faces away from the viewer when read in `frame`: relative
     to the frame given (the flag the user gave is never the suggestion). With the normals `v`
     (k, 3) as read, about half of them facing away (:data:`SWAP_RANGE`) is tried against the
     reversed channel order first (an audit: an OpenCV-frame map saved in BGR order and read
-    with --normal-frame opencv was offered two frames that both ran at 20 deg off)."""
+    with --normal-frame opencv was offered two frames that both ran at 20 deg off). Where
+    `rotated` (the normals were turned from world space) the rotation is asked about too;
+    where not, and negating z would leave many facing away (:data:`WORLD_AWAY`), whether the
+    normals are in world space (:func:`world_note`)."""
     if v is not None:
         away = facing_away(np.asarray(v, float))
         if away is not None and SWAP_RANGE[0] <= away <= SWAP_RANGE[1]:
             swapped = _swapped_orders(frame, np.asarray(v, float))
             if swapped is not None:
-                return f"{swapped}; else {facing_hint(frame)}"
+                return (f"{swapped}; else {facing_hint(frame)}"
+                        + (f"; or {world_note(True)}" if rotated else ""))
+        if rotated:
+            return f"{facing_hint(frame)}; or {world_note(True)}"
+        if away is not None and 1.0 - away > WORLD_AWAY:
+            return (f"{facing_hint(frame)}; but with z negated {1.0 - away:.0%} would still "
+                    f"face away: {world_note(False)}")
     if is_identity(frame):  # (y down, as OpenCV's, or y up with z alone negated, as
         # Blender's camera space through a Vector Transform node: only opencv was named, and
         # a user's Blender map then got an x-flip hint that turned it inside-out)

@@ -24,7 +24,7 @@ import numpy as np
 from ._warnings import warn
 from .camera import Camera, make_camera
 from .domain import Domain
-from .frames import EDGE_ON
+from .frames import EDGE_ON, world_note
 
 #: ``backfacing=`` choices: treat such normals as missing samples, or raise.
 BACKFACING = ("missing", "error", "outlier")
@@ -724,7 +724,8 @@ def prepare(
                      "another frame (world coordinates, a rotated export) or in BGR channel "
                      "order (OpenCV's imwrite; an axis string swaps it back: z,-y,-x for an "
                      "OpenCV-frame map, z,y,x for an OpenGL one)? "
-                     "docs/conventions.md and docs/recipes.md say how to convert it")
+                     "docs/conventions.md and docs/recipes.md say how to convert it; "
+                     f"{world_note()}")
             Kc = getattr(cam, "K", None)
             centred = (abs(Kc[0, 2] - (W - 1) / 2) <= 1 and abs(Kc[1, 2] - (H - 1) / 2) <= 1
                        if Kc is not None else False)
