@@ -213,7 +213,7 @@ def test_options_are_forwarded(tmp_path, capsys, monkeypatch):
     np.testing.assert_array_equal(seen.pop("K"), K)
     assert seen == {"method": "dgp", "pixel_size": 1.0, "backfacing": "missing", "max_iter": 7,
                     "outlier_eps": None, "prior": None, "prior_weight": None, "confidence": None,
-                    "prior_blur": None,
+                    "prior_blur": None, "normal_rotation": None,
                     "flat_weight": 1e-6, "mean_subtraction": False, "name": "plain",
                     "backend": "superlu"}
 

@@ -3,14 +3,16 @@ command line's --world-to-camera / --camera-to-world (and a dataset folder's fil
 
 from __future__ import annotations
 
+import json
 import warnings
 
 import numpy as np
 import pytest
 
 import facetlift
-from facetlift import frames, synthetic
+from facetlift import frames, io, synthetic
 from facetlift.camera import K_from_fov
+from facetlift.cli import main
 
 
 def random_rotation(seed: int) -> np.ndarray:
@@ -164,3 +166,218 @@ def test_no_world_hint_where_a_z_flip_explains_it(sphere, stored):
     assert error is not None and "face away" in error and "world" not in error
     error, said = run_integrate(n, mask)  # (and nothing on the right map)
     assert error is None and "world" not in said
+
+
+# --------------------------------------------------------------------------------------------
+# reading a rotation file: facetlift.io.read_rotation
+
+
+def test_rotation_files_in_every_form(tmp_path):
+    R = random_rotation(11)
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = R.T, [0.5, 1.0, -3.0]  # (camera to world)
+    files = {
+        "rows.txt": ("# world to camera\n" + "\n".join(", ".join(f"{v:.17g}" for v in row)
+                                                      for row in R), False),
+        "line.txt": (" ".join(f"{v:.17g}" for v in R.ravel()) + "  # row by row", False),
+        "pose.txt": ("\n".join(" ".join(f"{v:.17g}" for v in row) for row in pose), True),
+        "pose34.txt": ("\n".join(" ".join(f"{v:.17g}" for v in row) for row in pose[:3]),
+                       True),
+        "list.json": (json.dumps(R.tolist()), False),
+        "blender.json": (json.dumps({"matrix_world": pose.tolist(), "name": "Camera"}), True),
+        # (several matrices: the one that names a rotation, not the intrinsics)
+        "colmap.json": (json.dumps({"K": np.eye(3).tolist(), "R": R.tolist(),
+                                    "t": [1, 2, 3]}), False),
+    }
+    for name, (text, c2w) in files.items():
+        (tmp_path / name).write_text(text)
+        got = io.read_rotation(tmp_path / name, camera_to_world=c2w)
+        np.testing.assert_allclose(got, R, atol=1e-12, err_msg=name)
+    np.save(tmp_path / "r.npy", pose)
+    np.testing.assert_allclose(io.read_rotation(tmp_path / "r.npy", camera_to_world=True), R,
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize("text, c2w, match", [
+    ("", False, r"`world_to_camera`: cannot read \S+ as a matrix \(the file is empty\)"),
+    ("# nothing\n", False, "only comments"),
+    ("1 0 0\n0 1 0", False, r"`world_to_camera` \S+bad.txt must be a 3x3 rotation .*shape "
+     r"\(2, 3\)"),
+    ("1 0 x\n0 1 0\n0 0 1", True, r"`camera_to_world`: cannot read \S+bad.txt as a matrix"),
+    ("2 0 0\n0 2 0\n0 0 2", True, r"`camera_to_world` \S+bad.txt is not a rotation.*"
+     r"singular values are 2 to 2"),
+    ("-1 0 0\n0 1 0\n0 0 1", False, r"`world_to_camera` \S+bad.txt is a reflection"),
+    ('{"A": [[1,0,0],[0,1,0],[0,0,1]], "B": [[1,0,0],[0,1,0],[0,0,1]]}', False,
+     r'holds several, "A", "B": which one is the camera\'s rotation'),
+    ('{"R": [[1,0,0],[0,1,0],[0,0,1]], "rotation": [[1,0,0],[0,1,0],[0,0,1]]}', False,
+     r'holds several, "R", "rotation"'),
+    ('{"focal": 35}', False, r'holds no 3x3, 3x4 or 4x4 matrix \(keys: "focal"\)'),
+    ('{"matrix_world": [[1,0,0],[0,1,0],[0,0,1]]}', False, r'`world_to_camera`: \S+ holds '
+     r'"matrix_world", which turns camera to world, .* give it with --camera-to-world'),
+    ('{"w2c": [[1,0,0],[0,1,0],[0,0,1]]}', True, r'holds "w2c", which turns world to camera'
+     r'.* give it with --world-to-camera'),
+])
+def test_bad_rotation_files_are_refused_naming_the_argument_and_file(tmp_path, text, c2w,
+                                                                     match):
+    (tmp_path / "bad.txt").write_text(text)
+    with pytest.raises(ValueError, match=match):
+        io.read_rotation(tmp_path / "bad.txt", camera_to_world=c2w)
+
+
+# --------------------------------------------------------------------------------------------
+# the command line
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture
+def views(tmp_path, sphere):
+    """A world-space map (world.npy) of the sphere, its camera-frame map (cam.npy) and the
+    camera's pose (camera to world) as a 4x4 text file, as Blender gives it."""
+    n, mask = sphere
+    n = np.where(mask[..., None], n, np.nan)
+    R = random_rotation(3)
+    np.save(tmp_path / "cam.npy", n)
+    np.save(tmp_path / "world.npy", to_world(n, R))
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = R.T, [1.0, -2.0, 5.0]
+    np.savetxt(tmp_path / "matrix_world.txt", pose, header="Blender camera.matrix_world")
+    return tmp_path, R
+
+
+def depth_of(folder):
+    return np.load(folder / "depth.npy")
+
+
+def test_cli_camera_to_world_text_and_world_to_camera_json(views, capsys):
+    d, R = views
+    assert run(capsys, "integrate", d / "cam.npy", "-o", d / "cam", "-s", "npy")[0] == 0
+    code, out, err = run(capsys, "integrate", d / "world.npy", "--camera-to-world",
+                         d / "matrix_world.txt", "-o", d / "w", "-s", "npy", "--json")
+    assert code == 0, err
+    np.testing.assert_allclose(depth_of(d / "w"), depth_of(d / "cam"), atol=1e-10)
+    rec = json.loads(out)
+    np.testing.assert_allclose(rec["normal_rotation"]["world_to_camera"], R, atol=1e-12)
+    assert rec["normal_rotation"]["given_as"] == "camera_to_world"
+    assert rec["normal_rotation"]["file"] == str(d / "matrix_world.txt")
+    assert rec["normal_rotation"]["frame"] == "x,y,z" and rec["warnings"] == []
+    # COLMAP: its world-to-camera R, to the OpenCV camera frame, in a JSON object
+    cv = frames.axes_matrix("opencv").T @ R  # (world -> OpenCV camera)
+    np.save(d / "colmap.npy", to_world(frames.from_facetlift(np.load(d / "cam.npy"), "opencv"),
+                                       cv))
+    (d / "image.json").write_text(json.dumps({"R": cv.tolist(), "t": [0.0, 1.0, 2.0],
+                                              "K": np.eye(3).tolist()}))
+    code, out, err = run(capsys, "integrate", d / "colmap.npy", "--normal-frame", "opencv",
+                         "--world-to-camera", d / "image.json", "-o", d / "c", "-s", "npy")
+    assert code == 0, err
+    np.testing.assert_allclose(depth_of(d / "c"), depth_of(d / "cam"), atol=1e-10)
+    assert "normals turned from world space" in out
+    # without the rotation: refused, and told of it
+    code, _, err = run(capsys, "integrate", d / "world.npy", "-o", d / "x", "-s", "npy")
+    assert code == 1 and "--world-to-camera FILE or --camera-to-world FILE" in err
+
+
+def test_cli_rotation_errors_name_the_flag_and_the_file(views, capsys):
+    d, _ = views
+    (d / "scaled.txt").write_text("2 0 0\n0 2 0\n0 0 2\n")
+    (d / "two.json").write_text(json.dumps({"a": np.eye(3).tolist(), "b": np.eye(3).tolist()}))
+    cases = [
+        (["--camera-to-world", d / "matrix_world.txt", "--world-to-camera",
+          d / "matrix_world.txt"], "--world-to-camera and --camera-to-world give the rotation "
+         "twice"),
+        (["--world-to-camera", d / "scaled.txt"], f"--world-to-camera {d / 'scaled.txt'} is "
+         "not a rotation"),
+        (["--camera-to-world", d / "two.json"], f'--camera-to-world: {d / "two.json"} must '
+         'hold one matrix (a key such as "R", "rotation", "world_to_camera", '
+         '"camera_to_world" or "matrix_world"); it holds several, "a", "b"'),
+        (["--world-to-camera", d / "none.txt"], "'--world-to-camera': File"),
+    ]
+    for flags, said in cases:
+        code, _, err = run(capsys, "integrate", d / "world.npy", *flags, "-o", d / "o")
+        assert code == 1 and said in err and "Traceback" not in err, err
+        assert not (d / "o").exists()  # (refused before anything is read or written)
+    p = d / "p.npy"
+    np.save(p, np.zeros((8, 8)))
+    code, _, err = run(capsys, "integrate", "--gradients", p, p, "--world-to-camera",
+                       d / "matrix_world.txt", "-o", d / "g")
+    assert code == 1 and "--world-to-camera: a gradient field's slopes" in err
+
+
+def test_a_dataset_folder_gives_its_rotation_and_a_flag_replaces_it(views, capsys):
+    d, _ = views
+    ds = d / "view"
+    ds.mkdir()
+    np.save(ds / "normal_map.npy", np.load(d / "world.npy"))
+    (ds / "camera_to_world.txt").write_text((d / "matrix_world.txt").read_text())
+    assert run(capsys, "integrate", d / "cam.npy", "-o", d / "cam", "-s", "npy")[0] == 0
+    code, out, err = run(capsys, "integrate", ds, "-o", d / "o1", "-s", "npy")
+    assert code == 0, err
+    assert "(the folder's camera_to_world.txt)" in out
+    np.testing.assert_allclose(depth_of(d / "o1"), depth_of(d / "cam"), atol=1e-10)
+    code, out, _ = run(capsys, "info", ds)
+    assert code == 0 and "likely as read (consistent)" in out
+    assert "world space: the normals turned into the camera frame by the folder's " \
+        "camera_to_world.txt (camera-to-world)" in out
+    # a flag replaces the folder's file (here a broken one, then unread)
+    (ds / "camera_to_world.txt").write_text("not numbers")
+    code, _, err = run(capsys, "integrate", ds, "-o", d / "o2", "-s", "npy")
+    assert code == 1 and "camera_to_world.txt as a matrix" in err
+    code, _, err = run(capsys, "integrate", ds, "--camera-to-world", d / "matrix_world.txt",
+                       "-o", d / "o2", "-s", "npy")
+    assert code == 0, err
+    np.testing.assert_allclose(depth_of(d / "o2"), depth_of(d / "cam"), atol=1e-10)
+    # two of them: which one was meant?
+    (ds / "world_to_camera.txt").write_text("1 0 0\n0 1 0\n0 0 1")
+    code, _, err = run(capsys, "integrate", ds, "-o", d / "o3", "-s", "npy")
+    assert code == 1 and "holds world_to_camera.txt and camera_to_world.txt" in err
+    # the folder's map given by its path: the folder's rotation is named as unread
+    (ds / "world_to_camera.txt").unlink()
+    (ds / "camera_to_world.txt").write_text((d / "matrix_world.txt").read_text())
+    code, _, err = run(capsys, "integrate", ds / "normal_map.npy", "-o", d / "o4", "-s", "npy")
+    assert "camera_to_world.txt (its rotation" in err and "--camera-to-world" in err
+
+
+def test_info_takes_the_flags(views, capsys):
+    d, _ = views
+    code, out, err = run(capsys, "info", d / "world.npy", "--camera-to-world",
+                         d / "matrix_world.txt", "--json")
+    rec = json.loads(out)
+    assert code == 0, err
+    assert rec["frame"]["likely"] == "as read (consistent)" and rec["usable"]
+    assert rec["normal_rotation"]["given_as"] == "camera_to_world"
+    code, out, _ = run(capsys, "info", d / "world.npy", "--json")
+    rec = json.loads(out)
+    assert code == 1 and "--world-to-camera FILE" in rec["frame"]["likely"]
+    assert rec["normal_rotation"] is None
+
+
+def test_batch_forwards_the_rotation_and_names_a_rotation_beside_plain_maps(views, capsys):
+    d, R = views
+    maps = d / "maps"
+    maps.mkdir()
+    for k in range(2):
+        np.save(maps / f"v{k}.npy", np.load(d / "world.npy"))
+    (maps / "camera_to_world.txt").write_text((d / "matrix_world.txt").read_text())
+    assert run(capsys, "integrate", d / "cam.npy", "-o", d / "cam", "-s", "npy")[0] == 0
+    code, _, err = run(capsys, "batch", maps, "-o", d / "b1", "-s", "npy", "--workers", "1")
+    assert code == 1 and "holds camera_to_world.txt beside its normal maps" in err
+    assert f"--camera-to-world {maps / 'camera_to_world.txt'}" in err
+    code, _, err = run(capsys, "batch", maps, "-o", d / "b2", "-s", "npy", "--workers", "1",
+                       "--camera-to-world", maps / "camera_to_world.txt")
+    assert code == 0, err
+    assert "holds camera_to_world.txt" not in err
+    recs = [json.loads(line) for line in (d / "b2" / "batch.jsonl").read_text().splitlines()]
+    for r in recs:
+        np.testing.assert_allclose(depth_of(d / "b2" / r["name"]), depth_of(d / "cam"),
+                                   atol=1e-10)
+        assert r["settings"]["camera_to_world"] == str(maps / "camera_to_world.txt")
+        np.testing.assert_allclose(r["normal_rotation"]["world_to_camera"], R, atol=1e-12)
+    # a bad file fails the template, before any item
+    (d / "bad.txt").write_text("1 2 3")
+    code, _, err = run(capsys, "batch", maps, "-o", d / "b3", "--world-to-camera",
+                       d / "bad.txt")
+    assert code == 1 and "--world-to-camera" in err and not (d / "b3").exists()

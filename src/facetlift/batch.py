@@ -304,12 +304,13 @@ def _unique(name: str, taken: set) -> str:
 
 
 def _unused_folder_files(found, template: Job) -> None:
-    """Warn once per folder that holds a ``K.txt`` or a ``mask.*`` beside normal-map files:
+    """Warn once per folder that holds a ``K.txt``, a ``mask.*`` or a rotation file
+    (``world_to_camera.*``, ``camera_to_world.*``) beside normal-map files:
     only a dataset folder's (with ``normal_map.*``) are read, so its maps would be integrated
     orthographically (a user's rig: 583 mm MADE instead of 1.88 mm, and no word) and
     without that mask (an audit: docs/cli.md said a folder's mask.png was its maps' mask)."""
     from .io.dataset import is_dataset
-    from .jobs import camera_unset, unread_files
+    from .jobs import camera_unset, rotation_field, rotation_files, unread_files
 
     by_folder: dict = {}
     for it in found:
@@ -321,7 +322,16 @@ def _unused_folder_files(found, template: Job) -> None:
     for folder in sorted(f for f in by_folder if not is_dataset(f)):
         # (the mask only where a map of the folder has none of its own, NAME_mask.*)
         mask = template.mask is None and any(it.mask is None for it in by_folder[folder])
-        unread = unread_files(folder, None, mask=mask, camera=camera)
+        unread = unread_files(folder, None, mask=mask, camera=camera,
+                              rotation=rotation_field(template) is None)
+        turns = rotation_files(unread)
+        for name in turns:  # (world-space maps integrated as camera-frame ones)
+            flag = f"--{Path(name).stem.replace('_', '-')}"
+            warnings.warn(
+                f"batch: {folder} holds {name} beside its normal maps, but only a dataset "
+                "folder's rotation file (with normal_map.* or Normal_gt.mat) is read: these "
+                f"maps' normals are read as the camera's; give {flag} {folder / name} "
+                f"({Path(name).stem}=) to use it for every map", stacklevel=3)
         if "K.txt" in unread:
             warnings.warn(
                 f"batch: {folder} holds K.txt beside its normal maps, but only a dataset "
@@ -329,7 +339,7 @@ def _unused_folder_files(found, template: Job) -> None:
                 f"integrated orthographically; give --K {folder / 'K.txt'} (K=) to use that "
                 "camera",
                 stacklevel=3)
-        for name in (n for n in unread if n != "K.txt"):
+        for name in (n for n in unread if n != "K.txt" and n not in turns):
             warnings.warn(
                 f"batch: {folder} holds {name} beside its normal maps, but it is no map's mask: "
                 "only a dataset folder's (with normal_map.* or Normal_gt.mat) is read, and "
@@ -512,8 +522,8 @@ def settings(job: Job) -> dict:
            if k not in ("normals", "gradients", "outdir", "unread_beside", "beside")}
     out["options"] = {k: v for k, v in job.options.items() if k not in NEUTRAL_OPTIONS}
     out["save"] = sorted(set(job.save))
-    for key in ("fov", "output_frame", "height_range"):  # (unset: as in a log written before
-        # they existed)
+    for key in ("fov", "output_frame", "height_range", "world_to_camera",
+                "camera_to_world"):  # (unset: as in a log written before they existed)
         if out.get(key) is None:
             out.pop(key, None)
     if not out.get("strict"):  # (off: as in a log written before it existed)
@@ -752,7 +762,8 @@ def _clean_abandoned(folders, existed=()) -> None:
 def check_template(job: Job, local: bool = True) -> None:
     """Refuse a batch template that would fail every item: its method, method options,
     ``max_memory``, normal and gradient frames and output kinds are checked as
-    :func:`facetlift.jobs.run` and :func:`facetlift.integrate` would check them, and
+    :func:`facetlift.jobs.run` and :func:`facetlift.integrate` would check them, its
+    rotation file (``world_to_camera`` / ``camera_to_world``), and
     ``prior_blur``'s value and the method's capability for it, and outputs the items could
     not make (:func:`facetlift.jobs._check_outputs`; the report's matplotlib only where the
     items run in this process or its workers: `local`).
@@ -771,7 +782,8 @@ def check_template(job: Job, local: bool = True) -> None:
     info = methods.get(job.method)
     if not isinstance(job.options, dict):
         raise ValueError(f"`options` must be a dict of method options; got {job.options!r}")
-    for name in ("mask", "K", "prior", "prior_weight_map", "confidence"):
+    for name in ("mask", "K", "prior", "prior_weight_map", "confidence", "world_to_camera",
+                 "camera_to_world"):
         value = getattr(job, name, None)
         if value is not None and not isinstance(value, (str, os.PathLike)):
             # (an array reached every item as a path: a TypeError 'bug' record each, an audit)
@@ -795,6 +807,9 @@ def check_template(job: Job, local: bool = True) -> None:
     validate(info.specs(), opts, job.method)
     if job.normal_frame is not None:
         frames.parse(job.normal_frame)
+    from .jobs import read_rotation
+
+    read_rotation(job)  # (a file given for every item: read once, here)
     frames.normal_encoding(job.normal_encoding, "normal_encoding")
     if job.output_frame is not None:
         frames.parse(job.output_frame, "output_frame")
@@ -846,13 +861,14 @@ def log_record(rec: dict) -> dict:
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
             "shape", "facets", "mask_source", "converged", "warnings", "resumed", "settings",
             "input_stamp", "perspective", "camera", "prior_file", "confidence_file",
-            "depth_range", "normals", "evaluation", "hints")
+            "depth_range", "normals", "evaluation", "hints", "normal_rotation")
     # (mask_source: whether NAME_mask.png was used, a user asked; perspective: whether a
     # camera was used, a dataset folder's K.txt included; camera: which, a DiLiGenT folder's
     # being its parent's Calib_Results.mat; depth_range: height.png's scale;
     # normals: the mask's pixels without a usable normal, by reason; evaluation: the scores
     # against a dataset folder's depth_gt.*; prior_file, confidence_file: which files, a
-    # frame's own NAME_prior_depth.* among them; hints: integrate --json's)
+    # frame's own NAME_prior_depth.* among them; hints: integrate --json's; normal_rotation:
+    # the rotation that turned world-space normals, and its file, a folder's own among them)
     return jsonable({k: rec[k] for k in keep if k in rec})
 
 

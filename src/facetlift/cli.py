@@ -98,6 +98,7 @@ RESERVED_OPTIONS = {
     "known": "NaN normals in the map (missing samples; the command line has no `known`)",
     "backfacing": "--backfacing", "outlier_eps": "--outlier-eps",
     "normal_frame": "--normal-frame", "prior_weight": "--prior-weight",
+    "normal_rotation": "--world-to-camera or --camera-to-world",
     "confidence": "--confidence", "prior_blur": "--prior-blur",
     "prior_outliers": "--prior-outliers", "prior_fit": "--prior-fit", "progress": "--progress",
 }
@@ -152,6 +153,20 @@ _JOB_OPTIONS = [
                  "away), or an axis string such "
                  "as 'x,-y,-z' (docs/conventions.md lists common sources)."),
     click.option("--y-down", is_flag=True, help="Alias of --normal-frame directx."),
+    click.option("--world-to-camera", "world_to_camera", metavar="FILE",
+                 type=click.Path(exists=True, dir_okay=False, path_type=Path),
+                 help="Normals in world space (a multi-view pipeline's; COLMAP's R with "
+                 "--normal-frame opencv): the rotation from world to the camera frame of "
+                 "--normal-frame, as text (3x3, or a 3x4 / 4x4 pose: its upper-left 3x3; "
+                 "spaces or commas, # comments), .npy or JSON (a list, or an object with one "
+                 "matrix such as \"R\"). A dataset folder's world_to_camera.txt is used "
+                 "automatically. docs/conventions.md."),
+    click.option("--camera-to-world", "camera_to_world", metavar="FILE",
+                 type=click.Path(exists=True, dir_okay=False, path_type=Path),
+                 help="Instead of --world-to-camera: the camera's pose, camera to world "
+                 "(Blender's camera.matrix_world, for its world-space Normal pass), "
+                 "transposed; files as for --world-to-camera. A dataset folder's "
+                 "camera_to_world.txt is used automatically."),
     click.option("--normal-encoding", "normal_encoding", type=click.Choice(["xyz", "xy"]),
                  default="xyz", show_default=True,
                  help="How the map stores its normals: xyz = x, y, z in R, G, B; xy = a "
@@ -300,7 +315,8 @@ def _job_options(f):
 
 
 def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_down=False,
-              normal_encoding="xyz", gradient_frame="xy", mat_keys=None, method="dgp",
+              world_to_camera=None, camera_to_world=None, normal_encoding="xyz",
+              gradient_frame="xy", mat_keys=None, method="dgp",
               pixel_size=1.0, K=None,
               fov=None, orthographic=False, backfacing="missing", outlier_eps=None,
               solver=None,
@@ -357,7 +373,10 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         normals=None if normals is None else str(normals),
         gradients=tuple(str(g) for g in gradients) if gradients else None,
         mask=None if mask is None else str(mask), K=None if K is None else str(K), fov=fov,
-        orthographic=orthographic, normal_frame=frame, normal_encoding=normal_encoding,
+        orthographic=orthographic, normal_frame=frame,
+        world_to_camera=None if world_to_camera is None else str(world_to_camera),
+        camera_to_world=None if camera_to_world is None else str(camera_to_world),
+        normal_encoding=normal_encoding,
         gradient_frame=gradient_frame,
         mat_keys=_split(mat_keys), method=method, pixel_size=pixel_size,
         backfacing=backfacing, outlier_eps=outlier_eps, options=opts,
@@ -374,9 +393,10 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         prior_outliers=prior_outliers, prior_fit=prior_fit, dataset_prior=not no_prior,
         dataset_confidence=not no_confidence, strict=strict,
     )
-    from .jobs import check_fov
+    from .jobs import check_fov, read_rotation
 
     check_fov(job)  # (before the input is read)
+    read_rotation(job)  # (its file and the two flags together refused before, too)
     return job
 
 
@@ -407,10 +427,12 @@ def summary(record: dict) -> str:
             # (asked only where the alpha looked like data: a 0/255 alpha of separate pieces,
             # an atlas's or leaf cards', is a mask, a review)
             source += ": a height packed in the alpha? --mask replaces it"
+    rotation = record.get("normal_rotation")
     parts = [
         f"{H}x{W} pixels, {record['facets']} facets (mask: {source})",
         (f"perspective ({record.get('camera', 'K')})" if record.get("perspective")
          else "orthographic"),
+        *([f"normals turned from world space ({rotation['file']})"] if rotation else []),
         f"method {info.get('method')}" + (f" ({info['solver']})" if "solver" in info else ""),
     ]
     it = info.get("iterations")
@@ -619,6 +641,14 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--normal-frame", "normal_frame", metavar="FRAME",
               help="Read the map in this frame (as for 'integrate').")
 @click.option("--y-down", is_flag=True, help="Alias of --normal-frame directx.")
+@click.option("--world-to-camera", "world_to_camera", metavar="FILE",
+              type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Normals in world space: the rotation from world to the camera frame, as "
+              "for 'integrate'.")
+@click.option("--camera-to-world", "camera_to_world", metavar="FILE",
+              type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Instead of --world-to-camera: the camera's pose (Blender's matrix_world), "
+              "as for 'integrate'.")
 @click.option("--normal-encoding", "normal_encoding", type=click.Choice(["xyz", "xy"]),
               default="xyz", show_default=True,
               help="xy: a two-channel map (BC5, RG), z rebuilt; as for 'integrate'.")
@@ -638,8 +668,9 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="A confidence map to check against the map, as for 'integrate'.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def info(normals, gradients, mask, K, fov, normal_frame, y_down, normal_encoding,
-         gradient_frame, mat_keys, prior, prior_scale, prior_fit, confidence, as_json):
+def info(normals, gradients, mask, K, fov, normal_frame, y_down, world_to_camera,
+         camera_to_world, normal_encoding, gradient_frame, mat_keys, prior, prior_scale,
+         prior_fit, confidence, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
     encoding, mask and components, unusable normals, K, and the memory planner's estimate of
     the peak memory the default integration would need (the figure --max-memory is checked
@@ -665,7 +696,8 @@ def info(normals, gradients, mask, K, fov, normal_frame, y_down, normal_encoding
                    normal_encoding=normal_encoding, mat_keys=_split(mat_keys),
                    gradient_frame=gradient_frame,
                    prior_scale=prior_scale, prior=prior, confidence=confidence,
-                   prior_fit=prior_fit)
+                   prior_fit=prior_fit, world_to_camera=world_to_camera,
+                   camera_to_world=camera_to_world)
     # (for preflight scripts: as integrate would fail, on the map or on a folder's files)
     status = EXIT_INPUT if rec.get("problem") or rec.get("refused") else EXIT_OK
     if as_json:
@@ -688,6 +720,10 @@ def _info_lines(rec: dict) -> list[str]:
         lines.append(f"  encoding: {rec['encoding']}")
     frame = rec.get("frame", {})
     lines.append(f"  frame: read as {frame.get('as_read')}; likely {frame.get('likely', '?')}")
+    rotation = rec.get("normal_rotation")
+    if rotation:  # (the frame above is that of the normals as turned)
+        lines.append(f"  world space: the normals turned into the camera frame by "
+                     f"{rotation['file']} ({rotation['given_as'].replace('_', '-')})")
     source = rec.get("camera")
     lines.append(f"  camera: {rec['projection']}"
                  + (f" ({source})" if rec["K"] and source not in (None, "orthographic") else "")

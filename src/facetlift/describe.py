@@ -113,7 +113,7 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
 def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
              normal_encoding: str = "xyz", mat_keys=None, gradient_frame: str = "xy",
              prior_scale=None, prior=None, confidence=None, prior_fit=None,
-             fov=None) -> dict:
+             fov=None, world_to_camera=None, camera_to_world=None) -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
     encoding, mask and components, unusable normals (with the first one's location), K, a
     dataset folder's depth prior and normal confidence (``prior`` / ``confidence``: known
@@ -133,6 +133,11 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         Horizontal field of view in degrees instead of `K` (as for ``integrate``).
     normal_frame : str, optional
         The frame to read it in (default facetlift's).
+    world_to_camera, camera_to_world : str or Path, optional
+        For normals in world space, a file of the camera's rotation, as for ``integrate``'s
+        ``--world-to-camera`` / ``--camera-to-world`` (:func:`facetlift.io.read_rotation`; a
+        dataset folder's own is read where neither is given): the checks and the frame guess
+        look at the normals turned into the camera frame (``normal_rotation`` in the report).
     normal_encoding : {"xyz", "xy"}
         How the map stores its normals (as for ``integrate``; ``"xy"``: a two-channel map,
         z rebuilt, :func:`facetlift.io.read_normals`).
@@ -156,7 +161,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         As the readers (unreadable file, bad frame).
     """
     from . import frames
-    from .jobs import Job, camera_source, read, recorded_warnings
+    from .jobs import Job, camera_source, read, recorded_warnings, rotation_record
     from .problem import UnusableNormalsWarning, no_camera_hint, prepare
 
     job = Job(normals=None if path is None else str(path),
@@ -168,8 +173,10 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
               gradient_frame=gradient_frame, prior_scale=prior_scale,
               prior=None if prior is None else str(prior),
               confidence=None if confidence is None else str(confidence), fov=fov,
-              prior_fit=prior_fit)  # (a 16-bit relative PNG then needs no scale, as in
-    # integrate: info refused it, a review)
+              prior_fit=prior_fit,  # (a 16-bit relative PNG then needs no scale, as in
+              # integrate: info refused it, a review)
+              world_to_camera=None if world_to_camera is None else str(world_to_camera),
+              camera_to_world=None if camera_to_world is None else str(camera_to_world))
     src = job.source
     unread = []
     with recorded_warnings() as read_caught:  # (a gradient layout's, ...)
@@ -203,7 +210,12 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
                    if isinstance(w.message, frames.LayoutWarning)), None)
     n = inp.normals
     H, W = n.shape[:2]
+    # (normals in world space: turned into the camera frame of normal_frame, in which they
+    # were read already, before the checks that look at their facing, as integrate does)
+    turn = (None if inp.rotation is None
+            else frames.rotation_in_facetlift(inp.rotation, normal_frame))
     where = dict(shape=[H, W], mask_source=inp.mask_source,
+                 normal_rotation=rotation_record(job, inp),
                  K=None if inp.K is None else inp.K.tolist(),
                  projection="perspective" if inp.K is not None else "orthographic",
                  # (where K came from, as integrate's summary says: a DiLiGenT folder's is
@@ -213,7 +225,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     def unusable(e: ValueError) -> dict:  # (integrate would refuse it: why, and the frame)
         out.update(usable=False, problem=str(e),
                    frame=_frame_guess(n, inp.mask, inp.K, frame=normal_frame, layout=layout,
-                                      field=inp.field))
+                                      field=inp.field, rotation=turn))
         return out
 
     from .prior_fit import check as check_fit
@@ -242,8 +254,9 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     out.update(where)
     with recording() as caught:
         try:
-            with frames.read_in(normal_frame):  # (read in it already: hints relative to it)
-                checked = frames.checked(n, inp.mask, frame=None)
+            with frames.read_in(normal_frame), frames.rotation_given(turn is not None):
+                # (read in it already: hints relative to it)
+                checked = frames.checked(n, inp.mask, frame=None, rotation=turn)
             # (a prior to be aligned is checked as values, not as depths: any sign)
             problem = prepare(checked, inp.mask, K=inp.K,
                               prior=None if fitted else prior_map, confidence=inp.confidence)
@@ -273,7 +286,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         warnings=out["warnings"] + [str(w.message) for w in caught if not issubclass(
             w.category, UnusableNormalsWarning)],
         frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame, layout=layout,
-                           field=inp.field),
+                           field=inp.field, rotation=turn),
         estimate=_twice(estimate(problem), fitted),
         # (what --discontinuities would need: a user planning a large job asked)
         estimate_discontinuities=_twice(estimate(problem, "dgp", discontinuities=True),
@@ -365,12 +378,14 @@ def _file_facts(src: Path) -> dict:
 
 
 def _frame_guess(n, mask, K, problem=None, *, frame=None, layout=None,
-                 field: bool = False) -> dict:
+                 field: bool = False, rotation=None) -> dict:
     """Whether the frame the map was read in looks right, from the view direction and the
     integrability; ``likely`` says what to change. `layout`: the other gradient layout, where
     the field was read in the wrong one (:class:`facetlift.frames.LayoutWarning`), which
-    ``likely`` then names: its normals are in no frame that a flip would fix."""
-    guess = _frame_evidence(n, mask, K, problem, frame=frame, field=field)
+    ``likely`` then names: its normals are in no frame that a flip would fix. `rotation`
+    (3, 3): world-space normals' turn into the camera frame, in facetlift's axes
+    (:func:`facetlift.frames.rotation_in_facetlift`)."""
+    guess = _frame_evidence(n, mask, K, problem, frame=frame, field=field, rotation=rotation)
     if layout is not None:
         guess["likely"] = (f"the other gradient layout: --gradient-frame {layout} "
                            f"(gradient_frame='{layout}')")
@@ -390,7 +405,8 @@ def _try(frame, axes: str, field: bool) -> str:
     return frames.flip_advice(frames.GRADIENT_FIELD if field else frame, axes)
 
 
-def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False) -> dict:
+def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False,
+                    rotation=None) -> dict:
     """:func:`_frame_guess` from the normals alone."""
     from . import frames
     from .problem import prepare
@@ -399,11 +415,12 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
     guess = {"as_read": f"{name} ({frames.axis_string(frame)})"}
     inside = frames._inside(n, mask)
     if inside is not None and len(inside):
+        raw, stored = inside, frames.from_facetlift(inside, frame)
+        inside = frames.rotate(inside, rotation)  # (as the camera sees them)
         away = frames.facing_away(inside)
         guess["facing_away"] = away
         # the encodings first, on the values as stored (before the frame: a [0, 1] map read
         # in a camera frame faces away, and the frame was blamed; frames.checked's order)
-        stored = frames.from_facetlift(inside, frame)
         scale = frames.encoded_scale(stored)
         if scale is not None:
             guess["likely"] = (f"undecoded {8 if scale == 255 else 16}-bit values as floats: "
@@ -413,9 +430,9 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
         if stored.min() >= 0 and float(np.median(stored[:, :2])) > 0.25:
             guess["likely"] = "[0, 1]-encoded floats: decode with 2 * v - 1"
             return guess
-        missing = frames.z_not_stored(inside) if away is not None and away > 0.5 else None
+        missing = frames.z_not_stored(raw) if away is not None and away > 0.5 else None
         if missing is not None and missing[1]:  # (a two-channel map: no frame to suggest)
-            guess["likely"] = (f"z not stored (z is {float(inside[0, 2]):g} everywhere: a "
+            guess["likely"] = (f"z not stored (z is {float(raw[0, 2]):g} everywhere: a "
                                "two-channel map, BC5 or RG): read it with --normal-encoding xy, "
                                "which rebuilds z = sqrt(1 - x^2 - y^2) (docs/recipes.md)")
             return guess
@@ -423,12 +440,12 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
             what = ("z flipped" if away > frames.SWAP_RANGE[1] else
                     "z flipped or channels in another order")
             guess["likely"] = (f"{what}: the normals face away from the viewer as read "
-                               f"({frames.facing_hint(frame, inside)})")
+                               f"({frames.facing_hint(frame, inside, rotation is not None)})")
             return guess
     if problem is None:
         try:
             with recording(record=False, action="ignore"):
-                problem = prepare(n, mask, K=K)
+                problem = prepare(frames.rotate(n, rotation), mask, K=K)
         except ValueError:
             # (no usable normal to judge by: said, not "?", a user's check)
             guess["likely"] = "cannot tell (no usable normal to judge the frame by)"
@@ -486,7 +503,7 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
         elif away > BACKFACING_FRAME_HINT:
             guess["likely"] = (f"another frame? {away:.0%} of the normals face away from the "
                                "camera (a world-frame export, or channels in BGR order?): see "
-                               "docs/conventions.md")
+                               f"docs/conventions.md; {frames.world_note(rotation is not None)}")
         elif own > frames.FLIP_MIN_CURL and flipped < UNTOLD * own:
             # (a texture artist's y-down detail map, slopes under 1 deg in 8 bits, was called
             # consistent: as read 43.9 % RMS, with --y-down 1.7 %)

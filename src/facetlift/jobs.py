@@ -62,6 +62,13 @@ class Job:
     fov: float | None = None
     orthographic: bool = False
     normal_frame: str | None = None
+    #: Normals in world space: a file of the rotation from world to the camera frame named
+    #: by `normal_frame` (``world_to_camera``, --world-to-camera), or of the camera's pose,
+    #: camera to world (``camera_to_world``, --camera-to-world: Blender's matrix_world),
+    #: transposed (facetlift.io.read_rotation); one of them. A dataset folder's
+    #: world_to_camera.* or camera_to_world.* is used where neither is given.
+    world_to_camera: str | None = None
+    camera_to_world: str | None = None
     #: How the normal map stores its normals: "xyz" (R, G, B) or "xy" (a two-channel map,
     #: BC5 or RG: z rebuilt; facetlift.frames.NORMAL_ENCODINGS).
     normal_encoding: str = "xyz"
@@ -148,6 +155,41 @@ class Input:
     #: file given (--prior, --confidence) or "the folder's <name>"; None without one.
     prior_file: str | None = None
     confidence_file: str | None = None
+    #: The rotation from world to the camera frame of the job's `normal_frame`, for normals
+    #: in world space (None: they are in the camera's frame), the file it came from and the
+    #: field that named it ("world_to_camera" or "camera_to_world": which way it was read).
+    rotation: np.ndarray | None = None
+    rotation_file: str | None = None
+    rotation_as: str | None = None
+
+
+def rotation_field(job: Job) -> str | None:
+    """The field of `job` that gives its rotation file (:data:`facetlift.io.dataset.
+    ROTATION_FIELDS`), or None; a ValueError where it gives both, or something not a path
+    (a batch's template reads it for every item)."""
+    from .io.dataset import ROTATION_FIELDS
+
+    given = [f for f in ROTATION_FIELDS if getattr(job, f, None) is not None]
+    for f in given:
+        if not isinstance(getattr(job, f), (str, os.PathLike)):
+            raise ValueError(f"`{f}` is a file holding the camera's rotation; got "
+                             f"{type(getattr(job, f)).__name__} (an array goes to "
+                             "facetlift.integrate(normals, normal_rotation=R))")
+    if len(given) > 1:
+        raise ValueError("`world_to_camera` and `camera_to_world` give the rotation twice, "
+                         "one the other's inverse: give one of them")
+    return given[0] if given else None
+
+
+def read_rotation(job: Job) -> np.ndarray | None:
+    """The rotation from world to the camera frame that `job`'s own file gives
+    (:func:`rotation_field`, :func:`facetlift.io.read_rotation`), or None."""
+    field_ = rotation_field(job)
+    if field_ is None:
+        return None
+    from .io import read_rotation as read
+
+    return read(getattr(job, field_), camera_to_world=field_ == "camera_to_world")
 
 
 def default_outdir(src: Path) -> Path:
@@ -166,7 +208,8 @@ def input_paths(job: Job) -> list[Path]:
         paths = dataset_files(paths[0], with_prior=job.dataset_prior,
                               with_confidence=job.dataset_confidence)
     paths += [Path(p) for p in (job.mask, job.K, job.prior, job.prior_weight_map,
-                                job.confidence) if p is not None]
+                                job.confidence, job.world_to_camera, job.camera_to_world)
+              if p is not None]
     return paths
 
 
@@ -184,6 +227,8 @@ def read(job: Job) -> Input:
 
     src = job.source
     K = prior = conf = K_file = None
+    rotation = rotation_file = rotation_as = None
+    given_rotation = rotation_field(job)
     files = {"prior": None, "confidence": None}
     field_input = bool(job.gradients)
     folder = not field_input and src.is_dir()  # (a dataset folder may hold its own prior)
@@ -220,8 +265,11 @@ def read(job: Job) -> Input:
                              prior_scale=None if job.prior else _prior_scale(job),
                              with_prior=job.dataset_prior and job.prior is None,
                              with_confidence=job.dataset_confidence and job.confidence is None,
-                             encoding=encoding)
+                             with_rotation=given_rotation is None, encoding=encoding)
         n, m, K = ds["normals"], ds["mask"], ds["K"]
+        if ds["rotation"] is not None:
+            rotation, rotation_file = ds["rotation"], f"the folder's {ds['rotation_file'].name}"
+            rotation_as = ds["rotation_file"].name.split(".")[0]
         prior, conf = ds["prior"], ds["confidence"]
         K_file = ds["K_file"]
         for name in files:  # (named in the summary: a stray confidence.npy changed results
@@ -239,6 +287,13 @@ def read(job: Job) -> Input:
             _unread_beside(src, job)
     if field_input and job.K is not None:
         raise ValueError("`K`: a gradient field is orthographic; --K does not apply")
+    if given_rotation is not None:
+        if field_input:
+            raise ValueError(f"`{given_rotation}`: a gradient field's slopes are of the height "
+                             "over the image plane, with no world frame to turn from; it does "
+                             "not apply")
+        rotation, rotation_file = read_rotation(job), str(getattr(job, given_rotation))
+        rotation_as = given_rotation
     if not field_input and job.gradient_frame != Job.gradient_frame:  # (ignored silently: an
         # audit; a warning, not an error: a batch may mix fields and maps, a review)
         warn(f"`gradient_frame` {job.gradient_frame!r} applies to a gradient field "
@@ -297,7 +352,8 @@ def read(job: Job) -> Input:
                  K_file=None if K_file is None or job.K is not None or job.fov is not None
                  else _camera_name(K_file, src),
                  prior_file=files["prior"] if prior is not None else None,
-                 confidence_file=files["confidence"] if conf is not None else None)
+                 confidence_file=files["confidence"] if conf is not None else None,
+                 rotation=rotation, rotation_file=rotation_file, rotation_as=rotation_as)
 
 
 def _beside_tail(job: Job, name: str) -> str:
@@ -325,6 +381,20 @@ def _beside_file(job: Job, name: str):
         raise ValueError(f"{e}{tail}") from None
 
 
+def rotation_record(job: Job, inp: Input) -> dict | None:
+    """The record's ``normal_rotation``: the rotation from world to the camera frame the
+    normals were read in (``frame``, an axis string), the file it came from (``file``: the
+    path given, or "the folder's NAME") and which way the file held it (``given_as``:
+    "world_to_camera", or "camera_to_world" transposed); None without one."""
+    if inp.rotation is None:
+        return None
+    from . import frames
+
+    return {"world_to_camera": np.asarray(inp.rotation).tolist(),
+            "frame": frames.axis_string(job.normal_frame), "file": inp.rotation_file,
+            "given_as": inp.rotation_as}
+
+
 def camera_source(job: Job, inp: Input) -> str:
     """Where the camera of `job` read as `inp` (:func:`read`) came from, as the summaries
     name it: "orthographic" without one, "K" (given), "fov D deg", or "the folder's K.txt"
@@ -344,11 +414,11 @@ def _camera_name(path: Path, folder: Path) -> str:
 
 def _beside_dataset_files(src: Path, job: Job, own_mask: bool = False) -> None:
     """Warn where a normal map given by its path lies in a dataset folder (``normal_map.*``
-    beside ``K.txt`` or ``mask.*``, or DiLiGenT's ``Normal_gt.mat`` beside ``mask.png`` and
-    with a camera file there or in its parent) whose files the job does not use: only the
-    folder as the input reads them (a user's ``integrate bear/normal_map.png`` ran
-    orthographically on the valid normals, without the folder's K and mask, and no word; an
-    audit). Not the mask where the map has its own (`own_mask`: a .mat file's)."""
+    beside ``K.txt``, ``mask.*`` or a rotation file, or DiLiGenT's ``Normal_gt.mat`` beside
+    ``mask.png`` and with a camera file there or in its parent) whose files the job does not
+    use: only the folder as the input reads them (a user's ``integrate bear/normal_map.png``
+    ran orthographically on the valid normals, without the folder's K and mask, and no word;
+    an audit). Not the mask where the map has its own (`own_mask`: a .mat file's)."""
     from .io.dataset import DILIGENT_NORMALS, _find, camera_files
     from .io.images import MASK_FORMATS
 
@@ -372,6 +442,11 @@ def _beside_dataset_files(src: Path, job: Job, own_mask: bool = False) -> None:
             pass
     if mpath is not None:
         unused.append(f"{mpath.name} (its mask)")
+    turns = rotation_files(unread_files(folder, None, mask=False, camera=False,
+                                        rotation=rotation_field(job) is None))
+    if turns:
+        unused.append(f"{turns[0]} (its rotation: the world-space normals are read as the "
+                      "camera's)")
     if unused:
         from .io.dataset import normals_file
 
@@ -387,8 +462,10 @@ def _beside_dataset_files(src: Path, job: Job, own_mask: bool = False) -> None:
                f"the folder as the input reads {them} with its {own.name}, not this map")
         # (the flags of the files named only: '--K / --mask' for a lone mask.png, a user's
         # check)
-        flags = " / ".join(flag for flag, given in (("--K", camera),
-                                                     ("--mask", mpath is not None)) if given)
+        flags = " / ".join(flag for flag, given in (
+            ("--K", camera), ("--mask", mpath is not None),
+            (f"--{Path(turns[0]).stem.replace('_', '-')}" if turns else "", bool(turns)))
+            if given)
         warn(f"{src} lies in a dataset folder whose {' and '.join(unused)} this run does not "
              f"read: {how}; or give {them} with {flags}", UserWarning)
 
@@ -401,13 +478,15 @@ def camera_unset(job: Job) -> bool:
 
 
 def unread_files(folder: Path, stem: str | None, *, mask: bool, camera: bool,
-                 prior: bool = False, confidence: bool = False) -> list[str]:
+                 prior: bool = False, confidence: bool = False,
+                 rotation: bool = False) -> list[str]:
     """The names of the files in `folder` that a plain map file named `stem` (None: any map
     of the folder) would be read with if its folder were a dataset, or if it were a batch
     item, but that ``integrate`` does not read: ``mask.*`` and ``NAME_mask.*`` where
     `mask`, ``K.txt`` where `camera`, a batch item's ``NAME_prior_depth.*`` and
-    ``NAME_confidence.*`` where `prior` and `confidence` (each only where the flags do not
-    give one)."""
+    ``NAME_confidence.*`` where `prior` and `confidence`, a dataset folder's rotation file
+    (``world_to_camera.*``, ``camera_to_world.*``) where `rotation` (each only where the
+    flags do not give one)."""
     from .batch import companions
     from .io.dataset import _find
     from .io.images import MASK_FORMATS
@@ -433,7 +512,20 @@ def unread_files(folder: Path, stem: str | None, *, mask: bool, camera: bool,
                 found.append(p.name)
     if camera and (folder / "K.txt").is_file():
         found.append("K.txt")
+    if rotation:
+        from .io.dataset import ROTATION_FIELDS, ROTATION_FORMATS
+
+        found += [f"{name}{ext}" for name in ROTATION_FIELDS for ext in ROTATION_FORMATS
+                  if (folder / f"{name}{ext}").is_file()]
     return found
+
+
+def rotation_files(names) -> list[str]:
+    """The rotation files (``world_to_camera.*``, ``camera_to_world.*``) among the file
+    `names` (:func:`unread_files`)."""
+    from .io.dataset import ROTATION_FIELDS
+
+    return [n for n in names if Path(n).stem in ROTATION_FIELDS]
 
 
 def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
@@ -446,18 +538,21 @@ def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
 
     unread = unread_files(src.parent, src.stem, mask=job.mask is None and not own_mask,
                           camera=camera_unset(job), prior=job.prior is None,
-                          confidence=job.confidence is None)
+                          confidence=job.confidence is None,
+                          rotation=rotation_field(job) is None)
     if not unread:
         return
+    turns = rotation_files(unread)
     # (a batch item's own prior and confidence, read by batch, not by integrate: a review)
     from .batch import companions
 
     stems = {f"{src.stem}{suffix}": f"--{kind}" for kind, suffix, _ in companions()}
     paired = {n: stems[Path(n).stem] for n in unread if Path(n).stem in stems}
     flags = " / ".join(f for f, given in (
-        ("--mask", any(n != "K.txt" and n not in paired for n in unread)),
+        ("--mask", any(n != "K.txt" and n not in paired and n not in turns for n in unread)),
         ("--K", "K.txt" in unread), ("--prior", "--prior" in paired.values()),
-        ("--confidence", "--confidence" in paired.values())) if given)
+        ("--confidence", "--confidence" in paired.values()),
+        (f"--{Path(turns[0]).stem.replace('_', '-')}" if turns else "", bool(turns))) if given)
     folder = src.parent
     own = [folder / f"normal_map{ext}" for ext in NORMAL_READ_FORMATS
            if (folder / f"normal_map{ext}").is_file()]
@@ -470,11 +565,15 @@ def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
          f"normal-map file's mask and camera come only from --mask and --K"
          + (", its prior and confidence from --prior and --confidence (facetlift batch "
             "pairs NAME_prior_depth.* and NAME_confidence.* with NAME.*)" if paired else "")
+         + (", the rotation of world-space normals from --world-to-camera or "
+            "--camera-to-world" if turns else "")
          + f" ({why}); give "
          f"{flags} to use "
          f"{'it' if len(unread) == 1 else 'them'}"
          + (" (without K.txt's camera the map is integrated orthographically)"
-            if "K.txt" in unread else ""), UserWarning)
+            if "K.txt" in unread else "")
+         + (f" (without {turns[0]} its normals are read as the camera's)" if turns else ""),
+         UserWarning)
 
 
 def _from_folder(message: str, job: Job, inp: Input) -> str:
@@ -700,11 +799,16 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         depth_prior = opts.pop("prior", None) if inp.prior is None else inp.prior
         t1 = time.perf_counter()
         announce(progress, "integrating")
+        # (the normals were read in the job's frame already: the rotation goes from world
+        # to that frame, and is given to integrate as one to facetlift's)
+        turn = (None if inp.rotation is None
+                else frames.rotation_in_facetlift(inp.rotation, job.normal_frame))
         with frames.read_in(frames.GRADIENT_FIELD if inp.field else job.normal_frame):
             try:
                 surface = facetlift.integrate(
                     inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size,
                     K=inp.K, backfacing=job.backfacing, outlier_eps=job.outlier_eps,
+                    normal_rotation=turn,
                     prior=depth_prior,
                     prior_weight=inp.prior_weight if inp.prior is not None else None,
                     confidence=inp.confidence, prior_blur=job.prior_blur,
@@ -760,6 +864,9 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         # without asking)
         "prior_file": inp.prior_file,
         "confidence_file": inp.confidence_file,
+        # (normals in world space: the rotation to the camera frame of --normal-frame, and
+        # its file; None for camera-frame normals)
+        "normal_rotation": rotation_record(job, inp),
         # (the depth of height.png's 0 and 65535, as io.write_height scales it)
         "depth_range": _depth_range(surface, job.height_range if "height" in save else None),
         "mean_deviation": jsonable(sinfo.get("mean_deviation")),

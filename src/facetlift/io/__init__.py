@@ -9,6 +9,7 @@ what              formats                                library
 normal maps       PNG 8/16 bit, TIFF, OpenEXR, ``.npy``  imagecodecs (libpng), tifffile, OpenEXR
 masks             PNG, TIFF, ``.npy``                    imagecodecs, tifffile
 intrinsics ``K``  text, 3 x 3                            numpy
+rotations         text, ``.npy``, JSON; 3x3, 3x4, 4x4    numpy
 depth maps        ``.npy``, OpenEXR, TIFF, ``.npz``      numpy, OpenEXR, tifffile
 height maps       PNG 16 bit, OpenEXR                    imagecodecs, OpenEXR
 meshes            PLY (binary), OBJ; quads or triangles  meshio
@@ -41,7 +42,7 @@ Modules: :mod:`~facetlift.io.images` (normal maps, masks, depth maps),
 """
 
 from .atomic import OutputSet, atomic_path, sweep
-from .dataset import read_dataset, read_K
+from .dataset import read_dataset, read_K, read_rotation
 from .images import (
     DEPTH_FORMATS,
     ENCODED_LENGTH_RANGE,
@@ -77,6 +78,7 @@ __all__ = [
     "read_dataset",
     "read_depth",
     "read_prior",
+    "read_rotation",
     "read_weights",
     "read_mask",
     "read_normals",

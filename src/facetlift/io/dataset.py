@@ -138,6 +138,142 @@ def _K_text(p: Path):
     return np.loadtxt(rows, dtype=float, ndmin=2)
 
 
+#: The flags (fields) that give a rotation file, and which way it turns: ``world_to_camera``
+#: holds the rotation from world to the camera frame; ``camera_to_world`` the camera's pose
+#: (Blender's ``matrix_world``), transposed when read (:func:`read_rotation`).
+ROTATION_FIELDS = ("world_to_camera", "camera_to_world")
+
+#: The extensions of a dataset folder's rotation file, ``world_to_camera.*`` or
+#: ``camera_to_world.*`` (:func:`read_dataset`).
+ROTATION_FORMATS = (".txt", ".json", ".npy")
+
+#: The keys of a JSON object's matrix that say which way it turns (:func:`read_rotation`):
+#: a camera-to-world key in a file given as world-to-camera, or the reverse, is refused.
+#: ``transform_matrix`` is a NeRF ``transforms.json`` frame's pose (camera to world).
+_C2W_KEYS = ("camera_to_world", "matrix_world", "c2w", "cam2world", "transform_matrix")
+_W2C_KEYS = ("world_to_camera", "w2c", "world2cam")
+#: ... and the keys that say nothing of the direction but name a rotation.
+_ROTATION_KEYS = ("r", "rotation")
+
+#: The shapes a rotation file may hold: a rotation, or a pose whose upper-left 3x3 is one.
+_POSE_SHAPES = {9: (3, 3), 12: (3, 4), 16: (4, 4)}
+
+
+def read_rotation(path, *, camera_to_world: bool = False, arg: str | None = None
+                  ) -> np.ndarray:
+    """Read a camera's rotation for normals given in world space
+    (:func:`facetlift.integrate`'s ``normal_rotation``), as the rotation from world to the
+    camera frame.
+
+    The file holds a 3x3 rotation, or a 3x4 or 4x4 pose of which the upper-left 3x3 is used:
+    as text (three or four rows; numbers separated by spaces, tabs or commas, ``#``
+    comments; or the 9, 12 or 16 numbers on one line, row by row), as a ``.npy`` array, or as
+    JSON: a nested list, or an object with one matrix-valued key (``matrix_world``, ``R``,
+    ``rotation``, ``world_to_camera``, ``camera_to_world``, ...; where it has several, the one
+    that names a rotation, else an error naming them).
+
+    Parameters
+    ----------
+    path : str or Path
+    camera_to_world : bool
+        The file holds the camera's pose, camera to world (Blender's ``matrix_world``, a NeRF
+        ``transform_matrix``): its rotation is transposed. A JSON key that says the other way
+        (``matrix_world`` read as world to camera, ``world_to_camera`` read as camera to
+        world) is refused.
+    arg : str, optional
+        The argument named in the errors (default ``camera_to_world`` or
+        ``world_to_camera``: the command line names the flag).
+
+    Raises
+    ------
+    ValueError
+        A missing or unparsable file, another count of numbers, or a matrix that is no rotation
+        (:func:`facetlift.frames.check_rotation`), naming `arg` and the file.
+    """
+    from ..frames import check_rotation
+
+    arg = arg or ROTATION_FIELDS[int(bool(camera_to_world))]
+    p = _existing(path, arg)
+    what = ("a 3x3 rotation or a 3x4 / 4x4 pose (three or four rows of numbers, or 9, 12 or 16 "
+            "numbers), a .npy array of one, or JSON (a nested list, or an object with one "
+            "matrix such as \"R\" or \"matrix_world\")")
+    try:
+        if p.suffix.lower() == ".npy":
+            m = np.load(p, allow_pickle=False)
+        else:
+            m = _rotation_text(p, arg, camera_to_world)
+        m = np.asarray(m, dtype=float)
+    except _KError as e:  # (the file's own message: its keys)
+        raise ValueError(str(e)) from None
+    except Exception as e:
+        reason = _loadtxt_reason(e) if p.suffix.lower() != ".npy" else "not a .npy file of numbers"
+        raise ValueError(f"`{arg}`: cannot read {p} as a matrix ({reason}): give {what}"
+                         ) from None
+    if m.ndim <= 2 and m.size in _POSE_SHAPES and m.shape != _POSE_SHAPES[m.size] and (
+            m.ndim == 1 or 1 in m.shape):
+        m = m.reshape(_POSE_SHAPES[m.size])  # (the numbers on one line, row by row)
+    try:
+        R = check_rotation(m, arg)
+    except ValueError as e:  # (the file named after the flag: which of several it was)
+        text = str(e)
+        head = f"`{arg}`"
+        raise ValueError(f"{head} {p}{text[len(head):]}" if text.startswith(head)
+                         else f"{head}: {p}: {text}") from None
+    return R.T.copy() if camera_to_world else R
+
+
+def _rotation_text(p: Path, arg: str, camera_to_world: bool):
+    """The numbers of a text or JSON rotation file (:func:`read_rotation`)."""
+    import json
+
+    text = p.read_text(encoding="utf-8-sig").strip()
+    if not text:
+        raise ValueError("the file is empty")
+    if p.suffix.lower() == ".json" or text[0] in "[{":
+        data = json.loads(text)
+        return _json_matrix(data, p, arg, camera_to_world) if isinstance(data, dict) else data
+    rows = _text_rows(p)
+    if not rows:
+        raise ValueError("no numbers in it, only comments")
+    return np.loadtxt(rows, dtype=float, ndmin=2)
+
+
+def _json_matrix(data: dict, p: Path, arg: str, camera_to_world: bool):
+    """The matrix of a JSON object (:func:`read_rotation`): its one matrix-valued key, or of
+    several the one that names a rotation; a key that names the other direction than `arg`'s
+    is refused (a :class:`_KError`, given as it is)."""
+    def matrix(v):
+        try:
+            a = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            return False
+        return a.shape in _POSE_SHAPES.values() or (a.ndim == 1 and a.size in _POSE_SHAPES)
+
+    found = [k for k, v in data.items() if matrix(v)]
+    named = [k for k in found if str(k).lower() in _C2W_KEYS + _W2C_KEYS + _ROTATION_KEYS]
+    if len(found) == 1:
+        key = found[0]
+    elif len(named) == 1:
+        key = named[0]
+    else:
+        listed = ", ".join(f'"{k}"' for k in (found or list(data))) or "none"
+        raise _KError(
+            f"`{arg}`: {p} must hold one matrix (a key such as \"R\", \"rotation\", "
+            "\"world_to_camera\", \"camera_to_world\" or \"matrix_world\"); "
+            + (f"it holds several, {listed}: which one is the camera's rotation? Keep that one"
+               if found else f"it holds no 3x3, 3x4 or 4x4 matrix (keys: {listed})"))
+    low = str(key).lower()
+    other = _W2C_KEYS if camera_to_world else _C2W_KEYS
+    if low in other:
+        flag = "--world-to-camera" if camera_to_world else "--camera-to-world"
+        raise _KError(
+            f"`{arg}`: {p} holds \"{key}\", which turns "
+            + ("world to camera" if camera_to_world else "camera to world")
+            + f", but was given as the other direction: give it with {flag} "
+            f"(facetlift.io.read_rotation(path, camera_to_world={not camera_to_world}))")
+    return data[key]
+
+
 def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
     """The folder's one ``stem.<ext>`` file, or None; a ValueError naming `folder` when it has
     several (which one was meant?) or one that is not a file (a folder named K.txt was
@@ -173,6 +309,7 @@ def _dataset_formats() -> dict[str, tuple[str, ...]]:
 
     return {"normal_map": NORMAL_READ_FORMATS, "Normal_gt": (".mat",), "mask": MASK_FORMATS,
             "K": (".txt",), "Calib_Results": (".mat",),
+            **{name: ROTATION_FORMATS for name in ROTATION_FIELDS},
             "prior_depth": PRIOR_FORMATS + PRIOR_POINT_FORMATS, "confidence": PRIOR_FORMATS}
 
 
@@ -268,7 +405,7 @@ def _other_maps(f: Path) -> list[str]:
     map to integrate)."""
     from ..jobs import OUTPUT_STEMS
 
-    other = {"mask", "prior_depth", "confidence"} | OUTPUT_STEMS
+    other = {"mask", "prior_depth", "confidence", *ROTATION_FIELDS} | OUTPUT_STEMS
     cameras = {name.lower() for name in CAMERA_FILES}
     out = []
     for p in sorted(f.iterdir()):
@@ -306,7 +443,8 @@ def one_channel(p: Path) -> bool:
 
 def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                  prior_scale: float | None = None, with_prior: bool = True,
-                 with_confidence: bool = True, encoding: str = "xyz") -> dict:
+                 with_confidence: bool = True, with_rotation: bool = True,
+                 encoding: str = "xyz") -> dict:
     """Read a folder in the BiNI / DiLiGenT layout.
 
     The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
@@ -327,14 +465,19 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     as its points with their weights where it has a weight column; docs/fusion.md) are
     picked up like ``K.txt``; `prior_scale` is that of :func:`~facetlift.io.read_prior`
     (required for a 16-bit PNG prior); `with_prior` and `with_confidence` False leave those
-    files unread (``None``).
+    files unread (``None``). For normals in world space, ``world_to_camera.*`` (the rotation
+    from world to the camera frame `frame` names) or ``camera_to_world.*`` (the camera's
+    pose, Blender's ``matrix_world``: transposed), as ``.txt``, ``.json`` or ``.npy``
+    (:func:`read_rotation`), are picked up like ``K.txt`` too (one of them; `with_rotation`
+    False leaves them unread).
 
     Returns
     -------
     dict
         ``normals`` (H, W, 3) float64, ``mask`` (H, W) bool (the mask file, else the normal
         map's alpha channel, else None), ``K`` (3, 3) or None, ``K_file`` the camera file
-        it came from (a Path) or None, ``prior`` (H, W) depth with
+        it came from (a Path) or None, ``rotation`` (3, 3) from world to the camera frame
+        or None and ``rotation_file`` (a Path) or None, ``prior`` (H, W) depth with
         NaN where unknown, or None, and ``confidence`` (H, W) or None; ``prior_file`` and
         ``confidence_file`` the files these came from (Paths) or None. The command line
         uses them (``facetlift integrate FOLDER``, which names the files in its summary);
@@ -364,6 +507,7 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
     kpaths = camera_files(f)
     K = _read_camera(kpaths)
+    rotation, rpath = _read_folder_rotation(f) if with_rotation else (None, None)
     from ..problem import prior_image, prior_samples
     from .images import read_prior, read_weights
 
@@ -404,7 +548,25 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                              f"{extra[name].shape[1]} (HxW) but the normal map is {H}x{W}"
                              f"{hint}; {skip}")
     return {"normals": normals, "mask": mask, "K": K,
-            "K_file": kpaths[0] if kpaths else None, **extra}
+            "K_file": kpaths[0] if kpaths else None, "rotation": rotation,
+            "rotation_file": rpath, **extra}
+
+
+def _read_folder_rotation(f: Path) -> tuple[np.ndarray | None, Path | None]:
+    """A dataset folder's rotation for normals in world space (:func:`read_dataset`), from
+    world to the camera frame, and its file; ``(None, None)`` without one. Two of them
+    (``world_to_camera.txt`` beside ``camera_to_world.txt``) are refused: which one was
+    meant?"""
+    found = [(name, p) for name in ROTATION_FIELDS
+             if (p := _find(f, name, ROTATION_FORMATS)) is not None]
+    if len(found) > 1:
+        raise ValueError(f"`folder`: {f} holds {' and '.join(p.name for _, p in found)}, each "
+                         "a rotation of the camera: keep one (a rotation given with "
+                         "--world-to-camera or --camera-to-world replaces them)")
+    if not found:
+        return None, None
+    name, p = found[0]
+    return read_rotation(p, camera_to_world=name == "camera_to_world"), p
 
 
 def _no_normals(f: Path) -> str:
