@@ -160,6 +160,31 @@ def test_placed_oracle_removes_the_pieces_offsets(name):
     assert err > 5.0 and placed < 0.05 and dev < 0.1 and seconds > 0
 
 
+@pytest.mark.parametrize("name", ["steps", "occluder"])
+def test_oracle_takes_the_occluding_sides_from_the_truth(name, monkeypatch):
+    """The split solve leaves each piece an arbitrary constant; the occlusion rule reads each
+    pair's occluding side from the gaps it starts from, so the oracle starts it from the
+    true placement: any other constants per piece give the same oracle (from the solve's own,
+    the sides were a coin flip and the oracle no floor)."""
+    from facetlift.bench import discontinuities as D
+    from facetlift.methods.dgp import split as dgp_split
+
+    gt = synthetic.analytic(name, 64)
+    base = D.oracle(gt, gt.normals)
+    solve = dgp_split.solve_pieces
+
+    def shifted(mesh, *a, **kw):  # every piece moved by a large constant of either sign
+        z, info = solve(mesh, *a, **kw)
+        rng = np.random.default_rng(mesh.n_pieces)
+        return z + rng.choice([-50.0, 50.0], mesh.n_pieces)[mesh.piece], info
+
+    monkeypatch.setattr(dgp_split, "solve_pieces", shifted)
+    other = D.oracle(gt, gt.normals)
+    assert other[0] == pytest.approx(base[0], rel=1e-9, abs=1e-12)
+    assert other[3] == pytest.approx(base[3], rel=1e-9, abs=1e-12)
+    assert other[1] == pytest.approx(base[1], rel=1e-5, abs=1e-6)  # (angles: rounding)
+
+
 def test_placed_oracle_ignores_missing_ground_truth(monkeypatch):
     """Ground truth missing on 60 % of the pixels (the jumps cut as before): each piece is
     still moved by the median of its known differences, not held by the missing ones."""
