@@ -381,3 +381,31 @@ def test_batch_forwards_the_rotation_and_names_a_rotation_beside_plain_maps(view
     code, _, err = run(capsys, "batch", maps, "-o", d / "b3", "--world-to-camera",
                        d / "bad.txt")
     assert code == 1 and "--world-to-camera" in err and not (d / "b3").exists()
+
+
+def test_the_outputs_that_carry_normals_get_the_camera_frame_ones(views, capsys, monkeypatch):
+    """-s points writes each point's normal beside its camera-frame coordinates, and the report
+    measures the deviation from the normals integrated: both the turned ones, not the world
+    normals as read (points in the camera frame with world normals, a deviation panel of
+    the rotation's angle)."""
+    import meshio
+
+    d, _ = views
+    seen = []
+
+    def report(path, surface, normals=None, **kw):  # (no matplotlib needed: what it is given)
+        seen.append(np.array(normals))
+        path.write_bytes(b"")
+        return path
+
+    monkeypatch.setattr(io, "write_report", report)
+    for name, flags in (("cam", []), ("w", ["--camera-to-world", d / "matrix_world.txt"])):
+        src = d / ("cam.npy" if name == "cam" else "world.npy")
+        code, _, err = run(capsys, "integrate", src, *flags, "-s", "points", "-s", "report",
+                           "-o", d / name)
+        assert code == 0, err
+    clouds = [meshio.read(d / o / "points.ply") for o in ("cam", "w")]
+    np.testing.assert_allclose(clouds[1].points, clouds[0].points, atol=1e-9)
+    for k in ("nx", "ny", "nz"):
+        np.testing.assert_allclose(clouds[1].point_data[k], clouds[0].point_data[k], atol=1e-6)
+    np.testing.assert_allclose(seen[1], seen[0], atol=1e-12)

@@ -827,9 +827,12 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
             _strict_check(caught, surface)
         t2 = time.perf_counter()
         announce(progress, "writing outputs")
+        # (the normals integrated, in the camera frame: the points' normals and the report's
+        # deviation are of them, not of world-space ones as read)
+        used = frames.rotate(inp.normals, turn)
         for kind, name in zip(save, names, strict=True):
             try:
-                _write(surface, kind, out.path(name), inp.normals, job.triangles,
+                _write(surface, kind, out.path(name), used, job.triangles,
                        job.output_frame, job.height_range)
             except OSError as e:  # (say which and where: the file written is a staging one)
                 if e.errno is None:
@@ -1012,9 +1015,9 @@ def _write(surface, kind: str, path: Path, normals, triangles, frame=None,
 
 
 def _point_normals(surface, normals):
-    """The input normals at :meth:`Surface.points`' pixels (facetlift's frame, as read: a
-    gradient field's from its slopes), unit length; None where they are not an (H, W, 3) map
-    of the surface's shape."""
+    """The input normals at :meth:`Surface.points`' pixels (facetlift's camera frame, as
+    integrated: world-space ones turned by their rotation, a gradient field's from its
+    slopes), unit length; None where they are not an (H, W, 3) map of the surface's shape."""
     n = None if normals is None else np.asarray(normals, dtype=float)
     if n is None or n.shape != surface.shape + (3,):
         return None
