@@ -409,3 +409,28 @@ def test_the_outputs_that_carry_normals_get_the_camera_frame_ones(views, capsys,
     for k in ("nx", "ny", "nz"):
         np.testing.assert_allclose(clouds[1].point_data[k], clouds[0].point_data[k], atol=1e-6)
     np.testing.assert_allclose(seen[1], seen[0], atol=1e-12)
+
+
+def test_a_rotation_npy_beside_maps_is_no_batch_item(views, capsys):
+    """world_to_camera.npy beside a folder's maps (a .npy, as the maps are) is a rotation
+    file, as K.txt is a camera file: no item, and not skipped as 'a one-channel file that
+    pairs with no normal map' (a depth map or grey image), in a folder or a pattern, and no
+    subfolder of maps for it alone."""
+    d, R = views
+    maps = d / "maps"
+    maps.mkdir()
+    np.save(maps / "v0.npy", np.load(d / "world.npy"))
+    np.save(maps / "world_to_camera.npy", R)
+    for spec in (maps, maps / "*.npy"):
+        out = d / f"b{len(str(spec))}"
+        code, _, err = run(capsys, "batch", spec, "-o", out, "-s", "npy", "--workers", "1",
+                           "--world-to-camera", maps / "world_to_camera.npy")
+        assert code == 0, err
+        assert "one-channel" not in err and "world_to_camera.npy" not in err, err
+        assert [json.loads(line)["name"] for line in
+                (out / "batch.jsonl").read_text().splitlines()] == ["v0"]
+    (maps / "cams").mkdir()  # (a subfolder holding a rotation alone holds no maps)
+    (maps / "world_to_camera.npy").rename(maps / "cams" / "world_to_camera.npy")
+    code, _, err = run(capsys, "batch", maps, "-o", d / "bt", "-s", "npy", "--workers", "1",
+                       "--world-to-camera", maps / "cams" / "world_to_camera.npy")
+    assert code == 0 and "subfolder" not in err, err

@@ -84,7 +84,8 @@ def items(inputs, *, list_file=None) -> list[Item]:
     ``a_npy``), and what still collides gets ``-2``, ``-3`` ... A dataset folder is named
     after the folder (DiLiGenT's ``bearPNG/``, not its ``Normal_gt.mat``: an audit's objects
     came out as ``Normal_gt``, ``Normal_gt-2`` ...), and a folder's camera file
-    (``Calib_Results.mat``, :data:`facetlift.io.dataset.CAMERA_FILES`) is no item unless
+    (``Calib_Results.mat``, :data:`facetlift.io.dataset.CAMERA_FILES`) or rotation file
+    (``world_to_camera.npy``, :func:`facetlift.io.dataset.is_rotation_file`) is no item unless
     named explicitly. Paths are made absolute but
     not resolved: two links to one file are two items.
 
@@ -97,7 +98,7 @@ def items(inputs, *, list_file=None) -> list[Item]:
     ValueError
         No normal map found at all (every input missing, or none holds a map).
     """
-    from .io.dataset import CAMERA_FILES, is_dataset, one_channel
+    from .io.dataset import CAMERA_FILES, is_dataset, is_rotation_file, one_channel
     from .io.images import MASK_FORMATS, NORMAL_READ_FORMATS
 
     if isinstance(inputs, (str, os.PathLike)):  # (one input: a str was read letter by letter)
@@ -159,6 +160,8 @@ def items(inputs, *, list_file=None) -> list[Item]:
         if key in seen or (_is_mask_file(p, NORMAL_READ_FORMATS, files) and (
                 not explicit or given.intersection(_maps_of(p, NORMAL_READ_FORMATS, files)))):
             continue
+        if not explicit and is_rotation_file(p):  # (world_to_camera.npy beside the maps:
+            continue  # the camera's, as K.txt; _unused_folder_files names it, a review)
         if not explicit and p.stem.endswith("_mask") and one_channel(p):
             lone.append(p.name)  # (a grey X_mask.* without its map X.*: a mask, no item)
             continue
@@ -269,9 +272,9 @@ def _own_files(found: list[Item], template: Job) -> list[Item]:
 
 def _holds_maps(folder: Path) -> bool:
     """Whether `folder` (not hidden, no facetlift output folder) holds a file that may be a
-    normal map: an extension of one, and neither a mask nor an output's name; False where it
-    cannot be listed."""
-    from .io.dataset import CAMERA_FILES
+    normal map: an extension of one, and neither a mask, a camera or rotation file nor an
+    output's name; False where it cannot be listed."""
+    from .io.dataset import CAMERA_FILES, is_rotation_file
     from .io.images import NORMAL_READ_FORMATS
 
     if folder.name.startswith(".") or folder.name.endswith("_facetlift"):
@@ -286,7 +289,7 @@ def _holds_maps(folder: Path) -> bool:
         return False
     return any(Path(n).suffix.lower() in kinds and Path(n).stem not in OUTPUT_STEMS
                and Path(n).stem.lower() != "mask" and _companion(Path(n).stem) is None
-               and n not in CAMERA_FILES for n in names)
+               and n not in CAMERA_FILES and not is_rotation_file(n) for n in names)
 
 
 def _stem(p: Path) -> str:

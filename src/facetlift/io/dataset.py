@@ -147,6 +147,14 @@ ROTATION_FIELDS = ("world_to_camera", "camera_to_world")
 #: ``camera_to_world.*`` (:func:`read_dataset`).
 ROTATION_FORMATS = (".txt", ".json", ".npy")
 
+def is_rotation_file(path) -> bool:
+    """Whether `path` is named as a rotation file (``world_to_camera.*`` or
+    ``camera_to_world.*`` of :data:`ROTATION_FORMATS`): a camera's, as ``K.txt`` is, and no
+    normal map even where it is a ``.npy`` beside maps (:func:`facetlift.batch.items`)."""
+    p = Path(path)
+    return p.stem in ROTATION_FIELDS and p.suffix.lower() in ROTATION_FORMATS
+
+
 #: The keys of a JSON object's matrix that say which way it turns (:func:`read_rotation`):
 #: a camera-to-world key in a file given as world-to-camera, or the reverse, is refused.
 #: ``transform_matrix`` is a NeRF ``transforms.json`` frame's pose (camera to world).
