@@ -434,3 +434,28 @@ def test_a_rotation_npy_beside_maps_is_no_batch_item(views, capsys):
     code, _, err = run(capsys, "batch", maps, "-o", d / "bt", "-s", "npy", "--workers", "1",
                        "--world-to-camera", maps / "cams" / "world_to_camera.npy")
     assert code == 0 and "subfolder" not in err, err
+
+
+def test_a_transposed_pose_is_refused_not_taken_for_its_inverse(sphere, tmp_path):
+    """A 4x4 pose stored column by column (OpenGL, glm, three.js's matrix.elements, a
+    flattened column-major array) has its translation in the bottom row: read row by row its
+    upper-left 3x3 is the rotation's inverse, a rotation too, which would turn the normals the
+    wrong way without a word where the facing check happens to pass. A 4x4 whose bottom row
+    is not 0 0 0 1 is no pose."""
+    n, mask = sphere
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = random_rotation(4), [0.5, -1.0, 4.0]
+    with pytest.raises(ValueError, match=r"`normal_rotation`: a 4x4 pose's bottom row is "
+                                         r"0 0 0 1; got \[0\.5, -1, 4, 1\]: .*column by "
+                                         r"column.*transpose"):
+        facetlift.integrate(n, mask, normal_rotation=pose.T)
+    odd = pose.copy()
+    odd[3] = [0.0, 0.0, 1.0, 0.0]
+    with pytest.raises(ValueError, match=r"bottom row is 0 0 0 1; got \[0, 0, 1, 0\]: "
+                                         r"it is no pose"):
+        facetlift.integrate(n, mask, normal_rotation=odd)
+    (tmp_path / "three.txt").write_text(" ".join(f"{v:.17g}" for v in pose.T.ravel()))
+    with pytest.raises(ValueError, match=r"`camera_to_world` \S+three.txt: a 4x4 pose's "
+                                         "bottom row"):
+        io.read_rotation(tmp_path / "three.txt", camera_to_world=True)
+    assert np.allclose(frames.check_rotation(pose), pose[:3, :3])  # (the pose as it is)

@@ -265,9 +265,11 @@ def check_rotation(matrix, name: str = "normal_rotation") -> np.ndarray:
     Raises
     ------
     ValueError
-        Another shape, non-finite or non-numeric entries, a matrix that is not orthonormal
-        (within :data:`ROTATION_TOLERANCE`: a scaled camera's pose, a projection matrix) or a
-        reflection (determinant -1), each naming `name` and what was found.
+        Another shape, non-finite or non-numeric entries, a 4x4 whose bottom row is not
+        0 0 0 1 (a pose written column by column: the inverse rotation, said so), a matrix
+        that is not orthonormal (within :data:`ROTATION_TOLERANCE`: a scaled camera's pose, a
+        projection matrix) or a reflection (determinant -1), each naming `name` and what was
+        found.
     """
     try:
         m = np.asarray(matrix, dtype=float)
@@ -282,6 +284,19 @@ def check_rotation(matrix, name: str = "normal_rotation") -> np.ndarray:
     if not np.isfinite(R).all():
         raise ValueError(f"`{name}` has non-finite entries in its rotation (the upper-left "
                          f"3x3): {R.tolist()}")
+    unit = np.array([0.0, 0.0, 0.0, 1.0])
+    if m.shape == (4, 4) and not np.allclose(m[3], unit, rtol=0, atol=ROTATION_TOLERANCE):
+        # (a pose stored column by column, read row by row: its 3x3 is the inverse rotation,
+        # a rotation too, which nothing after this would catch)
+        got = ", ".join(f"{v:g}" for v in m[3])
+        raise ValueError(
+            f"`{name}`: a 4x4 pose's bottom row is 0 0 0 1; got [{got}]: "
+            + ("its last column is 0 0 0 1, so the pose was written column by column (as "
+               "OpenGL, glm and three.js's matrix.elements store it) and read row by row: "
+               "transpose it (its upper-left 3x3 as read is the inverse rotation)"
+               if np.allclose(m[:, 3], unit, rtol=0, atol=ROTATION_TOLERANCE) else
+               "it is no pose (a projection matrix?): give the camera's rotation, or its "
+               "pose with the translation in the last column"))
     off = float(np.abs(R @ R.T - np.eye(3)).max())
     if off > ROTATION_TOLERANCE:
         s = np.linalg.svd(R, compute_uv=False)
