@@ -459,3 +459,18 @@ def test_a_transposed_pose_is_refused_not_taken_for_its_inverse(sphere, tmp_path
                                          "bottom row"):
         io.read_rotation(tmp_path / "three.txt", camera_to_world=True)
     assert np.allclose(frames.check_rotation(pose), pose[:3, :3])  # (the pose as it is)
+
+
+@pytest.mark.parametrize("name", ["sphere", "vase"])
+def test_a_world_map_that_a_channel_swap_seems_to_mend_is_asked_about_too(name):
+    """A Blender camera looking along world X (Z up), tilted a little: its world-space Normal
+    pass read as a camera-frame map faces away on about half its pixels, and the reversed
+    channel order (z, y, x) happens to face the viewer, so the error offered 'BGR order'
+    alone, a frame whose surface has x and y swapped, and never the rotation."""
+    gt = synthetic.analytic(name, 48)
+    a = np.radians(10.0)
+    tilt = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    c2w = np.array([[0.0, 0, 1], [1, 0, 0], [0, 1, 0]]) @ tilt  # (camera x, y, z in world)
+    error, _ = run_integrate(gt.normals @ c2w.T, gt.mask)
+    assert error is not None and "channels in another order" in error
+    assert "--world-to-camera FILE or --camera-to-world FILE" in error

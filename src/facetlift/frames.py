@@ -892,8 +892,9 @@ def _swapped_orders(frame, v: np.ndarray) -> str | None:
 
 #: Where the normals of a map that faces away would still face away by more than this share
 #: with z negated (as every frame a hint names for a camera-frame map does; prepare's
-#: :data:`facetlift.problem.BACKFACING_FRAME_HINT`), and no channel order explains them, the
-#: hint asks about world-space normals (:func:`world_note`).
+#: :data:`facetlift.problem.BACKFACING_FRAME_HINT`), the hint asks about world-space normals
+#: (:func:`world_note`); so it does after a channel order that faces them (a world-space map
+#: seen along a world axis is one, its channels reversed).
 WORLD_AWAY = 0.05
 
 
@@ -904,15 +905,15 @@ def facing_hint(frame, v: np.ndarray | None = None, rotated: bool = False) -> st
     reversed channel order first (an audit: an OpenCV-frame map saved in BGR order and read
     with --normal-frame opencv was offered two frames that both ran at 20 deg off). Where
     `rotated` (the normals were turned from world space) the rotation is asked about too;
-    where not, and negating z would leave many facing away (:data:`WORLD_AWAY`), whether the
-    normals are in world space (:func:`world_note`)."""
+    where not, and a channel order faces them or negating z would leave many facing away
+    (:data:`WORLD_AWAY`), whether the normals are in world space (:func:`world_note`)."""
     if v is not None:
         away = facing_away(np.asarray(v, float))
         if away is not None and SWAP_RANGE[0] <= away <= SWAP_RANGE[1]:
             swapped = _swapped_orders(frame, np.asarray(v, float))
-            if swapped is not None:
-                return (f"{swapped}; else {facing_hint(frame)}"
-                        + (f"; or {world_note(True)}" if rotated else ""))
+            if swapped is not None:  # (world-space normals too: a Blender camera looking
+                # along world x, z up, faces the viewer with the channels reversed, a review)
+                return f"{swapped}; else {facing_hint(frame)}; or {world_note(rotated)}"
         if rotated:
             return f"{facing_hint(frame)}; or {world_note(True)}"
         if away is not None and 1.0 - away > WORLD_AWAY:
