@@ -313,7 +313,7 @@ def _unused_folder_files(found, template: Job) -> None:
     orthographically (a user's rig: 583 mm MADE instead of 1.88 mm, and no word) and
     without that mask (an audit: docs/cli.md said a folder's mask.png was its maps' mask)."""
     from .io.dataset import is_dataset
-    from .jobs import camera_unset, rotation_field, rotation_files, unread_files
+    from .jobs import camera_unset, rotation_field, rotation_files, rotation_flag, unread_files
 
     by_folder: dict = {}
     for it in found:
@@ -329,7 +329,7 @@ def _unused_folder_files(found, template: Job) -> None:
                               rotation=rotation_field(template) is None)
         turns = rotation_files(unread)
         for name in turns:  # (world-space maps integrated as camera-frame ones)
-            flag = f"--{Path(name).stem.replace('_', '-')}"
+            flag = rotation_flag(name)
             warnings.warn(
                 f"batch: {folder} holds {name} beside its normal maps, but only a dataset "
                 "folder's rotation file (with normal_map.* or Normal_gt.mat) is read: these "

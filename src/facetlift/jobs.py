@@ -464,7 +464,7 @@ def _beside_dataset_files(src: Path, job: Job, own_mask: bool = False) -> None:
         # check)
         flags = " / ".join(flag for flag, given in (
             ("--K", camera), ("--mask", mpath is not None),
-            (f"--{Path(turns[0]).stem.replace('_', '-')}" if turns else "", bool(turns)))
+            (rotation_flag(turns[0]) if turns else "", bool(turns)))
             if given)
         warn(f"{src} lies in a dataset folder whose {' and '.join(unused)} this run does not "
              f"read: {how}; or give {them} with {flags}", UserWarning)
@@ -528,6 +528,12 @@ def rotation_files(names) -> list[str]:
     return [n for n in names if Path(n).stem in ROTATION_FIELDS]
 
 
+def rotation_flag(name) -> str:
+    """The flag that reads the rotation file `name` (:func:`rotation_files`):
+    ``--world-to-camera`` or ``--camera-to-world``."""
+    return f"--{Path(name).stem.replace('_', '-')}"
+
+
 def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
     """Warn where a plain map file (not a dataset folder's ``normal_map.*``) has beside it a
     ``mask.*``, its ``NAME_mask.*`` or a ``K.txt`` that the job does not read: only --mask and
@@ -552,7 +558,7 @@ def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
         ("--mask", any(n != "K.txt" and n not in paired and n not in turns for n in unread)),
         ("--K", "K.txt" in unread), ("--prior", "--prior" in paired.values()),
         ("--confidence", "--confidence" in paired.values()),
-        (f"--{Path(turns[0]).stem.replace('_', '-')}" if turns else "", bool(turns))) if given)
+        (rotation_flag(turns[0]) if turns else "", bool(turns))) if given)
     folder = src.parent
     own = [folder / f"normal_map{ext}" for ext in NORMAL_READ_FORMATS
            if (folder / f"normal_map{ext}").is_file()]
