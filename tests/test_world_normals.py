@@ -474,3 +474,30 @@ def test_a_world_map_that_a_channel_swap_seems_to_mend_is_asked_about_too(name):
     error, _ = run_integrate(gt.normals @ c2w.T, gt.mask)
     assert error is not None and "channels in another order" in error
     assert "--world-to-camera FILE or --camera-to-world FILE" in error
+
+
+def test_read_dataset_rotation_as_its_docstring_says_to_pass_it(views):
+    """read_dataset's normals come converted from `frame`, its rotation does not: the
+    docstring's rotation_in_facetlift(ds["rotation"], frame) gives the camera-frame result
+    with an OpenCV-frame folder (COLMAP's R), and the rotation as it is does not."""
+    d, R = views
+    ds_dir = d / "colmap"
+    ds_dir.mkdir()
+    cv = frames.axes_matrix("opencv").T @ R  # (world -> OpenCV camera)
+    np.save(ds_dir / "normal_map.npy",
+            to_world(frames.from_facetlift(np.load(d / "cam.npy"), "opencv"), cv))
+    np.savetxt(ds_dir / "world_to_camera.txt", cv)
+    ref = facetlift.integrate(np.load(d / "cam.npy"))
+    ds = io.read_dataset(ds_dir, frame="opencv")
+    np.testing.assert_allclose(ds["rotation"], cv, atol=1e-12)
+    got = facetlift.integrate(ds["normals"], ds["mask"], normal_rotation=frames.
+                              rotation_in_facetlift(ds["rotation"], "opencv"))
+    np.testing.assert_allclose(got.depth[ref.mask], ref.depth[ref.mask], atol=1e-10)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            wrong = facetlift.integrate(ds["normals"], ds["mask"],
+                                        normal_rotation=ds["rotation"]).depth[ref.mask]
+        except ValueError:
+            wrong = None
+    assert wrong is None or not np.allclose(wrong, ref.depth[ref.mask], atol=1e-3)

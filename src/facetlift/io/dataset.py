@@ -485,12 +485,16 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
         ``normals`` (H, W, 3) float64, ``mask`` (H, W) bool (the mask file, else the normal
         map's alpha channel, else None), ``K`` (3, 3) or None, ``K_file`` the camera file
         it came from (a Path) or None, ``rotation`` (3, 3) from world to the camera frame
-        or None and ``rotation_file`` (a Path) or None, ``prior`` (H, W) depth with
+        `frame` names, or None and ``rotation_file`` (a Path) or None, ``prior`` (H, W) depth with
         NaN where unknown, or None, and ``confidence`` (H, W) or None; ``prior_file`` and
         ``confidence_file`` the files these came from (Paths) or None. The command line
         uses them (``facetlift integrate FOLDER``, which names the files in its summary);
         pass them to :func:`facetlift.integrate` as ``prior=`` and ``confidence=`` to do
-        the same.
+        the same, and the rotation as ``normal_rotation=frames.rotation_in_facetlift(
+        ds["rotation"], frame)`` (:func:`facetlift.frames.rotation_in_facetlift`): the
+        normals returned were converted from `frame` already, the rotation was not (with the
+        default frame the two are the same; with ``frame="opencv"`` and COLMAP's R,
+        ``normal_rotation=ds["rotation"]`` turns them wrong).
 
     Raises
     ------
