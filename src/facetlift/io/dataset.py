@@ -298,8 +298,8 @@ def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
 
 def dataset_files(folder, *, with_prior: bool = True, with_confidence: bool = True
                   ) -> list[Path]:
-    """The files of `folder` that :func:`read_dataset` reads (its normal map, mask, K and,
-    where wanted, prior and confidence; a DiLiGenT folder's ``Normal_gt.mat`` and its
+    """The files of `folder` that :func:`read_dataset` reads (its normal map, mask, K, rotation
+    file and, where wanted, prior and confidence; a DiLiGenT folder's ``Normal_gt.mat`` and its
     parent's camera file too): what a job's outputs must not overwrite, and what a batch's
     ``--resume`` looks at. Its other files, an earlier run's outputs among them, are not
     inputs. Where a name is ambiguous (two ``mask`` files) every candidate counts
