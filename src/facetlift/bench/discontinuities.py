@@ -348,12 +348,18 @@ def oracle(gt, normals) -> tuple[float, float, float, float]:
         z, _ = solve_pieces(mesh, bx, by, target)  # (an arbitrary constant per piece)
         k = mesh.n_pieces
         cam, (r, c) = problem.camera, problem.domain.pixels
-        try:  # each piece's median difference to the truth over its finite samples (a piece
-            # without one stays put: scipy's median of an empty label is not NaN)
+
+        def surface_of(v):
+            return make_surface(problem, MethodResult(values=v[mesh.corners].mean(axis=1),
+                                                      extras={"corner_values": v[mesh.corners]}))
+
+        try:  # each piece's median difference to the truth over the pixels where both are
+            # finite (the surface's depth, as returned: not at facets without a normal; a
+            # piece without one stays put: scipy's median of an empty label is not NaN)
             with np.errstate(invalid="ignore", divide="ignore"):
                 true = cam.from_depth(gt.depth[r, c])
-            ok = np.isfinite(true)
-            mine = z[mesh.corners].mean(axis=1)
+                mine = cam.from_depth(surface_of(z).depth[r, c])
+            ok = np.isfinite(true) & np.isfinite(mine)
             move = np.atleast_1d(ndimage.median(np.where(ok, true - mine, 0.0),
                                                 np.where(ok, mesh.facet_piece + 1, 0),
                                                 np.arange(1, k + 1)))
@@ -367,19 +373,15 @@ def oracle(gt, normals) -> tuple[float, float, float, float]:
                                     scale=problem.camera.footprint(), small=SMALL_PIECE)
         placed_z = start + offsets[mesh.piece]
 
-        def surface_of(v):
-            return make_surface(problem, MethodResult(values=v[mesh.corners].mean(axis=1),
-                                                      extras={"corner_values": v[mesh.corners]}))
-
         surface = surface_of(placed_z)
     dev = metrics.input_deviation(problem, surface)
     seconds = time.perf_counter() - t0
     placed_error = float("nan")
-    if move is not None:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                placed_error = error_of(gt, surface_of(start).depth)
+    if move is not None:  # (each pixel's own value moved: a facet's depth as the surface
+        try:  # returns it, not its corners' again)
+            placed = np.full(gt.depth.shape, np.nan)
+            placed[r, c] = cam.to_depth(mine + move[mesh.facet_piece])
+            placed_error = error_of(gt, placed)
         except Exception as e:  # (the oracle's own figures stand)
             log.info("placed oracle failed on %s: %s", gt.name, e)
     return error_of(gt, surface.depth), dev, seconds, placed_error
