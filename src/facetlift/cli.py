@@ -187,8 +187,11 @@ _JOB_OPTIONS = [
     click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Perspective intrinsics: a text file of the 3x3 matrix (OpenCV layout) "
                  "or of fx fy cx cy (also under a header naming them), JSON, a (3, 3) "
-                 ".npy, or a .mat file's KK (a calibration's Calib_Results.mat) or K. A "
-                 "dataset folder's K.txt is used automatically."),
+                 ".npy, or a .mat file's KK (a calibration's Calib_Results.mat) or K; or a "
+                 "calibration tool's file: OpenCV FileStorage .yml/.xml (camera_matrix), ROS "
+                 "camera_info YAML or a CameraInfo dump (k), COLMAP's cameras.txt, a "
+                 "nerfstudio transforms.json (fl_x; COLMAP's and nerfstudio's cx, cy are "
+                 "shifted by -0.5 px). A dataset folder's K.txt is used automatically."),
     click.option("--fov", type=float, default=None, metavar="DEG",
                  help="Horizontal field of view in degrees (across the width, also for a "
                  "portrait photo), for a camera without a K: fx = fy = (W/2)/tan(fov/2), the "

@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from .._warnings import recording
+from . import _kfiles
+from ._kfiles import _KError
 from ._paths import _existing
 from .images import (
     MASK_FORMATS,
@@ -31,6 +33,24 @@ def read_K(path) -> np.ndarray:
     (the calibration toolbox's ``Calib_Results.mat``, DiLiGenT's), ``K``, or its only 3x3
     numeric variable.
 
+    Calibration tools' own files are read too (:mod:`facetlift.io._kfiles`):
+
+    - OpenCV FileStorage YAML (``%YAML:1.0``; ``.yml`` / ``.yaml``) or XML (``.xml``): the
+      ``opencv-matrix`` node of 3 rows and 3 cols named ``camera_matrix``, ``cameraMatrix``,
+      ``K``, ``intrinsic(s)`` or ``M1`` (case aside), or the only 3x3 one; a stereo file's
+      two cameras (``M1`` / ``M2``) are refused, naming them;
+    - ROS ``camera_info`` YAML (``camera_matrix``) or a CameraInfo dump (``k:`` / ``K:``,
+      nine numbers): the matrix for the raw image; where its ``projection_matrix`` (``P``)
+      differs, a warning gives P's left 3x3, the rectified image's camera;
+    - COLMAP's ``cameras.txt`` (found by its lines ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS``):
+      its camera (several only where all are the same), a pinhole model (SIMPLE_PINHOLE,
+      PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV; distortion other than zero is
+      warned about, fish-eye and FOV models refused), **cx and cy minus 0.5**: COLMAP puts
+      the upper-left pixel's centre at (0.5, 0.5), facetlift at (0, 0);
+    - a nerfstudio / instant-ngp ``transforms.json`` (``fl_x``, ``fl_y``, ``cx``, ``cy``;
+      ``fl_y`` defaults to ``fl_x``), whose principal point is COLMAP's: minus 0.5 too
+      (``camera_angle_x`` alone is refused: it needs the width, as ``--fov``).
+
     Raises
     ------
     ValueError
@@ -46,6 +66,8 @@ def read_K(path) -> np.ndarray:
             K = _K_mat(p)
         elif p.suffix.lower() == ".npy":
             K = np.load(p, allow_pickle=False)
+        elif p.suffix.lower() == ".xml":  # (OpenCV FileStorage's)
+            K = _kfiles.K_xml(p)
         else:
             K = _K_text(p)
         K = np.asarray(K, dtype=float)
@@ -71,10 +93,6 @@ def read_K(path) -> np.ndarray:
         return check_K(K)
     except ValueError as e:  # (check_K names a transposed K)
         raise ValueError(f"`{arg}`: {p}: {e}") from None
-
-
-class _KError(ValueError):
-    """A K file's own message, given as it is (not as a parse error)."""
 
 
 #: The names a ``.mat`` file's intrinsics go by, in order: the calibration toolbox's
@@ -110,13 +128,16 @@ _K_NAMES = ("fx", "fy", "cx", "cy")
 
 
 def _K_text(p: Path):
-    """The numbers of a text K file (:func:`read_K`): JSON, a header of names over the four
+    """The numbers of a text K file (:func:`read_K`): JSON (a nerfstudio transforms.json
+    too), YAML (OpenCV's, ROS's), COLMAP's cameras.txt, a header of names over the four
     numbers (a user's 'fx fy cx cy' first line was refused), or plain rows."""
     import json
 
     text = p.read_text(encoding="utf-8-sig").strip()
     if text[:1] in "[{":
         data = json.loads(text)
+        if isinstance(data, dict) and _kfiles.is_transforms(data):
+            return _kfiles.K_transforms(data, p)
         if isinstance(data, dict):
             low = {str(k).lower(): v for k, v in data.items()}
             missing = [k for k in _K_NAMES if k not in low]
@@ -124,7 +145,12 @@ def _K_text(p: Path):
                 raise ValueError(f"a JSON object needs {', '.join(_K_NAMES)}; {missing} missing")
             data = [low[k] for k in _K_NAMES]
         return np.asarray(data, dtype=float)
+    if _kfiles.is_yaml(p, text):
+        return _kfiles.K_yaml(p, text)
     rows = _text_rows(p)
+    cameras = _kfiles.colmap_lines(rows)
+    if cameras:
+        return _kfiles.K_colmap(p, cameras)
     head = rows[0].split() if rows else []
     if head and all(w.strip("\"'").lower() in _K_NAMES for w in head):
         names = [w.strip("\"'").lower() for w in head]

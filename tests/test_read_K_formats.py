@@ -1,0 +1,302 @@
+"""read_K on the files calibration tools write: OpenCV FileStorage YAML / XML, ROS
+camera_info and CameraInfo dumps, COLMAP's cameras.txt, nerfstudio's transforms.json; each
+written as the tool writes it."""
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from facetlift import io
+from facetlift.cli import main
+
+#: The camera of these files, in facetlift's convention (pixel centres at integers).
+K = np.array([[500.0, 0, 320.5], [0, 510, 240.25], [0, 0, 1]])
+
+OPENCV_YAML = """%YAML:1.0
+---
+calibration_time: "Thu 01 Jan 2026 12:00:00 PM UTC"
+image_width: 640
+image_height: 480
+flags: 0
+camera_matrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 5.0000000000000000e+02, 0., 3.2050000000000000e+02, 0.,
+       5.1000000000000000e+02, 2.4025000000000000e+02, 0., 0., 1. ]
+distortion_coefficients: !!opencv-matrix
+   rows: 1
+   cols: 5
+   dt: d
+   data: [ 1.0000000000000001e-01, -2.0000000000000001e-01, 0., 0.,
+       0. ]
+avg_reprojection_error: 2.5000000000000000e-01
+"""
+
+STEREO_YAML = """%YAML:1.0
+---
+M1: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 500., 0., 320.5, 0., 510., 240.25, 0., 0., 1. ]
+D1: !!opencv-matrix
+   rows: 1
+   cols: 5
+   dt: d
+   data: [ 0., 0., 0., 0., 0. ]
+M2: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 502., 0., 318., 0., 511., 241., 0., 0., 1. ]
+D2: !!opencv-matrix
+   rows: 1
+   cols: 5
+   dt: d
+   data: [ 0., 0., 0., 0., 0. ]
+R: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 1., 0., 0., 0., 1., 0., 0., 0., 1. ]
+"""
+
+OPENCV_XML = """<?xml version="1.0"?>
+<opencv_storage>
+<calibration_time>"Thu 01 Jan 2026 12:00:00 PM UTC"</calibration_time>
+<image_width>640</image_width>
+<image_height>480</image_height>
+<camera_matrix type_id="opencv-matrix">
+  <rows>3</rows>
+  <cols>3</cols>
+  <dt>d</dt>
+  <data>
+    5.0000000000000000e+02 0. 3.2050000000000000e+02 0.
+    5.1000000000000000e+02 2.4025000000000000e+02 0. 0. 1.</data></camera_matrix>
+<distortion_coefficients type_id="opencv-matrix">
+  <rows>5</rows>
+  <cols>1</cols>
+  <dt>d</dt>
+  <data>
+    0. 0. 0. 0. 0.</data></distortion_coefficients>
+</opencv_storage>
+"""
+
+# (camera_calibration's ost.yaml; P from a rectification, differing from the camera matrix)
+ROS_CAMERA_INFO = """image_width: 640
+image_height: 480
+camera_name: narrow_stereo
+camera_matrix:
+  rows: 3
+  cols: 3
+  data: [500.0, 0.0, 320.5, 0.0, 510.0, 240.25, 0.0, 0.0, 1.0]
+distortion_model: plumb_bob
+distortion_coefficients:
+  rows: 1
+  cols: 5
+  data: [0.1, -0.2, 0.001, 0.0, 0.0]
+rectification_matrix:
+  rows: 3
+  cols: 3
+  data: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+projection_matrix:
+  rows: 3
+  cols: 4
+  data: [480.0, 0.0, 318.0, 0.0, 0.0, 490.0, 238.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+"""
+
+# (ros2 topic echo --once /camera/camera_info > info.yaml)
+ROS2_DUMP = "\n".join([
+    "header:", "  stamp:", "    sec: 1767225600", "    nanosec: 0",
+    "  frame_id: camera_optical_frame", "height: 480", "width: 640",
+    "distortion_model: plumb_bob", "d:", *["- 0.0"] * 5,
+    "k:", *[f"- {float(v)!r}" for v in K.ravel()],
+    "r:", *[f"- {float(v)!r}" for v in np.eye(3).ravel()],
+    "p:", *[f"- {float(v)!r}" for v in np.hstack([K, np.zeros((3, 1))]).ravel()],
+    "binning_x: 0", "binning_y: 0", "roi:", "  x_offset: 0", "  y_offset: 0", "  height: 0",
+    "  width: 0", "  do_rectify: false", "---", ""])
+
+# (rostopic echo -n 1 /camera/camera_info, ROS 1: upper-case flow lists)
+ROS1_DUMP = """header:
+  seq: 12
+  stamp:
+    secs: 1767225600
+    nsecs:         0
+  frame_id: "camera_rgb_optical_frame"
+height: 480
+width: 640
+distortion_model: "plumb_bob"
+D: [0.0, 0.0, 0.0, 0.0, 0.0]
+K: [500.0, 0.0, 320.5, 0.0, 510.0, 240.25, 0.0, 0.0, 1.0]
+R: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+P: [500.0, 0.0, 320.5, 0.0, 0.0, 510.0, 240.25, 0.0, 0.0, 0.0, 1.0, 0.0]
+binning_x: 0
+binning_y: 0
+roi:
+  x_offset: 0
+  y_offset: 0
+  height: 0
+  width: 0
+  do_rectify: False
+---
+"""
+
+COLMAP_HEADER = ("# Camera list with one line of data per camera:\n"
+                 "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n")
+
+
+def colmap(*lines):
+    return COLMAP_HEADER + f"# Number of cameras: {len(lines)}\n" + "".join(
+        ln + "\n" for ln in lines)
+
+
+def read(tmp_path, name, text):
+    (tmp_path / name).write_text(text)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        got = io.read_K(tmp_path / name)
+    return got, [str(w.message) for w in caught]
+
+
+@pytest.mark.parametrize("name, text", [
+    ("calib.yml", OPENCV_YAML),
+    ("calib.yaml", OPENCV_YAML.replace("%YAML:1.0", "%YAML 1.0")),
+    ("calib.txt", OPENCV_YAML),  # (found by its %YAML line, whatever its name)
+    ("calib.xml", OPENCV_XML),
+    ("info.yaml", ROS2_DUMP),
+    ("info.txt", ROS2_DUMP),  # (an echo redirected to a .txt: found by its k: line)
+    ("info1.yaml", ROS1_DUMP),
+    # (an echo of several messages: the first; a later one's other K is not read)
+    ("info2.yaml", ROS1_DUMP + ROS1_DUMP.replace("320.5", "300.5")),
+])
+def test_calibration_files_give_their_camera_matrix(tmp_path, name, text):
+    got, said = read(tmp_path, name, text)
+    np.testing.assert_array_equal(got, K)
+    assert said == []  # (P equal to K in the dumps: nothing to say)
+
+
+def test_opencv_yaml_reads_the_matrix_not_the_distortion_or_another_3x3(tmp_path):
+    """The data list spans two lines; the 1x5 distortion beside it is no candidate; a
+    rotation R beside the camera_matrix is not taken for it."""
+    text = OPENCV_YAML + ("R: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
+                          "   data: [ 1., 0., 0., 0., 1., 0., 0., 0., 1. ]\n")
+    got, _ = read(tmp_path, "calib.yml", text)
+    np.testing.assert_array_equal(got, K)
+    # (an unnamed single 3x3 is taken too; rows / cols other than 3x3 are not)
+    got, _ = read(tmp_path, "mtx.yml", OPENCV_YAML.replace("camera_matrix", "mtx"))
+    np.testing.assert_array_equal(got, K)
+    with pytest.raises(ValueError, match=r"^`K`: .*bad\.yml holds no 3x3 matrix"):
+        read(tmp_path, "bad.yml", OPENCV_YAML.replace("rows: 3", "rows: 4"))
+
+
+def test_a_stereo_calibration_names_its_two_cameras(tmp_path):
+    with pytest.raises(ValueError, match=r"^`K`: .*stereo\.yml holds several 3x3 matrices, "
+                       r"M1, M2 \(a stereo calibration.*\): which is the image's camera\? "
+                       r"Copy that one out"):
+        read(tmp_path, "stereo.yml", STEREO_YAML)
+    # (one camera's M1 alone is the usual key)
+    got, _ = read(tmp_path, "left.yml", STEREO_YAML.split("M2:")[0])
+    np.testing.assert_array_equal(got, K)
+
+
+def test_ros_camera_info_with_another_projection_warns_of_rectified_images(tmp_path):
+    got, said = read(tmp_path, "ost.yaml", ROS_CAMERA_INFO)
+    np.testing.assert_array_equal(got, K)  # (camera_matrix: the raw image's)
+    assert len(said) == 1 and "ost.yaml" in said[0] and "rectified image" in said[0]
+    assert "projection_matrix's left 3x3" in said[0] and "480 490 318 238" in said[0]
+    # (a P equal to the camera matrix within 1e-6 relative: silent)
+    same = ROS_CAMERA_INFO.replace(
+        "480.0, 0.0, 318.0, 0.0, 0.0, 490.0, 238.0",
+        "500.0001, 0.0, 320.5, 0.0, 0.0, 510.0, 240.25")
+    got, said = read(tmp_path, "same.yaml", same)
+    assert said == []
+
+
+def test_colmap_pinhole_shifts_the_principal_point_by_half_a_pixel(tmp_path):
+    """COLMAP's upper-left pixel centre is (0.5, 0.5), facetlift's (0, 0)."""
+    got, said = read(tmp_path, "cameras.txt", colmap("1 PINHOLE 640 480 500 510 321 240.75"))
+    np.testing.assert_array_equal(got, K)
+    assert said == []
+    got, _ = read(tmp_path, "simple.txt", colmap("3 SIMPLE_PINHOLE 640 480 500 321 240.75"))
+    np.testing.assert_array_equal(got, [[500, 0, 320.5], [0, 500, 240.25], [0, 0, 1]])
+    # (the same camera twice, e.g. one per image: taken)
+    got, _ = read(tmp_path, "twice.txt", colmap("1 PINHOLE 640 480 500 510 321 240.75",
+                                                "2 PINHOLE 640 480 500 510 321 240.75"))
+    np.testing.assert_array_equal(got, K)
+
+
+def test_colmap_distortion_is_warned_about_and_zero_distortion_is_not(tmp_path):
+    got, said = read(tmp_path, "cameras.txt",
+                     colmap("1 SIMPLE_RADIAL 640 480 500 321 240.75 -0.0123"))
+    np.testing.assert_array_equal(got, [[500, 0, 320.5], [0, 500, 240.25], [0, 0, 1]])
+    assert len(said) == 1 and "lens distortion (k -0.0123)" in said[0]
+    assert "image_undistorter" in said[0]
+    got, said = read(tmp_path, "zero.txt",
+                     colmap("1 OPENCV 640 480 500 510 321 240.75 0 0 0 0"))
+    np.testing.assert_array_equal(got, K)
+    assert said == []
+
+
+def test_colmap_different_cameras_are_listed(tmp_path):
+    with pytest.raises(ValueError, match=r"^`K`: .*cameras\.txt holds 2 different cameras, "
+                       r"camera 1 \(PINHOLE, 640x480\), camera 2 \(SIMPLE_RADIAL, 1920x1080\): "
+                       r"give the image's camera.*save its line as a cameras\.txt of its own"):
+        read(tmp_path, "cameras.txt", colmap("1 PINHOLE 640 480 500 510 321 240.75",
+                                             "2 SIMPLE_RADIAL 1920 1080 1500 960 540 0.01"))
+
+
+def test_colmap_fisheye_is_refused(tmp_path):
+    with pytest.raises(ValueError, match=r"^`K`: .*camera 1 is COLMAP's OPENCV_FISHEYE, a "
+                       r"fish-eye.*needs a pinhole image.*image_undistorter.*PINHOLE"):
+        read(tmp_path, "cameras.txt",
+             colmap("1 OPENCV_FISHEYE 640 480 300 300 320 240 0.01 0.001 0 0"))
+    with pytest.raises(ValueError, match=r"PINHOLE\) must have 4 parameters \(fx, fy, cx, cy"):
+        read(tmp_path, "short.txt", colmap("1 PINHOLE 640 480 500 510 321"))
+
+
+def test_transforms_json_fl_x_alone_and_its_half_pixel(tmp_path):
+    """nerfstudio copies COLMAP's cx, cy into transforms.json and casts rays through
+    pixel + 0.5: its principal point is COLMAP's, shifted as COLMAP's."""
+    data = {"camera_model": "OPENCV", "fl_x": 500.0, "cx": 321.0, "cy": 240.75, "w": 640,
+            "h": 480, "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0,
+            "frames": [{"file_path": "images/frame_00001.png",
+                        "transform_matrix": np.eye(4).tolist()}]}
+    got, said = read(tmp_path, "transforms.json", json.dumps(data, indent=4))
+    np.testing.assert_array_equal(got, [[500, 0, 320.5], [0, 500, 240.25], [0, 0, 1]])
+    assert said == []
+    got, said = read(tmp_path, "t2.json", json.dumps({**data, "fl_y": 510.0, "k1": 0.02}))
+    np.testing.assert_array_equal(got, K)
+    assert len(said) == 1 and "lens distortion (k1 0.02)" in said[0]
+    blender = {"camera_angle_x": 0.6911112070083618, "frames": data["frames"]}
+    with pytest.raises(ValueError, match=r"^`K`: .*camera_angle_x \(0\.69111\d* radians = "
+                       r"39\.5978 degrees\).*give --fov with that angle in degrees"):
+        read(tmp_path, "transforms_train.json", json.dumps(blender))
+
+
+def test_integrate_with_colmap_cameras_txt_matches_the_fx_fy_cx_cy_file(tmp_path, capsys):
+    """The command line: --K cameras.txt gives the depth of the equivalent text file (COLMAP's
+    cx, cy minus 0.5), not that of COLMAP's numbers taken as given; a reader's warning is
+    shown as the others are."""
+    from test_cli import write_input
+
+    npath, mpath, _ = write_input(tmp_path)
+    (tmp_path / "cameras.txt").write_text(colmap("1 PINHOLE 26 20 40 42 13.5 10.5"))
+    (tmp_path / "K.txt").write_text("fx fy cx cy\n40 42 13 10\n")
+    (tmp_path / "asis.txt").write_text("fx fy cx cy\n40 42 13.5 10.5\n")
+    depth = {}
+    for name in ("cameras.txt", "K.txt", "asis.txt"):
+        code = main(["integrate", str(npath), "--mask", str(mpath), "--K", str(tmp_path / name),
+                     "-s", "npy", "-o", str(tmp_path / name.split(".")[0])])
+        _, err = capsys.readouterr()
+        assert code == 0, err
+        depth[name] = np.load(tmp_path / name.split(".")[0] / "depth.npy")
+    np.testing.assert_array_equal(depth["cameras.txt"], depth["K.txt"])
+    assert not np.allclose(depth["cameras.txt"], depth["asis.txt"], equal_nan=True)
+    (tmp_path / "radial.txt").write_text(colmap("1 SIMPLE_RADIAL 26 20 40 13.5 10.5 0.05"))
+    code = main(["integrate", str(npath), "--mask", str(mpath), "--K",
+                 str(tmp_path / "radial.txt"), "-s", "npy", "-o", str(tmp_path / "r")])
+    _, err = capsys.readouterr()
+    assert code == 0 and "facetlift: warning: --K: " in err and "lens distortion (k 0.05)" in err
