@@ -300,3 +300,13 @@ def test_integrate_with_colmap_cameras_txt_matches_the_fx_fy_cx_cy_file(tmp_path
                  str(tmp_path / "radial.txt"), "-s", "npy", "-o", str(tmp_path / "r")])
     _, err = capsys.readouterr()
     assert code == 0 and "facetlift: warning: --K: " in err and "lens distortion (k 0.05)" in err
+
+
+@pytest.mark.parametrize("name", ["K.yml", "K.yaml"])
+def test_plain_rows_in_a_yaml_named_file_are_still_read_as_text(tmp_path, name):
+    """A .yml / .yaml name alone does not make a file YAML: three rows of numbers (no key)
+    parsed before the calibration readers and must still."""
+    got, said = read(tmp_path, name, "500 0 320.5\n0 510 240.25\n0 0 1\n")
+    np.testing.assert_array_equal(got, K)
+    got, _ = read(tmp_path, "four" + name[1:], "fx fy cx cy\n500 510 320.5 240.25\n")
+    np.testing.assert_array_equal(got, K)
