@@ -314,8 +314,10 @@ def K_transforms(data: dict, p: Path) -> np.ndarray:
                       "the field of view across the width, without a focal length in pixels: "
                       "give --fov with that angle in degrees instead of --K (fov= in Python)")
     model = str(low.get("camera_model", "")).upper()
-    if "FISHEYE" in model or model == "EQUIRECTANGULAR":
-        raise _KError(f"`K`: {p}: its camera_model is {model}: a normal map needs a pinhole "
+    fisheye = low.get("is_fisheye") in (True, 1, "true", "True")  # (instant-ngp's flag)
+    if fisheye or "FISHEYE" in model or model == "EQUIRECTANGULAR":
+        what = "is_fisheye is true" if fisheye else f"its camera_model is {model}"
+        raise _KError(f"`K`: {p}: {what}: a normal map needs a pinhole "
                       "image; undistort the images first (COLMAP's image_undistorter writes "
                       "PINHOLE cameras)")
     missing = [k for k in ("cx", "cy") if k not in low]
