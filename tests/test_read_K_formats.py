@@ -300,3 +300,26 @@ def test_integrate_with_colmap_cameras_txt_matches_the_fx_fy_cx_cy_file(tmp_path
                  str(tmp_path / "radial.txt"), "-s", "npy", "-o", str(tmp_path / "r")])
     _, err = capsys.readouterr()
     assert code == 0 and "facetlift: warning: --K: " in err and "lens distortion (k 0.05)" in err
+
+
+@pytest.mark.parametrize("name", ["K.yml", "K.yaml"])
+def test_plain_rows_in_a_yaml_named_file_are_still_read_as_text(tmp_path, name):
+    """A .yml / .yaml name alone does not make a file YAML: three rows of numbers (no key)
+    parsed before the calibration readers and must still."""
+    got, said = read(tmp_path, name, "500 0 320.5\n0 510 240.25\n0 0 1\n")
+    np.testing.assert_array_equal(got, K)
+    got, _ = read(tmp_path, "four" + name[1:], "fx fy cx cy\n500 510 320.5 240.25\n")
+    np.testing.assert_array_equal(got, K)
+
+
+def test_instant_ngp_fisheye_flag_is_refused(tmp_path):
+    """instant-ngp's colmap2nerf.py marks a fish-eye camera by "is_fisheye": true beside
+    fl_x (no camera_model): refused as nerfstudio's fish-eye camera_model is."""
+    data = {"camera_angle_x": 1.1, "fl_x": 500.0, "fl_y": 510.0, "k1": 0.0, "k2": 0.0,
+            "p1": 0.0, "p2": 0.0, "is_fisheye": False, "cx": 321.0, "cy": 240.75, "w": 640.0,
+            "h": 480.0, "aabb_scale": 32, "frames": []}
+    got, said = read(tmp_path, "transforms.json", json.dumps(data))
+    np.testing.assert_array_equal(got, K)
+    with pytest.raises(ValueError, match=r"^`K`: .*fish\.json: is_fisheye is true: a normal "
+                       r"map needs a pinhole image"):
+        read(tmp_path, "fish.json", json.dumps({**data, "is_fisheye": True}))

@@ -29,8 +29,12 @@ _CAMERA_KEY = re.compile(r"^(m|k|camera_?matrix|intrinsics?)[_-]?(\d+|left|right
 
 def is_yaml(p: Path, text: str) -> bool:
     """Whether a K file is YAML: named ``.yml`` / ``.yaml``, headed ``%YAML`` or ``---``, or
-    with a line ``camera_matrix:`` or ``k:`` (a CameraInfo dump saved as .txt)."""
+    with a line ``camera_matrix:`` or ``k:`` (a CameraInfo dump saved as .txt); never a file
+    without a ``key:`` line (three rows of numbers saved as ``K.yml`` are read as text, as
+    before these readers)."""
     first = text.lstrip().split("\n", 1)[0].strip()
+    if re.search(r"(?m)^[ \t]*[^\s#%:-][^#\n]*:", text) is None:
+        return False  # (no key at all: a plain K file, e.g. three rows of numbers in a .yml)
     return (p.suffix.lower() in (".yml", ".yaml") or first.startswith("%YAML") or first == "---"
             or re.search(r"(?m)^\s*(camera_?matrix|cameraMatrix|k|K)\s*:", text) is not None)
 
@@ -310,8 +314,10 @@ def K_transforms(data: dict, p: Path) -> np.ndarray:
                       "the field of view across the width, without a focal length in pixels: "
                       "give --fov with that angle in degrees instead of --K (fov= in Python)")
     model = str(low.get("camera_model", "")).upper()
-    if "FISHEYE" in model or model == "EQUIRECTANGULAR":
-        raise _KError(f"`K`: {p}: its camera_model is {model}: a normal map needs a pinhole "
+    fisheye = low.get("is_fisheye") in (True, 1, "true", "True")  # (instant-ngp's flag)
+    if fisheye or "FISHEYE" in model or model == "EQUIRECTANGULAR":
+        what = "is_fisheye is true" if fisheye else f"its camera_model is {model}"
+        raise _KError(f"`K`: {p}: {what}: a normal map needs a pinhole "
                       "image; undistort the images first (COLMAP's image_undistorter writes "
                       "PINHOLE cameras)")
     missing = [k for k in ("cx", "cy") if k not in low]
