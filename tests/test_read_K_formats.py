@@ -257,6 +257,43 @@ def test_colmap_fisheye_is_refused(tmp_path):
         read(tmp_path, "short.txt", colmap("1 PINHOLE 640 480 500 510 321"))
 
 
+def colmap_bin(*cams):
+    """A cameras.bin as COLMAP writes it: uint64 count, then per camera int32 id and model
+    id, uint64 width and height, float64 parameters (little-endian)."""
+    import struct
+
+    out = struct.pack("<Q", len(cams))
+    for cid, model_id, w, h, params in cams:
+        out += struct.pack("<iiQQ", cid, model_id, w, h) + struct.pack(f"<{len(params)}d",
+                                                                          *params)
+    return out
+
+
+def test_colmap_cameras_bin_reads_as_its_text_export(tmp_path):
+    """COLMAP's mapper writes the binary model by default: the same camera as cameras.txt
+    gives it, principal point shifted by half a pixel; its errors name the file."""
+    (tmp_path / "cameras.bin").write_bytes(colmap_bin((1, 1, 640, 480, (500, 510, 321,
+                                                                         240.75))))
+    np.testing.assert_array_equal(io.read_K(tmp_path / "cameras.bin"), K)
+    (tmp_path / "two.bin").write_bytes(colmap_bin((1, 1, 640, 480, (500, 510, 321, 240.75)),
+                                                  (2, 2, 1920, 1080, (1500, 960, 540, 0.01))))
+    with pytest.raises(ValueError, match=r"^`K`: .*two\.bin holds 2 different cameras, "
+                       r"camera 1 \(PINHOLE, 640x480\), camera 2 \(SIMPLE_RADIAL, 1920x1080\)"):
+        io.read_K(tmp_path / "two.bin")
+    (tmp_path / "fish.bin").write_bytes(colmap_bin((1, 5, 640, 480, (300,) * 8)))
+    with pytest.raises(ValueError, match=r"camera 1 is COLMAP's OPENCV_FISHEYE"):
+        io.read_K(tmp_path / "fish.bin")
+    whole = colmap_bin((1, 1, 640, 480, (500, 510, 321, 240.75)))
+    for name, data, why in (("cut.bin", whole[:-8], r"parameters run past its end"),
+                            ("long.bin", whole + b"\0" * 8, r"8 bytes after its 1 cameras"),
+                            ("tiny.bin", b"\1\2", r"2 bytes"),
+                            ("model.bin", colmap_bin((1, 42, 640, 480, ())), r"model id 42")):
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(ValueError, match=rf"^`K`: \S+{name} is not a COLMAP cameras\.bin "
+                           rf"\(.*{why}.*model_converter"):
+            io.read_K(tmp_path / name)
+
+
 def test_transforms_json_fl_x_alone_and_its_half_pixel(tmp_path):
     """nerfstudio copies COLMAP's cx, cy into transforms.json and casts rays through
     pixel + 0.5: its principal point is COLMAP's, shifted as COLMAP's."""

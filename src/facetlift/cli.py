@@ -189,7 +189,7 @@ _JOB_OPTIONS = [
                  "or of fx fy cx cy (also under a header naming them), JSON, a (3, 3) "
                  ".npy, or a .mat file's KK (a calibration's Calib_Results.mat) or K; or a "
                  "calibration tool's file: OpenCV FileStorage .yml/.xml (camera_matrix), ROS "
-                 "camera_info YAML or a CameraInfo dump (k), COLMAP's cameras.txt, a "
+                 "camera_info YAML or a CameraInfo dump (k), COLMAP's cameras.txt or .bin, a "
                  "nerfstudio transforms.json (fl_x; COLMAP's and nerfstudio's cx, cy are "
                  "shifted by -0.5 px). A dataset folder's K.txt is used automatically."),
     click.option("--fov", type=float, default=None, metavar="DEG",

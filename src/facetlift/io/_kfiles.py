@@ -1,7 +1,8 @@
 """Perspective intrinsics from calibration tools' own files (:func:`facetlift.io.read_K`):
 OpenCV FileStorage YAML and XML, ROS ``camera_info`` YAML and CameraInfo dumps, COLMAP's
-``cameras.txt`` and nerfstudio / instant-ngp ``transforms.json``. Small targeted readers, no
-YAML library (PyYAML cannot read OpenCV's ``%YAML:1.0`` files anyway)."""
+``cameras.txt`` and ``cameras.bin``, and nerfstudio / instant-ngp ``transforms.json``. Small
+targeted readers, no YAML library (PyYAML cannot read OpenCV's ``%YAML:1.0`` files
+anyway)."""
 
 from __future__ import annotations
 
@@ -282,6 +283,53 @@ def K_colmap(p: Path, cams: list[list[str]]) -> np.ndarray:
     # (COLMAP's pixel centres at +0.5, facetlift's at integers: docs/conventions.md)
     return np.array([[fx, 0.0, par["cx"] - 0.5], [0.0, fy, par["cy"] - 0.5],
                      [0.0, 0.0, 1.0]])
+
+
+#: COLMAP's binary model ids (``cameras.bin``, as its ``read_write_model.py`` writes and reads
+#: them) with their names and parameter counts.
+COLMAP_IDS = {
+    0: ("SIMPLE_PINHOLE", 3), 1: ("PINHOLE", 4), 2: ("SIMPLE_RADIAL", 4), 3: ("RADIAL", 5),
+    4: ("OPENCV", 8), 5: ("OPENCV_FISHEYE", 8), 6: ("FULL_OPENCV", 12), 7: ("FOV", 5),
+    8: ("SIMPLE_RADIAL_FISHEYE", 4), 9: ("RADIAL_FISHEYE", 5), 10: ("THIN_PRISM_FISHEYE", 12),
+    11: ("RAD_TAN_THIN_PRISM_FISHEYE", 16),
+}
+
+
+def K_colmap_bin(p: Path) -> np.ndarray:
+    """The intrinsics of a COLMAP ``cameras.bin`` (the sparse model COLMAP's mapper writes by
+    default; little-endian: the number of cameras as uint64, then per camera its id and model
+    id as int32, width and height as uint64 and the model's parameters as float64), read as
+    :func:`K_colmap` reads the same cameras from ``cameras.txt``."""
+    import struct
+
+    data = p.read_bytes()
+
+    def bad(why):
+        return _KError(f"`K`: {p} is not a COLMAP cameras.bin ({why}); COLMAP's text export "
+                       "(colmap model_converter --output_type TXT) writes cameras.txt")
+
+    if len(data) < 8:
+        raise bad(f"{len(data)} bytes")
+    (count,) = struct.unpack_from("<Q", data, 0)
+    at, cams = 8, []
+    for _ in range(count):
+        if at + 24 > len(data):
+            raise bad(f"it says {count} cameras and ends after {len(cams)}")
+        cid, model_id, width, height = struct.unpack_from("<iiQQ", data, at)
+        at += 24
+        if model_id not in COLMAP_IDS:
+            raise bad(f"camera {cid} has model id {model_id}, which this reader does not know")
+        name, n = COLMAP_IDS[model_id]
+        if at + 8 * n > len(data):
+            raise bad(f"camera {cid}'s {n} parameters run past its end")
+        params = struct.unpack_from(f"<{n}d", data, at)
+        at += 8 * n
+        cams.append([str(cid), name, str(width), str(height), *(repr(v) for v in params)])
+    if not cams:
+        raise bad("it holds no camera")
+    if at != len(data):
+        raise bad(f"{len(data) - at} bytes after its {count} cameras")
+    return K_colmap(p, cams)
 
 
 # ------------------------------------------------------------------ transforms.json

@@ -42,7 +42,8 @@ def read_K(path) -> np.ndarray:
     - ROS ``camera_info`` YAML (``camera_matrix``) or a CameraInfo dump (``k:`` / ``K:``,
       nine numbers): the matrix for the raw image; where its ``projection_matrix`` (``P``)
       differs, a warning gives P's left 3x3, the rectified image's camera;
-    - COLMAP's ``cameras.txt`` (found by its lines ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS``):
+    - COLMAP's ``cameras.txt`` (found by its lines ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS``)
+      or ``cameras.bin`` (any ``.bin``: the binary model COLMAP's mapper writes):
       its camera (several only where all are the same), a pinhole model (SIMPLE_PINHOLE,
       PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV; distortion other than zero is
       warned about, fish-eye and FOV models refused), **cx and cy minus 0.5**: COLMAP puts
@@ -68,6 +69,8 @@ def read_K(path) -> np.ndarray:
             K = np.load(p, allow_pickle=False)
         elif p.suffix.lower() == ".xml":  # (OpenCV FileStorage's)
             K = _kfiles.K_xml(p)
+        elif p.suffix.lower() == ".bin":  # (COLMAP's sparse model: cameras.bin)
+            K = _kfiles.K_colmap_bin(p)
         else:
             K = _K_text(p)
         K = np.asarray(K, dtype=float)
