@@ -313,6 +313,22 @@ def test_transforms_json_fl_x_alone_and_its_half_pixel(tmp_path):
         read(tmp_path, "transforms_train.json", json.dumps(blender))
 
 
+def test_transforms_json_with_its_camera_per_frame(tmp_path):
+    """nerfstudio's datasets of several cameras give fl_x, cx, ... per frame: one camera for
+    every frame is read (shifted as at the top); different ones are named, not guessed."""
+    cam = {"fl_x": 500, "fl_y": 510, "cx": 321, "cy": 240.75, "w": 640, "h": 480}
+    frames = [{"file_path": f"images/{i}.png", "transform_matrix": np.eye(4).tolist(), **cam}
+              for i in range(3)]
+    (tmp_path / "same.json").write_text(json.dumps({"camera_model": "OPENCV",
+                                                    "frames": frames}))
+    np.testing.assert_array_equal(io.read_K(tmp_path / "same.json"), K)
+    frames[1] = {**frames[1], "fl_x": 600}
+    (tmp_path / "two.json").write_text(json.dumps({"frames": frames}))
+    with pytest.raises(ValueError, match=r"^`K`: \S+two\.json gives its frames 2 different "
+                       r"cameras .*3 frames.*minus 0\.5"):
+        io.read_K(tmp_path / "two.json")
+
+
 def test_integrate_with_colmap_cameras_txt_matches_the_fx_fy_cx_cy_file(tmp_path, capsys):
     """The command line: --K cameras.txt gives the depth of the equivalent text file (COLMAP's
     cx, cy minus 0.5), not that of COLMAP's numbers taken as given; a reader's warning is

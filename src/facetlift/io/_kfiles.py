@@ -338,22 +338,47 @@ def K_colmap_bin(p: Path) -> np.ndarray:
 _NERF_DISTORTION = ("k1", "k2", "k3", "k4", "p1", "p2")
 
 
+#: The camera keys a transforms.json frame may hold for itself (nerfstudio's datasets of
+#: several cameras give them per frame, not at the top).
+_NERF_CAMERA = ("fl_x", "fl_y", "cx", "cy", "camera_model", "is_fisheye", *_NERF_DISTORTION)
+
+
+def _frame_cameras(low: dict) -> list[dict]:
+    """The cameras a transforms.json's frames give for themselves (those with ``fl_x``)."""
+    frames = low.get("frames")
+    if not isinstance(frames, list):
+        return []
+    return [{k: f[k] for k in _NERF_CAMERA if k in f} for f in frames
+            if isinstance(f, dict) and "fl_x" in f]
+
+
 def is_transforms(data: dict) -> bool:
     """Whether a JSON object is a nerfstudio / instant-ngp ``transforms.json``'s camera
-    (``fl_x``, or ``camera_angle_x`` alone)."""
-    low = {str(k).lower() for k in data}
-    return "fl_x" in low or ("camera_angle_x" in low and "fx" not in low)
+    (``fl_x`` at its top or in its frames, or ``camera_angle_x`` alone)."""
+    low = {str(k).lower(): v for k, v in data.items()}
+    return ("fl_x" in low or ("camera_angle_x" in low and "fx" not in low)
+            or bool(_frame_cameras(low)))
 
 
 def K_transforms(data: dict, p: Path) -> np.ndarray:
     """The intrinsics of a ``transforms.json`` (nerfstudio, instant-ngp): ``fl_x``, ``fl_y``
-    (``fl_x`` where missing), ``cx``, ``cy``. Their principal point is COLMAP's (nerfstudio
+    (``fl_x`` where missing), ``cx``, ``cy``, at its top or, the same for every frame, in its
+    frames. Their principal point is COLMAP's (nerfstudio
     copies COLMAP's cx, cy unchanged and casts its rays through ``pixel + 0.5``): cx and cy
     minus 0.5, as :func:`K_colmap`. ``camera_angle_x`` alone is refused (it needs the
     image's width: ``--fov``)."""
     import math
 
     low = {str(k).lower(): v for k, v in data.items()}
+    frames = _frame_cameras(low) if "fl_x" not in low else []
+    if frames:  # (the camera given per frame: one for all, or the image's to be named)
+        distinct = {tuple(sorted((k, str(v)) for k, v in f.items())) for f in frames}
+        if len(distinct) > 1:
+            raise _KError(f"`K`: {p} gives its frames {len(distinct)} different cameras "
+                          f"(fl_x, cx, ... per frame, {len(frames)} frames): give the image's "
+                          "own as a text file, fx fy cx cy with its cx and cy minus 0.5 "
+                          "(nerfstudio's principal point is COLMAP's)")
+        low = {**low, **frames[0]}
     if "fl_x" not in low:
         angle = low["camera_angle_x"]
         deg = f" = {math.degrees(float(angle)):.6g} degrees" \
