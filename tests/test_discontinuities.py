@@ -1101,3 +1101,33 @@ def test_gap_fill_weights_and_which_facets_it_fills_end_to_end():
     assert s.info["gaps_filled"] == 2
     assert s.info["missing"] == 2 and s.info["outliers"] == 1  # (the back-facing facet is
     # not known; the confidence-0 one is known and not usable: counted as before the fill)
+
+
+def _steep_noisy_plane(slope, shape=(48, 64), seed=0):
+    """A plane rising `slope` per pixel along x (view cosine 1 / sqrt(1 + slope^2)) with 3 deg
+    of angular noise on its normals."""
+    rng = np.random.default_rng(seed)
+    n = np.zeros((*shape, 3))
+    n[..., 0], n[..., 2] = -slope, 1.0
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    n = n + rng.normal(size=n.shape) * np.deg2rad(3.0)
+    return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+def test_many_cuts_without_a_prior_are_warned_about_as_noise():
+    """A plane seen at view cosine 0.15 with 3 deg of noise: its noisy steep normals read as
+    jumps (about half the corners cut): a warning names the cause and discontinuity_k; the
+    same plane at view cosine 0.32 cuts far fewer and gets none."""
+    mask = np.ones((48, 64), bool)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        s = facetlift.integrate(_steep_noisy_plane(6.5), mask, discontinuities=True)
+    said = [str(w.message) for w in caught if "corners were cut" in str(w.message)]
+    assert s.info["cut_corners"] > 0.3
+    assert len(said) == 1 and "noisy normals on surfaces seen steeply" in said[0]
+    assert "discontinuity_k=2" in said[0]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        s = facetlift.integrate(_steep_noisy_plane(3.0), mask, discontinuities=True)
+    assert s.info["cut_corners"] < 0.3
+    assert not any("corners were cut" in str(w.message) for w in caught)
