@@ -212,8 +212,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     H, W = n.shape[:2]
     # (normals in world space: turned into the camera frame of normal_frame, in which they
     # were read already, before the checks that look at their facing, as integrate does)
-    turn = (None if inp.rotation is None
-            else frames.rotation_in_facetlift(inp.rotation, normal_frame))
+    turn = frames.rotation_in_facetlift(inp.rotation, normal_frame)
     where = dict(shape=[H, W], mask_source=inp.mask_source,
                  normal_rotation=rotation_record(job, inp),
                  K=None if inp.K is None else inp.K.tolist(),

@@ -322,11 +322,14 @@ def axes_matrix(frame, name: str = "normal_frame") -> np.ndarray:
     return np.array(to_facetlift(np.eye(3), frame)).T
 
 
-def rotation_in_facetlift(R: np.ndarray, frame) -> np.ndarray:
+def rotation_in_facetlift(R: np.ndarray | None, frame) -> np.ndarray | None:
     """A rotation `R` from world to the camera frame `frame` as the rotation that takes
     normals already converted from `frame` (:func:`to_facetlift`: the world vectors with
     `frame`'s axis map applied, as a reader gives them) to the camera's facetlift frame:
-    ``P R P^T``, where ``P`` is `frame`'s axis map (:func:`axes_matrix`)."""
+    ``P R P^T``, where ``P`` is `frame`'s axis map (:func:`axes_matrix`); None for None (no
+    rotation: camera-frame normals)."""
+    if R is None:
+        return None
     P = axes_matrix(frame)
     return P @ R @ P.T
 

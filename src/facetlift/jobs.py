@@ -269,7 +269,7 @@ def read(job: Job) -> Input:
         n, m, K = ds["normals"], ds["mask"], ds["K"]
         if ds["rotation"] is not None:
             rotation, rotation_file = ds["rotation"], f"the folder's {ds['rotation_file'].name}"
-            rotation_as = ds["rotation_file"].name.split(".")[0]
+            rotation_as = ds["rotation_file"].stem
         prior, conf = ds["prior"], ds["confidence"]
         K_file = ds["K_file"]
         for name in files:  # (named in the summary: a stray confidence.npy changed results
@@ -807,8 +807,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         announce(progress, "integrating")
         # (the normals were read in the job's frame already: the rotation goes from world
         # to that frame, and is given to integrate as one to facetlift's)
-        turn = (None if inp.rotation is None
-                else frames.rotation_in_facetlift(inp.rotation, job.normal_frame))
+        turn = frames.rotation_in_facetlift(inp.rotation, job.normal_frame)
         with frames.read_in(frames.GRADIENT_FIELD if inp.field else job.normal_frame):
             try:
                 surface = facetlift.integrate(

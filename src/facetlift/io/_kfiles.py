@@ -121,16 +121,16 @@ def _matrix(node, shape: tuple[int, int]):
 
 
 def _walk(tree: dict, prefix: str = ""):
-    """(dotted name, key, value, parent mapping) of every mapping entry of `tree`."""
+    """(dotted name, value, parent mapping) of every mapping entry of `tree`."""
     for k, v in tree.items():
-        yield prefix + str(k), str(k), v, tree
+        yield prefix + str(k), v, tree
         if isinstance(v, dict) and not isinstance(v.get("data"), list):
             yield from _walk(v, prefix + str(k) + ".")
 
 
 def pick_K(found: dict[str, np.ndarray], p: Path, fmt: str) -> tuple[str, np.ndarray]:
     """The one intrinsics matrix of a calibration file's 3x3 matrices `found` (name ->
-    matrix): the only one named as a camera's (:data:`K_KEYS`, or one of a stereo pair's),
+    matrix): the only one named as a camera's (:data:`_CAMERA_KEY`, or one of a stereo pair's),
     else the only 3x3; otherwise a :class:`_KError` listing them."""
     cams = [n for n in found if _CAMERA_KEY.match(n.rsplit(".", 1)[-1].lower())]
     if len(cams) == 1:
@@ -162,7 +162,7 @@ def K_yaml(p: Path, text: str) -> np.ndarray:
         raise _KError(f"`K`: {p} is a YAML list, not a calibration (a mapping with a "
                       "camera_matrix, K or k)")
     found, parents = {}, {}
-    for name, _key, value, parent in _walk(tree):
+    for name, value, parent in _walk(tree):
         m = _matrix(value, (3, 3))
         if m is not None:
             found[name], parents[name] = m, parent
@@ -276,13 +276,24 @@ def K_colmap(p: Path, cams: list[list[str]]) -> np.ndarray:
     fx = par.get("fx", par.get("f"))
     fy = par.get("fy", par.get("f"))
     extra = {k: v for k, v in par.items() if k not in ("f", "fx", "fy", "cx", "cy") and v}
-    if extra:
-        warn(f"`K`: {p}: camera {cam[0]} ({model}) has lens distortion "
-             f"({', '.join(f'{k} {v:g}' for k, v in extra.items())}), which K leaves out: "
-             "the normal map must be of an undistorted image; " + _UNDISTORT)
-    # (COLMAP's pixel centres at +0.5, facetlift's at integers: docs/conventions.md)
-    return np.array([[fx, 0.0, par["cx"] - 0.5], [0.0, fy, par["cy"] - 0.5],
-                     [0.0, 0.0, 1.0]])
+    _distortion(f"{p}: camera {cam[0]} ({model})", extra)
+    return _K_centred(fx, fy, par["cx"], par["cy"])
+
+
+def _distortion(who: str, dist: dict) -> None:
+    """Warn that `who` (a file, or a camera of one) has the lens distortion `dist` (name ->
+    coefficient, the non-zero ones; nothing where empty), which K leaves out."""
+    if dist:
+        warn(f"`K`: {who} has lens distortion ({', '.join(f'{k} {v:g}' for k, v in dist.items())}"
+             "), which K leaves out: the normal map must be of an undistorted image; "
+             + _UNDISTORT)
+
+
+def _K_centred(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+    """The K of a principal point given as COLMAP (and nerfstudio) give it, the upper-left
+    pixel's centre at (0.5, 0.5): cx and cy minus 0.5, facetlift's pixel centres being at
+    integers (docs/conventions.md)."""
+    return np.array([[fx, 0.0, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
 
 
 #: COLMAP's binary model ids (``cameras.bin``, as its ``read_write_model.py`` writes and reads
@@ -404,9 +415,5 @@ def K_transforms(data: dict, p: Path) -> np.ndarray:
         dist = {k: float(low[k]) for k in _NERF_DISTORTION if k in low}
     except (TypeError, ValueError):
         raise _KError(f"`K`: {p}: fl_x, fl_y, cx, cy must be numbers") from None
-    dist = {k: v for k, v in dist.items() if v}
-    if dist:
-        warn(f"`K`: {p} has lens distortion ({', '.join(f'{k} {v:g}' for k, v in dist.items())}"
-             "), which K leaves out: the normal map must be of an undistorted image; "
-             + _UNDISTORT)
-    return np.array([[fx, 0.0, cx - 0.5], [0.0, fy, cy - 0.5], [0.0, 0.0, 1.0]])
+    _distortion(str(p), {k: v for k, v in dist.items() if v})
+    return _K_centred(fx, fy, cx, cy)

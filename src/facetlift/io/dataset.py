@@ -176,6 +176,7 @@ ROTATION_FIELDS = ("world_to_camera", "camera_to_world")
 #: ``camera_to_world.*`` (:func:`read_dataset`).
 ROTATION_FORMATS = (".txt", ".json", ".npy")
 
+
 def is_rotation_file(path) -> bool:
     """Whether `path` is named as a rotation file (``world_to_camera.*`` or
     ``camera_to_world.*`` of :data:`ROTATION_FORMATS`): a camera's, as ``K.txt`` is, and no
