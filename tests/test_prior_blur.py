@@ -278,7 +278,7 @@ def test_a_blurred_prior_that_tears_the_surface_apart_falls_back_to_pointwise():
     coarse_prior, sigma = coarse(depth, mask)
     info = run(n, mask, prior=coarse_prior, prior_weight=0.01, prior_blur=sigma,
                discontinuities=True).info["prior_blur"]
-    assert not info["fallback"] and info["astray"] is None
+    assert not info["fallback"] and info["astray"] is None and info["bent"] is None
     # relief that the blur flattens (a review's case: a ripple on a nearly flat wall, its
     # amplitude above the prior's whole range) is no runaway: the first solve has its range
     r, c = np.indices((64, 64)) + 0.5
@@ -292,6 +292,41 @@ def test_a_blurred_prior_that_tears_the_surface_apart_falls_back_to_pointwise():
     info = run(n, full, prior=ripple_prior, prior_weight=0.1, prior_blur=sigma,
                discontinuities=True).info["prior_blur"]
     assert not info["fallback"] and info["astray"] is None
+
+
+def test_blur_bent_needs_both_the_angle_and_the_ratio():
+    from facetlift.methods.dgp import BENT, BENT_RATIO, blur_bent
+
+    assert blur_bent(BENT + 1, None) == BENT + 1
+    assert blur_bent(BENT - 1, None) is None
+    assert blur_bent(BENT + 1, (BENT + 1) / BENT_RATIO * 0.9) == BENT + 1
+    assert blur_bent(BENT + 1, (BENT + 1) / BENT_RATIO * 1.1) is None  # (noisy normals)
+
+
+def test_a_blurred_prior_that_bends_the_surface_away_from_its_normals_falls_back(monkeypatch):
+    """A surface that a blurred prior bent far from its own normals (a mean angle above
+    BENT, and BENT_RATIO times the normals' own cuts') is treated as one that ran away: tried
+    from the smooth surface, then the prior compared pixel by pixel, with a warning. The
+    thresholds are lowered here so that the benchmark's kind of coarse prior takes that path:
+    the wiring is what is tested (docs/fusion.md has the cases that reach the defaults)."""
+    import facetlift.methods.dgp as dgp
+
+    n, depth, mask = two_bumps((48, 64))
+    coarse_prior, sigma = coarse(depth, mask)
+    kw = dict(prior=coarse_prior, prior_weight=0.01, discontinuities=True)
+    kept = run(n, mask, prior_blur=sigma, **kw).info
+    free = kept["prior_free"]["deviation"]
+    assert free > 0 and kept["prior_blur"]["bent"] is None  # (measured; far below BENT)
+    monkeypatch.setattr(dgp, "BENT", 0.0)
+    monkeypatch.setattr(dgp, "BENT_RATIO", 0.0)
+    with pytest.warns(UserWarning, match=r"prior_blur: the surface departed from its own "
+                                         r"normals by [\d.]+ deg on average \(the normals' "
+                                         r"own cuts: [\d.e-]+ deg\).*compared pixel by pixel"):
+        s = facetlift.integrate(n, mask, prior_blur=sigma, **kw)
+    info = s.info["prior_blur"]
+    assert info["fallback"] and info["astray"] is None and info["bent"] > 0
+    assert info["retried_bent"] > 0 and info["retried"] is None  # (from the smooth surface)
+    np.testing.assert_array_equal(s.depth, run(n, mask, **kw).depth)
 
 
 def test_zero_blur_is_the_pointwise_prior():

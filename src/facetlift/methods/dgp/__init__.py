@@ -328,7 +328,7 @@ def _add_pass(info, other, counts, lists, before=False):
 
 
 def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
-                   footprint=None, **kw):
+                   footprint=None, deviation=None, **kw):
     """:func:`solve_discontinuous`, from the normals' own cuts where a depth prior is compared
     pixel by pixel on few facets (:data:`PRIOR_CUTS_FIRST`) or seen through a blur
     (:data:`BLURRED_CUTS_FIRST`). That first pass is the prior-free
@@ -336,9 +336,11 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
     without a prior); the two passes share ``max_iter``, and ``info`` counts both
     (``info["prior_free"]``: the first pass's own). With a pointwise prior and the pixel
     `footprint` (of the unknown), the islands of :data:`ISLAND_FACETS` are then glued back and
-    the last system solved again (``info["islands_reglued"]``). Returns ``z, y, w, info`` as
-    :func:`solve_discontinuous` and the split of `y` where the islands' search formed it
-    (else None) for :func:`place_pieces`."""
+    the last system solved again (``info["islands_reglued"]``). With `deviation` (a callable
+    of facet copies: their mean angle to the input normals) the first pass's surface is
+    measured (``info["prior_free"]["deviation"]``, None where its weights were reused: no
+    surface). Returns ``z, y, w, info`` as :func:`solve_discontinuous` and the split of `y`
+    where the islands' search formed it (else None) for :func:`place_pieces`."""
     if not (prior is not None and kw["max_iter"] > 0 and (
             (blur is None and 0 < np.mean(prior[0] > 0) <= PRIOR_CUTS_FIRST)
             or (blur is not None and BLURRED_CUTS_FIRST))):
@@ -366,8 +368,11 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
         first = {**counts, "multigrid_builds": 0, "multigrid_refreshes": 0, "factorizations": 0,
                  "seconds": {"setup": 0.0, "solve": 0.0}}
     else:
-        _, _, w, first = solve_discontinuous(domain, bx, by, target, polish_last=False,
-                                             **first_kw)
+        _, y_free, w, first = solve_discontinuous(domain, bx, by, target, polish_last=False,
+                                                  **first_kw)
+        if deviation is not None:  # (of its last loose solve: no polish in this pass)
+            first["deviation"] = deviation(y_free)
+        del y_free
     w_first = w
     kw["max_iter"] -= first["iterations"]  # (0 left: one solve with these cuts)
     z, y, w, info = solve_discontinuous(domain, bx, by, target, prior=prior, x0=x0, w0=w,
@@ -391,6 +396,7 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
         split = None if islands[1] else islands[2]  # (of `y` as returned: nothing glued)
     info["prior_free"] = {key: first[key] for key in ("iterations", "grown", "converged",
                                                       "seconds")}
+    info["prior_free"]["deviation"] = first.get("deviation")
     info["prior_free"]["reused"] = reused is not None
     _add_pass(info, first, ("iterations", "grown") + _BUILDS,
               ("energy", "weight_change", "cg_iterations", "unsolved"), before=True)
@@ -409,7 +415,7 @@ def run(
     domain = problem.domain
     terms = prior = fusion_terms(problem)  # (the pointwise prior, as given)
     weights = problem.confidence  # None: every normal term weighs 1
-    blur = astray = retried = None
+    blur = astray = retried = bent = retried_bent = None
 
     def blurred():
         """A new BlurredPrior of the prior's terms, and the prior it weighs."""
@@ -457,25 +463,58 @@ def run(
         common = dict(normal_scale=scale, k=discontinuity_k, max_iter=discontinuity_iter,
                       tol=discontinuity_tol, flat_weight=flat_weight, callback=progress,
                       weights=weights)
+
+        def deviation(c):
+            """Mean angle (deg) of the facets' copies `c` to the input's own normals."""
+            return mean_angle(rowwise(c, E_X), rowwise(c, E_Y), bx, by, given, s)
+
         z, y, w, info, split = _discontinuous(domain, bx, by, target, prior=prior, x0=z0,
                                               final_weights=final, blur=blur, footprint=s,
+                                              deviation=None if blur is None else deviation,
                                               **common)
+        free = info.get("prior_free", {}).get("deviation")  # (the normals' own cuts' surface)
         announce(progress, "placing pieces")
         copies, pinfo = place_pieces(domain, y, bx, by, target, s, split=split,
                                      anchored=None if prior is None else prior[0] > 0,
                                      hang_anchored=blur is not None)
-        astray = None if blur is None else blur_astray(blur, copies.mean(axis=1))
-        if astray is not None and "prior_free" in info:
+
+        def trouble():
+            """Whether the blurred prior ran away (:func:`blur_astray`) or bent the surface
+            away from its normals (:func:`blur_bent`); sets `astray` and `bent`."""
+            nonlocal astray, bent
+            astray = blur_astray(blur, copies.mean(axis=1))
+            bent = None if astray is not None else blur_bent(deviation(copies), free)
+            return astray is not None or bent is not None
+
+        bent = None
+        if blur is not None and trouble() and "prior_free" in info:
             # (they ran away from the normals' cuts: the blurred prior once more from the
             # smooth surface, BLURRED_CUTS_FIRST)
             blur, prior = blurred()
             z, y, w, info = solve_discontinuous(domain, bx, by, target, prior=prior, x0=z0,
                                                 final_weights=final, blur=blur, **common)
             retried = astray  # (the departure from the normals' cuts)
+            retried_bent = bent
             copies, pinfo = place_pieces(domain, y, bx, by, target, s, anchored=prior[0] > 0,
                                          hang_anchored=True)
-            astray = blur_astray(blur, copies.mean(axis=1))
-        if astray is not None:  # (a blurred prior's corrections ran away: the pointwise one)
+            trouble()
+        if bent is not None:  # (the blurred prior bent it away from its normals: pointwise)
+            prior = terms
+            z, y, w, info, split = _discontinuous(domain, bx, by, target, prior=prior,
+                                                  x0=start(prior), final_weights=None,
+                                                  blur=None, footprint=s, **common)
+            copies, pinfo = place_pieces(domain, y, bx, by, target, s, anchored=prior[0] > 0,
+                                         split=split)
+            blur.returned = blur.rms(copies.mean(axis=1))  # (of the surface returned)
+            free_text = "" if free is None else f" (the normals' own cuts: {free:.2g} deg)"
+            warn(f"prior_blur: the surface departed from its own normals by {bent:.3g} deg on "
+                 f"average{free_text}, more than a surface of these normals can: the blurred "
+                 f"prior's corrections bent it (sigma {problem.prior_blur:g} px; a prior that "
+                 "is not blurred as said, e.g. block means upsampled without a further blur, "
+                 "can do so, docs/fusion.md). The prior was compared pixel by pixel instead "
+                 "(info['prior_blur']['fallback']); a smaller prior_weight (--prior-weight) or "
+                 "integrating without discontinuities may do better", ConvergenceWarning)
+        elif astray is not None:  # (a blurred prior's corrections ran away: the pointwise one)
             prior = terms
             z, y, w, info, split = _discontinuous(domain, bx, by, target, prior=prior,
                                                   x0=start(prior), final_weights=None,
@@ -492,7 +531,8 @@ def run(
                  "pixel instead (info['prior_blur']['fallback']); a smaller prior_weight "
                  "(--prior-weight) or integrating without discontinuities may do better",
                  ConvergenceWarning)
-        pointwise = prior is not None and (blur is None or astray is not None)
+        pointwise = prior is not None and (blur is None or astray is not None
+                                           or bent is not None)
         _discontinuity_warnings(info, prior if pointwise else None, domain,
                                 pinfo["mesh_pieces"],
                                 blurred=prior if prior is not None and not pointwise else None)
@@ -531,11 +571,14 @@ def run(
         result = MethodResult(vertex_values=z, info=info)
     if blur is not None:
         info["prior_blur"] = blur.info()
-        info["prior_blur"]["fallback"] = astray is not None
+        info["prior_blur"]["fallback"] = astray is not None or bent is not None
         info["prior_blur"]["astray"] = astray  # (the departure ratio that called for it)
+        # (the mean deviation from the normals, deg, that called for it: blur_bent)
+        info["prior_blur"]["bent"] = bent
         # (the same from the normals' cuts, where it called for the retry from the smooth
         # surface: BLURRED_CUTS_FIRST)
         info["prior_blur"]["retried"] = retried
+        info["prior_blur"]["retried_bent"] = retried_bent
         if not info["prior_blur"]["fallback"]:
             info["converged"] = bool(info.get("converged", True)) and blur.converged
             _blur_check(info["prior_blur"], blur.prior[blur.samples])
@@ -688,6 +731,36 @@ def blur_astray(blur, centres) -> float | None:
         return None
     ratio = q / span
     return ratio if ratio > ASTRAY else None
+
+
+#: Mean angle (degrees) between a blurred prior's surface (``prior_blur``, with
+#: discontinuities) and its input normals above which, where it is also more than
+#: :data:`BENT_RATIO` times the angle of the normals' own cuts' surface, the prior is taken to
+#: have bent the surface away from its normals (:func:`blur_bent`): it is then handled as one
+#: that ran away (:data:`ASTRAY`): tried once more from the smooth surface, then compared
+#: pixel by pixel, with a warning. Measured (twenty-eighth session, docs/fusion.md, "A blurred
+#: prior that bends the surface"; the fusion benchmark's 51 perspective and orthographic
+#: scenes, weight 0.003, a `/tmp` script): with its coarse prior blurred as said the surfaces
+#: came out 0-10.2 deg from their normals, none caught (the largest, `featuretype@front` and
+#: `mountain@front` at 8.6-10.2 deg, still below the smooth route's errors); with 8 x 8 block
+#: means repeated and declared blurred by 4 px, 47 of the 51 fall back, most because they ran
+#: away (ASTRAY), four because they came out 18-50 deg from their normals (the other four stay
+#: within 0.5 deg): `tray_bottom@oblique` 48.6 deg (aligned error 1.69 mm; 0.047 once
+#: caught), `max_planck@front` 33.6 (2.45; 0.083), `cheburashka@front` 18.4 (1.12; 0.063) and
+#: its orthographic view 18.1 (5.46 %; 0.29). Not caught: the DiLiGenT bear with 4 x 4
+#: block means declared blurred by 2 px, 5.6 deg (MADE 0.37 mm; 0.020 without the prior, 0.041
+#: on the smooth route with it).
+BENT = 15.0
+BENT_RATIO = 3.0
+
+
+def blur_bent(angle: float, free: float | None) -> float | None:
+    """`angle` (the surface's mean deviation from its normals, degrees) where it exceeds
+    :data:`BENT` and :data:`BENT_RATIO` times `free` (the normals' own cuts' surface's; None:
+    not measured), else None."""
+    if angle > BENT and (free is None or angle > BENT_RATIO * free):
+        return angle
+    return None
 
 
 def _blur_check(pb: dict, prior) -> None:
