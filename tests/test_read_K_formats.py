@@ -175,7 +175,63 @@ def read(tmp_path, name, text):
 def test_calibration_files_give_their_camera_matrix(tmp_path, name, text):
     got, said = read(tmp_path, name, text)
     np.testing.assert_array_equal(got, K)
-    assert said == []  # (P equal to K in the dumps: nothing to say)
+    # (P equal to K in the dumps, zero distortion: nothing to say; OPENCV_YAML's distortion
+    # is warned about)
+    distorted = text.startswith("%YAML")
+    assert len(said) == distorted
+    assert not distorted or "lens distortion (k1 0.1, k2 -0.2)" in said[0]
+
+
+DISTORTED = [  # (file name, text, the coefficients named): k1 -0.25, p1 0.001 in each
+    ("dist.yml", OPENCV_YAML.replace("1.0000000000000001e-01, -2.0000000000000001e-01, 0., 0.",
+                                     "-0.25, 0., 1.0e-03, 0."), "k1 -0.25, p1 0.001"),
+    ("dist_coeffs.yml", OPENCV_YAML.replace("distortion_coefficients", "dist_coeffs").replace(
+        "1.0000000000000001e-01, -2.0000000000000001e-01, 0., 0.", "-0.25, 0., 1.0e-03, 0."),
+     "k1 -0.25, p1 0.001"),
+    ("D.yml", OPENCV_YAML.replace("distortion_coefficients", "D").replace(
+        "1.0000000000000001e-01, -2.0000000000000001e-01, 0., 0.", "-0.25, 0., 1.0e-03, 0."),
+     "k1 -0.25, p1 0.001"),
+    ("dist.xml", OPENCV_XML.replace("0. 0. 0. 0. 0.</data>", "-0.25 0. 1.0e-03 0. 0.</data>"),
+     "k1 -0.25, p1 0.001"),
+    ("ost.yaml", ROS_CAMERA_INFO.replace("[0.1, -0.2, 0.001, 0.0, 0.0]",
+                                         "[-0.25, 0.0, 0.001, 0.0, 0.0]"), "k1 -0.25, p1 0.001"),
+    ("ros2.yaml", ROS2_DUMP.replace("d:\n- 0.0\n- 0.0\n- 0.0", "d:\n- -0.25\n- 0.0\n- 0.001"),
+     "k1 -0.25, p1 0.001"),
+    ("ros1.yaml", ROS1_DUMP.replace("D: [0.0, 0.0, 0.0,", "D: [-0.25, 0.0, 0.001,"),
+     "k1 -0.25, p1 0.001"),
+    ("fisheye.yaml", ROS1_DUMP.replace('"plumb_bob"', '"equidistant"').replace(
+        "D: [0.0, 0.0, 0.0, 0.0, 0.0]", "D: [-0.25, 0.0, 0.001, 0.0]"), "k1 -0.25, k3 0.001"),
+]
+
+
+@pytest.mark.parametrize("name, text, named", DISTORTED)
+def test_opencv_and_ros_distortion_is_warned_about(tmp_path, name, text, named):
+    """Distortion other than zero in an OpenCV FileStorage file (distortion_coefficients,
+    dist_coeffs, D) or a ROS camera_info / CameraInfo dump (distortion_coefficients, d, D)
+    was read without a word, where COLMAP's and nerfstudio's was warned about (a fresh
+    user's review): the same warning, naming the file and the coefficients, and how to
+    undistort the image first."""
+    got, said = read(tmp_path, name, text)
+    np.testing.assert_array_equal(got, K)
+    said = [w for w in said if "lens distortion" in w]
+    assert len(said) == 1, said
+    assert said[0].startswith(f"`K`: {tmp_path / name} has lens distortion ({named}), which K "
+                              "leaves out: the normal map must be of an undistorted image")
+    assert ("cv2.fisheye.undistortImage" if "fisheye" in name else "cv2.undistort(") in said[0]
+
+
+def test_a_stereo_calibration_s_own_distortion_is_the_one_read(tmp_path):
+    """One camera of a stereo calibration (M1 with D1 and D2 beside it): D1 is its own."""
+    import re
+
+    left = re.sub(r"M2:.*?(?=D2:)", "", STEREO_YAML, flags=re.S)  # (M1, D1, D2, R)
+    got, said = read(tmp_path, "left.yml", left.replace("data: [ 0., 0., 0., 0., 0. ]",
+                                                        "data: [ 0.5, 0., 0., 0., 0. ]", 1))
+    np.testing.assert_array_equal(got, K)
+    assert len(said) == 1 and "lens distortion (k1 0.5)" in said[0]
+    got, said = read(tmp_path, "right.yml", left.replace("data: [ 0., 0., 0., 0., 0. ]\nR",
+                                                         "data: [ 0.5, 0., 0., 0., 0. ]\nR"))
+    assert said == []
 
 
 def test_opencv_yaml_reads_the_matrix_not_the_distortion_or_another_3x3(tmp_path):
@@ -205,12 +261,15 @@ def test_a_stereo_calibration_names_its_two_cameras(tmp_path):
 def test_ros_camera_info_with_another_projection_warns_of_rectified_images(tmp_path):
     got, said = read(tmp_path, "ost.yaml", ROS_CAMERA_INFO)
     np.testing.assert_array_equal(got, K)  # (camera_matrix: the raw image's)
-    assert len(said) == 1 and "ost.yaml" in said[0] and "rectified image" in said[0]
+    # (and its distortion, the other warning)
+    assert len(said) == 2 and "ost.yaml" in said[0] and "rectified image" in said[0]
     assert "projection_matrix's left 3x3" in said[0] and "480 490 318 238" in said[0]
+    assert "lens distortion (k1 0.1, k2 -0.2, p1 0.001)" in said[1]
     # (a P equal to the camera matrix within 1e-6 relative: silent)
     same = ROS_CAMERA_INFO.replace(
         "480.0, 0.0, 318.0, 0.0, 0.0, 490.0, 238.0",
-        "500.0001, 0.0, 320.5, 0.0, 0.0, 510.0, 240.25")
+        "500.0001, 0.0, 320.5, 0.0, 0.0, 510.0, 240.25").replace(
+        "[0.1, -0.2, 0.001, 0.0, 0.0]", "[0.0, 0.0, 0.0, 0.0, 0.0]")
     got, said = read(tmp_path, "same.yaml", same)
     assert said == []
 

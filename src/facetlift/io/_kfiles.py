@@ -153,7 +153,8 @@ def K_yaml(p: Path, text: str) -> np.ndarray:
     """The intrinsics of an OpenCV FileStorage YAML file (``%YAML:1.0``, a
     ``!!opencv-matrix`` node), a ROS ``camera_info`` YAML (``camera_matrix``; its
     ``projection_matrix`` differing is warned about) or a CameraInfo message dump
-    (``k:`` / ``K:``, nine numbers)."""
+    (``k:`` / ``K:``, nine numbers). Distortion coefficients beside the matrix that are not
+    all zero are warned about (:func:`_opencv_distortion`)."""
     lines = _yaml_lines(text)
     if not lines:
         raise _KError(f"`K`: {p} is an empty YAML file")
@@ -168,7 +169,66 @@ def K_yaml(p: Path, text: str) -> np.ndarray:
             found[name], parents[name] = m, parent
     name, K = pick_K(found, p, "YAML")
     _check_projection(K, parents[name], p, name)
+    parent = parents[name]
+    dist = _pick_distortion({k: _vector(v) for k, v in parent.items()}, name)
+    _opencv_distortion(p, dist, parent.get("distortion_model"))
     return K
+
+
+#: The keys a calibration's distortion coefficients go by (case aside): OpenCV's samples
+#: (``distortion_coefficients``, ``dist_coeffs``, ``distCoeffs``, ``D``, a stereo pair's
+#: ``D1`` / ``D2``) and ROS (``distortion_coefficients``; ``d`` in ROS 2, ``D`` in ROS 1).
+_DISTORTION_KEY = re.compile(
+    r"^(d|dist|dist_?coeffs?|distortion(_?coeff(icient)?s)?)[_-]?(\d+|left|right|l|r)?$")
+
+#: OpenCV's distortion coefficients in its order (calibrateCamera's 4, 5, 8, 12 or 14; ROS's
+#: plumb_bob and rational_polynomial models the same), and cv2.fisheye's (ROS's
+#: equidistant).
+OPENCV_DISTORTION = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4",
+                     "tx", "ty")
+FISHEYE_DISTORTION = ("k1", "k2", "k3", "k4")
+
+
+def _vector(node) -> list[float] | None:
+    """`node` as a list of numbers, or None: a matrix node's data (``rows``, ``cols``,
+    ``data``: OpenCV's, ROS's) or a flat list (a CameraInfo dump's ``d``)."""
+    if isinstance(node, dict):
+        node = node.get("data")
+    if isinstance(node, list) and node and all(isinstance(v, float) for v in node):
+        return node
+    return None
+
+
+def _pick_distortion(nodes: dict, name: str) -> list[float] | None:
+    """The distortion coefficients of the camera `name` (its key, dotted) among the entries
+    `nodes` (key -> list of numbers or None) of its mapping: the one named as distortion
+    (:data:`_DISTORTION_KEY`) with the camera key's suffix (``D1`` for ``M1``), else the only
+    one; None where there is none, or several of which none is the camera's."""
+    found = {k: v for k, v in nodes.items()
+             if v is not None and _DISTORTION_KEY.match(str(k).lower())}
+    own = _CAMERA_KEY.match(name.rsplit(".", 1)[-1].lower())
+    suffix = own.group(2) if own else None
+    same = [v for k, v in found.items()
+            if _DISTORTION_KEY.match(str(k).lower()).group(4) == suffix]
+    if len(same) == 1:
+        return same[0]
+    return next(iter(found.values())) if len(found) == 1 else None
+
+
+def _opencv_distortion(p: Path, dist: list[float] | None, model=None) -> None:
+    """Warn where an OpenCV or ROS calibration's distortion coefficients `dist` (OpenCV's
+    order; cv2.fisheye's for ROS's ``equidistant`` `model`) are not all zero, as
+    :func:`_distortion` warns of COLMAP's."""
+    if not dist:
+        return
+    fisheye = str(model or "").lower() in ("equidistant", "fisheye")
+    names = FISHEYE_DISTORTION if fisheye else OPENCV_DISTORTION
+    named = {(names[i] if i < len(names) else f"c{i}"): v for i, v in enumerate(dist) if v}
+    how = ("undistort the image first with these coefficients (cv2.fisheye.undistortImage: "
+           "an equidistant model is a fish-eye's)" if fisheye else
+           "undistort the image first with these coefficients (cv2.undistort(image, K, "
+           "dist); ROS's image_proc publishes it as image_rect)")
+    _distortion(str(p), named, how + " and compute the normal map from the undistorted image")
 
 
 def _check_projection(K: np.ndarray, parent: dict, p: Path, name: str) -> None:
@@ -192,14 +252,15 @@ def _check_projection(K: np.ndarray, parent: dict, p: Path, name: str) -> None:
 
 def K_xml(p: Path) -> np.ndarray:
     """The intrinsics of an OpenCV FileStorage XML file: its ``type_id="opencv-matrix"``
-    node of 3 rows and 3 cols, chosen among several as :func:`pick_K` does."""
+    node of 3 rows and 3 cols, chosen among several as :func:`pick_K` does; its distortion
+    coefficients warned about as :func:`K_yaml` warns of them."""
     import xml.etree.ElementTree as ET
 
     try:
         root = ET.parse(p).getroot()
     except ET.ParseError as e:
         raise _KError(f"`K`: cannot read {p} as XML ({e})") from None
-    found = {}
+    found, vectors = {}, {}
     for el in root.iter():
         data, rows, cols = el.find("data"), el.find("rows"), el.find("cols")
         if data is None or (el.get("type_id") != "opencv-matrix" and rows is None):
@@ -213,7 +274,11 @@ def K_xml(p: Path) -> np.ndarray:
                           "and data must be") from None
         if shape == (3, 3) and values.size == 9:
             found[el.tag] = values.reshape(3, 3)
-    return pick_K(found, p, "OpenCV XML")[1]
+        elif 1 in shape and values.size == shape[0] * shape[1]:
+            vectors[el.tag] = [float(v) for v in values]
+    name, K = pick_K(found, p, "OpenCV XML")
+    _opencv_distortion(p, _pick_distortion(vectors, name))
+    return K
 
 
 # ------------------------------------------------------------------ COLMAP cameras.txt
@@ -280,13 +345,14 @@ def K_colmap(p: Path, cams: list[list[str]]) -> np.ndarray:
     return _K_centred(fx, fy, par["cx"], par["cy"])
 
 
-def _distortion(who: str, dist: dict) -> None:
+def _distortion(who: str, dist: dict, undistort: str = _UNDISTORT) -> None:
     """Warn that `who` (a file, or a camera of one) has the lens distortion `dist` (name ->
-    coefficient, the non-zero ones; nothing where empty), which K leaves out."""
+    coefficient, the non-zero ones; nothing where empty), which K leaves out; `undistort`
+    says how to undistort (COLMAP's image_undistorter by default)."""
     if dist:
         warn(f"`K`: {who} has lens distortion ({', '.join(f'{k} {v:g}' for k, v in dist.items())}"
              "), which K leaves out: the normal map must be of an undistorted image; "
-             + _UNDISTORT)
+             + undistort)
 
 
 def _K_centred(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:

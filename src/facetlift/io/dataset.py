@@ -38,10 +38,12 @@ def read_K(path) -> np.ndarray:
     - OpenCV FileStorage YAML (``%YAML:1.0``; ``.yml`` / ``.yaml``) or XML (``.xml``): the
       ``opencv-matrix`` node of 3 rows and 3 cols named ``camera_matrix``, ``cameraMatrix``,
       ``K``, ``intrinsic(s)`` or ``M1`` (case aside), or the only 3x3 one; a stereo file's
-      two cameras (``M1`` / ``M2``) are refused, naming them;
+      two cameras (``M1`` / ``M2``) are refused, naming them; distortion coefficients other
+      than zero (``distortion_coefficients``, ``dist_coeffs``, ``D``) are warned about;
     - ROS ``camera_info`` YAML (``camera_matrix``) or a CameraInfo dump (``k:`` / ``K:``,
       nine numbers): the matrix for the raw image; where its ``projection_matrix`` (``P``)
-      differs, a warning gives P's left 3x3, the rectified image's camera;
+      differs, a warning gives P's left 3x3, the rectified image's camera; distortion
+      (``distortion_coefficients``, ``d`` / ``D``) other than zero is warned about;
     - COLMAP's ``cameras.txt`` (found by its lines ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS``)
       or ``cameras.bin`` (any ``.bin``: the binary model COLMAP's mapper writes):
       its camera (several only where all are the same), a pinhole model (SIMPLE_PINHOLE,
