@@ -18,6 +18,22 @@ class _KError(ValueError):
     """A K file's own message, given as it is (not as a parse error)."""
 
 
+def _stated_size(mapping: dict, *keys: tuple[str, str]) -> tuple[int, int] | None:
+    """The (H, W) of the first pair of `keys` (width key, height key) that `mapping` holds
+    as two positive whole numbers (OpenCV's and ROS's ``image_width`` / ``image_height``, a
+    CameraInfo's ``width`` / ``height``, nerfstudio's ``w`` / ``h``); None otherwise (a ROS
+    dump's 0 x 0: not calibrated)."""
+    for wkey, hkey in keys:
+        w, h = mapping.get(wkey), mapping.get(hkey)
+        try:
+            w, h = float(w), float(h)
+        except (TypeError, ValueError):
+            continue
+        if w > 0 and h > 0 and w.is_integer() and h.is_integer():
+            return int(h), int(w)
+    return None
+
+
 # ------------------------------------------------------------------ YAML (OpenCV, ROS)
 
 #: The keys a calibration's intrinsics go by (case aside): OpenCV's samples and
@@ -149,12 +165,14 @@ def pick_K(found: dict[str, np.ndarray], p: Path, fmt: str) -> tuple[str, np.nda
                   "numbers row by row, or fx fy cx cy as text)")
 
 
-def K_yaml(p: Path, text: str) -> np.ndarray:
+def K_yaml(p: Path, text: str) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of an OpenCV FileStorage YAML file (``%YAML:1.0``, a
     ``!!opencv-matrix`` node), a ROS ``camera_info`` YAML (``camera_matrix``; its
     ``projection_matrix`` differing is warned about) or a CameraInfo message dump
     (``k:`` / ``K:``, nine numbers). Distortion coefficients beside the matrix that are not
-    all zero are warned about (:func:`_opencv_distortion`)."""
+    all zero are warned about (:func:`_opencv_distortion`). Returns K and the image size (H,
+    W) the file states (``image_width`` / ``image_height``, a dump's ``width`` / ``height``),
+    or None."""
     lines = _yaml_lines(text)
     if not lines:
         raise _KError(f"`K`: {p} is an empty YAML file")
@@ -172,7 +190,8 @@ def K_yaml(p: Path, text: str) -> np.ndarray:
     parent = parents[name]
     dist = _pick_distortion({k: _vector(v) for k, v in parent.items()}, name)
     _opencv_distortion(p, dist, parent.get("distortion_model"))
-    return K
+    size = _stated_size(parent, ("image_width", "image_height"), ("width", "height"))
+    return K, size if size is not None else _stated_size(tree, ("image_width", "image_height"))
 
 
 #: The keys a calibration's distortion coefficients go by (case aside): OpenCV's samples
@@ -250,10 +269,11 @@ def _check_projection(K: np.ndarray, parent: dict, p: Path, name: str) -> None:
 # ------------------------------------------------------------------ OpenCV XML
 
 
-def K_xml(p: Path) -> np.ndarray:
+def K_xml(p: Path) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of an OpenCV FileStorage XML file: its ``type_id="opencv-matrix"``
     node of 3 rows and 3 cols, chosen among several as :func:`pick_K` does; its distortion
-    coefficients warned about as :func:`K_yaml` warns of them."""
+    coefficients warned about as :func:`K_yaml` warns of them. Returns K and the image size
+    (H, W) its ``<image_width>`` and ``<image_height>`` state, or None."""
     import xml.etree.ElementTree as ET
 
     try:
@@ -278,7 +298,9 @@ def K_xml(p: Path) -> np.ndarray:
             vectors[el.tag] = [float(v) for v in values]
     name, K = pick_K(found, p, "OpenCV XML")
     _opencv_distortion(p, _pick_distortion(vectors, name))
-    return K
+    stated = {el.tag: (el.text or "").strip() for el in root
+              if el.tag in ("image_width", "image_height")}
+    return K, _stated_size(stated, ("image_width", "image_height"))
 
 
 # ------------------------------------------------------------------ COLMAP cameras.txt
@@ -308,11 +330,13 @@ def colmap_lines(rows: list[str]) -> list[list[str]]:
             if len(r.split()) > 1 and r.split()[1] in (*COLMAP_MODELS, *COLMAP_FISHEYE)]
 
 
-def K_colmap(p: Path, cams: list[list[str]]) -> np.ndarray:
+def K_colmap(p: Path, cams: list[list[str]]) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of a COLMAP ``cameras.txt`` (``CAMERA_ID MODEL WIDTH HEIGHT
     PARAMS[]``): its one camera, or its several where all are the same. COLMAP puts the
     upper-left pixel's centre at (0.5, 0.5), facetlift at (0, 0): cx and cy are COLMAP's
-    minus 0.5. A fish-eye model is refused; distortion that is not zero is warned about."""
+    minus 0.5. A fish-eye model is refused; distortion that is not zero is warned about.
+    Returns K and the image size (H, W) of its WIDTH and HEIGHT (None where its cameras
+    differ in it)."""
     def key(c):
         return c[1], tuple(c[4:])
 
@@ -342,7 +366,10 @@ def K_colmap(p: Path, cams: list[list[str]]) -> np.ndarray:
     fy = par.get("fy", par.get("f"))
     extra = {k: v for k, v in par.items() if k not in ("f", "fx", "fy", "cx", "cy") and v}
     _distortion(f"{p}: camera {cam[0]} ({model})", extra)
-    return _K_centred(fx, fy, par["cx"], par["cy"])
+    sizes = {(c[2], c[3]) for c in cams}
+    size = _stated_size(dict(zip(("w", "h"), sizes.pop(), strict=True)), ("w", "h")) \
+        if len(sizes) == 1 else None
+    return _K_centred(fx, fy, par["cx"], par["cy"]), size
 
 
 def _distortion(who: str, dist: dict, undistort: str = _UNDISTORT) -> None:
@@ -372,7 +399,7 @@ COLMAP_IDS = {
 }
 
 
-def K_colmap_bin(p: Path) -> np.ndarray:
+def K_colmap_bin(p: Path) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of a COLMAP ``cameras.bin`` (the sparse model COLMAP's mapper writes by
     default; little-endian: the number of cameras as uint64, then per camera its id and model
     id as int32, width and height as uint64 and the model's parameters as float64), read as
@@ -417,7 +444,8 @@ _NERF_DISTORTION = ("k1", "k2", "k3", "k4", "p1", "p2")
 
 #: The camera keys a transforms.json frame may hold for itself (nerfstudio's datasets of
 #: several cameras give them per frame, not at the top).
-_NERF_CAMERA = ("fl_x", "fl_y", "cx", "cy", "camera_model", "is_fisheye", *_NERF_DISTORTION)
+_NERF_CAMERA = ("fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model", "is_fisheye",
+                *_NERF_DISTORTION)
 
 
 def _frame_cameras(low: dict) -> list[dict]:
@@ -437,13 +465,14 @@ def is_transforms(data: dict) -> bool:
             or bool(_frame_cameras(low)))
 
 
-def K_transforms(data: dict, p: Path) -> np.ndarray:
+def K_transforms(data: dict, p: Path) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of a ``transforms.json`` (nerfstudio, instant-ngp): ``fl_x``, ``fl_y``
     (``fl_x`` where missing), ``cx``, ``cy``, at its top or, the same for every frame, in its
     frames. Their principal point is COLMAP's (nerfstudio
     copies COLMAP's cx, cy unchanged and casts its rays through ``pixel + 0.5``): cx and cy
     minus 0.5, as :func:`K_colmap`. ``camera_angle_x`` alone is refused (it needs the
-    image's width: ``--fov``)."""
+    image's width: ``--fov``). Returns K and the image size (H, W) of its ``w`` and ``h``,
+    or None."""
     import math
 
     low = {str(k).lower(): v for k, v in data.items()}
@@ -482,4 +511,4 @@ def K_transforms(data: dict, p: Path) -> np.ndarray:
     except (TypeError, ValueError):
         raise _KError(f"`K`: {p}: fl_x, fl_y, cx, cy must be numbers") from None
     _distortion(str(p), {k: v for k, v in dist.items() if v})
-    return _K_centred(fx, fy, cx, cy)
+    return _K_centred(fx, fy, cx, cy), _stated_size(low, ("w", "h"))
