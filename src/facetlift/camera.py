@@ -314,11 +314,12 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
     value = fov_degrees(fov)
     f = (W / 2.0) / np.tan(np.radians(value) / 2.0)
     from ._warnings import warn
+    from .errors import CameraWarning
     from .problem import FOV_WIDE
 
     if value < FOV_RADIANS:  # (a field of view in radians read as degrees: a telescope)
         warn(f"`fov` {value:g} deg is a telescope's field of view: is it in radians? Give "
-             f"degrees ({np.degrees(value):.4g} deg for {value:g} rad)")
+             f"degrees ({np.degrees(value):.4g} deg for {value:g} rad)", CameraWarning)
     elif value > FOV_WIDE:  # (said here, as a field of view: integrate asked a --fov 170
         # user whether the focal lengths were in mm, an audit)
         edge = 1.0 / np.cos(np.radians(value) / 2.0) ** 2
@@ -329,7 +330,7 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
              "nearly edge-on (its normals turn grazing or back-facing). A lens that wide is a "
              "fish-eye, which is no pinhole: undistort the image first. The field of view is "
              "the width's, not the diagonal's (a 35 mm-equivalent focal length f35 gives "
-             "2 atan(18 / f35) across the long side)")
+             "2 atan(18 / f35) across the long side)", CameraWarning)
     K = np.array([[f, 0.0, (W - 1) / 2.0], [0.0, f, (H - 1) / 2.0], [0.0, 0.0, 1.0]])
     key = id(K)
     _FROM_FOV[key] = (weakref.ref(K, lambda _: _FROM_FOV.pop(key, None)), K.copy(), value,

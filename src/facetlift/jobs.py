@@ -22,6 +22,7 @@ import numpy as np
 
 from ._progress import announce
 from ._warnings import recording, warn
+from .errors import CameraWarning
 
 #: Output kinds (``--save``) -> file names written into the output folder.
 OUTPUTS = {
@@ -892,6 +893,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         # were nowhere in batch.jsonl, a photometric-stereo user's check)
         "normals": _normal_counts(sinfo),
         "warnings": [str(w.message) for w in caught],
+        # (whether one of them says the camera looks wrong: the jump hint then points at it)
+        "camera_warned": any(issubclass(w.category, CameraWarning) for w in caught),
         "info": jsonable(sinfo),
         "timings": {"read": t_read, "integrate": t_integrate,
                     "write": time.perf_counter() - t2, "total": time.perf_counter() - t0},
