@@ -218,6 +218,49 @@ def test_options_are_forwarded(tmp_path, capsys, monkeypatch):
                     "backend": "superlu"}
 
 
+def test_K_typed_inline_is_forwarded(tmp_path, capsys, monkeypatch):
+    """A fresh user's review: --K "3772 3759 305.9 255.1" said "File ... does not exist".
+    Four numbers fx fy cx cy, or the matrix's nine row by row, spaces or commas, are taken
+    where no such file exists; other text is still a missing file, and numbers that are no
+    valid K are refused naming --K."""
+    npath, _, _ = write_input(tmp_path)
+    K = np.array([[50.0, 0, 13], [0, 52, 10], [0, 0, 1]])
+    seen = {}
+
+    def spy(normals, mask=None, **kw):
+        seen.update(kw)
+        raise ValueError("spy stops here")
+
+    monkeypatch.setattr(facetlift, "integrate", spy)
+    for typed in ("50 52 13 10", "50, 52, 13, 10", " 50,0,13, 0,52,10, 0,0,1 ",
+                  "50 0 13 0 52 10 0 0 1"):
+        seen.clear()
+        code, _, err = run(capsys, "integrate", npath, "--K", typed)
+        assert code == 1 and "spy stops here" in err, (typed, err)
+        np.testing.assert_array_equal(seen["K"], K)
+    monkeypatch.undo()
+    code, _, err = run(capsys, "integrate", npath, "--K", "50 52 13")
+    assert code == 1 and "Invalid value for '--K': File '50 52 13' does not exist" in err
+    code, _, err = run(capsys, "integrate", npath, "--K", "fx 52 13 10")
+    assert code == 1 and "does not exist" in err
+    code, _, err = run(capsys, "integrate", npath, "--K", "50 -52 13 10", "-o", tmp_path / "o")
+    assert code == 1 and "--K: '50 -52 13 10' (typed inline): --K must have positive focal" in err
+    # (a file of that name is read as the file)
+    (tmp_path / "50 52 13 10").write_text("60 62 13 10\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(facetlift, "integrate", spy)
+    assert run(capsys, "integrate", npath, "--K", "50 52 13 10")[0] == 1
+    assert seen["K"][0, 0] == 60
+    monkeypatch.undo()
+    # info and evaluate take it too
+    code, out, err = run(capsys, "info", npath, "--K", "50 52 13 10", "--json")
+    assert json.loads(out)["K"] == K.tolist(), err
+    depth = tmp_path / "depth.npy"
+    np.save(depth, np.full((20, 26), 2.0))
+    code, out, err = run(capsys, "evaluate", depth, "--gt", depth, "--K", "50 52 13 10")
+    assert code == 0 and "perspective (--K 50 52 13 10)" in out, err
+
+
 def test_discontinuities_forwarded_or_refused(tmp_path, capsys, monkeypatch):
     npath, _, _ = write_input(tmp_path)
     without = [k for k, v in REGISTRY.items() if not v.discontinuities]

@@ -175,7 +175,63 @@ def read(tmp_path, name, text):
 def test_calibration_files_give_their_camera_matrix(tmp_path, name, text):
     got, said = read(tmp_path, name, text)
     np.testing.assert_array_equal(got, K)
-    assert said == []  # (P equal to K in the dumps: nothing to say)
+    # (P equal to K in the dumps, zero distortion: nothing to say; OPENCV_YAML's distortion
+    # is warned about)
+    distorted = text.startswith("%YAML")
+    assert len(said) == distorted
+    assert not distorted or "lens distortion (k1 0.1, k2 -0.2)" in said[0]
+
+
+DISTORTED = [  # (file name, text, the coefficients named): k1 -0.25, p1 0.001 in each
+    ("dist.yml", OPENCV_YAML.replace("1.0000000000000001e-01, -2.0000000000000001e-01, 0., 0.",
+                                     "-0.25, 0., 1.0e-03, 0."), "k1 -0.25, p1 0.001"),
+    ("dist_coeffs.yml", OPENCV_YAML.replace("distortion_coefficients", "dist_coeffs").replace(
+        "1.0000000000000001e-01, -2.0000000000000001e-01, 0., 0.", "-0.25, 0., 1.0e-03, 0."),
+     "k1 -0.25, p1 0.001"),
+    ("D.yml", OPENCV_YAML.replace("distortion_coefficients", "D").replace(
+        "1.0000000000000001e-01, -2.0000000000000001e-01, 0., 0.", "-0.25, 0., 1.0e-03, 0."),
+     "k1 -0.25, p1 0.001"),
+    ("dist.xml", OPENCV_XML.replace("0. 0. 0. 0. 0.</data>", "-0.25 0. 1.0e-03 0. 0.</data>"),
+     "k1 -0.25, p1 0.001"),
+    ("ost.yaml", ROS_CAMERA_INFO.replace("[0.1, -0.2, 0.001, 0.0, 0.0]",
+                                         "[-0.25, 0.0, 0.001, 0.0, 0.0]"), "k1 -0.25, p1 0.001"),
+    ("ros2.yaml", ROS2_DUMP.replace("d:\n- 0.0\n- 0.0\n- 0.0", "d:\n- -0.25\n- 0.0\n- 0.001"),
+     "k1 -0.25, p1 0.001"),
+    ("ros1.yaml", ROS1_DUMP.replace("D: [0.0, 0.0, 0.0,", "D: [-0.25, 0.0, 0.001,"),
+     "k1 -0.25, p1 0.001"),
+    ("fisheye.yaml", ROS1_DUMP.replace('"plumb_bob"', '"equidistant"').replace(
+        "D: [0.0, 0.0, 0.0, 0.0, 0.0]", "D: [-0.25, 0.0, 0.001, 0.0]"), "k1 -0.25, k3 0.001"),
+]
+
+
+@pytest.mark.parametrize("name, text, named", DISTORTED)
+def test_opencv_and_ros_distortion_is_warned_about(tmp_path, name, text, named):
+    """Distortion other than zero in an OpenCV FileStorage file (distortion_coefficients,
+    dist_coeffs, D) or a ROS camera_info / CameraInfo dump (distortion_coefficients, d, D)
+    was read without a word, where COLMAP's and nerfstudio's was warned about (a fresh
+    user's review): the same warning, naming the file and the coefficients, and how to
+    undistort the image first."""
+    got, said = read(tmp_path, name, text)
+    np.testing.assert_array_equal(got, K)
+    said = [w for w in said if "lens distortion" in w]
+    assert len(said) == 1, said
+    assert said[0].startswith(f"`K`: {tmp_path / name} has lens distortion ({named}), which K "
+                              "leaves out: the normal map must be of an undistorted image")
+    assert ("cv2.fisheye.undistortImage" if "fisheye" in name else "cv2.undistort(") in said[0]
+
+
+def test_a_stereo_calibration_s_own_distortion_is_the_one_read(tmp_path):
+    """One camera of a stereo calibration (M1 with D1 and D2 beside it): D1 is its own."""
+    import re
+
+    left = re.sub(r"M2:.*?(?=D2:)", "", STEREO_YAML, flags=re.S)  # (M1, D1, D2, R)
+    got, said = read(tmp_path, "left.yml", left.replace("data: [ 0., 0., 0., 0., 0. ]",
+                                                        "data: [ 0.5, 0., 0., 0., 0. ]", 1))
+    np.testing.assert_array_equal(got, K)
+    assert len(said) == 1 and "lens distortion (k1 0.5)" in said[0]
+    got, said = read(tmp_path, "right.yml", left.replace("data: [ 0., 0., 0., 0., 0. ]\nR",
+                                                         "data: [ 0.5, 0., 0., 0., 0. ]\nR"))
+    assert said == []
 
 
 def test_opencv_yaml_reads_the_matrix_not_the_distortion_or_another_3x3(tmp_path):
@@ -205,12 +261,15 @@ def test_a_stereo_calibration_names_its_two_cameras(tmp_path):
 def test_ros_camera_info_with_another_projection_warns_of_rectified_images(tmp_path):
     got, said = read(tmp_path, "ost.yaml", ROS_CAMERA_INFO)
     np.testing.assert_array_equal(got, K)  # (camera_matrix: the raw image's)
-    assert len(said) == 1 and "ost.yaml" in said[0] and "rectified image" in said[0]
+    # (and its distortion, the other warning)
+    assert len(said) == 2 and "ost.yaml" in said[0] and "rectified image" in said[0]
     assert "projection_matrix's left 3x3" in said[0] and "480 490 318 238" in said[0]
+    assert "lens distortion (k1 0.1, k2 -0.2, p1 0.001)" in said[1]
     # (a P equal to the camera matrix within 1e-6 relative: silent)
     same = ROS_CAMERA_INFO.replace(
         "480.0, 0.0, 318.0, 0.0, 0.0, 490.0, 238.0",
-        "500.0001, 0.0, 320.5, 0.0, 0.0, 510.0, 240.25")
+        "500.0001, 0.0, 320.5, 0.0, 0.0, 510.0, 240.25").replace(
+        "[0.1, -0.2, 0.001, 0.0, 0.0]", "[0.0, 0.0, 0.0, 0.0, 0.0]")
     got, said = read(tmp_path, "same.yaml", same)
     assert said == []
 
@@ -376,3 +435,99 @@ def test_instant_ngp_fisheye_flag_is_refused(tmp_path):
     with pytest.raises(ValueError, match=r"^`K`: .*fish\.json: is_fisheye is true: a normal "
                        r"map needs a pinhole image"):
         read(tmp_path, "fish.json", json.dumps({**data, "is_fisheye": True}))
+
+
+def test_calibration_files_state_their_image_size_and_read_K_returns_K_alone(tmp_path):
+    """read_K_stated gives the image size (H, W) a calibration file states beside K (what a
+    normal map of another size is checked against); read_K still returns the matrix alone."""
+    from facetlift.io.dataset import read_K_stated
+
+    cases = {"calib.yml": OPENCV_YAML, "calib.xml": OPENCV_XML, "ost.yaml": ROS_CAMERA_INFO,
+             "info.yaml": ROS2_DUMP, "info1.yaml": ROS1_DUMP,
+             "cameras.txt": colmap("1 PINHOLE 640 480 500 510 321 240.75"),
+             "transforms.json": json.dumps({"fl_x": 500, "fl_y": 510, "cx": 321, "cy": 240.75,
+                                            "w": 640, "h": 480})}
+    for name, text in cases.items():
+        (tmp_path / name).write_text(text)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            K_, size = read_K_stated(tmp_path / name)
+            plain = io.read_K(tmp_path / name)
+        np.testing.assert_array_equal(K_, K)
+        assert size == (480, 640), name
+        assert isinstance(plain, np.ndarray) and plain.shape == (3, 3)
+    (tmp_path / "cameras.bin").write_bytes(colmap_bin((1, 1, 640, 480, (500, 510, 321,
+                                                                         240.75))))
+    assert read_K_stated(tmp_path / "cameras.bin")[1] == (480, 640)
+    # (none stated: a text K, a ROS dump's 0 x 0, COLMAP's same camera at two sizes)
+    (tmp_path / "K.txt").write_text("500 510 320.5 240.25\n")
+    (tmp_path / "zero.yaml").write_text(ROS2_DUMP.replace("height: 480", "height: 0"))
+    (tmp_path / "two.txt").write_text(colmap("1 PINHOLE 640 480 500 510 321 240.75",
+                                             "2 PINHOLE 1280 960 500 510 321 240.75"))
+    for name in ("K.txt", "zero.yaml", "two.txt"):
+        assert read_K_stated(tmp_path / name)[1] is None, name
+
+
+def test_resize_ratio_names_simple_fractions_on_both_axes():
+    from fractions import Fraction
+
+    from facetlift.camera import resize_ratio
+
+    assert resize_ratio((1024, 1224), (512, 612)) == Fraction(1, 2)
+    assert resize_ratio((1025, 1225), (512, 612)) == Fraction(1, 2)  # (a resize rounds)
+    assert resize_ratio((1080, 1920), (720, 1280)) == Fraction(2, 3)
+    assert resize_ratio((512, 612), (1024, 1224)) == 2
+    # (another ratio on each axis, a crop, the same size: none)
+    for stated, shape in (((480, 640), (480, 600)), ((1080, 1920), (540, 540)),
+                          ((480, 640), (480, 640)), ((480, 640), (640, 480))):
+        assert resize_ratio(stated, shape) is None
+
+
+def test_a_calibration_of_another_image_size_is_refused(tmp_path, capsys):
+    """A fresh user's review: a ROS camera_info of a 1224 x 1024 camera used on a 612 x 512
+    normal map was caught only by chance. Where the K file states an image size other than
+    the map's, --K is refused naming both sizes; where the map is that image resized by a
+    simple fraction, the message says so and gives K scaled for it. integrate, info,
+    evaluate and a dataset folder's camera file alike."""
+    from test_cli import write_input
+
+    npath, mpath, _ = write_input(tmp_path)  # (20 x 26)
+    ros = ROS_CAMERA_INFO.replace("[0.1, -0.2, 0.001, 0.0, 0.0]", "[0.0, 0.0, 0.0, 0.0, 0.0]")
+    ros = ros.split("projection_matrix")[0]
+    (tmp_path / "big.yaml").write_text(ros.replace("image_width: 640", "image_width: 52")
+                                       .replace("image_height: 480", "image_height: 40")
+                                       .replace("500.0, 0.0, 320.5, 0.0, 510.0, 240.25",
+                                                "80.0, 0.0, 25.5, 0.0, 84.0, 19.5"))
+    (tmp_path / "crop.yaml").write_text(ros.replace("image_width: 640", "image_width: 30")
+                                        .replace("image_height: 480", "image_height: 20"))
+    (tmp_path / "same.yaml").write_text(ros.replace("image_width: 640", "image_width: 26")
+                                        .replace("image_height: 480", "image_height: 20")
+                                        .replace("500.0, 0.0, 320.5, 0.0, 510.0, 240.25",
+                                                 "40.0, 0.0, 12.5, 0.0, 42.0, 9.5"))
+    base = ["integrate", str(npath), "--mask", str(mpath), "-s", "npy"]
+    assert main([*base, "--K", str(tmp_path / "big.yaml"), "-o", str(tmp_path / "a")]) == 1
+    err = capsys.readouterr().err
+    assert (f"--K: {tmp_path / 'big.yaml'} is the calibration of a 52 x 40 image (W x H) but "
+            "the normal map is 26 x 20: it looks like that image downsampled 2x") in err
+    # (fx, fy halved; cx, cy as pixel centres: (25.5 + 0.5) / 2 - 0.5, (19.5 + 0.5) / 2 - 0.5)
+    assert "for a resize (cv2.resize, PIL) fx fy cx cy = 40 42 12.5 9.5 " in err
+    assert "K[:2] / 2 instead (facetlift.Pinhole(K).subsampled(2))" in err
+    assert not (tmp_path / "a").exists()
+    assert main([*base, "--K", str(tmp_path / "crop.yaml"), "-o", str(tmp_path / "b")]) == 1
+    err = capsys.readouterr().err
+    assert "30 x 20 image (W x H) but the normal map is 26 x 20: K is for another image" in err
+    assert main([*base, "--K", str(tmp_path / "same.yaml"), "-o", str(tmp_path / "c")]) == 0
+    capsys.readouterr()
+    assert main(["info", str(npath), "--K", str(tmp_path / "big.yaml")]) == 1
+    assert "downsampled 2x" in capsys.readouterr().err
+    assert main(["evaluate", str(tmp_path / "c" / "depth.npy"), "--gt",
+                 str(tmp_path / "c" / "depth.npy"), "--K", str(tmp_path / "big.yaml")]) == 1
+    assert "downsampled 2x" in capsys.readouterr().err
+    # a dataset folder's K.txt that is a camera_info (found by its camera_matrix line)
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    write_input(folder, name="normal_map.png")
+    (folder / "K.txt").write_text((tmp_path / "big.yaml").read_text())
+    assert main(["integrate", str(folder), "-s", "npy", "-o", str(tmp_path / "d")]) == 1
+    assert (f"NORMALS: {folder / 'K.txt'} is the calibration of a 52 x 40 image"
+            in capsys.readouterr().err)

@@ -29,6 +29,7 @@ _LAZY = {
     "MemoryLimitError": ("errors", "MemoryLimitError"),
     "InputFileNotFound": ("errors", "InputFileNotFound"),
     "FrameWarning": ("errors", "FrameWarning"),
+    "CameraWarning": ("errors", "CameraWarning"),
     "ConvergenceWarning": ("errors", "ConvergenceWarning"),
     "LayoutWarning": ("frames", "LayoutWarning"),
     "UnusableNormalsWarning": ("problem", "UnusableNormalsWarning"),

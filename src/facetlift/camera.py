@@ -314,11 +314,12 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
     value = fov_degrees(fov)
     f = (W / 2.0) / np.tan(np.radians(value) / 2.0)
     from ._warnings import warn
+    from .errors import CameraWarning
     from .problem import FOV_WIDE
 
     if value < FOV_RADIANS:  # (a field of view in radians read as degrees: a telescope)
         warn(f"`fov` {value:g} deg is a telescope's field of view: is it in radians? Give "
-             f"degrees ({np.degrees(value):.4g} deg for {value:g} rad)")
+             f"degrees ({np.degrees(value):.4g} deg for {value:g} rad)", CameraWarning)
     elif value > FOV_WIDE:  # (said here, as a field of view: integrate asked a --fov 170
         # user whether the focal lengths were in mm, an audit)
         edge = 1.0 / np.cos(np.radians(value) / 2.0) ** 2
@@ -329,7 +330,7 @@ def K_from_fov(shape, fov: float) -> np.ndarray:
              "nearly edge-on (its normals turn grazing or back-facing). A lens that wide is a "
              "fish-eye, which is no pinhole: undistort the image first. The field of view is "
              "the width's, not the diagonal's (a 35 mm-equivalent focal length f35 gives "
-             "2 atan(18 / f35) across the long side)")
+             "2 atan(18 / f35) across the long side)", CameraWarning)
     K = np.array([[f, 0.0, (W - 1) / 2.0], [0.0, f, (H - 1) / 2.0], [0.0, 0.0, 1.0]])
     key = id(K)
     _FROM_FOV[key] = (weakref.ref(K, lambda _: _FROM_FOV.pop(key, None)), K.copy(), value,
@@ -449,3 +450,69 @@ def check_K(K) -> np.ndarray:
                "transpose" if transposed else "")
         )
     return Km
+
+
+#: The largest numerator and denominator of a scale between a calibration's image size and
+#: a normal map's that :func:`check_image_size` names as a resize (1/2, 2/3, 5/8, 4).
+RESIZE_TERMS = 16
+
+
+def resize_ratio(stated, shape):
+    """The simple fraction r (a :class:`fractions.Fraction`, numerator and denominator at most
+    :data:`RESIZE_TERMS`, not 1) by which an image of size `stated` (H, W) was resized to
+    `shape` (H, W): ``r * H`` and ``r * W`` each within one pixel of the map's (a resize
+    rounds); None where no such r fits both axes."""
+    from fractions import Fraction
+
+    (Hc, Wc), (H, W) = (int(v) for v in stated), (int(v) for v in shape)
+    if min(Hc, Wc, H, W) <= 0:
+        return None
+    for q in range(1, RESIZE_TERMS + 1):
+        for p in range(1, RESIZE_TERMS + 1):
+            r = Fraction(p, q)
+            if r.denominator == q and r != 1 and abs(Hc * r - H) < 1 and abs(Wc * r - W) < 1:
+                return r
+    return None
+
+
+def check_image_size(K, stated, shape, source: str, arg: str = "K") -> None:
+    """Refuse a camera `K` whose calibration file `source` states the image size `stated`
+    (H, W) where the normal map is of size `shape` (H, W): its K is that image's, and bends
+    the whole surface of another (a fresh user's 1224 x 1024 calibration on a 612 x 512 map
+    was caught only by chance). Where the map is that image resized by a simple fraction
+    (:func:`resize_ratio`) the message says so and gives K scaled with it; None where the
+    sizes agree or `stated` is None.
+
+    Raises
+    ------
+    ValueError
+        Naming `arg`, `source` and both sizes.
+    """
+    if stated is None:
+        return
+    (Hc, Wc), (H, W) = (int(v) for v in stated), (int(v) for v in tuple(shape)[:2])
+    if (Hc, Wc) == (H, W):
+        return
+    head = (f"`{arg}`: {source} is the calibration of a {Wc} x {Hc} image (W x H) but the "
+            f"normal map is {W} x {H}")
+    r = resize_ratio((Hc, Wc), (H, W))
+    if r is None:
+        raise ValueError(
+            f"{head}: K is for another image. Give the calibration of the image the map was "
+            "computed from; after a crop starting at column c0, row r0, subtract them from cx "
+            "and cy; after a resize by s, scale fx, fy, cx and cy with it (docs/conventions.md,"
+            " 'A K for another image')")
+    s = float(r)
+    fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
+    how = (f"downsampled {1 / r}x" if r.numerator == 1 else f"upsampled {r}x"
+           if r.denominator == 1 else f"resized by {r}")
+    scaled = f"{s * fx:.6g} {s * fy:.6g} {s * (cx + 0.5) - 0.5:.6g} {s * (cy + 0.5) - 0.5:.6g}"
+    n = r.denominator
+    stride = (f"; for image[::{n}, ::{n}] (one pixel in {n} kept) K[:2] / {n} instead "
+              f"(facetlift.Pinhole(K).subsampled({n}))" if r.numerator == 1 else "")
+    raise ValueError(
+        f"{head}: it looks like that image {how} ({W}/{Wc}, {H}/{Hc}: {r}), so K must be "
+        f"scaled by {r} too: for a resize (cv2.resize, PIL) fx fy cx cy = {scaled} (fx, fy "
+        f"times {r}; cx, cy as pixel centres, {r} (c + 0.5) - 0.5){stride}. Give the scaled K "
+        "as a file or inline (--K \"fx fy cx cy\"; K= in Python); docs/conventions.md, 'A K "
+        "for another image'")

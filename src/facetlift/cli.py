@@ -142,6 +142,28 @@ def _out_dir(ctx, param, value):
     return Path(value)
 
 
+class _CameraFile(click.Path):
+    """A --K value: a K file, or where no such path exists the intrinsics typed inline, four
+    numbers fx fy cx cy or the nine of the matrix row by row (spaces or commas), kept as the
+    text (:func:`facetlift.io.dataset.inline_K` reads it with the job); anything else is a
+    missing file, as before (``--K "3772 3759 305.9 255.1"`` said "File ... does not exist",
+    a fresh user's review)."""
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str) and not os.path.exists(value):
+            from .io.dataset import inline_K
+
+            try:
+                if inline_K(value) is not None:
+                    return value
+            except ValueError:  # (numbers, but no valid K: said when the job reads it)
+                return value
+        return super().convert(value, param, ctx)
+
+
+#: --K's type, for integrate, batch, info and evaluate alike.
+CAMERA_FILE = _CameraFile(exists=True, dir_okay=False, path_type=Path)
+
 #: The options ``integrate`` and ``batch`` share: what to read and how to integrate it.
 _JOB_OPTIONS = [
     click.option("-m", "--mask", type=click.Path(exists=True, dir_okay=False, path_type=Path),
@@ -184,14 +206,17 @@ _JOB_OPTIONS = [
                  help="Integration method; 'facetlift methods' lists them."),
     click.option("--pixel-size", type=float, default=1.0, show_default=True,
                  help="Pixel width in world units (orthographic): scales depth with x and y."),
-    click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    click.option("--K", "K", type=CAMERA_FILE, metavar="FILE | \"FX FY CX CY\"",
                  help="Perspective intrinsics: a text file of the 3x3 matrix (OpenCV layout) "
                  "or of fx fy cx cy (also under a header naming them), JSON, a (3, 3) "
                  ".npy, or a .mat file's KK (a calibration's Calib_Results.mat) or K; or a "
                  "calibration tool's file: OpenCV FileStorage .yml/.xml (camera_matrix), ROS "
                  "camera_info YAML or a CameraInfo dump (k), COLMAP's cameras.txt or .bin, a "
                  "nerfstudio transforms.json (fl_x; COLMAP's and nerfstudio's cx, cy are "
-                 "shifted by -0.5 px). A dataset folder's K.txt is used automatically."),
+                 "shifted by -0.5 px); one stating another image size than the map's is "
+                 "refused. Or typed inline: four numbers fx fy cx cy, or the matrix's nine "
+                 "row by row, separated by spaces or commas (--K \"3772 3759 305.9 255.1\"). "
+                 "A dataset folder's K.txt is used automatically."),
     click.option("--fov", type=float, default=None, metavar="DEG",
                  help="Horizontal field of view in degrees (across the width, also for a "
                  "portrait photo), for a camera without a K: fx = fy = (W/2)/tan(fov/2), the "
@@ -501,9 +526,9 @@ def summary(record: dict) -> str:
 
 
 # (the hints' words and rules are facetlift.hints', shared with a batch's records)
-def _jump_hint(job, info: dict) -> str | None:
+def _jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
     """:func:`facetlift.hints.jump_hint`, printed as a ``hint:`` line on stderr."""
-    return _echo_hint(jump_hint(job, info))
+    return _echo_hint(jump_hint(job, info, camera_warned))
 
 
 def _torn_hint(job, info: dict) -> str | None:
@@ -589,7 +614,7 @@ def integrate(normals, gradients, progress, as_json, **flags):
         for path in record["outputs"].values():
             click.echo(f"wrote {path}")
         click.echo(summary(record))
-    hint = _jump_hint(job, info)
+    hint = _jump_hint(job, info, record.get("camera_warned", False))
     torn = _torn_hint(job, info)
     unconverged = (not record["converged"] and info.get("solver") != "discontinuous"
                    and not jobs.finished_unconverged(info))  # (exit 2, outputs written)
@@ -637,8 +662,8 @@ def integrate(normals, gradients, progress, as_json, **flags):
               "q, as for 'integrate'; see --gradient-frame.")
 @click.option("-m", "--mask", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Mask image, as for 'integrate'.")
-@click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-              help="Perspective intrinsics, as for 'integrate'.")
+@click.option("--K", "K", type=CAMERA_FILE, metavar="FILE | \"FX FY CX CY\"",
+              help="Perspective intrinsics, a file or typed inline, as for 'integrate'.")
 @click.option("--fov", type=float, default=None, metavar="DEG",
               help="Horizontal field of view in degrees instead of --K, as for 'integrate'.")
 @click.option("--normal-frame", "normal_frame", metavar="FRAME",
@@ -1001,8 +1026,9 @@ def _split(text):
 @click.option("-m", "--mask", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="The pixels to score (PNG/TIFF/npy, nonzero = inside). Default: where both "
               "depths are finite.")
-@click.option("--K", "K", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-              help="The result's camera, as for 'integrate': score it as a perspective depth "
+@click.option("--K", "K", type=CAMERA_FILE, metavar="FILE | \"FX FY CX CY\"",
+              help="The result's camera, as for 'integrate' (a file, or fx fy cx cy typed "
+              "inline): score it as a perspective depth "
               "(a surface .npz keeps its own). Without one no camera is given and the result "
               "is scored as orthographic.")
 @click.option("--fov", "fov", type=float, default=None, metavar="DEG",
@@ -1040,10 +1066,15 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         if stored is not None and stored.shape == (3, 3) and np.isfinite(stored).all():
             camera = stored
     if K is not None or fov is not None:  # (integrate took --fov too: a fov user had no K file)
-        from .camera import K_from_fov
+        from .camera import K_from_fov, check_image_size
+        from .io.dataset import camera_of
 
-        given, named, flag = ((io.read_K(K), f"`K`: {K}", "--K") if K is not None
-                              else (K_from_fov(est.shape, fov), f"`fov` {fov:g}", "--fov"))
+        if K is not None:  # (a file stating another image size is refused, as integrate does)
+            given, stated = camera_of(K)
+            check_image_size(given, stated, est.shape, str(K))
+            named, flag = f"`K`: {K}", "--K"
+        else:
+            given, named, flag = K_from_fov(est.shape, fov), f"`fov` {fov:g}", "--fov"
         if camera is not None and not np.allclose(given, camera, rtol=1e-6):
             raise ValueError(f"{named} differs from the camera {result} was integrated with "
                              f"({camera.tolist()}); leave {flag} out to use the surface's own")

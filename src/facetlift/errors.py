@@ -3,9 +3,9 @@
 ``ValueError``) and, from :func:`facetlift.batch`,
 :class:`WorkersDied`; and the warning categories a caller may filter or turn into errors
 (``warnings.simplefilter("error", facetlift.FrameWarning)``): :class:`FrameWarning`,
-:class:`ConvergenceWarning` (and :class:`facetlift.problem.UnusableNormalsWarning`,
-:class:`facetlift.frames.LayoutWarning`, a FrameWarning). The others are plain
-``UserWarning``.
+:class:`CameraWarning`, :class:`ConvergenceWarning` (and
+:class:`facetlift.problem.UnusableNormalsWarning`, :class:`facetlift.frames.LayoutWarning`, a
+FrameWarning). The others are plain ``UserWarning``.
 
 Kept in a module without heavy imports, so the command line can catch them cheaply.
 """
@@ -47,6 +47,15 @@ class FrameHint(FrameWarning):
     flipped by a small margin (correlated errors on a flat view), or normals pointing into the
     object all round its silhouette (an inside-out map, or a concave surface masked alone).
     The command line's ``--strict`` does not fail on these."""
+
+
+class CameraWarning(UserWarning):
+    """The camera is probably not the image's: K's principal point outside the image or at
+    its edge, focal lengths in mm (a field of view past 150 deg), the axes of an old BiNI
+    K.txt, a field of view in radians or past a pinhole's, or a calibration file's lens
+    distortion or rectified projection that K leaves out. A wrong K bends the whole surface,
+    so the command line's hint on depth jumps (:func:`facetlift.hints.jump_hint`) points at
+    this warning instead."""
 
 
 class ConvergenceWarning(UserWarning):

@@ -9,10 +9,12 @@ from __future__ import annotations
 from . import methods
 
 
-def job_hints(job, info: dict) -> list[str]:
+def job_hints(job, info: dict, camera_warned: bool = False) -> list[str]:
     """The hints that apply to a job's result whose ``Surface.info`` is `info` (JSON-ready, as
-    a job's record keeps it), in the order ``integrate`` prints them."""
-    return [h for h in (jump_hint(job, info), torn_hint(job, info)) if h is not None]
+    a job's record keeps it), in the order ``integrate`` prints them; `camera_warned`: the
+    run warned that its camera looks wrong (the record's ``camera_warned``)."""
+    return [h for h in (jump_hint(job, info, camera_warned), torn_hint(job, info))
+            if h is not None]
 
 
 #: Share of the facets deviating by more than 10 degrees from their normals above which a
@@ -39,15 +41,25 @@ JUMP_HINT_SHARE, JUMP_HINT_CURL = 0.002, 0.02
 #: smoothed noise, 2 % outliers; 2026-12-06) came to 0.88 at the least (wide tray_bottom
 #: with outliers), 0.94 without outliers.
 JUMP_FRAME_RATIO = 0.85
+#: Share of the facets deviating by more than 10 degrees above which the jump hint no longer
+#: names the jumps: bent-across jumps deviate that widely nowhere in the discontinuity
+#: benchmark (63 % at most, JUMP_HINT_SHARE's note; a few scenes of several meshes on a table
+#: 33-35 % at 128 x 153), while a K in the wrong units does (the DiLiGenT bear with K / 100,
+#: fx 37.7 px: 92 %, and a hint to flip the frame, a fresh user's review).
+JUMP_HINT_WIDE = 0.75
 
 
-def jump_hint(job, info: dict) -> str | None:
+def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
     """The hint where a smooth integration by a method that can keep depth
     jumps, but did not (its own default, e.g. bini's, or the option given), deviates from its
     normals in the way bent-across jumps do (:data:`JUMP_HINT_SHARE`); not where the map
     seems read in the wrong frame (that warning explains the deviation); None where there is
     no hint. Where the field is more integrable flipped (:data:`JUMP_FRAME_RATIO`) it names
-    the frame to try first, and the jumps only if the frame is right."""
+    the frame to try first, and the jumps only if the frame is right. Where the run warned
+    that its camera looks wrong (`camera_warned`: a :class:`facetlift.CameraWarning`, a K in
+    mm or a principal point 10x off on the DiLiGenT bear) it points at that warning instead,
+    and where the deviation is wider than jumps make (:data:`JUMP_HINT_WIDE`) at the input
+    as a whole: neither names the jumps."""
     from . import frames
 
     share = info.get("deviation_over_10")
@@ -68,6 +80,19 @@ def jump_hint(job, info: dict) -> str | None:
     if own is not None and (frames.flip_verdict(own, flipped) is not None
                             or not own >= JUMP_HINT_CURL):
         return None  # (a wrong frame explains it; an integrable field has no jump to keep)
+    head = f"{share:.1%} of the facets deviate from their normals by more than 10 deg"
+    if camera_warned:  # (a wrong K bends the whole surface: --discontinuities was named to a
+        # K in mm and to a principal point 10x off, beside the K warning, a fresh user's review)
+        return (f"{head}: a camera that is not the image's bends a whole surface so; mend the "
+                "camera the warning names first (--K, --fov; docs/conventions.md, 'Perspective "
+                "cameras: K') and run again: depth jumps are named then if the deviation stays")
+    if share > JUMP_HINT_WIDE:
+        frame = frame_first(job, ic) if own is not None else None
+        return (f"{head}{frame or ''}: far more than bent-across depth jumps make (63 % at "
+                "most on the discontinuity benchmark's scenes, the DiLiGenT bear's 0.5 %), so "
+                "the input is off as a whole: check its frame (facetlift info guesses it; "
+                "docs/conventions.md lists the frames of common sources), its camera (a "
+                "perspective map needs its own K, in pixels: --K or --fov) and its encoding")
     # (with a dense prior its own noise bends the surface alike: a fresh user's sensor depth,
     # 1 mm of noise at weight 0.5, deviated 11 deg, and only the jumps were named)
     dense = prior.get("samples", 0) > 0.25 * max(int(info.get("input", {}).get("usable", 1)), 1)
@@ -77,7 +102,6 @@ def jump_hint(job, info: dict) -> str | None:
     # the same deviation got no word, a user's check)
     keep = ("--discontinuities keeps them" if method.discontinuities else
             f"--method dgp --discontinuities keeps them ({method.name!r} cannot)")
-    head = f"{share:.1%} of the facets deviate from their normals by more than 10 deg"
     frame = frame_first(job, ic) if own is not None else None
     if frame is None:
         hint = (f"{head}, as where a smooth surface bends across depth jumps: {keep} "

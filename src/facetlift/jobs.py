@@ -22,6 +22,7 @@ import numpy as np
 
 from ._progress import announce
 from ._warnings import recording, warn
+from .errors import CameraWarning
 
 #: Output kinds (``--save``) -> file names written into the output folder.
 OUTPUTS = {
@@ -56,6 +57,8 @@ class Job:
     normals: str | None = None
     gradients: tuple | None = None
     mask: str | None = None
+    #: A K file (facetlift.io.read_K), or its numbers typed inline: "fx fy cx cy" or the
+    #: matrix's nine row by row (facetlift.io.dataset.inline_K).
     K: str | None = None
     #: Horizontal field of view in degrees: a pinhole K with the principal point at the
     #: centre (facetlift.camera.K_from_fov), instead of a K file.
@@ -302,8 +305,14 @@ def read(job: Job) -> Input:
     if job.mask is not None:
         m = io.read_mask(job.mask, n.shape[:2])
         source = str(job.mask)
-    if job.K is not None:
-        K = io.read_K(job.K)
+    if job.K is not None:  # (a file, or fx fy cx cy typed inline)
+        from .camera import check_image_size
+        from .io.dataset import camera_of
+
+        K, stated = camera_of(job.K)
+        # (a calibration of another size: a 1224 x 1024 one on a 612 x 512 map was caught
+        # only by chance, a fresh user's review)
+        check_image_size(K, stated, n.shape[:2], str(job.K))
     if job.fov is not None:
         check_fov(job)
         if field_input:
@@ -884,6 +893,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         # were nowhere in batch.jsonl, a photometric-stereo user's check)
         "normals": _normal_counts(sinfo),
         "warnings": [str(w.message) for w in caught],
+        # (whether one of them says the camera looks wrong: the jump hint then points at it)
+        "camera_warned": any(issubclass(w.category, CameraWarning) for w in caught),
         "info": jsonable(sinfo),
         "timings": {"read": t_read, "integrate": t_integrate,
                     "write": time.perf_counter() - t2, "total": time.perf_counter() - t0},

@@ -24,6 +24,7 @@ import numpy as np
 from ._warnings import warn
 from .camera import Camera, make_camera
 from .domain import Domain
+from .errors import CameraWarning
 from .frames import EDGE_ON, world_note
 
 #: ``backfacing=`` choices: treat such normals as missing samples, or raise.
@@ -987,7 +988,7 @@ def _check_principal_point(cam, H: int, W: int) -> None:
     warn(f"`K`: the principal point (cx {cx:g}, cy {cy:g}) {where} this {W} x {H} image "
          "(columns 0..W-1, rows 0..H-1): is K for another image? After a crop, subtract the "
          "crop's first column and row from cx and cy; after a resize, scale fx, fy, cx and cy "
-         "with the image (docs/conventions.md, 'A K for another image')")
+         "with the image (docs/conventions.md, 'A K for another image')", CameraWarning)
 
 
 #: A pinhole K whose field of view across the image's width exceeds this many degrees gets a
@@ -1018,7 +1019,7 @@ def _check_focal_length(cam, H: int, W: int, given=None) -> None:
              "image), not pixels? In pixels, fx = the focal length in mm x the image's width "
              "in pixels / the sensor's width in mm; a camera's field of view gives it too "
              "(--fov, or fx = (W / 2) / tan(fov / 2); docs/conventions.md). A camera that "
-             "wide is seldom a pinhole: if yours is, all is well")
+             "wide is seldom a pinhole: if yours is, all is well", CameraWarning)
 
 
 #: A principal point within this share of the image's size of the centre with x and y
@@ -1046,7 +1047,7 @@ def _check_swapped_axes(K, H: int, W: int) -> None:
              f"image's centre (cx {cx0:g}, cy {cy0:g}) would with x and y swapped: is K in "
              "another layout? BiNI's K.txt files before its commit 0684184 swap the axes and "
              f"count rows from the bottom: the K for facetlift (OpenCV) is then fx {fy:g}, fy "
-             f"{fx:g}, cx {cy:g}, cy {H - 1 - cx:g} (docs/conventions.md)")
+             f"{fx:g}, cx {cy:g}, cy {H - 1 - cx:g} (docs/conventions.md)", CameraWarning)
 
 
 def _warn_unfixed(problem: Problem) -> None:

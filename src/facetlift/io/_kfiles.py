@@ -12,10 +12,27 @@ from pathlib import Path
 import numpy as np
 
 from .._warnings import warn
+from ..errors import CameraWarning
 
 
 class _KError(ValueError):
     """A K file's own message, given as it is (not as a parse error)."""
+
+
+def _stated_size(mapping: dict, *keys: tuple[str, str]) -> tuple[int, int] | None:
+    """The (H, W) of the first pair of `keys` (width key, height key) that `mapping` holds
+    as two positive whole numbers (OpenCV's and ROS's ``image_width`` / ``image_height``, a
+    CameraInfo's ``width`` / ``height``, nerfstudio's ``w`` / ``h``); None otherwise (a ROS
+    dump's 0 x 0: not calibrated)."""
+    for wkey, hkey in keys:
+        w, h = mapping.get(wkey), mapping.get(hkey)
+        try:
+            w, h = float(w), float(h)
+        except (TypeError, ValueError):
+            continue
+        if w > 0 and h > 0 and w.is_integer() and h.is_integer():
+            return int(h), int(w)
+    return None
 
 
 # ------------------------------------------------------------------ YAML (OpenCV, ROS)
@@ -149,11 +166,14 @@ def pick_K(found: dict[str, np.ndarray], p: Path, fmt: str) -> tuple[str, np.nda
                   "numbers row by row, or fx fy cx cy as text)")
 
 
-def K_yaml(p: Path, text: str) -> np.ndarray:
+def K_yaml(p: Path, text: str) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of an OpenCV FileStorage YAML file (``%YAML:1.0``, a
     ``!!opencv-matrix`` node), a ROS ``camera_info`` YAML (``camera_matrix``; its
     ``projection_matrix`` differing is warned about) or a CameraInfo message dump
-    (``k:`` / ``K:``, nine numbers)."""
+    (``k:`` / ``K:``, nine numbers). Distortion coefficients beside the matrix that are not
+    all zero are warned about (:func:`_opencv_distortion`). Returns K and the image size (H,
+    W) the file states (``image_width`` / ``image_height``, a dump's ``width`` / ``height``),
+    or None."""
     lines = _yaml_lines(text)
     if not lines:
         raise _KError(f"`K`: {p} is an empty YAML file")
@@ -168,7 +188,67 @@ def K_yaml(p: Path, text: str) -> np.ndarray:
             found[name], parents[name] = m, parent
     name, K = pick_K(found, p, "YAML")
     _check_projection(K, parents[name], p, name)
-    return K
+    parent = parents[name]
+    dist = _pick_distortion({k: _vector(v) for k, v in parent.items()}, name)
+    _opencv_distortion(p, dist, parent.get("distortion_model"))
+    size = _stated_size(parent, ("image_width", "image_height"), ("width", "height"))
+    return K, size if size is not None else _stated_size(tree, ("image_width", "image_height"))
+
+
+#: The keys a calibration's distortion coefficients go by (case aside): OpenCV's samples
+#: (``distortion_coefficients``, ``dist_coeffs``, ``distCoeffs``, ``D``, a stereo pair's
+#: ``D1`` / ``D2``) and ROS (``distortion_coefficients``; ``d`` in ROS 2, ``D`` in ROS 1).
+_DISTORTION_KEY = re.compile(
+    r"^(d|dist|dist_?coeffs?|distortion(_?coeff(icient)?s)?)[_-]?(\d+|left|right|l|r)?$")
+
+#: OpenCV's distortion coefficients in its order (calibrateCamera's 4, 5, 8, 12 or 14; ROS's
+#: plumb_bob and rational_polynomial models the same), and cv2.fisheye's (ROS's
+#: equidistant).
+OPENCV_DISTORTION = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4",
+                     "tx", "ty")
+FISHEYE_DISTORTION = ("k1", "k2", "k3", "k4")
+
+
+def _vector(node) -> list[float] | None:
+    """`node` as a list of numbers, or None: a matrix node's data (``rows``, ``cols``,
+    ``data``: OpenCV's, ROS's) or a flat list (a CameraInfo dump's ``d``)."""
+    if isinstance(node, dict):
+        node = node.get("data")
+    if isinstance(node, list) and node and all(isinstance(v, float) for v in node):
+        return node
+    return None
+
+
+def _pick_distortion(nodes: dict, name: str) -> list[float] | None:
+    """The distortion coefficients of the camera `name` (its key, dotted) among the entries
+    `nodes` (key -> list of numbers or None) of its mapping: the one named as distortion
+    (:data:`_DISTORTION_KEY`) with the camera key's suffix (``D1`` for ``M1``), else the only
+    one; None where there is none, or several of which none is the camera's."""
+    found = {k: v for k, v in nodes.items()
+             if v is not None and _DISTORTION_KEY.match(str(k).lower())}
+    own = _CAMERA_KEY.match(name.rsplit(".", 1)[-1].lower())
+    suffix = own.group(2) if own else None
+    same = [v for k, v in found.items()
+            if _DISTORTION_KEY.match(str(k).lower()).group(4) == suffix]
+    if len(same) == 1:
+        return same[0]
+    return next(iter(found.values())) if len(found) == 1 else None
+
+
+def _opencv_distortion(p: Path, dist: list[float] | None, model=None) -> None:
+    """Warn where an OpenCV or ROS calibration's distortion coefficients `dist` (OpenCV's
+    order; cv2.fisheye's for ROS's ``equidistant`` `model`) are not all zero, as
+    :func:`_distortion` warns of COLMAP's."""
+    if not dist:
+        return
+    fisheye = str(model or "").lower() in ("equidistant", "fisheye")
+    names = FISHEYE_DISTORTION if fisheye else OPENCV_DISTORTION
+    named = {(names[i] if i < len(names) else f"c{i}"): v for i, v in enumerate(dist) if v}
+    how = ("undistort the image first with these coefficients (cv2.fisheye.undistortImage: "
+           "an equidistant model is a fish-eye's)" if fisheye else
+           "undistort the image first with these coefficients (cv2.undistort(image, K, "
+           "dist); ROS's image_proc publishes it as image_rect)")
+    _distortion(str(p), named, how + " and compute the normal map from the undistorted image")
 
 
 def _check_projection(K: np.ndarray, parent: dict, p: Path, name: str) -> None:
@@ -183,23 +263,26 @@ def _check_projection(K: np.ndarray, parent: dict, p: Path, name: str) -> None:
             warn(f"`K`: {p}: its {name} is the camera's for the raw (unrectified) image and "
                  f"is used; for a rectified image (image_rect) its {key}'s left 3x3 "
                  f"{left.tolist()} is the camera instead: save that as a K file (fx fy cx cy: "
-                 f"{left[0, 0]:g} {left[1, 1]:g} {left[0, 2]:g} {left[1, 2]:g})")
+                 f"{left[0, 0]:g} {left[1, 1]:g} {left[0, 2]:g} {left[1, 2]:g})",
+                 CameraWarning)
         return
 
 
 # ------------------------------------------------------------------ OpenCV XML
 
 
-def K_xml(p: Path) -> np.ndarray:
+def K_xml(p: Path) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of an OpenCV FileStorage XML file: its ``type_id="opencv-matrix"``
-    node of 3 rows and 3 cols, chosen among several as :func:`pick_K` does."""
+    node of 3 rows and 3 cols, chosen among several as :func:`pick_K` does; its distortion
+    coefficients warned about as :func:`K_yaml` warns of them. Returns K and the image size
+    (H, W) its ``<image_width>`` and ``<image_height>`` state, or None."""
     import xml.etree.ElementTree as ET
 
     try:
         root = ET.parse(p).getroot()
     except ET.ParseError as e:
         raise _KError(f"`K`: cannot read {p} as XML ({e})") from None
-    found = {}
+    found, vectors = {}, {}
     for el in root.iter():
         data, rows, cols = el.find("data"), el.find("rows"), el.find("cols")
         if data is None or (el.get("type_id") != "opencv-matrix" and rows is None):
@@ -213,7 +296,13 @@ def K_xml(p: Path) -> np.ndarray:
                           "and data must be") from None
         if shape == (3, 3) and values.size == 9:
             found[el.tag] = values.reshape(3, 3)
-    return pick_K(found, p, "OpenCV XML")[1]
+        elif 1 in shape and values.size == shape[0] * shape[1]:
+            vectors[el.tag] = [float(v) for v in values]
+    name, K = pick_K(found, p, "OpenCV XML")
+    _opencv_distortion(p, _pick_distortion(vectors, name))
+    stated = {el.tag: (el.text or "").strip() for el in root
+              if el.tag in ("image_width", "image_height")}
+    return K, _stated_size(stated, ("image_width", "image_height"))
 
 
 # ------------------------------------------------------------------ COLMAP cameras.txt
@@ -243,11 +332,13 @@ def colmap_lines(rows: list[str]) -> list[list[str]]:
             if len(r.split()) > 1 and r.split()[1] in (*COLMAP_MODELS, *COLMAP_FISHEYE)]
 
 
-def K_colmap(p: Path, cams: list[list[str]]) -> np.ndarray:
+def K_colmap(p: Path, cams: list[list[str]]) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of a COLMAP ``cameras.txt`` (``CAMERA_ID MODEL WIDTH HEIGHT
     PARAMS[]``): its one camera, or its several where all are the same. COLMAP puts the
     upper-left pixel's centre at (0.5, 0.5), facetlift at (0, 0): cx and cy are COLMAP's
-    minus 0.5. A fish-eye model is refused; distortion that is not zero is warned about."""
+    minus 0.5. A fish-eye model is refused; distortion that is not zero is warned about.
+    Returns K and the image size (H, W) of its WIDTH and HEIGHT (None where its cameras
+    differ in it)."""
     def key(c):
         return c[1], tuple(c[4:])
 
@@ -277,16 +368,20 @@ def K_colmap(p: Path, cams: list[list[str]]) -> np.ndarray:
     fy = par.get("fy", par.get("f"))
     extra = {k: v for k, v in par.items() if k not in ("f", "fx", "fy", "cx", "cy") and v}
     _distortion(f"{p}: camera {cam[0]} ({model})", extra)
-    return _K_centred(fx, fy, par["cx"], par["cy"])
+    sizes = {(c[2], c[3]) for c in cams}
+    size = _stated_size(dict(zip(("w", "h"), sizes.pop(), strict=True)), ("w", "h")) \
+        if len(sizes) == 1 else None
+    return _K_centred(fx, fy, par["cx"], par["cy"]), size
 
 
-def _distortion(who: str, dist: dict) -> None:
+def _distortion(who: str, dist: dict, undistort: str = _UNDISTORT) -> None:
     """Warn that `who` (a file, or a camera of one) has the lens distortion `dist` (name ->
-    coefficient, the non-zero ones; nothing where empty), which K leaves out."""
+    coefficient, the non-zero ones; nothing where empty), which K leaves out; `undistort`
+    says how to undistort (COLMAP's image_undistorter by default)."""
     if dist:
         warn(f"`K`: {who} has lens distortion ({', '.join(f'{k} {v:g}' for k, v in dist.items())}"
              "), which K leaves out: the normal map must be of an undistorted image; "
-             + _UNDISTORT)
+             + undistort, CameraWarning)
 
 
 def _K_centred(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
@@ -306,7 +401,7 @@ COLMAP_IDS = {
 }
 
 
-def K_colmap_bin(p: Path) -> np.ndarray:
+def K_colmap_bin(p: Path) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of a COLMAP ``cameras.bin`` (the sparse model COLMAP's mapper writes by
     default; little-endian: the number of cameras as uint64, then per camera its id and model
     id as int32, width and height as uint64 and the model's parameters as float64), read as
@@ -351,7 +446,8 @@ _NERF_DISTORTION = ("k1", "k2", "k3", "k4", "p1", "p2")
 
 #: The camera keys a transforms.json frame may hold for itself (nerfstudio's datasets of
 #: several cameras give them per frame, not at the top).
-_NERF_CAMERA = ("fl_x", "fl_y", "cx", "cy", "camera_model", "is_fisheye", *_NERF_DISTORTION)
+_NERF_CAMERA = ("fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model", "is_fisheye",
+                *_NERF_DISTORTION)
 
 
 def _frame_cameras(low: dict) -> list[dict]:
@@ -371,13 +467,14 @@ def is_transforms(data: dict) -> bool:
             or bool(_frame_cameras(low)))
 
 
-def K_transforms(data: dict, p: Path) -> np.ndarray:
+def K_transforms(data: dict, p: Path) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of a ``transforms.json`` (nerfstudio, instant-ngp): ``fl_x``, ``fl_y``
     (``fl_x`` where missing), ``cx``, ``cy``, at its top or, the same for every frame, in its
     frames. Their principal point is COLMAP's (nerfstudio
     copies COLMAP's cx, cy unchanged and casts its rays through ``pixel + 0.5``): cx and cy
     minus 0.5, as :func:`K_colmap`. ``camera_angle_x`` alone is refused (it needs the
-    image's width: ``--fov``)."""
+    image's width: ``--fov``). Returns K and the image size (H, W) of its ``w`` and ``h``,
+    or None."""
     import math
 
     low = {str(k).lower(): v for k, v in data.items()}
@@ -416,4 +513,4 @@ def K_transforms(data: dict, p: Path) -> np.ndarray:
     except (TypeError, ValueError):
         raise _KError(f"`K`: {p}: fl_x, fl_y, cx, cy must be numbers") from None
     _distortion(str(p), {k: v for k, v in dist.items() if v})
-    return _K_centred(fx, fy, cx, cy)
+    return _K_centred(fx, fy, cx, cy), _stated_size(low, ("w", "h"))

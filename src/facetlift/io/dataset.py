@@ -38,10 +38,12 @@ def read_K(path) -> np.ndarray:
     - OpenCV FileStorage YAML (``%YAML:1.0``; ``.yml`` / ``.yaml``) or XML (``.xml``): the
       ``opencv-matrix`` node of 3 rows and 3 cols named ``camera_matrix``, ``cameraMatrix``,
       ``K``, ``intrinsic(s)`` or ``M1`` (case aside), or the only 3x3 one; a stereo file's
-      two cameras (``M1`` / ``M2``) are refused, naming them;
+      two cameras (``M1`` / ``M2``) are refused, naming them; distortion coefficients other
+      than zero (``distortion_coefficients``, ``dist_coeffs``, ``D``) are warned about;
     - ROS ``camera_info`` YAML (``camera_matrix``) or a CameraInfo dump (``k:`` / ``K:``,
       nine numbers): the matrix for the raw image; where its ``projection_matrix`` (``P``)
-      differs, a warning gives P's left 3x3, the rectified image's camera;
+      differs, a warning gives P's left 3x3, the rectified image's camera; distortion
+      (``distortion_coefficients``, ``d`` / ``D``) other than zero is warned about;
     - COLMAP's ``cameras.txt`` (found by its lines ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS``)
       or ``cameras.bin`` (any ``.bin``: the binary model COLMAP's mapper writes):
       its camera (several only where all are the same), a pinhole model (SIMPLE_PINHOLE,
@@ -58,21 +60,31 @@ def read_K(path) -> np.ndarray:
         Missing or unparsable file, another count of numbers, or a matrix that is not valid
         intrinsics (see :mod:`facetlift.conventions`; a transposed matrix is named so).
     """
+    return read_K_stated(path)[0]
+
+
+def read_K_stated(path) -> tuple[np.ndarray, tuple[int, int] | None]:
+    """:func:`read_K`'s K, and the image size (H, W) its calibration file states for the
+    camera, or None where it states none (a text K file, ``.npy``, ``.mat``): OpenCV's and
+    ROS's ``image_width`` / ``image_height``, a CameraInfo dump's ``width`` / ``height``,
+    COLMAP's WIDTH and HEIGHT, a transforms.json's ``w`` / ``h``. Where K meets a normal map,
+    :func:`facetlift.camera.check_image_size` compares the two."""
     from ..camera import check_K
 
     arg = "K"
     p = _existing(path, arg)
+    size = None
     try:
         if p.suffix.lower() == ".mat":  # (it was read as text: "'utf-8' codec can't decode")
             K = _K_mat(p)
         elif p.suffix.lower() == ".npy":
             K = np.load(p, allow_pickle=False)
         elif p.suffix.lower() == ".xml":  # (OpenCV FileStorage's)
-            K = _kfiles.K_xml(p)
+            K, size = _kfiles.K_xml(p)
         elif p.suffix.lower() == ".bin":  # (COLMAP's sparse model: cameras.bin)
-            K = _kfiles.K_colmap_bin(p)
+            K, size = _kfiles.K_colmap_bin(p)
         else:
-            K = _K_text(p)
+            K, size = _K_text(p)
         K = np.asarray(K, dtype=float)
     except _KError as e:  # (the .mat file's own message: its variables, or why unreadable)
         raise ValueError(str(e)) from None
@@ -93,9 +105,47 @@ def read_K(path) -> np.ndarray:
                          "a 3x3 matrix (three rows, or nine numbers), or the four numbers "
                          "fx fy cx cy") from None
     try:
-        return check_K(K)
+        return check_K(K), size
     except ValueError as e:  # (check_K names a transposed K)
         raise ValueError(f"`{arg}`: {p}: {e}") from None
+
+
+def inline_K(value) -> np.ndarray | None:
+    """The intrinsics typed inline as a K file's place (``--K "3772 3759 305.9 255.1"``): a
+    string that is no existing path and holds four numbers ``fx fy cx cy`` or the nine of
+    the 3x3 matrix row by row, separated by spaces or commas, checked as :func:`read_K`
+    checks a file's; None for anything else (a file's path, to be read as one).
+
+    Raises
+    ------
+    ValueError
+        Four or nine numbers that are no valid intrinsics (naming `K` and the text).
+    """
+    import re
+
+    from ..camera import check_K
+
+    if not isinstance(value, str) or os.path.exists(value):
+        return None
+    words = [w for w in re.split(r"[\s,]+", value.strip()) if w]
+    if len(words) not in (4, 9):
+        return None
+    try:
+        numbers = np.array([float(w) for w in words])
+    except ValueError:
+        return None
+    try:
+        return check_K(numbers if numbers.size == 4 else numbers.reshape(3, 3))
+    except ValueError as e:
+        raise ValueError(f"`K`: {value!r} (typed inline): {e}") from None
+
+
+def camera_of(value) -> tuple[np.ndarray, tuple[int, int] | None]:
+    """The camera of a ``--K`` value (a job's `K`): its intrinsics typed inline
+    (:func:`inline_K`; no stated size), else its file's (:func:`read_K_stated`): K and the
+    image size (H, W) the file states, or None."""
+    K = inline_K(value)
+    return (K, None) if K is not None else read_K_stated(value)
 
 
 #: The names a ``.mat`` file's intrinsics go by, in order: the calibration toolbox's
@@ -133,7 +183,8 @@ _K_NAMES = ("fx", "fy", "cx", "cy")
 def _K_text(p: Path):
     """The numbers of a text K file (:func:`read_K`): JSON (a nerfstudio transforms.json
     too), YAML (OpenCV's, ROS's), COLMAP's cameras.txt, a header of names over the four
-    numbers (a user's 'fx fy cx cy' first line was refused), or plain rows."""
+    numbers (a user's 'fx fy cx cy' first line was refused), or plain rows; and the image
+    size (H, W) the file states, or None (:func:`read_K_stated`)."""
     import json
 
     text = p.read_text(encoding="utf-8-sig").strip()
@@ -147,7 +198,7 @@ def _K_text(p: Path):
             if missing:
                 raise ValueError(f"a JSON object needs {', '.join(_K_NAMES)}; {missing} missing")
             data = [low[k] for k in _K_NAMES]
-        return np.asarray(data, dtype=float)
+        return np.asarray(data, dtype=float), None
     if _kfiles.is_yaml(p, text):
         return _kfiles.K_yaml(p, text)
     rows = _text_rows(p)
@@ -163,8 +214,8 @@ def _K_text(p: Path):
         if values.shape != (1, 4):
             raise ValueError(f"one line of four numbers under the header; got shape "
                              f"{values.shape}")
-        return np.array([values[0, names.index(k)] for k in _K_NAMES])
-    return np.loadtxt(rows, dtype=float, ndmin=2)
+        return np.array([values[0, names.index(k)] for k in _K_NAMES]), None
+    return np.loadtxt(rows, dtype=float, ndmin=2), None
 
 
 #: The flags (fields) that give a rotation file, and which way it turns: ``world_to_camera``
@@ -400,10 +451,18 @@ def camera_files(folder) -> list[Path]:
     return []
 
 
-def _read_camera(paths: list[Path]) -> np.ndarray | None:
+def _read_camera(paths: list[Path], shape=None) -> np.ndarray | None:
     """The K of a dataset folder's camera files (:func:`camera_files`); where there are two
-    (K.txt beside Calib_Results.mat) they must agree: which one was meant, otherwise?"""
-    Ks = [read_K(p) for p in paths]
+    (K.txt beside Calib_Results.mat) they must agree: which one was meant, otherwise? A file
+    stating an image size other than `shape` (H, W), the normal map's, is refused
+    (:func:`facetlift.camera.check_image_size`)."""
+    from ..camera import check_image_size
+
+    read = [read_K_stated(p) for p in paths]
+    if shape is not None:
+        for p, (K, stated) in zip(paths, read, strict=True):
+            check_image_size(K, stated, shape, str(p), arg="folder")
+    Ks = [K for K, _ in read]
     if len(Ks) > 1 and not np.allclose(Ks[0], Ks[1], rtol=1e-6, atol=1e-6):
         raise ValueError(f"`folder`: {paths[0]} and {paths[1]} hold different intrinsics "
                          f"({Ks[0].tolist()} and {Ks[1].tolist()}); keep one, or give the "
@@ -548,7 +607,7 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                                       check_alpha=mpath is None, encoding=encoding)
     mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
     kpaths = camera_files(f)
-    K = _read_camera(kpaths)
+    K = _read_camera(kpaths, normals.shape[:2])
     rotation, rpath = _read_folder_rotation(f) if with_rotation else (None, None)
     from ..problem import prior_image, prior_samples
     from .images import read_prior, read_weights
