@@ -463,6 +463,24 @@ def test_info_takes_the_gradient_layout_and_y_down_and_shows_warnings(tmp_path, 
     assert code == 0 and "read as directx" in out and "try the default frame" in out
 
 
+def test_a_field_in_the_other_layout_is_not_also_told_to_negate_a_slope(tmp_path, capsys):
+    """integrate --gradients PROW QCOL --mask M on a row/column field warned 'try
+    --gradient-frame rowcol' and 'try negating the y slope (q...)' in one run (a review):
+    the layout warning alone; with --gradient-frame rowcol, no warning."""
+    from test_frames import _sphere_rowcol
+
+    p, q, mask = _sphere_rowcol()
+    for name, arr in (("prow", p), ("qcol", q), ("hmask", mask)):
+        np.save(tmp_path / f"{name}.npy", arr)
+    args = ["integrate", "--gradients", tmp_path / "prow.npy", tmp_path / "qcol.npy",
+            "--mask", tmp_path / "hmask.npy"]
+    code, _, err = run(capsys, *args, "-o", tmp_path / "a")
+    assert code == 0 and "--gradient-frame rowcol" in err
+    assert "negat" not in err and "flipped" not in err, err
+    code, _, err = run(capsys, *args, "-o", tmp_path / "b", "--gradient-frame", "rowcol")
+    assert code == 0 and "warning" not in err, err
+
+
 def test_info_takes_a_gradient_field_as_two_files(tmp_path, capsys):
     """info --gradients P Q describes what integrate --gradients P Q reads (it had no such
     option): its layout is checked as a .mat field's is; a map and a field together, or

@@ -441,9 +441,10 @@ def integrate_gradients(
                          "turn from (rotate normals, not slopes: facetlift.integrate(normals, "
                          "normal_rotation=R))")
     px, qy = frames.gradients_to_facetlift(p, q, gradient_frame)
-    frames.layout_check(p, q, gradient_frame, mask)  # (warns when the other layout fits)
+    # (warns when the other layout fits; then the frame check after the solve stays silent)
+    layout = frames.layout_check(p, q, gradient_frame, mask)["suggested"]
     normals = normals_from_gradients(px, qy)
-    with frames.read_in(frames.GRADIENT_FIELD):  # (hints speak of p and q)
+    with frames.read_in(frames.GRADIENT_FIELD, layout=layout):  # (hints speak of p and q)
         try:
             return integrate(normals, mask, pixel_size=pixel_size, **kwargs)
         except ValueError as e:

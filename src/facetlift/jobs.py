@@ -148,6 +148,9 @@ class Input:
     confidence: np.ndarray | None = None
     #: The normals were made from a gradient field (its hints speak of p and q).
     field: bool = False
+    #: The other layout the gradient field's layout check named (:func:`facetlift.frames.
+    #: layout_check`), None where it named none: the solve's frame check then stays silent.
+    layout: str | None = None
     #: The dataset folder's camera file the K came from (K.txt, or DiLiGenT's
     #: Calib_Results.mat, perhaps the parent's), for the summary; None otherwise.
     K_file: str | None = None
@@ -227,7 +230,7 @@ def read(job: Job) -> Input:
 
     src = job.source
     K = prior = conf = K_file = None
-    rotation = rotation_file = rotation_as = None
+    rotation = rotation_file = rotation_as = layout = None
     given_rotation = rotation_field(job)
     files = {"prior": None, "confidence": None}
     field_input = bool(job.gradients)
@@ -240,7 +243,7 @@ def read(job: Job) -> Input:
                          "field (--gradients P Q) stores slopes: leave it out")
     if job.gradients:
         g = read_gradients(*job.gradients)
-        n, m, source = _normals_from_field(g, job), g["mask"], "valid gradients"
+        (n, layout), m, source = _normals_from_field(g, job), g["mask"], "valid gradients"
     elif is_mat(src):
         g = read_mat(src, job.mat_keys)
         field_input = "p" in g
@@ -248,7 +251,7 @@ def read(job: Job) -> Input:
             raise ValueError(f"`normal_encoding` {encoding!r} applies to a normal map; {src} "
                              "holds a gradient field (p, q), which stores slopes: leave it out")
         if field_input:
-            n = _normals_from_field(g, job)
+            n, layout = _normals_from_field(g, job)
         else:
             n = g["normals"]
             if encoding == "xy":
@@ -348,7 +351,7 @@ def read(job: Job) -> Input:
                              f"normal map is {n.shape[0]}x{n.shape[1]}{hint}"
                              f"{_beside_tail(job, name)}")
     return Input(normals=n, mask=m, K=K, mask_source=source, prior=prior, prior_weight=weight,
-                 confidence=conf, field=bool(field_input),
+                 confidence=conf, field=bool(field_input), layout=layout,
                  K_file=None if K_file is None or job.K is not None or job.fov is not None
                  else _camera_name(K_file, src),
                  prior_file=files["prior"] if prior is not None else None,
@@ -656,15 +659,17 @@ def _no_prior_checks(job: Job) -> None:
         check(job.prior_fit, has_prior=False, perspective=True)
 
 
-def _normals_from_field(g: dict, job: Job) -> np.ndarray:
+def _normals_from_field(g: dict, job: Job) -> tuple[np.ndarray, str | None]:
+    """The normals made from the field `g`, and the other layout its layout check named
+    (None where none: :attr:`Input.layout`)."""
     from . import frames
     from .problem import normals_from_gradients
 
     if job.normal_frame is not None:
         raise ValueError("`normal_frame` does not apply to a gradient field; use --gradient-frame")
-    frames.layout_check(g["p"], g["q"], job.gradient_frame, g.get("mask"))
+    layout = frames.layout_check(g["p"], g["q"], job.gradient_frame, g.get("mask"))["suggested"]
     return normals_from_gradients(*frames.gradients_to_facetlift(g["p"], g["q"],
-                                                                 job.gradient_frame))
+                                                                 job.gradient_frame)), layout
 
 
 @contextlib.contextmanager
@@ -808,7 +813,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         # (the normals were read in the job's frame already: the rotation goes from world
         # to that frame, and is given to integrate as one to facetlift's)
         turn = frames.rotation_in_facetlift(inp.rotation, job.normal_frame)
-        with frames.read_in(frames.GRADIENT_FIELD if inp.field else job.normal_frame):
+        with frames.read_in(frames.GRADIENT_FIELD if inp.field else job.normal_frame,
+                            layout=inp.layout):
             try:
                 surface = facetlift.integrate(
                     inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size,
