@@ -303,7 +303,8 @@ def read(job: Job) -> Input:
              f"(--gradients P Q, or a .mat file holding p and q); {src.name} is a normal map, "
              "whose frame is --normal-frame: it is ignored here")
     if job.mask is not None:
-        m = io.read_mask(job.mask, n.shape[:2])
+        m = io.read_mask(job.mask, n.shape[:2],
+                         of="the gradient field" if field_input else "the normal map")
         source = str(job.mask)
     if job.K is not None:
         K = io.read_K(job.K)
@@ -347,8 +348,9 @@ def read(job: Job) -> Input:
             hint = coarse_prior_hint(arr.shape, n.shape[:2]) if name == "prior" else ""
             # (a batch's NAME_prior_depth.*: the file named, and how to leave it unread)
             own = f" ({Path(getattr(job, name)).name})" if name in job.beside else ""
-            raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW){own} but the "
-                             f"normal map is {n.shape[0]}x{n.shape[1]}{hint}"
+            of = "the gradient field" if field_input else "the normal map"
+            raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW){own} but "
+                             f"{of} is {n.shape[0]}x{n.shape[1]}{hint}"
                              f"{_beside_tail(job, name)}")
     return Input(normals=n, mask=m, K=K, mask_source=source, prior=prior, prior_weight=weight,
                  confidence=conf, field=bool(field_input), layout=layout,

@@ -24,7 +24,7 @@ import numpy as np
 from ._warnings import warn
 from .camera import Camera, make_camera
 from .domain import Domain
-from .frames import EDGE_ON, world_note
+from .frames import EDGE_ON, GRADIENT_FIELD, reading, world_note
 
 #: ``backfacing=`` choices: treat such normals as missing samples, or raise.
 BACKFACING = ("missing", "error", "outlier")
@@ -681,7 +681,10 @@ def prepare(
     # (pixels without a normal enclosed by the object, where the domain is the valid normals:
     # left out as holes; told in the same warning, once: an audit's 39 black pixels became
     # NaN holes in the depth and the mesh without a word)
-    hole_note = "" if "holes" not in counts else _holes_note(holes)
+    # (normals made from a gradient field are spoken of as its samples: its user was told of
+    # 8/16-bit black pixels and normals, a review)
+    field = reading() == GRADIENT_FIELD
+    hole_note = "" if "holes" not in counts else _holes_note(holes, field)
     if hole_note and not problems:
         warn(hole_note[0].upper() + hole_note[1:], UnusableNormalsWarning)
     if problems:
@@ -695,7 +698,9 @@ def prepare(
             note = grazing_note if grazing_note is not None else (
                 None if outlier_eps is not None else
                 "outlier_eps / --outlier-eps sets another: a smaller one keeps more, 0 all")
-            rule = (f"; grazing: view cosine < {eps:.4g}"
+            steep = (f" (a slope steeper than {np.sqrt(1 - eps * eps) / eps:.4g}, or "
+                     "infinite)" if field and eps > 0 else "")
+            rule = (f"; grazing: view cosine < {eps:.4g}{steep}"
                     f"{'' if note is None else ', ' + note}")
         if "isolated" in problems:
             rule += (f"; isolated: {isolated_rule_text(isolated)} (an outlier of a "
@@ -712,7 +717,7 @@ def prepare(
             counts["facing_away_flip"] = list(mended)  # (info's frame guess names it too)
             # (a y-down map with a camera over a floor: its floor faces away, and the warning
             # asked about BGR order, world frames and K, never about y; an audit)
-            from .frames import flip_advice, reading
+            from .frames import flip_advice
 
             frame = (f"; {away:.0%} of the normals face away from the camera, and with "
                      f"{mended[0]} negated {mended[1]:.1%} would: the map's {mended[0]} axis "
@@ -739,11 +744,10 @@ def prepare(
                           f"point (cx {Kc[0, 2]:g}, cy {Kc[1, 2]:g}) is usually near the "
                           f"centre of this {W} x {H} image, its focal lengths fx "
                           f"{Kc[0, 0]:g}, fy {Kc[1, 1]:g} scale with the image")
-        from .frames import GRADIENT_FIELD, reading
-
-        hint = no_camera_hint(counts, cam.perspective, reading() == GRADIENT_FIELD)
+        hint = no_camera_hint(counts, cam.perspective, field)
         warn(
-            f"{sum(int(v.sum()) for v in problems.values())} normal(s) inside the mask cannot be "
+            f"{sum(int(v.sum()) for v in problems.values())} "
+            f"{'gradient sample(s)' if field else 'normal(s)'} inside the mask cannot be "
             f"used and were treated as missing samples ({what}{rule}); first at "
             f"(row {r[first]}, col {c[first]}){frame}{'; ' + hint if hint else ''}"
             + (f". Also: {hole_note}" if hole_note else ""), UnusableNormalsWarning
@@ -1833,9 +1837,17 @@ def enclosed_holes(m: np.ndarray, max_pixels: int = HOLE_PIXELS) -> np.ndarray:
     return enclosed_gaps(m, max_pixels)[0]
 
 
-def _holes_note(holes: np.ndarray) -> str:
-    """The warning's words on the enclosed pixels without a normal (:func:`enclosed_holes`)."""
+def _holes_note(holes: np.ndarray, field: bool = False) -> str:
+    """The warning's words on the enclosed pixels without a normal (:func:`enclosed_holes`);
+    `field`: the normals were made from a gradient field, whose samples are named instead."""
     rr, cc = np.nonzero(holes)
+    if field:
+        return (f"{int(holes.sum())} pixel(s) enclosed by the object hold no gradient sample "
+                "(p or q not finite) and were left out as holes, NaN in the depth and the mesh "
+                f"(holes of at most {HOLE_PIXELS} pixels surrounded by valid samples); first "
+                f"at (row {rr[0]}, col {cc[0]}). Without a mask the domain is the finite "
+                "samples: give one (--mask, mask=) to integrate such pixels as missing "
+                "samples, filled from their neighbours")
     return (f"{int(holes.sum())} pixel(s) enclosed by the object hold no normal (not finite or "
             "zero length; in an 8/16-bit file, a pixel whose decoded length is far from 1, "
             "such as black (0, 0, 0)) and were left out as holes, NaN in the depth and the "
