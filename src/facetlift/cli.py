@@ -989,7 +989,7 @@ def _split(text):
 
 
 @cli.command(context_settings=CONTEXT)
-@click.argument("result", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("result", type=click.Path(exists=True, path_type=Path))
 @click.option("--gt", "gt", required=True,
               type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Ground-truth depth map: .npy, .npz (its depth_gt or depth array, or its "
@@ -1010,8 +1010,9 @@ def _split(text):
               "with (integrate's --fov), for a camera without a K file.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
-    """Score a result RESULT (depth.npy, .exr, .tif or surface.npz, as integrate writes them)
-    against a ground-truth depth map: MADE (BiNI's: the result times the median of GT /
+    """Score a result RESULT (depth.npy, .exr, .tif or surface.npz, as integrate writes them,
+    or integrate's output folder: its surface.npz, else its depth.npy, .exr or .tif) against
+    a ground-truth depth map: MADE (BiNI's: the result times the median of GT /
     RESULT, then the mean absolute error), that scale, the RMSE after it, the mean absolute
     error without a scale (for metric depth, e.g. a result fused with a depth prior) and, for
     an orthographic result, the paper's normalised error (facetlift.metrics.evaluate), which
@@ -1022,6 +1023,7 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
     Examples:
       facetlift evaluate out/depth.npy --gt bear/depth_gt.npz -m bear/mask.png --K bear/K.txt
       facetlift evaluate out/surface.npz --gt gt.exr --json
+      facetlift evaluate out --gt gt.exr
       facetlift evaluate out/depth.npy --gt depth_gt.npy --fov 60
     """
     import numpy as np
@@ -1032,6 +1034,8 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         raise ValueError(f"`fov` {fov:g} and `K` contradict each other; give one")
     if gt_scale is not None and not (np.isfinite(gt_scale) and gt_scale > 0):
         raise ValueError(f"`gt_scale` must be a positive number; got {gt_scale!r}")
+    if result.is_dir():  # (integrate's output folder was refused as "is a directory", a review)
+        result = _result_in_folder(result)
     est = io.read_depth(result, arg="result")
     camera = None
     if result.suffix.lower() == ".npz":  # (a surface's: its camera, NaN when orthographic)
@@ -1060,10 +1064,11 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         raise ValueError(f"`gt`: {gt} is {truth.shape[0]}x{truth.shape[1]} (HxW) but `result` "
                          f"{result} is {est.shape[0]}x{est.shape[1]}: give the ground truth of "
                          "the same view and crop")
-    sel = None if mask is None else io.read_mask(mask, est.shape)
+    sel = None if mask is None else io.read_mask(mask, est.shape, of=f"the result {result}")
     perspective = camera is not None
     try:
-        rec = metrics.evaluate(est, truth, sel, perspective=perspective)
+        # (its warnings in the command line's words: --K, not perspective=True, a review)
+        rec = metrics._evaluate(est, truth, sel, perspective, "command line")
     except ValueError as e:  # (the library's arguments, named as the command's)
         raise ValueError(str(e).replace("`estimate`", "`result`").replace("`truth`", "`gt`")
                          ) from None
@@ -1081,6 +1086,21 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
                                 surface=result.suffix.lower() == ".npz"):
         click.echo(line)
     return EXIT_OK
+
+
+def _result_in_folder(folder: Path) -> Path:
+    """The result ``facetlift evaluate`` scores in integrate's output `folder`: its
+    surface.npz (which keeps its camera), else its depth.npy, .exr or .tif; a ValueError
+    naming them where it holds none."""
+    from .jobs import OUTPUTS
+
+    names = [OUTPUTS[k] for k in ("npz", "npy", "exr", "tif")]
+    found = next((folder / n for n in names if (folder / n).is_file()), None)
+    if found is None:
+        raise ValueError(f"`result`: the folder {folder} holds none of {', '.join(names)} "
+                         "(integrate writes them with -s npz, npy, exr, tif): give the depth "
+                         "file, or the folder of a run that saved one")
+    return found
 
 
 def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:

@@ -927,7 +927,8 @@ def _evaluate_against_gt(src: Path, surface) -> dict | None:
                              f"{surface.depth.shape[0]}x{surface.depth.shape[1]}")
         # (its warnings, e.g. an orthographic result's range unlike the truth's: --pixel-size,
         # are the job's too)
-        scores = metrics.evaluate(surface, truth, surface.mask)
+        # (run from the command line or Python: its warnings name both)
+        scores = metrics._evaluate(surface, truth, surface.mask, None, "both")
     except ValueError as e:
         warn(f"{gt.name} in {src}: not scored ({e})")
         return None
