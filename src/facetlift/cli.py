@@ -132,14 +132,30 @@ def _parse_option(text: str) -> tuple[str, object]:
         return key, value  # a bare string such as solver=iterative
 
 
+#: The endings of the files facetlift reads and writes, by the ``-s`` kind that writes one:
+#: an ``-o`` ending so names a file, not the folder it is (:func:`_out_dir`).
+_FILE_ENDINGS = {".npy": "npy", ".png": "png", ".exr": "exr", ".tif": "tif", ".tiff": "tif",
+                 ".ply": "ply", ".obj": "obj", ".npz": "npz"}
+
+
 def _out_dir(ctx, param, value):
     """``-o``/``--out`` as a Path; an empty one is refused (click would read it as the
-    current folder, and write every output there)."""
+    current folder, and write every output there), and so is one ending like a file
+    (``-o out.npy`` made a folder named out.npy, a review) unless that folder exists."""
     if value is None:
         return None
     if not str(value).strip():
         raise click.BadParameter("is empty: give a folder")
-    return Path(value)
+    path = Path(value)
+    kind = _FILE_ENDINGS.get(path.suffix.lower())
+    if kind is not None and not path.is_dir():
+        raise click.BadParameter(
+            f"{value!r} ends like a file name, but -o is the output folder, written with fixed "
+            f"names ({', '.join(OUTPUTS[k] for k in DEFAULT_SAVE)} by default; -s picks "
+            "which, and no option names a single output file): give a folder, e.g. -o "
+            f"{path.with_suffix('')} -s {kind} to write "
+            f"{path.with_suffix('') / OUTPUTS[kind]}")
+    return path
 
 
 #: The options ``integrate`` and ``batch`` share: what to read and how to integrate it.
@@ -366,6 +382,15 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         from .memory import parse_size  # first; --option max_memory=... as well)
 
         parse_size(opts["max_memory"])
+    # (the prior's numbers by their values alone, before the input is read: --prior-weight -1
+    # was refused after the map's warnings, a review; whether a prior is there is the
+    # reading's to say, a dataset folder may hold one)
+    from .problem import check_prior_blur, prior_weight_value
+
+    if prior_weight is not None:
+        prior_weight_value(prior_weight)
+    if prior_blur is not None:
+        check_prior_blur(prior_blur, has_prior=True)
     frame = frames.resolve(normal_frame, y_down, "normal_frame")
     if frame is not None:
         frames.parse(frame)
@@ -536,7 +561,9 @@ class _FieldFile(click.Path):
               "TIFF) holding p and q; see --gradient-frame.")
 @_job_options
 @click.option("-o", "--out", "outdir", type=click.Path(file_okay=False), callback=_out_dir,
-              help="Output folder. Default: <input>_facetlift/ next to the input.")
+              help="Output folder, its files named by -s (depth.npy, ...); a name ending "
+              "like a file (.npy, .png, .exr, .tif, .ply, .obj, .npz) is refused unless that "
+              "folder exists. Default: <input>_facetlift/ next to the input.")
 @click.option("--json", "as_json", is_flag=True,
               help="Print one JSON object (outputs, diagnostics, timings) instead of text.")
 def integrate(normals, gradients, progress, as_json, **flags):
@@ -1092,8 +1119,6 @@ def _result_in_folder(folder: Path) -> Path:
     """The result ``facetlift evaluate`` scores in integrate's output `folder`: its
     surface.npz (which keeps its camera), else its depth.npy, .exr or .tif; a ValueError
     naming them where it holds none."""
-    from .jobs import OUTPUTS
-
     names = [OUTPUTS[k] for k in ("npz", "npy", "exr", "tif")]
     found = next((folder / n for n in names if (folder / n).is_file()), None)
     if found is None:

@@ -1086,6 +1086,20 @@ def prior_blur_value(prior_blur) -> float:
     return blur
 
 
+def prior_weight_value(prior_weight) -> float:
+    """A scalar `prior_weight` as a float, finite and >= 0 (ValueError naming it otherwise,
+    in the words :func:`prepare` uses): the command line checks its --prior-weight so before
+    any input is read (it was refused after the map's own warnings, a review)."""
+    if isinstance(prior_weight, (bool, np.bool_, str, bytes)) or not hasattr(prior_weight,
+                                                                             "__float__"):
+        raise ValueError(f"`prior_weight` must be a finite number >= 0; got "
+                         f"{_short(prior_weight)}")
+    w = float(prior_weight)
+    if not (np.isfinite(w) and w >= 0):
+        raise ValueError(f"`prior_weight` must be a finite number >= 0; got {prior_weight!r}")
+    return w
+
+
 def check_prior_blur(prior_blur, has_prior: bool, shape=None) -> float:
     """`prior_blur` checked (:func:`prior_blur_value`); also refused without a prior and
     above the image's larger side `shape` (a blur wider than the image fits one plane to
