@@ -1006,42 +1006,17 @@ def _depth_range(surface, height_range=None) -> list | None:
 
 def _write(surface, kind: str, path: Path, normals, triangles, frame=None,
            height_range=None) -> None:
-    from . import frames, io
-
-    if kind == "report":
-        io.write_report(path, surface, normals,
-                        mean_deviation=surface.info.get("mean_deviation"))
-    elif kind == "discontinuities":
-        io.write_discontinuities(path, surface)
-    elif kind == "height":
-        io.write_height(path, surface, height_range=height_range)
-    elif kind == "height-exr":  # (the heights themselves: no range applies)
-        io.write_height(path, surface)
-    elif kind == "points":  # (one point per pixel centre, with the input's normal there)
-        pn = _point_normals(surface, normals)
-        io.write_points(path, surface.points(frame=frame),
-                        None if pn is None else frames.from_facetlift(pn, frame, "frame"))
-    elif kind in ("ply", "obj"):
-        surface.save(path, frame=frame, **({} if triangles is None else
-                                           {"triangles": triangles}))
+    """Output `kind` at `path` (named :data:`OUTPUTS`' `kind`): by :meth:`Surface.save`,
+    which writes the command line's file names as ``--save`` does (one writer for both: its
+    points.ply was a mesh, a review)."""
+    if Path(path).name != OUTPUTS[kind]:  # pragma: no cover - a caller's bug
+        raise ValueError(f"{kind} output must be named {OUTPUTS[kind]}; got {path}")
+    if kind in ("ply", "obj"):
+        kw = {"frame": frame, **({} if triangles is None else {"triangles": triangles})}
     else:
-        surface.save(path)
-
-
-def _point_normals(surface, normals):
-    """The input normals at :meth:`Surface.points`' pixels (facetlift's camera frame, as
-    integrated: world-space ones turned by their rotation, a gradient field's from its
-    slopes), unit length; None where they are not an (H, W, 3) map of the surface's shape."""
-    n = None if normals is None else np.asarray(normals, dtype=float)
-    if n is None or n.shape != surface.shape + (3,):
-        return None
-    r, c = np.nonzero(surface.mask)
-    v = n[r, c]
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        # (scaled by the largest component first: a normal of 1e300 is a usable direction, a
-        # review)
-        v = v / np.max(np.abs(v), axis=1, keepdims=True)
-        return v / np.linalg.norm(v, axis=1, keepdims=True)
+        kw = {"report": {"normals": normals}, "points": {"normals": normals, "frame": frame},
+              "height": {"height_range": height_range}}.get(kind, {})
+    surface.save(path, **kw)
 
 
 def finished_unconverged(info: dict) -> bool:
