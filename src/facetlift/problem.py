@@ -1182,6 +1182,35 @@ def _is_points(prior, shape: tuple[int, int] | None = None) -> bool:
         for v in prior))
 
 
+def _unprojected_hint(prior, shape: tuple[int, int]) -> str:
+    """The words, or "", on points that look unprojected, for a prior with no sample in the
+    mask: where its points (2 or more) round onto one pixel, or most fall outside the image,
+    as 3-D points (x, y in metres) read as columns and rows do (a CSV of three points under
+    an x,y,z header in metres was told "(1 outside it)" alone, a review; the error of points
+    all outside the image asked already)."""
+    try:
+        rows, cols = (np.asarray(v, dtype=float).ravel() for v in prior[:2])
+    except (TypeError, ValueError):
+        return ""
+    ok = np.isfinite(rows) & np.isfinite(cols)
+    if rows.shape != cols.shape or ok.sum() < 2:
+        return ""
+    H, W = shape
+    r, c = np.rint(rows[ok]), np.rint(cols[ok])
+    out = (r < 0) | (r >= H) | (c < 0) | (c >= W)
+    pixels = np.unique(r[~out] * W + c[~out]).size
+    if out.mean() > 0.5:
+        said = f"{int(out.sum())} of its {out.size} points lie outside the {H} x {W} image"
+    elif pixels == 1 and not out.any():
+        said = (f"its {out.size} points all fall into one pixel (row {int(r[0])}, col "
+                f"{int(c[0])})")
+    else:
+        return ""
+    return (f"; {said}: 3-D points not projected with K (x, y in metres or mm, not the "
+            "image's columns and rows)? Project them with K first (docs/fusion.md, 'Sparse "
+            "SfM points projected with K')")
+
+
 def _ambiguous_points(prior) -> bool:
     """Whether `prior`'s 3 or 4 sequences of 3 or 4 numbers each (not numpy arrays) could as
     well be that many points (row, col, depth[, weight]) as columns: a list of points from
@@ -1482,6 +1511,7 @@ def check_prior(prior, prior_weight, shape, mask, camera):
             "`prior` has no finite depth sample inside the mask"
             + (f" ({outside} outside it)" if outside else "")
             + (left or "; give depths where the normals are, NaN elsewhere")
+            + (_unprojected_hint(prior, shape) if _is_points(prior, shape) else "")
         )
     wbad = have & ~(np.isfinite(w) & (w >= 0) & (w <= MAX_PRIOR_WEIGHT))
     if wbad.any():
