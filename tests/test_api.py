@@ -405,9 +405,17 @@ def test_small_api_messages_a_user_met(tmp_path):
         facetlift.integrate_gradients(np.full((10, 10), np.nan), np.zeros((10, 10)))
     n = np.zeros((10, 10, 3))
     n[..., 2] = 1.0
-    with pytest.raises(ValueError, match=r"did you mean .*'discontinuities' for "
-                       r"'discontinuity'\?"):
+    # best first: the one option taking True before those the ratio ranks higher (a review:
+    # 'discontinuities' came last)
+    with pytest.raises(ValueError, match=r"did you mean 'discontinuities' or 'discontinuity_k' "
+                       r"or 'discontinuity_tol' for 'discontinuity'\?"):
         facetlift.integrate(n, discontinuity=True)
+    with pytest.raises(ValueError, match=r"did you mean 'discontinuity_k' or "
+                       r"'discontinuity_tol' or 'discontinuities' for 'discontinuity'\?"):
+        facetlift.integrate(n, discontinuity=2.0)
+    with pytest.raises(ValueError, match=r"`method` must be one of .*; got 'DGP'; did you mean "
+                       r"'dgp'\?"):
+        facetlift.integrate(n, method="DGP")
     with pytest.raises(ValueError, match=r"did you mean 'max_iter' for 'maxiter'\?"):
         facetlift.integrate(n, maxiter=3)
 

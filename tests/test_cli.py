@@ -321,6 +321,17 @@ def _one_line_error(err):
          "--solver must be one of 'direct', 'iterative'; got 'magic'"),
         (lambda t, n, m: [n, "--pixel-size", "-1"], "--pixel-size must be a positive"),
         (lambda t, n, m: [n, "-s", "jpg"], "Invalid value for '-s'"),
+        # (another case, a misspelling: the name meant, a review)
+        (lambda t, n, m: [n, "--method", "DGP"], r"got 'DGP'; did you mean 'dgp'\? \(method "
+         r"names are lower case\)"),
+        (lambda t, n, m: [n, "--method", "frankot-chellappa"],
+         r"did you mean 'frankot_chellappa'\?"),
+        # (-o out.npy made a folder named out.npy, a review)
+        (lambda t, n, m: [n, "-o", t / "out.npy"], r"'-o' / '--out': '.*out\.npy' ends like a "
+         r"file name, but -o is the output folder.*no option names a single output file.*"
+         r"e\.g\. -o .*out -s npy to write .*out/depth\.npy"),
+        (lambda t, n, m: [n, "-o", t / "mesh.PLY", "-s", "ply"], r"-o .*mesh -s ply to write "
+         r".*mesh/mesh\.ply"),
     ],
 )
 def test_bad_input_exits_1(tmp_path, capsys, make_args, message):
@@ -328,6 +339,37 @@ def test_bad_input_exits_1(tmp_path, capsys, make_args, message):
     code, _, err = run(capsys, "integrate", *make_args(tmp_path, npath, mpath))
     assert code == 1
     assert re.search(message, _one_line_error(err))
+    assert not (tmp_path / "out.npy").exists() and not (tmp_path / "mesh.PLY").exists()
+
+
+def test_an_existing_folder_with_a_file_ending_is_an_output_folder(tmp_path, capsys):
+    """-o refuses a name ending like a file only where no such folder exists (a folder the
+    user made so, or an earlier run's, is written into as before); batch's -o alike."""
+    npath, mpath, _ = write_input(tmp_path)
+    (tmp_path / "scan.tif").mkdir()
+    code, _, err = run(capsys, "integrate", npath, "--mask", mpath, "-o", tmp_path / "scan.tif")
+    assert code == 0 and (tmp_path / "scan.tif" / "depth.npy").is_file(), err
+    code, _, err = run(capsys, "batch", npath, "-o", tmp_path / "all.npz")
+    assert code == 1 and "-o is the output folder" in _one_line_error(err)
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--prior-weight", "-1"], "--prior-weight must be a finite number >= 0; got -1.0"),
+    (["--prior-weight", "nan"], "--prior-weight must be a finite number >= 0; got nan"),
+    (["--prior-blur", "-2"], "--prior-blur must be a finite number of pixels >= 0"),
+    (["--prior-blur", "0.2"], "--prior-blur below half a pixel is no blur"),
+])
+def test_prior_numbers_are_refused_before_the_input_is_read(tmp_path, capsys, flags, message):
+    """--prior-weight -1 was refused after the map was read and its warnings printed (a
+    review): the prior's numbers are checked by value first, the one line of the error
+    alone."""
+    n = facetlift.normals_from_gradients(np.full((12, 14), 0.2), np.zeros((12, 14)))
+    n[4, 4] = [1.0, 0.0, 0.0]  # edge-on: a warning once the map is read
+    np.save(tmp_path / "n.npy", n)
+    np.save(tmp_path / "prior.npy", np.full((12, 14), 5.0))
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "--prior",
+                       tmp_path / "prior.npy", *flags, "-o", tmp_path / "out")
+    assert code == 1 and message in _one_line_error(err)
 
 
 def test_corrupt_png_exits_1(tmp_path, capsys):

@@ -463,6 +463,63 @@ def test_info_takes_the_gradient_layout_and_y_down_and_shows_warnings(tmp_path, 
     assert code == 0 and "read as directx" in out and "try the default frame" in out
 
 
+def test_a_field_in_the_other_layout_is_not_also_told_to_negate_a_slope(tmp_path, capsys):
+    """integrate --gradients PROW QCOL --mask M on a row/column field warned 'try
+    --gradient-frame rowcol' and 'try negating the y slope (q...)' in one run (a review):
+    the layout warning alone; with --gradient-frame rowcol, no warning."""
+    from test_frames import _sphere_rowcol
+
+    p, q, mask = _sphere_rowcol()
+    for name, arr in (("prow", p), ("qcol", q), ("hmask", mask)):
+        np.save(tmp_path / f"{name}.npy", arr)
+    args = ["integrate", "--gradients", tmp_path / "prow.npy", tmp_path / "qcol.npy",
+            "--mask", tmp_path / "hmask.npy"]
+    code, _, err = run(capsys, *args, "-o", tmp_path / "a")
+    assert code == 0 and "--gradient-frame rowcol" in err
+    assert "negat" not in err and "flipped" not in err, err
+    code, _, err = run(capsys, *args, "-o", tmp_path / "b", "--gradient-frame", "rowcol")
+    assert code == 0 and "warning" not in err, err
+
+
+def test_a_gradient_field_is_spoken_of_as_one(tmp_path, capsys):
+    """--gradients P Q was described in a normal map's words (a review): a mask of another
+    size 'but the normal map is', the holes of 'an 8/16-bit file ... black (0, 0, 0)', the
+    unusable count in 'normal(s)'. Now the gradient field and its samples; a normal map's
+    messages keep theirs."""
+    n = dome(24, 28)
+    p, q = facetlift.gradients_from_normals(n)
+    p[12, 14] = np.nan  # enclosed by the object: a hole without a mask
+    p[3, 3] = np.inf  # a vertical facet: grazing
+    np.save(tmp_path / "p.npy", p)
+    np.save(tmp_path / "q.npy", q)
+    np.save(tmp_path / "big.npy", np.ones((30, 30), bool))
+    field = ["integrate", "--gradients", tmp_path / "p.npy", tmp_path / "q.npy"]
+    code, _, err = run(capsys, *field, "--mask", tmp_path / "big.npy", "-o", tmp_path / "a")
+    assert code == 1 and "but the gradient field is 24x28" in one_line(err)
+    code, _, err = run(capsys, *field, "-o", tmp_path / "b")
+    assert code == 0 and "1 gradient sample(s) inside the mask cannot be used" in err
+    assert "hold no gradient sample (p or q not finite)" in err
+    assert "slope steeper than 11.43" in err
+    assert "normal(s)" not in err and "8/16-bit" not in err and "black" not in err, err
+    code, out, _ = run(capsys, "info", "--gradients", tmp_path / "p.npy", tmp_path / "q.npy",
+                       "--mask", tmp_path / "big.npy")
+    assert code == 1 and "but the gradient field is" in out + _
+    # a normal map keeps its words
+    np.save(tmp_path / "n.npy", np.where(np.isfinite(p)[..., None], n, np.nan))
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "--mask", tmp_path / "big.npy",
+                       "-o", tmp_path / "c")
+    assert code == 1 and "but the normal map is 24x28" in one_line(err)
+    # in Python: the sizes are those of p and q
+    with pytest.raises(ValueError, match=r"`mask` must have shape \(24, 28\) to match `p` and "
+                       r"`q`"):
+        facetlift.integrate_gradients(p, q, np.ones((30, 30), bool))
+    with pytest.raises(ValueError, match="24x28, the gradient field's size"), \
+            pytest.warns(facetlift.UnusableNormalsWarning):
+        facetlift.integrate_gradients(p, q, prior=np.ones((30, 30)))
+    with pytest.warns(facetlift.UnusableNormalsWarning, match=r"^1 gradient sample\(s\)"):
+        facetlift.integrate_gradients(p, q)
+
+
 def test_info_takes_a_gradient_field_as_two_files(tmp_path, capsys):
     """info --gradients P Q describes what integrate --gradients P Q reads (it had no such
     option): its layout is checked as a .mat field's is; a map and a field together, or

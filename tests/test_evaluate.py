@@ -100,14 +100,17 @@ def test_an_orthographic_result_in_other_units_is_warned_about():
     assert rec["range_ratio"] == pytest.approx(2.3)
     assert ("depth range (1st to 99th percentile over the 428 pixels scored) is 2.3 times the "
             "ground truth's") in said[0]
-    assert "--pixel-size on the command line" in said[0] and "about 0.435 times" in said[0]
+    # (Python's words from Python: the command line's from facetlift evaluate, below)
+    assert "(pixel_size: the world width" in said[0] and "about 0.435 times" in said[0]
+    assert "e.g. pixel_size=0.435" in said[0] and "--" not in said[0]
     assert "depth jumps" not in said[0]
-    with pytest.warns(UserWarning, match=r"is 0.5 times .*--pixel-size.*flattened across "
-                                          r"depth jumps"):
+    with pytest.warns(UserWarning, match=r"is 0.5 times .*pixel_size.*flattened across "
+                                          r"depth jumps .*discontinuities=True keeps"):
         metrics.evaluate(0.5 * est, gt, mask)
     with pytest.warns(UserWarning, match=r"Its depths are all > 0, as a perspective "
-                                          r"result's are .*--K on the command line"):
+                                          r"result's are .*\(perspective=True, or K=K\)") as c:
         assert metrics.evaluate(gt / 1500, gt, mask)["made"] is not None
+    assert "--K" not in str(c[0].message)
     assert metrics.evaluate(gt, gt, mask, perspective=True)["range_ratio"] is None
     flat = np.full(gt.shape, 3.0)
     assert metrics.evaluate(flat - 3, flat)["range_ratio"] is None  # (a flat truth: none)
@@ -169,13 +172,18 @@ def test_cli_evaluate(tmp_path, capsys):
     assert "no camera given: scored as orthographic (up to an offset per piece)" in out
     assert f"MADE:              {rec['made']:.6g}" in out
     assert "give --K to score it as one" in out
-    assert "facetlift: warning: the result's depth range" in err and "--K on the" in err
+    # (the command line's flags alone: it said "perspective=True; --K on the command line",
+    # a review)
+    assert "facetlift: warning: the result's depth range" in err
+    assert "score it with its camera (--K, or --fov as integrate took it)" in err
+    assert "perspective=True" not in err
     # an orthographic result in pixels against a truth in mm: the warning names --pixel-size
     np.save(tmp_path / "pixels.npy", 2.3 * (gt - np.nanmean(gt[mask])))
     code, out, err = run(capsys, "evaluate", tmp_path / "pixels.npy", "--gt",
                          tmp_path / "depth_gt.npz", "-m", tmp_path / "mask.png", "--json")
     assert code == 0 and json.loads(out)["range_ratio"] == pytest.approx(2.3, rel=1e-4)
-    assert "is 2.3 times the ground truth's" in err and "--pixel-size" in err
+    assert "is 2.3 times the ground truth's" in err and "(--pixel-size: the world" in err
+    assert "e.g. --pixel-size 0.435" in err and "pixel_size" not in err
     # a surface .npz keeps its camera; a --K that differs from it is refused
     s = facetlift.integrate(facetlift.normals_from_gradients(np.full((20, 26), 0.01),
                                                              np.zeros((20, 26))), K=K)
@@ -189,6 +197,56 @@ def test_cli_evaluate(tmp_path, capsys):
     code, _, err = run(capsys, "evaluate", tmp_path / "surface.npz", "--gt",
                        tmp_path / "depth_gt.npz", "--K", tmp_path / "K2.txt")
     assert code == 1 and "--K: " in err and "differs from the camera" in err
+
+
+def test_evaluate_takes_K_in_python():
+    """metrics.evaluate(depth, gt, mask, K=K) was a TypeError (it takes perspective=): K
+    scores the result as a perspective depth, as facetlift evaluate --K does; a K that is
+    no 3 x 3 matrix, or one beside perspective=False, or unlike a Surface's, is refused."""
+    est, gt, mask = scene()
+    want = metrics.evaluate(est, gt, mask, perspective=True)
+    got = metrics.evaluate(est, gt, mask, K=K)
+    assert got["perspective"] is True and got["made"] == pytest.approx(want["made"])
+    assert metrics.evaluate(est, gt, mask, K=K.tolist(), perspective=True) == got
+    with pytest.raises(ValueError, match=r"`K` must be a finite 3 x 3 camera matrix; got "
+                                         r"shape \(3,\)"):
+        metrics.evaluate(est, gt, mask, K=[1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match=r"`K` and perspective=False contradict"):
+        metrics.evaluate(est, gt, mask, K=K, perspective=False)
+    s = facetlift.integrate(facetlift.normals_from_gradients(np.full((20, 26), 0.01),
+                                                             np.zeros((20, 26))), K=K)
+    assert metrics.evaluate(s, gt, K=K)["perspective"] is True
+    K2 = K.copy()
+    K2[0, 0] = 41
+    with pytest.raises(ValueError, match=r"`K` differs from the camera the Surface was"):
+        metrics.evaluate(s, gt, K=K2)
+
+
+def test_cli_evaluate_takes_an_output_folder(tmp_path, capsys):
+    """facetlift evaluate OUTFOLDER --gt GT was refused as 'is a directory' (a review):
+    integrate's output folder is read, its surface.npz first (it keeps the camera), else its
+    depth.npy; a folder holding neither is refused naming what it looks for."""
+    est, gt, mask = scene()
+    np.save(tmp_path / "gt.npy", gt)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    np.save(out_dir / "depth.npy", est)
+    args = ("--gt", tmp_path / "gt.npy", "--json")
+    code, out, err = run(capsys, "evaluate", out_dir, *args)
+    assert code == 0, err
+    rec = json.loads(out)
+    assert rec["result"] == str(out_dir / "depth.npy") and rec["perspective"] is False
+    assert rec["made"] == pytest.approx(metrics.evaluate(est, gt, K=K)["made"])
+    s = facetlift.integrate(facetlift.normals_from_gradients(np.full((20, 26), 0.01),
+                                                             np.zeros((20, 26))), K=K)
+    s.save(out_dir / "surface.npz")
+    code, out, err = run(capsys, "evaluate", out_dir, *args)
+    assert code == 0 and json.loads(out)["perspective"] is True, err
+    assert json.loads(out)["result"] == str(out_dir / "surface.npz")
+    (tmp_path / "empty").mkdir()
+    code, _, err = run(capsys, "evaluate", tmp_path / "empty", "--gt", tmp_path / "gt.npy")
+    assert code == 1 and "RESULT: the folder" in err and "holds none of surface.npz, " \
+        "depth.npy, depth.exr, depth.tif" in err
 
 
 def test_cli_evaluate_refusals(tmp_path, capsys):

@@ -427,6 +427,40 @@ def test_a_gradient_field_in_the_other_layout_is_named():
         frames.layout_check(-(0.3 * y), 0.3 * x)
 
 
+def _sphere_rowcol(size=64):
+    """A sphere cap's slopes stored as row/column derivatives (p = dz/d(row), q = dz/d(col)),
+    from synthetic's analytic height, and its mask."""
+    from facetlift import synthetic
+
+    r, c = np.indices((size, size))
+    x, y = c + 0.5 - size / 2, -(r + 0.5 - size / 2)
+    _, gx, gy, inside = synthetic.analytic_height("sphere", x, y, scale=size / 2)
+    return np.where(inside, -gy, np.nan), np.where(inside, gx, np.nan), inside
+
+
+def test_a_field_in_the_other_layout_gets_the_layout_warning_alone():
+    """A row/column field read as xy was told both 'try --gradient-frame rowcol' and 'negate
+    q' (the flip check after the solve, a review): the layout warning alone, and the
+    integrability record says which layout was named; in the right layout, neither."""
+    p, q, mask = _sphere_rowcol()
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        s = facetlift.integrate_gradients(p, q, mask)
+    said = [str(w.message) for w in rec]
+    assert len(said) == 1 and "--gradient-frame rowcol" in said[0], said
+    assert s.info["integrability"]["other_layout"] == "rowcol"
+    assert s.info["integrability"]["curl"] > 0.5  # (the curls are still recorded)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s = facetlift.integrate_gradients(p, q, mask, gradient_frame="rowcol")
+    assert "other_layout" not in s.info["integrability"]
+    # a slope of the wrong sign in the right layout is still named by the flip check
+    with pytest.warns(UserWarning, match=r"negate p \(q with --gradient-frame rowcol\)|"
+                      r"negate q \(p with") as rec:
+        facetlift.integrate_gradients(-p, q, mask, gradient_frame="rowcol")
+    assert not any("other layout" in str(w.message) for w in rec)
+
+
 def test_integrate_gradients_refusals():
     p = np.zeros((5, 5))
     with pytest.raises(ValueError, match="`gradient_frame` must be one of"):

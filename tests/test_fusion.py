@@ -415,6 +415,42 @@ def test_cli_prior_points_file_errors(tmp_path, capsys, text, match):
     assert code == 1 and re.search(match, err) and "Traceback" not in err, err
 
 
+@pytest.mark.parametrize("z", ["1.49,1.49,1.49", "1.49,1.51,1.47"])
+def test_cli_prior_of_unprojected_points_asks_about_K(tmp_path, capsys, z):
+    """A CSV of three camera-frame points in metres under an x,y,z header (0.012,-0.03,1.49)
+    rounds onto pixel (0, 0): it was told "no finite depth sample inside the mask (1 outside
+    it)" alone (a review); the message asks whether they were projected with K, as the error
+    of points all outside the image does, whether the pixel's depths agree (outside the mask)
+    or not (left out as a conflict)."""
+    _write_inputs(tmp_path)
+    mask = np.ones((24, 28), bool)
+    mask[0, 0] = False
+    np.save(tmp_path / "m.npy", mask)
+    depths = z.split(",")
+    xy = [("0.012", "-0.03"), ("0.02", "0.01"), ("-0.015", "0.02")]
+    (tmp_path / "pts.csv").write_text("x,y,z\n" + "".join(
+        f"{x},{y},{d}\n" for (x, y), d in zip(xy, depths, strict=True)))
+    argv = ["integrate", str(tmp_path / "n.npy"), "--mask", str(tmp_path / "m.npy"), "-o",
+            str(tmp_path / "o"), "--prior"]
+    code = main(argv + [str(tmp_path / "pts.csv")])
+    err = capsys.readouterr().err
+    assert code == 1 and "no finite depth sample inside the mask" in err, err
+    assert ("its 3 points all fall into one pixel (row 0, col 0): 3-D points not projected "
+            "with K (x, y in metres or mm") in err
+    # most of them outside the image: asked alike; points spread over the image are not
+    (tmp_path / "far.csv").write_text("row,col,depth\n0,0,1.5\n-40,3,1.5\n5,900,1.5\n")
+    code = main(argv + [str(tmp_path / "far.csv")])
+    err = capsys.readouterr().err
+    assert code == 1 and "2 of its 3 points lie outside the 24 x 28 image: 3-D points not " \
+        "projected with K" in err, err
+    (tmp_path / "spread.csv").write_text("row,col,depth\n0,0,1.5\n0,1,1.5\n1,0,1.5\n")
+    mask[:2, :2] = False
+    np.save(tmp_path / "m.npy", mask)
+    code = main(argv + [str(tmp_path / "spread.csv")])
+    err = capsys.readouterr().err
+    assert code == 1 and "(3 outside it)" in err and "projected with K" not in err, err
+
+
 def test_info_checks_a_prior_and_a_confidence_given_as_flags(tmp_path, capsys):
     """info read only a dataset folder's prior (a user's check: no way to preflight one's
     own points file); now --prior / --confidence are read and checked as integrate would."""

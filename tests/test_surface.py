@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -283,3 +285,58 @@ def test_a_surface_from_a_depth_map_and_one_reloaded(tmp_path):
                                      mask=np.ones((4, 5), bool))
     with pytest.raises(ValueError, match=r"`mask` must have the shape of `depth`"):
         facetlift.Surface.from_depth(np.ones((4, 5)), np.ones((5, 4), bool))
+
+
+def test_the_command_lines_file_names_are_saved_as_it_writes_them(tmp_path):
+    """Surface.save("points.ply") wrote the mesh where -s points writes a point cloud,
+    "discontinuities.png" a plain preview where -s discontinuities writes the jump map, and
+    "height.exr" the depth where -s height-exr writes the heights (a review): every output
+    name of the command line is written by save as the command line writes it (the same
+    bytes); other names keep their extension's meaning."""
+    import meshio
+
+    from facetlift import io
+    from facetlift.cli import main
+    from facetlift.jobs import OUTPUTS
+
+    gt = synthetic.analytic("steps", 24)
+    np.save(tmp_path / "n.npy", gt.normals)
+    io.write_mask(tmp_path / "m.png", gt.mask)
+    kinds = [k for k in OUTPUTS if k != "report"]  # (the report's title needs the run's info)
+    argv = ["integrate", tmp_path / "n.npy", "--mask", tmp_path / "m.png", "--discontinuities",
+            "-o", tmp_path / "cli"] + [a for k in kinds for a in ("-s", k)]
+    assert main([str(a) for a in argv]) == 0
+    s = io.load_surface(tmp_path / "cli" / "surface.npz")
+    (tmp_path / "py").mkdir()
+    for kind in kinds:
+        name = OUTPUTS[kind]
+        kw = {"normals": gt.normals} if kind == "points" else {}
+        s.save(tmp_path / "py" / name, **kw)
+        a, b = ((tmp_path / w / name).read_bytes() for w in ("py", "cli"))
+        if name.endswith((".ply", ".obj")):  # (meshio's header names the time of writing)
+            a, b = (re.sub(rb"(comment|#) Created by meshio[^\n]*\n", b"", x) for x in (a, b))
+        assert a == b, name
+    cloud = meshio.read(tmp_path / "py" / "points.ply")
+    assert len(cloud.points) == gt.mask.sum() and not cloud.cells
+    assert "nx" in cloud.point_data
+    s.save(tmp_path / "py" / "POINTS.PLY")  # (any case; no normals given: points alone)
+    assert len(meshio.read(tmp_path / "py" / "POINTS.PLY").points) == gt.mask.sum()
+    # other names keep their meaning: a mesh, a preview, a depth
+    assert meshio.read(s.save(tmp_path / "cloud_points.ply")).cells
+    s.save(tmp_path / "jumps.png")
+    assert (tmp_path / "jumps.png").read_bytes() == io.write_preview(
+        tmp_path / "preview.png", s).read_bytes()
+    np.testing.assert_array_equal(io.read_depth(s.save(tmp_path / "d.exr")),
+                                  np.float32(s.depth), strict=False)
+    with pytest.raises(ValueError, match=r"points.ply \(as --save points writes it\) takes only "
+                       r"\['frame', 'normals'\]; got \['triangles'\]"):
+        s.save(tmp_path / "points.ply", triangles=True)
+    smooth = facetlift.integrate(gt.normals, gt.mask)
+    with pytest.raises(ValueError, match="no discontinuity map: integrate with "
+                       "discontinuities=True"):
+        smooth.save(tmp_path / "discontinuities.png")
+    pytest.importorskip("matplotlib")
+    s.save(tmp_path / "report.png", normals=gt.normals)
+    (tmp_path / "r").mkdir()
+    assert (tmp_path / "report.png").read_bytes() == io.write_report(
+        tmp_path / "r" / "report.png", s, gt.normals).read_bytes()

@@ -441,18 +441,24 @@ def integrate_gradients(
                          "turn from (rotate normals, not slopes: facetlift.integrate(normals, "
                          "normal_rotation=R))")
     px, qy = frames.gradients_to_facetlift(p, q, gradient_frame)
-    frames.layout_check(p, q, gradient_frame, mask)  # (warns when the other layout fits)
+    # (warns when the other layout fits; then the frame check after the solve stays silent)
+    layout = frames.layout_check(p, q, gradient_frame, mask)["suggested"]
     normals = normals_from_gradients(px, qy)
-    with frames.read_in(frames.GRADIENT_FIELD):  # (hints speak of p and q)
+    with frames.read_in(frames.GRADIENT_FIELD, layout=layout):  # (hints speak of p and q)
         try:
             return integrate(normals, mask, pixel_size=pixel_size, **kwargs)
         except ValueError as e:
             text = str(e)
-            if not text.startswith("`normals`"):
+            # (a mask, prior or confidence of another size was told to match `normals` and
+            # the normal map's size: the field's words, a review)
+            said = text.replace("to match `normals`", "to match `p` and `q`").replace(
+                "the normal map's size", "the gradient field's size")
+            if text.startswith("`normals`"):
+                # (the normals are made here from p and q: named so, a user's check)
+                said = "`p`, `q` (the normals made from them)" + said[len("`normals`"):]
+            if said == text:
                 raise
-            # (the normals are made here from p and q: named so, a user's check)
-            raise type(e)("`p`, `q` (the normals made from them)" + text[len("`normals`"):]
-                          ) from None
+            raise type(e)(said) from None
 
 
 def _check_discontinuities(info: methods.MethodInfo, value) -> bool:

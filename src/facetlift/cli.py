@@ -132,14 +132,30 @@ def _parse_option(text: str) -> tuple[str, object]:
         return key, value  # a bare string such as solver=iterative
 
 
+#: The endings of the files facetlift reads and writes, by the ``-s`` kind that writes one:
+#: an ``-o`` ending so names a file, not the folder it is (:func:`_out_dir`).
+_FILE_ENDINGS = {".npy": "npy", ".png": "png", ".exr": "exr", ".tif": "tif", ".tiff": "tif",
+                 ".ply": "ply", ".obj": "obj", ".npz": "npz"}
+
+
 def _out_dir(ctx, param, value):
     """``-o``/``--out`` as a Path; an empty one is refused (click would read it as the
-    current folder, and write every output there)."""
+    current folder, and write every output there), and so is one ending like a file
+    (``-o out.npy`` made a folder named out.npy, a review) unless that folder exists."""
     if value is None:
         return None
     if not str(value).strip():
         raise click.BadParameter("is empty: give a folder")
-    return Path(value)
+    path = Path(value)
+    kind = _FILE_ENDINGS.get(path.suffix.lower())
+    if kind is not None and not path.is_dir():
+        raise click.BadParameter(
+            f"{value!r} ends like a file name, but -o is the output folder, written with fixed "
+            f"names ({', '.join(OUTPUTS[k] for k in DEFAULT_SAVE)} by default; -s picks "
+            "which, and no option names a single output file): give a folder, e.g. -o "
+            f"{path.with_suffix('')} -s {kind} to write "
+            f"{path.with_suffix('') / OUTPUTS[kind]}")
+    return path
 
 
 class _CameraFile(click.Path):
@@ -391,6 +407,15 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         from .memory import parse_size  # first; --option max_memory=... as well)
 
         parse_size(opts["max_memory"])
+    # (the prior's numbers by their values alone, before the input is read: --prior-weight -1
+    # was refused after the map's warnings, a review; whether a prior is there is the
+    # reading's to say, a dataset folder may hold one)
+    from .problem import check_prior_blur, prior_weight_value
+
+    if prior_weight is not None:
+        prior_weight_value(prior_weight)
+    if prior_blur is not None:
+        check_prior_blur(prior_blur, has_prior=True)
     frame = frames.resolve(normal_frame, y_down, "normal_frame")
     if frame is not None:
         frames.parse(frame)
@@ -561,7 +586,9 @@ class _FieldFile(click.Path):
               "TIFF) holding p and q; see --gradient-frame.")
 @_job_options
 @click.option("-o", "--out", "outdir", type=click.Path(file_okay=False), callback=_out_dir,
-              help="Output folder. Default: <input>_facetlift/ next to the input.")
+              help="Output folder, its files named by -s (depth.npy, ...); a name ending "
+              "like a file (.npy, .png, .exr, .tif, .ply, .obj, .npz) is refused unless that "
+              "folder exists. Default: <input>_facetlift/ next to the input.")
 @click.option("--json", "as_json", is_flag=True,
               help="Print one JSON object (outputs, diagnostics, timings) instead of text.")
 def integrate(normals, gradients, progress, as_json, **flags):
@@ -1014,7 +1041,7 @@ def _split(text):
 
 
 @cli.command(context_settings=CONTEXT)
-@click.argument("result", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("result", type=click.Path(exists=True, path_type=Path))
 @click.option("--gt", "gt", required=True,
               type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="Ground-truth depth map: .npy, .npz (its depth_gt or depth array, or its "
@@ -1036,8 +1063,9 @@ def _split(text):
               "with (integrate's --fov), for a camera without a K file.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
-    """Score a result RESULT (depth.npy, .exr, .tif or surface.npz, as integrate writes them)
-    against a ground-truth depth map: MADE (BiNI's: the result times the median of GT /
+    """Score a result RESULT (depth.npy, .exr, .tif or surface.npz, as integrate writes them,
+    or integrate's output folder: its surface.npz, else its depth.npy, .exr or .tif) against
+    a ground-truth depth map: MADE (BiNI's: the result times the median of GT /
     RESULT, then the mean absolute error), that scale, the RMSE after it, the mean absolute
     error without a scale (for metric depth, e.g. a result fused with a depth prior) and, for
     an orthographic result, the paper's normalised error (facetlift.metrics.evaluate), which
@@ -1048,6 +1076,7 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
     Examples:
       facetlift evaluate out/depth.npy --gt bear/depth_gt.npz -m bear/mask.png --K bear/K.txt
       facetlift evaluate out/surface.npz --gt gt.exr --json
+      facetlift evaluate out --gt gt.exr
       facetlift evaluate out/depth.npy --gt depth_gt.npy --fov 60
     """
     import numpy as np
@@ -1058,6 +1087,8 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         raise ValueError(f"`fov` {fov:g} and `K` contradict each other; give one")
     if gt_scale is not None and not (np.isfinite(gt_scale) and gt_scale > 0):
         raise ValueError(f"`gt_scale` must be a positive number; got {gt_scale!r}")
+    if result.is_dir():  # (integrate's output folder was refused as "is a directory", a review)
+        result = _result_in_folder(result)
     est = io.read_depth(result, arg="result")
     camera = None
     if result.suffix.lower() == ".npz":  # (a surface's: its camera, NaN when orthographic)
@@ -1091,10 +1122,11 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         raise ValueError(f"`gt`: {gt} is {truth.shape[0]}x{truth.shape[1]} (HxW) but `result` "
                          f"{result} is {est.shape[0]}x{est.shape[1]}: give the ground truth of "
                          "the same view and crop")
-    sel = None if mask is None else io.read_mask(mask, est.shape)
+    sel = None if mask is None else io.read_mask(mask, est.shape, of=f"the result {result}")
     perspective = camera is not None
     try:
-        rec = metrics.evaluate(est, truth, sel, perspective=perspective)
+        # (its warnings in the command line's words: --K, not perspective=True, a review)
+        rec = metrics._evaluate(est, truth, sel, perspective, "command line")
     except ValueError as e:  # (the library's arguments, named as the command's)
         raise ValueError(str(e).replace("`estimate`", "`result`").replace("`truth`", "`gt`")
                          ) from None
@@ -1112,6 +1144,19 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
                                 surface=result.suffix.lower() == ".npz"):
         click.echo(line)
     return EXIT_OK
+
+
+def _result_in_folder(folder: Path) -> Path:
+    """The result ``facetlift evaluate`` scores in integrate's output `folder`: its
+    surface.npz (which keeps its camera), else its depth.npy, .exr or .tif; a ValueError
+    naming them where it holds none."""
+    names = [OUTPUTS[k] for k in ("npz", "npy", "exr", "tif")]
+    found = next((folder / n for n in names if (folder / n).is_file()), None)
+    if found is None:
+        raise ValueError(f"`result`: the folder {folder} holds none of {', '.join(names)} "
+                         "(integrate writes them with -s npz, npy, exr, tif): give the depth "
+                         "file, or the folder of a run that saved one")
+    return found
 
 
 def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:

@@ -253,8 +253,10 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     out.update(where)
     with recording() as caught:
         try:
-            with frames.read_in(normal_frame), frames.rotation_given(turn is not None):
-                # (read in it already: hints relative to it)
+            with frames.read_in(frames.GRADIENT_FIELD if inp.field else normal_frame), \
+                    frames.rotation_given(turn is not None):
+                # (read in it already: hints relative to it; a field's speak of its samples,
+                # as integrate's do)
                 checked = frames.checked(n, inp.mask, frame=None, rotation=turn)
             # (a prior to be aligned is checked as values, not as depths: any sign)
             problem = prepare(checked, inp.mask, K=inp.K,

@@ -183,15 +183,27 @@ _READ_IN: contextvars.ContextVar = contextvars.ContextVar("facetlift_read_in", d
 GRADIENT_FIELD = "gradient field"
 
 
+#: The other gradient layout :func:`layout_check` named for the field being integrated
+#: (:func:`read_in`'s `layout`), None where it named none.
+_LAYOUT_NAMED: contextvars.ContextVar = contextvars.ContextVar("facetlift_layout",
+                                                               default=None)
+
+
 @contextlib.contextmanager
-def read_in(frame):
+def read_in(frame, *, layout: str | None = None):
     """Within it, normals given to :func:`checked` were converted already from a source in
     `frame` (e.g. by a reader): a map that faces away gets a hint relative to `frame`, not a
-    suggestion of the frame the user already gave."""
+    suggestion of the frame the user already gave. `layout`: for a gradient field
+    (:data:`GRADIENT_FIELD`), the other layout :func:`layout_check` named (its ``"suggested"``):
+    :func:`flip_check` then stays silent (a field turned by 90 degrees is not mended by a
+    slope's sign, and a run told both "try --gradient-frame rowcol" and "negate q" was told two
+    contradictory things, a review)."""
     token = _READ_IN.set(frame)
+    named = _LAYOUT_NAMED.set(layout)
     try:
         yield
     finally:
+        _LAYOUT_NAMED.reset(named)
         _READ_IN.reset(token)
 
 
@@ -1247,9 +1259,17 @@ def flip_check(problem) -> dict:
     Returns
     -------
     dict
-        ``{"curl": ..., "curl_y_flipped": ..., "curl_x_flipped": ...}``.
+        ``{"curl": ..., "curl_y_flipped": ..., "curl_x_flipped": ...}``; for a gradient
+        field whose other layout :func:`layout_check` named (:func:`read_in`'s `layout`),
+        also ``"other_layout"``, and no warning: that layout is the advice.
     """
     out = flip_curls(problem)
+    layout = _LAYOUT_NAMED.get()
+    if layout is not None and _READ_IN.get() == GRADIENT_FIELD:
+        # (the layout warning has spoken: a slope's sign is no second cause to name; the
+        # field turned by 90 degrees is far from integrable either way)
+        out["other_layout"] = layout
+        return out
     own = out["curl"]
     # the axis the silhouette says is negated, else the one whose flip is the more integrable,
     # decides and is named first (with a pinhole camera the two flips differ: a review's
@@ -1410,17 +1430,20 @@ def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
     Returns
     -------
     dict
-        ``{"curl": ..., "curl_other_layout": ..., "curl_y_flipped": ...}`` (the last: with
-        one slope's sign flipped; a layout is not suggested where that explains it better).
+        ``{"curl": ..., "curl_other_layout": ..., "curl_y_flipped": ..., "suggested": ...}``
+        (the third: with one slope's sign flipped; a layout is not suggested where that
+        explains it better; the last: the layout the warning named, else None: hand it to
+        :func:`read_in` for the solve, so that :func:`flip_check` does not contradict it).
     """
     given = gradient_frame(frame)
     other = "rowcol" if given == "xy" else "xy"
     # (rowcol: dz/dx = q, dz/dy = -p; no converted copy of the whole field is made)
     gx, gy, sign = (p, q, 1.0) if given == "xy" else (q, p, -1.0)
     own, alt, flip = layout_curls(gx, gy, mask, gy_sign=sign)
-    out = {"curl": own, "curl_other_layout": alt, "curl_y_flipped": flip}
+    out = {"curl": own, "curl_other_layout": alt, "curl_y_flipped": flip, "suggested": None}
     # (not where a slope's sign explains it better: flip_check names that after the solve)
     if own > LAYOUT_MIN_CURL and alt < LAYOUT_RATIO * own and alt < flip:
+        out["suggested"] = other
         meaning = GRADIENT_FRAMES[other]
         warn(
             f"the gradient field is far more integrable in the other layout (relative curl "

@@ -152,6 +152,8 @@ def frame_first(job, ic: dict) -> str | None:
     None otherwise."""
     from . import frames
 
+    if ic.get("other_layout"):  # (the layout warning's advice stands alone: frames.read_in)
+        return None
     own = ic["curl"]
     a, b = frames.flip_order(ic)
     flipped = ic[f"curl_{a}_flipped"]

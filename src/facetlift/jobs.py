@@ -151,6 +151,9 @@ class Input:
     confidence: np.ndarray | None = None
     #: The normals were made from a gradient field (its hints speak of p and q).
     field: bool = False
+    #: The other layout the gradient field's layout check named (:func:`facetlift.frames.
+    #: layout_check`), None where it named none: the solve's frame check then stays silent.
+    layout: str | None = None
     #: The dataset folder's camera file the K came from (K.txt, or DiLiGenT's
     #: Calib_Results.mat, perhaps the parent's), for the summary; None otherwise.
     K_file: str | None = None
@@ -230,7 +233,7 @@ def read(job: Job) -> Input:
 
     src = job.source
     K = prior = conf = K_file = None
-    rotation = rotation_file = rotation_as = None
+    rotation = rotation_file = rotation_as = layout = None
     given_rotation = rotation_field(job)
     files = {"prior": None, "confidence": None}
     field_input = bool(job.gradients)
@@ -243,7 +246,7 @@ def read(job: Job) -> Input:
                          "field (--gradients P Q) stores slopes: leave it out")
     if job.gradients:
         g = read_gradients(*job.gradients)
-        n, m, source = _normals_from_field(g, job), g["mask"], "valid gradients"
+        (n, layout), m, source = _normals_from_field(g, job), g["mask"], "valid gradients"
     elif is_mat(src):
         g = read_mat(src, job.mat_keys)
         field_input = "p" in g
@@ -251,7 +254,7 @@ def read(job: Job) -> Input:
             raise ValueError(f"`normal_encoding` {encoding!r} applies to a normal map; {src} "
                              "holds a gradient field (p, q), which stores slopes: leave it out")
         if field_input:
-            n = _normals_from_field(g, job)
+            n, layout = _normals_from_field(g, job)
         else:
             n = g["normals"]
             if encoding == "xy":
@@ -303,7 +306,8 @@ def read(job: Job) -> Input:
              f"(--gradients P Q, or a .mat file holding p and q); {src.name} is a normal map, "
              "whose frame is --normal-frame: it is ignored here")
     if job.mask is not None:
-        m = io.read_mask(job.mask, n.shape[:2])
+        m = io.read_mask(job.mask, n.shape[:2],
+                         of="the gradient field" if field_input else "the normal map")
         source = str(job.mask)
     if job.K is not None:  # (a file, or fx fy cx cy typed inline)
         from .camera import check_image_size
@@ -353,11 +357,12 @@ def read(job: Job) -> Input:
             hint = coarse_prior_hint(arr.shape, n.shape[:2]) if name == "prior" else ""
             # (a batch's NAME_prior_depth.*: the file named, and how to leave it unread)
             own = f" ({Path(getattr(job, name)).name})" if name in job.beside else ""
-            raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW){own} but the "
-                             f"normal map is {n.shape[0]}x{n.shape[1]}{hint}"
+            of = "the gradient field" if field_input else "the normal map"
+            raise ValueError(f"`{name}`: size {arr.shape[0]}x{arr.shape[1]} (HxW){own} but "
+                             f"{of} is {n.shape[0]}x{n.shape[1]}{hint}"
                              f"{_beside_tail(job, name)}")
     return Input(normals=n, mask=m, K=K, mask_source=source, prior=prior, prior_weight=weight,
-                 confidence=conf, field=bool(field_input),
+                 confidence=conf, field=bool(field_input), layout=layout,
                  K_file=None if K_file is None or job.K is not None or job.fov is not None
                  else _camera_name(K_file, src),
                  prior_file=files["prior"] if prior is not None else None,
@@ -665,15 +670,17 @@ def _no_prior_checks(job: Job) -> None:
         check(job.prior_fit, has_prior=False, perspective=True)
 
 
-def _normals_from_field(g: dict, job: Job) -> np.ndarray:
+def _normals_from_field(g: dict, job: Job) -> tuple[np.ndarray, str | None]:
+    """The normals made from the field `g`, and the other layout its layout check named
+    (None where none: :attr:`Input.layout`)."""
     from . import frames
     from .problem import normals_from_gradients
 
     if job.normal_frame is not None:
         raise ValueError("`normal_frame` does not apply to a gradient field; use --gradient-frame")
-    frames.layout_check(g["p"], g["q"], job.gradient_frame, g.get("mask"))
+    layout = frames.layout_check(g["p"], g["q"], job.gradient_frame, g.get("mask"))["suggested"]
     return normals_from_gradients(*frames.gradients_to_facetlift(g["p"], g["q"],
-                                                                 job.gradient_frame))
+                                                                 job.gradient_frame)), layout
 
 
 @contextlib.contextmanager
@@ -817,7 +824,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         # (the normals were read in the job's frame already: the rotation goes from world
         # to that frame, and is given to integrate as one to facetlift's)
         turn = frames.rotation_in_facetlift(inp.rotation, job.normal_frame)
-        with frames.read_in(frames.GRADIENT_FIELD if inp.field else job.normal_frame):
+        with frames.read_in(frames.GRADIENT_FIELD if inp.field else job.normal_frame,
+                            layout=inp.layout):
             try:
                 surface = facetlift.integrate(
                     inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size,
@@ -930,7 +938,8 @@ def _evaluate_against_gt(src: Path, surface) -> dict | None:
                              f"{surface.depth.shape[0]}x{surface.depth.shape[1]}")
         # (its warnings, e.g. an orthographic result's range unlike the truth's: --pixel-size,
         # are the job's too)
-        scores = metrics.evaluate(surface, truth, surface.mask)
+        # (run from the command line or Python: its warnings name both)
+        scores = metrics._evaluate(surface, truth, surface.mask, None, "both")
     except ValueError as e:
         warn(f"{gt.name} in {src}: not scored ({e})")
         return None
@@ -1008,42 +1017,17 @@ def _depth_range(surface, height_range=None) -> list | None:
 
 def _write(surface, kind: str, path: Path, normals, triangles, frame=None,
            height_range=None) -> None:
-    from . import frames, io
-
-    if kind == "report":
-        io.write_report(path, surface, normals,
-                        mean_deviation=surface.info.get("mean_deviation"))
-    elif kind == "discontinuities":
-        io.write_discontinuities(path, surface)
-    elif kind == "height":
-        io.write_height(path, surface, height_range=height_range)
-    elif kind == "height-exr":  # (the heights themselves: no range applies)
-        io.write_height(path, surface)
-    elif kind == "points":  # (one point per pixel centre, with the input's normal there)
-        pn = _point_normals(surface, normals)
-        io.write_points(path, surface.points(frame=frame),
-                        None if pn is None else frames.from_facetlift(pn, frame, "frame"))
-    elif kind in ("ply", "obj"):
-        surface.save(path, frame=frame, **({} if triangles is None else
-                                           {"triangles": triangles}))
+    """Output `kind` at `path` (named :data:`OUTPUTS`' `kind`): by :meth:`Surface.save`,
+    which writes the command line's file names as ``--save`` does (one writer for both: its
+    points.ply was a mesh, a review)."""
+    if Path(path).name != OUTPUTS[kind]:  # pragma: no cover - a caller's bug
+        raise ValueError(f"{kind} output must be named {OUTPUTS[kind]}; got {path}")
+    if kind in ("ply", "obj"):
+        kw = {"frame": frame, **({} if triangles is None else {"triangles": triangles})}
     else:
-        surface.save(path)
-
-
-def _point_normals(surface, normals):
-    """The input normals at :meth:`Surface.points`' pixels (facetlift's camera frame, as
-    integrated: world-space ones turned by their rotation, a gradient field's from its
-    slopes), unit length; None where they are not an (H, W, 3) map of the surface's shape."""
-    n = None if normals is None else np.asarray(normals, dtype=float)
-    if n is None or n.shape != surface.shape + (3,):
-        return None
-    r, c = np.nonzero(surface.mask)
-    v = n[r, c]
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        # (scaled by the largest component first: a normal of 1e300 is a usable direction, a
-        # review)
-        v = v / np.max(np.abs(v), axis=1, keepdims=True)
-        return v / np.linalg.norm(v, axis=1, keepdims=True)
+        kw = {"report": {"normals": normals}, "points": {"normals": normals, "frame": frame},
+              "height": {"height_range": height_range}}.get(kind, {})
+    surface.save(path, **kw)
 
 
 def finished_unconverged(info: dict) -> bool:

@@ -161,30 +161,46 @@ def _range_ratio(est, gt, m) -> float | None:
     return None if flat else float((hi - lo) / (ghi - glo))
 
 
-def _range_check(est, gt, m) -> float | None:
+#: The settings :func:`_range_check`'s warning names, in the words of its caller: Python's
+#: arguments (:func:`evaluate`), the command line's flags (``facetlift evaluate``: it was
+#: told of perspective=True, a review) or both (a job's own scoring, run from either).
+_WORDS = {
+    "python": {"camera": "perspective=True, or K=K", "pixel": "pixel_size",
+               "set": "pixel_size={:.3g}", "jumps": "discontinuities=True"},
+    "command line": {"camera": "--K, or --fov as integrate took it", "pixel": "--pixel-size",
+                     "set": "--pixel-size {:.3g}", "jumps": "--discontinuities"},
+    "both": {"camera": "in Python perspective=True or K=K; on the command line --K or --fov",
+             "pixel": "pixel_size; --pixel-size on the command line",
+             "set": "--pixel-size {:.3g}", "jumps": "discontinuities=True, --discontinuities"},
+}
+
+
+def _range_check(est, gt, m, words: str = "python") -> float | None:
     """:func:`evaluate`'s warning on an orthographic result in other units than the truth
-    (:data:`RANGE_MISMATCH`); the ratio of the ranges (:func:`_range_ratio`)."""
+    (:data:`RANGE_MISMATCH`), naming the settings in `words` (:data:`_WORDS`); the ratio of
+    the ranges (:func:`_range_ratio`)."""
     from ._warnings import warn
 
     ratio = _range_ratio(est, gt, m)
     if ratio is None or 1.0 / RANGE_MISMATCH <= ratio <= RANGE_MISMATCH:
         return ratio
+    say = _WORDS[words]
     head = (f"the result's depth range (1st to 99th percentile over the {int(m.sum())} pixels "
             f"scored) is {ratio:.3g} times the ground truth's: the normalised error compares "
             "them as stored, in units that then differ, and means little")
     if (est[m] > 0).all():  # (positive depths: a perspective result, up to scale)
         warn(f"{head}. Its depths are all > 0, as a perspective result's are (defined up to "
-             "scale, median depth 1): score it with its camera (perspective=True; --K on the "
-             "command line), after a median scale (MADE)")
+             f"scale, median depth 1): score it with its camera ({say['camera']}), after a "
+             "median scale (MADE)")
     else:
         jumps = ("; or, if the units are right, the result is flattened across depth jumps "
-                 "(a smooth one bends across them: discontinuities=True, --discontinuities, "
-                 "keeps those the normals show)" if ratio < 1 else "")
+                 f"(a smooth one bends across them: {say['jumps']} keeps those the normals "
+                 "show)" if ratio < 1 else "")
         warn(f"{head}. An orthographic result's depth is in the units of the pixel size it "
-             "was integrated with (pixel_size; --pixel-size on the command line: the world "
-             "width of a pixel, 1 by default, so depth in pixels): integrate again with the "
-             f"ground truth's, about {1.0 / ratio:.3g} times the one used (e.g. --pixel-size "
-             f"{1.0 / ratio:.3g} where it was 1){jumps}")
+             f"was integrated with ({say['pixel']}: the world width of a pixel, 1 by default, "
+             "so depth in pixels): integrate again with the ground truth's, about "
+             f"{1.0 / ratio:.3g} times the one used (e.g. {say['set'].format(1.0 / ratio)} "
+             f"where it was 1){jumps}")
     return ratio
 
 
@@ -239,7 +255,7 @@ def _made(est, gt, m) -> tuple[float, np.ndarray, float]:
     return float(np.nanmean(err[m])), err, scale
 
 
-def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None) -> dict:
+def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None, K=None) -> dict:
     """Score a result against a ground-truth depth map: what ``facetlift evaluate`` prints.
 
     Every measure is one of this module's, over the same pixels: :func:`made` (BiNI's: the
@@ -263,6 +279,10 @@ def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None) -> 
         Whether the result is a perspective depth (a camera's z, defined up to scale). Default:
         a Surface's camera says; an array is taken as orthographic (a height, defined up to an
         offset per piece).
+    K : (3, 3) array_like, optional
+        The result's camera, as given to :func:`facetlift.integrate` (``facetlift evaluate
+        --K``): the same as ``perspective=True`` (the scores need no more of it); refused
+        beside ``perspective=False``, or where `estimate` is a Surface with another camera.
 
     Returns
     -------
@@ -282,8 +302,29 @@ def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None) -> 
     ValueError
         Shapes that differ; no pixel where the mask, the estimate and the truth are all
         defined (with how many each has); depths <= 0 where a scale is needed: in a
-        perspective result, or in the truth of one.
+        perspective result, or in the truth of one; a `K` that is no 3 x 3 matrix, or that
+        contradicts `perspective` or the Surface's camera.
     """
+    if K is not None:  # (evaluate(depth, gt, mask, K=K) was a TypeError, a review)
+        cam = np.asarray(K, dtype=float) if np.ndim(K) == 2 else None
+        if cam is None or cam.shape != (3, 3) or not np.isfinite(cam).all():
+            raise ValueError(f"`K` must be a finite 3 x 3 camera matrix; got "
+                             f"{'shape ' + str(np.shape(K)) if cam is None else cam.tolist()}")
+        if perspective is False:
+            raise ValueError("`K` and perspective=False contradict each other: a camera "
+                             "scores the result as a perspective depth; give one of them")
+        own = getattr(estimate, "K", None)
+        if own is not None and not np.allclose(np.asarray(own, float), cam, rtol=1e-6):
+            raise ValueError(f"`K` differs from the camera the Surface was integrated with "
+                             f"({np.asarray(own).tolist()}); leave it out to use the "
+                             "Surface's own")
+        perspective = True
+    return _evaluate(estimate, truth, mask, perspective, "python")
+
+
+def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
+    """:func:`evaluate`, its warnings naming the settings in `words` (:data:`_WORDS`): the
+    command line's flags for ``facetlift evaluate``."""
     if perspective is None:
         perspective = getattr(estimate, "K", None) is not None
     est = np.asarray(_depth_of(estimate), dtype=float)
@@ -325,7 +366,7 @@ def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None) -> 
         out["notes"].append("no normalised error: a perspective result is scored after a "
                             "scale (MADE), not an offset")
     else:
-        out["range_ratio"] = ratio = _range_check(est, gt, m)
+        out["range_ratio"] = ratio = _range_check(est, gt, m, words)
         off = ratio is not None and not 1.0 / RANGE_MISMATCH <= ratio <= RANGE_MISMATCH
         try:  # (where the ranges differ, said above: not again as a spread)
             out["normalized_error"], _ = _normalized(*_offset_aligned(est, gt, m, not off))

@@ -135,6 +135,17 @@ def _convert(opt: Option, value):
     return _number(opt, value)
 
 
+def _takes(option: Option | None, value) -> bool:
+    """Whether `option` (None: not a method option) accepts `value`."""
+    if option is None:
+        return False
+    try:
+        option.check(value)
+    except ValueError:
+        return False
+    return True
+
+
 def validate(options: tuple[Option, ...], given: dict, method: str,
              keywords: tuple[str, ...] = (), hints: dict | None = None) -> dict:
     """Checked values of every option of `method`: the given ones converted, defaults elsewhere.
@@ -163,7 +174,11 @@ def validate(options: tuple[Option, ...], given: dict, method: str,
             close = {u: difflib.get_close_matches(u, sorted((set(spec) | set(keywords))
                                                             - {u}), n=3, cutoff=0.75)
                      for u in rest}  # (not the name itself: "'solver' for 'solver'")
-            close = {u: " or ".join(map(repr, m)) for u, m in close.items() if m}
+            # best first: an option that takes the value given, then by difflib's ratio (its
+            # order): discontinuity=True was offered 'discontinuity_k' first and the one
+            # option taking True, 'discontinuities', last (a review)
+            close = {u: " or ".join(map(repr, sorted(m, key=lambda o, u=u: not _takes(
+                spec.get(o), given[u])))) for u, m in close.items() if m}
             if close:
                 hint = "; did you mean " + ", ".join(f"{m} for {u!r}"
                                                      for u, m in close.items()) + "?"

@@ -25,7 +25,7 @@ from ._warnings import warn
 from .camera import Camera, make_camera
 from .domain import Domain
 from .errors import CameraWarning
-from .frames import EDGE_ON, world_note
+from .frames import EDGE_ON, GRADIENT_FIELD, reading, world_note
 
 #: ``backfacing=`` choices: treat such normals as missing samples, or raise.
 BACKFACING = ("missing", "error", "outlier")
@@ -682,7 +682,10 @@ def prepare(
     # (pixels without a normal enclosed by the object, where the domain is the valid normals:
     # left out as holes; told in the same warning, once: an audit's 39 black pixels became
     # NaN holes in the depth and the mesh without a word)
-    hole_note = "" if "holes" not in counts else _holes_note(holes)
+    # (normals made from a gradient field are spoken of as its samples: its user was told of
+    # 8/16-bit black pixels and normals, a review)
+    field = reading() == GRADIENT_FIELD
+    hole_note = "" if "holes" not in counts else _holes_note(holes, field)
     if hole_note and not problems:
         warn(hole_note[0].upper() + hole_note[1:], UnusableNormalsWarning)
     if problems:
@@ -696,7 +699,9 @@ def prepare(
             note = grazing_note if grazing_note is not None else (
                 None if outlier_eps is not None else
                 "outlier_eps / --outlier-eps sets another: a smaller one keeps more, 0 all")
-            rule = (f"; grazing: view cosine < {eps:.4g}"
+            steep = (f" (a slope steeper than {np.sqrt(1 - eps * eps) / eps:.4g}, or "
+                     "infinite)" if field and eps > 0 else "")
+            rule = (f"; grazing: view cosine < {eps:.4g}{steep}"
                     f"{'' if note is None else ', ' + note}")
         if "isolated" in problems:
             rule += (f"; isolated: {isolated_rule_text(isolated)} (an outlier of a "
@@ -713,7 +718,7 @@ def prepare(
             counts["facing_away_flip"] = list(mended)  # (info's frame guess names it too)
             # (a y-down map with a camera over a floor: its floor faces away, and the warning
             # asked about BGR order, world frames and K, never about y; an audit)
-            from .frames import flip_advice, reading
+            from .frames import flip_advice
 
             frame = (f"; {away:.0%} of the normals face away from the camera, and with "
                      f"{mended[0]} negated {mended[1]:.1%} would: the map's {mended[0]} axis "
@@ -740,11 +745,10 @@ def prepare(
                           f"point (cx {Kc[0, 2]:g}, cy {Kc[1, 2]:g}) is usually near the "
                           f"centre of this {W} x {H} image, its focal lengths fx "
                           f"{Kc[0, 0]:g}, fy {Kc[1, 1]:g} scale with the image")
-        from .frames import GRADIENT_FIELD, reading
-
-        hint = no_camera_hint(counts, cam.perspective, reading() == GRADIENT_FIELD)
+        hint = no_camera_hint(counts, cam.perspective, field)
         warn(
-            f"{sum(int(v.sum()) for v in problems.values())} normal(s) inside the mask cannot be "
+            f"{sum(int(v.sum()) for v in problems.values())} "
+            f"{'gradient sample(s)' if field else 'normal(s)'} inside the mask cannot be "
             f"used and were treated as missing samples ({what}{rule}); first at "
             f"(row {r[first]}, col {c[first]}){frame}{'; ' + hint if hint else ''}"
             + (f". Also: {hole_note}" if hole_note else ""), UnusableNormalsWarning
@@ -1083,6 +1087,20 @@ def prior_blur_value(prior_blur) -> float:
     return blur
 
 
+def prior_weight_value(prior_weight) -> float:
+    """A scalar `prior_weight` as a float, finite and >= 0 (ValueError naming it otherwise,
+    in the words :func:`prepare` uses): the command line checks its --prior-weight so before
+    any input is read (it was refused after the map's own warnings, a review)."""
+    if isinstance(prior_weight, (bool, np.bool_, str, bytes)) or not hasattr(prior_weight,
+                                                                             "__float__"):
+        raise ValueError(f"`prior_weight` must be a finite number >= 0; got "
+                         f"{_short(prior_weight)}")
+    w = float(prior_weight)
+    if not (np.isfinite(w) and w >= 0):
+        raise ValueError(f"`prior_weight` must be a finite number >= 0; got {prior_weight!r}")
+    return w
+
+
 def check_prior_blur(prior_blur, has_prior: bool, shape=None) -> float:
     """`prior_blur` checked (:func:`prior_blur_value`); also refused without a prior and
     above the image's larger side `shape` (a blur wider than the image fits one plane to
@@ -1163,6 +1181,35 @@ def _is_points(prior, shape: tuple[int, int] | None = None) -> bool:
     return shape is None or not (len(prior) == shape[0] and all(
         not isinstance(v, np.ndarray) and np.ndim(v) == 1 and len(v) == shape[1]
         for v in prior))
+
+
+def _unprojected_hint(prior, shape: tuple[int, int]) -> str:
+    """The words, or "", on points that look unprojected, for a prior with no sample in the
+    mask: where its points (2 or more) round onto one pixel, or most fall outside the image,
+    as 3-D points (x, y in metres) read as columns and rows do (a CSV of three points under
+    an x,y,z header in metres was told "(1 outside it)" alone, a review; the error of points
+    all outside the image asked already)."""
+    try:
+        rows, cols = (np.asarray(v, dtype=float).ravel() for v in prior[:2])
+    except (TypeError, ValueError):
+        return ""
+    ok = np.isfinite(rows) & np.isfinite(cols)
+    if rows.shape != cols.shape or ok.sum() < 2:
+        return ""
+    H, W = shape
+    r, c = np.rint(rows[ok]), np.rint(cols[ok])
+    out = (r < 0) | (r >= H) | (c < 0) | (c >= W)
+    pixels = np.unique(r[~out] * W + c[~out]).size
+    if out.mean() > 0.5:
+        said = f"{int(out.sum())} of its {out.size} points lie outside the {H} x {W} image"
+    elif pixels == 1 and not out.any():
+        said = (f"its {out.size} points all fall into one pixel (row {int(r[0])}, col "
+                f"{int(c[0])})")
+    else:
+        return ""
+    return (f"; {said}: 3-D points not projected with K (x, y in metres or mm, not the "
+            "image's columns and rows)? Project them with K first (docs/fusion.md, 'Sparse "
+            "SfM points projected with K')")
 
 
 def _ambiguous_points(prior) -> bool:
@@ -1465,6 +1512,7 @@ def check_prior(prior, prior_weight, shape, mask, camera):
             "`prior` has no finite depth sample inside the mask"
             + (f" ({outside} outside it)" if outside else "")
             + (left or "; give depths where the normals are, NaN elsewhere")
+            + (_unprojected_hint(prior, shape) if _is_points(prior, shape) else "")
         )
     wbad = have & ~(np.isfinite(w) & (w >= 0) & (w <= MAX_PRIOR_WEIGHT))
     if wbad.any():
@@ -1834,9 +1882,17 @@ def enclosed_holes(m: np.ndarray, max_pixels: int = HOLE_PIXELS) -> np.ndarray:
     return enclosed_gaps(m, max_pixels)[0]
 
 
-def _holes_note(holes: np.ndarray) -> str:
-    """The warning's words on the enclosed pixels without a normal (:func:`enclosed_holes`)."""
+def _holes_note(holes: np.ndarray, field: bool = False) -> str:
+    """The warning's words on the enclosed pixels without a normal (:func:`enclosed_holes`);
+    `field`: the normals were made from a gradient field, whose samples are named instead."""
     rr, cc = np.nonzero(holes)
+    if field:
+        return (f"{int(holes.sum())} pixel(s) enclosed by the object hold no gradient sample "
+                "(p or q not finite) and were left out as holes, NaN in the depth and the mesh "
+                f"(holes of at most {HOLE_PIXELS} pixels surrounded by valid samples); first "
+                f"at (row {rr[0]}, col {cc[0]}). Without a mask the domain is the finite "
+                "samples: give one (--mask, mask=) to integrate such pixels as missing "
+                "samples, filled from their neighbours")
     return (f"{int(holes.sum())} pixel(s) enclosed by the object hold no normal (not finite or "
             "zero length; in an 8/16-bit file, a pixel whose decoded length is far from 1, "
             "such as black (0, 0, 0)) and were left out as holes, NaN in the depth and the "

@@ -214,7 +214,18 @@ class Surface:
         discontinuities`` writes it), but ``height.png`` (also ``heightmap``, ``height_map``,
         ``displacement``) the 16-bit height map of ``--save height`` (keyword
         ``height_range``). ``frame=`` writes a mesh in another frame
-        (:meth:`to_mesh`). Files are written atomically. Returns the path written.
+        (:meth:`to_mesh`).
+
+        The command line's own file names write what its ``--save`` writes under them
+        (:data:`facetlift.io.surface.CLI_NAMES`): ``points.ply`` the point cloud of ``-s
+        points`` (not the mesh; keywords ``frame`` and ``normals``, the input normals
+        (H, W, 3) to give each point), ``discontinuities.png`` the jump map of ``-s
+        discontinuities`` (refused for a surface without one), ``report.png`` the report of
+        ``-s report`` (needs matplotlib; keywords ``normals``, ``dpi``) and ``height.exr``
+        the heights of ``-s height-exr`` (not the depth). Every other name keeps its
+        extension's meaning; ``depth.png`` is a shaded preview with a warning (the command
+        line writes no depth PNG: depth goes to .npy, .exr, .tif). Files are written
+        atomically. Returns the path written.
         """
         from . import io
 

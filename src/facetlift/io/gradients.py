@@ -43,7 +43,7 @@ def read_gradients(p_path, q_path, mask_path=None) -> dict:
     q = read_gradient(q_path, "q")
     if q.shape != p.shape:
         raise ValueError(f"`q`: {q_path} has shape {q.shape}, but `p` has {p.shape}")
-    mask = None if mask_path is None else read_mask(mask_path, p.shape)
+    mask = None if mask_path is None else read_mask(mask_path, p.shape, of="the gradient field")
     return {"p": p, "q": q, "mask": mask}
 
 

@@ -440,7 +440,8 @@ def _soft_edge_check(plane: np.ndarray | None, m: np.ndarray, p, arg: str) -> No
          f"threshold it (e.g. at half of {top:g}) if those pixels hold no normal of the object")
 
 
-def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
+def read_mask(path, shape: tuple[int, int] | None = None, *, of: str = "the normal map"
+              ) -> np.ndarray:
     """Read a mask image: nonzero is inside (a warning where many inside pixels hold values
     below the largest: an antialiased edge, :func:`_soft_edge_check`).
 
@@ -453,6 +454,9 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
         alpha alone is the mask.
     shape : (H, W), optional
         Required shape (that of the normal map).
+    of : str
+        What `shape` is the size of, for the message where the mask's differs ("the gradient
+        field" for one: it was told of a normal map, a review).
 
     Returns
     -------
@@ -496,7 +500,7 @@ def read_mask(path, shape: tuple[int, int] | None = None) -> np.ndarray:
         shape = tuple(shape)[:2]
     if shape is not None and m.shape != tuple(shape):
         raise ValueError(
-            f"`{arg}`: {p} has size {m.shape[0]}x{m.shape[1]} (HxW) but the normal map is "
+            f"`{arg}`: {p} has size {m.shape[0]}x{m.shape[1]} (HxW) but {of} is "
             f"{shape[0]}x{shape[1]}"
         )
     return m

@@ -14,6 +14,15 @@ from .preview import write_preview
 
 SURFACE_FORMATS = DEPTH_FORMATS + (".npz",) + MESH_FORMATS + (".png",)
 
+#: The command line's output file names (``facetlift.jobs.OUTPUTS``) whose content is not
+#: their extension's default, by ``--save`` kind: :func:`save_surface` writes these exact
+#: names (in any case) as ``--save`` does. ``surface.save("points.ply")`` wrote the mesh, and
+#: ``"discontinuities.png"`` a plain preview, where ``-s points`` and ``-s discontinuities``
+#: write the point cloud and the jump map (a review); ``height.exr`` held the depth where
+#: ``-s height-exr`` writes the heights.
+CLI_NAMES = {"points.ply": "points", "discontinuities.png": "discontinuities",
+             "report.png": "report", "height.exr": "height-exr"}
+
 
 #: ``.png`` names that :func:`save_surface` writes as a 16-bit height map
 #: (:func:`~facetlift.io.preview.write_height`), as ``--save height`` names its file, not as a
@@ -37,8 +46,18 @@ def save_surface(surface, path, **kwargs) -> Path:
     (:func:`write_preview`, keywords forwarded), except ``height.png``, the other names of
     :data:`HEIGHT_STEMS` and names ending in ``_height`` (``bear_height.png``; or ``-``): the
     16-bit height map of ``--save height``
-    (:func:`~facetlift.io.preview.write_height`, keyword ``height_range``). Returns the path
-    written.
+    (:func:`~facetlift.io.preview.write_height`, keyword ``height_range``).
+
+    The command line's own file names (:data:`CLI_NAMES`) write what its ``--save`` writes
+    under them: ``points.ply`` the point cloud (:func:`~facetlift.io.meshes.write_points`,
+    a point per pixel centre; keywords ``frame`` and ``normals``, the input normals
+    (H, W, 3) to give each point), ``discontinuities.png`` the map of the depth jumps
+    (:func:`~facetlift.io.preview.write_discontinuities`, keyword ``min_size``; a surface
+    without one is refused), ``report.png`` the report
+    (:func:`~facetlift.io.report.write_report`, needs matplotlib; keywords ``normals``,
+    ``dpi``) and ``height.exr`` the heights (:func:`~facetlift.io.preview.write_height`);
+    any other name keeps its extension's meaning (``mesh_points.ply`` is a mesh). Returns
+    the path written.
 
     Raises
     ------
@@ -52,6 +71,10 @@ def save_surface(surface, path, **kwargs) -> Path:
     def no_kwargs():
         if kwargs:
             raise ValueError(f"{ext} output takes no options; got {sorted(kwargs)}")
+
+    kind = CLI_NAMES.get(p.name.lower())
+    if kind is not None:
+        return _save_as_cli(surface, p, kind, kwargs)
 
     if ext in DEPTH_FORMATS:
         no_kwargs()
@@ -104,6 +127,60 @@ def save_surface(surface, path, **kwargs) -> Path:
         warn(f"{p.name}: a .png is a shaded preview of the surface, not its depth; write "
              "depth as .exr, .tif or .npy (or .npz with the vertex depth and the mask)")
     return write_preview(p, surface, **kwargs)
+
+
+#: The keywords each of :data:`CLI_NAMES`' writers takes.
+_CLI_KEYWORDS = {"points": ("frame", "normals"), "discontinuities": ("min_size",),
+                 "report": ("dpi", "normals"), "height-exr": ()}
+
+
+def _save_as_cli(surface, p: Path, kind: str, kwargs: dict) -> Path:
+    """:func:`save_surface` of one of :data:`CLI_NAMES`: as ``--save kind`` writes it."""
+    extra = sorted(set(kwargs) - set(_CLI_KEYWORDS[kind]))
+    if extra:
+        takes = _CLI_KEYWORDS[kind]
+        raise ValueError(f"{p.name} (as --save {kind} writes it) takes "
+                         + (f"only {list(takes)}" if takes else "no options")
+                         + f"; got {extra}")
+    if kind == "points":
+        from .. import frames
+        from .meshes import write_points
+
+        frame = kwargs.get("frame")
+        pn = point_normals(surface, kwargs.get("normals"))
+        return write_points(p, surface.points(frame=frame),
+                            None if pn is None else frames.from_facetlift(pn, frame, "frame"))
+    if kind == "discontinuities":
+        from .preview import write_discontinuities
+
+        return write_discontinuities(p, surface, **kwargs)
+    if kind == "report":
+        from .. import io as package  # (facetlift.io.write_report: the one a test replaces)
+
+        info = surface.info if isinstance(surface.info, dict) else {}
+        return package.write_report(p, surface, kwargs.get("normals"),
+                            mean_deviation=info.get("mean_deviation"),
+                            **({"dpi": kwargs["dpi"]} if "dpi" in kwargs else {}))
+    from .preview import write_height
+
+    return write_height(p, surface)[0]
+
+
+def point_normals(surface, normals):
+    """The input normals at :meth:`facetlift.Surface.points`' pixels (facetlift's camera
+    frame, as integrated: world-space ones turned by their rotation, a gradient field's from
+    its slopes), unit length; None where they are not an (H, W, 3) map of the surface's
+    shape."""
+    n = None if normals is None else np.asarray(normals, dtype=float)
+    if n is None or n.shape != surface.shape + (3,):
+        return None
+    r, c = np.nonzero(surface.mask)
+    v = n[r, c]
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        # (scaled by the largest component first: a normal of 1e300 is a usable direction, a
+        # review)
+        v = v / np.max(np.abs(v), axis=1, keepdims=True)
+        return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
 def _cut_arrays(surface) -> dict:

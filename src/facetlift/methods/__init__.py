@@ -134,8 +134,22 @@ def register(info: MethodInfo) -> None:
 
 
 def get(name: str) -> MethodInfo:
+    """The registered method `name`; a ValueError listing them otherwise, with the name meant
+    where another case or a misspelling gives one (--method DGP got the list alone, a
+    review)."""
     if name not in REGISTRY:
-        raise ValueError(f"`method` must be one of {sorted(REGISTRY)}; got {name!r}")
+        hint = ""
+        if isinstance(name, str):
+            import difflib
+
+            lower = {k.lower(): k for k in REGISTRY}
+            meant = ([lower[name.lower()]] if name.lower() in lower else
+                     [lower[m] for m in difflib.get_close_matches(name.lower(), sorted(lower),
+                                                                  n=2, cutoff=0.75)])
+            if meant:
+                hint = "; did you mean " + " or ".join(map(repr, meant)) + "?" + (
+                    " (method names are lower case)" if name.lower() in lower else "")
+        raise ValueError(f"`method` must be one of {sorted(REGISTRY)}; got {name!r}{hint}")
     return REGISTRY[name]
 
 
