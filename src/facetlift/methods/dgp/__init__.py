@@ -498,7 +498,8 @@ def run(
             copies, pinfo = place_pieces(domain, y, bx, by, target, s, anchored=prior[0] > 0,
                                          hang_anchored=True)
             trouble()
-        if bent is not None:  # (the blurred prior bent it away from its normals: pointwise)
+        if astray is not None or bent is not None:  # (the blurred prior ran away or bent
+            # the surface away from its normals: the prior compared pixel by pixel instead)
             prior = terms
             z, y, w, info, split = _discontinuous(domain, bx, by, target, prior=prior,
                                                   x0=start(prior), final_weights=None,
@@ -506,31 +507,24 @@ def run(
             copies, pinfo = place_pieces(domain, y, bx, by, target, s, anchored=prior[0] > 0,
                                          split=split)
             blur.returned = blur.rms(copies.mean(axis=1))  # (of the surface returned)
-            free_text = "" if free is None else f" (the normals' own cuts: {free:.2g} deg)"
-            warn(f"prior_blur: the surface departed from its own normals by {bent:.3g} deg on "
-                 f"average{free_text}, more than a surface of these normals can: the blurred "
-                 f"prior's corrections bent it (sigma {problem.prior_blur:g} px; a prior that "
-                 "is not blurred as said, e.g. block means upsampled without a further blur, "
-                 "can do so, docs/fusion.md). The prior was compared pixel by pixel instead "
+            if bent is not None:
+                free_text = "" if free is None else f" (the normals' own cuts: {free:.2g} deg)"
+                why = (f"the surface departed from its own normals by {bent:.3g} deg on "
+                       f"average{free_text}, more than a surface of these normals can: the "
+                       "blurred prior's corrections bent it (sigma "
+                       f"{problem.prior_blur:g} px; a prior that is not blurred as said, e.g. "
+                       "block means upsampled without a further blur, can do so, "
+                       "docs/fusion.md)")
+            else:
+                why = (f"the surface departed from the blurred prior by up to {astray:.3g} "
+                       "times the depth range of the prior (or of the first solve, the larger; "
+                       "99.9th percentile), far beyond what a blur can hide: the blurred "
+                       f"prior's corrections tore it apart (sigma {problem.prior_blur:g} px; "
+                       "block means upsampled without a further blur are known to do so, "
+                       "docs/fusion.md)")
+            warn(f"prior_blur: {why}. The prior was compared pixel by pixel instead "
                  "(info['prior_blur']['fallback']); a smaller prior_weight (--prior-weight) or "
                  "integrating without discontinuities may do better", ConvergenceWarning)
-        elif astray is not None:  # (a blurred prior's corrections ran away: the pointwise one)
-            prior = terms
-            z, y, w, info, split = _discontinuous(domain, bx, by, target, prior=prior,
-                                                  x0=start(prior), final_weights=None,
-                                                  blur=None, footprint=s, **common)
-            copies, pinfo = place_pieces(domain, y, bx, by, target, s, anchored=prior[0] > 0,
-                                         split=split)
-            blur.returned = blur.rms(copies.mean(axis=1))  # (of the surface returned)
-            warn(f"prior_blur: the surface departed from the blurred prior by up to "
-                 f"{astray:.3g} times the depth range of the prior (or of the first solve, the "
-                 "larger; 99.9th percentile), far beyond what a blur can hide: the blurred "
-                 "prior's corrections tore it apart "
-                 f"(sigma {problem.prior_blur:g} px; block means upsampled without a further "
-                 "blur are known to do so, docs/fusion.md). The prior was compared pixel by "
-                 "pixel instead (info['prior_blur']['fallback']); a smaller prior_weight "
-                 "(--prior-weight) or integrating without discontinuities may do better",
-                 ConvergenceWarning)
         pointwise = prior is not None and (blur is None or astray is not None
                                            or bent is not None)
         _discontinuity_warnings(info, prior if pointwise else None, domain,
