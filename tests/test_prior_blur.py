@@ -329,6 +329,28 @@ def test_a_blurred_prior_that_bends_the_surface_away_from_its_normals_falls_back
     np.testing.assert_array_equal(s.depth, run(n, mask, **kw).depth)
 
 
+def test_the_bent_check_keeps_its_ratio_where_the_first_pass_is_reused(monkeypatch):
+    """With prior_fit the prior-free reweightings are reused from the normals-only run
+    (shared_cuts): their surface's deviation was None there, and the BENT_RATIO guard (so
+    that noisy normals do not count as bent) was silently off, a review. The reused pass
+    keeps the deviation of the run it came from; with BENT 0 and a ratio no surface reaches,
+    nothing is bent, reused or not."""
+    import facetlift.methods.dgp as dgp
+
+    n, depth, mask = two_bumps((48, 64))
+    coarse_prior, sigma = coarse(depth, mask)
+    kw = dict(prior=coarse_prior, prior_blur=sigma, discontinuities=True)
+    own = run(n, mask, **kw).info["prior_free"]["deviation"]
+    monkeypatch.setattr(dgp, "BENT", 0.0)
+    monkeypatch.setattr(dgp, "BENT_RATIO", 1e9)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", facetlift.ConvergenceWarning)
+        info = facetlift.integrate(n, mask, prior_fit="affine", **kw).info
+    assert info["prior_free"]["reused"]
+    assert info["prior_free"]["deviation"] == pytest.approx(own, rel=0.5)
+    assert not info["prior_blur"]["fallback"] and info["prior_blur"]["bent"] is None
+
+
 def test_zero_blur_is_the_pointwise_prior():
     n, depth, mask = two_bumps((48, 64))
     prior, _ = coarse(depth, mask)

@@ -338,9 +338,10 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
     `footprint` (of the unknown), the islands of :data:`ISLAND_FACETS` are then glued back and
     the last system solved again (``info["islands_reglued"]``). With `deviation` (a callable
     of facet copies: their mean angle to the input normals) the first pass's surface is
-    measured (``info["prior_free"]["deviation"]``, None where its weights were reused: no
-    surface). Returns ``z, y, w, info`` as :func:`solve_discontinuous` and the split of `y`
-    where the islands' search formed it (else None) for :func:`place_pieces`."""
+    measured (``info["prior_free"]["deviation"]``; where its weights were reused, that of the
+    prior-free run they came from, which measures it when given `deviation`). Returns ``z, y,
+    w, info`` as :func:`solve_discontinuous` and the split of `y` where the islands' search
+    formed it (else None) for :func:`place_pieces`."""
     if not (prior is not None and kw["max_iter"] > 0 and (
             (blur is None and 0 < np.mean(prior[0] > 0) <= PRIOR_CUTS_FIRST)
             or (blur is not None and BLURRED_CUTS_FIRST))):
@@ -350,9 +351,12 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
         if prior is None and kept is not None and x0 is None:  # (shared_cuts)
             info = out[3]
             kept.append((_cut_key(domain, bx, by, target, kw), (out[2], {
-                key: info[key] for key in ("iterations", "grown", "converged", "energy",
-                                           "weight_change", "block_coarse_space",
-                                           "cg_iterations", "unsolved")})))
+                **{key: info[key] for key in ("iterations", "grown", "converged", "energy",
+                                              "weight_change", "block_coarse_space",
+                                              "cg_iterations", "unsolved")},
+                # (its surface's, for a reusing run's blur_bent: without it the ratio to the
+                # normals' own cuts was off there, a review)
+                "deviation": None if deviation is None else deviation(out[1])})))
         return (*out, None)
     first_kw = dict(kw)
     weights = kw.get("weights")
@@ -470,7 +474,10 @@ def run(
 
         z, y, w, info, split = _discontinuous(domain, bx, by, target, prior=prior, x0=z0,
                                               final_weights=final, blur=blur, footprint=s,
-                                              deviation=None if blur is None else deviation,
+                                              # (a prior-free run's too: kept for a run
+                                              # that reuses its cuts, shared_cuts)
+                                              deviation=deviation if blur is not None
+                                              or prior is None else None,
                                               **common)
         free = info.get("prior_free", {}).get("deviation")  # (the normals' own cuts' surface)
         announce(progress, "placing pieces")
