@@ -350,7 +350,10 @@ def test_an_existing_folder_with_a_file_ending_is_an_output_folder(tmp_path, cap
     code, _, err = run(capsys, "integrate", npath, "--mask", mpath, "-o", tmp_path / "scan.tif")
     assert code == 0 and (tmp_path / "scan.tif" / "depth.npy").is_file(), err
     code, _, err = run(capsys, "batch", npath, "-o", tmp_path / "all.npz")
-    assert code == 1 and "-o is the output folder" in _one_line_error(err)
+    line = _one_line_error(err)
+    assert code == 1 and "-o is the output folder" in line
+    # (batch writes one folder per item: told so, a review)
+    assert re.search(r"-o .*all -s npz to write .*all/<item>/surface\.npz for every item", line)
 
 
 @pytest.mark.parametrize("flags, message", [

@@ -516,13 +516,21 @@ def test_a_calibration_of_another_image_size_is_refused(tmp_path, capsys):
     assert main([*base, "--K", str(tmp_path / "crop.yaml"), "-o", str(tmp_path / "b")]) == 1
     err = capsys.readouterr().err
     assert "30 x 20 image (W x H) but the normal map is 26 x 20: K is for another image" in err
+    assert "a K already adjusted for it has no image size to compare" in err  # (a crop)
+    # the image turned on its side (a review: told only 'another image')
+    (tmp_path / "side.yaml").write_text(ros.replace("image_width: 640", "image_width: 20")
+                                        .replace("image_height: 480", "image_height: 26"))
+    assert main([*base, "--K", str(tmp_path / "side.yaml"), "-o", str(tmp_path / "e")]) == 1
+    assert "the image is turned on its side (portrait against landscape)" in \
+        capsys.readouterr().err
     assert main([*base, "--K", str(tmp_path / "same.yaml"), "-o", str(tmp_path / "c")]) == 0
     capsys.readouterr()
     assert main(["info", str(npath), "--K", str(tmp_path / "big.yaml")]) == 1
     assert "downsampled 2x" in capsys.readouterr().err
     assert main(["evaluate", str(tmp_path / "c" / "depth.npy"), "--gt",
                  str(tmp_path / "c" / "depth.npy"), "--K", str(tmp_path / "big.yaml")]) == 1
-    assert "downsampled 2x" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "downsampled 2x" in err and "but the result is 26 x 20" in err  # (not a normal map)
     # a dataset folder's K.txt that is a camera_info (found by its camera_matrix line)
     folder = tmp_path / "ds"
     folder.mkdir()

@@ -475,13 +475,16 @@ def resize_ratio(stated, shape):
     return None
 
 
-def check_image_size(K, stated, shape, source: str, arg: str = "K") -> None:
+def check_image_size(K, stated, shape, source: str, arg: str = "K",
+                     of: str = "the normal map") -> None:
     """Refuse a camera `K` whose calibration file `source` states the image size `stated`
-    (H, W) where the normal map is of size `shape` (H, W): its K is that image's, and bends
-    the whole surface of another (a fresh user's 1224 x 1024 calibration on a 612 x 512 map
-    was caught only by chance). Where the map is that image resized by a simple fraction
-    (:func:`resize_ratio`) the message says so and gives K scaled with it; None where the
-    sizes agree or `stated` is None.
+    (H, W) where the normal map (`of`: what is compared, e.g. "the result" for evaluate) is
+    of size `shape` (H, W): its K is that image's, and bends the whole surface of another (a
+    fresh user's 1224 x 1024 calibration on a 612 x 512 map was caught only by chance). Where
+    the map is that image resized by a simple fraction (:func:`resize_ratio`) the message
+    says so and gives K scaled with it; where it is that image turned on its side, it says
+    so; a K already adjusted for a crop is told to come without the stated size (a plain K
+    file or inline). None where the sizes agree or `stated` is None.
 
     Raises
     ------
@@ -493,15 +496,22 @@ def check_image_size(K, stated, shape, source: str, arg: str = "K") -> None:
     (Hc, Wc), (H, W) = (int(v) for v in stated), (int(v) for v in tuple(shape)[:2])
     if (Hc, Wc) == (H, W):
         return
-    head = (f"`{arg}`: {source} is the calibration of a {Wc} x {Hc} image (W x H) but the "
-            f"normal map is {W} x {H}")
+    head = (f"`{arg}`: {source} is the calibration of a {Wc} x {Hc} image (W x H) but "
+            f"{of} is {W} x {H}")
+    plain = ("a K already adjusted for it has no image size to compare: give it as a plain K "
+             "file (fx fy cx cy) or inline (--K \"fx fy cx cy\"; K= in Python)")
+    if (Hc, Wc) == (W, H):
+        raise ValueError(
+            f"{head}: the image is turned on its side (portrait against landscape): K is "
+            "for the image as calibrated; rotate the map back, or swap fx, fy and cx, cy for "
+            f"a transposed image ({plain}); docs/conventions.md, 'A K for another image'")
     r = resize_ratio((Hc, Wc), (H, W))
     if r is None:
         raise ValueError(
             f"{head}: K is for another image. Give the calibration of the image the map was "
             "computed from; after a crop starting at column c0, row r0, subtract them from cx "
-            "and cy; after a resize by s, scale fx, fy, cx and cy with it (docs/conventions.md,"
-            " 'A K for another image')")
+            f"and cy; after a resize by s, scale fx, fy, cx and cy with it; {plain} "
+            "(docs/conventions.md, 'A K for another image')")
     s = float(r)
     fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
     how = (f"downsampled {1 / r}x" if r.numerator == 1 else f"upsampled {r}x"

@@ -154,7 +154,8 @@ def _out_dir(ctx, param, value):
             f"names ({', '.join(OUTPUTS[k] for k in DEFAULT_SAVE)} by default; -s picks "
             "which, and no option names a single output file): give a folder, e.g. -o "
             f"{path.with_suffix('')} -s {kind} to write "
-            f"{path.with_suffix('') / OUTPUTS[kind]}")
+            + (f"{path.with_suffix('') / '<item>' / OUTPUTS[kind]} for every item"
+               if ctx.info_name == "batch" else f"{path.with_suffix('') / OUTPUTS[kind]}"))
     return path
 
 
@@ -1102,7 +1103,7 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
 
         if K is not None:  # (a file stating another image size is refused, as integrate does)
             given, stated = camera_of(K)
-            check_image_size(given, stated, est.shape, str(K))
+            check_image_size(given, stated, est.shape, str(K), of="the result")
             named, flag = f"`K`: {K}", "--K"
         else:
             given, named, flag = K_from_fov(est.shape, fov), f"`fov` {fov:g}", "--fov"

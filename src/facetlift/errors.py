@@ -52,10 +52,12 @@ class FrameHint(FrameWarning):
 class CameraWarning(UserWarning):
     """The camera is probably not the image's: K's principal point outside the image or at
     its edge, focal lengths in mm (a field of view past 150 deg), the axes of an old BiNI
-    K.txt, a field of view in radians or past a pinhole's, or a calibration file's lens
-    distortion or rectified projection that K leaves out. A wrong K bends the whole surface,
-    so the command line's hint on depth jumps (:func:`facetlift.hints.jump_hint`) points at
-    this warning instead."""
+    K.txt, or a field of view in radians or past a pinhole's. A wrong K bends the whole
+    surface, so the command line's hint on depth jumps (:func:`facetlift.hints.jump_hint`)
+    points at this warning instead. A calibration file's lens distortion or rectified
+    projection, which K leaves out, is a plain UserWarning: nearly every real calibration has
+    some, with the right K (a review: the bear with its own K and k1 = -0.01 lost its jump
+    hint)."""
 
 
 class ConvergenceWarning(UserWarning):

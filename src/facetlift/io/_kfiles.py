@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 
 from .._warnings import warn
-from ..errors import CameraWarning
 
 
 class _KError(ValueError):
@@ -263,8 +262,7 @@ def _check_projection(K: np.ndarray, parent: dict, p: Path, name: str) -> None:
             warn(f"`K`: {p}: its {name} is the camera's for the raw (unrectified) image and "
                  f"is used; for a rectified image (image_rect) its {key}'s left 3x3 "
                  f"{left.tolist()} is the camera instead: save that as a K file (fx fy cx cy: "
-                 f"{left[0, 0]:g} {left[1, 1]:g} {left[0, 2]:g} {left[1, 2]:g})",
-                 CameraWarning)
+                 f"{left[0, 0]:g} {left[1, 1]:g} {left[0, 2]:g} {left[1, 2]:g})")
         return
 
 
@@ -381,7 +379,7 @@ def _distortion(who: str, dist: dict, undistort: str = _UNDISTORT) -> None:
     if dist:
         warn(f"`K`: {who} has lens distortion ({', '.join(f'{k} {v:g}' for k, v in dist.items())}"
              "), which K leaves out: the normal map must be of an undistorted image; "
-             + undistort, CameraWarning)
+             + undistort)
 
 
 def _K_centred(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
