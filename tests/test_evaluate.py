@@ -202,7 +202,8 @@ def test_cli_evaluate(tmp_path, capsys):
 def test_evaluate_takes_K_in_python():
     """metrics.evaluate(depth, gt, mask, K=K) was a TypeError (it takes perspective=): K
     scores the result as a perspective depth, as facetlift evaluate --K does; a K that is
-    no 3 x 3 matrix, or one beside perspective=False, or unlike a Surface's, is refused."""
+    no 3 x 3 matrix, or one beside perspective=False, or unlike a Surface's, or one given
+    for an orthographic Surface, is refused."""
     est, gt, mask = scene()
     want = metrics.evaluate(est, gt, mask, perspective=True)
     got = metrics.evaluate(est, gt, mask, K=K)
@@ -220,6 +221,11 @@ def test_evaluate_takes_K_in_python():
     K2[0, 0] = 41
     with pytest.raises(ValueError, match=r"`K` differs from the camera the Surface was"):
         metrics.evaluate(s, gt, K=K2)
+    # (an orthographic Surface with a K: refused, not failed later on depths <= 0, a review)
+    ortho = facetlift.integrate(facetlift.normals_from_gradients(np.full((20, 26), 0.01),
+                                                                 np.zeros((20, 26))))
+    with pytest.raises(ValueError, match=r"`K` given for an orthographic Surface"):
+        metrics.evaluate(ortho, gt, K=K)
 
 
 def test_cli_evaluate_takes_an_output_folder(tmp_path, capsys):

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 
@@ -457,13 +458,11 @@ def check_K(K) -> np.ndarray:
 RESIZE_TERMS = 16
 
 
-def resize_ratio(stated, shape):
+def resize_ratio(stated: tuple[int, int], shape: tuple[int, int]) -> Fraction | None:
     """The simple fraction r (a :class:`fractions.Fraction`, numerator and denominator at most
     :data:`RESIZE_TERMS`, not 1) by which an image of size `stated` (H, W) was resized to
     `shape` (H, W): ``r * H`` and ``r * W`` each within one pixel of the map's (a resize
     rounds); None where no such r fits both axes."""
-    from fractions import Fraction
-
     (Hc, Wc), (H, W) = (int(v) for v in stated), (int(v) for v in shape)
     if min(Hc, Wc, H, W) <= 0:
         return None

@@ -303,7 +303,8 @@ def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None, K=N
         Shapes that differ; no pixel where the mask, the estimate and the truth are all
         defined (with how many each has); depths <= 0 where a scale is needed: in a
         perspective result, or in the truth of one; a `K` that is no 3 x 3 matrix, or that
-        contradicts `perspective` or the Surface's camera.
+        contradicts `perspective` or the Surface's camera (an orthographic Surface has
+        none).
     """
     if K is not None:  # (evaluate(depth, gt, mask, K=K) was a TypeError, a review)
         cam = np.asarray(K, dtype=float) if np.ndim(K) == 2 else None
@@ -318,6 +319,10 @@ def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None, K=N
             raise ValueError(f"`K` differs from the camera the Surface was integrated with "
                              f"({np.asarray(own).tolist()}); leave it out to use the "
                              "Surface's own")
+        if own is None and hasattr(estimate, "depth") and hasattr(estimate, "K"):
+            raise ValueError("`K` given for an orthographic Surface (integrated without a "
+                             "camera: its depth is a height, not a camera's z); leave it out, "
+                             "or integrate with K")
         perspective = True
     return _evaluate(estimate, truth, mask, perspective, "python")
 
