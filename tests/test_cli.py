@@ -1054,6 +1054,26 @@ def test_normal_range_unsigned_in_info_a_folder_and_with_encoding_xy(tmp_path, c
     assert code == 1 and "--normal-range unsigned" in _one_line_error(err)
 
 
+def test_normal_range_unsigned_reads_a_mat_normal_map(tmp_path, capsys):
+    """A .mat file's normal map (--mat-keys N,mask) is decoded as a file's is; its signs are
+    counted inside its own mask."""
+    import scipy.io
+
+    n, v, mask = _sphere_files(tmp_path)
+    scipy.io.savemat(tmp_path / "u.mat", {"N": v, "mask": mask.astype(float)})
+    scipy.io.savemat(tmp_path / "s.mat", {"N": np.nan_to_num(n), "mask": mask.astype(float)})
+    code, _, err = run(capsys, "integrate", tmp_path / "u.mat", "--mat-keys", "N,mask",
+                       "--normal-range", "unsigned", "-s", "npy", "-o", tmp_path / "u")
+    assert code == 0, err
+    want = facetlift.integrate(n, mask).depth
+    np.testing.assert_allclose(np.load(tmp_path / "u" / "depth.npy")[mask], want[mask],
+                               atol=1e-9)
+    k = int(np.count_nonzero(n[mask] < -facetlift.frames.UNSIGNED_SLACK))
+    code, _, err = run(capsys, "integrate", tmp_path / "s.mat", "--mat-keys", "N,mask",
+                       "--normal-range", "unsigned", "-o", tmp_path / "s")
+    assert code == 1 and f"but {k} of its {3 * mask.sum()} components" in _one_line_error(err)
+
+
 def test_a_two_channel_map_with_blue_0_is_told_to_rebuild_z(tmp_path, capsys):
     """An audit: a BC5 map (B = 0) was told '100 % ... face away ... try --normal-frame
     opencv' after a warning that z is not stored; integrate and info say z is not stored."""
