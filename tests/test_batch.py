@@ -349,6 +349,10 @@ def test_fov_and_output_frame_in_templates_and_resume_settings(tmp_path):
     assert fb.settings(Job(normal_encoding="xy"))["normal_encoding"] == "xy"
     with pytest.raises(ValueError, match="`normal_encoding` must be one of"):
         fb.check_template(Job(normal_encoding="rg"))
+    assert "normal_range" not in plain
+    assert fb.settings(Job(normal_range="unsigned"))["normal_range"] == "unsigned"
+    with pytest.raises(ValueError, match="`normal_range` must be one of"):
+        fb.check_template(Job(normal_range="01"))
     with pytest.raises(ValueError, match="`height_range` must be two finite numbers"):
         fb.check_template(Job(height_range=(2, -1)))
     a, b, c = (fb.settings(Job(output_frame=f)) for f in ("opencv", "OpenCV", "x,-y,-z"))
@@ -941,6 +945,31 @@ def test_lone_one_channel_files_are_skipped_with_one_warning(tmp_path, capsys):
     out, err = capsys.readouterr()
     assert "skipped 4 one-channel file(s)" in err and "must be an (H, W, 3)" not in err, err
     assert code == 0 and "batch: 2 of 2 succeeded" in out, err
+
+def test_a_batch_of_zero_one_float_maps_runs_with_normal_range_unsigned(tmp_path, capsys):
+    """Float maps stored as (n + 1) / 2: refused item by item, naming the flag, without
+    --normal-range unsigned; with it (and --resume: the failed items run again), each
+    integrates to its signed map's depth, and the log records the flag."""
+    gt = facetlift.synthetic.analytic("sphere", 32)
+    (tmp_path / "in").mkdir()
+    for name in ("a", "b"):
+        np.save(tmp_path / "in" / f"{name}.npy", np.where(gt.mask[..., None],
+                                                          (gt.normals + 1) / 2, 0.0))
+    argv = ["batch", str(tmp_path / "in"), "-o", str(tmp_path / "o"), "--workers", "1", "-s",
+            "npy", "--no-progress"]
+    code = main(argv)
+    out, err = capsys.readouterr()
+    assert code == 1 and err.count("--normal-range unsigned") == 2, err
+    code = main([*argv, "--normal-range", "unsigned", "--resume"])
+    out, err = capsys.readouterr()
+    assert code == 0 and "batch: 2 of 2 succeeded" in out, err
+    want = facetlift.integrate(gt.normals, gt.mask).depth
+    for name in ("a", "b"):
+        got = np.load(tmp_path / "o" / name / "depth.npy")
+        np.testing.assert_allclose(got[gt.mask], want[gt.mask], atol=1e-9)
+    records = [json.loads(line) for line in (tmp_path / "o" / "batch.jsonl").open()]
+    assert records[-1]["settings"]["normal_range"] == "unsigned"
+
 
 def test_batch_records_carry_integrate_s_hints_and_the_summary_counts_them(tmp_path, capsys):
     """The same audit: integrate --json has `hints` (the smooth surface bent across depth

@@ -935,6 +935,148 @@ def test_a_zero_one_map_read_in_a_camera_frame_is_told_of_its_encoding(tmp_path,
     assert "likely [0, 1]-encoded floats" in out and "face away" not in out
 
 
+def _sphere_files(folder):
+    """An analytic sphere's signed normals (NaN outside) as .npy, and the same normals stored
+    in [0, 1] as a renderer writes them, (n + 1) / 2 on a black background, as .npy and
+    float32 EXR; and its mask."""
+    import OpenEXR
+
+    gt = facetlift.synthetic.analytic("sphere", 40)
+    np.save(folder / "signed.npy", gt.normals)
+    v = np.where(gt.mask[..., None], (gt.normals + 1) / 2, 0.0)
+    np.save(folder / "n01.npy", v)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {k: v[..., i].astype(np.float32)
+                               for i, k in enumerate("RGB")}) as f:
+        f.write(str(folder / "n01.exr"))
+    return gt.normals, v, gt.mask
+
+
+def test_a_zero_one_float_map_integrates_with_normal_range_unsigned(tmp_path, capsys,
+                                                                    monkeypatch):
+    """A user with a float map stored as (n + 1) / 2 (EXR, .npy) was refused and had to write
+    Python: --normal-range unsigned decodes it (2 v - 1, its black background no normal), and
+    the depth is the signed map's; without it the refusal names the flag, and the Python
+    remedy too. integrate is handed the decoded normals, no new argument."""
+    n, _, mask = _sphere_files(tmp_path)
+    code, _, err = run(capsys, "integrate", tmp_path / "signed.npy", "-s", "npy", "-o",
+                       tmp_path / "s")
+    assert code == 0, err
+    want = np.load(tmp_path / "s" / "depth.npy")
+    seen = {}
+
+    def spy(normals, mask=None, **kw):
+        seen.update(kw, normals=normals)
+        raise ValueError("spy stops here")
+
+    with monkeypatch.context() as m:
+        m.setattr(facetlift, "integrate", spy)
+        code, _, err = run(capsys, "integrate", tmp_path / "n01.npy", "--normal-range",
+                           "unsigned", "-o", tmp_path / "spy")
+    assert code == 1 and "spy stops here" in err and "normal_range" not in seen
+    np.testing.assert_allclose(seen["normals"][mask], n[mask], atol=1e-15)
+    for name, atol in (("n01.npy", 1e-9), ("n01.exr", 1e-4)):
+        out = tmp_path / name.replace(".", "_")
+        code, _, err = run(capsys, "integrate", tmp_path / name, "--normal-range", "unsigned",
+                           "-s", "npy", "-o", out)
+        assert code == 0 and "warning" not in err, err
+        got = np.load(out / "depth.npy")
+        np.testing.assert_array_equal(np.isnan(got), ~mask)
+        np.testing.assert_allclose(got[mask], want[mask], atol=atol * np.ptp(want[mask]))
+        code, _, err = run(capsys, "integrate", tmp_path / name, "-o", tmp_path / "no")
+        line = _one_line_error(err)
+        assert code == 1 and re.search(
+            r"looks \[0, 1\]-encoded: .*read it with --normal-range unsigned \(normal_range="
+            r"'unsigned' in a facetlift.jobs.Job or facetlift.io.read_normals\), which decodes "
+            r"n = 2 \* v - 1, or decode it in Python", line), line
+        assert not (tmp_path / "no").exists()
+
+
+def test_normal_range_unsigned_is_refused_for_integer_and_signed_maps(tmp_path, capsys):
+    """--normal-range unsigned applies to float maps: an 8/16-bit PNG (always decoded from its
+    integer range) and a map with negative components (signed) are refused naming the flag,
+    the latter with the count; as is a gradient field, which stores slopes."""
+    import imagecodecs
+
+    n, v, mask = _sphere_files(tmp_path)
+    (tmp_path / "n.png").write_bytes(imagecodecs.png_encode(np.round(v * 255).astype(np.uint8)))
+    code, _, err = run(capsys, "integrate", tmp_path / "n.png", "--normal-range", "unsigned",
+                       "-o", tmp_path / "a")
+    assert code == 1 and re.search(r"n.png: --normal-range 'unsigned' applies to float maps "
+                                   r"stored in \[0, 1\]; this one is an 8-bit integer map, "
+                                   r"always decoded from its integer range", _one_line_error(err))
+    k = int(np.count_nonzero(n[mask] < -facetlift.frames.UNSIGNED_SLACK))
+    for command in ("integrate", "info"):
+        code, _, err = run(capsys, command, tmp_path / "signed.npy", "--normal-range",
+                           "unsigned", *(["-o", tmp_path / "b"] if command == "integrate"
+                                         else []))
+        assert code == 1 and re.search(rf"signed.npy: --normal-range 'unsigned' says the map "
+                                       rf"stores \(n \+ 1\) / 2 in \[0, 1\], but {k} of its "
+                                       r"\d+ components are negative", _one_line_error(err))
+    np.save(tmp_path / "p.npy", np.zeros((8, 9)))
+    np.save(tmp_path / "q.npy", np.zeros((8, 9)))
+    code, _, err = run(capsys, "integrate", "--gradients", tmp_path / "p.npy",
+                       tmp_path / "q.npy", "--normal-range", "unsigned", "-o", tmp_path / "g")
+    assert code == 1 and "--normal-range 'unsigned' applies to a normal map" in (
+        _one_line_error(err))
+
+
+def test_normal_range_unsigned_in_info_a_folder_and_with_encoding_xy(tmp_path, capsys):
+    """info reads the map as integrate does (its encoding line says so) and points to the flag
+    without it; a dataset folder's normal_map.exr is read so too; with --normal-encoding xy,
+    x and y are decoded before z is rebuilt."""
+    import OpenEXR
+
+    _, v, mask = _sphere_files(tmp_path)
+    code, out, err = run(capsys, "info", tmp_path / "n01.exr", "--normal-range", "unsigned")
+    assert code == 0 and "encoding: 2 v - 1 (unsigned: stored in [0, 1])" in out, out + err
+    code, out, _ = run(capsys, "info", tmp_path / "n01.exr")
+    assert code == 1 and "likely [0, 1]-encoded floats: read with --normal-range unsigned" in (
+        out)
+    code, _, err = run(capsys, "integrate", tmp_path / "signed.npy", "-s", "npy", "-o",
+                       tmp_path / "s")
+    assert code == 0, err
+    want = np.load(tmp_path / "s" / "depth.npy")
+    folder = tmp_path / "set"
+    folder.mkdir()
+    (tmp_path / "n01.exr").rename(folder / "normal_map.exr")
+    io.write_mask(folder / "mask.png", mask)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {k: v[..., i].astype(np.float32)
+                               for i, k in enumerate("RG")}) as f:
+        f.write(str(tmp_path / "xy.exr"))
+    for args in ((folder,), (tmp_path / "xy.exr", "--normal-encoding", "xy")):
+        out = tmp_path / f"o{len(args)}"
+        code, _, err = run(capsys, "integrate", *args, "--normal-range", "unsigned", "-s",
+                           "npy", "-o", out)
+        assert code == 0, err
+        got = np.load(out / "depth.npy")
+        np.testing.assert_array_equal(np.isnan(got), ~mask)
+        np.testing.assert_allclose(got[mask], want[mask], atol=1e-4 * np.ptp(want[mask]))
+    code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "no")
+    assert code == 1 and "--normal-range unsigned" in _one_line_error(err)
+
+
+def test_normal_range_unsigned_reads_a_mat_normal_map(tmp_path, capsys):
+    """A .mat file's normal map (--mat-keys N,mask) is decoded as a file's is; its signs are
+    counted inside its own mask."""
+    import scipy.io
+
+    n, v, mask = _sphere_files(tmp_path)
+    scipy.io.savemat(tmp_path / "u.mat", {"N": v, "mask": mask.astype(float)})
+    scipy.io.savemat(tmp_path / "s.mat", {"N": np.nan_to_num(n), "mask": mask.astype(float)})
+    code, _, err = run(capsys, "integrate", tmp_path / "u.mat", "--mat-keys", "N,mask",
+                       "--normal-range", "unsigned", "-s", "npy", "-o", tmp_path / "u")
+    assert code == 0, err
+    want = facetlift.integrate(n, mask).depth
+    np.testing.assert_allclose(np.load(tmp_path / "u" / "depth.npy")[mask], want[mask],
+                               atol=1e-9)
+    k = int(np.count_nonzero(n[mask] < -facetlift.frames.UNSIGNED_SLACK))
+    code, _, err = run(capsys, "integrate", tmp_path / "s.mat", "--mat-keys", "N,mask",
+                       "--normal-range", "unsigned", "-o", tmp_path / "s")
+    assert code == 1 and f"but {k} of its {3 * mask.sum()} components" in _one_line_error(err)
+
+
 def test_a_two_channel_map_with_blue_0_is_told_to_rebuild_z(tmp_path, capsys):
     """An audit: a BC5 map (B = 0) was told '100 % ... face away ... try --normal-frame
     opencv' after a warning that z is not stored; integrate and info say z is not stored."""

@@ -156,6 +156,74 @@ def test_zero_one_encoded_floats_are_refused_with_the_fix():
     facetlift.integrate(2 * ((n + 1) / 2) - 1)  # the fix works
 
 
+def test_the_zero_one_refusal_names_the_remedy_of_where_the_map_came_from():
+    """From Python (arrays: integrate has no range option) the decode, and the reader's
+    argument for a file; read by a job (the command line) its flag, with the Python remedy;
+    after the job's own unsigned decode, no advice to give that flag again."""
+    v = (bump()[0] + 1) / 2
+    with pytest.raises(ValueError, match=r"decode it first with n = 2 \* v - 1 .*"
+                       r"read_normals\(path, normal_range='unsigned'\)") as e:
+        facetlift.integrate(v)
+    assert "--normal-range" not in str(e.value)
+    with frames.read_in(None, normal_range="signed"), pytest.raises(
+            ValueError, match=r"read it with --normal-range unsigned \(normal_range='unsigned' "
+            r"in a facetlift.jobs.Job or facetlift.io.read_normals\), which decodes "
+            r"n = 2 \* v - 1, or decode it in Python"):
+        facetlift.integrate(v)
+    with frames.read_in(None, normal_range="unsigned"), pytest.raises(
+            ValueError, match=r"after --normal-range unsigned's decoding .*encoded twice"):
+        facetlift.integrate(v)
+    with frames.read_in(None, normal_range="signed"), frames.read_in("opengl"), \
+            pytest.raises(ValueError, match="--normal-range unsigned"):
+        facetlift.integrate(v)  # (an inner read_in without a range keeps the outer one)
+
+
+def test_decode_unsigned_inverts_the_zero_one_encoding():
+    """2 v - 1, exactly as a float can; fill that holds no normal (black, white, mid-grey)
+    NaN as in an integer map, by length (x, y alone for a two-channel map), and NaN kept."""
+    n, _ = bump()
+    v = (n + 1) / 2
+    v[0, 0], v[0, 1], v[0, 2], v[0, 3] = 0.0, 1.0, 0.5, np.nan
+    got = frames.decode_unsigned(v, "`path`: m.npy")
+    assert np.isnan(got[0, :4]).all() and np.isfinite(got[0, 4:]).all()
+    np.testing.assert_allclose(got[1:], n[1:], atol=1e-15)
+    xy = frames.decode_unsigned(v[..., :2], "`path`: m.npy", channels=2)
+    assert xy.shape == n.shape[:2] + (2,)
+    assert np.isnan(xy[0, [0, 1, 3]]).all() and np.isfinite(xy[0, 2]).all()  # (grey: flat)
+    np.testing.assert_allclose(xy[1:], n[1:, :, :2], atol=1e-15)
+    with pytest.raises(ValueError, match=r"`normal_range` must be one of \['signed', "
+                       r"'unsigned'\]"):
+        frames.normal_range("01")
+    assert frames.normal_range(None) == "signed" and frames.normal_range(" Unsigned") == (
+        "unsigned")
+
+
+def test_decode_unsigned_refuses_integer_and_signed_maps():
+    """An 8/16-bit map is decoded from its integer range, always; a map with negative
+    components holds signed normals: both refused naming the option (and the count), beyond
+    a rounding's slack and inside `where` alone."""
+    n, _ = bump()
+    for dtype, bits in ((np.uint8, 8), (np.uint16, 16)):
+        with pytest.raises(ValueError, match=rf"`path`: m.png: `normal_range` 'unsigned' "
+                           rf"applies to float maps .*an {bits}-bit integer map, always decoded "
+                           r"from its integer range \(v / max \* 2 - 1\): leave it out"):
+            frames.decode_unsigned(np.zeros((4, 4, 3), dtype), "`path`: m.png")
+    k = int(np.count_nonzero(n < -frames.UNSIGNED_SLACK))
+    with pytest.raises(ValueError, match=rf"`normal_range` 'unsigned' says the map stores "
+                       rf"\(n \+ 1\) / 2 in \[0, 1\], but {k} of its {n.size} components are "
+                       r"negative \(down to -0\.\d+\): it holds signed normals"):
+        frames.decode_unsigned(n, "`path`: m.npy")
+    v = (n + 1) / 2
+    v[0, 0, 0] = -0.5 * frames.UNSIGNED_SLACK  # (rounding, an unclipped network output)
+    assert np.isfinite(frames.decode_unsigned(v, "m")[0, 0]).all()
+    v[0, 0, 0] = -0.5  # (outside the alpha: not counted)
+    where = np.ones(v.shape[:2], bool)
+    where[0, 0] = False
+    frames.decode_unsigned(v, "m", where)
+    with pytest.raises(ValueError, match="but 1 of its"):
+        frames.decode_unsigned(v, "m")
+
+
 @pytest.mark.parametrize("scale, bits", [(255, 8), (65535, 16)])
 def test_undecoded_integer_images_as_floats_are_refused_with_the_fix(scale, bits):
     """An 8/16-bit image read into floats and passed on: every normal would be nearly the

@@ -969,6 +969,58 @@ def test_a_two_channel_map_is_read_with_encoding_xy(tmp_path):
         io.read_normals(tmp_path / "rg.exr")
 
 
+def test_a_zero_one_float_map_is_read_with_normal_range_unsigned(tmp_path):
+    """Float maps storing (n + 1) / 2 in [0, 1] (.npy, float TIFF, EXR, as renderers and
+    networks write them) read as n with normal_range="unsigned", in any frame, with the
+    alpha; black fill holds no normal; with encoding="xy" x and y are decoded before z is
+    rebuilt. An 8/16-bit map or one with negative components is refused, naming it."""
+    import imagecodecs
+    import OpenEXR
+    import tifffile
+
+    n, mask = bump_normals()
+    v = (n + 1) / 2
+    v[~mask] = 0.0  # (a renderer's black background)
+    np.save(tmp_path / "u.npy", v)
+    np.save(tmp_path / "ua.npy", np.dstack([v, mask.astype(float)]))
+    tifffile.imwrite(tmp_path / "u.tif", v.astype(np.float32), photometric="rgb")
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {k: v[..., i].astype(np.float32)
+                               for i, k in enumerate("RGB")}) as f:
+        f.write(str(tmp_path / "u.exr"))
+    for name, atol in (("u.npy", 1e-15), ("ua.npy", 1e-15), ("u.tif", 1e-6),
+                       ("u.exr", 1e-6)):
+        got, alpha = io.read_normals(tmp_path / name, normal_range="unsigned")
+        assert (alpha is None) == (name != "ua.npy"), name
+        assert np.isnan(got[~mask]).all() and np.isfinite(got[mask]).all(), name
+        np.testing.assert_allclose(got[mask], n[mask], atol=atol, err_msg=name)
+        cv, _ = io.read_normals(tmp_path / name, normal_range="unsigned", frame="opencv")
+        np.testing.assert_allclose(cv[mask] * [1, -1, -1], got[mask])
+    np.save(tmp_path / "uxy.npy", v[..., :2])
+    with OpenEXR.File(header, {k: v[..., i].astype(np.float32) for i, k in enumerate("RG")}) as f:
+        f.write(str(tmp_path / "uxy.exr"))
+    for name, atol in (("uxy.npy", 1e-12), ("uxy.exr", 1e-6)):
+        got, _ = io.read_normals(tmp_path / name, encoding="xy", normal_range="unsigned")
+        assert np.isnan(got[~mask]).all(), name  # ((0, 0) -> (-1, -1): no normal)
+        np.testing.assert_allclose(got[mask], n[mask], atol=atol, err_msg=name)
+    (tmp_path / "u8.png").write_bytes(imagecodecs.png_encode(np.round(v * 255).astype(np.uint8)))
+    with pytest.raises(ValueError, match=r"`path`: \S*u8.png: `normal_range` 'unsigned' "
+                       r"applies to float maps stored in \[0, 1\]; this one is an 8-bit "
+                       r"integer map, always decoded from its integer range"):
+        io.read_normals(tmp_path / "u8.png", normal_range="unsigned")
+    tifffile.imwrite(tmp_path / "u16.tif", np.round(v * 65535).astype(np.uint16),
+                     photometric="rgb")
+    with pytest.raises(ValueError, match=r"u16.tif: `normal_range` 'unsigned' .*16-bit"):
+        io.read_normals(tmp_path / "u16.tif", normal_range="unsigned")
+    np.save(tmp_path / "s.npy", n)
+    k = int(np.count_nonzero(n < -facetlift.frames.UNSIGNED_SLACK))
+    with pytest.raises(ValueError, match=rf"s.npy: `normal_range` 'unsigned' says the map "
+                       rf"stores \(n \+ 1\) / 2 in \[0, 1\], but {k} of its"):
+        io.read_normals(tmp_path / "s.npy", normal_range="unsigned")
+    with pytest.raises(ValueError, match=r"`normal_range` must be one of"):
+        io.read_normals(tmp_path / "u.npy", normal_range="01")
+
+
 def test_a_two_channel_npy_or_tiff_is_read_with_encoding_xy(tmp_path):
     """A second audit: --normal-encoding xy took a two-channel EXR but refused an (H, W, 2)
     .npy and a two-channel float TIFF as "must be an (H, W, 3) RGB or (H, W, 4) RGBA normal

@@ -533,6 +533,8 @@ def settings(job: Job) -> dict:
         out.pop("strict", None)
     if out.get("normal_encoding") == "xyz":  # (the default: as before it existed)
         out.pop("normal_encoding", None)
+    if out.get("normal_range") == "signed":  # (the default: as before it existed)
+        out.pop("normal_range", None)
     if out.get("prior_weight") is None:  # (the default, as the result takes it: 1, as logs
         # before the blurred prior's own default recorded it, or that one; a review)
         from .problem import default_prior_weight
@@ -814,6 +816,7 @@ def check_template(job: Job, local: bool = True) -> None:
 
     read_rotation(job)  # (a file given for every item: read once, here)
     frames.normal_encoding(job.normal_encoding, "normal_encoding")
+    frames.normal_range(job.normal_range)
     if job.output_frame is not None:
         frames.parse(job.output_frame, "output_frame")
     from .jobs import check_fov

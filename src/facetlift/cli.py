@@ -213,6 +213,13 @@ _JOB_OPTIONS = [
                  "R and G, z rebuilt as sqrt(1 - x^2 - y^2) facing the viewer, B ignored; "
                  "from RGB(A) PNG/TIFF/npy, two-channel TIFF/npy (H, W, 2) or EXR R, G (a "
                  "two-channel PNG is grey + alpha)."),
+    click.option("--normal-range", "normal_range", type=click.Choice(["signed", "unsigned"]),
+                 default="signed", show_default=True,
+                 help="The range of a float map's components: signed = n itself, in [-1, 1]; "
+                 "unsigned = (n + 1) / 2 in [0, 1], as many renderers and networks write EXR, "
+                 "float TIFF or .npy maps, decoded as 2 v - 1 first (x and y alone with "
+                 "--normal-encoding xy). 8/16-bit PNG/TIFF maps are always decoded from their "
+                 "integer range and refuse unsigned."),
     click.option("--gradient-frame", default="xy", show_default=True,
                  help="Layout of a gradient field: xy (p = dz/dx right, q = dz/dy up) or "
                  "rowcol (aliases queau, matlab: p = dz/d(row) down, q = dz/d(col))."),
@@ -361,7 +368,7 @@ def _job_options(f):
 
 def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_down=False,
               world_to_camera=None, camera_to_world=None, normal_encoding="xyz",
-              gradient_frame="xy", mat_keys=None, method="dgp",
+              normal_range="signed", gradient_frame="xy", mat_keys=None, method="dgp",
               pixel_size=1.0, K=None,
               fov=None, orthographic=False, backfacing="missing", outlier_eps=None,
               solver=None,
@@ -430,7 +437,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         orthographic=orthographic, normal_frame=frame,
         world_to_camera=None if world_to_camera is None else str(world_to_camera),
         camera_to_world=None if camera_to_world is None else str(camera_to_world),
-        normal_encoding=normal_encoding,
+        normal_encoding=normal_encoding, normal_range=normal_range,
         gradient_frame=gradient_frame,
         mat_keys=_split(mat_keys), method=method, pixel_size=pixel_size,
         backfacing=backfacing, outlier_eps=outlier_eps, options=opts,
@@ -708,6 +715,10 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--normal-encoding", "normal_encoding", type=click.Choice(["xyz", "xy"]),
               default="xyz", show_default=True,
               help="xy: a two-channel map (BC5, RG), z rebuilt; as for 'integrate'.")
+@click.option("--normal-range", "normal_range", type=click.Choice(["signed", "unsigned"]),
+              default="signed", show_default=True,
+              help="unsigned: a float map stored in [0, 1], decoded as 2 v - 1; as for "
+              "'integrate'.")
 @click.option("--gradient-frame", "gradient_frame", default="xy", show_default=True,
               help="Layout of a gradient field (--gradients or a .mat input), as for "
               "'integrate'.")
@@ -725,7 +736,8 @@ def integrate(normals, gradients, progress, as_json, **flags):
               help="A confidence map to check against the map, as for 'integrate'.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def info(normals, gradients, mask, K, fov, normal_frame, y_down, world_to_camera,
-         camera_to_world, normal_encoding, gradient_frame, mat_keys, prior, prior_scale,
+         camera_to_world, normal_encoding, normal_range, gradient_frame, mat_keys, prior,
+         prior_scale,
          prior_fit, confidence, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
     encoding, mask and components, unusable normals, K, and the memory planner's estimate of
@@ -749,7 +761,8 @@ def info(normals, gradients, mask, K, fov, normal_frame, y_down, world_to_camera
         check_fov(Job(K=None if K is None else str(K), fov=fov))
     rec = describe(normals, gradients=gradients, mask=mask, K=K, fov=fov,
                    normal_frame=frames.resolve(normal_frame, y_down, "normal_frame"),
-                   normal_encoding=normal_encoding, mat_keys=_split(mat_keys),
+                   normal_encoding=normal_encoding, normal_range=normal_range,
+                   mat_keys=_split(mat_keys),
                    gradient_frame=gradient_frame,
                    prior_scale=prior_scale, prior=prior, confidence=confidence,
                    prior_fit=prior_fit, world_to_camera=world_to_camera,

@@ -111,7 +111,8 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
 
 
 def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
-             normal_encoding: str = "xyz", mat_keys=None, gradient_frame: str = "xy",
+             normal_encoding: str = "xyz", normal_range: str = "signed", mat_keys=None,
+             gradient_frame: str = "xy",
              prior_scale=None, prior=None, confidence=None, prior_fit=None,
              fov=None, world_to_camera=None, camera_to_world=None) -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
@@ -141,6 +142,9 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     normal_encoding : {"xyz", "xy"}
         How the map stores its normals (as for ``integrate``; ``"xy"``: a two-channel map,
         z rebuilt, :func:`facetlift.io.read_normals`).
+    normal_range : {"signed", "unsigned"}
+        The range of a float map's components (as for ``integrate``; ``"unsigned"``: stored as
+        ``(n + 1) / 2`` in [0, 1], decoded as ``2 v - 1``, :func:`facetlift.io.read_normals`).
     gradient_frame : str
         The layout of a gradient field in a ``.mat`` input (as for ``integrate``).
     prior_scale : float, optional
@@ -168,7 +172,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
               gradients=tuple(str(g) for g in gradients) if gradients else None,
               mask=None if mask is None else str(mask),
               K=None if K is None else str(K), normal_frame=normal_frame,
-              normal_encoding=normal_encoding,
+              normal_encoding=normal_encoding, normal_range=normal_range,
               mat_keys=None if mat_keys is None else tuple(mat_keys),
               gradient_frame=gradient_frame, prior_scale=prior_scale,
               prior=None if prior is None else str(prior),
@@ -203,6 +207,8 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
            "warnings": unread + [str(w.message) for w in read_caught]}
     if unread:
         out["refused"] = unread[0].split(": ", 1)[1]
+    if out.get("encoding") == "as stored" and frames.normal_range(normal_range) == "unsigned":
+        out["encoding"] = "2 v - 1 (unsigned: stored in [0, 1])"
     if out.get("encoding") and frames.normal_encoding(normal_encoding) == "xy":
         out["encoding"] += " on R and G alone (xy), z = sqrt(1 - x^2 - y^2)"
     # (a gradient field in the other layout: no frame of the normals made from it is right)
@@ -253,7 +259,8 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     out.update(where)
     with recording() as caught:
         try:
-            with frames.read_in(frames.GRADIENT_FIELD if inp.field else normal_frame), \
+            with frames.read_in(frames.GRADIENT_FIELD if inp.field else normal_frame,
+                                normal_range=frames.normal_range(normal_range)), \
                     frames.rotation_given(turn is not None):
                 # (read in it already: hints relative to it; a field's speak of its samples,
                 # as integrate's do)
@@ -429,7 +436,8 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
             return guess
         # (all >= 0, x and y around the encoding's 0.5: a flat view has them all near 0)
         if stored.min() >= 0 and float(np.median(stored[:, :2])) > 0.25:
-            guess["likely"] = "[0, 1]-encoded floats: decode with 2 * v - 1"
+            guess["likely"] = ("[0, 1]-encoded floats: read with --normal-range unsigned, "
+                               "which decodes 2 * v - 1")
             return guess
         missing = frames.z_not_stored(raw) if away is not None and away > 0.5 else None
         if missing is not None and missing[1]:  # (a two-channel map: no frame to suggest)

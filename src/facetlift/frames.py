@@ -32,6 +32,11 @@ Encodings
     are checked first, on the values as given (before the frame is applied, which negates
     axes): a [0, 1]-encoded map read in a camera frame faces away, and the frame was blamed.
 
+    A float map that stores ``(n + 1) / 2`` in [0, 1] (as many renderers and networks write
+    EXR, float TIFF or .npy) is read with the range ``"unsigned"`` of :data:`NORMAL_RANGES`
+    (``--normal-range unsigned``): :func:`decode_unsigned` decodes it as ``2 v - 1`` before
+    anything else, and refuses an integer map or one with negative components.
+
     A two-channel map (BC5, "RG", the ``"xy"`` of :data:`NORMAL_ENCODINGS`) stores x and y
     alone; :func:`decode_xy` reads them and rebuilds z facing the viewer. Read as an ``"xyz"``
     map, its one-valued blue channel is refused or warned about, naming the encoding
@@ -178,6 +183,12 @@ def flag(frame) -> str:
 _READ_IN: contextvars.ContextVar = contextvars.ContextVar("facetlift_read_in", default=None)
 
 
+#: The `normal_range` (:data:`NORMAL_RANGES`) a job read the normals handed to :func:`checked`
+#: with (:func:`read_in`): a map that looks [0, 1]-encoded is then told of the job's option
+#: (--normal-range); None for arrays from Python, which are told to decode them.
+_RANGE_READ: contextvars.ContextVar = contextvars.ContextVar("facetlift_range", default=None)
+
+
 #: :func:`read_in`'s mark for normals made from a gradient field (p, q): no normal frame
 #: applies, the hints name the slopes instead.
 GRADIENT_FIELD = "gradient field"
@@ -190,19 +201,24 @@ _LAYOUT_NAMED: contextvars.ContextVar = contextvars.ContextVar("facetlift_layout
 
 
 @contextlib.contextmanager
-def read_in(frame, *, layout: str | None = None):
+def read_in(frame, *, layout: str | None = None, normal_range: str | None = None):
     """Within it, normals given to :func:`checked` were converted already from a source in
     `frame` (e.g. by a reader): a map that faces away gets a hint relative to `frame`, not a
     suggestion of the frame the user already gave. `layout`: for a gradient field
     (:data:`GRADIENT_FIELD`), the other layout :func:`layout_check` named (its ``"suggested"``):
     :func:`flip_check` then stays silent (a field turned by 90 degrees is not mended by a
     slope's sign, and a run told both "try --gradient-frame rowcol" and "negate q" was told two
-    contradictory things, a review)."""
+    contradictory things, a review). `normal_range`: the range a job read the map with
+    (:data:`NORMAL_RANGES`), whose option a [0, 1]-encoded map is told of; None leaves the
+    enclosing one (none: arrays from Python)."""
     token = _READ_IN.set(frame)
     named = _LAYOUT_NAMED.set(layout)
+    ranged = None if normal_range is None else _RANGE_READ.set(normal_range)
     try:
         yield
     finally:
+        if ranged is not None:
+            _RANGE_READ.reset(ranged)
         _LAYOUT_NAMED.reset(named)
         _READ_IN.reset(token)
 
@@ -457,6 +473,82 @@ def normal_encoding(encoding, name: str = "encoding") -> str:
                          "R, G, B; 'xy': a two-channel map, BC5 or RG, z rebuilt); got "
                          f"{encoding!r}")
     return encoding.strip().lower()
+
+
+#: The range a float normal map's components are stored in: ``"signed"`` (the default), the
+#: components themselves, in [-1, 1]; ``"unsigned"``, ``n01 = (n + 1) / 2`` in [0, 1], as many
+#: renderers and networks write float maps (EXR, float TIFF, .npy), decoded as ``2 v - 1``
+#: before anything else (:func:`decode_unsigned`). An 8/16-bit map is always decoded from its
+#: integer range (``v / max * 2 - 1``): ``"unsigned"`` is refused for one.
+NORMAL_RANGES = ("signed", "unsigned")
+
+
+def normal_range(value, name: str = "normal_range") -> str:
+    """`value` checked against :data:`NORMAL_RANGES` (None: ``"signed"``); a ValueError
+    naming `name` and the choices otherwise."""
+    if value is None:
+        return "signed"
+    if not isinstance(value, str) or value.strip().lower() not in NORMAL_RANGES:
+        raise ValueError(f"`{name}` must be one of {list(NORMAL_RANGES)} ('signed': components "
+                         "in [-1, 1]; 'unsigned': float components stored in [0, 1] as "
+                         f"(n + 1) / 2, decoded as 2 v - 1); got {value!r}")
+    return value.strip().lower()
+
+
+#: With ``normal_range="unsigned"``, a stored component below ``-UNSIGNED_SLACK`` is negative:
+#: a map that holds any is refused as signed (:func:`decode_unsigned`). Less is rounding, or a
+#: network's output not clipped to [0, 1], and decodes to within 2 % of -1.
+UNSIGNED_SLACK = 0.01
+
+
+def decode_unsigned(values: np.ndarray, what: str, where=None, channels: int = 3,
+                    name: str = "normal_range") -> np.ndarray:
+    """(H, W, `channels`) float64 ``2 v - 1`` from the first `channels` of a float map `values`
+    (H, W, C) stored in [0, 1] (:data:`NORMAL_RANGES` ``"unsigned"``), NaN where the decoded
+    vector holds no normal, as :func:`decode` and :func:`decode_xy` mark integer pixels: with
+    3 channels, a length outside :data:`ENCODED_LENGTH_RANGE` (black, white or mid-grey fill);
+    with 2 (x, y alone, z rebuilt after), x, y longer than unit length by more than
+    :data:`UNIT_TOLERANCE`. NaN stays NaN. `what` names the input in the messages (a path,
+    with its argument), `where` ((H, W) bool, the alpha mask) the pixels whose signs are
+    counted (every pixel where None or of another shape).
+
+    Raises
+    ------
+    ValueError
+        An integer map (always decoded from its integer range) or, naming `name` and their
+        count, components below ``-UNSIGNED_SLACK`` (a signed map).
+    """
+    v = np.asarray(values)
+    if v.dtype.kind != "f":
+        kind = (f"is an {np.iinfo(v.dtype).bits}-bit integer map, always decoded from its "
+                "integer range (v / max * 2 - 1)" if v.dtype in ENCODED_DTYPES
+                else f"has pixel type {v.dtype}")
+        raise ValueError(f"{what}: `{name}` 'unsigned' applies to float maps stored in [0, 1]; "
+                         f"this one {kind}: leave it out")
+    v = v[..., :channels]
+    w = None if where is None else np.asarray(where)
+    inside = v if w is None or w.shape != v.shape[:2] else v[w.astype(bool)]
+    with np.errstate(invalid="ignore"):
+        negative = inside < -UNSIGNED_SLACK
+    count = int(np.count_nonzero(negative))
+    if count:
+        finite = int(np.count_nonzero(np.isfinite(inside)))
+        raise ValueError(
+            f"{what}: `{name}` 'unsigned' says the map stores (n + 1) / 2 in [0, 1], but "
+            f"{count} of its {finite} components are negative (down to "
+            f"{float(np.min(inside[negative])):.3g}): it holds signed normals, n itself in "
+            "[-1, 1]; leave the option out (or give 'signed')"
+        )
+    n = v.astype(np.float64) * 2.0 - 1.0
+    with np.errstate(invalid="ignore"):
+        length = np.sqrt(np.einsum("...i,...i->...", n, n))
+        if channels == 2:
+            bad = length > 1.0 + UNIT_TOLERANCE
+        else:
+            lo, hi = ENCODED_LENGTH_RANGE
+            bad = (length < lo) | (length > hi)
+    n[bad] = np.nan
+    return n
 
 
 def decode_xy(values: np.ndarray, where=None, frame=None) -> np.ndarray:
@@ -761,12 +853,23 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
         length = np.sqrt(np.einsum("ij,ij->i", v, v))
     if np.mean(np.abs(length - 1) > 0.05) < 0.5:
         return  # unit normals that all face up and right: a tilted plane, say
+    read = _RANGE_READ.get()
+    if read is None:  # (arrays from Python: facetlift.integrate has no option for it)
+        fix = ("decode it first with n = 2 * v - 1 (or pass the 8/16-bit integer image itself; "
+               "facetlift.io.read_normals(path, normal_range='unsigned') reads a float file "
+               "stored so)")
+    elif read == "unsigned":  # (2 v - 1 applied already, and still in [0, 1])
+        fix = ("and that is after --normal-range unsigned's decoding (2 * v - 1): was it "
+               "encoded twice?")
+    else:
+        fix = ("if the file stores (n + 1) / 2, read it with --normal-range unsigned "
+               "(normal_range='unsigned' in a facetlift.jobs.Job or facetlift.io.read_normals), "
+               "which decodes n = 2 * v - 1, or decode it in Python and pass the array (or save "
+               "the 8/16-bit integer image instead)")
     raise ValueError(
         f"`{name}` looks [0, 1]-encoded: every component inside the mask lies in [0, 1] as "
         "given (none negative, before any normal frame is applied) and the vectors are not "
-        "unit length; decode it first "
-        "with n = 2 * v - 1 (or pass the 8/16-bit integer image itself). If these really are "
-        "normals, normalise them to unit length"
+        f"unit length; {fix}. If these really are normals, normalise them to unit length"
     )
 
 

@@ -75,6 +75,9 @@ class Job:
     #: How the normal map stores its normals: "xyz" (R, G, B) or "xy" (a two-channel map,
     #: BC5 or RG: z rebuilt; facetlift.frames.NORMAL_ENCODINGS).
     normal_encoding: str = "xyz"
+    #: The range of a float map's components: "signed" (in [-1, 1]) or "unsigned" ((n + 1) / 2
+    #: in [0, 1], decoded as 2 v - 1 on reading; facetlift.frames.NORMAL_RANGES).
+    normal_range: str = "signed"
     gradient_frame: str = "xy"
     mat_keys: tuple | None = None
     method: str = "dgp"
@@ -241,8 +244,12 @@ def read(job: Job) -> Input:
     if job.prior is None and not folder:  # (the prior's own flags refused before the map is
         _no_prior_checks(job)  # read; a folder's, once it is read)
     encoding = frames.normal_encoding(job.normal_encoding, "normal_encoding")
+    signs = frames.normal_range(job.normal_range)
     if job.gradients and encoding != "xyz":
         raise ValueError(f"`normal_encoding` {encoding!r} applies to a normal map; a gradient "
+                         "field (--gradients P Q) stores slopes: leave it out")
+    if job.gradients and signs != "signed":
+        raise ValueError(f"`normal_range` {signs!r} applies to a normal map; a gradient "
                          "field (--gradients P Q) stores slopes: leave it out")
     if job.gradients:
         g = read_gradients(*job.gradients)
@@ -250,13 +257,18 @@ def read(job: Job) -> Input:
     elif is_mat(src):
         g = read_mat(src, job.mat_keys)
         field_input = "p" in g
-        if field_input and encoding != "xyz":
-            raise ValueError(f"`normal_encoding` {encoding!r} applies to a normal map; {src} "
-                             "holds a gradient field (p, q), which stores slopes: leave it out")
+        for key, value, default in (("normal_encoding", encoding, "xyz"),
+                                    ("normal_range", signs, "signed")):
+            if field_input and value != default:
+                raise ValueError(f"`{key}` {value!r} applies to a normal map; {src} holds a "
+                                 "gradient field (p, q), which stores slopes: leave it out")
         if field_input:
             n, layout = _normals_from_field(g, job)
         else:
             n = g["normals"]
+            if signs == "unsigned":
+                n = frames.decode_unsigned(n, f"`path`: {src}", g["mask"],
+                                           2 if encoding == "xy" else 3)
             if encoding == "xy":
                 n = frames.decode_xy(n, frame=job.normal_frame)
             n = frames.to_facetlift(n, job.normal_frame)
@@ -271,7 +283,8 @@ def read(job: Job) -> Input:
                              prior_scale=None if job.prior else _prior_scale(job),
                              with_prior=job.dataset_prior and job.prior is None,
                              with_confidence=job.dataset_confidence and job.confidence is None,
-                             with_rotation=given_rotation is None, encoding=encoding)
+                             with_rotation=given_rotation is None, encoding=encoding,
+                             normal_range=signs)
         n, m, K = ds["normals"], ds["mask"], ds["K"]
         if ds["rotation"] is not None:
             rotation, rotation_file = ds["rotation"], f"the folder's {ds['rotation_file'].name}"
@@ -286,7 +299,7 @@ def read(job: Job) -> Input:
     else:
         # (no word on an alpha that --mask replaces)
         n, m = io.read_normals(src, frame=job.normal_frame, check_alpha=job.mask is None,
-                               encoding=encoding)
+                               encoding=encoding, normal_range=signs)
         source = "alpha channel" if m is not None else "valid normals"
         _beside_dataset_files(src, job)
         if job.unread_beside and src.stem.lower() != "normal_map":
@@ -825,7 +838,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         # to that frame, and is given to integrate as one to facetlift's)
         turn = frames.rotation_in_facetlift(inp.rotation, job.normal_frame)
         with frames.read_in(frames.GRADIENT_FIELD if inp.field else job.normal_frame,
-                            layout=inp.layout):
+                            layout=inp.layout,
+                            normal_range=frames.normal_range(job.normal_range)):
             try:
                 surface = facetlift.integrate(
                     inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size,

@@ -24,7 +24,10 @@ see :mod:`facetlift.conventions`). Pillow is not used for PNG because it silentl
 16-bit RGB PNGs to 8 bits. A pixel of an integer map whose decoded vector has a length outside
 :data:`ENCODED_LENGTH_RANGE` does not encode a normal (black, white or mid-grey background
 fill) and decodes as NaN, i.e. a missing sample. A two-channel map (BC5, "RG") is read with
-``encoding="xy"``: R, G = x, y, and z is rebuilt (:func:`facetlift.frames.decode_xy`).
+``encoding="xy"``: R, G = x, y, and z is rebuilt (:func:`facetlift.frames.decode_xy`). A float
+map storing ``(n + 1) / 2`` in [0, 1] is read with ``normal_range="unsigned"``: decoded as
+``2 v - 1`` first, its fill marked NaN as an integer map's
+(:func:`facetlift.frames.decode_unsigned`).
 
 Every writer is atomic: it writes a temporary file in the target directory, flushes it to disk
 and renames it over the target, so a failed write never leaves a partial file behind.

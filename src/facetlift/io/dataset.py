@@ -470,10 +470,12 @@ def _read_camera(paths: list[Path], shape=None) -> np.ndarray | None:
     return Ks[0] if Ks else None
 
 
-def _read_mat_normals(p: Path, frame: str | None, encoding: str = "xyz") -> np.ndarray:
+def _read_mat_normals(p: Path, frame: str | None, encoding: str = "xyz",
+                      normal_range: str = "signed") -> np.ndarray:
     """The (H, W, 3) normals of a DiLiGenT ``Normal_gt.mat``: its variable ``Normal_gt``, or
-    its only (H, W, 3) numeric one, converted from `frame` (z rebuilt first with
-    ``encoding="xy"``, as :func:`facetlift.io.read_normals` does)."""
+    its only (H, W, 3) numeric one, converted from `frame` (decoded as ``2 v - 1`` first with
+    ``normal_range="unsigned"``, then z rebuilt with ``encoding="xy"``, as
+    :func:`facetlift.io.read_normals` does)."""
     from .. import frames
     from .images import load_mat
 
@@ -489,7 +491,10 @@ def _read_mat_normals(p: Path, frame: str | None, encoding: str = "xyz") -> np.n
                          "numeric variable; got variables "
                          + (", ".join(f"{k} ({v})" for k, v in sorted(found.items())) or "none")
                          + ": integrate it by its path with --mat-keys NAME")
-    n = maps[name].astype(np.float64)
+    n = maps[name]
+    if normal_range == "unsigned":  # (refuses an integer variable)
+        n = frames.decode_unsigned(n, f"`folder`: {p}'s {name}")
+    n = n.astype(np.float64)
     if encoding == "xy":
         n = frames.decode_xy(n, frame=frame)
     return frames.to_facetlift(n, frame)
@@ -541,7 +546,7 @@ def one_channel(p: Path) -> bool:
 def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                  prior_scale: float | None = None, with_prior: bool = True,
                  with_confidence: bool = True, with_rotation: bool = True,
-                 encoding: str = "xyz") -> dict:
+                 encoding: str = "xyz", normal_range: str = "signed") -> dict:
     """Read a folder in the BiNI / DiLiGenT layout.
 
     The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
@@ -555,7 +560,7 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     its parent's ``K.txt`` or ``Calib_Results.mat``, where the release keeps it
     (:func:`camera_files`; a BiNI folder without ``K.txt`` stays orthographic).
 
-    `frame`, `y_down` and `encoding` are those of
+    `frame`, `y_down`, `encoding` and `normal_range` are those of
     :func:`~facetlift.io.read_normals`. A depth prior
     ``prior_depth.*`` and a normal confidence ``confidence.*`` (``.npy``, ``.exr``, ``.tif``,
     ``.png``; the prior also as a points file, ``.csv`` or ``.txt``, returned as a map, or
@@ -601,10 +606,14 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     if npath.suffix.lower() == ".mat":
         from .. import frames
 
-        normals, alpha = _read_mat_normals(npath, frames.resolve(frame, y_down), encoding), None
+        normals = _read_mat_normals(npath, frames.resolve(frame, y_down),
+                                    frames.normal_encoding(encoding),
+                                    frames.normal_range(normal_range))
+        alpha = None
     else:  # (the folder's mask replaces the map's alpha: no word on the alpha then)
         normals, alpha = read_normals(npath, frame=frame, y_down=y_down,
-                                      check_alpha=mpath is None, encoding=encoding)
+                                      check_alpha=mpath is None, encoding=encoding,
+                                      normal_range=normal_range)
     mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
     kpaths = camera_files(f)
     K = _read_camera(kpaths, normals.shape[:2])

@@ -182,11 +182,18 @@ def _check_png_normals(data: bytes, path: Path, arg: str) -> None:
 
 
 def _decode_unit(pixels: np.ndarray, path: Path, arg: str, where=None, encoding: str = "xyz",
-                 frame=None) -> np.ndarray:
+                 frame=None, normal_range: str = "signed") -> np.ndarray:
     """uint8/uint16 -> [-1, 1] per channel (:func:`facetlift.frames.decode`, its unit-length
-    check among `where`, the alpha mask); float passes through; other dtypes are refused.
-    `encoding` ``"xy"``: x and y alone, z rebuilt to face the viewer in `frame`
-    (:func:`facetlift.frames.decode_xy`)."""
+    check among `where`, the alpha mask); float passes through, or with `normal_range`
+    ``"unsigned"`` is decoded as ``2 v - 1`` (:func:`facetlift.frames.decode_unsigned`, which
+    refuses an integer map); other dtypes are refused. `encoding` ``"xy"``: x and y alone, z
+    rebuilt to face the viewer in `frame` (:func:`facetlift.frames.decode_xy`)."""
+    # (another pixel type is refused below as it is without the option: the type is wrong)
+    if normal_range == "unsigned" and (pixels.dtype.kind == "f"
+                                       or pixels.dtype in frames.ENCODED_DTYPES):
+        pixels = frames.decode_unsigned(pixels, f"`{arg}`: {path}", where,  # (refuses 8/16
+                                        2 if encoding == "xy" else 3)  # bits)
+        return frames.decode_xy(pixels, frame=frame) if encoding == "xy" else pixels
     if encoding == "xy" and (pixels.dtype in frames.ENCODED_DTYPES or pixels.dtype.kind == "f"):
         return frames.decode_xy(pixels, where=where, frame=frame)
     if pixels.dtype in frames.ENCODED_DTYPES:
@@ -323,7 +330,7 @@ def _alpha_levels(alpha: np.ndarray, m: np.ndarray, p, arg: str) -> None:
 
 def read_normals(
     path, *, frame: str | None = None, y_down: bool = False, check_alpha: bool = True,
-    encoding: str = "xyz",
+    encoding: str = "xyz", normal_range: str = "signed",
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Read a normal map.
 
@@ -354,6 +361,14 @@ def read_normals(
         is ignored (:func:`facetlift.frames.decode_xy`). An integer pixel whose x, y are
         longer than unit length (black or white fill) holds no normal; a mid-grey fill reads
         as a flat normal, so such a map needs its mask.
+    normal_range : {"signed", "unsigned"}
+        ``"signed"`` (default): float components stored as they are, in [-1, 1].
+        ``"unsigned"``: a float map (EXR, float TIFF, .npy) storing ``(n + 1) / 2`` in [0, 1],
+        as many renderers and networks write it, decoded as ``2 v - 1`` before anything else
+        (with ``encoding="xy"``, x and y, before z is rebuilt); like an integer map's, a
+        decoded vector that holds no normal (black, white or mid-grey fill) is NaN
+        (:func:`facetlift.frames.decode_unsigned`). 8/16-bit maps are always decoded from
+        their integer range and refuse it.
 
     Returns
     -------
@@ -369,14 +384,18 @@ def read_normals(
     ------
     ValueError
         Missing, corrupt or truncated file, wrong number of channels, unsupported pixel type
-        or extension, a bad `frame` or `encoding`; a grey image saved as RGB (R = G = B at
-        every pixel inside the alpha, where there is one: :func:`facetlift.frames.grey_check`).
+        or extension, a bad `frame`, `encoding` or `normal_range`; ``"unsigned"`` for an
+        integer map, or for one with negative components (beyond
+        :data:`facetlift.frames.UNSIGNED_SLACK`: signed normals); a grey image saved as RGB
+        (R = G = B at every pixel inside the alpha, where there is one:
+        :func:`facetlift.frames.grey_check`).
         The message names the path.
     """
     arg = "path"
     frame = frames.resolve(frame, y_down)
     frames.parse(frame)
     encoding = frames.normal_encoding(encoding)
+    normal_range = frames.normal_range(normal_range)
     p = _existing(path, arg)
     ext = _suffix(p, NORMAL_READ_FORMATS, "normal map", arg, reading_map=True)
     if ext in (".png", ".tif", ".tiff"):
@@ -387,7 +406,7 @@ def read_normals(
         rgb, alpha = _split_alpha(pixels, p, arg, check_alpha, encoding)
         if rgb.shape[-1] == 3:  # (R = G = B: no two-channel map's sign)
             frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
-        n = _decode_unit(rgb, p, arg, alpha, encoding, frame)
+        n = _decode_unit(rgb, p, arg, alpha, encoding, frame, normal_range)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
         names, alpha_name = _exr_normal_channels(ch, p, arg, 2 if encoding == "xy" else 3)
@@ -401,6 +420,8 @@ def read_normals(
         alpha = (_alpha_mask(ch[alpha_name], p, arg, check_alpha) if alpha_name in ch
                  else None)
         frames.grey_check(n, alpha, f"`{arg}`: {p}")
+        if normal_range == "unsigned":
+            n = frames.decode_unsigned(n, f"`{arg}`: {p}", alpha, n.shape[-1])
         if encoding == "xy":
             n = frames.decode_xy(n, frame=frame)
     else:
@@ -409,7 +430,7 @@ def read_normals(
         if rgb.shape[-1] == 3:
             frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
         # (uint8/uint16 arrays decode like PNG pixels)
-        n = _decode_unit(rgb, p, arg, alpha, encoding, frame)
+        n = _decode_unit(rgb, p, arg, alpha, encoding, frame, normal_range)
     return frames.to_facetlift(n, frame), alpha
 
 
