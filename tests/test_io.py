@@ -1284,3 +1284,22 @@ def test_a_two_channel_exr_without_the_encoding_is_told_of_it(tmp_path):
         io.read_normals(tmp_path / "xy.exr")
     n, _ = io.read_normals(tmp_path / "xy.exr", encoding="xy")
     assert n.shape == (20, 24, 3) and np.allclose(np.linalg.norm(n, axis=-1), 1.0)
+
+
+def test_a_dataset_mat_normal_map_is_decoded_unsigned_as_a_file_is(tmp_path):
+    """A folder's Normal_gt.mat stored in [0, 1] reads as its normals with
+    normal_range="unsigned"; with encoding="xy" x and y alone are decoded (its third channel,
+    here a mid-grey 0.5, is ignored, as a file's is): flat normals were NaN (a review)."""
+    import scipy.io
+
+    n, mask = bump_normals()
+    v = np.where(mask[..., None], (n + 1) / 2, 0.0)
+    io.write_mask(tmp_path / "mask.png", mask)
+    scipy.io.savemat(tmp_path / "Normal_gt.mat", {"Normal_gt": v})
+    got = io.read_dataset(tmp_path, normal_range="unsigned")["normals"]
+    np.testing.assert_allclose(got[mask], n[mask], atol=1e-12)
+    v[..., 2] = 0.5  # (a two-channel map's unused B)
+    scipy.io.savemat(tmp_path / "Normal_gt.mat", {"Normal_gt": v})
+    got = io.read_dataset(tmp_path, encoding="xy", normal_range="unsigned")["normals"]
+    assert np.isfinite(got[mask]).all()
+    np.testing.assert_allclose(got[mask], n[mask], atol=1e-12)

@@ -492,8 +492,10 @@ def _read_mat_normals(p: Path, frame: str | None, encoding: str = "xyz",
                          + (", ".join(f"{k} ({v})" for k, v in sorted(found.items())) or "none")
                          + ": integrate it by its path with --mat-keys NAME")
     n = maps[name]
-    if normal_range == "unsigned":  # (refuses an integer variable)
-        n = frames.decode_unsigned(n, f"`folder`: {p}'s {name}")
+    if normal_range == "unsigned":  # (refuses an integer variable; x, y alone for "xy", as
+        # a file's: its third channel counted in the length made flat normals NaN, a review)
+        n = frames.decode_unsigned(n, f"`folder`: {p}'s {name}",
+                                   channels=2 if encoding == "xy" else 3)
     n = n.astype(np.float64)
     if encoding == "xy":
         n = frames.decode_xy(n, frame=frame)
