@@ -1192,3 +1192,20 @@ def test_a_dataset_folders_ground_truth_is_scored(tmp_path, capsys):
                      said), said
     logged = [json.loads(line) for line in (tmp_path / "batch" / "batch.jsonl").open()]
     assert sorted(bool(r.get("evaluation")) for r in logged) == [False, True]
+
+
+def test_normal_range_unsigned_names_a_mat_maps_undecoded_integer_values(tmp_path, capsys):
+    """A .mat file's uint8 normal map (read as floats, 0..255) with --normal-range unsigned was
+    decoded into fill, and the run said 'no usable normal (all missing)'; it is named as
+    undecoded 8-bit values, as a float .npy of them is (a review)."""
+    import scipy.io
+
+    n, _, mask = _sphere_files(tmp_path)
+    v = np.where(mask[..., None], np.round((n + 1) / 2 * 255), 0).astype(np.uint8)
+    scipy.io.savemat(tmp_path / "u8.mat", {"N": v, "mask": mask.astype(np.uint8)})
+    np.save(tmp_path / "f255.npy", v.astype(np.float32))
+    for args in ((tmp_path / "u8.mat", "--mat-keys", "N,mask"), (tmp_path / "f255.npy",)):
+        code, _, err = run(capsys, "integrate", *args, "--normal-range", "unsigned", "-o",
+                           tmp_path / "o")
+        assert code == 1 and re.search(r"--normal-range 'unsigned' says .* reach 255: they "
+                                       r"look like an undecoded 8-bit", _one_line_error(err)), err

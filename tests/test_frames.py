@@ -1014,3 +1014,21 @@ def test_a_y_down_map_over_a_floor_is_told_to_flip_y(tmp_path, capsys):
     assert facetlift.problem._flip_mends_facing(
         facetlift.camera.Orthographic(), np.zeros(3, int), np.zeros(3, int),
         np.array([[0.0, 0, -1]] * 3), np.ones(3, bool), 1.0) is None
+
+
+def test_decode_unsigned_names_undecoded_integer_values_as_floats():
+    """An 8/16-bit map's values as floats (0..255 from a float conversion, a .mat's uint8
+    variable, which read_mat makes float) given 'unsigned' were decoded into vectors far longer
+    than unit, all NaN, and the run said 'no usable normal (all missing)'; without the option
+    the undecoded-8-bit check names them: it is named with it too (a review)."""
+    n, _ = bump()
+    for scale, bits in ((255, 8), (65535, 16)):
+        v = np.round((n + 1) / 2 * scale)
+        v[:4] = 0.0  # (a black fill: no mask said where it is)
+        with pytest.raises(ValueError, match=rf"m.npy: `normal_range` 'unsigned' says the map "
+                           rf"stores \(n \+ 1\) / 2 in \[0, 1\], but its components reach "
+                           rf"\d+: .*undecoded {bits}-bit.*n = v / {scale} \* 2 - 1"):
+            frames.decode_unsigned(v, "`path`: m.npy")
+    v = (n + 1) / 2
+    v[0, 0] = 1.2  # (one stray pixel above 1: its fill rule's, not a refusal)
+    assert np.isnan(frames.decode_unsigned(v, "m")[0, 0]).all()

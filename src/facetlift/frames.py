@@ -516,7 +516,8 @@ def decode_unsigned(values: np.ndarray, what: str, where=None, channels: int = 3
     ------
     ValueError
         An integer map (always decoded from its integer range) or, naming `name` and their
-        count, components below ``-UNSIGNED_SLACK`` (a signed map).
+        count, components below ``-UNSIGNED_SLACK`` (a signed map); with 3 channels, an 8/16-bit
+        map's values as floats (:func:`encoded_scale`).
     """
     v = np.asarray(values)
     if v.dtype.kind != "f":
@@ -538,6 +539,23 @@ def decode_unsigned(values: np.ndarray, what: str, where=None, channels: int = 3
             f"{count} of its {finite} components are negative (down to "
             f"{float(np.min(inside[negative])):.3g}): it holds signed normals, n itself in "
             "[-1, 1]; leave the option out (or give 'signed')"
+        )
+    scale = None
+    if v.shape[-1] == 3 and np.max(inside, initial=0.0, where=np.isfinite(inside)) > 1.0:
+        rows = inside.reshape(-1, 3)
+        rows = rows[np.isfinite(rows).all(axis=1)]
+        # (R = G = B: a fill, black, white or grey, outside a mask file's inside)
+        rows = rows[(rows[:, 0] != rows[:, 1]) | (rows[:, 1] != rows[:, 2])]
+        scale = encoded_scale(rows.astype(np.float64))
+    if scale is not None:  # (2 v - 1 of these is all fill, NaN: "no usable normal" said no
+        # more; without the option the undecoded-integer check names them, a review)
+        bits = 8 if scale == 255 else 16
+        raise ValueError(
+            f"{what}: `{name}` 'unsigned' says the map stores (n + 1) / 2 in [0, 1], but its "
+            f"components reach {float(rows.max()):g}: they look like an undecoded {bits}-bit "
+            f"normal map's values as floats (2 * v / {scale} - 1 is of unit length); decode it "
+            f"first with n = v / {scale} * 2 - 1 (or pass the {bits}-bit integer image "
+            "itself) and leave the option out"
         )
     n = v.astype(np.float64) * 2.0 - 1.0
     with np.errstate(invalid="ignore"):
