@@ -1209,3 +1209,17 @@ def test_normal_range_unsigned_names_a_mat_maps_undecoded_integer_values(tmp_pat
                            tmp_path / "o")
         assert code == 1 and re.search(r"--normal-range 'unsigned' says .* reach 255: they "
                                        r"look like an undecoded 8-bit", _one_line_error(err)), err
+
+
+def test_info_does_not_advise_normal_range_unsigned_to_a_run_that_gave_it(tmp_path, capsys):
+    """A map encoded twice, read with --normal-range unsigned, is still in [0, 1]: info's frame
+    line told it to 'read with --normal-range unsigned', the flag it was given; it says the
+    decode was applied (as integrate's refusal does), and the refusal's sentence ends once."""
+    _, v, mask = _sphere_files(tmp_path)
+    np.save(tmp_path / "twice.npy", np.where(mask[..., None], (v + 1) / 2, 0.0))
+    code, out, err = run(capsys, "info", tmp_path / "twice.npy", "--normal-range", "unsigned")
+    assert code == 1, out + err
+    frame = next(line for line in out.splitlines() if line.strip().startswith("frame:"))
+    assert "read with --normal-range unsigned" not in frame, frame
+    assert "after --normal-range unsigned's decoding" in frame, frame
+    assert "?." not in out

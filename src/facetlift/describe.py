@@ -230,6 +230,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     def unusable(e: ValueError) -> dict:  # (integrate would refuse it: why, and the frame)
         out.update(usable=False, problem=str(e),
                    frame=_frame_guess(n, inp.mask, inp.K, frame=normal_frame, layout=layout,
+                                      normal_range=frames.normal_range(normal_range),
                                       field=inp.field, rotation=turn))
         return out
 
@@ -294,6 +295,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         warnings=out["warnings"] + [str(w.message) for w in caught if not issubclass(
             w.category, UnusableNormalsWarning)],
         frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame, layout=layout,
+                           normal_range=frames.normal_range(normal_range),
                            field=inp.field, rotation=turn),
         estimate=_twice(estimate(problem), fitted),
         # (what --discontinuities would need: a user planning a large job asked)
@@ -386,14 +388,16 @@ def _file_facts(src: Path) -> dict:
 
 
 def _frame_guess(n, mask, K, problem=None, *, frame=None, layout=None,
-                 field: bool = False, rotation=None) -> dict:
+                 field: bool = False, rotation=None, normal_range: str = "signed") -> dict:
     """Whether the frame the map was read in looks right, from the view direction and the
     integrability; ``likely`` says what to change. `layout`: the other gradient layout, where
     the field was read in the wrong one (:class:`facetlift.frames.LayoutWarning`), which
     ``likely`` then names: its normals are in no frame that a flip would fix. `rotation`
     (3, 3): world-space normals' turn into the camera frame, in facetlift's axes
-    (:func:`facetlift.frames.rotation_in_facetlift`)."""
-    guess = _frame_evidence(n, mask, K, problem, frame=frame, field=field, rotation=rotation)
+    (:func:`facetlift.frames.rotation_in_facetlift`). `normal_range`: the range the map was
+    read with (an ``"unsigned"`` map still in [0, 1] is not told to give that flag)."""
+    guess = _frame_evidence(n, mask, K, problem, frame=frame, field=field, rotation=rotation,
+                            normal_range=normal_range)
     if layout is not None:
         guess["likely"] = (f"the other gradient layout: --gradient-frame {layout} "
                            f"(gradient_frame='{layout}')")
@@ -414,7 +418,7 @@ def _try(frame, axes: str, field: bool) -> str:
 
 
 def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False,
-                    rotation=None) -> dict:
+                    rotation=None, normal_range: str = "signed") -> dict:
     """:func:`_frame_guess` from the normals alone."""
     from . import frames
     from .problem import prepare
@@ -436,8 +440,11 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
             return guess
         # (all >= 0, x and y around the encoding's 0.5: a flat view has them all near 0)
         if stored.min() >= 0 and float(np.median(stored[:, :2])) > 0.25:
-            guess["likely"] = ("[0, 1]-encoded floats: read with --normal-range unsigned, "
-                               "which decodes 2 * v - 1")
+            guess["likely"] = (
+                "[0, 1]-encoded floats after --normal-range unsigned's decoding (2 * v - 1): "
+                "was it encoded twice?" if normal_range == "unsigned" else
+                "[0, 1]-encoded floats: read with --normal-range unsigned, which decodes "
+                "2 * v - 1")  # (the flag given told to give it, a review)
             return guess
         missing = frames.z_not_stored(raw) if away is not None and away > 0.5 else None
         if missing is not None and missing[1]:  # (a two-channel map: no frame to suggest)

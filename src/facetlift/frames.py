@@ -877,8 +877,8 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
                "facetlift.io.read_normals(path, normal_range='unsigned') reads a float file "
                "stored so)")
     elif read == "unsigned":  # (2 v - 1 applied already, and still in [0, 1])
-        fix = ("and that is after --normal-range unsigned's decoding (2 * v - 1): was it "
-               "encoded twice?")
+        fix = ("and that is after --normal-range unsigned's decoding (2 * v - 1): it may "
+               "have been encoded twice")
     else:
         fix = ("if the file stores (n + 1) / 2, read it with --normal-range unsigned "
                "(normal_range='unsigned' in a facetlift.jobs.Job or facetlift.io.read_normals), "
