@@ -203,9 +203,10 @@ def test_decode_unsigned_refuses_integer_and_signed_maps():
     components holds signed normals: both refused naming the option (and the count), beyond
     a rounding's slack and inside `where` alone."""
     n, _ = bump()
-    for dtype, bits in ((np.uint8, 8), (np.uint16, 16)):
+    for dtype, bits in ((np.uint8, "an 8"), (np.uint16, "a 16")):  # (not "an 16-bit")
         with pytest.raises(ValueError, match=rf"`path`: m.png: `normal_range` 'unsigned' "
-                           rf"applies to float maps .*an {bits}-bit integer map, always decoded "
+                           rf"applies to float maps .*this one is {bits}-bit integer map, "
+                           r"always decoded "
                            r"from its integer range \(v / max \* 2 - 1\): leave it out"):
             frames.decode_unsigned(np.zeros((4, 4, 3), dtype), "`path`: m.png")
     k = int(np.count_nonzero(n < -frames.UNSIGNED_SLACK))

@@ -521,8 +521,9 @@ def decode_unsigned(values: np.ndarray, what: str, where=None, channels: int = 3
     """
     v = np.asarray(values)
     if v.dtype.kind != "f":
-        kind = (f"is an {np.iinfo(v.dtype).bits}-bit integer map, always decoded from its "
-                "integer range (v / max * 2 - 1)" if v.dtype in ENCODED_DTYPES
+        bits = np.iinfo(v.dtype).bits if v.dtype in ENCODED_DTYPES else None
+        kind = (f"is {'an' if bits == 8 else 'a'} {bits}-bit integer map, always decoded from "
+                "its integer range (v / max * 2 - 1)" if bits is not None
                 else f"has pixel type {v.dtype}")
         raise ValueError(f"{what}: `{name}` 'unsigned' applies to float maps stored in [0, 1]; "
                          f"this one {kind}: leave it out")
