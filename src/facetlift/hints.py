@@ -76,7 +76,10 @@ def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
         return None  # (a prior in other units explains it, warned about: an audit)
     ic = info.get("integrability") or {}
     own = ic.get("curl")
-    flipped = min(ic.get("curl_y_flipped", float("inf")), ic.get("curl_x_flipped", float("inf")))
+    # (None where a curl could not be measured, e.g. a map mostly without normals: a review
+    # saw the run end in an internal error here after its depth was written)
+    flipped = min((v for v in (ic.get("curl_y_flipped"), ic.get("curl_x_flipped"))
+                   if v is not None), default=float("inf"))
     if own is not None and (frames.flip_verdict(own, flipped) is not None
                             or not own >= JUMP_HINT_CURL):
         return None  # (a wrong frame explains it; an integrable field has no jump to keep)
@@ -155,6 +158,8 @@ def frame_first(job, ic: dict) -> str | None:
     if ic.get("other_layout"):  # (the layout warning's advice stands alone: frames.read_in)
         return None
     own = ic["curl"]
+    if ic.get("curl_y_flipped") is None or ic.get("curl_x_flipped") is None:
+        return None  # (not measured: no flip to name)
     a, b = frames.flip_order(ic)
     flipped = ic[f"curl_{a}_flipped"]
     if not (own > frames.FLIP_MIN_CURL and flipped < JUMP_FRAME_RATIO * own):
