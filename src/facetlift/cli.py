@@ -1111,12 +1111,11 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         if stored is not None and stored.shape == (3, 3) and np.isfinite(stored).all():
             camera = stored
     if K is not None or fov is not None:  # (integrate took --fov too: a fov user had no K file)
-        from .camera import K_from_fov, check_image_size
+        from .camera import K_from_fov
         from .io.dataset import camera_of
 
         if K is not None:  # (a file stating another image size is refused, as integrate does)
-            given, stated = camera_of(K)
-            check_image_size(given, stated, est.shape, str(K), of="the result")
+            given = camera_of(K, est.shape, of="the result")
             named, flag = f"`K`: {K}", "--K"
         else:
             given, named, flag = K_from_fov(est.shape, fov), f"`fov` {fov:g}", "--fov"

@@ -463,16 +463,21 @@ def decode(pixels: np.ndarray, where=None) -> np.ndarray:
 NORMAL_ENCODINGS = ("xyz", "xy")
 
 
+def _one_of(value, choices: tuple[str, ...], name: str, meaning: str) -> str:
+    """`value` (None: the first of `choices`) lower-cased and checked against `choices`; a
+    ValueError naming `name`, the choices and their `meaning` otherwise."""
+    if value is None:
+        return choices[0]
+    if not isinstance(value, str) or value.strip().lower() not in choices:
+        raise ValueError(f"`{name}` must be one of {list(choices)} ({meaning}); got {value!r}")
+    return value.strip().lower()
+
+
 def normal_encoding(encoding, name: str = "encoding") -> str:
     """`encoding` checked against :data:`NORMAL_ENCODINGS` (None: ``"xyz"``); a ValueError
     naming `name` and the choices otherwise."""
-    if encoding is None:
-        return "xyz"
-    if not isinstance(encoding, str) or encoding.strip().lower() not in NORMAL_ENCODINGS:
-        raise ValueError(f"`{name}` must be one of {list(NORMAL_ENCODINGS)} ('xyz': x, y, z in "
-                         "R, G, B; 'xy': a two-channel map, BC5 or RG, z rebuilt); got "
-                         f"{encoding!r}")
-    return encoding.strip().lower()
+    return _one_of(encoding, NORMAL_ENCODINGS, name, "'xyz': x, y, z in R, G, B; 'xy': a "
+                   "two-channel map, BC5 or RG, z rebuilt")
 
 
 #: The range a float normal map's components are stored in: ``"signed"`` (the default), the
@@ -486,13 +491,8 @@ NORMAL_RANGES = ("signed", "unsigned")
 def normal_range(value, name: str = "normal_range") -> str:
     """`value` checked against :data:`NORMAL_RANGES` (None: ``"signed"``); a ValueError
     naming `name` and the choices otherwise."""
-    if value is None:
-        return "signed"
-    if not isinstance(value, str) or value.strip().lower() not in NORMAL_RANGES:
-        raise ValueError(f"`{name}` must be one of {list(NORMAL_RANGES)} ('signed': components "
-                         "in [-1, 1]; 'unsigned': float components stored in [0, 1] as "
-                         f"(n + 1) / 2, decoded as 2 v - 1); got {value!r}")
-    return value.strip().lower()
+    return _one_of(value, NORMAL_RANGES, name, "'signed': components in [-1, 1]; 'unsigned': "
+                   "float components stored in [0, 1] as (n + 1) / 2, decoded as 2 v - 1")
 
 
 #: With ``normal_range="unsigned"``, a stored component below ``-UNSIGNED_SLACK`` is negative:

@@ -323,13 +323,11 @@ def read(job: Job) -> Input:
                          of="the gradient field" if field_input else "the normal map")
         source = str(job.mask)
     if job.K is not None:  # (a file, or fx fy cx cy typed inline)
-        from .camera import check_image_size
         from .io.dataset import camera_of
 
-        K, stated = camera_of(job.K)
-        # (a calibration of another size: a 1224 x 1024 one on a 612 x 512 map was caught
-        # only by chance, a fresh user's review)
-        check_image_size(K, stated, n.shape[:2], str(job.K))
+        # (a calibration of another size refused: a 1224 x 1024 one on a 612 x 512 map was
+        # caught only by chance, a fresh user's review)
+        K = camera_of(job.K, n.shape[:2])
     if job.fov is not None:
         check_fov(job)
         if field_input:

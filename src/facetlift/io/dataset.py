@@ -140,12 +140,19 @@ def inline_K(value) -> np.ndarray | None:
         raise ValueError(f"`K`: {value!r} (typed inline): {e}") from None
 
 
-def camera_of(value) -> tuple[np.ndarray, tuple[int, int] | None]:
-    """The camera of a ``--K`` value (a job's `K`): its intrinsics typed inline
-    (:func:`inline_K`; no stated size), else its file's (:func:`read_K_stated`): K and the
-    image size (H, W) the file states, or None."""
+def camera_of(value, shape, of: str = "the normal map") -> np.ndarray:
+    """The camera of a ``--K`` value (a job's `K`) for an image of size `shape` (H, W, `of`
+    what it is): its intrinsics typed inline (:func:`inline_K`; no stated size), else its
+    file's (:func:`read_K_stated`), refused where the file states another image size
+    (:func:`facetlift.camera.check_image_size`)."""
+    from ..camera import check_image_size
+
     K = inline_K(value)
-    return (K, None) if K is not None else read_K_stated(value)
+    if K is not None:
+        return K
+    K, stated = read_K_stated(value)
+    check_image_size(K, stated, shape, str(value), of=of)
+    return K
 
 
 #: The names a ``.mat`` file's intrinsics go by, in order: the calibration toolbox's

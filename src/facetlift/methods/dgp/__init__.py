@@ -493,7 +493,6 @@ def run(
             bent = None if astray is not None else blur_bent(deviation(copies), free)
             return astray is not None or bent is not None
 
-        bent = None
         if blur is not None and trouble() and "prior_free" in info:
             # (they ran away from the normals' cuts: the blurred prior once more from the
             # smooth surface, BLURRED_CUTS_FIRST)
@@ -552,8 +551,7 @@ def run(
         info["solver"] = "discontinuous"
         # (of the facets as returned, each on its own corner copies: the glued vertices' mean
         # angle, 1.8 deg where the result's was 0.68, described a surface not returned)
-        info["deviation"] = [mean_angle(rowwise(copies, E_X), rowwise(copies, E_Y), bx, by,
-                                        given, s)]
+        info["deviation"] = [deviation(copies)]
         info["gaps_filled"] = 0 if filled is None else int(filled.sum())
         extras = {"corner_values": copies}
         if split_mesh is not None:  # (make_surface splits the copies itself otherwise)
