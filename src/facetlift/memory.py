@@ -70,7 +70,7 @@ COEFFICIENTS = {
     "dgp-loop-spectral": (0.0, 125.0, 5 * MiB, 0.0),
     "dgp-loop-pcg": (205.0, 68.0, 20 * MiB, 0.0),
     "dgp-loop-factor": (205.0, 68.0, 20 * MiB, 110.0),
-    "dgp-discontinuous": (880.0, 145.0, 24 * MiB, 0.0),
+    "dgp-discontinuous": (760.0, 65.0, 26 * MiB, 0.0),
     "poisson": (607.0, 0.0, 0.0, 45.0),
     "m_estimator": (894.0, 0.0, 0.0, 31.0),
     "alpha_surface": (934.0, 0.0, 0.0, 27.0),
