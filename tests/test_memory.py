@@ -111,7 +111,7 @@ def test_absurd_options_are_refused_before_they_allocate(method, options):
 
 def test_estimate_grows_with_the_domain_and_names_the_route():
     small = facetlift.prepare(*_disk_normals(128))
-    large = facetlift.prepare(*_disk_normals(512))
+    large = facetlift.prepare(*_disk_normals(1024))
     a, route = memory.estimate(small, "dgp", {"solver": "direct", "backend": "auto"})
     b, _ = memory.estimate(large, "dgp", {"solver": "direct", "backend": "auto"})
     assert route == "dgp-pcg" and b > 3 * a > 0

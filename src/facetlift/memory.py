@@ -65,8 +65,8 @@ MARGIN = 0.05
 #: the iterate of its smallest residual (:data:`facetlift.linalg.cg.GROWTH`), not refitted.
 COEFFICIENTS = {
     "dgp-spectral": (0.0, 85.0, 8 * MiB, 0.0),
-    "dgp-pcg": (172.0, 68.0, 12 * MiB, 0.0),
-    "dgp-factor": (172.0, 68.0, 12 * MiB, 110.0),
+    "dgp-pcg": (172.0, 68.0, 18 * MiB, 0.0),
+    "dgp-factor": (172.0, 68.0, 18 * MiB, 110.0),
     "dgp-loop-spectral": (0.0, 125.0, 5 * MiB, 0.0),
     "dgp-loop-pcg": (205.0, 68.0, 20 * MiB, 0.0),
     "dgp-loop-factor": (205.0, 68.0, 20 * MiB, 110.0),
