@@ -273,7 +273,8 @@ def read(job: Job) -> Input:
                 n = frames.decode_xy(n, frame=job.normal_frame)
             n = frames.to_facetlift(n, job.normal_frame)
         m = g["mask"]
-        source = f"{src.name} mask" if m is not None else "valid normals"
+        source = (f"{src.name} mask" if m is not None else
+                  "valid gradients" if field_input else "valid normals")
         if not field_input and src.name == DILIGENT_NORMALS:  # (its folder's files)
             _beside_dataset_files(src, job, own_mask=m is not None)
         elif not field_input and job.unread_beside:
@@ -894,6 +895,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         # height splits into one per brick, all at mean depth 0, a second audit)
         "components": _components(surface.mask),
         "mask_source": inp.mask_source,
+        # (the input was a gradient field, not a normal map: the summary counts its samples)
+        "gradient_field": inp.field,
         "perspective": surface.K is not None,
         # (where the camera came from, for the summary: K, a field of view, a dataset's K.txt)
         "camera": camera_source(job, inp) if surface.K is not None else "orthographic",
