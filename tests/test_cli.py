@@ -1077,6 +1077,64 @@ def test_normal_range_unsigned_reads_a_mat_normal_map(tmp_path, capsys):
     assert code == 1 and f"but {k} of its {3 * mask.sum()} components" in _one_line_error(err)
 
 
+def test_normal_range_unsigned_counts_signs_inside_a_separate_mask(tmp_path, capsys):
+    """A [0, 1] map whose background outside its mask file holds -1 (a signed fill) was
+    refused as signed normals with --normal-range unsigned: --mask, a dataset folder's
+    mask.png and batch's NAME_mask.png were read after the map, so the fill's signs were
+    counted (its own alpha and a .mat file's mask already bounded them). Now only the pixels
+    inside the mask count, for a .npy, an EXR and a .mat map; negatives inside are still
+    refused, counted there; a mask of another size still gets its own refusal."""
+    import OpenEXR
+    import scipy.io
+
+    n, v, mask = _sphere_files(tmp_path)
+    want = facetlift.integrate(n, mask).depth
+    filled = np.where(mask[..., None], v, -1.0)
+    np.save(tmp_path / "fill.npy", filled)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {k: filled[..., i].astype(np.float32)
+                               for i, k in enumerate("RGB")}) as f:
+        f.write(str(tmp_path / "fill.exr"))
+    scipy.io.savemat(tmp_path / "fill.mat", {"N": filled})
+    io.write_mask(tmp_path / "m.png", mask)
+    folder = tmp_path / "set"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", filled)
+    io.write_mask(folder / "mask.png", mask)
+    unsigned = ("--normal-range", "unsigned")
+    for i, args in enumerate(((tmp_path / "fill.npy", "--mask", tmp_path / "m.png"),
+                              (tmp_path / "fill.exr", "--mask", tmp_path / "m.png"),
+                              (tmp_path / "fill.mat", "--mat-keys", "N", "--mask",
+                               tmp_path / "m.png"),
+                              (folder,))):
+        code, _, err = run(capsys, "integrate", *args, *unsigned, "-s", "npy", "-o",
+                           tmp_path / f"o{i}")
+        assert code == 0, err
+        got = np.load(tmp_path / f"o{i}" / "depth.npy")
+        np.testing.assert_allclose(got[mask], want[mask], atol=1e-4 * np.ptp(want[mask]))
+        code, out, err = run(capsys, "info", *args, *unsigned)
+        assert code == 0 and "unusable normals: none" in out, out + err
+    # without the mask every component counts: the fill's
+    code, _, err = run(capsys, "integrate", tmp_path / "fill.npy", *unsigned, "-o",
+                       tmp_path / "no")
+    assert code == 1 and f"but {3 * (~mask).sum()} of its {3 * mask.size} components are " \
+        "negative" in _one_line_error(err)
+    # a negative inside the mask is still refused, counted among the mask's components
+    inside = filled.copy()
+    inside[mask.nonzero()[0][0], mask.nonzero()[1][0], 0] = -0.5
+    np.save(tmp_path / "inside.npy", inside)
+    code, _, err = run(capsys, "integrate", tmp_path / "inside.npy", "--mask",
+                       tmp_path / "m.png", *unsigned, "-o", tmp_path / "no")
+    assert code == 1 and f"but 1 of its {3 * mask.sum()} components are negative (down to " \
+        "-0.5)" in _one_line_error(err)
+    io.write_mask(tmp_path / "small.png", mask[:-2])
+    code, _, err = run(capsys, "integrate", tmp_path / "fill.npy", "--mask",
+                       tmp_path / "small.png", *unsigned, "-o", tmp_path / "no")
+    assert code == 1 and re.search(r"small.png has size 38x40 \(HxW\) but the normal map is "
+                                   r"40x40", _one_line_error(err))
+    assert not (tmp_path / "no").exists()
+
+
 def test_a_two_channel_map_with_blue_0_is_told_to_rebuild_z(tmp_path, capsys):
     """An audit: a BC5 map (B = 0) was told '100 % ... face away ... try --normal-frame
     opencv' after a warning that z is not stored; integrate and info say z is not stored."""

@@ -251,6 +251,9 @@ def read(job: Job) -> Input:
     if job.gradients and signs != "signed":
         raise ValueError(f"`normal_range` {signs!r} applies to a normal map; a gradient "
                          "field (--gradients P Q) stores slopes: leave it out")
+    # (read before the map, its size checked after: an "unsigned" map's signs are counted
+    # inside it, and a fill outside it was refused as signed normals, a review)
+    given = None if job.mask is None else io.read_mask(job.mask)
     if job.gradients:
         g = read_gradients(*job.gradients)
         (n, layout), m, source = _normals_from_field(g, job), g["mask"], "valid gradients"
@@ -267,7 +270,8 @@ def read(job: Job) -> Input:
         else:
             n = g["normals"]
             if signs == "unsigned":
-                n = frames.decode_unsigned(n, f"`path`: {src}", g["mask"],
+                n = frames.decode_unsigned(n, f"`path`: {src}",
+                                           g["mask"] if given is None else given,
                                            2 if encoding == "xy" else 3)
             if encoding == "xy":
                 n = frames.decode_xy(n, frame=job.normal_frame)
@@ -285,7 +289,7 @@ def read(job: Job) -> Input:
                              with_prior=job.dataset_prior and job.prior is None,
                              with_confidence=job.dataset_confidence and job.confidence is None,
                              with_rotation=given_rotation is None, encoding=encoding,
-                             normal_range=signs)
+                             normal_range=signs, mask=given)
         n, m, K = ds["normals"], ds["mask"], ds["K"]
         if ds["rotation"] is not None:
             rotation, rotation_file = ds["rotation"], f"the folder's {ds['rotation_file'].name}"
@@ -300,7 +304,7 @@ def read(job: Job) -> Input:
     else:
         # (no word on an alpha that --mask replaces)
         n, m = io.read_normals(src, frame=job.normal_frame, check_alpha=job.mask is None,
-                               encoding=encoding, normal_range=signs)
+                               encoding=encoding, normal_range=signs, mask=given)
         source = "alpha channel" if m is not None else "valid normals"
         _beside_dataset_files(src, job)
         if job.unread_beside and src.stem.lower() != "normal_map":
@@ -319,9 +323,11 @@ def read(job: Job) -> Input:
         warn(f"`gradient_frame` {job.gradient_frame!r} applies to a gradient field "
              f"(--gradients P Q, or a .mat file holding p and q); {src.name} is a normal map, "
              "whose frame is --normal-frame: it is ignored here")
-    if job.mask is not None:
-        m = io.read_mask(job.mask, n.shape[:2],
-                         of="the gradient field" if field_input else "the normal map")
+    if given is not None:
+        from .io.images import check_mask_size
+
+        m = check_mask_size(given, Path(job.mask), n.shape[:2],
+                            of="the gradient field" if field_input else "the normal map")
         source = str(job.mask)
     if job.K is not None:  # (a file, or fx fy cx cy typed inline)
         from .io.dataset import camera_of

@@ -16,6 +16,7 @@ from .images import (
     NORMAL_READ_FORMATS,
     _loadtxt_reason,
     _text_rows,
+    check_mask_size,
     read_mask,
     read_normals,
 )
@@ -478,11 +479,11 @@ def _read_camera(paths: list[Path], shape=None) -> np.ndarray | None:
 
 
 def _read_mat_normals(p: Path, frame: str | None, encoding: str = "xyz",
-                      normal_range: str = "signed") -> np.ndarray:
+                      normal_range: str = "signed", mask=None) -> np.ndarray:
     """The (H, W, 3) normals of a DiLiGenT ``Normal_gt.mat``: its variable ``Normal_gt``, or
     its only (H, W, 3) numeric one, converted from `frame` (decoded as ``2 v - 1`` first with
-    ``normal_range="unsigned"``, then z rebuilt with ``encoding="xy"``, as
-    :func:`facetlift.io.read_normals` does)."""
+    ``normal_range="unsigned"``, its signs counted inside `mask`, then z rebuilt with
+    ``encoding="xy"``, as :func:`facetlift.io.read_normals` does)."""
     from .. import frames
     from .images import load_mat
 
@@ -501,7 +502,7 @@ def _read_mat_normals(p: Path, frame: str | None, encoding: str = "xyz",
     n = maps[name]
     if normal_range == "unsigned":  # (refuses an integer variable; x, y alone for "xy", as
         # a file's: its third channel counted in the length made flat normals NaN, a review)
-        n = frames.decode_unsigned(n, f"`folder`: {p}'s {name}",
+        n = frames.decode_unsigned(n, f"`folder`: {p}'s {name}", mask,
                                    channels=2 if encoding == "xy" else 3)
     n = n.astype(np.float64)
     if encoding == "xy":
@@ -555,7 +556,7 @@ def one_channel(p: Path) -> bool:
 def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                  prior_scale: float | None = None, with_prior: bool = True,
                  with_confidence: bool = True, with_rotation: bool = True,
-                 encoding: str = "xyz", normal_range: str = "signed") -> dict:
+                 encoding: str = "xyz", normal_range: str = "signed", mask=None) -> dict:
     """Read a folder in the BiNI / DiLiGenT layout.
 
     The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
@@ -580,7 +581,11 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     from world to the camera frame `frame` names) or ``camera_to_world.*`` (the camera's
     pose, Blender's ``matrix_world``: transposed), as ``.txt``, ``.json`` or ``.npy``
     (:func:`read_rotation`), are picked up like ``K.txt`` too (one of them; `with_rotation`
-    False leaves them unread).
+    False leaves them unread). `mask` ((H, W) bool, optional): a mask given in place of the
+    folder's ``mask.*`` (``facetlift integrate FOLDER --mask M``), which is then not read; it
+    is returned as ``mask``, and as :func:`~facetlift.io.read_normals`' `mask` its pixels are
+    those whose components ``normal_range="unsigned"`` counts (its size is the caller's to
+    check: the command line names its file).
 
     Returns
     -------
@@ -611,19 +616,26 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     npath = normals_file(f)
     if npath is None:
         raise ValueError(_no_normals(f))
-    mpath = _find(f, "mask", formats["mask"])
+    mpath = _find(f, "mask", formats["mask"]) if mask is None else None
+    # (read before the map: an "unsigned" map's signs are counted inside it, not in a fill
+    # outside it, a review)
+    if mpath is not None:
+        mask = read_mask(mpath)
     if npath.suffix.lower() == ".mat":
         from .. import frames
 
         normals = _read_mat_normals(npath, frames.resolve(frame, y_down),
                                     frames.normal_encoding(encoding),
-                                    frames.normal_range(normal_range))
+                                    frames.normal_range(normal_range), mask)
         alpha = None
     else:  # (the folder's mask replaces the map's alpha: no word on the alpha then)
         normals, alpha = read_normals(npath, frame=frame, y_down=y_down,
-                                      check_alpha=mpath is None, encoding=encoding,
-                                      normal_range=normal_range)
-    mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
+                                      check_alpha=mask is None, encoding=encoding,
+                                      normal_range=normal_range, mask=mask)
+    if mpath is not None:
+        mask = check_mask_size(mask, mpath, normals.shape)
+    elif mask is None:
+        mask = alpha
     kpaths = camera_files(f)
     K = _read_camera(kpaths, normals.shape[:2])
     rotation, rpath = _read_folder_rotation(f) if with_rotation else (None, None)
