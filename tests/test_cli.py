@@ -261,6 +261,45 @@ def test_K_typed_inline_is_forwarded(tmp_path, capsys, monkeypatch):
     assert code == 0 and "perspective (--K 50 52 13 10)" in out, err
 
 
+def test_K_typed_inline_is_parsed_once(tmp_path, capsys, monkeypatch):
+    """--K "fx fy cx cy" was parsed and checked twice, by the option's type and again when the
+    job read its camera (once more per item in a batch): now once, kept with the text
+    (io.dataset.InlineK), so it costs the checks of a K file with the same numbers (one read
+    per item in a batch, the text parsed once for all); the job still holds the text, and a
+    pickled copy (a batch worker's) its matrix."""
+    import pickle
+
+    from facetlift import camera
+    from facetlift.io.dataset import InlineK, inline_value
+
+    npath, _, _ = write_input(tmp_path)
+    (tmp_path / "K.txt").write_text("50 52 13 10\n")
+    folder = tmp_path / "maps"
+    folder.mkdir()
+    for name in ("a.png", "b.png"):
+        (folder / name).write_bytes(npath.read_bytes())
+    calls = []
+    check_K = camera.check_K
+    monkeypatch.setattr(camera, "check_K", lambda *a, **k: calls.append(1) or check_K(*a, **k))
+    counts = {}
+    for K in ("50 52 13 10", tmp_path / "K.txt"):
+        for command in (("integrate", npath, "-o", tmp_path / f"o{len(counts)}"),
+                        ("batch", folder, "-o", tmp_path / f"b{len(counts)}", "--workers",
+                         1),  # (in this process, where check_K is counted)
+                        ("info", npath)):
+            calls.clear()
+            code, _, err = run(capsys, *command, "--K", K)
+            assert code == 0, err
+            counts[command[0], isinstance(K, str)] = len(calls)
+    for command, fewer in (("integrate", 0), ("info", 0), ("batch", 1)):
+        # (a batch of two reads the file for each item, the text once for both)
+        assert counts[command, True] == counts[command, False] - fewer, counts
+    typed = inline_value("50 52 13 10")
+    assert isinstance(typed, InlineK) and typed == "50 52 13 10" and inline_value(typed) is typed
+    again = pickle.loads(pickle.dumps(typed))
+    assert again == typed and np.array_equal(again.K, typed.K)
+
+
 def test_discontinuities_forwarded_or_refused(tmp_path, capsys, monkeypatch):
     npath, _, _ = write_input(tmp_path)
     without = [k for k, v in REGISTRY.items() if not v.discontinuities]

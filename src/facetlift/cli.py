@@ -162,19 +162,18 @@ def _out_dir(ctx, param, value):
 class _CameraFile(click.Path):
     """A --K value: a K file, or where no such path exists the intrinsics typed inline, four
     numbers fx fy cx cy or the nine of the matrix row by row (spaces or commas), kept as the
-    text (:func:`facetlift.io.dataset.inline_K` reads it with the job); anything else is a
-    missing file, as before (``--K "3772 3759 305.9 255.1"`` said "File ... does not exist",
-    a fresh user's review)."""
+    text with its numbers parsed once (:class:`facetlift.io.dataset.InlineK`: numbers that
+    are no valid K are refused when the job reads its camera, as a file's are); anything else
+    is a missing file, as before (``--K "3772 3759 305.9 255.1"`` said "File ... does not
+    exist", a fresh user's review)."""
 
     def convert(self, value, param, ctx):
         if isinstance(value, str) and not os.path.exists(value):
-            from .io.dataset import inline_K
+            from .io.dataset import inline_value
 
-            try:
-                if inline_K(value) is not None:
-                    return value
-            except ValueError:  # (numbers, but no valid K: said when the job reads it)
-                return value
+            inline = inline_value(value)
+            if inline is not None:
+                return inline
         return super().convert(value, param, ctx)
 
 
@@ -381,6 +380,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               no_confidence=False, strict=False):
     """A :class:`facetlift.jobs.Job` from the parsed flags (ValueError on bad values)."""
     from . import frames
+    from .io.dataset import K_value
     from .jobs import Job
 
     _methods.get(method)
@@ -433,7 +433,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
     job = Job(
         normals=None if normals is None else str(normals),
         gradients=tuple(str(g) for g in gradients) if gradients else None,
-        mask=None if mask is None else str(mask), K=None if K is None else str(K), fov=fov,
+        mask=None if mask is None else str(mask), K=K_value(K), fov=fov,
         orthographic=orthographic, normal_frame=frame,
         world_to_camera=None if world_to_camera is None else str(world_to_camera),
         camera_to_world=None if camera_to_world is None else str(camera_to_world),

@@ -165,13 +165,14 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         As the readers (unreadable file, bad frame).
     """
     from . import frames
+    from .io.dataset import K_value
     from .jobs import Job, camera_source, read, recorded_warnings, rotation_record
     from .problem import UnusableNormalsWarning, no_camera_hint, prepare
 
     job = Job(normals=None if path is None else str(path),
               gradients=tuple(str(g) for g in gradients) if gradients else None,
               mask=None if mask is None else str(mask),
-              K=None if K is None else str(K), normal_frame=normal_frame,
+              K=K_value(K), normal_frame=normal_frame,
               normal_encoding=normal_encoding, normal_range=normal_range,
               mat_keys=None if mat_keys is None else tuple(mat_keys),
               gradient_frame=gradient_frame, prior_scale=prior_scale,

@@ -58,7 +58,8 @@ class Job:
     gradients: tuple | None = None
     mask: str | None = None
     #: A K file (facetlift.io.read_K), or its numbers typed inline: "fx fy cx cy" or the
-    #: matrix's nine row by row (facetlift.io.dataset.inline_K).
+    #: matrix's nine row by row (facetlift.io.dataset.inline_K; the command line's is an
+    #: io.dataset.InlineK, the text with its numbers parsed once).
     K: str | None = None
     #: Horizontal field of view in degrees: a pinhole K with the principal point at the
     #: centre (facetlift.camera.K_from_fov), instead of a K file.

@@ -111,21 +111,29 @@ def read_K_stated(path) -> tuple[np.ndarray, tuple[int, int] | None]:
         raise ValueError(f"`{arg}`: {p}: {e}") from None
 
 
-def inline_K(value) -> np.ndarray | None:
-    """The intrinsics typed inline as a K file's place (``--K "3772 3759 305.9 255.1"``): a
-    string that is no existing path and holds four numbers ``fx fy cx cy`` or the nine of
-    the 3x3 matrix row by row, separated by spaces or commas, checked as :func:`read_K`
-    checks a file's; None for anything else (a file's path, to be read as one).
+class InlineK(str):
+    """A K typed inline (:func:`inline_value`): the text as typed, which a job keeps, names
+    and records, with its numbers parsed once: ``K`` the checked (3, 3) intrinsics, or
+    ``error`` the message of the ValueError they give (raised by :func:`inline_K`, where the
+    job reads its camera, as a file's errors are)."""
 
-    Raises
-    ------
-    ValueError
-        Four or nine numbers that are no valid intrinsics (naming `K` and the text).
-    """
+    K: np.ndarray | None = None
+    error: str | None = None
+
+
+def inline_value(value) -> InlineK | None:
+    """`value` as an :class:`InlineK` where it is intrinsics typed inline in a K file's place
+    (``--K "3772 3759 305.9 255.1"``): a string that is no existing path and holds four
+    numbers ``fx fy cx cy`` or the nine of the 3x3 matrix row by row, separated by spaces or
+    commas, parsed and checked once, as :func:`read_K` checks a file's (an :class:`InlineK`
+    is returned as it is); None for anything else (a file's path, to be read as one). The
+    command line's ``--K`` keeps it, so that the job does not parse the text again."""
     import re
 
     from ..camera import check_K
 
+    if isinstance(value, InlineK):
+        return value
     if not isinstance(value, str) or os.path.exists(value):
         return None
     words = [w for w in re.split(r"[\s,]+", value.strip()) if w]
@@ -135,10 +143,34 @@ def inline_K(value) -> np.ndarray | None:
         numbers = np.array([float(w) for w in words])
     except ValueError:
         return None
+    out = InlineK(value)
     try:
-        return check_K(numbers if numbers.size == 4 else numbers.reshape(3, 3))
+        out.K = check_K(numbers if numbers.size == 4 else numbers.reshape(3, 3))
     except ValueError as e:
-        raise ValueError(f"`K`: {value!r} (typed inline): {e}") from None
+        out.error = f"`K`: {value!r} (typed inline): {e}"
+    return out
+
+
+def inline_K(value) -> np.ndarray | None:
+    """The intrinsics typed inline as a K file's place (:func:`inline_value`), checked as
+    :func:`read_K` checks a file's; None for anything else (a file's path, to be read as
+    one).
+
+    Raises
+    ------
+    ValueError
+        Four or nine numbers that are no valid intrinsics (naming `K` and the text).
+    """
+    inline = inline_value(value)
+    if inline is not None and inline.error is not None:
+        raise ValueError(inline.error)
+    return None if inline is None else inline.K.copy()  # (one text, many jobs: their own)
+
+
+def K_value(value) -> str | None:
+    """A job's `K` (:class:`facetlift.jobs.Job`) from a ``--K`` value: a file's path as text,
+    an :class:`InlineK` as it is (its numbers parsed once), None for None."""
+    return None if value is None else value if isinstance(value, InlineK) else str(value)
 
 
 def camera_of(value, shape, of: str = "the normal map") -> np.ndarray:
