@@ -31,8 +31,8 @@ def read_K(path) -> np.ndarray:
     naming them in any order (``cx cy fx fy``); or JSON: a 3x3 list, nine or four numbers, or
     an object with ``fx``, ``fy``, ``cx``, ``cy``. A ``.npy`` file holds a (3, 3) array, nine or
     four numbers likewise. A MATLAB ``.mat`` file (v4 to v7) holds it as the variable ``KK``
-    (the calibration toolbox's ``Calib_Results.mat``, DiLiGenT's), ``K``, or its only 3x3
-    numeric variable.
+    (the calibration toolbox's ``Calib_Results.mat``, DiLiGenT's, whose ``nx`` / ``ny``
+    state its image's size: :func:`read_K_stated`), ``K``, or its only 3x3 numeric variable.
 
     Calibration tools' own files are read too (:mod:`facetlift.io._kfiles`):
 
@@ -66,10 +66,11 @@ def read_K(path) -> np.ndarray:
 
 def read_K_stated(path) -> tuple[np.ndarray, tuple[int, int] | None]:
     """:func:`read_K`'s K, and the image size (H, W) its calibration file states for the
-    camera, or None where it states none (a text K file, ``.npy``, ``.mat``): OpenCV's and
-    ROS's ``image_width`` / ``image_height``, a CameraInfo dump's ``width`` / ``height``,
-    COLMAP's WIDTH and HEIGHT, a transforms.json's ``w`` / ``h``. Where K meets a normal map,
-    :func:`facetlift.camera.check_image_size` compares the two."""
+    camera, or None where it states none (a text K file, ``.npy``, a ``.mat`` file without
+    them): OpenCV's and ROS's ``image_width`` / ``image_height``, a CameraInfo dump's
+    ``width`` / ``height``, COLMAP's WIDTH and HEIGHT, a transforms.json's ``w`` / ``h``, the
+    calibration toolbox's ``nx`` / ``ny`` (a ``Calib_Results.mat``). Where K meets a normal
+    map, :func:`facetlift.camera.check_image_size` compares the two."""
     from ..camera import check_K
 
     arg = "K"
@@ -77,7 +78,7 @@ def read_K_stated(path) -> tuple[np.ndarray, tuple[int, int] | None]:
     size = None
     try:
         if p.suffix.lower() == ".mat":  # (it was read as text: "'utf-8' codec can't decode")
-            K = _K_mat(p)
+            K, size = _K_mat(p)
         elif p.suffix.lower() == ".npy":
             K = np.load(p, allow_pickle=False)
         elif p.suffix.lower() == ".xml":  # (OpenCV FileStorage's)
@@ -192,11 +193,18 @@ def camera_of(value, shape, of: str = "the normal map") -> np.ndarray:
 #: ``Calib_Results.mat`` (Bouguet's; DiLiGenT's) holds ``KK``.
 MAT_K_NAMES = ("KK", "K")
 
+#: The variables (width, height) in which the calibration toolbox's ``Calib_Results.mat``
+#: states the calibrated image's size (``[ny, nx] = size(I)``, beside ``fc``, ``cc``,
+#: ``alpha_c``, ``kc``).
+MAT_SIZE_NAMES = ("nx", "ny")
 
-def _K_mat(p: Path) -> np.ndarray:
+
+def _K_mat(p: Path) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of a ``.mat`` file (:func:`read_K`): its variable of
     :data:`MAT_K_NAMES`, or its only 3x3 numeric one; a :class:`_KError` lists the variables
-    otherwise (a calibration's file also holds each view's 3x3 rotation, Rc_1, ...)."""
+    otherwise (a calibration's file also holds each view's 3x3 rotation, Rc_1, ...). And the
+    image size (H, W) it states in :data:`MAT_SIZE_NAMES` (two positive whole numbers), or
+    None (:func:`read_K_stated`)."""
     from .images import load_mat
 
     try:
@@ -213,7 +221,10 @@ def _K_mat(p: Path) -> np.ndarray:
         raise _KError(f"`K`: {p} must hold the 3x3 intrinsics as {' or '.join(MAT_K_NAMES)}, "
                       "or one 3x3 numeric variable; got variables "
                       + (", ".join(f"{k} ({v})" for k, v in sorted(found.items())) or "none"))
-    return square[name].astype(float)
+    # (the toolbox's 1x1 matrices as numbers; anything else is no size, as a ROS dump's 0 x 0)
+    sizes = {k: np.asarray(data[k]).item() if np.size(data[k]) == 1 else None
+             for k in MAT_SIZE_NAMES if k in data}
+    return square[name].astype(float), _kfiles._stated_size(sizes, MAT_SIZE_NAMES)
 
 
 #: The names a K file's header or JSON object may give its four numbers.
