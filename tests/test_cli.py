@@ -261,6 +261,45 @@ def test_K_typed_inline_is_forwarded(tmp_path, capsys, monkeypatch):
     assert code == 0 and "perspective (--K 50 52 13 10)" in out, err
 
 
+def test_K_typed_inline_is_parsed_once(tmp_path, capsys, monkeypatch):
+    """--K "fx fy cx cy" was parsed and checked twice, by the option's type and again when the
+    job read its camera (once more per item in a batch): now once, kept with the text
+    (io.dataset.InlineK), so it costs the checks of a K file with the same numbers (one read
+    per item in a batch, the text parsed once for all); the job still holds the text, and a
+    pickled copy (a batch worker's) its matrix."""
+    import pickle
+
+    from facetlift import camera
+    from facetlift.io.dataset import InlineK, inline_value
+
+    npath, _, _ = write_input(tmp_path)
+    (tmp_path / "K.txt").write_text("50 52 13 10\n")
+    folder = tmp_path / "maps"
+    folder.mkdir()
+    for name in ("a.png", "b.png"):
+        (folder / name).write_bytes(npath.read_bytes())
+    calls = []
+    check_K = camera.check_K
+    monkeypatch.setattr(camera, "check_K", lambda *a, **k: calls.append(1) or check_K(*a, **k))
+    counts = {}
+    for K in ("50 52 13 10", tmp_path / "K.txt"):
+        for command in (("integrate", npath, "-o", tmp_path / f"o{len(counts)}"),
+                        ("batch", folder, "-o", tmp_path / f"b{len(counts)}", "--workers",
+                         1),  # (in this process, where check_K is counted)
+                        ("info", npath)):
+            calls.clear()
+            code, _, err = run(capsys, *command, "--K", K)
+            assert code == 0, err
+            counts[command[0], isinstance(K, str)] = len(calls)
+    for command, fewer in (("integrate", 0), ("info", 0), ("batch", 1)):
+        # (a batch of two reads the file for each item, the text once for both)
+        assert counts[command, True] == counts[command, False] - fewer, counts
+    typed = inline_value("50 52 13 10")
+    assert isinstance(typed, InlineK) and typed == "50 52 13 10" and inline_value(typed) is typed
+    again = pickle.loads(pickle.dumps(typed))
+    assert again == typed and np.array_equal(again.K, typed.K)
+
+
 def test_discontinuities_forwarded_or_refused(tmp_path, capsys, monkeypatch):
     npath, _, _ = write_input(tmp_path)
     without = [k for k, v in REGISTRY.items() if not v.discontinuities]
@@ -1075,6 +1114,64 @@ def test_normal_range_unsigned_reads_a_mat_normal_map(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", tmp_path / "s.mat", "--mat-keys", "N,mask",
                        "--normal-range", "unsigned", "-o", tmp_path / "s")
     assert code == 1 and f"but {k} of its {3 * mask.sum()} components" in _one_line_error(err)
+
+
+def test_normal_range_unsigned_counts_signs_inside_a_separate_mask(tmp_path, capsys):
+    """A [0, 1] map whose background outside its mask file holds -1 (a signed fill) was
+    refused as signed normals with --normal-range unsigned: --mask, a dataset folder's
+    mask.png and batch's NAME_mask.png were read after the map, so the fill's signs were
+    counted (its own alpha and a .mat file's mask already bounded them). Now only the pixels
+    inside the mask count, for a .npy, an EXR and a .mat map; negatives inside are still
+    refused, counted there; a mask of another size still gets its own refusal."""
+    import OpenEXR
+    import scipy.io
+
+    n, v, mask = _sphere_files(tmp_path)
+    want = facetlift.integrate(n, mask).depth
+    filled = np.where(mask[..., None], v, -1.0)
+    np.save(tmp_path / "fill.npy", filled)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {k: filled[..., i].astype(np.float32)
+                               for i, k in enumerate("RGB")}) as f:
+        f.write(str(tmp_path / "fill.exr"))
+    scipy.io.savemat(tmp_path / "fill.mat", {"N": filled})
+    io.write_mask(tmp_path / "m.png", mask)
+    folder = tmp_path / "set"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", filled)
+    io.write_mask(folder / "mask.png", mask)
+    unsigned = ("--normal-range", "unsigned")
+    for i, args in enumerate(((tmp_path / "fill.npy", "--mask", tmp_path / "m.png"),
+                              (tmp_path / "fill.exr", "--mask", tmp_path / "m.png"),
+                              (tmp_path / "fill.mat", "--mat-keys", "N", "--mask",
+                               tmp_path / "m.png"),
+                              (folder,))):
+        code, _, err = run(capsys, "integrate", *args, *unsigned, "-s", "npy", "-o",
+                           tmp_path / f"o{i}")
+        assert code == 0, err
+        got = np.load(tmp_path / f"o{i}" / "depth.npy")
+        np.testing.assert_allclose(got[mask], want[mask], atol=1e-4 * np.ptp(want[mask]))
+        code, out, err = run(capsys, "info", *args, *unsigned)
+        assert code == 0 and "unusable normals: none" in out, out + err
+    # without the mask every component counts: the fill's
+    code, _, err = run(capsys, "integrate", tmp_path / "fill.npy", *unsigned, "-o",
+                       tmp_path / "no")
+    assert code == 1 and f"but {3 * (~mask).sum()} of its {3 * mask.size} components are " \
+        "negative" in _one_line_error(err)
+    # a negative inside the mask is still refused, counted among the mask's components
+    inside = filled.copy()
+    inside[mask.nonzero()[0][0], mask.nonzero()[1][0], 0] = -0.5
+    np.save(tmp_path / "inside.npy", inside)
+    code, _, err = run(capsys, "integrate", tmp_path / "inside.npy", "--mask",
+                       tmp_path / "m.png", *unsigned, "-o", tmp_path / "no")
+    assert code == 1 and f"but 1 of its {3 * mask.sum()} components are negative (down to " \
+        "-0.5)" in _one_line_error(err)
+    io.write_mask(tmp_path / "small.png", mask[:-2])
+    code, _, err = run(capsys, "integrate", tmp_path / "fill.npy", "--mask",
+                       tmp_path / "small.png", *unsigned, "-o", tmp_path / "no")
+    assert code == 1 and re.search(r"small.png has size 38x40 \(HxW\) but the normal map is "
+                                   r"40x40", _one_line_error(err))
+    assert not (tmp_path / "no").exists()
 
 
 def test_a_two_channel_map_with_blue_0_is_told_to_rebuild_z(tmp_path, capsys):

@@ -520,6 +520,45 @@ def test_a_gradient_field_is_spoken_of_as_one(tmp_path, capsys):
         facetlift.integrate_gradients(p, q)
 
 
+def test_summary_and_info_lines_count_a_gradient_fields_samples(tmp_path, capsys):
+    """The summary's "2 missing normals", info's "unusable normals", its holes "with no valid
+    normal", a .mat field's "mask: valid normals" and info's "read as opengl (x,y,z)" spoke of
+    a gradient field in a normal map's words (a review): now its samples and its layout; a
+    normal map's lines keep theirs."""
+    n = dome(24, 28)
+    p, q = facetlift.gradients_from_normals(n)
+    p[5, 5] = p[12, 14] = np.nan  # missing inside a mask; holes without one
+    p[3, 3] = np.inf  # grazing
+    np.save(tmp_path / "p.npy", p)
+    np.save(tmp_path / "q.npy", q)
+    np.save(tmp_path / "m.npy", np.ones(p.shape, bool))
+    sio.savemat(tmp_path / "g.mat", {"p": p, "q": q})
+    field = ["--gradients", tmp_path / "p.npy", tmp_path / "q.npy"]
+    code, out, err = run(capsys, "integrate", *field, "--mask", tmp_path / "m.npy",
+                         "-o", tmp_path / "a")
+    assert code == 0 and "2 missing gradient samples, 1 unusable" in out, err
+    code, out, _ = run(capsys, "info", *field, "--mask", tmp_path / "m.npy")
+    assert code == 0 and "unusable gradient samples: 2 missing, 1 grazing" in out
+    assert "read as a gradient field, --gradient-frame xy (p = dz/dx" in out
+    code, out, _ = run(capsys, "info", tmp_path / "g.mat", "--gradient-frame", "rowcol")
+    assert code == 0 and "mask: 670 pixels (valid gradients)" in out
+    assert "--gradient-frame rowcol (p = dz/d(row)" in out
+    assert "have no gradient sample (p or q not finite)" in out
+    code, out, err = run(capsys, "integrate", tmp_path / "g.mat", "-o", tmp_path / "b")
+    assert code == 0 and "(mask: valid gradients)" in out, err
+    code, out, _ = run(capsys, "info", tmp_path / "g.mat", "--json")
+    assert json.loads(out)["gradient_field"] is True
+    # a normal map keeps its words
+    np.save(tmp_path / "n.npy", np.where(np.isfinite(p)[..., None], n, np.nan))
+    code, out, err = run(capsys, "integrate", tmp_path / "n.npy", "--mask", tmp_path / "m.npy",
+                         "-o", tmp_path / "c")
+    assert code == 0 and "3 missing normals" in out and "gradient" not in out, err
+    code, out, _ = run(capsys, "info", tmp_path / "n.npy")
+    assert code == 0 and "read as opengl (x,y,z)" in out and "(valid normals)" in out
+    assert "have no valid normal" in out and "unusable normals:" in out
+    assert "gradient" not in out
+
+
 def test_info_takes_a_gradient_field_as_two_files(tmp_path, capsys):
     """info --gradients P Q describes what integrate --gradients P Q reads (it had no such
     option): its layout is checked as a .mat field's is; a map and a field together, or

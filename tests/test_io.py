@@ -1286,6 +1286,45 @@ def test_a_two_channel_exr_without_the_encoding_is_told_of_it(tmp_path):
     assert n.shape == (20, 24, 3) and np.allclose(np.linalg.norm(n, axis=-1), 1.0)
 
 
+def test_normal_range_unsigned_counts_signs_inside_the_mask_given(tmp_path):
+    """read_normals(mask=) and a dataset folder's mask.* (or read_dataset(mask=), which
+    replaces it) bound the pixels whose signs normal_range="unsigned" counts, as a file's alpha
+    does: a signed fill (-1) outside them is no signed map; a negative inside still is. A
+    mask of another size counts none (its caller refuses it)."""
+    import scipy.io
+
+    n, mask = bump_normals()
+    v = np.where(mask[..., None], (n + 1) / 2, -1.0)
+    np.save(tmp_path / "u.npy", v)
+    with pytest.raises(ValueError, match=rf"but {3 * (~mask).sum()} of its {3 * mask.size} "
+                       "components are negative"):
+        io.read_normals(tmp_path / "u.npy", normal_range="unsigned")
+    got, alpha = io.read_normals(tmp_path / "u.npy", normal_range="unsigned", mask=mask)
+    assert alpha is None and np.isnan(got[~mask]).all()
+    np.testing.assert_allclose(got[mask], n[mask], atol=1e-15)
+    got, _ = io.read_normals(tmp_path / "u.npy", normal_range="unsigned", mask=mask[:-1])
+    np.testing.assert_allclose(got[mask], n[mask], atol=1e-15)
+    for name, write in (("normal_map.npy", lambda p: np.save(p, v)),
+                        ("Normal_gt.mat", lambda p: scipy.io.savemat(p, {"Normal_gt": v}))):
+        folder = tmp_path / name.split(".")[0]
+        folder.mkdir()
+        write(folder / name)
+        with pytest.raises(ValueError, match="components are negative"):
+            io.read_dataset(folder, normal_range="unsigned")
+        ds = io.read_dataset(folder, normal_range="unsigned", mask=mask)
+        assert ds["mask"] is mask
+        np.testing.assert_allclose(ds["normals"][mask], n[mask], atol=1e-12)
+        io.write_mask(folder / "mask.png", mask)
+        ds = io.read_dataset(folder, normal_range="unsigned")
+        np.testing.assert_array_equal(ds["mask"], mask)
+        np.testing.assert_allclose(ds["normals"][mask], n[mask], atol=1e-12)
+    v[mask.nonzero()[0][0], mask.nonzero()[1][0], 1] = -0.25
+    np.save(tmp_path / "u.npy", v)
+    with pytest.raises(ValueError, match=rf"but 1 of its {3 * mask.sum()} components are "
+                       r"negative \(down to -0.25\)"):
+        io.read_normals(tmp_path / "u.npy", normal_range="unsigned", mask=mask)
+
+
 def test_a_dataset_mat_normal_map_is_decoded_unsigned_as_a_file_is(tmp_path):
     """A folder's Normal_gt.mat stored in [0, 1] reads as its normals with
     normal_range="unsigned"; with encoding="xy" x and y alone are decoded (its third channel,

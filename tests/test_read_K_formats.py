@@ -539,3 +539,62 @@ def test_a_calibration_of_another_image_size_is_refused(tmp_path, capsys):
     assert main(["integrate", str(folder), "-s", "npy", "-o", str(tmp_path / "d")]) == 1
     assert (f"NORMALS: {folder / 'K.txt'} is the calibration of a 52 x 40 image"
             in capsys.readouterr().err)
+
+
+def bouguet_mat(path, nx, ny, fc=(40.0, 42.0), cc=(12.5, 9.5)):
+    """A Calib_Results.mat as the Camera Calibration Toolbox saves it: KK with fc, cc,
+    alpha_c, kc beside it, the calibrated image's size nx (width) and ny (height) as 1x1
+    matrices (left out where None), and a view's rotation (another 3x3)."""
+    from scipy import io as sio
+
+    KK = np.array([[fc[0], 0.0, cc[0]], [0.0, fc[1], cc[1]], [0.0, 0.0, 1.0]])
+    data = {"KK": KK, "fc": np.array([[fc[0]], [fc[1]]]), "cc": np.array([[cc[0]], [cc[1]]]),
+            "alpha_c": 0.0, "kc": np.zeros((5, 1)), "Rc_1": np.eye(3)}
+    data.update({k: v for k, v in (("nx", nx), ("ny", ny)) if v is not None})
+    sio.savemat(path, data)
+    return KK
+
+
+def test_a_calibration_toolbox_mat_states_its_image_size(tmp_path, capsys):
+    """A Bouguet Calib_Results.mat states its image's size (nx, ny), which was not read: a
+    calibration of another image size passed, as no other calibration file does. Now read
+    (read_K_stated), and checked as the other files' sizes are: --K, info, evaluate, a
+    dataset folder's Calib_Results.mat; without nx, ny (or not two whole numbers) no size, as
+    before."""
+    from test_cli import write_input
+
+    from facetlift.io.dataset import read_K_stated
+
+    npath, mpath, _ = write_input(tmp_path)  # (20 x 26)
+    same = bouguet_mat(tmp_path / "same.mat", 26, 20)
+    bouguet_mat(tmp_path / "big.mat", 52, 40, fc=(80.0, 84.0), cc=(25.5, 19.5))
+    bouguet_mat(tmp_path / "none.mat", None, None)
+    bouguet_mat(tmp_path / "odd.mat", 26.5, 20)
+    bouguet_mat(tmp_path / "two.mat", np.array([26, 26]), 20)
+    K_, size = read_K_stated(tmp_path / "same.mat")
+    np.testing.assert_array_equal(K_, same)
+    assert size == (20, 26) and read_K_stated(tmp_path / "big.mat")[1] == (40, 52)
+    for name in ("none.mat", "odd.mat", "two.mat"):
+        assert read_K_stated(tmp_path / name)[1] is None, name
+    base = ["integrate", str(npath), "--mask", str(mpath), "-s", "npy"]
+    assert main([*base, "--K", str(tmp_path / "big.mat"), "-o", str(tmp_path / "a")]) == 1
+    err = capsys.readouterr().err
+    assert (f"--K: {tmp_path / 'big.mat'} is the calibration of a 52 x 40 image (W x H) but "
+            "the normal map is 26 x 20: it looks like that image downsampled 2x") in err
+    assert "fx fy cx cy = 40 42 12.5 9.5 " in err and not (tmp_path / "a").exists()
+    for name in ("same.mat", "none.mat"):
+        assert main([*base, "--K", str(tmp_path / name), "-o", str(tmp_path / name[:-4])]) == 0
+    capsys.readouterr()
+    assert main(["info", str(npath), "--K", str(tmp_path / "big.mat")]) == 1
+    assert "downsampled 2x" in capsys.readouterr().err
+    depth = str(tmp_path / "same" / "depth.npy")
+    assert main(["evaluate", depth, "--gt", depth, "--K", str(tmp_path / "big.mat")]) == 1
+    assert "but the result is 26 x 20" in capsys.readouterr().err
+    # a dataset folder's Calib_Results.mat
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    write_input(folder, name="normal_map.png")
+    (tmp_path / "big.mat").rename(folder / "Calib_Results.mat")
+    assert main(["integrate", str(folder), "-s", "npy", "-o", str(tmp_path / "d")]) == 1
+    assert (f"{folder / 'Calib_Results.mat'} is the calibration of a 52 x 40 image"
+            in capsys.readouterr().err)

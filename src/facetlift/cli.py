@@ -162,19 +162,18 @@ def _out_dir(ctx, param, value):
 class _CameraFile(click.Path):
     """A --K value: a K file, or where no such path exists the intrinsics typed inline, four
     numbers fx fy cx cy or the nine of the matrix row by row (spaces or commas), kept as the
-    text (:func:`facetlift.io.dataset.inline_K` reads it with the job); anything else is a
-    missing file, as before (``--K "3772 3759 305.9 255.1"`` said "File ... does not exist",
-    a fresh user's review)."""
+    text with its numbers parsed once (:class:`facetlift.io.dataset.InlineK`: numbers that
+    are no valid K are refused when the job reads its camera, as a file's are); anything else
+    is a missing file, as before (``--K "3772 3759 305.9 255.1"`` said "File ... does not
+    exist", a fresh user's review)."""
 
     def convert(self, value, param, ctx):
         if isinstance(value, str) and not os.path.exists(value):
-            from .io.dataset import inline_K
+            from .io.dataset import inline_value
 
-            try:
-                if inline_K(value) is not None:
-                    return value
-            except ValueError:  # (numbers, but no valid K: said when the job reads it)
-                return value
+            inline = inline_value(value)
+            if inline is not None:
+                return inline
         return super().convert(value, param, ctx)
 
 
@@ -381,6 +380,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               no_confidence=False, strict=False):
     """A :class:`facetlift.jobs.Job` from the parsed flags (ValueError on bad values)."""
     from . import frames
+    from .io.dataset import K_value
     from .jobs import Job
 
     _methods.get(method)
@@ -433,7 +433,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
     job = Job(
         normals=None if normals is None else str(normals),
         gradients=tuple(str(g) for g in gradients) if gradients else None,
-        mask=None if mask is None else str(mask), K=None if K is None else str(K), fov=fov,
+        mask=None if mask is None else str(mask), K=K_value(K), fov=fov,
         orthographic=orthographic, normal_frame=frame,
         world_to_camera=None if world_to_camera is None else str(world_to_camera),
         camera_to_world=None if camera_to_world is None else str(camera_to_world),
@@ -473,6 +473,14 @@ def _progress_total(job) -> int | None:
     if job.options.get("discontinuities"):
         return None
     return job.options.get("max_iter")
+
+
+def _samples(field: bool, count: int = 2) -> str:
+    """What a pixel's input value is called in the summary and ``info`` lines: a normal, or
+    for a gradient field (`field`) a gradient sample (as :mod:`facetlift.problem`'s warnings
+    name them); plural unless `count` is 1."""
+    word = "gradient sample" if field else "normal"
+    return word if count == 1 else f"{word}s"
 
 
 def summary(record: dict) -> str:
@@ -516,9 +524,10 @@ def summary(record: dict) -> str:
         if removed:
             parts.append(f"{removed} prior outlier{'s' if removed != 1 else ''} left out")
         if fit:  # (its depth keeps the normals' units: not metric, a user's check)
+            units = "gradient field's" if record.get("gradient_field") else "normals'"
             parts.append(f"prior aligned by --prior-fit {fit.get('kind')} ({fit.get('method')}: "
                          f"scale {fit.get('scale'):.4g}, shift {fit.get('shift'):.4g}; the depth "
-                         "keeps the normals' units, not the prior's)")
+                         f"keeps the {units} units, not the prior's)")
     cut = info.get("cut_pieces") or 0
     if cut > 0:  # (docs/results.md, "What the remaining error is")
         held = (isinstance(prior, dict) and not prior.get("left_out")
@@ -529,7 +538,7 @@ def summary(record: dict) -> str:
     counts = info.get("input") or {}
     missing = counts.get("missing") or 0
     if missing:  # (NaN inside the mask: no warning, being the documented way to say it)
-        parts.append(f"{missing} missing normal{'s' if missing != 1 else ''}")
+        parts.append(f"{missing} missing {_samples(record.get('gradient_field'), missing)}")
     unusable = sum(counts.get(k) or 0 for k in ("non-finite", "zero-length", "back-facing",
                                                  "grazing", "isolated"))
     if unusable:
@@ -815,24 +824,26 @@ def _info_lines(rec: dict) -> list[str]:
         lines.append(f"  cannot be integrated as read: {_as_flags(rec['problem'])}")
         return lines
     c = rec["counts"]
+    field = rec.get("gradient_field")
     lines.append(f"  mask: {rec['mask_pixels']} pixels ({rec['mask_source']}), "
                  f"{rec['components']} component(s)")
     # (both as integrate counts them, problem.enclosed_gaps: the small ones are what its
-    # warning names, the larger ones taken for real holes)
+    # warning names, the larger ones taken for real holes; a gradient field's in its words)
+    valid = "gradient sample (p or q not finite)" if field else "valid normal"
     if rec.get("holes"):
         lines.append(f"  holes: {rec['holes']} pixels enclosed by the object, in holes of at "
-                     f"most {HOLE_PIXELS} pixels, have no valid normal and are left out (NaN / "
+                     f"most {HOLE_PIXELS} pixels, have no {valid} and are left out (NaN / "
                      "background fill inside, or a small real hole: a mask, --mask, integrates "
                      "across those as missing samples)")
     if rec.get("larger_holes"):
         lines.append(f"  larger holes: {rec['larger_holes']} pixels in enclosed regions of more "
-                     f"than {HOLE_PIXELS} pixels without a valid normal, left out as real holes "
+                     f"than {HOLE_PIXELS} pixels without a {valid}, left out as real holes "
                      "(a ring's; if they are NaN / background fill inside the object, a mask, "
                      "--mask, integrates across them as missing samples)")
     bad = ", ".join(f"{c[k]} {k}" for k in ("missing", "non-finite", "zero-length",
                                             "back-facing", "grazing") if c.get(k))
     first = rec.get("first_unusable")
-    lines.append(f"  unusable normals: {bad or 'none'}"
+    lines.append(f"  unusable {_samples(field)}: {bad or 'none'}"
                  + (f"; first at (row {first[0]}, col {first[1]})" if first else ""))
     if rec.get("camera_hint"):
         lines.append(f"  without a camera: {rec['camera_hint']}")

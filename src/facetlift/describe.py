@@ -165,13 +165,14 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         As the readers (unreadable file, bad frame).
     """
     from . import frames
+    from .io.dataset import K_value
     from .jobs import Job, camera_source, read, recorded_warnings, rotation_record
     from .problem import UnusableNormalsWarning, no_camera_hint, prepare
 
     job = Job(normals=None if path is None else str(path),
               gradients=tuple(str(g) for g in gradients) if gradients else None,
               mask=None if mask is None else str(mask),
-              K=None if K is None else str(K), normal_frame=normal_frame,
+              K=K_value(K), normal_frame=normal_frame,
               normal_encoding=normal_encoding, normal_range=normal_range,
               mat_keys=None if mat_keys is None else tuple(mat_keys),
               gradient_frame=gradient_frame, prior_scale=prior_scale,
@@ -223,6 +224,8 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
                  normal_rotation=rotation_record(job, inp),
                  K=None if inp.K is None else inp.K.tolist(),
                  projection="perspective" if inp.K is not None else "orthographic",
+                 # (a gradient field, not a normal map: info's lines name its samples)
+                 gradient_field=bool(inp.field),
                  # (where K came from, as integrate's summary says: a DiLiGenT folder's is
                  # its parent's Calib_Results.mat, which info did not name, a second audit)
                  camera=camera_source(job, inp))
@@ -231,7 +234,8 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         out.update(usable=False, problem=str(e),
                    frame=_frame_guess(n, inp.mask, inp.K, frame=normal_frame, layout=layout,
                                       normal_range=frames.normal_range(normal_range),
-                                      field=inp.field, rotation=turn))
+                                      field=inp.field, gradient_frame=gradient_frame,
+                                      rotation=turn))
         return out
 
     from .prior_fit import check as check_fit
@@ -296,7 +300,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
             w.category, UnusableNormalsWarning)],
         frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame, layout=layout,
                            normal_range=frames.normal_range(normal_range),
-                           field=inp.field, rotation=turn),
+                           field=inp.field, gradient_frame=gradient_frame, rotation=turn),
         estimate=_twice(estimate(problem), fitted),
         # (what --discontinuities would need: a user planning a large job asked)
         estimate_discontinuities=_twice(estimate(problem, "dgp", discontinuities=True),
@@ -388,16 +392,24 @@ def _file_facts(src: Path) -> dict:
 
 
 def _frame_guess(n, mask, K, problem=None, *, frame=None, layout=None,
-                 field: bool = False, rotation=None, normal_range: str = "signed") -> dict:
+                 field: bool = False, gradient_frame: str = "xy", rotation=None,
+                 normal_range: str = "signed") -> dict:
     """Whether the frame the map was read in looks right, from the view direction and the
     integrability; ``likely`` says what to change. `layout`: the other gradient layout, where
     the field was read in the wrong one (:class:`facetlift.frames.LayoutWarning`), which
     ``likely`` then names: its normals are in no frame that a flip would fix. `rotation`
     (3, 3): world-space normals' turn into the camera frame, in facetlift's axes
     (:func:`facetlift.frames.rotation_in_facetlift`). `normal_range`: the range the map was
-    read with (an ``"unsigned"`` map still in [0, 1] is not told to give that flag)."""
+    read with (an ``"unsigned"`` map still in [0, 1] is not told to give that flag). `field`:
+    the normals were made from a gradient field in the layout `gradient_frame`, which
+    ``as_read`` names instead of a normal frame."""
+    from . import frames
+
     guess = _frame_evidence(n, mask, K, problem, frame=frame, field=field, rotation=rotation,
                             normal_range=normal_range)
+    if field:  # (no normal frame was given: "read as opengl (x,y,z)" was a normal map's words)
+        g = frames.gradient_frame(gradient_frame)
+        guess["as_read"] = f"a gradient field, --gradient-frame {g} ({frames.GRADIENT_FRAMES[g]})"
     if layout is not None:
         guess["likely"] = (f"the other gradient layout: --gradient-frame {layout} "
                            f"(gradient_frame='{layout}')")

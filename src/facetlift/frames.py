@@ -509,8 +509,10 @@ def decode_unsigned(values: np.ndarray, what: str, where=None, channels: int = 3
     3 channels, a length outside :data:`ENCODED_LENGTH_RANGE` (black, white or mid-grey fill);
     with 2 (x, y alone, z rebuilt after), x, y longer than unit length by more than
     :data:`UNIT_TOLERANCE`. NaN stays NaN. `what` names the input in the messages (a path,
-    with its argument), `where` ((H, W) bool, the alpha mask) the pixels whose signs are
-    counted (every pixel where None or of another shape).
+    with its argument), `where` ((H, W) bool: the alpha, or a mask given apart from the map)
+    the pixels whose components are checked (every pixel where None; none where of another
+    shape: a mask file of another size, which its reader's caller refuses naming the file,
+    where a refusal of the fill outside it would mislead).
 
     Raises
     ------
@@ -529,7 +531,8 @@ def decode_unsigned(values: np.ndarray, what: str, where=None, channels: int = 3
                          f"this one {kind}: leave it out")
     v = v[..., :channels]
     w = None if where is None else np.asarray(where)
-    inside = v if w is None or w.shape != v.shape[:2] else v[w.astype(bool)]
+    inside = (v if w is None else v[w.astype(bool)] if w.shape == v.shape[:2]
+              else np.empty((0, v.shape[-1]), v.dtype))
     with np.errstate(invalid="ignore"):
         negative = inside < -UNSIGNED_SLACK
     count = int(np.count_nonzero(negative))

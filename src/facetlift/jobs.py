@@ -58,7 +58,8 @@ class Job:
     gradients: tuple | None = None
     mask: str | None = None
     #: A K file (facetlift.io.read_K), or its numbers typed inline: "fx fy cx cy" or the
-    #: matrix's nine row by row (facetlift.io.dataset.inline_K).
+    #: matrix's nine row by row (facetlift.io.dataset.inline_K; the command line's is an
+    #: io.dataset.InlineK, the text with its numbers parsed once).
     K: str | None = None
     #: Horizontal field of view in degrees: a pinhole K with the principal point at the
     #: centre (facetlift.camera.K_from_fov), instead of a K file.
@@ -251,6 +252,9 @@ def read(job: Job) -> Input:
     if job.gradients and signs != "signed":
         raise ValueError(f"`normal_range` {signs!r} applies to a normal map; a gradient "
                          "field (--gradients P Q) stores slopes: leave it out")
+    # (read before the map, its size checked after: an "unsigned" map's signs are counted
+    # inside it, and a fill outside it was refused as signed normals, a review)
+    given = None if job.mask is None else io.read_mask(job.mask)
     if job.gradients:
         g = read_gradients(*job.gradients)
         (n, layout), m, source = _normals_from_field(g, job), g["mask"], "valid gradients"
@@ -267,13 +271,15 @@ def read(job: Job) -> Input:
         else:
             n = g["normals"]
             if signs == "unsigned":
-                n = frames.decode_unsigned(n, f"`path`: {src}", g["mask"],
+                n = frames.decode_unsigned(n, f"`path`: {src}",
+                                           g["mask"] if given is None else given,
                                            2 if encoding == "xy" else 3)
             if encoding == "xy":
                 n = frames.decode_xy(n, frame=job.normal_frame)
             n = frames.to_facetlift(n, job.normal_frame)
         m = g["mask"]
-        source = f"{src.name} mask" if m is not None else "valid normals"
+        source = (f"{src.name} mask" if m is not None else
+                  "valid gradients" if field_input else "valid normals")
         if not field_input and src.name == DILIGENT_NORMALS:  # (its folder's files)
             _beside_dataset_files(src, job, own_mask=m is not None)
         elif not field_input and job.unread_beside:
@@ -284,7 +290,7 @@ def read(job: Job) -> Input:
                              with_prior=job.dataset_prior and job.prior is None,
                              with_confidence=job.dataset_confidence and job.confidence is None,
                              with_rotation=given_rotation is None, encoding=encoding,
-                             normal_range=signs)
+                             normal_range=signs, mask=given)
         n, m, K = ds["normals"], ds["mask"], ds["K"]
         if ds["rotation"] is not None:
             rotation, rotation_file = ds["rotation"], f"the folder's {ds['rotation_file'].name}"
@@ -299,7 +305,7 @@ def read(job: Job) -> Input:
     else:
         # (no word on an alpha that --mask replaces)
         n, m = io.read_normals(src, frame=job.normal_frame, check_alpha=job.mask is None,
-                               encoding=encoding, normal_range=signs)
+                               encoding=encoding, normal_range=signs, mask=given)
         source = "alpha channel" if m is not None else "valid normals"
         _beside_dataset_files(src, job)
         if job.unread_beside and src.stem.lower() != "normal_map":
@@ -318,9 +324,11 @@ def read(job: Job) -> Input:
         warn(f"`gradient_frame` {job.gradient_frame!r} applies to a gradient field "
              f"(--gradients P Q, or a .mat file holding p and q); {src.name} is a normal map, "
              "whose frame is --normal-frame: it is ignored here")
-    if job.mask is not None:
-        m = io.read_mask(job.mask, n.shape[:2],
-                         of="the gradient field" if field_input else "the normal map")
+    if given is not None:
+        from .io.images import check_mask_size
+
+        m = check_mask_size(given, Path(job.mask), n.shape[:2],
+                            of="the gradient field" if field_input else "the normal map")
         source = str(job.mask)
     if job.K is not None:  # (a file, or fx fy cx cy typed inline)
         from .io.dataset import camera_of
@@ -894,6 +902,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         # height splits into one per brick, all at mean depth 0, a second audit)
         "components": _components(surface.mask),
         "mask_source": inp.mask_source,
+        # (the input was a gradient field, not a normal map: the summary counts its samples)
+        "gradient_field": inp.field,
         "perspective": surface.K is not None,
         # (where the camera came from, for the summary: K, a field of view, a dataset's K.txt)
         "camera": camera_source(job, inp) if surface.K is not None else "orthographic",

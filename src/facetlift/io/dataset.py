@@ -16,6 +16,7 @@ from .images import (
     NORMAL_READ_FORMATS,
     _loadtxt_reason,
     _text_rows,
+    check_mask_size,
     read_mask,
     read_normals,
 )
@@ -30,8 +31,8 @@ def read_K(path) -> np.ndarray:
     naming them in any order (``cx cy fx fy``); or JSON: a 3x3 list, nine or four numbers, or
     an object with ``fx``, ``fy``, ``cx``, ``cy``. A ``.npy`` file holds a (3, 3) array, nine or
     four numbers likewise. A MATLAB ``.mat`` file (v4 to v7) holds it as the variable ``KK``
-    (the calibration toolbox's ``Calib_Results.mat``, DiLiGenT's), ``K``, or its only 3x3
-    numeric variable.
+    (the calibration toolbox's ``Calib_Results.mat``, DiLiGenT's, whose ``nx`` / ``ny``
+    state its image's size: :func:`read_K_stated`), ``K``, or its only 3x3 numeric variable.
 
     Calibration tools' own files are read too (:mod:`facetlift.io._kfiles`):
 
@@ -65,10 +66,11 @@ def read_K(path) -> np.ndarray:
 
 def read_K_stated(path) -> tuple[np.ndarray, tuple[int, int] | None]:
     """:func:`read_K`'s K, and the image size (H, W) its calibration file states for the
-    camera, or None where it states none (a text K file, ``.npy``, ``.mat``): OpenCV's and
-    ROS's ``image_width`` / ``image_height``, a CameraInfo dump's ``width`` / ``height``,
-    COLMAP's WIDTH and HEIGHT, a transforms.json's ``w`` / ``h``. Where K meets a normal map,
-    :func:`facetlift.camera.check_image_size` compares the two."""
+    camera, or None where it states none (a text K file, ``.npy``, a ``.mat`` file without
+    them): OpenCV's and ROS's ``image_width`` / ``image_height``, a CameraInfo dump's
+    ``width`` / ``height``, COLMAP's WIDTH and HEIGHT, a transforms.json's ``w`` / ``h``, the
+    calibration toolbox's ``nx`` / ``ny`` (a ``Calib_Results.mat``). Where K meets a normal
+    map, :func:`facetlift.camera.check_image_size` compares the two."""
     from ..camera import check_K
 
     arg = "K"
@@ -76,7 +78,7 @@ def read_K_stated(path) -> tuple[np.ndarray, tuple[int, int] | None]:
     size = None
     try:
         if p.suffix.lower() == ".mat":  # (it was read as text: "'utf-8' codec can't decode")
-            K = _K_mat(p)
+            K, size = _K_mat(p)
         elif p.suffix.lower() == ".npy":
             K = np.load(p, allow_pickle=False)
         elif p.suffix.lower() == ".xml":  # (OpenCV FileStorage's)
@@ -110,21 +112,29 @@ def read_K_stated(path) -> tuple[np.ndarray, tuple[int, int] | None]:
         raise ValueError(f"`{arg}`: {p}: {e}") from None
 
 
-def inline_K(value) -> np.ndarray | None:
-    """The intrinsics typed inline as a K file's place (``--K "3772 3759 305.9 255.1"``): a
-    string that is no existing path and holds four numbers ``fx fy cx cy`` or the nine of
-    the 3x3 matrix row by row, separated by spaces or commas, checked as :func:`read_K`
-    checks a file's; None for anything else (a file's path, to be read as one).
+class InlineK(str):
+    """A K typed inline (:func:`inline_value`): the text as typed, which a job keeps, names
+    and records, with its numbers parsed once: ``K`` the checked (3, 3) intrinsics, or
+    ``error`` the message of the ValueError they give (raised by :func:`inline_K`, where the
+    job reads its camera, as a file's errors are)."""
 
-    Raises
-    ------
-    ValueError
-        Four or nine numbers that are no valid intrinsics (naming `K` and the text).
-    """
+    K: np.ndarray | None = None
+    error: str | None = None
+
+
+def inline_value(value) -> InlineK | None:
+    """`value` as an :class:`InlineK` where it is intrinsics typed inline in a K file's place
+    (``--K "3772 3759 305.9 255.1"``): a string that is no existing path and holds four
+    numbers ``fx fy cx cy`` or the nine of the 3x3 matrix row by row, separated by spaces or
+    commas, parsed and checked once, as :func:`read_K` checks a file's (an :class:`InlineK`
+    is returned as it is); None for anything else (a file's path, to be read as one). The
+    command line's ``--K`` keeps it, so that the job does not parse the text again."""
     import re
 
     from ..camera import check_K
 
+    if isinstance(value, InlineK):
+        return value
     if not isinstance(value, str) or os.path.exists(value):
         return None
     words = [w for w in re.split(r"[\s,]+", value.strip()) if w]
@@ -134,10 +144,34 @@ def inline_K(value) -> np.ndarray | None:
         numbers = np.array([float(w) for w in words])
     except ValueError:
         return None
+    out = InlineK(value)
     try:
-        return check_K(numbers if numbers.size == 4 else numbers.reshape(3, 3))
+        out.K = check_K(numbers if numbers.size == 4 else numbers.reshape(3, 3))
     except ValueError as e:
-        raise ValueError(f"`K`: {value!r} (typed inline): {e}") from None
+        out.error = f"`K`: {value!r} (typed inline): {e}"
+    return out
+
+
+def inline_K(value) -> np.ndarray | None:
+    """The intrinsics typed inline as a K file's place (:func:`inline_value`), checked as
+    :func:`read_K` checks a file's; None for anything else (a file's path, to be read as
+    one).
+
+    Raises
+    ------
+    ValueError
+        Four or nine numbers that are no valid intrinsics (naming `K` and the text).
+    """
+    inline = inline_value(value)
+    if inline is not None and inline.error is not None:
+        raise ValueError(inline.error)
+    return None if inline is None else inline.K.copy()  # (one text, many jobs: their own)
+
+
+def K_value(value) -> str | None:
+    """A job's `K` (:class:`facetlift.jobs.Job`) from a ``--K`` value: a file's path as text,
+    an :class:`InlineK` as it is (its numbers parsed once), None for None."""
+    return None if value is None else value if isinstance(value, InlineK) else str(value)
 
 
 def camera_of(value, shape, of: str = "the normal map") -> np.ndarray:
@@ -159,11 +193,18 @@ def camera_of(value, shape, of: str = "the normal map") -> np.ndarray:
 #: ``Calib_Results.mat`` (Bouguet's; DiLiGenT's) holds ``KK``.
 MAT_K_NAMES = ("KK", "K")
 
+#: The variables (width, height) in which the calibration toolbox's ``Calib_Results.mat``
+#: states the calibrated image's size (``[ny, nx] = size(I)``, beside ``fc``, ``cc``,
+#: ``alpha_c``, ``kc``).
+MAT_SIZE_NAMES = ("nx", "ny")
 
-def _K_mat(p: Path) -> np.ndarray:
+
+def _K_mat(p: Path) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of a ``.mat`` file (:func:`read_K`): its variable of
     :data:`MAT_K_NAMES`, or its only 3x3 numeric one; a :class:`_KError` lists the variables
-    otherwise (a calibration's file also holds each view's 3x3 rotation, Rc_1, ...)."""
+    otherwise (a calibration's file also holds each view's 3x3 rotation, Rc_1, ...). And the
+    image size (H, W) it states in :data:`MAT_SIZE_NAMES` (two positive whole numbers), or
+    None (:func:`read_K_stated`)."""
     from .images import load_mat
 
     try:
@@ -180,7 +221,10 @@ def _K_mat(p: Path) -> np.ndarray:
         raise _KError(f"`K`: {p} must hold the 3x3 intrinsics as {' or '.join(MAT_K_NAMES)}, "
                       "or one 3x3 numeric variable; got variables "
                       + (", ".join(f"{k} ({v})" for k, v in sorted(found.items())) or "none"))
-    return square[name].astype(float)
+    # (the toolbox's 1x1 matrices as numbers; anything else is no size, as a ROS dump's 0 x 0)
+    sizes = {k: np.asarray(data[k]).item() if np.size(data[k]) == 1 else None
+             for k in MAT_SIZE_NAMES if k in data}
+    return square[name].astype(float), _kfiles._stated_size(sizes, MAT_SIZE_NAMES)
 
 
 #: The names a K file's header or JSON object may give its four numbers.
@@ -478,11 +522,11 @@ def _read_camera(paths: list[Path], shape=None) -> np.ndarray | None:
 
 
 def _read_mat_normals(p: Path, frame: str | None, encoding: str = "xyz",
-                      normal_range: str = "signed") -> np.ndarray:
+                      normal_range: str = "signed", mask=None) -> np.ndarray:
     """The (H, W, 3) normals of a DiLiGenT ``Normal_gt.mat``: its variable ``Normal_gt``, or
     its only (H, W, 3) numeric one, converted from `frame` (decoded as ``2 v - 1`` first with
-    ``normal_range="unsigned"``, then z rebuilt with ``encoding="xy"``, as
-    :func:`facetlift.io.read_normals` does)."""
+    ``normal_range="unsigned"``, its signs counted inside `mask`, then z rebuilt with
+    ``encoding="xy"``, as :func:`facetlift.io.read_normals` does)."""
     from .. import frames
     from .images import load_mat
 
@@ -501,7 +545,7 @@ def _read_mat_normals(p: Path, frame: str | None, encoding: str = "xyz",
     n = maps[name]
     if normal_range == "unsigned":  # (refuses an integer variable; x, y alone for "xy", as
         # a file's: its third channel counted in the length made flat normals NaN, a review)
-        n = frames.decode_unsigned(n, f"`folder`: {p}'s {name}",
+        n = frames.decode_unsigned(n, f"`folder`: {p}'s {name}", mask,
                                    channels=2 if encoding == "xy" else 3)
     n = n.astype(np.float64)
     if encoding == "xy":
@@ -555,7 +599,7 @@ def one_channel(p: Path) -> bool:
 def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                  prior_scale: float | None = None, with_prior: bool = True,
                  with_confidence: bool = True, with_rotation: bool = True,
-                 encoding: str = "xyz", normal_range: str = "signed") -> dict:
+                 encoding: str = "xyz", normal_range: str = "signed", mask=None) -> dict:
     """Read a folder in the BiNI / DiLiGenT layout.
 
     The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
@@ -580,7 +624,11 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     from world to the camera frame `frame` names) or ``camera_to_world.*`` (the camera's
     pose, Blender's ``matrix_world``: transposed), as ``.txt``, ``.json`` or ``.npy``
     (:func:`read_rotation`), are picked up like ``K.txt`` too (one of them; `with_rotation`
-    False leaves them unread).
+    False leaves them unread). `mask` ((H, W) bool, optional): a mask given in place of the
+    folder's ``mask.*`` (``facetlift integrate FOLDER --mask M``), which is then not read; it
+    is returned as ``mask``, and as :func:`~facetlift.io.read_normals`' `mask` its pixels are
+    those whose components ``normal_range="unsigned"`` counts (its size is the caller's to
+    check: the command line names its file).
 
     Returns
     -------
@@ -611,19 +659,26 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     npath = normals_file(f)
     if npath is None:
         raise ValueError(_no_normals(f))
-    mpath = _find(f, "mask", formats["mask"])
+    mpath = _find(f, "mask", formats["mask"]) if mask is None else None
+    # (read before the map: an "unsigned" map's signs are counted inside it, not in a fill
+    # outside it, a review)
+    if mpath is not None:
+        mask = read_mask(mpath)
     if npath.suffix.lower() == ".mat":
         from .. import frames
 
         normals = _read_mat_normals(npath, frames.resolve(frame, y_down),
                                     frames.normal_encoding(encoding),
-                                    frames.normal_range(normal_range))
+                                    frames.normal_range(normal_range), mask)
         alpha = None
     else:  # (the folder's mask replaces the map's alpha: no word on the alpha then)
         normals, alpha = read_normals(npath, frame=frame, y_down=y_down,
-                                      check_alpha=mpath is None, encoding=encoding,
-                                      normal_range=normal_range)
-    mask = read_mask(mpath, normals.shape[:2]) if mpath is not None else alpha
+                                      check_alpha=mask is None, encoding=encoding,
+                                      normal_range=normal_range, mask=mask)
+    if mpath is not None:
+        mask = check_mask_size(mask, mpath, normals.shape)
+    elif mask is None:
+        mask = alpha
     kpaths = camera_files(f)
     K = _read_camera(kpaths, normals.shape[:2])
     rotation, rpath = _read_folder_rotation(f) if with_rotation else (None, None)

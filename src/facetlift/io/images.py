@@ -182,17 +182,19 @@ def _check_png_normals(data: bytes, path: Path, arg: str) -> None:
 
 
 def _decode_unit(pixels: np.ndarray, path: Path, arg: str, where=None, encoding: str = "xyz",
-                 frame=None, normal_range: str = "signed") -> np.ndarray:
+                 frame=None, normal_range: str = "signed", counted=None) -> np.ndarray:
     """uint8/uint16 -> [-1, 1] per channel (:func:`facetlift.frames.decode`, its unit-length
     check among `where`, the alpha mask); float passes through, or with `normal_range`
     ``"unsigned"`` is decoded as ``2 v - 1`` (:func:`facetlift.frames.decode_unsigned`, which
-    refuses an integer map); other dtypes are refused. `encoding` ``"xy"``: x and y alone, z
+    refuses an integer map, and counts the signs among `counted`, a mask given apart from the
+    file, else among `where`); other dtypes are refused. `encoding` ``"xy"``: x and y alone, z
     rebuilt to face the viewer in `frame` (:func:`facetlift.frames.decode_xy`)."""
     # (another pixel type is refused below as it is without the option: the type is wrong)
     if normal_range == "unsigned" and (pixels.dtype.kind == "f"
                                        or pixels.dtype in frames.ENCODED_DTYPES):
-        pixels = frames.decode_unsigned(pixels, f"`{arg}`: {path}", where,  # (refuses 8/16
-                                        2 if encoding == "xy" else 3)  # bits)
+        pixels = frames.decode_unsigned(  # (refuses 8/16 bits)
+            pixels, f"`{arg}`: {path}", where if counted is None else counted,
+            2 if encoding == "xy" else 3)
         return frames.decode_xy(pixels, frame=frame) if encoding == "xy" else pixels
     if encoding == "xy" and (pixels.dtype in frames.ENCODED_DTYPES or pixels.dtype.kind == "f"):
         return frames.decode_xy(pixels, where=where, frame=frame)
@@ -330,7 +332,7 @@ def _alpha_levels(alpha: np.ndarray, m: np.ndarray, p, arg: str) -> None:
 
 def read_normals(
     path, *, frame: str | None = None, y_down: bool = False, check_alpha: bool = True,
-    encoding: str = "xyz", normal_range: str = "signed",
+    encoding: str = "xyz", normal_range: str = "signed", mask=None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Read a normal map.
 
@@ -369,6 +371,11 @@ def read_normals(
         decoded vector that holds no normal (black, white or mid-grey fill) is NaN
         (:func:`facetlift.frames.decode_unsigned`). 8/16-bit maps are always decoded from
         their integer range and refuse it.
+    mask : (H, W) array_like of bool, optional
+        The object's mask where it is given apart from the file (a mask file's: ``--mask``, a
+        dataset folder's ``mask.*``), which replaces the alpha: ``"unsigned"`` counts the
+        components inside it alone, so a fill outside it may hold anything (with a mask of
+        another size none is counted: the caller's size check refuses it, naming its file).
 
     Returns
     -------
@@ -406,7 +413,7 @@ def read_normals(
         rgb, alpha = _split_alpha(pixels, p, arg, check_alpha, encoding)
         if rgb.shape[-1] == 3:  # (R = G = B: no two-channel map's sign)
             frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
-        n = _decode_unit(rgb, p, arg, alpha, encoding, frame, normal_range)
+        n = _decode_unit(rgb, p, arg, alpha, encoding, frame, normal_range, mask)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
         names, alpha_name = _exr_normal_channels(ch, p, arg, 2 if encoding == "xy" else 3)
@@ -421,7 +428,8 @@ def read_normals(
                  else None)
         frames.grey_check(n, alpha, f"`{arg}`: {p}")
         if normal_range == "unsigned":
-            n = frames.decode_unsigned(n, f"`{arg}`: {p}", alpha, n.shape[-1])
+            n = frames.decode_unsigned(n, f"`{arg}`: {p}", alpha if mask is None else mask,
+                                       n.shape[-1])
         if encoding == "xy":
             n = frames.decode_xy(n, frame=frame)
     else:
@@ -430,7 +438,7 @@ def read_normals(
         if rgb.shape[-1] == 3:
             frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
         # (uint8/uint16 arrays decode like PNG pixels)
-        n = _decode_unit(rgb, p, arg, alpha, encoding, frame, normal_range)
+        n = _decode_unit(rgb, p, arg, alpha, encoding, frame, normal_range, mask)
     return frames.to_facetlift(n, frame), alpha
 
 
@@ -517,11 +525,20 @@ def read_mask(path, shape: tuple[int, int] | None = None, *, of: str = "the norm
     if a.dtype.kind == "f" and not np.isfinite(a).all():
         raise ValueError(f"`{arg}`: {p} contains NaN or inf")
     _soft_edge_check(plane, m, p, arg)
+    return check_mask_size(m, p, shape, of=of)
+
+
+def check_mask_size(m: np.ndarray, path, shape: tuple[int, ...] | None, *,
+                    of: str = "the normal map") -> np.ndarray:
+    """`m`, the mask :func:`read_mask` read from `path`, where it is of `shape` ((H, W), or
+    the normal map's (H, W, C); None: any); a ValueError naming `mask`, `path`, both sizes
+    and `of` otherwise. Apart from :func:`read_mask` for a mask read before its map (whose
+    pixels are those its range check counts: :func:`read_normals`' `mask`)."""
     if shape is not None and len(tuple(shape)) == 3:  # (the normal map's own shape, H x W x 3)
         shape = tuple(shape)[:2]
     if shape is not None and m.shape != tuple(shape):
         raise ValueError(
-            f"`{arg}`: {p} has size {m.shape[0]}x{m.shape[1]} (HxW) but {of} is "
+            f"`mask`: {path} has size {m.shape[0]}x{m.shape[1]} (HxW) but {of} is "
             f"{shape[0]}x{shape[1]}"
         )
     return m
