@@ -1320,3 +1320,22 @@ def test_info_does_not_advise_normal_range_unsigned_to_a_run_that_gave_it(tmp_pa
     assert "read with --normal-range unsigned" not in frame, frame
     assert "after --normal-range unsigned's decoding" in frame, frame
     assert "?." not in out
+
+
+def test_info_reads_the_normals_noise_from_their_curl(tmp_path, capsys):
+    """info names the normals' angular noise (frames.normal_noise): about 3 deg for a 16-bit
+    map with 3 deg of angular noise, about 0 for the same surface's own normals; in the JSON
+    record as 'noise' (degrees)."""
+    from facetlift import synthetic
+
+    H, W = 60, 70
+    r, c = np.mgrid[0:H, 0:W] + 0.5
+    n = facetlift.normals_from_gradients(0.2 * np.cos(c / 8), 0.1 * np.sin(r / 9))
+    noisy = synthetic.add_angular_noise(n, 3.0, np.random.default_rng(2))
+    for name, normals, lo, hi in (("clean", n, 0.0, 0.1), ("noisy", noisy, 2.5, 3.4)):
+        path = io.write_normals(tmp_path / f"{name}.png", normals, bits=16)
+        code, out, _ = run(capsys, "info", path, "--json")
+        assert code == 0 and lo <= json.loads(out)["noise"] < hi, out
+        code, out, _ = run(capsys, "info", path)
+        line = next(x for x in out.splitlines() if "noise: about" in x)
+        assert "read from the normals' curl" in line, out

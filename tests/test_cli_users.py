@@ -220,7 +220,8 @@ def test_summary_and_json_show_the_mean_deviation(dome_png, tmp_path, capsys):
     rec = json.loads(out)
     assert abs(rec["mean_deviation"] - dev) < 0.01
     assert rec["info"]["mean_deviation"] == rec["mean_deviation"]
-    assert set(rec["info"]["integrability"]) == {"curl", "curl_y_flipped", "curl_x_flipped"}
+    assert set(rec["info"]["integrability"]) == {"curl", "curl_y_flipped", "curl_x_flipped",
+                                                 "noise"}
 
 
 def test_y_flipped_map_warns_on_the_cli(tmp_path, capsys):

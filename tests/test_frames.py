@@ -1033,3 +1033,40 @@ def test_decode_unsigned_names_undecoded_integer_values_as_floats():
     v = (n + 1) / 2
     v[0, 0] = 1.2  # (one stray pixel above 1: its fill rule's, not a refusal)
     assert np.isnan(frames.decode_unsigned(v, "m")[0, 0]).all()
+
+
+@pytest.mark.parametrize("deg", [1.0, 3.0, 6.0])
+def test_normal_noise_reads_the_angular_noise_from_the_curl(deg):
+    """frames.normal_noise: about 0 for a surface's own normals, about the rotation angle's
+    spread for angular noise, on a front view, a plane seen at view cosine 0.5 and through a
+    pinhole (the bear's camera on its own normals), and the same seen by integrate
+    (info['integrability']['noise'])."""
+    from facetlift import synthetic
+
+    n, _ = bump((96, 96))
+    assert frames.normal_noise(prepare(n)) < 0.05
+    rng = np.random.default_rng(5)
+    noisy = synthetic.add_angular_noise(n, deg, rng)
+    assert 0.85 * deg < frames.normal_noise(prepare(noisy)) < 1.1 * deg
+    tilted = np.zeros((64, 64, 3))
+    tilted[..., 0], tilted[..., 2] = -np.sqrt(3.0), 1.0  # (view cosine 0.5)
+    tilted /= np.linalg.norm(tilted, axis=-1, keepdims=True)
+    assert frames.normal_noise(prepare(tilted)) < 1e-6
+    got = frames.normal_noise(prepare(synthetic.add_angular_noise(tilted, deg, rng)))
+    assert 0.8 * deg < got < 1.15 * deg
+    data = io.read_dataset(BEAR)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        own = frames.normal_noise(prepare(data["normals"], data["mask"], K=data["K"]))
+        bear = synthetic.add_angular_noise(data["normals"], deg, rng)
+        seen = frames.normal_noise(prepare(bear, data["mask"], K=data["K"]))
+        s = facetlift.integrate(noisy)
+    assert own < 0.5  # (the bear's normals: 0.4 deg)
+    assert 0.85 * deg < seen < 1.15 * deg
+    assert s.info["integrability"]["noise"] == pytest.approx(
+        frames.normal_noise(prepare(noisy)), rel=1e-9)
+
+
+def test_normal_noise_is_nan_without_a_block_of_four_pixels():
+    n, _ = bump((1, 30))
+    assert np.isnan(frames.normal_noise(prepare(n)))

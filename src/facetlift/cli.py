@@ -845,6 +845,9 @@ def _info_lines(rec: dict) -> list[str]:
     first = rec.get("first_unusable")
     lines.append(f"  unusable {_samples(field)}: {bad or 'none'}"
                  + (f"; first at (row {first[0]}, col {first[1]})" if first else ""))
+    if rec.get("noise") is not None:
+        lines.append(f"  noise: about {rec['noise']:.1f} deg, read from the {_samples(field)}' "
+                     "curl (a surface's own are curl-free: 0 up to detail below the pixel)")
     if rec.get("camera_hint"):
         lines.append(f"  without a camera: {rec['camera_hint']}")
     jg = rec.get("discontinuity_grazing") or {}

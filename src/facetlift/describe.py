@@ -314,8 +314,15 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         # (the unusable-normals warning's hint for a photo integrated without a camera: info
         # called such a map's frame consistent and said nothing else, an audit)
         camera_hint=no_camera_hint(counts, inp.K is not None, inp.field) or None,
+        # (degrees; NaN without a 2x2 block of usable pixels: None in the record)
+        noise=_finite(frames.normal_noise(problem)),
     )
     return out
+
+
+def _finite(x: float) -> float | None:
+    """`x`, or None where it is not finite (a JSON record's value)."""
+    return float(x) if np.isfinite(x) else None
 
 
 def _twice(est: dict, fitted: bool) -> dict:

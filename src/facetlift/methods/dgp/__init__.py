@@ -535,7 +535,8 @@ def run(
                                            or bent is not None)
         _discontinuity_warnings(info, prior if pointwise else None, domain,
                                 pinfo["mesh_pieces"],
-                                blurred=prior if prior is not None and not pointwise else None)
+                                blurred=prior if prior is not None and not pointwise else None,
+                                problem=problem)
         if pointwise and pinfo.get("unanchored_pieces"):
             size, row, col = pinfo["unanchored_largest"]
             r0, c0 = problem.extras.get("offset", (0, 0))  # (the image's rows and columns)
@@ -638,11 +639,12 @@ def fill_gaps(domain, bx, by, target, scale, cosines, weights, gaps):
 
 
 def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
-                            blurred=None) -> None:
+                            blurred=None, problem=None) -> None:
     """The discontinuity route's warnings on the solve returned: a pointwise `prior` that tore
     the surface apart (:data:`TORN`, :data:`TORN_PIECES`; None: no such prior), or a
-    `blurred` one (``prior_blur``, the prior's terms as `prior`'s) that did, and solves left
-    unfinished."""
+    `blurred` one (``prior_blur``, the prior's terms as `prior`'s) that did, a run without a
+    prior that cut too much (:data:`CUT_MANY`; the normals' noise of `problem` named), and
+    solves left unfinished."""
     if prior is not None and prior[0].max() > PRIOR_STRONG:
         warn(f"discontinuities with prior_weight up to {prior[0].max():g}: above "
              f"{PRIOR_STRONG:g} the reweightings' solves stop before the normals' part is "
@@ -682,10 +684,16 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
              "points at their footprints' centres, or integrating without discontinuities may "
              "do better")
     if prior is None and blurred is None and info["cut_corners"] > CUT_MANY:
+        from ...frames import normal_noise
+
+        noise = float("nan") if problem is None else normal_noise(problem)
+        read = ("" if not np.isfinite(noise) else
+                f" (these normals' noise, read from their curl: about {noise:.1f} deg)")
         warn(f"discontinuities: {info['cut_corners']:.0%} of the facet corners were cut "
              f"({pieces:,} mesh pieces), more than surfaces with real jumps give (at most 21 % "
-             "on the development benchmark's renders and the real maps): noisy normals on "
-             "surfaces seen steeply (a floor or a table top from a low camera) read as jumps. "
+             "on the development benchmark's renders and the real maps): noisy normals"
+             f"{read} on surfaces seen steeply (a floor or a table top from a low camera) "
+             "read as jumps. "
              "A smaller discontinuity_k cuts far less (--option discontinuity_k=2, or 1), or "
              "integrate without discontinuities (docs/results.md, 'A flat surface seen "
              "steeply, with noise, falls apart')")
