@@ -486,7 +486,7 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
             guess["likely"] = "cannot tell (no usable normal to judge the frame by)"
             return guess
     curls = frames.flip_curls(problem)
-    guess.update(curls)
+    guess.update({k: v for k, v in curls.items() if k != "noise"})  # (its own line, `noise`)
     # (the verdict on the better flip, named, as integrate's warning: info called a map "not
     # by the margin" that integrate called far more integrable flipped, a user's check; where
     # the two flips tie, the silhouette names the axis: a DSINE map, x flipped, was told y

@@ -1206,7 +1206,12 @@ def normal_noise(problem, *, sample: int = CURL_SAMPLE) -> float:
     0.2-0.7 (the local evidence of jumps is what it measures, and low frequencies do not
     disturb it).
     """
-    dgx_dy, dgy_dx, c2 = _cross_derivatives(problem, (1.0, 1.0, 1.0), sample, cosines=True)
+    return _noise(problem, _cross_derivatives(problem, (1.0, 1.0, 1.0), sample, cosines=True))
+
+
+def _noise(problem, parts) -> float:
+    """:func:`normal_noise` from :func:`_cross_derivatives`' `parts` with their cosines."""
+    dgx_dy, dgy_dx, c2 = parts
     if dgx_dy is None:
         return float("nan")
     across = np.sqrt(0.5 * (1.0 + c2))
@@ -1215,20 +1220,21 @@ def normal_noise(problem, *, sample: int = CURL_SAMPLE) -> float:
 
 
 def flip_curls(problem) -> dict:
-    """``{"curl", "curl_y_flipped", "curl_x_flipped"}``: :func:`relative_curl` of the field
-    as given and with y and x flipped (for an orthographic camera from one set of cross
-    derivatives: flipping y or x negates one slope, and the curl's sign with it)."""
+    """``{"curl", "curl_y_flipped", "curl_x_flipped", "noise"}``: :func:`relative_curl` of
+    the field as given and with y and x flipped (for an orthographic camera from one set of
+    cross derivatives: flipping y or x negates one slope, and the curl's sign with it), and
+    :func:`normal_noise` (from the same cross derivatives as the field's own curl)."""
     from .camera import Orthographic
 
+    parts = _cross_derivatives(problem, (1.0, 1.0, 1.0), CURL_SAMPLE, cosines=True)
+    out = {"curl": _curl_ratio(*parts[:2])}
     if not isinstance(problem.camera, Orthographic):  # (a pinhole's are not odd in nx, ny)
-        return {
-            "curl": relative_curl(problem),
-            "curl_y_flipped": relative_curl(problem, (1.0, -1.0, 1.0)),
-            "curl_x_flipped": relative_curl(problem, (-1.0, 1.0, 1.0)),
-        }
-    parts = _cross_derivatives(problem, (1.0, 1.0, 1.0), CURL_SAMPLE)
-    flipped = _curl_ratio(*parts, sign=1.0)
-    return {"curl": _curl_ratio(*parts), "curl_y_flipped": flipped, "curl_x_flipped": flipped}
+        out["curl_y_flipped"] = relative_curl(problem, (1.0, -1.0, 1.0))
+        out["curl_x_flipped"] = relative_curl(problem, (-1.0, 1.0, 1.0))
+    else:
+        out["curl_y_flipped"] = out["curl_x_flipped"] = _curl_ratio(*parts[:2], sign=1.0)
+    out["noise"] = _noise(problem, parts)
+    return out
 
 
 def flip_verdict(own: float, flipped: float) -> str | None:
@@ -1430,7 +1436,6 @@ def flip_check(problem) -> dict:
         also ``"other_layout"``, and no warning: that layout is the advice.
     """
     out = flip_curls(problem)
-    out["noise"] = normal_noise(problem)  # (not a frame's sign: what the curl says of noise)
     layout = _LAYOUT_NAMED.get()
     if layout is not None and _READ_IN.get() == GRADIENT_FIELD:
         # (the layout warning has spoken: a slope's sign is no second cause to name; the
