@@ -96,7 +96,7 @@ def test_perspective_priors_give_the_parts_their_relative_depth(kind, discontinu
     s0 = run(n, mask, K=K, discontinuities=discontinuities)
     s = run(n, mask, K=K, discontinuities=discontinuities, prior=prior, prior_weight=0.01,
             prior_fit=kind)
-    assert s.info["prior"]["fit"]["used"]
+    assert s.info["prior"]["fit"]["used"] and s.info["prior"]["left_out"] is False
     true = np.median(depth[comp == 1]) / np.median(depth[comp == 0])
     got = np.median(s.depth[comp == 1]) / np.median(s.depth[comp == 0])
     assert got == pytest.approx(true, rel=1e-2)

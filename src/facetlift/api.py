@@ -160,7 +160,8 @@ def integrate(
         normals' own units (a pinhole camera's median depth near 1, not metric). A prior
         that cannot be aligned (constant, running against the normals, its scale
         undetermined) is left out with a warning: the result is then the normals-only one
-        (``info["prior"]["left_out"]``). docs/fusion.md, "A monocular depth map".
+        (``info["prior"]["left_out"]`` True; False where the fitted prior was used).
+        docs/fusion.md, "A monocular depth map".
     **options
         Method options (``facetlift methods`` lists them, with types and defaults).
         ``progress=True`` shows the command line's progress bar on stderr (the methods'
@@ -392,7 +393,8 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
                             "cannot align it)" if kind == "scale" else ""))
                 w.message = w.category(text)
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        surface.info.setdefault("prior", {})["fit"] = details
+        # (left_out always there: a fitted run's lookup of it raised KeyError, a docs check)
+        surface.info.setdefault("prior", {}).update(fit=details, left_out=False)
     seconds = surface.info.get("seconds")
     if isinstance(seconds, dict):
         seconds["prior_fit"] = details["seconds"]
