@@ -151,6 +151,39 @@ def test_dataset_folder_and_formats(tmp_path, capsys):
         (out / "mesh.obj").read_text().split("\nf ")[1].split()) == 3
 
 
+def test_stl_output(tmp_path, capsys):
+    """-s stl writes mesh.stl, named in the output and the record: the PLY's mesh as two
+    triangles per pixel, facing the viewer; --quads is for the others (said where alone)."""
+    import meshio
+
+    npath, mpath, mask = write_input(tmp_path)
+    out = tmp_path / "o"
+    code, stdout, err = run(capsys, "integrate", npath, "-m", mpath, "-o", out, "-s", "stl",
+                            "-s", "ply", "--quads")
+    assert code == 0 and err == "", err
+    assert f"wrote {out / 'mesh.stl'}" in stdout
+    assert sorted(p.name for p in out.iterdir()) == ["mesh.ply", "mesh.stl"]
+    stl, ply = (meshio.read(out / n) for n in ("mesh.stl", "mesh.ply"))
+    assert ply.cells[0].type == "quad" and len(ply.cells[0].data) == mask.sum()
+    assert stl.cells[0].type == "triangle" and len(stl.cells[0].data) == 2 * mask.sum()
+    np.testing.assert_allclose(np.unique(stl.points, axis=0),
+                               np.unique(np.float32(ply.points), axis=0))
+    rec = np.fromfile(out / "mesh.stl", [("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")],
+                      offset=84)
+    assert (rec["n"][:, 2] > 0).all()
+    code, stdout, err = run(capsys, "integrate", npath, "-m", mpath, "-o", tmp_path / "j",
+                            "-s", "stl", "--quads", "--json")
+    assert code == 0 and json.loads(stdout)["outputs"] == {"stl": str(tmp_path / "j" /
+                                                                      "mesh.stl")}
+    assert "quad faces (--quads; `triangles` False) apply to the ply and obj meshes" in err
+    code, _, err = run(capsys, "integrate", npath, "-o", tmp_path / "mesh.stl", "-s", "stl")
+    assert code == 1 and re.search(r"-o .*mesh -s stl to write .*mesh/mesh\.stl", err), err
+    code, _, err = run(capsys, "batch", npath, "-m", mpath, "-o", tmp_path / "b", "-s", "stl",
+                       "--workers", "1")
+    assert code == 0 and (tmp_path / "b" / "normals" / "mesh.stl").read_bytes() == (
+        out / "mesh.stl").read_bytes(), err
+
+
 def test_json_output(tmp_path, capsys):
     npath, mpath, mask = write_input(tmp_path)
     code, stdout, err = run(capsys, "integrate", npath, "-m", mpath, "-o", tmp_path / "j",

@@ -327,7 +327,7 @@ def test_a_line_of_mixed_pixels_does_not_relay_a_placement():
     assert abs(np.quantile(own_gaps(None), 0.95)) > 0.5
 
 
-def test_the_mesh_is_split_at_the_jumps_and_agrees_with_the_depth():
+def test_the_mesh_is_split_at_the_jumps_and_agrees_with_the_depth(tmp_path):
     n, gt, left = scissor_ortho(H=30, W=36)
     s = facetlift.integrate(n, discontinuities=True)
     verts, quads = s.to_mesh()
@@ -336,6 +336,13 @@ def test_the_mesh_is_split_at_the_jumps_and_agrees_with_the_depth():
     np.testing.assert_allclose(-z[quads].mean(axis=1), s.depth[s.mask], atol=1e-10)
     # a face across the seam would span the jump (up to 54 units here)
     assert np.ptp(z[quads], axis=1).max() < 3.0
+    # the STL is the split mesh too: its triangles are the quads' halves, none across the seam
+    stl = np.fromfile(s.save(tmp_path / "m.stl"), offset=84, dtype=[
+        ("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attr", "<u2")])["corners"]
+    verts, tris = s.to_mesh(triangles=True)
+    assert len(stl) == 2 * len(quads)
+    np.testing.assert_array_equal(stl, np.float32(verts[tris]))
+    assert np.ptp(stl[:, :, 2], axis=1).max() < 3.0
 
 
 def test_missing_samples_and_components():

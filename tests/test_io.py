@@ -592,6 +592,75 @@ def test_ply_is_binary(tmp_path, surface):
     assert b"format binary_little_endian" in head
 
 
+#: A binary STL's records after its 80-byte header and triangle count.
+STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("attr", "<u2")])
+
+
+def test_stl_is_binary_triangles_facing_the_viewer(tmp_path, surface):
+    """An STL holds two triangles per facet, the PLY's vertices (as float32) in to_mesh's
+    order, and facet normals toward the viewer (+z, as the input's: a bump seen from above)."""
+    import meshio
+
+    path = surface.save(tmp_path / "m.stl")
+    data = path.read_bytes()
+    assert not data.startswith(b"solid")  # (binary: an ASCII STL starts so)
+    count = int(np.frombuffer(data, "<u4", 1, 80)[0])
+    assert count == 2 * surface.mask.sum() and len(data) == 84 + 50 * count
+    rec = np.frombuffer(data, STL_RECORD, offset=84)
+    verts, faces = surface.to_mesh(triangles=True)
+    np.testing.assert_array_equal(rec["corners"], verts[faces].astype(np.float32))
+    ply = meshio.read(surface.save(tmp_path / "m.ply"))
+    assert ply.cells[0].type == "quad" and 2 * len(ply.cells[0].data) == count
+    np.testing.assert_allclose(np.unique(rec["corners"].reshape(-1, 3), axis=0),
+                               np.unique(np.float32(ply.points), axis=0))
+    n = rec["normal"].astype(float)
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1, atol=1e-6)
+    assert (n[:, 2] > 0).all()
+    # each pixel's two facet normals against the input normal there (row-major facets)
+    normals, mask = bump_normals()
+    pair = n.reshape(-1, 2, 3).sum(axis=1)
+    pair /= np.linalg.norm(pair, axis=1, keepdims=True)
+    cos = np.sum(pair * normals[mask], axis=1)
+    assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 2
+    back = meshio.read(path)  # (its reader merges the corners that coincide)
+    assert back.cells[0].type == "triangle" and len(back.cells[0].data) == count
+    assert len(back.points) == len(verts)
+
+
+def test_stl_takes_triangles_only(tmp_path, surface):
+    with pytest.raises(ValueError, match=r"`triangles`: an STL holds triangles only"):
+        surface.save(tmp_path / "m.stl", triangles=False)
+    with pytest.raises(ValueError, match="`triangles` must be True or False"):
+        surface.save(tmp_path / "m.stl", triangles="no")
+    with pytest.raises(ValueError, match=r"`faces`: an STL holds triangles only; got quads"):
+        io.write_mesh(tmp_path / "m.stl", *surface.to_mesh())
+    assert list(tmp_path.iterdir()) == []
+    assert surface.save(tmp_path / "m.stl", triangles=True).read_bytes() == surface.save(
+        tmp_path / "n.stl").read_bytes()
+
+
+def test_stl_facet_normals_follow_the_winding(tmp_path):
+    """Counter-clockwise seen from +z faces +z, the other way -z; a degenerate triangle gets
+    (0, 0, 0), not NaN."""
+    import warnings
+
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0]], float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        io.write_mesh(tmp_path / "t.stl", v, np.array([[0, 1, 2], [0, 2, 1], [0, 1, 3]]))
+    rec = np.fromfile(tmp_path / "t.stl", STL_RECORD, offset=84)
+    np.testing.assert_array_equal(rec["normal"], [[0, 0, 1], [0, 0, -1], [0, 0, 0]])
+
+
+@pytest.mark.parametrize("frame", ["opencv", "directx"])
+def test_stl_in_another_frame_still_faces_the_viewer(tmp_path, surface, frame):
+    from facetlift import frames
+
+    rec = np.fromfile(surface.save(tmp_path / "m.stl", frame=frame), STL_RECORD, offset=84)
+    toward = frames.from_facetlift(np.array([[0.0, 0.0, 1.0]]), frame, "frame")[0]
+    assert (rec["normal"] @ toward > 0).all()
+
+
 def test_preview(tmp_path, surface):
     import imagecodecs
 
@@ -627,7 +696,8 @@ def test_shade_flat_plane_is_uniform():
 # ------------------------------------------------------------------------------ atomicity
 
 
-def test_atomic_write_leaves_nothing_on_failure(tmp_path, surface, monkeypatch):
+@pytest.mark.parametrize("name", ["m.ply", "m.stl"])
+def test_atomic_write_leaves_nothing_on_failure(tmp_path, surface, monkeypatch, name):
     import meshio
 
     def boom(path, *a, **k):
@@ -636,7 +706,7 @@ def test_atomic_write_leaves_nothing_on_failure(tmp_path, surface, monkeypatch):
 
     monkeypatch.setattr(meshio, "write", boom)
     with pytest.raises(RuntimeError, match="disk full"):
-        surface.save(tmp_path / "m.ply")
+        surface.save(tmp_path / name)
     assert list(tmp_path.iterdir()) == []
 
 
@@ -734,8 +804,12 @@ def test_unknown_extensions(tmp_path, surface):
         io.read_normals(tmp_path / "n.jpg")
     with pytest.raises(ValueError, match=r"unsupported normal map format '\.jpg'.*\.npy$"):
         io.write_normals(tmp_path / "w.jpg", np.dstack([np.zeros((2, 2))] * 2 + [np.ones((2, 2))]))
-    with pytest.raises(ValueError, match=r"unsupported surface format '\.stl'.*\.npz.*\.ply"):
-        surface.save(tmp_path / "m.stl")
+    with pytest.raises(ValueError, match=r"`path`: unsupported surface format '\.off'.*\.npz"
+                       r".*\.ply, \.obj, \.stl"):
+        surface.save(tmp_path / "m.off")
+    with pytest.raises(ValueError, match=r"`path`: unsupported mesh format '\.off'.*\.stl$"):
+        io.write_mesh(tmp_path / "m.off", *surface.to_mesh())
+    assert list(tmp_path.glob("m.*")) == []
     with pytest.raises(ValueError, match=r"unsupported depth format '\.png'"):
         io.write_depth(tmp_path / "d.png", surface.depth)
     with pytest.raises(ValueError, match=r"unsupported mask format"):

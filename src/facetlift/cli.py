@@ -135,7 +135,7 @@ def _parse_option(text: str) -> tuple[str, object]:
 #: The endings of the files facetlift reads and writes, by the ``-s`` kind that writes one:
 #: an ``-o`` ending so names a file, not the folder it is (:func:`_out_dir`).
 _FILE_ENDINGS = {".npy": "npy", ".png": "png", ".exr": "exr", ".tif": "tif", ".tiff": "tif",
-                 ".ply": "ply", ".obj": "obj", ".npz": "npz"}
+                 ".ply": "ply", ".obj": "obj", ".stl": "stl", ".npz": "npz"}
 
 
 def _out_dir(ctx, param, value):
@@ -318,8 +318,9 @@ _JOB_OPTIONS = [
     click.option("-s", "--save", "--format", "save", multiple=True,
                  type=click.Choice(list(OUTPUTS)),
                  help="What to write, repeatable: npy/exr/tif = depth map, npz = depth + "
-                 "vertex depth + mask, ply/obj = mesh, png = shaded preview, report = one PNG "
-                 "with shading, depth, deviation and discontinuity panels (needs "
+                 "vertex depth + mask, ply/obj/stl = mesh (stl: binary, triangles, for "
+                 "slicers and CAD), png = shaded preview, report = one PNG with shading, "
+                 "depth, deviation and discontinuity panels (needs "
                  "facetlift[plot]), discontinuities = where the surface is cut by depth jumps "
                  "(with --discontinuities), height = a 16-bit grey height map PNG scaled to "
                  "0..1 (alpha only where pixels are outside the mask; its range in the "
@@ -333,14 +334,15 @@ _JOB_OPTIONS = [
                  "heights outside are clipped, with a warning counting them. Default: each "
                  "map's own lowest and highest."),
     click.option("--quads", is_flag=True,
-                 help="Write quad meshes (the PLY default; OBJ defaults to triangles)."),
+                 help="Write quad meshes (the PLY default; OBJ defaults to triangles; STL "
+                 "holds triangles only)."),
     click.option("--triangles", is_flag=True,
                  help="Write triangle meshes (the OBJ default)."),
     click.option("--output-frame", "output_frame", metavar="FRAME",
                  help="Frame of the mesh's and the point cloud's coordinates (and the points' "
                  "normals): opengl (default: x right, y up, z toward the viewer), opencv (the "
                  "camera frame of OpenCV and COLMAP: y down, z away), directx, or an axis "
-                 "string such as 'x,-y,-z', as for --normal-frame. For the ply, obj and "
+                 "string such as 'x,-y,-z', as for --normal-frame. For the ply, obj, stl and "
                  "points outputs; depth maps are unchanged."),
     click.option("--max-memory", default=None, metavar="SIZE",
                  help="Refuse the job if its estimated peak memory, above the input as "
@@ -604,8 +606,8 @@ class _FieldFile(click.Path):
 @_job_options
 @click.option("-o", "--out", "outdir", type=click.Path(file_okay=False), callback=_out_dir,
               help="Output folder, its files named by -s (depth.npy, ...); a name ending "
-              "like a file (.npy, .png, .exr, .tif, .ply, .obj, .npz) is refused unless that "
-              "folder exists. Default: <input>_facetlift/ next to the input.")
+              "like a file (.npy, .png, .exr, .tif, .ply, .obj, .stl, .npz) is refused unless "
+              "that folder exists. Default: <input>_facetlift/ next to the input.")
 @click.option("--json", "as_json", is_flag=True,
               help="Print one JSON object (outputs, diagnostics, timings) instead of text.")
 def integrate(normals, gradients, progress, as_json, **flags):

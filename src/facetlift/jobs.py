@@ -32,6 +32,7 @@ OUTPUTS = {
     "npz": "surface.npz",
     "ply": "mesh.ply",
     "obj": "mesh.obj",
+    "stl": "mesh.stl",
     "png": "preview.png",
     "report": "report.png",
     "discontinuities": "discontinuities.png",
@@ -51,7 +52,8 @@ class Job:
 
     Give `normals` (a normal-map file, a dataset folder, or a ``.mat`` file) or `gradients`
     (two files p, q). `options` are method options; `save` the output kinds of
-    :data:`OUTPUTS`; `triangles` None keeps each format's default (PLY quads, OBJ triangles).
+    :data:`OUTPUTS`; `triangles` None keeps each format's default (PLY quads, OBJ triangles;
+    STL holds triangles only, whatever it says).
     """
 
     normals: str | None = None
@@ -816,10 +818,13 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
     _check_outputs(save, job)  # (before any reading or solving: not after the whole job)
     if job.output_frame is not None:
         frames.parse(job.output_frame, "output_frame")
-        if not set(save) & {"ply", "obj", "points"}:  # (accepted and ignored: a review)
+        if not set(save) & {"ply", "obj", "stl", "points"}:  # (accepted and ignored: a review)
             warn(f"`output_frame` {job.output_frame!r} applies to the mesh and point outputs "
-                 "(ply, obj, points), none of which is saved: depth maps stay in facetlift's "
-                 "convention (depth along the viewing axis)")
+                 "(ply, obj, stl, points), none of which is saved: depth maps stay in "
+                 "facetlift's convention (depth along the viewing axis)")
+    if job.triangles is False and "stl" in save and not set(save) & {"ply", "obj"}:
+        warn("quad faces (--quads; `triangles` False) apply to the ply and obj meshes, neither "
+             "of which is saved: mesh.stl holds triangles (STL has no quads)")
     check_height_range(job, save)
     src = job.source
     outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)
@@ -1046,6 +1051,8 @@ def _write(surface, kind: str, path: Path, normals, triangles, frame=None,
         raise ValueError(f"{kind} output must be named {OUTPUTS[kind]}; got {path}")
     if kind in ("ply", "obj"):
         kw = {"frame": frame, **({} if triangles is None else {"triangles": triangles})}
+    elif kind == "stl":  # (triangles only: --quads is for the others, warned where alone)
+        kw = {"frame": frame}
     else:
         kw = {"report": {"normals": normals}, "points": {"normals": normals, "frame": frame},
               "height": {"height_range": height_range}}.get(kind, {})

@@ -208,8 +208,11 @@ class Surface:
         surface: test ``np.isnan(K).all()``), and where the surface has
         depth jumps the cut edges ``cuts_right``, ``cuts_down``, the ``discontinuities``
         map and the split mesh (``split_*``; :func:`facetlift.io.load_surface` reads it all
-        back); ``.ply``/``.obj``: the mesh, split at the jumps (``.ply`` quads and ``.obj``
-        triangles unless ``triangles=`` says otherwise); ``.png``: a shaded preview (the map
+        back); ``.ply``/``.obj``/``.stl``: the mesh, split at the jumps (``.ply`` quads and
+        ``.obj`` triangles unless ``triangles=`` says otherwise; ``.stl`` a binary STL of
+        triangles only, facet normals toward the viewer, coordinates in the units of
+        `pixel_size` (orthographic) or of the depth (with `K`): STL states none); ``.png``: a
+        shaded preview (the map
         of the jumps is :func:`facetlift.io.write_discontinuities`, as ``--save
         discontinuities`` writes it), but ``height.png`` (also ``heightmap``, ``height_map``,
         ``displacement``) the 16-bit height map of ``--save height`` (keyword

@@ -1,4 +1,4 @@
-"""Facet meshes as binary PLY or OBJ, through meshio (imported on first use)."""
+"""Facet meshes as binary PLY, OBJ or binary STL, through meshio (imported on first use)."""
 
 from __future__ import annotations
 
@@ -9,23 +9,28 @@ import numpy as np
 from ._paths import _suffix
 from .atomic import atomic_path
 
-MESH_FORMATS = (".ply", ".obj")
+MESH_FORMATS = (".ply", ".obj", ".stl")
 
 
 def write_mesh(path, vertices, faces) -> Path:
-    """Write a mesh as binary PLY or OBJ.
+    """Write a mesh as binary PLY, OBJ or binary STL.
 
     Parameters
     ----------
     path : str or Path
-        ``.ply`` (binary little-endian) or ``.obj``.
+        ``.ply`` (binary little-endian), ``.obj`` or ``.stl`` (binary; triangles only, each
+        with its facet normal by the right-hand rule of its corners' order, so a face listed
+        counter-clockwise as seen by the viewer faces the viewer; (0, 0, 0) for a degenerate
+        one; coordinates as float32 and without units: STL has none).
     vertices : (n, 3) float
-    faces : (m, 4) quads or (m, 3) triangles of int vertex indices (0-based)
+    faces : (m, 4) quads or (m, 3) triangles of int vertex indices (0-based); triangles for
+        ``.stl`` (``Surface.to_mesh(triangles=True)`` splits a facet mesh's quads)
 
     Raises
     ------
     ValueError
-        Bad shapes, non-finite vertices, indices out of range, unknown extension.
+        Bad shapes, non-finite vertices, indices out of range, unknown extension, quads for
+        ``.stl``.
     """
     import meshio
 
@@ -45,16 +50,32 @@ def write_mesh(path, vertices, faces) -> Path:
         raise ValueError(
             f"`faces` index out of range [0, {len(v)}): min {f.min()}, max {f.max()}"
         )
+    if ext == ".stl" and f.shape[1] != 3:  # (meshio would drop the quads with a warning)
+        raise ValueError(f"`faces`: an STL holds triangles only; got quads {f.shape}: split "
+                         "them, e.g. Surface.to_mesh(triangles=True)")
     dtype = np.int32 if len(v) < 2**31 else np.int64
     cell = "quad" if f.shape[1] == 4 else "triangle"
-    mesh = meshio.Mesh(v, [(cell, f.astype(dtype))])
-    fmt = "ply" if ext == ".ply" else "obj"
+    cells = [(cell, f.astype(dtype))]
     with atomic_path(p) as tmp:
-        if fmt == "ply":
-            meshio.write(tmp, mesh, file_format="ply", binary=True)
+        if ext == ".ply":
+            meshio.write(tmp, meshio.Mesh(v, cells), file_format="ply", binary=True)
+        elif ext == ".stl":
+            mesh = meshio.Mesh(v, cells, cell_data={"facet_normals": [_facet_normals(v, f)]})
+            meshio.write(tmp, mesh, file_format="stl", binary=True)
         else:
-            meshio.write(tmp, mesh, file_format="obj")
+            meshio.write(tmp, meshio.Mesh(v, cells), file_format="obj")
     return p
+
+
+def _facet_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Unit normals (m, 3) of triangles `f`, ``(b - a) x (c - a)``: toward the side from
+    which the corners run counter-clockwise; (0, 0, 0) for a degenerate one (meshio's own
+    gave NaN there)."""
+    a = v[f[:, 0]]
+    n = np.cross(v[f[:, 1]] - a, v[f[:, 2]] - a)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(length > 0, n / length, 0.0)
 
 
 def write_points(path, points, normals=None) -> Path:

@@ -38,11 +38,13 @@ def save_surface(surface, path, **kwargs) -> Path:
     ``.npz``: arrays ``depth``, ``vertex_depth``, ``mask``, ``pixel_size`` and ``K``
     (NaN-filled 3x3 when orthographic), and where the surface has depth jumps ``cuts_right``,
     ``cuts_down``, ``discontinuities`` and the split mesh (``split_corners``, ``split_i``,
-    ``split_j``, ``split_depth``; :func:`load_surface` reads it all back); ``.ply``/``.obj``:
-    the facet mesh
+    ``split_j``, ``split_depth``; :func:`load_surface` reads it all back);
+    ``.ply``/``.obj``/``.stl``: the facet mesh
     (:func:`write_mesh`, split at the jumps where there are any; keyword ``triangles``: True
     splits each quad in two, False keeps quads; default quads for PLY and triangles for OBJ,
-    since OBJ readers such as Open3D's take triangles only); ``.png``: a shaded preview
+    since OBJ readers such as Open3D's take triangles only; a binary STL holds triangles only,
+    with facet normals toward the viewer, and refuses ``triangles=False``); ``.png``: a
+    shaded preview
     (:func:`write_preview`, keywords forwarded), except ``height.png``, the other names of
     :data:`HEIGHT_STEMS` and names ending in ``_height`` (``bear_height.png``; or ``-``): the
     16-bit height map of ``--save height``
@@ -98,7 +100,10 @@ def save_surface(surface, path, **kwargs) -> Path:
         if extra:
             raise ValueError(f"{ext} output takes only `triangles` and `frame`; got {extra}")
         triangles = kwargs.get("triangles")
-        triangles = ext == ".obj" if triangles is None else triangles  # (to_mesh checks it)
+        triangles = ext != ".ply" if triangles is None else triangles  # (to_mesh checks it)
+        if ext == ".stl" and isinstance(triangles, (bool, np.bool_)) and not triangles:
+            raise ValueError("`triangles`: an STL holds triangles only; leave it out (or True) "
+                             "for .stl, or write quads to .ply or .obj")
         verts, faces = surface.to_mesh(triangles=triangles, frame=kwargs.get("frame"))
         return write_mesh(p, verts, faces)
     stem = p.stem.lower()
