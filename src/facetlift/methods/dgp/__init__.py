@@ -119,6 +119,11 @@ OPTIONS = (
            kind="int", low=0, when=_DISC),
     Option("discontinuity_tol", DEFAULT_TOL, "stop when no corner weight (0..4) changes "
            "by more than this (and grow cuts only by larger steps)", low=0.0, when=_DISC),
+    Option("discontinuity_seed", False, "start the reweightings from cuts where the normals' "
+           "curl says a jump is (one whose height changes along it: a sheet over another, a "
+           "vessel's rim), not from the smooth surface; off by default: better on the "
+           "development benchmark, mixed on held-out views (docs/results.md)", kind="bool",
+           when=_DISC),
 )
 
 
@@ -411,7 +416,7 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
 
 def run(
     problem, *, solver, discontinuities, mean_subtraction, max_iter, tol, backend, flat_weight,
-    progress, discontinuity_k, discontinuity_iter, discontinuity_tol,
+    progress, discontinuity_k, discontinuity_iter, discontinuity_tol, discontinuity_seed,
 ) -> MethodResult:
     """Integrate `problem` with the DGP method (options checked by facetlift.solve)."""
     bx, by, target = targets(problem)
@@ -464,9 +469,15 @@ def run(
         if (prior is None or blur is not None) and power:
             final = np.where(target, cosines, 1.0) ** power
             final = final if weights is None else final * weights
+        seed = None
+        if discontinuity_seed:  # (the prior-free reweightings from the normals' curl)
+            from ...frames import normal_noise
+
+            seed = discontinuous.curl_seed(domain, bx, by, target, cosines, s,
+                                           float(np.radians(normal_noise(problem))))
         common = dict(normal_scale=scale, k=discontinuity_k, max_iter=discontinuity_iter,
                       tol=discontinuity_tol, flat_weight=flat_weight, callback=progress,
-                      weights=weights)
+                      weights=weights, seed=seed)
 
         def deviation(c):
             """Mean angle (deg) of the facets' copies `c` to the input's own normals."""

@@ -76,6 +76,21 @@ Final weights
     error of a test sphere from 0.45 to 0.74). ``info["prior_blur"]["mismatch"]`` is measured
     on the surface returned.
 
+Seeded by the curl (``discontinuity_seed``, off by default)
+    From the smooth surface a jump is seen only where the two sides' differences differ: a
+    cliff between two surfaces of about the same slope (a sheet lying over another, a rim
+    seen from the front) bends the smooth surface over whole regions and is never cut (the
+    analytic ``fold``: 7.2 % error, as BiNI's, against 0.02 % with its jump cut). Its normals
+    are not integrable along it, though: a jump whose height changes along its line leaves
+    that change as curl there. With ``discontinuity_seed`` the first solve starts from corner
+    weights lowered where the curl (:func:`curl_seed`: summed over 3 x 3 vertices, so that a
+    crease's sampling curl cancels, scaled to an angle and compared with the larger of
+    :data:`SEED_TAU` and :data:`SEED_NOISE` times the normals' noise) says so; the
+    reweightings then keep or glue back those cuts as from the smooth start
+    (``info["seeded_corners"]``). A jump of constant height leaves no curl and is not seeded.
+    Measured on the development benchmark and a held-out set (docs/results.md, "Seeded by the
+    curl"): better on the first as a whole, mixed on the second, hence off by default.
+
 Grazing normals
     The route is run (``facetlift.integrate``) with a grazing threshold of cos 87.5 deg on
     every camera (``MethodInfo.jump_grazing``, ``facetlift.methods.JUMP_GRAZING``; the paper's
@@ -616,6 +631,51 @@ class GlueInverse:
             yield row
 
 
+#: The first solve's glue weights from the normals' curl (:func:`curl_seed`): a corner at a
+#: vertex where the curl, summed over :data:`SEED_WINDOW` x :data:`SEED_WINDOW` vertices and
+#: scaled to an angle, is ``C`` starts at ``1 / (1 + (C / tau)^2)``, ``tau`` the larger of
+#: :data:`SEED_TAU` (radians) and :data:`SEED_NOISE` times the normals' noise
+#: (:func:`facetlift.frames.normal_noise`), with ``discontinuity_seed``. See the module
+#: docstring, "Seeded by the curl"; the values were the first tried (a 3 x 3 window against
+#: none, on ten scenes), measured on the development benchmark (docs/results.md).
+SEED_TAU = 0.01
+SEED_NOISE = 3.0
+SEED_WINDOW = 3
+
+
+def curl_seed(domain, bx, by, target, cosines, footprint: float, noise: float):
+    """(m, 4) starting corner weights from the curl of the target slopes, or None where no
+    corner is seeded below 1 (see :data:`SEED_TAU`).
+
+    Around every interior vertex the four facets' slopes `bx`, `by` (of the unknown per pixel,
+    y up; `target` False: none) per pixel `footprint` give a curl, scaled to an angle as
+    :func:`facetlift.frames.normal_noise` scales it (`cosines`: the facets' view cosines); the
+    signed curl is summed over a window of :data:`SEED_WINDOW` vertices a side and divided by
+    the window's width, so that a jump line's curl (its height's change along it) adds up
+    and a crease's (the sampling's, of either sign along it) cancels. `noise` is in radians.
+    """
+    import scipy.ndimage as ndi
+
+    H, W = domain.shape
+    r, c = domain.pixels
+    img = np.full((3, H + 2, W + 2), np.nan)
+    img[0, r + 1, c + 1] = np.where(target, bx, np.nan) / footprint
+    img[1, r + 1, c + 1] = np.where(target, by, np.nan) / footprint
+    img[2, r + 1, c + 1] = np.where(target, cosines, np.nan) ** 2
+    tl, tr, bl, br = img[:, :-1, :-1], img[:, :-1, 1:], img[:, 1:, :-1], img[:, 1:, 1:]
+    curl = 0.5 * ((tl[0] + tr[0] - bl[0] - br[0]) - (tr[1] + br[1] - tl[1] - bl[1]))
+    c2 = 0.25 * (tl[2] + tr[2] + bl[2] + br[2])
+    curl *= c2 / np.sqrt(0.5 * (1.0 + c2))  # (radians: frames.normal_noise)
+    np.nan_to_num(curl, copy=False, nan=0.0)  # (a vertex without four targets: no curl)
+    if SEED_WINDOW > 1:
+        curl = ndi.uniform_filter(curl, size=SEED_WINDOW, mode="constant") * SEED_WINDOW
+    tau = max(SEED_TAU, SEED_NOISE * (noise if np.isfinite(noise) else 0.0))
+    g = 1.0 / (1.0 + np.square(curl / tau))
+    if g.min() >= 1.0:
+        return None
+    return np.stack([g[r + dr, c + dc] for dr, dc in CORNER_OFFSETS], axis=1)
+
+
 def neighbours(domain) -> dict[str, np.ndarray]:
     """Facet index of each facet's neighbour on the +x, -x, +y (up) and -y side; -1 if none."""
     H, W = domain.shape
@@ -687,7 +747,7 @@ def solve_discontinuous(
     domain, bx, by, target, *, normal_scale, k: float = DEFAULT_K,
     max_iter: int = DEFAULT_ITER, tol: float = DEFAULT_TOL, flat_weight: float = 1e-9,
     cg_rtol: float = 1e-6, callback=None, prior=None, weights=None, x0=None,
-    final_weights=None, blur=None, w0=None, polish_last=True,
+    final_weights=None, blur=None, w0=None, polish_last=True, seed=None,
 ):
     """Minimise the glued facet energy with bilateral weights (see the module docstring).
 
@@ -738,6 +798,9 @@ def solve_discontinuous(
         Solve the last system to `cg_rtol` after the reweightings (default). False where only
         the weights are wanted (:data:`facetlift.methods.dgp.PRIOR_CUTS_FIRST`): `z` and `y`
         are then the last loose solve's.
+    seed : (m, 4) float, optional
+        Corner weights of the first solve where neither `w0` nor a `prior` is given and
+        `max_iter` is not 0 (:func:`curl_seed`; default all 1).
 
     Returns
     -------
@@ -766,8 +829,13 @@ def solve_discontinuous(
     # the V-cycle is ours since; the process-wide limit stuck at one thread for a library's
     # threaded callers, and without it the timing objects take the same time: bear 0.77 /
     # 0.77 s, bunny 2.34 / 2.41 s, medians of 3 interleaved, 2026-12-03)
+    if w0 is None and prior is None and seed is not None and max_iter > 0:
+        w0, seeded = seed, True
+    else:
+        seeded = False
     return _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight,
-                  cg_rtol, callback, prior, weights, x0, final_weights, blur, w0, polish_last)
+                  cg_rtol, callback, prior, weights, x0, final_weights, blur, w0, polish_last,
+                  seeded)
 
 
 def _of(ref, K) -> bool:
@@ -795,7 +863,7 @@ def _factorized(K, rhs, amg, grid):
 
 def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, cg_rtol,
            callback, prior=None, weights=None, x0=None, final_weights=None, blur=None, w0=None,
-           polish_last=True):
+           polish_last=True, seeded=False):
     t0 = time.perf_counter()
     m = domain.n_facets
     fusion = None
@@ -987,7 +1055,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         return z
 
     # the first (smooth) solution only starts the reweightings: as loose as theirs
-    announce(callback, "smooth start" if w0 is None else "start from the normals' cuts")
+    announce(callback, "smooth start" if w0 is None else
+             "start from the normals' curl" if seeded else "start from the normals' cuts")
     # (the glue inverse, the copies' constant part and the pairs' evidence are formed after
     # this solve, whose first multigrid build is the run's largest transient, about four
     # times the matrix: 2048^2 peaks there)
@@ -1140,6 +1209,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         "weight_change": changes,
         "cg_iterations": cg_its,
         "cut_corners": float((w < CUT).mean()),
+        # (the corners the curl started cut, curl_seed)
+        "seeded_corners": float((w0 < CUT).mean()) if seeded else 0.0,
         "multigrid_builds": amg["builds"],
         "multigrid_refreshes": amg["refreshes"],
         "block_coarse_space": slow,
