@@ -308,7 +308,8 @@ def shared_cuts():
 def _cut_key(domain, bx, by, target, kw) -> tuple:
     """A digest of the input and the options that decide the prior-free cut weights."""
     h = hashlib.blake2b(digest_size=20)
-    for a in (domain.mask, bx, by, target, kw["normal_scale"], kw.get("weights")):
+    for a in (domain.mask, bx, by, target, kw["normal_scale"], kw.get("weights"),
+              kw.get("seed")):  # (discontinuity_seed's start: other cuts)
         a = np.array([np.nan]) if a is None else np.ascontiguousarray(a)
         h.update(f"{a.dtype}{a.shape}".encode())
         h.update(a.view(np.uint8).ravel() if a.size else b"")
@@ -358,7 +359,7 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
             kept.append((_cut_key(domain, bx, by, target, kw), (out[2], {
                 **{key: info[key] for key in ("iterations", "grown", "converged", "energy",
                                               "weight_change", "block_coarse_space",
-                                              "cg_iterations", "unsolved")},
+                                              "cg_iterations", "unsolved", "seeded_corners")},
                 # (its surface's, for a reusing run's blur_bent: without it the ratio to the
                 # normals' own cuts was off there, a review)
                 "deviation": None if deviation is None else deviation(out[1])})))
@@ -403,8 +404,8 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
     if islands is not None:
         info["islands_reglued"] = islands[1]
         split = None if islands[1] else islands[2]  # (of `y` as returned: nothing glued)
-    info["prior_free"] = {key: first[key] for key in ("iterations", "grown", "converged",
-                                                      "seconds")}
+    info["prior_free"] = {key: first.get(key) for key in ("iterations", "grown", "converged",
+                                                          "seconds", "seeded_corners")}
     info["prior_free"]["deviation"] = first.get("deviation")
     info["prior_free"]["reused"] = reused is not None
     _add_pass(info, first, ("iterations", "grown") + _BUILDS,
