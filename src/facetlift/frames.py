@@ -1175,9 +1175,22 @@ def _cross_derivatives(problem, flip, sample, cosines: bool = False):
         return none
     if not cosines:
         return dgx_dy[good], dgy_dx[good]
-    c2 = np.square(problem.camera.view_cosine(rk, ck, n, unit=True))
+    c2 = np.square(_slope_cosine(problem.camera, rk, ck, n))
     c2 = (c2[tl] + c2[tr] + c2[bl] + c2[br])[good] / 4
     return dgx_dy[good], dgy_dx[good], c2
+
+
+def _slope_cosine(camera, rows, cols, n) -> np.ndarray:
+    """The cosine ``c`` by whose square and first power an angular error of unit normals `n`
+    grows into the error of the grid slopes along and across the tilt (:func:`normal_noise`):
+    orthographically the view cosine, ``n_z``; through a pinhole the normal's dot product
+    with the viewing ray of unit z, ``m . K^-1 (col, row, 1)`` (the slopes' denominator, the
+    view cosine times the ray's length). A plane facing the optical axis has slopes that do
+    not grow off the axis (``c`` = 1), where the view cosine there, the ray's angle's
+    cosine, made a wide lens' noise read low (f = 60 px on 128^2: 1.25 deg for 2)."""
+    c = camera.view_cosine(rows, cols, n, unit=True)
+    rays = getattr(camera, "rays", None)
+    return c if rays is None else c * np.linalg.norm(rays(rows, cols), axis=-1)
 
 
 #: Median of the absolute value of a standard normal: :func:`normal_noise`'s median |curl| over
@@ -1192,8 +1205,9 @@ def normal_noise(problem, *, sample: int = CURL_SAMPLE) -> float:
     A surface's own normals are integrable however detailed, so their curl around every 2x2
     block of pixels is zero up to detail below the pixel; noise is not. A normal tilted from
     the view by an angle of cosine ``c`` turns an angular error along the tilt into a slope
-    error ``1 / c^2`` times as large, one across it ``1 / c`` times: the curl of the slopes per
-    pixel footprint times ``c^2 / sqrt((1 + c^2) / 2)`` (``c^2`` the block's mean) has the
+    error ``1 / c^2`` times as large, one across it ``1 / c`` times (through a pinhole,
+    ``c`` is the normal's dot product with the unit-z ray, :func:`_slope_cosine`): the
+    curl of the slopes per pixel footprint times ``c^2 / sqrt((1 + c^2) / 2)`` (``c^2`` the block's mean) has the
     spread of a front view's, in radians. Its median over the blocks (about `sample` usable
     pixels, :func:`relative_curl`'s sample) over that of a standard normal's absolute value
     estimates the spread. Jumps and creases are lines and barely move a median. Measured on
