@@ -289,6 +289,10 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
             out[name].update(known_in_mask=int(inside.sum()), range=[
                 float(arr[inside].min()), float(arr[inside].max())] if inside.any() else None)
     counts = dict(problem.counts)
+    frame = _frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame, layout=layout,
+                         normal_range=frames.normal_range(normal_range), field=inp.field,
+                         gradient_frame=gradient_frame, rotation=turn)
+    noise = frame.pop("noise", None)
     out.update(
         usable=True,
         mask_pixels=int(d.n_facets),
@@ -298,9 +302,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         # (the unusable normals have their own line: not again as a warning)
         warnings=out["warnings"] + [str(w.message) for w in caught if not issubclass(
             w.category, UnusableNormalsWarning)],
-        frame=_frame_guess(n, inp.mask, inp.K, problem, frame=normal_frame, layout=layout,
-                           normal_range=frames.normal_range(normal_range),
-                           field=inp.field, gradient_frame=gradient_frame, rotation=turn),
+        frame=frame,
         estimate=_twice(estimate(problem), fitted),
         # (what --discontinuities would need: a user planning a large job asked)
         estimate_discontinuities=_twice(estimate(problem, "dgp", discontinuities=True),
@@ -314,8 +316,9 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         # (the unusable-normals warning's hint for a photo integrated without a camera: info
         # called such a map's frame consistent and said nothing else, an audit)
         camera_hint=no_camera_hint(counts, inp.K is not None, inp.field) or None,
-        # (degrees; NaN without a 2x2 block of usable pixels: None in the record)
-        noise=_finite(frames.normal_noise(problem)),
+        # (degrees; NaN without a 2x2 block of usable pixels: None in the record; the frame
+        # check's, where it measured the curls, else measured here)
+        noise=_finite(frames.normal_noise(problem) if noise is None else noise),
     )
     return out
 
@@ -486,7 +489,7 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
             guess["likely"] = "cannot tell (no usable normal to judge the frame by)"
             return guess
     curls = frames.flip_curls(problem)
-    guess.update({k: v for k, v in curls.items() if k != "noise"})  # (its own line, `noise`)
+    guess.update(curls)  # ("noise" taken out by describe: its own line)
     # (the verdict on the better flip, named, as integrate's warning: info called a map "not
     # by the margin" that integrate called far more integrable flipped, a user's check; where
     # the two flips tie, the silhouette names the axis: a DSINE map, x flipped, was told y

@@ -1207,18 +1207,18 @@ def normal_noise(problem, *, sample: int = CURL_SAMPLE) -> float:
     the view by an angle of cosine ``c`` turns an angular error along the tilt into a slope
     error ``1 / c^2`` times as large, one across it ``1 / c`` times (through a pinhole,
     ``c`` is the normal's dot product with the unit-z ray, :func:`_slope_cosine`): the
-    curl of the slopes per pixel footprint times ``c^2 / sqrt((1 + c^2) / 2)`` (``c^2`` the block's mean) has the
-    spread of a front view's, in radians. Its median over the blocks (about `sample` usable
-    pixels, :func:`relative_curl`'s sample) over that of a standard normal's absolute value
-    estimates the spread. Jumps and creases are lines and barely move a median. Measured on
-    angular noise (:func:`facetlift.synthetic.add_angular_noise`, tests/test_frames.py): 0.94x
-    the angle's spread on a front view, 0.9x on a plane seen at view cosine 0.5 and on the
-    DiLiGenT bear's normals through its camera (its own normals 0.36 deg). On the
-    development renders (docs/results.md, "A noise-aware dead zone", before the cross-tilt
-    factor): exact normals 0.0-0.85 deg (an orthographic armadillo, detail below its pixels,
-    2.4), 8-bit about 0.1 more, 3 deg of angular noise 2.3-3.0, noise smoothed over 8 px
-    0.2-0.7 (the local evidence of jumps is what it measures, and low frequencies do not
-    disturb it).
+    curl of the slopes per pixel footprint times ``c^2 / sqrt((1 + c^2) / 2)`` (``c^2`` the
+    block's mean) has the spread of a front view's, in radians. Its median over the blocks
+    (about `sample` usable pixels, :func:`relative_curl`'s sample) over that of a standard
+    normal's absolute value estimates the spread. Jumps and creases are lines and barely move a
+    median. Measured on angular noise (:func:`facetlift.synthetic.add_angular_noise`,
+    tests/test_frames.py): 0.94x the angle's spread on a front view, 0.92-1.01x on a plane seen
+    at view cosine 0.5, 0.96-1.07x on the DiLiGenT bear's normals through its camera (its own
+    normals 0.4 deg), 0.96-1.04x through a wide lens (f = 60 px on 128^2). On the development
+    renders (docs/results.md, "A noise-aware dead zone", before the cross-tilt factor): exact
+    normals 0.0-0.85 deg (an orthographic armadillo, detail below its pixels, 2.4), 8-bit about
+    0.1 more, 3 deg of angular noise 2.3-3.0, noise smoothed over 8 px 0.2-0.7 (the local
+    evidence of jumps is what it measures, and low frequencies do not disturb it).
     """
     return _noise(problem, _cross_derivatives(problem, (1.0, 1.0, 1.0), sample, cosines=True))
 

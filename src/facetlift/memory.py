@@ -62,7 +62,9 @@ MARGIN = 0.05
 #: :data:`facetlift.linalg.LARGE`). Fitted to benchmarks/bench_memory.py on rect and disk
 #: domains at 512^2-1536^2, checked at 256^2-2048^2 (docs/benchmarks.md,
 #: "Memory planning"); the facet-CG routes 8 bytes per facet above that fit since CG keeps
-#: the iterate of its smallest residual (:data:`facetlift.linalg.cg.GROWTH`), not refitted.
+#: the iterate of its smallest residual (:data:`facetlift.linalg.cg.GROWTH`), not refitted,
+#: and their fixed part 18 MiB since 2026-12-06 (was 12); the discontinuity route refitted
+#: on rect and disk at 256^2-2048^2 on 2026-12-06 (1.01-1.09x its measured peaks there).
 COEFFICIENTS = {
     "dgp-spectral": (0.0, 85.0, 8 * MiB, 0.0),
     "dgp-pcg": (172.0, 68.0, 18 * MiB, 0.0),

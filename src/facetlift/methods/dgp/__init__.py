@@ -121,8 +121,10 @@ OPTIONS = (
            "by more than this (and grow cuts only by larger steps)", low=0.0, when=_DISC),
     Option("discontinuity_seed", False, "start the reweightings from cuts where the normals' "
            "curl says a jump is (one whose height changes along it: a sheet over another, a "
-           "vessel's rim), not from the smooth surface; off by default: better on the "
-           "development benchmark, mixed on held-out views (docs/results.md)", kind="bool",
+           "vessel's rim), not from the smooth surface (the reweightings without a prior, or "
+           "those a sparse or blurred prior starts from; not with a dense pointwise prior); "
+           "off by default: better on the development benchmark, mixed on held-out views "
+           "(docs/results.md)", kind="bool",
            when=_DISC),
 )
 
@@ -471,7 +473,8 @@ def run(
             final = np.where(target, cosines, 1.0) ** power
             final = final if weights is None else final * weights
         seed = None
-        if discontinuity_seed:  # (the prior-free reweightings from the normals' curl)
+        if discontinuity_seed and discontinuity_iter > 0:  # (the prior-free reweightings
+            # from the normals' curl; with no reweighting the smooth surface, as documented)
             from ...frames import normal_noise
 
             seed = discontinuous.curl_seed(domain, bx, by, target, cosines, s,
@@ -699,13 +702,18 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
         from ...frames import normal_noise
 
         noise = float("nan") if problem is None else normal_noise(problem)
-        read = ("" if not np.isfinite(noise) else
-                f" (these normals' noise, read from their curl: about {noise:.1f} deg)")
+        steep = "on surfaces seen steeply (a floor or a table top from a low camera)"
+        if np.isfinite(noise) and noise < NOISE_LOW:  # (the usual cause ruled out: a review)
+            cause = (f"these normals' noise, read from their curl, is low (about {noise:.1f} "
+                     f"deg), so it is less likely noisy normals {steep} read as jumps than "
+                     "many real ones, or a camera or frame that does not fit the normals")
+        else:
+            read = ("" if not np.isfinite(noise) else
+                    f" (these normals' noise, read from their curl: about {noise:.1f} deg)")
+            cause = f"noisy normals{read} {steep} read as jumps"
         warn(f"discontinuities: {info['cut_corners']:.0%} of the facet corners were cut "
              f"({pieces:,} mesh pieces), more than surfaces with real jumps give (at most 21 % "
-             "on the development benchmark's renders and the real maps): noisy normals"
-             f"{read} on surfaces seen steeply (a floor or a table top from a low camera) "
-             "read as jumps. "
+             f"on the development benchmark's renders and the real maps): {cause}. "
              "A smaller discontinuity_k cuts far less (--option discontinuity_k=2, or 1), or "
              "integrate without discontinuities (docs/results.md, 'A flat surface seen "
              "steeply, with noise, falls apart')")
@@ -880,6 +888,10 @@ TORN_PIECES = 0.01
 #: 1.26 mm); a plane at view cosine 0.15 with 3-deg noise cuts 0.46-0.47 (twenty-seventh
 #: session). A warning only: nothing is changed.
 CUT_MANY = 0.3
+#: Below this noise (degrees, :func:`facetlift.frames.normal_noise`) the warning of
+#: :data:`CUT_MANY` does not blame noisy normals (exact renders read 0.0-0.85 deg, 8-bit ones
+#: about 0.1 more, 3 deg of angular noise 2.3-3.0).
+NOISE_LOW = 1.0
 
 #: The weight that did best for a dense noisy prior with discontinuities (docs/fusion.md),
 #: which the tearing warning recommends.

@@ -648,8 +648,10 @@ def curl_seed(domain, bx, by, target, cosines, footprint: float, noise: float):
     corner is seeded below 1 (see :data:`SEED_TAU`).
 
     Around every interior vertex the four facets' slopes `bx`, `by` (of the unknown per pixel,
-    y up; `target` False: none) per pixel `footprint` give a curl, scaled to an angle as
-    :func:`facetlift.frames.normal_noise` scales it (`cosines`: the facets' view cosines); the
+    y up; `target` False: none) per pixel `footprint` give a curl, scaled to an angle by the
+    factor :func:`facetlift.frames.normal_noise` uses, of the facets' view `cosines` (as it was
+    measured; normal_noise has since taken a pinhole's slope cosine, which reads a wide lens'
+    off-axis curl larger, a review); the
     signed curl is summed over a window of :data:`SEED_WINDOW` vertices a side and divided by
     the window's width, so that a jump line's curl (its height's change along it) adds up
     and a crease's (the sampling's, of either sign along it) cancels. `noise` is in radians.
