@@ -1223,13 +1223,21 @@ def normal_noise(problem, *, sample: int = CURL_SAMPLE) -> float:
     return _noise(problem, _cross_derivatives(problem, (1.0, 1.0, 1.0), sample, cosines=True))
 
 
+def curl_to_angle(c2):
+    """The factor ``c^2 / sqrt((1 + c^2) / 2)`` that turns the curl of the slopes per pixel
+    footprint around a 2x2 block into radians of the normals' angle (:func:`normal_noise`;
+    also :func:`facetlift.methods.dgp.discontinuous.curl_seed`), `c2` the block's mean
+    squared cosine: the slope error along the tilt grows as ``1 / c^2``, across it as
+    ``1 / c``."""
+    return c2 / np.sqrt(0.5 * (1.0 + c2))
+
+
 def _noise(problem, parts) -> float:
     """:func:`normal_noise` from :func:`_cross_derivatives`' `parts` with their cosines."""
     dgx_dy, dgy_dx, c2 = parts
     if dgx_dy is None:
         return float("nan")
-    across = np.sqrt(0.5 * (1.0 + c2))
-    curl = np.abs(dgx_dy - dgy_dx) * c2 / (across * problem.camera.footprint())
+    curl = np.abs(dgx_dy - dgy_dx) * curl_to_angle(c2) / problem.camera.footprint()
     return float(np.degrees(np.median(curl) / _HALF_NORMAL_MEDIAN))
 
 

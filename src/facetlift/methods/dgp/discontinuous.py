@@ -648,15 +648,17 @@ def curl_seed(domain, bx, by, target, cosines, footprint: float, noise: float):
     corner is seeded below 1 (see :data:`SEED_TAU`).
 
     Around every interior vertex the four facets' slopes `bx`, `by` (of the unknown per pixel,
-    y up; `target` False: none) per pixel `footprint` give a curl, scaled to an angle by the
-    factor :func:`facetlift.frames.normal_noise` uses, of the facets' view `cosines` (as it was
-    measured; normal_noise has since taken a pinhole's slope cosine, which reads a wide lens'
-    off-axis curl larger, a review); the
-    signed curl is summed over a window of :data:`SEED_WINDOW` vertices a side and divided by
-    the window's width, so that a jump line's curl (its height's change along it) adds up
-    and a crease's (the sampling's, of either sign along it) cancels. `noise` is in radians.
+    y up; `target` False: none) per pixel `footprint` give a curl, scaled to an angle by
+    :func:`facetlift.frames.curl_to_angle` of the facets' view `cosines` (as it was measured;
+    :func:`facetlift.frames.normal_noise` has since taken a pinhole's slope cosine, which reads
+    a wide lens' off-axis curl larger, a review); the signed curl is summed over a window of
+    :data:`SEED_WINDOW` vertices a side and divided by the window's width, so that a jump
+    line's curl (its height's change along it) adds up and a crease's (the sampling's, of
+    either sign along it) cancels. `noise` is in radians.
     """
     import scipy.ndimage as ndi
+
+    from ...frames import curl_to_angle
 
     H, W = domain.shape
     r, c = domain.pixels
@@ -666,8 +668,7 @@ def curl_seed(domain, bx, by, target, cosines, footprint: float, noise: float):
     img[2, r + 1, c + 1] = np.where(target, cosines, np.nan) ** 2
     tl, tr, bl, br = img[:, :-1, :-1], img[:, :-1, 1:], img[:, 1:, :-1], img[:, 1:, 1:]
     curl = 0.5 * ((tl[0] + tr[0] - bl[0] - br[0]) - (tr[1] + br[1] - tl[1] - bl[1]))
-    c2 = 0.25 * (tl[2] + tr[2] + bl[2] + br[2])
-    curl *= c2 / np.sqrt(0.5 * (1.0 + c2))  # (radians: frames.normal_noise)
+    curl *= curl_to_angle(0.25 * (tl[2] + tr[2] + bl[2] + br[2]))  # (radians)
     np.nan_to_num(curl, copy=False, nan=0.0)  # (a vertex without four targets: no curl)
     if SEED_WINDOW > 1:
         curl = ndi.uniform_filter(curl, size=SEED_WINDOW, mode="constant") * SEED_WINDOW
