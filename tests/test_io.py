@@ -91,7 +91,8 @@ def test_a_height_in_the_alpha_is_warned_about_and_an_antialiased_edge_is_not(tm
     """An audit: a "normal + height" texture (the height in the alpha, many grey levels) had
     every alpha > 0 pixel taken as the mask without a word; 15 % of it was integrated. An
     antialiased object edge (in-between levels along the edge, here 61 of them on 7 % of a
-    small image) stays silent; so does the alpha where a mask file replaces it."""
+    small image) stays silent; so does the alpha where a mask file replaces it (check_alpha
+    False, or a mask given to read_normals)."""
     import warnings
 
     import imagecodecs
@@ -125,6 +126,7 @@ def test_a_height_in_the_alpha_is_warned_about_and_an_antialiased_edge_is_not(tm
     with warnings.catch_warnings():  # (the caller has a mask of its own)
         warnings.simplefilter("error")
         io.read_normals(tmp_path / "height.png", check_alpha=False)
+        io.read_normals(tmp_path / "height.png", mask=np.ones((H, W), bool))
         io.write_mask(tmp_path / "all.png", np.ones((H, W), bool))
         from facetlift import jobs
 
@@ -1449,3 +1451,129 @@ def test_a_dataset_mat_normal_map_is_decoded_unsigned_as_a_file_is(tmp_path):
     got = io.read_dataset(tmp_path, encoding="xy", normal_range="unsigned")["normals"]
     assert np.isfinite(got[mask]).all()
     np.testing.assert_allclose(got[mask], n[mask], atol=1e-12)
+
+
+def _sphere_on_fill(bits: int, fill, H: int = 64, W: int = 64):
+    """An 8/16-bit encoded sphere (a continuous spread of normals, rounded as encoders do)
+    inside a disk, `fill` (a colour, or "garbage": random codes) outside it; and the disk."""
+    r, c = np.mgrid[0:H, 0:W] - np.array([(H - 1) / 2, (W - 1) / 2])[:, None, None]
+    mask = np.hypot(r, c) < 0.3 * min(H, W)
+    x, y = c / (0.38 * W), -r / (0.38 * H)
+    n = np.dstack([x, y, np.sqrt(np.clip(1 - x**2 - y**2, 0, None))])
+    top = 255 if bits == 8 else 65535
+    px = np.round((n + 1) / 2 * top).astype(np.uint8 if bits == 8 else np.uint16)
+    if isinstance(fill, str):
+        px[~mask] = np.random.default_rng(bits).integers(0, top + 1, ((~mask).sum(), 3))
+    else:
+        px[~mask] = fill
+    return px, mask
+
+
+@pytest.mark.parametrize("ext", [".png", ".tif", ".npy"])
+@pytest.mark.parametrize("bits", [8, 16])
+def test_an_integer_maps_checks_look_inside_the_mask_given(tmp_path, bits, ext):
+    """An 8/16-bit map's decode checks (the share of vectors longer than unit length, warned
+    about) counted every pixel where the mask was given apart from the file (read_normals'
+    mask=, --mask, a folder's mask.png): a fill of garbage outside the mask, as many exports
+    leave, was warned about as the map's. Now the pixels inside it alone, as an alpha's; the
+    same garbage inside the mask still is; a mask of another size looks at none (its caller
+    refuses it). A black (all-zero) fill is no normal, NaN, and no word either way."""
+    import imagecodecs
+    import tifffile
+
+    def save(name, px):
+        path = tmp_path / f"{name}{ext}"
+        if ext == ".png":
+            path.write_bytes(imagecodecs.png_encode(px))
+        elif ext == ".tif":
+            tifffile.imwrite(path, px, photometric="rgb")
+        else:
+            np.save(path, px)
+        return path
+
+    px, mask = _sphere_on_fill(bits, "garbage")
+    top = 255 if bits == 8 else 65535
+    expected = px[mask] / top * 2 - 1
+    path = save("garbage", px)
+    with pytest.warns(facetlift.FrameWarning, match="longer than unit length"):
+        io.read_normals(path)  # (no mask: the garbage is the map's)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got, alpha = io.read_normals(path, mask=mask)
+        io.read_normals(path, mask=mask[:-1])
+    assert alpha is None
+    np.testing.assert_array_equal(got[mask], expected)
+    with pytest.warns(facetlift.FrameWarning, match="longer than unit length"):
+        io.read_normals(path, mask=np.ones_like(mask))  # (the garbage inside the mask)
+    px, _ = _sphere_on_fill(bits, 0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got, _ = io.read_normals(save("zeros", px), mask=mask)
+    assert np.isnan(got[~mask]).all()
+    np.testing.assert_array_equal(got[mask], expected)
+
+
+def test_a_dataset_folders_mask_and_the_command_lines_bound_an_integer_maps_checks(
+        tmp_path, capsys):
+    """As read_normals(mask=): a folder's mask.png (read_dataset) and --mask bound the pixels
+    whose lengths an 8-bit map's decode counts; garbage outside them is not warned about."""
+    import imagecodecs
+
+    from facetlift.cli import main
+
+    px, mask = _sphere_on_fill(8, "garbage")
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    io.write_mask(folder / "mask.png", mask)
+    (folder / "normal_map.png").write_bytes(imagecodecs.png_encode(px))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ds = io.read_dataset(folder)
+    np.testing.assert_array_equal(ds["mask"], mask)
+    np.testing.assert_array_equal(ds["normals"][mask], px[mask] / 255 * 2 - 1)
+    for argv in ([folder], [folder / "normal_map.png", "--mask", folder / "mask.png"]):
+        code = main(["integrate", *map(str, argv), "-s", "npy",
+                     "-o", str(tmp_path / f"out{len(argv)}")])
+        err = capsys.readouterr().err
+        assert code == 0 and "longer than unit length" not in err, err
+
+
+@pytest.mark.parametrize("encoding", ["xyz", "xy"])
+def test_an_eight_bit_fill_outside_the_mask_given_decides_no_zero_plateau(tmp_path, encoding):
+    """An 8-bit map's zero plateaus (frames.decode: a spike at code 127 says the encoder
+    truncates, and the whole map is decoded half a code up) were counted on every pixel where
+    the mask was given apart from the file: a flat fill (127, 127, 255) outside it made a
+    rounding encoder's sphere decode as a truncating one's. Now the pixels inside the mask
+    decide; the same fill inside it still does."""
+    import imagecodecs
+
+    px, mask = _sphere_on_fill(8, (127, 127, 255))
+    (tmp_path / "n.png").write_bytes(imagecodecs.png_encode(px))
+    got, _ = io.read_normals(tmp_path / "n.png", mask=mask, encoding=encoding)
+    np.testing.assert_array_equal(got[mask][:, :2], px[mask][:, :2] / 255 * 2 - 1)
+    got, _ = io.read_normals(tmp_path / "n.png", mask=np.ones_like(mask), encoding=encoding)
+    np.testing.assert_allclose(got[mask][:, :2], (px[mask][:, :2] + 0.5) / 255 * 2 - 1,
+                               rtol=0, atol=1e-15)
+
+
+def test_the_grey_check_looks_inside_the_mask_given(tmp_path):
+    """The grey-image check (R = G = B with two levels or more: a height map, no normal map)
+    looked at every pixel where the mask was given apart from the file: a grey image inside
+    the mask passed on a coloured fill around it, and one plane whose normal is (1, 1, 1) /
+    sqrt(3) (R = G = B, one level) was refused on a black fill around it. Now the pixels
+    inside the mask alone, as inside an alpha."""
+    import imagecodecs
+
+    px, mask = _sphere_on_fill(8, "garbage")
+    px[mask] = np.arange(mask.sum())[:, None] % 50 + 100  # (grey levels)
+    (tmp_path / "grey.png").write_bytes(imagecodecs.png_encode(px))
+    with pytest.warns(facetlift.FrameWarning, match="longer than unit length"):
+        io.read_normals(tmp_path / "grey.png")  # (its fill's colours: no grey image)
+    with pytest.raises(ValueError, match="R = G = B at every pixel inside the mask"):
+        io.read_normals(tmp_path / "grey.png", mask=mask)
+    px[mask], px[~mask] = 201, 0  # (201 / 255 * 2 - 1 = 0.576 = 1 / sqrt(3))
+    (tmp_path / "plane.png").write_bytes(imagecodecs.png_encode(px))
+    with pytest.raises(ValueError, match="R = G = B at every pixel of the image"):
+        io.read_normals(tmp_path / "plane.png")
+    got, _ = io.read_normals(tmp_path / "plane.png", mask=mask)
+    np.testing.assert_array_equal(got[mask], np.full((mask.sum(), 3), 201 / 255 * 2 - 1))

@@ -627,8 +627,9 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     False leaves them unread). `mask` ((H, W) bool, optional): a mask given in place of the
     folder's ``mask.*`` (``facetlift integrate FOLDER --mask M``), which is then not read; it
     is returned as ``mask``, and as :func:`~facetlift.io.read_normals`' `mask` its pixels are
-    those whose components ``normal_range="unsigned"`` counts (its size is the caller's to
-    check: the command line names its file).
+    those the map's checks look at (an 8/16-bit map's unit-length share and zero plateaus, the
+    grey check, the components ``normal_range="unsigned"`` counts), as the folder's
+    ``mask.*``'s are (its size is the caller's to check: the command line names its file).
 
     Returns
     -------

@@ -181,20 +181,32 @@ def _check_png_normals(data: bytes, path: Path, arg: str) -> None:
         )
 
 
+def _counted(mask, alpha, shape) -> np.ndarray | None:
+    """The pixels a normal map's checks look at (:func:`read_normals`: the grey check, the
+    8/16-bit decode's unit-length share and zero plateaus, ``"unsigned"``'s signs): `mask`,
+    given apart from the file (it replaces the alpha: the fill outside it may hold anything),
+    else the file's `alpha` mask (None: every pixel). A `mask` of another size than `shape`
+    ((H, W)) selects none: its caller refuses it naming its file, where a word on the pixels
+    would mislead."""
+    if mask is None:
+        return alpha
+    m = np.asarray(mask)
+    return m.astype(bool) if m.shape == tuple(shape) else np.zeros(shape, bool)
+
+
 def _decode_unit(pixels: np.ndarray, path: Path, arg: str, where=None, encoding: str = "xyz",
-                 frame=None, normal_range: str = "signed", counted=None) -> np.ndarray:
+                 frame=None, normal_range: str = "signed") -> np.ndarray:
     """uint8/uint16 -> [-1, 1] per channel (:func:`facetlift.frames.decode`, its unit-length
-    check among `where`, the alpha mask); float passes through, or with `normal_range`
-    ``"unsigned"`` is decoded as ``2 v - 1`` (:func:`facetlift.frames.decode_unsigned`, which
-    refuses an integer map, and counts the signs among `counted`, a mask given apart from the
-    file, else among `where`); other dtypes are refused. `encoding` ``"xy"``: x and y alone, z
+    check and zero plateaus among `where`, the pixels :func:`_counted` names); float passes
+    through, or with `normal_range` ``"unsigned"`` is decoded as ``2 v - 1``
+    (:func:`facetlift.frames.decode_unsigned`, which refuses an integer map, and counts the
+    signs among `where`); other dtypes are refused. `encoding` ``"xy"``: x and y alone, z
     rebuilt to face the viewer in `frame` (:func:`facetlift.frames.decode_xy`)."""
     # (another pixel type is refused below as it is without the option: the type is wrong)
     if normal_range == "unsigned" and (pixels.dtype.kind == "f"
                                        or pixels.dtype in frames.ENCODED_DTYPES):
-        pixels = frames.decode_unsigned(  # (refuses 8/16 bits)
-            pixels, f"`{arg}`: {path}", where if counted is None else counted,
-            2 if encoding == "xy" else 3)
+        pixels = frames.decode_unsigned(pixels, f"`{arg}`: {path}", where,  # (refuses 8/16
+                                        2 if encoding == "xy" else 3)  # bits)
         return frames.decode_xy(pixels, frame=frame) if encoding == "xy" else pixels
     if encoding == "xy" and (pixels.dtype in frames.ENCODED_DTYPES or pixels.dtype.kind == "f"):
         return frames.decode_xy(pixels, where=where, frame=frame)
@@ -352,7 +364,8 @@ def read_normals(
     check_alpha : bool
         Warn where the alpha that makes `alpha_mask` holds many grey levels away from its
         edge (:func:`_alpha_levels`: a height packed in the alpha, all of it > 0 taken as
-        inside). False where the caller has a mask of its own, which replaces the alpha.
+        inside). False where the caller has a mask of its own, which replaces the alpha (a
+        given `mask` leaves the alpha unchecked too).
     encoding : {"xyz", "xy"}
         ``"xyz"`` (default): x, y, z in R, G, B. ``"xy"``: a two-channel map (BC5, "RG", as
         game engines compress tangent-space maps) storing x and y alone in R and G (8/16-bit
@@ -373,9 +386,12 @@ def read_normals(
         their integer range and refuse it.
     mask : (H, W) array_like of bool, optional
         The object's mask where it is given apart from the file (a mask file's: ``--mask``, a
-        dataset folder's ``mask.*``), which replaces the alpha: ``"unsigned"`` counts the
-        components inside it alone, so a fill outside it may hold anything (with a mask of
-        another size none is counted: the caller's size check refuses it, naming its file).
+        dataset folder's ``mask.*``), which replaces the alpha: the checks look at the pixels
+        inside it alone (the grey check; an 8/16-bit map's share of vectors longer than unit
+        length, warned about, and its 8-bit zero plateaus, :func:`facetlift.frames.decode`;
+        the components ``"unsigned"`` counts), so a fill outside it may hold anything (with a
+        mask of another size none is looked at: the caller's size check refuses it, naming
+        its file). It is not returned: `alpha_mask` is the file's.
 
     Returns
     -------
@@ -394,7 +410,7 @@ def read_normals(
         or extension, a bad `frame`, `encoding` or `normal_range`; ``"unsigned"`` for an
         integer map, or for one with negative components (beyond
         :data:`facetlift.frames.UNSIGNED_SLACK`: signed normals); a grey image saved as RGB
-        (R = G = B at every pixel inside the alpha, where there is one:
+        (R = G = B at every pixel inside `mask`, else inside the alpha where there is one:
         :func:`facetlift.frames.grey_check`).
         The message names the path.
     """
@@ -410,10 +426,11 @@ def read_normals(
             with open(p, "rb") as fh:
                 _check_png_normals(fh.read(26), p, arg)
         pixels = _decode_image(p, ext, arg)
-        rgb, alpha = _split_alpha(pixels, p, arg, check_alpha, encoding)
+        rgb, alpha = _split_alpha(pixels, p, arg, check_alpha and mask is None, encoding)
+        counted = _counted(mask, alpha, rgb.shape[:2])
         if rgb.shape[-1] == 3:  # (R = G = B: no two-channel map's sign)
-            frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
-        n = _decode_unit(rgb, p, arg, alpha, encoding, frame, normal_range, mask)
+            frames.grey_check(rgb, counted, f"`{arg}`: {p}")
+        n = _decode_unit(rgb, p, arg, counted, encoding, frame, normal_range)
     elif ext == ".exr":
         ch = _read_exr(p, arg)
         names, alpha_name = _exr_normal_channels(ch, p, arg, 2 if encoding == "xy" else 3)
@@ -424,21 +441,22 @@ def read_normals(
                 "HALF or FLOAT, holding the components themselves"
             )
         n = np.stack([ch[c] for c in names], axis=-1).astype(np.float64)
-        alpha = (_alpha_mask(ch[alpha_name], p, arg, check_alpha) if alpha_name in ch
-                 else None)
-        frames.grey_check(n, alpha, f"`{arg}`: {p}")
+        alpha = (_alpha_mask(ch[alpha_name], p, arg, check_alpha and mask is None)
+                 if alpha_name in ch else None)
+        counted = _counted(mask, alpha, n.shape[:2])
+        frames.grey_check(n, counted, f"`{arg}`: {p}")
         if normal_range == "unsigned":
-            n = frames.decode_unsigned(n, f"`{arg}`: {p}", alpha if mask is None else mask,
-                                       n.shape[-1])
+            n = frames.decode_unsigned(n, f"`{arg}`: {p}", counted, n.shape[-1])
         if encoding == "xy":
             n = frames.decode_xy(n, frame=frame)
     else:
         arr = _read_npy(p, arg)
-        rgb, alpha = _split_alpha(arr, p, arg, check_alpha, encoding)
+        rgb, alpha = _split_alpha(arr, p, arg, check_alpha and mask is None, encoding)
+        counted = _counted(mask, alpha, rgb.shape[:2])
         if rgb.shape[-1] == 3:
-            frames.grey_check(rgb, alpha, f"`{arg}`: {p}")
+            frames.grey_check(rgb, counted, f"`{arg}`: {p}")
         # (uint8/uint16 arrays decode like PNG pixels)
-        n = _decode_unit(rgb, p, arg, alpha, encoding, frame, normal_range, mask)
+        n = _decode_unit(rgb, p, arg, counted, encoding, frame, normal_range)
     return frames.to_facetlift(n, frame), alpha
 
 
