@@ -541,16 +541,19 @@ def test_a_calibration_of_another_image_size_is_refused(tmp_path, capsys):
             in capsys.readouterr().err)
 
 
-def bouguet_mat(path, nx, ny, fc=(40.0, 42.0), cc=(12.5, 9.5)):
+def bouguet_mat(path, nx, ny, fc=(40.0, 42.0), cc=(12.5, 9.5), kc=(0.0,) * 5):
     """A Calib_Results.mat as the Camera Calibration Toolbox saves it: KK with fc, cc,
-    alpha_c, kc beside it, the calibrated image's size nx (width) and ny (height) as 1x1
-    matrices (left out where None), and a view's rotation (another 3x3)."""
+    alpha_c, kc (5 x 1; left out where None) beside it, the calibrated image's size nx
+    (width) and ny (height) as 1x1 matrices (left out where None), and a view's rotation
+    (another 3x3)."""
     from scipy import io as sio
 
     KK = np.array([[fc[0], 0.0, cc[0]], [0.0, fc[1], cc[1]], [0.0, 0.0, 1.0]])
     data = {"KK": KK, "fc": np.array([[fc[0]], [fc[1]]]), "cc": np.array([[cc[0]], [cc[1]]]),
-            "alpha_c": 0.0, "kc": np.zeros((5, 1)), "Rc_1": np.eye(3)}
+            "alpha_c": 0.0, "Rc_1": np.eye(3)}
     data.update({k: v for k, v in (("nx", nx), ("ny", ny)) if v is not None})
+    if kc is not None:
+        data["kc"] = np.reshape(np.asarray(kc, float), (-1, 1))
     sio.savemat(path, data)
     return KK
 
@@ -598,3 +601,43 @@ def test_a_calibration_toolbox_mat_states_its_image_size(tmp_path, capsys):
     assert main(["integrate", str(folder), "-s", "npy", "-o", str(tmp_path / "d")]) == 1
     assert (f"{folder / 'Calib_Results.mat'} is the calibration of a 52 x 40 image"
             in capsys.readouterr().err)
+
+
+def test_a_calibration_toolbox_mats_lens_distortion_is_warned_about(tmp_path, capsys):
+    """A Bouguet Calib_Results.mat's kc (its lens distortion, k1 k2 p1 p2 k3) was read
+    without a word, where OpenCV's, ROS's, COLMAP's and nerfstudio's distortion is warned
+    about: KK is a pinhole's, and facetlift models none. Now one warning names the file, the
+    coefficients beyond 1e-6 and the whole kc, and says to undistort the images first; a kc
+    of zeros (or below 1e-6), or none, is no word. --K and a dataset folder alike."""
+    from test_cli import write_input
+
+    npath, mpath, _ = write_input(tmp_path)  # (20 x 26)
+    for name, kc in (("zero.mat", (0.0,) * 5), ("tiny.mat", (1e-7, -1e-7, 0, 0, 5e-7)),
+                     ("none.mat", None)):
+        bouguet_mat(tmp_path / name, 26, 20, kc=kc)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            io.read_K(tmp_path / name)
+    KK = bouguet_mat(tmp_path / "dist.mat", 26, 20, kc=(-0.21, 0.13, 0.0, 2e-7, 0.0))
+    with pytest.warns(UserWarning) as rec:
+        got = io.read_K(tmp_path / "dist.mat")
+    np.testing.assert_array_equal(got, KK)
+    said = [str(w.message) for w in rec]
+    assert len(said) == 1, said
+    assert said[0].startswith(f"`K`: {tmp_path / 'dist.mat'} has lens distortion (k1 -0.21, "
+                              "k2 0.13), which K leaves out: the normal map must be of an "
+                              "undistorted image; its kc = [-0.21, 0.13, 0, 2e-07, 0] ")
+    assert "ideal pinhole" in said[0] and "undistort the images first" in said[0]
+    base = ["integrate", str(npath), "--mask", str(mpath), "-s", "npy"]
+    assert main([*base, "--K", str(tmp_path / "dist.mat"), "-o", str(tmp_path / "a")]) == 0
+    err = capsys.readouterr().err
+    assert err.count("lens distortion") == 1 and "kc = [-0.21, 0.13, 0, 2e-07, 0]" in err
+    assert main([*base, "--K", str(tmp_path / "zero.mat"), "-o", str(tmp_path / "b")]) == 0
+    assert "lens distortion" not in capsys.readouterr().err
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    write_input(folder, name="normal_map.png")
+    (tmp_path / "dist.mat").rename(folder / "Calib_Results.mat")
+    with pytest.warns(UserWarning, match=r"Calib_Results.mat has lens distortion \(k1 -0.21"):
+        ds = io.read_dataset(folder)
+    np.testing.assert_array_equal(ds["K"], KK)

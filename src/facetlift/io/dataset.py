@@ -32,7 +32,9 @@ def read_K(path) -> np.ndarray:
     an object with ``fx``, ``fy``, ``cx``, ``cy``. A ``.npy`` file holds a (3, 3) array, nine or
     four numbers likewise. A MATLAB ``.mat`` file (v4 to v7) holds it as the variable ``KK``
     (the calibration toolbox's ``Calib_Results.mat``, DiLiGenT's, whose ``nx`` / ``ny``
-    state its image's size: :func:`read_K_stated`), ``K``, or its only 3x3 numeric variable.
+    state its image's size: :func:`read_K_stated`; its lens distortion ``kc`` is warned about
+    where a coefficient exceeds :data:`MAT_DISTORTION_TOLERANCE`), ``K``, or its only 3x3
+    numeric variable.
 
     Calibration tools' own files are read too (:mod:`facetlift.io._kfiles`):
 
@@ -198,13 +200,20 @@ MAT_K_NAMES = ("KK", "K")
 #: ``alpha_c``, ``kc``).
 MAT_SIZE_NAMES = ("nx", "ny")
 
+#: The calibration toolbox's lens distortion ``kc`` (a ``Calib_Results.mat``'s): its five
+#: coefficients, in OpenCV's order (radial k1, k2, tangential p1, p2, radial k3), and the size
+#: above which one is warned about (:func:`_K_mat`: K is a pinhole's, the distortion left out).
+MAT_DISTORTION = ("k1", "k2", "p1", "p2", "k3")
+MAT_DISTORTION_TOLERANCE = 1e-6
+
 
 def _K_mat(p: Path) -> tuple[np.ndarray, tuple[int, int] | None]:
     """The intrinsics of a ``.mat`` file (:func:`read_K`): its variable of
     :data:`MAT_K_NAMES`, or its only 3x3 numeric one; a :class:`_KError` lists the variables
     otherwise (a calibration's file also holds each view's 3x3 rotation, Rc_1, ...). And the
     image size (H, W) it states in :data:`MAT_SIZE_NAMES` (two positive whole numbers), or
-    None (:func:`read_K_stated`)."""
+    None (:func:`read_K_stated`). Its lens distortion ``kc``, where a coefficient exceeds
+    :data:`MAT_DISTORTION_TOLERANCE`, is warned about as other calibration files' is."""
     from .images import load_mat
 
     try:
@@ -224,7 +233,30 @@ def _K_mat(p: Path) -> tuple[np.ndarray, tuple[int, int] | None]:
     # (the toolbox's 1x1 matrices as numbers; anything else is no size, as a ROS dump's 0 x 0)
     sizes = {k: np.asarray(data[k]).item() if np.size(data[k]) == 1 else None
              for k in MAT_SIZE_NAMES if k in data}
+    _mat_distortion(p, data.get("kc"))
     return square[name].astype(float), _kfiles._stated_size(sizes, MAT_SIZE_NAMES)
+
+
+def _mat_distortion(p: Path, kc) -> None:
+    """Warn where a ``Calib_Results.mat``'s `kc` (the toolbox's distortion, 5 x 1) holds a
+    coefficient beyond :data:`MAT_DISTORTION_TOLERANCE`: facetlift's camera is a pinhole, and
+    the normals must be of an undistorted image (a kc that is no vector of numbers says
+    nothing)."""
+    try:
+        kc = np.asarray(kc, dtype=float).ravel()
+    except (TypeError, ValueError):
+        return
+    if kc.size == 0 or not (np.abs(kc) > MAT_DISTORTION_TOLERANCE).any():
+        return  # (also a NaN kc: no coefficient known)
+    named = {(MAT_DISTORTION[i] if i < len(MAT_DISTORTION) else f"kc({i + 1})"): float(v)
+             for i, v in enumerate(kc) if abs(v) > MAT_DISTORTION_TOLERANCE}
+    listed = ", ".join(f"{v:g}" for v in kc)
+    _kfiles._distortion(
+        str(p), named,
+        f"its kc = [{listed}] (the calibration toolbox's k1, k2, p1, p2, k3, in OpenCV's "
+        "order) is not modelled, facetlift's camera being an ideal pinhole: undistort the "
+        "images first (the toolbox's 'Undistort image', or cv2.undistort(image, KK, kc)) and "
+        "compute the normal map from the undistorted ones")
 
 
 #: The names a K file's header or JSON object may give its four numbers.
