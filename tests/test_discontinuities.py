@@ -288,6 +288,17 @@ def test_occlusion_places_a_separated_piece_by_its_smallest_jump():
     o = spl.piece_offsets(mesh, z, bx, by, tg, "continue")
     g = gaps(z + o[mesh.piece])
     assert g.min() < -1.5 and g.max() > 1.5
+    # the route's `touch`: a pair whose smallest jump is farther than `touch` keeps its
+    # relative place; within it, it is closed as above
+    smallest = np.quantile(gaps(z), 0.05)
+    assert smallest > 2.0
+    o = spl.occlusion_offsets(mesh, z, bx, by, tg, scale=1.0, touch=0.9 * smallest)
+    assert o[1] - o[0] == pytest.approx(0.0, abs=1e-9)
+    np.testing.assert_allclose(gaps(z + o[mesh.piece]), gaps(z), atol=1e-9)
+    o = spl.occlusion_offsets(mesh, z, bx, by, tg, scale=1.0, touch=1.1 * smallest)
+    assert np.quantile(gaps(z + o[mesh.piece]), 0.05) == pytest.approx(0.0, abs=1e-9)
+    o = spl.occlusion_offsets(mesh, z, bx, by, tg, scale=2.0, touch=0.9 * smallest)
+    assert np.quantile(gaps(z + o[mesh.piece]), 0.05) == pytest.approx(0.0, abs=1e-9)
 
 
 def test_a_line_of_mixed_pixels_does_not_relay_a_placement():
@@ -825,8 +836,10 @@ def test_a_final_solve_cg_cannot_finish_is_factorized_or_its_iterate_kept(monkey
         kept = facetlift.integrate(n, discontinuities=True)
     assert kept.info["polish"] == "multigrid" and len(kept.info["unsolved"]) == 1
     assert 1e-6 < kept.info["unsolved"][0] < 1e-3  # above cg_rtol, below the start
-    # (measured 2.9e-6 of the depth range apart)
-    np.testing.assert_allclose(kept.depth, ref.depth, atol=1e-4 * np.ptp(ref.depth))
+    # (measured 8.3e-4 of the depth range apart, at 7 pixels: a strip of facets more than
+    # split.TOUCH footprints from its neighbours keeps the place the unfinished solve gave it;
+    # 2.9e-6 when the occlusion rule closed every pair)
+    np.testing.assert_allclose(kept.depth, ref.depth, atol=2e-3 * np.ptp(ref.depth))
 
 
 def test_the_factorization_keeps_to_the_memory_the_job_may_take(monkeypatch):

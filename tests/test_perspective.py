@@ -306,8 +306,10 @@ def test_diligent_bear_made():
     """Regression check on the one real map with ground truth (docs/perspective.md: smooth
     0.468 mm, discontinuities 0.046 mm with the benchmark-chosen defaults (0.025 with the
     grazing rule at cos 85 deg, 0.050 before the final view-cosine weights), BiNI's reference
-    0.334 mm). The discontinuity route's grazing rule (cos 87.5 deg) decides most of it: with
-    the pinhole default 1/255 the neck's fading ends stay bridged (0.28 mm)."""
+    0.334 mm; 0.079 mm since the occlusion rule closes only pieces within split.TOUCH
+    footprints, issue 9's limit 0.10 mm). The discontinuity route's grazing rule (cos 87.5
+    deg) decides most of it: with the pinhole default 1/255 the neck's fading ends stay
+    bridged (0.28 mm)."""
     from facetlift.io import read_dataset
 
     data = read_dataset(DILIGENT)  # the PNG is 16-bit; read_normals keeps all 16
@@ -325,7 +327,7 @@ def test_diligent_bear_made():
     bridged = made(facetlift.integrate(n, mask, K=K, discontinuities=True,
                                        outlier_eps=1 / 255))
     assert smooth < 0.5
-    assert made(jumps) < 0.06 and 0.1 < bridged
+    assert made(jumps) < 0.10 and 0.1 < bridged
 
 
 def test_iterative_loop_stops_on_angles_in_perspective():

@@ -904,7 +904,9 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
     occlusion rule (:func:`facetlift.methods.dgp.split.occlusion_offsets`): the mesh is split
     where neighbouring copies part by more than :data:`facetlift.operators.split.GAP`
     footprints, and each separated piece moved rigidly so that the smallest jump on its boundary
-    is zero. Pieces holding a facet of `anchored` (m,) bool (prior samples) stay where the
+    is zero where that jump is at most :data:`facetlift.methods.dgp.split.TOUCH` footprints
+    (without `anchored`; farther apart the pair keeps the solve's relative place). Pieces
+    holding a facet of `anchored` (m,) bool (prior samples) stay where the
     solve put them: the prior decided their offset; the others are placed relative to them.
     Then the pieces of at most :data:`SMALL_PIECE` facets are hung on their larger
     neighbours: those holding a facet of `anchored` only with `hang_anchored` (a blurred
@@ -916,15 +918,17 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
     for :func:`run`, which takes it out). `split`: :func:`facetlift.operators.split.from_copies`
     of `copies` where the caller formed it already (the islands' search), else formed here."""
     from ...operators.split import GAP, from_copies
-    from .split import absorb_small_pieces, occlusion_offsets
+    from .split import TOUCH, absorb_small_pieces, occlusion_offsets
 
     mesh, values = split if split is not None else from_copies(domain, copies,
                                                                GAP * footprint)
     fixed = None
     if anchored is not None:
         fixed = np.bincount(mesh.facet_piece[anchored], minlength=mesh.n_pieces) > 0
+    # (a gap of more than TOUCH footprints is left as the solve has it; with a prior every
+    # pair is closed, as before TOUCH: the fusion benchmark was not re-run with it)
     offsets = occlusion_offsets(mesh, values, bx, by, target, scale=footprint, fixed=fixed,
-                                small=SMALL_PIECE)
+                                small=SMALL_PIECE, touch=TOUCH if anchored is None else None)
     moved = int((np.abs(offsets) > GAP * footprint).sum())
     loose = {}
     if fixed is not None:  # (large pieces no sample holds: placed by the rule, not measured)
