@@ -1149,14 +1149,15 @@ def test_summary_counts_missing_and_unusable_normals(tmp_path, capsys):
 
 def test_summary_says_when_the_mesh_is_in_pieces(tmp_path, capsys):
     """An occluder is cut from the plane behind it: the summary says how many pieces the cuts
-    add, placed by the occlusion rule (normals cannot tell their depths apart); a smooth run,
+    add, closed by the occlusion rule where they nearly touch and left where the solve put
+    them otherwise (normals cannot tell their depths apart); a smooth run,
     and two mask components without a jump, say nothing of pieces."""
     gt = facetlift.synthetic.analytic("occluder", 48)
     np.save(tmp_path / "n.npy", gt.normals)
     args = ("integrate", str(tmp_path / "n.npy"), "--mask", str(_all_mask(tmp_path, (48, 48))))
     code, out, _ = run(capsys, *args, "-o", str(tmp_path / "a"), "--discontinuities")
-    m = re.search(r"cuts split the mesh into (\d+) more pieces? \(placed by the occlusion "
-                  r"rule\)", out)
+    m = re.search(r"cuts split the mesh into (\d+) more pieces? \(closed by the occlusion "
+                  r"rule where they nearly touch, else left where the solve put them\)", out)
     assert code == 0 and m and int(m.group(1)) >= 1
     code, out, _ = run(capsys, *args, "-o", str(tmp_path / "b"))
     assert code == 0 and "piece" not in out

@@ -299,6 +299,39 @@ def test_occlusion_places_a_separated_piece_by_its_smallest_jump():
     assert np.quantile(gaps(z + o[mesh.piece]), 0.05) == pytest.approx(0.0, abs=1e-9)
     o = spl.occlusion_offsets(mesh, z, bx, by, tg, scale=2.0, touch=0.9 * smallest)
     assert np.quantile(gaps(z + o[mesh.piece]), 0.05) == pytest.approx(0.0, abs=1e-9)
+    # the mirror: the plateau far below, its jumps negative, the smallest the 95 % quantile
+    z = z + np.where(mesh.piece == 1, -16.0, 0.0)
+    edge = np.quantile(gaps(z), 0.95)
+    assert edge < -2.0
+    o = spl.occlusion_offsets(mesh, z, bx, by, tg, scale=1.0, touch=0.9 * abs(edge))
+    assert o[1] - o[0] == pytest.approx(0.0, abs=1e-9)
+    o = spl.occlusion_offsets(mesh, z, bx, by, tg, scale=1.0, touch=1.1 * abs(edge))
+    assert np.quantile(gaps(z + o[mesh.piece]), 0.95) == pytest.approx(0.0, abs=1e-9)
+    with pytest.raises(ValueError, match="scale"):
+        spl.occlusion_offsets(mesh, z, bx, by, tg, touch=1.0)
+
+
+def test_the_route_closes_only_near_pieces_without_a_prior(monkeypatch):
+    """The route's placement passes split.TOUCH to the occlusion rule without a depth prior
+    and closes every pair with one (the fusion benchmark was measured that way)."""
+    from facetlift.methods.dgp import split as spl
+
+    seen = []
+    real = spl.occlusion_offsets
+
+    def spy(*a, **kw):
+        seen.append(kw.get("touch"))
+        return real(*a, **kw)
+
+    monkeypatch.setattr(spl, "occlusion_offsets", spy)
+    gt = facetlift.synthetic.analytic("occluder", 48)
+    facetlift.integrate(gt.normals, gt.mask, discontinuities=True)
+    assert seen == [spl.TOUCH]
+    seen.clear()
+    prior = np.full(gt.mask.shape, np.nan)
+    prior[5, 5] = gt.depth[5, 5]
+    facetlift.integrate(gt.normals, gt.mask, discontinuities=True, prior=prior)
+    assert seen and all(t is None for t in seen)
 
 
 def test_a_line_of_mixed_pixels_does_not_relay_a_placement():
@@ -839,7 +872,8 @@ def test_a_final_solve_cg_cannot_finish_is_factorized_or_its_iterate_kept(monkey
     # (measured 8.3e-4 of the depth range apart, at 7 pixels: a strip of facets more than
     # split.TOUCH footprints from its neighbours keeps the place the unfinished solve gave it;
     # 2.9e-6 when the occlusion rule closed every pair)
-    np.testing.assert_allclose(kept.depth, ref.depth, atol=2e-3 * np.ptp(ref.depth))
+    d = np.abs(kept.depth - ref.depth) / np.ptp(ref.depth)
+    assert np.nanmax(d) < 2e-3 and (d > 1e-4).sum() <= 10
 
 
 def test_the_factorization_keeps_to_the_memory_the_job_may_take(monkeypatch):

@@ -304,10 +304,10 @@ DILIGENT = Path(__file__).parents[1] / ".." / "shared" / "data" / "normal_maps" 
 @pytest.mark.skipif(not (DILIGENT / "depth_gt.npz").is_file(), reason="no DiLiGenT bear data")
 def test_diligent_bear_made():
     """Regression check on the one real map with ground truth (docs/perspective.md: smooth
-    0.468 mm, discontinuities 0.046 mm with the benchmark-chosen defaults (0.025 with the
-    grazing rule at cos 85 deg, 0.050 before the final view-cosine weights), BiNI's reference
-    0.334 mm; 0.079 mm since the occlusion rule closes only pieces within split.TOUCH
-    footprints, issue 9's limit 0.10 mm). The discontinuity route's grazing rule (cos 87.5
+    0.468 mm, discontinuities 0.079 mm since the occlusion rule closes only pieces within
+    split.TOUCH footprints (issue 9's limit 0.10 mm; 0.020 with every pair closed, 0.311 with
+    none; 0.046 with the isolated normals kept, 0.050 before the final view-cosine weights),
+    BiNI's reference 0.334 mm). The discontinuity route's grazing rule (cos 87.5
     deg) decides most of it: with the pinhole default 1/255 the neck's fading ends stay
     bridged (0.28 mm)."""
     from facetlift.io import read_dataset

@@ -534,9 +534,12 @@ def summary(record: dict) -> str:
     if cut > 0:  # (docs/results.md, "What the remaining error is")
         held = (isinstance(prior, dict) and not prior.get("left_out")
                 and (prior.get("samples") or 0) > 0)
+        # (without a prior the pieces the rule closes come out joined: those counted are
+        # mostly ones too far apart to close, methods.dgp.split.TOUCH)
         parts.append(f"cuts split the mesh into {cut} more piece{'s' if cut != 1 else ''} "
-                     "(placed by " + ("the prior where they hold samples, else " if held
-                                      else "") + "the occlusion rule)")
+                     + ("(placed by the prior where they hold samples, else the occlusion "
+                        "rule)" if held else "(closed by the occlusion rule where they nearly "
+                        "touch, else left where the solve put them)"))
     counts = info.get("input") or {}
     missing = counts.get("missing") or 0
     if missing:  # (NaN inside the mask: no warning, being the documented way to say it)

@@ -12,9 +12,11 @@ data folder with the defaults.
 
 Every scene is integrated by the smooth DGP, the discontinuity-preserving DGP (defaults and a
 sweep of ``discontinuity_k``), BiNI, and the **oracle**: the same facet integration with the
-true jump edges cut (:func:`facetlift.synthetic.jump_edges` of the ground truth) and the same
-rule for the separated pieces' offsets (:func:`facetlift.methods.dgp.split.occlusion_offsets`)
-with each pair's occluding side taken from the ground truth too (:func:`oracle`), and
+true jump edges cut (:func:`facetlift.synthetic.jump_edges` of the ground truth) and the
+route's rule for the separated pieces' offsets
+(:func:`facetlift.methods.dgp.split.occlusion_offsets`) with every pair closed (no
+``TOUCH``: started from the true places, it would leave far pairs at their truth) and each
+pair's occluding side taken from the ground truth too (:func:`oracle`), and
 **oracle-placed**, the oracle's cuts with every piece moved to its
 true place (what the occlusion rule's guesses cost). Reported per run: MADE (median scale, as
 BiNI evaluates, for pinhole scenes) or the paper's normalised error in % (orthographic
@@ -368,7 +370,8 @@ def oracle(gt, normals) -> tuple[float, float, float, float]:
             log.info("true placement failed on %s: %s", gt.name, e)
             move = None
         start = z if move is None else z + move[mesh.piece]
-        # (the route's rule, line pieces included: SMALL_PIECE)
+        # (the route's rule, line pieces included: SMALL_PIECE; every pair closed, as with a
+        # prior: split.TOUCH would keep far pairs at their true places)
         offsets = occlusion_offsets(mesh, start, bx, by, target,
                                     scale=problem.camera.footprint(), small=SMALL_PIECE)
         placed_z = start + offsets[mesh.piece]

@@ -52,8 +52,10 @@ Depth discontinuities (``discontinuities=True``)
     Every facet keeps its own corner values, glued to the shared vertices by bilateral
     weights (BiNI's one-sided depth differences, transposed to facets) that are reweighted
     until they settle, so facets separate where the depth jumps; pieces cut off on all sides
-    are placed by the occlusion rule. See :mod:`facetlift.methods.dgp.discontinuous`. Only
-    with ``solver="direct"``; it has its own multigrid-CG solver (``backend`` is not used).
+    are placed by the occlusion rule where they nearly touch (:data:`.split.TOUCH`; every
+    pair with a depth prior), else left where the solve put them. See
+    :mod:`facetlift.methods.dgp.discontinuous`. Only with ``solver="direct"``; it has its own
+    multigrid-CG solver (``backend`` is not used).
 
 Options
     Declared in :data:`OPTIONS` (``facetlift methods``, docs/methods.md).
