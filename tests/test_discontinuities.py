@@ -313,7 +313,7 @@ def test_occlusion_places_a_separated_piece_by_its_smallest_jump():
 
 def test_the_route_closes_only_near_pieces_without_a_prior(monkeypatch):
     """The route's placement passes split.TOUCH to the occlusion rule without a depth prior
-    and closes every pair with one (the fusion benchmark was measured that way)."""
+    and closes every pair with one (TOUCH with sparse priors: 31 runs better, 58 worse)."""
     from facetlift.methods.dgp import split as spl
 
     seen = []
