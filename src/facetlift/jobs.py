@@ -272,9 +272,11 @@ def read(job: Job) -> Input:
             n, layout = _normals_from_field(g, job)
         else:
             n = g["normals"]
-            if signs == "unsigned":
+            if signs == "unsigned":  # (its signs counted where a map's are: images._counted)
+                from .io.images import _counted
+
                 n = frames.decode_unsigned(n, f"`path`: {src}",
-                                           g["mask"] if given is None else given,
+                                           _counted(given, g["mask"], n.shape[:2]),
                                            2 if encoding == "xy" else 3)
             if encoding == "xy":
                 n = frames.decode_xy(n, frame=job.normal_frame)
