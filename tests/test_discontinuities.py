@@ -494,13 +494,20 @@ def test_crack_growth_cuts_a_fading_jump(monkeypatch):
         h = -s.depth
         return np.abs(h - h.mean() - (height - height.mean())).mean()
 
+    # (the default's 20 free reweightings let the tip run further before the weights settle,
+    # below; the growth phase is checked where the settling freezes the tip short of the
+    # jump's end, with the 10 of the schedule it was measured with)
+    default = facetlift.integrate(n, discontinuities=True)
+    monkeypatch.setattr(disc, "SETTLE_AFTER", 10)
     s = facetlift.integrate(n, discontinuities=True)
     monkeypatch.setattr(disc, "GROW", False)
     frozen = facetlift.integrate(n, discontinuities=True)
-    monkeypatch.undo()
+    monkeypatch.setattr(disc, "GROW", True)
     smooth = facetlift.integrate(n)
     # measured: 1.07 px without the growth phase (the sides cut near the ridge only, the rest
-    # of the jump bends the background), 0.49 with it in 15 growth reweightings; smooth 1.99
+    # of the jump bends the background), 0.49 with it in 15 growth reweightings; smooth 1.99;
+    # the default (SETTLE_AFTER 20) 0.18, 0.29 without the growth
+    assert default.info["converged"] and error(default) < 0.5 * error(s)
     assert s.info["converged"] and s.info["grown"] > 0 and frozen.info["grown"] == 0
     assert error(s) < 0.6 * error(frozen) and error(s) < 0.3 * error(smooth)
     assert s.info["mean_deviation"] < 0.6 * frozen.info["mean_deviation"]
@@ -682,6 +689,9 @@ def test_multigrid_policy_refresh_rebuild_and_block_coarse_space(monkeypatch):
     # (every reweighting solved to LOOSE_RTOL: with the forcing term the policies' different
     # preconditioners stop the early solves at different points and the paths part a little)
     monkeypatch.setattr(disc, "FORCING", None)
+    # (the schedule these paths were written for: with SETTLE_AFTER 20 the cuts of this scene
+    # run to their ends before the settling, and the growth phase below has nothing to grow)
+    monkeypatch.setattr(disc, "SETTLE_AFTER", 10)
     # without the growth phase (whose few-corner steps leave a hierarchy the polish's trial
     # finishes on): one build for the reweightings, and the final polish, which the trial
     # does not finish here, factorizes at this size; above DIRECT_POLISH it builds a
