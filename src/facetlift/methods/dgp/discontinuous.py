@@ -41,8 +41,8 @@ Iteration and stopping rule
     scenes a few corners on ambiguous edges flip back and forth for ever (the cap was the usual
     exit). After :data:`SETTLE_AFTER` free reweightings (:data:`PRIOR_SETTLE_AFTER` with a
     depth prior in the system) every weight step is therefore scaled by
-    ``DECAY ** (iteration - SETTLE_AFTER)``: the cuts form freely first, then the weights
-    settle. The loop stops when no corner weight moves by more than ``tol``
+    ``DECAY ** (iteration - SETTLE_AFTER)`` (or that one): the cuts form freely first, then
+    the weights settle. The loop stops when no corner weight moves by more than ``tol``
     (``discontinuity_tol``, weights are in [0, 4]); ``discontinuity_iter`` is a cap, reported
     as ``converged=False`` when hit.
 
@@ -181,8 +181,9 @@ EVIDENCE = "difference"
 #: higher), 8-bit 39 / 7; 1.05-1.2x the time; a fresh held-out set (seed 8086, exact, 8-bit,
 #: noise and blur, 144 runs) 75 / 18, every mean lower (docs/results.md, "Slower settling");
 #: the DiLiGenT bear 0.079 -> 0.117 mm (issue 9's 0.10 missed; 15, 25 and 30: 0.115-0.118),
-#: BiNI's tent 2.47 -> 1.15 deg, the human map 2.61 -> 2.51 deg. 30 gained about 0.7 % more
-#: (blur) for more time and was worse with noise. Faster settling had lost before (6 and 5:
+#: BiNI's tent 2.47 -> 1.15 deg, the human map 2.61 -> 2.51 deg. 30 (against 20, 191 runs: 48
+#: better / 18 worse, mean group ratio 0.993, blur 1-2 % lower) took more time and was worse
+#: with noise (wide +2.5 %). Faster settling had lost before (6 and 5:
 #: docs/benchmarks.md), and 30 had lost on 24 perspective scenes before the grazing rule and
 #: the crack growth (DiLiGenT bear 0.382 -> 0.317 mm then, means 3.344 -> 3.393 mm).
 SETTLE_AFTER = 20
