@@ -178,8 +178,10 @@ EVIDENCE = "difference"
 #: errors better and 22 worse by more than 1 %, 17 of 18 group-condition means lower
 #: (perspective exact 2.429 -> 2.316 mm, noise 2.349 -> 2.328, blur 3.186 -> 3.050; room blur
 #: 5.682 -> 5.216; tabletop exact 7.251 -> 7.062; orthographic noise 6.819 -> 6.877 %, the one
-#: higher), 8-bit 39 / 7; 1.05-1.2x the time; a fresh held-out set (seed 8086, exact, 8-bit,
-#: noise and blur, 144 runs) 75 / 18, every mean lower (docs/results.md, "Slower settling");
+#: higher), 8-bit 39 / 7; 1.05-1.2x the time (the four timing objects 0.94-1.27x, docs/
+#: benchmarks.md); a fresh held-out set (seed 8086, exact, 8-bit, noise and blur, 144 runs)
+#: 75 / 18, every mean lower, and a second one (seed 9091) ahead of BiNI in all five
+#: conditions (docs/results.md, "Slower settling");
 #: the DiLiGenT bear 0.079 -> 0.117 mm (issue 9's 0.10 missed; 15, 25 and 30: 0.115-0.118),
 #: BiNI's tent 2.47 -> 1.15 deg, the human map 2.61 -> 2.51 deg. 30 (against 20, 191 runs: 48
 #: better / 18 worse, mean group ratio 0.993, blur 1-2 % lower) took more time and was worse
