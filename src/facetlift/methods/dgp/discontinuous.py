@@ -39,12 +39,12 @@ Iteration and stopping rule
     Iteratively reweighted least squares from the smooth solution. The bilateral weights do
     not come from an energy that the iteration decreases, and on 30-80 % of the benchmark's
     scenes a few corners on ambiguous edges flip back and forth for ever (the cap was the usual
-    exit). After :data:`SETTLE_AFTER` free reweightings (:data:`PRIOR_SETTLE_AFTER` with a
-    depth prior in the system) every weight step is therefore scaled by
-    ``DECAY ** (iteration - SETTLE_AFTER)`` (or that one): the cuts form freely first, then
-    the weights settle. The loop stops when no corner weight moves by more than ``tol``
-    (``discontinuity_tol``, weights are in [0, 4]); ``discontinuity_iter`` is a cap, reported
-    as ``converged=False`` when hit.
+    exit). After ``n`` free reweightings (:data:`SETTLE_AFTER`; :data:`PRIOR_SETTLE_AFTER`
+    with a depth prior in the system) every weight step is therefore scaled by
+    ``DECAY ** (iteration - n)``: the cuts form freely first, then the weights settle. The
+    loop stops when no corner weight moves by more than ``tol`` (``discontinuity_tol``,
+    weights are in [0, 4]); ``discontinuity_iter`` is a cap, reported as ``converged=False``
+    when hit.
 
     Crack growth: where a jump fades to zero along its boundary (one surface passes behind
     another, the sides of a tent) its cut advances about one pixel per reweighting, from where
