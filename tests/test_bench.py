@@ -286,6 +286,8 @@ def test_every_discontinuity_condition_perturbs_as_named():
             np.testing.assert_array_equal(n, gt.normals)
         elif name in ("noise3", "smooth3"):  # RMS 3 degrees
             assert np.sqrt(np.mean(ang**2)) == pytest.approx(3.0, rel=0.1), name
+        elif name == "noise6":
+            assert np.sqrt(np.mean(ang**2)) == pytest.approx(6.0, rel=0.1), name
         elif name == "outliers":  # 2 % moved, by up to 45 degrees
             assert (ang > 1e-3).mean() == pytest.approx(0.02, abs=0.002)
             assert ang.max() <= 45.0 + 1e-6

@@ -1243,7 +1243,8 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
 @click.option("--conditions", default=None,
               help="Comma-separated normal conditions of the discontinuities and heldout "
                    "experiments "
-                   "(default exact,16bit,8bit,noise3, with --quick exact,8bit; also smooth3: "
+                   "(default exact,16bit,8bit,noise3, with --quick exact,8bit; also noise6: 6 "
+                   "degrees of angular noise, smooth3: "
                    "spatially correlated errors of 3 degrees RMS, outliers: 2 % of the "
                    "normals rotated by up to 45 degrees, blur1.5: the normal map blurred by "
                    "a Gaussian of 1.5 px, soft occlusion boundaries).")
