@@ -115,7 +115,9 @@ OPTIONS = (
            "also hears stage(name) as the discontinuity route's steps without iterations "
            "start (facetlift._progress)", kind="callable", none=True),
     Option("discontinuity_k", DEFAULT_K, "sharpness of the bilateral weights, in squared pixel "
-           "footprints (larger cuts more readily)", low=0.0, low_open=True, when=_DISC),
+           "footprints (larger cuts more readily), for normals with up to 4 deg of noise; "
+           "noisier ones (read from their curl) get k * 4 / noise (info['discontinuity_k'])",
+           low=0.0, low_open=True, when=_DISC),
     Option("discontinuity_iter", DEFAULT_ITER, "cap on the reweightings, the growth phase's "
            "included (a safety net: the weights settle and the cuts stop growing first)",
            kind="int", low=0, when=_DISC),
@@ -474,14 +476,16 @@ def run(
         if (prior is None or blur is not None) and power:
             final = np.where(target, cosines, 1.0) ** power
             final = final if weights is None else final * weights
+        from ...frames import normal_noise
+
+        noise = normal_noise(problem)  # (degrees, from the curl: discontinuous.NOISE_K)
+        k_used = discontinuous.sharpness(discontinuity_k, noise)
         seed = None
         if discontinuity_seed and discontinuity_iter > 0:  # (the prior-free reweightings
             # from the normals' curl; with no reweighting the smooth surface, as documented)
-            from ...frames import normal_noise
-
             seed = discontinuous.curl_seed(domain, bx, by, target, cosines, s,
-                                           float(np.radians(normal_noise(problem))))
-        common = dict(normal_scale=scale, k=discontinuity_k, max_iter=discontinuity_iter,
+                                           float(np.radians(noise)))
+        common = dict(normal_scale=scale, k=k_used, max_iter=discontinuity_iter,
                       tol=discontinuity_tol, flat_weight=flat_weight, callback=progress,
                       weights=weights, seed=seed)
 

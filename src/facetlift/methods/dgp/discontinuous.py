@@ -31,7 +31,9 @@ Bilateral weights (after BiNI, Cao et al., ECCV 2022, transposed to facets)
     facet without a usable normal) gives no evidence: its difference counts as zero, as the
     empty rows of BiNI's one-sided differences do at the mask border. ``k``
     (``discontinuity_k``) is in squared pixel footprints, the same for orthographic and
-    perspective input. Its default and the evidence compared (plain
+    perspective input; for normals noisier than :data:`NOISE_K` degrees (read from their
+    curl) the route uses ``k * NOISE_K / noise`` (:func:`sharpness`,
+    ``info["discontinuity_k"]``). Its default and the evidence compared (plain
     differences, :data:`EVIDENCE`) were chosen on the discontinuity benchmark as a whole
     (``facetlift bench --experiments discontinuities``; docs/results.md, "Discontinuities").
 
@@ -139,6 +141,27 @@ log = logging.getLogger(__name__)
 
 #: Default for ``discontinuity_k`` (squared pixel footprints; see the module docstring).
 DEFAULT_K = 4.0
+
+#: Angular noise of the normals (degrees, read from their curl:
+#: :func:`facetlift.frames.normal_noise`) up to which ``discontinuity_k`` applies as given;
+#: noisier normals get ``k * NOISE_K / noise`` (:func:`sharpness`). The argument of the
+#: bilateral sigmoid, ``k (D_-^2 - D_+^2) = k (D_- - D_+)(D_- + D_+)``, carries a noise about
+#: proportional to the normals' (the cross term ``2 D e`` dominates), so a decisiveness that
+#: falls as ``1 / noise`` keeps that noise's share of it fixed; below ``NOISE_K`` the spread of
+#: the evidence is the surfaces' own, for which the default was chosen. 4 deg lies above every
+#: condition the default ``k`` was chosen on: the normals' noise read 0.0-2.9 deg on the
+#: development benchmark's exact, 8-bit, outlier and smooth3 renders and 2.5-3.4 deg at 3 deg
+#: of noise (one orthographic render 4.6). Measured (thirty-second session, docs/results.md
+#: "Six degrees of noise"; one A/B each against ``k`` as given, 89 development scenes): at 6
+#: deg of noise (read 5.0-7.3) 44 better / 26 worse by more than 1 %, mean group ratio 0.941
+#: (rooms 4.746 -> 3.671 mm, wide 1.719 -> 1.582, orthographic 7.546 -> 7.258 %; vessels 11.98
+#: -> 12.12 mm), at 9 deg 64 / 17, 0.799 (perspective 2.901 -> 2.560 mm, rooms 8.79 -> 4.29,
+#: tables 10.69 -> 7.57), at 3 deg 1 / 0; ``k = 2`` throughout had been 35 / 176 at exact,
+#: 3-deg and blurred normals, and at 6 deg 43 / 33 (0.967). ``k`` falling as ``1 / noise^2``
+#: instead (from 4 deg) was worse at 6 deg (0.979) and 9 deg (0.985: perspective +5 %, wide
+#: +16 %); the held-out sets of seeds 9091 and 777001 at 6 deg: 2.373 -> 1.997 mm and 2.826
+#: -> 2.553 (BiNI 1.664 and 2.657), 27 / 9 and 25 / 10 scenes better.
+NOISE_K = 4.0
 
 #: Default cap on the reweightings, the growth phase's included (a safety net: the
 #: weight-change rule and the end of the growth phase normally come first).
@@ -758,6 +781,15 @@ def bilateral_weights(u, nb, scale, k, slopes=None):
         np.multiply(omega["x"][sx], omega["y"][sy], out=out[:, i])
     out *= 4.0
     return np.maximum(out, FLOOR, out=out)
+
+
+def sharpness(k: float, noise: float) -> float:
+    """The bilateral sigmoid's sharpness for ``discontinuity_k`` `k` and the normals' angular
+    noise `noise` in degrees (:data:`NOISE_K`): `k` up to ``NOISE_K`` (or where the noise is
+    unknown, NaN), ``k * NOISE_K / noise`` above."""
+    if not (np.isfinite(noise) and noise > NOISE_K):
+        return float(k)
+    return float(k) * NOISE_K / float(noise)
 
 
 def changes_big(step) -> bool:
