@@ -1326,3 +1326,51 @@ def test_noisy_normals_of_a_surface_without_jumps_are_cut_less(monkeypatch):
     assert given.info["discontinuity_k"] == DC.DEFAULT_K
     assert scaled.info["cut_corners"] < 0.7 * given.info["cut_corners"]
     assert err < 0.8 * err_given
+
+
+def test_the_noise_scaled_sharpness_holds_with_a_sparse_prior_and_its_shared_cuts():
+    """A sparse prior's first pass and a reuse of a prior-free run's cuts (shared_cuts) run
+    at the sharpness the prior-free run used on the same noisy normals; a map whose noise
+    cannot be read (no 2 x 2 block of usable pixels) keeps discontinuity_k as given."""
+    from facetlift.methods import dgp
+    from facetlift.methods.dgp import discontinuous as DC
+
+    gt = synthetic.analytic("sphere", 48)
+    noisy = synthetic.add_angular_noise(gt.normals, 8.0, np.random.default_rng(2))
+    prior = np.full(gt.depth.shape, np.nan)
+    r, c = np.nonzero(gt.mask)
+    pick = np.random.default_rng(3).choice(r.size, 20, replace=False)
+    prior[r[pick], c[pick]] = gt.depth[r[pick], c[pick]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with dgp.shared_cuts():
+            free = facetlift.integrate(noisy, gt.mask, discontinuities=True)
+            fused = facetlift.integrate(noisy, gt.mask, discontinuities=True, prior=prior)
+        line = np.zeros((5, 9), bool)
+        line[2, :] = True  # (one row: no 2 x 2 block, the noise is NaN)
+        flat = np.zeros((5, 9, 3))
+        flat[..., 2] = 1.0
+        single = facetlift.integrate(flat, line, discontinuities=True)
+    assert free.info["discontinuity_k"] < DC.DEFAULT_K
+    assert fused.info["discontinuity_k"] == free.info["discontinuity_k"]
+    assert fused.info["prior_free"]["reused"]
+    assert single.info["discontinuity_k"] == DC.DEFAULT_K
+
+
+def test_the_many_cuts_warning_says_when_the_sharpness_was_lowered_for_noise():
+    """A plane seen at view cosine 0.15 with noisy normals cuts more than CUT_MANY of its
+    corners (about 0.35-0.38 at 3 and 8 deg); the warning names the noise and, above
+    NOISE_K, the lowered sharpness the run used."""
+    H = W = 64
+    n = np.zeros((H, W, 3))
+    n[..., 1] = math.sqrt(1.0 - 0.15**2)
+    n[..., 2] = 0.15
+    mask = np.ones((H, W), bool)
+    for deg, lowered in ((3.0, False), (8.0, True)):
+        noisy = synthetic.add_angular_noise(n, deg, np.random.default_rng(0))
+        with pytest.warns(UserWarning, match="facet corners were cut") as rec:
+            s = facetlift.integrate(noisy, mask, discontinuities=True)
+        text = " ".join(str(w.message) for w in rec if "corners were cut" in str(w.message))
+        assert "noisy normals" in text and "A smaller discontinuity_k" in text
+        assert ("sharpness was already lowered to "
+                f"{s.info['discontinuity_k']:.2g}" in text) is lowered
