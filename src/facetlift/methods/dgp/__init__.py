@@ -558,7 +558,7 @@ def run(
         _discontinuity_warnings(info, prior if pointwise else None, domain,
                                 pinfo["mesh_pieces"],
                                 blurred=prior if prior is not None and not pointwise else None,
-                                problem=problem, noise=noise)
+                                noise=noise)
         if pointwise and pinfo.get("unanchored_pieces"):
             size, row, col = pinfo["unanchored_largest"]
             r0, c0 = problem.extras.get("offset", (0, 0))  # (the image's rows and columns)
@@ -661,12 +661,12 @@ def fill_gaps(domain, bx, by, target, scale, cosines, weights, gaps):
 
 
 def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
-                            blurred=None, problem=None, noise=None) -> None:
+                            blurred=None, noise: float = float("nan")) -> None:
     """The discontinuity route's warnings on the solve returned: a pointwise `prior` that tore
     the surface apart (:data:`TORN`, :data:`TORN_PIECES`; None: no such prior), or a
     `blurred` one (``prior_blur``, the prior's terms as `prior`'s) that did, a run without a
-    prior that cut too much (:data:`CUT_MANY`; the normals' noise named: `noise` in degrees,
-    or read from `problem` where not given), and solves left unfinished."""
+    prior that cut too much (:data:`CUT_MANY`; the normals' noise, `noise` in degrees as the
+    route read it, named), and solves left unfinished."""
     if prior is not None and prior[0].max() > PRIOR_STRONG:
         warn(f"discontinuities with prior_weight up to {prior[0].max():g}: above "
              f"{PRIOR_STRONG:g} the reweightings' solves stop before the normals' part is "
@@ -706,10 +706,6 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
              "points at their footprints' centres, or integrating without discontinuities may "
              "do better")
     if prior is None and blurred is None and info["cut_corners"] > CUT_MANY:
-        if noise is None:
-            from ...frames import normal_noise
-
-            noise = float("nan") if problem is None else normal_noise(problem)
         steep = "on surfaces seen steeply (a floor or a table top from a low camera)"
         if np.isfinite(noise) and noise < NOISE_LOW:  # (the usual cause ruled out: a review)
             cause = (f"these normals' noise, read from their curl, is low (about {noise:.1f} "
@@ -722,7 +718,7 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
         warn(f"discontinuities: {info['cut_corners']:.0%} of the facet corners were cut "
              f"({pieces:,} mesh pieces), more than surfaces with real jumps give (at most 21 % "
              f"on the development benchmark's renders and the real maps): {cause}. "
-             + ("" if not (np.isfinite(noise) and noise > discontinuous.NOISE_K) else
+             + ("" if discontinuous.sharpness(1.0, noise) == 1.0 else
                 f"For this noise the sharpness was already lowered to "
                 f"{info['discontinuity_k']:.2g} (discontinuity_k times "
                 f"{discontinuous.NOISE_K:g} / noise, info['discontinuity_k']). ")
