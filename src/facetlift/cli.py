@@ -1247,7 +1247,7 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
                    "degrees of angular noise, smooth3: "
                    "spatially correlated errors of 3 degrees RMS, outliers: 2 % of the "
                    "normals rotated by up to 45 degrees, blur1.5: the normal map blurred by "
-                   "a Gaussian of 1.5 px, soft occlusion boundaries).")
+                   "a Gaussian of 1.5 px, soft occlusion boundaries; blur3: of 3 px).")
 @click.option("--heldout-seed", "heldout_seed", type=click.IntRange(min=0), default=None,
               metavar="N",
               help="Seed of the heldout experiment's random views (a new one draws a fresh "

@@ -57,12 +57,15 @@ log = logging.getLogger(__name__)
 #: largest degrees: :func:`facetlift.synthetic.perturb_fraction`), ("blur", sigma px: soft
 #: occlusion boundaries, :func:`facetlift.synthetic.blur_normals`) or None. The last three are
 #: not in the default run (``Settings.disc_conditions``), nor is ``noise6`` (6 degrees of
-#: angular noise, where BiNI draws level: docs/results.md, "Six degrees of noise"):
+#: angular noise, where BiNI draws level: docs/results.md, "Six degrees of noise") or
+#: ``blur3`` (a 3 px blur, as a normal estimator smooths an occlusion boundary; docs/results.md,
+#: "Stronger blur, smooth errors and a fresh held-out set"):
 #: ``facetlift bench --experiments discontinuities --conditions smooth3,outliers,blur1.5`` runs
 #: them (``benchmarks/bench_jump_free.py --conditions`` too).
 CONDITIONS = {"exact": None, "16bit": ("quantize", 16), "8bit": ("quantize", 8),
               "noise3": ("noise", 3.0), "noise6": ("noise", 6.0), "smooth3": ("smooth", 3.0, 8.0),
-              "outliers": ("outliers", 0.02, 45.0), "blur1.5": ("blur", 1.5)}
+              "outliers": ("outliers", 0.02, 45.0), "blur1.5": ("blur", 1.5),
+              "blur3": ("blur", 3.0)}
 #: Analytic jump scenes of the benchmark (see the module docstring for ``helix``).
 ANALYTIC = tuple(n for n in synthetic.WITH_JUMPS if n != "helix")
 #: Focal length (px) of the wide-angle camera and its distance to the object.
