@@ -316,7 +316,8 @@ def _cut_key(domain, bx, by, target, kw) -> tuple:
     """A digest of the input and the options that decide the prior-free cut weights."""
     h = hashlib.blake2b(digest_size=20)
     for a in (domain.mask, bx, by, target, kw["normal_scale"], kw.get("weights"),
-              kw.get("seed")):  # (discontinuity_seed's start: other cuts)
+              kw.get("seed"), kw.get("k_scale")):  # (discontinuity_seed's start, the
+        # steep planar facets' sharpness: other cuts)
         a = np.array([np.nan]) if a is None else np.ascontiguousarray(a)
         h.update(f"{a.dtype}{a.shape}".encode())
         h.update(a.view(np.uint8).ravel() if a.size else b"")
@@ -486,9 +487,12 @@ def run(
             # from the normals' curl; with no reweighting the smooth surface, as documented)
             seed = discontinuous.curl_seed(domain, bx, by, target, cosines, s,
                                            float(np.radians(noise)))
+        # (a plane seen nearly edge-on through noisy normals: its facets' sharpness capped)
+        k_scale = discontinuous.steep_planar(domain, problem.normals, target, bx, by, s, noise,
+                                             given=given)
         common = dict(normal_scale=scale, k=k_used, max_iter=discontinuity_iter,
                       tol=discontinuity_tol, flat_weight=flat_weight, callback=progress,
-                      weights=weights, seed=seed)
+                      weights=weights, seed=seed, k_scale=k_scale)
 
         def deviation(c):
             """Mean angle (deg) of the facets' copies `c` to the input's own normals."""

@@ -101,6 +101,15 @@ Grazing normals
     edge-on normals, whose slopes would bridge it; as missing samples they give no evidence
     and no target, and the cut can close (docs/results.md, "Discontinuities: the grazing rule").
 
+Steep planes under noise
+    Where the normals are noisy (their curl reads noise, :func:`facetlift.frames.normal_noise`)
+    the evidence of a steep facet carries a noise growing with its slope, and a plane seen
+    nearly edge-on was cut at random into hundreds of pieces. On facets whose normals scatter
+    about their local mean no more than that noise does, the sharpness is capped so that the
+    noise of their evidence stays bounded (:func:`steep_planar`, :data:`STEEP_TAU`;
+    ``info["steep_planar"]`` is the share of facets capped). Exact normals read almost no noise
+    and are not capped.
+
 Pieces without glue
     A region whose every boundary corner is cut loose would be free to float; a tiny floor on
     the weights (``FLOOR``) keeps it attached where its copies meet the vertices best.
@@ -162,6 +171,40 @@ DEFAULT_K = 4.0
 #: +16 %); the held-out sets of seeds 9091 and 777001 at 6 deg: 2.373 -> 1.997 mm and 2.826
 #: -> 2.553 (BiNI 1.664 and 2.657), 27 / 9 and 25 / 10 scenes better.
 NOISE_K = 4.0
+
+#: A plane seen nearly edge-on through noisy normals falls apart into hundreds of pieces: on
+#: a facet of slope ``t`` (footprints per pixel) the bilateral argument's two squared
+#: differences, both about ``(c t)^2``, carry a noise of about ``2 sqrt(2) k t sigma``
+#: (``sigma`` the normals' angular noise in radians), far beyond the sigmoid's width where
+#: ``t`` is large, and the reweightings cut at random (docs/results.md, "Stronger blur,
+#: smooth errors and a fresh held-out set": a tray seen at view cosine 0.1-0.2 with 3 deg of
+#: noise, 4.87 mm against BiNI's 0.90). Where the normals scatter about their own mean over a
+#: (2 :data:`PLANAR_RADIUS` + 1)^2 window by a mean angle of at most :data:`PLANAR` times the
+#: noise read from the curl (a plane, or a surface whose normals turn evenly: the window's mean
+#: follows an even turn), each facet's sharpness is capped at ``k STEEP_TAU / (t sigma)``
+#: (:func:`steep_planar`), so that its evidence's noise stays about ``2 sqrt(2) STEEP_TAU k``:
+#: a plane's noisy cuts no longer form. A band toward a silhouette, whose normals turn ever
+#: faster, mostly keeps the full sharpness (the back of a cow seen from behind: capped without
+#: this test, it bridged the jump to the head, 1.35 -> 10.0 mm); the test tells them apart
+#: only partly (a cylinder's band on 24 x 20 pixels: about a quarter of the share of a
+#: plane's facets capped, tests/test_discontinuities.py). Measured (thirty-third session,
+#: docs/results.md "Steep planes under noise"): the development benchmark's 89 scenes at exact,
+#: 3 and 6 deg of noise (267 runs) 42 better / 32 worse by more than 1 %, mean group ratio
+#: 1.002 (exact normals unchanged); at 8-bit, blurred and smooth3 normals (267 runs) 2 / 1;
+#: held-out sets with 3 deg of noise (seed 1206) 2.557 -> 2.304 mm (BiNI 2.421), with 6 deg
+#: (seeds 9091, 777001, 4711) 1.997 / 2.553 / 3.264 -> 1.287 / 2.438 / 3.145 (BiNI 1.664 /
+#: 2.657 / 3.004), and a set drawn after the choice (seed 2468) 3.157 -> 2.982 mm at 3 deg and
+#: 3.733 -> 3.226 at 6 deg (BiNI 3.288 and 3.437), 28 scene-conditions better, 13 worse. The
+#: cap without the planarity test lost (3 deg: 28 / 48, perspective 2.33 -> 2.64 mm), and on
+#: five probe scenes so did 0.25 and 0.5, a cap kept to the interior of steep regions, and one
+#: kept to facets steeper than 3 or 4 footprints per pixel.
+STEEP_TAU = 0.1
+#: See :data:`STEEP_TAU`: the largest ratio of a facet's local normal spread to the noise read
+#: from the curl at which it counts as planar (the held-out trays' steep facets: median 0.75
+#: with 3 deg of noise; the cow's back seen from behind: 1.1).
+PLANAR = 0.9
+#: See :data:`STEEP_TAU`: half the window's width (pixels) of the planarity test.
+PLANAR_RADIUS = 2
 
 #: Default cap on the reweightings, the growth phase's included (a safety net: the
 #: weight-change rule and the end of the growth phase normally come first).
@@ -792,6 +835,43 @@ def sharpness(k: float, noise: float) -> float:
     return float(k) * NOISE_K / float(noise)
 
 
+def steep_planar(domain, normals, target, bx, by, footprint: float, noise: float, given=None):
+    """(m,) factors in (0, 1] of the bilateral sharpness per facet (:data:`STEEP_TAU`), or None
+    where none is below 1: ``min(1, STEEP_TAU / (t sigma))`` on the facets whose normals
+    scatter about their local mean no more than the noise does (:data:`PLANAR`), 1
+    elsewhere. `normals` (m, 3) are the input's (NaN where
+    missing), `bx`, `by` the facets' slopes of the unknown, `footprint` the camera's footprint,
+    `noise` the normals' noise in degrees (:func:`facetlift.frames.normal_noise`); `given`
+    (m,) bool, the facets whose own normal is used (default `target`: a normal of confidence 0
+    is none, and a filled facet's neighbours speak for it)."""
+    if not (np.isfinite(noise) and noise > 0 and STEEP_TAU > 0):
+        return None
+    sigma = math.radians(noise)
+    t = np.hypot(bx, by) / footprint
+    cap = STEEP_TAU / np.maximum(t * sigma, 1e-300)
+    steep = target & (cap < 1.0)
+    if not steep.any():
+        return None
+    from scipy import ndimage
+
+    H, W = domain.shape
+    r, c = domain.pixels
+    good = (target if given is None else given) & np.isfinite(normals).all(axis=1)
+    size = 2 * PLANAR_RADIUS + 1
+    img = np.zeros((3, H, W))
+    img[:, r[good], c[good]] = normals[good].T
+    have = np.zeros((H, W))
+    have[r[good], c[good]] = 1.0
+    mean = np.stack([ndimage.uniform_filter(img[i], size) for i in range(3)])
+    mean /= np.maximum(np.sqrt(np.sum(mean * mean, axis=0)), 1e-12)
+    angle = np.arccos(np.clip(np.sum(img * mean, axis=0), -1.0, 1.0)) * have
+    spread = ndimage.uniform_filter(angle, size) / np.maximum(
+        ndimage.uniform_filter(have, size), 1e-12)
+    planar = spread[r, c] < PLANAR * sigma  # (a filled facet by its neighbours' normals)
+    out = np.where(steep & planar, cap, 1.0)
+    return out if (out < 1.0).any() else None
+
+
 def changes_big(step) -> bool:
     """Whether a weight step may change the system's near-null modes (see :data:`REUSE_STEP`)."""
     return bool(np.abs(step).max() > REUSE_STEP)
@@ -801,7 +881,7 @@ def solve_discontinuous(
     domain, bx, by, target, *, normal_scale, k: float = DEFAULT_K,
     max_iter: int = DEFAULT_ITER, tol: float = DEFAULT_TOL, flat_weight: float = 1e-9,
     cg_rtol: float = 1e-6, callback=None, prior=None, weights=None, x0=None,
-    final_weights=None, blur=None, w0=None, polish_last=True, seed=None,
+    final_weights=None, blur=None, w0=None, polish_last=True, seed=None, k_scale=None,
 ):
     """Minimise the glued facet energy with bilateral weights (see the module docstring).
 
@@ -855,6 +935,8 @@ def solve_discontinuous(
     seed : (m, 4) float, optional
         Corner weights of the first solve where neither `w0` nor a `prior` is given and
         `max_iter` is not 0 (:func:`curl_seed`; default all 1).
+    k_scale : (m,) float, optional
+        Factor of `k` per facet (:func:`steep_planar`; default 1 everywhere).
 
     Returns
     -------
@@ -887,9 +969,13 @@ def solve_discontinuous(
         w0, seeded = seed, True
     else:
         seeded = False
-    return _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight,
-                  cg_rtol, callback, prior, weights, x0, final_weights, blur, w0, polish_last,
-                  seeded)
+    out = _solve(domain, bx, by, target, normal_scale,
+                 k if k_scale is None else k * np.asarray(k_scale, dtype=float), max_iter, tol,
+                 flat_weight, cg_rtol, callback, prior, weights, x0, final_weights, blur, w0,
+                 polish_last, seeded)
+    out[3]["discontinuity_k"] = float(k)
+    out[3]["steep_planar"] = 0.0 if k_scale is None else float(np.mean(k_scale < 1.0))
+    return out
 
 
 def _of(ref, K) -> bool:
@@ -1271,7 +1357,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         "multigrid_refreshes": amg["refreshes"],
         "block_coarse_space": slow,
         "unsettled_corners": unsettled,
-        "discontinuity_k": float(k),
+        "discontinuity_k": float(np.max(k)),  # (solve_discontinuous: the scalar)
         "final_weights": bool(final),
         "polish": polish,
         "factorizations": amg["factorized"],  # (systems solved by a factorization)
