@@ -865,9 +865,10 @@ def steep_planar(domain, normals, target, bx, by, footprint: float, noise: float
     mean = np.stack([ndimage.uniform_filter(img[i], size) for i in range(3)])
     mean /= np.maximum(np.sqrt(np.sum(mean * mean, axis=0)), 1e-12)
     angle = np.arccos(np.clip(np.sum(img * mean, axis=0), -1.0, 1.0)) * have
-    spread = ndimage.uniform_filter(angle, size) / np.maximum(
-        ndimage.uniform_filter(have, size), 1e-12)
-    planar = spread[r, c] < PLANAR * sigma  # (a filled facet by its neighbours' normals)
+    count = ndimage.uniform_filter(have, size)
+    spread = ndimage.uniform_filter(angle, size) / np.maximum(count, 1e-12)
+    # (a filled facet by its neighbours' normals; a window without a given normal is none)
+    planar = (spread[r, c] < PLANAR * sigma) & (count[r, c] > 0)
     out = np.where(steep & planar, cap, 1.0)
     return out if (out < 1.0).any() else None
 
@@ -974,7 +975,8 @@ def solve_discontinuous(
                  flat_weight, cg_rtol, callback, prior, weights, x0, final_weights, blur, w0,
                  polish_last, seeded)
     out[3]["discontinuity_k"] = float(k)
-    out[3]["steep_planar"] = 0.0 if k_scale is None else float(np.mean(k_scale < 1.0))
+    out[3]["steep_planar"] = (0.0 if k_scale is None or not target.any()  # (of the facets
+                              else float(np.mean(np.asarray(k_scale)[target] < 1.0)))  # with one)
     return out
 
 
