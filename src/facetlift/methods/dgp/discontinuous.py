@@ -107,8 +107,8 @@ Steep planes under noise
     nearly edge-on was cut at random into hundreds of pieces. On facets whose normals scatter
     about their local mean no more than that noise does, the sharpness is capped so that the
     noise of their evidence stays bounded (:func:`steep_planar`, :data:`STEEP_TAU`;
-    ``info["steep_planar"]`` is the share of facets capped). Exact normals read almost no noise
-    and are not capped.
+    ``info["steep_planar"]`` is the share of the facets with a normal that were capped). Exact
+    normals read almost no noise and are not capped.
 
 Pieces without glue
     A region whose every boundary corner is cut loose would be free to float; a tiny floor on
@@ -838,10 +838,10 @@ def sharpness(k: float, noise: float) -> float:
 def steep_planar(domain, normals, target, bx, by, footprint: float, noise: float, given=None):
     """(m,) factors in (0, 1] of the bilateral sharpness per facet (:data:`STEEP_TAU`), or None
     where none is below 1: ``min(1, STEEP_TAU / (t sigma))`` on the facets whose normals
-    scatter about their local mean no more than the noise does (:data:`PLANAR`), 1
-    elsewhere. `normals` (m, 3) are the input's (NaN where
-    missing), `bx`, `by` the facets' slopes of the unknown, `footprint` the camera's footprint,
-    `noise` the normals' noise in degrees (:func:`facetlift.frames.normal_noise`); `given`
+    scatter about their local mean no more than the noise does (:data:`PLANAR`), 1 elsewhere.
+    `normals` (m, 3) are the input's (NaN where missing), `bx`, `by` the facets' slopes of the
+    unknown, `footprint` the camera's footprint, `noise` the normals' noise in degrees
+    (:func:`facetlift.frames.normal_noise`); `given`
     (m,) bool, the facets whose own normal is used (default `target`: a normal of confidence 0
     is none, and a filled facet's neighbours speak for it)."""
     if not (np.isfinite(noise) and noise > 0 and STEEP_TAU > 0):
