@@ -854,14 +854,12 @@ def steep_planar(domain, normals, target, bx, by, footprint: float, noise: float
         return None
     from scipy import ndimage
 
-    H, W = domain.shape
     r, c = domain.pixels
     good = (target if given is None else given) & np.isfinite(normals).all(axis=1)
     size = 2 * PLANAR_RADIUS + 1
-    img = np.zeros((3, H, W))
-    img[:, r[good], c[good]] = normals[good].T
-    have = np.zeros((H, W))
-    have[r[good], c[good]] = 1.0
+    img = np.stack([domain.to_image(np.where(good, normals[:, i], 0.0), fill=0.0)
+                    for i in range(3)])
+    have = domain.to_image(good.astype(float), fill=0.0)
     mean = np.stack([ndimage.uniform_filter(img[i], size) for i in range(3)])
     mean /= np.maximum(np.sqrt(np.sum(mean * mean, axis=0)), 1e-12)
     angle = np.arccos(np.clip(np.sum(img * mean, axis=0), -1.0, 1.0)) * have
@@ -970,11 +968,11 @@ def solve_discontinuous(
         w0, seeded = seed, True
     else:
         seeded = False
-    out = _solve(domain, bx, by, target, normal_scale,
-                 k if k_scale is None else k * np.asarray(k_scale, dtype=float), max_iter, tol,
-                 flat_weight, cg_rtol, callback, prior, weights, x0, final_weights, blur, w0,
-                 polish_last, seeded)
-    out[3]["discontinuity_k"] = float(k)
+    per_facet = k if k_scale is None else k * np.asarray(k_scale, dtype=float)
+    out = _solve(domain, bx, by, target, normal_scale, per_facet, max_iter, tol, flat_weight,
+                 cg_rtol, callback, prior, weights, x0, final_weights, blur, w0, polish_last,
+                 seeded)
+    out[3]["discontinuity_k"] = float(k)  # (the scalar; `per_facet` is what the weights use)
     out[3]["steep_planar"] = (0.0 if k_scale is None or not target.any()  # (of the facets
                               else float(np.mean(np.asarray(k_scale)[target] < 1.0)))  # with one)
     return out
@@ -1359,7 +1357,6 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         "multigrid_refreshes": amg["refreshes"],
         "block_coarse_space": slow,
         "unsettled_corners": unsettled,
-        "discontinuity_k": float(np.max(k)),  # (solve_discontinuous: the scalar)
         "final_weights": bool(final),
         "polish": polish,
         "factorizations": amg["factorized"],  # (systems solved by a factorization)
