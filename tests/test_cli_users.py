@@ -963,7 +963,12 @@ real = meshes.write_mesh
 def slow(path, *a, **k):
     out = real(path, *a, **k)
     Path(sys.argv[1]).write_text("writing")
-    time.sleep(300)  # (the signal ends it; a lost one fails the test at its timeout)
+    # (the signal ends it; a lost one fails the test at its timeout). In short naps: the
+    # kernel may hand the process's signal to another of its threads (a BLAS pool's), which
+    # leaves the main thread's nap running; Python acts on the signal at the next nap's end.
+    # One nap of 300 s so outlasted the test's 120 s wait once in a fresh clone's run under load
+    for _ in range(3000):
+        time.sleep(0.1)
     return out
 meshes.write_mesh = slow
 import facetlift.io.surface as s
