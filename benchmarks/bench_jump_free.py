@@ -110,7 +110,9 @@ def scene_arguments(description: str) -> argparse.ArgumentParser:
                                                 "/tmp/facetlift-bench-cache/discontinuities")),
                     help="render cache (the benchmark's: $FACETLIFT_BENCH_CACHE)")
     ap.add_argument("--step", type=int, default=1, help="every STEP-th scene")
-    ap.add_argument("--groups", default="perspective,wide,ortho")
+    ap.add_argument("--groups", default="perspective,wide,ortho",
+                    help="comma-separated groups of the benchmark (perspective, wide, ortho, "
+                    "tabletop, room, vessel)")
     return ap
 
 
