@@ -186,19 +186,17 @@ def _names(text):
     return None if text is None else [t.strip() for t in text.split(",") if t.strip()]
 
 
-def _run(spec, constants, gt, normals, error_of, run_method):
-    """(error or NaN, seconds, status message) of one side's run on one scene."""
+def _run(ctx, spec, constants, gt, normals, error_of):
+    """(error or NaN, seconds, status message) of one side's run on one scene
+    (:meth:`facetlift.bench.core.Context.measure`: a metric's ValueError is a failure)."""
     with applied(constants), warnings.catch_warnings():
         warnings.simplefilter("ignore")
         t = time.perf_counter()
-        r = run_method(spec, normals, gt.mask, pixel_size=gt.pixel_size, K=gt.K)
+        r, err = ctx.measure(spec, normals, gt.mask, lambda s: error_of(gt, s.depth),
+                             pixel_size=gt.pixel_size, K=gt.K)
         secs = time.perf_counter() - t
-    if r.status != "ok":
-        return math.nan, secs, f"{r.status}: {r.message}"
-    try:
-        return error_of(gt, r.surface.depth), secs, "ok"
-    except ValueError as e:  # (the metric's: e.g. no finite depth, as Context.measure)
-        return math.nan, secs, f"metric: {e}"
+    return (err, secs, "ok") if r.status == "ok" else (math.nan, secs,
+                                                       f"{r.status}: {r.message}")
 
 
 def main(argv=None) -> int:
@@ -226,7 +224,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from facetlift.bench import discontinuities as D
-    from facetlift.bench.core import Settings, Spec, run_method
+    from facetlift.bench.core import Settings, Spec, method_status
 
     try:
         sides = [split_settings(args.a), split_settings(args.b)]
@@ -248,6 +246,7 @@ def main(argv=None) -> int:
         ap.error(f"--data: no folder {args.data} (the shared data: its meshes make the scenes)")
     ctx = context(args)  # (the render cache: --cache, $FACETLIFT_BENCH_CACHE)
     ctx.settings = Settings.quick() if args.quick else Settings()
+    ctx.status = method_status(["dgp"])
     if args.heldout_seed is not None:
         ctx.settings.heldout_seed = args.heldout_seed
     ctx.models = tuple(_names(args.models)) if args.models else None
@@ -281,7 +280,7 @@ def main(argv=None) -> int:
                 normals = D.condition(gt, cond, f"{group}:{name}")
                 out = [None, None]
                 for i in ((0, 1) if k % 2 == 0 else (1, 0)):  # (warm-up on either side)
-                    out[i] = _run(specs[i], sides[i][1], gt, normals, D.error_of, run_method)
+                    out[i] = _run(ctx, specs[i], sides[i][1], gt, normals, D.error_of)
                     seconds[i] += out[i][1]
                     if out[i][2] != "ok" and not said[i]:
                         said[i] = True  # (the first failure of each side, e.g. a bad constant)
