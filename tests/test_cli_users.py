@@ -1488,3 +1488,17 @@ def test_an_option_the_method_lacks_is_named_as_typed(dome_png, tmp_path, capsys
     code, _, err = run(capsys, "integrate", dome_png, "--method", "poisson", "--option",
                        "max_iter=3", "-o", tmp_path / "o")
     assert code == 1 and "unknown option(s) [--option max_iter]" in one_line(err)
+
+
+def test_a_setting_an_option_needs_is_named_as_its_flag(capsys, tmp_path):
+    """"set solver='iterative'" was Python on the command line (a fresh user's check)."""
+    np.save(tmp_path / "n.npy", np.dstack([np.zeros((5, 6, 2)), np.ones((5, 6))]))
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "o", "--tol",
+                       "1e-4")
+    line = one_line(err)
+    assert code == 1 and "--tol applies only with --solver iterative" in line, line
+    assert "set --solver iterative" in line and "solver=" not in line
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "-o", tmp_path / "o",
+                       "--option", "discontinuity_k=3")
+    line = one_line(err)
+    assert code == 1 and "applies only with --discontinuities" in line, line

@@ -641,3 +641,14 @@ def test_a_calibration_toolbox_mats_lens_distortion_is_warned_about(tmp_path, ca
     with pytest.warns(UserWarning, match=r"Calib_Results.mat has lens distortion \(k1 -0.21"):
         ds = io.read_dataset(folder)
     np.testing.assert_array_equal(ds["K"], KK)
+
+
+def test_a_2x2_matrix_is_refused_as_such_and_four_numbers_in_a_column_are_fx_fy_cx_cy(tmp_path):
+    """Four numbers in two rows were read as fx fy cx cy, and the error showed a 3x3 matrix
+    the user never wrote (a fresh user's check)."""
+    p = tmp_path / "K.txt"
+    np.savetxt(p, 3000 * np.eye(2))
+    with pytest.raises(ValueError, match=r"holds a 2x2 matrix; expected a 3x3 matrix"):
+        io.read_K(p)
+    p.write_text("3000\n3100\n300\n250\n")
+    np.testing.assert_array_equal(io.read_K(p), [[3000, 0, 300], [0, 3100, 250], [0, 0, 1]])

@@ -1221,7 +1221,8 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
     return lines + [f"  note: {n}" for n in rec["notes"]]
 
 
-@cli.command("bench", context_settings=CONTEXT)
+@cli.command("bench", context_settings=CONTEXT,
+             short_help="Reproduce the paper's experiments and run the benchmarks.")
 @click.option("-o", "--out", "out", required=True, type=click.Path(file_okay=False),
               help="Output folder for tables (CSV, Markdown) and figures (PNG).")
 @click.option("--quick", is_flag=True, help="Small sizes and few models (a smoke test).")
@@ -1255,7 +1256,8 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
 @click.option("--no-progress", is_flag=True, help="No progress bars.")
 def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_dir, conditions,
           no_progress, heldout_seed):
-    """Reproduce the paper's experiments (Table 1, Figs. 4-10) into a folder."""
+    """Reproduce the paper's experiments (Table 1, Figs. 4-10) and run the discontinuity,
+    held-out and fusion benchmarks, into a folder."""
     from .bench import run_bench
 
     try:
@@ -1322,7 +1324,13 @@ def _as_flags(message: str) -> str:
     if head is not None:
         listed = re.sub(r"'(\w+)'", lambda m: names.get(m.group(1), m.group(0)), head.group(1))
         message = message[:head.start(1)] + listed + message[head.end(1):]
-    return re.sub(r"`(\w+)`", lambda m: names.get(m.group(1), m.group(0)), message)
+    message = re.sub(r"`(\w+)`", lambda m: names.get(m.group(1), m.group(0)), message)
+    # (the settings such a message asks for, as the flags that make them: "set
+    # solver='iterative'" was Python on the command line, a fresh user's check)
+    message = re.sub(r"\bsolver='(\w+)'", r"--solver \1", message)
+    return re.sub(r"\bdiscontinuities=(True|False)\b",
+                  lambda m: "--discontinuities" if m.group(1) == "True"
+                  else "no --discontinuities", message)
 
 
 def _one_line(e: BaseException) -> str:
@@ -1383,6 +1391,11 @@ _STATUS = {EXIT_INPUT: "error", EXIT_SOLVER: "solver_error", EXIT_BUG: "internal
            EXIT_INTERRUPTED: "interrupted", EXIT_TERMINATED: "terminated"}
 
 
+#: What Ctrl-C says (as SIGTERM does: the outputs are staged and moved in as a set).
+_INTERRUPTED = ("interrupted (Ctrl-C); nothing partial was written (a batch's finished items "
+                "are in its log)")
+
+
 def _main(args: list[str]) -> int:
     from .errors import MemoryLimitError, WorkersDied
     from .io.atomic import Terminated
@@ -1394,7 +1407,7 @@ def _main(args: list[str]) -> int:
     except click.exceptions.Exit as e:  # pragma: no cover - returned, not raised, by click 8
         return e.exit_code
     except click.exceptions.Abort as e:  # click turns Ctrl-C (KeyboardInterrupt) into Abort
-        _error("interrupted" if isinstance(e.__cause__, KeyboardInterrupt) else "aborted")
+        _error(_INTERRUPTED if isinstance(e.__cause__, KeyboardInterrupt) else "aborted")
         return EXIT_INTERRUPTED
     except click.ClickException as e:  # usage errors, bad parameters, unreadable files
         msg = e.format_message()
@@ -1426,7 +1439,7 @@ def _main(args: list[str]) -> int:
         _error(str(e))
         return EXIT_SOLVER
     except KeyboardInterrupt:
-        _error("interrupted")
+        _error(_INTERRUPTED)
         return EXIT_INTERRUPTED
     except Terminated:
         _error("terminated (SIGTERM); nothing partial was written (a batch's finished items "

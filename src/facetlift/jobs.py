@@ -604,6 +604,7 @@ def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
     why = (f"{src.name} is not this folder's {own[0].name}, the map that integrating the "
            f"folder ({folder}) reads as a dataset" if own and own[0].name != src.name
            else "a folder is read as a dataset only with normal_map.* or Normal_gt.mat")
+    own_mask_file = any(Path(n).stem == f"{src.stem}_mask" for n in unread)
     warn(f"{src.name} has {' and '.join(unread)} beside it, which this run does not read: a "
          f"normal-map file's mask and camera come only from --mask and --K"
          + (", its prior and confidence from --prior and --confidence (facetlift batch "
@@ -615,7 +616,9 @@ def _unread_beside(src: Path, job: Job, own_mask: bool = False) -> None:
          f"{'it' if len(unread) == 1 else 'them'}"
          + (" (without K.txt's camera the map is integrated orthographically)"
             if "K.txt" in unread else "")
-         + (f" (without {turns[0]} its normals are read as the camera's)" if turns else ""),
+         + (f" (without {turns[0]} its normals are read as the camera's)" if turns else "")
+         + ("; facetlift batch reads NAME_mask.* beside NAME.* as its mask"
+            if own_mask_file else ""),
          UserWarning)
 
 
