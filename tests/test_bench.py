@@ -280,7 +280,15 @@ def test_every_discontinuity_condition_perturbs_as_named():
     m = gt.mask
     for name in CONDITIONS:
         n = condition(gt, name, "vase")
-        assert n.shape == gt.normals.shape and np.isfinite(n[m]).all(), name
+        assert n.shape == gt.normals.shape, name
+        if name.startswith("ps"):  # a photometric stereo's fit: NaN where too few lights
+            ok = np.isfinite(n[..., 0]) & m
+            assert ok.sum() > 0.97 * m.sum() and np.isnan(n[~m]).all(), name
+            ang = np.degrees(np.arccos(np.clip(np.sum(n[ok] * gt.normals[ok], axis=-1), -1, 1)))
+            assert 0 < np.median(ang) < (2.0 if name == "ps" else 10.0), name
+            np.testing.assert_array_equal(n, condition(gt, name, "vase"))
+            continue
+        assert np.isfinite(n[m]).all(), name
         ang = np.degrees(np.arccos(np.clip(np.sum(n[m] * gt.normals[m], axis=-1), -1, 1)))
         if name == "exact":
             np.testing.assert_array_equal(n, gt.normals)

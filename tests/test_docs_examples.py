@@ -96,7 +96,7 @@ RECIPE_TWO_CHANNEL = ("docs/recipes.md",
                       'encoding="xy"')
 RECIPE_QUEAU = ("docs/recipes.md", "## A gradient field from Quéau's toolbox (`.mat`)", None)
 RECIPE_PHOTOMETRIC = ("docs/recipes.md", "## A photometric-stereo pipeline in Python",
-                      "np.percentile")  # tests/test_readme.py
+                      "photometric.fit")  # tests/test_readme.py
 RECIPE_WARNINGS = ("docs/recipes.md", "## A photometric-stereo pipeline in Python",
                    "FrameWarning")
 RECIPE_FROM_DEPTH = ("docs/recipes.md",

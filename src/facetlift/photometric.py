@@ -1,0 +1,319 @@
+"""Photometric stereo: a robust least-squares fit of normals from images, and a simulation of
+such images from a ground truth, so that benchmarks can feed the integrators normals whose
+errors look like a photometric stereo's (shadows, highlights, image noise) instead of
+independent angular noise.
+
+Frames follow :mod:`facetlift.conventions`: light directions and normals have x right, y up
+and z toward the viewer; a light direction points from the surface toward the (distant)
+light.
+
+:func:`fit`
+    Lambertian least squares per pixel over the observations that are neither shadowed
+    (darker than ``shadow`` of the brightest) nor saturated, then again without the
+    observations brighter than the first fit by more than ``highlight`` of the albedo (a
+    highlight), for ``passes`` fits in all. Returns unit normals (NaN where fewer than three
+    usable lights, or a badly conditioned set of them, are left) and a confidence in (0, 1]
+    from the fit's residual: 1 where the residual is typical, 1/2 at three times the median.
+    This is the fit of docs/recipes.md, "A photometric-stereo pipeline in Python"; its
+    thresholds were the first ones tried and are not tuned.
+
+:func:`simulate`
+    Images of a :class:`facetlift.synthetic.GroundTruth` under distant lights: a smooth
+    random albedo, Lambertian shading, Blinn-Phong highlights, attached shadows, shadows cast
+    by the visible surface (marched over the ground-truth depth map in the image: geometry the
+    camera does not see casts none), saturation, Gaussian image noise and quantisation.
+    Each pixel is shaded with its ground-truth normal (for renders with several rays per pixel,
+    their mean) and shadowed from its centre's point. Interreflections are not modelled.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["cast_shadows", "fit", "lights_on_cap", "simulate"]
+
+#: Residuals (RMS over the albedo) below this count as an exact fit in :func:`fit`'s
+#: confidence: a fit to rounding errors is not spread over (0, 1] by their size.
+RESIDUAL_FLOOR = 1e-6
+
+
+def lights_on_cap(count: int, spread_deg: float = 40.0, rng=None) -> np.ndarray:
+    """(count, 3) unit light directions spread evenly (a Fibonacci spiral, turned at random
+    by `rng`) over the spherical cap within `spread_deg` degrees of the viewing axis, as a
+    photometric-stereo dome's lights (DiLiGenT's 96 reach about 40 degrees)."""
+    if not (isinstance(count, (int, np.integer)) and count >= 3):
+        raise ValueError(f"`count` must be an integer >= 3; got {count!r}")
+    if not (np.isfinite(spread_deg) and 0 < spread_deg < 90):
+        raise ValueError(f"`spread_deg` must be in (0, 90) degrees; got {spread_deg!r}")
+    rng = np.random.default_rng(rng)
+    i = np.arange(count) + 0.5
+    cos_min = np.cos(np.radians(spread_deg))
+    z = 1.0 - (1.0 - cos_min) * i / count  # (equal areas of the cap)
+    phi = i * np.pi * (3.0 - np.sqrt(5.0)) + rng.uniform(0, 2 * np.pi)
+    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def _check_lights(lights, images=None, least: int = 3) -> np.ndarray:
+    L = np.asarray(lights, dtype=float)
+    if L.ndim != 2 or L.shape[1] != 3 or len(L) < least:
+        raise ValueError(f"`lights` must be a (k, 3) array of k >= {least} directions; got "
+                         f"shape {L.shape}")
+    if images is not None and len(L) != len(images):
+        raise ValueError(f"`lights` has {len(L)} directions but `images` {len(images)} images")
+    norm = np.linalg.norm(L, axis=1)
+    if not (np.isfinite(L).all() and (norm > 0).all()):
+        raise ValueError("`lights` must be finite, non-zero directions")
+    return L / norm[:, None]
+
+
+def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 0.98,
+        highlight: float = 0.1, passes: int = 2):
+    """Normals and a confidence from images under known distant lights.
+
+    Parameters
+    ----------
+    images : (k, H, W) array_like
+        Linear intensities (any scale), one image per light.
+    lights : (k, 3) array_like
+        Directions toward the lights (x right, y up, z toward the viewer); normalised here.
+    mask : (H, W) bool, optional
+        Pixels to fit; default every pixel with finite intensities.
+    shadow, saturation : float
+        Observations below ``shadow`` or above ``saturation`` times the 99.9th percentile of
+        the intensities inside the mask are left out (shadows, clipped highlights).
+    highlight : float
+        From the second pass on, observations brighter than the previous fit predicts by more
+        than this fraction of the pixel's albedo are left out.
+    passes : int
+        Least-squares fits (>= 1).
+
+    Returns
+    -------
+    normals : (H, W, 3) float
+        Unit normals, NaN outside the mask and where fewer than three usable observations (or
+        a nearly degenerate set of light directions) are left.
+    confidence : (H, W) float
+        ``1 / (1 + (res / (3 median res))^2)`` of the fit's RMS residual over the albedo,
+        the median taken no lower than :data:`RESIDUAL_FLOOR` (0 where there is no normal).
+
+    Raises
+    ------
+    ValueError
+        Shapes that do not match, non-finite lights, thresholds out of range.
+    """
+    I = np.asarray(images, dtype=float)
+    if I.ndim != 3:
+        raise ValueError(f"`images` must be a (k, H, W) stack; got shape {I.shape}")
+    L = _check_lights(lights, I)
+    H, W = I.shape[1:]
+    if mask is None:
+        mask = np.isfinite(I).all(axis=0)
+    else:
+        mask = np.asarray(mask)
+        if mask.shape != (H, W):
+            raise ValueError(f"`mask` must have the images' shape {(H, W)}; got {mask.shape}")
+        mask = mask.astype(bool) & np.isfinite(I).all(axis=0)
+    if not (0 <= shadow < saturation <= 1):
+        raise ValueError(f"`shadow` and `saturation` must satisfy 0 <= shadow < saturation "
+                         f"<= 1; got {shadow!r}, {saturation!r}")
+    if not (highlight > 0):
+        raise ValueError(f"`highlight` must be > 0; got {highlight!r}")
+    if not (isinstance(passes, (int, np.integer)) and passes >= 1):
+        raise ValueError(f"`passes` must be an integer >= 1; got {passes!r}")
+    normals = np.full((H, W, 3), np.nan)
+    confidence = np.zeros((H, W))
+    if not mask.any():
+        return normals, confidence
+    obs = I[:, mask]  # (k, m)
+    top = np.percentile(obs, 99.9)
+    if not top > 0:
+        return normals, confidence
+    use = (obs > shadow * top) & (obs < saturation * top)
+    m = obs.shape[1]
+    G = np.full((m, 3), np.nan)
+    for step in range(passes):
+        w = use.astype(float)
+        A = np.einsum("km,ki,kj->mij", w, L, L)
+        b = np.einsum("km,km,ki->mi", w, obs, L)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ok = (use.sum(axis=0) >= 3) & (np.linalg.cond(A) < 1e6)
+        G = np.full((m, 3), np.nan)
+        G[ok] = np.linalg.solve(A[ok], b[ok][..., None])[..., 0]
+        rho = np.linalg.norm(G, axis=1)
+        ok &= rho > 0
+        G[~ok] = np.nan
+        pred = L @ G.T
+        if step + 1 < passes:  # (a highlight: brighter than Lambert predicts)
+            with np.errstate(invalid="ignore"):
+                use &= ~(obs - pred > highlight * rho)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = G / rho[:, None]
+        res = np.sqrt(np.einsum("km,km->m", use, (pred - obs) ** 2)
+                      / np.maximum(use.sum(axis=0), 1)) / rho
+        ref = max(np.nanmedian(res[ok]) if ok.any() else 0.0, RESIDUAL_FLOOR)
+        conf = 1.0 / (1.0 + (res / (3.0 * ref)) ** 2)
+    out = normals[mask]
+    out[ok] = n[ok]
+    normals[mask] = out
+    c = np.zeros(m)
+    c[ok] = np.nan_to_num(conf[ok], nan=1.0)
+    confidence[mask] = c
+    return normals, confidence
+
+
+def _points(gt) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W, 3) points in an OpenCV camera frame (x right, y down, z forward; for an
+    orthographic scene x = col * pixel_size, y = row * pixel_size) and the (H, W) footprint
+    of a pixel at each depth."""
+    H, W = gt.mask.shape
+    r, c = np.mgrid[0:H, 0:W].astype(float)
+    d = gt.depth
+    if gt.K is None:
+        h = float(gt.pixel_size)
+        return np.stack([c * h, r * h, d], axis=-1), np.full((H, W), h)
+    K = np.asarray(gt.K, dtype=float)
+    x = (c - K[0, 2] - K[0, 1] * (r - K[1, 2]) / K[1, 1]) / K[0, 0]
+    y = (r - K[1, 2]) / K[1, 1]
+    return np.stack([x * d, y * d, d], axis=-1), d / np.sqrt(K[0, 0] * K[1, 1])
+
+
+def _project(gt, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of camera-frame points P (..., 3), rounded to pixels."""
+    if gt.K is None:
+        h = float(gt.pixel_size)
+        return np.rint(P[..., 1] / h), np.rint(P[..., 0] / h)
+    K = np.asarray(gt.K, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        x, y = P[..., 0] / P[..., 2], P[..., 1] / P[..., 2]
+    return np.rint(K[1, 1] * y + K[1, 2]), np.rint(K[0, 0] * x + K[0, 1] * y + K[0, 2])
+
+
+def _slope(depth: np.ndarray) -> np.ndarray:
+    """Per pixel, the depth change per pixel of the surface it lies on: per axis the smaller
+    of the two one-sided differences (a jump beside a pixel is not its slope), 0 where
+    neither neighbour exists."""
+    out = np.zeros(depth.shape)
+    for axis in (0, 1):
+        d = np.abs(np.diff(depth, axis=axis))
+        pad = [(0, 0), (0, 0)]
+        pad[axis] = (1, 0)
+        before = np.pad(d, pad, constant_values=np.nan)
+        pad[axis] = (0, 1)
+        after = np.pad(d, pad, constant_values=np.nan)
+        with np.errstate(invalid="ignore"):
+            s = np.fmin(before, after)
+        out += np.nan_to_num(s) ** 2
+    return np.sqrt(out)
+
+
+def cast_shadows(gt, lights, *, thickness=None, reach: float = 256.0) -> np.ndarray:
+    """(k, H, W) bool: pixels of `gt`'s mask whose point the visible surface hides from each
+    light, found by marching from the point toward the light through the ground-truth depth
+    map: a point is blocked where the surface seen at its projection lies in front of it by
+    more than a pixel's depth tolerance (the rounding to a pixel) and less than `thickness`
+    (default: any amount, the visible surface taken as the front of a solid). The march takes
+    steps of about one pixel in the image, growing after 16 pixels, up to `reach` pixels."""
+    L = _check_lights(lights, least=1)
+    mask = gt.mask
+    depth = np.where(mask, gt.depth, np.nan)
+    H, W = mask.shape
+    X, foot = _points(gt)
+    rows, cols = np.nonzero(mask)
+    X, foot = X[rows, cols], foot[rows, cols]
+    slope = _slope(depth)
+    thickness = np.inf if thickness is None else float(thickness)
+    pix = np.r_[np.arange(1, 17), 16 * 1.15 ** np.arange(1, 200)]
+    pix = pix[pix <= reach]
+    out = np.zeros((len(L), H, W), bool)
+    for j, (lx, ly, lz) in enumerate(L):
+        d_cam = np.array([lx, -ly, -lz])  # (toward the light, in the camera frame)
+        lateral = max(np.hypot(lx, ly), 0.05)
+        blocked = np.zeros(len(rows), bool)
+        for s in pix:
+            t = s * foot / lateral
+            P = X + t[:, None] * d_cam
+            rr, cc = _project(gt, P)
+            inside = (rr >= 0) & (rr < H) & (cc >= 0) & (cc < W) & ~blocked
+            if not inside.any():
+                continue
+            ri, ci = rr[inside].astype(int), cc[inside].astype(int)
+            seen = depth[ri, ci]
+            gap = P[inside, 2] - seen  # (> 0: the surface there is in front of the point)
+            tol = foot[inside] + 0.5 * slope[ri, ci]  # (the rounding to a pixel)
+            with np.errstate(invalid="ignore"):
+                hit = (gap > tol) & (gap < thickness)
+            idx = np.flatnonzero(inside)
+            blocked[idx[hit]] = True
+        out[j, rows, cols] = blocked
+    return out
+
+
+def simulate(gt, lights, rng=None, *, albedo=None, specular: float = 0.2,
+             shininess: float = 100.0, noise: float = 0.005, bits: int = 16,
+             shadows: bool = True, exposure: float = 0.8) -> np.ndarray:
+    """(k, H, W) images of `gt` (a :class:`facetlift.synthetic.GroundTruth`) under distant
+    `lights` (k, 3).
+
+    Each pixel: ``albedo * max(0, n.l) + specular * max(0, n.h)^shininess`` (the highlight
+    only where ``n.l > 0``; ``h`` halfway between the light and the direction to the camera),
+    0 where the point is in a cast shadow (:func:`cast_shadows`, with `shadows`); scaled so
+    that the 99.9th percentile of the diffuse part over the mask and lights is `exposure`,
+    Gaussian noise of standard deviation `noise` added, clipped to [0, 1] (highlights
+    saturate) and quantised to `bits` bits (0: not quantised). 0 outside the mask.
+
+    Parameters
+    ----------
+    albedo : (H, W) array_like, optional
+        Default: a smooth random texture in [0.4, 1] (drawn from `rng`).
+    """
+    from scipy.ndimage import gaussian_filter
+
+    L = _check_lights(lights)
+    if not (np.isfinite(specular) and specular >= 0 and np.isfinite(shininess)
+            and shininess > 0):
+        raise ValueError(f"`specular` must be >= 0 and `shininess` > 0; got {specular!r}, "
+                         f"{shininess!r}")
+    if not (np.isfinite(noise) and noise >= 0):
+        raise ValueError(f"`noise` must be a finite number >= 0; got {noise!r}")
+    if not (isinstance(bits, (int, np.integer)) and 0 <= bits <= 32):
+        raise ValueError(f"`bits` must be an integer in [0, 32]; got {bits!r}")
+    if not (np.isfinite(exposure) and exposure > 0):
+        raise ValueError(f"`exposure` must be > 0; got {exposure!r}")
+    rng = np.random.default_rng(rng)
+    mask = gt.mask
+    H, W = mask.shape
+    if albedo is None:
+        tex = gaussian_filter(rng.random((H, W)), 6.0)
+        lo, hi = tex[mask].min() if mask.any() else 0, tex[mask].max() if mask.any() else 1
+        albedo = 0.4 + 0.6 * (tex - lo) / max(hi - lo, 1e-12)
+    else:
+        albedo = np.asarray(albedo, dtype=float)
+        if albedo.shape != (H, W):
+            raise ValueError(f"`albedo` must have the mask's shape {(H, W)}; got "
+                             f"{albedo.shape}")
+    n = gt.normals[mask]
+    a = albedo[mask]
+    X, _ = _points(gt)
+    if gt.K is None:
+        v = np.broadcast_to([0.0, 0.0, 1.0], n.shape)
+    else:
+        p = X[mask]
+        v = np.stack([-p[:, 0], p[:, 1], p[:, 2]], axis=1)  # (to the camera, our frame)
+        v = v / np.linalg.norm(v, axis=1, keepdims=True)
+    blocked = cast_shadows(gt, L)[:, mask] if shadows else np.zeros((len(L), len(n)), bool)
+    diffuse = np.clip(n @ L.T, 0.0, None).T * a  # (k, m)
+    hv = L[:, None, :] + v[None]
+    hv /= np.linalg.norm(hv, axis=2, keepdims=True)
+    spec = specular * np.clip(np.einsum("kmi,mi->km", hv, n), 0.0, None) ** shininess
+    lit = (diffuse > 0) & ~blocked
+    shade = np.where(lit, diffuse + spec, 0.0)
+    scale = exposure / max(np.percentile(np.where(blocked, 0.0, diffuse), 99.9), 1e-12)
+    shade = shade * scale + noise * rng.normal(size=shade.shape)
+    shade = np.clip(shade, 0.0, 1.0)
+    if bits:
+        levels = 2.0 ** bits - 1
+        shade = np.rint(shade * levels) / levels
+    out = np.zeros((len(L), H, W))
+    out[:, mask] = shade
+    return out

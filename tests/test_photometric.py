@@ -1,0 +1,198 @@
+"""facetlift.photometric: the robust least-squares fit and the image simulation."""
+
+import numpy as np
+import pytest
+
+from facetlift import photometric, synthetic
+
+
+def _front_normals(rng, shape, max_deg=30.0):
+    """Random unit normals within `max_deg` of the viewing axis."""
+    theta = np.radians(max_deg) * np.sqrt(rng.random(shape))
+    phi = 2 * np.pi * rng.random(shape)
+    return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi),
+                     np.cos(theta)], axis=-1)
+
+
+def _lambert(n, L, albedo):
+    return np.clip(np.einsum("hwi,ki->khw", n, L), 0, None) * albedo
+
+
+def test_lights_on_cap_are_unit_and_within_the_spread():
+    L = photometric.lights_on_cap(96, 35.0, rng=3)
+    assert L.shape == (96, 3)
+    np.testing.assert_allclose(np.linalg.norm(L, axis=1), 1.0)
+    angle = np.degrees(np.arccos(L[:, 2]))
+    assert angle.max() <= 35.0 + 1e-9 and angle.min() < 5.0
+    assert np.abs(L[:, :2].mean(axis=0)).max() < 0.05  # (spread all round the axis)
+
+
+def test_fit_recovers_lambertian_normals_and_albedo_exactly():
+    rng = np.random.default_rng(0)
+    n = _front_normals(rng, (20, 30))
+    L = photometric.lights_on_cap(12, 25.0, rng)
+    albedo = 0.3 + 0.7 * rng.random((20, 30))
+    got, conf = photometric.fit(_lambert(n, L, albedo), L, saturation=1.0)
+    np.testing.assert_allclose(got, n, atol=1e-10)
+    np.testing.assert_allclose(conf, 1.0)
+
+
+def test_fit_leaves_shadows_out():
+    rng = np.random.default_rng(1)
+    n = _front_normals(rng, (10, 10), max_deg=60.0)
+    L = photometric.lights_on_cap(20, 40.0, rng)
+    I = _lambert(n, L, 1.0)
+    I[rng.random(I.shape) < 0.3] = 0.0  # (cast shadows: 30 % of the observations dark)
+    got, _ = photometric.fit(I, L, saturation=1.0)
+    ok = np.isfinite(got[..., 0])
+    assert ok.mean() > 0.9
+    np.testing.assert_allclose(got[ok], n[ok], atol=1e-10)
+    # a plain least squares over every image is off
+    G = np.linalg.lstsq(L, I.reshape(20, -1), rcond=None)[0].T
+    plain = G / np.linalg.norm(G, axis=1, keepdims=True)
+    assert np.abs(plain - n.reshape(-1, 3)).max() > 0.05
+
+
+def test_fit_drops_a_highlight_on_its_second_pass():
+    rng = np.random.default_rng(2)
+    n = _front_normals(rng, (8, 8))
+    L = photometric.lights_on_cap(16, 30.0, rng)
+    I = 0.5 * _lambert(n, L, 1.0)
+    k = rng.integers(0, 16, size=(8, 8))
+    r, c = np.mgrid[0:8, 0:8]
+    I[k, r, c] += 0.3  # (one highlight per pixel, below saturation)
+    once, _ = photometric.fit(I, L, passes=1, saturation=1.0)
+    twice, conf = photometric.fit(I, L, passes=2, saturation=1.0)
+    assert np.degrees(np.arccos(np.clip((once * n).sum(-1), -1, 1))).max() > 1.0
+    np.testing.assert_allclose(twice, n, atol=1e-9)
+
+
+def test_fit_confidence_falls_where_the_fit_is_poor():
+    rng = np.random.default_rng(4)
+    n = _front_normals(rng, (16, 16))
+    L = photometric.lights_on_cap(20, 35.0, rng)
+    I = _lambert(n, L, 0.8) + 0.002 * rng.normal(size=(20, 16, 16))
+    I[:, :4, :4] += 0.05 * rng.normal(size=(20, 4, 4))  # (a corner far from Lambert)
+    _, conf = photometric.fit(np.clip(I, 0, None), L, passes=1, saturation=1.0)
+    assert conf[:4, :4].mean() < 0.2 < 0.7 < conf[8:, 8:].mean()
+
+
+def test_fit_gives_no_normal_with_too_few_lights_and_outside_the_mask():
+    rng = np.random.default_rng(5)
+    n = _front_normals(rng, (6, 6))
+    L = photometric.lights_on_cap(8, 30.0, rng)
+    I = _lambert(n, L, 1.0)
+    I[2:, 0, 0] = 0.0  # (two lights left)
+    mask = np.ones((6, 6), bool)
+    mask[5, 5] = False
+    got, conf = photometric.fit(I, L, mask, saturation=1.0)
+    assert np.isnan(got[0, 0]).all() and conf[0, 0] == 0
+    assert np.isnan(got[5, 5]).all() and conf[5, 5] == 0
+    np.testing.assert_allclose(got[3, 3], n[3, 3], atol=1e-10)
+
+
+@pytest.mark.parametrize("call, match", [
+    (lambda I, L, m: photometric.fit(I[0], L), "images"),
+    (lambda I, L, m: photometric.fit(I, L[:5]), "lights"),
+    (lambda I, L, m: photometric.fit(I, L[:, :2]), "lights"),
+    (lambda I, L, m: photometric.fit(I, np.where(L > 0.5, np.nan, L)), "lights"),
+    (lambda I, L, m: photometric.fit(I, L, m[:3]), "mask"),
+    (lambda I, L, m: photometric.fit(I, L, shadow=0.5, saturation=0.4), "shadow"),
+    (lambda I, L, m: photometric.fit(I, L, highlight=0), "highlight"),
+    (lambda I, L, m: photometric.fit(I, L, passes=0), "passes"),
+    (lambda I, L, m: photometric.lights_on_cap(2), "count"),
+    (lambda I, L, m: photometric.lights_on_cap(10, 95.0), "spread_deg"),
+])
+def test_bad_arguments_name_themselves(call, match):
+    I, L, m = np.ones((6, 4, 4)), photometric.lights_on_cap(6), np.ones((4, 4), bool)
+    with pytest.raises(ValueError, match=match):
+        call(I, L, m)
+
+
+def _box_on_floor(size=40, height=10.0):
+    """Orthographic: a floor at depth `height`, a box whose top is at depth 0 on columns 25+."""
+    depth = np.full((size, size), height)
+    depth[:, 25:] = 0.0
+    normals = np.zeros((size, size, 3))
+    normals[..., 2] = 1.0
+    return synthetic.GroundTruth(depth, normals, np.ones((size, size), bool), 1.0, "box")
+
+
+def test_a_box_casts_a_shadow_as_long_as_it_is_high():
+    gt = _box_on_floor()
+    s45 = np.radians(45.0)
+    from_right = np.array([[np.sin(s45), 0.0, np.cos(s45)]])
+    from_left = np.array([[-np.sin(s45), 0.0, np.cos(s45)]])
+    shadow = photometric.cast_shadows(gt, from_right)[0]
+    # at 45 degrees a box 10 high shades 10 pixels of floor beside it, give or take a pixel
+    row = shadow[20]
+    assert row[17:25].all() and not row[:14].any() and not row[25:].any()
+    assert not photometric.cast_shadows(gt, from_left).any()
+    # a thin box (depth 1 deep) lets the rays that pass behind it through
+    thin = photometric.cast_shadows(gt, from_right, thickness=1.0)[0]
+    assert thin[20].sum() < row.sum()
+
+
+def test_simulated_images_fit_back_to_the_normals_without_noise():
+    gt = synthetic.analytic("sphere", 48)
+    rng = np.random.default_rng(6)
+    L = photometric.lights_on_cap(12, 30.0, rng)
+    I = photometric.simulate(gt, L, rng, specular=0.0, noise=0.0, bits=0, shadows=False,
+                             exposure=0.5)
+    assert I.shape == (12, 48, 48) and (I[:, ~gt.mask] == 0).all()
+    got, _ = photometric.fit(I, L, gt.mask, saturation=1.0)
+    ok = np.isfinite(got[..., 0])
+    assert ok[gt.mask].mean() > 0.9
+    np.testing.assert_allclose(got[ok], gt.normals[ok], atol=1e-8)
+
+
+def _angles(got, gt):
+    ok = np.isfinite(got[..., 0])
+    return np.degrees(np.arccos(np.clip((got[ok] * gt.normals[ok]).sum(-1), -1, 1)))
+
+
+def test_simulated_images_with_noise_and_shadows_fit_within_a_degree():
+    gt = synthetic.analytic("steps", 64)
+    rng = np.random.default_rng(7)
+    L = photometric.lights_on_cap(20, 40.0, rng)
+    I = photometric.simulate(gt, L, rng, specular=0.0)
+    assert I.min() >= 0 and I.max() <= 1
+    levels = I * 65535
+    np.testing.assert_allclose(levels, np.rint(levels), atol=1e-6)  # (16 bits)
+    angle = _angles(photometric.fit(I, L, gt.mask)[0], gt)
+    assert angle.size == gt.mask.sum() and np.median(angle) < 1.0 and np.mean(angle) < 1.0
+
+
+def test_simulated_highlights_bias_a_plane_as_a_least_squares_fit_does():
+    # (a plane seen head-on catches the same highlights everywhere: what the fit cannot tell
+    # from Lambert tilts it as a whole; a sphere's are local)
+    rng = np.random.default_rng(8)
+    L = photometric.lights_on_cap(20, 40.0, rng)
+    plane = synthetic.analytic("steps", 48)
+    sphere = synthetic.analytic("sphere", 48)
+    a_plane = _angles(photometric.fit(photometric.simulate(plane, L, 1), L, plane.mask)[0],
+                      plane)
+    a_sphere = _angles(photometric.fit(photometric.simulate(sphere, L, 1), L,
+                                       sphere.mask)[0], sphere)
+    assert np.median(a_plane) > 2.0 and np.median(a_sphere) < 1.0
+
+
+def test_simulate_bad_arguments():
+    gt = synthetic.analytic("sphere", 16)
+    L = photometric.lights_on_cap(4)
+    for kw, match in (({"noise": -1}, "noise"), ({"bits": 40}, "bits"),
+                      ({"specular": -0.1}, "specular"), ({"exposure": 0}, "exposure"),
+                      ({"albedo": np.ones((3, 3))}, "albedo")):
+        with pytest.raises(ValueError, match=match):
+            photometric.simulate(gt, L, 0, **kw)
+
+
+def test_the_benchmark_s_photometric_conditions_are_seeded_fits():
+    from facetlift.bench import discontinuities as D
+
+    gt = synthetic.analytic("occluder", 48)
+    mild = D.condition(gt, "ps", "ortho:occluder")
+    np.testing.assert_array_equal(mild, D.condition(gt, "ps", "ortho:occluder"))
+    shiny = D.condition(gt, "ps_shiny", "ortho:occluder")
+    a_mild, a_shiny = _angles(mild, gt), _angles(shiny, gt)
+    assert a_mild.size > 0.99 * gt.mask.sum() and 0 < np.mean(a_mild) < np.mean(a_shiny)
