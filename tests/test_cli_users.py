@@ -1502,3 +1502,15 @@ def test_a_setting_an_option_needs_is_named_as_its_flag(capsys, tmp_path):
                        "--option", "discontinuity_k=3")
     line = one_line(err)
     assert code == 1 and "applies only with --discontinuities" in line, line
+
+
+def test_only_an_option_s_requirement_is_rewritten_as_flags(monkeypatch):
+    """Messages that give both spellings already were doubled ("--discontinuities
+    (--discontinuities)", a review)."""
+    from facetlift import cli
+
+    monkeypatch.setitem(cli._STATE, "args", ["integrate", "n.npy"])
+    both = "integrate with discontinuities=True (--discontinuities) to get one"
+    assert cli._as_flags(both) == both
+    assert cli._as_flags("`k` applies only with discontinuities=True") == (
+        "`k` applies only with --discontinuities")

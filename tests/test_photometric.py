@@ -124,13 +124,37 @@ def test_a_box_casts_a_shadow_as_long_as_it_is_high():
     from_right = np.array([[np.sin(s45), 0.0, np.cos(s45)]])
     from_left = np.array([[-np.sin(s45), 0.0, np.cos(s45)]])
     shadow = photometric.cast_shadows(gt, from_right)[0]
-    # at 45 degrees a box 10 high shades 10 pixels of floor beside it, give or take a pixel
+    # at 45 degrees a box 10 high shades 10 pixels of floor beside it (the pixel centres at
+    # 0.5-9.5 from its edge; the march's integer steps see nine of them)
     row = shadow[20]
-    assert row[17:25].all() and not row[:14].any() and not row[25:].any()
+    assert row[16:25].all() and not row[:15].any() and not row[25:].any()
+    assert (shadow == row).all()  # (every row alike: no shift along y)
     assert not photometric.cast_shadows(gt, from_left).any()
-    # a thin box (depth 1 deep) lets the rays that pass behind it through
-    thin = photometric.cast_shadows(gt, from_right, thickness=1.0)[0]
+    # a thin plate (half a unit deep) lets the rays that pass behind it through
+    thin = photometric.cast_shadows(gt, from_right, thickness=0.5)[0]
     assert thin[20].sum() < row.sum()
+
+
+def test_a_step_casts_its_shadow_downward_in_a_pinhole_view():
+    """Perspective: a raised band (rows 20-29, 100 mm nearer) lit from above shades the
+    floor below it in the image (y up is against the row index), and from below the floor
+    above it."""
+    H = W = 60
+    f = 600.0
+    K = np.array([[f, 0, W / 2], [0, f, H / 2], [0, 0, 1.0]])
+    depth = np.full((H, W), 1000.0)
+    depth[20:30] = 900.0
+    normals = np.zeros((H, W, 3))
+    normals[..., 2] = 1.0
+    gt = synthetic.GroundTruth(depth, normals, np.ones((H, W), bool), 1.0, "band", K)
+    t = np.radians(30.0)
+    above = photometric.cast_shadows(gt, np.array([[0.0, np.sin(t), np.cos(t)]]))[0]
+    below = photometric.cast_shadows(gt, np.array([[0.0, -np.sin(t), np.cos(t)]]))[0]
+    # (100 mm at tan 30: 57.7 mm of floor, at 1 m and f = 600 about 35 px; the image ends;
+    # near the left and right edges the march leaves the image before it meets the band)
+    inner = slice(5, 55)
+    assert above[30:40, inner].all() and not above[:30].any()
+    assert below[5:20, inner].all() and not below[20:].any()
 
 
 def test_simulated_images_fit_back_to_the_normals_without_noise():
@@ -196,3 +220,17 @@ def test_the_benchmark_s_photometric_conditions_are_seeded_fits():
     shiny = D.condition(gt, "ps_shiny", "ortho:occluder")
     a_mild, a_shiny = _angles(mild, gt), _angles(shiny, gt)
     assert a_mild.size > 0.99 * gt.mask.sum() and 0 < np.mean(a_mild) < np.mean(a_shiny)
+
+
+def test_a_nan_observation_is_left_out_and_three_lights_are_unchecked():
+    rng = np.random.default_rng(9)
+    n = _front_normals(rng, (6, 6))
+    L = photometric.lights_on_cap(12, 30.0, rng)
+    I = _lambert(n, L, 1.0) + 0.003 * rng.normal(size=(12, 6, 6))
+    I[4, 1, 1] = np.nan  # (one bad observation: the pixel keeps its normal)
+    I[3:, 2, 2] = 0.0  # (three lights left: no residual can check the fit)
+    got, conf = photometric.fit(np.clip(I, 0, None), L, saturation=1.0)
+    assert np.degrees(np.arccos(np.clip(got[1, 1] @ n[1, 1], -1, 1))) < 1.0
+    assert np.isfinite(got[2, 2]).all() and conf[2, 2] == photometric.UNCHECKED
+    others = np.delete(conf.ravel(), [2 * 6 + 2])
+    assert np.median(others) > 0.8 > photometric.UNCHECKED

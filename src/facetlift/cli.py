@@ -1328,8 +1328,10 @@ def _as_flags(message: str) -> str:
         listed = re.sub(r"'(\w+)'", lambda m: names.get(m.group(1), m.group(0)), head.group(1))
         message = message[:head.start(1)] + listed + message[head.end(1):]
     message = re.sub(r"`(\w+)`", lambda m: names.get(m.group(1), m.group(0)), message)
-    # (the settings such a message asks for, as the flags that make them: "set
-    # solver='iterative'" was Python on the command line, a fresh user's check)
+    if "applies only with" not in message:  # (others give both spellings, or quote Python)
+        return message
+    # (the settings an option needs, as the flags that make them: "set solver='iterative'"
+    # was Python on the command line, a fresh user's check)
     message = re.sub(r"\bsolver='(\w+)'", r"--solver \1", message)
     return re.sub(r"\bdiscontinuities=(True|False)\b",
                   lambda m: "--discontinuities" if m.group(1) == "True"

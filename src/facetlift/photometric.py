@@ -11,9 +11,10 @@ light.
     Lambertian least squares per pixel over the observations that are neither shadowed
     (darker than ``shadow`` of the brightest) nor saturated, then again without the
     observations brighter than the first fit by more than ``highlight`` of the albedo (a
-    highlight), for ``passes`` fits in all. Returns unit normals (NaN where fewer than three
-    usable lights, or a badly conditioned set of them, are left) and a confidence in (0, 1]
-    from the fit's residual: 1 where the residual is typical, 1/2 at three times the median.
+    highlight), for ``passes`` fits in all; NaN observations are left out too. Returns unit
+    normals (NaN where fewer than three usable lights, or a badly conditioned set of them, are
+    left) and a confidence in (0, 1] from the fit's residual: 1 where the residual is typical,
+    1/2 at three times the median and where only three lights were usable.
     This is the fit of docs/recipes.md, "A photometric-stereo pipeline in Python"; its
     thresholds were the first ones tried and are not tuned.
 
@@ -36,11 +37,17 @@ __all__ = ["cast_shadows", "fit", "lights_on_cap", "simulate"]
 #: confidence: a fit to rounding errors is not spread over (0, 1] by their size.
 RESIDUAL_FLOOR = 1e-6
 
+#: :func:`fit`'s confidence of a pixel fitted to exactly three observations: they fit any
+#: normal exactly, so no residual checks it (such pixels lie next to shadows, where a
+#: photometric stereo is least reliable); the confidence a residual of three times the median
+#: gets.
+UNCHECKED = 0.5
+
 
 def lights_on_cap(count: int, spread_deg: float = 40.0, rng=None) -> np.ndarray:
     """(count, 3) unit light directions spread evenly (a Fibonacci spiral, turned at random
-    by `rng`) over the spherical cap within `spread_deg` degrees of the viewing axis, as a
-    photometric-stereo dome's lights (DiLiGenT's 96 reach about 40 degrees)."""
+    by `rng`) over the spherical cap within `spread_deg` degrees of the viewing axis, as the
+    lights of a photometric-stereo rig around its camera."""
     if not (isinstance(count, (int, np.integer)) and count >= 3):
         raise ValueError(f"`count` must be an integer >= 3; got {count!r}")
     if not (np.isfinite(spread_deg) and 0 < spread_deg < 90):
@@ -74,11 +81,15 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
     Parameters
     ----------
     images : (k, H, W) array_like
-        Linear intensities (any scale), one image per light.
+        Linear intensities (any scale), one grey image per light, each divided by its light's
+        intensity where the lights differ (DiLiGenT's ``light_intensities.txt``; a colour
+        image first averaged over its channels, each divided by the light's intensity in
+        that channel).
     lights : (k, 3) array_like
         Directions toward the lights (x right, y up, z toward the viewer); normalised here.
     mask : (H, W) bool, optional
-        Pixels to fit; default every pixel with finite intensities.
+        Pixels to fit; default every pixel with a finite intensity. NaN observations are left
+        out of their pixel's fit.
     shadow, saturation : float
         Observations below ``shadow`` or above ``saturation`` times the 99.9th percentile of
         the intensities inside the mask are left out (shadows, clipped highlights).
@@ -94,8 +105,10 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
         Unit normals, NaN outside the mask and where fewer than three usable observations (or
         a nearly degenerate set of light directions) are left.
     confidence : (H, W) float
-        ``1 / (1 + (res / (3 median res))^2)`` of the fit's RMS residual over the albedo,
-        the median taken no lower than :data:`RESIDUAL_FLOOR` (0 where there is no normal).
+        ``1 / (1 + (res / (3 median res))^2)`` of the fit's residual over the albedo (its
+        root of the squared residuals' sum over the observations beyond three), the median
+        taken no lower than :data:`RESIDUAL_FLOOR`; :data:`UNCHECKED` where only three
+        observations were used, 0 where there is no normal.
 
     Raises
     ------
@@ -108,12 +121,12 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
     L = _check_lights(lights, I)
     H, W = I.shape[1:]
     if mask is None:
-        mask = np.isfinite(I).all(axis=0)
+        mask = np.isfinite(I).any(axis=0)
     else:
         mask = np.asarray(mask)
         if mask.shape != (H, W):
             raise ValueError(f"`mask` must have the images' shape {(H, W)}; got {mask.shape}")
-        mask = mask.astype(bool) & np.isfinite(I).all(axis=0)
+        mask = mask.astype(bool)
     if not (0 <= shadow < saturation <= 1):
         raise ValueError(f"`shadow` and `saturation` must satisfy 0 <= shadow < saturation "
                          f"<= 1; got {shadow!r}, {saturation!r}")
@@ -126,10 +139,12 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
     if not mask.any():
         return normals, confidence
     obs = I[:, mask]  # (k, m)
-    top = np.percentile(obs, 99.9)
+    finite = np.isfinite(obs)  # (a NaN observation is left out, not its whole pixel)
+    obs = np.where(finite, obs, 0.0)
+    top = np.percentile(obs[finite], 99.9) if finite.any() else 0.0
     if not top > 0:
         return normals, confidence
-    use = (obs > shadow * top) & (obs < saturation * top)
+    use = finite & (obs > shadow * top) & (obs < saturation * top)
     m = obs.shape[1]
     G = np.full((m, 3), np.nan)
     for step in range(passes):
@@ -149,15 +164,17 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
                 use &= ~(obs - pred > highlight * rho)
     with np.errstate(invalid="ignore", divide="ignore"):
         n = G / rho[:, None]
-        res = np.sqrt(np.einsum("km,km->m", use, (pred - obs) ** 2)
-                      / np.maximum(use.sum(axis=0), 1)) / rho
-        ref = max(np.nanmedian(res[ok]) if ok.any() else 0.0, RESIDUAL_FLOOR)
-        conf = 1.0 / (1.0 + (res / (3.0 * ref)) ** 2)
+        spare = use.sum(axis=0) - 3  # (observations beyond the three a normal needs)
+        res = np.sqrt(np.einsum("km,km->m", use, np.where(use, pred - obs, 0.0) ** 2)
+                      / np.maximum(spare, 1)) / rho
+        checked = ok & (spare > 0)
+        ref = max(np.nanmedian(res[checked]) if checked.any() else 0.0, RESIDUAL_FLOOR)
+        conf = np.where(spare > 0, 1.0 / (1.0 + (res / (3.0 * ref)) ** 2), UNCHECKED)
     out = normals[mask]
     out[ok] = n[ok]
     normals[mask] = out
     c = np.zeros(m)
-    c[ok] = np.nan_to_num(conf[ok], nan=1.0)
+    c[ok] = np.nan_to_num(conf[ok], nan=UNCHECKED)
     confidence[mask] = c
     return normals, confidence
 
@@ -211,7 +228,7 @@ def cast_shadows(gt, lights, *, thickness=None, reach: float = 256.0) -> np.ndar
     """(k, H, W) bool: pixels of `gt`'s mask whose point the visible surface hides from each
     light, found by marching from the point toward the light through the ground-truth depth
     map: a point is blocked where the surface seen at its projection lies in front of it by
-    more than a pixel's depth tolerance (the rounding to a pixel) and less than `thickness`
+    more than the depth error of rounding to a pixel and less than `thickness`
     (default: any amount, the visible surface taken as the front of a solid). The march takes
     steps of about one pixel in the image, growing after 16 pixels, up to `reach` pixels."""
     L = _check_lights(lights, least=1)
@@ -240,7 +257,8 @@ def cast_shadows(gt, lights, *, thickness=None, reach: float = 256.0) -> np.ndar
             ri, ci = rr[inside].astype(int), cc[inside].astype(int)
             seen = depth[ri, ci]
             gap = P[inside, 2] - seen  # (> 0: the surface there is in front of the point)
-            tol = foot[inside] + 0.5 * slope[ri, ci]  # (the rounding to a pixel)
+            # (the rounding to a pixel, and a tenth of a footprint against rounding errors)
+            tol = 0.1 * foot[inside] + 0.5 * slope[ri, ci]
             with np.errstate(invalid="ignore"):
                 hit = (gap > tol) & (gap < thickness)
             idx = np.flatnonzero(inside)

@@ -105,7 +105,7 @@ def read_K_stated(path) -> tuple[np.ndarray, tuple[int, int] | None]:
         # which a user saw as a 3x3 matrix they never wrote, a fresh user's check)
         raise ValueError(f"`{arg}`: {p} holds a 2x2 matrix; expected a "
                          "3x3 matrix (three rows, or nine numbers), or the four numbers "
-                         "fx fy cx cy on one line") from None
+                         "fx fy cx cy (in one row or one column)") from None
     elif K.size == 4:  # fx fy cx cy
         fx, fy, cx, cy = K.ravel()
         K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
