@@ -1514,3 +1514,20 @@ def test_only_an_option_s_requirement_is_rewritten_as_flags(monkeypatch):
     assert cli._as_flags(both) == both
     assert cli._as_flags("`k` applies only with discontinuities=True") == (
         "`k` applies only with --discontinuities")
+
+
+def test_report_title_names_the_discontinuity_route(tmp_path, monkeypatch):
+    """report.png said "method dgp" for a --discontinuities run (a fresh user's check)."""
+    from matplotlib.figure import Figure
+
+    from facetlift.io import report
+
+    titles = []
+    real = Figure.suptitle
+    monkeypatch.setattr(Figure, "suptitle",
+                        lambda self, t, **kw: titles.append(t) or real(self, t, **kw))
+    n = dome()
+    report.write_report(tmp_path / "a.png", facetlift.integrate(n), n)
+    report.write_report(tmp_path / "b.png", facetlift.integrate(n, discontinuities=True), n)
+    assert titles[0].endswith("method dgp")
+    assert titles[1].endswith("method dgp, discontinuities")

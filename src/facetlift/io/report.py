@@ -104,7 +104,10 @@ def write_report(path, surface, normals=None, *, dpi: int = 100,
     rows = -(-len(panels) // cols)
     aspect = crop[0] / max(crop[1], 1)
     fig = Figure(figsize=(4.2 * cols, 4.2 * rows * min(max(aspect, 0.3), 3.0) + 0.6))
-    fig.suptitle(f"{H}x{W}, {int(surface.mask.sum())} facets, method {info.get('method', '?')}")
+    method = info.get("method", "?")
+    if "discontinuity_k" in info:  # (the discontinuity route: "method dgp" alone hid it)
+        method += ", discontinuities"
+    fig.suptitle(f"{H}x{W}, {int(surface.mask.sum())} facets, method {method}")
     for k, (title, img, cmap, label, top) in enumerate(panels):
         ax = fig.add_subplot(rows, cols, k + 1)
         kw = {} if top is None else {"vmin": 0.0, "vmax": top}
