@@ -211,7 +211,8 @@ def main(argv=None) -> int:
                     help="a setting of side B (repeatable; B is the defaults plus these)")
     ap.add_argument("--conditions", default="exact,8bit,noise3",
                     help="comma-separated conditions of the benchmark (default "
-                    "exact,8bit,noise3; also 16bit, noise6, smooth3, outliers, blur1.5, blur3)")
+                    "exact,8bit,noise3; also 16bit, noise6, smooth3, outliers, blur1.5, blur3, ps, "
+                    "ps_shiny)")
     ap.add_argument("--heldout-seed", type=int, default=None,
                     help="a held-out set's scenes instead of the development benchmark's")
     ap.add_argument("--models", default=None,
