@@ -287,3 +287,18 @@ def test_the_sampled_brightness_sees_pixels_with_data(monkeypatch):
     assert np.isfinite(got[:, 1::2]).all() and np.isnan(got[:, 0::2]).all()
     np.testing.assert_allclose(got[:, 1::2], n[:, 1::2], atol=1e-10)
     assert (conf[:, 0::2] == 0).all()
+
+
+def test_integer_and_float32_images_fit_as_their_float64_values():
+    """The stack is not copied whole to float64 (a 16-bit capture stays 16-bit in memory):
+    each block is converted when it is fitted, to the same result."""
+    rng = np.random.default_rng(12)
+    n = _front_normals(rng, (24, 26), max_deg=50.0)
+    L = photometric.lights_on_cap(10, 40.0, rng)
+    I = _lambert(n, L, 1.0)
+    for stack in (np.rint(I / I.max() * 65535).astype(np.uint16), I.astype(np.float32)):
+        for a, b in zip(photometric.fit(stack, L), photometric.fit(stack.astype(float), L),
+                        strict=True):
+            np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="`images` must be a .* stack of numbers"):
+        photometric.fit(np.full((4, 2, 2), "a"), L[:4])

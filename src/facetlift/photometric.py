@@ -81,7 +81,8 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
     Parameters
     ----------
     images : (k, H, W) array_like
-        Linear intensities (any scale), one grey image per light, each divided by its light's
+        Linear intensities (any scale, integers or floats, not copied whole: each block of
+        pixels is fitted in float64), one grey image per light, each divided by its light's
         intensity where the lights differ (DiLiGenT's ``light_intensities.txt``; a colour
         image first averaged over its channels, each divided by the light's intensity in
         that channel).
@@ -117,9 +118,11 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
     ValueError
         Shapes that do not match, non-finite lights, thresholds out of range.
     """
-    I = np.asarray(images, dtype=float)
-    if I.ndim != 3:
-        raise ValueError(f"`images` must be a (k, H, W) stack; got shape {I.shape}")
+    I = np.asarray(images)  # (as given: each block is made float64 when it is fitted)
+    if I.ndim != 3 or not (np.issubdtype(I.dtype, np.integer)
+                           or np.issubdtype(I.dtype, np.floating)):
+        raise ValueError(f"`images` must be a (k, H, W) stack of numbers; got shape "
+                         f"{I.shape}, dtype {I.dtype}")
     L = _check_lights(lights, I)
     H, W = I.shape[1:]
     if mask is None:
@@ -189,7 +192,7 @@ def _brightness(flat: np.ndarray, pix: np.ndarray) -> float:
         if k * pix.size > TOP_SAMPLE:
             rng = np.random.default_rng(0)
             pix = np.sort(rng.choice(pix, -(-TOP_SAMPLE // k), replace=False))
-    obs = flat[:, pix]
+    obs = np.asarray(flat[:, pix], dtype=float)
     obs = obs[np.isfinite(obs)]
     return float(np.percentile(obs, 99.9)) if obs.size else 0.0
 
@@ -197,6 +200,7 @@ def _brightness(flat: np.ndarray, pix: np.ndarray) -> float:
 def _fit_block(obs, L, LL, top, shadow, saturation, highlight, passes):
     """:func:`fit` on the observations `obs` (k, c) of c pixels: (c, 3) unit normals (NaN
     where none), (c,) residuals over the albedo and (c,) observations beyond three."""
+    obs = np.asarray(obs, dtype=float)
     finite = np.isfinite(obs)  # (a NaN observation is left out, not its whole pixel)
     obs = np.where(finite, obs, 0.0)
     use = finite & (obs > shadow * top) & (obs < saturation * top)
@@ -229,13 +233,11 @@ def _points(gt) -> tuple[np.ndarray, np.ndarray]:
     H, W = gt.mask.shape
     r, c = np.mgrid[0:H, 0:W].astype(float)
     d = gt.depth
+    cam = gt.camera
     if gt.K is None:
-        h = float(gt.pixel_size)
+        h = cam.footprint()
         return np.stack([c * h, r * h, d], axis=-1), np.full((H, W), h)
-    K = np.asarray(gt.K, dtype=float)
-    x = (c - K[0, 2] - K[0, 1] * (r - K[1, 2]) / K[1, 1]) / K[0, 0]
-    y = (r - K[1, 2]) / K[1, 1]
-    return np.stack([x * d, y * d, d], axis=-1), d / np.sqrt(K[0, 0] * K[1, 1])
+    return cam.rays(r, c) * d[..., None], d * cam.footprint()
 
 
 def _project(gt, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -105,7 +105,7 @@ def write_report(path, surface, normals=None, *, dpi: int = 100,
     aspect = crop[0] / max(crop[1], 1)
     fig = Figure(figsize=(4.2 * cols, 4.2 * rows * min(max(aspect, 0.3), 3.0) + 0.6))
     method = info.get("method", "?")
-    if "discontinuity_k" in info:  # (the discontinuity route: "method dgp" alone hid it)
+    if info.get("solver") == "discontinuous":  # ("method dgp" alone hid the route)
         method += ", discontinuities"
     fig.suptitle(f"{H}x{W}, {int(surface.mask.sum())} facets, method {method}")
     for k, (title, img, cmap, label, top) in enumerate(panels):
