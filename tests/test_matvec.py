@@ -37,6 +37,20 @@ def test_split_product_equals_scipys(split):
     np.testing.assert_array_equal(A @ x.astype(np.float32), K @ x.astype(np.float32))
 
 
+def test_the_product_into_a_given_vector(split):
+    K = grid_matrix()
+    A = matvec.parallel(K)
+    x = np.random.default_rng(4).normal(size=K.shape[0])
+    out = np.full(K.shape[0], np.nan)
+    y = A.product(x, out=out)
+    assert y is out
+    np.testing.assert_array_equal(out, K @ x)
+    # (scipy's own product for another dtype, into the vector too)
+    y = A.product(x.astype(np.float32), out=out)
+    assert y is out
+    np.testing.assert_array_equal(out, K @ x.astype(np.float32))
+
+
 def test_small_busy_or_other_matrices_are_left_alone(monkeypatch):
     K = grid_matrix(20)
     assert matvec.parallel(K) is K  # below MIN_ROWS

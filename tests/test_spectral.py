@@ -67,6 +67,27 @@ def test_box_preconditioner_is_exact_on_full_rectangle():
     assert np.abs(K @ pre(b) - b).max() < 1e-10
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_a_box_the_domain_fills_skips_the_scatter_with_the_same_numbers(dtype):
+    # a full rectangle (e.g. with missing normals, which leaves the mask whole) fills its
+    # box: the preconditioner hands the residual to the transforms without a zeroed copy
+    d = Domain.from_mask(np.ones((20, 30), bool))
+    pre = BoxPreconditioner(d, dtype=dtype)
+    assert pre._fills
+    r = np.random.default_rng(3).standard_normal(d.n_vertices)
+    kept = r.copy()
+    x = pre(r)
+    np.testing.assert_array_equal(r, kept)  # (the residual is not written into)
+    assert x.dtype == np.float64 and x.shape == r.shape
+    pre._fills = False  # the general path: scatter into the box, gather back
+    np.testing.assert_array_equal(x, pre(r))
+    m = np.ones((20, 30), bool)
+    m[3, 4] = False  # (a hole of one pixel leaves every vertex: the box still filled)
+    assert BoxPreconditioner(Domain.from_mask(m))._fills
+    m[0, 0] = False  # (a corner pixel takes its corner vertex with it)
+    assert not BoxPreconditioner(Domain.from_mask(m))._fills
+
+
 def test_box_preconditioner_is_symmetric_positive_semidefinite():
     d = Domain.from_mask(_disk_with_hole(16))
     pre = BoxPreconditioner(d)

@@ -147,15 +147,24 @@ def cg(
     # the smallest residual so far and its iteration; its iterate is saved (in one buffer)
     # when the residual first rises after it: x - alpha d then
     best, best_at, saved, buf = rnorm, 0, False, None
+    # (alpha d and alpha A d formed in one reused buffer: the same numbers as the expressions,
+    # without two new n-vectors per iteration, whose fresh pages cost the kernel's time on a
+    # large map: docs/benchmarks.md, "Temporaries of the CG loop")
+    step = np.empty_like(x)
+    # (and A d, where the operator takes an output vector: the two-thread product)
+    into = getattr(A, "product", None)
+    Ad = np.empty_like(x) if into is not None else None
     for it in range(1, maxiter + 1):
-        Ad = A @ d
+        Ad = A @ d if into is None else into(d, out=Ad)
         dAd = _dot(d, Ad)
         if not dAd > 0:
             info.breakdown = True
             break
         alpha = rz / dAd
-        x += alpha * d
-        r -= alpha * Ad
+        np.multiply(d, alpha, out=step)
+        x += step
+        np.multiply(Ad, alpha, out=step)
+        r -= step
         info.iterations = it
         rnorm = np.sqrt(_dot(r, r))
         info.residuals.append(rnorm / bnorm)

@@ -106,10 +106,18 @@ class SplitProduct:
         _kernel(b - a, A.shape[1], A.indptr[a:b + 1], A.indices, A.data, x, y[a:b])
 
     def __matmul__(self, x):
+        return self.product(x)
+
+    def product(self, x, out: np.ndarray | None = None):
+        """``A @ x``, into `out` (a float64 vector of the rows' length, not `x`) where given:
+        a solver's loop reuses one buffer instead of a new vector per product."""
         if not (isinstance(x, np.ndarray) and x.ndim == 1 and x.dtype == np.float64
                 and x.flags.c_contiguous and x.shape[0] == self.shape[1]):
-            return self.A @ x  # (scipy's own product, and its errors)
-        y = np.empty(self.shape[0])
+            if out is None:
+                return self.A @ x  # (scipy's own product, and its errors)
+            out[...] = self.A @ x
+            return out
+        y = np.empty(self.shape[0]) if out is None else out
         n, cut = self.shape[0], self._cut
         try:
             job = _pool().submit(self._rows, cut, n, x, y)

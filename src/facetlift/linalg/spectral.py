@@ -17,6 +17,8 @@ sparse factorization.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import scipy.fft as sfft
 
@@ -70,10 +72,17 @@ class RectangleSolver:
         self._gain = self._gain.astype(self.dtype)
         self._inv_d = self._inv_d.astype(self.dtype)
 
-    def solve(self, b: np.ndarray) -> np.ndarray:
-        """(n,) solution in the solver's dtype (float32 transforms are twice as fast)."""
+    def solve(self, b: np.ndarray, overwrite: bool = False) -> np.ndarray:
+        """(n,) solution in the solver's dtype (float32 transforms are twice as fast). With
+        `overwrite`, a contiguous `b` of the solver's dtype is the workspace: the solution is
+        formed in its memory (the same numbers, no new arrays)."""
         H, W = self.H, self.W
-        y = np.asarray(b).reshape(H + 1, W + 1) * self._inv_d
+        b = np.asarray(b)
+        if overwrite and b.dtype == self.dtype and b.flags.c_contiguous:
+            y = b.reshape(H + 1, W + 1)
+            y *= self._inv_d
+        else:
+            y = b.reshape(H + 1, W + 1) * self._inv_d
         c = sfft.dctn(y, type=1, workers=self.workers, overwrite_x=True)
         c *= self._gain
         return sfft.dctn(c, type=1, workers=self.workers, overwrite_x=True).ravel()
@@ -106,6 +115,10 @@ class BoxPreconditioner:
             wb = sfft.next_fast_len(box.shape[1] - 1, real=True)
             box = np.pad(box, ((0, hb + 1 - box.shape[0]), (0, wb + 1 - box.shape[1])))
         self._inside = box.ravel()
+        # (the domain fills its box, e.g. a rectangle with missing normals: no scatter into a
+        # zeroed box and no gather back, the same numbers)
+        self._fills = bool(self._inside.all())
+        self._work = threading.local()
         if shift > 0:
             self.exact = False
         self._solver = RectangleSolver(box.shape[0] - 1, box.shape[1] - 1, workers, dtype,
@@ -113,6 +126,15 @@ class BoxPreconditioner:
         self._size = box.size
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
-        full = np.zeros(self._size, dtype=self._solver.dtype)
+        # the box's vector is a workspace kept per thread: a large map's CG would otherwise
+        # take one or two new box-sized arrays per iteration, whose fresh pages cost the
+        # kernel's time (docs/benchmarks.md, "Temporaries of the CG loop")
+        full = getattr(self._work, "box", None)
+        if full is None:
+            full = self._work.box = np.empty(self._size, dtype=self._solver.dtype)
+        if self._fills:
+            np.copyto(full, r, casting="same_kind")
+            return self._solver.solve(full, overwrite=True).astype(float)
+        full.fill(0)
         full[self._inside] = r
-        return self._solver.solve(full)[self._inside].astype(float)
+        return self._solver.solve(full, overwrite=True)[self._inside].astype(float, copy=False)
