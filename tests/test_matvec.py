@@ -49,6 +49,21 @@ def test_the_product_into_a_given_vector(split):
     y = A.product(x.astype(np.float32), out=out)
     assert y is out
     np.testing.assert_array_equal(out, K @ x.astype(np.float32))
+    # an `out` the kernel would write past or into `x` is refused, not written
+    n = K.shape[0]
+    for bad in (np.empty(n - 1), np.empty(n + 1), np.empty(n, np.float32),
+                np.empty(2 * n)[::2], x):
+        with pytest.raises(ValueError, match="`out` must be"):
+            A.product(x, out=bad)
+
+
+def test_cg_on_a_tall_two_thread_product_refuses_cleanly(split):
+    # (a caller's non-square matrix: scipy's own shape error, no product into a buffer of
+    # the wrong length)
+    K = sp.random(600, 590, density=0.05, format="csr", random_state=1)
+    assert isinstance(matvec.parallel(K), matvec.SplitProduct)
+    with pytest.raises(ValueError):
+        cg(K, np.ones(590), rtol=1e-8, maxiter=5)
 
 
 def test_small_busy_or_other_matrices_are_left_alone(monkeypatch):

@@ -81,6 +81,14 @@ def test_a_box_the_domain_fills_skips_the_scatter_with_the_same_numbers(dtype):
     assert x.dtype == np.float64 and x.shape == r.shape
     pre._fills = False  # the general path: scatter into the box, gather back
     np.testing.assert_array_equal(x, pre(r))
+    # each result is its own array: the next call reuses the workspace, not the result
+    for fills in (True, False):
+        pre._fills = fills
+        x1 = pre(r)
+        kept = x1.copy()
+        pre(2.0 * r + 1.0)
+        np.testing.assert_array_equal(x1, kept)
+        assert not np.shares_memory(x1, pre._work.box)
     m = np.ones((20, 30), bool)
     m[3, 4] = False  # (a hole of one pixel leaves every vertex: the box still filled)
     assert BoxPreconditioner(Domain.from_mask(m))._fills

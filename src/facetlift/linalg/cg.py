@@ -14,7 +14,7 @@ from typing import Callable
 import numpy as np
 
 from .dense import dot, norm  # noqa: F401  (norm: imported from here elsewhere)
-from .matvec import parallel
+from .matvec import SplitProduct, parallel
 
 
 @dataclass
@@ -148,11 +148,12 @@ def cg(
     # when the residual first rises after it: x - alpha d then
     best, best_at, saved, buf = rnorm, 0, False, None
     # (alpha d and alpha A d formed in one reused buffer: the same numbers as the expressions,
-    # without two new n-vectors per iteration, whose fresh pages cost the kernel's time on a
-    # large map: docs/benchmarks.md, "Temporaries of the CG loop")
+    # without two new n-vectors per iteration, whose fresh pages cost system (page-fault) time
+    # on a large map: docs/benchmarks.md, "Temporaries of the CG loop")
     step = np.empty_like(x)
-    # (and A d, where the operator takes an output vector: the two-thread product)
-    into = getattr(A, "product", None)
+    # (and A d into one buffer, where the operator is the two-thread product of a square
+    # matrix; any other operator makes its own vector)
+    into = A.product if isinstance(A, SplitProduct) and A.shape == (b.size, b.size) else None
     Ad = np.empty_like(x) if into is not None else None
     for it in range(1, maxiter + 1):
         Ad = A @ d if into is None else into(d, out=Ad)

@@ -109,8 +109,18 @@ class SplitProduct:
         return self.product(x)
 
     def product(self, x, out: np.ndarray | None = None):
-        """``A @ x``, into `out` (a float64 vector of the rows' length, not `x`) where given:
-        a solver's loop reuses one buffer instead of a new vector per product."""
+        """``A @ x``, into `out` where given: a solver's loop reuses one buffer instead of a
+        new vector per product. `out` must be a C-contiguous float64 vector of the rows'
+        length that shares no memory with `x` (the kernel writes the rows unchecked)."""
+        if out is not None and not (
+                isinstance(out, np.ndarray) and out.shape == (self.shape[0],)
+                and out.dtype == np.float64 and out.flags.c_contiguous
+                and not np.shares_memory(out, x)):
+            raise ValueError(
+                f"SplitProduct.product: `out` must be a C-contiguous float64 vector of "
+                f"{self.shape[0]} rows that shares no memory with `x`; got "
+                f"{getattr(out, 'dtype', type(out).__name__)} of shape "
+                f"{getattr(out, 'shape', None)}")
         if not (isinstance(x, np.ndarray) and x.ndim == 1 and x.dtype == np.float64
                 and x.flags.c_contiguous and x.shape[0] == self.shape[1]):
             if out is None:

@@ -74,8 +74,9 @@ class RectangleSolver:
 
     def solve(self, b: np.ndarray, overwrite: bool = False) -> np.ndarray:
         """(n,) solution in the solver's dtype (float32 transforms are twice as fast). With
-        `overwrite`, a contiguous `b` of the solver's dtype is the workspace: the solution is
-        formed in its memory (the same numbers, no new arrays)."""
+        `overwrite`, a C-contiguous `b` of the solver's dtype is the workspace: the solution
+        is formed in its memory and shares it (the same numbers, no new arrays); a `b` of
+        another dtype or layout, and any `b` without `overwrite`, is left untouched."""
         H, W = self.H, self.W
         b = np.asarray(b)
         if overwrite and b.dtype == self.dtype and b.flags.c_contiguous:
@@ -127,8 +128,10 @@ class BoxPreconditioner:
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
         # the box's vector is a workspace kept per thread: a large map's CG would otherwise
-        # take one or two new box-sized arrays per iteration, whose fresh pages cost the
-        # kernel's time (docs/benchmarks.md, "Temporaries of the CG loop")
+        # take one or two new box-sized arrays per iteration, whose fresh pages cost system
+        # (page-fault) time (docs/benchmarks.md, "Temporaries of the CG loop"). The result is
+        # always a new array (astype copies, the gather copies): the caller keeps it (CG's
+        # flexible update holds the last one) while the next call reuses the workspace
         full = getattr(self._work, "box", None)
         if full is None:
             full = self._work.box = np.empty(self._size, dtype=self._solver.dtype)
