@@ -203,6 +203,8 @@ def main(argv=None) -> int:
     sys.path.insert(0, str(HERE))
     from bench_jump_free import context, scene_arguments
 
+    from facetlift.bench import discontinuities as D
+
     ap = scene_arguments(__doc__.split("\n\n")[0])
     ap.set_defaults(groups=None)  # (every group, or ``heldout`` with --heldout-seed)
     ap.add_argument("--a", action="append", default=[], metavar="KEY=VALUE",
@@ -211,8 +213,7 @@ def main(argv=None) -> int:
                     help="a setting of side B (repeatable; B is the defaults plus these)")
     ap.add_argument("--conditions", default="exact,8bit,noise3",
                     help="comma-separated conditions of the benchmark (default "
-                    "exact,8bit,noise3; also 16bit, noise6, smooth3, outliers, blur1.5, blur3, ps, "
-                    "ps_shiny)")
+                    f"exact,8bit,noise3; known: {', '.join(D.CONDITIONS)})")
     ap.add_argument("--heldout-seed", type=int, default=None,
                     help="a held-out set's scenes instead of the development benchmark's")
     ap.add_argument("--models", default=None,
@@ -224,7 +225,6 @@ def main(argv=None) -> int:
     ap.add_argument("--csv", type=Path, default=None, help="write every run here")
     args = ap.parse_args(argv)
 
-    from facetlift.bench import discontinuities as D
     from facetlift.bench.core import Settings, Spec, method_status
 
     try:

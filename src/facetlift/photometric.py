@@ -348,7 +348,8 @@ def simulate(gt, lights, rng=None, *, albedo=None, specular: float = 0.2,
     H, W = mask.shape
     if albedo is None:
         tex = gaussian_filter(rng.random((H, W)), 6.0)
-        lo, hi = tex[mask].min() if mask.any() else 0, tex[mask].max() if mask.any() else 1
+        inside = tex[mask]
+        lo, hi = (inside.min(), inside.max()) if inside.size else (0.0, 1.0)
         albedo = 0.4 + 0.6 * (tex - lo) / max(hi - lo, 1e-12)
     else:
         albedo = np.asarray(albedo, dtype=float)
@@ -357,11 +358,10 @@ def simulate(gt, lights, rng=None, *, albedo=None, specular: float = 0.2,
                              f"{albedo.shape}")
     n = gt.normals[mask]
     a = albedo[mask]
-    X, _ = _points(gt)
     if gt.K is None:
         v = np.broadcast_to([0.0, 0.0, 1.0], n.shape)
     else:
-        p = X[mask]
+        p = _points(gt)[0][mask]
         v = np.stack([-p[:, 0], p[:, 1], p[:, 2]], axis=1)  # (to the camera, our frame)
         v = v / np.linalg.norm(v, axis=1, keepdims=True)
     blocked = cast_shadows(gt, L)[:, mask] if shadows else np.zeros((len(L), len(n)), bool)
