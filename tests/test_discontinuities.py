@@ -1303,6 +1303,47 @@ def test_the_sharpness_falls_as_one_over_the_noise_above_NOISE_K():
     assert sharpness(1.0, 4 * NOISE_K) == pytest.approx(0.25)
 
 
+def test_a_blurred_map_gets_the_sharper_sigmoid_a_sharp_or_noisy_one_does_not():
+    """SOFT_K: the share of one-pixel steps among the strong changes (soft_edges) tells a
+    blurred map (soft occlusion boundaries) from a sharp one; only the blurred one gets
+    discontinuity_k times SOFT_K, and noise above NOISE_K still lowers it instead. Isolated
+    outliers on a plane are spikes, neither steps nor ramps; too few strong changes say
+    nothing (NaN)."""
+    from facetlift.domain import Domain
+
+    assert disc.sharpness(4.0, 0.0, 0.0) == 4.0 * disc.SOFT_K
+    assert disc.sharpness(4.0, 0.0, disc.SOFT_SHARE) == 4.0
+    assert disc.sharpness(4.0, 0.0, float("nan")) == 4.0
+    assert disc.sharpness(4.0, 2 * disc.NOISE_K, 0.0) == pytest.approx(2.0)  # (noise first)
+    gt = synthetic.analytic("occluder", 96)
+    dom = Domain(gt.mask)
+
+    def share(normals):
+        return disc.soft_edges(dom, normals[gt.mask], np.ones(int(gt.mask.sum()), bool))
+
+    sharp = share(gt.normals)
+    soft = share(synthetic.blur_normals(gt.normals, 1.5, mask=gt.mask))
+    assert sharp > 10 * disc.SOFT_SHARE and soft < disc.SOFT_SHARE, (sharp, soft)
+    flat = np.zeros((96, 96, 3))
+    flat[..., 2] = 1.0
+    assert math.isnan(disc.soft_edges(Domain(np.ones((96, 96), bool)), flat.reshape(-1, 3),
+                                      np.ones(96 * 96, bool)))  # (no strong change)
+    spiky = flat.copy()
+    rng = np.random.default_rng(3)
+    rr, cc = rng.integers(2, 94, 300), rng.integers(2, 94, 300)
+    spiky[rr, cc] = (0.5, 0.0, math.sqrt(0.75))  # (outliers of 30 deg)
+    got = disc.soft_edges(Domain(np.ones((96, 96), bool)), spiky.reshape(-1, 3),
+                          np.ones(96 * 96, bool))
+    assert math.isnan(got) or got >= disc.SOFT_SHARE, got
+    s = facetlift.integrate(synthetic.blur_normals(gt.normals, 1.5, mask=gt.mask), gt.mask,
+                            discontinuities=True, discontinuity_iter=2)
+    assert s.info["soft_edges"] < disc.SOFT_SHARE
+    assert s.info["discontinuity_k"] == pytest.approx(disc.DEFAULT_K * disc.SOFT_K)
+    s = facetlift.integrate(gt.normals, gt.mask, discontinuities=True, discontinuity_iter=2)
+    assert s.info["soft_edges"] > disc.SOFT_SHARE
+    assert s.info["discontinuity_k"] == disc.DEFAULT_K
+
+
 def test_noisy_normals_of_a_surface_without_jumps_are_cut_less(monkeypatch):
     """8 deg of angular noise on an analytic sphere (no jump): the sharpness scaled to the
     noise read from the curl (NOISE_K) cuts half the corners and errs about 30 % less than

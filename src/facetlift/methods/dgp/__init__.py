@@ -117,7 +117,8 @@ OPTIONS = (
     Option("discontinuity_k", DEFAULT_K, "sharpness of the bilateral weights, in squared pixel "
            f"footprints (larger cuts more readily), for normals with up to "
            f"{discontinuous.NOISE_K:g} deg of noise; noisier ones (read from their curl) get "
-           f"k * {discontinuous.NOISE_K:g} / noise (info['discontinuity_k'])",
+           f"k * {discontinuous.NOISE_K:g} / noise, blurred maps (soft occlusion boundaries, "
+           f"info['soft_edges']) k * {discontinuous.SOFT_K:g} (info['discontinuity_k'])",
            low=0.0, low_open=True, when=_DISC),
     Option("discontinuity_iter", DEFAULT_ITER, "cap on the reweightings, the growth phase's "
            "included (a safety net: the weights settle and the cuts stop growing first)",
@@ -481,7 +482,9 @@ def run(
         from ...frames import normal_noise
 
         noise = normal_noise(problem)  # (degrees, from the curl: discontinuous.NOISE_K)
-        k_used = discontinuous.sharpness(discontinuity_k, noise)
+        # (a blurred map's soft occlusion boundaries: discontinuous.SOFT_K)
+        steps = discontinuous.soft_edges(domain, problem.normals, given)
+        k_used = discontinuous.sharpness(discontinuity_k, noise, steps)
         seed = None
         if discontinuity_seed and discontinuity_iter > 0:  # (the prior-free reweightings
             # from the normals' curl; with no reweighting the smooth surface, as documented)
@@ -580,6 +583,8 @@ def run(
         # angle, 1.8 deg where the result's was 0.68, described a surface not returned)
         info["deviation"] = [deviation(copies)]
         info["gaps_filled"] = 0 if filled is None else int(filled.sum())
+        # (the share of one-pixel steps among the map's strong changes; NaN: too few seen)
+        info["soft_edges"] = steps
         extras = {"corner_values": copies}
         if split_mesh is not None:  # (make_surface splits the copies itself otherwise)
             extras["split_mesh"] = split_mesh
