@@ -389,7 +389,7 @@ def test_info_names_the_flag_where_an_input_cannot_be_integrated(tmp_path, capsy
     # `confidence` (the Python argument) where integrate says --confidence (an audit)
     io.write_normals(tmp_path / "n.npy", dome())
     conf = np.full((20, 24), 0.5)
-    conf[3, 4] = -0.1
+    conf[3:12] -= 0.6  # (many pixels below 0: refused; a few are bad pixels, below)
     np.save(tmp_path / "c.npy", conf)
     code, out, _ = run(capsys, "info", tmp_path / "n.npy", "--confidence", tmp_path / "c.npy")
     line = [x for x in out.splitlines() if "cannot be integrated as read" in x]
@@ -398,6 +398,13 @@ def test_info_names_the_flag_where_an_input_cannot_be_integrated(tmp_path, capsy
     code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "--confidence",
                        tmp_path / "c.npy", "-o", tmp_path / "out")
     assert code == 1 and "--confidence must be finite" in one_line(err)
+    conf = np.full((20, 24), 0.5)
+    conf[3, 4] = -0.1  # (one bad pixel: a missing normal, counted and said with the flag)
+    np.save(tmp_path / "c.npy", conf)
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "--confidence",
+                       tmp_path / "c.npy", "-o", tmp_path / "out")
+    assert code == 0 and "--confidence: 1 pixel(s) inside the mask are not finite" in (
+        " ".join(err.split())), err
 
 
 def test_info_says_when_the_frame_check_cannot_tell(tmp_path, capsys):

@@ -241,7 +241,8 @@ def test_confidence_lowers_the_weight_of_bad_normals():
     # (every point left out, here two disagreeing in one pixel: said so, an audit)
     ({"prior": (np.array([3, 3]), np.array([4, 4]), np.array([1.0, 5.0]))},
      r"no finite depth sample inside the mask; its points were all left out .*disagreeing"),
-    ({"prior": np.full((24, 28), np.inf)}, "`prior` must not contain inf"),
+    # (inf is left out as unknown: a map of nothing else has no sample)
+    ({"prior": np.full((24, 28), np.inf)}, "`prior` has no finite depth sample inside the mask"),
     ({"prior": np.ones((24, 28)), "prior_weight": -1.0}, "`prior_weight` must be a finite "
      "number >= 0; got -1.0"),
     ({"prior": np.ones((24, 28)), "prior_weight": np.full((3, 3), 1.0)},
@@ -280,12 +281,18 @@ def test_perspective_prior_must_be_positive():
     prior[3, 4] = -2.0
     with pytest.raises(ValueError, match="`prior` must hold positive z-depths .* got -2.0"):
         facetlift.integrate(n, K=K, prior=prior)
-    # a map with 0 for "unknown" (a user's check): the message says to write NaN
+    # a map of nothing but 0 (a user's check): the message says to write NaN
+    with pytest.raises(ValueError, match=r"672 of them are 0: if 0 marks an unknown depth, "
+                       "write NaN"):
+        facetlift.integrate(n, K=K, prior=np.zeros((24, 28)))
+    # a depth sensor's map, 0 where unknown, with samples: the zeros are left out, said
     prior = np.zeros((24, 28))
     prior[3, 4] = 5.0
-    with pytest.raises(ValueError, match=r"671 of them are 0: if 0 marks an unknown depth, "
-                       "write NaN"):
-        facetlift.integrate(n, K=K, prior=prior)
+    with pytest.warns(UserWarning, match=r"671 sample\(s\) in the mask with a non-positive "
+                      r"z-depth .* \(671 of them 0, as a depth sensor marks unknown pixels\)"):
+        a = facetlift.integrate(n, K=K, prior=prior).depth
+    b = facetlift.integrate(n, K=K, prior=np.where(prior > 0, prior, np.nan)).depth
+    np.testing.assert_array_equal(a, b)
     # orthographic, where 0 is a depth like any other: a warning when the zeros look like a
     # fill (an audit: 40,270 zeros beside 400 samples in mm, no word but the jump hint)
     prior[5:8, 6:9] = 7.0
@@ -298,6 +305,55 @@ def test_perspective_prior_must_be_positive():
         facetlift.integrate(n, prior=prior)
         facetlift.integrate(n, prior=np.zeros((24, 28)))  # (a plane at 0: no warning)
     assert not [w for w in caught if "exactly 0" in str(w.message)]
+
+
+def test_a_few_bad_prior_and_confidence_pixels_do_not_refuse_the_job():
+    """An audit: one inf pixel of a dense prior (even outside the mask), one negative depth
+    among many with a camera, or one inf or negative confidence refused the whole job; the
+    project's rule is that a few bad pixels become missing samples, counted and said."""
+    n, _ = wave()
+    K = np.array([[100.0, 0, 14], [0, 100.0, 12], [0, 0, 1]])
+    mask = np.ones((24, 28), bool)
+    mask[0, :] = False
+    good = np.full((24, 28), 5.0)
+    good[::3, ::3] = np.nan
+    base = facetlift.integrate(n, mask, K=K, prior=good).depth
+    bad = good.copy()
+    bad[0, 0] = np.inf  # (outside the mask)
+    bad[5, 6] = -np.inf
+    with pytest.warns(UserWarning, match=r"`prior`: 2 pixel\(s\) hold inf, the first at "
+                      r"\(row 0, col 0\); they were left out"):
+        got = facetlift.integrate(n, mask, K=K, prior=bad).depth
+    ref = good.copy()
+    ref[5, 6] = np.nan
+    np.testing.assert_array_equal(got, facetlift.integrate(n, mask, K=K, prior=ref).depth)
+    bad = good.copy()
+    bad[7, 8] = -4.0  # (one negative sample among hundreds: a bad pixel)
+    with pytest.warns(UserWarning, match=r"1 sample\(s\) in the mask with a non-positive "
+                      r"z-depth .*the first -4.0 at \(row 7, col 8\); they were left out"):
+        got = facetlift.integrate(n, mask, K=K, prior=bad).depth
+    ref = good.copy()
+    ref[7, 8] = np.nan
+    np.testing.assert_array_equal(got, facetlift.integrate(n, mask, K=K, prior=ref).depth)
+    assert np.isfinite(base).any()
+    bad = good.copy()
+    bad[::2] = -5.0  # (half of them negative: relative depth, refused)
+    with pytest.raises(ValueError, match=r"positive z-depths .*negative.*prior_fit"):
+        facetlift.integrate(n, mask, K=K, prior=bad)
+    # confidence: +inf is the map's largest confidence, a negative pixel none (as NaN)
+    conf = np.linspace(0.5, 2.0, 24 * 28).reshape(24, 28)
+    c = conf.copy()
+    c[4, 5], c[9, 9] = np.inf, -0.1
+    with pytest.warns(UserWarning, match=r"`confidence`: 2 pixel\(s\) inside the mask are "
+                      r"not finite and >= 0, the first inf at \(row 4, col 5\) \(1 \+inf, "
+                      r"taken as the map's largest confidence 2; 1 negative"):
+        got = facetlift.integrate(n, mask, confidence=c, discontinuities=False).depth
+    ref = conf.copy()
+    ref[4, 5], ref[9, 9] = 2.0, np.nan
+    np.testing.assert_array_equal(got, facetlift.integrate(n, mask, confidence=ref).depth)
+    with pytest.raises(ValueError, match=r"`confidence` must be finite and >= 0 .*more than "
+                       "a few bad ones"):
+        facetlift.integrate(n, mask, confidence=-conf)
 
 
 def test_points_behind_the_camera_are_left_out_and_swapped_axes_are_named():

@@ -1165,9 +1165,23 @@ def check_confidence(confidence, shape: tuple[int, int], mask=None) -> np.ndarra
     if bad.any():
         r, col = np.argwhere(bad)[0]
         where = "everywhere" if mask is None else "inside the mask (NaN there is a missing normal)"
+        up = np.isposinf(c)
+        finite = c[inside & np.isfinite(c) & (c > 0)]
+        # (a few bad pixels never refuse a job: +inf, as 1 / residual gives where a fit is
+        # exact, is the largest confidence of the map; a few negative values are none, as
+        # NaN is; many negative values are refused: a log-confidence, another quantity)
+        if (bad & ~up).sum() <= NEGATIVE_SHARE * inside.sum():
+            top = float(finite.max()) if finite.size else 1.0
+            warn(f"`confidence`: {int(bad.sum())} pixel(s) {where.split(' (')[0]} are not "
+                 f"finite and >= 0, the first {float(c[r, col])!r} at (row {r}, col {col}) "
+                 f"({int(up.sum())} +inf, taken as the map's largest confidence {top:g}; "
+                 f"{int((bad & ~up).sum())} negative or -inf, taken as 0: a missing normal)")
+            c[up] = top
+            c[bad & ~up] = 0.0
+            return c
         raise ValueError(f"`confidence` must be finite and >= 0 {where}; got "
                          f"{float(c[r, col])!r} at (row {r}, col {col}) ({int(bad.sum())} such "
-                         "pixel(s))")
+                         "pixel(s), more than a few bad ones)")
     return c
 
 
@@ -1400,8 +1414,12 @@ def prior_samples(prior, shape: tuple[int, int],
                          f"`normals` (NaN where unknown) or a (rows, cols, depths) triple; got "
                          f"shape {arr.shape}{hint}")
     arr = arr.astype(float)
-    if np.isinf(arr).any():
-        raise ValueError("`prior` must not contain inf (use NaN where the depth is unknown)")
+    inf = np.isinf(arr)
+    if inf.any():  # (a few bad pixels never refuse a job: left out, counted and said)
+        r, c = np.argwhere(inf)[0]
+        warn(f"`prior`: {int(inf.sum())} pixel(s) hold inf, the first at (row {r}, col {c}); "
+             "they were left out as unknown depths (NaN is the way to mark them)")
+        arr[inf] = np.nan
     return arr, None
 
 
@@ -1482,6 +1500,12 @@ MAX_PRIOR_WEIGHT = 1e10
 MAX_PRIOR_DEPTH = 1e30
 
 
+#: Largest share of a perspective prior's nonzero samples (in the mask) that may be
+#: negative and still be left out as bad pixels (:func:`check_prior`); more are refused
+#: (relative depth or disparity, which ``prior_fit`` aligns).
+NEGATIVE_SHARE = 0.01
+
+
 def check_prior(prior, prior_weight, shape, mask, camera):
     """Checked prior: ``(values, weights, outside)``, the first two (m,) on the facets of
     `mask`, the values in the camera's unknown (:meth:`facetlift.camera.Camera.from_depth`),
@@ -1536,17 +1560,33 @@ def check_prior(prior, prior_weight, shape, mask, camera):
         neg = have & (depth <= 0)
         if neg.any():
             k = int(np.flatnonzero(neg)[0])
-            zeros = int((have & (depth == 0)).sum())
-            hint = (f"; {zeros} of them are 0: if 0 marks an unknown depth, write NaN there "
-                    "(or pass the samples as (rows, cols, depths)); a disparity or "
-                    "inverse-depth map (0 at the far end) must be inverted into depth first "
-                    "(docs/fusion.md, 'Recipes')" if zeros else "")
-            hint += ("; relative depth or disparity from a monocular network (any sign, up "
-                     "to scale and shift): prior_fit='affine' or 'disparity' (--prior-fit)")
-            raise ValueError(
-                "`prior` must hold positive z-depths for a perspective camera (`K`); got "
-                f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s)){hint}"
-            )
+            zeros = have & (depth == 0)
+            below = neg & ~zeros
+            # a depth sensor's map marks unknown pixels by 0 (no z-depth is 0), and a few
+            # negative samples are bad pixels: both left out, counted and said, as points
+            # behind the camera are; many negative ones (relative depth, disparity) or none
+            # positive left are refused
+            if (have & ~neg).any() and below.sum() <= NEGATIVE_SHARE * (have & ~zeros).sum():
+                r, c = np.argwhere(mask)[k]
+                warn(f"`prior`: {int(neg.sum())} sample(s) in the mask with a non-positive "
+                     f"z-depth for a perspective camera ({int(zeros.sum())} of them 0, as a "
+                     f"depth sensor marks unknown pixels), the first {float(depth[k])!r} at "
+                     f"(row {r}, col {c}); they were left out (NaN is the way to mark unknown "
+                     "depths)")
+                have &= ~neg
+            else:
+                hint = (f"; {int(zeros.sum())} of them are 0: if 0 marks an unknown depth, "
+                        "write NaN there (or pass the samples as (rows, cols, depths)); a "
+                        "disparity or inverse-depth map (0 at the far end) must be inverted "
+                        "into depth first (docs/fusion.md, 'Recipes')" if zeros.any() else "")
+                hint += ("; relative depth or disparity from a monocular network (any sign, "
+                         "up to scale and shift): prior_fit='affine' or 'disparity' "
+                         "(--prior-fit)")
+                raise ValueError(
+                    "`prior` must hold positive z-depths for a perspective camera (`K`); got "
+                    f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s), "
+                    f"{int(below.sum())} of them negative, of {int(have.sum())}){hint}"
+                )
     else:
         _zero_fill_check(depth[have])
     outside = int(np.isfinite(img[~mask]).sum())
