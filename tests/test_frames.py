@@ -156,6 +156,28 @@ def test_zero_one_encoded_floats_are_refused_with_the_fix():
     facetlift.integrate(2 * ((n + 1) / 2) - 1)  # the fix works
 
 
+def test_a_resampled_zero_one_map_is_seen_as_encoded_and_decodes():
+    """An audit: a [0, 1]-encoded map resized with a cubic kernel rings a little past 0 and 1
+    (a few components in a thousand); it was integrated as signed normals without a word,
+    and normal_range='unsigned' refused it as signed. A signed map is still neither."""
+    from scipy import ndimage
+
+    n, _ = bump((48, 48))
+    v = (n + 1) / 2
+    v[20, 20:23] = (-0.05, 1.06, 0.5)  # (the ringing: three strays among 6,912 components)
+    v[30, 30, 0] = -0.02
+    with pytest.raises(ValueError, match=r"looks \[0, 1\]-encoded.*all but a few strays"):
+        facetlift.integrate(v)
+    got = frames.decode_unsigned(v, "a map")  # (no refusal as signed)
+    np.testing.assert_allclose(got[5, 5], n[5, 5])
+    facetlift.integrate(n)  # (signed unit normals: neither refused nor decoded)
+    with pytest.raises(ValueError, match="components are negative"):
+        frames.decode_unsigned(n, "a map")
+    big = np.stack([ndimage.zoom(v[..., i], 2.0, order=3) for i in range(3)], axis=-1)
+    with pytest.raises(ValueError, match=r"looks \[0, 1\]-encoded"):
+        facetlift.integrate(big)
+
+
 def test_the_zero_one_refusal_names_the_remedy_of_where_the_map_came_from():
     """From Python (arrays: integrate has no range option) the decode, and the reader's
     argument for a file; read by a job (the command line) its flag, with the Python remedy;

@@ -499,6 +499,12 @@ def normal_range(value, name: str = "normal_range") -> str:
 #: a map that holds any is refused as signed (:func:`decode_unsigned`). Less is rounding, or a
 #: network's output not clipped to [0, 1], and decodes to within 2 % of -1.
 UNSIGNED_SLACK = 0.01
+#: ... unless at most this share of the components is negative, none below
+#: ``-UNSIGNED_STRAY``: a [0, 1]-encoded map resampled with a cubic or Lanczos kernel rings a
+#: little past 0 and 1 at its edges (an audit: a bicubic half-size map, 28 of 30k components
+#: below 0, was refused as signed); a signed map has about half its x and y components
+#: negative. The same bounds let :func:`_check_encoding` see such a map as [0, 1]-encoded.
+UNSIGNED_STRAYS, UNSIGNED_STRAY = 0.005, 0.2
 
 
 def decode_unsigned(values: np.ndarray, what: str, where=None, channels: int = 3,
@@ -536,7 +542,7 @@ def decode_unsigned(values: np.ndarray, what: str, where=None, channels: int = 3
     with np.errstate(invalid="ignore"):
         negative = inside < -UNSIGNED_SLACK
     count = int(np.count_nonzero(negative))
-    if count:
+    if count and not _strays(inside):  # (a resampled map's ringing: decoded as it is)
         finite = int(np.count_nonzero(np.isfinite(inside)))
         raise ValueError(
             f"{what}: `{name}` 'unsigned' says the map stores (n + 1) / 2 in [0, 1], but "
@@ -790,8 +796,9 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals", rotation=N
     # 'directx' it was not refused at all
     sample = _inside(n, mask, sample=CHECK_SAMPLE)
     stored = None if sample is None else from_facetlift(sample, undo)
-    if stored is not None and len(stored) and stored.min() >= 0:  # (only then can the whole
-        _check_encoding(from_facetlift(_inside(n, mask), undo), name)  # map be encoded)
+    if stored is not None and len(stored) and stored.min() >= -UNSIGNED_STRAY:  # (only then
+        # can the whole map be encoded; a resampled one rings a little below 0)
+        _check_encoding(from_facetlift(_inside(n, mask), undo), name)
     n = rotate(to_facetlift(n, frame), turn)
     if sample is not None:
         _check_facing(rotate(to_facetlift(sample, frame), turn), name, read,
@@ -859,6 +866,20 @@ def encoded_scale(v: np.ndarray) -> int | None:
     return scale if np.mean(np.abs(length - 1) < 0.05) > 0.9 else None
 
 
+def _strays(v: np.ndarray) -> bool:
+    """Whether the components `v` lie in [0, 1] but for strays: at most
+    :data:`UNSIGNED_STRAYS` of the finite ones beyond ``UNSIGNED_SLACK`` outside it, none
+    beyond :data:`UNSIGNED_STRAY` (a [0, 1]-encoded map as stored, or resampled)."""
+    with np.errstate(invalid="ignore"):
+        finite = v[np.isfinite(v)]
+        if not finite.size:
+            return False
+        if finite.min() < -UNSIGNED_STRAY or finite.max() > 1.0 + UNSIGNED_STRAY:
+            return False
+        out = np.count_nonzero((finite < -UNSIGNED_SLACK) | (finite > 1.0 + UNSIGNED_SLACK))
+    return out <= UNSIGNED_STRAYS * finite.size
+
+
 def _check_encoding(v: np.ndarray, name: str) -> None:
     scale = encoded_scale(v)
     if scale is not None:
@@ -869,7 +890,7 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
             f"length; decode it first with n = v / {scale} * 2 - 1 (or pass the {bits}-bit "
             "integer image itself)"
         )
-    if len(v) < ENCODING_CHECK_PIXELS or v.min() < 0 or v.max() > 1:
+    if len(v) < ENCODING_CHECK_PIXELS or not _strays(v):
         return
     with np.errstate(over="ignore", invalid="ignore"):
         length = np.sqrt(np.einsum("ij,ij->i", v, v))
@@ -890,7 +911,8 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
                "the 8/16-bit integer image instead)")
     raise ValueError(
         f"`{name}` looks [0, 1]-encoded: every component inside the mask lies in [0, 1] as "
-        "given (none negative, before any normal frame is applied) and the vectors are not "
+        "given (none negative, before any normal frame is applied; or all but a few strays "
+        "within 0.2 of it, as a resampled map rings) and the vectors are not "
         f"unit length; {fix}. If these really are normals, normalise them to unit length"
     )
 
