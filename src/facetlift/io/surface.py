@@ -174,11 +174,15 @@ def _save_as_cli(surface, p: Path, kind: str, kwargs: dict) -> Path:
 def point_normals(surface, normals):
     """The input normals at :meth:`facetlift.Surface.points`' pixels (facetlift's camera
     frame, as integrated: world-space ones turned by their rotation, a gradient field's from
-    its slopes), unit length; None where they are not an (H, W, 3) map of the surface's
-    shape."""
-    n = None if normals is None else np.asarray(normals, dtype=float)
-    if n is None or n.shape != surface.shape + (3,):
+    its slopes), unit length; None where `normals` is None. A map of another shape is a
+    ValueError naming `normals` (a cloud without them had been written without a word, an
+    audit)."""
+    if normals is None:
         return None
+    n = np.asarray(normals, dtype=float)
+    if n.shape != surface.shape + (3,):
+        raise ValueError(f"`normals` must be an (H, W, 3) map of the surface's shape "
+                         f"{surface.shape + (3,)} for the points' normals; got {n.shape}")
     r, c = np.nonzero(surface.mask)
     v = n[r, c]
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
