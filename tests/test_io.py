@@ -1577,3 +1577,26 @@ def test_the_grey_check_looks_inside_the_mask_given(tmp_path):
         io.read_normals(tmp_path / "plane.png")
     got, _ = io.read_normals(tmp_path / "plane.png", mask=mask)
     np.testing.assert_array_equal(got[mask], np.full((mask.sum(), 3), 201 / 255 * 2 - 1))
+
+
+def test_a_feathered_8_bit_mask_is_warned_about(tmp_path):
+    """An audit: a mask blurred with sigma 3 px and saved as 8 bits holds only the levels 1-3
+    in its outer 2 pixels, and its thousands of in-between pixels (taken as inside, past the
+    object) went unwarned; a crisp mask still says nothing."""
+    import warnings
+
+    import imagecodecs
+    from scipy import ndimage
+
+    r, c = np.indices((120, 140))
+    crisp = (r - 60) ** 2 / 40**2 + (c - 70) ** 2 / 50**2 < 1
+    soft = np.clip(np.round(ndimage.gaussian_filter(crisp * 255.0, 3)), 0, 255).astype(np.uint8)
+    (tmp_path / "soft.png").write_bytes(imagecodecs.png_encode(soft))
+    (tmp_path / "crisp.png").write_bytes(imagecodecs.png_encode(crisp.astype(np.uint8) * 255))
+    with pytest.warns(UserWarning, match=r"soft.png: \d+ of its \d+ inside pixels, along its "
+                      r"edge, hold values between 0 and its largest"):
+        got = io.read_mask(tmp_path / "soft.png")
+    assert got.sum() > crisp.sum()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        np.testing.assert_array_equal(io.read_mask(tmp_path / "crisp.png"), crisp)

@@ -465,6 +465,8 @@ def read_normals(
 #: or more (an antialiased or blurred edge), gets a warning (:func:`read_mask`). (Label masks,
 #: 0/1/2 with every non-zero inside, have few values: no warning, a review.)
 SOFT_EDGE_SHARE, SOFT_EDGE_VALUES = 0.01, 4
+#: Width (pixels) of the band along the mask's edge that :func:`_soft_edge_check` looks at.
+SOFT_EDGE_BAND = 8
 
 
 def _soft_edge_check(plane: np.ndarray | None, m: np.ndarray, p, arg: str) -> None:
@@ -477,7 +479,10 @@ def _soft_edge_check(plane: np.ndarray | None, m: np.ndarray, p, arg: str) -> No
     if plane is None or not m.any() or m.all():
         return
     top = plane[m].max()
-    edge = m & ndimage.binary_dilation(~m, iterations=2)
+    # (a band of SOFT_EDGE_BAND pixels: a mask feathered by a blur of 3 px saved as 8 bits
+    # holds only the levels 1-3 in its outer 2 pixels, and its 15,745 in-between pixels went
+    # unwarned, an audit)
+    edge = m & ndimage.binary_dilation(~m, iterations=SOFT_EDGE_BAND)
     soft = edge & (plane < top)
     if soft.sum() < SOFT_EDGE_SHARE * m.sum() or np.unique(plane[soft]).size < SOFT_EDGE_VALUES:
         return
