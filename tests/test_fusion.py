@@ -293,6 +293,16 @@ def test_perspective_prior_must_be_positive():
         a = facetlift.integrate(n, K=K, prior=prior).depth
     b = facetlift.integrate(n, K=K, prior=np.where(prior > 0, prior, np.nan)).depth
     np.testing.assert_array_equal(a, b)
+    # (a review: the zeros' weights were checked before they were left out, and the zeros
+    # outside the mask were counted as unused samples)
+    mask = np.ones((24, 28), bool)
+    mask[:, :4] = False
+    p2 = prior.copy()
+    p2[1, 1] = 6.0  # (one real sample outside the mask, beside 95 zeros there)
+    with pytest.warns(UserWarning, match="non-positive z-depth"):
+        s = facetlift.integrate(n, mask, K=K, prior=p2,
+                                prior_weight=np.where(p2 > 0, 1.0, np.nan))
+    assert s.info["input"]["prior_outside_mask"] == 1 and s.info["input"]["prior_samples"] == 1
     # orthographic, where 0 is a depth like any other: a warning when the zeros look like a
     # fill (an audit: 40,270 zeros beside 400 samples in mm, no word but the jump hint)
     prior[5:8, 6:9] = 7.0

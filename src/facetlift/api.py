@@ -186,9 +186,12 @@ def integrate(
         (:func:`facetlift.frames.checked`); a `normal_rotation` that is no rotation
         (:func:`facetlift.frames.check_rotation`); a `prior` or `confidence` of the wrong shape,
         negative weights, a prior without a finite sample in the mask, non-positive
-        perspective prior depth in a map (points of a ``(rows, cols, depths)`` prior with one
-        are left out with a warning, unless every one is), or a prior / confidence for a
-        method without the capability.
+        perspective prior depth in a map where none is positive or more than 1 % of the nonzero
+        samples are negative (fewer, zeros and inf are left out with a warning, as points of a
+        ``(rows, cols, depths)`` prior with a non-positive depth are, unless every one is), a
+        confidence with more than 1 % negative pixels in the mask (fewer are missing normals,
+        +inf the largest confidence), or a prior / confidence for a method without the
+        capability.
     facetlift.SolverError
         The solver failed or produced non-finite depth inside the mask.
     facetlift.errors.MemoryLimitError

@@ -504,7 +504,7 @@ UNSIGNED_SLACK = 0.01
 #: little past 0 and 1 at its edges (an audit: a bicubic half-size map, 28 of 30k components
 #: below 0, was refused as signed); a signed map has about half its x and y components
 #: negative. The same bounds let :func:`_check_encoding` see such a map as [0, 1]-encoded.
-UNSIGNED_STRAYS, UNSIGNED_STRAY = 0.005, 0.2
+UNSIGNED_STRAYS, UNSIGNED_STRAY = 0.005, 0.1
 
 
 def decode_unsigned(values: np.ndarray, what: str, where=None, channels: int = 3,
@@ -912,7 +912,7 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
     raise ValueError(
         f"`{name}` looks [0, 1]-encoded: every component inside the mask lies in [0, 1] as "
         "given (none negative, before any normal frame is applied; or all but a few strays "
-        "within 0.2 of it, as a resampled map rings) and the vectors are not "
+        "within 0.1 of it, as a resampled map rings) and the vectors are not "
         f"unit length; {fix}. If these really are normals, normalise them to unit length"
     )
 

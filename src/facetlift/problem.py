@@ -1165,6 +1165,7 @@ def check_confidence(confidence, shape: tuple[int, int], mask=None) -> np.ndarra
     if bad.any():
         r, col = np.argwhere(bad)[0]
         where = "everywhere" if mask is None else "inside the mask (NaN there is a missing normal)"
+        said = "of the map" if mask is None else "inside the mask"
         up = np.isposinf(c)
         finite = c[inside & np.isfinite(c) & (c > 0)]
         # (a few bad pixels never refuse a job: +inf, as 1 / residual gives where a fit is
@@ -1172,7 +1173,7 @@ def check_confidence(confidence, shape: tuple[int, int], mask=None) -> np.ndarra
         # NaN is; many negative values are refused: a log-confidence, another quantity)
         if (bad & ~up).sum() <= NEGATIVE_SHARE * inside.sum():
             top = float(finite.max()) if finite.size else 1.0
-            warn(f"`confidence`: {int(bad.sum())} pixel(s) {where.split(' (')[0]} are not "
+            warn(f"`confidence`: {int(bad.sum())} pixel(s) {said} are not "
                  f"finite and >= 0, the first {float(c[r, col])!r} at (row {r}, col {col}) "
                  f"({int(up.sum())} +inf, taken as the map's largest confidence {top:g}; "
                  f"{int((bad & ~up).sum())} negative or -inf, taken as 0: a missing normal)")
@@ -1516,7 +1517,9 @@ def check_prior(prior, prior_weight, shape, mask, camera):
     ------
     ValueError
         A prior of another shape, with no finite sample inside the mask, with non-positive
-        depth for a perspective camera; a weight that is negative, not finite or of another
+        depth for a perspective camera where none is positive or more than
+        :data:`NEGATIVE_SHARE` of the nonzero samples are negative (fewer, and zeros, are left
+        out with a warning); a weight that is negative, not finite or of another
         shape (the message names the argument, the value and what was expected).
     """
     img, own = prior_samples(prior, shape, positive=camera.positive_depth)
@@ -1538,24 +1541,7 @@ def check_prior(prior, prior_weight, shape, mask, camera):
             + (left or "; give depths where the normals are, NaN elsewhere")
             + (_unprojected_hint(prior, shape) if _is_points(prior, shape) else "")
         )
-    wbad = have & ~(np.isfinite(w) & (w >= 0) & (w <= MAX_PRIOR_WEIGHT))
-    if wbad.any():
-        k = int(np.flatnonzero(wbad)[0])
-        mine = None if own is None else own[mask][k]
-        what = "`prior_weight`"
-        if mine is not None and np.isfinite(mine):  # (a points file's own weight column)
-            what = (f"`prior_weight` times the points' own weight (here "
-                    f"{float(given[mask][k]):g} x {float(mine):g})")
-        raise ValueError(f"{what} must be finite, >= 0 and <= {MAX_PRIOR_WEIGHT:g} "
-                         f"where the prior has a sample; got {float(w[k])!r} "
-                         f"({int(wbad.sum())} such pixel(s)); 1e8 already returns the prior "
-                         "where given")
-    huge = have & (np.abs(depth) > MAX_PRIOR_DEPTH)
-    if huge.any():
-        k = int(np.flatnonzero(huge)[0])
-        raise ValueError(f"`prior` depths must lie within +-{MAX_PRIOR_DEPTH:g} (beyond, the "
-                         f"energy's squares overflow; choose other units); got "
-                         f"{float(depth[k])!r} ({int(huge.sum())} such sample(s))")
+    # (first: the samples a perspective prior leaves out have no weight to check, a review)
     if camera.positive_depth:
         neg = have & (depth <= 0)
         if neg.any():
@@ -1589,7 +1575,28 @@ def check_prior(prior, prior_weight, shape, mask, camera):
                 )
     else:
         _zero_fill_check(depth[have])
-    outside = int(np.isfinite(img[~mask]).sum())
+    wbad = have & ~(np.isfinite(w) & (w >= 0) & (w <= MAX_PRIOR_WEIGHT))
+    if wbad.any():
+        k = int(np.flatnonzero(wbad)[0])
+        mine = None if own is None else own[mask][k]
+        what = "`prior_weight`"
+        if mine is not None and np.isfinite(mine):  # (a points file's own weight column)
+            what = (f"`prior_weight` times the points' own weight (here "
+                    f"{float(given[mask][k]):g} x {float(mine):g})")
+        raise ValueError(f"{what} must be finite, >= 0 and <= {MAX_PRIOR_WEIGHT:g} "
+                         f"where the prior has a sample; got {float(w[k])!r} "
+                         f"({int(wbad.sum())} such pixel(s)); 1e8 already returns the prior "
+                         "where given")
+    huge = have & (np.abs(depth) > MAX_PRIOR_DEPTH)
+    if huge.any():
+        k = int(np.flatnonzero(huge)[0])
+        raise ValueError(f"`prior` depths must lie within +-{MAX_PRIOR_DEPTH:g} (beyond, the "
+                         f"energy's squares overflow; choose other units); got "
+                         f"{float(depth[k])!r} ({int(huge.sum())} such sample(s))")
+    # (a perspective prior's zeros and negative values outside the mask are no samples
+    # either: not counted as unused ones, a review)
+    outside = int(np.sum(np.isfinite(img[~mask]) & ((img[~mask] > 0)
+                                                   | (not camera.positive_depth))))
     if _is_points(prior, shape):  # (a user's (u, v, z) as (rows, cols, depths): 57 % fell off)
         _swapped_check(prior, mask)
     values = np.where(have, camera.from_depth(np.where(have, depth, 1.0)), np.nan)

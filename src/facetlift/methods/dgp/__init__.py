@@ -562,6 +562,8 @@ def run(
                  "integrating without discontinuities may do better", ConvergenceWarning)
         pointwise = prior is not None and (blur is None or astray is not None
                                            or bent is not None)
+        # (the share of one-pixel steps among the map's strong changes; NaN: too few seen)
+        info["soft_edges"] = steps
         _discontinuity_warnings(info, prior if pointwise else None, domain,
                                 pinfo["mesh_pieces"],
                                 blurred=prior if prior is not None and not pointwise else None,
@@ -583,8 +585,6 @@ def run(
         # angle, 1.8 deg where the result's was 0.68, described a surface not returned)
         info["deviation"] = [deviation(copies)]
         info["gaps_filled"] = 0 if filled is None else int(filled.sum())
-        # (the share of one-pixel steps among the map's strong changes; NaN: too few seen)
-        info["soft_edges"] = steps
         extras = {"corner_values": copies}
         if split_mesh is not None:  # (make_surface splits the copies itself otherwise)
             extras["split_mesh"] = split_mesh
@@ -731,6 +731,14 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
                 f"For this noise the sharpness was already lowered to "
                 f"{info['discontinuity_k']:.2g} (discontinuity_k times "
                 f"{discontinuous.NOISE_K:g} / noise, info['discontinuity_k']). ")
+             # (a review: a blurred map's doubled sharpness went unsaid, and the advice's k=2
+             # was then the old default's 4)
+             + ("" if discontinuous.sharpness(1.0, noise, info.get("soft_edges", np.nan))
+                <= 1.0 else
+                f"This map read as blurred (info['soft_edges'] "
+                f"{info.get('soft_edges', np.nan):.3g}), so the sharpness was doubled to "
+                f"{info['discontinuity_k']:.2g} (discontinuity_k times "
+                f"{discontinuous.SOFT_K:g}); the values below are doubled too. ")
              + "A smaller discontinuity_k cuts far less (--option discontinuity_k=2, or 1), or "
              "integrate without discontinuities (docs/results.md, 'A flat surface seen "
              "steeply, with noise, falls apart')")

@@ -181,13 +181,16 @@ NOISE_K = 4.0
 #: steps (:data:`SOFT_PEAK` times both changes beside them; :func:`soft_edges`,
 #: ``info["soft_edges"]``), and the noise read from the curl is below :data:`NOISE_K`.
 #: Measured on the development benchmark's renders (thirty-seventh session, docs/results.md
-#: "Soft occlusion boundaries told from the map"): the share is 0.0175-1.0 on every exact,
-#: 8-bit, noisy, smooth3, outlier and photometric-stereo render with enough strong changes,
+#: "Discontinuities: soft occlusion boundaries told from the map"): the share is 0.0175-1.0
+#: on every exact, 8-bit, noisy, smooth3, outlier and photometric-stereo render with enough
+#: strong changes,
 #: 0.000-0.019 blurred by 1.5 px (75 of 77 below 0.01) and 0.000 by 3 px; the DiLiGenT bear
 #: 0.048, BiNI's human map 0.080, its tent 1.0. With the factor 2 (``k`` 8, the twentieth
 #: session's sweep) on the blurred renders: 107 better / 18 worse by more than 1 % of 178, mean
 #: group ratio 0.939 (perspective blur1.5 3.050 -> 2.847 mm, BiNI 3.150); a held-out set drawn
 #: before the change (seed 682732) blur1.5 2.548 -> 2.242 mm (BiNI 2.522), blur3 3.189 -> 2.904.
+#: A sharp map of a smooth, strongly curved surface can read as blurred (the analytic "face":
+#: 0.0; a review measured 16 % more error there with the factor, on a small error).
 SOFT_K = 2.0
 #: See :data:`SOFT_K`.
 SOFT_SHARE = 0.01
