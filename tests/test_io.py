@@ -255,6 +255,10 @@ def test_exr_multilayer_normal_pass(tmp_path, normals):
     with pytest.raises(ValueError, match=r"one layer named normal .*are ViewLayer.Combined: "
                        r"save the normal pass alone"):
         io.read_normals(tmp_path / "none.exr")
+    # a compositor's layer called N (N.X, N.Y, N.Z) is the normal pass too (an audit)
+    short = {f"N.{k}": n[..., i].astype(np.float32) for i, k in enumerate("XYZ")}
+    OpenEXR.File(hdr, short).write(str(tmp_path / "short.exr"))
+    np.testing.assert_allclose(io.read_normals(tmp_path / "short.exr")[0], n, atol=1e-7)
 
 
 @pytest.mark.parametrize("ext", [".png", ".npy"])
@@ -1600,3 +1604,28 @@ def test_a_feathered_8_bit_mask_is_warned_about(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         np.testing.assert_array_equal(io.read_mask(tmp_path / "crisp.png"), crisp)
+
+
+@pytest.mark.parametrize("shape, said", [
+    ((1, 20, 30, 3), r"looks like a batch of one \(1, H, W, C\): save a\[0\] instead"),
+    ((1, 3, 20, 30), r"looks like a batch of one: save a\[0\] \(moved to \(H, W, 3\)"),
+    ((3, 20, 30), r"got shape \(3, 20, 30\); it looks channel-first"),
+])
+def test_a_batch_of_one_or_a_channel_first_file_is_named(tmp_path, shape, said):
+    """An audit: a (1, H, W, 3) .npy got no hint, and a (3, H, W) one was said to have "30
+    channel(s)" before the channel-first advice."""
+    np.save(tmp_path / "a.npy", np.full(shape, 0.5))
+    with pytest.raises(ValueError, match=said) as e:
+        io.read_normals(tmp_path / "a.npy")
+    assert "channel(s)" not in str(e.value)
+
+
+def test_a_file_named_npy_that_is_no_npy_file_says_so(tmp_path):
+    """An audit: a text file named .npy was told of pickled data and allow_pickle."""
+    (tmp_path / "a.npy").write_text("hello\n")
+    with pytest.raises(ValueError, match=r"a.npy is not a .npy file \(it does not start with "
+                       r"numpy's header; it starts with b'hello\\n'\): save the array"):
+        io.read_normals(tmp_path / "a.npy")
+    (tmp_path / "e.npy").write_bytes(b"")
+    with pytest.raises(ValueError, match=r"e.npy is not a .npy file .*empty"):
+        io.read_normals(tmp_path / "e.npy")

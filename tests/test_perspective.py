@@ -601,3 +601,17 @@ def test_a_photo_integrated_without_a_camera_is_told_to_give_one(tmp_path, capsy
     with pytest.warns(UserWarning, match="cannot be used") as caught:
         facetlift.integrate_gradients(p, np.zeros((48, 64)), np.ones((48, 64), bool))
     assert not any("without a camera" in str(w.message) for w in caught)
+
+
+def test_subsampled_takes_a_positive_integer_stride():
+    """An audit: subsampled(0) said "`K` contains NaN or inf" and subsampled(1.5) was taken."""
+    from facetlift.camera import Orthographic, Pinhole
+
+    K = np.array([[100.0, 0, 14], [0, 100.0, 12], [0, 0, 1]])
+    np.testing.assert_allclose(Pinhole(K).subsampled(2).K[:2], K[:2] / 2)
+    assert Orthographic(0.5).subsampled(np.int64(4)).pixel_size == 2.0
+    for bad in (0, 1.5, -2, True):
+        with pytest.raises(ValueError, match=r"`stride` must be a positive integer"):
+            Pinhole(K).subsampled(bad)
+        with pytest.raises(ValueError, match=r"`stride` must be a positive integer"):
+            Orthographic(1.0).subsampled(bad)

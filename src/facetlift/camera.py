@@ -121,13 +121,25 @@ class Camera:
         raise NotImplementedError
 
     def subsampled(self, stride: int) -> Camera:
-        """The camera of the image subsampled with ``img[::stride, ::stride]``."""
+        """The camera of the image subsampled with ``img[::stride, ::stride]`` (`stride` a
+        positive integer)."""
         raise NotImplementedError
 
     #: Intrinsics (3, 3) of a pinhole camera, None for an orthographic one.
     K: np.ndarray | None = None
     #: Pixel width in world units (orthographic); 1.0 for a pinhole camera.
     pixel_size: float = 1.0
+
+
+def _stride(stride) -> int:
+    """`stride` of :meth:`Camera.subsampled` as a positive integer, or a ValueError naming it
+    (0 was "`K` contains NaN or inf" and 1.5 was taken, an audit: ``img[::1.5]`` is no
+    subsampling)."""
+    ok = isinstance(stride, (int, np.integer)) and not isinstance(stride, bool) and stride >= 1
+    if not ok:
+        raise ValueError(f"`stride` must be a positive integer (img[::stride, ::stride]); "
+                         f"got {stride!r}")
+    return int(stride)
 
 
 def _components_mean(values, component, n):
@@ -182,7 +194,7 @@ class Orthographic(Camera):
         return self
 
     def subsampled(self, stride):
-        return Orthographic(self.pixel_size * stride)
+        return Orthographic(self.pixel_size * _stride(stride))
 
     def __repr__(self) -> str:
         return f"Orthographic(pixel_size={self.pixel_size:g})"
@@ -277,7 +289,7 @@ class Pinhole(Camera):
 
     def subsampled(self, stride):
         K = self.K.copy()
-        K[:2] /= stride  # pixel centres at integer indices: index i -> i / stride
+        K[:2] /= _stride(stride)  # pixel centres at integer indices: index i -> i / stride
         return Pinhole(K)
 
     def __repr__(self) -> str:

@@ -118,12 +118,21 @@ def _read_exr(path: Path, arg: str) -> dict[str, np.ndarray]:
         ) from None
 
 
+def _normal_layer(layer: str) -> bool:
+    """Whether an EXR layer's name says it holds normals: "normal" in it (Blender's
+    ``ViewLayer.Normal``), or its last part "N" or "nrm" (a compositor's ``N.X``, ``N.Y``,
+    ``N.Z``, refused before, an audit), case aside."""
+    last = layer.rpartition(".")[2].lower()
+    return "normal" in layer.lower() or last in ("n", "nrm")
+
+
 def _exr_normal_channels(ch: dict, p: Path, arg: str,
                          count: int = 3) -> tuple[tuple[str, ...], str]:
     """The `count` channels of an EXR normal map (R, G, B or X, Y, Z; the first two for a
     two-channel map) and its alpha's name. A multilayer file (Blender's:
     ``ViewLayer.Normal.X``, ...) without such bare channels gives its one layer whose name
-    holds "normal" (case aside); otherwise the message lists the layers that could be it."""
+    holds "normal" (case aside; or is called "N" or "nrm", :func:`_normal_layer`); otherwise the
+    message lists the layers that could be it."""
     for names in (("R", "G", "B")[:count], ("X", "Y", "Z")[:count]):
         if all(c in ch for c in names):
             return names, "A"
@@ -135,7 +144,7 @@ def _exr_normal_channels(ch: dict, p: Path, arg: str,
     found = [(layer, axes) for layer, have in sorted(layers.items())
              for axes in (("X", "Y", "Z")[:count], ("R", "G", "B")[:count])
              if set(axes) <= have]
-    normal = [(layer, axes) for layer, axes in found if "normal" in layer.lower()]
+    normal = [(layer, axes) for layer, axes in found if _normal_layer(layer)]
     if len(normal) == 1:
         layer, axes = normal[0]
         return tuple(f"{layer}.{a}" for a in axes), f"{layer}.A"
@@ -156,6 +165,16 @@ def _exr_normal_channels(ch: dict, p: Path, arg: str,
 
 
 def _read_npy(path: Path, arg: str) -> np.ndarray:
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(6)
+    except OSError:
+        magic = b"\x93NUMPY"  # (np.load says what is wrong)
+    if magic != b"\x93NUMPY":  # (a text or other file named .npy: numpy spoke of pickled
+        # data and allow_pickle, an audit)
+        raise ValueError(f"`{arg}`: {path} is not a .npy file (it does not start with numpy's "
+                         f"header; {'empty' if not magic else f'it starts with {magic!r}'}): "
+                         "save the array with numpy.save")
     try:
         arr = np.load(path, allow_pickle=False)
     except Exception as e:
@@ -241,10 +260,16 @@ def _split_alpha(pixels: np.ndarray, path: Path, arg: str, check: bool = True,
             why = ("; a two-channel map storing x and y alone (BC5, RG) is read with "
                    "--normal-encoding xy (encoding='xy'), which rebuilds z")
         else:
+            first = pixels.ndim == 3 and pixels.shape[0] in (3, 4) and pixels.shape[-1] > 4
             why = ("; it looks channel-first (3 or 4, H, W): transpose it to (H, W, 3), e.g. "
-                   "numpy.moveaxis(a, 0, -1)"
-                   if pixels.ndim == 3 and pixels.shape[0] in (3, 4) and pixels.shape[-1] > 4
-                   else "")
+                   "numpy.moveaxis(a, 0, -1)" if first else "")
+            if first:  # (not "(612 channel(s))" before the channel-first advice, an audit)
+                channels = None
+            if pixels.ndim == 4 and pixels.shape[0] == 1:  # (a batch of one, an audit)
+                channels = None
+                why = ("; it looks like a batch of one (1, H, W, C): save a[0] instead"
+                       if pixels.shape[-1] in (3, 4) else "; it looks like a batch of one: "
+                       "save a[0] (moved to (H, W, 3) if channel-first) instead")
         raise ValueError(
             f"`{arg}`: {path} must be an (H, W, 3) RGB or (H, W, 4) RGBA normal map"
             + (", or (H, W, 2) x, y with --normal-encoding xy (.npy or TIFF)"
