@@ -161,9 +161,17 @@ def test_a_deviation_wider_than_jumps_make_names_the_input_not_the_jumps(capsys)
     assert JUMP_HINT_WIDE == 0.75
     assert "90.0% of the facets deviate" in wide and "--discontinuities" not in wide
     assert "the input is off as a whole: check its frame" in wide and "its camera" in wide
+    assert "depth prior" not in wide
+    withprior = _jump_hint(job, {**info, "deviation_over_10": 0.9, "prior": {"samples": 900}})
+    assert "and the depth prior: its depths in the units of the pixel size" in withprior
     jumps = _jump_hint(job, {**info, "deviation_over_10": 0.63})
     assert "--discontinuities keeps them" in jumps
     assert job_hints(job, {**info, "deviation_over_10": 0.63}) == [jumps]
     pointer = job_hints(job, {**info, "deviation_over_10": 0.01}, camera_warned=True)
     assert len(pointer) == 1 and "mend the camera the warning names first" in pointer[0]
+    # many normals facing away (a BGR map): its warning asks about the frame, no jump hint
+    # beside it (an audit)
+    away = {**info, "deviation_over_10": 0.41, "input": {"usable": 1000, "facing_away": 0.49}}
+    assert _jump_hint(job, away) is None
+    assert _jump_hint(job, {**away, "input": {"usable": 1000, "facing_away": 0.01}})
     capsys.readouterr()

@@ -70,6 +70,11 @@ def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
         return None
     if method.options().get("discontinuities") or info.get("solver") == "discontinuous":
         return None  # (bini keeps jumps by default: the flag would change nothing, a review)
+    from .problem import BACKFACING_FRAME_HINT
+
+    if (info.get("input") or {}).get("facing_away", 0.0) > BACKFACING_FRAME_HINT:
+        return None  # (the facing-away warning asks about the frame or BGR order, which
+        # explains the deviation: a BGR map was also told to keep jumps, an audit)
     prior = info.get("prior")
     prior = prior if isinstance(prior, dict) else {}  # (regularization's is its option's name)
     if prior.get("relief_warned"):
@@ -91,11 +96,19 @@ def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
                 "cameras: K') and run again: depth jumps are named then if the deviation stays")
     if share > JUMP_HINT_WIDE:
         frame = frame_first(job, ic) if own is not None else None
+        # (a dense prior in other units pulls the whole surface off its normals: an audit's
+        # orthographic run with a prior in mm was told of frame, camera and encoding only)
+        units = ("; and the depth prior: its depths in the units of the pixel size "
+                 "(--pixel-size) for an orthographic map, metric z-depth with --K, or "
+                 "--prior-fit for one known up to scale (docs/fusion.md, 'A prior in other "
+                 "units, or a relative depth given as metric')"
+                 if prior.get("samples", 0) > 0 else "")
         return (f"{head}{frame or ''}: far more than bent-across depth jumps make (63 % at "
                 "most on the discontinuity benchmark's scenes, the DiLiGenT bear's 0.5 %), so "
                 "the input is off as a whole: check its frame (facetlift info guesses it; "
                 "docs/conventions.md lists the frames of common sources), its camera (a "
-                "perspective map needs its own K, in pixels: --K or --fov) and its encoding")
+                "perspective map needs its own K, in pixels: --K or --fov) and its encoding"
+                + units)
     # (with a dense prior its own noise bends the surface alike: a fresh user's sensor depth,
     # 1 mm of noise at weight 0.5, deviated 11 deg, and only the jumps were named)
     dense = prior.get("samples", 0) > 0.25 * max(int(info.get("input", {}).get("usable", 1)), 1)
