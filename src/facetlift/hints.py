@@ -70,11 +70,6 @@ def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
         return None
     if method.options().get("discontinuities") or info.get("solver") == "discontinuous":
         return None  # (bini keeps jumps by default: the flag would change nothing, a review)
-    from .problem import BACKFACING_FRAME_HINT
-
-    if (info.get("input") or {}).get("facing_away", 0.0) > BACKFACING_FRAME_HINT:
-        return None  # (the facing-away warning asks about the frame or BGR order, which
-        # explains the deviation: a BGR map was also told to keep jumps, an audit)
     prior = info.get("prior")
     prior = prior if isinstance(prior, dict) else {}  # (regularization's is its option's name)
     if prior.get("relief_warned"):
@@ -109,6 +104,11 @@ def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
                 "docs/conventions.md lists the frames of common sources), its camera (a "
                 "perspective map needs its own K, in pixels: --K or --fov) and its encoding"
                 + units)
+    from .problem import BACKFACING_FRAME_HINT
+
+    if (info.get("input") or {}).get("facing_away", 0.0) > BACKFACING_FRAME_HINT:
+        return None  # (the facing-away warning asks about the frame or BGR order, which
+        # explains the deviation: a BGR map was also told to keep jumps, an audit)
     # (with a dense prior its own noise bends the surface alike: a fresh user's sensor depth,
     # 1 mm of noise at weight 0.5, deviated 11 deg, and only the jumps were named)
     dense = prior.get("samples", 0) > 0.25 * max(int(info.get("input", {}).get("usable", 1)), 1)
