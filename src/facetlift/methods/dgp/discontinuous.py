@@ -183,12 +183,12 @@ NOISE_K = 4.0
 #: Measured on the development benchmark's renders (thirty-seventh session, docs/results.md
 #: "Discontinuities: soft occlusion boundaries told from the map"): the share is 0.0175-1.0
 #: on every exact, 8-bit, noisy, smooth3, outlier and photometric-stereo render with enough
-#: strong changes,
-#: 0.000-0.019 blurred by 1.5 px (75 of 77 below 0.01) and 0.000 by 3 px; the DiLiGenT bear
-#: 0.048, BiNI's human map 0.080, its tent 1.0. With the factor 2 (``k`` 8, the twentieth
-#: session's sweep) on the blurred renders: 107 better / 18 worse by more than 1 % of 178, mean
-#: group ratio 0.939 (perspective blur1.5 3.050 -> 2.847 mm, BiNI 3.150); a held-out set drawn
-#: before the change (seed 682732) blur1.5 2.548 -> 2.242 mm (BiNI 2.522), blur3 3.189 -> 2.904.
+#: strong changes, 0.000-0.019 blurred by 1.5 px (75 of 77 below 0.01) and 0.000 by 3 px; the
+#: DiLiGenT bear 0.048, BiNI's human map 0.080, its tent 1.0. With the factor 2 (``k`` 8, the
+#: twentieth session's sweep) on the blurred renders: 107 better / 18 worse by more than 1 % of
+#: 178, mean group ratio 0.939 (perspective blur1.5 3.050 -> 2.847 mm, BiNI 3.150); a held-out
+#: set drawn before the change (seed 682732) blur1.5 2.548 -> 2.242 mm (BiNI 2.522), blur3
+#: 3.189 -> 2.904.
 #: Factors 1.5 and 3 against 2 on the same renders: mean group ratios 1.018 and 1.004 (3: large
 #: single failures, goblet@e50 10.1 -> 17.6 mm).
 #: A sharp map of a smooth, strongly curved surface can read as blurred (the analytic "face":
@@ -872,7 +872,8 @@ def sharpness(k: float, noise: float, steps: float = float("nan")) -> float:
 
 def soft_edges(domain, normals, given) -> float:
     """The share of one-pixel steps among the strong changes of the normal map (NaN where
-    fewer than :data:`SOFT_MIN` strong changes are seen): :data:`SOFT_K`.
+    fewer than :data:`SOFT_MIN` strong changes are seen); below :data:`SOFT_SHARE` the map
+    counts as blurred (:data:`SOFT_K`).
 
     A strong change is an angle above :data:`SOFT_ANGLE` between two 4-neighbours' normals
     (`normals` (m, 3), NaN where missing; `given` (m,) bool, the facets whose own normal is
