@@ -1763,3 +1763,22 @@ def test_a_blurred_prior_that_tears_the_surface_is_warned_about(monkeypatch):
                                          r"pieces: .*tore the surface apart.*0\.001"):
         s = facetlift.integrate(ds["normals"], ds["mask"], **kw)
     assert s.info["mesh_pieces"] > 100
+
+
+def test_info_counts_a_sensor_maps_zeros_as_unknown_with_a_camera(tmp_path, capsys):
+    """A review: info reported a perspective prior's zeros (a depth sensor's unknown, which
+    integrate leaves out) as known pixels with the range 0 to 5; an orthographic prior's
+    zeros are depths and stay counted."""
+    import json
+
+    n, _ = wave()
+    np.save(tmp_path / "n.npy", n)
+    p = np.zeros((24, 28))
+    p[::4, ::4] = 5.0
+    np.save(tmp_path / "p.npy", p)
+    for extra, known, low in ((["--K", str(_K_file(tmp_path))], 42, 5.0), ([], 672, 0.0)):
+        code = main(["info", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "p.npy"),
+                     "--json", *extra])
+        rec = json.loads(capsys.readouterr().out)
+        assert code == 0 and rec["prior"]["known_pixels"] == known
+        assert rec["prior"]["known_in_mask"] == known and rec["prior"]["range"][0] == low

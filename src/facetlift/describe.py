@@ -253,9 +253,19 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
                 out.update(where)
                 return unusable(e)
         out["warnings"] += [str(w.message) for w in placed]
+    def known_of(name, arr):
+        """The pixels of a prior / confidence map that hold a value integrate uses: a
+        perspective prior's zeros and negative values are left out (a depth sensor's 0 for
+        unknown: not known pixels here either, a review)."""
+        known = np.isfinite(arr)
+        if name == "prior" and inp.K is not None and not fitted:
+            with np.errstate(invalid="ignore"):
+                known &= arr > 0
+        return known
+
     for name, arr in (("prior", prior_map), ("confidence", inp.confidence)):
         if arr is not None:  # (a prior / confidence file, or a dataset folder's)
-            known = np.isfinite(arr)
+            known = known_of(name, arr)
             given = prior if name == "prior" else confidence
             out[name] = {"source": "dataset file" if given is None else str(given),
                          "known_pixels": int(known.sum()),
@@ -285,7 +295,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     for name, arr in (("prior", prior_map), ("confidence", inp.confidence)):
         if arr is not None and name in out:  # (the range over the mask, where it is used: a
             # user's confidence read "0 to 1" from the background's zeros)
-            inside = d.mask & np.isfinite(arr)
+            inside = d.mask & known_of(name, arr)
             out[name].update(known_in_mask=int(inside.sum()), range=[
                 float(arr[inside].min()), float(arr[inside].max())] if inside.any() else None)
     counts = dict(problem.counts)
