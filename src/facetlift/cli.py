@@ -1248,7 +1248,8 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
                    "degrees of angular noise, smooth3: "
                    "spatially correlated errors of 3 degrees RMS, outliers: 2 % of the "
                    "normals rotated by up to 45 degrees, blur1.5: the normal map blurred by "
-                   "a Gaussian of 1.5 px, soft occlusion boundaries; blur3: of 3 px; ps: "
+                   "a Gaussian of 1.5 px, soft occlusion boundaries; blur3: of 3 px; "
+                   "blur0.7: of 0.7 px; ps: "
                    "normals fitted by photometric stereo to simulated images under 20 "
                    "lights, with shadows, highlights and image noise; ps_shiny: the same "
                    "with broader, brighter highlights).")

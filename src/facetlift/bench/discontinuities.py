@@ -74,7 +74,7 @@ log = logging.getLogger(__name__)
 CONDITIONS = {"exact": None, "16bit": ("quantize", 16), "8bit": ("quantize", 8),
               "noise3": ("noise", 3.0), "noise6": ("noise", 6.0), "smooth3": ("smooth", 3.0, 8.0),
               "outliers": ("outliers", 0.02, 45.0), "blur1.5": ("blur", 1.5),
-              "blur3": ("blur", 3.0), "ps": ("ps", 20, 40.0, 0.2, 100.0),
+              "blur3": ("blur", 3.0), "blur0.7": ("blur", 0.7), "ps": ("ps", 20, 40.0, 0.2, 100.0),
               "ps_shiny": ("ps", 20, 40.0, 0.6, 20.0)}
 #: Analytic jump scenes of the benchmark (see the module docstring for ``helix``).
 ANALYTIC = tuple(n for n in synthetic.WITH_JUMPS if n != "helix")
