@@ -163,7 +163,13 @@ def test_a_deviation_wider_than_jumps_make_names_the_input_not_the_jumps(capsys)
     assert "the input is off as a whole: check its frame" in wide and "its camera" in wide
     assert "depth prior" not in wide
     withprior = _jump_hint(job, {**info, "deviation_over_10": 0.9, "prior": {"samples": 900}})
-    assert "and the depth prior: its depths in the units of the pixel size" in withprior
+    assert "and the dense depth prior: its depths in the units of the pixel size" in withprior
+    assert "or --prior-fit for one known up to scale" in withprior
+    fitted = _jump_hint(job, {**info, "deviation_over_10": 0.9,
+                              "prior": {"samples": 900, "fit": {"scale": 2.0}}})
+    assert "dense depth prior" in fitted and "--prior-fit" not in fitted
+    sparse = _jump_hint(job, {**info, "deviation_over_10": 0.9, "prior": {"samples": 3}})
+    assert "depth prior" not in sparse
     jumps = _jump_hint(job, {**info, "deviation_over_10": 0.63})
     assert "--discontinuities keeps them" in jumps
     assert job_hints(job, {**info, "deviation_over_10": 0.63}) == [jumps]

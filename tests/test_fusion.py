@@ -1782,3 +1782,10 @@ def test_info_counts_a_sensor_maps_zeros_as_unknown_with_a_camera(tmp_path, caps
         rec = json.loads(capsys.readouterr().out)
         assert code == 0 and rec["prior"]["known_pixels"] == known
         assert rec["prior"]["known_in_mask"] == known and rec["prior"]["range"][0] == low
+    # a prior integrate refuses (a negated relative depth) keeps its values in the report
+    np.save(tmp_path / "neg.npy", np.where(p > 0, -p, np.nan))
+    code = main(["info", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "neg.npy"),
+                 "--json", "--K", str(_K_file(tmp_path))])
+    rec = json.loads(capsys.readouterr().out)
+    assert code == 1 and "positive z-depths" in rec["problem"]
+    assert rec["prior"]["known_pixels"] == 42 and rec["prior"]["range"] == [-5.0, -5.0]

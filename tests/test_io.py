@@ -255,10 +255,15 @@ def test_exr_multilayer_normal_pass(tmp_path, normals):
     with pytest.raises(ValueError, match=r"one layer named normal .*are ViewLayer.Combined: "
                        r"save the normal pass alone"):
         io.read_normals(tmp_path / "none.exr")
-    # a compositor's layer called N (N.X, N.Y, N.Z) is the normal pass too (an audit)
+    # a compositor's layer called N (N.X, N.Y, N.Z) is the normal pass too (an audit), a
+    # render pass's sub-layer called N is not (a review)
     short = {f"N.{k}": n[..., i].astype(np.float32) for i, k in enumerate("XYZ")}
     OpenEXR.File(hdr, short).write(str(tmp_path / "short.exr"))
     np.testing.assert_allclose(io.read_normals(tmp_path / "short.exr")[0], n, atol=1e-7)
+    sub = {f"Diffuse.N.{k}": n[..., i].astype(np.float32) for i, k in enumerate("XYZ")}
+    OpenEXR.File(hdr, sub).write(str(tmp_path / "sub.exr"))
+    with pytest.raises(ValueError, match=r"one layer named normal \(or N\)"):
+        io.read_normals(tmp_path / "sub.exr")
 
 
 @pytest.mark.parametrize("ext", [".png", ".npy"])
@@ -1610,6 +1615,10 @@ def test_a_feathered_8_bit_mask_is_warned_about(tmp_path):
     ((1, 20, 30, 3), r"looks like a batch of one \(1, H, W, C\): save a\[0\] instead"),
     ((1, 3, 20, 30), r"looks like a batch of one: save a\[0\] \(moved to \(H, W, 3\)"),
     ((3, 20, 30), r"got shape \(3, 20, 30\); it looks channel-first"),
+    ((2, 20, 30), r"looks channel-first .* \(x, y alone: then \(H, W, 2\) with "
+                  r"--normal-encoding xy\)"),
+    ((1, 20, 30, 2), r"batch of one \(1, H, W, C\): save a\[0\] instead and read it with "
+                     r"--normal-encoding xy"),
 ])
 def test_a_batch_of_one_or_a_channel_first_file_is_named(tmp_path, shape, said):
     """An audit: a (1, H, W, 3) .npy got no hint, and a (3, H, W) one was said to have "30
@@ -1629,3 +1638,7 @@ def test_a_file_named_npy_that_is_no_npy_file_says_so(tmp_path):
     (tmp_path / "e.npy").write_bytes(b"")
     with pytest.raises(ValueError, match=r"e.npy is not a .npy file .*empty"):
         io.read_normals(tmp_path / "e.npy")
+    np.savez(tmp_path / "z.npz", a=np.zeros((4, 4, 3)))
+    (tmp_path / "z.npz").rename(tmp_path / "z.npy")
+    with pytest.raises(ValueError, match=r"z.npy is an .npz archive"):
+        io.read_normals(tmp_path / "z.npy")

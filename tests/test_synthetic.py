@@ -244,6 +244,34 @@ def test_blur_normals_softens_a_boundary_inside_the_mask_only():
         synthetic.blur_normals(np.zeros((4, 3)), 1.0)
 
 
+def test_resample_normals_softens_a_boundary_over_the_blocks_inside_the_mask_only():
+    # two planes meeting at a column, resampled at half and a quarter of the resolution
+    n = np.zeros((20, 32, 3))
+    n[:, :16] = np.array([0.6, 0.0, 0.8])
+    n[:, 16:] = np.array([-0.6, 0.0, 0.8])
+    mask = np.ones((20, 32), bool)
+    mask[:, 28:] = False
+    n[~mask] = np.nan
+    for f in (2, 4):
+        out = synthetic.resample_normals(n, f)
+        np.testing.assert_allclose(np.linalg.norm(out[mask], axis=-1), 1.0, atol=1e-12)
+        assert np.isnan(out[~mask]).all()
+        x = out[10, :28, 0]
+        assert x[0] == pytest.approx(0.6) and x[27] == pytest.approx(-0.6)  # far from the seam
+        assert np.all(np.diff(x) <= 1e-12)  # monotonic
+        soft = int(np.sum(np.abs(x) < 0.59))  # (pixels between the two planes' normals)
+        assert f - 1 <= soft <= 2 * f, (f, soft)  # (about a block on each side)
+    # a plane stays the plane, a factor of 1 returns a copy, and bad input is named
+    plane = np.broadcast_to(np.array([0.0, 0.6, 0.8]), (9, 10, 3))
+    np.testing.assert_allclose(synthetic.resample_normals(plane, 3), plane, atol=1e-12)
+    np.testing.assert_array_equal(synthetic.resample_normals(n, 1), n)
+    for bad in (0, 1.5, True, "2"):
+        with pytest.raises(ValueError, match="`factor`"):
+            synthetic.resample_normals(n, bad)
+    with pytest.raises(ValueError, match="`mask`"):
+        synthetic.resample_normals(n, 2, mask=mask[:, :5])
+
+
 def test_smooth_noise_is_correlated_with_the_rms_asked():
     rng = np.random.default_rng(3)
     n = normals_from_gradients(rng.normal(0, 0.3, (160, 160)), rng.normal(0, 0.3, (160, 160)))

@@ -1249,7 +1249,8 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
                    "spatially correlated errors of 3 degrees RMS, outliers: 2 % of the "
                    "normals rotated by up to 45 degrees, blur1.5: the normal map blurred by "
                    "a Gaussian of 1.5 px, soft occlusion boundaries; blur3: of 3 px; "
-                   "blur0.7: of 0.7 px; ps: "
+                   "blur0.7: of 0.7 px; resample2, resample4: estimated at half or a "
+                   "quarter of the resolution and upsampled bilinearly; ps: "
                    "normals fitted by photometric stereo to simulated images under 20 "
                    "lights, with shadows, highlights and image noise; ps_shiny: the same "
                    "with broader, brighter highlights).")

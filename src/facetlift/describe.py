@@ -259,8 +259,14 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         unknown: not known pixels here either, a review)."""
         known = np.isfinite(arr)
         if name == "prior" and inp.K is not None and not fitted:
+            from .problem import NEGATIVE_SHARE
+
             with np.errstate(invalid="ignore"):
-                known &= arr > 0
+                pos, neg = known & (arr > 0), known & (arr < 0)
+            # (only where integrate leaves them out: a prior it refuses, e.g. a negated
+            # relative depth, keeps its values in the report beside the refusal, a review)
+            if pos.any() and neg.sum() <= NEGATIVE_SHARE * (pos | neg).sum():
+                known = pos
         return known
 
     for name, arr in (("prior", prior_map), ("confidence", inp.confidence)):

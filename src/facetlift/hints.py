@@ -93,11 +93,13 @@ def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
         frame = frame_first(job, ic) if own is not None else None
         # (a dense prior in other units pulls the whole surface off its normals: an audit's
         # orthographic run with a prior in mm was told of frame, camera and encoding only)
-        units = ("; and the depth prior: its depths in the units of the pixel size "
-                 "(--pixel-size) for an orthographic map, metric z-depth with --K, or "
-                 "--prior-fit for one known up to scale (docs/fusion.md, 'A prior in other "
-                 "units, or a relative depth given as metric')"
-                 if prior.get("samples", 0) > 0 else "")
+        dense = prior.get("samples", 0) > 0.25 * max(int(info.get("input", {}).get(
+            "usable", 1)), 1)
+        units = ("; and the dense depth prior: its depths in the units of the pixel size "
+                 "(--pixel-size) for an orthographic map, metric z-depth with --K"
+                 + ("" if prior.get("fit") else ", or --prior-fit for one known up to scale")
+                 + " (docs/fusion.md, 'A prior in other units, or a relative depth given as "
+                 "metric')" if dense else "")
         return (f"{head}{frame or ''}: far more than bent-across depth jumps make (63 % at "
                 "most on the discontinuity benchmark's scenes, the DiLiGenT bear's 0.5 %), so "
                 "the input is off as a whole: check its frame (facetlift info guesses it; "

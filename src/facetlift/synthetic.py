@@ -1265,6 +1265,64 @@ def blur_normals(normals, sigma: float, mask=None):
     return out
 
 
+def resample_normals(normals, factor: int, mask=None):
+    """The normal map estimated at `factor` times lower resolution and upsampled back: each
+    `factor` x `factor` block's mean normal over the mask, interpolated bilinearly between the
+    blocks' centres to every pixel (as a network run on a downsized image and resized to the
+    input gives its normals), renormalised to unit length. Block means and interpolation are
+    normalised by the mask (pixels outside it give no weight); a pixel whose interpolated
+    mean has length zero keeps its own normal, NaN rows stay NaN.
+
+    Parameters
+    ----------
+    normals : (H, W, 3) array_like
+        Unit normals.
+    factor : int
+        The resolution's reduction (>= 1; 1 returns a copy).
+    mask : (H, W) bool, optional
+        The pixels that are resampled and give weight (default: the finite normals).
+
+    Returns
+    -------
+    (H, W, 3) float
+    """
+    from scipy.ndimage import map_coordinates
+
+    n = _check_map(normals)
+    if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
+        raise ValueError(f"`factor` must be an integer >= 1; got {factor!r}")
+    f = int(factor)
+    ok = np.isfinite(n).all(axis=-1)
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != n.shape[:2]:
+            raise ValueError(f"`mask` must have shape {n.shape[:2]}; got {mask.shape}")
+        ok &= mask
+    out = n.copy()
+    if f == 1 or not ok.any():
+        return out
+    H, W = ok.shape
+    h, w = -(-H // f), -(-W // f)
+    pad = ((0, h * f - H), (0, w * f - W))
+    wgt = np.pad(ok.astype(float), pad).reshape(h, f, w, f).sum(axis=(1, 3))
+    sums = [np.pad(np.where(ok, n[..., i], 0.0), pad).reshape(h, f, w, f).sum(axis=(1, 3))
+            for i in range(3)]
+    # (pixel centres: pixel r lies at block coordinate (r + 0.5) / f - 0.5)
+    rr, cc = np.meshgrid((np.arange(H) + 0.5) / f - 0.5, (np.arange(W) + 0.5) / f - 0.5,
+                         indexing="ij")
+    at = np.array([rr.ravel(), cc.ravel()])
+
+    def up(a):
+        return map_coordinates(a, at, order=1, mode="nearest").reshape(H, W)
+
+    weight = up(wgt)
+    mean = np.stack([up(a) for a in sums], axis=-1)
+    length = np.linalg.norm(mean, axis=-1)
+    use = ok & (weight > 0) & (length > 1e-12 * np.maximum(weight, 1e-300))
+    out[use] = mean[use] / length[use][:, None]
+    return out
+
+
 def _turn(v, side, angle, keep_front):
     """Unit vectors `v` turned by `angle` (rad) toward the unit tangents `side`."""
     c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]

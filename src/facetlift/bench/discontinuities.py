@@ -74,7 +74,9 @@ log = logging.getLogger(__name__)
 CONDITIONS = {"exact": None, "16bit": ("quantize", 16), "8bit": ("quantize", 8),
               "noise3": ("noise", 3.0), "noise6": ("noise", 6.0), "smooth3": ("smooth", 3.0, 8.0),
               "outliers": ("outliers", 0.02, 45.0), "blur1.5": ("blur", 1.5),
-              "blur3": ("blur", 3.0), "blur0.7": ("blur", 0.7), "ps": ("ps", 20, 40.0, 0.2, 100.0),
+              "blur3": ("blur", 3.0), "blur0.7": ("blur", 0.7),
+              "resample2": ("resample", 2), "resample4": ("resample", 4),
+              "ps": ("ps", 20, 40.0, 0.2, 100.0),
               "ps_shiny": ("ps", 20, 40.0, 0.6, 20.0)}
 #: Analytic jump scenes of the benchmark (see the module docstring for ``helix``).
 ANALYTIC = tuple(n for n in synthetic.WITH_JUMPS if n != "helix")
@@ -308,6 +310,8 @@ def condition(gt, cond: str, name: str):
         return synthetic.quantize(gt.normals, how[1])
     if how[0] == "blur":
         return synthetic.blur_normals(gt.normals, how[1], mask=gt.mask)
+    if how[0] == "resample":
+        return synthetic.resample_normals(gt.normals, how[1], mask=gt.mask)
     rng = np.random.default_rng([SEED, zlib.crc32(name.encode())])
     if how[0] == "smooth":
         return synthetic.add_smooth_noise(gt.normals, how[1], rng, length=how[2])

@@ -120,10 +120,9 @@ def _read_exr(path: Path, arg: str) -> dict[str, np.ndarray]:
 
 def _normal_layer(layer: str) -> bool:
     """Whether an EXR layer's name says it holds normals: "normal" in it (Blender's
-    ``ViewLayer.Normal``), or its last part "N" or "nrm" (a compositor's ``N.X``, ``N.Y``,
-    ``N.Z``, refused before, an audit), case aside."""
-    last = layer.rpartition(".")[2].lower()
-    return "normal" in layer.lower() or last in ("n", "nrm")
+    ``ViewLayer.Normal``), or the whole name "N" or "nrm" (a compositor's ``N.X``, ``N.Y``,
+    ``N.Z``, refused before, an audit; not ``Diffuse.N``), case aside."""
+    return "normal" in layer.lower() or layer.lower() in ("n", "nrm")
 
 
 def _exr_normal_channels(ch: dict, p: Path, arg: str,
@@ -148,10 +147,10 @@ def _exr_normal_channels(ch: dict, p: Path, arg: str,
     if len(normal) == 1:
         layer, axes = normal[0]
         return tuple(f"{layer}.{a}" for a in axes), f"{layer}.A"
-    which = ("; a multilayer file needs one layer named normal with them, and its layers "
+    which = ("; a multilayer file needs one layer named normal (or N) with them, and its layers "
              f"with {('two', 'three')[count - 2]} components are "
              f"{', '.join(layer for layer, _ in found)}"
-             + (" (more than one named normal: save the one you mean alone)"
+             + (" (more than one named normal or N: save the one you mean alone)"
                 if len(normal) > 1 else ": save the normal pass alone, or as its own file")
              if found else "")
     want = "R, G, B or X, Y, Z" if count == 3 else "R, G or X, Y (a two-channel map)"
@@ -170,6 +169,9 @@ def _read_npy(path: Path, arg: str) -> np.ndarray:
             magic = fh.read(6)
     except OSError:
         magic = b"\x93NUMPY"  # (np.load says what is wrong)
+    if magic.startswith(b"PK\x03\x04"):  # (an .npz archive named .npy, a review)
+        raise ValueError(f"`{arg}`: {path} is an .npz archive (several arrays, zipped), not a "
+                         ".npy file: save the one array with numpy.save")
     if magic != b"\x93NUMPY":  # (a text or other file named .npy: numpy spoke of pickled
         # data and allow_pickle, an audit)
         raise ValueError(f"`{arg}`: {path} is not a .npy file (it does not start with numpy's "
@@ -260,16 +262,20 @@ def _split_alpha(pixels: np.ndarray, path: Path, arg: str, check: bool = True,
             why = ("; a two-channel map storing x and y alone (BC5, RG) is read with "
                    "--normal-encoding xy (encoding='xy'), which rebuilds z")
         else:
-            first = pixels.ndim == 3 and pixels.shape[0] in (3, 4) and pixels.shape[-1] > 4
-            why = ("; it looks channel-first (3 or 4, H, W): transpose it to (H, W, 3), e.g. "
-                   "numpy.moveaxis(a, 0, -1)" if first else "")
+            first = pixels.ndim == 3 and pixels.shape[0] in (2, 3, 4) and pixels.shape[-1] > 4
+            xy = (" (x, y alone: then (H, W, 2) with --normal-encoding xy)"
+                  if first and pixels.shape[0] == 2 else "")
+            why = ("; it looks channel-first (C, H, W): transpose it to (H, W, C), e.g. "
+                   f"numpy.moveaxis(a, 0, -1){xy}" if first else "")
             if first:  # (not "(612 channel(s))" before the channel-first advice, an audit)
                 channels = None
             if pixels.ndim == 4 and pixels.shape[0] == 1:  # (a batch of one, an audit)
                 channels = None
                 why = ("; it looks like a batch of one (1, H, W, C): save a[0] instead"
-                       if pixels.shape[-1] in (3, 4) else "; it looks like a batch of one: "
-                       "save a[0] (moved to (H, W, 3) if channel-first) instead")
+                       + (" and read it with --normal-encoding xy (x, y alone)"
+                          if pixels.shape[-1] == 2 and encoding != "xy" else "")
+                       if pixels.shape[-1] in (2, 3, 4) else "; it looks like a batch of "
+                       "one: save a[0] (moved to (H, W, 3) if channel-first) instead")
         raise ValueError(
             f"`{arg}`: {path} must be an (H, W, 3) RGB or (H, W, 4) RGBA normal map"
             + (", or (H, W, 2) x, y with --normal-encoding xy (.npy or TIFF)"

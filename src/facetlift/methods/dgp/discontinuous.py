@@ -190,7 +190,7 @@ NOISE_K = 4.0
 #: set drawn before the change (seed 682732) blur1.5 2.548 -> 2.242 mm (BiNI 2.522), blur3
 #: 3.189 -> 2.904.
 #: Factors 1.5 and 3 against 2 on the same renders: mean group ratios 1.018 and 1.004 (3: large
-#: single failures, goblet@e50 10.1 -> 17.6 mm).
+#: single failures, goblet@e50 10.15 -> 17.61 mm).
 #: A sharp map of a smooth, strongly curved surface can read as blurred (the analytic "face":
 #: 0.0; a review measured 16 % more error there with the factor, on a small error).
 SOFT_K = 2.0
