@@ -1619,6 +1619,7 @@ def test_a_feathered_8_bit_mask_is_warned_about(tmp_path):
                   r"--normal-encoding xy\)"),
     ((1, 20, 30, 2), r"batch of one \(1, H, W, C\): save a\[0\] instead and read it with "
                      r"--normal-encoding xy"),
+    ((1, 20, 30), r"looks like one grey image \(1, H, W\)"),
 ])
 def test_a_batch_of_one_or_a_channel_first_file_is_named(tmp_path, shape, said):
     """An audit: a (1, H, W, 3) .npy got no hint, and a (3, H, W) one was said to have "30

@@ -269,6 +269,10 @@ def _split_alpha(pixels: np.ndarray, path: Path, arg: str, check: bool = True,
                    f"numpy.moveaxis(a, 0, -1){xy}" if first else "")
             if first:  # (not "(612 channel(s))" before the channel-first advice, an audit)
                 channels = None
+            elif pixels.ndim == 3 and pixels.shape[0] == 1 and pixels.shape[-1] > 4:
+                channels = None  # (one grey image with a leading axis, a review)
+                why = ("; it looks like one grey image (1, H, W): a height or a grey map "
+                       "holds no normals (slopes p, q: --gradients P Q)")
             if pixels.ndim == 4 and pixels.shape[0] == 1:  # (a batch of one, an audit)
                 channels = None
                 why = ("; it looks like a batch of one (1, H, W, C): save a[0] instead"
