@@ -1782,6 +1782,20 @@ def test_info_counts_a_sensor_maps_zeros_as_unknown_with_a_camera(tmp_path, caps
         rec = json.loads(capsys.readouterr().out)
         assert code == 0 and rec["prior"]["known_pixels"] == known
         assert rec["prior"]["known_in_mask"] == known and rec["prior"]["range"][0] == low
+    # fitted (--prior-fit) for a camera: the zeros are left out of the fit too (they pulled
+    # the scale 1e4 off, a review), and info counts the same pixels
+    code = main(["info", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "p.npy"),
+                 "--json", "--K", str(_K_file(tmp_path)), "--prior-fit", "scale"])
+    rec = json.loads(capsys.readouterr().out)
+    assert code == 0 and rec["prior"]["known_pixels"] == 42
+    K = np.loadtxt(_K_file(tmp_path))
+    d = facetlift.integrate(n, K=K).depth
+    q = np.where(p > 0, 3.0 * d, 0.0)
+    with pytest.warns(UserWarning, match=r"`prior`: 630 pixel\(s\) hold exactly 0, the first "
+                      r"at \(row 0, col 1\): left out of the fit"):
+        s = facetlift.integrate(n, K=K, prior=q, prior_fit="scale")
+    assert s.info["prior"]["fit"]["scale"] == pytest.approx(1 / 3)
+    assert s.info["input"]["prior_samples"] == 42
     # a prior integrate refuses (a negated relative depth) keeps its values in the report
     np.save(tmp_path / "neg.npy", np.where(p > 0, -p, np.nan))
     code = main(["info", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "neg.npy"),

@@ -256,8 +256,11 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     def known_of(name, arr):
         """The pixels of a prior / confidence map that hold a value integrate uses: a
         perspective prior's zeros and negative values are left out (a depth sensor's 0 for
-        unknown: not known pixels here either, a review)."""
+        unknown: not known pixels here either, a review), a fitted one's zeros."""
         known = np.isfinite(arr)
+        if name == "prior" and inp.K is not None and fitted:
+            # (a fitted map for a camera: its zeros are left out alike, before the fit)
+            return known & (arr != 0) if (known & (arr != 0)).any() else known
         if name == "prior" and inp.K is not None and not fitted:
             from .problem import NEGATIVE_SHARE
 
