@@ -329,7 +329,7 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
     first, the prior aligned to that surface (:func:`facetlift.prior_fit.fit`), then the
     fusion with the aligned prior."""
     from .methods.dgp import shared_cuts
-    from .problem import _is_points, _weight_image, default_prior_weight, prior_samples
+    from .problem import _is_points, _weight_image, default_prior_weight, fit_zeros, prior_samples
 
     t0 = time.perf_counter()
     prior_weight = default_prior_weight(prior_weight, prior_blur)
@@ -341,8 +341,8 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
     if kwargs.get("K") is not None and not _is_points(prior, shape):
         # a map for a camera: 0 is a sensor's (or a clipped network's) "unknown", as the
         # unfitted route leaves it out; fitted, the zeros pulled the scale 1e4 off (a review)
-        zeros = raw == 0
-        if zeros.any() and not zeros.all():
+        zeros = fit_zeros(raw)
+        if zeros is not None:
             r, c = np.argwhere(zeros)[0]
             warn(f"`prior`: {int(zeros.sum())} pixel(s) hold exactly 0, the first at (row {r}, "
                  f"col {c}): left out of the fit and the fusion as unknown depths (a depth "

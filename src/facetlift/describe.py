@@ -257,20 +257,16 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         """The pixels of a prior / confidence map that hold a value integrate uses: a
         perspective prior's zeros and negative values are left out (a depth sensor's 0 for
         unknown: not known pixels here either, a review), a fitted one's zeros."""
-        known = np.isfinite(arr)
-        if name == "prior" and inp.K is not None and fitted:
-            # (a fitted map for a camera: its zeros are left out alike, before the fit)
-            return known & (arr != 0) if (known & (arr != 0)).any() else known
-        if name == "prior" and inp.K is not None and not fitted:
-            from .problem import NEGATIVE_SHARE
+        from .problem import fit_zeros, left_out_depths
 
-            with np.errstate(invalid="ignore"):
-                pos, neg = known & (arr > 0), known & (arr < 0)
-            # (only where integrate leaves them out: a prior it refuses, e.g. a negated
-            # relative depth, keeps its values in the report beside the refusal, a review)
-            if pos.any() and neg.sum() <= NEGATIVE_SHARE * (pos | neg).sum():
-                known = pos
-        return known
+        known = np.isfinite(arr)
+        if name != "prior" or inp.K is None:
+            return known
+        # (a fitted map's zeros are left out before the fit; an unfitted one's as integrate
+        # leaves them out, and a prior it refuses, e.g. a negated relative depth, keeps its
+        # values in the report beside the refusal, a review)
+        out = fit_zeros(arr) if fitted else left_out_depths(arr, known)
+        return known if out is None else known & ~out
 
     for name, arr in (("prior", prior_map), ("confidence", inp.confidence)):
         if arr is not None:  # (a prior / confidence file, or a dataset folder's)

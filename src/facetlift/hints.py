@@ -89,17 +89,18 @@ def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
         return (f"{head}: a camera that is not the image's bends a whole surface so; mend the "
                 "camera the warning names first (--K, --fov; docs/conventions.md, 'Perspective "
                 "cameras: K') and run again: depth jumps are named then if the deviation stays")
+    # (a prior with samples on over a quarter of the usable normals: a dense map, whose own
+    # noise or units bend the surface too)
+    dense = prior.get("samples", 0) > 0.25 * max(int(info.get("input", {}).get("usable", 1)), 1)
+    frame = frame_first(job, ic) if own is not None else None
     if share > JUMP_HINT_WIDE:
-        frame = frame_first(job, ic) if own is not None else None
         # (a dense prior in other units pulls the whole surface off its normals: an audit's
         # orthographic run with a prior in mm was told of frame, camera and encoding only)
-        dense = prior.get("samples", 0) > 0.25 * max(int(info.get("input", {}).get(
-            "usable", 1)), 1)
+        fit = "" if prior.get("fit") else ", or --prior-fit for one known up to scale"
         units = ("; and the dense depth prior: its depths in the units of the pixel size "
-                 "(--pixel-size) for an orthographic map, metric z-depth with --K"
-                 + ("" if prior.get("fit") else ", or --prior-fit for one known up to scale")
-                 + " (docs/fusion.md, 'A prior in other units, or a relative depth given as "
-                 "metric')" if dense else "")
+                 f"(--pixel-size) for an orthographic map, metric z-depth with --K{fit} "
+                 "(docs/fusion.md, 'A prior in other units, or a relative depth given as "
+                 "metric')") if dense else ""
         return (f"{head}{frame or ''}: far more than bent-across depth jumps make (63 % at "
                 "most on the discontinuity benchmark's scenes, the DiLiGenT bear's 0.5 %), so "
                 "the input is off as a whole: check its frame (facetlift info guesses it; "
@@ -113,14 +114,12 @@ def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
         # explains the deviation: a BGR map was also told to keep jumps, an audit)
     # (with a dense prior its own noise bends the surface alike: a fresh user's sensor depth,
     # 1 mm of noise at weight 0.5, deviated 11 deg, and only the jumps were named)
-    dense = prior.get("samples", 0) > 0.25 * max(int(info.get("input", {}).get("usable", 1)), 1)
     also = (" (or the dense prior's own noise: a lower --prior-weight, e.g. 0.01, or "
             "--prior-blur; docs/fusion.md)" if dense else "")
     # (a method that cannot keep jumps: the one that can, named; poisson and the others at
     # the same deviation got no word, a user's check)
     keep = ("--discontinuities keeps them" if method.discontinuities else
             f"--method dgp --discontinuities keeps them ({method.name!r} cannot)")
-    frame = frame_first(job, ic) if own is not None else None
     if frame is None:
         hint = (f"{head}, as where a smooth surface bends across depth jumps: {keep} "
                 f"(slower; docs/perspective.md){also}")

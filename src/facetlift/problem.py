@@ -1507,6 +1507,30 @@ MAX_PRIOR_DEPTH = 1e30
 NEGATIVE_SHARE = 0.01
 
 
+def left_out_depths(depth: np.ndarray, have: np.ndarray) -> np.ndarray | None:
+    """The samples `have` of a perspective prior's `depth` that integrate leaves out, or None
+    where it refuses the prior (:func:`check_prior`, and ``facetlift info``'s counts).
+
+    A depth sensor's map marks unknown pixels by 0 (no z-depth is 0), and a few negative
+    samples are bad pixels: both are left out, as points behind the camera are. Many negative
+    ones (more than :data:`NEGATIVE_SHARE` of the nonzero samples: relative depth, disparity)
+    or none positive left are refused."""
+    with np.errstate(invalid="ignore"):
+        neg = have & (depth <= 0)
+        zeros = have & (depth == 0)
+    if (have & ~neg).any() and (neg & ~zeros).sum() <= NEGATIVE_SHARE * (have & ~zeros).sum():
+        return neg
+    return None
+
+
+def fit_zeros(raw: np.ndarray) -> np.ndarray | None:
+    """The exact zeros of a prior map given to ``prior_fit`` with a camera, which are left out
+    before the alignment as unknown depths (a depth sensor's mark), or None where there are
+    none or nothing else (``facetlift.integrate``'s fitted route, ``facetlift info``)."""
+    zeros = raw == 0
+    return zeros if zeros.any() and not zeros.all() else None
+
+
 def check_prior(prior, prior_weight, shape, mask, camera):
     """Checked prior: ``(values, weights, outside)``, the first two (m,) on the facets of
     `mask`, the values in the camera's unknown (:meth:`facetlift.camera.Camera.from_depth`),
@@ -1548,11 +1572,7 @@ def check_prior(prior, prior_weight, shape, mask, camera):
             k = int(np.flatnonzero(neg)[0])
             zeros = have & (depth == 0)
             below = neg & ~zeros
-            # a depth sensor's map marks unknown pixels by 0 (no z-depth is 0), and a few
-            # negative samples are bad pixels: both left out, counted and said, as points
-            # behind the camera are; many negative ones (relative depth, disparity) or none
-            # positive left are refused
-            if (have & ~neg).any() and below.sum() <= NEGATIVE_SHARE * (have & ~zeros).sum():
+            if left_out_depths(depth, have) is not None:
                 r, c = np.argwhere(mask)[k]
                 warn(f"`prior`: {int(neg.sum())} sample(s) in the mask with a non-positive "
                      f"z-depth for a perspective camera ({int(zeros.sum())} of them 0, as a "

@@ -1247,18 +1247,35 @@ def blur_normals(normals, sigma: float, mask=None):
     if not good:
         raise ValueError(f"`sigma` must be a finite number of pixels >= 0; got {sigma!r}")
     sigma = float(sigma)
+    ok = _filtered_pixels(n, mask)
+    if sigma == 0:
+        return n.copy()
+    return _filtered_normals(n, ok, lambda a: gaussian_filter(a, sigma, mode="constant"))
+
+
+def _filtered_pixels(n: np.ndarray, mask) -> np.ndarray:
+    """The (H, W) pixels of the map `n` that a normalised filter averages and that give it
+    weight: the finite normals, within `mask` where given (a ValueError naming `mask` where
+    its shape is not the map's)."""
     ok = np.isfinite(n).all(axis=-1)
     if mask is not None:
         mask = np.asarray(mask, dtype=bool)
         if mask.shape != n.shape[:2]:
             raise ValueError(f"`mask` must have shape {n.shape[:2]}; got {mask.shape}")
         ok &= mask
+    return ok
+
+
+def _filtered_normals(n: np.ndarray, ok: np.ndarray, linear) -> np.ndarray:
+    """The map `n` with its pixels `ok` replaced by the normalised `linear` filter's mean of
+    the normals at `ok` (each component filtered with weight 1 at `ok` and 0 elsewhere),
+    renormalised to unit length; a pixel of weight 0 or a mean of length zero (opposite
+    normals) keeps its own normal, the others stay as they are."""
     out = n.copy()
-    if sigma == 0 or not ok.any():
+    if not ok.any():
         return out
-    weight = gaussian_filter(ok.astype(float), sigma, mode="constant")
-    mean = np.stack([gaussian_filter(np.where(ok, n[..., i], 0.0), sigma, mode="constant")
-                     for i in range(3)], axis=-1)
+    weight = linear(ok.astype(float))
+    mean = np.stack([linear(np.where(ok, n[..., i], 0.0)) for i in range(3)], axis=-1)
     length = np.linalg.norm(mean, axis=-1)
     use = ok & (weight > 0) & (length > 1e-12 * np.maximum(weight, 1e-300))
     out[use] = mean[use] / length[use][:, None]
@@ -1292,35 +1309,23 @@ def resample_normals(normals, factor: int, mask=None):
     if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
         raise ValueError(f"`factor` must be an integer >= 1; got {factor!r}")
     f = int(factor)
-    ok = np.isfinite(n).all(axis=-1)
-    if mask is not None:
-        mask = np.asarray(mask, dtype=bool)
-        if mask.shape != n.shape[:2]:
-            raise ValueError(f"`mask` must have shape {n.shape[:2]}; got {mask.shape}")
-        ok &= mask
-    out = n.copy()
-    if f == 1 or not ok.any():
-        return out
+    ok = _filtered_pixels(n, mask)
+    if f == 1:
+        return n.copy()
     H, W = ok.shape
     h, w = -(-H // f), -(-W // f)
     pad = ((0, h * f - H), (0, w * f - W))
-    wgt = np.pad(ok.astype(float), pad).reshape(h, f, w, f).sum(axis=(1, 3))
-    sums = [np.pad(np.where(ok, n[..., i], 0.0), pad).reshape(h, f, w, f).sum(axis=(1, 3))
-            for i in range(3)]
     # (pixel centres: pixel r lies at block coordinate (r + 0.5) / f - 0.5)
     rr, cc = np.meshgrid((np.arange(H) + 0.5) / f - 0.5, (np.arange(W) + 0.5) / f - 0.5,
                          indexing="ij")
     at = np.array([rr.ravel(), cc.ravel()])
 
-    def up(a):
-        return map_coordinates(a, at, order=1, mode="nearest").reshape(H, W)
+    def linear(a):
+        """Block sums of `a`, interpolated bilinearly back to every pixel."""
+        blocks = np.pad(a, pad).reshape(h, f, w, f).sum(axis=(1, 3))
+        return map_coordinates(blocks, at, order=1, mode="nearest").reshape(H, W)
 
-    weight = up(wgt)
-    mean = np.stack([up(a) for a in sums], axis=-1)
-    length = np.linalg.norm(mean, axis=-1)
-    use = ok & (weight > 0) & (length > 1e-12 * np.maximum(weight, 1e-300))
-    out[use] = mean[use] / length[use][:, None]
-    return out
+    return _filtered_normals(n, ok, linear)
 
 
 def _turn(v, side, angle, keep_front):
