@@ -448,12 +448,38 @@ def test_bini_fills_a_hole_of_missing_normals():
     # measured 0.0455 of the range against poisson's 0.0454 (0.324 unfilled)
     assert err["bini"] < 1.2 * err["poisson"], err
 
+@pytest.mark.parametrize("camera", ["orthographic", "perspective"])
+def test_bini_joins_parts_that_touch_at_a_corner(camera):
+    """BiNI's differences join 4-neighbours only: the second of two squares touching at a
+    corner kept CG's arbitrary constant (1.4 units off on a plane; with K another scale), where
+    every other method joins them through the diagonal (an audit). Now it is placed by the
+    diagonal step's slopes."""
+    H = W = 30
+    m = np.zeros((H, W), bool)
+    m[2:15, 2:15] = True
+    m[15:28, 15:28] = True
+    n = np.dstack([np.full((H, W), -0.3), np.full((H, W), 0.2), np.ones((H, W))])
+    K = np.array([[60.0, 0, 15], [0, 60.0, 15], [0, 0, 1]]) if camera == "perspective" else None
+    ref = facetlift.integrate(n, m, K=K, method="poisson")
+    for disc in (True, False):
+        s = facetlift.integrate(n, m, K=K, method="bini", discontinuities=disc)
+        assert s.info["pinched"] == 1
+        if K is None:
+            e = s.height - ref.height
+            assert np.ptp(e[m]) < 2e-3  # (1.38 before; BiNI's CG stops at 1e-3)
+        else:
+            e = np.log(s.depth / ref.depth)
+            assert np.ptp(e[m]) < 2e-3
+    one = facetlift.integrate(n, np.pad(np.ones((26, 26), bool), 2), method="bini")
+    assert one.info["pinched"] == 0
+
 
 def test_options_of_another_route_are_refused_and_caps_are_warned():
     from facetlift import synthetic
 
     gt = synthetic.analytic("pyramid", 32)
     with pytest.raises(ValueError, match=r"`max_iter` applies only with prior='edge_preserving'"):
+
         facetlift.integrate(gt.normals, method="regularization", max_iter=3)
     with pytest.raises(ValueError, match=r"`k` applies only with discontinuities=True"):
         facetlift.integrate(gt.normals, method="bini", discontinuities=False, k=100.0)

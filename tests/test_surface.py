@@ -158,6 +158,24 @@ def test_mesh_quads_are_the_facets(plane_surface):
         shared = set(pair[0]) & set(pair[1])
         assert len(shared) == 2 and shared in ({quad[0], quad[2]}, {quad[1], quad[3]})
 
+def test_mesh_vertices_are_numbered_from_the_mask(plane_surface):
+    """A mask narrowed after the solve (or a foreign vertex depth finite beyond its mask)
+    numbered the vertices from where `vertex_depth` is finite and the faces from the mask:
+    294 of 296 faces of a half sphere had corners at the wrong grid points (an audit)."""
+    s, _, h = plane_surface
+    s.mask = s.mask & (np.arange(s.mask.shape[1])[None, :] < 8)
+    verts, quads = s.to_mesh()
+    r, c = np.nonzero(s.mask)
+    assert len(verts) == Domain.from_mask(s.mask).n_vertices
+    np.testing.assert_allclose(verts[quads][:, 3, :2], np.column_stack([c, -r]) * h)
+    np.testing.assert_allclose(verts[quads][:, 1, :2], np.column_stack([c + 1, -(r + 1)]) * h)
+    assert len(s.points("vertices")) == len(verts)
+    s.vertex_depth = s.vertex_depth.copy()
+    s.vertex_depth[r[0], c[0]] = np.nan
+    with pytest.raises(ValueError, match=r"`vertex_depth` is not finite at 1 corner"):
+        s.to_mesh()
+
+
 
 def test_repr(plane_surface):
     s = plane_surface[0]

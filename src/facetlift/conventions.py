@@ -27,7 +27,9 @@ Depth
 Pixels, facets and vertices
     Pixel ``(r, c)`` is the quad facet whose corners are the vertices ``(r, c)``, ``(r, c+1)``,
     ``(r+1, c+1)``, ``(r+1, c)`` of an ``(H+1) x (W+1)`` vertex grid, in that order. The facet
-    centre is the mean of its four corners, and ``Surface.depth[r, c]`` is the depth there.
+    centre is the mean of its four corners (for a perspective camera the geometric mean of
+    their depths: the mean of the log-depths), and ``Surface.depth[r, c]`` is the depth
+    there.
     With pixel size ``h``, vertex ``(i, j)`` lies at ``x = j*h``, ``y = -i*h`` (orthographic).
     Two pixels belong to one connected component when they share a vertex (8-connectivity).
 

@@ -43,7 +43,7 @@ class Surface:
         Where the surface is cut by a depth jump (discontinuity-preserving methods): ``right``
         (H, W-1) bool between pixel (r, c) and (r, c+1), ``down`` (H-1, W) between (r, c) and
         (r+1, c). :meth:`to_mesh` splits the mesh there; ``depth`` is the mean of each facet's
-        four mesh corners, so the two agree everywhere.
+        four mesh corners (perspective: their geometric mean), so the two agree everywhere.
     discontinuities : (H, W) float or None
         Per pixel, the largest depth jump across its cut edges (0 where none, NaN outside).
     split : (corners, i, j, depth) or None
@@ -161,11 +161,35 @@ class Surface:
             r, c = np.nonzero(self.mask)
             pts = self.camera.points(r + 0.5, c + 0.5, self.depth[r, c])
         elif where == "vertices":
-            i, j = np.nonzero(np.isfinite(self.vertex_depth))
+            i, j = self._vertices()
             pts = self.camera.points(i, j, self.vertex_depth[i, j])
         else:
             raise ValueError(f"`where` must be 'facets' or 'vertices'; got {where!r}")
         return frames.from_facetlift(pts, frame, "frame")
+
+    def _vertices(self, domain: Domain | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Grid positions (i, j) of the corners of the mask's facets, row-major: the vertices
+        :meth:`to_mesh`'s faces index (numbered from the mask, not from where `vertex_depth`
+        is finite: a mask narrowed after the solve, or a foreign depth finite beyond it,
+        would otherwise number the vertices apart from the faces).
+
+        Raises
+        ------
+        ValueError
+            Naming `vertex_depth`, where it is not finite at such a corner.
+        """
+        vm = (Domain.from_mask(self.mask) if domain is None else domain).vertex_mask
+        if self.vertex_depth.shape != vm.shape:
+            raise ValueError(f"`vertex_depth` must have shape {vm.shape} (one more row and "
+                             f"column than the mask); got {self.vertex_depth.shape}")
+        bad = vm & ~np.isfinite(self.vertex_depth)
+        if bad.any():
+            i, j = np.argwhere(bad)[0]
+            raise ValueError(
+                f"`vertex_depth` is not finite at {int(bad.sum()):,} corner(s) of the mask's "
+                f"facets (the first at vertex ({i}, {j})): no mesh or vertex points of it; "
+                "narrow `mask` to the facets whose four corners have a depth")
+        return np.nonzero(vm)
 
     def to_mesh(self, triangles: bool = False, frame=None) -> tuple[np.ndarray, np.ndarray]:
         """The facet mesh: vertices (n, 3) and faces (m, 4) quads or (2m, 3) triangles.
@@ -183,8 +207,11 @@ class Surface:
             corners, i, j, depth = self.split
             verts = frames.from_facetlift(self.camera.points(i, j, depth), frame, "frame")
         else:
-            corners = Domain.from_mask(self.mask).corners
-            verts = self.points("vertices", frame=frame)
+            domain = Domain.from_mask(self.mask)
+            corners = domain.corners
+            i, j = self._vertices(domain)
+            verts = frames.from_facetlift(self.camera.points(i, j, self.vertex_depth[i, j]),
+                                          frame, "frame")
         # conventional corner order (r,c),(r,c+1),(r+1,c+1),(r+1,c) is clockwise seen from the
         # viewer (y up); reverse it for outward (viewer-facing) normals
         quads = corners[:, ::-1]

@@ -25,9 +25,10 @@ Energy
     measured slopes in the first round and from the current surface afterwards, at most
     `max_iter` (default 10, as in the code) rounds, stopping when the relative height change
     is below `tol`. Default ``lam = 10`` (the code's value). This prior penalises slopes
-    themselves, so it flattens every non-planar surface (heights shrink by roughly
-    ``1 / (1 + lam b / 4)``); the code rescales its output to the height range of the Poisson
-    solution afterwards, which we do not do.
+    themselves, so it flattens every surface that is not level, planes included (heights
+    shrink by roughly ``1 / (1 + lam b / 4)``: an exact tilted plane comes back at 0.29 of its
+    height with ``lam = 10``, 0.80 with ``lam = 1``); the code rescales its output to the
+    height range of the Poisson solution afterwards, which we do not do.
 
 Masks and missing samples
     As :mod:`facetlift.methods.poisson`. ``lam -> 0`` gives the Poisson solution.

@@ -43,7 +43,7 @@ import scipy.sparse as sp
 from ..domain import Domain
 
 HORIZONTAL, VERTICAL, DIAGONAL = 0, 1, 2
-_FOUR = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=bool)
+FOUR = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=bool)
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,7 +107,7 @@ def build(domain: Domain) -> PixelGraph:
     kinds = [np.full(nh, HORIZONTAL), np.full(nv, VERTICAL)]
 
     # pinch diagonals between different 4-connected components
-    lab4, _ = ndi.label(mask, structure=_FOUR)
+    lab4, _ = ndi.label(mask, structure=FOUR)
     a, b = mask[:-1, :-1], mask[1:, 1:]  # (r, c) -> (r+1, c+1)
     pr, pc = np.nonzero(a & b & ~mask[:-1, 1:] & ~mask[1:, :-1])
     keep = lab4[pr, pc] != lab4[pr + 1, pc + 1]
