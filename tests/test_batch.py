@@ -1029,3 +1029,83 @@ def test_two_priors_beside_a_map_fail_only_where_one_would_be_read(tmp_path):
     (both,) = fb.items([folder])
     (left,) = fb._own_files([both], Job(dataset_prior=False))
     assert left.error and "its confidence: keep one" in left.error
+
+
+def test_a_folder_of_another_inputs_results_is_kept(tmp_path):
+    """An audit: a batch of b/m0.png into an OUT holding a/m0.png's results wrote over m0/
+    without a word, and a later --resume of a/m0.png kept b's results as a's. Now the other
+    input gets m0-2/ (with a warning), and resume checks whose results the folder holds."""
+    maps(tmp_path / "a", n=1)
+    maps(tmp_path / "b", n=2)
+    (tmp_path / "b" / "m1.png").replace(tmp_path / "b" / "m0.png")  # (another map, one name)
+    a, b, out = tmp_path / "a" / "m0.png", tmp_path / "b" / "m0.png", tmp_path / "out"
+    fb.batch([a], out, save=("npy",), workers=1)
+    first = np.load(out / "m0" / "depth.npy")
+    with pytest.warns(UserWarning, match=r"m0/ holds .*a/m0\.png, so .*b/m0\.png is written "
+                                         r"to m0-2/"):
+        rec, = fb.batch([b], out, save=("npy",), workers=1)
+    assert rec["name"] == "m0-2"
+    np.testing.assert_array_equal(np.load(out / "m0" / "depth.npy"), first)
+    assert not np.array_equal(np.load(out / "m0-2" / "depth.npy"), first, equal_nan=True)
+    rec, = fb.batch([a], out, save=("npy",), workers=1, resume=True)
+    assert rec.get("resumed") and rec["name"] == "m0"
+    # the same input run again takes its own folder back (no renaming, no warning)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rec, = fb.batch([b], out, save=("npy",), workers=1)
+    assert rec["name"] == "m0-2"
+
+
+def test_resume_notices_an_edited_mask_given_to_every_item(tmp_path):
+    """An audit: --mask's file was compared by its path's text only, so an edited mask
+    file left the results of the old one."""
+    maps(tmp_path / "in", n=1)
+    mask = np.zeros((16, 18), bool)
+    mask[2:14, 2:16] = True
+    io.write_mask(tmp_path / "sq.png", mask)
+    kw = dict(save=("npy",), workers=1, mask=str(tmp_path / "sq.png"))
+    fb.batch([tmp_path / "in"], tmp_path / "out", **kw)
+    assert fb.batch([tmp_path / "in"], tmp_path / "out", resume=True, **kw)[0].get("resumed")
+    mask[2:14, 2:8] = False
+    io.write_mask(tmp_path / "sq.png", mask)
+    rec, = fb.batch([tmp_path / "in"], tmp_path / "out", resume=True, **kw)
+    assert not rec.get("resumed")
+    assert np.isfinite(np.load(tmp_path / "out" / "m0" / "depth.npy")).sum() == mask.sum()
+
+
+def test_dot_and_globbed_folders_and_own_outputs(tmp_path, monkeypatch):
+    """An audit: `batch .` wrote into OUT itself (name ""), `batch ..` beside OUT; a glob
+    matching plain folders made each a failed item; facetlift's own preview.png in a folder
+    of maps ran as a map; a list file's BOM hid its first entry; batch records had no
+    camera_warned."""
+    maps(tmp_path / "x" / "in", n=2)
+    monkeypatch.chdir(tmp_path / "x" / "in")
+    assert [it.name for it in fb.items(["."])] == ["m0", "m1"]
+    ds = tmp_path / "ds" / "bear"
+    ds.mkdir(parents=True)
+    (ds / "normal_map.png").write_bytes((tmp_path / "x" / "in" / "m0.png").read_bytes())
+    (ds / "sub").mkdir()
+    monkeypatch.chdir(ds / "sub")
+    assert [it.name for it in fb.items([".."])] == ["bear"]
+    monkeypatch.chdir(tmp_path)
+    assert sorted(it.name for it in fb.items(["x/*"])) == ["m0", "m1"]
+    s = facetlift.integrate(io.read_normals(tmp_path / "x" / "in" / "m0.png")[0])
+    s.save(tmp_path / "x" / "in" / "preview.png")
+    with pytest.warns(UserWarning, match=r"skipped 1 file\(s\) named like facetlift's outputs"):
+        assert [it.name for it in fb.items(["x/in"])] == ["m0", "m1"]
+    (tmp_path / "list.txt").write_bytes("\ufeffx/in/m1.png\n".encode())
+    assert [it.name for it in fb.items([], list_file=tmp_path / "list.txt")] == ["m1"]
+    (tmp_path / "bad.txt").write_bytes(b"\xff\xfe\x00bad")
+    with pytest.raises(ValueError, match=r"`list_file`: .*bad\.txt is no UTF-8 text"):
+        fb.items([], list_file=tmp_path / "bad.txt")
+    rec, = fb.batch(["x/in/m0.png"], tmp_path / "out", save=("npy",), workers=1,
+                    K="100 100 500 500")
+    assert rec["camera_warned"] is True and "camera_warned" in fb.log_record(rec)
+    for kw, match in (({"triangles": "yes"}, r"`triangles` must be True or False or None"),
+                      ({"backfacing": "maybe"}, r"`backfacing` must be one of"),
+                      ({"strict": "no"}, r"`strict` must be True or False"),
+                      ({"K": "1 2 3"}, r"`K`: 1 2 3 is no file"),
+                      ({"outlier_eps": -3.0}, r"outlier_eps")):
+        with pytest.raises(ValueError, match=match):  # (before any item: each failed alone)
+            fb.batch(["x/in/m0.png"], tmp_path / "o2", workers=1, **kw)
+    assert not (tmp_path / "o2").exists()

@@ -6,6 +6,7 @@ refusals: shapes that differ, no common pixel, depths <= 0 where a scale is need
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -249,6 +250,13 @@ def test_cli_evaluate_takes_an_output_folder(tmp_path, capsys):
     code, out, err = run(capsys, "evaluate", out_dir, *args)
     assert code == 0 and json.loads(out)["perspective"] is True, err
     assert json.loads(out)["result"] == str(out_dir / "surface.npz")
+    # a later run into the folder without -s npz: its depth.npy, not the stale surface.npz
+    # (an audit), with a warning naming the stale file
+    t = (out_dir / "surface.npz").stat().st_mtime
+    os.utime(out_dir / "depth.npy", (t + 10, t + 10))
+    code, out, err = run(capsys, "evaluate", out_dir, *args)
+    assert code == 0 and json.loads(out)["result"] == str(out_dir / "depth.npy"), err
+    assert "holds surface.npz from an earlier run than its depth.npy" in err
     (tmp_path / "empty").mkdir()
     code, _, err = run(capsys, "evaluate", tmp_path / "empty", "--gt", tmp_path / "gt.npy")
     assert code == 1 and "RESULT: the folder" in err and "holds none of surface.npz, " \

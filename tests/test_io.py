@@ -1193,8 +1193,10 @@ def test_a_height_map_covering_the_image_is_plain_grey(tmp_path):
 
 def test_height_exr_holds_the_heights_and_round_trips(tmp_path):
     """height.exr: the heights themselves (-depth, not scaled), float32, one channel Y (the
-    OpenEXR luminance a viewer shows as grey), NaN outside the mask; read back by the depth
-    reader, and written by -s height-exr."""
+    OpenEXR luminance a viewer shows as grey), NaN outside the mask, marked as heights in its
+    header; read back by the depth reader as depth (it took the heights for depths, the sign
+    wrong, an audit), and written by -s height-exr. An unmarked one-channel EXR is read as
+    it is."""
     import OpenEXR
 
     from facetlift.cli import main
@@ -1206,9 +1208,14 @@ def test_height_exr_holds_the_heights_and_round_trips(tmp_path):
     with OpenEXR.File(str(path), separate_channels=True) as f:
         ch = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
     assert list(ch) == ["Y"] and ch["Y"].dtype == np.float32
+    np.testing.assert_allclose(ch["Y"][mask], -s.depth[mask], rtol=1e-6, atol=1e-6)
     back = io.read_depth(path)
     np.testing.assert_array_equal(np.isnan(back), ~mask)
-    np.testing.assert_allclose(back[mask], -s.depth[mask], rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(back[mask], s.depth[mask], rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(io.read_prior(path)[mask], s.depth[mask], rtol=1e-6, atol=1e-6)
+    with OpenEXR.File({"type": OpenEXR.scanlineimage}, {"Y": ch["Y"]}) as f:  # (unmarked)
+        f.write(str(tmp_path / "plain.exr"))
+    np.testing.assert_array_equal(io.read_depth(tmp_path / "plain.exr"), ch["Y"])
     with pytest.raises(ValueError, match=r"`height_range` .* applies to the 16-bit PNG"):
         io.write_height(tmp_path / "h2.exr", s, height_range=(0, 1))
     io.write_normals(tmp_path / "n.png", np.where(mask[..., None], n, np.nan), mask)
@@ -1218,7 +1225,7 @@ def test_height_exr_holds_the_heights_and_round_trips(tmp_path):
     d = np.load(tmp_path / "o" / "depth.npy")
     h = io.read_depth(tmp_path / "o" / "height.exr")
     np.testing.assert_array_equal(np.isnan(h), np.isnan(d))
-    np.testing.assert_allclose(h[~np.isnan(d)], -d[~np.isnan(d)], rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(h[~np.isnan(d)], d[~np.isnan(d)], rtol=1e-6, atol=1e-6)
 
 
 def test_a_symmetric_height_range_puts_each_maps_mean_height_at_mid_grey(tmp_path,

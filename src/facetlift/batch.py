@@ -34,7 +34,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ._warnings import recording
-from .jobs import OUTPUT_STEMS, Job
+from .jobs import OUTPUT_STEMS, OUTPUTS, Job
 
 #: Name of the JSON-lines log inside the batch's output folder.
 LOG_NAME = "batch.jsonl"
@@ -98,7 +98,7 @@ def items(inputs, *, list_file=None) -> list[Item]:
     ValueError
         No normal map found at all (every input missing, or none holds a map).
     """
-    from .io.dataset import CAMERA_FILES, is_dataset, is_rotation_file, one_channel
+    from .io.dataset import is_dataset, is_rotation_file, one_channel
     from .io.images import MASK_FORMATS, NORMAL_READ_FORMATS
 
     if isinstance(inputs, (str, os.PathLike)):  # (one input: a str was read letter by letter)
@@ -106,9 +106,13 @@ def items(inputs, *, list_file=None) -> list[Item]:
     specs = [str(s) for s in inputs]
     if list_file is not None:
         try:
-            lines = Path(list_file).read_text().splitlines()
+            # (utf-8-sig: a BOM made the first entry "does not exist", an audit)
+            lines = Path(list_file).read_text(encoding="utf-8-sig").splitlines()
         except OSError as e:
             raise ValueError(f"`list_file`: cannot read {list_file}: {e.strerror}") from None
+        except UnicodeDecodeError as e:
+            raise ValueError(f"`list_file`: {list_file} is no UTF-8 text list of inputs "
+                             f"(byte {e.start}: {e.reason})") from None
         base = Path(list_file).parent
         for line in lines:
             # (a comment starts the line or follows a space: 'obj#3.png' is a file name)
@@ -122,30 +126,20 @@ def items(inputs, *, list_file=None) -> list[Item]:
             found = sorted(glob.glob(spec))
             if not found:
                 absent.append((spec, f"`inputs`: the pattern {spec!r} matches nothing"))
-            paths += [(Path(f), False) for f in found]
+            for f in map(Path, found):  # (a matched folder is read as a named one: 'in/*'
+                # made in/a and in/b failed items, an audit; the batch's own OUT is skipped)
+                if f.is_dir() and not is_dataset(f):
+                    if not (f / LOG_NAME).is_file():
+                        paths += _folder_items(f)
+                else:
+                    paths.append((f, False))
             continue
         p = Path(spec)
         if not p.exists():
             absent.append((spec, f"`inputs`: {p} does not exist"))
             continue
         if p.is_dir() and not is_dataset(p):
-            kinds = NORMAL_READ_FORMATS + (".mat",)
-            children = sorted(p.iterdir())
-            folders = {c: is_dataset(c) for c in children if c.is_dir()}
-            # (DiLiGenT's Calib_Results.mat beside its object folders is their camera: it
-            # ran as a normal map and failed, an audit)
-            paths += [(c, False) for c in children if folders.get(c)
-                      or (c.is_file() and c.suffix.lower() in kinds
-                          and c.name not in CAMERA_FILES)]
-            deeper = [c.name for c, dataset in folders.items()
-                      if not dataset and _holds_maps(c)]
-            if deeper:  # (a user's folder of days, each a folder of maps: silently skipped)
-                warnings.warn(
-                    f"batch: {p}: skipped {len(deeper)} subfolder(s) holding maps but no "
-                    f"normal_map.* or Normal_gt.mat ({', '.join(deeper[:3])}"
-                    f"{', ...' if len(deeper) > 3 else ''}): a folder is read one level "
-                    f"deep; name each as an input (facetlift batch {p / deeper[0]} ...)",
-                    stacklevel=2)
+            paths += _folder_items(p)
         else:
             paths.append((p, True))
     found, seen, lone, grey = [], set(), [], []
@@ -189,14 +183,14 @@ def items(inputs, *, list_file=None) -> list[Item]:
             + "; give such a file to every map with --mask, --prior or --confidence",
             stacklevel=2)
     names: dict[str, set] = {}
-    for p, _ in found:
-        names.setdefault(_stem(p), set()).add(p.name)
+    for p, key in found:
+        names.setdefault(_stem(p), set()).add(Path(key).name)
     out, taken = [], set()
     for p, key in found:
         # a stem shared by inputs of different extensions (a.png and a.npy) names each by its
         # extension too, whatever order they come in; then -2, -3 ... for what still collides
         # (one name in several folders)
-        name = _stem(p) if len(names[_stem(p)]) == 1 else p.name.replace(".", "_")
+        name = _stem(p) if len(names[_stem(p)]) == 1 else Path(key).name.replace(".", "_")
         name = _unique(name, taken)
         mask = None
         own = {}
@@ -204,7 +198,9 @@ def items(inputs, *, list_file=None) -> list[Item]:
         ambiguous = []
         if p.is_file():  # (X_mask with any case of a mask extension)
             kinds = {e.lower() for e in MASK_FORMATS}
-            mask = next((str(m) for m in sorted(files.stem(p.parent, f"{p.stem}_mask"))
+            # (absolute, as its prior's: a cluster's workers run in another folder, an audit)
+            mask = next((os.path.abspath(m) for m in sorted(files.stem(p.parent,
+                                                                      f"{p.stem}_mask"))
                          if m.suffix.lower() in kinds), None)
             for field, suffix, formats in companions():  # (its prior and confidence alike)
                 kinds = {e.lower() for e in formats}
@@ -231,6 +227,41 @@ def items(inputs, *, list_file=None) -> list[Item]:
             # (the log's name; no folder is made: a pattern's is "pattern")
             name = "pattern" if _GLOB & set(spec) else (Path(spec).name or "input")
             out.append(Item(path=key, name=_unique(name, taken), error=why))
+    return out
+
+
+def _folder_items(p: Path) -> list[tuple[Path, bool]]:
+    """The items a plain folder given as an input holds, one level deep: its dataset
+    folders and map files (not a camera file or facetlift's own outputs), with a warning
+    naming the outputs and the subfolders of maps it skips."""
+    from .io.dataset import CAMERA_FILES, is_dataset
+    from .io.images import NORMAL_READ_FORMATS
+
+    kinds = NORMAL_READ_FORMATS + (".mat",)
+    children = sorted(p.iterdir())
+    folders = {c: is_dataset(c) for c in children if c.is_dir()}
+    # (DiLiGenT's Calib_Results.mat beside its object folders is their camera: it
+    # ran as a normal map and failed, an audit)
+    outputs = set(OUTPUTS.values())
+    out = [(c, False) for c in children if folders.get(c)
+           or (c.is_file() and c.suffix.lower() in kinds
+               and c.name not in CAMERA_FILES and c.name not in outputs)]
+    ours = [c.name for c in children if c.is_file() and c.name in outputs]
+    if ours:  # (an integrate -o into the maps' folder: its preview.png and
+        # report.png ran as maps, its depth.exr failed the batch, an audit)
+        warnings.warn(
+            f"batch: {p}: skipped {len(ours)} file(s) named like facetlift's outputs "
+            f"({', '.join(ours[:4])}{', ...' if len(ours) > 4 else ''}): name one as "
+            "an input to integrate it", stacklevel=3)
+    deeper = [c.name for c, dataset in folders.items()
+              if not dataset and _holds_maps(c)]
+    if deeper:  # (a user's folder of days, each a folder of maps: silently skipped)
+        warnings.warn(
+            f"batch: {p}: skipped {len(deeper)} subfolder(s) holding maps but no "
+            f"normal_map.* or Normal_gt.mat ({', '.join(deeper[:3])}"
+            f"{', ...' if len(deeper) > 3 else ''}): a folder is read one level "
+            f"deep; name each as an input (facetlift batch {p / deeper[0]} ...)",
+            stacklevel=3)
     return out
 
 
@@ -293,7 +324,11 @@ def _holds_maps(folder: Path) -> bool:
 
 
 def _stem(p: Path) -> str:
-    return p.name if p.is_dir() else p.stem
+    """The folder name an input gives its results: of the absolute path (``.`` and ``..``
+    named the cwd's results ``""`` and ``..``, written into OUT itself or beside it, an
+    audit); ``input`` where that has no name (the root)."""
+    q = Path(os.path.abspath(p))
+    return (q.name if p.is_dir() else q.stem) or "input"
 
 
 def _unique(name: str, taken: set) -> str:
@@ -486,6 +521,10 @@ def run_item(job: Job, threads: int | None = None) -> dict:
             pass
     if "warnings" not in rec:  # (a successful run's record has its own, in order)
         rec["warnings"] = list(dict.fromkeys(str(w.message) for w in caught))
+    if "camera_warned" not in rec:  # (a failed run's, from its warnings as jobs.run's)
+        from .errors import CameraWarning
+
+        rec["camera_warned"] = any(issubclass(w.category, CameraWarning) for w in caught)
     rec.setdefault("mean_deviation", None)
     rec.setdefault("outputs", {})
     return rec
@@ -493,16 +532,37 @@ def run_item(job: Job, threads: int | None = None) -> dict:
 
 def _finished(log: Path) -> dict[str, dict]:
     """item -> its last record in an existing log (unreadable lines are skipped)."""
-    done = {}
+    return {rec["item"]: rec for rec in _finished_records(log)}
+
+
+def _owners(log: Path) -> dict[str, str]:
+    """Output folder name -> the input whose results the log says are in it: the item of
+    the last ``ok`` record naming that folder whose outputs are still there (unreadable lines
+    are skipped)."""
+    last: dict[str, dict] = {}
+    for rec in _finished_records(log):
+        name = rec.get("name")
+        if not isinstance(name, str):
+            continue
+        if rec.get("status") == "ok":
+            last[name] = rec
+        elif name in last and last[name]["item"] == rec["item"]:
+            last.pop(name)  # (its later run failed: its outputs may be gone)
+    return {name: rec["item"] for name, rec in last.items()
+            if isinstance(rec.get("outputs"), dict) and rec["outputs"]
+            and any(Path(p).is_file() for p in rec["outputs"].values())}
+
+
+def _finished_records(log: Path):
+    """Every record of an existing log, in order (unreadable lines skipped)."""
     if log.is_file():
-        for line in log.read_text().splitlines():
+        for line in log.read_text(encoding="utf-8", errors="replace").splitlines():
             try:
                 rec = json.loads(line)
             except json.JSONDecodeError:
                 continue  # a line cut by a killed run
             if isinstance(rec, dict) and "item" in rec:
-                done[rec["item"]] = rec
-    return done
+                yield rec
 
 
 #: Method options that do not change an item's result (a memory limit: retrying the items
@@ -550,10 +610,18 @@ def settings(job: Job) -> dict:
     return jsonable(out)
 
 
-def fingerprint(item: Item) -> list:
+#: The template's fields that name a file read for every item (:func:`fingerprint`).
+TEMPLATE_FILES = ("mask", "K", "prior", "prior_weight_map", "confidence", "world_to_camera",
+                  "camera_to_world")
+
+
+def fingerprint(item: Item, template: Job | None = None) -> list:
     """What an item's inputs are now: ``[name, size, mtime_ns]`` of its file (a dataset
-    folder: of each file in it) and of its mask file; ``--resume`` runs an item again when
-    they changed (a map replaced under the same name)."""
+    folder: of each file in it) and of its mask file, and ``[absolute path, size,
+    mtime_ns]`` of the files `template` gives every item (``--mask``, ``--K``, ``--prior``
+    ...: edited, or a relative path run from another folder, they were compared by their
+    path's text only, an audit); ``--resume`` runs an item again when they changed (a map
+    replaced under the same name)."""
     files = [Path(item.path)]
     if files[0].is_dir():  # (and a DiLiGenT folder's camera file in its parent)
         from .io.dataset import camera_files
@@ -571,6 +639,11 @@ def fingerprint(item: Item) -> list:
         except OSError:
             continue
         out.append([f.name, st.st_size, st.st_mtime_ns])
+    for field in TEMPLATE_FILES if template is not None else ():
+        value = getattr(template, field, None)
+        if isinstance(value, (str, os.PathLike)) and os.path.isfile(value):
+            st = os.stat(value)
+            out.append([os.path.abspath(value), st.st_size, st.st_mtime_ns])
     return out
 
 
@@ -678,23 +751,40 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     prepare_folder(root)  # created and checked before any work
     log_path = root / LOG_NAME if log is None else Path(log)
     earlier = _finished(log_path) if resume else {}
+    # (which input's results each folder holds, by the log: a batch of other inputs into the
+    # same OUT wrote b's map.png over a's map/ without a word, and a later --resume of a kept
+    # b's results as a's, an audit)
+    owners = _owners(log_path)
     asked = settings(template)
     jobs, results = [], {}
-    stamps = {it.path: fingerprint(it) for it in found}
+    stamps = {it.path: fingerprint(it, template) for it in found}
     for it in found:
         rec = earlier.get(it.path)
-        if rec is not None and _complete(rec, asked, stamps[it.path]):
+        if rec is not None and _complete(rec, asked, stamps[it.path]) and owners.get(
+                rec.get("name")) == it.path:
             results[it.path] = dict(rec, resumed=True)
     # the folders of the items kept from an earlier run are theirs: an item run now that
-    # would take one of those names (a new a.npy beside a kept a.png) is named anew
-    kept = {results[p]["name"] for p in results}
+    # would take one of those names (a new a.npy beside a kept a.png) is named anew; so are
+    # the folders the log gives to inputs not run now
+    running = {it.path for it in found}
+    kept = {results[p]["name"] for p in results} | {
+        n for n, item in owners.items() if item not in running}
+    mine = {item: n for n, item in owners.items()}  # (an input's folder by the log)
     # (the names items() gave the others are taken too: a renamed one must not land on one)
     taken = kept | {it.name for it in found if it.path not in results and it.name not in kept}
+    moved = []
     for it in found:
         if it.path in results or it.error is not None:
             continue
         if it.name in kept:
-            it = replace(it, name=_unique(it.name, taken))
+            old, own = it.name, mine.get(it.path)
+            if own is not None and own not in taken:  # (its own folder of an earlier run)
+                taken.add(own)
+                it = replace(it, name=own)
+            else:
+                it = replace(it, name=_unique(it.name, taken))
+                if owners.get(old) not in (None, it.path) and owners[old] not in running:
+                    moved.append((old, owners[old], it))
         # (the files beside it that it does not read: named once per folder, above)
         j = replace(template.with_input(it.path, root / it.name), unread_beside=False)
         if it.mask is not None and template.mask is None:
@@ -705,6 +795,13 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         if own:
             j = replace(j, beside=tuple(own), **own)
         jobs.append((it, j))
+    if moved:
+        old, other, it = moved[0]
+        warnings.warn(
+            f"batch: {len(moved)} item(s) named like a folder of {root} that holds another "
+            f"input's results ({LOG_NAME}) were given new folders: {old}/ holds {other}, so "
+            f"{it.path} is written to {it.name}/"
+            + (f" (and {len(moved) - 1} more)" if len(moved) > 1 else ""), stacklevel=2)
     n_workers = _workers(workers, len(jobs))
     if on_record is not None:
         for it in found:
@@ -730,7 +827,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         for it in found:  # (missing inputs: failed records, nothing to run)
             if it.error is not None and it.path not in results:
                 done(it, {"status": "error", "error": it.error, "exit": 1, "seconds": 0.0,
-                          "warnings": [], "mean_deviation": None, "outputs": {}})
+                          "warnings": [], "mean_deviation": None, "outputs": {}, "hints": [],
+                          "camera_warned": False})
         existed = {j.outdir for _, j in jobs if Path(j.outdir).exists()}
         try:
             # (SIGTERM as an exception, like Ctrl-C: the workers are stopped, not orphaned)
@@ -812,6 +910,21 @@ def check_template(job: Job, local: bool = True) -> None:
     validate(info.specs(), opts, job.method)
     if job.normal_frame is not None:
         frames.parse(job.normal_frame)
+    # (values that failed every item, one record each, instead of the batch: an audit)
+    import numpy as np
+
+    for name, none in (("triangles", True), ("strict", False), ("orthographic", False)):
+        value = getattr(job, name)
+        if not (isinstance(value, (bool, np.bool_)) or (none and value is None)):
+            raise ValueError(f"`{name}` must be True or False{' or None' if none else ''}; "
+                             f"got {value!r}")
+    from .problem import BACKFACING, _check_eps
+
+    if job.backfacing not in BACKFACING:
+        raise ValueError(f"`backfacing` must be one of {BACKFACING[:2]}; got "
+                         f"{job.backfacing!r}")
+    if job.outlier_eps is not None:
+        _check_eps(job.outlier_eps)
     from .jobs import read_rotation
 
     read_rotation(job)  # (a file given for every item: read once, here)
@@ -822,6 +935,13 @@ def check_template(job: Job, local: bool = True) -> None:
     from .jobs import check_fov
 
     check_fov(job)
+    if job.K is not None:  # (typed inline: its numbers; a file: there; each item reads it,
+        # checked against its own image size)
+        from .io.dataset import inline_K
+
+        if inline_K(job.K) is None and not os.path.isfile(job.K):
+            raise ValueError(f"`K`: {job.K} is no file, nor fx fy cx cy or nine numbers typed "
+                             "inline")
     frames.gradient_frame(job.gradient_frame)
     if job.pixel_size is not None:
         from .camera import make_camera
@@ -867,7 +987,8 @@ def log_record(rec: dict) -> dict:
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
             "shape", "facets", "mask_source", "converged", "warnings", "resumed", "settings",
             "input_stamp", "perspective", "camera", "prior_file", "confidence_file",
-            "depth_range", "normals", "evaluation", "hints", "normal_rotation")
+            "depth_range", "normals", "evaluation", "hints", "normal_rotation",
+            "camera_warned")
     # (mask_source: whether NAME_mask.png was used, a user asked; perspective: whether a
     # camera was used, a dataset folder's K.txt included; camera: which, a DiLiGenT folder's
     # being its parent's Calib_Results.mat; depth_range: height.png's scale;

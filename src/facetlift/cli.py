@@ -1183,12 +1183,28 @@ def _result_in_folder(folder: Path) -> Path:
     surface.npz (which keeps its camera), else its depth.npy, .exr or .tif; a ValueError
     naming them where it holds none."""
     names = [OUTPUTS[k] for k in ("npz", "npy", "exr", "tif")]
-    found = next((folder / n for n in names if (folder / n).is_file()), None)
-    if found is None:
+    present = [folder / n for n in names if (folder / n).is_file()]
+    if not present:
         raise ValueError(f"`result`: the folder {folder} holds none of {', '.join(names)} "
                          "(integrate writes them with -s npz, npy, exr, tif): give the depth "
                          "file, or the folder of a run that saved one")
+    # (of the latest run only: a later integrate -o into the folder without -s npz left an
+    # earlier run's surface.npz, which was scored instead of its depth.npy, an audit; one
+    # run's outputs are written as one set, within moments)
+    when = {f: f.stat().st_mtime for f in present}
+    latest = max(when.values())
+    found = next(f for f in present if when[f] >= latest - STALE_SECONDS)
+    stale = [f.name for f in present if when[f] < latest - STALE_SECONDS]
+    if stale:
+        warnings.warn(f"evaluate: {folder} holds {', '.join(stale)} from an earlier run than "
+                      f"its {found.name}: scoring {found.name}, the latest (give a file to "
+                      "score another)", stacklevel=2)
     return found
+
+
+#: Outputs of one folder written this many seconds apart come from different runs
+#: (:func:`_result_in_folder`): one run writes its set within moments.
+STALE_SECONDS = 2.0
 
 
 def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:

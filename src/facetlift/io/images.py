@@ -106,6 +106,19 @@ def _flush_c_stdio() -> None:
         ctypes.CDLL(None).fflush(None)
 
 
+def _exr_quantity(path: Path) -> str | None:
+    """The :data:`EXR_QUANTITY` of an EXR file's header (None where it has none or cannot be
+    read: the reading itself says why)."""
+    try:
+        import OpenEXR
+
+        with _stdout_to_stderr(), OpenEXR.File(str(path), header_only=True) as f:
+            value = f.header().get(EXR_QUANTITY)
+    except Exception:
+        return None
+    return value if isinstance(value, str) else None
+
+
 def _read_exr(path: Path, arg: str) -> dict[str, np.ndarray]:
     try:
         import OpenEXR
@@ -689,7 +702,8 @@ def _read_npz_depth(p: Path, arg: str, wanted: tuple[str, ...] = ("depth",)) -> 
 def read_depth(path, *, npz_names: tuple[str, ...] = ("depth",), arg: str = "path",
                zero_unknown: bool = False) -> np.ndarray:
     """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF) or
-    the ``depth`` of a :meth:`facetlift.Surface.save` ``.npz``.
+    the ``depth`` of a :meth:`facetlift.Surface.save` ``.npz``; a ``height.exr`` of
+    :func:`facetlift.io.write_height` (marked so in its header) is read back as depth.
 
     `npz_names`: the arrays of a ``.npz`` looked for, in order (else its only one): a
     ground truth's, e.g. ``("depth_gt", "depth")`` for BiNI's DiLiGenT ``depth_gt.npz``.
@@ -699,6 +713,10 @@ def read_depth(path, *, npz_names: tuple[str, ...] = ("depth",), arg: str = "pat
                    npz_names=tuple(npz_names))
     integer = a.dtype.kind in "ui"
     a = a.astype(np.float64)
+    if Path(path).suffix.lower() == ".exr" and _exr_quantity(Path(path)) == "height":
+        # (facetlift's height.exr: its heights were taken for depths, the sign silently
+        # wrong, an audit; "0.0 -" keeps 0 from becoming -0.0)
+        a = 0.0 - a
     if zero_unknown and integer:
         a[a == 0] = np.nan
     return a
@@ -708,10 +726,18 @@ def read_depth(path, *, npz_names: tuple[str, ...] = ("depth",), arg: str = "pat
 # encoding
 
 
-def _write_exr(path: Path, channels: dict[str, np.ndarray]) -> None:
+#: The EXR header attribute that marks what a one-channel image of facetlift's holds
+#: (:func:`facetlift.io.write_height` writes ``"height"``: :func:`read_depth` then reads it
+#: back as depth, ``-height``).
+EXR_QUANTITY = "facetlift_quantity"
+
+
+def _write_exr(path: Path, channels: dict[str, np.ndarray], quantity: str | None = None) -> None:
     import OpenEXR
 
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    if quantity is not None:
+        header[EXR_QUANTITY] = quantity
     data = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in channels.items()}
     with atomic_path(path) as tmp:
         try:
@@ -955,6 +981,8 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior",
     a = read_plane(p, maps, "depth prior", arg, prefer=("Z",), mat_names=MAT_PRIOR_NAMES)
     zero_unknown = a.dtype.kind in "ui"
     a = a.astype(np.float64)
+    if p.suffix.lower() == ".exr" and _exr_quantity(p) == "height":  # (as read_depth)
+        a = 0.0 - a
     if zero_unknown:
         a[a == 0] = np.nan
     return a if scale is None else a * float(scale)

@@ -265,7 +265,7 @@ def write_height(path, surface, *, height_range=None) -> tuple[Path, tuple[float
         if given is not None:
             raise ValueError(f"`height_range` {height_range!r} applies to the 16-bit PNG; "
                              f"{p.name} holds the heights themselves: leave it out")
-        _write_exr(p, {"Y": np.negative(depth, dtype=np.float32)})
+        _write_exr(p, {"Y": np.negative(depth, dtype=np.float32)}, quantity="height")
         return p, None
     if given is None:
         low, high = float(np.nanmax(depth)), float(np.nanmin(depth))
