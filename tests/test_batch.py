@@ -1104,7 +1104,8 @@ def test_dot_and_globbed_folders_and_own_outputs(tmp_path, monkeypatch):
     for kw, match in (({"triangles": "yes"}, r"`triangles` must be True or False or None"),
                       ({"backfacing": "maybe"}, r"`backfacing` must be one of"),
                       ({"strict": "no"}, r"`strict` must be True or False"),
-                      ({"K": "1 2 3"}, r"`K`: 1 2 3 is no file"),
+                      ({"K": "1 2 3"}, r"`K`: '1 2 3' \(typed inline\) holds 3 numbers"),
+                      ({"K": "nofile.txt"}, r"`K`: nofile.txt is no file"),
                       ({"outlier_eps": -3.0}, r"outlier_eps")):
         with pytest.raises(ValueError, match=match):  # (before any item: each failed alone)
             fb.batch(["x/in/m0.png"], tmp_path / "o2", workers=1, **kw)

@@ -272,8 +272,9 @@ def test_K_typed_inline_is_forwarded(tmp_path, capsys, monkeypatch):
         assert code == 1 and "spy stops here" in err, (typed, err)
         np.testing.assert_array_equal(seen["K"], K)
     monkeypatch.undo()
-    code, _, err = run(capsys, "integrate", npath, "--K", "50 52 13")
-    assert code == 1 and "Invalid value for '--K': File '50 52 13' does not exist" in err
+    code, _, err = run(capsys, "integrate", npath, "--K", "50 52 13")  # (named as such, not
+    # "File '50 52 13' does not exist": an audit)
+    assert code == 1 and "--K: '50 52 13' (typed inline) holds 3 numbers; give four" in err
     code, _, err = run(capsys, "integrate", npath, "--K", "fx 52 13 10")
     assert code == 1 and "does not exist" in err
     code, _, err = run(capsys, "integrate", npath, "--K", "50 -52 13 10", "-o", tmp_path / "o")
@@ -1372,3 +1373,36 @@ def test_info_reads_the_normals_noise_from_their_curl(tmp_path, capsys):
         code, out, _ = run(capsys, "info", path)
         line = next(x for x in out.splitlines() if "noise: about" in x)
         assert "read from the normals' curl" in line, out
+
+
+def test_info_takes_integrates_folder_flags_and_a_given_K_over_the_folders_is_warned(
+        tmp_path, capsys):
+    """An audit: info told a folder's user to give --no-prior, which it refused (and had no
+    --orthographic); --K over a dataset folder's differing K.txt replaced it in silence where
+    --fov warns; info's text left out the zero-confidence pixels its JSON counts."""
+    ds = tmp_path / "ds"
+    ds.mkdir()
+    _, _, mask = write_input(ds, name="normal_map.png")
+    np.savetxt(ds / "K.txt", [[50.0, 0, 12.5], [0, 50.0, 9.5], [0, 0, 1]])
+    conf = np.ones((20, 26))
+    conf[0, :5] = 0.0
+    np.save(ds / "confidence.npy", conf)
+    np.save(ds / "prior_depth.npy", np.full((20, 26), -1.0))  # (refused: not positive)
+    code, out, err = run(capsys, "info", ds)
+    assert code == 1 and "positive z-depths" in out
+    code, out, err = run(capsys, "info", ds, "--no-prior", "--json")
+    rec = json.loads(out)
+    assert code == 0 and "prior" not in rec and rec["counts"]["zero_confidence"] == 5, err
+    code, out, err = run(capsys, "info", ds, "--no-prior")
+    assert code == 0 and "5 zero confidence" in out, out
+    code, out, err = run(capsys, "info", ds, "--no-prior", "--no-confidence", "--orthographic",
+                         "--json")
+    rec = json.loads(out)
+    assert code == 0 and rec.get("K") is None and "confidence" not in rec, out
+    code, _, err = run(capsys, "info", ds, "--orthographic", "--K", "50 50 12.5 9.5")
+    assert code == 1 and "contradict" in err
+    np.save(ds / "prior_depth.npy", np.full((20, 26), 3.0))
+    code, _, err = run(capsys, "integrate", ds, "--K", "60 60 12.5 9.5", "-o", tmp_path / "o")
+    assert code == 0 and "--K 60 60 12.5 9.5 replaces the K of the dataset folder's K.txt" in err
+    code, _, err = run(capsys, "integrate", ds, "--K", "50 50 12.5 9.5", "-o", tmp_path / "o2")
+    assert code == 0 and "replaces the K" not in err  # (the same K: no word)

@@ -1791,11 +1791,20 @@ def test_info_counts_a_sensor_maps_zeros_as_unknown_with_a_camera(tmp_path, caps
     K = np.loadtxt(_K_file(tmp_path))
     d = facetlift.integrate(n, K=K).depth
     q = np.where(p > 0, 3.0 * d, 0.0)
-    with pytest.warns(UserWarning, match=r"`prior`: 630 pixel\(s\) hold exactly 0, the first "
-                      r"at \(row 0, col 1\): left out of the fit"):
+    with pytest.warns(UserWarning, match=r"`prior`: 630 pixel\(s\) in the mask hold exactly 0, "
+                      r"the first at \(row 0, col 1\): left out of the fit"):
         s = facetlift.integrate(n, K=K, prior=q, prior_fit="scale")
     assert s.info["prior"]["fit"]["scale"] == pytest.approx(1 / 3)
     assert s.info["input"]["prior_samples"] == 42
+    # zeros only outside the mask (a map's background): no word (an audit)
+    inner = np.zeros((24, 28), bool)
+    inner[::4, :] = True
+    inner[:, ::4] = True
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s = facetlift.integrate(n, inner, K=K, prior=np.where(inner, 3.0 * d, 0.0),
+                                prior_fit="scale")
+    assert s.info["prior"]["fit"]["scale"] == pytest.approx(1 / 3, rel=1e-2)
     # a prior integrate refuses (a negated relative depth) keeps its values in the report
     np.save(tmp_path / "neg.npy", np.where(p > 0, -p, np.nan))
     code = main(["info", str(tmp_path / "n.npy"), "--prior", str(tmp_path / "neg.npy"),
@@ -1803,3 +1812,16 @@ def test_info_counts_a_sensor_maps_zeros_as_unknown_with_a_camera(tmp_path, caps
     rec = json.loads(capsys.readouterr().out)
     assert code == 1 and "positive z-depths" in rec["problem"]
     assert rec["prior"]["known_pixels"] == 42 and rec["prior"]["range"] == [-5.0, -5.0]
+
+
+def test_a_prior_of_weight_zero_everywhere_is_warned_about():
+    """An audit: prior_weight 0 (or an all-zero weight map) dropped the prior in silence,
+    leaving the camera's gauge where the user expected metric depth."""
+    n = np.dstack([np.zeros((12, 14)), np.zeros((12, 14)), np.ones((12, 14))])
+    p = np.full((12, 14), 5.0)
+    with pytest.warns(UserWarning, match=r"`prior_weight` is 0 at every sample"):
+        facetlift.integrate(n, prior=p, prior_weight=np.zeros((12, 14)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s = facetlift.integrate(n, prior=p, prior_weight=1e-3)
+    np.testing.assert_allclose(s.depth, 5.0, atol=1e-6)

@@ -372,6 +372,22 @@ def test_a_principal_point_outside_the_image_is_warned_about():
         facetlift.integrate(n, K=[200.0, 200.0, 29.5, 19.5])
 
 
+def test_a_k_kept_from_before_a_resize_is_warned_about_with_its_conversion():
+    """An audit: the bear at a quarter of its size with the K of an eighth (the principal point
+    at the centre of an image half this size, inside it) gave 5x the error and no word."""
+    H, W = 128, 153
+    n = np.dstack([np.zeros((H, W)), np.zeros((H, W)), np.ones((H, W))])
+    half = [[400.0, 0, (0.5 * W - 1) / 2], [0, 400.0, (0.5 * H - 1) / 2], [0, 0, 1]]
+    with pytest.warns(UserWarning, match=r"principal point \(cx 37.75, cy 31.5\) lies at the "
+                      r"centre of an image 0.5 times the size of this 153 x 128 \(W x H\) one"
+                      r".*fx 800, fy 800, cx 76, cy 63.5"):
+        facetlift.integrate(n, K=half)
+    with warnings.catch_warnings():  # (centred, or off-centre as a crop's: no word)
+        warnings.simplefilter("error")
+        facetlift.integrate(n, K=[800.0, 800.0, (W - 1) / 2, (H - 1) / 2])
+        facetlift.integrate(n, K=[800.0, 800.0, 50.3, 90.2])
+
+
 def test_a_k_with_swapped_axes_is_warned_about_with_its_conversion():
     """BiNI's K.txt files before its commit 0684184 swap the axes and count rows from the
     bottom; upper-triangular all the same, they passed the layout check (a user's DiLiGenT
@@ -383,7 +399,8 @@ def test_a_k_with_swapped_axes_is_warned_about_with_its_conversion():
     mask[200:210, 300:310] = True
     old = [[3759.005431071329895, 0, 255.875], [0, 3772.077471010729823, 305.875], [0, 0, 1]]
     with pytest.warns(UserWarning, match=r"principal point \(cx 255.875, cy 305.875\) lies "
-                      r"where this 612 x 512 image's centre \(cx 305.5, cy 255.5\) would with "
+                      r"where this 612 x 512 \(W x H\) image's centre \(cx 305.5, cy 255.5\) "
+                      r"would with "
                       r"x and y swapped.*fx 3772.08, fy 3759.01, cx 305.875, cy 255.125"):
         facetlift.integrate(n, mask, K=old)
     with warnings.catch_warnings():

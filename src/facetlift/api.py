@@ -343,10 +343,15 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
         # unfitted route leaves it out; fitted, the zeros pulled the scale 1e4 off (a review)
         zeros = fit_zeros(raw)
         if zeros is not None:
-            r, c = np.argwhere(zeros)[0]
-            warn(f"`prior`: {int(zeros.sum())} pixel(s) hold exactly 0, the first at (row {r}, "
-                 f"col {c}): left out of the fit and the fusion as unknown depths (a depth "
-                 "sensor's mark; NaN is the way to mark them)")
+            # (those inside the mask: a map's 0 around the object is no sample to miss, and
+            # was warned about as 17,148 left out, an audit)
+            inside = zeros if mask is None or np.shape(mask) != shape else (
+                zeros & np.asarray(mask, dtype=bool))
+            if inside.any():
+                r, c = np.argwhere(inside)[0]
+                warn(f"`prior`: {int(inside.sum())} pixel(s) in the mask hold exactly 0, the "
+                     f"first at (row {r}, col {c}): left out of the fit and the fusion as "
+                     "unknown depths (a depth sensor's mark; NaN is the way to mark them)")
             raw = np.where(zeros, np.nan, raw)
     weight = _weight_image(prior_weight, "prior_weight", shape)
     if own is not None:  # (points with their own weights: those times prior_weight, as

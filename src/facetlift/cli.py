@@ -748,11 +748,17 @@ def integrate(normals, gradients, progress, as_json, **flags):
               "values are not checked as depths, and the time estimate allows for two runs.")
 @click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="A confidence map to check against the map, as for 'integrate'.")
+@click.option("--no-prior", "no_prior", is_flag=True,
+              help="Leave a dataset folder's prior_depth.* file unread, as for 'integrate'.")
+@click.option("--no-confidence", "no_confidence", is_flag=True,
+              help="Leave a dataset folder's confidence.* file unread, as for 'integrate'.")
+@click.option("--orthographic", is_flag=True,
+              help="Ignore K (e.g. a dataset's K.txt), as for 'integrate'.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def info(normals, gradients, mask, K, fov, normal_frame, y_down, world_to_camera,
          camera_to_world, normal_encoding, normal_range, gradient_frame, mat_keys, prior,
          prior_scale,
-         prior_fit, confidence, as_json):
+         prior_fit, confidence, no_prior, no_confidence, orthographic, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
     encoding, mask and components, unusable normals, K, and the memory planner's estimate of
     the peak memory the default integration would need (the figure --max-memory is checked
@@ -769,10 +775,18 @@ def info(normals, gradients, mask, K, fov, normal_frame, y_down, world_to_camera
     from .describe import describe
 
     frames.gradient_frame(gradient_frame)  # (refused as integrate refuses it, on any input)
+    # (integrate's flags that info named in its advice and did not take: an audit)
+    if no_prior and prior is not None:
+        raise ValueError(f"--no-prior and --prior {prior} contradict each other; give one")
+    if no_confidence and confidence is not None:
+        raise ValueError(f"--no-confidence and --confidence {confidence} contradict each "
+                         "other; give one")
+    if orthographic and K is not None:
+        raise ValueError(f"--K {K} and --orthographic contradict each other: give one")
     if fov is not None:  # (as integrate refuses them)
         from .jobs import Job, check_fov
 
-        check_fov(Job(K=None if K is None else str(K), fov=fov))
+        check_fov(Job(K=None if K is None else str(K), fov=fov, orthographic=orthographic))
     rec = describe(normals, gradients=gradients, mask=mask, K=K, fov=fov,
                    normal_frame=frames.resolve(normal_frame, y_down, "normal_frame"),
                    normal_encoding=normal_encoding, normal_range=normal_range,
@@ -780,7 +794,8 @@ def info(normals, gradients, mask, K, fov, normal_frame, y_down, world_to_camera
                    gradient_frame=gradient_frame,
                    prior_scale=prior_scale, prior=prior, confidence=confidence,
                    prior_fit=prior_fit, world_to_camera=world_to_camera,
-                   camera_to_world=camera_to_world)
+                   camera_to_world=camera_to_world, dataset_prior=not no_prior,
+                   dataset_confidence=not no_confidence, orthographic=orthographic)
     # (for preflight scripts: as integrate would fail, on the map or on a folder's files)
     status = EXIT_INPUT if rec.get("problem") or rec.get("refused") else EXIT_OK
     if as_json:
@@ -845,8 +860,9 @@ def _info_lines(rec: dict) -> list[str]:
                      f"than {HOLE_PIXELS} pixels without a {valid}, left out as real holes "
                      "(a ring's; if they are NaN / background fill inside the object, a mask, "
                      "--mask, integrates across them as missing samples)")
-    bad = ", ".join(f"{c[k]} {k}" for k in ("missing", "non-finite", "zero-length",
-                                            "back-facing", "grazing") if c.get(k))
+    bad = ", ".join(f"{c[k]} {k.replace('_', ' ')}" for k in (
+        "missing", "non-finite", "zero-length", "back-facing", "grazing", "zero_confidence")
+        if c.get(k))  # (zero confidence too, as the JSON and integrate count it: an audit)
     first = rec.get("first_unusable")
     lines.append(f"  unusable {_samples(field)}: {bad or 'none'}"
                  + (f"; first at (row {first[0]}, col {first[1]})" if first else ""))

@@ -114,7 +114,9 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
              normal_encoding: str = "xyz", normal_range: str = "signed", mat_keys=None,
              gradient_frame: str = "xy",
              prior_scale=None, prior=None, confidence=None, prior_fit=None,
-             fov=None, world_to_camera=None, camera_to_world=None) -> dict:
+             fov=None, world_to_camera=None, camera_to_world=None,
+             dataset_prior: bool = True, dataset_confidence: bool = True,
+             orthographic: bool = False) -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
     encoding, mask and components, unusable normals (with the first one's location), K, a
     dataset folder's depth prior and normal confidence (``prior`` / ``confidence``: known
@@ -158,6 +160,11 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         What the prior is known up to, as for ``integrate`` (:mod:`facetlift.prior_fit`): its
         values are then not checked as depths (any sign), and the time estimate allows for
         the route's two runs.
+    dataset_prior, dataset_confidence : bool
+        Read a dataset folder's ``prior_depth.*`` / ``confidence.*`` (``integrate``'s
+        ``--no-prior`` / ``--no-confidence`` set them False).
+    orthographic : bool
+        Ignore K (a dataset folder's ``K.txt``), as ``integrate --orthographic``.
 
     Raises
     ------
@@ -181,7 +188,9 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
               prior_fit=prior_fit,  # (a 16-bit relative PNG then needs no scale, as in
               # integrate: info refused it, a review)
               world_to_camera=None if world_to_camera is None else str(world_to_camera),
-              camera_to_world=None if camera_to_world is None else str(camera_to_world))
+              camera_to_world=None if camera_to_world is None else str(camera_to_world),
+              dataset_prior=dataset_prior, dataset_confidence=dataset_confidence,
+              orthographic=orthographic)
     src = job.source
     unread = []
     with recorded_warnings() as read_caught:  # (a gradient layout's, ...)

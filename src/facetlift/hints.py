@@ -114,8 +114,11 @@ def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
         # explains the deviation: a BGR map was also told to keep jumps, an audit)
     # (with a dense prior its own noise bends the surface alike: a fresh user's sensor depth,
     # 1 mm of noise at weight 0.5, deviated 11 deg, and only the jumps were named)
-    also = (" (or the dense prior's own noise: a lower --prior-weight, e.g. 0.01, or "
-            "--prior-blur; docs/fusion.md)" if dense else "")
+    # (with --prior-blur given, not that again: an audit)
+    also = ("" if not dense else " (or the dense prior's own noise: a lower --prior-weight, e.g. "
+            "0.001; docs/fusion.md)" if info.get("prior_blur") else
+            " (or the dense prior's own noise: a lower --prior-weight, e.g. 0.01, or "
+            "--prior-blur; docs/fusion.md)")
     # (a method that cannot keep jumps: the one that can, named; poisson and the others at
     # the same deviation got no word, a user's check)
     keep = ("--discontinuities keeps them" if method.discontinuities else

@@ -339,7 +339,14 @@ def read(job: Job) -> Input:
 
         # (a calibration of another size refused: a 1224 x 1024 one on a 612 x 512 map was
         # caught only by chance, a fresh user's review)
-        K = camera_of(job.K, n.shape[:2])
+        folder_K, K = K, camera_of(job.K, n.shape[:2])
+        if folder_K is not None and not np.allclose(folder_K, K, rtol=1e-6, atol=1e-9):
+            # (replaced in silence where --fov warns: an audit)
+            name = "K.txt" if K_file is None else _camera_name(K_file, src)
+            warn(f"`K` {job.K} replaces the K of the dataset folder's {name} (fx "
+                 f"{folder_K[0, 0]:g}, cx {folder_K[0, 2]:g}, cy {folder_K[1, 2]:g}), which "
+                 f"differs (fx {K[0, 0]:g}, cx {K[0, 2]:g}, cy {K[1, 2]:g}); leave --K out to "
+                 "use the folder's")
     if job.fov is not None:
         check_fov(job)
         if field_input:

@@ -737,13 +737,13 @@ def prepare(
                        if Kc is not None else False)
             if Kc is not None and centred:  # (e.g. a K from a field of view, --fov: an audit)
                 frame += (f"; or is K for another image size, or its focal length wrong (fx "
-                          f"{Kc[0, 0]:g}, fy {Kc[1, 1]:g} for this {W} x {H} image; they scale "
-                          "with the image, and --fov gives them from the field of view across "
-                          "the width)?")
+                          f"{Kc[0, 0]:g}, fy {Kc[1, 1]:g} for this {W} x {H} (W x H) image; they "
+                          "scale with the image, and --fov gives them from the field of view "
+                          "across the width)?")
             elif Kc is not None:  # (a K of another image turns the rays: a user's check)
                 frame += (f"; or is K for another image (a crop or a resize)? Its principal "
                           f"point (cx {Kc[0, 2]:g}, cy {Kc[1, 2]:g}) is usually near the "
-                          f"centre of this {W} x {H} image, its focal lengths fx "
+                          f"centre of this {W} x {H} (W x H) image, its focal lengths fx "
                           f"{Kc[0, 0]:g}, fy {Kc[1, 1]:g} scale with the image")
         hint = no_camera_hint(counts, cam.perspective, field)
         warn(
@@ -986,10 +986,11 @@ def _check_principal_point(cam, H: int, W: int) -> None:
     if (min(cx + 0.5, W - 0.5 - cx) >= PRINCIPAL_EDGE * W - tol
             and min(cy + 0.5, H - 0.5 - cy) >= PRINCIPAL_EDGE * H - tol):
         _check_swapped_axes(Kc, H, W)
+        _check_scaled_centre(Kc, H, W)
         return
     inside = -0.5 <= cx <= W - 0.5 and -0.5 <= cy <= H - 0.5
     where = "lies at the edge of" if inside else "lies outside"
-    warn(f"`K`: the principal point (cx {cx:g}, cy {cy:g}) {where} this {W} x {H} image "
+    warn(f"`K`: the principal point (cx {cx:g}, cy {cy:g}) {where} this {W} x {H} (W x H) image "
          "(columns 0..W-1, rows 0..H-1): is K for another image? After a crop, subtract the "
          "crop's first column and row from cx and cy; after a resize, scale fx, fy, cx and cy "
          "with the image (docs/conventions.md, 'A K for another image')", CameraWarning)
@@ -1048,10 +1049,40 @@ def _check_swapped_axes(K, H: int, W: int) -> None:
     if swapped <= SWAPPED_CENTRE and true >= SWAPPED_FARTHER * max(swapped, SWAPPED_CENTRE / 2):
         fx, fy = float(K[0, 0]), float(K[1, 1])
         warn(f"`K`: the principal point (cx {cx:g}, cy {cy:g}) lies where this {W} x {H} "
-             f"image's centre (cx {cx0:g}, cy {cy0:g}) would with x and y swapped: is K in "
-             "another layout? BiNI's K.txt files before its commit 0684184 swap the axes and "
+             f"(W x H) image's centre (cx {cx0:g}, cy {cy0:g}) would with x and y swapped: is K "
+             "in another layout? BiNI's K.txt files before its commit 0684184 swap the axes and "
              f"count rows from the bottom: the K for facetlift (OpenCV) is then fx {fy:g}, fy "
-             f"{fx:g}, cx {cy:g}, cy {H - 1 - cx:g} (docs/conventions.md)", CameraWarning)
+             f"{fx:g}, cx {cy:g}, cy {H - 1 - cx:g}; where only cx and cy were swapped, cx "
+             f"{cy:g}, cy {cx:g} (docs/conventions.md)", CameraWarning)
+
+
+#: Image sizes, relative to the one integrated, whose centre a K's principal point is checked
+#: against (:func:`_check_scaled_centre`): a K kept from the image before a resize.
+SCALED_SIZES = (0.25, 1 / 3, 0.5, 2 / 3, 1.5)
+
+
+def _check_scaled_centre(K, H: int, W: int) -> None:
+    """A warning where K's principal point sits at the centre an image `s` times this one's
+    size would have (:data:`SCALED_SIZES`, within :data:`SWAPPED_CENTRE` of the size), far
+    from this image's own: a K kept from before a resize (an audit: the bear at 1/4 of its
+    size with the K of 1/8 of it, 5x the error and no word). A crop's K lands there only by
+    chance."""
+    cx, cy = float(K[0, 2]), float(K[1, 2])
+    cx0, cy0 = (W - 1) / 2, (H - 1) / 2
+    true = float(np.hypot((cx - cx0) / W, (cy - cy0) / H))
+    for size in SCALED_SIZES:
+        cxs, cys = (size * W - 1) / 2, (size * H - 1) / 2
+        off = float(np.hypot((cx - cxs) / W, (cy - cys) / H))
+        if off <= SWAPPED_CENTRE and true >= SWAPPED_FARTHER * max(off, SWAPPED_CENTRE / 2):
+            a = 1.0 / size  # (pixel centres at integer indices: c' = (c + 0.5) a - 0.5)
+            fx, fy = float(K[0, 0]), float(K[1, 1])
+            warn(f"`K`: the principal point (cx {cx:g}, cy {cy:g}) lies at the centre of an "
+                 f"image {size:.3g} times the size of this {W} x {H} (W x H) one (cx {cxs:g}, "
+                 f"cy {cys:g}), far from its own (cx {cx0:g}, cy {cy0:g}): is K for the image "
+                 f"before a resize? Scaled to this one it is fx {fx * a:.6g}, fy {fy * a:.6g}, "
+                 f"cx {(cx + 0.5) * a - 0.5:.6g}, cy {(cy + 0.5) * a - 0.5:.6g} "
+                 "(docs/conventions.md, 'A K for another image')", CameraWarning)
+            return
 
 
 def _warn_unfixed(problem: Problem) -> None:
@@ -1607,6 +1638,10 @@ def check_prior(prior, prior_weight, shape, mask, camera):
                          f"where the prior has a sample; got {float(w[k])!r} "
                          f"({int(wbad.sum())} such pixel(s)); 1e8 already returns the prior "
                          "where given")
+    if have.any() and not (w[have] > 0).any():  # (dropped in silence: an audit)
+        warn("`prior_weight` is 0 at every sample of the prior: the prior is not used (the "
+             "result keeps the camera's gauge, not its depths); give a positive weight, or "
+             "leave the prior out")
     huge = have & (np.abs(depth) > MAX_PRIOR_DEPTH)
     if huge.any():
         k = int(np.flatnonzero(huge)[0])

@@ -145,13 +145,18 @@ def inline_value(value) -> InlineK | None:
     if not isinstance(value, str) or os.path.exists(value):
         return None
     words = [w for w in re.split(r"[\s,]+", value.strip()) if w]
-    if len(words) not in (4, 9):
-        return None
     try:
         numbers = np.array([float(w) for w in words])
     except ValueError:
         return None
     out = InlineK(value)
+    if len(words) not in (4, 9):  # (numbers all, but a count no K has: "file '943 939 76'
+        # does not exist" said nothing of it, an audit)
+        if len(words) < 2:
+            return None
+        out.error = (f"`K`: {value!r} (typed inline) holds {len(words)} numbers; give four, "
+                     "fx fy cx cy, or the nine of the 3x3 matrix row by row, or a K file")
+        return out
     try:
         out.K = check_K(numbers if numbers.size == 4 else numbers.reshape(3, 3))
     except ValueError as e:
