@@ -482,3 +482,51 @@ def test_a_camera_a_method_cannot_take_is_refused_before_the_input_is_checked():
         warnings.simplefilter("error")
         with pytest.raises(ValueError, match=r"method 'kernel' does not support perspective"):
             facetlift.integrate(n, method="kernel", K=K)
+
+
+def test_inputs_an_audit_of_the_api_refused_or_misread():
+    """An audit of the Python API: normals scaled by 1e-3 (half of them negative) were
+    refused as [0, 1]-encoded; np.True_ was refused by every bool option (numpy 2 names its
+    type "bool"); big-endian uint16 was refused as "not uint16"; Surface.from_depth took a
+    masked array's hidden values and a NaN mask; prepare(camera=...) dropped K= in silence and
+    took a string; progress=False was refused."""
+    from facetlift import synthetic
+    from facetlift.camera import Orthographic
+    from facetlift.surface import Surface
+
+    gt = synthetic.analytic("sphere", 32)
+    ref = facetlift.integrate(gt.normals, gt.mask).depth
+    for scale in (1e-3, 1e-8):
+        np.testing.assert_allclose(facetlift.integrate(gt.normals * scale, gt.mask).depth, ref,
+                                   atol=1e-9)
+    with pytest.raises(ValueError, match=r"looks \[0, 1\]-encoded"):  # (still refused)
+        facetlift.integrate((gt.normals + 1) / 2, gt.mask)
+    s = facetlift.integrate(gt.normals, gt.mask, discontinuities=True,
+                            discontinuity_seed=np.True_)
+    assert s.info["method"] == "dgp"
+    facetlift.integrate(gt.normals, gt.mask, solver="iterative", mean_subtraction=np.False_)
+    u = np.round((np.where(gt.mask[..., None], gt.normals, [0, 0, 1]) + 1) / 2 * 65535)
+    with pytest.warns(UserWarning, match=r"decoded as v / 65535"):
+        a = facetlift.integrate(u.astype(np.uint16), gt.mask).depth
+    with pytest.warns(UserWarning, match=r"decoded as v / 65535"):
+        b = facetlift.integrate(u.astype(">u2"), gt.mask).depth
+    np.testing.assert_array_equal(a, b)
+    depth = np.fromfunction(lambda r, c: 5 + 0.01 * r + 0.02 * c, (20, 20))
+    hidden = np.ma.masked_array(depth.copy(), mask=np.zeros((20, 20), bool))
+    hidden.mask[5, 5] = True
+    hidden.data[5, 5] = 1e6
+    surf = Surface.from_depth(hidden)
+    assert not surf.mask[5, 5] and np.nanmax(surf.vertex_depth) < 6
+    with pytest.raises(ValueError, match=r"`mask` contains NaN"):
+        Surface.from_depth(depth, np.full((20, 20), np.nan))
+    with pytest.raises(ValueError, match=r"`depth` must be a real numeric array"):
+        Surface.from_depth("abc")
+    with pytest.raises(ValueError, match=r"give `camera`, or `K` / `pixel_size`, not both"):
+        facetlift.prepare(gt.normals, gt.mask, camera=Orthographic(1.0), K=np.eye(3))
+    with pytest.raises(ValueError, match=r"`camera` must be a facetlift.camera.Camera"):
+        facetlift.prepare(gt.normals, gt.mask, camera="pinhole")
+    facetlift.integrate(gt.normals, gt.mask, progress=False)
+    with pytest.raises(ValueError, match=r"`progress` must be True .*; got 'garbage'"):
+        facetlift.integrate(gt.normals, gt.mask, method="frankot_chellappa", progress="garbage")
+    problem = facetlift.prepare(gt.normals, gt.mask)
+    facetlift.solve(problem, "frankot_chellappa", progress=lambda i, v: None)

@@ -257,10 +257,7 @@ def integrate(
         options["solver"] = solver
     if K is not None and not info.perspective:  # (before the input's warnings: a user's)
         raise _no_perspective(method)
-    if "progress" in options and "progress" not in info.options():
-        # (a method without iterations has nothing to report: progress= is accepted by every
-        # method, as the command line's --progress is; frankot_chellappa refused it, a user's)
-        options.pop("progress")
+    _progress_option(options, info)
     # (a mistyped option is refused before the input is read and checked: its warnings, e.g.
     # about grazing normals, came first and hid the one line that mattered; progress=True is
     # a bar made in _solve)
@@ -526,6 +523,25 @@ def _no_progress(iteration, value):
     """(A stand-in for ``progress=True`` while the options are checked.)"""
 
 
+def _progress_option(options: dict, info) -> None:
+    """`options`' ``progress`` checked and taken out where it asks for nothing: False or None
+    (``progress=verbose``: False was refused, an audit), or a method without iterations,
+    which has nothing to report (progress= is accepted by every method, as the command
+    line's --progress is; frankot_chellappa refused a callable, a user's, and took any value,
+    an audit)."""
+    if "progress" not in options:
+        return
+    value = options["progress"]
+    if value is None or value is False:
+        options.pop("progress")
+        return
+    if not (value is True or callable(value)):
+        raise ValueError(f"`progress` must be True (a progress bar on stderr), a callable or "
+                         f"None; got {value!r}")
+    if "progress" not in info.options():
+        options.pop("progress")
+
+
 def _solve(problem, method, t0, max_memory, options):
     """:func:`solve`, timed from `t0` (integrate's start; None: now). (Its own arguments are
     positional here: an option named ``t0`` or ``problem`` is the method's, refused as such.)"""
@@ -539,6 +555,8 @@ def _solve(problem, method, t0, max_memory, options):
         finally:
             bar.close()
     info = methods.get(method)
+    options = dict(options)
+    _progress_option(options, info)
     values = validate(info.specs(), options, method)
     eps = problem.counts.get("outlier_eps")
     jump = info.jump_grazing

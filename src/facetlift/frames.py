@@ -894,8 +894,14 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
         return
     with np.errstate(over="ignore", invalid="ignore"):
         length = np.sqrt(np.einsum("ij,ij->i", v, v))
+        d = 2.0 * v - 1.0
+        decoded = np.sqrt(np.einsum("ij,ij->i", d, d))
     if np.mean(np.abs(length - 1) > 0.05) < 0.5:
         return  # unit normals that all face up and right: a tilted plane, say
+    if np.mean(np.abs(decoded - 1) < 0.05) < 0.5:
+        return  # (nor (n + 1) / 2: normals not of unit length, which prepare normalises; a
+        # map scaled by 1e-3, or all components >= 0 at 0.8 of unit length, was refused as
+        # [0, 1]-encoded, an audit)
     read = _RANGE_READ.get()
     if read is None:  # (arrays from Python: facetlift.integrate has no option for it)
         fix = ("decode it first with n = 2 * v - 1 (or pass the 8/16-bit integer image itself; "
@@ -952,6 +958,8 @@ def as_float_normals(n: np.ndarray, name: str, mask=None, hidden=None) -> np.nda
     types refused; NaN at the `hidden` pixels (:func:`masked_pixels`). Shared by
     :func:`checked` and :func:`facetlift.io.write_normals`."""
     if n.dtype.kind == "u":
+        if not n.dtype.isnative:  # (big-endian '>u2' was refused as "must be uint16", an audit)
+            n = n.astype(n.dtype.newbyteorder("="))
         if n.dtype not in ENCODED_DTYPES:
             raise ValueError(
                 f"`{name}` has integer type {n.dtype}; integer normal maps must be uint8 or "

@@ -122,7 +122,10 @@ def _number(opt: Option, value):
 
 def _convert(opt: Option, value):
     if opt.kind == "bool":
-        if isinstance(value, bool) or type(value).__name__ == "bool_":
+        # (numpy's bool: its type is named "bool" since numpy 2, and np.True_ was refused
+        # by every bool option, an audit)
+        if isinstance(value, bool) or type(value).__module__ == "numpy" and type(
+                value).__name__ in ("bool", "bool_"):
             return True, bool(value)
         return False, None
     if opt.kind == "callable":

@@ -537,6 +537,15 @@ def prepare(
         raise ValueError(f"`normals` must have at least one pixel; got shape {n.shape}")
     if backfacing not in BACKFACING:
         raise ValueError(f"`backfacing` must be one of {BACKFACING[:2]}; got {backfacing!r}")
+    if camera is not None:  # (K and pixel_size were dropped in silence beside it, and a
+        # string failed on an attribute, an audit)
+        if not isinstance(camera, Camera):
+            raise ValueError(f"`camera` must be a facetlift.camera.Camera (Orthographic, "
+                             f"Pinhole); got {type(camera).__name__}: give K= or pixel_size= "
+                             "instead")
+        if K is not None or not (isinstance(pixel_size, (int, float)) and pixel_size == 1.0):
+            raise ValueError("give `camera`, or `K` / `pixel_size`, not both: the camera "
+                             "holds them")
     cam = make_camera(pixel_size, K) if camera is None else camera
     _check_principal_point(cam, H, W)
     _check_focal_length(cam, H, W, given=K)

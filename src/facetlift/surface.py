@@ -82,16 +82,25 @@ class Surface:
             A `depth` that is no (H, W) array, a `mask` of another shape, or a mask pixel
             whose depth is not finite (or not positive with `K`).
         """
-        from .problem import _short
+        from .problem import _bool_image, _short, numeric_array, unmasked
 
-        d = np.asarray(depth, dtype=float)
+        # (as integrate reads its arrays: a masked array's masked pixels unknown, a NaN mask
+        # refused, a soft one warned about, a string named; np.asarray took the masked
+        # values and every nonzero mask value, NaN included, an audit)
+        d = numeric_array(unmasked(depth), "depth").astype(float)
         if d.ndim != 2:
             raise ValueError(f"`depth` must be an (H, W) array; got {_short(depth)}")
         camera = make_camera(pixel_size, K)
-        ok = np.isfinite(d) & (d > 0 if camera.perspective else True)
-        m = ok if mask is None else np.asarray(mask, dtype=bool)
-        if m.shape != d.shape:
-            raise ValueError(f"`mask` must have the shape of `depth` {d.shape}; got {m.shape}")
+        with np.errstate(invalid="ignore"):
+            ok = np.isfinite(d) & (d > 0 if camera.perspective else True)
+        if mask is None:
+            m = ok
+        else:
+            shape = np.shape(unmasked(mask, 0.0))
+            if shape != d.shape:
+                raise ValueError(f"`mask` must have the shape of `depth` {d.shape}; got "
+                                 f"{shape}")
+            m = _bool_image(mask, "mask", d.shape)
         if (m & ~ok).any():
             r, c = np.argwhere(m & ~ok)[0]
             what = "finite and positive (a pinhole camera's z-depth)" if camera.perspective \
