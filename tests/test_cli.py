@@ -1406,3 +1406,17 @@ def test_info_takes_integrates_folder_flags_and_a_given_K_over_the_folders_is_wa
     assert code == 0 and "--K 60 60 12.5 9.5 replaces the K of the dataset folder's K.txt" in err
     code, _, err = run(capsys, "integrate", ds, "--K", "50 50 12.5 9.5", "-o", tmp_path / "o2")
     assert code == 0 and "replaces the K" not in err  # (the same K: no word)
+
+
+def test_info_json_words_warnings_as_the_command_line_and_says_camera_warned(tmp_path,
+                                                                             capsys):
+    """An audit: info --json named `K` in its warnings where integrate --json names --K, and
+    had no camera_warned."""
+    npath, mpath, _ = write_input(tmp_path)
+    code, out, err = run(capsys, "info", npath, "--mask", mpath, "--K", "50 50 25.5 19.5",
+                         "--json")
+    rec = json.loads(out)
+    assert code == 0 and rec["camera_warned"] is True, err
+    assert any(w.startswith("--K: the principal point") for w in rec["warnings"]), rec
+    code, out, _ = run(capsys, "info", npath, "--mask", mpath, "--json")
+    assert json.loads(out)["camera_warned"] is False

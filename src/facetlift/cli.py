@@ -799,6 +799,12 @@ def info(normals, gradients, mask, K, fov, normal_frame, y_down, world_to_camera
     # (for preflight scripts: as integrate would fail, on the map or on a folder's files)
     status = EXIT_INPUT if rec.get("problem") or rec.get("refused") else EXIT_OK
     if as_json:
+        # (its warnings and problem in the command line's words, as integrate --json's: they
+        # named `K` where integrate's name --K, an audit)
+        rec = dict(rec, warnings=[_as_flags(str(w)) for w in rec.get("warnings", [])])
+        for key in ("problem", "refused"):
+            if isinstance(rec.get(key), str):
+                rec[key] = _as_flags(rec[key])
         click.echo(json.dumps(jsonable(rec)))
         _STATE["printed_json"] = True  # (the report is the one object, failed or not)
         return status

@@ -110,6 +110,14 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
     return out
 
 
+def _camera_warned(*caught) -> bool:
+    """Whether one of the recorded warnings is a :class:`facetlift.errors.CameraWarning` (a K
+    that looks wrong), as ``integrate --json``'s ``camera_warned``."""
+    from .errors import CameraWarning
+
+    return any(issubclass(w.category, CameraWarning) for ws in caught for w in ws)
+
+
 def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
              normal_encoding: str = "xyz", normal_range: str = "signed", mat_keys=None,
              gradient_frame: str = "xy",
@@ -302,6 +310,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
             # unusable, and its warning was dropped, a review)
             out["warnings"] += [str(w.message) for w in caught if not issubclass(
                 w.category, UnusableNormalsWarning)]
+            out["camera_warned"] = _camera_warned(read_caught, caught)
             return unusable(e)
     d = problem.domain
     if fitted:
@@ -326,6 +335,8 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         # (the unusable normals have their own line: not again as a warning)
         warnings=out["warnings"] + [str(w.message) for w in caught if not issubclass(
             w.category, UnusableNormalsWarning)],
+        # (as integrate's record says it: an audit)
+        camera_warned=_camera_warned(read_caught, caught),
         frame=frame,
         estimate=_twice(estimate(problem), fitted),
         # (what --discontinuities would need: a user planning a large job asked)
