@@ -159,6 +159,21 @@ def test_output_set_commits_all_or_nothing(tmp_path):
     np.testing.assert_array_equal(np.load(out / "a.npy"), np.zeros(2))
 
 
+def test_a_failed_output_set_removes_the_folders_it_made(tmp_path):
+    """An audit: a failed -o new/sub removed sub/ but left new/, which it had made too; a
+    folder that was there before stays."""
+    with pytest.raises(RuntimeError, match="failed"):
+        with atomic.OutputSet(tmp_path / "new" / "sub" / "o", ["a.npy"]) as s:
+            np.save(s.path("a.npy"), np.zeros(2))
+            raise RuntimeError("failed")
+    assert not (tmp_path / "new").exists()
+    (tmp_path / "kept").mkdir()
+    with pytest.raises(RuntimeError, match="failed"):
+        with atomic.OutputSet(tmp_path / "kept" / "o", ["a.npy"]):
+            raise RuntimeError("failed")
+    assert (tmp_path / "kept").is_dir() and not (tmp_path / "kept" / "o").exists()
+
+
 def test_output_set_commit_that_fails_leaves_the_folder_as_it_was(tmp_path, monkeypatch):
     """A user's check: a folder named like one output (mkdir out/preview.png) left a new
     depth.npy and mesh.ply beside the staging folder, with a bare '[Errno 21]'."""

@@ -177,10 +177,11 @@ class Orthographic(Camera):
             return -h * n[..., 0] / n[..., 2], -h * n[..., 1] / n[..., 2]
 
     def to_depth(self, unknown):
-        return -np.asarray(unknown, dtype=float)
+        # ("0.0 -": a flat map's height 0 gave depth -0.0, written so in depth_range, an audit)
+        return 0.0 - np.asarray(unknown, dtype=float)
 
     def from_depth(self, depth):
-        return -np.asarray(depth, dtype=float)
+        return 0.0 - np.asarray(depth, dtype=float)
 
     def gauge(self, facet_values, component, n):
         return _components_mean(facet_values, component, n)

@@ -212,6 +212,9 @@ class OutputSet:
                         f"`out`: the output {target} is the input {src}; choose another "
                         "output folder (-o)"
                     )
+        # (the folders above it that this run makes too: a failed -o new/sub left new/, an
+        # audit; removed on failure while empty, innermost first)
+        self._made = [p for p in self.outdir.absolute().parents if not p.exists()]
         self.created = prepare_folder(self.outdir)
         token = secrets.token_hex(4)
         self.staging = self.outdir / f"{STAGING_PREFIX}{_host()}-{os.getpid()}-{token}"
@@ -295,6 +298,8 @@ class OutputSet:
         if self.created:
             with contextlib.suppress(OSError):
                 self.outdir.rmdir()  # only when empty
+                for parent in self._made:  # (innermost first; stops at one not empty)
+                    parent.rmdir()
 
     def __enter__(self):
         self._sigterm.__enter__()
