@@ -121,6 +121,40 @@ def test_a_bini_folder_stays_orthographic_under_a_parent_camera(tmp_path):
     np.testing.assert_array_equal(ds["K"], KK)
 
 
+def test_a_photometric_stereo_folder_with_an_estimate_takes_the_parents_camera(tmp_path):
+    """An audit: a release object folder holding the user's estimated normal_map.png (as the
+    'photometric stereo folder' error tells) beside light_directions.txt, without
+    Normal_gt.mat, ran orthographic: its parent's Calib_Results.mat was looked for only beside
+    a Normal_gt.mat."""
+    n, mask = bump()
+    diligent(tmp_path / "pmsData", objects=("objPNG",))
+    f = tmp_path / "pmsData" / "objPNG"
+    (f / "Normal_gt.mat").unlink()
+    io.write_normals(f / "normal_map.png", n, bits=16)
+    np.testing.assert_array_equal(io.read_dataset(f)["K"], KK)
+
+
+def test_dataset_file_names_are_matched_whatever_their_case(tmp_path):
+    """An audit: K.TXT, mask.PNG and Normal_Map.png (a Windows user's names) were skipped in
+    silence: the job ran orthographic and without its mask (1578 mm MADE on the bear instead
+    of 0.47). Two names that differ only in case are refused."""
+    n, mask = bump()
+    f = tmp_path / "obj"
+    f.mkdir()
+    io.write_normals(f / "Normal_Map.PNG", np.where(mask[..., None], n, [0, 0, 1]), bits=16)
+    io.write_mask(f / "MASK.png", mask)
+    np.savetxt(f / "K.TXT", KK)
+    from facetlift.io.dataset import is_dataset
+
+    assert is_dataset(f)
+    ds = io.read_dataset(f)
+    np.testing.assert_array_equal(ds["mask"], mask)
+    np.testing.assert_array_equal(ds["K"], KK)
+    np.savetxt(f / "k.txt", KK)
+    with pytest.raises(ValueError, match=r"K.TXT and k.txt, names that differ only in case"):
+        io.read_dataset(f)
+
+
 def test_normal_gt_variables(tmp_path):
     n, mask = bump()
     f = tmp_path / "objPNG"

@@ -302,3 +302,31 @@ def test_integer_and_float32_images_fit_as_their_float64_values():
             np.testing.assert_array_equal(a, b)
     with pytest.raises(ValueError, match="`images` must be a .* stack of numbers"):
         photometric.fit(np.full((4, 2, 2), "a"), L[:4])
+
+
+def test_degenerate_lights_and_dark_images_are_refused_or_warned():
+    """An audit: coplanar lights and dark images gave all-NaN normals with no word (integrate
+    then said 'no usable normal'); lights spread by 0.01 across a plane gave a 19 deg median
+    error, confident, with no word."""
+    import warnings
+
+    from facetlift import photometric, synthetic
+
+    gt = synthetic.analytic("sphere", 32)
+    n = np.where(gt.mask[..., None], gt.normals, [0, 0, 1])
+
+    def shade(L):
+        return np.clip(np.einsum("hwc,kc->khw", n, np.asarray(L)), 0, None)
+
+    arc = np.array([[np.sin(a), 0.0, np.cos(a)] for a in np.linspace(-0.5, 0.5, 5)])
+    with pytest.raises(ValueError, match=r"`lights` span fewer than three dimensions"):
+        photometric.fit(shade(arc), arc, gt.mask)
+    near = arc + [[0, 0.01 * s, 0] for s in (1, -1, 1, -1, 1)]
+    with pytest.warns(UserWarning, match=r"`lights` nearly share a plane"):
+        photometric.fit(shade(near), near, gt.mask)
+    cap = photometric.lights_on_cap(20, 40.0)  # (a rig's lights: no word)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        photometric.fit(shade(cap), cap, gt.mask)
+    with pytest.raises(ValueError, match=r"`images` hold no positive intensity"):
+        photometric.fit(np.zeros((20, 32, 32)), cap, gt.mask)

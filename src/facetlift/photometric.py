@@ -31,6 +31,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._warnings import warn
+
 __all__ = ["cast_shadows", "fit", "lights_on_cap", "simulate"]
 
 #: Residuals (RMS over the albedo) below this count as an exact fit in :func:`fit`'s
@@ -72,6 +74,28 @@ def _check_lights(lights, images=None, least: int = 3) -> np.ndarray:
     if not (np.isfinite(L).all() and (norm > 0).all()):
         raise ValueError("`lights` must be finite, non-zero directions")
     return L / norm[:, None]
+
+
+#: Ratios of the light directions' smallest singular value to their largest below which
+#: :func:`fit` refuses them as coplanar (no normal is determined) and warns that they are
+#: badly conditioned (noise in the images turns the normals far along the direction the
+#: lights hardly span; a set spread by 0.01 across a plane: 19 deg median error with no word,
+#: an audit). DiLiGenT's 96 lights within about 40 deg of the axis read about 0.3.
+LIGHTS_SINGULAR, LIGHTS_ILL = 1e-6, 0.05
+
+
+def _check_span(L: np.ndarray) -> None:
+    """Refuse directions that span fewer than three dimensions, warn about nearly so."""
+    sv = np.linalg.svd(L, compute_uv=False)
+    ratio = float(sv[-1] / sv[0])
+    if ratio < LIGHTS_SINGULAR:
+        raise ValueError("`lights` span fewer than three dimensions (all in one plane, or "
+                         "along one line): no normal is determined by them; lights from "
+                         "directions that do not share a plane are needed")
+    if ratio < LIGHTS_ILL:
+        warn(f"`lights` nearly share a plane (their smallest singular value is {ratio:.2g} of "
+             "the largest): the normals are poorly determined across it, and noise in the "
+             "images turns them far; spread the lights more (docs/recipes.md)")
 
 
 def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 0.98,
@@ -124,6 +148,7 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
         raise ValueError(f"`images` must be a (k, H, W) stack of numbers; got shape "
                          f"{I.shape}, dtype {I.dtype}")
     L = _check_lights(lights, I)
+    _check_span(L)
     H, W = I.shape[1:]
     if mask is None:
         mask = np.isfinite(I).any(axis=0)
@@ -144,8 +169,10 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
     flat = I.reshape(len(L), -1)
     pix = np.flatnonzero(mask.ravel())
     top = _brightness(flat, pix)
-    if not top > 0:
-        return normals, confidence
+    if not top > 0:  # (all NaN with no word before: integrate then said "no usable normal")
+        raise ValueError("`images` hold no positive intensity inside the mask (all dark, or "
+                         "negative): nothing to fit; are they the photographs, linear, and the "
+                         "mask theirs?")
     LL = (L[:, :, None] * L[:, None, :]).reshape(len(L), 9)  # (each light's l l^T)
     m = pix.size
     n = np.full((m, 3), np.nan)

@@ -456,11 +456,34 @@ def _json_matrix(data: dict, p: Path, arg: str, camera_to_world: bool):
     return data[key]
 
 
+def _named(folder: Path, name: str) -> Path | None:
+    """`folder`'s entry named `name`, the case of its letters aside (a Windows user's
+    ``K.TXT``, ``mask.PNG`` or ``Normal_Map.png`` was skipped in silence: the job ran
+    orthographic, without its mask, an audit); the exact name first; None where there is
+    none or the folder cannot be listed. A ValueError naming `folder` where two entries
+    differ only in case and neither is the exact name."""
+    exact = folder / name
+    if os.path.lexists(exact):
+        return exact
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return None
+    low = name.lower()
+    hits = [n for n in names if n.lower() == low]
+    if len(hits) > 1:
+        raise ValueError(f"`folder`: {folder} holds {' and '.join(sorted(hits))}, names that "
+                         "differ only in case: keep one")
+    return folder / hits[0] if hits else None
+
+
 def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
-    """The folder's one ``stem.<ext>`` file, or None; a ValueError naming `folder` when it has
-    several (which one was meant?) or one that is not a file (a folder named K.txt was
-    skipped in silence, and the job ran without it)."""
-    found = [folder / f"{stem}{ext}" for ext in formats if (folder / f"{stem}{ext}").exists()]
+    """The folder's one ``stem.<ext>`` file (the case of its letters aside, :func:`_named`),
+    or None; a ValueError naming `folder` when it has several (which one was meant?) or one
+    that is not a file (a folder named K.txt was skipped in silence, and the job ran without
+    it)."""
+    found = list(dict.fromkeys(p for ext in formats
+                               if (p := _named(folder, f"{stem}{ext}")) is not None))
     for p in found:
         if not p.is_file():
             raise ValueError(f"`folder`: {p} is not a file")
@@ -480,8 +503,9 @@ def dataset_files(folder, *, with_prior: bool = True, with_confidence: bool = Tr
     (read_dataset refuses the folder anyway)."""
     f = Path(folder)
     skip = {"prior_depth": not with_prior, "confidence": not with_confidence}
-    own = [f / f"{stem}{ext}" for stem, formats in _dataset_formats().items()
-           if not skip.get(stem) for ext in formats if (f / f"{stem}{ext}").is_file()]
+    own = list(dict.fromkeys(p for stem, formats in _dataset_formats().items()
+                             if not skip.get(stem) for ext in formats
+                             if (p := _named(f, f"{stem}{ext}")) is not None and p.is_file()))
     return own + [p for p in camera_files(f) if p.parent != f]
 
 
@@ -512,30 +536,39 @@ def normals_file(folder) -> Path | None:
     where it holds several ``normal_map.*``."""
     f = Path(folder)
     found = _find(f, "normal_map", NORMAL_READ_FORMATS)
-    if found is None and os.path.isfile(f / DILIGENT_NORMALS):
-        return f / DILIGENT_NORMALS
-    return found
+    gt = _named(f, DILIGENT_NORMALS) if found is None else None
+    return gt if gt is not None and gt.is_file() else found
 
 
 def is_dataset(folder) -> bool:
     """Whether `folder` is a dataset folder (:func:`read_dataset`): it holds a
     ``normal_map.*`` or a ``Normal_gt.mat``. False where it cannot be read."""
     f = Path(folder)
+    try:  # (one listing, the case of the names aside: _named)
+        names = {n.lower() for n in os.listdir(f)}
+    except OSError:
+        return False
+    wanted = [f"normal_map{ext}".lower() for ext in NORMAL_READ_FORMATS]
     # (os.path.isfile: False for a folder that cannot be read, where Path.is_file raises)
-    return any(os.path.isfile(f / f"normal_map{ext}") for ext in NORMAL_READ_FORMATS) \
-        or os.path.isfile(f / DILIGENT_NORMALS)
+    return any(w in names and os.path.isfile(_named(f, w)) for w in wanted) or (
+        DILIGENT_NORMALS.lower() in names and os.path.isfile(_named(f, DILIGENT_NORMALS)))
 
 
 def camera_files(folder) -> list[Path]:
     """The camera files :func:`read_dataset` reads for `folder` (:data:`CAMERA_FILES`): the
     folder's own (both where it has both, which must agree), else, in the DiLiGenT layout
-    only (a ``Normal_gt.mat`` in the folder), its parent's: the release keeps one
+    only (a ``Normal_gt.mat`` or a ``light_directions.txt`` in the folder), its parent's: the
+    release keeps one
     ``Calib_Results.mat`` beside its object folders. Not a BiNI folder's parent: a BiNI
     folder without ``K.txt`` is orthographic, and a camera file above it must not make it
     perspective without a word. An empty list: orthographic."""
     f = Path(folder)
-    for where in (f, f.parent) if os.path.isfile(f / DILIGENT_NORMALS) else (f,):
-        found = [where / name for name in CAMERA_FILES if (where / name).exists()]
+    # (the parent too in a photometric-stereo folder of the release, light_directions.txt, whose
+    # estimated normal_map.png the user saved there as told: it ran orthographic, an audit)
+    release = any((p := _named(f, name)) is not None and p.is_file()
+                  for name in (DILIGENT_NORMALS, "light_directions.txt"))
+    for where in (f, f.parent) if release else (f,):
+        found = [p for name in CAMERA_FILES if (p := _named(where, name)) is not None]
         for p in found:
             if not p.is_file():
                 raise ValueError(f"`folder`: {p} is not a file")
