@@ -1420,3 +1420,14 @@ def test_info_json_words_warnings_as_the_command_line_and_says_camera_warned(tmp
     assert any(w.startswith("--K: the principal point") for w in rec["warnings"]), rec
     code, out, _ = run(capsys, "info", npath, "--mask", mpath, "--json")
     assert json.loads(out)["camera_warned"] is False
+
+
+def test_methods_refuses_json_with_markdown_and_a_flipped_plane_is_told_its_frame(capsys):
+    """A docs audit: `methods --json --markdown` printed Markdown, exit 0; a plane read in a
+    z-flipped frame was told "x and y vary" and pointed to --normal-encoding xy."""
+    code, out, err = run(capsys, "methods", "--json", "--markdown")
+    assert code == 1 and "give --json or --markdown, not both" in err
+    n = facetlift.normals_from_gradients(np.full((30, 30), -0.3), np.full((30, 30), -0.2))
+    with pytest.raises(ValueError, match=r"face away from the viewer") as got:
+        facetlift.integrate(n, normal_frame="opencv")
+    assert "x and y vary" not in str(got.value)

@@ -881,7 +881,7 @@ def _info_lines(rec: dict) -> list[str]:
     if jg.get("more_grazing"):
         lines.append(f"  with --discontinuities (dgp): {jg['more_grazing']} more grazing (view "
                      f"cosine < {jg['outlier_eps']:.4g}), treated as missing unless "
-                     "--outlier-eps says otherwise")
+                     "integrate --outlier-eps says otherwise")
     if jg.get("fewer_grazing"):
         lines.append(f"  with --discontinuities (dgp): {jg['fewer_grazing']} of the grazing ones "
                      f"kept (its rule is a view cosine < {jg['outlier_eps']:.4g})")
@@ -1051,6 +1051,8 @@ def methods(as_json, markdown):
     blur: --prior-blur). Options are passed with --solver/--max-iter/--tol/--backend or
     '--option KEY=VALUE'.
     """
+    if markdown and as_json:  # (Markdown was printed, exit 0: an audit)
+        raise ValueError("give --json or --markdown, not both")
     if markdown:
         click.echo(_methods.markdown(), nl=False)
         return EXIT_OK

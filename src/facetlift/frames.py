@@ -1021,7 +1021,9 @@ def z_not_stored(v: np.ndarray) -> tuple[str, bool] | None:
     if len(v) < ENCODING_CHECK_PIXELS:
         return None
     z = v[:, 2]
-    if z.min() != z.max() or np.ptp(v[:, :2]) == 0:
+    # (x and y each constant, a plane's: not "x and y vary", and no two-channel map; its one
+    # normal facing away is a frame's z flipped, which the facing check names, an audit)
+    if z.min() != z.max() or (np.ptp(v[:, 0]) == 0 and np.ptp(v[:, 1]) == 0):
         return None
     with np.errstate(invalid="ignore"):
         f = (v[:, :2] + 1.0) / 2.0 * 65535.0  # (8-bit codes lie on it too: 65535 = 257 * 255)
