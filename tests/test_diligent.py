@@ -296,3 +296,15 @@ def test_the_recipes_diligent_folder_lines_run_as_written(tmp_path, capsys, monk
     assert (tmp_path / "bear_out" / "depth.npy").is_file()
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
         "batch.jsonl", "bearPNG", "catPNG"]
+
+
+def test_the_release_folder_itself_points_to_its_objects_and_an_empty_K_is_named(tmp_path):
+    """An audit: `integrate pmsData` said only 'no normal_map file'; an empty K.txt was read
+    as JSON ('Expecting value')."""
+    diligent(tmp_path / "pmsData")
+    with pytest.raises(ValueError, match=r"it holds dataset folders \(bearPNG, catPNG\).*"
+                                         r"facetlift batch"):
+        io.read_dataset(tmp_path / "pmsData")
+    (tmp_path / "K.txt").write_text("")
+    with pytest.raises(ValueError, match=r"the file is empty"):
+        io.read_K(tmp_path / "K.txt")

@@ -330,3 +330,19 @@ def test_degenerate_lights_and_dark_images_are_refused_or_warned():
         photometric.fit(shade(cap), cap, gt.mask)
     with pytest.raises(ValueError, match=r"`images` hold no positive intensity"):
         photometric.fit(np.zeros((20, 32, 32)), cap, gt.mask)
+
+
+def test_fit_names_the_layout_a_colour_stack_and_bad_arguments():
+    """An audit: an (H, W, k) stack was told only that the counts differ; a colour stack got
+    no word on averaging; a ragged list and lights given as a string got numpy's words."""
+    from facetlift import photometric
+
+    L = photometric.lights_on_cap(8)
+    with pytest.raises(ValueError, match=r"look \(H, W, k\).*np.moveaxis\(images, -1, 0\)"):
+        photometric.fit(np.full((32, 32, 8), 0.5), L)
+    with pytest.raises(ValueError, match=r"colour images, \(k, H, W, 3\), are averaged"):
+        photometric.fit(np.zeros((8, 32, 32, 3)), L)
+    with pytest.raises(ValueError, match=r"`images` .* images of different shapes"):
+        photometric.fit([np.zeros((4, 4)), np.zeros((5, 5)), np.zeros((4, 4))], L[:3])
+    with pytest.raises(ValueError, match=r"`lights` must be a \(k, 3\) array .* str"):
+        photometric.fit(np.ones((8, 4, 4)), "abc")

@@ -64,12 +64,20 @@ def lights_on_cap(count: int, spread_deg: float = 40.0, rng=None) -> np.ndarray:
 
 
 def _check_lights(lights, images=None, least: int = 3) -> np.ndarray:
-    L = np.asarray(lights, dtype=float)
+    try:  # (a string or a ragged list: numpy's own words, which named no argument, an audit)
+        L = np.asarray(lights, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"`lights` must be a (k, 3) array of k >= {least} directions; got "
+                         f"{type(lights).__name__} that is no array of numbers") from None
     if L.ndim != 2 or L.shape[1] != 3 or len(L) < least:
         raise ValueError(f"`lights` must be a (k, 3) array of k >= {least} directions; got "
                          f"shape {L.shape}")
     if images is not None and len(L) != len(images):
-        raise ValueError(f"`lights` has {len(L)} directions but `images` {len(images)} images")
+        layout = (" (the images look (H, W, k), one per light along the last axis: give "
+                  "them as (k, H, W), np.moveaxis(images, -1, 0))"
+                  if images.ndim == 3 and images.shape[-1] == len(L) else "")
+        raise ValueError(f"`lights` has {len(L)} directions but `images` {len(images)} images"
+                         + layout)
     norm = np.linalg.norm(L, axis=1)
     if not (np.isfinite(L).all() and (norm > 0).all()):
         raise ValueError("`lights` must be finite, non-zero directions")
@@ -142,11 +150,18 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
     ValueError
         Shapes that do not match, non-finite lights, thresholds out of range.
     """
-    I = np.asarray(images)  # (as given: each block is made float64 when it is fitted)
+    try:  # (as given: each block is made float64 when it is fitted)
+        I = np.asarray(images)
+    except ValueError:  # (a ragged list of images: numpy's words, an audit)
+        raise ValueError("`images` must be a (k, H, W) stack of numbers; got images of "
+                         "different shapes") from None
     if I.ndim != 3 or not (np.issubdtype(I.dtype, np.integer)
                            or np.issubdtype(I.dtype, np.floating)):
+        colour = (": colour images, (k, H, W, 3), are averaged over their channels first, "
+                  "each divided by its light's intensity in that channel, images.mean(axis=-1)"
+                  if I.ndim == 4 and I.shape[-1] in (3, 4) else "")
         raise ValueError(f"`images` must be a (k, H, W) stack of numbers; got shape "
-                         f"{I.shape}, dtype {I.dtype}")
+                         f"{I.shape}, dtype {I.dtype}{colour}")
     L = _check_lights(lights, I)
     _check_span(L)
     H, W = I.shape[1:]

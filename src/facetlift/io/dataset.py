@@ -281,6 +281,9 @@ def _K_text(p: Path):
     import json
 
     text = p.read_text(encoding="utf-8-sig").strip()
+    if not text:  # ("" in "[{" is True: an empty file was read as JSON, an audit)
+        raise ValueError("the file is empty: it must hold K's nine numbers (three rows), or "
+                         "fx fy cx cy")
     if text[:1] in "[{":
         data = json.loads(text)
         if isinstance(data, dict) and _kfiles.is_transforms(data):
@@ -832,6 +835,15 @@ def _no_normals(f: Path) -> str:
                 "normal maps; save the estimated normals there as normal_map.png (or .npy, "
                 "(H, W, 3) floats, x right, y up, z toward the camera) and give the folder "
                 "again, or integrate the normal map by its path")
+    try:  # (the release's pmsData: its object folders, an audit)
+        objects = [c.name for c in sorted(f.iterdir()) if c.is_dir() and is_dataset(c)]
+    except OSError:
+        objects = []
+    if objects:
+        return (f"`folder`: {f} has no normal_map file ({looked}); it holds dataset folders "
+                f"({', '.join(objects[:3])}{', ...' if len(objects) > 3 else ''}): integrate "
+                f"one (facetlift integrate {f / objects[0]}), or all of them with `facetlift "
+                f"batch {f} -o OUT`")
     maps = _other_maps(f)
     named = f"{', '.join(maps[:3])}{', ...' if len(maps) > 3 else ''}"
     mat = " (a .mat file with --mat-keys where it holds several arrays)" if any(
