@@ -384,7 +384,7 @@ def test_progress_true_shows_the_command_lines_bar(capsys):
     assert s.info["iterations"] > 0 and "reweighting" in err and "smooth start" in err
     assert not [t for t in threading.enumerate() if t.name == "facetlift-progress"]
     with pytest.raises(ValueError, match=r"`progress` must be True \(a progress bar on stderr\), "
-                       r"a callable or None; got .yes."):
+                       r"False, a callable or None; got .yes."):
         facetlift.integrate(gt.normals, gt.mask, progress="yes")
 
 
@@ -501,6 +501,10 @@ def test_inputs_an_audit_of_the_api_refused_or_misread():
                                    atol=1e-9)
     with pytest.raises(ValueError, match=r"looks \[0, 1\]-encoded"):  # (still refused)
         facetlift.integrate((gt.normals + 1) / 2, gt.mask)
+    small = np.zeros((32, 32), bool)  # (an encoded object on a white background, 6 % of the
+    small[13:21, 13:21] = True  # image: it passed with the first version of the rule, a review)
+    with pytest.raises(ValueError, match=r"looks \[0, 1\]-encoded"):
+        facetlift.integrate(np.where(small[..., None], (gt.normals + 1) / 2, 1.0))
     s = facetlift.integrate(gt.normals, gt.mask, discontinuities=True,
                             discontinuity_seed=np.True_)
     assert s.info["method"] == "dgp"
@@ -526,6 +530,7 @@ def test_inputs_an_audit_of_the_api_refused_or_misread():
     with pytest.raises(ValueError, match=r"`camera` must be a facetlift.camera.Camera"):
         facetlift.prepare(gt.normals, gt.mask, camera="pinhole")
     facetlift.integrate(gt.normals, gt.mask, progress=False)
+    facetlift.integrate(gt.normals, gt.mask, progress=np.False_)
     with pytest.raises(ValueError, match=r"`progress` must be True .*; got 'garbage'"):
         facetlift.integrate(gt.normals, gt.mask, method="frankot_chellappa", progress="garbage")
     problem = facetlift.prepare(gt.normals, gt.mask)

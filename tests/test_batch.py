@@ -1056,6 +1056,32 @@ def test_a_folder_of_another_inputs_results_is_kept(tmp_path):
     assert rec["name"] == "m0-2"
 
 
+def test_a_moved_input_keeps_its_folder_and_folders_do_not_swap(tmp_path):
+    """A review: after `mv maps maps2` every item got a new folder (ownership compared the
+    path's text); a run naming b/m and a/m in the other order than before swapped their
+    folders in silence."""
+    maps(tmp_path / "maps", n=2)
+    out = tmp_path / "out"
+    fb.batch([tmp_path / "maps"], out, save=("npy",), workers=1)
+    (tmp_path / "maps").rename(tmp_path / "maps2")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        recs = fb.batch([tmp_path / "maps2"], out, save=("npy",), workers=1)
+    assert [r["name"] for r in recs] == ["m0", "m1"]
+    maps(tmp_path / "a", n=1)
+    maps(tmp_path / "b", n=2)
+    (tmp_path / "b" / "m1.png").replace(tmp_path / "b" / "m0.png")
+    a, b = tmp_path / "a" / "m0.png", tmp_path / "b" / "m0.png"
+    out2 = tmp_path / "out2"
+    fb.batch([a], out2, save=("npy",), workers=1)
+    with pytest.warns(UserWarning, match=r"given new folders"):
+        fb.batch([b], out2, save=("npy",), workers=1)
+    first = np.load(out2 / "m0" / "depth.npy")
+    recs = fb.batch([b, a], out2, save=("npy",), workers=1)
+    assert {r["item"]: r["name"] for r in recs} == {str(b): "m0-2", str(a): "m0"}
+    np.testing.assert_array_equal(np.load(out2 / "m0" / "depth.npy"), first)
+
+
 def test_resume_notices_an_edited_mask_given_to_every_item(tmp_path):
     """An audit: --mask's file was compared by its path's text only, so an edited mask
     file left the results of the old one."""

@@ -661,7 +661,7 @@ def test_bad_options(saddle, options, match):
         ({"outlier_eps": "x"}, "`outlier_eps` must be a number"),
         ({"flat_weight": "x"}, "`flat_weight` must be a number > 0"),
         ({"progress": 3, "solver": "iterative"},
-         r"`progress` must be True \(a progress bar on stderr\), a callable or None"),
+         r"`progress` must be True \(a progress bar on stderr\), False, a callable or None"),
     ],
 )
 def test_bad_option_types(saddle, options, match):

@@ -6,14 +6,14 @@ refusals: shapes that differ, no common pixel, depths <= 0 where a scale is need
 from __future__ import annotations
 
 import json
-import os
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import facetlift
-from facetlift import io, metrics
+from facetlift import cli, io, metrics
 from facetlift.cli import main
 
 BEAR = Path(__file__).parents[1] / ".." / "shared" / "data" / "normal_maps" / "diligent_bear"
@@ -229,7 +229,7 @@ def test_evaluate_takes_K_in_python():
         metrics.evaluate(ortho, gt, K=K)
 
 
-def test_cli_evaluate_takes_an_output_folder(tmp_path, capsys):
+def test_cli_evaluate_takes_an_output_folder(tmp_path, capsys, monkeypatch):
     """facetlift evaluate OUTFOLDER --gt GT was refused as 'is a directory' (a review):
     integrate's output folder is read, its surface.npz first (it keeps the camera), else its
     depth.npy; a folder holding neither is refused naming what it looks for."""
@@ -252,8 +252,10 @@ def test_cli_evaluate_takes_an_output_folder(tmp_path, capsys):
     assert json.loads(out)["result"] == str(out_dir / "surface.npz")
     # a later run into the folder without -s npz: its depth.npy, not the stale surface.npz
     # (an audit), with a warning naming the stale file
-    t = (out_dir / "surface.npz").stat().st_mtime
-    os.utime(out_dir / "depth.npy", (t + 10, t + 10))
+    # (the later run's files are moved into place a moment later: STALE_SECONDS shortened)
+    monkeypatch.setattr(cli, "STALE_SECONDS", 0.05)
+    time.sleep(0.2)
+    np.save(out_dir / "depth.npy", est)
     code, out, err = run(capsys, "evaluate", out_dir, *args)
     assert code == 0 and json.loads(out)["result"] == str(out_dir / "depth.npy"), err
     assert "holds surface.npz from an earlier run than its depth.npy" in err

@@ -1804,6 +1804,11 @@ def test_info_counts_a_sensor_maps_zeros_as_unknown_with_a_camera(tmp_path, caps
         warnings.simplefilter("error")
         s = facetlift.integrate(n, inner, K=K, prior=np.where(inner, 3.0 * d, 0.0),
                                 prior_fit="scale")
+        # (and without a mask: the domain is the valid normals, a review)
+        blk = np.zeros((24, 28), bool)
+        blk[4:20, 4:24] = True
+        facetlift.integrate(np.where(blk[..., None], n, np.nan), K=K,
+                            prior=np.where(blk, 3.0 * d, 0.0), prior_fit="scale")
     assert s.info["prior"]["fit"]["scale"] == pytest.approx(1 / 3, rel=1e-2)
     # a prior integrate refuses (a negated relative depth) keeps its values in the report
     np.save(tmp_path / "neg.npy", np.where(p > 0, -p, np.nan))
@@ -1852,3 +1857,22 @@ def test_an_exact_dense_prior_is_not_blamed_for_the_normals_cuts():
                                     agrees=True)
     with pytest.warns(UserWarning, match=r"its samples tear the surface apart"):
         dgp._discontinuity_warnings(info, dgp.fusion_terms(problem), problem.domain, 500)
+
+
+def test_the_torn_warning_is_gated_by_the_priors_agreement_in_a_run(monkeypatch):
+    """The gate wired into the route (a review): with every cut counting as torn, an exact
+    dense prior gets no warning, the same prior with 2 footprints of noise does."""
+    from facetlift import synthetic
+    from facetlift.methods import dgp
+
+    monkeypatch.setattr(dgp, "TORN", -1.0)
+    gt = synthetic.analytic("steps", 64)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        facetlift.integrate(gt.normals, gt.mask, prior=gt.depth, prior_weight=0.01,
+                            discontinuities=True)
+    s = gt.depth.shape
+    noisy = gt.depth + np.random.default_rng(1).normal(0, 2 * gt.pixel_size, s)
+    with pytest.warns(UserWarning, match=r"its samples tear the surface apart"):
+        facetlift.integrate(gt.normals, gt.mask, prior=noisy, prior_weight=0.01,
+                            discontinuities=True)

@@ -220,8 +220,8 @@ def test_reweightings_report_progress(outlier_input):
     facetlift.integrate(normals, method="poisson", pixel_size=H, backend="amg",
                         progress=lambda it, v: seen.append((it, v)))
     assert len(seen) > 1 and seen[-1][1] < 1e-10  # relative residuals down to rtol
-    with pytest.raises(ValueError,
-                       match=r"`progress` must be True \(a progress bar on stderr\), a callable"):
+    with pytest.raises(ValueError, match=r"`progress` must be True \(a progress bar on "
+                                         r"stderr\), False, a callable"):
         facetlift.integrate(normals, method="m_estimator", progress=3)
 
 

@@ -339,16 +339,8 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
         # a map for a camera: 0 is a sensor's (or a clipped network's) "unknown", as the
         # unfitted route leaves it out; fitted, the zeros pulled the scale 1e4 off (a review)
         zeros = fit_zeros(raw)
-        if zeros is not None:
-            # (those inside the mask: a map's 0 around the object is no sample to miss, and
-            # was warned about as 17,148 left out, an audit)
-            inside = zeros if mask is None or np.shape(mask) != shape else (
-                zeros & np.asarray(mask, dtype=bool))
-            if inside.any():
-                r, c = np.argwhere(inside)[0]
-                warn(f"`prior`: {int(inside.sum())} pixel(s) in the mask hold exactly 0, the "
-                     f"first at (row {r}, col {c}): left out of the fit and the fusion as "
-                     "unknown depths (a depth sensor's mark; NaN is the way to mark them)")
+        if zeros is not None:  # (counted in the domain after the first run: _fitted_runs)
+            kwargs["_zeros"] = zeros
             raw = np.where(zeros, np.nan, raw)
     weight = _weight_image(prior_weight, "prior_weight", shape)
     if own is not None:  # (points with their own weights: those times prior_weight, as
@@ -363,8 +355,9 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
 
 
 def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_blur,
-                 prior_outliers, **kwargs) -> Surface:
-    """The two runs of :func:`_integrate_fitted` and the fit between them."""
+                 prior_outliers, _zeros=None, **kwargs) -> Surface:
+    """The two runs of :func:`_integrate_fitted` and the fit between them (`_zeros`: the
+    prior map's exact zeros, left out, warned about where they lie in the domain)."""
     from . import prior_fit as pf
     from ._progress import announce
     from .problem import prior_blur_value
@@ -372,6 +365,17 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
     failed = None
     with recording() as said:
         first = integrate(normals, mask, **kwargs)
+    if _zeros is not None:
+        # (those in the domain the normals gave, the first run's: a map's 0 around the object
+        # is no sample to miss, and was warned about as 17,148 left out, an audit; with no
+        # mask given the domain is the valid normals, a review)
+        inside = _zeros & first.mask
+        if inside.any():
+            r, c = np.argwhere(inside)[0]
+            warn(f"`prior`: {int(inside.sum())} pixel(s) in the mask hold exactly 0, the first "
+                 f"at (row {r}, col {c}): left out of the fit and the fusion as unknown depths "
+                 "(a depth sensor's mark; NaN is the way to mark them)")
+    with recording() as fitting:
         # (the fit took 16 s of an audit's 1280 x 720 run, under a bar that still read
         # "integrating: 24it" and then counted again from 0 without a word)
         announce(kwargs.get("progress"), "fitting the prior")
@@ -380,6 +384,7 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
                                       blur=prior_blur_value(prior_blur))
         except ValueError as e:
             failed, aligned = e, None
+    said = [*said, *fitting]
     for w in said:  # (in their order; the input's only where no second run says them again)
         if aligned is None or "prior_fit=" in str(w.message):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -532,12 +537,14 @@ def _progress_option(options: dict, info) -> None:
     if "progress" not in options:
         return
     value = options["progress"]
+    if isinstance(value, np.bool_):  # (numpy's bools as bool options take them, a review)
+        value = options["progress"] = bool(value)
     if value is None or value is False:
         options.pop("progress")
         return
     if not (value is True or callable(value)):
-        raise ValueError(f"`progress` must be True (a progress bar on stderr), a callable or "
-                         f"None; got {value!r}")
+        raise ValueError(f"`progress` must be True (a progress bar on stderr), False, a "
+                         f"callable or None; got {value!r}")
     if "progress" not in info.options():
         options.pop("progress")
 

@@ -243,9 +243,10 @@ def _folder_items(p: Path) -> list[tuple[Path, bool]]:
     # (DiLiGenT's Calib_Results.mat beside its object folders is their camera: it
     # ran as a normal map and failed, an audit)
     outputs = set(OUTPUTS.values())
+    cameras = {n.lower() for n in CAMERA_FILES}  # (calib_results.mat too, a review)
     out = [(c, False) for c in children if folders.get(c)
            or (c.is_file() and c.suffix.lower() in kinds
-               and c.name not in CAMERA_FILES and c.name not in outputs)]
+               and c.name.lower() not in cameras and c.name not in outputs)]
     ours = [c.name for c in children if c.is_file() and c.name in outputs]
     if ours:  # (an integrate -o into the maps' folder: its preview.png and
         # report.png ran as maps, its depth.exr failed the batch, an audit)
@@ -535,22 +536,34 @@ def _finished(log: Path) -> dict[str, dict]:
     return {rec["item"]: rec for rec in _finished_records(log)}
 
 
-def _owners(log: Path) -> dict[str, str]:
-    """Output folder name -> the input whose results the log says are in it: the item of
-    the last ``ok`` record naming that folder whose outputs are still there (unreadable lines
-    are skipped)."""
+def _owners(log: Path) -> dict[str, dict]:
+    """Output folder name -> the log record whose results are in it: the last ``ok`` record
+    naming that folder, while some of its outputs are still there (a later failed run of the
+    same input leaves them: an output set fails whole, a review), unreadable lines
+    skipped."""
     last: dict[str, dict] = {}
     for rec in _finished_records(log):
-        name = rec.get("name")
-        if not isinstance(name, str):
-            continue
-        if rec.get("status") == "ok":
-            last[name] = rec
-        elif name in last and last[name]["item"] == rec["item"]:
-            last.pop(name)  # (its later run failed: its outputs may be gone)
-    return {name: rec["item"] for name, rec in last.items()
+        if rec.get("status") == "ok" and isinstance(rec.get("name"), str):
+            last[rec["name"]] = rec
+    return {name: rec for name, rec in last.items()
             if isinstance(rec.get("outputs"), dict) and rec["outputs"]
             and any(Path(p).is_file() for p in rec["outputs"].values())}
+
+
+def _same_input(rec: dict, path: str, stamp: list) -> bool:
+    """Whether the log record `rec` is of the input at `path` (its real path, the case aside
+    where the file system ignores it), or of an input since moved or renamed whose files are
+    the same (its path gone, its ``input_stamp`` equal to `stamp`: `mv maps maps2` gave every
+    item a new folder and resumed none, a review)."""
+    def real(p):
+        return os.path.normcase(os.path.realpath(p))
+
+    item = rec.get("item")
+    if not isinstance(item, str):
+        return False
+    if real(item) == real(path):
+        return True
+    return not os.path.exists(item) and bool(stamp) and rec.get("input_stamp") == stamp
 
 
 def _finished_records(log: Path):
@@ -758,33 +771,37 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     asked = settings(template)
     jobs, results = [], {}
     stamps = {it.path: fingerprint(it, template) for it in found}
+    # (each input's folder by the log: the first folder whose owner is that input)
+    mine: dict[str, str] = {}
+    for name, rec in owners.items():
+        for it in found:
+            if it.path not in mine and _same_input(rec, it.path, stamps[it.path]):
+                mine[it.path] = name
+                break
     for it in found:
         rec = earlier.get(it.path)
-        if rec is not None and _complete(rec, asked, stamps[it.path]) and owners.get(
-                rec.get("name")) == it.path:
+        if rec is not None and _complete(rec, asked, stamps[it.path]) and mine.get(
+                it.path) == rec.get("name"):
             results[it.path] = dict(rec, resumed=True)
-    # the folders of the items kept from an earlier run are theirs: an item run now that
-    # would take one of those names (a new a.npy beside a kept a.png) is named anew; so are
-    # the folders the log gives to inputs not run now
-    running = {it.path for it in found}
-    kept = {results[p]["name"] for p in results} | {
-        n for n, item in owners.items() if item not in running}
-    mine = {item: n for n, item in owners.items()}  # (an input's folder by the log)
+    # the folders of the items kept from an earlier run are theirs, and so are the folders
+    # the log gives to inputs not run now: an item run now that would take one of those names
+    # (a new a.npy beside a kept a.png) is named anew. An item run again takes its own folder
+    # first, whatever items() named it (two runs naming b/m and a/m apart swapped their
+    # folders, a review)
+    claimed = set(mine.values())
+    reserved = {results[p]["name"] for p in results} | set(owners)
+    pending = [it for it in found if it.path not in results and it.error is None]
     # (the names items() gave the others are taken too: a renamed one must not land on one)
-    taken = kept | {it.name for it in found if it.path not in results and it.name not in kept}
+    taken = reserved | {it.name for it in pending if it.path not in mine}
     moved = []
-    for it in found:
-        if it.path in results or it.error is not None:
-            continue
-        if it.name in kept:
-            old, own = it.name, mine.get(it.path)
-            if own is not None and own not in taken:  # (its own folder of an earlier run)
-                taken.add(own)
-                it = replace(it, name=own)
-            else:
-                it = replace(it, name=_unique(it.name, taken))
-                if owners.get(old) not in (None, it.path) and owners[old] not in running:
-                    moved.append((old, owners[old], it))
+    for it in pending:
+        if it.path in mine:
+            it = replace(it, name=mine[it.path])
+        elif it.name in reserved:
+            old = it.name
+            it = replace(it, name=_unique(it.name, taken))
+            if old in owners and old not in claimed:
+                moved.append((old, owners[old]["item"], it))
         # (the files beside it that it does not read: named once per folder, above)
         j = replace(template.with_input(it.path, root / it.name), unread_beside=False)
         if it.mask is not None and template.mask is None:

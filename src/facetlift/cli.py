@@ -1213,12 +1213,21 @@ def _result_in_folder(folder: Path) -> Path:
                          "(integrate writes them with -s npz, npy, exr, tif): give the depth "
                          "file, or the folder of a run that saved one")
     # (of the latest run only: a later integrate -o into the folder without -s npz left an
-    # earlier run's surface.npz, which was scored instead of its depth.npy, an audit; one
-    # run's outputs are written as one set, within moments)
-    when = {f: f.stat().st_mtime for f in present}
-    latest = max(when.values())
-    found = next(f for f in present if when[f] >= latest - STALE_SECONDS)
-    stale = [f.name for f in present if when[f] < latest - STALE_SECONDS]
+    # earlier run's surface.npz, which was scored instead of its depth.npy, an audit. One
+    # run's outputs are moved into place as one set, within moments: on POSIX systems the
+    # move sets st_ctime, while st_mtime is when each was written into staging, seconds
+    # apart on large maps, a review; the latest run's are those within STALE_SECONDS of
+    # each other, counting from the newest)
+    stamp = "st_ctime" if os.name == "posix" else "st_mtime"
+    when = {f: getattr(f.stat(), stamp) for f in present}
+    order = sorted(present, key=when.get, reverse=True)
+    latest = [order[0]]
+    for f in order[1:]:
+        if when[latest[-1]] - when[f] > STALE_SECONDS:
+            break
+        latest.append(f)
+    found = next(f for f in present if f in latest)
+    stale = [f.name for f in present if f not in latest]
     if stale:
         warnings.warn(f"evaluate: {folder} holds {', '.join(stale)} from an earlier run than "
                       f"its {found.name}: scoring {found.name}, the latest (give a file to "

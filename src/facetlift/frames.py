@@ -866,6 +866,13 @@ def encoded_scale(v: np.ndarray) -> int | None:
     return scale if np.mean(np.abs(length - 1) < 0.05) > 0.9 else None
 
 
+#: Share of the vectors whose ``2 v - 1`` is of unit length (within 0.05) below which a map
+#: whose components lie in [0, 1] is taken for normals not of unit length, not for a [0, 1]
+#: encoding (:func:`_check_encoding`): an encoded object covering 14 % of an image on a
+#: white background reads 0.14, normals scaled by 1e-3 read 0.
+UNSIGNED_UNIT_SHARE = 0.01
+
+
 def _strays(v: np.ndarray) -> bool:
     """Whether the components `v` lie in [0, 1] but for strays: at most
     :data:`UNSIGNED_STRAYS` of the finite ones beyond ``UNSIGNED_SLACK`` outside it, none
@@ -898,10 +905,12 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
         decoded = np.sqrt(np.einsum("ij,ij->i", d, d))
     if np.mean(np.abs(length - 1) > 0.05) < 0.5:
         return  # unit normals that all face up and right: a tilted plane, say
-    if np.mean(np.abs(decoded - 1) < 0.05) < 0.5:
+    unit = float(np.mean(np.abs(decoded - 1) < 0.05))
+    if unit < UNSIGNED_UNIT_SHARE:
         return  # (nor (n + 1) / 2: normals not of unit length, which prepare normalises; a
         # map scaled by 1e-3, or all components >= 0 at 0.8 of unit length, was refused as
-        # [0, 1]-encoded, an audit)
+        # [0, 1]-encoded, an audit. Not "half of them": an encoded object on a white or grey
+        # background, whose 2 v - 1 is never of unit length, passed so, a review)
     read = _RANGE_READ.get()
     if read is None:  # (arrays from Python: facetlift.integrate has no option for it)
         fix = ("decode it first with n = 2 * v - 1 (or pass the 8/16-bit integer image itself; "

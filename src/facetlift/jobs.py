@@ -344,9 +344,9 @@ def read(job: Job) -> Input:
             # (replaced in silence where --fov warns: an audit)
             name = "K.txt" if K_file is None else _camera_name(K_file, src)
             warn(f"`K` {job.K} replaces the K of the dataset folder's {name} (fx "
-                 f"{folder_K[0, 0]:g}, cx {folder_K[0, 2]:g}, cy {folder_K[1, 2]:g}), which "
-                 f"differs (fx {K[0, 0]:g}, cx {K[0, 2]:g}, cy {K[1, 2]:g}); leave --K out to "
-                 "use the folder's")
+                 f"{folder_K[0, 0]:g}, fy {folder_K[1, 1]:g}, cx {folder_K[0, 2]:g}, cy "
+                 f"{folder_K[1, 2]:g}), which differs (fx {K[0, 0]:g}, fy {K[1, 1]:g}, cx "
+                 f"{K[0, 2]:g}, cy {K[1, 2]:g}); leave --K out to use the folder's")
     if job.fov is not None:
         check_fov(job)
         if field_input:
@@ -554,8 +554,15 @@ def unread_files(folder: Path, stem: str | None, *, mask: bool, camera: bool,
                 p = None
             if p is not None:
                 found.append(p.name)
-    if camera and (folder / "K.txt").is_file():
-        found.append("K.txt")
+    if camera:  # (K.TXT too, as a dataset folder's is read, a review)
+        from .io.dataset import _named
+
+        try:
+            k = _named(folder, "K.txt")
+        except ValueError:
+            k = None
+        if k is not None and k.is_file():
+            found.append("K.txt")  # (the name the advice below keys on)
     if rotation:
         from .io.dataset import ROTATION_FIELDS, ROTATION_FORMATS
 

@@ -69,8 +69,8 @@ class Option:
         if self.kind == "bool":
             text = "True or False"
         elif self.kind == "callable":  # (integrate takes progress=True for its own bar)
-            text = ("True (a progress bar on stderr), a callable" if self.name == "progress"
-                    else "a callable")
+            text = ("True (a progress bar on stderr), False, a callable"
+                    if self.name == "progress" else "a callable")
         elif self.kind == "choice":
             text = "one of " + ", ".join(repr(c) for c in self.choices)
         else:

@@ -1066,8 +1066,11 @@ def _check_swapped_axes(K, H: int, W: int) -> None:
 
 
 #: Image sizes, relative to the one integrated, whose centre a K's principal point is checked
-#: against (:func:`_check_scaled_centre`): a K kept from the image before a resize.
-SCALED_SIZES = (0.25, 1 / 3, 0.5, 2 / 3, 1.5)
+#: against (:func:`_check_scaled_centre`): a K kept from the image before a resize. Not sizes
+#: above 1: a right K of a crop from the top-left corner of a larger image has its principal
+#: point at the centre of an image that much larger (a 1920 x 1080 camera's K on its
+#: 1280 x 720 top-left crop), a review.
+SCALED_SIZES = (0.25, 1 / 3, 0.5, 2 / 3)
 
 
 def _check_scaled_centre(K, H: int, W: int) -> None:
@@ -1089,8 +1092,9 @@ def _check_scaled_centre(K, H: int, W: int) -> None:
                  f"image {size:.3g} times the size of this {W} x {H} (W x H) one (cx {cxs:g}, "
                  f"cy {cys:g}), far from its own (cx {cx0:g}, cy {cy0:g}): is K for the image "
                  f"before a resize? Scaled to this one it is fx {fx * a:.6g}, fy {fy * a:.6g}, "
-                 f"cx {(cx + 0.5) * a - 0.5:.6g}, cy {(cy + 0.5) * a - 0.5:.6g} "
-                 "(docs/conventions.md, 'A K for another image')", CameraWarning)
+                 f"cx {(cx + 0.5) * a - 0.5:.6g}, cy {(cy + 0.5) * a - 0.5:.6g}. (A crop's K, "
+                 "shifted by the crop's first column and row, can sit there too: then it is "
+                 "right; docs/conventions.md, 'A K for another image')", CameraWarning)
             return
 
 

@@ -552,9 +552,11 @@ def is_dataset(folder) -> bool:
     except OSError:
         return False
     wanted = [f"normal_map{ext}".lower() for ext in NORMAL_READ_FORMATS]
-    # (os.path.isfile: False for a folder that cannot be read, where Path.is_file raises)
-    return any(w in names and os.path.isfile(_named(f, w)) for w in wanted) or (
-        DILIGENT_NORMALS.lower() in names and os.path.isfile(_named(f, DILIGENT_NORMALS)))
+    try:  # (os.path.isfile: False for a folder that cannot be read, where Path.is_file raises)
+        return any(w in names and os.path.isfile(_named(f, w)) for w in wanted) or (
+            DILIGENT_NORMALS.lower() in names and os.path.isfile(_named(f, DILIGENT_NORMALS)))
+    except ValueError:  # (two names that differ only in case: a dataset, whose reading says
+        return True  # which, a review)
 
 
 def camera_files(folder) -> list[Path]:

@@ -567,8 +567,12 @@ def run(
         # (not with a prior aligned by prior_fit, inside shared_cuts: its alignment a few %
         # off tears a sharp prior at the jumps while it agrees on the flats, and the warning
         # names the fit, a review)
-        agrees = (pointwise and _CUTS.get() is None
-                  and prior_mismatch(domain, prior, bx, by, target, s) <= PRIOR_AGREES)
+        # (measured only where the warning would fire: six image-sized arrays, a review)
+        fitted = _CUTS.get() is not None
+
+        def agrees():
+            return (pointwise and not fitted
+                    and prior_mismatch(domain, prior, bx, by, target, s) <= PRIOR_AGREES)
         _discontinuity_warnings(info, prior if pointwise else None, domain,
                                 pinfo["mesh_pieces"],
                                 blurred=prior if prior is not None and not pointwise else None,
@@ -683,7 +687,10 @@ def fill_gaps(domain, bx, by, target, scale, cosines, weights, gaps):
 #: its weight or blur it, which took its 0.00044 mm to 0.0015 and 0.0024. Gaussian noise of
 #: sigma footprints reads 0.95 sigma (the DiLiGenT bear's own depth as the prior: 0.005 exact,
 #: 0.24 / 0.48 / 0.95 / 2.86 at 0.25 / 0.5 / 1 / 3 footprints); a sensor's 1-3 footprints
-#: stay far above this.
+#: stay far above this. A median of local steps cannot see a prior that is smooth and wrong
+#: as a whole, or one with a false jump along a line (the median of a steps scene's pairs
+#: reads 0.0 with a false 5-unit jump, 0.035 scaled by 1.2, a review): such a prior tearing
+#: the surface gets no warning.
 PRIOR_AGREES = 0.1
 
 
@@ -711,7 +718,7 @@ def prior_mismatch(domain, prior, bx, by, target, footprint: float) -> float:
 
 def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
                             blurred=None, noise: float = float("nan"),
-                            agrees: bool = False) -> None:
+                            agrees=False) -> None:
     """The discontinuity route's warnings on the solve returned: a pointwise `prior` that tore
     the surface apart (:data:`TORN`, :data:`TORN_PIECES`; None: no such prior), or a
     `blurred` one (``prior_blur``, the prior's terms as `prior`'s) that did, a run without a
@@ -724,9 +731,10 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
              "and the surface away from the samples gets worse, not better; "
              f"{PRIOR_STRONG:g} already meets exact samples closely (docs/fusion.md, 'Units')")
     many = max(TORN_PIECES * domain.n_facets, 50)
-    # (`agrees`: the pointwise prior steps as the normals do, :data:`PRIOR_AGREES`: the cuts
-    # are the normals' own)
-    if prior is not None and not agrees and (info["cut_corners"] > TORN or pieces > many):
+    # (`agrees`, a bool or a callable giving one: the pointwise prior steps as the normals
+    # do, :data:`PRIOR_AGREES`: the cuts are the normals' own)
+    if prior is not None and (info["cut_corners"] > TORN or pieces > many) and not (
+            agrees() if callable(agrees) else agrees):
         samples = int((prior[0] > 0).sum())
         typical = float(np.median(prior[0][prior[0] > 0])) if samples else 0.0
         # (a user at 0.01 was told to lower it to 0.01)
