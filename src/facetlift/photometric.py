@@ -148,7 +148,8 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
     Raises
     ------
     ValueError
-        Shapes that do not match, non-finite lights, thresholds out of range.
+        Shapes that do not match, non-finite lights or lights that share a plane, thresholds
+        out of range, an empty mask, images with no positive intensity inside the mask.
     """
     try:  # (as given: each block is made float64 when it is fitted)
         I = np.asarray(images)
@@ -183,6 +184,8 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
     confidence = np.zeros((H, W))
     flat = I.reshape(len(L), -1)
     pix = np.flatnonzero(mask.ravel())
+    if not pix.size:
+        raise ValueError("`mask` is empty: no pixel to fit")
     top = _brightness(flat, pix)
     if not top > 0:  # (all NaN with no word before: integrate then said "no usable normal")
         raise ValueError("`images` hold no positive intensity inside the mask (all dark, or "
