@@ -84,9 +84,11 @@ def progress_bar(total: int | None):
         if state.get("stage", "integrating") == "integrating" and not state.get("counted"):
             state["counted"] = True
             b.bar_format = None  # (iterations reported: counted from here)
-        b.update(iteration - b.n)
         label = _STAGE_VALUES.get(state.get("stage"))
+        # (the value first: the update redraws, and the bar showed the last iteration's value,
+        # an audit)
         b.set_postfix_str(f"{label} {value:.3g}" if label else f"{value:.4g}", refresh=False)
+        b.update(iteration - b.n)
 
     def stage(name):
         state["stage"] = name

@@ -1498,8 +1498,8 @@ def _main(args: list[str]) -> int:
         _error(_INTERRUPTED)
         return EXIT_INTERRUPTED
     except Terminated:
-        _error("terminated (SIGTERM); nothing partial was written (a batch's finished items "
-               "are in its log)")
+        _error("terminated (SIGTERM or SIGHUP); nothing partial was written (a batch's "
+               "finished items are in its log)")
         return EXIT_TERMINATED
     except Exception as e:
         if _STATE["debug"]:
