@@ -374,3 +374,22 @@ def test_evaluate_takes_the_field_of_view_integrate_took(tmp_path, capsys):
     code, _, err = run(capsys, "evaluate", tmp_path / "s.npz", "--gt", tmp_path / "gt.npy",
                        "--fov", "60")
     assert code == 1 and "differs from the camera" in err
+
+
+def test_a_few_ground_truth_pixels_setting_the_range_are_warned_about():
+    """An audit: one hole stored as 0 in a float ground truth set the normalised error's
+    depth range and took the bear's error from 2.30 % to 0.07 % without a word."""
+    import warnings
+
+    from facetlift import synthetic
+
+    gt = synthetic.analytic("sphere", 48)
+    s = facetlift.integrate(gt.normals, gt.mask)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        metrics.evaluate(s.depth, gt.depth, gt.mask)
+    bad = gt.depth.copy()
+    r, c = np.argwhere(gt.mask)[100]
+    bad[r, c] = 1e3
+    with pytest.warns(UserWarning, match=rf"a few pixels set it .*\(row {r}, col {c}\)"):
+        metrics.evaluate(s.depth, bad, gt.mask)

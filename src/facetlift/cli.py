@@ -1262,8 +1262,11 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
                 if rec["made"] is not None else ""),
              f"  scale:             {num(rec['scale'])}"
              + (" (median of GT / RESULT)" if rec["scale"] is not None else ""),
-             f"  RMSE after scale:  {num(rec['rmse_scaled'])}",
-             f"  MAE, no scale:     {num(rec['mae'])} (as stored: for metric depth)",
+             f"  RMSE after scale:  {num(rec['rmse_scaled'])}"
+             + (" (the ground truth's units)" if rec["rmse_scaled"] is not None else ""),
+             f"  MAE, no scale:     {num(rec['mae'])}"
+             + (" (the ground truth's units, as stored: for metric depth; a large one beside "
+                "a small MADE is a scale, e.g. other units)" if rec["mae"] is not None else ""),
              "  normalised error:  "
              + ("-" if ne is None else f"{100 * ne:.4g} % of the ground truth's depth range "
                 "(offset-aligned per piece)")]
