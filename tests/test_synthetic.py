@@ -542,3 +542,14 @@ def test_ground_truth_repr_is_a_summary():
     gt = synthetic.analytic("sphere", 32)
     assert repr(gt) == "GroundTruth('sphere', 32x32, %d pixels, orthographic, pixel_size=1)" % (
         int(gt.mask.sum()))
+
+
+def test_depth_jumps_take_the_camera_of_a_perspective_render():
+    """An audit: depth_jumps took orthographic slopes in pixel-size units, so a perspective
+    render (depth in mm) of a sphere had 4,066 of its 4,664 pixels flagged and
+    continuous_region kept 598; it now tests in the camera's unknown, as jump_edges."""
+    gt = synthetic.render_perspective(trimesh.creation.icosphere(4), None, (96, 112), fill=0.8)
+    assert not synthetic.depth_jumps(gt).any()
+    assert synthetic.continuous_region(gt).mask.sum() == gt.mask.sum()
+    steps = synthetic.analytic("steps", 64)
+    assert synthetic.depth_jumps(steps).any()
