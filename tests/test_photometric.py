@@ -346,3 +346,7 @@ def test_fit_names_the_layout_a_colour_stack_and_bad_arguments():
         photometric.fit([np.zeros((4, 4)), np.zeros((5, 5)), np.zeros((4, 4))], L[:3])
     with pytest.raises(ValueError, match=r"`lights` must be a \(k, 3\) array .* str"):
         photometric.fit(np.ones((8, 4, 4)), "abc")
+    with pytest.raises(ValueError, match=r"`mask` is empty"):
+        photometric.fit(np.ones((8, 4, 4)), L, np.zeros((4, 4), bool))
+    with pytest.raises(ValueError, match=r"`images` are NaN at every pixel"):
+        photometric.fit(np.full((8, 4, 4), np.nan), L)

@@ -553,3 +553,17 @@ def test_depth_jumps_take_the_camera_of_a_perspective_render():
     assert synthetic.continuous_region(gt).mask.sum() == gt.mask.sum()
     steps = synthetic.analytic("steps", 64)
     assert synthetic.depth_jumps(steps).any()
+    # a perspective jump (a small sphere in front of a large one) is flagged, on every pixel
+    # beside an edge jump_edges finds (a review)
+    front = trimesh.creation.icosphere(3, radius=0.5)
+    front.apply_translation([0.6, 0.3, 1.2])
+    both = trimesh.util.concatenate([trimesh.creation.icosphere(3, radius=1.0), front])
+    gt = synthetic.render_perspective(both, None, (96, 112), fill=0.8)
+    right, down = synthetic.jump_edges(gt)
+    beside = np.zeros(gt.mask.shape, bool)
+    beside[:, :-1] |= right
+    beside[:, 1:] |= right
+    beside[:-1] |= down
+    beside[1:] |= down
+    flagged = synthetic.depth_jumps(gt)
+    assert beside.any() and not (beside & ~flagged).any()

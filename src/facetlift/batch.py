@@ -1027,6 +1027,30 @@ def _dask():
     return dask
 
 
+def _tracker_outlives_hangup() -> None:
+    """Start multiprocessing's resource tracker with SIGHUP ignored, before the pool: a
+    closed terminal sends SIGHUP to the whole process group, and the tracker, which ignores
+    SIGINT and SIGTERM but not SIGHUP, died with the workers and printed five tracebacks
+    about leaked resources (a review). Nothing where there is no SIGHUP or the tracker
+    cannot be started here."""
+    import signal
+
+    if not hasattr(signal, "SIGHUP"):
+        return
+    try:
+        from multiprocessing import resource_tracker
+
+        old = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    except (ImportError, ValueError):  # (not the main thread: no handler can be set)
+        return
+    try:
+        resource_tracker.ensure_running()
+    except Exception:  # (the pool starts it as it would have)
+        pass
+    finally:
+        signal.signal(signal.SIGHUP, old)
+
+
 def _on_processes(jobs, n_workers: int, done) -> None:
     """The Dask local scheduler, one process per worker; `done` runs here as items finish."""
     dask = _dask()
@@ -1054,6 +1078,7 @@ def _on_processes(jobs, n_workers: int, done) -> None:
     # our own pool, so that an interrupt stops its workers: Dask's own waits for the running
     # items at shutdown, and an interrupt during a worker's start could leave the process
     # waiting for it at exit (a Ctrl-C hang, 2 of 2 tries at 3 s into a 3-map batch)
+    _tracker_outlives_hangup()
     ctx = _Recording(get_context())  # (every worker it starts: what _stop stops)
     from .io.images import _REDIRECT
 

@@ -1265,8 +1265,12 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
              f"  RMSE after scale:  {num(rec['rmse_scaled'])}"
              + (" (the ground truth's units)" if rec["rmse_scaled"] is not None else ""),
              f"  MAE, no scale:     {num(rec['mae'])}"
-             + (" (the ground truth's units, as stored: for metric depth; a large one beside "
-                "a small MADE is a scale, e.g. other units)" if rec["mae"] is not None else ""),
+             + (" (the ground truth's units, as stored: for metric depth)"
+                if rec["mae"] is not None else "")
+             + ("; far above MADE: a scale between the two (a result up to scale, or in "
+                "other units)"
+                if rec["mae"] is not None and rec["made"] is not None
+                and rec["mae"] > 10 * max(rec["made"], 1e-300) else ""),
              "  normalised error:  "
              + ("-" if ne is None else f"{100 * ne:.4g} % of the ground truth's depth range "
                 "(offset-aligned per piece)")]

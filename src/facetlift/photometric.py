@@ -166,6 +166,7 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
     L = _check_lights(lights, I)
     _check_span(L)
     H, W = I.shape[1:]
+    given_mask = mask is not None
     if mask is None:
         mask = np.isfinite(I).any(axis=0)
     else:
@@ -184,8 +185,9 @@ def fit(images, lights, mask=None, *, shadow: float = 0.02, saturation: float = 
     confidence = np.zeros((H, W))
     flat = I.reshape(len(L), -1)
     pix = np.flatnonzero(mask.ravel())
-    if not pix.size:
-        raise ValueError("`mask` is empty: no pixel to fit")
+    if not pix.size:  # (without a mask, the images' finite pixels: none, a review)
+        raise ValueError("`mask` is empty: no pixel to fit" if given_mask else
+                         "`images` are NaN at every pixel (or have none): no pixel to fit")
     top = _brightness(flat, pix)
     if not top > 0:  # (all NaN with no word before: integrate then said "no usable normal")
         raise ValueError("`images` hold no positive intensity inside the mask (all dark, or "

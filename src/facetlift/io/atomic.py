@@ -76,7 +76,8 @@ def _save_npy(path: Path, arr: np.ndarray) -> None:
 
 
 class Terminated(BaseException):
-    """SIGTERM arrived while an :class:`OutputSet` was open (exit code 143)."""
+    """SIGTERM (or SIGHUP, :data:`STOP_SIGNALS`) arrived while an :class:`OutputSet` was open
+    (exit code 143)."""
 
 
 #: Name prefix of staging folders, ``<prefix><host>-<pid>-<hex>``; :func:`atomic_path`'s
@@ -355,12 +356,13 @@ def sigterm_raises():
         yield
         return
     old = {}
-    for sig in STOP_SIGNALS:
-        if sig != signal.SIGTERM and signal.getsignal(sig) is signal.SIG_IGN:
-            continue  # (nohup's: the user asked to outlive the terminal)
-        old[sig] = signal.signal(sig, _raise_terminated)
-    try:
+    try:  # (installed inside, put back in reverse order: a signal between two installs left
+        # the first handler in place for good, a review)
+        for sig in STOP_SIGNALS:
+            if sig != signal.SIGTERM and signal.getsignal(sig) is signal.SIG_IGN:
+                continue  # (nohup's: the user asked to outlive the terminal)
+            old[sig] = signal.signal(sig, _raise_terminated)
         yield
     finally:
-        for sig, handler in old.items():
+        for sig, handler in reversed(list(old.items())):
             signal.signal(sig, signal.SIG_DFL if handler is None else handler)
