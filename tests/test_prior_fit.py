@@ -543,3 +543,25 @@ def test_a_relative_depth_given_with_k_is_named_by_its_relief():
     with pytest.warns(UserWarning, match=r"prior: its relative relief \(of log-depth\) is "
                       r"[\d.]+ times .*prior_fit='affine'"):
         facetlift.prepare(n, mask, K=K, prior=(gt - 1460.0) / 60.0 + 0.01)
+
+
+def test_a_fitted_integer_priors_zeros_are_values(tmp_path):
+    """A neural-estimator user's audit: a disparity scaled to 0..65535 (16-bit PNG) lost its
+    farthest samples, whose code is 0, read as unknown without a word. With prior_fit the 0
+    of an integer file is a value (with a camera the fitted route leaves exact zeros out all
+    the same, with a warning that counts them); without it, still a sensor's unknown."""
+    from facetlift import io
+    from facetlift.jobs import Job, read
+
+    n, depth, mask, _ = steps()
+    codes = np.round((depth - depth.min()) / np.ptp(depth) * 65535).astype(np.uint16)
+    assert (codes == 0).any()
+    np.save(tmp_path / "rel.npy", codes)
+    np.save(tmp_path / "n.npy", np.where(mask[..., None], n, np.nan))
+    assert np.isnan(io.read_prior(tmp_path / "rel.npy")).any()
+    assert not np.isnan(io.read_prior(tmp_path / "rel.npy", zero_unknown=False)).any()
+    fitted = read(Job(normals=str(tmp_path / "n.npy"), prior=str(tmp_path / "rel.npy"),
+                      prior_fit="affine"))
+    assert np.isfinite(fitted.prior).all()
+    plain = read(Job(normals=str(tmp_path / "n.npy"), prior=str(tmp_path / "rel.npy")))
+    assert np.isnan(plain.prior).sum() == (codes == 0).sum()

@@ -272,9 +272,9 @@ _JOB_OPTIONS = [
     click.option("--prior", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Depth prior (npy, EXR, TIFF, MATLAB .mat, an earlier result's npz, or "
                  "16-bit PNG with --prior-scale), NaN where unknown (0 too in integer "
-                 "files), or a points file (.csv/.txt: one sample per line under a "
-                 "header naming the columns, e.g. u,v,depth: pixels, not a cloud's metres), in "
-                 "the output's depth convention "
+                 "files, but for --prior-fit), or a points file (.csv/.txt: one sample per "
+                 "line under a header naming the columns, e.g. u,v,depth: pixels, not a "
+                 "cloud's metres), in the output's depth convention "
                  "(metric z-depth with K). "
                  "A dataset folder's prior_depth.* is used automatically. docs/fusion.md."),
     click.option("--prior-scale", type=float, default=None, metavar="S",

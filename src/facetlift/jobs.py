@@ -294,7 +294,8 @@ def read(job: Job) -> Input:
                              with_prior=job.dataset_prior and job.prior is None,
                              with_confidence=job.dataset_confidence and job.confidence is None,
                              with_rotation=given_rotation is None, encoding=encoding,
-                             normal_range=signs, mask=given)
+                             normal_range=signs, mask=given,
+                             prior_zero_unknown=_zero_unknown(job))
         n, m, K = ds["normals"], ds["mask"], ds["K"]
         if ds["rotation"] is not None:
             rotation, rotation_file = ds["rotation"], f"the folder's {ds['rotation_file'].name}"
@@ -363,7 +364,7 @@ def read(job: Job) -> Input:
         K = None
     if job.prior is not None:
         with _beside_file(job, "prior"):
-            prior = io.read_prior(job.prior, _prior_scale(job))
+            prior = io.read_prior(job.prior, _prior_scale(job), zero_unknown=_zero_unknown(job))
         files["prior"] = str(job.prior)
     elif prior is None and folder:
         _no_prior_checks(job)
@@ -1003,6 +1004,13 @@ def _components(mask) -> int:
     from .domain import _EIGHT
 
     return int(ndimage.label(mask, structure=_EIGHT)[1])
+
+
+def _zero_unknown(job) -> bool:
+    """Whether an integer prior file's 0 marks an unknown depth (a sensor's): not for a prior
+    aligned by ``prior_fit``, a network's relative depth or disparity scaled to start at 0
+    (:func:`facetlift.io.read_prior`)."""
+    return job.prior_fit in (None, "none")
 
 
 def _prior_scale(job: Job) -> float | None:

@@ -679,7 +679,8 @@ def one_channel(p: Path) -> bool:
 def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
                  prior_scale: float | None = None, with_prior: bool = True,
                  with_confidence: bool = True, with_rotation: bool = True,
-                 encoding: str = "xyz", normal_range: str = "signed", mask=None) -> dict:
+                 encoding: str = "xyz", normal_range: str = "signed", mask=None,
+                 prior_zero_unknown: bool = True) -> dict:
     """Read a folder in the BiNI / DiLiGenT layout.
 
     The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
@@ -770,7 +771,8 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     extra = {}  # the folder's own prior and confidence: a file at fault can be left unread
     for name, stem, wanted, reader in (
             ("prior", "prior_depth", with_prior,
-             lambda p: read_prior(p, prior_scale, arg="prior")),
+             lambda p: read_prior(p, prior_scale, arg="prior",
+                                  zero_unknown=prior_zero_unknown)),
             ("confidence", "confidence", with_confidence,
              lambda p: read_weights(p, arg="confidence"))):
         path = _find(f, stem, formats[stem]) if wanted else None

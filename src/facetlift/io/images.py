@@ -924,7 +924,7 @@ _POINT_COLUMNS = {"row": "row", "r": "row", "y": "row", "v": "row",
 
 
 def read_prior(path, scale: float | None = None, *, arg: str = "prior",
-               scale_arg: str = "prior_scale"):
+               scale_arg: str = "prior_scale", zero_unknown: bool = True):
     """A depth prior: an (H, W) map, NaN where unknown, or from a points file a ``(rows,
     cols, depths)`` triple (:func:`facetlift.integrate`'s other form of `prior`).
 
@@ -948,7 +948,11 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior",
     other transposes every sample.
 
     `arg` and `scale_arg` are the names the messages give the file and the scale (a ground
-    truth read alike: ``facetlift evaluate --gt --gt-scale``).
+    truth read alike: ``facetlift evaluate --gt --gt-scale``). `zero_unknown` False keeps an
+    integer file's 0 as a value (a relative depth or disparity scaled to start at 0, aligned
+    by ``prior_fit``: its farthest or nearest samples were dropped without a word, an
+    audit; with a camera the fitted route leaves exact zeros out all the same, with a
+    warning that counts them).
 
     Raises
     ------
@@ -979,13 +983,13 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior",
                                 "none: give --prior-fit affine or disparity instead, which takes "
                                 "its scale from the normals (in Python any scale, e.g. 1, and "
                                 "integrate's prior_fit=)" if scale_arg == "prior_scale" else ""))
-        return np.where(a > 0, a * float(scale), np.nan)
+        return np.where((a > 0) | (not zero_unknown), a * float(scale), np.nan)
     a = read_plane(p, maps, "depth prior", arg, prefer=("Z",), mat_names=MAT_PRIOR_NAMES)
-    zero_unknown = a.dtype.kind in "ui"
+    integer = a.dtype.kind in "ui"
     a = a.astype(np.float64)
     if p.suffix.lower() == ".exr" and _exr_quantity(p) == "height":  # (as read_depth)
         a = 0.0 - a
-    if zero_unknown:
+    if integer and zero_unknown:
         a[a == 0] = np.nan
     return a if scale is None else a * float(scale)
 
