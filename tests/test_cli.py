@@ -1431,3 +1431,19 @@ def test_methods_refuses_json_with_markdown_and_a_flipped_plane_is_told_its_fram
     with pytest.raises(ValueError, match=r"face away from the viewer") as got:
         facetlift.integrate(n, normal_frame="opencv")
     assert "x and y vary" not in str(got.value)
+
+
+def test_a_gradient_field_in_the_other_layout_gets_no_jump_hint(tmp_path, capsys):
+    """A gradients audit: a row-down field read as xy got the layout warning and a hint that
+    its deviation looked like depth jumps (--discontinuities); the layout is the advice."""
+    H, W = 60, 80
+    r, c = np.mgrid[0:H, 0:W] + 0.5
+    z = 8 * np.exp(-((c - 50) ** 2 + (r - 25) ** 2) / 200) + 0.05 * c
+    p = np.gradient(z, axis=1)  # dz/dx (x right)
+    q = -np.gradient(z, axis=0)  # dz/dy (y up)
+    np.save(tmp_path / "p.npy", -q)  # (rowcol: dz/d(row), dz/d(col))
+    np.save(tmp_path / "q.npy", p)
+    code, _, err = run(capsys, "integrate", "--gradients", tmp_path / "p.npy",
+                       tmp_path / "q.npy", "-o", tmp_path / "o")
+    assert code == 0 and "--gradient-frame rowcol" in err, err
+    assert "--discontinuities keeps them" not in err

@@ -75,6 +75,8 @@ def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
     if prior.get("relief_warned"):
         return None  # (a prior in other units explains it, warned about: an audit)
     ic = info.get("integrability") or {}
+    if ic.get("other_layout"):  # (a gradient field in the other layout: its warning's advice
+        return None  # stands alone, not beside "--discontinuities keeps them", an audit)
     own = ic.get("curl")
     # (None where a curl could not be measured, e.g. a map mostly without normals: a review
     # saw the run end in an internal error here after its depth was written)

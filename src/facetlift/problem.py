@@ -855,9 +855,12 @@ def _check_trend(problem: Problem) -> None:
              f"samples where both change, they change the same way on only {agree:.0%} of "
              f"{pairs} pairs. Is it a disparity or inverse depth (invert it first, or give it "
              "with prior_fit='disparity', --prior-fit disparity), a height "
-             "rather than a depth (larger = farther), or are the normals in another frame "
-             "(normal_frame, --normal-frame)? (info['prior']['trend']; docs/fusion.md, 'A "
-             "prior that runs against the normals')")
+             "rather than a depth (larger = farther; Quéau's z0 is his z, a height), or "
+             + ("is the gradient field in another layout (gradient_frame, --gradient-frame)"
+                if reading() == GRADIENT_FIELD else
+                "are the normals in another frame (normal_frame, --normal-frame)")
+             + "? (info['prior']['trend']; docs/fusion.md, 'A prior that runs against the "
+             "normals')")
 
 
 #: A prior whose relief is this many times the normals' or more, or this many times less, is
