@@ -718,7 +718,9 @@ def _normals_from_field(g: dict, job: Job) -> tuple[np.ndarray, str | None]:
     from .problem import normals_from_gradients
 
     if job.normal_frame is not None:
-        raise ValueError("`normal_frame` does not apply to a gradient field; use --gradient-frame")
+        # (--y-down sets it too, and was named `normal_frame`, an audit)
+        raise ValueError("a normal frame (normal_frame=; --normal-frame or --y-down) does not "
+                         "apply to a gradient field; use --gradient-frame")
     layout = frames.layout_check(g["p"], g["q"], job.gradient_frame, g.get("mask"))["suggested"]
     return normals_from_gradients(*frames.gradients_to_facetlift(g["p"], g["q"],
                                                                  job.gradient_frame)), layout
