@@ -400,8 +400,7 @@ def test_small_api_messages_a_user_met(tmp_path):
     with pytest.raises(ValueError, match="does not exist"):
         io.read_normals(tmp_path / "nope.png")
     assert issubclass(InputFileNotFound, ValueError)
-    with pytest.raises(ValueError, match=r"^`p`, `q` \(the normals made from them\) has no "
-                       "finite"):
+    with pytest.raises(ValueError, match=r"^`p` and `q` have no pixel where both are finite"):
         facetlift.integrate_gradients(np.full((10, 10), np.nan), np.zeros((10, 10)))
     n = np.zeros((10, 10, 3))
     n[..., 2] = 1.0

@@ -1447,3 +1447,14 @@ def test_a_gradient_field_in_the_other_layout_gets_no_jump_hint(tmp_path, capsys
                        tmp_path / "q.npy", "-o", tmp_path / "o")
     assert code == 0 and "--gradient-frame rowcol" in err, err
     assert "--discontinuities keeps them" not in err
+
+
+def test_an_all_nan_gradient_file_is_named_as_gradients(tmp_path, capsys):
+    """A gradients audit: an all-NaN p was reported as 'NORMALS has no finite, non-zero
+    normal'."""
+    np.save(tmp_path / "p.npy", np.full((12, 14), np.nan))
+    np.save(tmp_path / "q.npy", np.zeros((12, 14)))
+    code, _, err = run(capsys, "integrate", "--gradients", tmp_path / "p.npy",
+                       tmp_path / "q.npy", "-o", tmp_path / "o")
+    assert code == 1 and ("--gradients P and --gradients Q have no pixel where both are "
+                          "finite") in err

@@ -560,8 +560,11 @@ def prepare(
         with np.errstate(over="ignore", invalid="ignore"):
             length2 = np.einsum("ijk,ijk->ij", n, n)
         m = (np.isfinite(length2) & (length2 > 0)) | _huge(n, length2)
-        if not m.any():
-            raise ValueError("`normals` has no finite, non-zero normal: nothing to integrate")
+        if not m.any():  # (a gradient field's in its words: an all-NaN p was told of its
+            # normals, a gradients audit)
+            raise ValueError("`p` and `q` have no pixel where both are finite: nothing to "
+                             "integrate" if reading() == GRADIENT_FIELD else
+                             "`normals` has no finite, non-zero normal: nothing to integrate")
         # (the mask is the normals' own: a lone pixel of it is left out, said)
         m = _without_lone_pixels(
             m, "`normals`: every finite, non-zero normal is an isolated pixel (no neighbour "
