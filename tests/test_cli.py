@@ -1458,3 +1458,27 @@ def test_an_all_nan_gradient_file_is_named_as_gradients(tmp_path, capsys):
                        tmp_path / "q.npy", "-o", tmp_path / "o")
     assert code == 1 and ("--gradients P and --gradients Q have no pixel where both are "
                           "finite") in err
+
+
+def test_a_mat_gradient_field_is_hinted_as_a_field_and_its_empty_mask_named(tmp_path, capsys):
+    """A gradients audit: a .mat of p and q whose mask is all zeros said only "`mask` is
+    empty"; a .mat field's jump hint told it to try --normal-frame directx, which a gradient
+    field refuses."""
+    from scipy import io as sio
+
+    H, W = 60, 80
+    r, c = np.mgrid[0:H, 0:W].astype(float)
+    x, y = c, -r
+    g = 8 * np.exp(-((x - 55) ** 2 + (y + 20) ** 2) / 150)
+    p, q = g * (-2 * (x - 55) / 150) + 0.05, g * (-2 * (y + 20) / 150) - 0.03
+    mask = np.ones((H, W), bool)
+    mask[:5, :] = False
+    mask[:, -3:] = False
+    np.save(tmp_path / "mask.npy", mask.astype(np.uint8))
+    # (Quéau's layout, p = dz/d(row), q = dz/d(col), read as the default xy)
+    sio.savemat(tmp_path / "f.mat", {"p": -q, "q": p, "mask": np.zeros((H, W))})
+    code, _, err = run(capsys, "integrate", tmp_path / "f.mat", "-o", tmp_path / "o0")
+    assert code == 1 and "f.mat holds a mask with no pixel set" in err
+    code, _, err = run(capsys, "integrate", tmp_path / "f.mat", "--mask", tmp_path / "mask.npy",
+                       "-o", tmp_path / "o")
+    assert code == 0 and "hint:" in err and "--normal-frame" not in err, err

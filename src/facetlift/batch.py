@@ -517,7 +517,8 @@ def run_item(job: Job, threads: int | None = None) -> dict:
         from .hints import job_hints
 
         try:
-            rec["hints"] = job_hints(job, rec["info"], rec.get("camera_warned", False))
+            rec["hints"] = job_hints(job, rec["info"], rec.get("camera_warned", False),
+                                     bool(rec.get("gradient_field")))
         except Exception:  # pragma: no cover - (a hint never fails a finished item)
             pass
     if "warnings" not in rec:  # (a successful run's record has its own, in order)

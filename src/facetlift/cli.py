@@ -573,9 +573,9 @@ def summary(record: dict) -> str:
 
 
 # (the hints' words and rules are facetlift.hints', shared with a batch's records)
-def _jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
+def _jump_hint(job, info: dict, camera_warned: bool = False, field: bool = False) -> str | None:
     """:func:`facetlift.hints.jump_hint`, printed as a ``hint:`` line on stderr."""
-    return _echo_hint(jump_hint(job, info, camera_warned))
+    return _echo_hint(jump_hint(job, info, camera_warned, field))
 
 
 def _torn_hint(job, info: dict) -> str | None:
@@ -663,7 +663,8 @@ def integrate(normals, gradients, progress, as_json, **flags):
         for path in record["outputs"].values():
             click.echo(f"wrote {path}")
         click.echo(summary(record))
-    hint = _jump_hint(job, info, record.get("camera_warned", False))
+    hint = _jump_hint(job, info, record.get("camera_warned", False),
+                      bool(record.get("gradient_field")))
     torn = _torn_hint(job, info)
     unconverged = (not record["converged"] and info.get("solver") != "discontinuous"
                    and not jobs.finished_unconverged(info))  # (exit 2, outputs written)

@@ -9,11 +9,11 @@ from __future__ import annotations
 from . import methods
 
 
-def job_hints(job, info: dict, camera_warned: bool = False) -> list[str]:
+def job_hints(job, info: dict, camera_warned: bool = False, field: bool = False) -> list[str]:
     """The hints that apply to a job's result whose ``Surface.info`` is `info` (JSON-ready, as
     a job's record keeps it), in the order ``integrate`` prints them; `camera_warned`: the
     run warned that its camera looks wrong (the record's ``camera_warned``)."""
-    return [h for h in (jump_hint(job, info, camera_warned), torn_hint(job, info))
+    return [h for h in (jump_hint(job, info, camera_warned, field), torn_hint(job, info))
             if h is not None]
 
 
@@ -49,7 +49,8 @@ JUMP_FRAME_RATIO = 0.85
 JUMP_HINT_WIDE = 0.75
 
 
-def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
+def jump_hint(job, info: dict, camera_warned: bool = False,
+              field: bool = False) -> str | None:
     """The hint where a smooth integration by a method that can keep depth
     jumps, but did not (its own default, e.g. bini's, or the option given), deviates from its
     normals in the way bent-across jumps do (:data:`JUMP_HINT_SHARE`); not where the map
@@ -94,7 +95,7 @@ def jump_hint(job, info: dict, camera_warned: bool = False) -> str | None:
     # (a prior with samples on over a quarter of the usable normals: a dense map, whose own
     # noise or units bend the surface too)
     dense = prior.get("samples", 0) > 0.25 * max(int(info.get("input", {}).get("usable", 1)), 1)
-    frame = frame_first(job, ic) if own is not None else None
+    frame = frame_first(job, ic, field) if own is not None else None
     if share > JUMP_HINT_WIDE:
         # (a dense prior in other units pulls the whole surface off its normals: an audit's
         # orthographic run with a prior in mm was told of frame, camera and encoding only)
@@ -167,7 +168,7 @@ def torn_hint(job, info: dict) -> str | None:
     return hint
 
 
-def frame_first(job, ic: dict) -> str | None:
+def frame_first(job, ic: dict, field: bool = False) -> str | None:
     """:func:`jump_hint`'s words on the frame where the field's relative curls `ic`
     (``info["integrability"]``) say it is more integrable flipped (:data:`JUMP_FRAME_RATIO`),
     naming the flag to try as the frame check does (:func:`facetlift.frames.flip_advice`);
@@ -183,7 +184,9 @@ def frame_first(job, ic: dict) -> str | None:
     flipped = ic[f"curl_{a}_flipped"]
     if not (own > frames.FLIP_MIN_CURL and flipped < JUMP_FRAME_RATIO * own):
         return None
-    read = frames.GRADIENT_FIELD if getattr(job, "gradients", None) else getattr(
+    # (`field`: the record's gradient_field, a .mat of p and q too, whose field was told to
+    # try --normal-frame directx, which a gradient field refuses, an audit)
+    read = frames.GRADIENT_FIELD if field or getattr(job, "gradients", None) else getattr(
         job, "normal_frame", None)
     try_ = frames.flip_advice(read, a)
     if not frames.flip_decided(ic) and read != frames.GRADIENT_FIELD:

@@ -282,6 +282,10 @@ def read(job: Job) -> Input:
                 n = frames.decode_xy(n, frame=job.normal_frame)
             n = frames.to_facetlift(n, job.normal_frame)
         m = g["mask"]
+        if m is not None and given is None and not np.asarray(m).any():
+            # (named: "`mask` is empty" did not say it was the file's, a gradients audit)
+            raise ValueError(f"`path`: {src} holds a mask with no pixel set: nothing to "
+                             "integrate (--mat-keys names another variable; --mask gives one)")
         source = (f"{src.name} mask" if m is not None else
                   "valid gradients" if field_input else "valid normals")
         if not field_input and src.name == DILIGENT_NORMALS:  # (its folder's files)
