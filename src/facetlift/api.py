@@ -335,12 +335,12 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
         return integrate(normals, mask, prior=prior, prior_weight=prior_weight,
                          prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
     raw, own = prior_samples(prior, shape)  # (raw values: any sign before the alignment)
+    zeros = None
     if kwargs.get("K") is not None and not _is_points(prior, shape):
         # a map for a camera: 0 is a sensor's (or a clipped network's) "unknown", as the
         # unfitted route leaves it out; fitted, the zeros pulled the scale 1e4 off (a review)
         zeros = fit_zeros(raw)
         if zeros is not None:  # (counted in the domain after the first run: _fitted_runs)
-            kwargs["_zeros"] = zeros
             raw = np.where(zeros, np.nan, raw)
     weight = _weight_image(prior_weight, "prior_weight", shape)
     if own is not None:  # (points with their own weights: those times prior_weight, as
@@ -351,12 +351,13 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
     # second run's first pass: done once, facetlift.methods.dgp.shared_cuts)
     with shared_cuts():
         return _fitted_runs(kind, normals, mask, raw, weight, t0, prior_weight=prior_weight,
-                            prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
+                            prior_blur=prior_blur, prior_outliers=prior_outliers, zeros=zeros,
+                            **kwargs)
 
 
 def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_blur,
-                 prior_outliers, _zeros=None, **kwargs) -> Surface:
-    """The two runs of :func:`_integrate_fitted` and the fit between them (`_zeros`: the
+                 prior_outliers, zeros=None, **kwargs) -> Surface:
+    """The two runs of :func:`_integrate_fitted` and the fit between them (`zeros`: the
     prior map's exact zeros, left out, warned about where they lie in the domain)."""
     from . import prior_fit as pf
     from ._progress import announce
@@ -365,11 +366,11 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
     failed = None
     with recording() as said:
         first = integrate(normals, mask, **kwargs)
-    if _zeros is not None:
+    if zeros is not None:
         # (those in the domain the normals gave, the first run's: a map's 0 around the object
         # is no sample to miss, and was warned about as 17,148 left out, an audit; with no
         # mask given the domain is the valid normals, a review)
-        inside = _zeros & first.mask
+        inside = zeros & first.mask
         if inside.any():
             r, c = np.argwhere(inside)[0]
             warn(f"`prior`: {int(inside.sum())} pixel(s) in the mask hold exactly 0, the first "

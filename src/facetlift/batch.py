@@ -532,18 +532,13 @@ def run_item(job: Job, threads: int | None = None) -> dict:
     return rec
 
 
-def _finished(log: Path) -> dict[str, dict]:
-    """item -> its last record in an existing log (unreadable lines are skipped)."""
-    return {rec["item"]: rec for rec in _finished_records(log)}
-
-
-def _owners(log: Path) -> dict[str, dict]:
+def _owners(records: list[dict]) -> dict[str, dict]:
     """Output folder name -> the log record whose results are in it: the last ``ok`` record
-    naming that folder, while some of its outputs are still there (a later failed run of the
-    same input leaves them: an output set fails whole, a review), unreadable lines
-    skipped."""
+    of `records` (a log's, :func:`_finished_records`) naming that folder, while some of its
+    outputs are still there (a later failed run of the same input leaves them: an output set
+    fails whole, a review)."""
     last: dict[str, dict] = {}
-    for rec in _finished_records(log):
+    for rec in records:
         if rec.get("status") == "ok" and isinstance(rec.get("name"), str):
             last[rec["name"]] = rec
     return {name: rec for name, rec in last.items()
@@ -551,20 +546,34 @@ def _owners(log: Path) -> dict[str, dict]:
             and any(Path(p).is_file() for p in rec["outputs"].values())}
 
 
-def _same_input(rec: dict, path: str, stamp: list) -> bool:
-    """Whether the log record `rec` is of the input at `path` (its real path, the case aside
-    where the file system ignores it), or of an input since moved or renamed whose files are
-    the same (its path gone, its ``input_stamp`` equal to `stamp`: `mv maps maps2` gave every
-    item a new folder and resumed none, a review)."""
-    def real(p):
-        return os.path.normcase(os.path.realpath(p))
+def _real(path: str) -> str:
+    """`path` as the file system names it: links resolved, the case aside where it ignores
+    it."""
+    return os.path.normcase(os.path.realpath(path))
 
-    item = rec.get("item")
-    if not isinstance(item, str):
-        return False
-    if real(item) == real(path):
-        return True
-    return not os.path.exists(item) and bool(stamp) and rec.get("input_stamp") == stamp
+
+def _folders_of(owners: dict[str, dict], found: list, stamps: dict) -> dict[str, str]:
+    """Input path -> its folder by the log (:func:`_owners`): the folder whose record is of
+    the same input, by its real path (:func:`_real`), or of an input since moved or renamed
+    whose files are the same (its path gone, its ``input_stamp`` equal to the input's: `mv
+    maps maps2` gave every item a new folder and resumed none, a review); the first such
+    folder. One pass over each, through dicts of the inputs' real paths and stamps."""
+    by_real, by_stamp = {}, {}
+    for it in found:
+        by_real.setdefault(_real(it.path), it.path)
+        if stamps.get(it.path):
+            by_stamp.setdefault(json.dumps(stamps[it.path]), it.path)
+    mine: dict[str, str] = {}
+    for name, rec in owners.items():
+        item = rec.get("item")
+        if not isinstance(item, str):
+            continue
+        path = by_real.get(_real(item))
+        if path is None and not os.path.exists(item) and rec.get("input_stamp"):
+            path = by_stamp.get(json.dumps(rec["input_stamp"]))
+        if path is not None and path not in mine:
+            mine[path] = name
+    return mine
 
 
 def _finished_records(log: Path):
@@ -764,21 +773,16 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     root = Path(out).resolve()
     prepare_folder(root)  # created and checked before any work
     log_path = root / LOG_NAME if log is None else Path(log)
-    earlier = _finished(log_path) if resume else {}
+    records = list(_finished_records(log_path))  # (the log read once)
+    earlier = {rec["item"]: rec for rec in records} if resume else {}  # (each item's last)
     # (which input's results each folder holds, by the log: a batch of other inputs into the
     # same OUT wrote b's map.png over a's map/ without a word, and a later --resume of a kept
     # b's results as a's, an audit)
-    owners = _owners(log_path)
+    owners = _owners(records)
     asked = settings(template)
     jobs, results = [], {}
     stamps = {it.path: fingerprint(it, template) for it in found}
-    # (each input's folder by the log: the first folder whose owner is that input)
-    mine: dict[str, str] = {}
-    for name, rec in owners.items():
-        for it in found:
-            if it.path not in mine and _same_input(rec, it.path, stamps[it.path]):
-                mine[it.path] = name
-                break
+    mine = _folders_of(owners, found, stamps)  # (each input's folder by the log)
     for it in found:
         rec = earlier.get(it.path)
         if rec is not None and _complete(rec, asked, stamps[it.path]) and mine.get(

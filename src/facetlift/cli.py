@@ -367,6 +367,18 @@ def _job_options(f):
     return f
 
 
+def _refuse_contradictions(prior, no_prior, confidence, no_confidence, K, orthographic):
+    """The flags of `integrate`, `batch` and `info` that contradict each other, refused."""
+    if no_prior and prior is not None:
+        raise ValueError(f"--no-prior and --prior {prior} contradict each other; give one")
+    if no_confidence and confidence is not None:
+        raise ValueError(f"--no-confidence and --confidence {confidence} contradict each "
+                         "other; give one")
+    if K is not None and orthographic:
+        raise ValueError(f"--K {K} and --orthographic contradict each other: --orthographic "
+                         "ignores a camera (e.g. a dataset folder's K.txt); give one of them")
+
+
 def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_down=False,
               world_to_camera=None, camera_to_world=None, normal_encoding="xyz",
               normal_range="signed", gradient_frame="xy", mat_keys=None, method="dgp",
@@ -388,11 +400,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
     _methods.get(method)
     if quads and triangles:
         raise ValueError("give --quads or --triangles, not both")
-    if no_prior and prior is not None:
-        raise ValueError(f"--no-prior and --prior {prior} contradict each other; give one")
-    if no_confidence and confidence is not None:
-        raise ValueError(f"--no-confidence and --confidence {confidence} contradict each "
-                         "other; give one")
+    _refuse_contradictions(prior, no_prior, confidence, no_confidence, K, orthographic)
     if K is not None and not orthographic and pixel_size != 1.0:  # (also for a batch)
         raise ValueError(f"`pixel_size` {pixel_size!r} applies to orthographic input; --K "
                          f"{K} gives a camera (its scale comes from K): drop --pixel-size, or "
@@ -400,9 +408,6 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
     if fov is not None and pixel_size != 1.0:
         raise ValueError(f"`pixel_size` {pixel_size!r} applies to orthographic input; "
                          f"--fov gives a camera: drop --pixel-size")
-    if K is not None and orthographic:
-        raise ValueError(f"--K {K} and --orthographic contradict each other: --orthographic "
-                         "ignores a camera (e.g. a dataset folder's K.txt); give one of them")
     opts = dict(_parse_option(o) for o in options)
     for key, value in (("solver", solver), ("max_iter", max_iter), ("tol", tol),
                        ("backend", backend), ("max_memory", max_memory),
@@ -777,13 +782,7 @@ def info(normals, gradients, mask, K, fov, normal_frame, y_down, world_to_camera
 
     frames.gradient_frame(gradient_frame)  # (refused as integrate refuses it, on any input)
     # (integrate's flags that info named in its advice and did not take: an audit)
-    if no_prior and prior is not None:
-        raise ValueError(f"--no-prior and --prior {prior} contradict each other; give one")
-    if no_confidence and confidence is not None:
-        raise ValueError(f"--no-confidence and --confidence {confidence} contradict each "
-                         "other; give one")
-    if orthographic and K is not None:
-        raise ValueError(f"--K {K} and --orthographic contradict each other: give one")
+    _refuse_contradictions(prior, no_prior, confidence, no_confidence, K, orthographic)
     if fov is not None:  # (as integrate refuses them)
         from .jobs import Job, check_fov
 

@@ -961,14 +961,20 @@ def masked_pixels(a):
     return np.ma.getdata(a), (hidden.any(axis=-1) if hidden.ndim == 3 else None)
 
 
+def native(a: np.ndarray) -> np.ndarray:
+    """`a` in the machine's byte order (a copy only where it was not): big-endian ``>u2``
+    compares unequal to uint16, and such a map was refused as "must be uint8 or uint16"
+    (an audit)."""
+    return a if a.dtype.isnative else a.astype(a.dtype.newbyteorder("="))
+
+
 def as_float_normals(n: np.ndarray, name: str, mask=None, hidden=None) -> np.ndarray:
     """(H, W, 3) normals `n` as floats: a uint8/uint16 map decoded (:func:`decode`, its
     unit-length check inside `mask` and outside `hidden`) with a warning, other unsigned
     types refused; NaN at the `hidden` pixels (:func:`masked_pixels`). Shared by
     :func:`checked` and :func:`facetlift.io.write_normals`."""
     if n.dtype.kind == "u":
-        if not n.dtype.isnative:  # (big-endian '>u2' was refused as "must be uint16", an audit)
-            n = n.astype(n.dtype.newbyteorder("="))
+        n = native(n)
         if n.dtype not in ENCODED_DTYPES:
             raise ValueError(
                 f"`{name}` has integer type {n.dtype}; integer normal maps must be uint8 or "

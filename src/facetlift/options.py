@@ -15,6 +15,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 _KINDS = ("int", "float", "bool", "choice", "callable")
 
 
@@ -122,10 +124,9 @@ def _number(opt: Option, value):
 
 def _convert(opt: Option, value):
     if opt.kind == "bool":
-        # (numpy's bool: its type is named "bool" since numpy 2, and np.True_ was refused
-        # by every bool option, an audit)
-        if isinstance(value, bool) or type(value).__module__ == "numpy" and type(
-                value).__name__ in ("bool", "bool_"):
+        # (numpy's bool too: its type's name, which the check read, is "bool" since numpy 2,
+        # and np.True_ was refused by every bool option, an audit)
+        if isinstance(value, (bool, np.bool_)):
             return True, bool(value)
         return False, None
     if opt.kind == "callable":

@@ -459,19 +459,21 @@ def _json_matrix(data: dict, p: Path, arg: str, camera_to_world: bool):
     return data[key]
 
 
-def _named(folder: Path, name: str) -> Path | None:
+def _named(folder: Path, name: str, names: list[str] | None = None) -> Path | None:
     """`folder`'s entry named `name`, the case of its letters aside (a Windows user's
     ``K.TXT``, ``mask.PNG`` or ``Normal_Map.png`` was skipped in silence: the job ran
     orthographic, without its mask, an audit); the exact name first; None where there is
-    none or the folder cannot be listed. A ValueError naming `folder` where two entries
-    differ only in case and neither is the exact name."""
+    none or the folder cannot be listed. `names`: the folder's listing where the caller has
+    it (one listing for many names). A ValueError naming `folder` where two entries differ
+    only in case and neither is the exact name."""
     exact = folder / name
-    if os.path.lexists(exact):
+    if name in names if names is not None else os.path.lexists(exact):
         return exact
-    try:
-        names = os.listdir(folder)
-    except OSError:
-        return None
+    if names is None:
+        try:
+            names = os.listdir(folder)
+        except OSError:
+            return None
     low = name.lower()
     hits = [n for n in names if n.lower() == low]
     if len(hits) > 1:
@@ -485,8 +487,12 @@ def _find(folder: Path, stem: str, formats: tuple[str, ...]) -> Path | None:
     or None; a ValueError naming `folder` when it has several (which one was meant?) or one
     that is not a file (a folder named K.txt was skipped in silence, and the job ran without
     it)."""
+    try:  # (listed once for every extension)
+        names = os.listdir(folder)
+    except OSError:  # (not listable: the exact names alone)
+        names = None
     found = list(dict.fromkeys(p for ext in formats
-                               if (p := _named(folder, f"{stem}{ext}")) is not None))
+                               if (p := _named(folder, f"{stem}{ext}", names)) is not None))
     for p in found:
         if not p.is_file():
             raise ValueError(f"`folder`: {p} is not a file")
@@ -548,13 +554,15 @@ def is_dataset(folder) -> bool:
     ``normal_map.*`` or a ``Normal_gt.mat``. False where it cannot be read."""
     f = Path(folder)
     try:  # (one listing, the case of the names aside: _named)
-        names = {n.lower() for n in os.listdir(f)}
+        listing = os.listdir(f)
     except OSError:
         return False
+    names = {n.lower() for n in listing}
     wanted = [f"normal_map{ext}".lower() for ext in NORMAL_READ_FORMATS]
     try:  # (os.path.isfile: False for a folder that cannot be read, where Path.is_file raises)
-        return any(w in names and os.path.isfile(_named(f, w)) for w in wanted) or (
-            DILIGENT_NORMALS.lower() in names and os.path.isfile(_named(f, DILIGENT_NORMALS)))
+        return any(w in names and os.path.isfile(_named(f, w, listing)) for w in wanted) or (
+            DILIGENT_NORMALS.lower() in names
+            and os.path.isfile(_named(f, DILIGENT_NORMALS, listing)))
     except ValueError:  # (two names that differ only in case: a dataset, whose reading says
         return True  # which, a review)
 

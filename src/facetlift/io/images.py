@@ -237,8 +237,7 @@ def _decode_unit(pixels: np.ndarray, path: Path, arg: str, where=None, encoding:
     signs among `where`); other dtypes are refused. `encoding` ``"xy"``: x and y alone, z
     rebuilt to face the viewer in `frame` (:func:`facetlift.frames.decode_xy`)."""
     # (another pixel type is refused below as it is without the option: the type is wrong)
-    if not pixels.dtype.isnative:  # (a big-endian >u2 .npy was refused as "not uint16")
-        pixels = pixels.astype(pixels.dtype.newbyteorder("="))
+    pixels = frames.native(pixels)  # (a big-endian >u2 .npy was refused as "not uint16")
     if normal_range == "unsigned" and (pixels.dtype.kind == "f"
                                        or pixels.dtype in frames.ENCODED_DTYPES):
         pixels = frames.decode_unsigned(pixels, f"`{arg}`: {path}", where,  # (refuses 8/16
