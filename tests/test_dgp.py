@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import facetlift
-from facetlift import linalg
+from facetlift import linalg, synthetic
 from facetlift.conventions import OUTLIER_EPS
 from facetlift.domain import Domain
 
@@ -667,3 +667,40 @@ def test_bad_options(saddle, options, match):
 def test_bad_option_types(saddle, options, match):
     with pytest.raises(ValueError, match=match):
         facetlift.integrate(saddle.normals((6, 7), 0.1), pixel_size=0.1, **options)
+
+
+@pytest.mark.parametrize("solver", ["direct", "iterative"])
+@pytest.mark.parametrize("band", ["row", "column", "three rows"])
+def test_a_band_of_missing_normals_does_not_step_the_surface(solver, band):
+    """A band of missing normals across the domain left the offset between its sides to the
+    flattest fill: a plane came back with a step one band width times its slope high (an
+    audit). The slopes are continued across such a band; the plane is exact."""
+    H, W = 20, 24
+    r, c = np.mgrid[0:H, 0:W].astype(float)
+    n = np.dstack([np.full((H, W), -0.3), np.full((H, W), 0.2), np.ones((H, W))])
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    exact = -(0.3 * c + 0.2 * r)
+    rows, cols = {"row": (slice(10, 11), slice(None)), "column": (slice(None), slice(10, 11)),
+                  "three rows": (slice(9, 12), slice(None))}[band]
+    n[rows, cols] = np.nan
+    s = facetlift.integrate(n, np.ones((H, W), bool), solver=solver)
+    assert np.ptp(s.depth - exact) < 1e-8
+    assert s.info["gaps_filled"] == np.isnan(n[..., 0]).sum()
+
+
+def test_missing_normals_inside_a_region_keep_the_flattest_fill():
+    """Scattered missing normals and a hole inside one region are not continued (their
+    corners are fixed by their neighbours, or the hole's inside keeps the flattest fill)."""
+    from facetlift.methods import dgp
+
+    gt = synthetic.analytic("sphere", 64)
+    n = gt.normals.copy()
+    n[np.random.default_rng(0).random(gt.shape) < 0.3] = np.nan
+    n[20:30, 30:40] = np.nan
+    s = facetlift.integrate(n, gt.mask)
+    assert s.info["gaps_filled"] == 0
+    problem = facetlift.prepare(n, gt.mask)
+    bx, by, target = dgp.targets(problem)
+    *_, filled = dgp.continue_gaps(problem.domain, bx, by, target, None,
+                                   problem.extras["no_normal"])
+    assert not filled.any()
