@@ -20,6 +20,11 @@ def test_python_quick_start_runs_verbatim(tmp_path, monkeypatch):
     gt = synthetic.analytic("occluder", 48)
     io.write_normals(tmp_path / "normal_map.png", np.nan_to_num(gt.normals))
     io.write_mask(tmp_path / "mask.png", gt.mask)
+    import imagecodecs
+
+    photo = np.zeros(gt.shape + (3,), np.uint8)
+    photo[..., 0] = 200
+    (tmp_path / "photo.jpg").write_bytes(imagecodecs.jpeg8_encode(photo))
     monkeypatch.chdir(tmp_path)
     scope: dict = {}
     exec(compile(code, str(README), "exec"), scope)  # noqa: S102 - the README's own code
@@ -27,6 +32,9 @@ def test_python_quick_start_runs_verbatim(tmp_path, monkeypatch):
         assert (tmp_path / name).stat().st_size > 0, name
     assert np.isfinite(scope["surface"].depth[gt.mask]).all()
     assert scope["jumps"].discontinuities is not None
+    import meshio
+
+    assert (meshio.read(tmp_path / "mesh.ply").point_data["red"] > 190).all()  # (painted)
 
 
 RECIPES = README.parent / "docs" / "recipes.md"

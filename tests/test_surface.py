@@ -347,7 +347,7 @@ def test_the_command_lines_file_names_are_saved_as_it_writes_them(tmp_path):
     np.testing.assert_array_equal(io.read_depth(s.save(tmp_path / "d.exr")),
                                   np.float32(s.depth), strict=False)
     with pytest.raises(ValueError, match=r"points.ply \(as --save points writes it\) takes only "
-                       r"\['frame', 'normals'\]; got \['triangles'\]"):
+                       r"\['frame', 'normals', 'colors'\]; got \['triangles'\]"):
         s.save(tmp_path / "points.ply", triangles=True)
     smooth = facetlift.integrate(gt.normals, gt.mask)
     with pytest.raises(ValueError, match="no discontinuity map: integrate with "

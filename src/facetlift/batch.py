@@ -609,7 +609,7 @@ def settings(job: Job) -> dict:
     out["options"] = {k: v for k, v in job.options.items() if k not in NEUTRAL_OPTIONS}
     out["save"] = sorted(set(job.save))
     for key in ("fov", "output_frame", "height_range", "world_to_camera",
-                "camera_to_world"):  # (unset: as in a log written before they existed)
+                "camera_to_world", "colors"):  # (unset: as in a log written before they existed)
         if out.get(key) is None:
             out.pop(key, None)
     if not out.get("strict"):  # (off: as in a log written before it existed)
@@ -915,6 +915,10 @@ def check_template(job: Job, local: bool = True) -> None:
             raise ValueError(f"`{name}` of a batch is a file path read for every item; got "
                              f"{type(value).__name__}: write it to a file, or integrate each "
                              "map with facetlift.integrate, which takes arrays")
+    if getattr(job, "colors", None) is not None:  # (one picture for every map: not theirs)
+        raise ValueError(f"`colors` {job.colors}: a batch takes no colour image (one picture "
+                         "would paint every map); integrate each map with --colors (or "
+                         "Surface.save(..., colors=))")
     if isinstance(job.save, (str, os.PathLike)) or not all(isinstance(k, str) for k in job.save):
         raise ValueError(f"`save` must be a sequence of output names; got {job.save!r}")
     opts = dict(job.options)

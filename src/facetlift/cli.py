@@ -387,7 +387,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
               solver=None,
               max_iter=None, tol=None, backend=None, discontinuities=False, options=(),
               save=(), height_range=None, quads=False, triangles=False, output_frame=None,
-              outdir=None,
+              colors=None, outdir=None,
               max_memory=None, prior=None,
               prior_scale=None, prior_weight=None, prior_weight_map=None, confidence=None,
               prior_blur=None, prior_outliers=None, prior_fit=None, no_prior=False,
@@ -453,6 +453,7 @@ def _make_job(*, normals=None, gradients=None, mask=None, normal_frame=None, y_d
         triangles=True if triangles else (False if quads else None),
         output_frame=None if output_frame is None or frames.is_identity(output_frame)
         else output_frame,
+        colors=None if colors is None else str(colors),
         outdir=None if outdir is None else str(outdir),
         prior=None if prior is None else str(prior), prior_scale=prior_scale,
         prior_weight=prior_weight,
@@ -618,6 +619,13 @@ class _FieldFile(click.Path):
               "that folder exists. Default: <input>_facetlift/ next to the input.")
 @click.option("--json", "as_json", is_flag=True,
               help="Print one JSON object (outputs, diagnostics, timings) instead of text.")
+@click.option("--colors", "--colours", "colors",
+              type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="An image of the object (the photo the normals were estimated from, an "
+              "albedo; PNG, JPEG, TIFF, EXR or .npy) whose colours paint the ply, obj and "
+              "points outputs: each point its pixel's colour, each mesh vertex the mean of "
+              "its facets' (one side's at a jump). The same picture at another size is "
+              "resampled.")
 def integrate(normals, gradients, progress, as_json, **flags):
     """Integrate a normal map NORMALS into a depth map, a mesh and a preview.
 

@@ -41,6 +41,8 @@ OUTPUTS = {
     "points": "points.ply",
 }
 DEFAULT_SAVE = ("npy", "ply", "png")
+#: The outputs that an image's colours paint (``Job.colors``, --colors).
+COLOURED = frozenset({"ply", "obj", "points"})
 #: The file stems of :data:`OUTPUTS` ("depth", "mesh", ...): files by these names in a folder
 #: are facetlift's results, not inputs.
 OUTPUT_STEMS = frozenset(Path(name).stem for name in OUTPUTS.values())
@@ -97,6 +99,10 @@ class Job:
     #: None for facetlift's (x right, y up, z toward the viewer), "opencv" for the camera
     #: frame of OpenCV and COLMAP, or any frame a normal map may be in (facetlift.frames).
     output_frame: str | None = None
+    #: An image of the object (the photograph, an albedo) whose colours are painted on the
+    #: ply, obj and points outputs (facetlift.io.read_colors; resampled where it is the same
+    #: picture at another size).
+    colors: str | None = None
     outdir: str | None = None
     #: Depth prior file (docs/fusion.md), its scale (16-bit PNG), weight or weight map file,
     #: and the normals' confidence file; a dataset folder's prior_depth.* / confidence.* are
@@ -220,7 +226,8 @@ def input_paths(job: Job) -> list[Path]:
         paths = dataset_files(paths[0], with_prior=job.dataset_prior,
                               with_confidence=job.dataset_confidence)
     paths += [Path(p) for p in (job.mask, job.K, job.prior, job.prior_weight_map,
-                                job.confidence, job.world_to_camera, job.camera_to_world)
+                                job.confidence, job.world_to_camera, job.camera_to_world,
+                                job.colors)
               if p is not None]
     return paths
 
@@ -848,6 +855,9 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
             warn(f"`output_frame` {job.output_frame!r} applies to the mesh and point outputs "
                  "(ply, obj, stl, points), none of which is saved: depth maps stay in "
                  "facetlift's convention (depth along the viewing axis)")
+    if job.colors is not None and not set(save) & COLOURED:
+        warn(f"`colors` {job.colors} paints only the ply, obj and points outputs, none of "
+             "which is saved: add -s ply, -s obj or -s points")
     if job.triangles is False and "stl" in save and not set(save) & {"ply", "obj"}:
         warn("quad faces (--quads; `triangles` False) apply to the ply and obj meshes, neither "
              "of which is saved: mesh.stl holds triangles (STL has no quads)")
@@ -861,6 +871,9 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
             io.OutputSet(outdir, names, inputs=input_paths(job)) as out:
         announce(progress, "reading")
         inp = read(job)
+        # (before the solve: a wrong image fails the job at once)
+        rgb = (None if job.colors is None or not set(save) & COLOURED
+               else io.read_colors(job.colors, inp.normals.shape[:2]))
         t_read = time.perf_counter() - t0
         opts = dict(job.options)
         if progress is not None and "progress" in info.options() and "progress" not in opts:
@@ -906,7 +919,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         for kind, name in zip(save, names, strict=True):
             try:
                 _write(surface, kind, out.path(name), used, job.triangles,
-                       job.output_frame, job.height_range)
+                       job.output_frame, job.height_range, rgb)
             except OSError as e:  # (say which and where: the file written is a staging one)
                 if e.errno is None:
                     raise
@@ -1076,10 +1089,11 @@ def _depth_range(surface, height_range=None) -> list | None:
 
 
 def _write(surface, kind: str, path: Path, normals, triangles, frame=None,
-           height_range=None) -> None:
+           height_range=None, colors=None) -> None:
     """Output `kind` at `path` (named :data:`OUTPUTS`' `kind`): by :meth:`Surface.save`,
     which writes the command line's file names as ``--save`` does (one writer for both: its
-    points.ply was a mesh, a review)."""
+    points.ply was a mesh, a review). `colors`: the (H, W, 3) image painted on the kinds of
+    :data:`COLOURED`."""
     if Path(path).name != OUTPUTS[kind]:  # pragma: no cover - a caller's bug
         raise ValueError(f"{kind} output must be named {OUTPUTS[kind]}; got {path}")
     if kind in ("ply", "obj"):
@@ -1089,6 +1103,8 @@ def _write(surface, kind: str, path: Path, normals, triangles, frame=None,
     else:
         kw = {"report": {"normals": normals}, "points": {"normals": normals, "frame": frame},
               "height": {"height_range": height_range}}.get(kind, {})
+    if colors is not None and kind in COLOURED:
+        kw["colors"] = colors
     surface.save(path, **kw)
 
 

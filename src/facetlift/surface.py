@@ -253,12 +253,14 @@ class Surface:
         discontinuities`` writes it), but ``height.png`` (also ``heightmap``, ``height_map``,
         ``displacement``) the 16-bit height map of ``--save height`` (keyword
         ``height_range``). ``frame=`` writes a mesh in another frame
-        (:meth:`to_mesh`).
+        (:meth:`to_mesh`); ``colors=`` an image of the object, (H, W, 3) or (H, W), painted
+        on a mesh's vertices or ``points.ply``'s points (:mod:`facetlift.io.colors`; files
+        through :func:`facetlift.io.read_colors`).
 
         The command line's own file names write what its ``--save`` writes under them
         (:data:`facetlift.io.surface.CLI_NAMES`): ``points.ply`` the point cloud of ``-s
-        points`` (not the mesh; keywords ``frame`` and ``normals``, the input normals
-        (H, W, 3) to give each point), ``discontinuities.png`` the jump map of ``-s
+        points`` (not the mesh; keywords ``frame``, ``normals``, the input normals
+        (H, W, 3) to give each point, and ``colors``), ``discontinuities.png`` the jump map of ``-s
         discontinuities`` (refused for a surface without one), ``report.png`` the report of
         ``-s report`` (needs matplotlib; keywords ``normals``, ``dpi``) and ``height.exr``
         the heights of ``-s height-exr`` (not the depth). Every other name keeps its

@@ -12,7 +12,8 @@ intrinsics ``K``  text, 3 x 3                            numpy
 rotations         text, ``.npy``, JSON; 3x3, 3x4, 4x4    numpy
 depth maps        ``.npy``, OpenEXR, TIFF, ``.npz``      numpy, OpenEXR, tifffile
 height maps       PNG 16 bit, OpenEXR                    imagecodecs, OpenEXR
-meshes            PLY (binary), OBJ; quads or triangles  meshio
+meshes            PLY (binary), OBJ; quads or triangles  meshio (PLY)
+colours           PNG, JPEG, TIFF, OpenEXR, ``.npy``     imagecodecs, tifffile, OpenEXR
 previews          PNG                                    imagecodecs; matplotlib for colormaps
 reports           PNG (panels)                           matplotlib
 gradient fields   ``.npy``, OpenEXR, TIFF, ``.mat``      numpy, OpenEXR, tifffile, scipy.io
@@ -39,12 +40,14 @@ with the ``plot`` extra (``pip install 'facetlift[plot]'``); the shaded preview 
 
 Modules: :mod:`~facetlift.io.images` (normal maps, masks, depth maps),
 :mod:`~facetlift.io.dataset` (``K.txt``, dataset folders), :mod:`~facetlift.io.meshes`,
-:mod:`~facetlift.io.preview`, :mod:`~facetlift.io.surface` (:func:`save_surface`) and
+:mod:`~facetlift.io.colors`, :mod:`~facetlift.io.preview`, :mod:`~facetlift.io.surface`
+(:func:`save_surface`) and
 :mod:`~facetlift.io.atomic` (:func:`atomic_path`). Everything public is importable from
 ``facetlift.io`` itself.
 """
 
 from .atomic import OutputSet, atomic_path, sweep
+from .colors import COLOR_FORMATS, read_colors
 from .dataset import read_dataset, read_K, read_rotation
 from .images import (
     DEPTH_FORMATS,
@@ -67,6 +70,7 @@ from .report import write_report
 from .surface import SURFACE_FORMATS, load_surface, save_surface
 
 __all__ = [
+    "COLOR_FORMATS",
     "DEPTH_FORMATS",
     "HEIGHT_FORMATS",
     "ENCODED_LENGTH_RANGE",
@@ -78,6 +82,7 @@ __all__ = [
     "SURFACE_FORMATS",
     "atomic_path",
     "read_K",
+    "read_colors",
     "read_dataset",
     "read_depth",
     "read_prior",

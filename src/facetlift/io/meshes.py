@@ -1,4 +1,5 @@
-"""Facet meshes as binary PLY or OBJ, through meshio (imported on first use), or binary STL."""
+"""Facet meshes as binary PLY (through meshio, imported on first use), OBJ or binary STL, and
+point clouds as binary PLY; meshes and clouds optionally with a colour per vertex or point."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from .atomic import atomic_path
 MESH_FORMATS = (".ply", ".obj", ".stl")
 
 
-def write_mesh(path, vertices, faces) -> Path:
+def write_mesh(path, vertices, faces, colors=None) -> Path:
     """Write a mesh as binary PLY, OBJ or binary STL.
 
     Parameters
@@ -25,12 +26,16 @@ def write_mesh(path, vertices, faces) -> Path:
     vertices : (n, 3) float
     faces : (m, 4) quads or (m, 3) triangles of int vertex indices (0-based); triangles for
         ``.stl`` (``Surface.to_mesh(triangles=True)`` splits a facet mesh's quads)
+    colors : (n, 3) optional, a colour per vertex: floats in [0, 1] or uint8 (R, G, B as
+        displayed, i.e. sRGB). PLY stores them as the vertex properties ``red``, ``green``,
+        ``blue`` (uchar), OBJ as three more numbers in [0, 1] on each ``v`` line (MeshLab,
+        Blender, Open3D and trimesh read both); STL has no colours and refuses them.
 
     Raises
     ------
     ValueError
         Bad shapes, non-finite vertices, indices out of range, unknown extension, quads for
-        ``.stl``.
+        ``.stl``, colours of another shape or outside [0, 1], colours for ``.stl``.
     """
     import meshio
 
@@ -53,20 +58,74 @@ def write_mesh(path, vertices, faces) -> Path:
     if ext == ".stl" and f.shape[1] != 3:  # (meshio would drop the quads with a warning)
         raise ValueError(f"`faces`: an STL holds triangles only; got quads {f.shape}: split "
                          "them, e.g. Surface.to_mesh(triangles=True)")
+    if colors is not None and ext == ".stl":
+        raise ValueError("`colors`: an STL holds no colours; write the coloured mesh as .ply "
+                         "or .obj")
+    rgb = None if colors is None else colour_bytes(colors, len(v))
     if ext == ".stl":  # (written here, in blocks: meshio's writer held about 184 B per
         # triangle at once, 2.5 times the PLY's per pixel and more than the solve's estimate)
         with atomic_path(p) as tmp:
             _write_stl(tmp, v, f)
         return p
+    if ext == ".obj":  # (our own writer: meshio's formats a line per vertex and face in
+        # Python, 27 s for a 2048^2 mesh, and has no vertex colours)
+        with atomic_path(p) as tmp:
+            _write_obj(tmp, v, f, rgb)
+        return p
     dtype = np.int32 if len(v) < 2**31 else np.int64
     cell = "quad" if f.shape[1] == 4 else "triangle"
     cells = [(cell, f.astype(dtype))]
+    data = {} if rgb is None else {k: rgb[:, i] for i, k in enumerate(("red", "green", "blue"))}
     with atomic_path(p) as tmp:
-        if ext == ".ply":
-            meshio.write(tmp, meshio.Mesh(v, cells), file_format="ply", binary=True)
-        else:
-            meshio.write(tmp, meshio.Mesh(v, cells), file_format="obj")
+        meshio.write(tmp, meshio.Mesh(v, cells, point_data=data), file_format="ply",
+                     binary=True)
     return p
+
+
+def colour_bytes(colors, n: int, arg: str = "colors") -> np.ndarray:
+    """(n, 3) uint8 colours from `colors`: uint8 as they are, floats in [0, 1] rounded to
+    0-255. ValueError naming `arg` for another shape, a non-finite value or one outside
+    [0, 1]."""
+    c = np.asarray(colors)
+    if c.shape != (n, 3):
+        raise ValueError(f"`{arg}` must have shape ({n}, 3), one colour per vertex or point; "
+                         f"got {c.shape}")
+    if c.dtype == np.uint8:
+        return np.ascontiguousarray(c)
+    if c.dtype.kind not in "fiu":
+        raise ValueError(f"`{arg}` must hold numbers (floats in [0, 1] or uint8); got {c.dtype}")
+    c = c.astype(np.float64)
+    if not np.isfinite(c).all():
+        raise ValueError(f"`{arg}` contains NaN or inf ({int((~np.isfinite(c)).sum())} values)")
+    if c.size and (c.min() < 0 or c.max() > 1):
+        raise ValueError(f"`{arg}` must be in [0, 1] (or uint8); got values from {c.min():g} "
+                         f"to {c.max():g}")
+    return np.round(c * 255).astype(np.uint8)
+
+
+#: Rows per block of :func:`_write_obj`'s text.
+OBJ_BLOCK = 1 << 16
+
+
+def _write_obj(path, v: np.ndarray, f: np.ndarray, rgb: np.ndarray | None) -> None:
+    """Wavefront OBJ of vertices `v` (n, 3), faces `f` (m, 3 or 4; 1-based in the file) and
+    optional colours `rgb` (n, 3) uint8, written as ``v x y z r g b`` with r, g, b in [0, 1];
+    coordinates with their shortest exact decimal form (``repr``), :data:`OBJ_BLOCK` rows of
+    text at a time."""
+    with open(path, "w", encoding="ascii", newline="\n") as fh:
+        fh.write("# written by facetlift\n")
+        for start in range(0, len(v), OBJ_BLOCK):
+            rows = v[start:start + OBJ_BLOCK].tolist()
+            if rgb is None:
+                fh.write("".join("v %r %r %r\n" % tuple(r) for r in rows))
+            else:
+                cols = (rgb[start:start + OBJ_BLOCK] / 255.0).tolist()
+                fh.write("".join("v %r %r %r %.4f %.4f %.4f\n" % (*r, *c)
+                                 for r, c in zip(rows, cols, strict=True)))
+        line = "f" + " %d" * f.shape[1] + "\n"
+        for start in range(0, len(f), OBJ_BLOCK):
+            rows = (f[start:start + OBJ_BLOCK].astype(np.int64) + 1).tolist()
+            fh.write("".join(line % tuple(r) for r in rows))
 
 
 #: A binary STL's record: facet normal, three corners (float32), attribute byte count.
@@ -106,11 +165,12 @@ def _facet_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
         return np.where(length > 0, n / length, 0.0)
 
 
-def write_points(path, points, normals=None) -> Path:
-    """Write a point cloud as binary PLY: `points` (n, 3) float, and optional unit `normals`
+def write_points(path, points, normals=None, colors=None) -> Path:
+    """Write a point cloud as binary PLY: `points` (n, 3) float, optional unit `normals`
     (n, 3) as the vertex properties nx, ny, nz (CloudCompare, Open3D and PCL read both; a
-    point without a finite normal gets (0, 0, 0)). Points with a non-finite coordinate are
-    left out."""
+    point without a finite normal gets (0, 0, 0)) and optional `colors` (n, 3), floats in
+    [0, 1] or uint8, as ``red``, ``green``, ``blue`` (uchar). Points with a non-finite
+    coordinate are left out."""
     import meshio
 
     p = Path(path)
@@ -127,6 +187,9 @@ def write_points(path, points, normals=None) -> Path:
                              f"{n.shape}")
         n = np.where(np.isfinite(n).all(axis=1)[:, None], n, 0.0)
         data = {k: n[keep, i].astype(np.float32) for i, k in enumerate(("nx", "ny", "nz"))}
+    if colors is not None:
+        rgb = colour_bytes(colors, len(v))[keep]
+        data.update({k: rgb[:, i] for i, k in enumerate(("red", "green", "blue"))})
     cloud = meshio.Mesh(v[keep], [], point_data=data)
     with atomic_path(p) as tmp:
         meshio.write(tmp, cloud, file_format="ply", binary=True)

@@ -8,6 +8,7 @@ import numpy as np
 
 from ._paths import _suffix
 from .atomic import atomic_path
+from .colors import mesh_colors, point_colors
 from .images import DEPTH_FORMATS, write_depth
 from .meshes import MESH_FORMATS, write_mesh
 from .preview import write_preview
@@ -43,7 +44,10 @@ def save_surface(surface, path, **kwargs) -> Path:
     (:func:`write_mesh`, split at the jumps where there are any; keyword ``triangles``: True
     splits each quad in two, False keeps quads; default quads for PLY and triangles for OBJ,
     since OBJ readers such as Open3D's take triangles only; a binary STL holds triangles only,
-    with facet normals toward the viewer, and refuses ``triangles=False``); ``.png``: a
+    with facet normals toward the viewer, and refuses ``triangles=False``; keyword
+    ``colors``: an image of the object, (H, W, 3) or grey (H, W), uint8, uint16 or floats in
+    [0, 1], painted on the PLY's or OBJ's vertices, each the mean of its facets' pixels, one
+    side's at a jump: :mod:`facetlift.io.colors`); ``.png``: a
     shaded preview
     (:func:`write_preview`, keywords forwarded), except ``height.png``, the other names of
     :data:`HEIGHT_STEMS` and names ending in ``_height`` (``bear_height.png``; or ``-``): the
@@ -52,8 +56,9 @@ def save_surface(surface, path, **kwargs) -> Path:
 
     The command line's own file names (:data:`CLI_NAMES`) write what its ``--save`` writes
     under them: ``points.ply`` the point cloud (:func:`~facetlift.io.meshes.write_points`,
-    a point per pixel centre; keywords ``frame`` and ``normals``, the input normals
-    (H, W, 3) to give each point), ``discontinuities.png`` the map of the depth jumps
+    a point per pixel centre; keywords ``frame``, ``normals``, the input normals
+    (H, W, 3) to give each point, and ``colors``, an image of the object whose pixels colour
+    the points), ``discontinuities.png`` the map of the depth jumps
     (:func:`~facetlift.io.preview.write_discontinuities`, keyword ``min_size``; a surface
     without one is refused), ``report.png`` the report
     (:func:`~facetlift.io.report.write_report`, needs matplotlib; keywords ``normals``,
@@ -96,16 +101,22 @@ def save_surface(surface, path, **kwargs) -> Path:
             )
         return p
     if ext in MESH_FORMATS:
-        extra = sorted(set(kwargs) - {"triangles", "frame"})
+        extra = sorted(set(kwargs) - {"triangles", "frame", "colors"})
         if extra:
-            raise ValueError(f"{ext} output takes only `triangles` and `frame`; got {extra}")
+            raise ValueError(f"{ext} output takes only `triangles`, `frame` and `colors`; got "
+                             f"{extra}")
         triangles = kwargs.get("triangles")
         triangles = ext != ".ply" if triangles is None else triangles  # (to_mesh checks it)
         if ext == ".stl" and isinstance(triangles, (bool, np.bool_)) and not triangles:
             raise ValueError("`triangles`: an STL holds triangles only; leave it out (or True) "
                              "for .stl, or write quads to .ply or .obj")
+        colors = kwargs.get("colors")
+        if colors is not None and ext == ".stl":  # (before the mesh is formed)
+            raise ValueError("`colors`: an STL holds no colours; write the coloured mesh as "
+                             ".ply or .obj")
         verts, faces = surface.to_mesh(triangles=triangles, frame=kwargs.get("frame"))
-        return write_mesh(p, verts, faces)
+        rgb = None if colors is None else mesh_colors(surface, colors)
+        return write_mesh(p, verts, faces, rgb)
     stem = p.stem.lower()
     if stem in HEIGHT_STEMS or stem.endswith(tuple(f"{sep}{h}" for h in HEIGHT_STEMS
                                                    for sep in "_-")):
@@ -135,7 +146,7 @@ def save_surface(surface, path, **kwargs) -> Path:
 
 
 #: The keywords each of :data:`CLI_NAMES`' writers takes.
-_CLI_KEYWORDS = {"points": ("frame", "normals"), "discontinuities": ("min_size",),
+_CLI_KEYWORDS = {"points": ("frame", "normals", "colors"), "discontinuities": ("min_size",),
                  "report": ("dpi", "normals"), "height-exr": ()}
 
 
@@ -153,8 +164,10 @@ def _save_as_cli(surface, p: Path, kind: str, kwargs: dict) -> Path:
 
         frame = kwargs.get("frame")
         pn = point_normals(surface, kwargs.get("normals"))
+        colors = kwargs.get("colors")
         return write_points(p, surface.points(frame=frame),
-                            None if pn is None else frames.from_facetlift(pn, frame, "frame"))
+                            None if pn is None else frames.from_facetlift(pn, frame, "frame"),
+                            None if colors is None else point_colors(surface, colors))
     if kind == "discontinuities":
         from .preview import write_discontinuities
 

@@ -1,0 +1,217 @@
+"""Colours for meshes and point clouds: an image of the object (the photograph a neural
+estimator saw, a photometric stereo's albedo or one of its images) painted onto the result.
+
+Every pixel is a facet (docs/conventions.md), so pixel (r, c)'s colour belongs to facet (r, c):
+a point of ``points.ply`` at that pixel's centre takes it as it is, and a mesh vertex takes the
+mean colour of the facets that use it (on a mesh split at depth jumps, of its own side's
+facets only, so that no colour bleeds across a jump).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .._warnings import warn
+from ._paths import _existing, _suffix
+
+COLOR_FORMATS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr", ".npy")
+
+#: Largest relative difference of the two axes' scale factors for which an image of another
+#: size is resampled to the normal map's (the same picture at another resolution, with each
+#: side rounded to whole pixels); beyond it the image is refused as another picture.
+ASPECT_TOLERANCE = 0.02
+
+
+def read_colors(path, shape: tuple[int, int] | None = None, *, arg: str = "colors"
+                ) -> np.ndarray:
+    """An image's colours as float32 (H, W, 3) in [0, 1], as displayed (sRGB).
+
+    PNG (8 or 16 bit), JPEG and TIFF are taken as stored, scaled by their largest value
+    (255, 65535); a float TIFF or ``.npy`` must lie in [0, 1]; OpenEXR holds linear light by
+    its convention and is encoded to sRGB (values above 1 clipped, with a warning). A grey
+    image gives grey colours; an alpha channel is dropped. With `shape` (the normal map's),
+    an image of the same picture at another resolution is resampled to it (with a warning);
+    one of another aspect ratio is refused.
+
+    Raises
+    ------
+    ValueError
+        Naming `arg`: an unreadable file, an unsupported format or layout, values outside
+        [0, 1] in a float file, another picture's shape.
+    """
+    p = _existing(path, arg)
+    ext = _suffix(p, COLOR_FORMATS, "colour image", arg)
+    if ext == ".exr":
+        from .images import _read_exr
+
+        ch = _read_exr(p, arg)
+        names = _exr_colour_channels(ch, p, arg)
+        a = np.dstack([ch[n] for n in names]).astype(np.float64)
+        a = _srgb(a, p, arg)
+    elif ext == ".npy":
+        from .images import _read_npy
+
+        a = _read_npy(p, arg)
+    elif ext in (".jpg", ".jpeg"):
+        try:
+            import imagecodecs
+
+            a = np.asarray(imagecodecs.jpeg8_decode(p.read_bytes()))
+        except OSError as e:
+            raise ValueError(f"`{arg}`: cannot read {p}: {e}") from None
+        except Exception as e:  # (each codec has its own errors)
+            raise ValueError(f"`{arg}`: {p} is not a readable JPEG image "
+                             f"({type(e).__name__}: {e})") from None
+    else:
+        from .images import _decode_image
+
+        a = _decode_image(p, ext, arg)
+    return colour_image(a, shape, arg=arg, source=p)
+
+
+def _exr_colour_channels(ch: dict, p: Path, arg: str) -> list[str]:
+    """The EXR channels holding R, G, B (of the default layer, or of the only layer that has
+    all three), or the one channel of a grey image."""
+    for prefix in [""] + sorted({k.rsplit(".", 1)[0] + "." for k in ch if "." in k}):
+        names = [prefix + c for c in "RGB"]
+        if all(n in ch for n in names):
+            return names
+    if len(ch) == 1 or "Y" in ch:
+        return ["Y" if "Y" in ch else next(iter(ch))]
+    raise ValueError(f"`{arg}`: {p} must hold R, G and B channels (or one grey channel) for "
+                     f"the colours; got channels {sorted(ch)}")
+
+
+def _srgb(a: np.ndarray, p, arg: str) -> np.ndarray:
+    """Linear light (an EXR's) encoded as sRGB in [0, 1]; values above 1 clipped with a
+    warning, negative or non-finite ones set to 0."""
+    bad = ~np.isfinite(a)
+    a = np.where(bad, 0.0, np.maximum(a, 0.0))
+    over = a > 1.0
+    if over.mean() > 0.01:
+        warn(f"`{arg}`: {p} is linear light with {over.mean():.0%} of its values above 1; "
+             "they are clipped to white (tone-map it first to keep the highlights)")
+    a = np.minimum(a, 1.0)
+    return np.where(a <= 0.0031308, 12.92 * a, 1.055 * a ** (1 / 2.4) - 0.055)
+
+
+def colour_image(image, shape: tuple[int, int] | None = None, *, arg: str = "colors",
+                 source=None) -> np.ndarray:
+    """`image` as float32 (H, W, 3) in [0, 1]: uint8 and uint16 scaled by 255 and 65535,
+    floats as they are (they must lie in [0, 1]; NaN is black), grey repeated, alpha
+    dropped; resampled to `shape` where it is the same picture at another resolution
+    (:data:`ASPECT_TOLERANCE`). ValueError naming `arg` otherwise."""
+    where = f" ({source})" if source is not None else ""
+    a = np.asarray(image)
+    if a.dtype.kind == "b" or a.dtype.kind not in "uif":
+        raise ValueError(f"`{arg}`{where} must hold numbers (uint8, uint16 or floats in "
+                         f"[0, 1]); got {a.dtype}")
+    if a.ndim == 3 and a.shape[2] in (2, 4):  # (grey + alpha, RGBA: the alpha dropped)
+        a = a[..., :a.shape[2] - 1]
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    if a.ndim == 2:
+        a = np.repeat(a[..., None], 3, axis=2)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ValueError(f"`{arg}`{where} must be an (H, W, 3) colour or (H, W) grey image; "
+                         f"got shape {a.shape}")
+    if a.dtype.kind in "ui":
+        top = 255 if a.dtype.itemsize == 1 else 65535 if a.dtype.itemsize == 2 else None
+        if top is None or a.min() < 0:
+            raise ValueError(f"`{arg}`{where}: integer colours must be uint8 or uint16; got "
+                             f"{a.dtype}" + (" with negative values" if top else ""))
+        c = a.astype(np.float32) / np.float32(top)
+    else:
+        c = a.astype(np.float32)
+        c = np.where(np.isfinite(c), c, np.float32(0.0))
+        if c.size and (c.min() < 0 or c.max() > 1):
+            raise ValueError(f"`{arg}`{where}: float colours must lie in [0, 1]; got values "
+                             f"from {c.min():g} to {c.max():g} (scale them, or give uint8)")
+    if shape is not None and c.shape[:2] != tuple(shape):
+        c = _resampled(c, tuple(shape), arg, where)
+    return np.ascontiguousarray(c)
+
+
+def _resampled(c: np.ndarray, shape: tuple[int, int], arg: str, where: str) -> np.ndarray:
+    """`c` (h, w, 3) resampled to `shape` (H, W): the same picture at another resolution
+    (:func:`_axis_weights` along each axis); another aspect ratio is a ValueError."""
+    (h, w), (H, W) = c.shape[:2], shape
+    sy, sx = H / h, W / w
+    # (each side rounded to whole pixels: the scales may differ by one pixel's worth)
+    slack = max(ASPECT_TOLERANCE, 1.0 / min(h, w, H, W))
+    if abs(sy - sx) > slack * max(sy, sx):
+        raise ValueError(f"`{arg}`{where} is {h} x {w} pixels, the normal map {H} x {W}: "
+                         "another picture (its aspect ratio differs); give the image the "
+                         "normals were estimated from, at their size or scaled")
+    warn(f"`{arg}`{where}: the image is {h} x {w} pixels and the normal map {H} x {W}; its "
+         "colours are resampled to the map's size")
+    Ry, Rx = _axis_weights(h, H), _axis_weights(w, W)
+    out = np.empty((H, W, 3), np.float32)
+    for k in range(3):
+        out[..., k] = (Ry @ (Rx @ c[..., k].T).T)
+    return np.clip(out, 0.0, 1.0)
+
+
+def _axis_weights(n: int, N: int):
+    """(N, n) sparse weights resampling one axis of n pixels to N: where it shrinks, each new
+    pixel the mean of the old ones it covers, by the length of their overlap (an area
+    average); where it grows, linear interpolation between the old pixel centres."""
+    import scipy.sparse as sp
+
+    if N < n:
+        lo, hi = np.arange(N) * (n / N), np.arange(1, N + 1) * (n / N)
+        rows, cols, vals = [], [], []
+        for i in range(N):
+            k = np.arange(int(np.floor(lo[i])), min(n, int(np.ceil(hi[i]))))
+            overlap = np.minimum(k + 1, hi[i]) - np.maximum(k, lo[i])
+            rows.append(np.full(k.size, i))
+            cols.append(k)
+            vals.append(overlap / overlap.sum())
+        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
+                                                      np.concatenate(cols))), shape=(N, n))
+    x = np.clip((np.arange(N) + 0.5) * (n / N) - 0.5, 0, n - 1)  # (old pixel coordinates)
+    k = np.minimum(np.floor(x).astype(int), max(n - 2, 0))
+    t = x - k
+    nxt = np.minimum(k + 1, n - 1)
+    return sp.csr_matrix((np.r_[1 - t, t], (np.r_[np.arange(N), np.arange(N)], np.r_[k, nxt])),
+                         shape=(N, n))
+
+
+def point_colors(surface, colors) -> np.ndarray:
+    """(n, 3) float colours of :meth:`facetlift.Surface.points`' pixels (the mask's, in
+    row-major order) from an (H, W, 3) image of the surface's shape (:func:`colour_image`)."""
+    c = colour_image(colors, surface.shape)
+    return c[surface.mask]
+
+
+def mesh_colors(surface, colors, faces_of=None) -> np.ndarray:
+    """(n, 3) float colours of :meth:`facetlift.Surface.to_mesh`'s vertices: each vertex the
+    mean colour of the facets that use it (of its side's facets where the mesh is split at
+    jumps). `faces_of`: the (m, 4) corner indices of the facets, in the mask's row-major
+    order (computed from the surface where None)."""
+    c = point_colors(surface, colors).astype(np.float64)
+    if faces_of is None:
+        faces_of = facet_corners(surface)
+    corners = np.asarray(faces_of)
+    n = int(corners.max()) + 1 if corners.size else 0
+    flat = corners.ravel()
+    count = np.bincount(flat, minlength=n)
+    out = np.empty((n, 3))
+    for k in range(3):
+        out[:, k] = np.bincount(flat, weights=np.repeat(c[:, k], corners.shape[1]),
+                                minlength=n)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out /= count[:, None]
+    return np.clip(np.nan_to_num(out, nan=0.0), 0.0, 1.0)
+
+
+def facet_corners(surface) -> np.ndarray:
+    """(m, 4) vertex indices of each facet's corners, as :meth:`facetlift.Surface.to_mesh`
+    numbers its vertices (the split mesh's where the surface has jumps)."""
+    if getattr(surface, "split", None) is not None:
+        return surface.split[0]
+    from ..domain import Domain
+
+    return Domain.from_mask(surface.mask).corners
