@@ -637,7 +637,7 @@ def test_backends_agree(wave, backend, solver):
         ({"tol": 1e-3}, r"`tol` applies only with solver='iterative'"),
         ({"outlier_eps": 2}, r"`outlier_eps` must be a number >= 0 and < 1; got 2"),
         ({"outlier_eps": -0.1}, r"`outlier_eps` must be a number >= 0 and < 1; got -0.1"),
-        ({"flat_weight": 0}, "`flat_weight` must be a number > 0; got 0"),
+        ({"flat_weight": 0}, "`flat_weight` must be a number > 0 and <= 1; got 0"),
         ({"discontinuity_k": 0.5}, "`discontinuity_k` applies only with discontinuities=True"),
         ({"discontinuities": True, "solver": "iterative"},
          "`discontinuities` applies only with solver='direct'"),

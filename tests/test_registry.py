@@ -166,7 +166,7 @@ def _bad_values(o: Option) -> list:
     if o.low is not None:
         bad.append(o.low if o.low_open else o.low - 1)
     if o.high is not None:
-        bad.append(o.high if o.high_open else o.high + 1)
+        bad.append(o.high if o.high_open else o.high + max(1, abs(o.high)))  # (1e100 + 1)
     if not o.none:
         bad.append(None)
     return bad

@@ -650,6 +650,8 @@ def prepare(
             # of 1, so 1e-12 everywhere is the same as 1 everywhere (it was flattened by the
             # solvers' own tiny regularisers against such weights)
             conf = conf / float(conf[usable].max())
+        if usable.any():
+            conf = _confidence_floor(conf, usable)
         # (after the scaling: the facets without a usable normal keep the weight 1 of their
         # flat and twist terms whatever the map's scale; set before it, a map scaled by 0.01
         # weighed them 100 times the best normal and moved the bear's depth by 8.5 % of its
@@ -772,6 +774,7 @@ def prepare(
                                       (H, W), m, cam)
         counts["prior_samples"] = int((pw > 0).sum())
         counts["prior_outside_mask"] = outside  # (dropped: counted, not silently)
+        _prior_ratio_check(pw, None if conf is None else conf[usable])
     elif not _is_default_weight(prior_weight):
         raise ValueError(f"`prior_weight` applies only with a `prior`; got {_short(prior_weight)} "
                          "and prior=None")
@@ -1543,6 +1546,48 @@ def resize_prior_hint(small, shape) -> str:
             "the normals. docs/fusion.md, 'A monocular depth map' and 'Blurred priors'")
 
 
+#: The smallest ratio of a confidence to the map's largest that the solvers resolve: a
+#: confidence of 1e-12 beside ones of 1 flattened the half of a plane it weighed (46 % of the
+#: depth range off where its normals were the only data, an audit); smaller ones are raised
+#: to it, with a warning (0 stays a missing normal).
+CONFIDENCE_RANGE = 1e-8
+
+#: The smallest ratio of the largest prior weight to the largest normal weight (1, or the
+#: largest confidence) that the solvers resolve: at 1e-16 the prior's offset was lost to
+#: rounding (a plane 0.96 off, or a solver error that named nothing, an audit); below it the
+#: prior is refused, naming both.
+PRIOR_RATIO = 1e-10
+
+
+def _confidence_floor(conf: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """`conf` with the usable normals' confidences below :data:`CONFIDENCE_RANGE` of the
+    largest raised to it, with a warning counting them."""
+    top = float(conf[usable].max())
+    low = usable & (conf < CONFIDENCE_RANGE * top)
+    if low.any():
+        warn(f"`confidence`: {int(low.sum())} normal(s) have a confidence below "
+             f"{CONFIDENCE_RANGE:g} of the largest ({top:g}); they are raised to it, as the "
+             "solvers cannot weigh a wider range (0 marks a missing normal)")
+        conf = np.where(low, CONFIDENCE_RANGE * top, conf)
+    return conf
+
+
+def _prior_ratio_check(pw: np.ndarray, conf) -> None:
+    """Refuse prior weights too small against the normals' weight to be resolved
+    (:data:`PRIOR_RATIO`)."""
+    used = pw[pw > 0]
+    if not used.size:
+        return
+    top = 1.0 if conf is None or not conf.size else float(conf.max())
+    if float(used.max()) < PRIOR_RATIO * top:
+        against = "1 (a normal's)" if conf is None else f"{top:g}, the largest `confidence`"
+        raise ValueError(f"`prior_weight`: the prior's largest weight {float(used.max()):g} is "
+                         f"below {PRIOR_RATIO:g} of the normals' weight {against}: the solvers "
+                         "cannot resolve it and its depths would be lost to rounding; give a "
+                         "larger `prior_weight` (or smaller confidences), or leave the prior "
+                         "out")
+
+
 #: The largest prior weight: at 1e8 the result already meets the prior where given to
 #: rounding (tests/test_fusion.py); 1e300 overflowed into a depth of 0 everywhere.
 MAX_PRIOR_WEIGHT = 1e10
@@ -1606,9 +1651,12 @@ def check_prior(prior, prior_weight, shape, mask, camera):
     if not have.any():
         outside = int(np.isfinite(img).sum())
         # (points all left out, e.g. every pixel's points conflicting: said so, an audit)
+        points = _is_points(prior, shape)
         left = ("; its points were all left out or fell outside the mask (the warnings above "
                 "say why: outside the image, behind the camera, non-finite, or disagreeing "
-                "within a pixel)" if _is_points(prior, shape) and not outside else "")
+                "within a pixel)" if points and not outside else "")
+        if points and not np.size(prior[2]):  # (no warning above to point at, an audit)
+            left = "; its list of points (rows, cols, depths) is empty"
         raise ValueError(
             "`prior` has no finite depth sample inside the mask"
             + (f" ({outside} outside it)" if outside else "")

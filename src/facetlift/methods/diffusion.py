@@ -69,7 +69,7 @@ C4 = 3.31488
 OPTIONS = (
     Option("sigma", 0.5, "Gaussian of the structure tensor, in pixels", low=0.0),
     Option("contrast", 1.0, "slope contrast of the edge-enhancing diffusivity",
-           low=0.0, low_open=True),
+           low=0.0, low_open=True, high=1e100),
     Option("beta", 0.02, "smallest diffusivity across level lines", low=0.0, low_open=True,
            high=1.0),
     g.BACKEND,

@@ -60,7 +60,7 @@ PRIORS = {"laplacian": 1.0, "edge_preserving": 10.0}
 
 OPTIONS = (
     Option("lam", None, "weight of the smoothness prior (default 1 for 'laplacian', 10 for "
-           "'edge_preserving')", low=0.0, none=True),
+           "'edge_preserving')", low=0.0, high=1e8, none=True),
     Option("prior", "laplacian", "smoothness prior", kind="choice", choices=tuple(PRIORS)),
     *g.iteration_options(10, "rounds", when={"prior": "edge_preserving"}),
     g.BACKEND,

@@ -111,7 +111,7 @@ OPTIONS = (
            kind="choice", choices=("auto", "pcg", "pardiso", "superlu", "amg"),
            when={"discontinuities": False}),
     Option("flat_weight", 1e-9, "slope weight of facets without a normal (selects the "
-           "flattest of otherwise equal solutions)", low=0.0, low_open=True),
+           "flattest of otherwise equal solutions)", low=0.0, low_open=True, high=1.0),
     Option("progress", None, "callable(iteration, value) called after every iteration of "
            "the routes that iterate: the loop (value: deviation), the reweightings, the CG "
            "of the direct route (value: relative residual); one with a `stage` attribute "
