@@ -1,5 +1,7 @@
 # Two commands set everything up on a fresh machine: `make demo` and `make test`.
-PY ?= python3
+# Python 3.11 where it is installed under that name (the version the project is developed
+# and tested on), else python3 (3.10 or newer); `make PY=python3.12 demo` picks another.
+PY ?= $(shell command -v python3.11 2>/dev/null || echo python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
@@ -7,11 +9,16 @@ TEST_STAMP := $(VENV)/.installed-test
 
 .PHONY: demo test test-slow lint bench clean
 
+# (a failed creation, e.g. a Debian Python without python3-venv, leaves no half venv behind
+# that later runs would take as made)
 $(BIN)/python:
-	$(PY) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(PY) -m venv $(VENV) || { rm -rf $(VENV); exit 1; }
+	$(BIN)/python -m pip install --quiet --upgrade pip || { rm -rf $(VENV); exit 1; }
 
 $(STAMP): pyproject.toml | $(BIN)/python
+	@$(BIN)/python -c 'import sys; sys.exit(sys.version_info < (3, 10))' || { echo \
+	  "$(VENV) was made with `$(BIN)/python -V 2>&1`; facetlift needs 3.10 or newer:" \
+	  "run 'make clean', then 'make PY=python3.11 demo' (or another Python >= 3.10)"; exit 1; }
 	$(BIN)/python -m pip install --quiet --only-binary=:all: -e .
 	touch $@
 

@@ -1136,3 +1136,15 @@ def test_dot_and_globbed_folders_and_own_outputs(tmp_path, monkeypatch):
         with pytest.raises(ValueError, match=match):  # (before any item: each failed alone)
             fb.batch(["x/in/m0.png"], tmp_path / "o2", workers=1, **kw)
     assert not (tmp_path / "o2").exists()
+
+
+def test_a_cluster_without_distributed_names_the_extra(tmp_path, monkeypatch):
+    """dask installed without dask.distributed: the cluster route raised a bare
+    ModuleNotFoundError (an audit)."""
+    import sys
+
+    from facetlift.batch import _on_cluster
+
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    with pytest.raises(ImportError, match=r"dask\.distributed.*facetlift\[batch\]"):
+        _on_cluster([], "tcp://127.0.0.1:1", lambda *a: None)

@@ -567,3 +567,13 @@ def test_depth_jumps_take_the_camera_of_a_perspective_render():
     beside[1:] |= down
     flagged = synthetic.depth_jumps(gt)
     assert beside.any() and not (beside & ~flagged).any()
+
+
+@pytest.mark.parametrize("call", ["tabletop", "room"])
+def test_scene_builders_name_the_render_extra_without_trimesh(call, monkeypatch):
+    """tabletop and room imported trimesh bare: a ModuleNotFoundError traceback (an audit)."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "trimesh", None)  # (import trimesh -> ImportError)
+    with pytest.raises(ImportError, match=rf"synthetic\.{call} needs trimesh.*facetlift\[render\]"):
+        getattr(synthetic, call)(["mesh.ply"])

@@ -1031,7 +1031,8 @@ def _dask():
     except ImportError as e:
         raise ImportError(
             "facetlift batch with several workers or a cluster needs Dask, which comes with "
-            "the batch extra: pip install 'facetlift[batch]' (or run with --workers 1)"
+            "the batch extra: pip install 'facetlift[batch]' (or run with one worker: "
+            "--workers 1, workers=1)"
         ) from e
     return dask
 
@@ -1197,7 +1198,12 @@ def _stop(pool, procs) -> None:
 def _on_cluster(jobs, scheduler, done) -> None:
     """A ``dask.distributed`` scheduler (address or Client); `done` runs as futures finish."""
     _dask()
-    from distributed import Client, as_completed
+    try:
+        from distributed import Client, as_completed
+    except ImportError as e:  # (dask alone is a common install: named, an audit)
+        raise ImportError("facetlift batch on a cluster (a scheduler) needs dask.distributed, "
+                          "which comes with the batch extra: pip install 'facetlift[batch]'"
+                          ) from e
 
     own = not isinstance(scheduler, Client)
     client = Client(scheduler) if own else scheduler

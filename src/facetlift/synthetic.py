@@ -430,15 +430,14 @@ def tabletop(meshes, *, seed: int = 0, spacing: float = 0.9, behind=(0.1, 0.6),
     -------
     trimesh.Trimesh
     """
-    import trimesh
-
+    trimesh = _trimesh("tabletop")
     parts, table = _tabletop_parts(meshes, seed, spacing, behind, margin)
     return trimesh.util.concatenate(parts + [table])
 
 
 def _tabletop_parts(meshes, seed, spacing, behind, margin):
     """The objects of :func:`tabletop`, placed, and the table: (list, trimesh.Trimesh)."""
-    import trimesh
+    trimesh = _trimesh("tabletop")
 
     if len(meshes) == 0:
         raise ValueError("`meshes` must name at least one mesh")
@@ -446,7 +445,7 @@ def _tabletop_parts(meshes, seed, spacing, behind, margin):
     parts = []
     k = len(meshes)
     for i, mesh in enumerate(meshes):
-        m = _load_mesh(mesh).copy()
+        m = _load_mesh(mesh, "tabletop").copy()
         m.apply_translation(-m.bounds.mean(axis=0))
         m.apply_scale(1.0 / np.linalg.norm(m.vertices, axis=1).max())
         m.apply_transform(trimesh.transformations.rotation_matrix(rng.uniform(-np.pi, np.pi),
@@ -516,13 +515,12 @@ def room(meshes, *, seed: int = 0, size: float = 4.0, height: float = 2.0, boxes
     -------
     trimesh.Trimesh
     """
-    import trimesh
-
+    trimesh = _trimesh("room")
     rng = np.random.default_rng(seed)
     half = size / 2.0
     parts = []
     for mesh in meshes:
-        m = _load_mesh(mesh).copy()
+        m = _load_mesh(mesh, "room").copy()
         m.apply_translation(-m.bounds.mean(axis=0))
         m.apply_scale(rng.uniform(*radius) / np.linalg.norm(m.vertices, axis=1).max())
         parts.append(m)
@@ -704,8 +702,8 @@ def _trimesh(caller: str):
     return trimesh
 
 
-def _load_mesh(mesh):
-    trimesh = _trimesh("render_mesh")
+def _load_mesh(mesh, caller: str = "render_mesh"):
+    trimesh = _trimesh(caller)
     if isinstance(mesh, trimesh.Trimesh):
         return mesh
     if isinstance(mesh, (str, Path)):
@@ -729,7 +727,12 @@ def _first_hits(mesh, origins, direction):
     except ImportError:  # pragma: no cover - embreex is installed in the test setup
         from trimesh.ray.ray_triangle import RayMeshIntersector
 
-        return RayMeshIntersector(mesh).intersects_first(origins, dirs)
+        try:
+            return RayMeshIntersector(mesh).intersects_first(origins, dirs)
+        except ImportError as e:  # (trimesh's own caster needs rtree: named, an audit)
+            raise ImportError("facetlift.synthetic's ray casting needs embreex (or rtree for "
+                              "trimesh's slower caster), which come with the render extra: "
+                              "pip install 'facetlift[render]'") from e
 
 
 def _hits(depth, normals, mask, **kw) -> GroundTruth:
@@ -746,14 +749,14 @@ def _hits(depth, normals, mask, **kw) -> GroundTruth:
     return GroundTruth(depth=depth, normals=normals, mask=mask, **kw)
 
 
-def _mesh_in_view(mesh, view, name):
+def _mesh_in_view(mesh, view, name, caller: str = "render_mesh"):
     """(label, trimesh mesh, the view's frame (3, 3), the vertices (n, 3) in it: x right, y up,
     z toward the viewer) of a mesh to render; the label is `name` or ``"<stem>@<view>"``."""
     label = name
     if label is None:
         stem = Path(mesh).stem if isinstance(mesh, (str, Path)) else "mesh"
         label = f"{stem}@{view if isinstance(view, str) else 'custom'}"
-    m = _load_mesh(mesh)
+    m = _load_mesh(mesh, caller)
     frame = _view_frame(view)
     return label, m, frame, np.asarray(m.vertices, dtype=float) @ frame.T
 
@@ -924,7 +927,7 @@ def render_perspective(
         raise ValueError(f"`fill` must be in (0, 4]; got {fill!r}")
     if isinstance(samples, bool) or int(samples) != samples or samples < 1:
         raise ValueError(f"`samples` must be an integer >= 1; got {samples!r}")
-    label, m, frame, P = _mesh_in_view(mesh, view, name)
+    label, m, frame, P = _mesh_in_view(mesh, view, name, "render_perspective")
     centre = (P.min(axis=0) + P.max(axis=0)) / 2
     radius = float(np.linalg.norm(P - centre, axis=1).max())
     f = float(min(K[0, 0], K[1, 1]))

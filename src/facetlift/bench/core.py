@@ -255,6 +255,9 @@ class Context:
     extra_meshes: tuple = ()
     extra_normal_maps: tuple = ()
     sections: list[tuple[str, str]] = field(default_factory=list)
+    #: Scenes that could not be made (scene name -> why, e.g. the render extra missing): the
+    #: report lists them, as the means are over the others.
+    unavailable: dict[str, str] = field(default_factory=dict)
 
     def specs(self, variants: bool = True) -> list[Spec]:
         """The table columns of this run (see :func:`default_specs`)."""

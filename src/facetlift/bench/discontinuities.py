@@ -105,9 +105,9 @@ def specs(ctx: Context) -> list[Spec]:
 
 def load_mesh(path: Path):
     """The mesh at `path`, loop-subdivided to >= :data:`MIN_FACES` unless it is a CAD model."""
-    import trimesh
+    from ..synthetic import _trimesh
 
-    m = trimesh.load(path, force="mesh")
+    m = _trimesh("render_perspective").load(path, force="mesh")
     flat = float(np.mean(m.face_adjacency_angles < np.radians(1.0))) if len(m.faces) > 1 else 1
     if flat < CAD_FLAT and len(m.faces) < MIN_FACES:
         m = m.subdivide_loop(iterations=math.ceil(math.log(MIN_FACES / len(m.faces), 4)))
@@ -574,6 +574,7 @@ def usable(ctx: Context, data, label: str):
             gt = load()
         except Exception as e:
             log.warning("scene %s unavailable: %s", name, e)
+            ctx.unavailable[name] = str(e)  # (listed in the report, an audit)
             continue
         if gt.mask.sum() < ctx.settings.disc_min_pixels or gt.depth_range < _flat(gt):
             log.info("scene %s skipped: %d pixels, depth range %g", name, gt.mask.sum(),

@@ -6,9 +6,35 @@ the run has none (failed, unavailable, ...).
 
 from __future__ import annotations
 
+import functools
+import importlib.util
+import logging
 from pathlib import Path
 
 import numpy as np
+
+log = logging.getLogger("facetlift.bench")
+
+#: The figures not drawn because matplotlib (the plot extra) is missing, by file name: the
+#: report lists them (:func:`facetlift.bench.runner.run_bench`), and the experiments' tables
+#: and CSV files are written all the same.
+NOT_DRAWN: list[str] = []
+
+
+def _drawn(draw):
+    """`draw(path, ...)` where matplotlib is installed; else nothing drawn, None returned and
+    the file named in :data:`NOT_DRAWN` (a bench without the plot extra lost finished
+    experiments from its report to an ImportError, with a traceback each, an audit)."""
+    @functools.wraps(draw)
+    def wrapper(path, *args, **kwargs):
+        if importlib.util.find_spec("matplotlib") is None:
+            if not NOT_DRAWN:
+                log.warning("matplotlib is not installed: the figures are not drawn "
+                            "(pip install 'facetlift[plot]'); tables and CSV files are written")
+            NOT_DRAWN.append(Path(path).name)
+            return None
+        return draw(path, *args, **kwargs)
+    return wrapper
 
 
 def _plt():
@@ -32,6 +58,7 @@ def savefig(fig, path: Path) -> Path:
     return path
 
 
+@_drawn
 def convergence(path: Path, curves: dict, shape) -> Path:
     """Fig. 4: deviation per iteration; `curves` maps mean subtraction (bool) to the curve."""
     plt = _plt()
@@ -49,6 +76,7 @@ def convergence(path: Path, curves: dict, shape) -> Path:
     return savefig(fig, path)
 
 
+@_drawn
 def perturbation(path: Path, maps: list, rows: list[dict]) -> Path:
     """Fig. 5: per fraction, the perturbation angles and the error maps as inliers / outliers.
 
@@ -76,6 +104,7 @@ def perturbation(path: Path, maps: list, rows: list[dict]) -> Path:
     return savefig(fig, path)
 
 
+@_drawn
 def error_maps(path: Path, gt, runs: list, cond: str = "") -> Path:
     """Figs. 6-8: the ground-truth height, then the normalised error map (%) of every run."""
     finite = [e for r, e in runs if e is not None]
@@ -85,6 +114,7 @@ def error_maps(path: Path, gt, runs: list, cond: str = "") -> Path:
                      label="error % of depth range")
 
 
+@_drawn
 def angle_maps(path: Path, runs: list) -> Path:
     """Fig. 10: the angular error map (deg) of every run."""
     return _map_grid(path, runs, vmax=20, title_size=7, label="deg (clipped at 20)",
@@ -126,6 +156,7 @@ def _map_grid(path: Path, runs: list, *, vmax: float, title, title_size: float, 
     return savefig(fig, path)
 
 
+@_drawn
 def error_bars(path: Path, summary: list[dict], domains: list[str]) -> Path:
     """Fig. 9: mean normalised error per method and condition, one panel per domain."""
     plt = _plt()
@@ -163,6 +194,7 @@ def error_bars(path: Path, summary: list[dict], domains: list[str]) -> Path:
     return savefig(fig, path)
 
 
+@_drawn
 def thumbnails(path: Path, gts: list) -> Path | None:
     """The normal maps of the ground truths `gts` (nothing written where there is none)."""
     if not gts:
@@ -181,6 +213,7 @@ def thumbnails(path: Path, gts: list) -> Path | None:
     return savefig(fig, path)
 
 
+@_drawn
 def made_maps(path: Path, runs: list) -> Path | None:
     """The bear: the MADE map (mm) of every run that has one (nothing written where none has)."""
     ok = [(r, e) for r, e in runs if e is not None]

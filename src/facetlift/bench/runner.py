@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from .. import methods as _methods
-from . import discontinuities, fig9, fusion, maps, paper, real
+from . import discontinuities, fig9, fusion, maps, paper, plots, real
 from .core import Context, Settings, bar, method_status
 from .tables import md_table, write_text
 
@@ -156,6 +156,7 @@ def run_bench(
                   extra_meshes=tuple(extra_meshes), extra_normal_maps=tuple(extra_normal_maps))
     t0 = time.perf_counter()
     failures = []
+    plots.NOT_DRAWN.clear()
     for e in bar(exps, progress, "bench"):
         error = _run(e, ctx)
         if error:
@@ -216,5 +217,14 @@ def _report(ctx: Context, mode: str, failures: list, seconds: float) -> str:
     if failures:
         head += ["## Failed experiments\n",
                  md_table([{"experiment": e, "error": m} for e, m in failures])]
+    if plots.NOT_DRAWN:
+        head += ["## Figures not drawn\n",
+                 f"matplotlib is not installed (pip install 'facetlift[plot]'): "
+                 f"{', '.join(plots.NOT_DRAWN)}; the tables below and the CSV files are "
+                 "complete.\n"]
+    unavailable = ctx.unavailable
+    if unavailable:
+        head += ["## Scenes not rendered\n",
+                 md_table([{"scene": k, "reason": v} for k, v in unavailable.items()])]
     body = [f"## {title}\n\n{text}" for title, text in ctx.sections]
     return "\n".join(head + body)
