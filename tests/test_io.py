@@ -739,16 +739,14 @@ def test_shade_flat_plane_is_uniform():
 
 @pytest.mark.parametrize("name", ["m.ply", "m.stl"])
 def test_atomic_write_leaves_nothing_on_failure(tmp_path, surface, monkeypatch, name):
-    import meshio
-
     def boom(path, *a, **k):
         Path(path).write_bytes(b"partial")
         raise RuntimeError("disk full")
 
     from facetlift.io import meshes
 
-    monkeypatch.setattr(meshio, "write", boom)
-    monkeypatch.setattr(meshes, "_write_stl", boom)  # (STL: written block by block, here)
+    for writer in ("_write_stl", "_write_ply", "_write_obj"):  # (block by block, here)
+        monkeypatch.setattr(meshes, writer, boom)
     with pytest.raises(RuntimeError, match="disk full"):
         surface.save(tmp_path / name)
     assert list(tmp_path.iterdir()) == []
@@ -787,7 +785,7 @@ def test_atomic_exr_failure(tmp_path, monkeypatch):
             raise RuntimeError("exr failed")
 
     monkeypatch.setattr(OpenEXR, "File", Broken)
-    with pytest.raises(OSError, match="cannot write .*d.exr as OpenEXR: exr failed"):
+    with pytest.raises(OSError, match="cannot write as OpenEXR: exr failed.*d.exr"):
         io.write_depth(tmp_path / "d.exr", np.zeros((2, 2)))
     assert list(tmp_path.iterdir()) == []
 
@@ -1650,3 +1648,30 @@ def test_a_file_named_npy_that_is_no_npy_file_says_so(tmp_path):
     (tmp_path / "z.npz").rename(tmp_path / "z.npy")
     with pytest.raises(ValueError, match=r"z.npy is an .npz archive"):
         io.read_normals(tmp_path / "z.npy")
+
+
+def test_an_exr_that_cannot_be_written_names_its_target_with_an_errno(tmp_path, monkeypatch):
+    """The OpenEXR bindings' failure named the temporary file and carried no errno, so the
+    command line could not say which output failed (an audit)."""
+    import OpenEXR
+
+    class Failing:
+        def __init__(self, *a):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *a):
+            return False
+
+        def write(self, name):
+            raise RuntimeError(f'Cannot open image file "{name}"')
+
+    monkeypatch.setattr(OpenEXR, "File", Failing)
+    target = tmp_path / "depth.exr"
+    with pytest.raises(OSError) as e:
+        io.write_depth(target, np.zeros((4, 5)))
+    assert e.value.errno is not None and e.value.filename == str(target)
+    assert ".tmp" not in str(e.value) and "cannot write as OpenEXR" in str(e.value)
+    assert list(tmp_path.iterdir()) == []

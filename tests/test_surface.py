@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 
+import meshio
 import numpy as np
 import pytest
 
@@ -358,3 +359,35 @@ def test_the_command_lines_file_names_are_saved_as_it_writes_them(tmp_path):
     (tmp_path / "r").mkdir()
     assert (tmp_path / "report.png").read_bytes() == io.write_report(
         tmp_path / "r" / "report.png", s, gt.normals).read_bytes()
+
+
+def test_point_normals_are_the_camera_frames_whatever_frame_was_integrated(tmp_path):
+    """Surface.save("points.ply", normals=n) with the n given to integrate with a
+    normal_frame or a normal_rotation wrote them in the caller's frame (an OpenCV map's
+    faced away, an audit); they are turned as integrate turned them."""
+    gt = synthetic.analytic("vase", (40, 48))
+    want = gt.normals[gt.mask]
+    th = np.radians(20)
+    R = np.array([[1, 0, 0], [0, np.cos(th), -np.sin(th)], [0, np.sin(th), np.cos(th)]])
+    world = np.einsum("ij,hwj->hwi", R.T, gt.normals)
+    for given, kw in ((gt.normals * [1, -1, -1], {"normal_frame": "opencv"}),
+                      (world, {"normal_rotation": R})):
+        s = facetlift.integrate(given, gt.mask, **kw)
+        cloud = meshio.read(s.save(tmp_path / "points.ply", normals=given))
+        got = np.column_stack([cloud.point_data[k] for k in ("nx", "ny", "nz")])
+        np.testing.assert_allclose(got, want, atol=1e-6)
+
+
+def test_a_height_named_depth_file_warns(tmp_path):
+    """bear_height.exr held the depth without a word, where bear_height.png holds heights (a
+    sign trap, an audit); height.exr itself writes the heights, as the command line."""
+    gt = synthetic.analytic("vase", 24)
+    s = facetlift.integrate(gt.normals, gt.mask)
+    with pytest.warns(UserWarning, match="holds the depth .* not the heights"):
+        s.save(tmp_path / "bear_height.exr")
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s.save(tmp_path / "height.exr")
+        s.save(tmp_path / "bear_depth.exr")

@@ -281,7 +281,15 @@ def integrate(
             confidence=confidence, grazing_note=note, prior_blur=prior_blur,
             prior_outliers=prior_outliers, isolated=isolated, grazing_share=share,
         )
-        return _solve(problem, method, t0, max_memory, options)
+        surface = _solve(problem, method, t0, max_memory, options)
+    # (how the caller's normals reach the camera's facetlift frame: Surface.save's
+    # normals= for points.ply and the report take the same array, and were written in the
+    # caller's frame, an audit)
+    if not frames.is_identity(normal_frame):
+        surface.info["normal_frame"] = frames.axis_string(normal_frame)
+    if normal_rotation is not None:
+        surface.info["normal_rotation"] = np.asarray(normal_rotation, float).tolist()
+    return surface
 
 
 #: :func:`integrate`'s own keyword arguments, offered where a misspelt one looks like one.

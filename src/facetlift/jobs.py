@@ -913,12 +913,12 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
             _strict_check(caught, surface)
         t2 = time.perf_counter()
         announce(progress, "writing outputs")
-        # (the normals integrated, in the camera frame: the points' normals and the report's
-        # deviation are of them, not of world-space ones as read)
-        used = frames.rotate(inp.normals, turn)
+        # (the normals as integrate was given them: Surface.save turns them by the rotation
+        # it records, so the points' normals and the report's deviation are of the camera
+        # frame's, not of world-space ones as read)
         for kind, name in zip(save, names, strict=True):
             try:
-                _write(surface, kind, out.path(name), used, job.triangles,
+                _write(surface, kind, out.path(name), inp.normals, job.triangles,
                        job.output_frame, job.height_range, rgb)
             except OSError as e:  # (say which and where: the file written is a staging one)
                 if e.errno is None:

@@ -12,7 +12,7 @@ intrinsics ``K``  text, 3 x 3                            numpy
 rotations         text, ``.npy``, JSON; 3x3, 3x4, 4x4    numpy
 depth maps        ``.npy``, OpenEXR, TIFF, ``.npz``      numpy, OpenEXR, tifffile
 height maps       PNG 16 bit, OpenEXR                    imagecodecs, OpenEXR
-meshes            PLY (binary), OBJ; quads or triangles  meshio (PLY)
+meshes            PLY (binary), OBJ, STL                 numpy (facetlift's own writers)
 colours           PNG, JPEG, TIFF, OpenEXR, ``.npy``     imagecodecs, tifffile, OpenEXR
 previews          PNG                                    imagecodecs; matplotlib for colormaps
 reports           PNG (panels)                           matplotlib

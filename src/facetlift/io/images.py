@@ -745,7 +745,14 @@ def _write_exr(path: Path, channels: dict[str, np.ndarray], quantity: str | None
             with OpenEXR.File(header, data) as f:
                 f.write(str(tmp))
         except RuntimeError as e:  # the bindings report every write failure this way
-            raise OSError(f"cannot write {path} as OpenEXR: {e}") from None
+            # (with an errno and the target, not the temporary file: the command line then
+            # says which output failed and that nothing was written, as for the others, an
+            # audit)
+            import errno
+
+            why = str(e).replace(str(tmp), str(path))
+            code = errno.EIO if os.access(Path(tmp).parent, os.W_OK) else errno.EACCES
+            raise OSError(code, f"cannot write as OpenEXR: {why}", str(path)) from None
 
 
 def _write_tiff(path: Path, arr: np.ndarray) -> None:

@@ -1,5 +1,7 @@
-"""Facet meshes as binary PLY (through meshio, imported on first use), OBJ or binary STL, and
-point clouds as binary PLY; meshes and clouds optionally with a colour per vertex or point."""
+"""Facet meshes as binary PLY, OBJ or binary STL, and point clouds as binary PLY; meshes and
+clouds optionally with a colour per vertex or point. Written by facetlift itself, in blocks or
+as numpy records (no library's per-line Python loop, no time stamp in the files: the same
+surface gives the same bytes)."""
 
 from __future__ import annotations
 
@@ -28,7 +30,7 @@ def write_mesh(path, vertices, faces, colors=None) -> Path:
         ``.stl`` (``Surface.to_mesh(triangles=True)`` splits a facet mesh's quads)
     colors : (n, 3) optional, a colour per vertex: floats in [0, 1] or uint8 (R, G, B as
         displayed, i.e. sRGB). PLY stores them as the vertex properties ``red``, ``green``,
-        ``blue`` (uchar), OBJ as three more numbers in [0, 1] on each ``v`` line (MeshLab,
+        ``blue`` (uint8), OBJ as three more numbers in [0, 1] on each ``v`` line (MeshLab,
         Blender, Open3D and trimesh read both); STL has no colours and refuses them.
 
     Raises
@@ -37,8 +39,6 @@ def write_mesh(path, vertices, faces, colors=None) -> Path:
         Bad shapes, non-finite vertices, indices out of range, unknown extension, quads for
         ``.stl``, colours of another shape or outside [0, 1], colours for ``.stl``.
     """
-    import meshio
-
     p = Path(path)
     ext = _suffix(p, MESH_FORMATS, "mesh", "path")
     v = np.asarray(vertices, dtype=np.float64)
@@ -72,14 +72,54 @@ def write_mesh(path, vertices, faces, colors=None) -> Path:
         with atomic_path(p) as tmp:
             _write_obj(tmp, v, f, rgb)
         return p
-    dtype = np.int32 if len(v) < 2**31 else np.int64
-    cell = "quad" if f.shape[1] == 4 else "triangle"
-    cells = [(cell, f.astype(dtype))]
     data = {} if rgb is None else {k: rgb[:, i] for i, k in enumerate(("red", "green", "blue"))}
     with atomic_path(p) as tmp:
-        meshio.write(tmp, meshio.Mesh(v, cells, point_data=data), file_format="ply",
-                     binary=True)
+        _write_ply(tmp, v, f, data)
     return p
+
+
+#: PLY's names of the numpy types :func:`_write_ply` writes.
+_PLY_TYPES = {"f8": "double", "f4": "float", "u1": "uint8", "i4": "int32"}
+
+
+def _write_ply(path, v: np.ndarray, f: np.ndarray | None, props: dict) -> None:
+    """Binary little-endian PLY: vertices `v` (n, 3) as ``x y z`` (double) followed by the
+    vertex properties `props` (name -> (n,) float32 or uint8 array, in order), and faces `f`
+    (m, 3 or 4; None: a point cloud, no face element) as ``list uint8 int32
+    vertex_indices``. The layout meshio wrote before, without its time stamp."""
+    if len(v) >= 2**31:
+        raise ValueError(f"a PLY's int32 vertex indices hold fewer than 2^31 vertices; got "
+                         f"{len(v)}")
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    fields += [(k, np.dtype(a.dtype).newbyteorder("<").str) for k, a in props.items()]
+    header = ["ply", "format binary_little_endian 1.0", "comment written by facetlift",
+              f"element vertex {len(v)}"]
+    header += [f"property {_PLY_TYPES[t[1:]]} {name}" for name, t in fields]
+    if f is not None:
+        header += [f"element face {len(f)}", "property list uint8 int32 vertex_indices"]
+    header.append("end_header")
+    with open(path, "wb") as fh:
+        fh.write(("\n".join(header) + "\n").encode("ascii"))
+        for start in range(0, len(v), PLY_BLOCK):  # (a block of records at a time)
+            part = slice(start, start + PLY_BLOCK)
+            rec = np.empty(len(v[part]), dtype=fields)
+            rec["x"], rec["y"], rec["z"] = v[part].T
+            for k, a in props.items():
+                rec[k] = a[part]
+            rec.tofile(fh)
+        if f is not None:
+            face = np.empty(min(len(f), PLY_BLOCK),
+                            dtype=[("n", "u1"), ("v", "<i4", (f.shape[1],))])
+            face["n"] = f.shape[1]
+            for start in range(0, len(f), PLY_BLOCK):
+                part = f[start:start + PLY_BLOCK]
+                out = face[:len(part)]
+                out["v"] = part
+                out.tofile(fh)
+
+
+#: Records per block of :func:`_write_ply` (a few MiB of temporaries each).
+PLY_BLOCK = 1 << 17
 
 
 def colour_bytes(colors, n: int, arg: str = "colors") -> np.ndarray:
@@ -171,8 +211,6 @@ def write_points(path, points, normals=None, colors=None) -> Path:
     point without a finite normal gets (0, 0, 0)) and optional `colors` (n, 3), floats in
     [0, 1] or uint8, as ``red``, ``green``, ``blue`` (uchar). Points with a non-finite
     coordinate are left out."""
-    import meshio
-
     p = Path(path)
     _suffix(p, (".ply",), "point cloud", "path")
     v = np.asarray(points, dtype=np.float64)
@@ -190,7 +228,6 @@ def write_points(path, points, normals=None, colors=None) -> Path:
     if colors is not None:
         rgb = colour_bytes(colors, len(v))[keep]
         data.update({k: rgb[:, i] for i, k in enumerate(("red", "green", "blue"))})
-    cloud = meshio.Mesh(v[keep], [], point_data=data)
     with atomic_path(p) as tmp:
-        meshio.write(tmp, cloud, file_format="ply", binary=True)
+        _write_ply(tmp, v[keep], None, data)
     return p

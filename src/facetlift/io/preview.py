@@ -116,6 +116,11 @@ def write_preview(
     """
     p = Path(path)
     _suffix(p, (".png",), "preview", "path")
+    if not all(hasattr(surface, a) for a in ("depth", "mask", "camera")):
+        # (a depth array gave an AttributeError from deep inside, an audit)
+        raise TypeError(f"`surface` must be a facetlift.Surface (integrate's result, or "
+                        f"Surface.from_depth(depth, mask) for a depth map); got "
+                        f"{type(surface).__name__}")
     min_size, bg = _min_size(min_size), _background(background)
     cmap = None
     if colormap is not None:

@@ -85,6 +85,13 @@ def save_surface(surface, path, **kwargs) -> Path:
 
     if ext in DEPTH_FORMATS:
         no_kwargs()
+        if _height_named(p) and p.name.lower() not in CLI_NAMES:  # (a sign trap, an audit)
+            from .._warnings import warn
+
+            warn(f"{p.name}: a {ext} file holds the depth (larger is farther), not the "
+                 "heights its name suggests; io.write_height(path, surface) writes the heights "
+                 "(-depth) to .exr or a 16-bit .png, as the command line's height.exr and "
+                 "height.png")
         return write_depth(p, surface.depth)
     if ext == ".npz":
         no_kwargs()
@@ -118,8 +125,7 @@ def save_surface(surface, path, **kwargs) -> Path:
         rgb = None if colors is None else mesh_colors(surface, colors)
         return write_mesh(p, verts, faces, rgb)
     stem = p.stem.lower()
-    if stem in HEIGHT_STEMS or stem.endswith(tuple(f"{sep}{h}" for h in HEIGHT_STEMS
-                                                   for sep in "_-")):
+    if _height_named(p):
         # (the command line's height.png, also per object: bear_height.png; a user's check)
         extra = sorted(set(kwargs) - {"height_range"})
         if extra:
@@ -150,6 +156,14 @@ _CLI_KEYWORDS = {"points": ("frame", "normals", "colors"), "discontinuities": ("
                  "report": ("dpi", "normals"), "height-exr": ()}
 
 
+def _height_named(p: Path) -> bool:
+    """Whether `p`'s name says it holds heights: a stem of :data:`HEIGHT_STEMS` or ending in
+    ``_height`` / ``-height`` (and the like)."""
+    stem = p.stem.lower()
+    return stem in HEIGHT_STEMS or stem.endswith(tuple(f"{sep}{h}" for h in HEIGHT_STEMS
+                                                       for sep in "_-"))
+
+
 def _save_as_cli(surface, p: Path, kind: str, kwargs: dict) -> Path:
     """:func:`save_surface` of one of :data:`CLI_NAMES`: as ``--save kind`` writes it."""
     extra = sorted(set(kwargs) - set(_CLI_KEYWORDS[kind]))
@@ -176,7 +190,10 @@ def _save_as_cli(surface, p: Path, kind: str, kwargs: dict) -> Path:
         from .. import io as package  # (facetlift.io.write_report: the one a test replaces)
 
         info = surface.info if isinstance(surface.info, dict) else {}
-        return package.write_report(p, surface, kwargs.get("normals"),
+        given = kwargs.get("normals")
+        if given is not None and np.shape(given) == surface.shape + (3,):
+            given = camera_normals(surface, given)  # (as the points' normals)
+        return package.write_report(p, surface, given,
                             mean_deviation=info.get("mean_deviation"),
                             **({"dpi": kwargs["dpi"]} if "dpi" in kwargs else {}))
     from .preview import write_height
@@ -184,18 +201,41 @@ def _save_as_cli(surface, p: Path, kind: str, kwargs: dict) -> Path:
     return write_height(p, surface)[0]
 
 
+def camera_normals(surface, normals) -> np.ndarray:
+    """The (H, W, 3) normals given to :func:`facetlift.integrate` as it took them: uint8 /
+    uint16 decoded (``v / max * 2 - 1``), from its ``normal_frame`` to facetlift's and turned
+    by its ``normal_rotation`` (both recorded in ``surface.info``), so that the array a
+    caller integrated gives the camera-frame normals of the result (they came out in the
+    caller's frame: an OpenCV map's point normals faced away, an audit)."""
+    from .. import frames
+
+    n = np.asarray(normals)
+    if n.dtype in (np.uint8, np.uint16):
+        n = n / float(np.iinfo(n.dtype).max) * 2.0 - 1.0
+    n = np.asarray(n, dtype=float)
+    info = surface.info if isinstance(surface.info, dict) else {}
+    frame = info.get("normal_frame")
+    if frame is not None:
+        n = frames.to_facetlift(n, frame)
+    R = info.get("normal_rotation")
+    if R is not None:
+        n = frames.rotate(n, frames.rotation_in_facetlift(np.asarray(R, float), frame))
+    return n
+
+
 def point_normals(surface, normals):
     """The input normals at :meth:`facetlift.Surface.points`' pixels (facetlift's camera
-    frame, as integrated: world-space ones turned by their rotation, a gradient field's from
-    its slopes), unit length; None where `normals` is None. A map of another shape is a
-    ValueError naming `normals` (a cloud without them had been written without a word, an
-    audit)."""
+    frame, as integrated: in the frame and with the rotation :func:`facetlift.integrate` was
+    given, :func:`camera_normals`; a gradient field's from its slopes), unit length; None
+    where `normals` is None. A map of another shape is a ValueError naming `normals` (a cloud
+    without them had been written without a word, an audit)."""
     if normals is None:
         return None
-    n = np.asarray(normals, dtype=float)
+    n = np.asarray(normals)
     if n.shape != surface.shape + (3,):
         raise ValueError(f"`normals` must be an (H, W, 3) map of the surface's shape "
                          f"{surface.shape + (3,)} for the points' normals; got {n.shape}")
+    n = camera_normals(surface, n)
     r, c = np.nonzero(surface.mask)
     v = n[r, c]
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
