@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import facetlift
-from facetlift import methods
+from facetlift import methods, synthetic
 from facetlift.methods import MethodInfo, MethodResult
 from facetlift.options import Option
 
@@ -534,3 +534,98 @@ def test_inputs_an_audit_of_the_api_refused_or_misread():
         facetlift.integrate(gt.normals, gt.mask, method="frankot_chellappa", progress="garbage")
     problem = facetlift.prepare(gt.normals, gt.mask)
     facetlift.solve(problem, "frankot_chellappa", progress=lambda i, v: None)
+
+
+def test_another_threads_filters_hold_while_one_records():
+    """While one thread recorded its warnings (prior_fit, jobs, batch items), every other
+    thread's warnings were shown unfiltered: a simplefilter('error', FrameWarning) did not
+    raise (an audit)."""
+    import threading
+    import warnings
+
+    face = synthetic.analytic("face", 48)
+    sph = synthetic.analytic("sphere", 48)
+    prior = np.where(np.random.default_rng(0).random((48, 48)) < 0.05, sph.depth * 2 + 1,
+                     np.nan)
+    inside, release = threading.Event(), threading.Event()
+
+    def hold(i, v):
+        inside.set()
+        release.wait(30)
+
+    t = threading.Thread(target=facetlift.integrate, args=(sph.normals, sph.mask),
+                         kwargs=dict(prior=prior, prior_fit="affine", progress=hold))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", facetlift.FrameWarning)
+        t.start()
+        try:
+            assert inside.wait(30)
+            with pytest.raises(facetlift.FrameWarning):
+                facetlift.integrate(face.normals * [1, -1, 1], face.mask)
+        finally:
+            release.set()
+            t.join()
+
+
+def test_prior_fit_passes_on_warnings_that_are_not_its_own():
+    """A progress callback's warning in prior_fit's first run was dropped with the input's
+    warnings that the second run repeats (an audit)."""
+    import warnings
+
+    sph = synthetic.analytic("sphere", 48)
+    prior = np.where(np.random.default_rng(0).random((48, 48)) < 0.05, sph.depth * 2 + 1,
+                     np.nan)
+    said = []
+
+    def callback(i, v):
+        if not said:
+            said.append(i)
+            warnings.warn("the callback's own warning", stacklevel=2)
+
+    with pytest.warns(UserWarning, match="the callback's own warning"):
+        facetlift.integrate(sph.normals, sph.mask, prior=prior, prior_fit="affine",
+                            progress=callback)
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs os.fork")
+def test_a_child_forked_beside_a_limited_call_gets_the_process_limits_back():
+    """A fork while another thread was inside a BLAS-limited or recording call left the child
+    on one BLAS thread and with its warning filters at 'always' for its life (an audit)."""
+    import os
+    import threading
+    import warnings
+
+    from threadpoolctl import threadpool_info
+
+    from facetlift import _threads, _warnings
+
+    before = [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+    inside, release = threading.Event(), threading.Event()
+
+    def hold():
+        with _threads.blas_limit(1), _warnings.recording():
+            inside.set()
+            release.wait(30)
+
+    t = threading.Thread(target=hold)
+    t.start()
+    try:
+        assert inside.wait(30)
+        r, w = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # (the child: report and leave at once)
+            try:
+                blas = [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+                ok = (blas == before and _threads._STATE["depth"] == 0
+                      and _warnings._SHARED["depth"] == 0
+                      and warnings.showwarning is not _warnings._dispatch)
+                os.write(w, b"1" if ok else repr((blas, before)).encode())
+            finally:
+                os._exit(0)
+        os.close(w)
+        said = os.read(r, 200)
+        os.waitpid(pid, 0)
+    finally:
+        release.set()
+        t.join()
+    assert said == b"1", said

@@ -1148,3 +1148,31 @@ def test_a_cluster_without_distributed_names_the_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "distributed", None)
     with pytest.raises(ImportError, match=r"dask\.distributed.*facetlift\[batch\]"):
         _on_cluster([], "tcp://127.0.0.1:1", lambda *a: None)
+
+
+def _sleep_forever():  # (a worker that ignores SIGTERM, as one busy in C code may)
+    import signal
+    import time
+
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    while True:
+        time.sleep(0.05)
+
+
+def test_stopped_workers_are_reaped_before_their_folders_are_swept(monkeypatch):
+    """A second interrupt cut _stop's wait short: the killed workers were not yet reaped,
+    looked alive to the sweep, and their staging folders stayed (an audit)."""
+    import multiprocessing as mp
+
+    from facetlift import batch as B
+
+    monkeypatch.setattr(B, "STOP_GRACE", 0.3)
+    proc = mp.get_context("fork").Process(target=_sleep_forever)
+    proc.start()
+
+    class Pool:
+        def shutdown(self, **kw):
+            pass
+
+    B._stop(Pool(), [proc])
+    assert proc.exitcode is not None  # (reaped: no longer "alive" to os.kill(pid, 0))

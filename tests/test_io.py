@@ -1675,3 +1675,41 @@ def test_an_exr_that_cannot_be_written_names_its_target_with_an_errno(tmp_path, 
     assert e.value.errno is not None and e.value.filename == str(target)
     assert ".tmp" not in str(e.value) and "cannot write as OpenEXR" in str(e.value)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs os.fork")
+def test_a_commit_killed_halfway_is_rolled_back_by_the_sweep(tmp_path):
+    """A batch worker killed between two moves of its commit left one output new and one
+    old, and the sweep deleted the old ones kept aside (an audit): the sweep puts the folder
+    back as it was."""
+    import os
+
+    from facetlift.io import atomic
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "a.txt").write_text("old a")
+    pid = os.fork()
+    if pid == 0:  # (the worker: stages two new files, dies after the first move)
+        try:
+            s = atomic.OutputSet(out, ["a.txt", "b.txt"])
+            s.path("a.txt").write_text("new a")
+            s.path("b.txt").write_text("new b")
+            real = os.replace
+            moved = []
+
+            def die_after_one(src, dst):
+                if moved:
+                    os._exit(0)
+                real(src, dst)
+                moved.append(dst)
+
+            os.replace = die_after_one
+            s.commit()
+        finally:
+            os._exit(1)
+    os.waitpid(pid, 0)
+    assert (out / "a.txt").read_text() == "new a"  # (half-way, as the worker left it)
+    atomic.sweep(out)
+    assert sorted(p.name for p in out.iterdir()) == ["a.txt"]
+    assert (out / "a.txt").read_text() == "old a"

@@ -15,10 +15,34 @@ discontinuity route, which a user may well call from threads, sets no limit.)
 from __future__ import annotations
 
 import contextlib
+import os
 import threading
 
 _LOCK = threading.Lock()
 _STATE = {"depth": 0, "limiter": None, "limit": None}
+#: This thread's own depth in :func:`blas_limit` (the child of a fork keeps only the forking
+#: thread's).
+_MINE = threading.local()
+
+
+def _after_fork_in_child() -> None:
+    """A child forked while other threads were inside :func:`blas_limit` has none of them:
+    its depth is the forking thread's own, and where that is 0 the process's own limits are
+    put back (the child kept one BLAS thread for its life, an audit)."""
+    global _LOCK
+    _LOCK = threading.Lock()
+    own = getattr(_MINE, "depth", 0)
+    if own == 0 and _STATE["limiter"] is not None:
+        try:
+            _STATE["limiter"].restore_original_limits()
+        except Exception:  # pragma: no cover - (a library gone in the child)
+            pass
+        _STATE["limiter"] = _STATE["limit"] = None
+    _STATE["depth"] = own
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
 def single_blas_thread():
@@ -44,9 +68,11 @@ def blas_limit(threads: int = 1):
             inner = (threadpool_limits(limits=threads, user_api="blas"), _STATE["limit"])
             _STATE["limit"] = threads
         _STATE["depth"] += 1
+    _MINE.depth = getattr(_MINE, "depth", 0) + 1
     try:
         yield
     finally:
+        _MINE.depth -= 1
         with _LOCK:
             _STATE["depth"] -= 1
             if inner is not None:

@@ -15,14 +15,15 @@ def warn(message: str, category: type[Warning] = UserWarning, **fields) -> None:
     """``warnings.warn`` with the stack level of the first frame outside facetlift, computed
     by walking the stack (as scikit-image does), so the warning names the user's line.
     `fields` go to the category's constructor (its attributes: a reader of the recorded
-    warning need not parse the message)."""
+    warning need not parse the message); the warning is marked ``from_facetlift``."""
     frame = sys._getframe(1)
     level = 2
     while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE):
         frame = frame.f_back
         level += 1
-    warnings.warn(category(message, **fields) if fields else message, category,
-                  stacklevel=level)
+    w = category(message, **fields)
+    w.from_facetlift = True  # (told from others' warnings where facetlift re-emits a record)
+    warnings.warn(w, category, stacklevel=level)
 
 
 #: The warning capture shared by the threads that record (:func:`recording`).
@@ -36,13 +37,23 @@ def warn(message: str, category: type[Warning] = UserWarning, **fields) -> None:
 #: around whole jobs ran a threaded cluster's items one at a time and could deadlock, a
 #: review).
 _LOCK = threading.Lock()
-_SHARED: dict = {"depth": 0, "restore": None, "show": None}
+_SHARED: dict = {"depth": 0, "restore": None, "show": None, "filters": (), "seen": set()}
 _LOCAL = threading.local()
 
 
-def _reinit_after_fork() -> None:  # (a child forked while another thread held the lock;
-    global _LOCK  # the forking thread's own blocks, in its thread-local stack, go on as they
-    _LOCK = threading.Lock()  # were)
+def _reinit_after_fork() -> None:
+    """A child forked while another thread held the lock or recorded: a new lock, and the
+    depth of the forking thread's own blocks (its thread-local stack goes on as it was);
+    where it has none the capture is taken down (the child's filters stayed at "always"
+    for its life, an audit)."""
+    global _LOCK
+    _LOCK = threading.Lock()
+    own = len(getattr(_LOCAL, "stack", None) or ())
+    if own == 0 and _SHARED["restore"] is not None:
+        restore, _SHARED["restore"] = _SHARED["restore"], None
+        with contextlib.suppress(Exception):
+            restore.__exit__(None, None, None)
+    _SHARED["depth"] = own
 
 
 if hasattr(os, "register_at_fork"):
@@ -53,8 +64,36 @@ def _dispatch(message, category, filename, lineno, file=None, line=None):
     stack = getattr(_LOCAL, "stack", None)
     if stack:
         stack[-1](message, category, filename, lineno, file, line)
-    else:
-        _SHARED["show"](message, category, filename, lineno, file, line)
+        return
+    # (another thread's warning: judged by the filters as they were before the capture,
+    # which replaced them with "always" for the whole process; shown unfiltered, a user's
+    # simplefilter("error", ...) in one thread was ignored while another recorded, an audit)
+    action = _user_action(message, category, filename, lineno)
+    if action == "error":
+        raise message if isinstance(message, Warning) else category(message)
+    if action == "ignore":
+        return
+    if action in ("default", "module", "once"):
+        text = str(message)
+        key = {"default": (text, category, filename, lineno), "module": (text, category,
+               filename), "once": (text, category)}[action]
+        if key in _SHARED["seen"]:
+            return
+        _SHARED["seen"].add(key)
+    _SHARED["show"](message, category, filename, lineno, file, line)
+
+
+def _user_action(message, category, filename, lineno) -> str:
+    """The action of the first of the filters saved at the capture's installation that
+    matches (as ``warnings.warn_explicit`` matches them, the module taken from the file
+    name); ``warnings.defaultaction`` where none does."""
+    text = str(message)
+    module = os.path.splitext(os.path.basename(filename or ""))[0] or "<unknown>"
+    for action, msg, cat, mod, ln in _SHARED["filters"]:
+        if ((msg is None or msg.match(text)) and issubclass(category, cat)
+                and (mod is None or mod.match(module)) and (ln == 0 or lineno == ln)):
+            return action
+    return warnings.defaultaction
 
 
 @contextlib.contextmanager
@@ -76,6 +115,7 @@ def recording(record: bool = True, action: str = "always", on_warning=None):
         if _SHARED["depth"] == 0:
             restore = warnings.catch_warnings()
             restore.__enter__()
+            _SHARED["filters"], _SHARED["seen"] = tuple(warnings.filters), set()
             warnings.simplefilter("always")
             _SHARED["restore"], _SHARED["show"] = restore, warnings.showwarning
             warnings.showwarning = _dispatch

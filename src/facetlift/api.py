@@ -355,12 +355,22 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
         # the fused run below is given them, the aligned prior being a map)
         weight = np.where(np.isfinite(own), weight * own, weight)
         prior_weight = weight
+    bar = None
+    if kwargs.get("progress") is True:  # (one bar for both runs and the fit between, with
+        # its stages named, as the command line's: each run made a bar of its own, an audit)
+        from ._progress import progress_bar
+
+        bar, kwargs["progress"] = progress_bar(None)
     # (the discontinuity route's prior-free reweightings, run for the first surface, are the
     # second run's first pass: done once, facetlift.methods.dgp.shared_cuts)
-    with shared_cuts():
-        return _fitted_runs(kind, normals, mask, raw, weight, t0, prior_weight=prior_weight,
-                            prior_blur=prior_blur, prior_outliers=prior_outliers, zeros=zeros,
-                            **kwargs)
+    try:
+        with shared_cuts():
+            return _fitted_runs(kind, normals, mask, raw, weight, t0,
+                                prior_weight=prior_weight, prior_blur=prior_blur,
+                                prior_outliers=prior_outliers, zeros=zeros, **kwargs)
+    finally:
+        if bar is not None:
+            bar.close()
 
 
 def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_blur,
@@ -394,8 +404,11 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
         except ValueError as e:
             failed, aligned = e, None
     said = [*said, *fitting]
-    for w in said:  # (in their order; the input's only where no second run says them again)
-        if aligned is None or "prior_fit=" in str(w.message):
+    for w in said:  # (in their order; the input's only where no second run says them again;
+        # others' warnings, a progress callback's or numpy's, always: they were dropped, an
+        # audit)
+        if (aligned is None or "prior_fit=" in str(w.message)
+                or not getattr(w.message, "from_facetlift", False)):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     if failed is not None:
         raise failed

@@ -1193,6 +1193,13 @@ def _stop(pool, procs) -> None:
             time.sleep(0.05)
     finally:
         signal_all(alive(), kill=True)
+        # (reaped before the caller sweeps their staging folders: a worker still alive to
+        # os.kill(pid, 0) keeps its folder, and a second Ctrl-C left them in the items'
+        # folders, an audit)
+        for proc in list(procs):
+            with contextlib.suppress(Exception):
+                if proc.pid is not None:
+                    proc.join(STOP_GRACE)
 
 
 def _on_cluster(jobs, scheduler, done) -> None:

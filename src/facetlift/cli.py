@@ -1462,9 +1462,13 @@ _STATUS = {EXIT_INPUT: "error", EXIT_SOLVER: "solver_error", EXIT_BUG: "internal
            EXIT_INTERRUPTED: "interrupted", EXIT_TERMINATED: "terminated"}
 
 
-#: What Ctrl-C says (as SIGTERM does: the outputs are staged and moved in as a set).
-_INTERRUPTED = ("interrupted (Ctrl-C); nothing partial was written (a batch's finished items "
-                "are in its log)")
+def _stopped(how: str) -> str:
+    """What Ctrl-C ("interrupted (Ctrl-C)") or SIGTERM says: the outputs are staged and moved
+    in as a set; a batch's finished items are in its log (said by a batch only: a plain
+    integrate's message spoke of one, an audit)."""
+    command = next((a for a in _STATE.get("args", ()) if not a.startswith("-")), None)
+    return (f"{how}; nothing partial was written"
+            + (" (a batch's finished items are in its log)" if command == "batch" else ""))
 
 
 def _main(args: list[str]) -> int:
@@ -1478,7 +1482,8 @@ def _main(args: list[str]) -> int:
     except click.exceptions.Exit as e:  # pragma: no cover - returned, not raised, by click 8
         return e.exit_code
     except click.exceptions.Abort as e:  # click turns Ctrl-C (KeyboardInterrupt) into Abort
-        _error(_INTERRUPTED if isinstance(e.__cause__, KeyboardInterrupt) else "aborted")
+        _error(_stopped("interrupted (Ctrl-C)") if isinstance(e.__cause__, KeyboardInterrupt)
+               else "aborted")
         return EXIT_INTERRUPTED
     except click.ClickException as e:  # usage errors, bad parameters, unreadable files
         msg = e.format_message()
@@ -1510,11 +1515,10 @@ def _main(args: list[str]) -> int:
         _error(str(e))
         return EXIT_SOLVER
     except KeyboardInterrupt:
-        _error(_INTERRUPTED)
+        _error(_stopped("interrupted (Ctrl-C)"))
         return EXIT_INTERRUPTED
     except Terminated:
-        _error("terminated (SIGTERM or SIGHUP); nothing partial was written (a batch's "
-               "finished items are in its log)")
+        _error(_stopped("terminated (SIGTERM or SIGHUP)"))
         return EXIT_TERMINATED
     except Exception as e:
         if _STATE["debug"]:

@@ -113,6 +113,7 @@ def sweep(folder) -> list[Path]:
     for p in entries:
         m = staged.match(p.name)
         if m and m.group(1) == host and not _alive(int(m.group(2))):
+            _roll_back(p, Path(folder))
             shutil.rmtree(p, ignore_errors=True)
             removed.append(p)
             continue
@@ -122,6 +123,34 @@ def sweep(folder) -> list[Path]:
                 p.unlink()
                 removed.append(p)
     return removed
+
+
+#: The list of names a commit is moving, written into the staging folder before the first
+#: move (:meth:`OutputSet.commit`): a run killed in the middle of its moves (a batch worker
+#: stopped by its parent, which dies at once) left some outputs new and some old, and the
+#: sweep deleted the old ones kept aside (an audit); :func:`sweep` now puts them back.
+MOVING = ".moving"
+
+
+def _roll_back(staging: Path, outdir: Path) -> None:
+    """Undo the moves of a dead run's unfinished commit (:data:`MOVING`): each listed output
+    no longer in `staging` was moved in, and goes back to the file kept aside for it in
+    ``.replaced``, or is removed where it had none; the folder is left as it was before."""
+    listed = staging / MOVING
+    try:
+        names = [n for n in listed.read_text(encoding="utf-8").splitlines() if n]
+    except OSError:
+        return
+    aside = staging / ".replaced"
+    for name in names:
+        if (staging / name).exists() or "/" in name or name in (".", ".."):
+            continue  # (not moved yet: the folder still holds its old file, if any)
+        target = outdir / name
+        with contextlib.suppress(OSError):
+            if (aside / name).exists() or (aside / name).is_symlink():
+                os.replace(aside / name, target)
+            elif target.is_file() or target.is_symlink():
+                target.unlink()
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -254,6 +283,9 @@ class OutputSet:
         moves = [(name, p, self.outdir / name) for name, p in self.staged.items() if p.exists()]
         self._in_the_way(name for name, _, _ in moves)
         aside = self.staging / ".replaced"
+        # (for the sweep of a run killed mid-commit: what it was moving, _roll_back)
+        (self.staging / MOVING).write_text("".join(f"{name}\n" for name, _, _ in moves),
+                                           encoding="utf-8")
         done: dict[str, Path] = {}
         kept: dict[str, Path] = {}
         try:
