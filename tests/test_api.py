@@ -629,3 +629,35 @@ def test_a_child_forked_beside_a_limited_call_gets_the_process_limits_back():
         release.set()
         t.join()
     assert said == b"1", said
+
+
+def test_module_filters_hold_in_other_threads_while_one_records():
+    """A filter's module= is matched against the module's name (numpy._core..., the test
+    module), not the file's base name, while another thread records (a review)."""
+    import threading
+    import warnings
+
+    from facetlift import _warnings
+
+    inside, release = threading.Event(), threading.Event()
+
+    def hold():
+        with _warnings.recording():
+            inside.set()
+            release.wait(30)
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        warnings.filterwarnings("ignore", module="numpy")
+        warnings.filterwarnings("error", message="raised here", module=__name__)
+        t = threading.Thread(target=hold)
+        t.start()
+        try:
+            assert inside.wait(30)
+            np.mean(np.array([]))  # (numpy's RuntimeWarning: ignored)
+            with pytest.raises(UserWarning, match="raised here"):
+                warnings.warn("raised here", stacklevel=1)
+        finally:
+            release.set()
+            t.join()
+    assert not [w for w in seen if issubclass(w.category, RuntimeWarning)]

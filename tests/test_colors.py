@@ -168,3 +168,76 @@ def test_batch_refuses_one_colour_image(tmp_path):
     with pytest.raises(ValueError, match="`colors`.*a batch takes no colour image"):
         facetlift.batch([str(tmp_path / "*.png")], str(tmp_path / "o"),
                         job=Job(colors=str(tmp_path / "p.png")))
+
+
+def test_a_jpeg_is_turned_as_its_exif_orientation_says(tmp_path):
+    """A phone's portrait photo is stored sideways with an EXIF orientation: refused as
+    another picture, or painted turned (a review)."""
+    import struct
+
+    stored = np.zeros((40, 60, 3), np.uint8)
+    stored[:5, :, 0] = 255  # (the stored top rows red)
+    jpg = imagecodecs.jpeg8_encode(stored, level=95)
+    ifd = struct.pack(">H", 1) + struct.pack(">HHII", 0x0112, 3, 1, 6 << 16) + b"\0" * 4
+    tiff = b"MM" + struct.pack(">HI", 42, 8) + ifd
+    app1 = b"\xff\xe1" + struct.pack(">H", len(tiff) + 8) + b"Exif\0\0" + tiff
+    (tmp_path / "o6.jpg").write_bytes(jpg[:2] + app1 + jpg[2:])
+    shown = io.read_colors(tmp_path / "o6.jpg", (60, 40))  # (turned 90 deg clockwise)
+    assert shown[:, -3:, 0].mean() > 0.95 and shown[:, :20, 0].max() < 0.05  # (JPEG blur)
+
+
+def test_odd_images_are_refused_by_name(tmp_path):
+    import OpenEXR
+    import tifffile
+
+    from facetlift.io.colors import colour_image
+
+    with pytest.raises(ValueError, match="is empty"):
+        colour_image(np.zeros((0, 0, 3)))
+    with pytest.raises(ValueError, match="must be uint8 or uint16; got int16"):
+        colour_image(np.zeros((4, 4, 3), np.int16))
+    assert colour_image(np.full((4, 4, 3), 1.0000001, np.float32)).max() == 1.0  # (rounding)
+    tifffile.imwrite(tmp_path / "cmyk.tif", np.zeros((4, 4, 4), np.uint8),
+                     photometric="separated")
+    with pytest.raises(ValueError, match="a CMYK TIFF"):
+        io.read_colors(tmp_path / "cmyk.tif")
+    plane = np.zeros((4, 4), np.float32)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"X": plane, "Y": plane, "Z": plane}) as f:
+        f.write(str(tmp_path / "xyz.exr"))
+    with pytest.raises(ValueError, match=r"must hold R, G and B channels .*\['X', 'Y', 'Z'\]"):
+        io.read_colors(tmp_path / "xyz.exr")
+    layers = {f"{lay}.{c}": plane for lay in ("Combined", "DiffCol") for c in "RGB"}
+    with OpenEXR.File(header, layers) as f:
+        f.write(str(tmp_path / "layers.exr"))
+    with pytest.raises(ValueError, match="several colour layers"):
+        io.read_colors(tmp_path / "layers.exr")
+
+
+def test_more_refusals_and_a_path_for_colors(cut, tmp_path, capsys):
+    s, img = cut
+    rgb = (img * 255).astype(np.uint8)
+    data = imagecodecs.jpeg8_encode(rgb, level=95)
+    (tmp_path / "cut.jpg").write_bytes(data[:len(data) // 2])
+    with pytest.raises(ValueError, match="a truncated JPEG"):
+        io.read_colors(tmp_path / "cut.jpg")
+    (tmp_path / "photo.png").write_bytes(imagecodecs.png_encode(rgb))
+    by_path = meshio.read(s.save(tmp_path / "a.ply", colors=str(tmp_path / "photo.png")))
+    by_array = meshio.read(s.save(tmp_path / "b.ply", colors=rgb))
+    assert np.array_equal(by_path.point_data["red"], by_array.point_data["red"])
+    code = main(["batch", str(tmp_path / "photo.png"), "-o", str(tmp_path / "o"), "--colors",
+                 str(tmp_path / "photo.png")])
+    assert code == 1 and "a batch takes no colour image" in capsys.readouterr().err
+
+
+def test_the_same_surface_gives_the_same_bytes(cut, tmp_path):
+    """PLY, OBJ and points are written by facetlift without a time stamp (meshio wrote one)."""
+    s, img = cut
+    up = np.dstack([np.zeros(s.shape), np.zeros(s.shape), np.ones(s.shape)])
+    for run in ("a", "b"):
+        (tmp_path / run).mkdir()
+        s.save(tmp_path / run / "mesh.ply", colors=img)
+        s.save(tmp_path / run / "mesh.obj", colors=img)
+        s.save(tmp_path / run / "points.ply", colors=img, normals=up)
+    for name in ("mesh.ply", "mesh.obj", "points.ply"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()

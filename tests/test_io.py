@@ -1678,7 +1678,8 @@ def test_an_exr_that_cannot_be_written_names_its_target_with_an_errno(tmp_path, 
 
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs os.fork")
-def test_a_commit_killed_halfway_is_rolled_back_by_the_sweep(tmp_path):
+@pytest.mark.parametrize("user_wrote_since", [False, True])
+def test_a_commit_killed_halfway_is_rolled_back_by_the_sweep(tmp_path, user_wrote_since):
     """A batch worker killed between two moves of its commit left one output new and one
     old, and the sweep deleted the old ones kept aside (an audit): the sweep puts the folder
     back as it was."""
@@ -1710,6 +1711,9 @@ def test_a_commit_killed_halfway_is_rolled_back_by_the_sweep(tmp_path):
             os._exit(1)
     os.waitpid(pid, 0)
     assert (out / "a.txt").read_text() == "new a"  # (half-way, as the worker left it)
+    if user_wrote_since:  # (a file of the user's since: not the run's to roll back, a review)
+        (out / "a.txt").unlink()
+        (out / "a.txt").write_text("the user's a")
     atomic.sweep(out)
     assert sorted(p.name for p in out.iterdir()) == ["a.txt"]
-    assert (out / "a.txt").read_text() == "old a"
+    assert (out / "a.txt").read_text() == ("the user's a" if user_wrote_since else "old a")

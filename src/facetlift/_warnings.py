@@ -83,12 +83,31 @@ def _dispatch(message, category, filename, lineno, file=None, line=None):
     _SHARED["show"](message, category, filename, lineno, file, line)
 
 
+#: Module names by file name, for :func:`_module_of` (rebuilt where a file is not in it).
+_MODULES: dict = {}
+
+
+def _module_of(filename) -> str:
+    """The module name of `filename`, as ``warnings`` matches a filter's ``module`` against
+    (``numpy._core.fromnumeric``, ``__main__``: the file's base name matched neither, a
+    review); the base name for a file of no loaded module."""
+    key = os.path.abspath(filename) if filename else ""
+    if key not in _MODULES:
+        for name, mod in list(sys.modules.items()):
+            f = getattr(mod, "__file__", None)
+            if isinstance(f, str):
+                _MODULES.setdefault(os.path.abspath(f), name)
+        if key not in _MODULES:
+            return os.path.splitext(os.path.basename(filename or ""))[0] or "<unknown>"
+    return _MODULES[key]
+
+
 def _user_action(message, category, filename, lineno) -> str:
     """The action of the first of the filters saved at the capture's installation that
     matches (as ``warnings.warn_explicit`` matches them, the module taken from the file
     name); ``warnings.defaultaction`` where none does."""
     text = str(message)
-    module = os.path.splitext(os.path.basename(filename or ""))[0] or "<unknown>"
+    module = _module_of(filename)
     for action, msg, cat, mod, ln in _SHARED["filters"]:
         if ((msg is None or msg.match(text)) and issubclass(category, cat)
                 and (mod is None or mod.match(module)) and (ln == 0 or lineno == ln)):

@@ -960,7 +960,10 @@ def _say_item(r: dict) -> None:
               "see the input and output paths).")
 @click.option("--resume", is_flag=True, help="Skip items the log says finished.")
 @click.option("--json", "as_json", is_flag=True, help="Print the records as JSON lines.")
-def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_json, **flags):
+@click.option("--colors", "--colours", "colors", hidden=True, expose_value=True,
+              help="Refused: one picture would paint every map.")
+def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_json, colors,
+          **flags):
     """Integrate many normal maps: files, dataset folders, folders of them, glob patterns
     (quote them) or a --list file, each into OUT/<name>/. Exit 0 only if every item
     succeeded, else 1 with the count; the log OUT/batch.jsonl has one record per item.
@@ -971,6 +974,10 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
       facetlift batch data/ -o out --save npy --save report --resume
       facetlift batch --list maps.txt -o /shared/out --scheduler tcp://head:8786
     """
+    if colors is not None:  # (click's "No such option" offered --solver, a user's check)
+        raise ValueError(f"--colors {colors}: a batch takes no colour image (one picture would "
+                         "paint every map); integrate each map with facetlift integrate "
+                         "--colors")
     from .batch import LOG_NAME, log_record
     from .batch import batch as run_batch
     from .errors import WorkersDied

@@ -955,6 +955,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         # without asking)
         "prior_file": inp.prior_file,
         "confidence_file": inp.confidence_file,
+        # (the image that painted the meshes and points, --colors)
+        "colors_file": job.colors,
         # (normals in world space: the rotation to the camera frame of --normal-frame, and
         # its file; None for camera-frame normals)
         "normal_rotation": rotation_record(job, inp),

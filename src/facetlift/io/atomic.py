@@ -125,31 +125,46 @@ def sweep(folder) -> list[Path]:
     return removed
 
 
-#: The list of names a commit is moving, written into the staging folder before the first
-#: move (:meth:`OutputSet.commit`): a run killed in the middle of its moves (a batch worker
-#: stopped by its parent, which dies at once) left some outputs new and some old, and the
-#: sweep deleted the old ones kept aside (an audit); :func:`sweep` now puts them back.
+#: The outputs a commit is moving, one JSON line each (name, and device, inode, size and
+#: modification time of the staged file, which the move keeps), written into the staging
+#: folder before the first move and removed right after the last (:meth:`OutputSet.commit`):
+#: a run killed in the middle of its moves (a batch worker stopped by its parent, which dies
+#: at once) left some outputs new and some old, and the sweep deleted the old ones kept aside
+#: (an audit); :func:`sweep` now puts them back.
 MOVING = ".moving"
 
 
 def _roll_back(staging: Path, outdir: Path) -> None:
-    """Undo the moves of a dead run's unfinished commit (:data:`MOVING`): each listed output
-    no longer in `staging` was moved in, and goes back to the file kept aside for it in
-    ``.replaced``, or is removed where it had none; the folder is left as it was before."""
-    listed = staging / MOVING
+    """Undo the moves of a dead run's unfinished commit (:data:`MOVING`): an output that is
+    still the very file the run moved in (same device, inode, size and modification time; a
+    file written there since is the user's and is left alone) goes back to the file kept
+    aside for it in ``.replaced``, or is removed where it had none (an inode is reused at
+    once, so its size and modification time are compared too)."""
+    import json
+
     try:
-        names = [n for n in listed.read_text(encoding="utf-8").splitlines() if n]
+        lines = (staging / MOVING).read_text(encoding="utf-8").splitlines()
     except OSError:
         return
     aside = staging / ".replaced"
-    for name in names:
-        if (staging / name).exists() or "/" in name or name in (".", ".."):
-            continue  # (not moved yet: the folder still holds its old file, if any)
+    for line in lines:
+        try:
+            name, *stamp = json.loads(line)
+        except (ValueError, TypeError):
+            continue
+        if not isinstance(name, str) or Path(name).name != name or name in (".", ".."):
+            continue
         target = outdir / name
+        try:
+            st = os.lstat(target)
+        except OSError:
+            continue
+        if [st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns] != stamp:
+            continue  # (not moved in by that run, or replaced since: not ours to touch)
         with contextlib.suppress(OSError):
             if (aside / name).exists() or (aside / name).is_symlink():
                 os.replace(aside / name, target)
-            elif target.is_file() or target.is_symlink():
+            else:
                 target.unlink()
 
 
@@ -284,8 +299,14 @@ class OutputSet:
         self._in_the_way(name for name, _, _ in moves)
         aside = self.staging / ".replaced"
         # (for the sweep of a run killed mid-commit: what it was moving, _roll_back)
-        (self.staging / MOVING).write_text("".join(f"{name}\n" for name, _, _ in moves),
-                                           encoding="utf-8")
+        import json
+
+        listed = []
+        for name, p, _ in moves:
+            st = os.lstat(p)
+            listed.append(json.dumps([name, st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns])
+                          + "\n")
+        (self.staging / MOVING).write_text("".join(listed), encoding="utf-8")
         done: dict[str, Path] = {}
         kept: dict[str, Path] = {}
         try:
@@ -296,6 +317,9 @@ class OutputSet:
                     kept[name] = target
                 done[name] = target  # (before the move: an interrupt right after it)
                 os.replace(p, target)
+            # (done: nothing to roll back; removed before the staging folder, whose removal
+            # a kill may cut short, a review)
+            (self.staging / MOVING).unlink()
         except BaseException as e:
             for name, target in done.items():
                 with contextlib.suppress(OSError):

@@ -9,6 +9,7 @@ facets only, so that no colour bleeds across a jump).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,10 @@ from .._warnings import warn
 from ._paths import _existing, _suffix
 
 COLOR_FORMATS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr", ".npy")
+
+#: How far float colours may lie outside [0, 1] and still be taken (clipped): rounding of
+#: float32 processing (1.0000001 was refused as "from 1 to 1", a review).
+FLOAT_SLACK = 1e-5
 
 #: Largest relative difference of the two axes' scale factors for which an image of another
 #: size is resampled to the normal map's (the same picture at another resolution, with each
@@ -28,9 +33,10 @@ def read_colors(path, shape: tuple[int, int] | None = None, *, arg: str = "color
                 ) -> np.ndarray:
     """An image's colours as float32 (H, W, 3) in [0, 1], as displayed (sRGB).
 
-    PNG (8 or 16 bit), JPEG and TIFF are taken as stored, scaled by their largest value
-    (255, 65535); a float TIFF or ``.npy`` must lie in [0, 1]; OpenEXR holds linear light by
-    its convention and is encoded to sRGB (values above 1 clipped, with a warning). A grey
+    PNG (8 or 16 bit), JPEG (turned as its EXIF orientation says) and TIFF are taken as
+    stored, scaled by their largest value (255, 65535); a float TIFF or ``.npy`` must lie in
+    [0, 1]; OpenEXR holds linear light by its convention and is encoded to sRGB (values above
+    1 clipped, with a warning); a CMYK TIFF and an EXR of several colour layers are refused. A grey
     image gives grey colours; an alpha channel is dropped. With `shape` (the normal map's),
     an image of the same picture at another resolution is resampled to it (with a warning);
     one of another aspect ratio is refused.
@@ -58,30 +64,99 @@ def read_colors(path, shape: tuple[int, int] | None = None, *, arg: str = "color
         try:
             import imagecodecs
 
-            a = np.asarray(imagecodecs.jpeg8_decode(p.read_bytes()))
+            data = p.read_bytes()
+            a = np.asarray(imagecodecs.jpeg8_decode(data))
         except OSError as e:
             raise ValueError(f"`{arg}`: cannot read {p}: {e}") from None
         except Exception as e:  # (each codec has its own errors)
             raise ValueError(f"`{arg}`: {p} is not a readable JPEG image "
                              f"({type(e).__name__}: {e})") from None
+        if b"\xff\xd9" not in data[-64:]:  # (a cut-off file decodes its lost rows as grey
+            # without an error, a user's check)
+            raise ValueError(f"`{arg}`: {p} is a truncated JPEG (it does not end with the "
+                             "end-of-image marker); its missing rows would be painted grey")
+        a = _oriented(a, _exif_orientation(data))
     else:
         from .images import _decode_image
 
+        if ext in (".tif", ".tiff"):
+            _refuse_cmyk(p, arg)
         a = _decode_image(p, ext, arg)
     return colour_image(a, shape, arg=arg, source=p)
 
 
 def _exr_colour_channels(ch: dict, p: Path, arg: str) -> list[str]:
     """The EXR channels holding R, G, B (of the default layer, or of the only layer that has
-    all three), or the one channel of a grey image."""
-    for prefix in [""] + sorted({k.rsplit(".", 1)[0] + "." for k in ch if "." in k}):
-        names = [prefix + c for c in "RGB"]
-        if all(n in ch for n in names):
-            return names
-    if len(ch) == 1 or "Y" in ch:
+    all three), or the channel of a grey image (its only one, or Y beside at most A)."""
+    if all(c in ch for c in "RGB"):
+        return list("RGB")
+    layers = sorted({k.rsplit(".", 1)[0] for k in ch if "." in k
+                     and all(f"{k.rsplit('.', 1)[0]}.{c}" in ch for c in "RGB")})
+    if len(layers) == 1:
+        return [f"{layers[0]}.{c}" for c in "RGB"]
+    if len(layers) > 1:  # (a Blender multilayer file: which pass is the picture?)
+        raise ValueError(f"`{arg}`: {p} holds several colour layers ({', '.join(layers)}); "
+                         "write the one to paint with to a file of its own")
+    if len(ch) == 1 or set(ch) in ({"Y"}, {"Y", "A"}):
         return ["Y" if "Y" in ch else next(iter(ch))]
     raise ValueError(f"`{arg}`: {p} must hold R, G and B channels (or one grey channel) for "
                      f"the colours; got channels {sorted(ch)}")
+
+
+def _refuse_cmyk(p: Path, arg: str) -> None:
+    """A CMYK (separated) TIFF read as RGBA painted red as cyan (a review): refused."""
+    try:
+        import tifffile
+
+        with tifffile.TiffFile(p) as tif:
+            separated = tif.pages[0].photometric == tifffile.PHOTOMETRIC.SEPARATED
+    except Exception:  # (the reading proper says what is wrong)
+        return
+    if separated:
+        raise ValueError(f"`{arg}`: {p} is a CMYK TIFF; convert it to RGB first")
+
+
+#: numpy operations turning an image stored with an EXIF orientation into its displayed
+#: orientation (1: as stored), as image viewers show it.
+_ORIENT = {2: lambda a: a[:, ::-1], 3: lambda a: a[::-1, ::-1], 4: lambda a: a[::-1],
+           5: lambda a: a.swapaxes(0, 1), 6: lambda a: np.rot90(a, -1),
+           7: lambda a: a[::-1, ::-1].swapaxes(0, 1), 8: lambda a: np.rot90(a, 1)}
+
+
+def _oriented(a: np.ndarray, orientation: int) -> np.ndarray:
+    """`a` turned as its EXIF `orientation` says (a phone's portrait photo is stored
+    sideways: refused as another picture, or painted turned, a review)."""
+    turn = _ORIENT.get(orientation)
+    return a if turn is None else np.ascontiguousarray(turn(a))
+
+
+def _exif_orientation(data: bytes) -> int:
+    """The EXIF orientation tag (0x0112) of a JPEG's APP1 segment; 1 where it has none or the
+    segment cannot be read."""
+    import struct
+
+    i = 2
+    while i + 4 <= len(data) and data[i] == 0xFF:
+        marker, size = data[i + 1], struct.unpack(">H", data[i + 2:i + 4])[0]
+        if marker == 0xE1 and data[i + 4:i + 10] == b"Exif\0\0":
+            tiff = data[i + 10:i + 2 + size]
+            try:
+                order = {b"II": "<", b"MM": ">"}[tiff[:2]]
+                (ifd,) = struct.unpack(order + "I", tiff[4:8])
+                (count,) = struct.unpack(order + "H", tiff[ifd:ifd + 2])
+                for k in range(count):
+                    at = ifd + 2 + 12 * k
+                    tag, kind = struct.unpack(order + "HH", tiff[at:at + 4])
+                    if tag == 0x0112 and kind == 3:  # (SHORT)
+                        (value,) = struct.unpack(order + "H", tiff[at + 8:at + 10])
+                        return int(value) if 1 <= value <= 8 else 1
+            except (KeyError, struct.error):
+                return 1
+            return 1
+        if marker in (0xD9, 0xDA):  # (end of image, start of scan: no more headers)
+            break
+        i += 2 + size
+    return 1
 
 
 def _srgb(a: np.ndarray, p, arg: str) -> np.ndarray:
@@ -90,8 +165,8 @@ def _srgb(a: np.ndarray, p, arg: str) -> np.ndarray:
     bad = ~np.isfinite(a)
     a = np.where(bad, 0.0, np.maximum(a, 0.0))
     over = a > 1.0
-    if over.mean() > 0.01:
-        warn(f"`{arg}`: {p} is linear light with {over.mean():.0%} of its values above 1; "
+    if over.any():
+        warn(f"`{arg}`: {p} is linear light with {over.mean():.2%} of its values above 1; "
              "they are clipped to white (tone-map it first to keep the highlights)")
     a = np.minimum(a, 1.0)
     return np.where(a <= 0.0031308, 12.92 * a, 1.055 * a ** (1 / 2.4) - 0.055)
@@ -99,11 +174,15 @@ def _srgb(a: np.ndarray, p, arg: str) -> np.ndarray:
 
 def colour_image(image, shape: tuple[int, int] | None = None, *, arg: str = "colors",
                  source=None) -> np.ndarray:
-    """`image` as float32 (H, W, 3) in [0, 1]: uint8 and uint16 scaled by 255 and 65535,
+    """`image` (an array, or a file's path: :func:`read_colors`) as float32 (H, W, 3) in
+    [0, 1]: uint8 and uint16 scaled by 255 and 65535,
     floats as they are (they must lie in [0, 1]; NaN is black), grey repeated, alpha
     dropped; resampled to `shape` where it is the same picture at another resolution
     (:data:`ASPECT_TOLERANCE`). ValueError naming `arg` otherwise."""
     where = f" ({source})" if source is not None else ""
+    if isinstance(image, (str, os.PathLike)):  # (the command line's --colors FILE, a user's
+        # natural Surface.save(..., colors="photo.jpg"))
+        return read_colors(image, shape, arg=arg)
     a = np.asarray(image)
     if a.dtype.kind == "b" or a.dtype.kind not in "uif":
         raise ValueError(f"`{arg}`{where} must hold numbers (uint8, uint16 or floats in "
@@ -117,18 +196,21 @@ def colour_image(image, shape: tuple[int, int] | None = None, *, arg: str = "col
     if a.ndim != 3 or a.shape[2] != 3:
         raise ValueError(f"`{arg}`{where} must be an (H, W, 3) colour or (H, W) grey image; "
                          f"got shape {a.shape}")
+    if a.size == 0:
+        raise ValueError(f"`{arg}`{where} is empty (shape {a.shape})")
     if a.dtype.kind in "ui":
-        top = 255 if a.dtype.itemsize == 1 else 65535 if a.dtype.itemsize == 2 else None
-        if top is None or a.min() < 0:
+        if a.dtype not in (np.uint8, np.uint16):  # (int16 was scaled by 65535, a review)
             raise ValueError(f"`{arg}`{where}: integer colours must be uint8 or uint16; got "
-                             f"{a.dtype}" + (" with negative values" if top else ""))
-        c = a.astype(np.float32) / np.float32(top)
+                             f"{a.dtype} (convert, or give floats in [0, 1])")
+        c = a.astype(np.float32) / np.float32(np.iinfo(a.dtype).max)
     else:
         c = a.astype(np.float32)
         c = np.where(np.isfinite(c), c, np.float32(0.0))
-        if c.size and (c.min() < 0 or c.max() > 1):
+        lo, hi = float(c.min()), float(c.max())
+        if lo < -FLOAT_SLACK or hi > 1 + FLOAT_SLACK:
             raise ValueError(f"`{arg}`{where}: float colours must lie in [0, 1]; got values "
-                             f"from {c.min():g} to {c.max():g} (scale them, or give uint8)")
+                             f"from {lo:.9g} to {hi:.9g} (scale them, or give uint8)")
+        c = np.clip(c, 0.0, 1.0)  # (rounding's overshoot, within FLOAT_SLACK)
     if shape is not None and c.shape[:2] != tuple(shape):
         c = _resampled(c, tuple(shape), arg, where)
     return np.ascontiguousarray(c)

@@ -105,6 +105,7 @@ def save_surface(surface, path, **kwargs) -> Path:
                 pixel_size=np.float64(surface.pixel_size),
                 K=K,
                 **_cut_arrays(surface),
+                **_frame_arrays(surface),
             )
         return p
     if ext in MESH_FORMATS:
@@ -245,6 +246,19 @@ def point_normals(surface, normals):
         return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
+def _frame_arrays(surface) -> dict:
+    """``normal_frame`` and ``normal_rotation`` of ``surface.info`` where integrate was given
+    them: :func:`load_surface` puts them back, so the reloaded surface turns the same normals
+    for points.ply and the report (they faced away after a reload, a review)."""
+    info = surface.info if isinstance(surface.info, dict) else {}
+    out = {}
+    if info.get("normal_frame") is not None:
+        out["normal_frame"] = np.str_(info["normal_frame"])
+    if info.get("normal_rotation") is not None:
+        out["normal_rotation"] = np.asarray(info["normal_rotation"], float)
+    return out
+
+
 def _cut_arrays(surface) -> dict:
     """``cuts_right``, ``cuts_down`` and ``discontinuities`` where the surface has jumps, and
     its split mesh (``split_corners``, ``split_i``, ``split_j``, ``split_depth``: what
@@ -263,7 +277,9 @@ def load_surface(path):
     """The :class:`facetlift.Surface` of a ``.npz`` written by :func:`save_surface` (``-s npz``
     on the command line): depth, vertex depth, mask, camera and, where it has jumps, its cuts,
     discontinuity map and split mesh (files written before 2026-12-05 lack the split mesh:
-    their mesh is then the unsplit one). ``info`` is not stored (``--json`` has it).
+    their mesh is then the unsplit one). ``info`` is not stored (``--json`` has it), but its
+    ``normal_frame`` and ``normal_rotation``, which :meth:`~facetlift.Surface.save`'s
+    ``normals=`` needs.
 
     Raises
     ------
@@ -311,6 +327,11 @@ def load_surface(path):
         warn(f"`path`: {p} was written before surfaces kept their split mesh: its cuts are "
              "read, but its mesh (to_mesh, save) is not split at them; the mesh outputs of "
              "that run have the split geometry")
-    return Surface(depth, data["vertex_depth"], data["mask"].astype(bool),
+    info = {}  # (only how the integrated normals reach the camera frame, _frame_arrays)
+    if "normal_frame" in data:
+        info["normal_frame"] = str(data["normal_frame"])
+    if "normal_rotation" in data and data["normal_rotation"].shape == (3, 3):
+        info["normal_rotation"] = data["normal_rotation"].tolist()
+    return Surface(depth, data["vertex_depth"], data["mask"].astype(bool), info,
                    pixel_size=float(data["pixel_size"]) if K is None else 1.0, K=K, cuts=cuts,
                    discontinuities=data.get("discontinuities"), split=split)
