@@ -119,12 +119,15 @@ def integrate(
         normal (a depth error at a sample costs as much as the same change of depth across
         one pixel against the normals). Dimensionless: independent of image size and depth
         units (for a perspective camera both terms are in log-depth). Large values fit the
-        prior exactly where given. Default (None): 1, or 0.003 with a `prior_blur`
+        prior exactly where given; the largest must be at least 1e-10 of the normals' weight
+        (:data:`facetlift.problem.PRIOR_RATIO`). Default (None): 1, or 0.003 with a `prior_blur`
         (``facetlift.problem.BLURRED_PRIOR_WEIGHT``: a blurred prior is met by undoing its blur,
         which weights above about 0.03 turn into its own errors; docs/fusion.md).
     confidence : (H, W) array_like of float, optional
         Weight (>= 0) of each pixel's normal term; 0 is the same as a missing normal, 1 the
-        default everywhere. For methods with the ``confidence`` capability.
+        default everywhere; positive values below 1e-8 of the largest are raised to it, with
+        a warning (:data:`facetlift.problem.CONFIDENCE_RANGE`). For methods with the
+        ``confidence`` capability.
     prior_blur : float, optional
         A coarse or blurred prior (a monocular network's depth, a low-resolution sensor, a
         depth map upsampled from a coarse grid): the standard deviation, in pixels, of the

@@ -111,8 +111,10 @@ def save_surface(surface, path, **kwargs) -> Path:
     if ext in MESH_FORMATS:
         extra = sorted(set(kwargs) - {"triangles", "frame", "colors"})
         if extra:
+            cloud = (" (a point cloud with normals is written under the name points.ply)"
+                     if "normals" in extra and ext == ".ply" else "")
             raise ValueError(f"{ext} output takes only `triangles`, `frame` and `colors`; got "
-                             f"{extra}")
+                             f"{extra}{cloud}")
         triangles = kwargs.get("triangles")
         triangles = ext != ".ply" if triangles is None else triangles  # (to_mesh checks it)
         if ext == ".stl" and isinstance(triangles, (bool, np.bool_)) and not triangles:
