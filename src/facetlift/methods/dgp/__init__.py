@@ -833,9 +833,9 @@ def _loose(domain, idx, label, k: int, groups) -> np.ndarray:
     group, whose inside keeps the flattest fill: continuing the slopes into holes was no
     better on the analytic surfaces (the 128^2 face, RMS inside a hole at rows 50-59, columns
     70-79: 0.17 -> 0.42; 24 x 24 there 2.2 -> 1.8; 30 % random missing normals +4 % on the
-    sphere). Only groups of at least :data:`CONTINUE_GROUP` facets count: a few known normals amid missing ones (30 % missing
-    at random leaves such islands) sit as well in the flattest fill (the sphere's error +6 %
-    with them continued). `groups`: the large groups' labels, :func:`_groups`."""
+    sphere). Only large groups count (:func:`_groups`, whose labels `groups` are): a few
+    known normals amid missing ones (30 % missing at random leaves such islands) sit as well
+    in the flattest fill (the sphere's error +6 % with them continued)."""
     H, W = domain.shape
     r, c = domain.pixels[0][idx], domain.pixels[1][idx]
     lo = np.full(k, np.iinfo(np.int64).max)
