@@ -279,7 +279,8 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
                                                          "mask_source", "perspective",
                                                          "camera", "depth_range", "normals",
                                                          "evaluation", "prior_file",
-                                                         "confidence_file", "normal_rotation"}
+                                                         "confidence_file", "colors_file",
+                                                         "normal_rotation"}
     code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "1",
                  "-s", "npy", "--progress"])
     assert code == 1 and "batch:" in capsys.readouterr().err  # the bar, on stderr

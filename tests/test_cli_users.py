@@ -1418,7 +1418,8 @@ def test_the_jump_hint_names_a_dense_prior_too(capsys):
     # method option named prior (regularization's, a string) is no depth prior
     other = _jump_hint(SimpleNamespace(method="poisson", options={}),
                        {**info, "method": "poisson"})
-    assert "--method dgp --discontinuities keeps them ('poisson' cannot)" in other
+    assert ("--method dgp --discontinuities keeps them ('poisson' takes no --discontinuities)"
+            in other)
     assert _jump_hint(SimpleNamespace(method="regularization", options={}),
                       {**info, "method": "regularization", "prior": "laplacian"}) is not None
     capsys.readouterr()

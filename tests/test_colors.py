@@ -1,5 +1,7 @@
 """Colours painted on meshes and point clouds (facetlift.io.colors, --colors)."""
 
+from pathlib import Path
+
 import imagecodecs
 import meshio
 import numpy as np
@@ -241,3 +243,22 @@ def test_the_same_surface_gives_the_same_bytes(cut, tmp_path):
         s.save(tmp_path / run / "points.ply", colors=img, normals=up)
     for name in ("mesh.ply", "mesh.obj", "points.ply"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+
+
+def test_a_batch_paints_each_map_with_its_own_colors_file(tmp_path):
+    """NAME_colors.* beside NAME.* is that map's colour image (as NAME_prior_depth.* is its
+    prior): its meshes are painted, and it is no item of its own."""
+    gt = synthetic.analytic("sphere", 24)
+    for name, value in (("a", 40), ("b", 200)):
+        io.write_normals(tmp_path / f"{name}.png", gt.normals)
+        photo = np.full(gt.shape + (3,), value, np.uint8)
+        (tmp_path / f"{name}_colors.png").write_bytes(imagecodecs.png_encode(photo))
+    records = facetlift.batch([str(tmp_path / "*.png")], str(tmp_path / "out"),
+                              save=("ply",))
+    assert sorted(r["name"] for r in records) == ["a", "b"]
+    assert all(r["status"] == "ok" for r in records)
+    for name, value in (("a", 40), ("b", 200)):
+        red = meshio.read(tmp_path / "out" / name / "mesh.ply").point_data["red"]
+        assert (red == value).all()
+    assert {r["name"]: Path(r["colors_file"]).name for r in records} == {
+        "a": "a_colors.png", "b": "b_colors.png"}

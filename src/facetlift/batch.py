@@ -54,6 +54,9 @@ class Item:
     #: depth), as a dataset folder's ``prior_depth.*`` and ``confidence.*``.
     prior: str | None = None
     confidence: str | None = None
+    #: The map's own colour image, ``NAME_colors.*`` beside ``NAME.*`` (an estimator's input
+    #: photo, renamed after its map): it paints the item's meshes and points (--colors).
+    colors: str | None = None
     #: Why the input cannot run (it does not exist, a pattern matches nothing): the batch
     #: records it as a failed item and runs the others.
     error: str | None = None
@@ -77,7 +80,9 @@ def items(inputs, *, list_file=None) -> list[Item]:
     an item unless named explicitly; so are ``<stem>_prior_depth.<ext>`` and
     ``<stem>_confidence.<ext>`` its depth prior and normal confidence (:func:`companions`: the
     formats of a dataset folder's ``prior_depth.*`` and ``confidence.*``; two of one kind
-    make the item an error: which was meant?). A one-channel image or 2-d array that pairs
+    make the item an error: which was meant?), and ``<stem>_colors.<ext>`` the image that
+    paints its meshes and points (--colors; :data:`facetlift.io.colors.COLOR_FORMATS`). A
+    one-channel image or 2-d array that pairs
     with no map (a stray depth map, a grey image: no normal map) is skipped with one warning
     naming them, unless named explicitly. Output names are the file stems or folder names; inputs
     sharing a stem (``a.png``, ``a.npy``) are named with their extension (``a_png``,
@@ -210,8 +215,8 @@ def items(inputs, *, list_file=None) -> list[Item]:
                 if len(them) > 1:  # (as a dataset folder's two of a kind: which one was meant?)
                     ambiguous.append((field, (
                         f"`inputs`: {p.parent} holds {' and '.join(m.name for m in them)} "
-                        f"beside {p.name}, each of them its {field}: keep one (--no-{field} "
-                        "reads neither)")))
+                        f"beside {p.name}, each of them its {field}: keep one"
+                        + (f" (--no-{field} reads neither)" if field != "colors" else ""))))
                     error = error or ambiguous[0][1]
         out.append(Item(path=key, name=name, mask=mask, error=error,
                         ambiguous=tuple(ambiguous), **own))
@@ -424,16 +429,18 @@ def companions() -> tuple:
     (:func:`facetlift.io.dataset.dataset_files`), named after one map of a folder of maps (a
     video's frames, each with its monocular depth). ``NAME_mask.*`` is looked for apart
     (:func:`items`), as before these."""
+    from .io.colors import COLOR_FORMATS
     from .io.dataset import _dataset_formats
 
     formats = _dataset_formats()
     return (("prior", "_prior_depth", formats["prior_depth"]),
-            ("confidence", "_confidence", formats["confidence"]))
+            ("confidence", "_confidence", formats["confidence"]),
+            ("colors", "_colors", COLOR_FORMATS))
 
 
 def _companion(stem: str) -> tuple[str, str] | None:
-    """``(X, suffix)`` where `stem` is ``X_mask``, ``X_prior_depth`` or ``X_confidence`` (a
-    non-empty X), else None."""
+    """``(X, suffix)`` where `stem` is ``X_mask``, ``X_prior_depth``, ``X_confidence`` or
+    ``X_colors`` (a non-empty X), else None."""
     for suffix in ("_mask",) + tuple(s for _, s, _ in companions()):
         if stem.endswith(suffix) and len(stem) > len(suffix):
             return stem[:-len(suffix)], suffix
@@ -654,7 +661,8 @@ def fingerprint(item: Item, template: Job | None = None) -> list:
         with contextlib.suppress(ValueError):  # (the item's own reading says why)
             files += [c for c in camera_files(folder) if c.parent != folder]
     # (its mask, prior and confidence beside it: a frame's depth replaced is a new input)
-    files += [Path(f) for f in (item.mask, item.prior, item.confidence) if f is not None]
+    files += [Path(f) for f in (item.mask, item.prior, item.confidence, item.colors)
+              if f is not None]
     out = []
     for f in files:
         try:
@@ -813,7 +821,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             j = replace(j, mask=it.mask)
         # (its own prior and confidence, NAME_prior_depth.* and NAME_confidence.*: where the
         # template takes them, _own_files left them on the item)
-        own = {k: getattr(it, k) for k in ("prior", "confidence") if getattr(it, k)}
+        own = {k: getattr(it, k) for k in ("prior", "confidence", "colors") if getattr(it, k)}
         if own:
             j = replace(j, beside=tuple(own), **own)
         jobs.append((it, j))
@@ -916,9 +924,10 @@ def check_template(job: Job, local: bool = True) -> None:
                              f"{type(value).__name__}: write it to a file, or integrate each "
                              "map with facetlift.integrate, which takes arrays")
     if getattr(job, "colors", None) is not None:  # (one picture for every map: not theirs)
-        raise ValueError(f"`colors` {job.colors}: a batch takes no colour image (one picture "
-                         "would paint every map); integrate each map with --colors (or "
-                         "Surface.save(..., colors=))")
+        raise ValueError(f"`colors` {job.colors}: a batch takes no colour image for every map "
+                         "(one picture would paint them all); name each map's own NAME_colors.* "
+                         "beside it (NAME.png and NAME_colors.jpg), or integrate each map with "
+                         "--colors")
     if isinstance(job.save, (str, os.PathLike)) or not all(isinstance(k, str) for k in job.save):
         raise ValueError(f"`save` must be a sequence of output names; got {job.save!r}")
     opts = dict(job.options)
@@ -1012,7 +1021,7 @@ def log_record(rec: dict) -> dict:
 
     keep = ("item", "name", "status", "error", "exit", "outputs", "mean_deviation", "seconds",
             "shape", "facets", "mask_source", "converged", "warnings", "resumed", "settings",
-            "input_stamp", "perspective", "camera", "prior_file", "confidence_file",
+            "input_stamp", "perspective", "camera", "prior_file", "confidence_file", "colors_file",
             "depth_range", "normals", "evaluation", "hints", "normal_rotation",
             "camera_warned")
     # (mask_source: whether NAME_mask.png was used, a user asked; perspective: whether a

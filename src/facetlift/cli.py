@@ -975,9 +975,10 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
       facetlift batch --list maps.txt -o /shared/out --scheduler tcp://head:8786
     """
     if colors is not None:  # (click's "No such option" offered --solver, a user's check)
-        raise ValueError(f"--colors {colors}: a batch takes no colour image (one picture would "
-                         "paint every map); integrate each map with facetlift integrate "
-                         "--colors")
+        raise ValueError(f"--colors {colors}: a batch takes no colour image for every map (one "
+                         "picture would paint them all); name each map's own NAME_colors.* "
+                         "beside it (NAME.png and NAME_colors.jpg), or integrate each map with "
+                         "facetlift integrate --colors")
     from .batch import LOG_NAME, log_record
     from .batch import batch as run_batch
     from .errors import WorkersDied

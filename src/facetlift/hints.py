@@ -124,8 +124,11 @@ def jump_hint(job, info: dict, camera_warned: bool = False,
             "--prior-blur; docs/fusion.md)")
     # (a method that cannot keep jumps: the one that can, named; poisson and the others at
     # the same deviation got no word, a user's check)
+    # ("cannot" was wrong for alpha_surface, whose graph cuts itself, and best on the bear: a
+    # reproduction)
     keep = ("--discontinuities keeps them" if method.discontinuities else
-            f"--method dgp --discontinuities keeps them ({method.name!r} cannot)")
+            f"--method dgp --discontinuities keeps them ({method.name!r} takes no "
+            "--discontinuities)")
     if frame is None:
         hint = (f"{head}, as where a smooth surface bends across depth jumps: {keep} "
                 f"(slower; docs/perspective.md){also}")

@@ -131,7 +131,7 @@ class Job:
     #: ``NAME_mask.*``, ``K.txt``); a batch names them once per folder instead (False for
     #: its items).
     unread_beside: bool = True
-    #: Which of ``prior`` and ``confidence`` a batch found beside the map, as
+    #: Which of ``prior``, ``confidence`` and ``colors`` a batch found beside the map, as
     #: ``NAME_prior_depth.*`` and ``NAME_confidence.*`` (not given by the user): their
     #: errors name the file and what leaves it unread (``dataset_prior=False``, --no-prior).
     beside: tuple = ()
@@ -550,7 +550,7 @@ def unread_files(folder: Path, stem: str | None, *, mask: bool, camera: bool,
     found = []
     wanted = {"prior": prior, "confidence": confidence}
     for kind, suffix, formats in (companions() if stem is not None else ()):
-        if not wanted[kind]:
+        if not wanted.get(kind, False):  # (a batch's NAME_colors.*: cosmetic, not warned of)
             continue
         try:
             p = _find(folder, f"{stem}{suffix}", formats)
@@ -855,7 +855,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
             warn(f"`output_frame` {job.output_frame!r} applies to the mesh and point outputs "
                  "(ply, obj, stl, points), none of which is saved: depth maps stay in "
                  "facetlift's convention (depth along the viewing axis)")
-    if job.colors is not None and not set(save) & COLOURED:
+    if job.colors is not None and not set(save) & COLOURED and "colors" not in job.beside:
         warn(f"`colors` {job.colors} paints only the ply, obj and points outputs, none of "
              "which is saved: add -s ply, -s obj or -s points")
     if job.triangles is False and "stl" in save and not set(save) & {"ply", "obj"}:
@@ -872,8 +872,16 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         announce(progress, "reading")
         inp = read(job)
         # (before the solve: a wrong image fails the job at once)
-        rgb = (None if job.colors is None or not set(save) & COLOURED
-               else io.read_colors(job.colors, inp.normals.shape[:2]))
+        rgb = None
+        if job.colors is not None and set(save) & COLOURED:
+            try:
+                rgb = io.read_colors(job.colors, inp.normals.shape[:2])
+            except ValueError as e:  # (a batch's NAME_colors.*: which file, and the way out)
+                if "colors" not in job.beside:
+                    raise
+                raise ValueError(f"{e} (the map's NAME_colors file beside it, which a batch "
+                                 "paints its meshes with: rename it to leave it unread)"
+                                 ) from None
         t_read = time.perf_counter() - t0
         opts = dict(job.options)
         if progress is not None and "progress" in info.options() and "progress" not in opts:
