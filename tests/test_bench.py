@@ -487,6 +487,57 @@ def test_scenes_that_cannot_be_made_are_listed(tmp_path):
 
     ctx = Context(tmp_path, Settings.quick())
     assert list(disc.usable(ctx, [("perspective", "spot@front", missing)], "x")) == []
-    assert ctx.unavailable == {"spot@front": "facetlift.synthetic.render_perspective needs "
-                                             "trimesh"}
+    assert ctx.unavailable == {"spot@front (perspective)": "facetlift.synthetic."
+                                                           "render_perspective needs trimesh"}
     assert "## Scenes not rendered" in _report(ctx, "quick", [], 1.0)
+
+
+def test_an_interrupted_run_still_writes_its_report(tmp_path, monkeypatch):
+    """Ctrl-C left the finished experiments' files without a report.md (an audit)."""
+    from facetlift.bench import runner
+
+    def stop(ctx):
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(runner.EXPERIMENT_FUNCTIONS, "fig4", stop)
+    with pytest.raises(KeyboardInterrupt):
+        run_bench(tmp_path, quick=True, experiments=["table1", "fig4"], progress=False)
+    report = (tmp_path / "report.md").read_text()
+    assert "| fig4 | interrupted" in report and (tmp_path / "table1.csv").is_file()
+
+
+def test_unknown_models_are_refused(tmp_path):
+    with pytest.raises(ValueError, match=r"`models`: unknown \['nope'\]"):
+        run_bench(tmp_path, quick=True, experiments=["fig9"], models=["nope"], progress=False)
+
+
+def test_the_render_cache_is_keyed_by_the_meshes_contents(tmp_path, monkeypatch):
+    """A render cached under its mesh's stem came back for another mesh of that name or an
+    edited one; a truncated cache file dropped its scene from every later run (an audit)."""
+    import numpy as np
+
+    from facetlift import synthetic
+    from facetlift.bench import discontinuities as disc
+    from facetlift.bench.core import Context, Settings
+
+    monkeypatch.setenv("FACETLIFT_BENCH_CACHE", str(tmp_path / "cache"))
+    ctx = Context(tmp_path, Settings.quick())
+    mesh = tmp_path / "m.ply"
+    mesh.write_text("one")
+    made = []
+
+    def make():
+        made.append(1)
+        return synthetic.analytic("sphere", 8)
+
+    disc._cached(ctx, "k", make, (mesh,))
+    disc._cached(ctx, "k", make, (mesh,))
+    assert len(made) == 1  # (the second from the cache)
+    mesh.write_text("another mesh")
+    disc._cached(ctx, "k", make, (mesh,))
+    assert len(made) == 2  # (other contents: rendered anew)
+    cached = tmp_path / "cache" / "k.npz"
+    cached.write_bytes(cached.read_bytes()[:100])
+    gt = disc._cached(ctx, "k", make, (mesh,))
+    assert len(made) == 3 and np.isfinite(gt.depth[gt.mask]).all()
+    assert sorted(p.name for p in (tmp_path / "cache").iterdir()) == ["k.npz"]

@@ -1475,6 +1475,9 @@ def _stopped(how: str) -> str:
     in as a set; a batch's finished items are in its log (said by a batch only: a plain
     integrate's message spoke of one, an audit)."""
     command = next((a for a in _STATE.get("args", ()) if not a.startswith("-")), None)
+    if command == "bench":  # (its files are written experiment by experiment, an audit)
+        return (f"{how}; the finished experiments' files are in the output folder, and its "
+                "report.md lists them and the one interrupted")
     return (f"{how}; nothing partial was written"
             + (" (a batch's finished items are in its log)" if command == "batch" else ""))
 

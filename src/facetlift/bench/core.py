@@ -264,11 +264,16 @@ class Context:
         return default_specs(self.settings.methods, variants=variants)
 
     def meshes(self, limit: int | None = None) -> list[Path]:
-        """The data folder's ``meshes/*.ply`` (sorted, the first `limit` of them) and then the
-        extra meshes of this run."""
+        """The data folder's ``meshes/*.ply`` (sorted, the first `limit` of them, or, where
+        the run names `models`, those it names: a quick run's limit cut them before the names
+        were looked at, an audit) and then the extra meshes of this run."""
         found = []
         if self.data is not None and (self.data / "meshes").is_dir():
-            found = sorted((self.data / "meshes").glob("*.ply"))[:limit]
+            found = sorted((self.data / "meshes").glob("*.ply"))
+            if self.models:
+                found = [p for p in found if p.stem in self.models]
+            else:
+                found = found[:limit]
         return found + [Path(p) for p in self.extra_meshes]
 
     def add(self, title: str, text: str) -> None:

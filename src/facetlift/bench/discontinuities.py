@@ -35,9 +35,13 @@ consistent with the normals, so its error measures where a method happens to put
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import hashlib
 import logging
 import math
 import os
+import secrets
 import time
 import warnings
 import zlib
@@ -120,19 +124,55 @@ def _cache_dir(ctx: Context) -> Path:
     return d
 
 
-def _cached(ctx: Context, key: str, make) -> synthetic.GroundTruth:
+@functools.lru_cache(maxsize=None)
+def _file_digest(path: str, size: int, mtime_ns: int) -> str:
+    """SHA-1 of a file's bytes (cached per path, size and modification time)."""
+    return hashlib.sha1(Path(path).read_bytes()).hexdigest()
+
+
+def _sources_digest(sources) -> str:
+    """One digest of the files a scene is rendered from (its meshes): a render cached under
+    a key of their stems alone came back for another mesh of the same name, an edited one or
+    another data folder's (an audit)."""
+    parts = []
+    for p in sources:
+        st = os.stat(p)
+        parts.append(_file_digest(str(Path(p).resolve()), st.st_size, st.st_mtime_ns))
+    return hashlib.sha1(("|".join(parts) + f"|{CACHE_VERSION}").encode()).hexdigest()
+
+
+#: Part of every cached render's digest: raise it when the renderer changes what it returns.
+CACHE_VERSION = 1
+
+
+def _cached(ctx: Context, key: str, make, sources=()) -> synthetic.GroundTruth:
+    """The scene `key` from the render cache, or made (`make`) and stored there. With
+    `sources` (the mesh files it is rendered from) a cached file is used only where it
+    holds the same digest of them (:func:`_sources_digest`); a file that cannot be read is
+    rendered anew (it was dropped from every later run, an audit)."""
     path = _cache_dir(ctx) / f"{key}.npz"
+    digest = _sources_digest(sources) if sources else ""
     if path.is_file():
-        with np.load(path) as z:
-            K = z["K"] if z["K"].size else None
-            return synthetic.GroundTruth(z["depth"], z["normals"], z["mask"],
-                                         float(z["pixel_size"]), str(z["name"]), K)
+        try:
+            with np.load(path) as z:
+                stored = str(z["sources"]) if "sources" in z.files else ""
+                if stored == digest:
+                    K = z["K"] if z["K"].size else None
+                    return synthetic.GroundTruth(z["depth"], z["normals"], z["mask"],
+                                                 float(z["pixel_size"]), str(z["name"]), K)
+            log.info("cached scene %s was rendered from other files: rendered anew", path)
+        except Exception as e:  # (a truncated or foreign file: rendered anew)
+            log.warning("cached scene %s cannot be read (%s): rendered anew", path, e)
     gt = make()
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, depth=gt.depth, normals=gt.normals, mask=gt.mask,
-                        pixel_size=gt.pixel_size, name=gt.name,
-                        K=np.zeros(0) if gt.K is None else gt.K)
-    os.replace(tmp, path)
+    tmp = path.with_name(f"{key}.{os.getpid()}.{secrets.token_hex(4)}.tmp.npz")
+    try:  # (a name of its own: two runs sharing the cache moved each other's away, an audit)
+        np.savez_compressed(tmp, depth=gt.depth, normals=gt.normals, mask=gt.mask,
+                            pixel_size=gt.pixel_size, name=gt.name,
+                            K=np.zeros(0) if gt.K is None else gt.K, sources=digest)
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
     return gt
 
 
@@ -194,8 +234,8 @@ def scenes(ctx: Context) -> list[tuple[str, str, object]]:
     f_wide = WIDE_F * res[1] / 612.0
     out = []
 
-    def add(group, name, key, make):
-        out.append((group, name, lambda: _cached(ctx, key, make)))
+    def add(group, name, key, make, sources):
+        out.append((group, name, lambda: _cached(ctx, key, make, sources)))
 
     tag = f"{res[0]}x{res[1]}_s{s.disc_samples}"
     for path in meshes:
@@ -203,17 +243,18 @@ def scenes(ctx: Context) -> list[tuple[str, str, object]]:
             add("perspective", f"{path.stem}@{view}", f"pin_{path.stem}_{view}_{tag}",
                 lambda p=path, v=view: synthetic.render_perspective(
                     load_mesh(p), _pinhole(res), res, view=v, samples=s.disc_samples,
-                    name=f"{p.stem}@{v}"))
+                    name=f"{p.stem}@{v}"), (path,))
         for view in s.disc_wide_views:
             add("wide", f"{path.stem}@{view}", f"wide_{path.stem}_{view}_{tag}",
                 lambda p=path, v=view: synthetic.render_perspective(
                     load_mesh(p), _pinhole(res, f_wide), res, view=v, distance=WIDE_DISTANCE,
-                    samples=s.disc_samples, name=f"{p.stem}@{v}"))
+                    samples=s.disc_samples, name=f"{p.stem}@{v}"), (path,))
         for view in s.disc_ortho_views:
             n = s.disc_ortho_size
             add("ortho", f"{path.stem}@{view}", f"ortho_{path.stem}_{view}_{n}",
                 lambda p=path, v=view, n=n: synthetic.render_mesh(load_mesh(p), n, view=v,
-                                                                   name=f"{p.stem}@{v}"))
+                                                                   name=f"{p.stem}@{v}"),
+                (path,))
     for i in range(s.disc_tabletop if len(meshes) >= 2 else 0):
         pick = tabletop_meshes(meshes, i)
         name = "+".join(p.stem for p in pick) + f"@table{i}"
@@ -221,7 +262,8 @@ def scenes(ctx: Context) -> list[tuple[str, str, object]]:
         add("tabletop", name, f"table{TABLE_VERSION}_{i}_{name}_f{TABLE_FILL:g}_{tag}",
             lambda pick=pick, i=i, name=name: synthetic.render_perspective(
                 synthetic.tabletop([load_mesh(p) for p in pick], seed=i), _pinhole(res), res,
-                view=synthetic.TABLE_VIEW, fill=TABLE_FILL, samples=s.disc_samples, name=name))
+                view=synthetic.TABLE_VIEW, fill=TABLE_FILL, samples=s.disc_samples, name=name),
+            tuple(pick))
     rres = tuple(s.disc_room_resolution)
     rtag = f"{rres[0]}x{rres[1]}_s{s.disc_samples}"
     for i in range(s.disc_rooms if meshes else 0):
@@ -231,14 +273,15 @@ def scenes(ctx: Context) -> list[tuple[str, str, object]]:
             lambda pick=pick, i=i, name=name: synthetic.render_perspective(
                 synthetic.room([load_mesh(p) for p in pick], seed=i),
                 _pinhole(rres, WIDE_F * rres[1] / 612.0), rres, view=synthetic.room_view(i),
-                fill=ROOM_FILL, distance=WIDE_DISTANCE, samples=s.disc_samples, name=name))
+                fill=ROOM_FILL, distance=WIDE_DISTANCE, samples=s.disc_samples, name=name),
+            tuple(pick))
     for kind in s.disc_vessels:
         for elev in s.disc_vessel_elevations:
             name = f"{kind}@e{elev:g}"
             add("vessel", name, f"vessel{VESSEL_VERSION}_{kind}_e{elev:g}_{tag}",
                 lambda kind=kind, elev=elev, name=name: synthetic.render_perspective(
                     synthetic.vessel(kind), _pinhole(res), res,
-                    view=synthetic.vessel_view(elev), samples=s.disc_samples, name=name))
+                    view=synthetic.vessel_view(elev), samples=s.disc_samples, name=name), ())
     for name in s.disc_analytic:
         n = s.disc_ortho_size
         out.append(("ortho", name, lambda name=name, n=n: synthetic.analytic(name, n)))
@@ -288,7 +331,7 @@ def heldout_scenes(ctx: Context) -> list[tuple[str, str, object]]:
             out.append(("heldout", name, lambda p=path, v=view, f=fill, name=name, key=key: _cached(
                 ctx, key, lambda: synthetic.render_perspective(
                     load_mesh(p), _pinhole(res), res, view=v, fill=f, samples=s.disc_samples,
-                    name=name))))
+                    name=name), (p,))))
     if ctx.models:
         out = [t for t in out if t[1] in ctx.models or t[1].split("@")[0] in ctx.models]
     return out
@@ -574,7 +617,8 @@ def usable(ctx: Context, data, label: str):
             gt = load()
         except Exception as e:
             log.warning("scene %s unavailable: %s", name, e)
-            ctx.unavailable[name] = str(e)  # (listed in the report, an audit)
+            # (listed in the report, an audit; by group too: one name in two groups)
+            ctx.unavailable[f"{name} ({group})"] = str(e)
             continue
         if gt.mask.sum() < ctx.settings.disc_min_pixels or gt.depth_range < _flat(gt):
             log.info("scene %s skipped: %d pixels, depth range %g", name, gt.mask.sum(),

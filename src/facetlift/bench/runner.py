@@ -44,6 +44,45 @@ def _machine() -> str:
     return f"{cpu}, {os.cpu_count()} logical CPUs, Python {platform.python_version()}"
 
 
+def _provenance(ctx: Context) -> list[str]:
+    """The report's lines on what produced it (a reviewer could not tell the code or the
+    settings from report.md, an audit): facetlift's version and, from a checkout, its git
+    commit (``-dirty`` with local changes), the libraries' versions, the date, the resolved
+    data and cache folders, and the settings that choose what runs."""
+    import datetime
+    import subprocess
+
+    import numpy
+    import scipy
+
+    from .. import __version__
+
+    code = f"facetlift {__version__}"
+    try:
+        here = Path(__file__).resolve().parent
+        rev = subprocess.run(["git", "-C", str(here), "describe", "--always", "--dirty"],
+                             capture_output=True, text=True, timeout=10)
+        if rev.returncode == 0 and rev.stdout.strip():
+            code += f", git {rev.stdout.strip()}"
+    except (OSError, subprocess.SubprocessError):
+        pass
+    try:
+        import pyamg
+
+        libs = f"numpy {numpy.__version__}, scipy {scipy.__version__}, pyamg {pyamg.__version__}"
+    except ImportError:  # pragma: no cover - (a core dependency)
+        libs = f"numpy {numpy.__version__}, scipy {scipy.__version__}"
+    s = ctx.settings
+    cache = os.environ.get("FACETLIFT_BENCH_CACHE") or str(ctx.out / "cache")
+    data = ctx.data.resolve() if ctx.data is not None else None
+    return [f"Code: {code}; {libs}  ",
+            f"Date: {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC  ",
+            f"Data: {data}; render cache: {Path(cache).resolve()}  ",
+            f"Settings: methods {', '.join(s.methods) if s.methods else 'all'}; models "
+            f"{', '.join(ctx.models) if ctx.models else 'all'}; discontinuity conditions "
+            f"{', '.join(s.disc_conditions)}; held-out seed {s.heldout_seed}\n"]
+
+
 def default_data_dir() -> Path | None:
     """``$FACETLIFT_DATA`` if set, else a ``shared/data`` folder beside the checkout, else None."""
     env = os.environ.get("FACETLIFT_DATA")
@@ -154,15 +193,23 @@ def run_bench(
         raise ValueError(f"`data_dir`: {data} is not a folder")
     ctx = Context(out, s, data, progress, method_status(s.methods), models=models,
                   extra_meshes=tuple(extra_meshes), extra_normal_maps=tuple(extra_normal_maps))
+    _check_models(ctx)
     t0 = time.perf_counter()
     failures = []
     plots.NOT_DRAWN.clear()
-    for e in bar(exps, progress, "bench"):
-        error = _run(e, ctx)
-        if error:
-            failures.append((e, error))
     mode = f"{'quick' if quick else 'full'}; experiments: {', '.join(exps)}"
-    write_text(out / "report.md", _report(ctx, mode, failures, time.perf_counter() - t0))
+    running = None
+    try:
+        for e in bar(exps, progress, "bench"):
+            running = e
+            error = _run(e, ctx)
+            if error:
+                failures.append((e, error))
+        running = None
+    finally:
+        if running is not None:  # (Ctrl-C or SIGTERM: the report of what finished, an audit)
+            failures.append((running, "interrupted (the experiments after it did not run)"))
+        write_text(out / "report.md", _report(ctx, mode, failures, time.perf_counter() - t0))
     return out
 
 
@@ -189,6 +236,21 @@ def _check_extras(extra_meshes, extra_normal_maps) -> None:
             raise ValueError(f"`extra_normal_maps`: {p} is not a folder")
 
 
+def _check_models(ctx: Context) -> None:
+    """Refuse `models` that name nothing this run could make (an unknown name gave empty
+    tables and exit 0, an audit): a mesh of the data folder or an extra mesh (its stem, or
+    ``stem@view``), an analytic surface or a vessel kind."""
+    from .. import synthetic
+
+    if not ctx.models:
+        return
+    known = {p.stem for p in ctx.meshes()} | set(synthetic.ANALYTIC)
+    known |= {"cup", "bowl", "goblet", "vase"} | set(ctx.settings.disc_vessels)
+    unknown = sorted(m for m in ctx.models if str(m).split("@")[0] not in known)
+    if unknown:
+        raise ValueError(f"`models`: unknown {unknown}; this run knows {sorted(known)}")
+
+
 def _run(name: str, ctx: Context) -> str | None:
     """Run experiment `name`; None, or the error that stopped it (logged with its traceback)."""
     t0 = time.perf_counter()
@@ -210,7 +272,7 @@ def _report(ctx: Context, mode: str, failures: list, seconds: float) -> str:
         "# facetlift bench report\n",
         f"Machine: {_machine()}  ",
         f"Mode: {mode}; total {seconds:.0f} s  ",
-        f"Data: {ctx.data}\n",
+        *_provenance(ctx),
         "## Methods\n",
         md_table(avail),
     ]
