@@ -541,3 +541,33 @@ def test_the_render_cache_is_keyed_by_the_meshes_contents(tmp_path, monkeypatch)
     gt = disc._cached(ctx, "k", make, (mesh,))
     assert len(made) == 3 and np.isfinite(gt.depth[gt.mask]).all()
     assert sorted(p.name for p in (tmp_path / "cache").iterdir()) == ["k.npz"]
+
+
+@pytest.mark.skipif(not (DATA / "meshes").is_dir(), reason="needs ../shared/data")
+def test_scene_and_table_names_are_models_too(tmp_path):
+    """`cow@left` and `spot+stanford_bunny@table4`, the docs' examples, were refused by the
+    first check of the names (a review)."""
+    from facetlift.bench.core import Context, Settings
+    from facetlift.bench.runner import _check_models
+
+    for names in (["cow@left"], ["spot+stanford_bunny@table4"], ["cow", "sphere", "cup"]):
+        _check_models(Context(tmp_path, Settings.quick(), DATA, models=tuple(names)))
+    with pytest.raises(ValueError, match=r"unknown \['cow\+nope@table0'\]"):
+        _check_models(Context(tmp_path, Settings.quick(), DATA, models=("cow+nope@table0",)))
+
+
+def test_sigterm_still_writes_the_report(tmp_path, monkeypatch):
+    """SIGTERM killed a run without its report (Ctrl-C wrote one; a review)."""
+    import os
+    import signal
+
+    from facetlift.bench import runner
+    from facetlift.io.atomic import Terminated
+
+    def term(ctx):
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setitem(runner.EXPERIMENT_FUNCTIONS, "fig4", term)
+    with pytest.raises(Terminated):
+        run_bench(tmp_path, quick=True, experiments=["table1", "fig4"], progress=False)
+    assert "| fig4 | interrupted" in (tmp_path / "report.md").read_text()

@@ -262,3 +262,19 @@ def test_a_batch_paints_each_map_with_its_own_colors_file(tmp_path):
         assert (red == value).all()
     assert {r["name"]: Path(r["colors_file"]).name for r in records} == {
         "a": "a_colors.png", "b": "b_colors.png"}
+
+
+def test_jpeg_trailers_pass_and_cmyk_is_refused(tmp_path):
+    """Data after a JPEG's end-of-image marker (a phone's trailer) was refused as truncated,
+    and a CMYK JPEG painted grey as white (a review)."""
+    rgb = np.full((8, 8, 3), 100, np.uint8)
+    data = imagecodecs.jpeg8_encode(rgb, level=95)
+    (tmp_path / "t.jpg").write_bytes(data + b"SEFH" + bytes(200))
+    assert abs(io.read_colors(tmp_path / "t.jpg").mean() * 255 - 100) < 3
+    (tmp_path / "cut.jpg").write_bytes(data[:-1])
+    with pytest.raises(ValueError, match="truncated JPEG"):
+        io.read_colors(tmp_path / "cut.jpg")
+    PIL = pytest.importorskip("PIL.Image")  # (with matplotlib, the test extra's)
+    PIL.new("CMYK", (8, 8), (0, 0, 0, 128)).save(tmp_path / "k.jpg")
+    with pytest.raises(ValueError, match="a CMYK JPEG"):
+        io.read_colors(tmp_path / "k.jpg")

@@ -1694,3 +1694,41 @@ def test_a_commit_killed_halfway_is_rolled_back_by_the_sweep(tmp_path, user_wrot
     atomic.sweep(out)
     assert sorted(p.name for p in out.iterdir()) == ["a.txt"]
     assert (out / "a.txt").read_text() == ("the user's a" if user_wrote_since else "old a")
+
+
+def test_the_roll_back_puts_back_an_old_file_moved_aside(tmp_path):
+    """Where the old output could be neither linked nor copied aside it is moved aside; a
+    run killed before its new file moved in left the folder without it, and the sweep
+    deleted the only copy (a review)."""
+    import json
+
+    from facetlift.io import atomic
+
+    staging = tmp_path / "stage"
+    (staging / ".replaced").mkdir(parents=True)
+    (staging / ".replaced" / "depth.npy").write_text("the old output")
+    (staging / "depth.npy").write_text("the new one, not moved in")
+    (staging / atomic.MOVING).write_text(json.dumps(["depth.npy", 0, 0, 0, 0]) + "\n")
+    atomic._roll_back(staging, tmp_path)
+    assert (tmp_path / "depth.npy").read_text() == "the old output"
+
+
+def test_a_commit_that_cannot_list_its_moves_aborts_cleanly(tmp_path, monkeypatch):
+    """A failure to write the list of moves left the staging folder behind (a review)."""
+    import errno
+
+    from facetlift.io import atomic
+
+    out = atomic.OutputSet(tmp_path / "o", ["a.txt"])
+    out.path("a.txt").write_text("new")
+    real = Path.write_text
+
+    def full(self, *a, **k):
+        if self.name == atomic.MOVING:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(Path, "write_text", full)
+    with pytest.raises(OSError, match="the folder was left as it was"):
+        out.commit()
+    assert not (tmp_path / "o").exists() or list((tmp_path / "o").iterdir()) == []

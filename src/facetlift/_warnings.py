@@ -87,18 +87,28 @@ def _dispatch(message, category, filename, lineno, file=None, line=None):
 _MODULES: dict = {}
 
 
-def _module_of(filename) -> str:
-    """The module name of `filename`, as ``warnings`` matches a filter's ``module`` against
-    (``numpy._core.fromnumeric``, ``__main__``: the file's base name matched neither, a
-    review); the base name for a file of no loaded module."""
+def _module_of(filename, lineno) -> str:
+    """The module name ``warnings`` matches a filter's ``module`` against: the ``__name__``
+    of the frame that warned (``numpy._core.fromnumeric``, ``__main__`` for a script, stdin
+    or a notebook cell: the file's base name matched neither, a review), found on this
+    thread's stack (the display runs in the thread that warned); else the loaded module of
+    that file, or its base name (looked up once per file)."""
+    frame = sys._getframe(1)
+    while frame is not None:
+        if frame.f_code.co_filename == filename and frame.f_lineno == lineno:
+            name = frame.f_globals.get("__name__")
+            if isinstance(name, str):
+                return name
+        frame = frame.f_back
     key = os.path.abspath(filename) if filename else ""
     if key not in _MODULES:
         for name, mod in list(sys.modules.items()):
             f = getattr(mod, "__file__", None)
             if isinstance(f, str):
                 _MODULES.setdefault(os.path.abspath(f), name)
-        if key not in _MODULES:
-            return os.path.splitext(os.path.basename(filename or ""))[0] or "<unknown>"
+        # (a file of no module: its base name, kept, so a miss scans once, not per warning)
+        _MODULES.setdefault(key, os.path.splitext(os.path.basename(filename or ""))[0]
+                            or "<unknown>")
     return _MODULES[key]
 
 
@@ -107,11 +117,16 @@ def _user_action(message, category, filename, lineno) -> str:
     matches (as ``warnings.warn_explicit`` matches them, the module taken from the file
     name); ``warnings.defaultaction`` where none does."""
     text = str(message)
-    module = _module_of(filename)
+    module = None  # (looked up only for a filter that names a module)
     for action, msg, cat, mod, ln in _SHARED["filters"]:
-        if ((msg is None or msg.match(text)) and issubclass(category, cat)
-                and (mod is None or mod.match(module)) and (ln == 0 or lineno == ln)):
-            return action
+        if not ((msg is None or msg.match(text)) and issubclass(category, cat)
+                and (ln == 0 or lineno == ln)):
+            continue
+        if mod is not None:
+            module = _module_of(filename, lineno) if module is None else module
+            if not mod.match(module):
+                continue
+        return action
     return warnings.defaultaction
 
 

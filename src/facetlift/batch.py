@@ -278,12 +278,18 @@ def _own_files(found: list[Item], template: Job) -> list[Item]:
     one file for every item, which takes precedence, as over a dataset folder's own, with one
     warning naming the items' files it leaves unread (a per-frame depth replaced by one
     file must not pass unsaid)."""
+    from .jobs import COLOURED, DEFAULT_SAVE
+
     out = []
     unread: dict = {"prior": [], "confidence": []}
+    # (an item's NAME_colors.* only where an output is painted: two of them failed an item
+    # that saved only depth, a review)
+    painted = bool(set(template.save or DEFAULT_SAVE) & COLOURED)
     for it in found:
         for field, given, wanted in (
                 ("prior", template.prior, template.dataset_prior),
-                ("confidence", template.confidence, template.dataset_confidence)):
+                ("confidence", template.confidence, template.dataset_confidence),
+                ("colors", None, painted)):
             own = getattr(it, field)
             if own is None:
                 continue

@@ -963,8 +963,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         # without asking)
         "prior_file": inp.prior_file,
         "confidence_file": inp.confidence_file,
-        # (the image that painted the meshes and points, --colors)
-        "colors_file": job.colors,
+        # (the image that painted the meshes and points, --colors; none where none was)
+        "colors_file": job.colors if rgb is not None else None,
         # (normals in world space: the rotation to the camera frame of --normal-frame, and
         # its file; None for camera-frame normals)
         "normal_rotation": rotation_record(job, inp),

@@ -373,7 +373,8 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
     else:
         out["range_ratio"] = ratio = _range_check(est, gt, m, words)
         off = ratio is not None and not 1.0 / RANGE_MISMATCH <= ratio <= RANGE_MISMATCH
-        if off and (est[m] > 0).all():  # (a perspective result scored without its camera:
+        if off and (est[m] > 0).all() and (gt[m] > 0).all():  # (a perspective result
+            # scored without its camera:
             # its "normalised error" of 20.8 % on the bear was a number without meaning, a
             # reproduction; the warning above says how to score it)
             out["notes"].append("no normalised error: the result's depths are all > 0 and "

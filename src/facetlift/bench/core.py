@@ -264,15 +264,14 @@ class Context:
         return default_specs(self.settings.methods, variants=variants)
 
     def meshes(self, limit: int | None = None) -> list[Path]:
-        """The data folder's ``meshes/*.ply`` (sorted, the first `limit` of them, or, where
-        the run names `models`, those it names: a quick run's limit cut them before the names
-        were looked at, an audit) and then the extra meshes of this run."""
+        """The data folder's ``meshes/*.ply`` (sorted, the first `limit` of them, or all of them
+        where the run names `models`, which the experiments pick by name: a quick run's limit
+        cut them before the names were looked at, an audit) and then the extra meshes of this
+        run."""
         found = []
         if self.data is not None and (self.data / "meshes").is_dir():
             found = sorted((self.data / "meshes").glob("*.ply"))
-            if self.models:
-                found = [p for p in found if p.stem in self.models]
-            else:
+            if not self.models:  # (named models pick among all: the scenes filter by name)
                 found = found[:limit]
         return found + [Path(p) for p in self.extra_meshes]
 

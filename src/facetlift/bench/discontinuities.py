@@ -151,7 +151,7 @@ def _cached(ctx: Context, key: str, make, sources=()) -> synthetic.GroundTruth:
     holds the same digest of them (:func:`_sources_digest`); a file that cannot be read is
     rendered anew (it was dropped from every later run, an audit)."""
     path = _cache_dir(ctx) / f"{key}.npz"
-    digest = _sources_digest(sources) if sources else ""
+    digest = _sources_digest(sources)  # (CACHE_VERSION alone where there is no file)
     if path.is_file():
         try:
             with np.load(path) as z:

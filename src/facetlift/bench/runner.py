@@ -59,11 +59,17 @@ def _provenance(ctx: Context) -> list[str]:
 
     code = f"facetlift {__version__}"
     try:
-        here = Path(__file__).resolve().parent
-        rev = subprocess.run(["git", "-C", str(here), "describe", "--always", "--dirty"],
+        here = Path(__file__).resolve().parents[1]  # (the package: src/facetlift)
+        top = subprocess.run(["git", "-C", str(here), "rev-parse", "--show-toplevel"],
                              capture_output=True, text=True, timeout=10)
-        if rev.returncode == 0 and rev.stdout.strip():
-            code += f", git {rev.stdout.strip()}"
+        # (only facetlift's own checkout: an installed copy inside another project's
+        # repository reported that project's commit, a review)
+        if top.returncode == 0 and Path(top.stdout.strip()).resolve() / "src" / "facetlift" \
+                == here:
+            rev = subprocess.run(["git", "-C", str(here), "describe", "--always", "--dirty"],
+                                 capture_output=True, text=True, timeout=10)
+            if rev.returncode == 0 and rev.stdout.strip():
+                code += f", git {rev.stdout.strip()}"
     except (OSError, subprocess.SubprocessError):
         pass
     try:
@@ -199,17 +205,24 @@ def run_bench(
     plots.NOT_DRAWN.clear()
     mode = f"{'quick' if quick else 'full'}; experiments: {', '.join(exps)}"
     running = None
-    try:
-        for e in bar(exps, progress, "bench"):
-            running = e
-            error = _run(e, ctx)
-            if error:
-                failures.append((e, error))
-        running = None
-    finally:
-        if running is not None:  # (Ctrl-C or SIGTERM: the report of what finished, an audit)
-            failures.append((running, "interrupted (the experiments after it did not run)"))
-        write_text(out / "report.md", _report(ctx, mode, failures, time.perf_counter() - t0))
+    from ..io.atomic import sigterm_raises
+
+    # (SIGTERM raised as an exception, as Ctrl-C is: it killed the run without a report, a
+    # review)
+    with sigterm_raises():
+        try:
+            for e in bar(exps, progress, "bench"):
+                running = e
+                error = _run(e, ctx)
+                if error:
+                    failures.append((e, error))
+            running = None
+        finally:
+            if running is not None:  # (Ctrl-C or SIGTERM: the report of what finished)
+                failures.append((running, "interrupted (the experiments after it did not "
+                                 "run)"))
+            write_text(out / "report.md", _report(ctx, mode, failures,
+                                                  time.perf_counter() - t0))
     return out
 
 
@@ -238,15 +251,18 @@ def _check_extras(extra_meshes, extra_normal_maps) -> None:
 
 def _check_models(ctx: Context) -> None:
     """Refuse `models` that name nothing this run could make (an unknown name gave empty
-    tables and exit 0, an audit): a mesh of the data folder or an extra mesh (its stem, or
-    ``stem@view``), an analytic surface or a vessel kind."""
+    tables and exit 0, an audit): a mesh of the data folder or an extra mesh (its stem, or a
+    scene ``stem@view``, ``a+b@table0``), an analytic surface or a vessel kind. (A view that
+    no experiment renders, ``cup@e30``, is not caught.)"""
     from .. import synthetic
 
     if not ctx.models:
         return
     known = {p.stem for p in ctx.meshes()} | set(synthetic.ANALYTIC)
     known |= {"cup", "bowl", "goblet", "vase"} | set(ctx.settings.disc_vessels)
-    unknown = sorted(m for m in ctx.models if str(m).split("@")[0] not in known)
+    # (a scene's name: stem@view, or a table's or a room's a+b@table0: every part known)
+    unknown = sorted(m for m in ctx.models
+                     if not all(part in known for part in str(m).split("@")[0].split("+")))
     if unknown:
         raise ValueError(f"`models`: unknown {unknown}; this run knows {sorted(known)}")
 

@@ -157,7 +157,11 @@ def _roll_back(staging: Path, outdir: Path) -> None:
         target = outdir / name
         try:
             st = os.lstat(target)
-        except OSError:
+        except OSError:  # (none there: an old file moved aside, where it could be neither
+            # linked nor copied, goes back; it was the only copy, a review)
+            with contextlib.suppress(OSError):
+                if (aside / name).exists() or (aside / name).is_symlink():
+                    os.replace(aside / name, target)
             continue
         if [st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns] != stamp:
             continue  # (not moved in by that run, or replaced since: not ours to touch)
@@ -298,18 +302,19 @@ class OutputSet:
         moves = [(name, p, self.outdir / name) for name, p in self.staged.items() if p.exists()]
         self._in_the_way(name for name, _, _ in moves)
         aside = self.staging / ".replaced"
-        # (for the sweep of a run killed mid-commit: what it was moving, _roll_back)
         import json
 
-        listed = []
-        for name, p, _ in moves:
-            st = os.lstat(p)
-            listed.append(json.dumps([name, st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns])
-                          + "\n")
-        (self.staging / MOVING).write_text("".join(listed), encoding="utf-8")
         done: dict[str, Path] = {}
         kept: dict[str, Path] = {}
         try:
+            # (for the sweep of a run killed mid-commit: what it was moving, _roll_back;
+            # inside, so that a failure to write it aborts as any other, a review)
+            listed = []
+            for name, p, _ in moves:
+                st = os.lstat(p)
+                listed.append(json.dumps([name, st.st_dev, st.st_ino, st.st_size,
+                                          st.st_mtime_ns]) + "\n")
+            (self.staging / MOVING).write_text("".join(listed), encoding="utf-8")
             for name, p, target in moves:
                 if target.exists() or target.is_symlink():
                     (aside / name).parent.mkdir(parents=True, exist_ok=True)

@@ -71,10 +71,13 @@ def read_colors(path, shape: tuple[int, int] | None = None, *, arg: str = "color
         except Exception as e:  # (each codec has its own errors)
             raise ValueError(f"`{arg}`: {p} is not a readable JPEG image "
                              f"({type(e).__name__}: {e})") from None
-        if b"\xff\xd9" not in data[-64:]:  # (a cut-off file decodes its lost rows as grey
+        if not _jpeg_complete(data):  # (a cut-off file decodes its lost rows as grey
             # without an error, a user's check)
-            raise ValueError(f"`{arg}`: {p} is a truncated JPEG (it does not end with the "
-                             "end-of-image marker); its missing rows would be painted grey")
+            raise ValueError(f"`{arg}`: {p} is a truncated JPEG (no end-of-image marker after "
+                             "its image data); its missing rows would be painted grey")
+        if a.ndim == 3 and a.shape[2] == 4:  # (its K was dropped as an alpha: grey came out
+            # white, a review)
+            raise ValueError(f"`{arg}`: {p} is a CMYK JPEG; convert it to RGB first")
         a = _oriented(a, _exif_orientation(data))
     else:
         from .images import _decode_image
@@ -128,6 +131,26 @@ def _oriented(a: np.ndarray, orientation: int) -> np.ndarray:
     sideways: refused as another picture, or painted turned, a review)."""
     turn = _ORIENT.get(orientation)
     return a if turn is None else np.ascontiguousarray(turn(a))
+
+
+def _jpeg_complete(data: bytes) -> bool:
+    """Whether a JPEG's image data ends with its end-of-image marker: the segments are walked
+    to the start of scan, and an ``FF D9`` must follow (inside the entropy-coded data an
+    ``FF`` byte is stuffed, so that pair is the marker); data after it (a phone's trailer) is
+    no matter (the last 64 bytes were looked at, and such files refused, a review)."""
+    import struct
+
+    i = 2
+    while i + 4 <= len(data) and data[i] == 0xFF:
+        marker = data[i + 1]
+        if marker == 0xFF:  # (fill bytes)
+            i += 1
+            continue
+        if marker == 0xDA:  # (start of scan)
+            return data.find(b"\xff\xd9", i) >= 0
+        (size,) = struct.unpack(">H", data[i + 2:i + 4])
+        i += 2 + size
+    return b"\xff\xd9" in data[-64:]  # (headers not walked to the end: the old test)
 
 
 def _exif_orientation(data: bytes) -> int:
