@@ -571,3 +571,16 @@ def test_sigterm_still_writes_the_report(tmp_path, monkeypatch):
     with pytest.raises(Terminated):
         run_bench(tmp_path, quick=True, experiments=["table1", "fig4"], progress=False)
     assert "| fig4 | interrupted" in (tmp_path / "report.md").read_text()
+
+
+def test_an_unreadable_normal_map_folder_is_named_in_the_report(tmp_path):
+    """It was only a row of fig10.csv (an audit)."""
+    (tmp_path / "empty").mkdir()
+    run_bench(tmp_path / "o", quick=True, experiments=["fig10"], progress=False,
+              extra_normal_maps=[tmp_path / "empty"], data_dir=tmp_path)
+    assert "Not read: empty (" in (tmp_path / "o" / "report.md").read_text()
+
+
+def test_experiments_named_twice_run_once(tmp_path):
+    out = run_bench(tmp_path, quick=True, experiments=["table1", "table1"], progress=False)
+    assert (out / "report.md").read_text().count("## Table 1") == 1

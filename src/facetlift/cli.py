@@ -1337,14 +1337,17 @@ def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_di
     held-out and fusion benchmarks, into a folder."""
     from .bench import run_bench
 
+    if experiments is not None and not _split(experiments):  # (an empty list ran every
+        # experiment, hours in full mode, an audit)
+        raise click.UsageError(f"--experiments {experiments!r} names no experiment")
     try:
         path = run_bench(out, quick=quick, methods=_split(methods), models=_split(models),
                          experiments=_split(experiments), extra_meshes=meshes,
                          extra_normal_maps=normal_maps, data_dir=data_dir,
                          conditions=_split(conditions), progress=not no_progress,
                          heldout_seed=heldout_seed)
-    except ValueError as e:
-        raise click.UsageError(str(e)) from None
+    except ValueError as e:  # (in the flags' words: `heldout_seed` was named, an audit)
+        raise click.UsageError(_as_flags(str(e))) from None
     click.echo(f"wrote {path / 'report.md'}")
 
 

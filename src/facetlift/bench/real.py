@@ -82,6 +82,10 @@ def fig10(ctx: Context) -> None:
     write_csv(ctx.out / "fig10.csv", rows)
     cols = ["data", "size", "pixels", "method", "status", "mean_deg", "max_deg", "seconds"]
     text = md_table([r for r in rows if r.get("method")], cols)
+    unread = [r for r in rows if r.get("status") == "unreadable"]
+    if unread:  # (shown only in fig10.csv before, an audit)
+        text += "\n\nNot read: " + "; ".join(f"{r['data']} ({r['message']})"
+                                              for r in unread) + "\n"
     if not folders:
         text = "No normal-map folders found (pass `extra_normal_maps` or a data folder).\n"
     write_text(ctx.out / "fig10.md", text)

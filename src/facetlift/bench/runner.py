@@ -167,7 +167,8 @@ def run_bench(
     s = _settings(quick, methods)
     if isinstance(experiments, str):
         experiments = experiments.split(",")
-    exps = EXPERIMENTS if experiments is None else tuple(experiments)
+    # (named twice, run once: `fig4,fig4` ran it twice, an audit)
+    exps = EXPERIMENTS if experiments is None else tuple(dict.fromkeys(experiments))
     if conditions is not None:
         from .discontinuities import CONDITIONS
 
