@@ -661,3 +661,33 @@ def test_module_filters_hold_in_other_threads_while_one_records():
             release.set()
             t.join()
     assert not [w for w in seen if issubclass(w.category, RuntimeWarning)]
+
+
+def test_plain_string_filters_of_python_itself_hold_while_one_records():
+    """Python's own default filter for __main__'s DeprecationWarnings holds its module as a
+    plain string: matching it as a regex raised an AttributeError inside any deprecation
+    warning of another thread while a facetlift job recorded (a review)."""
+    import threading
+    import warnings
+
+    from facetlift import _warnings
+
+    inside, release = threading.Event(), threading.Event()
+
+    def hold():
+        with _warnings.recording():
+            inside.set()
+            release.wait(30)
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.resetwarnings()
+        warnings.filters.insert(0, ("always", None, DeprecationWarning, __name__, 0))
+        t = threading.Thread(target=hold)
+        t.start()
+        try:
+            assert inside.wait(30)
+            warnings.warn("an old API", DeprecationWarning, stacklevel=1)
+        finally:
+            release.set()
+            t.join()
+    assert [str(w.message) for w in seen] == ["an old API"]

@@ -550,10 +550,16 @@ def test_scene_and_table_names_are_models_too(tmp_path):
     from facetlift.bench.core import Context, Settings
     from facetlift.bench.runner import _check_models
 
-    for names in (["cow@left"], ["spot+stanford_bunny@table4"], ["cow", "sphere", "cup"]):
-        _check_models(Context(tmp_path, Settings.quick(), DATA, models=tuple(names)))
-    with pytest.raises(ValueError, match=r"unknown \['cow\+nope@table0'\]"):
-        _check_models(Context(tmp_path, Settings.quick(), DATA, models=("cow+nope@table0",)))
+    for names in (["cow@left"], ["spot+stanford_bunny@table4"], ["cow", "sphere", "cup"],
+                  ["tent"]):
+        _check_models(Context(tmp_path, Settings(), DATA, models=tuple(names)))
+    # (names that no experiment of the run lists: a table of other meshes, quick mode's
+    # missing tables, a review)
+    with pytest.raises(ValueError, match=r"unknown \['cow\+spot@table0'\]"):
+        _check_models(Context(tmp_path, Settings(), DATA, models=("cow+spot@table0",)))
+    with pytest.raises(ValueError, match=r"unknown \['spot\+stanford_bunny@table4'\]"):
+        _check_models(Context(tmp_path, Settings.quick(), DATA,
+                              models=("spot+stanford_bunny@table4",)))
 
 
 def test_sigterm_still_writes_the_report(tmp_path, monkeypatch):

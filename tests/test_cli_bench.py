@@ -2,6 +2,7 @@
 
 The quick bench itself runs once, in tests/test_bench.py (fixture `quick`)."""
 
+import pytest
 from click.testing import CliRunner
 
 from facetlift.bench import EXPERIMENTS
@@ -30,3 +31,11 @@ def test_bench_help_lists_every_experiment():
     res = CliRunner().invoke(cli, ["bench", "--help"])
     assert res.exit_code == 0, res.output
     assert f"subset of: {', '.join(EXPERIMENTS)}." in " ".join(res.output.split())
+
+
+@pytest.mark.parametrize("flag", ["--experiments", "--models", "--methods", "--conditions"])
+def test_an_empty_list_names_nothing(flag, tmp_path, capsys):
+    """An empty list ran every experiment, model or method: hours in full mode (an audit and
+    a review)."""
+    assert main(["bench", "-o", str(tmp_path / "o"), flag, " , "]) == 1
+    assert f"{flag} ' , ' names nothing" in capsys.readouterr().err

@@ -1709,6 +1709,9 @@ def test_the_roll_back_puts_back_an_old_file_moved_aside(tmp_path):
     (staging / ".replaced" / "depth.npy").write_text("the old output")
     (staging / "depth.npy").write_text("the new one, not moved in")
     (staging / atomic.MOVING).write_text(json.dumps(["depth.npy", 0, 0, 0, 0]) + "\n")
+    atomic._roll_back(staging, tmp_path)  # (not marked as moved aside: the user deleted it)
+    assert not (tmp_path / "depth.npy").exists()
+    (staging / ".replaced" / ("depth.npy" + atomic.MOVED)).touch()
     atomic._roll_back(staging, tmp_path)
     assert (tmp_path / "depth.npy").read_text() == "the old output"
 

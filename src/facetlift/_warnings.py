@@ -112,6 +112,18 @@ def _module_of(filename, lineno) -> str:
     return _MODULES[key]
 
 
+def _matched(pattern, text: str) -> bool:
+    """A filter's message or module `pattern` against `text`, as ``warnings`` matches them:
+    None matches all, a compiled regex from its start, a plain string (Python's own default
+    filter for ``__main__``'s DeprecationWarnings holds one) by equality (it raised an
+    AttributeError inside any DeprecationWarning while a facetlift job recorded, a review)."""
+    if pattern is None:
+        return True
+    if isinstance(pattern, str):
+        return pattern == text
+    return bool(pattern.match(text))
+
+
 def _user_action(message, category, filename, lineno) -> str:
     """The action of the first of the filters saved at the capture's installation that
     matches (as ``warnings.warn_explicit`` matches them, the module taken from the file
@@ -119,12 +131,12 @@ def _user_action(message, category, filename, lineno) -> str:
     text = str(message)
     module = None  # (looked up only for a filter that names a module)
     for action, msg, cat, mod, ln in _SHARED["filters"]:
-        if not ((msg is None or msg.match(text)) and issubclass(category, cat)
+        if not (_matched(msg, text) and issubclass(category, cat)
                 and (ln == 0 or lineno == ln)):
             continue
         if mod is not None:
             module = _module_of(filename, lineno) if module is None else module
-            if not mod.match(module):
+            if not _matched(mod, module):
                 continue
         return action
     return warnings.defaultaction

@@ -1337,9 +1337,11 @@ def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_di
     held-out and fusion benchmarks, into a folder."""
     from .bench import run_bench
 
-    if experiments is not None and not _split(experiments):  # (an empty list ran every
-        # experiment, hours in full mode, an audit)
-        raise click.UsageError(f"--experiments {experiments!r} names no experiment")
+    for flag, value in (("--experiments", experiments), ("--models", models),
+                        ("--methods", methods), ("--conditions", conditions)):
+        if value is not None and not _split(value):  # (an empty list ran them all, hours in
+            # full mode, an audit and a review)
+            raise click.UsageError(f"{flag} {value!r} names nothing")
     try:
         path = run_bench(out, quick=quick, methods=_split(methods), models=_split(models),
                          experiments=_split(experiments), extra_meshes=meshes,

@@ -158,9 +158,10 @@ def _roll_back(staging: Path, outdir: Path) -> None:
         try:
             st = os.lstat(target)
         except OSError:  # (none there: an old file moved aside, where it could be neither
-            # linked nor copied, goes back; it was the only copy, a review)
+            # linked nor copied, goes back, it was the only copy; but not one the user
+            # deleted since, a review)
             with contextlib.suppress(OSError):
-                if (aside / name).exists() or (aside / name).is_symlink():
+                if (aside / (name + MOVED)).exists() and (aside / name).exists():
                     os.replace(aside / name, target)
             continue
         if [st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns] != stamp:
@@ -224,8 +225,15 @@ def _keep(target: Path, to: Path) -> None:
         pass
     try:  # (no hard links on this file system, or protected_hardlinks: a copy)
         shutil.copy2(target, to)
-    except OSError:  # (nor a copy: an unreadable file of another user; moved, as before)
+    except OSError:  # (nor a copy: an unreadable file of another user; moved, as before,
+        # marked first: the sweep of a run killed after the move puts it back, and only then,
+        # not an output the user deleted since, a review)
+        to.with_name(to.name + MOVED).touch()
         os.replace(target, to)
+
+
+#: The mark beside a file that :func:`_keep` moved aside rather than linked or copied.
+MOVED = ".moved"
 
 
 class OutputSet:

@@ -150,7 +150,10 @@ def _jpeg_complete(data: bytes) -> bool:
             return data.find(b"\xff\xd9", i) >= 0
         (size,) = struct.unpack(">H", data[i + 2:i + 4])
         i += 2 + size
-    return b"\xff\xd9" in data[-64:]  # (headers not walked to the end: the old test)
+    # (the walk stopped at a stray byte between segments, which libjpeg skips: an end marker
+    # after the first start of scan, a review)
+    sos = data.find(b"\xff\xda")
+    return sos >= 0 and data.find(b"\xff\xd9", sos) >= 0
 
 
 def _exif_orientation(data: bytes) -> int:
