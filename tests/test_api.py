@@ -631,35 +631,46 @@ def test_a_child_forked_beside_a_limited_call_gets_the_process_limits_back():
     assert said == b"1", said
 
 
+class _AnotherThreadRecords:
+    """A block during which another thread is inside facetlift's warning capture
+    (``_warnings.recording``), as a prior_fit call or a batch item in a thread is."""
+
+    def __enter__(self):
+        import threading
+
+        from facetlift import _warnings
+
+        self.inside, self.release = threading.Event(), threading.Event()
+
+        def hold():
+            with _warnings.recording():
+                self.inside.set()
+                self.release.wait(30)
+
+        self.thread = threading.Thread(target=hold)
+        self.thread.start()
+        assert self.inside.wait(30)
+        return self
+
+    def __exit__(self, *exc):
+        self.release.set()
+        self.thread.join()
+        return False
+
+
 def test_module_filters_hold_in_other_threads_while_one_records():
     """A filter's module= is matched against the module's name (numpy._core..., the test
     module), not the file's base name, while another thread records (a review)."""
-    import threading
     import warnings
-
-    from facetlift import _warnings
-
-    inside, release = threading.Event(), threading.Event()
-
-    def hold():
-        with _warnings.recording():
-            inside.set()
-            release.wait(30)
 
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
         warnings.filterwarnings("ignore", module="numpy")
         warnings.filterwarnings("error", message="raised here", module=__name__)
-        t = threading.Thread(target=hold)
-        t.start()
-        try:
-            assert inside.wait(30)
+        with _AnotherThreadRecords():
             np.mean(np.array([]))  # (numpy's RuntimeWarning: ignored)
             with pytest.raises(UserWarning, match="raised here"):
                 warnings.warn("raised here", stacklevel=1)
-        finally:
-            release.set()
-            t.join()
     assert not [w for w in seen if issubclass(w.category, RuntimeWarning)]
 
 
@@ -667,27 +678,11 @@ def test_plain_string_filters_of_python_itself_hold_while_one_records():
     """Python's own default filter for __main__'s DeprecationWarnings holds its module as a
     plain string: matching it as a regex raised an AttributeError inside any deprecation
     warning of another thread while a facetlift job recorded (a review)."""
-    import threading
     import warnings
-
-    from facetlift import _warnings
-
-    inside, release = threading.Event(), threading.Event()
-
-    def hold():
-        with _warnings.recording():
-            inside.set()
-            release.wait(30)
 
     with warnings.catch_warnings(record=True) as seen:
         warnings.resetwarnings()
         warnings.filters.insert(0, ("always", None, DeprecationWarning, __name__, 0))
-        t = threading.Thread(target=hold)
-        t.start()
-        try:
-            assert inside.wait(30)
+        with _AnotherThreadRecords():
             warnings.warn("an old API", DeprecationWarning, stacklevel=1)
-        finally:
-            release.set()
-            t.join()
     assert [str(w.message) for w in seen] == ["an old API"]
