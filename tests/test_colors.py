@@ -278,3 +278,14 @@ def test_jpeg_trailers_pass_and_cmyk_is_refused(tmp_path):
     PIL.new("CMYK", (8, 8), (0, 0, 0, 128)).save(tmp_path / "k.jpg")
     with pytest.raises(ValueError, match="a CMYK JPEG"):
         io.read_colors(tmp_path / "k.jpg")
+
+
+def test_a_batch_skips_a_colors_file_without_its_map(tmp_path):
+    """A photo X_colors.png with no map X.* ran as a normal map (a user's check)."""
+    gt = synthetic.analytic("sphere", 24)
+    io.write_normals(tmp_path / "a.png", gt.normals)
+    photo = (np.random.default_rng(0).random(gt.shape + (3,)) * 255).astype(np.uint8)
+    (tmp_path / "frame_009_colors.png").write_bytes(imagecodecs.png_encode(photo))
+    with pytest.warns(UserWarning, match=r"skipped 1 file\(s\) named like a map's colours"):
+        records = facetlift.batch([str(tmp_path)], str(tmp_path / "out"), save=("npy",))
+    assert [r["name"] for r in records] == ["a"]

@@ -147,7 +147,7 @@ def items(inputs, *, list_file=None) -> list[Item]:
             paths += _folder_items(p)
         else:
             paths.append((p, True))
-    found, seen, lone, grey = [], set(), [], []
+    found, seen, lone, grey, photos = [], set(), [], [], []
     given = {os.path.abspath(p) for p, _ in paths}
     files = _Listing()  # (each folder listed once: a lookup per file was quadratic)
     for p, explicit in paths:
@@ -164,11 +164,20 @@ def items(inputs, *, list_file=None) -> list[Item]:
         if not explicit and p.stem.endswith("_mask") and one_channel(p):
             lone.append(p.name)  # (a grey X_mask.* without its map X.*: a mask, no item)
             continue
+        if not explicit and p.stem.endswith("_colors") and len(p.stem) > len("_colors"):
+            photos.append(p.name)  # (a photo X_colors.* without its map X.*: it ran as a
+            continue  # normal map, a user's check)
         if not explicit and _grey(p):  # (a video's frame_000_prior_depth.png ran as a map
             grey.append(p.name)  # without its frame_000.png, and a stray depth map: both
             continue  # failed as "(H, W, 3) RGB" maps and the batch exited 1, an audit)
         seen.add(key)
         found.append((p, key))
+    if photos:
+        warnings.warn(
+            f"batch: skipped {len(photos)} file(s) named like a map's colours without a map of "
+            f"that name beside them ({', '.join(photos[:3])}"
+            f"{', ...' if len(photos) > 3 else ''}): NAME_colors.* paints NAME.*; rename it "
+            "after its map (a_normal.png pairs with a_normal_colors.jpg)", stacklevel=2)
     if lone:  # (a user's obj_normal.png + obj_mask.png: the mask ran as a map and failed)
         warnings.warn(
             f"batch: skipped {len(lone)} grey file(s) named like a mask without a map of that "
@@ -933,7 +942,8 @@ def check_template(job: Job, local: bool = True) -> None:
         raise ValueError(f"`colors` {job.colors}: a batch takes no colour image for every map "
                          "(one picture would paint them all); name each map's own NAME_colors.* "
                          "beside it (NAME.png and NAME_colors.jpg), or integrate each map with "
-                         "--colors")
+                         "its own (--colors; facetlift.integrate then Surface.save(..., "
+                         "colors=))")
     if isinstance(job.save, (str, os.PathLike)) or not all(isinstance(k, str) for k in job.save):
         raise ValueError(f"`save` must be a sequence of output names; got {job.save!r}")
     opts = dict(job.options)
