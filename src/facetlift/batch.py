@@ -836,7 +836,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             j = replace(j, mask=it.mask)
         # (its own prior and confidence, NAME_prior_depth.* and NAME_confidence.*: where the
         # template takes them, _own_files left them on the item)
-        own = {k: getattr(it, k) for k in ("prior", "confidence", "colors") if getattr(it, k)}
+        own = {k: getattr(it, k) for k, _, _ in companions() if getattr(it, k)}
         if own:
             j = replace(j, beside=tuple(own), **own)
         jobs.append((it, j))

@@ -138,6 +138,19 @@ def _jpeg_complete(data: bytes) -> bool:
     to the start of scan, and an ``FF D9`` must follow (inside the entropy-coded data an
     ``FF`` byte is stuffed, so that pair is the marker); data after it (a phone's trailer) is
     no matter (the last 64 bytes were looked at, and such files refused, a review)."""
+    for marker, i, _ in _jpeg_headers(data):
+        if marker == 0xDA:  # (start of scan)
+            return data.find(b"\xff\xd9", i) >= 0
+    # (the walk stopped at a stray byte between segments, which libjpeg skips: an end marker
+    # after the first start of scan, a review)
+    sos = data.find(b"\xff\xda")
+    return sos >= 0 and data.find(b"\xff\xd9", sos) >= 0
+
+
+def _jpeg_headers(data: bytes):
+    """``(marker, offset, size)`` of a JPEG's segments from the start of the file up to and
+    including its first start of scan (``FF DA``; fill bytes ``FF FF`` skipped); the walk
+    stops at a byte that starts no marker or at the end of the data."""
     import struct
 
     i = 2
@@ -146,14 +159,11 @@ def _jpeg_complete(data: bytes) -> bool:
         if marker == 0xFF:  # (fill bytes)
             i += 1
             continue
-        if marker == 0xDA:  # (start of scan)
-            return data.find(b"\xff\xd9", i) >= 0
         (size,) = struct.unpack(">H", data[i + 2:i + 4])
+        yield marker, i, size
+        if marker in (0xD9, 0xDA):  # (end of image, start of scan: no more headers)
+            return
         i += 2 + size
-    # (the walk stopped at a stray byte between segments, which libjpeg skips: an end marker
-    # after the first start of scan, a review)
-    sos = data.find(b"\xff\xda")
-    return sos >= 0 and data.find(b"\xff\xd9", sos) >= 0
 
 
 def _exif_orientation(data: bytes) -> int:
@@ -161,9 +171,7 @@ def _exif_orientation(data: bytes) -> int:
     segment cannot be read."""
     import struct
 
-    i = 2
-    while i + 4 <= len(data) and data[i] == 0xFF:
-        marker, size = data[i + 1], struct.unpack(">H", data[i + 2:i + 4])[0]
+    for marker, i, size in _jpeg_headers(data):
         if marker == 0xE1 and data[i + 4:i + 10] == b"Exif\0\0":
             tiff = data[i + 10:i + 2 + size]
             try:
@@ -179,9 +187,6 @@ def _exif_orientation(data: bytes) -> int:
             except (KeyError, struct.error):
                 return 1
             return 1
-        if marker in (0xD9, 0xDA):  # (end of image, start of scan: no more headers)
-            break
-        i += 2 + size
     return 1
 
 
@@ -294,15 +299,12 @@ def point_colors(surface, colors) -> np.ndarray:
     return c[surface.mask]
 
 
-def mesh_colors(surface, colors, faces_of=None) -> np.ndarray:
+def mesh_colors(surface, colors) -> np.ndarray:
     """(n, 3) float colours of :meth:`facetlift.Surface.to_mesh`'s vertices: each vertex the
     mean colour of the facets that use it (of its side's facets where the mesh is split at
-    jumps). `faces_of`: the (m, 4) corner indices of the facets, in the mask's row-major
-    order (computed from the surface where None)."""
+    jumps, :func:`facet_corners`)."""
     c = point_colors(surface, colors).astype(np.float64)
-    if faces_of is None:
-        faces_of = facet_corners(surface)
-    corners = np.asarray(faces_of)
+    corners = facet_corners(surface)
     n = int(corners.max()) + 1 if corners.size else 0
     flat = corners.ravel()
     count = np.bincount(flat, minlength=n)

@@ -686,13 +686,20 @@ def continue_gaps(domain, bx, by, target, weights, gaps):
     (:func:`fill_gaps`), and not a region of facets without a normal that touches none with
     one (it stays flat, with its warning).
     """
-    w = np.ones(domain.n_facets) if weights is None else np.asarray(weights, dtype=float)
-    values, fill = continued(domain, np.column_stack([bx, by, w]), target, gaps)
-    if not fill.any():
-        return bx, by, target, weights, fill
-    bx, by, w = values.T
-    w = np.where(fill, CONTINUE_WEIGHT * np.maximum(w, 0.0), w)
+    (bx, by), w, fill = _weakly_continued(domain, target, gaps, weights, (bx, by))
     return bx, by, target | fill, w, fill
+
+
+def _weakly_continued(domain, target, gaps, weights, columns):
+    """``(columns, weights, fill)``: the per-facet `columns` and the normal `weights` (None:
+    1) continued across the bands of :func:`continued`, the filled facets' weights times
+    :data:`CONTINUE_WEIGHT`; all as given where nothing is filled."""
+    w = np.ones(domain.n_facets) if weights is None else np.asarray(weights, dtype=float)
+    values, fill = continued(domain, np.column_stack([*columns, w]), target, gaps)
+    if not fill.any():
+        return tuple(columns), weights, fill
+    *columns, w = values.T
+    return tuple(columns), np.where(fill, CONTINUE_WEIGHT * np.maximum(w, 0.0), w), fill
 
 
 def _bands_continued(domain, bx, by, target, scale, cosines, weights, gaps, filled):
@@ -707,13 +714,8 @@ def _bands_continued(domain, bx, by, target, scale, cosines, weights, gaps, fill
     of every group, 21 better and 7 worse (perspective 3.245 -> 2.528 mm, rooms 11.14 ->
     3.92, wide 2.075 -> 2.508: a band along a jump is continued across it). A band one facet
     wide is :func:`fill_gaps`' as before."""
-    w = np.ones(domain.n_facets) if weights is None else np.asarray(weights, dtype=float)
-    values, more = continued(domain, np.column_stack([bx, by, w, scale, cosines]), target,
-                             gaps)
-    if not more.any():
-        return bx, by, target, scale, cosines, weights, filled
-    bx, by, w, scale, cosines = values.T
-    w = np.where(more, CONTINUE_WEIGHT * np.maximum(w, 0.0), w)
+    (bx, by, scale, cosines), w, more = _weakly_continued(domain, target, gaps, weights,
+                                                            (bx, by, scale, cosines))
     return bx, by, target | more, scale, cosines, w, filled | more
 
 
@@ -743,11 +745,13 @@ def continued(domain, values, target, gaps):
     rows, cols = [], []
     deg = np.zeros(idx.size)
     known_sum = np.zeros((idx.size, values.shape[1]))
+    beside = np.zeros(idx.size, bool)  # (a gap with an edge neighbour that has a target)
     for q in sides:
         qq = q[idx]
         inside = qq >= 0
         link = inside & (pos[np.maximum(qq, 0)] >= 0)  # (a gap beside a gap)
         fixed = inside & target[np.maximum(qq, 0)]  # (a gap beside a facet with a target)
+        beside |= fixed
         deg += link | fixed
         known_sum[fixed] += values[qq[fixed]]
         rows.append(np.flatnonzero(link))
@@ -758,7 +762,7 @@ def continued(domain, values, target, gaps):
     _, label = connected_components(A, directed=False)
     k = label.max() + 1
     touches = np.zeros(k, bool)
-    touches[label[_touch(idx, sides, target)]] = True
+    touches[label[beside]] = True
     keep = touches[label] & _loose(domain, idx, label, k, groups)[label]
     if not keep.any():
         return values, none
@@ -850,15 +854,6 @@ def _loose(domain, idx, label, k: int, groups) -> np.ndarray:
             np.minimum.at(lo, label[seen], g[seen])
             np.maximum.at(hi, label[seen], g[seen])
     return hi > lo
-
-
-def _touch(idx, sides, target) -> np.ndarray:
-    """Which facets `idx` have an edge neighbour with a target."""
-    out = np.zeros(idx.size, bool)
-    for q in sides:
-        qq = q[idx]
-        out |= (qq >= 0) & target[np.maximum(qq, 0)]
-    return out
 
 
 def fill_gaps(domain, bx, by, target, scale, cosines, weights, gaps):
