@@ -1177,3 +1177,39 @@ def test_stopped_workers_are_reaped_before_their_folders_are_swept(monkeypatch):
 
     B._stop(Pool(), [proc])
     assert proc.exitcode is not None  # (reaped: no longer "alive" to os.kill(pid, 0))
+
+
+def test_a_frame_without_its_prior_runs_from_its_normals_with_a_warning(tmp_path, capsys):
+    """`facetlift batch FOLDER --prior-fit affine` on a video whose network skipped a frame's
+    depth failed that frame ("--prior-fit='affine' needs a `prior`", exit 1), a user's check:
+    the prior's settings apply to the maps with a prior, and one without is integrated from
+    its normals alone, with a warning naming the settings not applied. Where no map has a
+    prior the settings are a mistake: each map is refused, as a single job is."""
+    folder = tmp_path / "frames"
+    depths = _frames(folder, n=3)
+    (folder / "frame_001_prior_depth.png").unlink()
+    code = main(["batch", str(folder), "-o", str(tmp_path / "o"), "--workers", "1",
+                 "-s", "npy", "--prior-fit", "affine", "--json", "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    recs = {r["name"]: r for r in map(json.loads, out.splitlines())}
+    assert [recs[f"frame_00{i}"]["status"] for i in range(3)] == ["ok"] * 3
+    lone = recs["frame_001"]
+    assert lone["prior_file"] is None
+    assert [w for w in lone["warnings"] if "no depth prior" in w and "--prior-fit affine "
+            "not applied" in w], lone["warnings"]
+    assert not [w for w in recs["frame_000"]["warnings"] if "no depth prior" in w]
+    # its depth is the normals-only one (the in-process depth of _frames, up to its constant)
+    got = np.load(tmp_path / "o" / "frame_001" / "depth.npy")
+    want = depths["m1"]
+    diff = (got - want)[np.isfinite(got) & np.isfinite(want)]
+    assert diff.size and np.ptp(diff) < 1e-6
+    # no map with a prior: refused, each naming the setting
+    for i in (0, 2):
+        (folder / f"frame_00{i}_prior_depth.png").unlink()
+    code = main(["batch", str(folder), "-o", str(tmp_path / "n"), "--workers", "1",
+                 "-s", "npy", "--prior-fit", "affine", "--json", "--no-progress"])
+    out, err = capsys.readouterr()
+    recs = [json.loads(line) for line in out.splitlines()]
+    assert code == 1 and all(r["status"] == "error" and "needs a `prior`" in r["error"]
+                             for r in recs), recs

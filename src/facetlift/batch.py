@@ -822,6 +822,11 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     # (the names items() gave the others are taken too: a renamed one must not land on one)
     taken = reserved | {it.name for it in pending if it.path not in mine}
     moved = []
+    # (the prior's settings apply to the maps with a prior; where some have none, those run
+    # from their normals alone with a warning: a video's frames without a network's depth
+    # failed, a user's check. Where no map can have one, each is refused as a job is)
+    optional = template.prior is None and template.dataset_prior and any(
+        it.prior is not None or Path(it.path).is_dir() for it in found)
     for it in pending:
         if it.path in mine:
             it = replace(it, name=mine[it.path])
@@ -831,7 +836,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
             if old in owners and old not in claimed:
                 moved.append((old, owners[old]["item"], it))
         # (the files beside it that it does not read: named once per folder, above)
-        j = replace(template.with_input(it.path, root / it.name), unread_beside=False)
+        j = replace(template.with_input(it.path, root / it.name), unread_beside=False,
+                    prior_optional=optional)
         if it.mask is not None and template.mask is None:
             j = replace(j, mask=it.mask)
         # (its own prior and confidence, NAME_prior_depth.* and NAME_confidence.*: where the

@@ -131,6 +131,11 @@ class Job:
     #: ``NAME_mask.*``, ``K.txt``); a batch names them once per folder instead (False for
     #: its items).
     unread_beside: bool = True
+    #: A batch item whose batch gives the prior's settings (``prior_fit``, ``prior_blur``, ...)
+    #: while some of its maps have no prior of their own: where this one has none, it is
+    #: integrated from its normals alone, with a warning naming the settings left unused,
+    #: instead of refused (False: refused, as a single job is).
+    prior_optional: bool = False
     #: Which of ``prior``, ``confidence`` and ``colors`` a batch found beside the map, as
     #: ``NAME_prior_depth.*`` and ``NAME_confidence.*`` (not given by the user): their
     #: errors name the file and what leaves it unread (``dataset_prior=False``, --no-prior).
@@ -699,7 +704,11 @@ def check_fov(job: Job) -> None:
 
 
 def _no_prior_checks(job: Job) -> None:
-    """Refuse the prior's own settings in a job without a prior (ValueError naming each)."""
+    """Refuse the prior's own settings in a job without a prior (ValueError naming each);
+    in a batch item of :attr:`Job.prior_optional`, warn that they are not applied."""
+    if job.prior_optional:
+        _unused_prior_settings(job)
+        return
     if job.prior_scale is not None:
         raise ValueError("`prior_scale` applies only with a prior (a dataset folder's "
                          "prior_depth file, or integrate's --prior)")
@@ -720,6 +729,34 @@ def _no_prior_checks(job: Job) -> None:
         from .prior_fit import check
 
         check(job.prior_fit, has_prior=False, perspective=True)
+
+
+def _unused_prior_settings(job: Job) -> None:
+    """Check the values of the prior's settings of a batch item without a prior, and warn
+    that they are not applied (nothing where none is given)."""
+    from .prior_fit import check
+    from .problem import check_prior_blur, check_prior_outliers
+
+    given = []
+    if job.prior_scale is not None:
+        given.append(f"--prior-scale {job.prior_scale:g}")
+    if job.prior_weight not in (None, 1.0):
+        given.append(f"--prior-weight {job.prior_weight:g}")
+    if job.prior_weight_map is not None:
+        given.append(f"--prior-weight-map {job.prior_weight_map}")
+    if job.prior_blur is not None:
+        check_prior_blur(job.prior_blur, has_prior=True)
+        given.append(f"--prior-blur {job.prior_blur:g}")
+    if job.prior_outliers is not None:
+        check_prior_outliers(job.prior_outliers, has_prior=True)
+        given.append(f"--prior-outliers {job.prior_outliers}")
+    if job.prior_fit not in (None, "none"):
+        check(job.prior_fit, has_prior=True, perspective=True)
+        given.append(f"--prior-fit {job.prior_fit}")
+    if given:
+        warn(f"no depth prior for this map (NAME_prior_depth.* beside it, or a dataset "
+             f"folder's prior_depth.*): integrated from its normals alone; "
+             f"{', '.join(given)} not applied")
 
 
 def _normals_from_field(g: dict, job: Job) -> tuple[np.ndarray, str | None]:
@@ -905,7 +942,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                     normal_rotation=turn,
                     prior=depth_prior,
                     prior_weight=inp.prior_weight if inp.prior is not None else None,
-                    confidence=inp.confidence, prior_blur=job.prior_blur,
+                    confidence=inp.confidence,
+                    prior_blur=job.prior_blur if inp.prior is not None else None,
                     **({} if job.prior_outliers is None or inp.prior is None
                        else {"prior_outliers": job.prior_outliers}),
                     **({} if job.prior_fit is None or inp.prior is None
