@@ -201,7 +201,8 @@ class Surface:
         return np.nonzero(vm)
 
     def to_mesh(self, triangles: bool = False, frame=None) -> tuple[np.ndarray, np.ndarray]:
-        """The facet mesh: vertices (n, 3) and faces (m, 4) quads or (2m, 3) triangles.
+        """The facet mesh: vertices (n, 3) and faces (m, 4) quads or (2m, 3) triangles
+        (int32 indices; int64 from 2^31 vertices).
 
         Vertices are those of ``points("vertices")``, or, where the surface has depth jumps
         (:attr:`cuts`), the split vertices: one copy per side of a jump, so that no face is
@@ -222,8 +223,10 @@ class Surface:
             verts = frames.from_facetlift(self.camera.points(i, j, self.vertex_depth[i, j]),
                                           frame, "frame")
         # conventional corner order (r,c),(r,c+1),(r+1,c+1),(r+1,c) is clockwise seen from the
-        # viewer (y up); reverse it for outward (viewer-facing) normals
-        quads = corners[:, ::-1]
+        # viewer (y up); reverse it for outward (viewer-facing) normals. 32-bit indices where
+        # they hold the vertices (every mesh format's; a 2048^2 map's triangles took 200 MB
+        # in 64 bits)
+        quads = corners[:, ::-1].astype(np.int32 if len(verts) < 2**31 else np.int64)
         if not triangles:
             faces = quads
         else:
