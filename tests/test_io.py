@@ -1735,3 +1735,39 @@ def test_a_commit_that_cannot_list_its_moves_aborts_cleanly(tmp_path, monkeypatc
     with pytest.raises(OSError, match="the folder was left as it was"):
         out.commit()
     assert not (tmp_path / "o").exists() or list((tmp_path / "o").iterdir()) == []
+
+
+def test_height_png_holds_its_depth_scale_and_reads_back_as_depth(tmp_path):
+    """height.png's 0 and 65535 stand for depths that only the batch record or the return
+    value said: the file alone could not be turned back into depth. It holds them as PNG
+    text (facetlift:depth_at_0, facetlift:depth_at_65535, also in words as a Comment, read
+    by any PNG reader), and io.read_height reads it back as depth within half a count, NaN
+    outside the mask; a PNG without them and an EXR not marked as heights are refused by
+    name."""
+    from PIL import Image
+
+    n, mask = bump_normals()
+    s = facetlift.integrate(n, mask)
+    path, (low, high) = io.write_height(tmp_path / "h.png", s)
+    text = io.png_text(path)
+    assert float(text["facetlift:depth_at_0"]) == low
+    assert float(text["facetlift:depth_at_65535"]) == high
+    with Image.open(path) as im:  # (chunks with valid CRCs: another reader sees them)
+        assert im.text["facetlift:depth_at_0"] == text["facetlift:depth_at_0"]
+        assert "height = -depth" in im.text["Comment"]
+    back = io.read_height(path)
+    np.testing.assert_array_equal(np.isnan(back), ~mask)
+    assert np.nanmax(np.abs(back - s.depth)) <= 0.5 * (low - high) / 65535 + 1e-12
+    # a fixed range: the file holds that one
+    path2, (low2, high2) = io.write_height(tmp_path / "r.png", s, height_range=(-20, 20))
+    assert (low2, high2) == (20.0, -20.0)
+    assert np.nanmax(np.abs(io.read_height(path2) - s.depth)) <= 40 / 65535
+    # the EXR alike; refusals
+    np.testing.assert_allclose(io.read_height(io.write_height(tmp_path / "h.exr", s)[0])[mask],
+                               s.depth[mask], rtol=1e-6, atol=1e-6)
+    io.write_mask(tmp_path / "plain.png", mask)
+    with pytest.raises(ValueError, match="holds no depth scale"):
+        io.read_height(tmp_path / "plain.png")
+    io.write_depth(tmp_path / "d.exr", s.depth)
+    with pytest.raises(ValueError, match="not marked as a height map"):
+        io.read_height(tmp_path / "d.exr")

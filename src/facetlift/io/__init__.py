@@ -55,6 +55,7 @@ from .images import (
     MASK_FORMATS,
     NORMAL_READ_FORMATS,
     NORMAL_WRITE_FORMATS,
+    png_text,
     read_depth,
     read_mask,
     read_normals,
@@ -65,7 +66,14 @@ from .images import (
     write_normals,
 )
 from .meshes import MESH_FORMATS, write_mesh, write_points
-from .preview import HEIGHT_FORMATS, shade, write_discontinuities, write_height, write_preview
+from .preview import (
+    HEIGHT_FORMATS,
+    read_height,
+    shade,
+    write_discontinuities,
+    write_height,
+    write_preview,
+)
 from .report import write_report
 from .surface import SURFACE_FORMATS, load_surface, save_surface
 
@@ -83,7 +91,9 @@ __all__ = [
     "atomic_path",
     "read_K",
     "read_colors",
+    "png_text",
     "read_dataset",
+    "read_height",
     "read_depth",
     "read_prior",
     "read_rotation",

@@ -766,10 +766,50 @@ def _write_tiff(path: Path, arr: np.ndarray) -> None:
         )
 
 
-def _write_png(path: Path, pixels: np.ndarray) -> None:
+def _write_png(path: Path, pixels: np.ndarray, text: dict | None = None) -> None:
+    """`pixels` as a PNG, with `text` (keyword: value, Latin-1) as tEXt chunks before its
+    end."""
     import imagecodecs
 
-    _write_bytes(path, imagecodecs.png_encode(np.ascontiguousarray(pixels)))
+    data = imagecodecs.png_encode(np.ascontiguousarray(pixels))
+    if text:
+        data = _png_text(data, text)
+    _write_bytes(path, data)
+
+
+def _png_text(png: bytes, text: dict) -> bytes:
+    """`png` with a tEXt chunk per item of `text` inserted before its IEND chunk (the last 12
+    bytes of an encoder's output)."""
+    import struct
+    import zlib
+
+    end = png.rindex(b"IEND") - 4
+    chunks = []
+    for key, value in text.items():
+        body = b"tEXt" + key.encode("latin-1") + b"\0" + str(value).encode("latin-1")
+        chunks.append(struct.pack(">I", len(body) - 4) + body
+                      + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF))
+    return png[:end] + b"".join(chunks) + png[end:]
+
+
+def png_text(path) -> dict:
+    """The tEXt chunks of the PNG file `path` as a dict (keyword: value): e.g. the depths of
+    ``height.png``'s 0 and 65535 (:func:`facetlift.io.write_height`)."""
+    import struct
+
+    data = Path(path).read_bytes()
+    if data[:8] != b"\x89PNG\r\n\x1a\n":
+        raise ValueError(f"{path} is not a PNG file")
+    out, at = {}, 8
+    while at + 8 <= len(data):
+        size, kind = struct.unpack(">I4s", data[at:at + 8])
+        if kind == b"tEXt":
+            key, _, value = data[at + 8:at + 8 + size].partition(b"\0")
+            out[key.decode("latin-1")] = value.decode("latin-1")
+        if kind == b"IEND":
+            break
+        at += 12 + size
+    return out
 
 
 def _image_array(a, name: str, ndim: int) -> np.ndarray:

@@ -8,7 +8,14 @@ import numpy as np
 
 from .._warnings import warn
 from ._paths import _suffix
-from .images import _write_exr, _write_png
+from .images import (
+    _decode_image,
+    _exr_quantity,
+    _write_exr,
+    _write_png,
+    png_text,
+    read_depth,
+)
 
 #: The most pixels a preview's shorter side is enlarged to (`min_size`), and the longest
 #: side an enlargement may make (a long thin map is enlarged less).
@@ -250,8 +257,9 @@ def write_height(path, surface, *, height_range=None) -> tuple[Path, tuple[float
     path : Path
     range : (float, float) or None
         PNG: ``(low, high)``, the depth of the values 0 and 65535 (the displacement scale is
-        ``low - high``); a flat surface is written as 0 everywhere. None for EXR, whose
-        values are the heights.
+        ``low - high``); a flat surface is written as 0 everywhere. The PNG also holds them,
+        as the text chunks ``facetlift:depth_at_0`` and ``facetlift:depth_at_65535``
+        (:func:`facetlift.io.png_text`). None for EXR, whose values are the heights.
 
     Raises
     ------
@@ -301,5 +309,50 @@ def write_height(path, surface, *, height_range=None) -> tuple[Path, tuple[float
              "widen the range to keep them", UserWarning)
     if not whole:
         img[..., 1][inside] = 65535
-    _write_png(p, img)
+    from .. import __version__
+
+    # (the scale in the file itself: a height map alone could not be turned back into depth)
+    _write_png(p, img, text={"Software": f"facetlift {__version__}",
+                             "facetlift:depth_at_0": repr(low),
+                             "facetlift:depth_at_65535": repr(high),
+                             "Comment": f"height = -depth; the value 0 is depth {low!r}, "
+                                        f"65535 is depth {high!r}"})
     return p, (low, high)
+
+
+def read_height(path) -> np.ndarray:
+    """The depth (H, W) of a height map that :func:`write_height` wrote, NaN outside its
+    mask: a ``.png``'s 16-bit values scaled back by the depths of 0 and 65535 it holds as
+    text (written since 2026-12-07; an older file, or another tool's, has no scale and is
+    refused), or an ``.exr``'s heights negated (:func:`facetlift.io.read_depth` reads it
+    alike).
+
+    Raises
+    ------
+    ValueError
+        Neither ``.png`` nor ``.exr``, unreadable, or a PNG without facetlift's scale.
+    """
+    p = Path(path)
+    ext = _suffix(p, HEIGHT_FORMATS, "height map", "path")
+    if ext == ".exr":
+        if _exr_quantity(p) != "height":
+            raise ValueError(f"`path`: {p.name} is not marked as a height map (facetlift's "
+                             "height.exr is); read a depth EXR with facetlift.io.read_depth")
+        return read_depth(p)
+    text = png_text(p)
+    try:
+        low = float(text["facetlift:depth_at_0"])
+        high = float(text["facetlift:depth_at_65535"])
+    except (KeyError, ValueError):
+        raise ValueError(f"`path`: {p.name} holds no depth scale (the text chunks "
+                         "facetlift:depth_at_0 and facetlift:depth_at_65535 of a height.png "
+                         "written by facetlift); scale its values yourself") from None
+    img = _decode_image(p, ".png", "path")
+    grey = img[..., 0] if img.ndim == 3 else img
+    if grey.dtype != np.uint16:
+        raise ValueError(f"`path`: {p.name} has pixel type {grey.dtype}; facetlift's height "
+                         "maps are 16-bit")
+    depth = low - grey.astype(float) * ((low - high) / 65535.0)
+    if img.ndim == 3:
+        depth[img[..., -1] == 0] = np.nan
+    return depth
