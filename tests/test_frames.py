@@ -464,17 +464,17 @@ def test_mean_deviation_is_reported_and_rises_with_noise():
     assert "diagnose" in b.info["seconds"]
 
 
-@pytest.mark.parametrize("frame", ["xy", "rowcol", "queau", "MATLAB"])
-def test_integrate_gradients_in_both_layouts(frame, rel_err):
+@pytest.mark.parametrize("frame", ["xy", "rowcol", "queau", "numpy", "image", "MATLAB",
+                                   "opencv"])
+def test_integrate_gradients_in_every_layout(frame, rel_err):
+    """Each gradient frame and alias reads its layout: `matlab` is MATLAB's own
+    [FX, FY] = gradient(Z) (columns first, rows down; it meant `rowcol` before, and MATLAB's
+    gradient came out wrong without a word, an audit), `numpy` np.gradient's rows first."""
     r, c = np.indices((24, 30))
-    z = 3 * np.exp(-((r - 11.5) ** 2 + (c - 14.5) ** 2) / 40)
-    zr = np.pad(z, 1, mode="edge")  # central differences at the pixel centres
-    dz_dcol = (zr[1:-1, 2:] - zr[1:-1, :-2]) / 2
-    dz_drow = (zr[2:, 1:-1] - zr[:-2, 1:-1]) / 2
-    if frames.gradient_frame(frame) == "xy":
-        p, q = dz_dcol, -dz_drow  # y up
-    else:
-        p, q = dz_drow, dz_dcol
+    z = 3 * np.exp(-((r - 11.5) ** 2 + (c - 14.5) ** 2) / 40) + 0.01 * r * c
+    dz_drow, dz_dcol = np.gradient(z)  # (central differences at the pixel centres)
+    p, q = {"xy": (dz_dcol, -dz_drow), "rowcol": (dz_drow, dz_dcol),
+            "image": (dz_dcol, dz_drow)}[frames.gradient_frame(frame)]
     s = facetlift.integrate_gradients(p, q, gradient_frame=frame)
     inner = (slice(2, -2), slice(2, -2))
     assert rel_err(s.height[inner], z[inner]) < 0.05
@@ -516,6 +516,29 @@ def test_a_gradient_field_in_the_other_layout_is_named():
         frames.layout_check(np.full(x.shape, 0.2), np.full(x.shape, -0.1))
     with pytest.warns(UserWarning, match="--gradient-frame rowcol"):  # (the paraboloid turned)
         frames.layout_check(-(0.3 * y), 0.3 * x)
+
+
+def test_p_and_q_given_the_other_way_round_are_named():
+    """Slopes given in the wrong order (--gradients Q P) came out bent with a hint to keep
+    depth jumps (an audit): the layout check names the exchange, in every frame, and stays
+    silent on the right order."""
+    r, c = np.indices((40, 48))
+    z = 3 * np.exp(-((r - 18.5) ** 2 / 60 + (c - 20.5) ** 2 / 30)) + 0.01 * r * c
+    dz_drow, dz_dcol = np.gradient(z)
+    for frame, (p, q) in {"xy": (dz_dcol, -dz_drow), "rowcol": (dz_drow, dz_dcol),
+                          "image": (dz_dcol, dz_drow)}.items():
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert frames.layout_check(p, q, frame)["suggested"] is None
+        with pytest.warns(frames.LayoutWarning, match=r"p and q look exchanged.*--gradients Q P"):
+            out = frames.layout_check(q, p, frame)
+        assert out["suggested"] == "swapped" and out["curl_swapped"] < 0.05 < out["curl"]
+        with warnings.catch_warnings(record=True) as got:
+            warnings.simplefilter("always")
+            s = facetlift.integrate_gradients(q, p, gradient_frame=frame)
+        said = [str(w.message) for w in got]
+        assert any("exchanged" in m for m in said), said
+        assert not any("--discontinuities" in h for h in s.info.get("hints", ())), said
 
 
 def _sphere_rowcol(size=64):

@@ -129,6 +129,12 @@ def test_mat_files_gradients_normals_and_keys(tmp_path):
     sio.savemat(tmp_path / "s.mat", {"p": p, "q": q[:, :3]})
     with pytest.raises(ValueError, match="must be .* arrays of one shape"):
         read_mat(tmp_path / "s.mat")
+    # integer slopes (scaled by 1000, say) are refused as a .npy's are: they were read as
+    # huge slopes, nearly all grazing (an audit)
+    sio.savemat(tmp_path / "i.mat", {"p": (p * 1000).astype(np.int16), "q": q})
+    with pytest.raises(ValueError, match=r"variable 'p' of .* has type int16; gradients must "
+                       "be floating point"):
+        read_mat(tmp_path / "i.mat")
 
 
 def test_mat_v73_and_garbage_are_clear_errors(tmp_path):

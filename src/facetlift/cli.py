@@ -220,8 +220,9 @@ _JOB_OPTIONS = [
                  "--normal-encoding xy). 8/16-bit PNG/TIFF maps are always decoded from their "
                  "integer range and refuse unsigned."),
     click.option("--gradient-frame", default="xy", show_default=True,
-                 help="Layout of a gradient field: xy (p = dz/dx right, q = dz/dy up) or "
-                 "rowcol (aliases queau, matlab: p = dz/d(row) down, q = dz/d(col))."),
+                 help="Layout of a gradient field: xy (p = dz/dx right, q = dz/dy up), "
+                 "rowcol (aliases queau, numpy: p = dz/d(row) down, q = dz/d(col)) or image "
+                 "(aliases matlab, opencv: p = dz/d(col), q = dz/d(row) down)."),
     click.option("--mat-keys", metavar="P,Q[,MASK] | N[,MASK]",
                  help="Variable names in a .mat input: a gradient field p,q[,mask] or a "
                  "normal map N[,mask]. Default: p,q[,mask], else the only HxWx3 variable."),
@@ -1164,11 +1165,13 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         result = _result_in_folder(result)
     est = io.read_depth(result, arg="result")
     camera = None
+    orthographic = False  # (a surface.npz that records an orthographic camera)
     if result.suffix.lower() == ".npz":  # (a surface's: its camera, NaN when orthographic)
         with np.load(result, allow_pickle=False) as z:
             stored = np.asarray(z["K"], dtype=float) if "K" in z.files else None
         if stored is not None and stored.shape == (3, 3) and np.isfinite(stored).all():
             camera = stored
+        orthographic = stored is not None and not np.isfinite(stored).all()
     if K is not None or fov is not None:  # (integrate took --fov too: a fov user had no K file)
         from .camera import K_from_fov
         from .io.dataset import camera_of
@@ -1178,6 +1181,9 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
             named, flag = f"`K`: {K}", "--K"
         else:
             given, named, flag = K_from_fov(est.shape, fov), f"`fov` {fov:g}", "--fov"
+        if orthographic:  # (as metrics.evaluate refuses a K for an orthographic Surface)
+            raise ValueError(f"{named} given for {result}, which was integrated "
+                             f"orthographically (its camera is stored): leave {flag} out")
         if camera is not None and not np.allclose(given, camera, rtol=1e-6):
             raise ValueError(f"{named} differs from the camera {result} was integrated with "
                              f"({camera.tolist()}); leave {flag} out to use the surface's own")

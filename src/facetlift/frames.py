@@ -1566,17 +1566,22 @@ def flip_check(problem) -> dict:
 # gradient fields
 
 #: Gradient frames -> what (p, q) hold. "xy" is facetlift's; "rowcol" is the layout of Quéau's
-#: normal_integration toolbox and of most MATLAB code.
+#: normal_integration toolbox and of numpy's ``np.gradient(z)`` (rows first); "image" that of
+#: MATLAB's ``[FX, FY] = gradient(Z)`` and of OpenCV's Sobel dx, dy (columns first, rows
+#: down). ("matlab" meant "rowcol" until 2026-12-07: MATLAB's own gradient() then came out
+#: wrong without a word, an audit.)
 GRADIENT_FRAMES = {
     "xy": "p = dz/dx (x right), q = dz/dy (y up)",
     "rowcol": "p = dz/d(row) (down the rows), q = dz/d(col) (along the columns)",
+    "image": "p = dz/d(col) (along the columns), q = dz/d(row) (down the rows)",
 }
-_GRADIENT_ALIASES = {"queau": "rowcol", "matlab": "rowcol", "facetlift": "xy"}
+_GRADIENT_ALIASES = {"queau": "rowcol", "numpy": "rowcol", "matlab": "image",
+                     "opencv": "image", "facetlift": "xy"}
 
 
 def gradient_frame(name) -> str:
     """The canonical name of a gradient frame (:data:`GRADIENT_FRAMES`, or an alias: ``queau``,
-    ``matlab`` = ``rowcol``); ValueError otherwise."""
+    ``numpy`` = ``rowcol``; ``matlab``, ``opencv`` = ``image``); ValueError otherwise."""
     key = name.strip().lower() if isinstance(name, str) else name
     key = _GRADIENT_ALIASES.get(key, key)
     if key not in GRADIENT_FRAMES:
@@ -1609,8 +1614,9 @@ LAYOUT_SAMPLE = 2**18
 
 
 def layout_curls(gx, gy, mask=None, *, gy_sign: float = 1.0,
-                 sample: int = LAYOUT_SAMPLE) -> tuple[float, float, float]:
-    """``(curl, curl of the other layout, curl with y flipped)`` of a gradient field in
+                 sample: int = LAYOUT_SAMPLE) -> tuple[float, float, float, float]:
+    """``(curl, curl of the other layout, curl with y flipped, curl with gx and gy
+    exchanged)`` of a gradient field in
     facetlift's frame (``gx = dz/dx``, ``gy = dz/dy``, y up), each relative to the sum of all
     four first derivatives' magnitudes (a denominator both layouts share), over the 2 x 2
     blocks inside `mask` whose slopes are finite and not grazing (the paper's rule, cos 85
@@ -1623,7 +1629,7 @@ def layout_curls(gx, gy, mask=None, *, gy_sign: float = 1.0,
     two rows (about `sample` pixels), taken before any conversion."""
     from .conventions import OUTLIER_EPS
 
-    nan = (float("nan"),) * 3
+    nan = (float("nan"),) * 4
     try:
         gx, gy = np.asarray(gx), np.asarray(gy)
     except Exception:
@@ -1656,34 +1662,44 @@ def layout_curls(gx, gy, mask=None, *, gy_sign: float = 1.0,
         div = np.abs(dgx_dx + dgy_dy)[good].sum()
         flipped = np.abs(dgx_dy + dgy_dx)[good].sum()  # (the field with gy negated)
         total = (np.abs(dgx_dy) + np.abs(dgy_dx) + np.abs(dgx_dx) + np.abs(dgy_dy))[good].sum()
+        swapped = np.abs(dgy_dy - dgx_dx)[good].sum()  # (the field with gx and gy exchanged)
     if not np.isfinite(total) or total <= 0:
-        return (0.0, 0.0, 0.0) if total == 0 else nan
-    return float(curl / total), float(div / total), float(flipped / total)
+        return (0.0, 0.0, 0.0, 0.0) if total == 0 else nan
+    return (float(curl / total), float(div / total), float(flipped / total),
+            float(swapped / total))
 
 
 def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
     """Relative curl (:func:`layout_curls`) of the gradient field (p, q) read in `frame` and
-    in the other layout; warns, naming ``--gradient-frame``, when the field as read has a
-    clear curl (above :data:`LAYOUT_MIN_CURL`) and the other layout less than
-    :data:`LAYOUT_RATIO` of it: ``p = dz/d(row)`` read as ``dz/dx`` turns the field by 90
-    degrees, which no flip of the normals undoes.
+    in the other layouts; warns when the field as read has a clear curl (above
+    :data:`LAYOUT_MIN_CURL`) and another reading less than :data:`LAYOUT_RATIO` of it: the
+    other layout of ``xy`` and ``rowcol`` (``p = dz/d(row)`` read as ``dz/dx`` turns the field
+    by 90 degrees, which no flip of the normals undoes), naming ``--gradient-frame``; or p and
+    q exchanged (two files given the other way round), naming that.
 
     Returns
     -------
     dict
-        ``{"curl": ..., "curl_other_layout": ..., "curl_y_flipped": ..., "suggested": ...}``
-        (the third: with one slope's sign flipped; a layout is not suggested where that
-        explains it better; the last: the layout the warning named, else None: hand it to
-        :func:`read_in` for the solve, so that :func:`flip_check` does not contradict it).
+        ``{"curl": ..., "curl_other_layout": ..., "curl_y_flipped": ..., "curl_swapped": ...,
+        "suggested": ...}`` (the third: with one slope's sign flipped, which explains it
+        better where it is lowest: no layout is then suggested; the fourth: with p and q
+        exchanged; the last: the layout the warning named, ``"swapped"`` for p and q
+        exchanged, else None: hand it to :func:`read_in` for the solve, so that
+        :func:`flip_check` does not contradict it).
     """
     given = gradient_frame(frame)
-    other = "rowcol" if given == "xy" else "xy"
-    # (rowcol: dz/dx = q, dz/dy = -p; no converted copy of the whole field is made)
-    gx, gy, sign = (p, q, 1.0) if given == "xy" else (q, p, -1.0)
-    own, alt, flip = layout_curls(gx, gy, mask, gy_sign=sign)
-    out = {"curl": own, "curl_other_layout": alt, "curl_y_flipped": flip, "suggested": None}
+    # (rowcol: dz/dx = q, dz/dy = -p; image: dz/dx = p, dz/dy = -q; no converted copy of the
+    # whole field is made)
+    gx, gy, sign = {"xy": (p, q, 1.0), "image": (p, q, -1.0), "rowcol": (q, p, -1.0)}[given]
+    own, alt, flip, swap = layout_curls(gx, gy, mask, gy_sign=sign)
+    out = {"curl": own, "curl_other_layout": alt, "curl_y_flipped": flip,
+           "curl_swapped": swap, "suggested": None}
+    # (the other layout of "image" is no named frame: its exchange is "rowcol"'s, below)
+    other = {"xy": "rowcol", "rowcol": "xy"}.get(given)
     # (not where a slope's sign explains it better: flip_check names that after the solve)
-    if own > LAYOUT_MIN_CURL and alt < LAYOUT_RATIO * own and alt < flip:
+    if not own > LAYOUT_MIN_CURL or flip <= min(alt, swap):
+        return out
+    if other is not None and alt < LAYOUT_RATIO * own and alt <= swap:
         out["suggested"] = other
         meaning = GRADIENT_FRAMES[other]
         warn(
@@ -1691,14 +1707,29 @@ def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
             f"{own:.2f} read as {given!r}, {alt:.2f} as {other!r}: {meaning}): try "
             f"--gradient-frame {other} (gradient_frame='{other}')", LayoutWarning, other=other
         )
+    elif swap < LAYOUT_RATIO * own:
+        out["suggested"] = "swapped"
+        also = (" (or --gradient-frame rowcol: MATLAB's gradient() and OpenCV's Sobel give "
+                "columns first, numpy's np.gradient rows first)" if given == "image" else
+                " (or --gradient-frame image)" if given == "rowcol" else "")
+        warn(
+            f"p and q look exchanged: the gradient field is far more integrable with them the "
+            f"other way round (relative curl {own:.2f} as given, {swap:.2f} exchanged): give "
+            f"them in the other order (--gradients Q P; integrate_gradients(q, p)){also}",
+            LayoutWarning, other="swapped"
+        )
     return out
 
 
 def gradients_to_facetlift(p, q, frame: str = "xy"):
     """(p, q) in `frame` -> facetlift's ``(dz/dx, dz/dy)`` with x right and y up.
 
-    ``rowcol``: ``dz/dx = q`` and ``dz/dy = -p`` (a row step goes down, against y).
+    ``rowcol``: ``dz/dx = q`` and ``dz/dy = -p`` (a row step goes down, against y);
+    ``image``: ``dz/dx = p`` and ``dz/dy = -q``.
     """
-    if gradient_frame(frame) == "xy":
+    given = gradient_frame(frame)
+    if given == "xy":
         return p, q
+    if given == "image":
+        return p, -np.asarray(q, dtype=float)
     return q, -np.asarray(p, dtype=float)

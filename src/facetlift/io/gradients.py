@@ -98,6 +98,12 @@ def read_mat(path, keys=None) -> dict:
     else:
         if len(keys) < 2:
             raise ValueError(f"`mat_keys`: a gradient field needs p and q; got {keys}")
+        for k, a in zip(keys[:2], arrays[:2], strict=True):
+            if a.dtype.kind != "f":  # (as a .npy or TIFF's: int16 slopes * 1000 came out
+                # as huge slopes, 99 % of them grazing, an audit)
+                raise ValueError(f"`mat_keys`: variable {k!r} of {f} has type {a.dtype}; "
+                                 "gradients must be floating point (slopes: scale integer "
+                                 "ones back first)")
         p, q = (a.astype(np.float64) for a in arrays[:2])
         if p.ndim != 2 or q.shape != p.shape:
             raise ValueError(
