@@ -686,3 +686,21 @@ def test_plain_string_filters_of_python_itself_hold_while_one_records():
         with _AnotherThreadRecords():
             warnings.warn("an old API", DeprecationWarning, stacklevel=1)
     assert [str(w.message) for w in seen] == ["an old API"]
+
+
+def test_a_notebook_sees_batch_parameters_and_a_missing_q_is_named():
+    """A notebook audit: inspect.signature(facetlift.batch) gave (*args, **kwargs) and
+    `facetlift.batch?` the module's text; integrate_gradients(pq, None) said "`q` must be a
+    real numeric array; got dtype object"."""
+    import inspect
+
+    import numpy as np
+
+    import facetlift
+    from facetlift.batch import batch as batch_function
+
+    assert inspect.signature(facetlift.batch) == inspect.signature(batch_function)
+    assert facetlift.batch.__call__.__doc__ == batch_function.__doc__
+    with pytest.raises(ValueError, match=r"`q` is required.*give p\[\.\.\., 0\] and "
+                       r"p\[\.\.\., 1\]"):
+        facetlift.integrate_gradients(np.zeros((8, 9, 2)), None)

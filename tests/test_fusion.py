@@ -331,9 +331,17 @@ def test_a_few_bad_prior_and_confidence_pixels_do_not_refuse_the_job():
     bad = good.copy()
     bad[0, 0] = np.inf  # (outside the mask)
     bad[5, 6] = -np.inf
-    with pytest.warns(UserWarning, match=r"`prior`: 2 pixel\(s\) hold inf, the first at "
-                      r"\(row 0, col 0\); they were left out"):
+    # (counted inside the mask only: a ray caster's inf for "no hit" around the object was
+    # warned about, an audit)
+    with pytest.warns(UserWarning, match=r"`prior`: 1 pixel\(s\) inside the mask hold inf, "
+                      r"the first at \(row 5, col 6\); they were left out"):
         got = facetlift.integrate(n, mask, K=K, prior=bad).depth
+    outside = good.copy()
+    outside[~mask] = np.inf
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        np.testing.assert_array_equal(facetlift.integrate(n, mask, K=K, prior=outside).depth,
+                                      base)
     ref = good.copy()
     ref[5, 6] = np.nan
     np.testing.assert_array_equal(got, facetlift.integrate(n, mask, K=K, prior=ref).depth)
@@ -408,6 +416,12 @@ def test_regularization_keeps_its_prior_option():
     n, _ = wave()
     s = run(n, method="regularization", prior="laplacian")
     assert s.info["prior"] == "laplacian"
+    # a depth prior's settings beside the string are named as such (they were refused as
+    # "applies only with a `prior`; ... prior=None", the string given: an audit)
+    for kw in ({"prior_weight": 2.0}, {"prior_fit": "affine"}, {"prior_blur": 2.0}):
+        with pytest.raises(ValueError, match=rf"`{next(iter(kw))}` belong\(s\) to a depth "
+                           r"prior; prior='laplacian' is regularization's smoothness option"):
+            run(n, method="regularization", prior="laplacian", **kw)
 
 
 # ------------------------------------------------------------------------------------------
@@ -1522,6 +1536,68 @@ def test_threads_record_their_own_warnings_at_the_same_time():
         t.join()
     assert got == {"a": ["from a"], "b": ["from b"]}
     assert warnings._showwarnmsg_impl is show and warnings.filters == filters
+
+
+def test_a_recording_thread_leaves_the_filters_other_threads_set_meanwhile():
+    """An audit: the capture saved the filters when the first thread began to record and
+    put that list back when the last one left, so a main thread's temporary
+    simplefilter("error", ...) inside catch_warnings, entered before a prior_fit run in a
+    worker and left while it ran, stayed for good (the next 8-bit map raised FrameWarning),
+    and a simplefilter("ignore", ...) set while it ran was lost. The capture now takes out
+    its own "always" entry only."""
+    import threading
+
+    from facetlift._warnings import recording
+
+    filters = list(warnings.filters)
+
+    def worker_records_while(between):
+        inside, resume = threading.Event(), threading.Event()
+
+        def work():
+            with recording():
+                inside.set()
+                resume.wait(10)
+
+        t = threading.Thread(target=work)
+        t.start()
+        inside.wait(10)
+        between()
+        resume.set()
+        t.join()
+
+    with warnings.catch_warnings():  # (entered before, left while the worker records)
+        warnings.simplefilter("error", facetlift.FrameWarning)
+        inside, resume = threading.Event(), threading.Event()
+
+        def work():
+            with recording():
+                inside.set()
+                resume.wait(10)
+
+        t = threading.Thread(target=work)
+        t.start()
+        inside.wait(10)
+    resume.set()
+    t.join()
+    assert warnings.filters == filters
+    try:
+        worker_records_while(lambda: warnings.simplefilter("ignore", facetlift.FrameWarning))
+        assert warnings.filters[1:] == filters
+        assert warnings.filters[0][:3] == ("ignore", None, facetlift.FrameWarning)
+    finally:
+        warnings.filters[:] = filters
+        warnings._filters_mutated()
+    inside, resume = threading.Event(), threading.Event()
+    t = threading.Thread(target=work)
+    t.start()
+    inside.wait(10)
+    with warnings.catch_warnings():  # (entered while the worker records, left after it)
+        resume.set()
+        t.join()
+    assert warnings.filters == filters
+    with pytest.warns(UserWarning, match="still heard"):
+        warnings.warn("still heard", UserWarning, stacklevel=1)
 
 
 def test_samples_move_the_pieces_of_the_normals_cuts_instead_of_tearing_islands(monkeypatch):

@@ -538,6 +538,7 @@ def test_a_mask_of_another_view_is_questioned_and_its_transpose_named():
     ((1, 20, 30, 3), r"a batch of one \(1, H, W, 3\); normals\[0\] gives"),
     ((1, 3, 20, 30), r"a batch of one, channel-first .*moveaxis\(normals\[0\], 0, -1\)"),
     ((3, 20, 30), r"channel-first \(3, H, W\); numpy.moveaxis\(normals, 0, -1\)"),
+    ((20, 30, 4), r"RGB and alpha\? give normals\[\.\.\., :3\] and mask=normals"),
 ])
 def test_a_network_tensor_shape_gets_the_indexing_that_makes_a_map(shape, advice):
     """An audit: (1, H, W, 3) and (1, 3, H, W), a network's batch of one, got only 'must

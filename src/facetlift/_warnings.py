@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import sys
 import threading
 import warnings
@@ -41,6 +42,38 @@ _SHARED: dict = {"depth": 0, "restore": None, "show": None, "filters": (), "seen
 _LOCAL = threading.local()
 
 
+#: The message pattern of the capture's own "always" filter: matches every message, and
+#: tells that entry from a user's ``simplefilter("always")`` by identity.
+_MARK = re.compile("")
+_ALWAYS = ("always", _MARK, Warning, None, 0)
+
+
+def _set_filters(entries, target=None) -> None:
+    """The filter list `target` (default: the current ``warnings.filters``) holds `entries`,
+    changed in place (other threads' in-place changes and their saved references keep
+    referring to it), the warnings module's caches told."""
+    (warnings.filters if target is None else target)[:] = entries
+    mutated = getattr(warnings, "_filters_mutated", None)
+    if mutated is not None:
+        mutated()
+
+
+def _take_down() -> None:
+    """Undo the capture's own changes to the process's warning state, and nothing else:
+    its "always" entry leaves whatever filter list is current, and the display is put back
+    where it is still the capture's. (Restoring the state saved at installation undid the
+    filters other threads set meanwhile, or made a temporary one of theirs permanent: a
+    ``simplefilter("error", ...)`` inside a main thread's ``catch_warnings`` stayed after a
+    ``prior_fit`` run in a worker thread ended, an audit.)"""
+    # (the list it was put in too, where another thread's catch_warnings has made another
+    # list current meanwhile: it restores this one when it leaves)
+    for target in (warnings.filters, _SHARED.pop("list", None)):
+        if target is not None and any(f[1] is _MARK for f in target):
+            _set_filters([f for f in target if f[1] is not _MARK], target)
+    if warnings.showwarning is _dispatch:
+        warnings.showwarning = _SHARED["show"]
+
+
 def _reinit_after_fork() -> None:
     """A child forked while another thread held the lock or recorded: a new lock, and the
     depth of the forking thread's own blocks (its thread-local stack goes on as it was);
@@ -50,9 +83,9 @@ def _reinit_after_fork() -> None:
     _LOCK = threading.Lock()
     own = len(getattr(_LOCAL, "stack", None) or ())
     if own == 0 and _SHARED["restore"] is not None:
-        restore, _SHARED["restore"] = _SHARED["restore"], None
+        _SHARED["restore"] = None
         with contextlib.suppress(Exception):
-            restore.__exit__(None, None, None)
+            _take_down()
     _SHARED["depth"] = own
 
 
@@ -64,6 +97,12 @@ def _dispatch(message, category, filename, lineno, file=None, line=None):
     stack = getattr(_LOCAL, "stack", None)
     if stack:
         stack[-1](message, category, filename, lineno, file, line)
+        return
+    if not any(f[1] is _MARK for f in warnings.filters):
+        # (the process's own filters judged it: no capture is installed in the current list,
+        # e.g. this display was put back by another thread's catch_warnings after the
+        # capture was taken down)
+        _SHARED["show"](message, category, filename, lineno, file, line)
         return
     # (another thread's warning: judged by the filters as they were before the capture,
     # which replaced them with "always" for the whole process; shown unfiltered, a user's
@@ -159,11 +198,11 @@ def recording(record: bool = True, action: str = "always", on_warning=None):
 
     with _LOCK:
         if _SHARED["depth"] == 0:
-            restore = warnings.catch_warnings()
-            restore.__enter__()
             _SHARED["filters"], _SHARED["seen"] = tuple(warnings.filters), set()
-            warnings.simplefilter("always")
-            _SHARED["restore"], _SHARED["show"] = restore, warnings.showwarning
+            _set_filters([_ALWAYS] + [f for f in warnings.filters if f[1] is not _MARK])
+            _SHARED["list"] = warnings.filters
+            _SHARED["show"] = warnings.showwarning
+            _SHARED["restore"] = True
             warnings.showwarning = _dispatch
         _SHARED["depth"] += 1
     stack = getattr(_LOCAL, "stack", None)
@@ -177,5 +216,5 @@ def recording(record: bool = True, action: str = "always", on_warning=None):
         with _LOCK:
             _SHARED["depth"] -= 1
             if _SHARED["depth"] == 0:
-                restore, _SHARED["restore"] = _SHARED["restore"], None
-                restore.__exit__(None, None, None)
+                _SHARED["restore"] = None
+                _take_down()

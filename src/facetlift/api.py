@@ -232,6 +232,18 @@ def integrate(
                 f"e.g. regularization; {method!r} has none)")
         options["prior"] = prior
         prior = None
+        # (the depth prior's own settings beside it were refused as "prior=None", the string
+        # given: an audit)
+        given = [name for name, v, unset in (
+            ("prior_weight", prior_weight, (None, 1.0)), ("prior_blur", prior_blur, (None,)),
+            ("prior_outliers", prior_outliers, (None, "remove")),
+            ("prior_fit", prior_fit, (None, "none"))) if not any(
+                v is u or (isinstance(v, (str, float, int)) and v == u) for u in unset)]
+        if given:
+            raise ValueError(
+                f"{', '.join(f'`{g}`' for g in given)} belong(s) to a depth prior; "
+                f"prior={options['prior']!r} is {method}'s smoothness option (its weight is "
+                "`lam`): leave them out, or give a depth map as the prior")
     fit_kind = prior_fit_check(prior_fit, prior is not None, K is not None)
     if fit_kind != "none":
         if not info.prior:
@@ -345,7 +357,10 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
     if len(shape) != 2:  # (integrate's own check names the problem)
         return integrate(normals, mask, prior=prior, prior_weight=prior_weight,
                          prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
-    raw, own = prior_samples(prior, shape)  # (raw values: any sign before the alignment)
+    inside = None if mask is None else np.asarray(mask)
+    inside = inside != 0 if inside is not None and inside.shape == shape else None
+    # (raw values: any sign before the alignment)
+    raw, own = prior_samples(prior, shape, mask=inside)
     zeros = None
     if kwargs.get("K") is not None and not _is_points(prior, shape):
         # a map for a camera: 0 is a sensor's (or a clipped network's) "unknown", as the
@@ -458,8 +473,10 @@ def integrate_gradients(
         The height's slopes, in height units per world unit; NaN marks a missing sample, and
         an infinite slope is a vertical (edge-on) facet: a grazing normal, counted as missing.
         With ``gradient_frame="xy"`` (default) ``p = dz/dx`` (x right) and ``q = dz/dy``
-        (y up); with ``"rowcol"`` (alias ``"queau"``: Quéau's toolbox, MATLAB code)
-        ``p = dz/d(row)`` downward and ``q = dz/d(col)``.
+        (y up); with ``"rowcol"`` (aliases ``"queau"``, ``"numpy"``: Quéau's toolbox,
+        ``np.gradient(z)``) ``p = dz/d(row)`` downward and ``q = dz/d(col)``; with ``"image"``
+        (aliases ``"matlab"``, ``"opencv"``: MATLAB's ``[FX, FY] = gradient(Z)``, OpenCV's
+        Sobel dx and dy) ``p = dz/d(col)`` and ``q = dz/d(row)`` downward.
     mask : (H, W) array_like of bool, optional
     gradient_frame : str
     pixel_size : float

@@ -1297,5 +1297,13 @@ class _CallableModule(types.ModuleType):
     def __call__(self, *args, **kwargs):
         return batch(*args, **kwargs)
 
+    @property
+    def __signature__(self):  # (inspect.signature and a notebook's `batch?` showed
+        # (*args, **kwargs) and the module's text, an audit)
+        import inspect
 
+        return inspect.signature(batch)
+
+
+_CallableModule.__call__.__doc__ = batch.__doc__
 sys.modules[__name__].__class__ = _CallableModule

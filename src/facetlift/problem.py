@@ -361,6 +361,11 @@ def normals_from_gradients(p, q) -> np.ndarray:
     (H, W, 3) float
         Normals in the facetlift convention; NaN where `p` or `q` is NaN.
     """
+    if q is None:  # (said "`q` must be a real numeric array; got dtype object", an audit)
+        shape = np.shape(p)
+        split = (" (an (H, W, 2) array: give p[..., 0] and p[..., 1])"
+                 if len(shape) == 3 and shape[-1] == 2 else "")
+        raise ValueError(f"`q` is required: the slopes come as two (H, W) arrays p and q{split}")
     p = _float_array(p, "p")
     q = _float_array(q, "q")
     if p.ndim != 2:
@@ -1331,15 +1336,17 @@ def prior_image(prior, shape: tuple[int, int], positive: bool = False) -> np.nda
     return prior_samples(prior, shape, positive)[0]
 
 
-def prior_samples(prior, shape: tuple[int, int],
-                  positive: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+def prior_samples(prior, shape: tuple[int, int], positive: bool = False,
+                  mask=None) -> tuple[np.ndarray, np.ndarray | None]:
     """:func:`prior_image` and, for ``(rows, cols, depths, weights)``, the (H, W) weights of
     its pixels (None otherwise): a pixel's depth is its points' weighted mean and its weight
     the weighted mean of their weights, ``sum w^2 / sum w`` (a doubtful point beside a good
     one does not halve its pull; points of weight 1 give what the triple gives), NaN where
     no point is. The weights must be finite and >= 0 (a ValueError names ``prior[3]``); a
     pixel whose points all weigh 0 holds no sample. They multiply ``prior_weight`` (SfM points
-    by their reprojection error or track length, a LiDAR's by its return strength).
+    by their reprojection error or track length, a LiDAR's by its return strength). A
+    dense map's inf pixels are unknown depths, counted in a warning where they lie inside
+    `mask` ((H, W) bool; None: anywhere): a ray caster's "no hit" outside the object is none.
     """
     H, W = shape
     if _is_points(prior, shape):
@@ -1470,9 +1477,13 @@ def prior_samples(prior, shape: tuple[int, int],
     arr = arr.astype(float)
     inf = np.isinf(arr)
     if inf.any():  # (a few bad pixels never refuse a job: left out, counted and said)
-        r, c = np.argwhere(inf)[0]
-        warn(f"`prior`: {int(inf.sum())} pixel(s) hold inf, the first at (row {r}, col {c}); "
-             "they were left out as unknown depths (NaN is the way to mark them)")
+        said = inf if mask is None else inf & np.asarray(mask, bool)
+        if said.any():  # (not where only the background holds them, an audit)
+            r, c = np.argwhere(said)[0]
+            inside = "" if mask is None else " inside the mask"
+            warn(f"`prior`: {int(said.sum())} pixel(s){inside} hold inf, the first at (row "
+                 f"{r}, col {c}); they were left out as unknown depths (NaN is the way to mark "
+                 "them)")
         arr[inf] = np.nan
     return arr, None
 
@@ -1641,7 +1652,7 @@ def check_prior(prior, prior_weight, shape, mask, camera):
         out with a warning); a weight that is negative, not finite or of another
         shape (the message names the argument, the value and what was expected).
     """
-    img, own = prior_samples(prior, shape, positive=camera.positive_depth)
+    img, own = prior_samples(prior, shape, positive=camera.positive_depth, mask=mask)
     given = _weight_image(prior_weight, "prior_weight", shape)
     # (the points' own weights: times prior_weight)
     weight = given if own is None else np.where(np.isfinite(own), given * own, given)
@@ -1915,6 +1926,9 @@ def _channel_first_hint(shape) -> str:
         return ""
     if len(shape) == 3 and shape[0] == 3 and shape[-1] != 3:
         return ": it looks channel-first (3, H, W); numpy.moveaxis(normals, 0, -1) gives (H, W, 3)"
+    if len(shape) == 3 and shape[-1] == 4:  # (an RGBA array: io.read_normals takes its alpha)
+        return (": RGB and alpha? give normals[..., :3] and mask=normals[..., 3] > 0 (or the "
+                "file to facetlift.io.read_normals, which reads an alpha as the mask)")
     return ""
 
 
