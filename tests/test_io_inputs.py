@@ -135,6 +135,12 @@ def test_mat_files_gradients_normals_and_keys(tmp_path):
     with pytest.raises(ValueError, match=r"variable 'p' of .* has type int16; gradients must "
                        "be floating point"):
         read_mat(tmp_path / "i.mat")
+    # a .mat given to --gradients (it holds both): named, not "unsupported format"
+    from facetlift.io.gradients import read_gradients
+
+    with pytest.raises(ValueError, match=r"is a MATLAB file, which holds p and q together: "
+                       r"give it as the input itself"):
+        read_gradients(tmp_path / "g.mat", tmp_path / "g.mat")
 
 
 def test_mat_v73_and_garbage_are_clear_errors(tmp_path):

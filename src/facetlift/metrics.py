@@ -376,12 +376,15 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
     bad = {which: int((a[m] <= 0).sum()) for which, a in (("estimate", est), ("truth", gt))}
     if perspective and any(bad.values()):
         which = "estimate" if bad["estimate"] else "truth"
+        a = est if which == "estimate" else gt
+        # (a result's background stored as 0 was told it might be orthographic, an audit)
+        zeros = int((a[m] == 0).sum()) == bad[which]
         raise ValueError(
             f"`{which}` has {bad[which]} depths <= 0 of the {out['pixels']} scored: a "
             "perspective result is scored after a median scale, which needs z-depths > 0 in "
             "both" + (" (0 where undefined? store NaN there, or give a mask)"
-                      if which == "truth" else " (an orthographic result? score it without "
-                      "a camera)"))
+                      if which == "truth" or zeros else " (an orthographic result? score it "
+                      "without a camera)"))
     if any(bad.values()):
         out["notes"].append(
             f"no scale: the {' and the '.join(k for k, v in bad.items() if v)} "
@@ -410,7 +413,39 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
             out["notes"].append(f"no normalised error: {e}")
         else:
             _outlier_range_check(gt, m)
+            _sign_check(est, gt, m, out["normalized_error"])
     return out
+
+
+#: Correlation of the result's and the truth's depths (each piece less its mean) below which,
+#: with the negated result scoring at most half the error, :func:`evaluate` warns that the
+#: result looks like a height.
+HEIGHT_CORRELATION = -0.8
+
+
+def _sign_check(est, gt, m, error: float) -> None:
+    """A warning where an orthographic result looks like a height (``-depth``: another tool's
+    convention, or facetlift's height map read as depth): its depths run against the truth's
+    (:data:`HEIGHT_CORRELATION`) and negated it scores at most half the error (20.7 % as
+    given, 0.0076 % negated, without a word, an audit)."""
+    from ._warnings import warn
+
+    k, n = _pieces(est, m)
+    size = np.maximum(np.bincount(k, minlength=n), 1)
+    e, g = est[m], gt[m]
+    e = e - (np.bincount(k, e, n) / size)[k]
+    g = g - (np.bincount(k, g, n) / size)[k]
+    scale = float(np.sqrt(np.sum(e * e) * np.sum(g * g)))
+    if not scale > 0 or float(np.sum(e * g)) / scale > HEIGHT_CORRELATION:
+        return
+    with np.errstate(all="ignore"):
+        flipped, _ = _normalized(*_offset_aligned(-est, gt, m, False))
+    if flipped <= 0.5 * error:
+        warn(f"the result's depths run against the ground truth's (correlation "
+             f"{float(np.sum(e * g)) / scale:.2f}); negated it scores {100 * flipped:.3g} % "
+             f"instead of {100 * error:.3g} %: is it a height (-depth)? facetlift's depth is "
+             "larger = farther (a height map of facetlift's, height.exr, is read back as "
+             "depth by facetlift.io.read_depth)")
 
 
 #: Ratio of the ground truth's full depth range (max - min: the normalised error's scale) to

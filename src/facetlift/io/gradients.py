@@ -18,15 +18,21 @@ GRADIENT_FORMATS = (".npy", ".exr", ".tif", ".tiff")
 
 
 def read_gradient(path, arg: str = "p") -> np.ndarray:
-    """One (H, W) float component of a gradient field: ``.npy``, a one-channel (or channel
-    ``Y``/``Z``/``R``) OpenEXR file, or a float TIFF.
+    """One (H, W) float component of a gradient field: ``.npy``, a one-channel OpenEXR file,
+    or a float TIFF.
 
     Raises
     ------
     ValueError
         Missing or unreadable file, several channels, not 2-D, or an integer pixel type (a
-        gradient has no integer encoding).
+        gradient has no integer encoding); a ``.mat`` file (it holds p and q together: the
+        command line takes it as NORMALS).
     """
+    if str(path).lower().endswith(".mat"):  # (said only "unsupported gradient format", an
+        # audit)
+        raise ValueError(f"`{arg}`: {path} is a MATLAB file, which holds p and q together: "
+                         "give it as the input itself (facetlift integrate FILE.mat, with "
+                         "--mat-keys P,Q where its variables are not p and q), not --gradients")
     a = read_plane(path, GRADIENT_FORMATS, "gradient", arg)
     if a.dtype.kind != "f":
         raise ValueError(
