@@ -1282,6 +1282,22 @@ def test_info_frame_hint_agrees_with_the_warning_when_a_mask_holds_zeros(tmp_pat
     assert code == 0 and json.loads(out)["frame"]["likely"].startswith("another frame?")
 
 
+def test_info_names_the_reversed_channel_order_as_integrate_does(tmp_path, capsys):
+    """An audit: an OpenCV-frame map saved in BGR order (cv2.imwrite; Metric3D's
+    normal_vis.png) read with --normal-frame opencv: integrate named the frame that reads it
+    (z,-y,-x), info said only "channels in BGR order?"; info names it too now."""
+    r, c = np.indices((64, 64))
+    x, y = (c - 31.5) / 40, -(r - 31.5) / 40
+    n = np.dstack([x, y, np.sqrt(np.clip(1 - x**2 - y**2, 0.05, 1))])
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    cv = n * [1, -1, -1]  # (OpenCV's camera frame: y down, z away)
+    np.save(tmp_path / "bgr.npy", np.ascontiguousarray(cv[..., ::-1]))
+    code, out, _ = run(capsys, "info", str(tmp_path / "bgr.npy"), "--normal-frame", "opencv",
+                       "--json")
+    likely = json.loads(out)["frame"]["likely"]
+    assert code == 0 and "--normal-frame z,-y,-x" in likely, likely
+
+
 def test_summary_names_the_camera_and_bini_s_k_is_pointed_to(tmp_path, capsys):
     """A BiNI user's check: the summary did not say whether K.txt was used, and
     --option k=2 (BiNI's name) for dgp said only "unknown option"."""

@@ -717,6 +717,22 @@ def test_8_bit_flat_areas_decode_to_exactly_zero(encode):
     assert rms(plain) > 0.1 and rms(d) < 0.02
 
 
+def test_8_bit_flat_areas_of_a_bgr_map_decode_to_zero_in_its_own_x_and_y():
+    """An audit: the zero plateaus were looked for in the stored channels 0 and 1, so a BGR
+    map (as cv2.imwrite writes it) read with normal_frame='z,y,x' kept the half-code tilt in
+    x, its third channel (a brick texture 3.4 % -> 9.8 % RMS height error); they are now the
+    channels the frame reads x and y from, and the BGR map comes out as the RGB one."""
+    n, h, flat = _bumps_on_a_plane()
+    v = np.round((n + 1) / 2 * 255).astype(np.uint8)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", facetlift.FrameWarning)  # (8-bit decoded)
+        rgb = facetlift.integrate(v).depth
+        bgr = facetlift.integrate(np.ascontiguousarray(v[..., ::-1]), normal_frame="z,y,x").depth
+    np.testing.assert_allclose(bgr, rgb, atol=1e-9)
+    d = frames.decode(np.ascontiguousarray(v[..., ::-1]), frame="z,y,x")
+    assert (d[flat][:, 1:] == 0).all()  # (stored y and x: channels 1 and 2)
+
+
 def test_8_bit_maps_without_a_flat_plateau_and_16_bit_maps_decode_as_before():
     """A sphere's normals are spread continuously: no spike at 128, and the decode is
     bit for bit v / 255 * 2 - 1 (NaN outside the valid lengths); 16 bits never change."""
@@ -1132,3 +1148,26 @@ def test_normal_noise_through_a_wide_lens(normal):
 def test_normal_noise_is_nan_without_a_block_of_four_pixels():
     n, _ = bump((1, 30))
     assert np.isnan(frames.normal_noise(prepare(n)))
+
+
+@pytest.mark.parametrize("fill", [(1.0, 1.0, 1.0), (-1.0, -1.0, -1.0),
+                                  (127 / 255 * 2 - 1,) * 3])
+def test_a_float_maps_background_fill_is_left_out(fill):
+    """An audit: a normal map decoded by the user as floats (v / 65535 * 2 - 1, as BiNI's
+    loader does) kept its white, black or mid-grey fill as normals, which a PNG's decoding
+    drops: without a mask the DiLiGenT bear came out joined to a 45-degree plane (17.6 mm
+    instead of 0.47), the grey fill was refused as facing away with the advice of a wrong
+    frame. A vector repeated at the corners with a length far from 1 is now left out, with
+    a warning; a unit-length background (a plane facing the camera) is kept."""
+    n, _ = bump((40, 48))
+    r, c = np.indices((40, 48))
+    mask = (r - 19.5) ** 2 + (c - 23.5) ** 2 < 17**2
+    filled = np.where(mask[..., None], n, np.asarray(fill))
+    with pytest.warns(UserWarning, match=r"a background fill, no normals, was left out"):
+        s = facetlift.integrate(filled)
+    np.testing.assert_array_equal(np.isfinite(s.depth), mask)
+    np.testing.assert_allclose(s.depth, facetlift.integrate(n, mask).depth, atol=1e-9)
+    with warnings.catch_warnings():  # (a plane facing the camera around it: kept)
+        warnings.simplefilter("error")
+        s = facetlift.integrate(np.where(mask[..., None], n, np.array([0.0, 0.0, 1.0])))
+    assert np.isfinite(s.depth).all()

@@ -227,6 +227,28 @@ def test_exr_xyz_channels(tmp_path, normals):
     np.testing.assert_allclose(back, n, atol=1e-7)
 
 
+def test_exr_normals_under_other_channel_names_and_cycles_denoising_layers(tmp_path, normals):
+    """An audit of real exports: lowercase x, y, z (N.x), Nuke's red, green, blue and a
+    Cycles multilayer file with 'Denoising Data' on (ViewLayer.Denoising Normal beside
+    ViewLayer.Normal) were refused; each is read now, the Normal layer itself chosen."""
+    import OpenEXR
+
+    n, _ = normals
+    hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    files = {
+        "lower.exr": {f"N.{k}": n[..., i] for i, k in enumerate("xyz")},
+        "nuke.exr": {k: n[..., i] for i, k in enumerate(("red", "green", "blue"))},
+        "denoise.exr": {**{f"ViewLayer.Normal.{k}": n[..., i] for i, k in enumerate("XYZ")},
+                        **{f"ViewLayer.Denoising Normal.{k}": 0.5 * n[..., i]
+                           for i, k in enumerate("XYZ")}},
+    }
+    for name, ch in files.items():
+        OpenEXR.File(hdr, {k: v.astype(np.float32) for k, v in ch.items()}).write(
+            str(tmp_path / name))
+        np.testing.assert_allclose(io.read_normals(tmp_path / name)[0], n, atol=1e-7,
+                                   err_msg=name)
+
+
 def test_exr_multilayer_normal_pass(tmp_path, normals):
     """A multilayer EXR (Blender's render layers: ``ViewLayer.Normal.X``, ...) gives its one
     layer named normal, with that layer's alpha; without one, or with two, the message lists

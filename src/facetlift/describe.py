@@ -574,9 +574,16 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
                                f"{_try(frame, mend[0], field)}; your estimator's frame is in "
                                "docs/conventions.md)")
         elif away > BACKFACING_FRAME_HINT:
+            # (the channel orders that face them, named as integrate names them: info said
+            # only "channels in BGR order?", an audit)
+            swapped = (frames._swapped_orders(frame, inside)
+                       if rotation is None and inside is not None and len(inside)
+                       and frames.SWAP_RANGE[0] <= away <= frames.SWAP_RANGE[1] else None)
             guess["likely"] = (f"another frame? {away:.0%} of the normals face away from the "
-                               "camera (a world-frame export, or channels in BGR order?): see "
-                               f"docs/conventions.md; {frames.world_note(rotation is not None)}")
+                               "camera (a world-frame export, or channels in BGR order?): "
+                               + (f"{swapped}; " if swapped else "")
+                               + f"see docs/conventions.md; "
+                               f"{frames.world_note(rotation is not None)}")
         elif own > frames.FLIP_MIN_CURL and flipped < UNTOLD * own:
             # (a texture artist's y-down detail map, slopes under 1 deg in 8 bits, was called
             # consistent: as read 43.9 % RMS, with --y-down 1.7 %)

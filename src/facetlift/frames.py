@@ -409,7 +409,7 @@ def world_note(rotated: bool | None = None) -> str:
 ZERO_PLATEAU_SHARE, ZERO_PLATEAU_RATIO = 0.005, 8
 
 
-def decode(pixels: np.ndarray, where=None) -> np.ndarray:
+def decode(pixels: np.ndarray, where=None, frame=None) -> np.ndarray:
     """uint8/uint16 pixels -> float64 normals ``v / max * 2 - 1``; NaN where the decoded
     length is outside :data:`ENCODED_LENGTH_RANGE` (background fill, not a normal). A warning
     where many of them (among `where`, (H, W) bool: the mask or alpha, where known) are
@@ -428,7 +428,9 @@ def decode(pixels: np.ndarray, where=None) -> np.ndarray:
     ``[v, v + 1)`` and the whole map decodes as ``(v + 0.5) / 255 * 2 - 1`` (its plateau then
     0; with 127 alone read as 0, the sloped texels of a second audit's truncated brick texture
     kept half a code of bias, 2.7 % RMS height error against 0.57 %). Other maps decode bit for
-    bit as ``v / 255 * 2 - 1``; 16-bit maps always do (their step, 3e-5, tilts little)."""
+    bit as ``v / 255 * 2 - 1``; 16-bit maps always do (their step, 3e-5, tilts little). The x
+    and y channels are those the normals' `frame` (:func:`parse`) reads x and y from (a BGR
+    map read with ``z,y,x`` kept its half-code tilt: x is its third channel, an audit)."""
     maxval = float(np.iinfo(pixels.dtype).max)
     n = pixels.astype(np.float64) / maxval * 2.0 - 1.0
     length = np.sqrt(np.einsum("...i,...i->...", n, n))
@@ -436,7 +438,7 @@ def decode(pixels: np.ndarray, where=None) -> np.ndarray:
     bad = (length < lo) | (length > hi)
     seen = _seen(bad, where)
     if pixels.dtype == np.uint8:
-        _zero_plateaus(n, pixels, seen)
+        _zero_plateaus(n, pixels, seen, parse(frame)[0][:2])
     n[bad] = np.nan
     # (longer only: averaging, resizing and noise shorten vectors, which renormalising fixes)
     off = length[seen] > 1.0 + UNIT_TOLERANCE
@@ -630,8 +632,10 @@ def _seen(bad: np.ndarray, where) -> np.ndarray:
     return ~bad if where is None or where.shape != bad.shape else ~bad & where.astype(bool)
 
 
-def _zero_plateaus(n: np.ndarray, pixels: np.ndarray, seen: np.ndarray) -> None:
-    """Set the x and y of `n` (the decoded uint8 `pixels`) to exactly 0 where their code is
+def _zero_plateaus(n: np.ndarray, pixels: np.ndarray, seen: np.ndarray,
+                   channels=(0, 1)) -> None:
+    """Set the x and y of `n` (the decoded uint8 `pixels`; stored in `channels`) to exactly
+    0 where their code is
     a plateau at 128 or 127 among the `seen` pixels, or, where every plateau is at 127, decode
     every channel as a truncating encoder's, ``(v + 0.5) / 255 * 2 - 1`` (:func:`decode`). A
     128 in one channel and a 127 in the other is a rounding encoder's map with one channel
@@ -642,7 +646,7 @@ def _zero_plateaus(n: np.ndarray, pixels: np.ndarray, seen: np.ndarray) -> None:
         return
     every = k == seen.size  # (then no mask to apply: a pass less per code)
     plateaus = {}
-    for ch in (0, 1):
+    for ch in channels:
         codes = pixels[..., ch]
         # (the four codes around 127.5 alone: a histogram of a 4096^2 map took 0.4 s)
         counts = {c: int(np.count_nonzero(codes == c if every else (codes == c) & seen))
@@ -783,7 +787,8 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals", rotation=N
     if n.ndim != 3 or n.shape[-1] != 3 or n.dtype.kind not in "uif":
         return normals
     grey_check(n, _where(mask, n.shape[:2], hidden), f"`{name}`")  # (before the decode's
-    n = as_float_normals(n, name, mask, hidden)  # warning)
+    floats = n.dtype.kind == "f"  # warning)
+    n = as_float_normals(n, name, mask, hidden, frame)
     read = _READ_IN.get()
     read = None if read == GRADIENT_FIELD else read  # (such normals never face away)
     # (the reader's frame, already applied, to undo for the values as stored; none where
@@ -799,6 +804,11 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals", rotation=N
     if stored is not None and len(stored) and stored.min() >= -UNSIGNED_STRAY:  # (only then
         # can the whole map be encoded; a resampled one rings a little below 0)
         _check_encoding(from_facetlift(_inside(n, mask), undo), name)
+    if floats and mask is None:  # (after the encodings' own words; an 8/16-bit map's fill
+        # is dropped by its decoding)
+        kept = drop_fill(n, name)
+        if kept is not n:
+            n, sample = kept, _inside(kept, mask, sample=CHECK_SAMPLE)
     n = rotate(to_facetlift(n, frame), turn)
     if sample is not None:
         _check_facing(rotate(to_facetlift(sample, frame), turn), name, read,
@@ -968,7 +978,8 @@ def native(a: np.ndarray) -> np.ndarray:
     return a if a.dtype.isnative else a.astype(a.dtype.newbyteorder("="))
 
 
-def as_float_normals(n: np.ndarray, name: str, mask=None, hidden=None) -> np.ndarray:
+def as_float_normals(n: np.ndarray, name: str, mask=None, hidden=None,
+                     frame=None) -> np.ndarray:
     """(H, W, 3) normals `n` as floats: a uint8/uint16 map decoded (:func:`decode`, its
     unit-length check inside `mask` and outside `hidden`) with a warning, other unsigned
     types refused; NaN at the `hidden` pixels (:func:`masked_pixels`). Shared by
@@ -986,11 +997,54 @@ def as_float_normals(n: np.ndarray, name: str, mask=None, hidden=None) -> np.nda
         )
         where = mask if hidden is None else (
             ~hidden if mask is None else np.asarray(mask).astype(bool) & ~hidden)
-        n = decode(n, where=where)
+        n = decode(n, where=where, frame=frame)
     if hidden is not None and hidden.any():  # (after the decode: an 8-bit masked map, a review)
         n = np.array(n, dtype=float)
         n[hidden] = np.nan
     return n
+
+
+#: Least share of the pixels one vector must fill, repeated exactly, for :func:`drop_fill` to
+#: take it for a float map's background fill.
+FILL_SHARE = 0.01
+
+
+def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
+    """Float normals `n` (H, W, 3) with a background fill left out (NaN): a vector found at
+    a corner of the image, of a length outside :data:`ENCODED_LENGTH_RANGE` (not 0: a zero
+    vector is a missing sample already), repeated exactly on at least :data:`FILL_SHARE` of
+    the pixels, with as many other finite ones (a map of one vector is a plane); with a
+    warning naming it. A PNG's black, white or mid-grey fill is dropped by
+    its decoding (:func:`decode`); the same map decoded by the user (``v / 65535 * 2 - 1``,
+    as BiNI's loader does) kept its white fill as normals (1, 1, 1): the DiLiGenT bear came
+    out joined to a 45-degree plane, 17.6 mm off instead of 0.47, with no word but a hint to
+    keep depth jumps (an audit). A copy where anything is dropped."""
+    H, W = n.shape[:2]
+    lo, hi = ENCODED_LENGTH_RANGE
+    out, said, tried = n, [], set()
+    for v in (n[0, 0], n[0, -1], n[-1, 0], n[-1, -1]):
+        key = tuple(float(x) for x in v)
+        if key in tried or not np.isfinite(v).all():
+            continue
+        tried.add(key)
+        length = float(np.sqrt(sum(x * x for x in key)))
+        if length == 0 or lo <= length <= hi:
+            continue
+        hit = (n[..., 0] == v[0]) & (n[..., 1] == v[1]) & (n[..., 2] == v[2])
+        count = int(np.count_nonzero(hit))
+        rest = int(np.count_nonzero(np.isfinite(n[..., 0]))) - count
+        if count < FILL_SHARE * H * W or rest < FILL_SHARE * H * W:
+            continue  # (too few; or everything: a plane of unnormalised normals, no fill)
+        if out is n:
+            out = np.array(n, dtype=float)
+        out[hit] = np.nan
+        said.append(f"{count} hold ({', '.join(f'{x:.4g}' for x in key)}), of length "
+                    f"{length:.3g}")
+    if said:
+        warn(f"`{name}`: a background fill, no normals, was left out: of the {H * W} pixels "
+             f"{'; '.join(said)} (a repeated vector at the image's corners; a unit normal has "
+             "length 1); give a mask to choose the pixels yourself")
+    return out
 
 
 def _check_facing(v: np.ndarray, name: str, frame=None, rotated: bool = False) -> None:

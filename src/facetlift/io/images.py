@@ -138,28 +138,46 @@ def _normal_layer(layer: str) -> bool:
     return "normal" in layer.lower() or layer.lower() in ("n", "nrm")
 
 
+#: EXR channel names (their last part, case aside) by the component they hold: Nuke writes
+#: ``red``, ``green``, ``blue``, renderers ``R``/``r``, ``X``/``x`` (refused before, an audit).
+_EXR_COMPONENTS = {"R": "R", "RED": "R", "G": "G", "GREEN": "G", "B": "B", "BLUE": "B",
+                   "X": "X", "Y": "Y", "Z": "Z", "A": "A", "ALPHA": "A"}
+
+
 def _exr_normal_channels(ch: dict, p: Path, arg: str,
                          count: int = 3) -> tuple[tuple[str, ...], str]:
-    """The `count` channels of an EXR normal map (R, G, B or X, Y, Z; the first two for a
-    two-channel map) and its alpha's name. A multilayer file (Blender's:
-    ``ViewLayer.Normal.X``, ...) without such bare channels gives its one layer whose name
-    holds "normal" (case aside; or is called "N" or "nrm", :func:`_normal_layer`); otherwise the
-    message lists the layers that could be it."""
-    for names in (("R", "G", "B")[:count], ("X", "Y", "Z")[:count]):
-        if all(c in ch for c in names):
-            return names, "A"
-    layers = {}  # layer -> its channels' last names
+    """The `count` channels of an EXR normal map (R, G, B or X, Y, Z, case aside, also
+    ``red``/``green``/``blue``; the first two for a two-channel map) and its alpha's name. A
+    multilayer file (Blender's: ``ViewLayer.Normal.X``, ...) without such bare channels gives
+    its one layer whose name holds "normal" (case aside; or is called "N" or "nrm",
+    :func:`_normal_layer`), or among several the one whose last part is "Normal" itself
+    (Cycles writes ``ViewLayer.Denoising Normal`` beside it, refused before, an audit);
+    otherwise the message lists the layers that could be it (a layer not named so, e.g. a
+    File Output node's ``Image`` or a render's ``Combined``, is never guessed)."""
+    layers: dict = {}  # layer -> {component: channel name}
     for key in ch:
         layer, _, last = key.rpartition(".")
-        if layer:
-            layers.setdefault(layer, set()).add(last)
-    found = [(layer, axes) for layer, have in sorted(layers.items())
+        comp = _EXR_COMPONENTS.get(last.upper())
+        if comp is not None:
+            layers.setdefault(layer, {}).setdefault(comp, key)
+
+    def alpha(layer):
+        return layers[layer].get("A", f"{layer}.A" if layer else "A")
+
+    bare = layers.get("", {})
+    for axes in (("R", "G", "B")[:count], ("X", "Y", "Z")[:count]):
+        if all(a in bare for a in axes):
+            return tuple(bare[a] for a in axes), alpha("")
+    found = [(layer, axes) for layer, have in sorted(layers.items()) if layer
              for axes in (("X", "Y", "Z")[:count], ("R", "G", "B")[:count])
-             if set(axes) <= have]
+             if set(axes) <= set(have)]
     normal = [(layer, axes) for layer, axes in found if _normal_layer(layer)]
-    if len(normal) == 1:
-        layer, axes = normal[0]
-        return tuple(f"{layer}.{a}" for a in axes), f"{layer}.A"
+    own = [(layer, axes) for layer, axes in normal
+           if layer.rpartition(".")[2].strip().lower() == "normal"]
+    pick = normal if len(normal) == 1 else own if len(own) == 1 else []
+    if pick:
+        layer, axes = pick[0]
+        return tuple(layers[layer][a] for a in axes), alpha(layer)
     which = ("; a multilayer file needs one layer named normal (or N) with them, and its layers "
              f"with {('two', 'three')[count - 2]} components are "
              f"{', '.join(layer for layer, _ in found)}"
@@ -167,8 +185,8 @@ def _exr_normal_channels(ch: dict, p: Path, arg: str,
                 if len(normal) > 1 else ": save the normal pass alone, or as its own file")
              if found else "")
     want = "R, G, B or X, Y, Z" if count == 3 else "R, G or X, Y (a two-channel map)"
-    if count == 3 and not which and any(all(c in ch for c in two) for two in (("R", "G"),
-                                                                               ("X", "Y"))):
+    if count == 3 and not which and any(all(c in bare for c in two) for two in (("R", "G"),
+                                                                                 ("X", "Y"))):
         # (x and y alone: a two-channel map, read with the encoding that rebuilds z; named as
         # for a two-channel .npy or TIFF, a user's check)
         which = ("; x and y alone are a two-channel (BC5/RG) map: read it with "
@@ -246,7 +264,7 @@ def _decode_unit(pixels: np.ndarray, path: Path, arg: str, where=None, encoding:
     if encoding == "xy" and (pixels.dtype in frames.ENCODED_DTYPES or pixels.dtype.kind == "f"):
         return frames.decode_xy(pixels, where=where, frame=frame)
     if pixels.dtype in frames.ENCODED_DTYPES:
-        return frames.decode(pixels, where=where)
+        return frames.decode(pixels, where=where, frame=frame)
     if pixels.dtype.kind == "f":
         return pixels.astype(np.float64)
     raise ValueError(
