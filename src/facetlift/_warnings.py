@@ -24,7 +24,30 @@ def warn(message: str, category: type[Warning] = UserWarning, **fields) -> None:
         level += 1
     w = category(message, **fields)
     w.from_facetlift = True  # (told from others' warnings where facetlift re-emits a record)
+    stack = getattr(_LOCAL, "stack", None)
+    if stack:  # (a recording thread: straight to its record, past the filters and the
+        # registries, so that no earlier display of the same line keeps it out of a record)
+        where = ("sys", 1) if frame is None else (frame.f_code.co_filename, frame.f_lineno)
+        stack[-1](w, category, *where, None, None)
+        return
     warnings.warn(w, category, stacklevel=level)
+
+
+def reemit(w) -> None:
+    """Show a recorded warning (a ``warnings.WarningMessage``) as ``warnings.warn`` would
+    have from the caller's line: through the filters, with the registry and module of the
+    first frame outside facetlift, so that the filters' once-per-line display holds across
+    calls (re-emitted without a registry, a ``prior_fit`` call's warnings came again on every
+    turn of a user's loop, an audit)."""
+    frame = sys._getframe(1)
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE):
+        frame = frame.f_back
+    registry = module = None
+    if frame is not None:
+        registry = frame.f_globals.setdefault("__warningregistry__", {})
+        module = frame.f_globals.get("__name__")
+    warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, module=module,
+                           registry=registry)
 
 
 #: The warning capture shared by the threads that record (:func:`recording`).
@@ -51,11 +74,12 @@ _ALWAYS = ("always", _MARK, Warning, None, 0)
 def _set_filters(entries, target=None) -> None:
     """The filter list `target` (default: the current ``warnings.filters``) holds `entries`,
     changed in place (other threads' in-place changes and their saved references keep
-    referring to it), the warnings module's caches told."""
+    referring to it). The warnings module is not told (``_filters_mutated``): that would
+    empty every module's registry of warnings shown once, and each recording block then
+    showed them again (a user's loop over ``prior_fit`` calls, an audit); the capture's
+    "always" entry needs no emptied registry, as facetlift's own warnings reach a record past
+    the registries (:func:`warn`)."""
     (warnings.filters if target is None else target)[:] = entries
-    mutated = getattr(warnings, "_filters_mutated", None)
-    if mutated is not None:
-        mutated()
 
 
 def _take_down() -> None:

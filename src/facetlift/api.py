@@ -6,12 +6,11 @@ import contextlib
 import inspect
 import logging
 import time
-import warnings
 
 import numpy as np
 
 from . import frames, memory, methods
-from ._warnings import recording, warn
+from ._warnings import recording, reemit, warn
 from .conventions import CORNER_OFFSETS
 from .domain import Domain
 from .linalg import SolverError
@@ -427,7 +426,7 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
         # audit)
         if (aligned is None or "prior_fit=" in str(w.message)
                 or not getattr(w.message, "from_facetlift", False)):
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            reemit(w)
     if failed is not None:
         raise failed
     details["seconds"] = time.perf_counter() - t0
@@ -452,7 +451,7 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
                          + ("; a prior with an offset needs prior_fit='affine' (a scale alone "
                             "cannot align it)" if kind == "scale" else ""))
                 w.message = w.category(text)
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            reemit(w)
         # (left_out always there: a fitted run's lookup of it raised KeyError, a docs check)
         surface.info.setdefault("prior", {}).update(fit=details, left_out=False)
     seconds = surface.info.get("seconds")

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ._progress import announce
-from ._warnings import recording, warn
+from ._warnings import recording, reemit, warn
 from .errors import CameraWarning
 
 #: Output kinds (``--save``) -> file names written into the output folder.
@@ -789,7 +789,7 @@ def recorded_warnings(on_warning=None):
     except BaseException:
         if on_warning is None:  # (a caller that heard them as they came has them already)
             for w in kept:
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+                reemit(w)
         raise
 
 
