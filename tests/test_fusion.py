@@ -281,6 +281,19 @@ def test_perspective_prior_must_be_positive():
     prior[3, 4] = -2.0
     with pytest.raises(ValueError, match="`prior` must hold positive z-depths .* got -2.0"):
         facetlift.integrate(n, K=K, prior=prior)
+    # a sparse metric map with one sample behind the camera among 50: left out, as points
+    # are (it was refused as relative depth, a perspective audit); 4 of 50 are refused
+    rng = np.random.default_rng(3)
+    idx = rng.choice(24 * 28, 50, replace=False)
+    sparse = np.full(24 * 28, np.nan)
+    sparse[idx] = 5.0 + rng.random(50)
+    sparse[idx[0]] = -5.0
+    with pytest.warns(UserWarning, match=r"1 sample\(s\) in the mask with a non-positive"):
+        facetlift.integrate(n, K=K, prior=sparse.reshape(24, 28))
+    sparse[idx[:4]] = -5.0
+    with pytest.raises(ValueError, match=r"`prior` must hold positive z-depths .*\(4 "
+                       r"non-positive sample\(s\), 4 of them negative, of 50\)"):
+        facetlift.integrate(n, K=K, prior=sparse.reshape(24, 28))
     # a map of nothing but 0 (a user's check): the message says to write NaN
     with pytest.raises(ValueError, match=r"672 of them are 0: if 0 marks an unknown depth, "
                        "write NaN"):

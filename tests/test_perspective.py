@@ -632,3 +632,41 @@ def test_subsampled_takes_a_positive_integer_stride():
             Pinhole(K).subsampled(bad)
         with pytest.raises(ValueError, match=r"`stride` must be a positive integer"):
             Orthographic(1.0).subsampled(bad)
+
+
+def test_a_perspective_audits_camera_mistakes_are_named(tmp_path):
+    """A perspective audit: in Python io.read_K dropped the image size a calibration file
+    states (a K of the 1.5x larger image passed without a word; --K refused it); a K kept
+    from before a 4/3 upsample was not caught (3/4 was no size checked); a normalised K
+    (0.87 0.87 0.5 0.5) was asked about millimetres and another image; a pasted K.tolist()
+    was read as a missing file."""
+    import warnings
+
+    from facetlift import io
+    from facetlift.errors import CameraWarning
+    from facetlift.io.dataset import inline_K
+
+    (tmp_path / "cameras.txt").write_text("# Camera list\n1 PINHOLE 459 384 600 600 229.5 192\n")
+    assert io.read_K(tmp_path / "cameras.txt")[0, 0] == 600  # (no shape: as before)
+    with pytest.raises(ValueError, match=r"looks like that image resized by 2/3 .* fx fy cx cy = "
+                       r"400 400 152.5 127.5"):
+        io.read_K(tmp_path / "cameras.txt", shape=(256, 306, 3))
+    assert io.read_K(tmp_path / "cameras.txt", shape=(384, 459))[0, 0] == 600
+    g = facetlift.synthetic.analytic("sphere", 96)
+    H = W = 96
+    K = np.array([[120.0, 0, (W - 1) / 2], [0, 120.0, (H - 1) / 2], [0, 0, 1]])
+    s = 0.75  # (the K of the image before a 4/3 upsample)
+    old = K.copy()
+    old[:2, :2] *= s
+    old[:2, 2] = s * (K[:2, 2] + 0.5) - 0.5
+    with pytest.warns(CameraWarning, match=r"centre of an image 0.75 times the size .* fx 120, "
+                      r"fy 120, cx 47.5, cy 47.5"):
+        facetlift.integrate(g.normals, g.mask, K=old)
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        facetlift.integrate(g.normals, g.mask, K=[0.87, 0.87, 0.5, 0.5])
+    said = [str(w.message) for w in got if issubclass(w.category, CameraWarning)]
+    assert len(said) == 1 and "looks normalised by the image's size" in said[0], said
+    assert "fx 83.52, fy 83.52, cx 47.5, cy 47.5" in said[0]
+    np.testing.assert_array_equal(inline_K("[[600, 0, 60], [0, 450, 200], [0, 0, 1]]"),
+                                  [[600, 0, 60], [0, 450, 200], [0, 0, 1]])

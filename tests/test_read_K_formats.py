@@ -368,7 +368,9 @@ def test_transforms_json_fl_x_alone_and_its_half_pixel(tmp_path):
     assert len(said) == 1 and "lens distortion (k1 0.02)" in said[0]
     blender = {"camera_angle_x": 0.6911112070083618, "frames": data["frames"]}
     with pytest.raises(ValueError, match=r"^`K`: .*camera_angle_x \(0\.69111\d* radians = "
-                       r"39\.5978 degrees\).*give --fov with that angle in degrees"):
+                       r"39\.5978 degrees\).*give --fov with that angle in degrees .*in "
+                       r"Python K=facetlift\.camera\.K_from_fov\(normals\.shape\[:2\], "
+                       r"degrees\)"):
         read(tmp_path, "transforms_train.json", json.dumps(blender))
 
 

@@ -568,7 +568,14 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
                            f"{other}")
     else:
         mend = problem.counts.get("facing_away_flip")
-        if mend is not None:  # (as prepare's warning: a y-down map over a floor, an audit)
+        axial = problem.counts.get("facing_away_axial")
+        if axial is not None:  # (as prepare's warning: an orthographic map given a camera)
+            guess["likely"] = (f"no camera, or a narrower one: {away:.0%} of the normals face "
+                               f"away from the camera's rays, yet {1 - axial:.1%} face the "
+                               "viewer along the optical axis, as an orthographic view's map "
+                               "does (try --orthographic, or check the K or --fov; a flip "
+                               "would not mend it)")
+        elif mend is not None:  # (as prepare's warning: a y-down map over a floor, an audit)
             guess["likely"] = (f"{mend[0]} flipped: {away:.0%} of the normals face away from "
                                f"the camera as read, {mend[1]:.1%} with {mend[0]} negated (try "
                                f"{_try(frame, mend[0], field)}; your estimator's frame is in "

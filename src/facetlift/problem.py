@@ -31,6 +31,22 @@ from .frames import EDGE_ON, GRADIENT_FIELD, reading, world_note
 BACKFACING = ("missing", "error", "outlier")
 
 
+def _faces_the_axis(cam, nf, clear, away: float):
+    """The share of the normals that face away along the optical axis (n_z < 0), where many
+    face away from a pinhole camera's rays (``away`` above :data:`BACKFACING_FRAME_HINT`) but
+    at most a few along the axis (that share at most the threshold and a quarter of
+    ``away``): an orthographic map given a camera, or a field of view too wide, which no
+    flip mends (a head-on map with a 60-degree fov was told to flip y, and came out worse,
+    an audit). None otherwise."""
+    if not away > BACKFACING_FRAME_HINT or not getattr(cam, "perspective", False):
+        return None
+    k = np.flatnonzero(clear)
+    if k.size == 0:
+        return None
+    share = float(np.mean(nf[k, 2] < 0))
+    return share if share <= min(BACKFACING_FRAME_HINT, away / 4) else None
+
+
 def _flip_mends_facing(cam, r, c, nf, clear, away: float):
     """``(axis, share)`` where many normals face away from a pinhole camera (``away`` above
     :data:`BACKFACING_FRAME_HINT`) and negating x or y alone turns all but a few of them
@@ -552,8 +568,9 @@ def prepare(
             raise ValueError("give `camera`, or `K` / `pixel_size`, not both: the camera "
                              "holds them")
     cam = make_camera(pixel_size, K) if camera is None else camera
-    _check_principal_point(cam, H, W)
-    _check_focal_length(cam, H, W, given=K)
+    if not _check_normalised(cam, H, W):
+        _check_principal_point(cam, H, W)
+        _check_focal_length(cam, H, W, given=K)
     eps = cam.grazing if outlier_eps is None else _check_eps(outlier_eps)
     isolated = _check_isolated(isolated)
     if grazing_share is not None and not (isinstance(grazing_share, (int, float, np.number))
@@ -732,8 +749,22 @@ def prepare(
         clear = ok & (np.abs(cos) > EDGE_ON)
         away = int((clear & (cos < 0)).sum()) / max(int(clear.sum()), 1)
         counts["facing_away"] = away  # (for info's frame guess: the same share)
+        axial = _faces_the_axis(cam, nf, clear, away)
         mended = _flip_mends_facing(cam, r, c, nf, clear, away)
-        if mended is not None:
+        if axial is not None and mended is not None and not axial < 0.5 * mended[1]:
+            axial = None  # (a flip mends it as well: a y-down map over a floor, whose
+            # normals face the axis too, keeps the flip's advice)
+        if axial is not None:
+            counts["facing_away_axial"] = axial  # (info's frame guess names it too)
+            Kc = cam.K
+            frame = (f"; {away:.0%} of the normals face away from the camera's rays, though "
+                     f"{1 - axial:.1%} of them face the viewer along the optical axis (z > "
+                     "0): a map of an orthographic view given a camera, or a camera whose "
+                     f"field of view is too wide for it (fx {Kc[0, 0]:g}, fy {Kc[1, 1]:g} for "
+                     f"this {W} x {H} (W x H) image): integrate it without the camera "
+                     "(--orthographic; no K in Python), or check the K or --fov; a flip of x "
+                     "or y would not mend it")
+        elif mended is not None:
             counts["facing_away_flip"] = list(mended)  # (info's frame guess names it too)
             # (a y-down map with a camera over a floor: its floor faces away, and the warning
             # asked about BGR order, world frames and K, never about y; an audit)
@@ -991,6 +1022,25 @@ def _remove_outliers(problem: Problem) -> None:
 PRINCIPAL_EDGE = 0.05
 
 
+def _check_normalised(cam, H: int, W: int) -> bool:
+    """A warning, and True, where a pinhole K looks normalised by the image's size (fx, fy
+    below 10, cx and cy within [0, 1], as some datasets and networks store it): the principal
+    point and focal length warnings then spoke of another image and of millimetres, never of
+    the scale (a perspective audit)."""
+    Kc = getattr(cam, "K", None)
+    if Kc is None:
+        return False
+    fx, fy, cx, cy = (float(Kc[0, 0]), float(Kc[1, 1]), float(Kc[0, 2]), float(Kc[1, 2]))
+    if not (fx < 10 and fy < 10 and 0 <= cx <= 1 and 0 <= cy <= 1 and min(H, W) > 10):
+        return False
+    warn(f"`K` looks normalised by the image's size (fx {fx:g}, fy {fy:g}, cx {cx:g}, cy "
+         f"{cy:g}): in pixels, multiply fx and cx by the width and fy and cy by the height; "
+         f"for this {W} x {H} (W x H) image fx {fx * W:.6g}, fy {fy * H:.6g}, cx "
+         f"{cx * W - 0.5:.6g}, cy {cy * H - 0.5:.6g} (cx, cy as pixel centres, taking the "
+         "normalised ones from the image's corner; docs/conventions.md)", CameraWarning)
+    return True
+
+
 def _check_principal_point(cam, H: int, W: int) -> None:
     """A warning where a pinhole camera's principal point lies outside the image or at its
     edge (:data:`PRINCIPAL_EDGE`): right for a crop of a corner with K shifted, but usually a
@@ -1083,8 +1133,9 @@ def _check_swapped_axes(K, H: int, W: int) -> None:
 #: against (:func:`_check_scaled_centre`): a K kept from the image before a resize. Not sizes
 #: above 1: a right K of a crop from the top-left corner of a larger image has its principal
 #: point at the centre of an image that much larger (a 1920 x 1080 camera's K on its
-#: 1280 x 720 top-left crop), a review.
-SCALED_SIZES = (0.25, 1 / 3, 0.5, 2 / 3)
+#: 1280 x 720 top-left crop), a review. 3/4 and 4/5 since a perspective audit (a K kept
+#: from before a phone's 4/3 upsample: 7.6 % relative MADE against 0.32 % and no word).
+SCALED_SIZES = (0.25, 1 / 3, 0.5, 2 / 3, 0.75, 0.8)
 
 
 def _check_scaled_centre(K, H: int, W: int) -> None:
@@ -1611,6 +1662,11 @@ MAX_PRIOR_DEPTH = 1e30
 #: negative and still be left out as bad pixels (:func:`check_prior`); more are refused
 #: (relative depth or disparity, which ``prior_fit`` aligns).
 NEGATIVE_SHARE = 0.01
+#: As many negative samples as this are left out whatever their share: a sparse map of 50
+#: metric samples with one behind the camera was refused as relative depth (its points given
+#: as (rows, cols, depths) were not), a perspective audit; a relative depth's or disparity's
+#: shift leaves far more of them negative.
+NEGATIVE_FEW = 3
 
 
 def left_out_depths(depth: np.ndarray, have: np.ndarray) -> np.ndarray | None:
@@ -1619,12 +1675,14 @@ def left_out_depths(depth: np.ndarray, have: np.ndarray) -> np.ndarray | None:
 
     A depth sensor's map marks unknown pixels by 0 (no z-depth is 0), and a few negative
     samples are bad pixels: both are left out, as points behind the camera are. Many negative
-    ones (more than :data:`NEGATIVE_SHARE` of the nonzero samples: relative depth, disparity)
-    or none positive left are refused."""
+    ones (more than :data:`NEGATIVE_SHARE` of the nonzero samples and more than
+    :data:`NEGATIVE_FEW`: relative depth, disparity) or none positive left are refused."""
     with np.errstate(invalid="ignore"):
         neg = have & (depth <= 0)
         zeros = have & (depth == 0)
-    if (have & ~neg).any() and (neg & ~zeros).sum() <= NEGATIVE_SHARE * (have & ~zeros).sum():
+    negative = int((neg & ~zeros).sum())
+    if (have & ~neg).any() and negative <= max(NEGATIVE_SHARE * (have & ~zeros).sum(),
+                                               NEGATIVE_FEW):
         return neg
     return None
 

@@ -491,7 +491,8 @@ def K_transforms(data: dict, p: Path) -> tuple[np.ndarray, tuple[int, int] | Non
             if isinstance(angle, (int, float)) else ""
         raise _KError(f"`K`: {p} gives the camera as camera_angle_x ({angle} radians{deg}), "
                       "the field of view across the width, without a focal length in pixels: "
-                      "give --fov with that angle in degrees instead of --K (fov= in Python)")
+                      "give --fov with that angle in degrees instead of --K (in Python "
+                      "K=facetlift.camera.K_from_fov(normals.shape[:2], degrees))")
     model = str(low.get("camera_model", "")).upper()
     fisheye = low.get("is_fisheye") in (True, 1, "true", "True")  # (instant-ngp's flag)
     if fisheye or "FISHEYE" in model or model == "EQUIRECTANGULAR":

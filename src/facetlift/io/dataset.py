@@ -22,8 +22,13 @@ from .images import (
 )
 
 
-def read_K(path) -> np.ndarray:
-    """Read 3x3 perspective intrinsics (OpenCV layout) from a file.
+def read_K(path, shape=None) -> np.ndarray:
+    """Read 3x3 perspective intrinsics (OpenCV layout) from a file; with `shape` (the normal
+    map's (H, W), or its (H, W, 3)), refused where the file states another image size, as
+    the command line's ``--K`` is (:func:`read_K_stated`,
+    :func:`facetlift.camera.check_image_size`: the message gives K scaled for a resize).
+    Without it a stated size goes unchecked (a K of the 1.5x larger image bent a surface 9x
+    more than the right one in Python, while ``--K`` refused it: a perspective audit).
 
     A text file holds the matrix as three rows (``np.loadtxt``; numbers separated by spaces,
     tabs or commas), or its nine numbers on one line (row by row), or the four numbers
@@ -61,9 +66,15 @@ def read_K(path) -> np.ndarray:
     ------
     ValueError
         Missing or unparsable file, another count of numbers, or a matrix that is not valid
-        intrinsics (see :mod:`facetlift.conventions`; a transposed matrix is named so).
+        intrinsics (see :mod:`facetlift.conventions`; a transposed matrix is named so); with
+        `shape`, a stated image size that differs.
     """
-    return read_K_stated(path)[0]
+    K, stated = read_K_stated(path)
+    if shape is not None:
+        from ..camera import check_image_size
+
+        check_image_size(K, stated, tuple(int(v) for v in tuple(shape)[:2]), str(path))
+    return K
 
 
 def read_K_stated(path) -> tuple[np.ndarray, tuple[int, int] | None]:
@@ -133,9 +144,10 @@ def inline_value(value) -> InlineK | None:
     """`value` as an :class:`InlineK` where it is intrinsics typed inline in a K file's place
     (``--K "3772 3759 305.9 255.1"``): a string that is no existing path and holds four
     numbers ``fx fy cx cy`` or the nine of the 3x3 matrix row by row, separated by spaces or
-    commas, parsed and checked once, as :func:`read_K` checks a file's (an :class:`InlineK`
-    is returned as it is); None for anything else (a file's path, to be read as one). The
-    command line's ``--K`` keeps it, so that the job does not parse the text again."""
+    commas (brackets aside: a pasted ``K.tolist()``), parsed and checked once, as
+    :func:`read_K` checks a file's (an :class:`InlineK` is returned as it is); None for
+    anything else (a file's path, to be read as one). The command line's ``--K`` keeps it,
+    so that the job does not parse the text again."""
     import re
 
     from ..camera import check_K
@@ -144,7 +156,9 @@ def inline_value(value) -> InlineK | None:
         return value
     if not isinstance(value, str) or os.path.exists(value):
         return None
-    words = [w for w in re.split(r"[\s,]+", value.strip()) if w]
+    # (brackets too: a pasted K.tolist(), "[[600, 0, 60], [0, 450, 200], [0, 0, 1]]", was a
+    # missing file, a perspective audit)
+    words = [w for w in re.split(r"[\s,;\[\]()]+", value.strip()) if w]
     try:
         numbers = np.array([float(w) for w in words])
     except ValueError:
