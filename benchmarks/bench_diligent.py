@@ -58,15 +58,21 @@ def load(folder: Path, *, high_byte: bool = False):
     16-bit file) instead of at its stored depth.
     """
     import imagecodecs
-    import imageio.v3 as iio
 
     path = folder / "normal_map.png"
-    rgb = iio.imread(path) if high_byte else imagecodecs.png_decode(path.read_bytes())
+    if high_byte:  # (only to read as PIL/imageio do; the rest needs neither)
+        try:
+            import imageio.v3 as iio
+        except ImportError:
+            raise SystemExit("high_byte needs imageio: pip install -e '.[bench]'") from None
+        rgb = iio.imread(path)
+    else:
+        rgb = imagecodecs.png_decode(path.read_bytes())
     if rgb.dtype not in (np.uint8, np.uint16) or rgb.ndim != 3:
         raise ValueError(f"{path}: expected 8- or 16-bit RGB; got {rgb.dtype} {rgb.shape}")
     n = rgb[..., :3].astype(np.float64) / np.iinfo(rgb.dtype).max * 2 - 1
     n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
-    mask = iio.imread(folder / "mask.png")
+    mask = imagecodecs.png_decode((folder / "mask.png").read_bytes())
     if mask.ndim == 3:
         mask = mask[..., 0]
     mask = mask > 127

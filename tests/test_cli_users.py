@@ -1430,6 +1430,15 @@ def test_the_jump_hint_names_a_dense_prior_too(capsys):
     sparse = _jump_hint(job, {**info, "prior": {"samples": 10}})
     assert "--discontinuities keeps them" in dense and "dense prior's own noise" in dense
     assert "--discontinuities keeps them" in sparse and "dense prior" not in sparse
+    # the lower weight named is a tenth of the one used ("e.g. 0.01" was named to a run at
+    # 0.01, an audit); with a blur, its sigma too
+    assert "a lower --prior-weight, e.g. 0.1," in dense
+    at = _jump_hint(SimpleNamespace(method="dgp", options={}, prior_weight=0.01),
+                    {**info, "prior": {"samples": 700}})
+    assert "e.g. 0.001," in at
+    blurred = _jump_hint(SimpleNamespace(method="dgp", options={}, prior_weight=None),
+                         {**info, "prior": {"samples": 700}, "prior_blur": {"sigma": 4.0}})
+    assert "e.g. 0.0003" in blurred and "another --prior-blur: about 1.1 times" in blurred
     # a method that cannot keep jumps names the one that can (poisson got no word); a
     # method option named prior (regularization's, a string) is no depth prior
     other = _jump_hint(SimpleNamespace(method="poisson", options={}),

@@ -118,10 +118,16 @@ def jump_hint(job, info: dict, camera_warned: bool = False,
     # (with a dense prior its own noise bends the surface alike: a fresh user's sensor depth,
     # 1 mm of noise at weight 0.5, deviated 11 deg, and only the jumps were named)
     # (with --prior-blur given, not that again: an audit)
-    also = ("" if not dense else " (or the dense prior's own noise: a lower --prior-weight, e.g. "
-            "0.001; docs/fusion.md)" if info.get("prior_blur") else
-            " (or the dense prior's own noise: a lower --prior-weight, e.g. 0.01, or "
-            "--prior-blur; docs/fusion.md)")
+    # (a tenth of the weight used: "e.g. 0.01" was named to a run at 0.01, an audit; with a
+    # blur, its sigma too, which a coarse map's misjudged size bends the surface with)
+    blurred = bool(info.get("prior_blur"))
+    given = getattr(job, "prior_weight", None)
+    weight = float(given) if given is not None else (0.003 if blurred else 1.0)
+    lower = f"a lower --prior-weight, e.g. {weight / 10:.3g}"
+    also = ("" if not dense else
+            f" (or the dense prior's own noise or blur: {lower}, or another --prior-blur: about "
+            "1.1 times the factor a coarse map was enlarged by; docs/fusion.md)" if blurred else
+            f" (or the dense prior's own noise: {lower}, or --prior-blur; docs/fusion.md)")
     # (a method that cannot keep jumps: the one that can, named; poisson and the others at
     # the same deviation got no word, a user's check)
     # ("cannot" was wrong for alpha_surface, whose graph cuts itself, and best on the bear: a

@@ -1100,8 +1100,11 @@ def _blur_check(pb: dict, prior) -> None:
                f"blurred by sigma {pb['sigma']:g} px")
         warn(f"prior_blur: the surface returned meets the blurred prior worse (weighted RMS "
              f"mismatch {last:.3g}) than the first solve did ({first:.3g}): {why}; compare "
-             "with a smaller `prior_blur` (--prior-blur) or none (a pointwise prior), and "
-             "without discontinuities (docs/fusion.md, 'Blurred priors')")
+             "with another `prior_blur` (--prior-blur: about 1.1 times the factor a coarse "
+             "map was enlarged by, more for a network's soft output; smaller for a sharper "
+             "map; a too small one was worse on the DiLiGenT bear, an audit) or none (a "
+             "pointwise prior), and without discontinuities (docs/fusion.md, 'Blurred "
+             "priors')")
 
 
 def fusion_terms(problem):
