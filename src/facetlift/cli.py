@@ -58,7 +58,7 @@ def cli(verbose, debug):
       facetlift integrate normal_map.png --mask mask.png
       facetlift integrate data/bear/ -o bear_out --save exr --save ply
       facetlift methods
-      facetlift evaluate bear_out/depth.npy --gt depth_gt.npz --mask mask.png --K K.txt
+      facetlift evaluate bear_out --gt data/bear/depth_gt.npz --K data/bear/K.txt
       facetlift bench --quick -o bench_out
 
     Run 'facetlift COMMAND --help' for the options of a command.
