@@ -1586,7 +1586,8 @@ def test_a_recording_thread_leaves_the_filters_other_threads_set_meanwhile():
 
     filters = list(warnings.filters)
 
-    def worker_records_while(between):
+    def recording_worker():
+        """A thread inside a recording block; the returned call lets it leave."""
         inside, resume = threading.Event(), threading.Event()
 
         def work():
@@ -1597,39 +1598,25 @@ def test_a_recording_thread_leaves_the_filters_other_threads_set_meanwhile():
         t = threading.Thread(target=work)
         t.start()
         inside.wait(10)
-        between()
-        resume.set()
-        t.join()
+        return lambda: (resume.set(), t.join())
 
     with warnings.catch_warnings():  # (entered before, left while the worker records)
         warnings.simplefilter("error", facetlift.FrameWarning)
-        inside, resume = threading.Event(), threading.Event()
-
-        def work():
-            with recording():
-                inside.set()
-                resume.wait(10)
-
-        t = threading.Thread(target=work)
-        t.start()
-        inside.wait(10)
-    resume.set()
-    t.join()
+        finish = recording_worker()
+    finish()
     assert warnings.filters == filters
     try:
-        worker_records_while(lambda: warnings.simplefilter("ignore", facetlift.FrameWarning))
+        finish = recording_worker()
+        warnings.simplefilter("ignore", facetlift.FrameWarning)  # (set while it records)
+        finish()
         assert warnings.filters[1:] == filters
         assert warnings.filters[0][:3] == ("ignore", None, facetlift.FrameWarning)
     finally:
         warnings.filters[:] = filters
         warnings._filters_mutated()
-    inside, resume = threading.Event(), threading.Event()
-    t = threading.Thread(target=work)
-    t.start()
-    inside.wait(10)
+    finish = recording_worker()
     with warnings.catch_warnings():  # (entered while the worker records, left after it)
-        resume.set()
-        t.join()
+        finish()
     assert warnings.filters == filters
     with pytest.warns(UserWarning, match="still heard"):
         warnings.warn("still heard", UserWarning, stacklevel=1)

@@ -85,6 +85,15 @@ def align(estimate, truth, mask=None) -> tuple[np.ndarray, np.ndarray]:
     return out, m
 
 
+def _piece_centred(est, gt, m) -> tuple[np.ndarray, np.ndarray]:
+    """The depths of `est` and `gt` at `m`, each less its mean over each of the result's
+    pieces (:func:`_pieces`)."""
+    k, n = _pieces(est, m)
+    size = np.maximum(np.bincount(k, minlength=n), 1)
+    e, g = est[m], gt[m]
+    return e - (np.bincount(k, e, n) / size)[k], g - (np.bincount(k, g, n) / size)[k]
+
+
 def _pieces(est, m) -> tuple[np.ndarray, int]:
     """``(labels, count)``: the piece of `est` (an 8-connected component of its finite
     pixels) of each pixel of `m` in row-major order, and how many pieces there are."""
@@ -173,11 +182,7 @@ def _range_ratio(est, gt, m) -> float | None:
     the estimate's pieces (:func:`_pieces`: separate objects integrated without a prior
     have mean depth 0 each, the truth keeps the gaps between them; a correct result was told
     its units were 18 times off, an audit); None where the truth's is 0."""
-    k, n = _pieces(est, m)
-    size = np.maximum(np.bincount(k, minlength=n), 1)
-    e, g = est[m], gt[m]
-    e = e - (np.bincount(k, e, n) / size)[k]
-    g = g - (np.bincount(k, g, n) / size)[k]
+    e, g = _piece_centred(est, gt, m)
     lo, hi = np.percentile(e, [1, 99])
     glo, ghi = np.percentile(g, [1, 99])
     flat = ghi - glo <= 1e-9 * max(1.0, abs(glo), abs(ghi))  # (rounding in a flat truth)
@@ -450,11 +455,7 @@ def _sign_check(est, gt, m, error: float) -> None:
     given, 0.0076 % negated, without a word, an audit)."""
     from ._warnings import warn
 
-    k, n = _pieces(est, m)
-    size = np.maximum(np.bincount(k, minlength=n), 1)
-    e, g = est[m], gt[m]
-    e = e - (np.bincount(k, e, n) / size)[k]
-    g = g - (np.bincount(k, g, n) / size)[k]
+    e, g = _piece_centred(est, gt, m)
     scale = float(np.sqrt(np.sum(e * e) * np.sum(g * g)))
     if not scale > 0 or float(np.sum(e * g)) / scale > HEIGHT_CORRELATION:
         return
