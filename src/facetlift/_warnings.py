@@ -225,7 +225,9 @@ def recording(record: bool = True, action: str = "always", on_warning=None):
             _SHARED["filters"], _SHARED["seen"] = tuple(warnings.filters), set()
             _set_filters([_ALWAYS] + [f for f in warnings.filters if f[1] is not _MARK])
             _SHARED["list"] = warnings.filters
-            _SHARED["show"] = warnings.showwarning
+            if warnings.showwarning is not _dispatch:  # (left as the display by another
+                # thread's catch_warnings: the display saved before is still the one)
+                _SHARED["show"] = warnings.showwarning
             _SHARED["restore"] = True
             warnings.showwarning = _dispatch
         _SHARED["depth"] += 1
