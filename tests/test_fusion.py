@@ -1990,3 +1990,53 @@ def test_the_torn_warning_is_gated_by_the_priors_agreement_in_a_run(monkeypatch)
     with pytest.warns(UserWarning, match=r"its samples tear the surface apart"):
         facetlift.integrate(gt.normals, gt.mask, prior=noisy, prior_weight=0.01,
                             discontinuities=True)
+
+
+def test_a_fusion_audits_mistakes_are_named():
+    """A fusion audit: a 0..255 confidence beside a prior weighed the prior 255x less (12x
+    the error) with no word; a dense prior flipped or shifted against the normals (15 and
+    4.6 mm) had no word; a prior turned on its side was told to be resized (12 mm after);
+    a per-point prior_weight array and an 8-bit PNG prior got messages with no way on."""
+    from facetlift import io
+
+    bear = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "normal_maps" \
+        / "diligent_bear"
+    if not bear.is_dir():
+        pytest.skip("the shared data is not here")
+    ds = io.read_dataset(bear)
+    n, m, K = ds["normals"], ds["mask"], ds["K"]
+    with np.load(bear / "depth_gt.npz") as z:
+        gt = np.where(m, z["depth_gt"].astype(float), np.nan)
+    noisy = gt + np.random.default_rng(0).normal(0, 1, gt.shape)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (registered: silent)
+        facetlift.integrate(n, m, K=K, prior=noisy, prior_weight=0.01)
+    for off in (noisy[::-1], np.roll(noisy, 30, 0)):
+        with pytest.warns(UserWarning, match=r"its relief hardly follows the normals'.*another "
+                          "view, or not registered"):
+            facetlift.integrate(n, m, K=K, prior=off, prior_weight=0.01)
+    with pytest.warns(UserWarning, match=r"`confidence` reaches 255 .* 0\.\.255\?"):
+        facetlift.integrate(n, m, K=K, prior=noisy, prior_weight=0.01,
+                            confidence=np.full(m.shape, 255.0))
+    with pytest.raises(ValueError, match=r"turned on its side: a depth frame in the other "
+                       r"orientation\? .*np\.rot90"):
+        facetlift.integrate(n, m, K=K, prior=np.rot90(gt))
+    r, c = np.nonzero(m)
+    with pytest.raises(ValueError, match=r"goes in the prior as a fourth array, prior=\(rows, "
+                       "cols, depths, weights\\)"):
+        facetlift.integrate(n, m, K=K, prior=(r[:50], c[:50], gt[r[:50], c[:50]]),
+                            prior_weight=np.ones(50))
+
+
+def test_an_8_bit_png_prior_is_told_how_to_go_on(tmp_path):
+    """A fusion audit: Depth Anything's demo writes its relative output as an 8-bit PNG,
+    refused as 'must be a single-channel 16-bit PNG' with no way forward."""
+    import imagecodecs
+
+    from facetlift import io
+
+    (tmp_path / "mono8.png").write_bytes(imagecodecs.png_encode(
+        np.arange(64, dtype=np.uint8).reshape(8, 8)))
+    with pytest.raises(ValueError, match=r"got dtype uint8, shape \(8, 8\): an 8-bit map holds "
+                       r"too few levels .*as \.npy"):
+        io.read_prior(tmp_path / "mono8.png", 1.0)

@@ -565,3 +565,23 @@ def test_a_fitted_integer_priors_zeros_are_values(tmp_path):
     assert np.isfinite(fitted.prior).all()
     plain = read(Job(normals=str(tmp_path / "n.npy"), prior=str(tmp_path / "rel.npy")))
     assert np.isnan(plain.prior).sum() == (codes == 0).sum()
+
+
+def test_a_fitted_prior_that_fights_the_normals_is_pointed_at_its_silhouette(monkeypatch):
+    """A fusion audit: a network's disparity fitted with prior_fit='disparity' whose band
+    along the silhouette blends into the background fought the normals (55 deg), and the
+    warning asked whether the prior needed prior_fit, which was given. The fitted run's
+    warning names the fit and the band (its threshold lowered here to see the words)."""
+    import warnings
+
+    import facetlift
+    from facetlift import api
+
+    gt = facetlift.synthetic.analytic("sphere", 48)
+    monkeypatch.setattr(api, "PRIOR_FIGHT", -1.0)
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        facetlift.integrate(gt.normals, gt.mask, prior=2 * gt.depth + 3, prior_fit="affine")
+    said = [str(w.message) for w in got if "fights them" in str(w.message)]
+    assert len(said) == 1 and "though prior_fit='affine' aligned it" in said[0], said
+    assert "band" in said[0] and "needs its scale and shift fitted" not in said[0]

@@ -451,6 +451,19 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
                          + ("; a prior with an offset needs prior_fit='affine' (a scale alone "
                             "cannot align it)" if kind == "scale" else ""))
                 w.message = w.category(text)
+            elif text.startswith("the surface deviates from its input normals by") and (
+                    "the depth prior fights them" in text):
+                # (it asked whether the prior needed prior_fit, given: a network's band along
+                # the silhouette was the cause, 55 deg -> 3.9 with it left out, an audit)
+                head = text.split("the depth prior fights them.")[0]
+                text = (f"{head}the depth prior fights them, though prior_fit={kind!r} aligned "
+                        f"it (scale {details['scale']:.4g}, shift {details['shift']:.4g}; "
+                        "info['prior']['fit']): a network's depth blends into the background "
+                        "along the object's silhouette, which the surface then follows; give "
+                        "the prior no weight in a band there (NaN within about 7 px of the "
+                        "mask's edge, or a --prior-weight-map that is 0 there; docs/fusion.md, "
+                        "'A monocular depth map'), or lower prior_weight (--prior-weight)")
+                w.message = w.category(text)
             reemit(w)
         # (left_out always there: a fitted run's lookup of it raised KeyError, a docs check)
         surface.info.setdefault("prior", {}).update(fit=details, left_out=False)

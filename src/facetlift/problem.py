@@ -672,6 +672,15 @@ def prepare(
             # of 1, so 1e-12 everywhere is the same as 1 everywhere (it was flattened by the
             # solvers' own tiny regularisers against such weights)
             conf = conf / float(conf[usable].max())
+        elif usable.any() and float(conf[usable].max()) > CONFIDENCE_ABOVE_ONE:
+            # (with a prior the values weigh the normals against it as given: an 8-bit map
+            # given as 0..255 weighed the prior 255x less, 12x the error, no word, an audit)
+            top = float(conf[usable].max())
+            warn(f"`confidence` reaches {top:.4g} (with a prior its values weigh the normals "
+                 f"against it as given: 1 is a normal of the prior's weight's units, so the "
+                 f"prior weighs {1 / top:.3g} of what it would beside a confidence of 1); an "
+                 "8-bit map given as 0..255? Give confidence / confidence.max(), or raise "
+                 "prior_weight to match (docs/fusion.md, 'Units of the weights')")
         if usable.any():
             conf = _confidence_floor(conf, usable)
         # (after the scaling: the facets without a usable normal keep the weight 1 of their
@@ -922,6 +931,16 @@ def _check_trend(problem: Problem) -> None:
 #: and 1.012, and the flat `plateau` views gained a ratio of 1.0-1.14.)
 RELIEF_FACTOR, RELIEF_FACTOR_DENSE, RELIEF_SPARSE = 2.0, 10.0, 0.25
 RELIEF_FACTOR_DENSE_LOW = 30.0
+#: A dense prior whose relief ratio is at most this (negative included) over at least
+#: RELIEF_UNRELATED_PAIRS pairs does not follow the normals at all (:func:`_check_relief`): a
+#: depth map of another view or not registered with the map (an audit's bear prior flipped
+#: up-down gave -0.02, shifted by 30 px 0.37, with no word at 15 and 4.6 mm of error; the
+#: fusion benchmark's coarse dense priors 0.64-2.64, noisy registered ones about 1).
+RELIEF_UNRELATED, RELIEF_UNRELATED_PAIRS = 0.5, 1000
+#: Fewest pairs whose relief ratio :func:`_check_relief` warns about (an audit: 2 % noisy
+#: metric samples on a cow's side view gave 24 pairs and a ratio of 2.03, warned as relative
+#: depth; exact ones there 1.5-1.84).
+RELIEF_WARN_PAIRS = 50
 
 
 def _check_relief(problem: Problem) -> None:
@@ -946,8 +965,17 @@ def _check_relief(problem: Problem) -> None:
     ratio, pairs = got
     problem.extras["prior_relief"] = ratio
     sparse = float(np.mean(problem.prior_weight > 0)) <= RELIEF_SPARSE
+    if not sparse and ratio <= RELIEF_UNRELATED and pairs >= RELIEF_UNRELATED_PAIRS:
+        problem.extras["prior_relief_warned"] = True
+        warn(f"prior: its relief hardly follows the normals' (a ratio of {ratio:.3g} over "
+             f"{pairs} pairs of nearby samples, 1 where they agree): is the depth map of "
+             "another view, or not registered with the normal map (shifted, flipped, turned, "
+             "cropped differently)? Its depths pull the surface off its normals")
+        return
     factor = RELIEF_FACTOR if sparse else RELIEF_FACTOR_DENSE
     low = RELIEF_FACTOR if sparse else RELIEF_FACTOR_DENSE_LOW
+    if pairs < RELIEF_WARN_PAIRS:  # (24 pairs of noisy metric SfM points read 2.03, and the
+        return  # advice, prior_fit, then left the prior out: the result no longer metric)
     if ratio > 0 and not 1.0 / low <= ratio <= factor and problem.perspective:
         problem.extras["prior_relief_warned"] = True
         # (log-depth relief: the same in any units, so a metric prior gives 1 whatever they
@@ -1257,8 +1285,13 @@ def _weight_image(a, name: str, shape: tuple[int, int]) -> np.ndarray:
             raise ValueError(f"`{name}` must be a finite number >= 0; got {a!r}")
         return np.full(shape, float(arr))
     if arr.shape != shape:
+        # (a weight per point of a (rows, cols, depths) prior: its place is the fourth array,
+        # an audit)
+        points = ("; a weight per point of a (rows, cols, depths) prior goes in the prior "
+                  "as a fourth array, prior=(rows, cols, depths, weights)"
+                  if name == "prior_weight" and arr.ndim == 1 else "")
         raise ValueError(f"`{name}` must be a number or have shape {shape} to match `normals`; "
-                         f"got shape {arr.shape}")
+                         f"got shape {arr.shape}{points}")
     return arr
 
 
@@ -1561,6 +1594,17 @@ def coarse_prior_hint(small, shape) -> str:
     samples at their footprints' centres (on the DiLiGenT bear a 4x coarse noisy sensor gave
     0.159 mm so, 0.376 mm upsampled to a dense map: an audit), or upsampled; of any other
     size, :func:`resize_prior_hint`; "" where `small` is no (h, w) size."""
+    try:  # (turned on its side: a portrait frame's depth beside a landscape map, told to
+        # resize it, which made 12 mm of error from 0.03 without a word, an audit)
+        turned = tuple(int(v) for v in small) == tuple(int(v) for v in shape)[::-1]
+        turned = turned or coarse_factor(tuple(small)[::-1], shape) is not None
+    except (TypeError, ValueError):
+        turned = False
+    if turned and int(shape[0]) != int(shape[1]):
+        return ("; it is the map's size (or a whole factor of it) turned on its side: a "
+                "depth frame in the other orientation? Turn it to the normal map's "
+                "(np.rot90(prior) or np.rot90(prior, -1), or prior.T for a transposed array: "
+                "the one whose depths then follow the normals' shape)")
     f = coarse_factor(small, shape)
     if f is None:
         return resize_prior_hint(small, shape)
@@ -1656,6 +1700,11 @@ MAX_PRIOR_WEIGHT = 1e10
 
 #: The largest |depth| of a prior sample (2e200 overflowed the energy's squares).
 MAX_PRIOR_DEPTH = 1e30
+
+
+#: Largest confidence taken without a word beside a prior (:func:`prepare`; the values then
+#: weigh the normals against the prior as given, and confidences are usually in [0, 1]).
+CONFIDENCE_ABOVE_ONE = 1.5
 
 
 #: Largest share of a perspective prior's nonzero samples (in the mask) that may be

@@ -1036,8 +1036,14 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior",
     if ext == ".png":
         a = _decode_image(p, ext, arg)
         if a.dtype != np.uint16 or a.ndim != 2:
+            # (Depth Anything's run.py writes its relative output as an 8-bit PNG: refused
+            # with no way forward, an audit)
+            eight = (": an 8-bit map holds too few levels for a depth (a network's relative "
+                     "output as its demo writes it? save its float output as .npy, or give "
+                     "this one as .npy, np.save('prior.npy', imageio.imread(path)), with "
+                     "--prior-fit)" if a.dtype == np.uint8 else "")
             raise ValueError(f"`{arg}`: {p} must be a single-channel 16-bit PNG (depth / scale); "
-                             f"got dtype {a.dtype}, shape {a.shape}")
+                             f"got dtype {a.dtype}, shape {a.shape}{eight}")
         if scale is None:
             flag = "--" + scale_arg.replace("_", "-")
             where = f"{scale_arg}= in Python; " if scale_arg == "prior_scale" else ""
