@@ -1213,3 +1213,22 @@ def test_a_frame_without_its_prior_runs_from_its_normals_with_a_warning(tmp_path
     recs = [json.loads(line) for line in out.splitlines()]
     assert code == 1 and all(r["status"] == "error" and "needs a `prior`" in r["error"]
                              for r in recs), recs
+    # dataset folders without a prior_depth.* alike (every folder counted as holding one
+    # before, a review); one holding it makes the others optional
+    from facetlift import synthetic
+
+    g = synthetic.analytic("sphere", 32)
+    for k in (0, 1):
+        d = tmp_path / "sets" / f"obj{k}"
+        d.mkdir(parents=True)
+        io.write_normals(d / "normal_map.png", np.nan_to_num(g.normals))
+        io.write_mask(d / "mask.png", g.mask)
+    args = ["batch", str(tmp_path / "sets"), "--workers", "1", "-s", "npy", "--prior-fit",
+            "affine", "--json", "--no-progress"]
+    code = main(args + ["-o", str(tmp_path / "s1")])
+    recs = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert code == 1 and all("needs a `prior`" in r["error"] for r in recs), recs
+    np.save(tmp_path / "sets" / "obj0" / "prior_depth.npy", 2 * g.depth + 3)
+    code = main(args + ["-o", str(tmp_path / "s2")])
+    recs = {r["name"]: r for r in map(json.loads, capsys.readouterr().out.splitlines())}
+    assert code == 0 and any("no depth prior" in w for w in recs["obj1"]["warnings"]), recs

@@ -153,6 +153,11 @@ def test_the_offsets_and_the_range_follow_the_results_own_pieces():
     assert rec["normalized_error"] < 1e-9 and rec["range_ratio"] == pytest.approx(1.0, 1e-3)
     with pytest.warns(UserWarning, match="is 4 times the ground truth's"):
         metrics.evaluate(facetlift.integrate_gradients(p, q, mask, pixel_size=4), truth)
+    # a result whose background is stored as 0, scored with a mask: its pieces are within
+    # the mask (with its 0s the two objects were one piece, 31.5 %, a review)
+    zero_bg = np.where(mask, s.depth, 0.0)
+    assert metrics.evaluate(zero_bg, truth, mask)["normalized_error"] < 1e-9
+    assert metrics.normalized_error(zero_bg, truth, mask)[0] < 1e-9
 
 
 def test_a_result_stored_as_height_is_told():

@@ -1170,7 +1170,15 @@ def test_a_float_maps_background_fill_is_left_out(fill):
     with warnings.catch_warnings():  # (a plane facing the camera around it: kept)
         warnings.simplefilter("error")
         s = facetlift.integrate(np.where(mask[..., None], n, np.array([0.0, 0.0, 1.0])))
-    assert np.isfinite(s.depth).all()
+        assert np.isfinite(s.depth).all()
+        # unnormalised normals (-p, -q, 1) of a ridge, and a tent's ground scaled by 2: flat
+        # parts repeated at the corners, no fill (they were dropped, or the whole map
+        # refused, a review)
+        p = np.where(np.arange(64) < 32, 1.2, -1.2)[None].repeat(64, 0)
+        assert np.isfinite(facetlift.integrate(np.dstack([-p, 0 * p, 1 + 0 * p])).depth).all()
+        tent = facetlift.synthetic.analytic("tent", 64)
+        got = facetlift.integrate(2 * tent.normals, tent.mask).depth
+        np.testing.assert_array_equal(np.isfinite(got), tent.mask)
 
 
 def test_an_orthographic_map_given_a_camera_is_not_told_to_flip(tmp_path, capsys):
@@ -1190,6 +1198,22 @@ def test_an_orthographic_map_given_a_camera_is_not_told_to_flip(tmp_path, capsys
     said = [str(w.message) for w in rec if issubclass(w.category, UnusableNormalsWarning)]
     assert said and "a map of an orthographic view given a camera" in said[0], said
     assert "negated" not in said[0] and "facing_away_flip" not in s.info["input"]
+    # a y-down room with a few outlier normals: one flip mends it far more than the other,
+    # so it keeps the flip's advice (it was told it was orthographic, a review)
+    H, W = 90, 120
+    K = np.array([[100.0, 0, 59.5], [0, 100.0, 44.5], [0, 0, 1]])
+    room = np.zeros((H, W, 3))
+    room[..., 2] = 1.0
+    room[60:, :] = (0.0, 1.0, 0.0)
+    room *= [1, -1, 1]
+    rng = np.random.default_rng(0)
+    odd = rng.random((H, W)) < 0.005
+    room[odd] = rng.normal(size=(int(odd.sum()), 3))
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        facetlift.integrate(room, K=K)
+    said = [str(w.message) for w in rec if issubclass(w.category, UnusableNormalsWarning)]
+    assert said and "--normal-frame directx" in said[0] and "orthographic" not in said[0]
     np.save(tmp_path / "n.npy", np.where(g.mask[..., None], g.normals, np.nan))
     code = main(["info", str(tmp_path / "n.npy"), "--fov", "60", "--json"])
     out = capsys.readouterr().out

@@ -294,6 +294,10 @@ def test_perspective_prior_must_be_positive():
     with pytest.raises(ValueError, match=r"`prior` must hold positive z-depths .*\(4 "
                        r"non-positive sample\(s\), 4 of them negative, of 50\)"):
         facetlift.integrate(n, K=K, prior=sparse.reshape(24, 28))
+    few = np.full(24 * 28, np.nan)  # (3 of 6 negative: a zero-mean relative depth, refused)
+    few[idx[:6]] = [-1.0, -0.5, -0.2, 0.3, 0.6, 1.0]
+    with pytest.raises(ValueError, match=r"must hold positive z-depths"):
+        facetlift.integrate(n, K=K, prior=few.reshape(24, 28))
     # a map of nothing but 0 (a user's check): the message says to write NaN
     with pytest.raises(ValueError, match=r"672 of them are 0: if 0 marks an unknown depth, "
                        "write NaN"):
@@ -1636,6 +1640,19 @@ def test_a_recording_thread_leaves_the_filters_other_threads_set_meanwhile():
     finally:
         warnings.showwarning = show
     assert shown == ["heard while one records", "heard after"], shown
+    # a capture left in a list that another thread's nested catch_warnings keeps current:
+    # the next capture's snapshot of the user's filters leaves that stale entry out, so the
+    # user's error filter still raises in another thread while it records (a review)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        finish = recording_worker()
+        with warnings.catch_warnings():
+            with warnings.catch_warnings():
+                finish()
+            finish = recording_worker()
+            with pytest.raises(RuntimeWarning, match="still an error"):
+                warnings.warn("still an error", RuntimeWarning, stacklevel=1)
+            finish()
 
 
 def test_samples_move_the_pieces_of_the_normals_cuts_instead_of_tearing_islands(monkeypatch):

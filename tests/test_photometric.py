@@ -394,6 +394,13 @@ def test_pixels_whose_lights_span_badly_get_no_normal(monkeypatch):
     monkeypatch.setattr(photometric, "LIGHTS_ILL", 1e-3)  # (the cut before: 1e-6 of the
     a = _angles(photometric.fit(images, L, gt.mask)[0], gt)  # eigenvalues)
     assert (a > 10).sum() > 100 and not np.isnan(a).any()
+    monkeypatch.undo()
+    # a narrow cone of lights, only warned about, keeps its normals: the cut is relative to
+    # the set's own span (a 4-degree cone lost every normal, a review)
+    L = photometric.lights_on_cap(12, 4.0, 0)
+    with pytest.warns(UserWarning, match="nearly share a plane"):
+        n, _ = photometric.fit(photometric.simulate(gt, L, 0), L, gt.mask)
+    assert np.isnan(_angles(n, gt)).mean() < 0.01
 
 
 def test_light_mistakes_are_named():

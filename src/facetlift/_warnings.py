@@ -210,7 +210,11 @@ def recording(record: bool = True, action: str = "always", on_warning=None):
     """The warnings this thread raises in the block: recorded in the yielded list (`record`,
     and `action` "always"), or dropped (`action` "ignore"); `on_warning` (callable(message))
     also hears each as it comes. Other threads' warnings are shown as before, and threads
-    record at the same time without taking turns (:data:`_SHARED`)."""
+    record at the same time without taking turns (:data:`_SHARED`). facetlift's own warnings
+    are recorded every time; another library's (numpy's, a callback's) as the warnings
+    module lets them through: one its registry marks as shown already at that line is not
+    recorded again (emptying the registries showed every warning again on each turn of a
+    user's loop, an audit)."""
     caught: list = []
 
     def handle(message, category, filename, lineno, file=None, line=None):
@@ -222,7 +226,10 @@ def recording(record: bool = True, action: str = "always", on_warning=None):
 
     with _LOCK:
         if _SHARED["depth"] == 0:
-            _SHARED["filters"], _SHARED["seen"] = tuple(warnings.filters), set()
+            # (without a stale entry of an earlier capture, which another thread's saved
+            # list can bring back: the user's filters behind it were then ignored, a review)
+            _SHARED["filters"] = tuple(f for f in warnings.filters if f[1] is not _MARK)
+            _SHARED["seen"] = set()
             _set_filters([_ALWAYS] + [f for f in warnings.filters if f[1] is not _MARK])
             _SHARED["list"] = warnings.filters
             if warnings.showwarning is not _dispatch:  # (left as the display by another

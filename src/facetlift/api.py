@@ -422,8 +422,8 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
             failed, aligned = e, None
     said = [*said, *fitting]
     for w in said:  # (in their order; the input's only where no second run says them again;
-        # others' warnings, a progress callback's or numpy's, always: they were dropped, an
-        # audit)
+        # others' warnings, a progress callback's or numpy's, as recorded: they were dropped,
+        # an audit; one already shown at its line is not recorded again, _warnings.recording)
         if (aligned is None or "prior_fit=" in str(w.message)
                 or not getattr(w.message, "from_facetlift", False)):
             reemit(w)

@@ -826,7 +826,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     # from their normals alone with a warning: a video's frames without a network's depth
     # failed, a user's check. Where no map can have one, each is refused as a job is)
     optional = template.prior is None and template.dataset_prior and any(
-        it.prior is not None or Path(it.path).is_dir() for it in found)
+        it.prior is not None or _folder_prior(it.path) for it in found)
     for it in pending:
         if it.path in mine:
             it = replace(it, name=mine[it.path])
@@ -1288,6 +1288,21 @@ class _Bar:
         if self.bar is not None:
             self.bar.close()
         return False
+
+
+def _folder_prior(path) -> bool:
+    """Whether `path` is a dataset folder holding a ``prior_depth.*`` (or more than one: the
+    item then says so), for a batch's optional prior settings (every folder counted before:
+    a batch of folders without a prior took --prior-fit with a warning per item, a review)."""
+    from .io.dataset import _dataset_formats, _find
+
+    p = Path(path)
+    if not p.is_dir():
+        return False
+    try:
+        return _find(p, "prior_depth", _dataset_formats()["prior_depth"]) is not None
+    except ValueError:
+        return True
 
 
 class _CallableModule(types.ModuleType):

@@ -1010,9 +1010,10 @@ FILL_SHARE = 0.01
 
 
 def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
-    """Float normals `n` (H, W, 3) with a background fill left out (NaN): a vector found at
-    a corner of the image, of a length outside :data:`ENCODED_LENGTH_RANGE` (not 0: a zero
-    vector is a missing sample already), repeated exactly on at least :data:`FILL_SHARE` of
+    """Float normals `n` (H, W, 3) with a background fill left out (NaN): a vector of three
+    equal components (a decoded black, white or mid-grey) found at a corner of the image, of
+    a length outside :data:`ENCODED_LENGTH_RANGE` (not 0: a zero vector is a missing sample
+    already), repeated exactly on at least :data:`FILL_SHARE` of
     the pixels, with as many other finite ones (a map of one vector is a plane); with a
     warning naming it. A PNG's black, white or mid-grey fill is dropped by
     its decoding (:func:`decode`); the same map decoded by the user (``v / 65535 * 2 - 1``,
@@ -1028,13 +1029,16 @@ def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
             continue
         tried.add(key)
         length = float(np.sqrt(sum(x * x for x in key)))
-        if length == 0 or lo <= length <= hi:
+        # (three equal components, as a decoded black, white or grey fill has: an unnormalised
+        # map's flat ground or plane, (-p, -q, 1) of any length, was taken for a fill, a
+        # review)
+        if length == 0 or lo <= length <= hi or not key[0] == key[1] == key[2]:
             continue
         hit = (n[..., 0] == v[0]) & (n[..., 1] == v[1]) & (n[..., 2] == v[2])
         count = int(np.count_nonzero(hit))
-        rest = int(np.count_nonzero(np.isfinite(n[..., 0]))) - count
+        rest = int(np.count_nonzero(np.isfinite(out[..., 0]))) - count
         if count < FILL_SHARE * H * W or rest < FILL_SHARE * H * W:
-            continue  # (too few; or everything: a plane of unnormalised normals, no fill)
+            continue  # (too few; or everything: no normal would be left)
         if out is n:
             out = np.array(n, dtype=float)
         out[hit] = np.nan

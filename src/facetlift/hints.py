@@ -110,7 +110,7 @@ def jump_hint(job, info: dict, camera_warned: bool = False,
                 "docs/conventions.md lists the frames of common sources), its camera (a "
                 "perspective map needs its own K, in pixels: --K or --fov) and its encoding"
                 + units)
-    from .problem import BACKFACING_FRAME_HINT
+    from .problem import BACKFACING_FRAME_HINT, BLURRED_PRIOR_WEIGHT
 
     if (info.get("input") or {}).get("facing_away", 0.0) > BACKFACING_FRAME_HINT:
         return None  # (the facing-away warning asks about the frame or BGR order, which
@@ -122,7 +122,7 @@ def jump_hint(job, info: dict, camera_warned: bool = False,
     # blur, its sigma too, which a coarse map's misjudged size bends the surface with)
     blurred = bool(info.get("prior_blur"))
     given = getattr(job, "prior_weight", None)
-    weight = float(given) if given is not None else (0.003 if blurred else 1.0)
+    weight = float(given) if given is not None else (BLURRED_PRIOR_WEIGHT if blurred else 1.0)
     lower = f"a lower --prior-weight, e.g. {weight / 10:.3g}"
     also = ("" if not dense else
             f" (or the dense prior's own noise or blur: {lower}, or another --prior-blur: about "

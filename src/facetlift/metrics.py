@@ -53,7 +53,7 @@ def _pair(estimate, truth, mask):
     return est, gt, m
 
 
-def align(estimate, truth, mask=None) -> tuple[np.ndarray, np.ndarray]:
+def align(estimate, truth, mask=None, *, region=None) -> tuple[np.ndarray, np.ndarray]:
     """Shift `estimate` on each of its pieces (the 8-connected components of its defined
     pixels) by its mean difference to `truth` over the compared pixels of that piece.
 
@@ -76,7 +76,9 @@ def align(estimate, truth, mask=None) -> tuple[np.ndarray, np.ndarray]:
         The compared pixels.
     """
     est, gt, m = _pair(estimate, truth, mask)
-    k, n = _pieces(est, m)
+    if region is None:  # (the result's own pixels, within the mask where one is given)
+        region = np.isfinite(est) if mask is None else np.isfinite(est) & np.asarray(mask, bool)
+    k, n = _pieces(m, region)
     r, c = np.nonzero(m)
     diff = est[r, c] - gt[r, c]
     shift = np.bincount(k, diff, n) / np.maximum(np.bincount(k, minlength=n), 1)
@@ -85,22 +87,24 @@ def align(estimate, truth, mask=None) -> tuple[np.ndarray, np.ndarray]:
     return out, m
 
 
-def _piece_centred(est, gt, m) -> tuple[np.ndarray, np.ndarray]:
+def _piece_centred(est, gt, m, region) -> tuple[np.ndarray, np.ndarray]:
     """The depths of `est` and `gt` at `m`, each less its mean over each of the result's
-    pieces (:func:`_pieces`)."""
-    k, n = _pieces(est, m)
+    pieces (:func:`_pieces` of `region`)."""
+    k, n = _pieces(m, region)
     size = np.maximum(np.bincount(k, minlength=n), 1)
     e, g = est[m], gt[m]
     return e - (np.bincount(k, e, n) / size)[k], g - (np.bincount(k, g, n) / size)[k]
 
 
-def _pieces(est, m) -> tuple[np.ndarray, int]:
-    """``(labels, count)``: the piece of `est` (an 8-connected component of its finite
-    pixels) of each pixel of `m` in row-major order, and how many pieces there are."""
+def _pieces(m, region) -> tuple[np.ndarray, int]:
+    """``(labels, count)``: the piece of the result (an 8-connected component of `region`:
+    its finite pixels, within the mask where one was given; a background stored as 0 would
+    join separate objects without it, a review) of each pixel of `m` in row-major order, and
+    how many pieces there are."""
     from .domain import Domain
 
-    d = Domain.from_mask(np.isfinite(est))
-    comp = np.full(est.shape, -1, dtype=np.int64)
+    d = Domain.from_mask(region)
+    comp = np.full(region.shape, -1, dtype=np.int64)
     comp[d.pixels] = d.facet_component
     return comp[m], d.n_components
 
@@ -166,23 +170,23 @@ SCALE_MISMATCH = 10.0
 RANGE_MISMATCH = 1.5
 
 
-def _offset_aligned(estimate, truth, mask, check: bool = True):
+def _offset_aligned(estimate, truth, mask, check: bool = True, region=None):
     """``(aligned, truth, mask)`` of :func:`align` for the offset-aligned errors, with
     :func:`_scale_check` (unless not `check`: :func:`evaluate` has said it its own way)."""
-    aligned, m = align(estimate, truth, mask)
+    aligned, m = align(estimate, truth, mask, region=region)
     gt = np.asarray(_depth_of(truth), dtype=float)
     if check:
         _scale_check(aligned, gt, m)
     return aligned, gt, m
 
 
-def _range_ratio(est, gt, m) -> float | None:
+def _range_ratio(est, gt, m, region) -> float | None:
     """The estimate's depth range over the truth's, each from the 1st to the 99th percentile
     over `m` (a few outliers do not make the range) of the depths less their mean on each of
     the estimate's pieces (:func:`_pieces`: separate objects integrated without a prior
     have mean depth 0 each, the truth keeps the gaps between them; a correct result was told
     its units were 18 times off, an audit); None where the truth's is 0."""
-    e, g = _piece_centred(est, gt, m)
+    e, g = _piece_centred(est, gt, m, region)
     lo, hi = np.percentile(e, [1, 99])
     glo, ghi = np.percentile(g, [1, 99])
     flat = ghi - glo <= 1e-9 * max(1.0, abs(glo), abs(ghi))  # (rounding in a flat truth)
@@ -203,13 +207,13 @@ _WORDS = {
 }
 
 
-def _range_check(est, gt, m, words: str = "python") -> float | None:
+def _range_check(est, gt, m, words: str = "python", region=None) -> float | None:
     """:func:`evaluate`'s warning on an orthographic result in other units than the truth
     (:data:`RANGE_MISMATCH`), naming the settings in `words` (:data:`_WORDS`); the ratio of
     the ranges (:func:`_range_ratio`)."""
     from ._warnings import warn
 
-    ratio = _range_ratio(est, gt, m)
+    ratio = _range_ratio(est, gt, m, np.isfinite(est) if region is None else region)
     if ratio is None or 1.0 / RANGE_MISMATCH <= ratio <= RANGE_MISMATCH:
         return ratio
     say = _WORDS[words]
@@ -373,6 +377,8 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
                 f"{int(np.isfinite(gt).sum())} finite, {both} both; are they of the same view "
                 "and crop?")
     est, gt, m = _pair(est, gt, mask)
+    # (the result's pieces: its finite pixels, within the mask where one is given)
+    region = np.isfinite(est) if mask is None else np.isfinite(est) & np.asarray(mask, bool)
     if mask is None:
         _zero_background_check(est, gt, m)
     out = {"pixels": int(m.sum()),
@@ -404,7 +410,7 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
         out["notes"].append("no normalised error: a perspective result is scored after a "
                             "scale (MADE), not an offset")
     else:
-        out["range_ratio"] = ratio = _range_check(est, gt, m, words)
+        out["range_ratio"] = ratio = _range_check(est, gt, m, words, region)
         off = ratio is not None and not 1.0 / RANGE_MISMATCH <= ratio <= RANGE_MISMATCH
         if off and (est[m] > 0).all() and (gt[m] > 0).all():  # (a perspective result
             # scored without its camera:
@@ -415,12 +421,13 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
                                 "scored without its camera")
             return out
         try:  # (where the ranges differ, said above: not again as a spread)
-            out["normalized_error"], _ = _normalized(*_offset_aligned(est, gt, m, not off))
+            out["normalized_error"], _ = _normalized(*_offset_aligned(est, gt, m, not off,
+                                                                      region))
         except ValueError as e:  # (a flat truth: zero depth range)
             out["notes"].append(f"no normalised error: {e}")
         else:
             _outlier_range_check(gt, m)
-            _sign_check(est, gt, m, out["normalized_error"])
+            _sign_check(est, gt, m, out["normalized_error"], region)
     return out
 
 
@@ -439,7 +446,8 @@ def _zero_background_check(est, gt, m) -> None:
     if both > ZERO_BACKGROUND * int(m.sum()):
         warn(f"{both} of the {int(m.sum())} pixels scored hold depth 0 in both the result and "
              "the ground truth: a background stored as 0? It is scored as surface; store NaN "
-             "there, or give a mask (--mask, mask=)")
+             "there, or give a mask (--mask, mask=); if the surface does lie at depth 0 there, "
+             "all is well")
 
 
 #: Correlation of the result's and the truth's depths (each piece less its mean) below which,
@@ -448,19 +456,19 @@ def _zero_background_check(est, gt, m) -> None:
 HEIGHT_CORRELATION = -0.8
 
 
-def _sign_check(est, gt, m, error: float) -> None:
+def _sign_check(est, gt, m, error: float, region) -> None:
     """A warning where an orthographic result looks like a height (``-depth``: another tool's
     convention, or facetlift's height map read as depth): its depths run against the truth's
     (:data:`HEIGHT_CORRELATION`) and negated it scores at most half the error (20.7 % as
     given, 0.0076 % negated, without a word, an audit)."""
     from ._warnings import warn
 
-    e, g = _piece_centred(est, gt, m)
+    e, g = _piece_centred(est, gt, m, region)
     scale = float(np.sqrt(np.sum(e * e) * np.sum(g * g)))
     if not scale > 0 or float(np.sum(e * g)) / scale > HEIGHT_CORRELATION:
         return
     with np.errstate(all="ignore"):
-        flipped, _ = _normalized(*_offset_aligned(-est, gt, m, False))
+        flipped, _ = _normalized(*_offset_aligned(-est, gt, m, False, region))
     if flipped <= 0.5 * error:
         warn(f"the result's depths run against the ground truth's (correlation "
              f"{float(np.sum(e * g)) / scale:.2f}); negated it scores {100 * flipped:.3g} % "

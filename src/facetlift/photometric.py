@@ -109,8 +109,9 @@ LENGTHS_DIFFER = 1.01
 LIGHTS_SINGULAR, LIGHTS_ILL = 1e-6, 0.05
 
 
-def _check_span(L: np.ndarray) -> None:
-    """Refuse directions that span fewer than three dimensions, warn about nearly so."""
+def _check_span(L: np.ndarray) -> float:
+    """Refuse directions that span fewer than three dimensions, warn about nearly so; the
+    ratio of their smallest singular value to their largest."""
     sv = np.linalg.svd(L, compute_uv=False)
     ratio = float(sv[-1] / sv[0])
     if ratio < LIGHTS_SINGULAR:
@@ -121,6 +122,7 @@ def _check_span(L: np.ndarray) -> None:
         warn(f"`lights` nearly share a plane (their smallest singular value is {ratio:.2g} of "
              "the largest): the normals are poorly determined across it, and noise in the "
              "images turns them far; spread the lights more (docs/recipes.md)")
+    return ratio
 
 
 def fit(images, lights, mask=None, *, intensities=None, shadow: float = 0.02,
@@ -190,7 +192,11 @@ def fit(images, lights, mask=None, *, intensities=None, shadow: float = 0.02,
         raise ValueError(f"`images` must be a (k, H, W) stack of numbers; got shape "
                          f"{I.shape}, dtype {I.dtype}{colour}")
     L = _check_lights(lights, I)
-    _check_span(L)
+    # a pixel's usable lights must span the directions nearly as well as the whole set (its
+    # least eigenvalue of sum l l^T, over the largest: LIGHTS_ILL^2, or a quarter of the
+    # set's own where the set is narrower and only warned about: a 4-degree cone of lights
+    # lost every normal to the cut, a review)
+    ill = min(LIGHTS_ILL**2, 0.25 * _check_span(L) ** 2)
     H, W = I.shape[1:]
     given_mask = mask is not None
     if mask is None:
@@ -243,7 +249,7 @@ def fit(images, lights, mask=None, *, intensities=None, shadow: float = 0.02,
         sl = slice(s0, s0 + BLOCK)
         n[sl], res[sl], spare[sl] = _fit_block(flat[:, pix[sl]], L, LL, top, shadow,
                                                saturation, highlight, passes, scale,
-                                               raw_top)
+                                               raw_top, ill)
     ok = np.isfinite(n).all(axis=1)
     checked = ok & (spare > 0)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -290,11 +296,12 @@ def _brightness(flat: np.ndarray, pix: np.ndarray, scale=None) -> float:
 
 
 def _fit_block(obs, L, LL, top, shadow, saturation, highlight, passes, scale=None,
-               raw_top=None):
+               raw_top=None, ill=LIGHTS_ILL**2):
     """:func:`fit` on the observations `obs` (k, c) of c pixels (as taken; times `scale`
     (k,) per light where given, after the clipped ones, above `saturation` times `raw_top`,
-    are found): (c, 3) unit normals (NaN where none), (c,) residuals over the albedo and (c,)
-    observations beyond three."""
+    are found): (c, 3) unit normals (NaN where none, or where the lights used span the
+    directions worse than `ill`: least over largest eigenvalue of their sum l l^T), (c,)
+    residuals over the albedo and (c,) observations beyond three."""
     obs = np.asarray(obs, dtype=float)
     finite = np.isfinite(obs)  # (a NaN observation is left out, not its whole pixel)
     obs = np.where(finite, obs, 0.0)
@@ -307,7 +314,7 @@ def _fit_block(obs, L, LL, top, shadow, saturation, highlight, passes, scale=Non
         A = (w.T @ LL).reshape(-1, 3, 3)  # (sum of l l^T over the lights used)
         b = (w * obs).T @ L
         ev = np.linalg.eigvalsh(A)  # (ascending; A is symmetric, so this is its condition)
-        ok = (use.sum(axis=0) >= 3) & (ev[:, 0] > LIGHTS_ILL**2 * ev[:, 2])
+        ok = (use.sum(axis=0) >= 3) & (ev[:, 0] > ill * ev[:, 2])
         G = np.full(b.shape, np.nan)
         G[ok] = np.linalg.solve(A[ok], b[ok][..., None])[..., 0]
         rho = np.linalg.norm(G, axis=1)

@@ -31,6 +31,12 @@ from .frames import EDGE_ON, GRADIENT_FIELD, reading, world_note
 BACKFACING = ("missing", "error", "outlier")
 
 
+#: Where the normals face the optical axis but not a pinhole camera's rays, the map is taken
+#: for an orthographic one given a camera only if negating x or y alone leaves shares facing
+#: away within this factor of each other (:func:`prepare`).
+FLIPS_EVEN = 2.0
+
+
 def _faces_the_axis(cam, nf, clear, away: float):
     """The share of the normals that face away along the optical axis (n_z < 0), where many
     face away from a pinhole camera's rays (``away`` above :data:`BACKFACING_FRAME_HINT`) but
@@ -47,22 +53,31 @@ def _faces_the_axis(cam, nf, clear, away: float):
     return share if share <= min(BACKFACING_FRAME_HINT, away / 4) else None
 
 
+def _flip_shares(cam, r, c, nf, clear) -> dict:
+    """``{axis: share}``: the share of the `clear` normals that would face away from the
+    pinhole camera with x or y negated ({} without a camera or clear normals)."""
+    k = np.flatnonzero(clear)
+    if k.size == 0 or not getattr(cam, "perspective", False):
+        return {}
+    shares = {}
+    for axis, sign in (("y", (1.0, -1.0, 1.0)), ("x", (-1.0, 1.0, 1.0))):
+        with np.errstate(invalid="ignore"):
+            cf = cam.view_cosine(r[k], c[k], nf[k] * np.array(sign), unit=True)
+        shares[axis] = float(np.mean(cf < 0))
+    return shares
+
+
 def _flip_mends_facing(cam, r, c, nf, clear, away: float):
     """``(axis, share)`` where many normals face away from a pinhole camera (``away`` above
     :data:`BACKFACING_FRAME_HINT`) and negating x or y alone turns all but a few of them
     toward it (the share facing away then: at most that threshold and a quarter of
     ``away``): a map read with y (or x) the wrong way round. None otherwise, and always
     without a camera, whose view cosine is n_z whatever x and y are."""
-    if not away > BACKFACING_FRAME_HINT or not getattr(cam, "perspective", False):
+    if not away > BACKFACING_FRAME_HINT:
         return None
-    k = np.flatnonzero(clear)
-    if k.size == 0:
+    shares = _flip_shares(cam, r, c, nf, clear)
+    if not shares:
         return None
-    shares = {}
-    for axis, sign in (("y", (1.0, -1.0, 1.0)), ("x", (-1.0, 1.0, 1.0))):
-        with np.errstate(invalid="ignore"):
-            cf = cam.view_cosine(r[k], c[k], nf[k] * np.array(sign), unit=True)
-        shares[axis] = float(np.mean(cf < 0))
     axis = min(shares, key=shares.get)
     share = shares[axis]
     return (axis, share) if share <= min(BACKFACING_FRAME_HINT, away / 4) else None
@@ -760,9 +775,15 @@ def prepare(
         counts["facing_away"] = away  # (for info's frame guess: the same share)
         axial = _faces_the_axis(cam, nf, clear, away)
         mended = _flip_mends_facing(cam, r, c, nf, clear, away)
-        if axial is not None and mended is not None and not axial < 0.5 * mended[1]:
-            axial = None  # (a flip mends it as well: a y-down map over a floor, whose
-            # normals face the axis too, keeps the flip's advice)
+        if axial is not None and mended is not None:
+            # (an orthographic map's silhouette faces away on every side alike, so negating x
+            # or y mends it about equally; a y-down map over a floor, whose normals face the
+            # axis too, is mended by one flip far more than by the other: the flip's advice,
+            # as before; a review found a flipped room told it was orthographic)
+            shares = _flip_shares(cam, r, c, nf, clear)
+            even = max(shares.values()) <= FLIPS_EVEN * min(shares.values()) + 1e-3
+            if not (even and axial < 0.5 * mended[1]):
+                axial = None
         if axial is not None:
             counts["facing_away_axial"] = axial  # (info's frame guess names it too)
             Kc = cam.K
@@ -1711,10 +1732,10 @@ CONFIDENCE_ABOVE_ONE = 1.5
 #: negative and still be left out as bad pixels (:func:`check_prior`); more are refused
 #: (relative depth or disparity, which ``prior_fit`` aligns).
 NEGATIVE_SHARE = 0.01
-#: As many negative samples as this are left out whatever their share: a sparse map of 50
-#: metric samples with one behind the camera was refused as relative depth (its points given
-#: as (rows, cols, depths) were not), a perspective audit; a relative depth's or disparity's
-#: shift leaves far more of them negative.
+#: As many negative samples as this (and at most a tenth of the samples) are left out
+#: whatever their share: a sparse map of 50 metric samples with one behind the camera was
+#: refused as relative depth (its points given as (rows, cols, depths) were not), a
+#: perspective audit; a relative depth's or disparity's shift leaves far more of them negative.
 NEGATIVE_FEW = 3
 
 
@@ -1730,8 +1751,11 @@ def left_out_depths(depth: np.ndarray, have: np.ndarray) -> np.ndarray | None:
         neg = have & (depth <= 0)
         zeros = have & (depth == 0)
     negative = int((neg & ~zeros).sum())
-    if (have & ~neg).any() and negative <= max(NEGATIVE_SHARE * (have & ~zeros).sum(),
-                                               NEGATIVE_FEW):
+    nonzero = int((have & ~zeros).sum())
+    # (the few only where they are a small share too: 3 of 6, a zero-mean network output, is
+    # relative depth, a review)
+    if (have & ~neg).any() and negative <= max(NEGATIVE_SHARE * nonzero,
+                                               min(NEGATIVE_FEW, 0.1 * nonzero)):
         return neg
     return None
 
