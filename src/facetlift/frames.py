@@ -437,11 +437,23 @@ def decode(pixels: np.ndarray, where=None, frame=None) -> np.ndarray:
     lo, hi = ENCODED_LENGTH_RANGE
     bad = (length < lo) | (length > hi)
     seen = _seen(bad, where)
+    channels = parse(frame)[0]
     if pixels.dtype == np.uint8:
-        _zero_plateaus(n, pixels, seen, parse(frame)[0][:2])
+        _zero_plateaus(n, pixels, seen, channels[:2])
+    flat_z = _constant_z(pixels, channels, where)
+    if flat_z is not None and np.mean(np.abs(length[_seen(np.zeros_like(bad), where)] - 1.0)
+                                      > 2 * UNIT_TOLERANCE) <= UNIT_SHARE:
+        flat_z = None  # (unit vectors all: planes of one slope each, a roof's, not a fill)
     n[bad] = np.nan
     # (longer only: averaging, resizing and noise shorten vectors, which renormalising fixes)
     off = length[seen] > 1.0 + UNIT_TOLERANCE
+    if flat_z is not None and not (off.size and off.mean() > UNIT_SHARE):
+        # (a two-channel map whose blue fill decodes between 0 and 1: its flat texels too
+        # short, left out as fill, the rest bent; 31 % of a texture kept, 29.7 % RMS, and no
+        # word, a texture artist's audit; 0 faces away and 255 is too long: said elsewhere)
+        warn(f"the map's z channel holds one code, {flat_z}, at "
+             "every pixel while x and y vary: is z stored? A two-channel map (BC5, RG) "
+             f"stores x and y only, and its filled channel is not z: {REBUILD_Z}", FrameWarning)
     if off.size and off.mean() > UNIT_SHARE:
         # (a texture artist's map with the blue channel fixed at 255, as two-channel bakes are
         # often filled, read as 'consistent' and lost 29 % of its height)
@@ -625,6 +637,32 @@ def decode_xy(values: np.ndarray, where=None, frame=None) -> np.ndarray:
     return n
 
 
+def _constant_z(pixels: np.ndarray, channels, where) -> int | None:
+    """The one code the z channel of the integer map `pixels` (stored in ``channels[2]``)
+    holds at every pixel inside `where` (or at all), above 0 and below the type's largest
+    (those decode to a normal facing away or too long, which other checks name), where x and
+    y vary; None otherwise."""
+    if pixels.ndim != 3 or pixels.shape[-1] < 3 or min(pixels.shape[:2]) < 2:
+        return None
+    z = pixels[..., channels[2]]
+    inside = None if where is None else np.asarray(where)
+    if inside is not None and inside.shape == z.shape:
+        inside = inside.astype(bool)
+        if inside.sum() < ENCODING_CHECK_PIXELS:
+            return None
+        z = z[inside]
+        xy = [pixels[..., ch][inside] for ch in channels[:2]]
+    else:
+        if z.size < ENCODING_CHECK_PIXELS:
+            return None
+        xy = [pixels[..., ch] for ch in channels[:2]]
+    first = z.flat[0]
+    top = np.iinfo(pixels.dtype).max
+    if not 0 < int(first) < top or not (z == first).all():
+        return None
+    return int(first) if any(a.min() != a.max() for a in xy) else None
+
+
 def _seen(bad: np.ndarray, where) -> np.ndarray:
     """The pixels a decode's checks count: a valid length (not `bad`), inside `where` ((H, W)
     bool, the mask or alpha) where it is given with the map's shape."""
@@ -803,7 +841,10 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals", rotation=N
     stored = None if sample is None else from_facetlift(sample, undo)
     if stored is not None and len(stored) and stored.min() >= -UNSIGNED_STRAY:  # (only then
         # can the whole map be encoded; a resampled one rings a little below 0)
-        _check_encoding(from_facetlift(_inside(n, mask), undo), name)
+        if floats:
+            _check_encoding(from_facetlift(_inside(n, mask), undo), name)
+        else:  # (an 8/16-bit array decoded here)
+            check_integer_encoding(from_facetlift(_inside(n, mask), undo), f"`{name}`")
     if floats and mask is None:  # (after the encodings' own words; an 8/16-bit map's fill
         # is dropped by its decoding)
         kept = drop_fill(n, name)
@@ -897,6 +938,38 @@ def _strays(v: np.ndarray) -> bool:
     return out <= UNSIGNED_STRAYS * finite.size
 
 
+def _unsigned_signature(v: np.ndarray) -> bool:
+    """Whether the (k, 3) values `v` look [0, 1]-encoded: every component >= 0 (but a few
+    strays), not of unit length, and ``2 v - 1`` of unit length for most of them."""
+    if len(v) < ENCODING_CHECK_PIXELS or not _strays(v):
+        return False
+    with np.errstate(over="ignore", invalid="ignore"):
+        length = np.sqrt(np.einsum("ij,ij->i", v, v))
+        d = 2.0 * v - 1.0
+        decoded = np.sqrt(np.einsum("ij,ij->i", d, d))
+    if np.mean(np.abs(length - 1) > 0.05) < 0.5:
+        return False  # unit normals that all face up and right: a tilted plane, say
+    # (nor (n + 1) / 2: normals not of unit length, which prepare normalises; a map scaled by
+    # 1e-3, or all components >= 0 at 0.8 of unit length, was refused as [0, 1]-encoded, an
+    # audit. Not "half of them": an encoded object on a white or grey background, whose
+    # 2 v - 1 is never of unit length, passed so, a review)
+    return float(np.mean(np.abs(decoded - 1) < 0.05)) >= UNSIGNED_UNIT_SHARE
+
+
+def check_integer_encoding(v: np.ndarray, name: str) -> None:
+    """Refuse the normals `v` (k, 3) decoded from an 8/16-bit map (``v / max * 2 - 1``) that
+    still look [0, 1]-encoded (:func:`_unsigned_signature`): encoded twice, or through a
+    colour curve; --normal-range unsigned, the advice for a float map, is refused for them (a
+    texture artist's sRGB map was sent from one refusal to the other, an audit)."""
+    if _unsigned_signature(v):
+        raise ValueError(
+            f"{name}: decoded from its 8/16-bit values (v / max * 2 - 1), every component "
+            "inside the mask still lies in [0, 1] and the vectors are not unit length: it looks "
+            "encoded twice ((n + 1) / 2 stored, then encoded again) or saved through a colour "
+            "curve (sRGB: a warning says so where it fits); decode it yourself, undoing that, "
+            "and pass floats (--normal-range applies to float maps only)")
+
+
 def _check_encoding(v: np.ndarray, name: str) -> None:
     scale = encoded_scale(v)
     if scale is not None:
@@ -907,20 +980,8 @@ def _check_encoding(v: np.ndarray, name: str) -> None:
             f"length; decode it first with n = v / {scale} * 2 - 1 (or pass the {bits}-bit "
             "integer image itself)"
         )
-    if len(v) < ENCODING_CHECK_PIXELS or not _strays(v):
+    if not _unsigned_signature(v):
         return
-    with np.errstate(over="ignore", invalid="ignore"):
-        length = np.sqrt(np.einsum("ij,ij->i", v, v))
-        d = 2.0 * v - 1.0
-        decoded = np.sqrt(np.einsum("ij,ij->i", d, d))
-    if np.mean(np.abs(length - 1) > 0.05) < 0.5:
-        return  # unit normals that all face up and right: a tilted plane, say
-    unit = float(np.mean(np.abs(decoded - 1) < 0.05))
-    if unit < UNSIGNED_UNIT_SHARE:
-        return  # (nor (n + 1) / 2: normals not of unit length, which prepare normalises; a
-        # map scaled by 1e-3, or all components >= 0 at 0.8 of unit length, was refused as
-        # [0, 1]-encoded, an audit. Not "half of them": an encoded object on a white or grey
-        # background, whose 2 v - 1 is never of unit length, passed so, a review)
     read = _RANGE_READ.get()
     if read is None:  # (arrays from Python: facetlift.integrate has no option for it)
         fix = ("decode it first with n = 2 * v - 1 (or pass the 8/16-bit integer image itself; "
@@ -1069,9 +1130,16 @@ def _check_facing(v: np.ndarray, name: str, frame=None, rotated: bool = False) -
                                    f". If z really is that value, {said}: "
                                    f"{facing_hint(frame, v, rotated)}")
         )
+    with np.errstate(invalid="ignore", over="ignore"):
+        median = float(np.nanmedian(np.sqrt(np.einsum("ij,ij->i", v, v))))
+    # (a colour texture of a material folder, its albedo, was told to try a camera frame,
+    # and written as a height 335 texels tall, a texture artist's audit)
+    colour = (f"; is it a normal map at all? Its vectors' median length is {median:.2g}, a "
+              "normal map's is 1: a colour texture (an albedo), a photo or a mask"
+              if not 0.9 <= median <= 1.1 else "")
     raise ValueError(
-        f"`{name}`: {said}, {facing_hint(frame, v, rotated)}, or see docs/conventions.md for "
-        "the frame of your source"
+        f"`{name}`: {said}{colour}, {facing_hint(frame, v, rotated)}, or see "
+        "docs/conventions.md for the frame of your source"
     )
 
 

@@ -71,6 +71,10 @@ def jump_hint(job, info: dict, camera_warned: bool = False,
         return None
     if method.options().get("discontinuities") or info.get("solver") == "discontinuous":
         return None  # (bini keeps jumps by default: the flag would change nothing, a review)
+    if (job.options or {}).get("pad") == "none":
+        return None  # (a periodic integration, a tileable texture's: its heights interpolated
+        # to the corners deviate on narrow bevels without a jump, and dgp is not periodic;
+        # docs/recipes.md's own tileable recipe was sent to dgp, worse there, an audit)
     prior = info.get("prior")
     prior = prior if isinstance(prior, dict) else {}  # (regularization's is its option's name)
     if prior.get("relief_warned"):

@@ -264,7 +264,11 @@ def _decode_unit(pixels: np.ndarray, path: Path, arg: str, where=None, encoding:
     if encoding == "xy" and (pixels.dtype in frames.ENCODED_DTYPES or pixels.dtype.kind == "f"):
         return frames.decode_xy(pixels, where=where, frame=frame)
     if pixels.dtype in frames.ENCODED_DTYPES:
-        return frames.decode(pixels, where=where, frame=frame)
+        n = frames.decode(pixels, where=where, frame=frame)
+        inside = frames._inside(n, where, sample=frames.CHECK_SAMPLE)
+        if inside is not None and len(inside) and inside.min() >= -frames.UNSIGNED_STRAY:
+            frames.check_integer_encoding(inside, f"`{arg}`: {path}")
+        return n
     if pixels.dtype.kind == "f":
         return pixels.astype(np.float64)
     raise ValueError(

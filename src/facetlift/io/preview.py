@@ -270,6 +270,10 @@ def write_height(path, surface, *, height_range=None) -> tuple[Path, tuple[float
     p = Path(path)
     ext = _suffix(p, HEIGHT_FORMATS, "height map", "path")
     given = check_height_range(height_range)
+    if not hasattr(surface, "depth"):  # (a bare AttributeError for an array, an audit)
+        raise ValueError(f"`surface` must be a facetlift.Surface; got {type(surface).__name__}: "
+                         "for an (H, W) depth array give facetlift.Surface.from_depth(depth) "
+                         "(a height h is the depth -h)")
     depth = np.asarray(surface.depth, dtype=float)
     inside = np.isfinite(depth)
     if not inside.any():
