@@ -1574,3 +1574,33 @@ def test_report_title_names_the_discontinuity_route(tmp_path, monkeypatch):
     report.write_report(tmp_path / "b.png", facetlift.integrate(n, discontinuities=True), n)
     assert titles[0].endswith("method dgp")
     assert titles[1].endswith("method dgp, discontinuities")
+
+
+def test_the_command_lines_objects_and_options_as_a_script_reads_them(tmp_path, capsys):
+    """A CLI audit: --option refused the Python spellings `facetlift methods` prints (True,
+    None, inf); info --json had no status or exit code, and exited 1 with nothing on stderr;
+    evaluate --json dropped its warnings; a --json failure's object dropped the warnings
+    its error pointed at."""
+    from facetlift.cli import _parse_option
+
+    assert _parse_option("discontinuities=True") == ("discontinuities", True)
+    assert _parse_option("alpha=None") == ("alpha", None)
+    assert _parse_option("alpha=inf") == ("alpha", float("inf"))
+    assert _parse_option("solver=iterative") == ("solver", "iterative")
+    np.save(tmp_path / "nan.npy", np.full((8, 9, 3), np.nan))
+    code, out, err = run(capsys, "info", str(tmp_path / "nan.npy"), "--json")
+    rec = json.loads(out)
+    assert code == 1 and rec["status"] == "error" and rec["exit_code"] == 1
+    assert "facetlift: error:" in err
+    g = facetlift.synthetic.analytic("sphere", 32)
+    np.save(tmp_path / "est.npy", 3 * np.where(g.mask, g.depth - np.nanmean(g.depth), np.nan))
+    np.save(tmp_path / "gt.npy", np.where(g.mask, g.depth, np.nan))
+    code, out, err = run(capsys, "evaluate", str(tmp_path / "est.npy"), "--gt",
+                         str(tmp_path / "gt.npy"), "--json")
+    rec = json.loads(out)
+    assert code == 0 and any("3 times the ground truth's" in w for w in rec["warnings"]), rec
+    io.write_normals(tmp_path / "flip.png", np.nan_to_num(g.normals * [1, -1, 1]))
+    code, out, err = run(capsys, "integrate", str(tmp_path / "flip.png"), "-o",
+                         str(tmp_path / "o"), "--json", "--strict")
+    rec = json.loads(out)
+    assert code == 1 and any("y flipped" in w for w in rec["warnings"]), rec

@@ -126,6 +126,12 @@ def _parse_option(text: str) -> tuple[str, object]:
     if key in RESERVED_OPTIONS:
         raise click.BadParameter(f"{key!r} is not a method option: give "
                                  f"{RESERVED_OPTIONS[key]}", param_hint="--option")
+    # (Python's spellings too, as `facetlift methods` prints the defaults: True, None and
+    # inf were refused as strings, an audit)
+    python = {"True": True, "False": False, "None": None, "inf": float("inf"),
+              "-inf": float("-inf")}
+    if value.strip() in python:
+        return key, python[value.strip()]
     try:
         return key, json.loads(value)
     except json.JSONDecodeError:
@@ -808,10 +814,16 @@ def info(normals, gradients, mask, K, fov, normal_frame, y_down, world_to_camera
                    dataset_confidence=not no_confidence, orthographic=orthographic)
     # (for preflight scripts: as integrate would fail, on the map or on a folder's files)
     status = EXIT_INPUT if rec.get("problem") or rec.get("refused") else EXIT_OK
+    reason = rec.get("problem") or rec.get("refused")
+    if status != EXIT_OK and isinstance(reason, str):
+        # (exit 1 with nothing on stderr, the reason in the report alone: an audit)
+        _error(_as_flags(reason))
     if as_json:
         # (its warnings and problem in the command line's words, as integrate --json's: they
-        # named `K` where integrate's name --K, an audit)
-        rec = dict(rec, warnings=[_as_flags(str(w)) for w in rec.get("warnings", [])])
+        # named `K` where integrate's name --K, an audit); status and exit_code as every
+        # other command's object has them
+        rec = dict(rec, warnings=[_as_flags(str(w)) for w in rec.get("warnings", [])],
+                   status="ok" if status == EXIT_OK else "error", exit_code=status)
         for key in ("problem", "refused"):
             if isinstance(rec.get(key), str):
                 rec[key] = _as_flags(rec[key])
@@ -1203,12 +1215,19 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
                          "the same view and crop")
     sel = None if mask is None else io.read_mask(mask, est.shape, of=f"the result {result}")
     perspective = camera is not None
+    from ._warnings import recording, reemit
+
     try:
-        # (its warnings in the command line's words: --K, not perspective=True, a review)
-        rec = metrics._evaluate(est, truth, sel, perspective, "command line")
+        # (its warnings in the command line's words: --K, not perspective=True, a review;
+        # kept for --json too, as integrate's: a unit warning went to stderr alone, an audit)
+        with recording() as caught:
+            rec = metrics._evaluate(est, truth, sel, perspective, "command line")
     except ValueError as e:  # (the library's arguments, named as the command's)
         raise ValueError(str(e).replace("`estimate`", "`result`").replace("`truth`", "`gt`")
                          ) from None
+    for w in caught:
+        reemit(w)
+    rec["warnings"] = [_as_flags(str(w.message)) for w in caught]
     if not perspective and rec["scale"] is not None and K is None:
         rec["notes"].append("the result's depths are all > 0, as a perspective result's are "
                             "(an orthographic one has mean 0): give --K to score it as one "
@@ -1353,7 +1372,10 @@ def bench(out, quick, methods, models, experiments, meshes, normal_maps, data_di
         path = run_bench(out, quick=quick, methods=_split(methods), models=_split(models),
                          experiments=_split(experiments), extra_meshes=meshes,
                          extra_normal_maps=normal_maps, data_dir=data_dir,
-                         conditions=_split(conditions), progress=not no_progress,
+                         conditions=_split(conditions),
+                         # (bars only on a terminal, as integrate's and batch's: a redirected
+                         # log held tqdm's cursor moves, an audit)
+                         progress=not no_progress and sys.stderr.isatty(),
                          heldout_seed=heldout_seed)
     except ValueError as e:  # (in the flags' words: `heldout_seed` was named, an audit)
         raise click.UsageError(_as_flags(str(e))) from None
@@ -1433,6 +1455,7 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
     its reading, numpy's), as ``facetlift: warning: ...`` on stderr: Python's display named
     a line of click's or numpy's source."""
     text = _as_flags(" ".join(str(message).split()))
+    _STATE.setdefault("warnings", []).append(text)  # (for a --json failure's object)
     print(f"facetlift: warning: {text}", file=sys.stderr if file is None else file)
 
 
@@ -1465,15 +1488,18 @@ def main(argv: list[str] | None = None) -> int:
     # an in-process call, whose host's stdout is its own)
     protected = _REDIRECT["enabled"]
     protect_stdout()
-    _STATE.update(debug=False, errors=[], printed_json=False, args=tuple(args))
+    _STATE.update(debug=False, errors=[], warnings=[], printed_json=False, args=tuple(args))
     try:
         code = _main(args)
     finally:
         protect_stdout(protected)
     if code != EXIT_OK and "--json" in args and not _STATE["printed_json"]:
         # a script reading --json gets one object on stdout for a failure too
+        # (with the warnings printed before the failure, which its error may point to:
+        # "the warning above says what to try" had none in the object, an audit)
         click.echo(json.dumps({"status": _STATUS.get(code, "error"), "exit_code": code,
-                               "error": "; ".join(_STATE["errors"]) or None}))
+                               "error": "; ".join(_STATE["errors"]) or None,
+                               "warnings": list(_STATE.get("warnings") or [])}))
     return code
 
 
