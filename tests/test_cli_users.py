@@ -1604,3 +1604,6 @@ def test_the_command_lines_objects_and_options_as_a_script_reads_them(tmp_path, 
                          str(tmp_path / "o"), "--json", "--strict")
     rec = json.loads(out)
     assert code == 1 and any("y flipped" in w for w in rec["warnings"]), rec
+    code, out, err = run(capsys, "integrate", str(tmp_path / "flip.png"), "-o",
+                         str(tmp_path / "m"), "--mat-keys", "a,b", "--no-progress")
+    assert "--mat-keys a,b name a MATLAB file's variables" in err  # (ignored silently before)

@@ -345,6 +345,9 @@ def read(job: Job) -> Input:
         warn(f"`gradient_frame` {job.gradient_frame!r} applies to a gradient field "
              f"(--gradients P Q, or a .mat file holding p and q); {src.name} is a normal map, "
              "whose frame is --normal-frame: it is ignored here")
+    if job.mat_keys and not is_mat(src):  # (ignored silently, a CLI audit)
+        warn(f"`mat_keys` {','.join(job.mat_keys)} name a MATLAB file's variables; {src.name} "
+             "is no .mat file: they are ignored here")
     if given is not None:
         from .io.images import check_mask_size
 
