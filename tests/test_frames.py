@@ -1219,3 +1219,39 @@ def test_an_orthographic_map_given_a_camera_is_not_told_to_flip(tmp_path, capsys
     out = capsys.readouterr().out
     likely = json.loads(out)["frame"]["likely"]
     assert code == 0 and likely.startswith("no camera, or a narrower one"), likely
+
+
+def test_the_second_reviews_inputs_are_read_right():
+    """A second review: a pure-blue fill (-1, -1, 1) of a user-decoded map went through as a
+    55-degree plane; an anti-aliased corrugated 8-bit texture was told its z was not stored;
+    unnormalised camera-frame normals in Python were asked whether they were a normal map."""
+    N, R = 96, 30
+    r, c = np.mgrid[0:N, 0:N] + 0.5
+    x, y = c - 48, 48 - r
+    s = R * R - x * x - y * y
+    m = s > 2
+    n = np.stack([x / R, y / R, np.sqrt(np.clip(s, 0, None)) / R], -1)
+    v = np.round((n + 1) / 2 * 255)
+    v[~m] = (0, 0, 255)
+    with pytest.warns(UserWarning, match="a background fill, no normals, was left out"):
+        got = facetlift.integrate(v / 255 * 2 - 1)
+    np.testing.assert_array_equal(np.isfinite(got.depth), m)
+    th = np.radians(25)
+    cc = np.mgrid[0:1024, 0:1024][1] + 0.5
+    big = np.zeros((1024, 1024, 3))
+    big[..., 2] = np.cos(th)
+    big[..., 0] = np.where(cc % 62 < 31, -np.sin(th), np.sin(th))
+    aa = big.reshape(256, 4, 256, 4, 3).mean((1, 3))
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        facetlift.integrate(np.round((aa + 1) / 2 * 255).astype(np.uint8))
+    assert not [w for w in rec if "z channel holds one code" in str(w.message)]
+    N, R = 128, 57
+    r, c = np.mgrid[0:N, 0:N] + 0.5
+    x, y = c - 64, 64 - r
+    s = R * R - x * x - y * y
+    m = s > 2
+    cv = np.stack([x / R, -y / R, -np.sqrt(np.clip(s, 0, None)) / R], -1) * 0.6
+    with pytest.raises(ValueError, match="face away") as e:
+        facetlift.integrate(np.where(m[..., None], cv, np.nan), m)
+    assert "is it a normal map at all" not in str(e.value)

@@ -2029,8 +2029,8 @@ def test_a_fusion_audits_mistakes_are_named():
         warnings.simplefilter("error")  # (registered: silent)
         facetlift.integrate(n, m, K=K, prior=noisy, prior_weight=0.01)
     for off in (noisy[::-1], np.roll(noisy, 30, 0)):
-        with pytest.warns(UserWarning, match=r"its relief hardly follows the normals'.*another "
-                          "view, or not registered"):
+        with pytest.warns(UserWarning, match=r"its relief hardly follows the normals'.*blurred "
+                          r".*or of another view, or not registered"):
             facetlift.integrate(n, m, K=K, prior=off, prior_weight=0.01)
     with pytest.warns(UserWarning, match=r"`confidence` reaches 255 .* 0\.\.255\?"):
         facetlift.integrate(n, m, K=K, prior=noisy, prior_weight=0.01,
@@ -2057,3 +2057,25 @@ def test_an_8_bit_png_prior_is_told_how_to_go_on(tmp_path):
     with pytest.raises(ValueError, match=r"got dtype uint8, shape \(8, 8\): an 8-bit map holds "
                        r"too few levels .*as \.npy"):
         io.read_prior(tmp_path / "mono8.png", 1.0)
+
+
+def test_the_second_reviews_priors_are_read_right():
+    """A second review: a square prior 3x coarser was told it was turned on its side; a
+    sparse map of 8 samples with one behind the camera was refused (its points are not)."""
+    from facetlift.perspective import normals_from_depth
+
+    n = np.zeros((121, 120, 3))
+    n[..., 2] = 1
+    with pytest.raises(ValueError) as e:
+        facetlift.integrate(n, prior=np.ones((40, 40)))
+    assert "turned on its side" not in str(e.value) and "3x coarser" in str(e.value)
+    K = np.array([[100.0, 0, 48], [0, 100, 48], [0, 0, 1]])
+    r, c = np.mgrid[0:96, 0:96]
+    d = 10 + 0.01 * (c - 48)
+    nn = normals_from_depth(d, K)
+    idx = np.random.default_rng(0).choice(96 * 96, 8, replace=False)
+    p = np.full((96, 96), np.nan)
+    p.flat[idx] = d.flat[idx]
+    p.flat[idx[0]] = -3
+    with pytest.warns(UserWarning, match=r"1 sample\(s\) in the mask with a non-positive"):
+        facetlift.integrate(nn, K=K, prior=p)

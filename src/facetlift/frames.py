@@ -442,8 +442,9 @@ def decode(pixels: np.ndarray, where=None, frame=None) -> np.ndarray:
         _zero_plateaus(n, pixels, seen, channels[:2])
     flat_z = _constant_z(pixels, channels, where)
     if flat_z is not None and np.mean(np.abs(length[_seen(np.zeros_like(bad), where)] - 1.0)
-                                      > 2 * UNIT_TOLERANCE) <= UNIT_SHARE:
-        flat_z = None  # (unit vectors all: planes of one slope each, a roof's, not a fill)
+                                      > 2 * UNIT_TOLERANCE) <= FILL_OFF_UNIT:
+        flat_z = None  # (unit vectors nearly all: planes of one slope each, a roof's, even
+        # anti-aliased along its ridges, a review; a filled channel puts most texels off)
     n[bad] = np.nan
     # (longer only: averaging, resizing and noise shorten vectors, which renormalising fixes)
     off = length[seen] > 1.0 + UNIT_TOLERANCE
@@ -635,6 +636,11 @@ def decode_xy(values: np.ndarray, where=None, frame=None) -> np.ndarray:
     if bad is not None:
         n[bad] = np.nan
     return n
+
+
+#: Share of a map's texels off unit length (by twice :data:`UNIT_TOLERANCE`) above which a z
+#: channel of one code is taken for a two-channel map's fill (:func:`decode`).
+FILL_OFF_UNIT = 0.25
 
 
 def _constant_z(pixels: np.ndarray, channels, where) -> int | None:
@@ -853,7 +859,7 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals", rotation=N
     n = rotate(to_facetlift(n, frame), turn)
     if sample is not None:
         _check_facing(rotate(to_facetlift(sample, frame), turn), name, read,
-                      rotated=turn is not None)
+                      rotated=turn is not None, decoded=not floats)
     return n
 
 
@@ -1072,7 +1078,8 @@ FILL_SHARE = 0.01
 
 def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
     """Float normals `n` (H, W, 3) with a background fill left out (NaN): a vector of three
-    equal components (a decoded black, white or mid-grey) found at a corner of the image, of
+    equal components (a decoded black, white or mid-grey) or of components +-1 (a pure
+    colour's decoded codes) found at a corner of the image, of
     a length outside :data:`ENCODED_LENGTH_RANGE` (not 0: a zero vector is a missing sample
     already), repeated exactly on at least :data:`FILL_SHARE` of
     the pixels, with as many other finite ones (a map of one vector is a plane); with a
@@ -1093,7 +1100,10 @@ def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
         # (three equal components, as a decoded black, white or grey fill has: an unnormalised
         # map's flat ground or plane, (-p, -q, 1) of any length, was taken for a fill, a
         # review)
-        if length == 0 or lo <= length <= hi or not key[0] == key[1] == key[2]:
+        # (or all of them +-1, a pure colour's decoded codes 0 and max: a pure blue fill, a
+        # review)
+        coded = all(abs(x) == 1.0 for x in key)
+        if length == 0 or lo <= length <= hi or not (key[0] == key[1] == key[2] or coded):
             continue
         hit = (n[..., 0] == v[0]) & (n[..., 1] == v[1]) & (n[..., 2] == v[2])
         count = int(np.count_nonzero(hit))
@@ -1112,7 +1122,8 @@ def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
     return out
 
 
-def _check_facing(v: np.ndarray, name: str, frame=None, rotated: bool = False) -> None:
+def _check_facing(v: np.ndarray, name: str, frame=None, rotated: bool = False,
+                  decoded: bool = False) -> None:
     if len(v) < ENCODING_CHECK_PIXELS:
         return
     away = facing_away(v)
@@ -1134,12 +1145,14 @@ def _check_facing(v: np.ndarray, name: str, frame=None, rotated: bool = False) -
         median = float(np.nanmedian(np.sqrt(np.einsum("ij,ij->i", v, v))))
     # (a colour texture of a material folder, its albedo, was told to try a camera frame,
     # and written as a height 335 texels tall, a texture artist's audit)
-    colour = (f"; is it a normal map at all? Its vectors' median length is {median:.2g}, a "
+    # (only for an image read or decoded here: an array of unnormalised normals, albedo times
+    # n in a camera frame, wants the frame hint alone, a review)
+    colour = (f". Or is it a normal map at all? Its vectors' median length is {median:.2g}, a "
               "normal map's is 1: a colour texture (an albedo), a photo or a mask"
-              if not 0.9 <= median <= 1.1 else "")
+              if not 0.9 <= median <= 1.1 and (decoded or reading() is not None) else "")
     raise ValueError(
-        f"`{name}`: {said}{colour}, {facing_hint(frame, v, rotated)}, or see "
-        "docs/conventions.md for the frame of your source"
+        f"`{name}`: {said}, {facing_hint(frame, v, rotated)}, or see "
+        f"docs/conventions.md for the frame of your source{colour}"
     )
 
 
