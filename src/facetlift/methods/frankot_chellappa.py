@@ -86,6 +86,36 @@ OPTIONS = (
 )
 
 
+#: With ``pad="none"`` (periodic), :func:`run` warns where the height the slopes climb across
+#: the box, row by row and column by column, varies by more than this share of the height's
+#: own spread: the map does not tile (a tileable map climbs 0 on every row; a constant bias
+#: climbs the same on every row, which the periodic solve removes, and is no seam), and the
+#: periodic solve spreads the seams' mismatch over the whole height (a non-tileable 240^2
+#: crop of a brick texture: 28 % RMS error with no word, against 1.9 % by dgp; a texture
+#: artist's audit). Measured: tileable bricks and weave 0.000-0.001, with slope noise of 0.05
+#: per pixel 0.53; crops of them that do not tile 1.0-1.2.
+TILE_SEAM = 0.8
+
+
+def _check_tiles(P: np.ndarray, Q: np.ndarray) -> None:
+    """Warn where the slope maps (P, Q) of a box integrated periodically do not tile."""
+    from .._warnings import warn
+
+    if min(P.shape) < 4:
+        return
+    climbs = [P.sum(axis=1), Q.sum(axis=0)]  # (each row's and column's height across)
+    rows = np.cumsum(P, axis=1)
+    cols = np.cumsum(Q, axis=0)
+    spread = np.sqrt((np.var(rows, axis=1).mean() + np.var(cols, axis=0).mean()) / 2)
+    varies = np.sqrt((np.var(climbs[0]) + np.var(climbs[1])) / 2)
+    if spread > 0 and varies > TILE_SEAM * spread:
+        warn(f"pad='none' integrates the map as periodic, but it does not tile: the height its "
+             f"slopes climb from one edge to the opposite one varies from row to row (or column "
+             f"to column) by {varies / spread:.2g} of the height's own spread; the seams' "
+             "mismatch bends the whole height: leave pad at its default (mirror), or make the "
+             "texture tileable first")
+
+
 def run(problem: Problem, *, pad: str, fill: str) -> MethodResult:
     """Integrate `problem` by the Frankot-Chellappa projection (see the module docstring).
 
@@ -115,6 +145,8 @@ def run(problem: Problem, *, pad: str, fill: str) -> MethodResult:
         Q[have] = q[f[ok]]
         if not have.all():
             P, Q = _fill(P, Q, have, fill) if have.any() else (P, Q)
+        if pad == "none" and len(groups) == 1:
+            _check_tiles(P, Q)
         values[f] = integrate_box(P, Q, problem.pixel_size, pad=pad)[r - r0, c - c0]
         boxes.append((int(H), int(W)))
         filled += int((~have).sum())
