@@ -1179,6 +1179,12 @@ def test_a_float_maps_background_fill_is_left_out(fill):
         tent = facetlift.synthetic.analytic("tent", 64)
         got = facetlift.integrate(2 * tent.normals, tent.mask).depth
         np.testing.assert_array_equal(np.isfinite(got), tent.mask)
+        # an unnormalised pyramid whose faces are (+-1, +-1, 1): no fill either (its other
+        # normals are not of unit length; three faces were dropped, a review)
+        yy, xx = np.mgrid[0:64, 0:64]
+        p, q = -np.sign(xx - 31.5), np.sign(yy - 31.5)
+        pyramid = np.dstack([-p, -q, np.ones_like(p)]).astype(float)
+        assert np.isfinite(facetlift.integrate(pyramid).depth).all()
 
 
 def test_an_orthographic_map_given_a_camera_is_not_told_to_flip(tmp_path, capsys):

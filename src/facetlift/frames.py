@@ -1079,7 +1079,8 @@ FILL_SHARE = 0.01
 def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
     """Float normals `n` (H, W, 3) with a background fill left out (NaN): a vector of three
     equal components (a decoded black, white or mid-grey) or of components +-1 (a pure
-    colour's decoded codes) found at a corner of the image, of
+    colour's decoded codes) found at a corner of the image, where the map's other normals are
+    mostly of unit length (a decoded map's), of
     a length outside :data:`ENCODED_LENGTH_RANGE` (not 0: a zero vector is a missing sample
     already), repeated exactly on at least :data:`FILL_SHARE` of
     the pixels, with as many other finite ones (a map of one vector is a plane); with a
@@ -1107,9 +1108,15 @@ def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
             continue
         hit = (n[..., 0] == v[0]) & (n[..., 1] == v[1]) & (n[..., 2] == v[2])
         count = int(np.count_nonzero(hit))
-        rest = int(np.count_nonzero(np.isfinite(out[..., 0]))) - count
+        others = np.isfinite(out[..., 0]) & ~hit
+        rest = int(np.count_nonzero(others))
         if count < FILL_SHARE * H * W or rest < FILL_SHARE * H * W:
             continue  # (too few; or everything: no normal would be left)
+        with np.errstate(invalid="ignore", over="ignore"):
+            around = np.sqrt(np.einsum("ij,ij->i", out[others], out[others]))
+        if not np.mean((around >= lo) & (around <= hi)) >= 0.5:
+            continue  # (the other normals not of unit length either: an unnormalised map,
+            # whose faces of (-p, -q, 1) with |p| = |q| = 1 are no fill, a review)
         if out is n:
             out = np.array(n, dtype=float)
         out[hit] = np.nan
