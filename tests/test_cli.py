@@ -555,6 +555,14 @@ def test_verbose_logs_to_stderr_for_one_run(tmp_path, capsys):
     assert "{" not in line and " iterations=" in line and "seconds.total=" in line
     code, _, err = run(capsys, "integrate", npath, "-o", tmp_path / "b")
     assert code == 0 and err == ""
+    # a parallel batch's items log in their worker processes: -v says so (it printed
+    # nothing and said nothing of it, a CLI audit); with --workers 1 their lines show
+    code, _, err = run(capsys, "-v", "batch", npath, "-o", tmp_path / "c", "--workers", "2",
+                       "--no-progress")
+    assert code == 0 and "give --workers 1 to see their lines" in err, err
+    code, _, err = run(capsys, "-v", "batch", npath, "-o", tmp_path / "d", "--workers", "1",
+                       "--no-progress")
+    assert code == 0 and "worker processes" not in err and "facetlift: dgp:" in err, err
 
 
 def test_console_script_entry_point():

@@ -1011,6 +1011,11 @@ def batch(inputs, list_file, outdir, workers, scheduler, resume, progress, as_js
         if as_json:
             click.echo(json.dumps(log_record(r)))
 
+    log = logging.getLogger("facetlift")
+    if workers != 1 and log.isEnabledFor(logging.INFO):  # (-v printed nothing from a
+        # parallel batch's items, and said nothing of it, a CLI audit)
+        log.info("batch: items that run in worker processes log there, not here: give "
+                 "--workers 1 to see their lines")
     try:
         records = run_batch(inputs, outdir, job=job, workers=workers, scheduler=scheduler,
                             resume=resume, progress=_show_progress(progress),
