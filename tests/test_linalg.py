@@ -520,3 +520,15 @@ def test_rowwise_products_equal_matmul_in_every_row_block(m, shape):
     v = rng.standard_normal(m)
     assert dense.dot(v, v) == pytest.approx(float(v @ v), rel=1e-12, abs=1e-300)
     assert dense.norm(v) == pytest.approx(float(np.linalg.norm(v)), rel=1e-12, abs=1e-300)
+
+
+def test_a_thin_domain_takes_cg_where_its_factorization_does_not_fit(monkeypatch):
+    """A large-maps audit: a 4096^2 map with 30 % of its normals NaN and no mask reads as
+    thin through its holes, and was refused for the 44 GiB of a factorization where CG fits
+    in a few GiB. A thin domain factorizes only where that fits."""
+    from facetlift import linalg, memory
+
+    assert linalg.choose(10_000, "auto", kind="facet", thin=True) in ("superlu", "pardiso")
+    monkeypatch.setattr(memory, "factorization_fits", lambda n, blocks=None: False)
+    assert linalg.choose(10_000, "auto", kind="facet", thin=True) == "pcg"
+    assert linalg.choose(10_000, "superlu", kind="facet", thin=True) == "superlu"

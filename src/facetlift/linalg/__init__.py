@@ -21,7 +21,8 @@ from the size and the ``kind`` of system: DGP facet systems always take "pcg" wi
 :class:`facetlift.linalg.facet.FacetPreconditioner` (the box spectral solve plus an exact
 solve on the vertices of facets without a target; multigrid where the box is poor, or a
 factorization where a model of its time beats CG's predicted remainder, chosen by measurement
-in :func:`facetlift.linalg.facet.solve`), except on thin domains, which factorize; graph
+in :func:`facetlift.linalg.facet.solve`), except on thin domains, which factorize where the
+factorization fits; graph
 Laplacians and other SPD systems factorize up to :data:`LARGE` unknowns and take
 multigrid-CG above. :func:`factorize` prepares a matrix for repeated solves (the paper's
 "prefactored" global step); :func:`solve` does one solve and reports what it did;
@@ -137,7 +138,8 @@ def choose(
         A facet system on a thin domain (:func:`facetlift.linalg.facet.thin`, a strip a few
         pixels wide): it factorizes with little fill, faster than any preconditioner helps
         CG there (a spiral 4 pixels wide with 30 % missing normals, 250k vertices: SuperLU
-        0.65 s, multigrid-CG 254 iterations and 35 s), so it is factorized at every size.
+        0.65 s, multigrid-CG 254 iterations and 35 s), so it is factorized at every size
+        where the factorization fits (:func:`facetlift.memory.factorization_fits`), else CG.
 
     Returns
     -------
@@ -158,7 +160,12 @@ def choose(
     if backend != "auto":
         return backend
     if kind == "facet" and thin:
-        return factorizer()
+        # (only where the factorization fits: a 4096^2 map with 30 % of its normals NaN and
+        # no mask reads as thin through its holes, and was refused for the 44 GiB of a
+        # factorization where CG fits in a few; a large-maps audit)
+        from ..memory import factorization_fits
+
+        return factorizer() if factorization_fits(n) else "pcg"
     if kind == "facet" or (preconditioner and trusted):
         return "pcg"
     if n <= (GRAPH_LARGE if kind == "graph" and not pardiso_available() else LARGE):
