@@ -532,8 +532,8 @@ def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
         raise MemoryLimitError(
             f"method {method!r} is limited to {cap:,} mask pixels by default (beyond that it "
             f"takes minutes on a 2-core machine); this job has {m:,}: crop or downsample the "
-            "input, use method='poisson' or 'dgp', or pass max_memory= / --max-memory to run "
-            "it anyway"
+            "input, use method='poisson' or 'dgp' (--method poisson or dgp), or pass "
+            "max_memory= / --max-memory to run it anyway"
         )
     est, route = estimate(problem, method, options)
     p = Plan(int(min(est, 2**62)), lim, route)
