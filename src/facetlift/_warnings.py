@@ -61,7 +61,7 @@ def reemit(w) -> None:
 #: around whole jobs ran a threaded cluster's items one at a time and could deadlock, a
 #: review).
 _LOCK = threading.Lock()
-_SHARED: dict = {"depth": 0, "restore": None, "show": None, "filters": (), "seen": set()}
+_SHARED: dict = {"depth": 0, "show": None, "filters": (), "seen": set()}
 _LOCAL = threading.local()
 
 
@@ -106,8 +106,7 @@ def _reinit_after_fork() -> None:
     global _LOCK
     _LOCK = threading.Lock()
     own = len(getattr(_LOCAL, "stack", None) or ())
-    if own == 0 and _SHARED["restore"] is not None:
-        _SHARED["restore"] = None
+    if own == 0 and _SHARED["depth"] > 0:  # (installed by another thread, gone in the child)
         with contextlib.suppress(Exception):
             _take_down()
     _SHARED["depth"] = own
@@ -235,7 +234,6 @@ def recording(record: bool = True, action: str = "always", on_warning=None):
             if warnings.showwarning is not _dispatch:  # (left as the display by another
                 # thread's catch_warnings: the display saved before is still the one)
                 _SHARED["show"] = warnings.showwarning
-            _SHARED["restore"] = True
             warnings.showwarning = _dispatch
         _SHARED["depth"] += 1
     stack = getattr(_LOCAL, "stack", None)
@@ -249,5 +247,4 @@ def recording(record: bool = True, action: str = "always", on_warning=None):
         with _LOCK:
             _SHARED["depth"] -= 1
             if _SHARED["depth"] == 0:
-                _SHARED["restore"] = None
                 _take_down()

@@ -830,9 +830,9 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals", rotation=N
         return normals  # prepare() says what is wrong with it
     if n.ndim != 3 or n.shape[-1] != 3 or n.dtype.kind not in "uif":
         return normals
+    floats = n.dtype.kind == "f"
     grey_check(n, _where(mask, n.shape[:2], hidden), f"`{name}`")  # (before the decode's
-    floats = n.dtype.kind == "f"  # warning)
-    n = as_float_normals(n, name, mask, hidden, frame)
+    n = as_float_normals(n, name, mask, hidden, frame)  # warning)
     read = _READ_IN.get()
     read = None if read == GRADIENT_FIELD else read  # (such normals never face away)
     # (the reader's frame, already applied, to undo for the values as stored; none where
@@ -1077,18 +1077,21 @@ FILL_SHARE = 0.01
 
 
 def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
-    """Float normals `n` (H, W, 3) with a background fill left out (NaN): a vector of three
-    equal components (a decoded black, white or mid-grey) or of components +-1 (a pure
-    colour's decoded codes) found at a corner of the image, where the map's other normals are
-    mostly of unit length (a decoded map's), of
-    a length outside :data:`ENCODED_LENGTH_RANGE` (not 0: a zero vector is a missing sample
-    already), repeated exactly on at least :data:`FILL_SHARE` of
-    the pixels, with as many other finite ones (a map of one vector is a plane); with a
-    warning naming it. A PNG's black, white or mid-grey fill is dropped by
-    its decoding (:func:`decode`); the same map decoded by the user (``v / 65535 * 2 - 1``,
-    as BiNI's loader does) kept its white fill as normals (1, 1, 1): the DiLiGenT bear came
-    out joined to a 45-degree plane, 17.6 mm off instead of 0.47, with no word but a hint to
-    keep depth jumps (an audit). A copy where anything is dropped."""
+    """Float normals `n` (H, W, 3) with a background fill left out (NaN), with a warning
+    naming it; a copy where anything is dropped. A fill is a vector found at a corner of the
+    image that
+    - has three equal components (a decoded black, white or mid-grey) or components +-1 (a
+      pure colour's decoded codes 0 and max),
+    - has a length outside :data:`ENCODED_LENGTH_RANGE` (not 0: a zero vector is a missing
+      sample already),
+    - is repeated exactly on at least :data:`FILL_SHARE` of the pixels, with as many other
+      finite ones (a map of one vector is a plane), and
+    - stands beside normals mostly of unit length (a decoded map's; an unnormalised map's
+      faces of (-p, -q, 1) are no fill).
+    A PNG's fill is dropped by its decoding (:func:`decode`); the same map decoded by the user
+    (``v / 65535 * 2 - 1``, as BiNI's loader does) kept its white fill as normals (1, 1, 1):
+    the DiLiGenT bear came out joined to a 45-degree plane, 17.6 mm off instead of 0.47, with
+    no word but a hint to keep depth jumps (an audit; the rest of the rule from reviews)."""
     H, W = n.shape[:2]
     lo, hi = ENCODED_LENGTH_RANGE
     out, said, tried = n, [], set()
@@ -1098,13 +1101,9 @@ def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
             continue
         tried.add(key)
         length = float(np.sqrt(sum(x * x for x in key)))
-        # (three equal components, as a decoded black, white or grey fill has: an unnormalised
-        # map's flat ground or plane, (-p, -q, 1) of any length, was taken for a fill, a
-        # review)
-        # (or all of them +-1, a pure colour's decoded codes 0 and max: a pure blue fill, a
-        # review)
+        grey = key[0] == key[1] == key[2]
         coded = all(abs(x) == 1.0 for x in key)
-        if length == 0 or lo <= length <= hi or not (key[0] == key[1] == key[2] or coded):
+        if length == 0 or lo <= length <= hi or not (grey or coded):
             continue
         hit = (n[..., 0] == v[0]) & (n[..., 1] == v[1]) & (n[..., 2] == v[2])
         count = int(np.count_nonzero(hit))
@@ -1115,8 +1114,7 @@ def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
         with np.errstate(invalid="ignore", over="ignore"):
             around = np.sqrt(np.einsum("ij,ij->i", out[others], out[others]))
         if not np.mean((around >= lo) & (around <= hi)) >= 0.5:
-            continue  # (the other normals not of unit length either: an unnormalised map,
-            # whose faces of (-p, -q, 1) with |p| = |q| = 1 are no fill, a review)
+            continue  # (the other normals not of unit length either: an unnormalised map)
         if out is n:
             out = np.array(n, dtype=float)
         out[hit] = np.nan
@@ -1148,15 +1146,18 @@ def _check_facing(v: np.ndarray, name: str, frame=None, rotated: bool = False,
                                    f". If z really is that value, {said}: "
                                    f"{facing_hint(frame, v, rotated)}")
         )
-    with np.errstate(invalid="ignore", over="ignore"):
-        median = float(np.nanmedian(np.sqrt(np.einsum("ij,ij->i", v, v))))
     # (a colour texture of a material folder, its albedo, was told to try a camera frame,
-    # and written as a height 335 texels tall, a texture artist's audit)
-    # (only for an image read or decoded here: an array of unnormalised normals, albedo times
-    # n in a camera frame, wants the frame hint alone, a review)
-    colour = (f". Or is it a normal map at all? Its vectors' median length is {median:.2g}, a "
-              "normal map's is 1: a colour texture (an albedo), a photo or a mask"
-              if not 0.9 <= median <= 1.1 and (decoded or reading() is not None) else "")
+    # and written as a height 335 texels tall, a texture artist's audit; asked only of an
+    # image read or decoded here: an array of unnormalised normals, albedo times n in a
+    # camera frame, wants the frame hint alone, a review)
+    colour = ""
+    if decoded or reading() is not None:
+        with np.errstate(invalid="ignore", over="ignore"):
+            median = float(np.nanmedian(np.sqrt(np.einsum("ij,ij->i", v, v))))
+        if not 0.9 <= median <= 1.1:
+            colour = (f". Or is it a normal map at all? Its vectors' median length is "
+                      f"{median:.2g}, a normal map's is 1: a colour texture (an albedo), a "
+                      "photo or a mask")
     raise ValueError(
         f"`{name}`: {said}, {facing_hint(frame, v, rotated)}, or see "
         f"docs/conventions.md for the frame of your source{colour}"

@@ -76,9 +76,7 @@ def align(estimate, truth, mask=None, *, region=None) -> tuple[np.ndarray, np.nd
         The compared pixels.
     """
     est, gt, m = _pair(estimate, truth, mask)
-    if region is None:  # (the result's own pixels, within the mask where one is given)
-        region = np.isfinite(est) if mask is None else np.isfinite(est) & np.asarray(mask, bool)
-    k, n = _pieces(m, region)
+    k, n = _pieces(m, _region(est, mask) if region is None else region)
     r, c = np.nonzero(m)
     diff = est[r, c] - gt[r, c]
     shift = np.bincount(k, diff, n) / np.maximum(np.bincount(k, minlength=n), 1)
@@ -94,6 +92,12 @@ def _piece_centred(est, gt, m, region) -> tuple[np.ndarray, np.ndarray]:
     size = np.maximum(np.bincount(k, minlength=n), 1)
     e, g = est[m], gt[m]
     return e - (np.bincount(k, e, n) / size)[k], g - (np.bincount(k, g, n) / size)[k]
+
+
+def _region(est, mask) -> np.ndarray:
+    """The pixels whose 8-connected components are the result's pieces: its finite ones,
+    within `mask` where one is given."""
+    return np.isfinite(est) if mask is None else np.isfinite(est) & np.asarray(mask, bool)
 
 
 def _pieces(m, region) -> tuple[np.ndarray, int]:
@@ -213,7 +217,7 @@ def _range_check(est, gt, m, words: str = "python", region=None) -> float | None
     the ranges (:func:`_range_ratio`)."""
     from ._warnings import warn
 
-    ratio = _range_ratio(est, gt, m, np.isfinite(est) if region is None else region)
+    ratio = _range_ratio(est, gt, m, _region(est, None) if region is None else region)
     if ratio is None or 1.0 / RANGE_MISMATCH <= ratio <= RANGE_MISMATCH:
         return ratio
     say = _WORDS[words]
@@ -377,8 +381,7 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
                 f"{int(np.isfinite(gt).sum())} finite, {both} both; are they of the same view "
                 "and crop?")
     est, gt, m = _pair(est, gt, mask)
-    # (the result's pieces: its finite pixels, within the mask where one is given)
-    region = np.isfinite(est) if mask is None else np.isfinite(est) & np.asarray(mask, bool)
+    region = _region(est, mask)
     if mask is None:
         _zero_background_check(est, gt, m)
     out = {"pixels": int(m.sum()),

@@ -67,15 +67,17 @@ def _flip_shares(cam, r, c, nf, clear) -> dict:
     return shares
 
 
-def _flip_mends_facing(cam, r, c, nf, clear, away: float):
+def _flip_mends_facing(cam, r, c, nf, clear, away: float, shares=None):
     """``(axis, share)`` where many normals face away from a pinhole camera (``away`` above
     :data:`BACKFACING_FRAME_HINT`) and negating x or y alone turns all but a few of them
     toward it (the share facing away then: at most that threshold and a quarter of
     ``away``): a map read with y (or x) the wrong way round. None otherwise, and always
-    without a camera, whose view cosine is n_z whatever x and y are."""
+    without a camera, whose view cosine is n_z whatever x and y are. `shares`: those of
+    :func:`_flip_shares`, where the caller has them."""
     if not away > BACKFACING_FRAME_HINT:
         return None
-    shares = _flip_shares(cam, r, c, nf, clear)
+    if shares is None:
+        shares = _flip_shares(cam, r, c, nf, clear)
     if not shares:
         return None
     axis = min(shares, key=shares.get)
@@ -774,13 +776,14 @@ def prepare(
         away = int((clear & (cos < 0)).sum()) / max(int(clear.sum()), 1)
         counts["facing_away"] = away  # (for info's frame guess: the same share)
         axial = _faces_the_axis(cam, nf, clear, away)
-        mended = _flip_mends_facing(cam, r, c, nf, clear, away)
+        shares = (_flip_shares(cam, r, c, nf, clear) if away > BACKFACING_FRAME_HINT
+                  else {})
+        mended = _flip_mends_facing(cam, r, c, nf, clear, away, shares)
         if axial is not None and mended is not None:
             # (an orthographic map's silhouette faces away on every side alike, so negating x
             # or y mends it about equally; a y-down map over a floor, whose normals face the
             # axis too, is mended by one flip far more than by the other: the flip's advice,
             # as before; a review found a flipped room told it was orthographic)
-            shares = _flip_shares(cam, r, c, nf, clear)
             even = max(shares.values()) <= FLIPS_EVEN * min(shares.values()) + 1e-3
             if not (even and axial < 0.5 * mended[1]):
                 axial = None
@@ -1625,7 +1628,7 @@ def coarse_prior_hint(small, shape) -> str:
             (w, h) == tuple(int(v) for v in shape) or coarse_factor((w, h), shape) is not None)
     except (TypeError, ValueError):
         turned = False
-    if turned and int(shape[0]) != int(shape[1]):
+    if turned:
         return ("; it is the map's size (or a whole factor of it) turned on its side: a "
                 "depth frame in the other orientation? Turn it to the normal map's "
                 "(np.rot90(prior) or np.rot90(prior, -1), or prior.T for a transposed array: "
