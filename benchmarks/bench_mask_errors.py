@@ -62,7 +62,11 @@ def error(gt, depth, used) -> float:
     return 100.0 * metrics.normalized_error(depth, gt.depth, keep)[0]
 
 
-def main(argv=None) -> int:
+def compare(argv, doc: str, make_variants, names, groups: str = "perspective") -> int:
+    """Integrate every ``--step``-th render of ``--groups`` in each variant of
+    ``make_variants(gt)`` (``{variant: (normals, mask, K)}``, in the order of `names`) with
+    the discontinuity route and BiNI; print each scene's errors, then each group's means and
+    wins. Shared by this script and ``bench_camera_errors.py``."""
     sys.path.insert(0, str(HERE))
     import warnings
 
@@ -72,8 +76,8 @@ def main(argv=None) -> int:
     from facetlift.bench import discontinuities as D
     from facetlift.bench.core import method_status
 
-    ap = scene_arguments(__doc__.split("\n\n")[0])
-    ap.set_defaults(step=3, groups="perspective")
+    ap = scene_arguments(doc.split("\n\n")[0])
+    ap.set_defaults(step=3, groups=groups)
     args = ap.parse_args(argv)
     ctx = context(args)
     ctx.status = method_status(["dgp"])
@@ -83,12 +87,12 @@ def main(argv=None) -> int:
     rows = []
     for group, name, gt in D.usable(ctx, scenes, "scenes"):
         line = [f"{group} {name}"]
-        for variant, (normals, mask) in variants(gt).items():
+        for variant, (normals, mask, K) in make_variants(gt).items():
             for label, kw in METHODS:
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
-                        s = facetlift.integrate(normals, mask, K=gt.K,
+                        s = facetlift.integrate(normals, mask, K=K,
                                                 pixel_size=gt.pixel_size, **kw)
                     e = error(gt, s.depth, mask)
                 except (ValueError, facetlift.SolverError) as ex:
@@ -97,10 +101,10 @@ def main(argv=None) -> int:
                 rows.append((group, name, variant, label, e))
                 line.append(f"{variant}:{label}={e:.3f}")
         print(" ".join(line), flush=True)
-    print("\n| group | mask | dgp-disc | BiNI | dgp-disc wins / losses (> 1 %) |")
+    print("\n| group | variant | dgp-disc | BiNI | dgp-disc wins / losses (> 1 %) |")
     print("|---|---|---|---|---|")
     for group in groups:
-        for variant in VARIANTS:
+        for variant in names:
             got = {lab: [r[4] for r in rows if r[0] == group and r[2] == variant and r[3] == lab]
                    for lab, _ in METHODS}
             a, b = got["dgp-disc"], got["bini"]
@@ -111,6 +115,12 @@ def main(argv=None) -> int:
             print(f"| {group} | {variant} | {np.nanmean(a):.3f} | {np.nanmean(b):.3f} | "
                   f"{wins} / {losses} of {len(a)} |")
     return 0
+
+
+def main(argv=None) -> int:
+    return compare(argv, __doc__,
+                   lambda gt: {k: (n, m, gt.K) for k, (n, m) in variants(gt).items()},
+                   VARIANTS)
 
 
 if __name__ == "__main__":
