@@ -301,8 +301,15 @@ def test_corner_copies_give_a_mesh_split_at_the_jumps(fake_method, tmp_path):
 
     io.write_discontinuities(tmp_path / "j.png", s)
     plain = facetlift.integrate(np.dstack([np.zeros((H, W, 2)), np.ones((H, W))]))
-    with pytest.raises(ValueError, match="no discontinuity map"):
+    with pytest.raises(ValueError, match="no discontinuity map: integrate with"):
         io.write_discontinuities(tmp_path / "k.png", plain)
+    # bini with discontinuities=True was told to integrate with discontinuities=True (an
+    # audit): the method is named, and the one that makes a map
+    bini = facetlift.integrate(np.dstack([np.zeros((H, W, 2)), np.ones((H, W))]),
+                               method="bini", discontinuities=True)
+    with pytest.raises(ValueError, match=r"method 'bini' does not make one \(it comes only "
+                       r"from \['dgp'\]"):
+        io.write_discontinuities(tmp_path / "b.png", bini)
 
 
 def test_submodules_are_attributes_of_a_plain_import():

@@ -1312,7 +1312,30 @@ def test_summary_names_the_camera_and_bini_s_k_is_pointed_to(tmp_path, capsys):
     assert code == 0 and ", perspective (the folder's K.txt), method dgp" in out
     code, _, err = run(capsys, "integrate", str(bear / "diligent_bear"), "--discontinuities",
                        "--option", "k=2", "-o", str(tmp_path / "k"))
-    assert code == 1 and "BiNI's k is 'discontinuity_k' here" in one_line(err)
+    assert code == 1 and "cut sharpness is 'discontinuity_k'" in one_line(err)
+    # (not the same weighting: BiNI itself is named, an audit)
+    assert "BiNI itself is method='bini' with its k" in one_line(err)
+    code, _, err = run(capsys, "integrate", str(bear / "diligent_bear"), "--method", "bini",
+                       "--option", "discontinuity_k=2", "-o", str(tmp_path / "k2"))
+    assert code == 1 and "this method's sigmoid sharpness is 'k'" in one_line(err)
+
+
+def test_bini_at_its_cap_returns_its_surface_with_exit_0(tmp_path, capsys):
+    """BiNI's own code returns its surface when its reweightings reach max_iter; --method bini
+    --max-iter 3 exited 2 (a BiNI user's audit). It now notes the cap and exits 0, as the
+    discontinuity route does; --json reports status ok."""
+    from facetlift import synthetic
+
+    g = synthetic.analytic("steps", 48)
+    np.save(tmp_path / "n.npy", g.normals)
+    args = ["integrate", str(tmp_path / "n.npy"), "--method", "bini", "--max-iter", "2",
+            "--tol", "0", "-s", "npy"]
+    code, out, err = run(capsys, *args, "-o", str(tmp_path / "o"))
+    assert code == 0 and "not converged" in out, err
+    assert "BiNI's reweighting used all 2 iterations" in " ".join(err.split())
+    code, out, err = run(capsys, *args, "-o", str(tmp_path / "j"), "--json")
+    rec = json.loads(out)
+    assert code == 0 and rec["status"] == "ok" and rec["converged"] is False, err
 
 
 def test_a_bad_max_memory_is_refused_before_the_input_is_read(tmp_path, capsys):

@@ -353,6 +353,39 @@ def test_cli_evaluate_takes_an_output_folder(tmp_path, capsys, monkeypatch):
         "depth.npy, depth.exr, depth.tif" in err
 
 
+def test_cli_evaluate_takes_a_dataset_folder_as_ground_truth(tmp_path, capsys):
+    """`--gt FOLDER` (a BiNI user's DiLiGenT folder) was refused as a directory (an audit): its
+    depth_gt.* is the ground truth, its mask.png the scored pixels and its K.txt the camera
+    where none is given and the result keeps none; the notes say so; --mask and --K win; a
+    folder without a ground truth is refused naming the files looked for."""
+    est, gt, mask = scene()
+    data = tmp_path / "data"
+    data.mkdir()
+    np.save(data / "depth_gt.npy", gt)
+    io.write_mask(data / "mask.png", mask)
+    np.savetxt(data / "K.txt", K)
+    np.save(tmp_path / "depth.npy", est)
+    code, out, err = run(capsys, "evaluate", tmp_path / "depth.npy", "--gt", data, "--json")
+    assert code == 0, err
+    rec = json.loads(out)
+    want = metrics.evaluate(est, gt, mask, perspective=True)
+    inside = (mask & np.isfinite(gt)).sum()
+    assert rec["perspective"] is True and rec["pixels"] == want["pixels"] == inside
+    assert rec["made"] == pytest.approx(want["made"]) and rec["gt"] == str(data / "depth_gt.npy")
+    notes = " ".join(rec["notes"])
+    assert "the folder's mask" in notes and "the folder's camera" in notes
+    # given ones win: every finite pixel, and an orthographic score without the folder's K
+    full = np.ones_like(mask)
+    io.write_mask(tmp_path / "all.png", full)
+    code, out, err = run(capsys, "evaluate", tmp_path / "depth.npy", "--gt", data, "-m",
+                         tmp_path / "all.png", "--K", data / "K.txt", "--json")
+    assert code == 0 and json.loads(out)["pixels"] == np.isfinite(gt).sum(), err
+    assert "the folder's mask" not in " ".join(json.loads(out)["notes"])
+    (tmp_path / "nogt").mkdir()
+    code, _, err = run(capsys, "evaluate", tmp_path / "depth.npy", "--gt", tmp_path / "nogt")
+    assert code == 1 and "holds none of depth_gt.npz, depth_gt.npy" in err, err
+
+
 def test_cli_evaluate_refusals(tmp_path, capsys):
     est, gt, mask = scene()
     np.save(tmp_path / "depth.npy", est)

@@ -267,6 +267,10 @@ def test_confidence_lowers_the_weight_of_bad_normals():
      "method 'frankot_chellappa' does not take a `prior`"),
     ({"confidence": np.ones((24, 28)), "method": "kernel"},
      "method 'kernel' does not take a `confidence`"),
+    # (BiNI's reference code has a depth term: a BiNI user was told it had none, an audit)
+    ({"prior": np.ones((24, 28)), "method": "bini"},
+     r"method 'bini' does not take a `prior`; facetlift's 'bini' is BiNI without the "
+     r"depth-fusion term of its reference code \(lambda1.*fuse with method 'dgp'"),
 ])
 def test_errors_name_the_argument(kwargs, match):
     n, _ = wave()

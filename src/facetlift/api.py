@@ -338,6 +338,16 @@ def _no_perspective(method: str) -> ValueError:
 def _lacks(method: str, what: str) -> ValueError:
     """The error for a `what` ("prior", "confidence", "prior_blur") that `method` lacks."""
     able = sorted(k for k, v in methods.REGISTRY.items() if getattr(v, what))
+    note = ""
+    if method == "bini" and what == "prior":
+        # (BiNI's reference code has a depth term, lambda1 with depth_map and depth_mask: a
+        # BiNI user was told its energy had none, an audit)
+        note = ("; facetlift's 'bini' is BiNI without the depth-fusion term of its reference "
+                "code (lambda1, depth_map, depth_mask): fuse with method 'dgp' (with "
+                "discontinuities=True to keep jumps), NaN where the depth mask is off; "
+                "docs/fusion.md relates lambda1 to prior_weight")
+        return ValueError(f"method {method!r} does not take a `prior`{note}; methods that "
+                          f"do: {able}")
     return ValueError(f"method {method!r} does not take a `{what}` (its energy has no such "
                       f"term); methods that do: {able}")
 

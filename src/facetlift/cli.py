@@ -275,8 +275,8 @@ _JOB_OPTIONS = [
                  "methods'). About 30 reweighted solves: up to 10-20x the time of the smooth "
                  "integration (the DiLiGenT bear about 8x, 0.13 -> 1.1 s; 'facetlift info' "
                  "estimates it); the "
-                 "cut's sharpness is --option discontinuity_k=K (default 4), the jumps' map "
-                 "--save discontinuities."),
+                 "cut's sharpness is --option discontinuity_k=K (default 4; --method bini: "
+                 "--option k=K, default 2), the jumps' map --save discontinuities."),
     click.option("--prior", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                  help="Depth prior (npy, EXR, TIFF, MATLAB .mat, an earlier result's npz, or "
                  "16-bit PNG with --prior-scale), NaN where unknown (0 too in integer "
@@ -718,6 +718,13 @@ def integrate(normals, gradients, progress, as_json, **flags):
             "(--option discontinuity_iter=N)",
             err=True,
         )
+    elif not record["converged"] and info.get("method") == "bini":
+        click.echo(
+            f"note: BiNI's reweighting used all {info.get('iterations')} iterations before "
+            "its energy settled (as BiNI's own code, the surface is returned); more: "
+            "--max-iter N",
+            err=True,
+        )
     elif unconverged:
         raise SolverFailure(
             f"method {info.get('method')!r} did not converge in {info.get('iterations')} "
@@ -1135,10 +1142,12 @@ def _split(text):
 @cli.command(context_settings=CONTEXT)
 @click.argument("result", type=click.Path(exists=True, path_type=Path))
 @click.option("--gt", "gt", required=True,
-              type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              type=click.Path(exists=True, path_type=Path),
               help="Ground-truth depth map: .npy, .npz (its depth_gt or depth array, or its "
               "only one), .exr (channel Z or its only one), .tif, or a 16-bit PNG with "
-              "--gt-scale; NaN (0 in a PNG or an integer TIFF) where undefined.")
+              "--gt-scale; NaN (0 in a PNG or an integer TIFF) where undefined. Or a "
+              "dataset folder (BiNI's DiLiGenT folders): its depth_gt.*, and its mask.png "
+              "and K.txt where --mask and --K are not given and the result keeps no camera.")
 @click.option("--gt-scale", "gt_scale", type=float, default=None, metavar="S",
               help="Depth units per count of a 16-bit PNG ground truth (e.g. 0.001 for "
               "millimetres in metres); multiplies other formats too.")
@@ -1182,6 +1191,9 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
     if result.is_dir():  # (integrate's output folder was refused as "is a directory", a review)
         result = _result_in_folder(result)
     est = io.read_depth(result, arg="result")
+    folder_notes = []
+    if gt.is_dir():  # (a BiNI user's `--gt bear` was refused as a directory, an audit)
+        gt, mask, K, folder_notes = _gt_folder(gt, mask, K, fov, result)
     camera = None
     orthographic = False  # (a surface.npz that records an orthographic camera)
     if result.suffix.lower() == ".npz":  # (a surface's: its camera, NaN when orthographic)
@@ -1237,6 +1249,7 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         rec["notes"].append("the result's depths are all > 0, as a perspective result's are "
                             "(an orthographic one has mean 0): give --K to score it as one "
                             "(or --fov, as integrate took it)")
+    rec["notes"][:0] = folder_notes
     rec = {"result": str(result), "gt": str(gt),
            "mask": "where both are finite" if mask is None else str(mask), **rec}
     if as_json:
@@ -1247,6 +1260,30 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
                                 surface=result.suffix.lower() == ".npz"):
         click.echo(line)
     return EXIT_OK
+
+
+def _gt_folder(folder: Path, mask, K, fov, result: Path):
+    """``(gt, mask, K, notes)`` of ``evaluate --gt FOLDER``: the folder's ground truth
+    (:data:`facetlift.jobs.GT_NAMES`, the first present), and its ``mask.png`` and ``K.txt``
+    where the command was given none and (for K) the result keeps no camera of its own (a
+    surface.npz does); ``notes`` say which files were taken. A ValueError names the files
+    looked for where the folder holds no ground truth."""
+    from .jobs import GT_NAMES
+
+    present = [folder / n for n in GT_NAMES if (folder / n).is_file()]
+    if not present:
+        raise ValueError(f"`gt`: the folder {folder} holds none of {', '.join(GT_NAMES)}: "
+                         "give the ground-truth file itself")
+    notes = [f"ground truth: {present[0].name} of {folder}"]
+    if mask is None and (folder / "mask.png").is_file():
+        mask = folder / "mask.png"
+        notes.append(f"scored inside {mask} (the folder's mask; --mask overrides it)")
+    if (K is None and fov is None and (folder / "K.txt").is_file()
+            and result.suffix.lower() != ".npz"):
+        K = folder / "K.txt"
+        notes.append(f"scored as a perspective depth with {K} (the folder's camera; --K "
+                     "overrides it)")
+    return present[0], mask, K, notes
 
 
 def _result_in_folder(folder: Path) -> Path:

@@ -1161,10 +1161,12 @@ def _write(surface, kind: str, path: Path, normals, triangles, frame=None,
 
 def finished_unconverged(info: dict) -> bool:
     """Whether a result reported ``converged=False`` is nevertheless a finished, usable
-    surface: the discontinuity reweighting stopped by its cap (a budget), or the blurred
-    prior's corrections by theirs (a safety net). The command line notes these with exit 0
-    and a batch records them as ok; any other unconverged result is a solver failure."""
-    return info.get("solver") == "discontinuous" or bool(
+    surface: the discontinuity reweighting stopped by its cap (a budget), BiNI's reweighting
+    by its ``max_iter`` (as BiNI's own code stops and returns its surface; a BiNI user's run
+    exited 2, an audit), or the blurred prior's corrections by their cap (a safety net). The
+    command line notes these with exit 0 and a batch records them as ok; any other
+    unconverged result is a solver failure."""
+    return info.get("solver") == "discontinuous" or info.get("method") == "bini" or bool(
         (info.get("prior_blur") or {}).get("capped"))
 
 

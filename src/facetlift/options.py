@@ -171,7 +171,12 @@ def validate(options: tuple[Option, ...], given: dict, method: str,
         hints = hints or {}
         rest = [u for u in unknown if u not in hints]
         if "k" in rest and "discontinuity_k" in spec:
-            hint = "; BiNI's k is 'discontinuity_k' here (default 4.0, with discontinuities)"
+            # (not the same weighting: BiNI itself is method='bini' with k, an audit)
+            hint = (f"; this route's cut sharpness is 'discontinuity_k' (default "
+                    f"{spec['discontinuity_k'].default:g}, with discontinuities; not BiNI's "
+                    "weighting: BiNI itself is method='bini' with its k)")
+        elif "discontinuity_k" in rest and "k" in spec:  # (bini's own sharpness)
+            hint = "; this method's sigmoid sharpness is 'k' (BiNI's k)"
         else:  # (a misspelling: discontinuity=True was told the valid list alone, a user's)
             import difflib
 

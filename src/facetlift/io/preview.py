@@ -185,6 +185,16 @@ def write_discontinuities(path, surface, *, min_size: int = 256) -> Path:
     min_size = _min_size(min_size)
     jumps = getattr(surface, "discontinuities", None)
     if jumps is None:
+        from .. import methods
+
+        method = (getattr(surface, "info", None) or {}).get("method")
+        able = sorted(k for k, v in methods.REGISTRY.items() if v.jump_map)
+        if method is not None and method not in able:
+            # (a bini surface integrated with discontinuities=True was told to do just that,
+            # an audit)
+            raise ValueError(f"the surface has no discontinuity map: method {method!r} "
+                             f"does not make one (it comes only from {able}, with "
+                             "discontinuities=True)")
         raise ValueError(
             "the surface has no discontinuity map: integrate with discontinuities=True "
             "(--discontinuities) to get one"
