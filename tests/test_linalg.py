@@ -429,7 +429,13 @@ def test_block_aggregates_shift_negative_positions_and_groups():
     assert block_aggregates([], [], 8).shape == (0, 0)
 
 
-def test_amg_setup_is_deterministic_and_leaves_numpy_random_alone():
+def test_amg_setup_is_deterministic_and_leaves_numpy_random_alone(monkeypatch):
+    """Smoothed aggregation's setup is repeatable and never touches numpy's global random
+    state: it was seeded and put back around the setup, and a host's thread drawing from it
+    meanwhile got the seed-0 stream (an embedding audit). The global functions are refused
+    here, and the smoother's estimator is put back afterwards."""
+    from pyamg.aggregation import smooth
+
     from facetlift import synthetic
 
     gt = synthetic.analytic("pyramid", 64)
@@ -437,11 +443,20 @@ def test_amg_setup_is_deterministic_and_leaves_numpy_random_alone():
     m[:, 30:32] = False
     np.random.seed(5)
     before = np.random.get_state()
-    a = facetlift.integrate(gt.normals, m, backend="amg")
-    b = facetlift.integrate(gt.normals, m, backend="amg")
+    estimator = smooth.approximate_spectral_radius
+
+    def refuse(*a, **kw):
+        raise AssertionError("numpy's global random state touched")
+
+    with monkeypatch.context() as mp:
+        for name in ("seed", "set_state", "get_state", "rand", "random_sample"):
+            mp.setattr(np.random, name, refuse)
+        a = facetlift.integrate(gt.normals, m, backend="amg")
+        b = facetlift.integrate(gt.normals, m, backend="amg")
     after = np.random.get_state()
     assert np.array_equal(a.depth, b.depth, equal_nan=True)
     assert np.array_equal(before[1], after[1]) and before[2] == after[2]
+    assert smooth.approximate_spectral_radius is estimator
 
 
 def test_ruge_stueben_setup_does_not_touch_numpy_random(monkeypatch):

@@ -585,3 +585,33 @@ def test_a_fitted_prior_that_fights_the_normals_is_pointed_at_its_silhouette(mon
     said = [str(w.message) for w in got if "fights them" in str(w.message)]
     assert len(said) == 1 and "though prior_fit='affine' aligned it" in said[0], said
     assert "band" in said[0] and "needs its scale and shift fitted" not in said[0]
+
+
+@pytest.mark.parametrize("failing", ["first", "second"])
+def test_a_run_that_raises_still_says_its_warnings(monkeypatch, failing):
+    """An embedding audit: with prior_fit, a first run that raised (out of its memory limit)
+    dropped the input's unusable-normals warning, which the same call without prior_fit shows
+    before its error. Each run's warnings are said before its error goes on."""
+    from facetlift import api
+
+    n, depth, mask, _ = steps()
+    n = n.copy()
+    n[3:5, 3:6] = np.inf
+    prior = np.where(mask, 0.37 * depth + 40.0, np.nan)
+    calls = []
+    real = api.integrate
+
+    def integrate(*args, **kw):
+        calls.append(kw.get("prior") is not None)
+        if (failing == "first") == (len(calls) == 1) and not kw.get("prior_fit"):
+            real(*args, **kw)  # (its warnings recorded)
+            raise facetlift.SolverError("planted")
+        return real(*args, **kw)
+
+    monkeypatch.setattr(api, "integrate", integrate)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(facetlift.SolverError, match="planted"):
+            real(n, mask, prior=prior, prior_weight=0.01, prior_fit="affine")
+    said = [str(w.message) for w in caught]
+    assert sum("6 normal(s) inside the mask cannot be used" in t for t in said) == 1, said

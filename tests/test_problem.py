@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -167,6 +168,10 @@ def _with(n, idx, value):
         (np.full((2, 2, 3), 1 + 0j), "`normals` must be a real numeric array; got dtype complex"),
         ([[[0, 0, 1], [0, 0]]], "`normals` could not be read as an array"),
         (np.full((3, 3, 3), np.nan), "`normals` has no finite, non-zero normal"),
+        # (a file name said "got dtype <U16", an embedding audit)
+        ("normal_map.png", r"`normals` must be a real numeric array, not a file name "
+         r"\('normal_map.png'\): read the file first \(facetlift.io.read_normals"),
+        (Path("n.exr"), r"not a file name \('n.exr'\)"),
     ],
 )
 def test_bad_normals(normals, match):

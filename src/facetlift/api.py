@@ -400,6 +400,23 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
             bar.close()
 
 
+@contextlib.contextmanager
+def _said_if_raised():
+    """:func:`recording` of one of :func:`_fitted_runs`' runs, whose warnings the caller says
+    after it; where the run raises, they are said before the error goes on (a first run that
+    ran out of memory dropped the input's unusable-normals warning, an embedding audit)."""
+    error = None
+    with recording() as said:
+        try:
+            yield said
+        except BaseException as e:  # (said outside the recording, then raised on)
+            error = e
+    if error is not None:
+        for w in said:
+            reemit(w)
+        raise error
+
+
 def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_blur,
                  prior_outliers, zeros=None, **kwargs) -> Surface:
     """The two runs of :func:`_integrate_fitted` and the fit between them (`zeros`: the
@@ -409,7 +426,7 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
     from .problem import prior_blur_value
 
     failed = None
-    with recording() as said:
+    with _said_if_raised() as said:
         first = integrate(normals, mask, **kwargs)
     if zeros is not None:
         # (those in the domain the normals gave, the first run's: a map's 0 around the object
@@ -445,7 +462,7 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
         surface.info["prior"] = {"fit": details, "left_out": True}
     else:
         announce(kwargs.get("progress"), "integrating with the prior")
-        with recording() as fused:
+        with _said_if_raised() as fused:
             surface = integrate(normals, mask, prior=aligned, prior_weight=prior_weight,
                                 prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
         for w in fused:  # (re-emitted, a torn surface's with what the fit adds to its causes)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 
@@ -430,6 +431,10 @@ def numeric_array(a, name: str, what: str = "a real numeric array") -> np.ndarra
     """``np.asarray(a)`` if it is a real numeric (or boolean) array, else a ValueError naming
     `name`. Shared by the input checks here and the writers in :mod:`facetlift.io`."""
     a = unmasked(a)
+    if isinstance(a, (str, Path)):  # (said "got dtype <U16" to a path, an embedding audit)
+        raise ValueError(f"`{name}` must be {what}, not a file name ({str(a)!r}): read the "
+                         "file first (facetlift.io.read_normals, read_mask, read_depth, "
+                         "read_prior)")
     try:
         arr = np.asarray(a)
     except Exception as e:  # ragged lists and the like

@@ -49,21 +49,35 @@ _SEED_LOCK = threading.Lock()
 
 @contextlib.contextmanager
 def _seeded(seed: int = 0):
-    """numpy's global random state seeded for a smoothed-aggregation setup (its spectral-radius
-    estimates start from random vectors), then put back: the same input gives the same
-    hierarchy, and the caller's random sequence is not advanced (backend="amg" differed by
-    2e-12 from run to run and moved numpy's global state). A thread of the caller's drawing
-    from that global state meanwhile draws from the seeded one: only smoothed aggregation
-    does this (dgp's explicit ``backend="amg"`` and the regularization and diffusion
-    methods); Ruge-Stueben, which the discontinuity route and poisson's multigrid use, draws
-    nothing and is not seeded."""
-    with _SEED_LOCK:  # (threads, e.g. Dask's, build one at a time: the global state is one)
-        state = np.random.get_state()
-        np.random.seed(seed)
+    """A smoothed-aggregation setup made deterministic without numpy's global random state.
+
+    The setup's spectral-radius estimates (pyamg's ``approximate_spectral_radius``, called by
+    its Jacobi prolongation smoother) start from ``np.random.rand`` unless given a start
+    vector, so the same input gave hierarchies 2e-12 apart. Until 2026-12-07 the global state
+    was seeded here and put back afterwards, which a host's thread drawing from it meanwhile
+    saw: 527,166 of one audit's draws repeated the seed-0 stream. Now the smoother's name for
+    the estimator is pointed, for the setup's duration, at one that starts from a fixed vector
+    (a private ``RandomState(seed)``'s draws) where none is given; numpy's global state is not
+    touched. The swap is of a pyamg module attribute: another thread's smoothed-aggregation
+    setup in that window also starts from the fixed vector (deterministic, and no worse).
+    Only smoothed aggregation does this (dgp's explicit ``backend="amg"`` and the
+    regularization and diffusion methods); Ruge-Stueben, which the discontinuity route and
+    poisson's multigrid use, draws nothing."""
+    from pyamg.aggregation import smooth
+
+    with _SEED_LOCK:  # (threads, e.g. Dask's, build one at a time: the swap is shared)
+        estimator = smooth.approximate_spectral_radius
+
+        def fixed_start(A, *args, initial_guess=None, **kwargs):
+            if initial_guess is None:
+                initial_guess = np.random.RandomState(seed).rand(A.shape[1], 1)
+            return estimator(A, *args, initial_guess=initial_guess, **kwargs)
+
+        smooth.approximate_spectral_radius = fixed_start
         try:
             yield
         finally:
-            np.random.set_state(state)
+            smooth.approximate_spectral_radius = estimator
 
 
 def preconditioner(K, **kw):
