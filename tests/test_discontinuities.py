@@ -1423,6 +1423,29 @@ def test_the_many_cuts_warning_says_when_the_sharpness_was_lowered_for_noise(mon
                 f"{s.info['discontinuity_k']:.2g}" in text) is lowered
 
 
+@pytest.mark.parametrize("width,angle", [(3, 60.0), (2, 70.0)])
+def test_a_narrow_strip_of_a_plane_is_not_warned_about_as_cut(width, angle):
+    """A review: a plane strip 3 pixels wide at 60 degrees (exact normals, one mesh piece)
+    read 33 % of its corners cut, 2 wide at 70 degrees 50 %, because a missing neighbour at
+    the mask's edge reads as a zero difference, and was told it cut more than real jumps do.
+    The warning counts the corners of facets whose eight neighbours are in the mask
+    (info["cut_corners_inside"]), which the strip has none of (NaN) or few."""
+    t = math.radians(angle)
+    n = np.zeros((64, width, 3))
+    n[..., 0] = math.sin(t)  # (sloping across the strip: its missing neighbours read flat)
+    n[..., 2] = math.cos(t)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        s = facetlift.integrate(n, None, discontinuities=True)
+    assert not any("corners" in str(w.message) and "were cut" in str(w.message) for w in rec)
+    assert s.info["cut_corners"] > 0.3  # (the edge facets' corners, as before)
+    inside = s.info["cut_corners_inside"]
+    assert math.isnan(inside) if width < 3 else inside < 0.05
+    ramp = np.tan(t) * (np.arange(width) + 0.5)[None, :]  # p = -n_x / n_z: depth rises
+    err = (s.depth - s.depth.mean()) - (ramp - ramp.mean())
+    assert np.abs(err).max() < 1e-6
+
+
 def _tilted(H, W, cos_of_column, noise_deg, seed=0):
     """Unit normals turned about the y axis by the angle whose cosine `cos_of_column(c)` gives
     per column (height falling along x), with `noise_deg` of angular noise."""

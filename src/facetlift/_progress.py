@@ -21,6 +21,34 @@ def announce(progress, name: str) -> None:
         stage(name)
 
 
+class Rising:
+    """A progress callable whose iteration count keeps rising across passes that each count
+    from 1 (the discontinuity route's prior-free pass, then its pass with the prior; a
+    blurred prior's retry): each pass continues where the last one stopped. With a depth
+    prior the command line's bar ran backwards, and a callable heard 1, 2, 1, 2, 3, ... (a
+    review). The stage protocol (:func:`announce`) is passed through."""
+
+    def __init__(self, progress):
+        self.progress = progress
+        self.base = 0
+        self.last = 0
+
+    def __call__(self, iteration, value):
+        if iteration <= self.last:  # (a new pass)
+            self.base += self.last
+        self.last = iteration
+        return self.progress(self.base + iteration, value)
+
+    @property
+    def stage(self):
+        return getattr(self.progress, "stage", None)
+
+
+def rising(progress):
+    """:class:`Rising` of `progress`, or None for None."""
+    return None if progress is None else Rising(progress)
+
+
 #: Seconds between redraws of the progress bar while a stage without iterations runs (its
 #: elapsed time keeps counting).
 _TICK = 1.0

@@ -411,6 +411,7 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
         # (the last system solved again to the same tolerance, by CG on a new hierarchy)
         info["polish"] = "direct" if again["factorizations"] else "multigrid"
         info["cut_corners"] = again["cut_corners"]  # (of the weights returned)
+        info["cut_corners_inside"] = again["cut_corners_inside"]
         _add_pass(info, again, _BUILDS, ("cg_iterations", "unsolved"))
     split = None
     if islands is not None:
@@ -499,8 +500,11 @@ def run(
         # (a plane seen nearly edge-on through noisy normals: its facets' sharpness capped)
         k_scale = discontinuous.steep_planar(domain, problem.normals, target, bx, by, s, noise,
                                              given=given)
+        from ..._progress import rising
+
+        # (one count over the passes, each of which counts from 1: a review)
         common = dict(normal_scale=scale, k=k_used, max_iter=discontinuity_iter,
-                      tol=discontinuity_tol, flat_weight=flat_weight, callback=progress,
+                      tol=discontinuity_tol, flat_weight=flat_weight, callback=rising(progress),
                       weights=weights, seed=seed, k_scale=k_scale)
 
         def deviation(c):
@@ -976,7 +980,11 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
              "pixel footprints, docs/fusion.md 'A depth sensor'), the coarse map's pixels as "
              "points at their footprints' centres, or integrating without discontinuities may "
              "do better")
-    if prior is None and blurred is None and info["cut_corners"] > CUT_MANY:
+    # (counted away from the mask's edge, info["cut_corners_inside"]: a slope's edge facets
+    # read as cut with nothing to separate, and a 3-pixel strip of a plane was warned
+    # about, a review)
+    inside = info.get("cut_corners_inside", info["cut_corners"])
+    if prior is None and blurred is None and inside > CUT_MANY:
         steep = "on surfaces seen steeply (a floor or a table top from a low camera)"
         if np.isfinite(noise) and noise < NOISE_LOW:  # (the usual cause ruled out: a review)
             cause = (f"these normals' noise, read from their curl, is low (about {noise:.1f} "
@@ -986,9 +994,10 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
             read = ("" if not np.isfinite(noise) else
                     f" (these normals' noise, read from their curl: about {noise:.1f} deg)")
             cause = f"noisy normals{read} {steep} read as jumps"
-        warn(f"discontinuities: {info['cut_corners']:.0%} of the facet corners were cut "
-             f"({pieces:,} mesh pieces), more than surfaces with real jumps give (at most 21 % "
-             f"on the development benchmark's renders and the real maps): {cause}. "
+        warn(f"discontinuities: {inside:.0%} of the facet corners were cut away from the "
+             f"mask's edge ({pieces:,} mesh pieces), more than surfaces with real jumps give "
+             "(at most 21 % of all corners on the development benchmark's renders and the "
+             f"real maps, 18 % away from the edge on every third of them): {cause}. "
              + ("" if discontinuous.sharpness(1.0, noise) == 1.0 else
                 f"For this noise the sharpness was already lowered to "
                 f"{info['discontinuity_k']:.2g} (discontinuity_k times "
@@ -998,9 +1007,9 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
              + ("" if discontinuous.sharpness(1.0, noise, info.get("soft_edges", np.nan))
                 <= 1.0 else
                 f"This map read as blurred (info['soft_edges'] "
-                f"{info.get('soft_edges', np.nan):.3g}), so the sharpness was doubled to "
+                f"{info.get('soft_edges', np.nan):.3g}), so the sharpness was raised to "
                 f"{info['discontinuity_k']:.2g} (discontinuity_k times "
-                f"{discontinuous.SOFT_K:g}); the values below are doubled too. ")
+                f"{discontinuous.SOFT_K:g}); the values below are multiplied by it too. ")
              + "A smaller discontinuity_k cuts far less (--option discontinuity_k=2, or 1), or "
              "integrate without discontinuities (docs/results.md, 'A flat surface seen "
              "steeply, with noise, falls apart')")

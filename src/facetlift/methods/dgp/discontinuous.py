@@ -72,7 +72,8 @@ Final weights
     facet's normal term by its view cosine squared (:data:`FINAL_COS_POWER`, BiNI's
     weighting of the slopes; times the confidence, if any): steep facets, whose slopes are
     least reliable and whose planes fit a curved surface worst, no longer bend whole smooth
-    regions. The ``energy`` trace is the reweightings' (uniform weights). Not with a depth
+    regions. The ``energy`` trace is the reweightings' (uniform normal weights, times the
+    confidence where one is given). Not with a depth
     prior compared pixel by pixel; with a blurred one (``prior_blur``) yes: the last solve then
     keeps the prior's half on the glued vertices and drops the half on the facets' own copies
     (``PRIOR_OWN``) with the uniform normal weights it was paired with (measured that way on
@@ -880,7 +881,8 @@ def soft_edges(domain, normals, given) -> float:
     used); it is a one-pixel step where it exceeds both changes beside it along the same line
     by :data:`SOFT_PEAK` times (both neighbours given). A spike (one normal unlike the two
     beside it, an outlier: a neighbouring change of at least half its size that turns back,
-    so that the normals two pixels apart differ less than either change) is neither step nor
+    so that the normals two pixels apart differ less than the larger change) is neither step
+    nor
     ramp and not counted. Chords ``|n_a - n_b|`` stand for the angles (monotonic)."""
     good = given & np.isfinite(normals).all(axis=1)
     img = np.stack([domain.to_image(np.where(good, normals[:, i], np.nan)) for i in range(3)],
@@ -972,7 +974,9 @@ def solve_discontinuous(
     flat_weight : float
         Slope weight of facets without a target (see dgp).
     cg_rtol : float
-        Relative residual of every CG solve.
+        Relative residual of the final solve (and of the one solve when ``max_iter`` is 0);
+        the first solve and the reweightings' solve to ``max(cg_rtol, LOOSE_RTOL)`` with the
+        forcing term (:data:`FORCING`; :data:`PRIOR_FORCING` with a prior).
     callback : callable(iteration, largest corner-weight change), optional
     prior : (w, t, fixed), optional
         Depth prior on the facet centres of the glued vertices ``z``: weights and targets
@@ -1068,6 +1072,17 @@ def _factorized(K, rhs, amg, grid):
     amg["ml"] = amg["pre"] = amg["for"] = amg["bal"] = None
     amg["factorized"] += 1
     return linalg.solve(K, rhs, linalg.factorizer(), grid=grid)[0]
+
+
+def _cut_inside(domain, w: np.ndarray) -> float:
+    """The share of corner weights `w` (m, 4) below :data:`CUT` among the facets whose eight
+    neighbours are all in `domain`; NaN where there is no such facet."""
+    from scipy import ndimage
+
+    full = ndimage.binary_erosion(domain.mask, np.ones((3, 3), bool), border_value=0)
+    r, c = domain.pixels
+    inside = full[r, c]
+    return float((w[inside] < CUT).mean()) if inside.any() else float("nan")
 
 
 def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, cg_rtol,
@@ -1420,6 +1435,11 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         "weight_change": changes,
         "cg_iterations": cg_its,
         "cut_corners": float((w < CUT).mean()),
+        # (the same among facets whose eight neighbours are all in the domain: at the mask's
+        # edge a missing neighbour reads as a zero difference, so a slope's edge facets have
+        # their inner corners below CUT with nothing to separate: a plane strip 3 pixels wide
+        # at 60 degrees read 33 % cut, 1 mesh piece, and was warned about, a review)
+        "cut_corners_inside": _cut_inside(domain, w),
         # (the corners the curl started cut, curl_seed)
         "seeded_corners": float((w0 < CUT).mean()) if seeded else 0.0,
         "multigrid_builds": amg["builds"],

@@ -12,8 +12,9 @@ Offsets of separated pieces
     :func:`piece_offsets` fixes those constants rigidly (without bending any piece): by least
     squares over the cut edges, so that on average the surface continues across the cut as
     the normals of the two facets predict (``rule="continue"``), or the vertex copies meet
-    (``rule="meet"``); :func:`occlusion_offsets` sets the smallest jump of every boundary
-    to zero (``rule="occlusion"``; the discontinuity route, without a depth prior, only
+    (``rule="meet"``); :func:`occlusion_offsets` sets a low quantile of every boundary's
+    jumps (5 %; the median where both signs are common) to zero (``rule="occlusion"``; the
+    discontinuity route, without a depth prior, only
     where it is at most :data:`TOUCH` footprints, from the places its own solve gave the
     pieces).
 """
