@@ -301,6 +301,24 @@ def test_normals_facing_away_name_the_opencv_frame():
         facetlift.integrate(frames.from_facetlift(n, "opencv"))
 
 
+def test_a_truncating_encoders_two_channel_map_gets_no_frame_advice():
+    """An audit of the docs' claims: a two-channel map (B = 0) from an encoder that truncates
+    is decoded at the middle of each code step, (v + 0.5) / 255, off the code grid the check
+    looked for, so the refusal went on to advise a frame, which recipes.md says it does not
+    (none mends it). Half steps count as decoded codes too."""
+    n, _ = bump()
+    codes = np.floor((n + 1) / 2 * 255).astype(float)
+    v = (codes + 0.5) / 255 * 2 - 1  # (x, y as the truncating encoder's decode reads them)
+    v[..., 2] = (0 + 0.5) / 255 * 2 - 1
+    text, decoded = frames.z_not_stored(v.reshape(-1, 3))
+    assert decoded and "is z stored" in text
+    with pytest.raises(ValueError, match="is z stored") as e:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            facetlift.integrate(v)
+    assert "normal-frame" not in str(e.value) and "If z really" not in str(e.value)
+
+
 @pytest.mark.parametrize("blue", [0, 37])
 def test_a_two_channel_map_is_told_that_z_is_not_stored(blue):
     """An audit: a BC5 map (x, y in R, G; B = 0) was refused as '100 % ... face away ... try

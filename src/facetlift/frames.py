@@ -1177,9 +1177,10 @@ def z_not_stored(v: np.ndarray) -> tuple[str, bool] | None:
     least :data:`ENCODING_CHECK_PIXELS`) is one value while x and y vary: a two-channel map
     (BC5, RG) stores x and y only and fills its blue channel with one value (0 decodes to z =
     -1: every normal faces away), which is not z. The sentence says so and how to rebuild z
-    (:data:`REBUILD_Z`). `decoded`: every x and y lies on the 16-bit code grid (or is 0), as a
-    decoded 8/16-bit map's do, where no other frame is worth naming; float normals built as
-    (p, q, -1) also have a constant z, and get the frame hint after. None otherwise."""
+    (:data:`REBUILD_Z`). `decoded`: every x and y lies on the 16-bit code grid or its half
+    steps (or is 0), as a decoded 8/16-bit map's do, where no other frame is worth naming;
+    float normals built as (p, q, -1) also have a constant z, and get the frame hint after.
+    None otherwise."""
     if len(v) < ENCODING_CHECK_PIXELS:
         return None
     z = v[:, 2]
@@ -1188,7 +1189,10 @@ def z_not_stored(v: np.ndarray) -> tuple[str, bool] | None:
     if z.min() != z.max() or (np.ptp(v[:, 0]) == 0 and np.ptp(v[:, 1]) == 0):
         return None
     with np.errstate(invalid="ignore"):
-        f = (v[:, :2] + 1.0) / 2.0 * 65535.0  # (8-bit codes lie on it too: 65535 = 257 * 255)
+        # (8-bit codes lie on it too: 65535 = 257 * 255; and the half steps, where a map read
+        # as a truncating encoder's is decoded at the middle of each step, (v + 0.5) / 255,
+        # which was told to try a frame that mends nothing, an audit of the docs' claims)
+        f = (v[:, :2] + 1.0) / 2.0 * 131070.0
         decoded = bool(((np.abs(f - np.round(f)) < 1e-6) | (v[:, :2] == 0)).all())
     return (f"z is {float(z[0]):g} at every pixel inside the mask while x and y vary: is z "
             "stored? A two-channel map (BC5, RG) stores x and y only, and a blue channel filled "

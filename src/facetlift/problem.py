@@ -997,11 +997,22 @@ def _check_relief(problem: Problem) -> None:
     if not sparse and ratio <= RELIEF_UNRELATED and pairs >= RELIEF_UNRELATED_PAIRS:
         # (the jump hint not silenced: a blurred prior reads so too, a review: a registered
         # map blurred by 4 px 0.48, by 6 px 0.31, whose cure is its blur declared)
+        units = ""
+        if ratio > 0:  # (a metric map without K read as this too, and was sent to a blur
+            # that made it worse, 17.6 deg: an audit of the docs' claims)
+            h = problem.pixel_size
+            units = (("a relative depth known only up to scale and shift (prior_fit='affine', "
+                      "--prior-fit affine), " if problem.perspective else
+                      f"in other units than the depth's (without K the depth is orthographic "
+                      f"in units of pixel_size {h:g}: a prior in other units needs a pixel_size "
+                      f"of about {ratio * h:.3g} (--pixel-size), a perspective one its "
+                      "camera's K (--K), one known only up to scale prior_fit='affine'), "))
         warn(f"prior: its relief hardly follows the normals' (a ratio of {ratio:.3g} over "
-             f"{pairs} pairs of nearby samples, 1 where they agree): is the depth map blurred "
-             "(a sensor's or an upsampled depth: give its blur, prior_blur= / --prior-blur), "
-             "or of another view, or not registered with the normal map (shifted, flipped, "
-             "turned, cropped differently)? Its depths pull the surface off its normals")
+             f"{pairs} pairs of nearby samples, 1 where they agree): is the depth map "
+             f"{units}blurred (a sensor's or an upsampled depth: give its blur, prior_blur= / "
+             "--prior-blur), or of another view, or not registered with the normal map "
+             "(shifted, flipped, turned, cropped differently)? Its depths pull the surface off "
+             "its normals")
         return
     factor = RELIEF_FACTOR if sparse else RELIEF_FACTOR_DENSE
     low = RELIEF_FACTOR if sparse else RELIEF_FACTOR_DENSE_LOW
