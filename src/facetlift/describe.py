@@ -20,12 +20,14 @@ from ._warnings import recording
 #: perspective, bear / disk / human / many / torus masks; "spectral" from the full rectangle)
 #: on the project's 2-core machine under load 2.3-6.4. ``"dgp-pcg"`` with missing normals
 #: takes the ``"dgp-pcg-missing"`` row (the 30 %-missing tables); factorized routes take the
-#: thin-spiral figures (4.0-4.3 s for 759k pixels). Routes not listed get no time.
+#: thin-spiral figures (4.0-4.3 s for 759k pixels), the slowest a map whose NaN normals (half
+#: of them, no mask) leave it thin with holes that join the outside, factorized as a 2-D
+#: system (512^2: 1.1-1.3 s for 130k pixels, 2026-12-07). Routes not listed get no time.
 SECONDS_PER_PIXEL = {
     "dgp-spectral": (6.9e-7, 1.25e-6),
     "dgp-pcg": (1.8e-6, 1.2e-5),
     "dgp-pcg-missing": (3.8e-6, 1.6e-5),
-    "dgp-superlu": (5.3e-6, 5.7e-6),
+    "dgp-superlu": (5.3e-6, 1.0e-5),
     # discontinuities=True (docs/benchmarks.md, "Discontinuities"), measured 2026-12-02/03:
     # fastest the 2048^2 disk of the mask suite's smooth surface (21.3 s, 3.3 M pixels; the
     # full square 37 s, 8.9e-6), the timing objects 1.7-3.6e-5 (0.7-2.4 s for 41-73k

@@ -85,11 +85,12 @@ COEFFICIENTS = {
 
 #: Bytes per vertex of the Ruge-Stueben hierarchy (and its setup) that replaces the spectral
 #: box on a thin domain (:func:`facetlift.linalg.facet.thin`) on the facet-CG routes. Measured
-#: on 2026-12-07 (a map with 30 % of its normals NaN and no mask, thin through its holes,
-#: ``backend="pcg"``): the plan without it was 0.32-0.36 of the peak at 512^2-2048^2 (2048^2:
-#: 772 MiB planned, 2,431 MiB peak; a large-maps audit's 4096^2 planned 3.0 GiB), the
-#: difference 418-458 B per vertex; with it 1.00-1.07x. A spiral 4 px wide at 1024^2: 0.94x
-#: with 30 % missing normals, 1.42x with every normal known.
+#: on 2026-12-07 on a map with 30 % of its normals NaN and no mask, thin through its holes by
+#: the test of that morning (its small holes are filled before the test since), with
+#: ``backend="pcg"``: the plan without it was 0.32-0.36 of the peak at 512^2-2048^2 (2048^2:
+#: 772 MiB planned, 2,431 MiB peak), the difference 418-458 B per vertex; with it 1.00-1.07x.
+#: A spiral 4 px wide at 1024^2: 0.94x with 30 % missing normals, 1.42x with every normal
+#: known.
 THIN_MULTIGRID = 460.0
 
 
