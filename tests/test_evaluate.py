@@ -381,6 +381,11 @@ def test_cli_evaluate_takes_a_dataset_folder_as_ground_truth(tmp_path, capsys):
                          tmp_path / "all.png", "--K", data / "K.txt", "--json")
     assert code == 0 and json.loads(out)["pixels"] == np.isfinite(gt).sum(), err
     assert "the folder's mask" not in " ".join(json.loads(out)["notes"])
+    # an orthographic result (mean 0) beside the folder's K: scored without it, said
+    np.save(tmp_path / "ortho.npy", est - np.nanmean(est))
+    code, out, err = run(capsys, "evaluate", tmp_path / "ortho.npy", "--gt", data, "--json")
+    assert code == 0 and json.loads(out)["perspective"] is False, err
+    assert "K.txt not used" in " ".join(json.loads(out)["notes"])
     (tmp_path / "nogt").mkdir()
     code, _, err = run(capsys, "evaluate", tmp_path / "depth.npy", "--gt", tmp_path / "nogt")
     assert code == 1 and "holds none of depth_gt.npz, depth_gt.npy" in err, err

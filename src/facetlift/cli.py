@@ -1193,7 +1193,7 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
     est = io.read_depth(result, arg="result")
     folder_notes = []
     if gt.is_dir():  # (a BiNI user's `--gt bear` was refused as a directory, an audit)
-        gt, mask, K, folder_notes = _gt_folder(gt, mask, K, fov, result)
+        gt, mask, K, folder_notes = _gt_folder(gt, mask, K, fov, result, est)
     camera = None
     orthographic = False  # (a surface.npz that records an orthographic camera)
     if result.suffix.lower() == ".npz":  # (a surface's: its camera, NaN when orthographic)
@@ -1262,12 +1262,13 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
     return EXIT_OK
 
 
-def _gt_folder(folder: Path, mask, K, fov, result: Path):
+def _gt_folder(folder: Path, mask, K, fov, result: Path, est):
     """``(gt, mask, K, notes)`` of ``evaluate --gt FOLDER``: the folder's ground truth
     (:data:`facetlift.jobs.GT_NAMES`, the first present), and its ``mask.png`` and ``K.txt``
-    where the command was given none and (for K) the result keeps no camera of its own (a
-    surface.npz does); ``notes`` say which files were taken. A ValueError names the files
-    looked for where the folder holds no ground truth."""
+    where the command was given none and (for K) the result `est` keeps no camera of its own
+    (a surface.npz does) and has only positive depths (an orthographic result, integrated
+    with --orthographic from such a folder, has mean 0); ``notes`` say which files were taken.
+    A ValueError names the files looked for where the folder holds no ground truth."""
     from .jobs import GT_NAMES
 
     present = [folder / n for n in GT_NAMES if (folder / n).is_file()]
@@ -1280,9 +1281,17 @@ def _gt_folder(folder: Path, mask, K, fov, result: Path):
         notes.append(f"scored inside {mask} (the folder's mask; --mask overrides it)")
     if (K is None and fov is None and (folder / "K.txt").is_file()
             and result.suffix.lower() != ".npz"):
-        K = folder / "K.txt"
-        notes.append(f"scored as a perspective depth with {K} (the folder's camera; --K "
-                     "overrides it)")
+        import numpy as np
+
+        with np.errstate(invalid="ignore"):
+            positive = bool(np.all(est[np.isfinite(est)] > 0))
+        if positive:
+            K = folder / "K.txt"
+            notes.append(f"scored as a perspective depth with {K} (the folder's camera; --K "
+                         "overrides it)")
+        else:
+            notes.append(f"the folder's {folder / 'K.txt'} not used: the result has depths "
+                         "<= 0, as an orthographic one has")
     return present[0], mask, K, notes
 
 
