@@ -5,6 +5,7 @@ this process."""
 from __future__ import annotations
 
 import json
+import os
 import warnings
 from pathlib import Path
 
@@ -1232,3 +1233,83 @@ def test_a_frame_without_its_prior_runs_from_its_normals_with_a_warning(tmp_path
     code = main(args + ["-o", str(tmp_path / "s2")])
     recs = {r["name"]: r for r in map(json.loads, capsys.readouterr().out.splitlines())}
     assert code == 0 and any("no depth prior" in w for w in recs["obj1"]["warnings"]), recs
+
+
+_KILLER = """
+import os, signal
+if os.environ.get("FACETLIFT_TEST_KILL"):
+    import facetlift.jobs as _jobs
+
+    _run = _jobs.run
+
+    def run(job, *a, **k):
+        if os.path.basename(str(job.normals)).startswith(os.environ["FACETLIFT_TEST_KILL"]):
+            os.kill(os.getpid(), signal.SIGKILL)
+        return _run(job, *a, **k)
+
+    _jobs.run = run
+"""
+
+
+def test_a_killed_worker_costs_its_item_alone(tmp_path, monkeypatch):
+    """A review: one local worker killed (SIGKILL, the out-of-memory killer) stopped the whole
+    batch with WorkersDied and no record of the item that killed it, so every --resume died
+    again. The items not started run on a new pool, those running beside it are run again
+    alone, and the one whose worker dies again gets a `killed` record (exit 1)."""
+    pytest.importorskip("dask")
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(_KILLER)
+    src = Path(facetlift.__file__).resolve().parents[1]
+    monkeypatch.setenv("PYTHONPATH", f"{hook}{os.pathsep}{src}")
+    monkeypatch.setenv("FACETLIFT_TEST_KILL", "m2")
+    maps(tmp_path / "in", n=5)
+    recs = facetlift.batch([tmp_path / "in"], tmp_path / "o", workers=2, save=("npy",))
+    status = {r["name"]: r["status"] for r in recs}
+    assert status == {"m0": "ok", "m1": "ok", "m2": "killed", "m3": "ok", "m4": "ok"}, status
+    killed = next(r for r in recs if r["name"] == "m2")
+    assert killed["exit"] == 1 and "worker process died" in killed["error"]
+    log = [json.loads(line) for line in (tmp_path / "o" / "batch.jsonl").open()]
+    assert sorted(r["name"] for r in log) == ["m0", "m1", "m2", "m3", "m4"]
+    assert not (tmp_path / "o" / "m2").exists()
+
+
+def test_recursive_patterns_resume_in_place_and_early_warnings(tmp_path, capsys):
+    """A review of batch: 'maps/**/*.png' matched one folder level alone (maps/a.png and
+    maps/sub/deeper/d.png skipped without a word); with OUT the folder holding the dataset
+    folders, each item's outputs changed its fingerprint and --resume ran everything again;
+    warnings of the batch's settings (an --output-frame with no mesh saved) never reached a
+    successful item's record."""
+    maps(tmp_path / "maps", n=1)
+    maps(tmp_path / "maps" / "sub" / "deeper", n=1)
+    recs = facetlift.batch([str(tmp_path / "maps" / "**" / "*.png")], tmp_path / "o",
+                           workers=1, save=("npy",), output_frame="opencv")
+    assert len(recs) == 2 and all(r["status"] == "ok" for r in recs)
+    assert all(any("applies to the mesh and point outputs" in w for w in r["warnings"])
+               for r in recs)
+    sets = tmp_path / "sets"
+    for name in ("a", "b"):
+        maps(sets / name, n=1)
+        (sets / name / "m0.png").rename(sets / name / "normal_map.png")
+    args = ["batch", str(sets), "-o", str(sets), "-s", "npy", "--resume", "--workers", "1",
+            "--no-progress"]
+    assert main(args) == 0
+    capsys.readouterr()
+    assert main(args) == 0
+    out = capsys.readouterr()
+    assert "2 from an earlier run" in out.out + out.err, out
+
+
+def test_a_batch_worker_starts_no_threads_of_its_own(monkeypatch):
+    """A review: each of a local batch's worker processes (one per core) also ran its
+    transforms on every core and kernel's tiles on up to 8 threads. Where _threads.CORES is
+    1, as a worker of a parallel batch sets it, the transforms and the split sparse products
+    keep to one thread and kernel's memory plan counts one tile."""
+    from facetlift import _threads, memory
+    from facetlift.linalg import matvec, spectral
+
+    monkeypatch.setattr(_threads, "CORES", 1)
+    assert spectral.fft_workers() == 1 and not matvec.free_core()
+    one = memory._kernel_tiles({"tile": 64, "margin": 8, "sigma": 2.0}, (512, 512))
+    monkeypatch.setattr(_threads, "CORES", 8)
+    assert memory._kernel_tiles({"tile": 64, "margin": 8, "sigma": 2.0}, (512, 512)) == 8 * one

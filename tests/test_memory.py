@@ -298,3 +298,24 @@ def test_the_plan_counts_the_local_solve_of_a_large_hole():
     local = int(weak_vertices(p.domain, p.usable).sum())
     assert route == "dgp-pcg" and local > 30_000
     assert est >= full + memory.factorization_bytes(local) and est > 2.5 * full
+
+
+def test_a_batch_workers_share_of_the_free_memory(monkeypatch):
+    """A review: each of a local batch's worker processes planned against all the free memory
+    at once, so items that each fit could together exhaust it. A worker plans against its
+    1/n share (memory.share_among, set by the batch's worker start), and says so; a limit of
+    the process's own (ulimit -v) is not divided."""
+    from facetlift import memory
+
+    monkeypatch.setattr(memory, "_meminfo", lambda: {"MemTotal": 16 * memory.GiB,
+                                                     "MemAvailable": 8 * memory.GiB})
+    monkeypatch.setattr(memory, "_address_space_headroom", lambda: None)
+    monkeypatch.setattr(memory, "_cgroup_headroom", lambda: None)
+    monkeypatch.setattr(memory, "_SHARE", 1)
+    whole, source = memory.default_limit_source()
+    assert source == memory.FREE
+    memory.share_among(2)
+    half, source = memory.default_limit_source()
+    assert half == whole // 2 and "a 1/2 share: this process is one of 2 batch workers" in source
+    monkeypatch.setattr(memory, "_address_space_headroom", lambda: 3 * memory.GiB)
+    assert memory.default_limit_source() == (3 * memory.GiB, memory.ADDRESS_SPACE)

@@ -18,6 +18,18 @@ import contextlib
 import os
 import threading
 
+#: Cores this process may use for its own threads (the transforms' and the split sparse
+#: products' second thread, ``kernel``'s tiles), or None: the machine's. A local batch's
+#: worker processes set 1 (:func:`facetlift.batch._worker_start`): one process per core, where
+#: each also started a thread per core for its transforms and ``kernel`` up to 8 (a review).
+CORES: int | None = None
+
+
+def cores() -> int:
+    """:data:`CORES`, else the machine's CPU count."""
+    return CORES if CORES is not None else (os.cpu_count() or 1)
+
+
 _LOCK = threading.Lock()
 _STATE = {"depth": 0, "limiter": None, "limit": None}
 #: This thread's own depth in :func:`blas_limit` (the child of a fork keeps only the forking

@@ -15,7 +15,9 @@ when more than one worker or a cluster is asked for.
 Statuses: ``ok``; ``error`` (bad input or a missing extra: ValueError, OSError, ImportError;
 exit 1); ``memory``
 (MemoryLimitError, exit 1); ``solver`` (SolverError, exit 2); ``not_converged`` (outputs
-written, exit 2); ``bug`` (any other exception, exit 3).
+written, exit 2); ``killed`` (a local worker process died while running it, also when run
+again alone: :data:`KILLED`; a cluster's workers died running it: Dask's ``KilledWorker``;
+exit 1); ``bug`` (any other exception, exit 3).
 """
 
 from __future__ import annotations
@@ -128,7 +130,9 @@ def items(inputs, *, list_file=None) -> list[Item]:
     absent: list[tuple[str, str]] = []  # (the input as given, why it cannot run)
     for spec in specs:
         if _GLOB & set(spec) and not Path(spec).exists():  # (a file named 'a[1].png' is one)
-            found = sorted(glob.glob(spec))
+            # (`**` any depth of folders, as shells with globstar read it: it matched one
+            # level alone, and 'maps/**/*.png' skipped maps/a.png without a word, a review)
+            found = sorted(glob.glob(spec, recursive=True))
             if not found:
                 absent.append((spec, f"`inputs`: the pattern {spec!r} matches nothing"))
             for f in map(Path, found):  # (a matched folder is read as a named one: 'in/*'
@@ -672,7 +676,12 @@ def fingerprint(item: Item, template: Job | None = None) -> list:
         from .io.dataset import camera_files
 
         folder = files[0]
-        files = sorted(f for f in folder.iterdir() if f.is_file())
+        # (not the outputs a batch writes there: with OUT the folder that holds the dataset
+        # folders, each item's own outputs changed its inputs and --resume ran it again every
+        # time, a review)
+        ours = set(OUTPUTS.values()) | {LOG_NAME}
+        files = sorted(f for f in folder.iterdir() if f.is_file() and f.name not in ours
+                       and not f.name.startswith(".facetlift"))
         with contextlib.suppress(ValueError):  # (the item's own reading says why)
             files += [c for c in camera_files(folder) if c.parent != folder]
     # (its mask, prior and confidence beside it: a frame's depth replaced is a new input)
@@ -1092,8 +1101,53 @@ def _tracker_outlives_hangup() -> None:
         signal.signal(signal.SIGHUP, old)
 
 
+#: A local batch's record of an item whose worker process died while running it (killed: by
+#: the out-of-memory killer or a signal, or crashed), after it was run again alone (when
+#: other items were running beside it) and its worker died again.
+KILLED = ("its worker process died while running it (killed, e.g. by the system's "
+          "out-of-memory killer, or crashed), also when run again alone; the other items went "
+          "on. A map too large for the memory: --max-memory lower, a crop, or --workers 1")
+
+
 def _on_processes(jobs, n_workers: int, done) -> None:
-    """The Dask local scheduler, one process per worker; `done` runs here as items finish."""
+    """The Dask local scheduler, one process per worker; `done` runs here as items finish.
+
+    A worker that dies (killed by the out-of-memory killer or a signal) breaks the pool: the
+    items not yet started run on a new one, and the items that were running when it broke are
+    run again one at a time, each alone in a pool of one; one whose worker dies again gets a
+    ``killed`` record (:data:`KILLED`). One worker killed stopped the whole batch, with no
+    record of the item that killed it, so every ``--resume`` died again (a review)."""
+    from .errors import WorkersDied
+
+    pending = list(jobs)
+    while pending:
+        lost, rest = _round(pending, n_workers, done)
+        if lost is None:
+            return
+        if not lost and len(rest) == len(pending):  # (no item ran: the workers cannot start)
+            raise WorkersDied(
+                "the batch's worker processes died before finishing (killed, out of memory, "
+                + (_no_script_file() or "or started from a script without `if __name__ == "
+                   "'__main__':`, which worker processes need")
+                + "); the log has the items that finished: rerun with resume=True, or with "
+                "workers=1"
+            )
+        for it, j in lost:
+            if len(lost) == 1 and n_workers == 1:
+                again = [(it, j)]  # (it ran alone already)
+            else:
+                again, _ = _round([(it, j)], 1, done)
+            if again:
+                done(it, {"status": "killed", "error": KILLED, "exit": 1, "seconds": None,
+                          "warnings": [], "mean_deviation": None, "outputs": {}, "hints": [],
+                          "camera_warned": False})
+        pending = rest
+
+
+def _round(jobs, n_workers: int, done):
+    """Run `jobs` on a new pool of `n_workers` processes: ``(None, None)`` when all finished,
+    else, where the pool broke (a worker died), ``(lost, rest)``: the jobs that were running
+    then and those not started."""
     dask = _dask()
     from dask.callbacks import Callback
 
@@ -1101,20 +1155,24 @@ def _on_processes(jobs, n_workers: int, done) -> None:
     tasks = []
     for it, j in jobs:
         task = dask.delayed(run_item, pure=False)(j, 1, dask_key_name=f"item-{len(tasks)}")
-        keys[task.key] = it
+        keys[task.key] = (it, j)
         tasks.append(task)
+    started, finished = set(), set()
 
     class _Done(Callback):
+        def _pretask(self, key, dsk, state):  # (in this process, as a task is handed out)
+            if key in keys:
+                started.add(key)
+
         def _posttask(self, key, result, dsk, state, worker_id):
             if key in keys:
-                done(keys[key], result)
+                finished.add(key)
+                done(keys[key][0], result)
 
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
     from dask.multiprocessing import get_context
-
-    from .errors import WorkersDied
 
     # our own pool, so that an interrupt stops its workers: Dask's own waits for the running
     # items at shutdown, and an interrupt during a worker's start could leave the process
@@ -1124,7 +1182,7 @@ def _on_processes(jobs, n_workers: int, done) -> None:
     from .io.images import _REDIRECT
 
     pool = ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_worker_start,
-                               initargs=(_REDIRECT["enabled"],))
+                               initargs=(_REDIRECT["enabled"], n_workers))
     try:
         with _Done():
             # one item per dispatch: Dask's default hands ready tasks out in chunks of 6, so a
@@ -1132,18 +1190,15 @@ def _on_processes(jobs, n_workers: int, done) -> None:
             # records (the log, the bar) came only when all of it had finished
             dask.compute(*tasks, scheduler="processes", num_workers=n_workers, chunksize=1,
                          pool=pool)
-    except BaseException as e:  # (an interrupt too: the running items are abandoned)
+    except BrokenProcessPool:
         _stop(pool, ctx.started)
-        if isinstance(e, BrokenProcessPool):
-            raise WorkersDied(
-                "the batch's worker processes died before finishing (killed, out of memory, "
-                + (_no_script_file() or "or started from a script without `if __name__ == "
-                   "'__main__':`, which worker processes need")
-                + "); the log has the items that finished: rerun with resume=True, or with "
-                "workers=1"
-            ) from e
+        return ([keys[k] for k in keys if k in started and k not in finished],
+                [keys[k] for k in keys if k not in started])
+    except BaseException:  # (an interrupt too: the running items are abandoned)
+        _stop(pool, ctx.started)
         raise
     pool.shutdown(wait=True)
+    return None, None
 
 
 def _no_script_file() -> str | None:
@@ -1162,18 +1217,26 @@ def _no_script_file() -> str | None:
     return None
 
 
-def _worker_start(protect: bool = False) -> None:
+def _worker_start(protect: bool = False, workers: int = 1) -> None:
     """A batch worker process leaves Ctrl-C to the parent, which stops it (:func:`_stop`),
-    dies at once on the parent's SIGTERM (:func:`facetlift.io.atomic.die_on_sigterm`), and
-    keeps stdout as the parent does (`protect`: the command line's, which it shares)."""
+    dies at once on the parent's SIGTERM (:func:`facetlift.io.atomic.die_on_sigterm`), keeps
+    stdout as the parent does (`protect`: the command line's, which it shares), plans its
+    items against its share of the free memory, one of `workers`
+    (:func:`facetlift.memory.share_among`), and starts no threads of its own beside others
+    (:data:`facetlift._threads.CORES`)."""
     import signal
 
+    from . import _threads
     from .io.atomic import die_on_sigterm
     from .io.images import protect_stdout
+    from .memory import share_among
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_on_sigterm()
     protect_stdout(protect)
+    share_among(workers)
+    if workers > 1:  # (one core each: a worker's own threads would only compete)
+        _threads.CORES = 1
 
 
 #: Seconds :func:`_stop` waits for terminated workers before it kills them.
@@ -1255,7 +1318,15 @@ def _on_cluster(jobs, scheduler, done) -> None:
                 rec = fut.result()
             except Exception as e:  # a worker died or the task could not run at all
                 rec = {"status": "bug", "error": f"{type(e).__name__}: {e}", "exit": 3,
-                       "outputs": {}, "mean_deviation": None, "seconds": None}
+                       "outputs": {}, "mean_deviation": None, "seconds": None,
+                       "warnings": [], "hints": [], "camera_warned": False}
+                # (a killed worker was "a bug in facetlift", exit 3, a review)
+                if type(e).__name__ == "KilledWorker":
+                    rec.update(status="killed", exit=1, error=(
+                        f"the cluster's workers running it died ({e}: killed, e.g. out of "
+                        "memory, or crashed); the other items went on"))
+                elif isinstance(e, ImportError):  # (a worker without facetlift or an extra)
+                    rec.update(status="error", exit=1, error=f"on the cluster's worker: {e}")
             done(it, rec)
     finally:
         if own:

@@ -889,19 +889,22 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
     if unknown:
         raise ValueError(f"`save`: unknown output(s) {unknown}; valid: {sorted(OUTPUTS)}")
     _check_outputs(save, job)  # (before any reading or solving: not after the whole job)
-    if job.output_frame is not None:
-        frames.parse(job.output_frame, "output_frame")
-        if not set(save) & {"ply", "obj", "stl", "points"}:  # (accepted and ignored: a review)
-            warn(f"`output_frame` {job.output_frame!r} applies to the mesh and point outputs "
-                 "(ply, obj, stl, points), none of which is saved: depth maps stay in "
-                 "facetlift's convention (depth along the viewing axis)")
-    if job.colors is not None and not set(save) & COLOURED and "colors" not in job.beside:
-        warn(f"`colors` {job.colors} paints only the ply, obj and points outputs, none of "
-             "which is saved: add -s ply, -s obj or -s points")
-    if job.triangles is False and "stl" in save and not set(save) & {"ply", "obj"}:
-        warn("quad faces (--quads; `triangles` False) apply to the ply and obj meshes, neither "
-             "of which is saved: mesh.stl holds triangles (STL has no quads)")
-    check_height_range(job, save)
+    # (said again in the job's record below: a batch item's record, which is that record,
+    # lost them, a review)
+    with recording() as early:
+        if job.output_frame is not None:
+            frames.parse(job.output_frame, "output_frame")
+            if not set(save) & {"ply", "obj", "stl", "points"}:  # (accepted and ignored)
+                warn(f"`output_frame` {job.output_frame!r} applies to the mesh and point "
+                     "outputs (ply, obj, stl, points), none of which is saved: depth maps "
+                     "stay in facetlift's convention (depth along the viewing axis)")
+        if job.colors is not None and not set(save) & COLOURED and "colors" not in job.beside:
+            warn(f"`colors` {job.colors} paints only the ply, obj and points outputs, none of "
+                 "which is saved: add -s ply, -s obj or -s points")
+        if job.triangles is False and "stl" in save and not set(save) & {"ply", "obj"}:
+            warn("quad faces (--quads; `triangles` False) apply to the ply and obj meshes, "
+                 "neither of which is saved: mesh.stl holds triangles (STL has no quads)")
+        check_height_range(job, save)
     src = job.source
     outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)
     names = [OUTPUTS[s] for s in save]
@@ -909,6 +912,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
     # phase fails, a write or the outputs' commit too)
     with recorded_warnings(on_warning) as caught, \
             io.OutputSet(outdir, names, inputs=input_paths(job)) as out:
+        for w in early:
+            reemit(w)
         announce(progress, "reading")
         inp = read(job)
         # (before the solve: a wrong image fails the job at once)

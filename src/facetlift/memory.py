@@ -301,10 +301,25 @@ FREE, ADDRESS_SPACE, CGROUP = ("the available memory", "what ulimit -v (the addr
                                "limit")
 
 
+#: How many processes share this machine's memory (:func:`share_among`): the batch's local
+#: worker processes each plan against their share of the free memory and of a cgroup's
+#: limit (both are the machine's, not the process's); 1 elsewhere.
+_SHARE = 1
+
+
+def share_among(n: int) -> None:
+    """Plan this process's jobs against a 1/`n` share of the free memory (and of a cgroup's
+    limit): set in each of a local batch's `n` worker processes, which otherwise each
+    planned against all of it at once, so that items that each fit could together exhaust
+    it and have a worker killed (a review: two workers both planned against 21.7 GiB)."""
+    global _SHARE
+    _SHARE = max(int(n), 1)
+
+
 def default_limit_source() -> tuple[int, str]:
     """``(bytes, what bounds them)``: :func:`default_limit` and which of the free memory
     (:data:`FREE`), ``ulimit -v`` (:data:`ADDRESS_SPACE`) or a cgroup (:data:`CGROUP`) is the
-    smallest."""
+    smallest; the first and the last divided among the processes of :func:`share_among`."""
     info = _meminfo()
     total = info.get("MemTotal")
     avail = info.get("MemAvailable")
@@ -315,13 +330,15 @@ def default_limit_source() -> tuple[int, str]:
             total = os.sysconf("SC_PHYS_PAGES") * page
         except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
             avail = total = 2**62
-    limits = [(avail - max(256 * MiB, int(MARGIN * (total or avail))), FREE)]
+    n = _SHARE
+    shared = "" if n == 1 else f" (a 1/{n} share: this process is one of {n} batch workers)"
+    limits = [((avail - max(256 * MiB, int(MARGIN * (total or avail)))) / n, FREE + shared)]
     space = _address_space_headroom()
     if space is not None:
         limits.append((space, ADDRESS_SPACE))
     cg = _cgroup_headroom()
     if cg is not None:
-        limits.append((cg, CGROUP))
+        limits.append((cg / n, CGROUP + shared))
     size, source = min(limits, key=lambda t: t[0])
     return max(int(size), 0), source
 
@@ -415,7 +432,9 @@ def _kernel_tiles(options: dict, shape) -> float:
     side_c = min(tile + 2 * o + 2 * margin, shape[1])
     k = side_r * side_c
     ev = min(tile + 2 * o, shape[0]) * min(tile + 2 * o, shape[1])
-    workers = min(os.cpu_count() or 1, 8)
+    from ._threads import cores
+
+    workers = min(cores(), 8)  # (kernel's threads, one per tile in flight)
     return workers * (8.0 * 6 * k * k + 8.0 * 5 * ev * k)
 
 

@@ -30,7 +30,9 @@ def fft_workers() -> int:
     thread 3.84 s for a disk, 3.77 against 3.67 s for the torus."""
     import os
 
-    n = os.cpu_count() or 1
+    from .._threads import cores
+
+    n = cores()
     try:
         busy = os.getloadavg()[0] >= n - 0.5
     except OSError:  # pragma: no cover - no load average on this platform

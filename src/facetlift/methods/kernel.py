@@ -83,7 +83,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 
@@ -95,7 +94,7 @@ import scipy.sparse.csgraph as csgraph
 import scipy.sparse.linalg as spla
 
 from .. import linalg
-from .._threads import single_blas_thread
+from .._threads import cores, single_blas_thread
 from ..options import Option
 from . import MethodResult
 
@@ -264,7 +263,7 @@ def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin, progress=None)
                 fits[members[col]][ev] = values[:, j]
         return len(members)
 
-    workers = max(1, min(len(groups), os.cpu_count() or 1, 8))
+    workers = max(1, min(len(groups), cores(), 8))
     with single_blas_thread(), ThreadPoolExecutor(workers) as pool:
         done, total = 0, max(sum(len(m) for m in groups.values()), 1)
         for k, count in enumerate(pool.map(fit_group, groups.values()), 1):
