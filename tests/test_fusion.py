@@ -2124,3 +2124,28 @@ def test_a_dense_prior_in_other_units_without_K_is_told_its_pixel_size():
         warnings.simplefilter("always")
         facetlift.integrate(g.normals, g.mask, prior=np.where(g.mask, g.depth, np.nan))
     assert not any("relief" in str(w.message) for w in rec)
+
+
+def test_exact_samples_far_from_a_smooth_surface_are_sent_to_discontinuities():
+    """An audit of warnings on clean inputs: exact sparse samples on the analytic occluder,
+    integrated smoothly, were called outliers to remove (removing them raised the error
+    3.29 -> 7.57 %, where discontinuities=True gives 0.06 %). On the smooth route the
+    warning now leads with the jumps the surface bends over and names discontinuities=True;
+    with it the samples are met and nothing is said."""
+    from facetlift import synthetic
+
+    g = synthetic.analytic("occluder", 128)
+    rng = np.random.default_rng(0)
+    prior = np.where(g.mask & (rng.random(g.mask.shape) < 0.04), g.depth, np.nan)
+    with pytest.warns(UserWarning, match=r"samples lie far from the surface returned .*: the "
+                      r"smooth surface bends over depth jumps and leaves correct samples far "
+                      r"from it: integrate with discontinuities=True \(--discontinuities\) "
+                      r"first\. Else outliers"):
+        facetlift.integrate(g.normals, g.mask, prior=prior, prior_outliers="keep")
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        s = facetlift.integrate(g.normals, g.mask, prior=prior, prior_outliers="keep",
+                                discontinuities=True)
+    assert not any("lie far from the surface" in str(w.message) for w in rec)
+    err = np.nanmean(np.abs(s.depth - g.depth)[g.mask]) / np.ptp(g.depth[g.mask])
+    assert err < 0.01
