@@ -4,6 +4,7 @@ this process."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import warnings
@@ -1313,3 +1314,77 @@ def test_a_batch_worker_starts_no_threads_of_its_own(monkeypatch):
     one = memory._kernel_tiles({"tile": 64, "margin": 8, "sigma": 2.0}, (512, 512))
     monkeypatch.setattr(_threads, "CORES", 8)
     assert memory._kernel_tiles({"tile": 64, "margin": 8, "sigma": 2.0}, (512, 512)) == 8 * one
+
+
+def test_a_scheduler_that_is_no_address_is_named(tmp_path):
+    """A review: scheduler='threads' (Dask's local scheduler's name, not a cluster's address)
+    said "missing port number in address 'threads'" without naming the argument."""
+    pytest.importorskip("distributed")
+    maps(tmp_path / "in", n=1)
+    with pytest.raises(ValueError, match=r"`scheduler` 'threads': .*tcp://host:8786.*"
+                       r"workers=N"):
+        facetlift.batch([tmp_path / "in"], tmp_path / "o", scheduler="threads")
+
+
+_SLEEPER = """
+import os, time
+if os.environ.get("FACETLIFT_TEST_PIDS"):
+    import facetlift.jobs as _jobs
+
+    def run(job, *a, **k):
+        with open(os.path.join(os.environ["FACETLIFT_TEST_PIDS"], str(os.getpid())), "w"):
+            pass
+        time.sleep(60)
+
+    _jobs.run = run
+"""
+
+
+def test_workers_of_a_killed_batch_end_themselves(tmp_path):
+    """A review: a batch's parent killed with SIGKILL (which no handler sees) left its worker
+    processes waiting for more items, orphans, for good. They now check for their parent and
+    end when it is gone."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    pytest.importorskip("dask")
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(_SLEEPER)
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    maps(tmp_path / "in", n=2)
+    src = Path(facetlift.__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=f"{hook}{os.pathsep}{src}", FACETLIFT_TEST_PIDS=str(pids))
+    parent = subprocess.Popen([sys.executable, "-m", "facetlift", "batch", str(tmp_path / "in"),
+                               "-o", str(tmp_path / "o"), "--workers", "2", "-s", "npy",
+                               "--no-progress"], env=env, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while len(list(pids.iterdir())) < 2 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        workers = [int(p.name) for p in pids.iterdir()]
+        assert len(workers) == 2
+    finally:
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+
+    def alive(pid):
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+
+    deadline = time.monotonic() + 10 * fb.ORPHAN_CHECK + 5
+    while any(alive(p) for p in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    try:
+        assert not any(alive(p) for p in workers)
+    finally:
+        for p in workers:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(p, signal.SIGKILL)

@@ -1222,8 +1222,9 @@ def _worker_start(protect: bool = False, workers: int = 1) -> None:
     dies at once on the parent's SIGTERM (:func:`facetlift.io.atomic.die_on_sigterm`), keeps
     stdout as the parent does (`protect`: the command line's, which it shares), plans its
     items against its share of the free memory, one of `workers`
-    (:func:`facetlift.memory.share_among`), and starts no threads of its own beside others
-    (:data:`facetlift._threads.CORES`)."""
+    (:func:`facetlift.memory.share_among`), starts no threads of its own beside others
+    (:data:`facetlift._threads.CORES`), and ends when the parent is gone
+    (:func:`_orphan_exits`)."""
     import signal
 
     from . import _threads
@@ -1237,6 +1238,29 @@ def _worker_start(protect: bool = False, workers: int = 1) -> None:
     share_among(workers)
     if workers > 1:  # (one core each: a worker's own threads would only compete)
         _threads.CORES = 1
+    _orphan_exits()
+
+
+#: Seconds between a batch worker's checks that its parent still runs (:func:`_orphan_exits`).
+ORPHAN_CHECK = 1.0
+
+
+def _orphan_exits() -> None:
+    """A batch worker whose parent died (a SIGKILL, which no handler sees) ends itself: the
+    workers finished their items and then waited for more, orphans, for good (a review).
+    What an item in flight leaves, its staging folder, the next run into that folder
+    sweeps (:func:`facetlift.io.atomic.sweep`)."""
+    import threading
+
+    parent = os.getppid()
+
+    def watch():
+        while True:
+            time.sleep(ORPHAN_CHECK)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="facetlift-orphan-check", daemon=True).start()
 
 
 #: Seconds :func:`_stop` waits for terminated workers before it kills them.
@@ -1307,7 +1331,13 @@ def _on_cluster(jobs, scheduler, done) -> None:
                           ) from e
 
     own = not isinstance(scheduler, Client)
-    client = Client(scheduler) if own else scheduler
+    try:
+        client = Client(scheduler) if own else scheduler
+    except (ValueError, TypeError) as e:  # (said "missing port number in address 'threads'"
+        # to scheduler='threads', without naming the argument, a review)
+        raise ValueError(f"`scheduler` {scheduler!r}: {e}; give a dask.distributed "
+                         "scheduler's address (tcp://host:8786) or a Client, or leave it out "
+                         "for local worker processes (workers=N)") from None
     try:
         futures = {}
         for it, j in jobs:
