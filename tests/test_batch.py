@@ -1288,6 +1288,11 @@ def test_recursive_patterns_resume_in_place_and_early_warnings(tmp_path, capsys)
     assert len(recs) == 2 and all(r["status"] == "ok" for r in recs)
     assert all(any("applies to the mesh and point outputs" in w for w in r["warnings"])
                for r in recs)
+    # (OUT under the pattern's root: the first run's previews are no maps of the second)
+    args = ([str(tmp_path / "maps" / "**" / "*.png")], tmp_path / "maps" / "out")
+    first = facetlift.batch(*args, workers=1, save=("npy", "png"))
+    again = facetlift.batch(*args, workers=1, save=("npy", "png"), resume=True)
+    assert len(first) == len(again) == 2 and all(r.get("resumed") for r in again)
     sets = tmp_path / "sets"
     for name in ("a", "b"):
         maps(sets / name, n=1)
@@ -1388,3 +1393,48 @@ def test_workers_of_a_killed_batch_end_themselves(tmp_path):
         for p in workers:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(p, signal.SIGKILL)
+
+
+_TIGHT = """
+import os
+if os.environ.get("FACETLIFT_TEST_AVAIL"):
+    import facetlift.jobs as _jobs
+    import facetlift.memory as _memory
+    from facetlift import _threads
+
+    _memory._meminfo = lambda: {"MemTotal": 2**30,
+                                "MemAvailable": int(os.environ["FACETLIFT_TEST_AVAIL"])}
+    _memory._cgroup_headroom = lambda: None
+    _run = _jobs.run
+
+    def run(job, *a, **k):
+        seen = os.path.join(os.environ["FACETLIFT_TEST_SEEN"], str(os.getpid()))
+        with open(seen, "w") as f:
+            f.write(f"{_threads.CORES} {_memory._SHARE}")
+        return _run(job, *a, **k)
+
+    _jobs.run = run
+"""
+
+
+def test_an_item_refused_by_its_workers_share_runs_again_alone(tmp_path, monkeypatch):
+    """A review: with each worker planning against 1/N of the free memory, items that fit
+    alone were refused in a parallel batch with nothing to say why or retry them. Such an
+    item runs again alone, with all of it, after the others. The workers' share and their one
+    core are the batch's own wiring, read in the workers here."""
+    pytest.importorskip("dask")
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(_TIGHT)
+    seen = tmp_path / "seen"
+    seen.mkdir()
+    src = Path(facetlift.__file__).resolve().parents[1]
+    monkeypatch.setenv("PYTHONPATH", f"{hook}{os.pathsep}{src}")
+    # (about 21 MiB above the planner's margin: a 256^2 map's ~13 MiB fit alone, not in half)
+    monkeypatch.setenv("FACETLIFT_TEST_AVAIL", str(277 * 2**20))
+    monkeypatch.setenv("FACETLIFT_TEST_SEEN", str(seen))
+    maps(tmp_path / "in", n=2, H=256, W=256)
+    recs = facetlift.batch([tmp_path / "in"], tmp_path / "o", workers=2, save=("npy",))
+    assert [r["status"] for r in recs] == ["ok", "ok"], [r.get("error") for r in recs]
+    states = {p.read_text() for p in seen.iterdir()}
+    assert "1 2" in states and "None 1" in states, states  # (shared, then alone)

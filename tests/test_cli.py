@@ -1490,3 +1490,16 @@ def test_a_mat_gradient_field_is_hinted_as_a_field_and_its_empty_mask_named(tmp_
     code, _, err = run(capsys, "integrate", tmp_path / "f.mat", "--mask", tmp_path / "mask.npy",
                        "-o", tmp_path / "o")
     assert code == 0 and "hint:" in err and "--normal-frame" not in err, err
+
+
+def test_a_settings_warning_is_said_before_a_later_checks_error(tmp_path, capsys):
+    """A review: --output-frame without a mesh saved was warned about, then the batch's
+    records were mended to keep it, which dropped it where a later check of the settings
+    (a bad --height-range) failed the job: both are said."""
+    n = np.dstack([np.zeros((12, 14, 2)), np.ones((12, 14))])
+    np.save(tmp_path / "n.npy", n)
+    code = main(["integrate", str(tmp_path / "n.npy"), "-o", str(tmp_path / "o"), "-s", "npy",
+                 "--output-frame", "opencv", "--height-range", "1", "0"])
+    err = capsys.readouterr().err
+    assert code == 1 and "applies to the mesh and point outputs" in err
+    assert "--height-range must be two finite numbers" in err

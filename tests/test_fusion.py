@@ -2149,3 +2149,24 @@ def test_exact_samples_far_from_a_smooth_surface_are_sent_to_discontinuities():
     assert not any("lie far from the surface" in str(w.message) for w in rec)
     err = np.nanmean(np.abs(s.depth - g.depth)[g.mask]) / np.ptp(g.depth[g.mask])
     assert err < 0.01
+
+
+def test_the_progress_count_rises_over_prior_fits_two_runs():
+    """A review: with prior_fit the normals-only run and the fused one each counted from 1
+    (the bar ran backwards); the count rises over both, and the stages are heard."""
+    from facetlift import synthetic
+
+    g = synthetic.analytic("steps", 64)
+    prior = np.where(g.mask, 0.5 * g.depth + 3.0, np.nan)
+    seen, stages = [], []
+
+    def progress(it, change):
+        seen.append(it)
+
+    progress.stage = stages.append
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        facetlift.integrate(g.normals, g.mask, prior=prior, prior_fit="affine",
+                            discontinuities=True, progress=progress, prior_weight=0.01)
+    assert seen == sorted(set(seen)) and len(seen) > 2, seen
+    assert "fitting the prior" in stages and "integrating with the prior" in stages

@@ -248,3 +248,22 @@ def recording(record: bool = True, action: str = "always", on_warning=None):
             _SHARED["depth"] -= 1
             if _SHARED["depth"] == 0:
                 _take_down()
+
+
+@contextlib.contextmanager
+def said_if_raised():
+    """:func:`recording` of a block whose warnings the caller says later (re-emits them);
+    where the block raises, they are said before the error goes on (a prior_fit run that ran
+    out of memory dropped the input's unusable-normals warning, an embedding audit; a job's
+    settings warning was lost to a later check's error, a review)."""
+    error = None
+    with recording() as said:
+        try:
+            yield said
+        except BaseException as e:  # (said outside the recording, then raised on)
+            error = e
+    if error is not None:
+        for w in said:
+            reemit(w)
+        raise error
+

@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from . import frames, memory, methods
-from ._warnings import recording, reemit, warn
+from ._warnings import recording, reemit, said_if_raised, warn
 from .conventions import CORNER_OFFSETS
 from .domain import Domain
 from .linalg import SolverError
@@ -338,7 +338,6 @@ def _no_perspective(method: str) -> ValueError:
 def _lacks(method: str, what: str) -> ValueError:
     """The error for a `what` ("prior", "confidence", "prior_blur") that `method` lacks."""
     able = sorted(k for k, v in methods.REGISTRY.items() if getattr(v, what))
-    note = ""
     if method == "bini" and what == "prior":
         # (BiNI's reference code has a depth term, lambda1 with depth_map and depth_mask: a
         # BiNI user was told its energy had none, an audit)
@@ -388,6 +387,11 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
         from ._progress import progress_bar
 
         bar, kwargs["progress"] = progress_bar(None)
+    if callable(kwargs.get("progress")):  # (one count over both runs, each counting from 1:
+        # the bar ran backwards, a review)
+        from ._progress import rising
+
+        kwargs["progress"] = rising(kwargs["progress"])
     # (the discontinuity route's prior-free reweightings, run for the first surface, are the
     # second run's first pass: done once, facetlift.methods.dgp.shared_cuts)
     try:
@@ -400,23 +404,6 @@ def _integrate_fitted(kind, normals, mask, *, prior, prior_weight, prior_blur,
             bar.close()
 
 
-@contextlib.contextmanager
-def _said_if_raised():
-    """:func:`recording` of one of :func:`_fitted_runs`' runs, whose warnings the caller says
-    after it; where the run raises, they are said before the error goes on (a first run that
-    ran out of memory dropped the input's unusable-normals warning, an embedding audit)."""
-    error = None
-    with recording() as said:
-        try:
-            yield said
-        except BaseException as e:  # (said outside the recording, then raised on)
-            error = e
-    if error is not None:
-        for w in said:
-            reemit(w)
-        raise error
-
-
 def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_blur,
                  prior_outliers, zeros=None, **kwargs) -> Surface:
     """The two runs of :func:`_integrate_fitted` and the fit between them (`zeros`: the
@@ -426,7 +413,7 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
     from .problem import prior_blur_value
 
     failed = None
-    with _said_if_raised() as said:
+    with said_if_raised() as said:
         first = integrate(normals, mask, **kwargs)
     if zeros is not None:
         # (those in the domain the normals gave, the first run's: a map's 0 around the object
@@ -462,7 +449,7 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
         surface.info["prior"] = {"fit": details, "left_out": True}
     else:
         announce(kwargs.get("progress"), "integrating with the prior")
-        with _said_if_raised() as fused:
+        with said_if_raised() as fused:
             surface = integrate(normals, mask, prior=aligned, prior_weight=prior_weight,
                                 prior_blur=prior_blur, prior_outliers=prior_outliers, **kwargs)
         for w in fused:  # (re-emitted, a torn surface's with what the fit adds to its causes)
@@ -829,8 +816,8 @@ def _far_samples_check(info: dict, blurred: bool, discontinuities: bool = True,
         if not discontinuities:
             # (the smooth route: the surface, bent over the jumps, is the likelier fault than
             # the samples; an audit of exact priors, 16 of 41 smooth runs warned, and the
-            # samples removed as told raised the error 1.09-2.3x on 5 of 6 scenes, where
-            # discontinuities=True took it from 3.29 to 0.063 % on the analytic occluder)
+            # samples removed as told raised the error on 4 of 5 renders and on the analytic
+            # occluder, 3.29 -> 5.4-7.6 %, where discontinuities=True gives 0.063 %)
             warn(head + "the smooth surface bends over depth jumps and leaves correct samples "
                  "far from it: integrate with discontinuities=True (--discontinuities) first. "
                  "Else outliers, such as a depth sensor's occluded or flying points or "

@@ -140,7 +140,7 @@ def items(inputs, *, list_file=None) -> list[Item]:
                 if f.is_dir() and not is_dataset(f):
                     if not (f / LOG_NAME).is_file():
                         paths += _folder_items(f)
-                else:
+                elif not _batch_output(f):
                     paths.append((f, False))
             continue
         p = Path(spec)
@@ -348,6 +348,13 @@ def _holds_maps(folder: Path) -> bool:
                and n not in CAMERA_FILES and not is_rotation_file(n) for n in names)
 
 
+def _batch_output(f: Path) -> bool:
+    """Whether `f` is a batch's own output (an item's preview.png, depth.npy ... in
+    OUT/NAME/, beside OUT's log): 'maps/**/*.png' with -o maps/out took a first run's
+    previews as maps on --resume (a review)."""
+    return f.stem in OUTPUT_STEMS and (f.parent.parent / LOG_NAME).is_file()
+
+
 def _stem(p: Path) -> str:
     """The folder name an input gives its results: of the absolute path (``.`` and ``..``
     named the cwd's results ``""`` and ``..``, written into OUT itself or beside it, an
@@ -527,6 +534,10 @@ def run_item(job: Job, threads: int | None = None) -> dict:
             rec.update(status="not_converged", exit=2, error="did not converge")
     except MemoryLimitError as e:
         rec.update(status="memory", error=str(e), exit=1)
+        from . import memory
+
+        if memory._SHARE > 1 and job.options.get("max_memory") is None:
+            rec["retry_alone"] = True  # (refused by this worker's share: _on_processes)
     except (ValueError, OSError, ImportError) as e:
         rec.update(status="error", error=str(e), exit=1)
     except SolverError as e:
@@ -1106,7 +1117,8 @@ def _tracker_outlives_hangup() -> None:
 #: other items were running beside it) and its worker died again.
 KILLED = ("its worker process died while running it (killed, e.g. by the system's "
           "out-of-memory killer, or crashed), also when run again alone; the other items went "
-          "on. A map too large for the memory: --max-memory lower, a crop, or --workers 1")
+          "on. A map too large for the memory: crop it, lower the memory limit (max_memory=, "
+          "--max-memory) or run fewer workers (workers=, --workers)")
 
 
 def _on_processes(jobs, n_workers: int, done) -> None:
@@ -1116,22 +1128,24 @@ def _on_processes(jobs, n_workers: int, done) -> None:
     items not yet started run on a new one, and the items that were running when it broke are
     run again one at a time, each alone in a pool of one; one whose worker dies again gets a
     ``killed`` record (:data:`KILLED`). One worker killed stopped the whole batch, with no
-    record of the item that killed it, so every ``--resume`` died again (a review)."""
-    from .errors import WorkersDied
+    record of the item that killed it, so every ``--resume`` died again (a review). Where no
+    worker could start at all (a script without a ``__main__`` guard), :class:`WorkersDied`.
+    An item refused for memory by its worker's share (:func:`facetlift.memory.share_among`)
+    runs again alone, with all of it, after the others."""
+    alone = []
 
+    def shared(it, rec):  # (a refusal by the share: run again alone, not recorded yet)
+        if rec.pop("retry_alone", False):
+            alone.append(it)
+        else:
+            done(it, rec)
+
+    job_of = {id(it): j for it, j in jobs}
     pending = list(jobs)
     while pending:
-        lost, rest = _round(pending, n_workers, done)
+        lost, rest = _round(pending, n_workers, shared)
         if lost is None:
-            return
-        if not lost and len(rest) == len(pending):  # (no item ran: the workers cannot start)
-            raise WorkersDied(
-                "the batch's worker processes died before finishing (killed, out of memory, "
-                + (_no_script_file() or "or started from a script without `if __name__ == "
-                   "'__main__':`, which worker processes need")
-                + "); the log has the items that finished: rerun with resume=True, or with "
-                "workers=1"
-            )
+            break
         for it, j in lost:
             if len(lost) == 1 and n_workers == 1:
                 again = [(it, j)]  # (it ran alone already)
@@ -1142,12 +1156,31 @@ def _on_processes(jobs, n_workers: int, done) -> None:
                           "warnings": [], "mean_deviation": None, "outputs": {}, "hints": [],
                           "camera_warned": False})
         pending = rest
+    for it in alone:
+        if _round([(it, job_of[id(it)])], 1, done)[0]:
+            done(it, {"status": "killed", "error": KILLED, "exit": 1, "seconds": None,
+                      "warnings": [], "mean_deviation": None, "outputs": {}, "hints": [],
+                      "camera_warned": False})
+
+
+def _workers_died() -> Exception:
+    """The error of a batch whose worker processes could not start at all."""
+    from .errors import WorkersDied
+
+    return WorkersDied(
+        "the batch's worker processes died before finishing (killed, out of memory, "
+        + (_no_script_file() or "or started from a script without `if __name__ == "
+           "'__main__':`, which worker processes need")
+        + "); the log has the items that finished: rerun with resume=True, or with "
+        "workers=1"
+    )
 
 
 def _round(jobs, n_workers: int, done):
     """Run `jobs` on a new pool of `n_workers` processes: ``(None, None)`` when all finished,
     else, where the pool broke (a worker died), ``(lost, rest)``: the jobs that were running
-    then and those not started."""
+    then and those not started. Raises :func:`_workers_died`'s error where the pool broke
+    before any worker had started (each counts itself in, :func:`_worker_start`)."""
     dask = _dask()
     from dask.callbacks import Callback
 
@@ -1178,11 +1211,15 @@ def _round(jobs, n_workers: int, done):
     # items at shutdown, and an interrupt during a worker's start could leave the process
     # waiting for it at exit (a Ctrl-C hang, 2 of 2 tries at 3 s into a 3-map batch)
     _tracker_outlives_hangup()
-    ctx = _Recording(get_context())  # (every worker it starts: what _stop stops)
+    base = get_context()
+    ctx = _Recording(base)  # (every worker it starts: what _stop stops)
+    # (the workers that started: a task is "started" here when it is handed out, so a script
+    # whose workers cannot start had every item recorded as killed, a review)
+    alive = base.Value("i", 0)
     from .io.images import _REDIRECT
 
     pool = ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_worker_start,
-                               initargs=(_REDIRECT["enabled"], n_workers))
+                               initargs=(_REDIRECT["enabled"], n_workers, alive))
     try:
         with _Done():
             # one item per dispatch: Dask's default hands ready tasks out in chunks of 6, so a
@@ -1190,8 +1227,10 @@ def _round(jobs, n_workers: int, done):
             # records (the log, the bar) came only when all of it had finished
             dask.compute(*tasks, scheduler="processes", num_workers=n_workers, chunksize=1,
                          pool=pool)
-    except BrokenProcessPool:
+    except BrokenProcessPool as e:
         _stop(pool, ctx.started)
+        if alive.value == 0:
+            raise _workers_died() from e
         return ([keys[k] for k in keys if k in started and k not in finished],
                 [keys[k] for k in keys if k not in started])
     except BaseException:  # (an interrupt too: the running items are abandoned)
@@ -1217,7 +1256,7 @@ def _no_script_file() -> str | None:
     return None
 
 
-def _worker_start(protect: bool = False, workers: int = 1) -> None:
+def _worker_start(protect: bool = False, workers: int = 1, alive=None) -> None:
     """A batch worker process leaves Ctrl-C to the parent, which stops it (:func:`_stop`),
     dies at once on the parent's SIGTERM (:func:`facetlift.io.atomic.die_on_sigterm`), keeps
     stdout as the parent does (`protect`: the command line's, which it shares), plans its
@@ -1239,6 +1278,9 @@ def _worker_start(protect: bool = False, workers: int = 1) -> None:
     if workers > 1:  # (one core each: a worker's own threads would only compete)
         _threads.CORES = 1
     _orphan_exits()
+    if alive is not None:  # (counted in: the pool's parent tells a start from a death)
+        with alive.get_lock():
+            alive.value += 1
 
 
 #: Seconds between a batch worker's checks that its parent still runs (:func:`_orphan_exits`).

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ._progress import announce
-from ._warnings import recording, reemit, warn
+from ._warnings import recording, reemit, said_if_raised, warn
 from .errors import CameraWarning
 
 #: Output kinds (``--save``) -> file names written into the output folder.
@@ -890,8 +890,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         raise ValueError(f"`save`: unknown output(s) {unknown}; valid: {sorted(OUTPUTS)}")
     _check_outputs(save, job)  # (before any reading or solving: not after the whole job)
     # (said again in the job's record below: a batch item's record, which is that record,
-    # lost them, a review)
-    with recording() as early:
+    # lost them, a review; said before an error of these checks goes on, as before)
+    with said_if_raised() as early:
         if job.output_frame is not None:
             frames.parse(job.output_frame, "output_frame")
             if not set(save) & {"ply", "obj", "stl", "points"}:  # (accepted and ignored)

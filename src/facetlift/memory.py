@@ -89,8 +89,8 @@ COEFFICIENTS = {
 #: the test of that morning (its small holes are filled before the test since), with
 #: ``backend="pcg"``: the plan without it was 0.32-0.36 of the peak at 512^2-2048^2 (2048^2:
 #: 772 MiB planned, 2,431 MiB peak), the difference 418-458 B per vertex; with it 1.00-1.07x.
-#: A spiral 4 px wide at 1024^2: 0.94x with 30 % missing normals, 1.42x with every normal
-#: known.
+#: A spiral 4 px wide at 1024^2: 0.92-0.95x with 30 % missing normals, 1.28-1.42x with every
+#: normal known (two measurements).
 THIN_MULTIGRID = 460.0
 
 

@@ -16,9 +16,9 @@ Bad normals
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from functools import cached_property
-from pathlib import Path
 
 import numpy as np
 
@@ -427,14 +427,23 @@ def gradients_from_normals(normals) -> tuple[np.ndarray, np.ndarray]:
         return -n[..., 0] / n[..., 2], -n[..., 1] / n[..., 2]
 
 
+#: The reader of each argument that a file name given as an array is pointed to.
+_READERS = {"normals": "facetlift.io.read_normals", "mask": "facetlift.io.read_mask",
+            "known": "facetlift.io.read_mask", "K": "facetlift.io.read_K",
+            "prior": "facetlift.io.read_prior, or read_depth for a float map",
+            "prior_weight": "facetlift.io.read_weights",
+            "confidence": "facetlift.io.read_weights", "p": "numpy.load, or facetlift.io."
+            "read_depth", "q": "numpy.load, or facetlift.io.read_depth"}
+
+
 def numeric_array(a, name: str, what: str = "a real numeric array") -> np.ndarray:
     """``np.asarray(a)`` if it is a real numeric (or boolean) array, else a ValueError naming
     `name`. Shared by the input checks here and the writers in :mod:`facetlift.io`."""
     a = unmasked(a)
-    if isinstance(a, (str, Path)):  # (said "got dtype <U16" to a path, an embedding audit)
-        raise ValueError(f"`{name}` must be {what}, not a file name ({str(a)!r}): read the "
-                         "file first (facetlift.io.read_normals, read_mask, read_depth, "
-                         "read_prior)")
+    if isinstance(a, (str, os.PathLike)):  # (said "got dtype <U16" to a path, an audit)
+        reader = _READERS.get(name.split("[")[0], "its reader in facetlift.io")
+        raise ValueError(f"`{name}` must be {what}, not a file name ({os.fspath(a)!r}): read "
+                         f"the file first ({reader})")
     try:
         arr = np.asarray(a)
     except Exception as e:  # ragged lists and the like

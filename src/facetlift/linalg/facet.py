@@ -146,7 +146,8 @@ def thin(domain) -> bool:
     :data:`~facetlift.problem.HOLE_PIXELS` pixels): a map whose normals are NaN at scattered
     pixels, integrated without a mask, is riddled with such holes and read as thin, so it was
     factorized as a 2-D system (2048^2 with 30 % of them NaN: 73.2 s and 7.2 GB, where CG with
-    the box takes 19.9 s; 1024^2 11.8 s against 4.4; depth within 6e-11 of its range). The
+    the box takes 18.4-19.9 s; 1024^2 11.8 s against 3.8-4.4; depth within 6e-11 of its
+    range). The
     box glues across a hole of a few pixels no more than the domain around it does."""
     import scipy.ndimage as ndi
 
