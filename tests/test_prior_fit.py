@@ -408,6 +408,11 @@ def test_cli_summary_and_info_with_prior_fit(tmp_path, capsys):
     alone = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     lo, hi = alone["estimate"]["seconds"]
     assert fitted["estimate"]["seconds"] == pytest.approx([2 * lo, 3 * hi])
+    # the second run's plan, with the prior's terms: info gave the first run's alone, 0.19x a
+    # fitted run's peak, and --max-memory refused the second run (an audit)
+    assert fitted["estimate"]["bytes"] > alone["estimate"]["bytes"]
+    assert fitted["estimate_discontinuities"]["bytes"] > alone["estimate_discontinuities"][
+        "bytes"]
 
 
 def test_a_progress_callable_hears_the_fit_and_the_second_run():

@@ -935,8 +935,11 @@ def _info_lines(rec: dict) -> list[str]:
             lo, hi = e["seconds"]
             line += f", {_seconds(lo)}-{_seconds(hi)} s on the 2-core benchmark machine"
         if e.get("bytes_factorized"):
-            line += (f"; up to about {_mib(e['bytes_factorized'])} where its last solve is "
-                     "factorized (when that fits)")
+            what_is = ("its last solve is factorized (when that fits)"
+                       if e["route"] == "dgp-discontinuous" else
+                       "it factorizes the system instead of iterating (when that fits and is "
+                       "modelled faster: many components, scattered missing normals)")
+            line += f"; up to about {_mib(e['bytes_factorized'])} where {what_is}"
         lines.append(line)
     return lines
 

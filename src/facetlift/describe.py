@@ -70,9 +70,11 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
         ``limit``: the default ``max_memory`` on this machine and ``fits``; ``seconds``:
         ``[fastest, slowest]`` from :data:`SECONDS_PER_PIXEL` (the slowest times
         :data:`PRIOR_SLOWER` with a depth prior), or None where no route was measured;
-        ``estimate: True``; for the discontinuity route ``bytes_factorized``, the peak where
-        its last solve is factorized (when CG is slow on it and the factorization fits: not in
-        the plan, which is CG's).
+        ``estimate: True``; for the facet-CG routes ``bytes_factorized``, the peak where the
+        system is factorized instead of iterated (where that is modelled faster and fits:
+        :mod:`facetlift.linalg.facet`); for the discontinuity route the peak where its last
+        solve is factorized (when CG is slow on it and the factorization fits). Neither is in
+        the plan, which is CG's (a factorization is only taken where it fits the limit).
 
     Raises
     ------
@@ -100,6 +102,16 @@ def estimate(problem, method: str = "dgp", **options) -> dict:
             rate[0] * m, rate[1] * m * (PRIOR_SLOWER if problem.has_prior else 1.0)],
         "estimate": True,
     }
+    if route in ("dgp-pcg", "dgp-loop-pcg") and options.get("backend", "auto") == "auto":
+        # (the facet CG factorizes the system instead where its model finds that faster and
+        # it fits (linalg.facet: many components, scattered missing normals): outside the
+        # plan, and unsaid; a mask of 340 small components peaked at 2.5x the plan, an audit)
+        from .linalg.facet import FACTOR_CAP, _blocks
+
+        blocks = _blocks(problem.domain)
+        if blocks.size and blocks.max() <= FACTOR_CAP:
+            out["bytes_factorized"] = peak + int(memory.factorization_bytes(
+                problem.domain.n_vertices, blocks))
     if route == "dgp-discontinuous":
         # the last solve is factorized where CG is slow on it and the factorization fits
         # (DIRECT_POLISH, memory.factorization_fits): outside the plan, whose route is CG's.
@@ -315,8 +327,24 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
             out["camera_warned"] = _camera_warned(read_caught, caught)
             return unusable(e)
     d = problem.domain
+    with_prior = None
     if fitted:
         out["prior"]["fit"] = prior_fit
+        # (the second run fuses the aligned prior: planned with the prior's own support, the
+        # values aside; info reported the first run's plan alone, 0.19x a fitted run's peak,
+        # and --max-memory then refused the second run, an audit)
+        support = known_of("prior", prior_map) if prior_map is not None else None
+        if support is not None and support.any():
+            with recording():
+                try:
+                    with frames.read_in(frames.GRADIENT_FIELD if inp.field else normal_frame,
+                                        normal_range=frames.normal_range(normal_range)), \
+                            frames.rotation_given(turn is not None):
+                        with_prior = prepare(checked, inp.mask, K=inp.K,
+                                             prior=np.where(support, 1.0, np.nan),
+                                             confidence=inp.confidence)
+                except ValueError:
+                    with_prior = None
     for name, arr in (("prior", prior_map), ("confidence", inp.confidence)):
         if arr is not None and name in out:  # (the range over the mask, where it is used: a
             # user's confidence read "0 to 1" from the background's zeros)
@@ -340,10 +368,10 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         # (as integrate's record says it: an audit)
         camera_warned=_camera_warned(read_caught, caught),
         frame=frame,
-        estimate=_twice(estimate(problem), fitted),
+        estimate=_twice(estimate(problem), with_prior, None),
         # (what --discontinuities would need: a user planning a large job asked)
         estimate_discontinuities=_twice(estimate(problem, "dgp", discontinuities=True),
-                                        fitted),
+                                        with_prior, {"discontinuities": True}),
         discontinuity_grazing=_jump_grazing(problem),
         # (prepare's holes, as integrate counts and warns them: info's own fill of any size
         # said 109 where integrate said 9, a review; none with a mask, inside which such
@@ -365,13 +393,26 @@ def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def _twice(est: dict, fitted: bool) -> dict:
-    """`est` for a prior aligned by ``prior_fit``: the route runs on the normals alone, then
-    with the prior (the slowest time :data:`PRIOR_SLOWER` times one run's)."""
-    if fitted and est.get("seconds"):
-        lo, hi = est["seconds"]
-        est["seconds"] = [2.0 * lo, hi * (1.0 + PRIOR_SLOWER)]
-    return est
+def _twice(est: dict, with_prior, options) -> dict:
+    """`est` (of the normals alone) for a prior aligned by ``prior_fit``: the route runs on the
+    normals alone, then with the prior, whose problem `with_prior` (None: not fitted) is
+    planned too (with `options`): the larger peak and its route, the two times summed."""
+    if with_prior is None:
+        return est
+    second = estimate(with_prior, "dgp", **(options or {}))
+    out = dict(second) if second["bytes"] >= est["bytes"] else dict(est)
+    out["bytes"] = max(est["bytes"], second["bytes"])
+    out["route"] = second["route"]
+    out["fits"] = out["bytes"] <= out["limit"]
+    if est.get("seconds") and second.get("seconds"):
+        out["seconds"] = [est["seconds"][0] + second["seconds"][0],
+                          est["seconds"][1] + second["seconds"][1]]
+    else:
+        out["seconds"] = None
+    factorized = [e["bytes_factorized"] for e in (est, second) if e.get("bytes_factorized")]
+    if factorized:
+        out["bytes_factorized"] = max(factorized)
+    return out
 
 
 def _jump_grazing(problem) -> dict:
