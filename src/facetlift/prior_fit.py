@@ -199,7 +199,11 @@ def fit(prior_img: np.ndarray, weight, surface, kind: str, perspective: bool,
         big = np.bincount(k)[k] >= MIN_SAMPLES
         if big.sum() >= 2 * MIN_SAMPLES:
             _, kk = np.unique(k[big], return_inverse=True)
-            r = _robust(x[big], y[big], kk, tile[big], om[big], model)
+            # (a rounded level: the error's deviation is the step / sqrt 12)
+            levels = np.unique(y[big])
+            r = _robust(x[big], y[big], kk, tile[big], om[big], model,
+                        floor=_quantum(np.diff(levels)) / np.sqrt(12.0) if levels.size > 1
+                        else 0.0)
             corr = _within_correlation(x[big], y[big], kk, om[big] * r["rob"])
             if r["theta"] != 0:
                 scale = 1.0 / r["theta"]
@@ -363,8 +367,9 @@ def _by_pairs(prior_img, z, surface, lab, kind, perspective, w_img, side, distan
         yv, xv = dP - sign * m * du, sign * du  # = c * xv
     else:
         yv, xv = dP, du  # = alpha * xv
+    # (a difference of two levels rounded each: the error's deviation is the step / sqrt 6)
     rfit = _robust(xv, yv, np.zeros(yv.size, dtype=np.int64), tv, wv, "scale", error=error,
-                   quick=not error)
+                   quick=not error, floor=_quantum(dP) / np.sqrt(6.0))
     return _levels(rfit["theta"], rfit, prior_img, surface, lab, kind, perspective, ok, i.size)
 
 
@@ -489,14 +494,33 @@ def _num(v):
     return None if v is None or not np.isfinite(v) else float(v)
 
 
-def _robust(x, y, k, tile, om, model, error: bool = True, quick: bool = False):
+def _quantum(d: np.ndarray) -> float:
+    """The step of the lattice the differences `d` lie on (a prior of coarse depth levels: a
+    network's 8-bit map, a sensor's whole millimetres), or 0 where they lie on none: the
+    smallest nonzero ``|d|`` where at least 90 % of them are whole multiples of it."""
+    a = np.abs(d[np.isfinite(d)])
+    pos = a[a > 0]
+    if pos.size < 10:
+        return 0.0
+    q = float(pos.min())
+    r = a / q
+    return q if float(np.mean(np.abs(r - np.round(r)) <= 1e-3)) >= 0.9 else 0.0
+
+
+def _robust(x, y, k, tile, om, model, error: bool = True, quick: bool = False,
+            floor: float = 0.0):
     """The piece model `model` fitted to ``y`` on ``x`` with Huber weights: a dict of
     ``theta`` (the scale parameter: ``alpha`` of "offset" ``y = alpha x + gamma_k``, the main
     piece's ``s`` of "slope" ``y = s_k x + beta`` and "scale" ``y = s_k x``), ``common``,
     ``each`` (K,), ``main``, ``error`` (theta's relative standard error, a jackknife over the
     tiles `tile`: each tile left out in turn) and ``rob`` (Huber weights). `quick`: one
     group's sums by :func:`_moments`' quicker path (:func:`_prior_blur`'s comparisons; the
-    fits reported keep the bincounts' arithmetic, the same numbers to the last bit)."""
+    fits reported keep the bincounts' arithmetic, the same numbers to the last bit).
+    `floor`: the least robust standard deviation, the rounding error of a prior of coarse
+    depth levels (:func:`_quantum`): without it most pairs of such a prior differ by exactly
+    0, their residuals set the deviation, every pair across a level's step was weighed down
+    as an outlier and the scale ran away round by round (32 levels over the analytic steps:
+    224x the true scale, still reported as determined; a review)."""
     K = int(k.max()) + 1
     main = int(np.argmax(np.bincount(k, weights=om, minlength=K)))
     rob = np.ones_like(om)
@@ -505,7 +529,7 @@ def _robust(x, y, k, tile, om, model, error: bool = True, quick: bool = False):
         ek = each[0] if K == 1 else each[k]  # (one group: no gather)
         res = y - (common * x + ek if model == "offset" else ek * x + common)
         ares = np.abs(res, out=res)
-        sigma = 1.4826 * float(np.median(ares))
+        sigma = max(1.4826 * float(np.median(ares)), floor)
         if not sigma > 0:
             break
         new = np.minimum(1.0, HUBER * sigma / np.maximum(ares, 1e-300, out=ares))
