@@ -1438,3 +1438,12 @@ def test_an_item_refused_by_its_workers_share_runs_again_alone(tmp_path, monkeyp
     assert [r["status"] for r in recs] == ["ok", "ok"], [r.get("error") for r in recs]
     states = {p.read_text() for p in seen.iterdir()}
     assert "1 2" in states and "None 1" in states, states  # (shared, then alone)
+
+
+def test_workers_beside_a_scheduler_are_said_to_go_unused(tmp_path):
+    """A review: --workers beside --scheduler was ignored without a word."""
+    pytest.importorskip("distributed")
+    maps(tmp_path / "in", n=1)
+    with pytest.warns(UserWarning, match=r"`workers` 2 is not used with a `scheduler`"), \
+            pytest.raises(ValueError, match="`scheduler` 'threads'"):
+        facetlift.batch([tmp_path / "in"], tmp_path / "o", scheduler="threads", workers=2)

@@ -811,6 +811,9 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     check_template(template, local=scheduler is None)
     if workers is not None:  # (checked before the output folder is made: an audit)
         _workers(workers, 1)
+        if scheduler is not None:  # (ignored without a word before, a review)
+            warnings.warn(f"batch: `workers` {workers} is not used with a `scheduler`: the "
+                          "cluster's own workers run the items", stacklevel=2)
     found = _own_files(items(inputs, list_file=list_file), template)
     _unused_folder_files(found, template)
     root = Path(out).resolve()
