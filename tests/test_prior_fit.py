@@ -170,6 +170,16 @@ def test_disparity_given_as_depth_is_left_out_with_a_warning():
     assert s.info["prior"]["fit"]["used"] is False
     assert s.info["prior"]["fit"]["correlation"] < -0.9
     np.testing.assert_allclose(s.depth, run(n, mask, K=K).depth, equal_nan=True)
+    # without a camera a disparity is no choice: a height given as depth is told to negate it
+    # (it was pointed to prior_fit='disparity', refused there, a review)
+    from facetlift import synthetic
+
+    g = synthetic.analytic("sphere", 96)
+    with pytest.warns(UserWarning, match=r"runs against the normals.*is it a height, near "
+                      r"being large \(then its negative, -prior, is the depth\)") as rec:
+        facetlift.integrate(g.normals, g.mask, prior=np.where(g.mask, -g.depth, np.nan),
+                            prior_fit="affine")
+    assert not any("disparity" in str(w.message) for w in rec)
 
 
 def test_flat_view_fits_over_the_whole_surface_or_leaves_the_prior_out():

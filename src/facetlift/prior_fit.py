@@ -219,7 +219,7 @@ def fit(prior_img: np.ndarray, weight, surface, kind: str, perspective: bool,
         if corr is None:
             corr = _within_correlation(x, y, k, om)
         why = (f"it runs against the normals (correlation {corr:.2f} with the normals-only "
-               "depth within its pieces): " + _against_hint(kind)
+               "depth within its pieces): " + _against_hint(kind, perspective)
                if corr is not None and corr <= AGAINST else
                f"no fit determines its scale (relative errors: {tried}): a flat view, "
                "parallel planes, or a prior unlike the normals' surface")
@@ -641,11 +641,15 @@ def _within_correlation(x, y, k, w) -> float | None:
     return float(np.sum(w * dx * dy)) / den if den > 0 else None
 
 
-def _against_hint(kind: str) -> str:
+def _against_hint(kind: str, perspective: bool = True) -> str:
+    # (without a camera a disparity is no choice, prior_fit='disparity' being refused there:
+    # a height map given as depth was pointed to it, a review)
     return ("is it depth rather than a disparity (then prior_fit='affine')?"
             if kind == "disparity" else
             "is it a disparity or inverse depth, near being large (then prior_fit='disparity' "
-            "with a pinhole camera)?") + " Or are the normals in another frame (normal_frame)?"
+            "with a pinhole camera)?" if perspective else
+            "is it a height, near being large (then its negative, -prior, is the depth)?"
+            ) + " Or are the normals in another frame (normal_frame)?"
 
 
 #: :func:`relief_ratio`: at most this many samples (a random subset) are paired, each with
