@@ -354,7 +354,8 @@ def test_a_few_bad_prior_and_confidence_pixels_do_not_refuse_the_job():
     bad[5, 6] = -np.inf
     # (counted inside the mask only: a ray caster's inf for "no hit" around the object was
     # warned about, an audit)
-    with pytest.warns(UserWarning, match=r"`prior`: 1 pixel\(s\) inside the mask hold inf, "
+    # (the one inside is -inf, said as it is: it read "inf", a review)
+    with pytest.warns(UserWarning, match=r"`prior`: 1 pixel\(s\) inside the mask hold -inf, "
                       r"the first at \(row 5, col 6\); they were left out"):
         got = facetlift.integrate(n, mask, K=K, prior=bad).depth
     outside = good.copy()

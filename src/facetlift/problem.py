@@ -1621,7 +1621,10 @@ def prior_samples(prior, shape: tuple[int, int], positive: bool = False,
         if said.any():  # (not where only the background holds them, an audit)
             r, c = np.argwhere(said)[0]
             inside = "" if mask is None else " inside the mask"
-            warn(f"`prior`: {int(said.sum())} pixel(s){inside} hold inf, the first at (row "
+            # (-inf was said as inf, a review)
+            neg, pos = bool((arr[said] < 0).any()), bool((arr[said] > 0).any())
+            which = "inf or -inf" if neg and pos else ("-inf" if neg else "inf")
+            warn(f"`prior`: {int(said.sum())} pixel(s){inside} hold {which}, the first at (row "
                  f"{r}, col {c}); they were left out as unknown depths (NaN is the way to mark "
                  "them)")
         arr[inf] = np.nan
