@@ -1236,6 +1236,15 @@ def test_a_frame_without_its_prior_runs_from_its_normals_with_a_warning(tmp_path
     assert code == 0 and any("no depth prior" in w for w in recs["obj1"]["warnings"]), recs
 
 
+def _worker_hook(tmp_path, code: str) -> str:
+    """A PYTHONPATH whose sitecustomize.py runs `code` in every new interpreter (the batch's
+    spawned workers), with this facetlift first."""
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(code)
+    return f"{hook}{os.pathsep}{Path(facetlift.__file__).resolve().parents[1]}"
+
+
 _KILLER = """
 import os, signal
 if os.environ.get("FACETLIFT_TEST_KILL"):
@@ -1258,11 +1267,7 @@ def test_a_killed_worker_costs_its_item_alone(tmp_path, monkeypatch):
     again. The items not started run on a new pool, those running beside it are run again
     alone, and the one whose worker dies again gets a `killed` record (exit 1)."""
     pytest.importorskip("dask")
-    hook = tmp_path / "hook"
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(_KILLER)
-    src = Path(facetlift.__file__).resolve().parents[1]
-    monkeypatch.setenv("PYTHONPATH", f"{hook}{os.pathsep}{src}")
+    monkeypatch.setenv("PYTHONPATH", _worker_hook(tmp_path, _KILLER))
     monkeypatch.setenv("FACETLIFT_TEST_KILL", "m2")
     maps(tmp_path / "in", n=5)
     recs = facetlift.batch([tmp_path / "in"], tmp_path / "o", workers=2, save=("npy",))
@@ -1355,14 +1360,11 @@ def test_workers_of_a_killed_batch_end_themselves(tmp_path):
     import time
 
     pytest.importorskip("dask")
-    hook = tmp_path / "hook"
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(_SLEEPER)
     pids = tmp_path / "pids"
     pids.mkdir()
     maps(tmp_path / "in", n=2)
-    src = Path(facetlift.__file__).resolve().parents[1]
-    env = dict(os.environ, PYTHONPATH=f"{hook}{os.pathsep}{src}", FACETLIFT_TEST_PIDS=str(pids))
+    env = dict(os.environ, PYTHONPATH=_worker_hook(tmp_path, _SLEEPER),
+               FACETLIFT_TEST_PIDS=str(pids))
     parent = subprocess.Popen([sys.executable, "-m", "facetlift", "batch", str(tmp_path / "in"),
                                "-o", str(tmp_path / "o"), "--workers", "2", "-s", "npy",
                                "--no-progress"], env=env, stdout=subprocess.DEVNULL,
@@ -1423,13 +1425,9 @@ def test_an_item_refused_by_its_workers_share_runs_again_alone(tmp_path, monkeyp
     item runs again alone, with all of it, after the others. The workers' share and their one
     core are the batch's own wiring, read in the workers here."""
     pytest.importorskip("dask")
-    hook = tmp_path / "hook"
-    hook.mkdir()
-    (hook / "sitecustomize.py").write_text(_TIGHT)
     seen = tmp_path / "seen"
     seen.mkdir()
-    src = Path(facetlift.__file__).resolve().parents[1]
-    monkeypatch.setenv("PYTHONPATH", f"{hook}{os.pathsep}{src}")
+    monkeypatch.setenv("PYTHONPATH", _worker_hook(tmp_path, _TIGHT))
     # (about 21 MiB above the planner's margin: a 256^2 map's ~13 MiB fit alone, not in half)
     monkeypatch.setenv("FACETLIFT_TEST_AVAIL", str(277 * 2**20))
     monkeypatch.setenv("FACETLIFT_TEST_SEEN", str(seen))

@@ -900,9 +900,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
 
         for it in found:  # (missing inputs: failed records, nothing to run)
             if it.error is not None and it.path not in results:
-                done(it, {"status": "error", "error": it.error, "exit": 1, "seconds": 0.0,
-                          "warnings": [], "mean_deviation": None, "outputs": {}, "hints": [],
-                          "camera_warned": False})
+                done(it, _failed("error", it.error, seconds=0.0))
         existed = {j.outdir for _, j in jobs if Path(j.outdir).exists()}
         try:
             # (SIGTERM as an exception, like Ctrl-C: the workers are stopped, not orphaned)
@@ -1124,6 +1122,14 @@ KILLED = ("its worker process died while running it (killed, e.g. by the system'
           "--max-memory) or run fewer workers (workers=, --workers)")
 
 
+def _failed(status: str, error: str, exit: int = 1, seconds=None) -> dict:
+    """The record of an item that failed outside :func:`run_item` (a missing input, a dead
+    worker), with the keys every record has."""
+    return {"status": status, "error": error, "exit": exit, "seconds": seconds,
+            "warnings": [], "mean_deviation": None, "outputs": {}, "hints": [],
+            "camera_warned": False}
+
+
 def _on_processes(jobs, n_workers: int, done) -> None:
     """The Dask local scheduler, one process per worker; `done` runs here as items finish.
 
@@ -1143,6 +1149,10 @@ def _on_processes(jobs, n_workers: int, done) -> None:
         else:
             done(it, rec)
 
+    def solo(it, j, ran_alone=False):  # (its worker dying alone too: the item's own doing)
+        if ran_alone or _round([(it, j)], 1, done)[0]:
+            done(it, _failed("killed", KILLED))
+
     job_of = {id(it): j for it, j in jobs}
     pending = list(jobs)
     while pending:
@@ -1150,20 +1160,10 @@ def _on_processes(jobs, n_workers: int, done) -> None:
         if lost is None:
             break
         for it, j in lost:
-            if len(lost) == 1 and n_workers == 1:
-                again = [(it, j)]  # (it ran alone already)
-            else:
-                again, _ = _round([(it, j)], 1, done)
-            if again:
-                done(it, {"status": "killed", "error": KILLED, "exit": 1, "seconds": None,
-                          "warnings": [], "mean_deviation": None, "outputs": {}, "hints": [],
-                          "camera_warned": False})
+            solo(it, j, ran_alone=len(lost) == 1 and n_workers == 1)
         pending = rest
     for it in alone:
-        if _round([(it, job_of[id(it)])], 1, done)[0]:
-            done(it, {"status": "killed", "error": KILLED, "exit": 1, "seconds": None,
-                      "warnings": [], "mean_deviation": None, "outputs": {}, "hints": [],
-                      "camera_warned": False})
+        solo(it, job_of[id(it)])
 
 
 def _workers_died() -> Exception:
@@ -1392,9 +1392,7 @@ def _on_cluster(jobs, scheduler, done) -> None:
             try:
                 rec = fut.result()
             except Exception as e:  # a worker died or the task could not run at all
-                rec = {"status": "bug", "error": f"{type(e).__name__}: {e}", "exit": 3,
-                       "outputs": {}, "mean_deviation": None, "seconds": None,
-                       "warnings": [], "hints": [], "camera_warned": False}
+                rec = _failed("bug", f"{type(e).__name__}: {e}", exit=3)
                 # (a killed worker was "a bug in facetlift", exit 3, a review)
                 if type(e).__name__ == "KilledWorker":
                     rec.update(status="killed", exit=1, error=(
