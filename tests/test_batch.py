@@ -570,6 +570,40 @@ def test_distributed_local_cluster_with_two_workers_equals_in_process(tmp_path, 
                                atol=1e-12)
 
 
+_STARTED = []  # (the items _slow_item began: in-process cluster workers share it)
+
+
+def _slow_item(job, *a, **kw):
+    import time
+
+    _STARTED.append(job)
+    time.sleep(0.4)
+    return fb._failed("error", "stub", seconds=0.4)
+
+
+def test_an_interrupted_cluster_batch_cancels_its_tasks(tmp_path, monkeypatch):
+    """Ctrl-C in a batch on a cluster left its submitted tasks running there (a review):
+    the futures are cancelled now."""
+    distributed = pytest.importorskip("distributed")
+    import time
+
+    maps(tmp_path / "in", n=6, H=8, W=8)
+    _STARTED.clear()
+    monkeypatch.setattr(fb, "run_item", _slow_item)
+
+    def interrupt(rec):
+        raise KeyboardInterrupt
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        with pytest.raises(KeyboardInterrupt):
+            fb.batch([tmp_path / "in"], tmp_path / "o", scheduler=client, on_record=interrupt)
+        time.sleep(1.5)  # (time for four more items, had they not been cancelled)
+        assert len(_STARTED) <= 2, len(_STARTED)
+        assert not client.futures
+
+
 def test_an_interrupted_batch_leaves_no_empty_folder_of_an_abandoned_item(tmp_path,
                                                                           monkeypatch):
     """A worker stopped mid-item cannot clean up: an interrupted batch left an empty folder
@@ -1146,11 +1180,26 @@ def test_a_cluster_without_distributed_names_the_extra(tmp_path, monkeypatch):
     ModuleNotFoundError (an audit)."""
     import sys
 
-    from facetlift.batch import _on_cluster
+    from facetlift.batch import _connect
 
     monkeypatch.setitem(sys.modules, "distributed", None)
     with pytest.raises(ImportError, match=r"dask\.distributed.*facetlift\[batch\]"):
-        _on_cluster([], "tcp://127.0.0.1:1", lambda *a: None)
+        _connect("tcp://127.0.0.1:1")
+
+
+def test_an_unreachable_scheduler_names_the_argument_and_leaves_nothing(tmp_path):
+    """No scheduler at the address: a bare "Timed out trying to connect" after 30 s, and an
+    empty batch.jsonl in a new output folder (a check). Now an OSError naming `scheduler`,
+    and the folder the batch made is gone."""
+    pytest.importorskip("distributed")
+    import dask
+
+    src = tmp_path / "in"
+    maps(src, n=1)
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        with pytest.raises(OSError, match=r"`scheduler` 'tcp://127\.0\.0\.1:1'.*answered"):
+            fb.batch([str(src)], tmp_path / "out", scheduler="tcp://127.0.0.1:1")
+    assert not (tmp_path / "out").exists()
 
 
 def _sleep_forever():  # (a worker that ignores SIGTERM, as one busy in C code may)

@@ -817,7 +817,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     found = _own_files(items(inputs, list_file=list_file), template)
     _unused_folder_files(found, template)
     root = Path(out).resolve()
-    prepare_folder(root)  # created and checked before any work
+    created = prepare_folder(root)  # created and checked before any work
     log_path = root / LOG_NAME if log is None else Path(log)
     records = list(_finished_records(log_path))  # (the log read once)
     earlier = {rec["item"]: rec for rec in records} if resume else {}  # (each item's last)
@@ -881,8 +881,20 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         for it in found:
             if it.path in results:
                 on_record(results[it.path])
-    with open(log_path, "a", encoding="utf-8") as fh, \
-            _Bar(len(found), len(results), bool(progress)) as bar:
+    client = own = None
+    if jobs and scheduler is not None:  # (before the log is made: nothing left if it fails)
+        try:
+            client, own = _connect(scheduler)
+        except BaseException:
+            if created:
+                with contextlib.suppress(OSError):
+                    root.rmdir()  # (only if empty)
+            raise
+    with contextlib.ExitStack() as stack:
+        if own:
+            stack.callback(client.close)
+        fh = stack.enter_context(open(log_path, "a", encoding="utf-8"))
+        bar = stack.enter_context(_Bar(len(found), len(results), bool(progress)))
 
         def done(it: Item, rec: dict) -> None:
             rec = dict(rec, item=it.path, name=it.name, settings=asked,
@@ -905,8 +917,8 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         try:
             # (SIGTERM as an exception, like Ctrl-C: the workers are stopped, not orphaned)
             with sigterm_raises():
-                if jobs and scheduler is not None:
-                    _on_cluster(jobs, scheduler, done)
+                if client is not None:
+                    _on_cluster(jobs, client, done)
                 elif jobs and n_workers > 1:
                     _on_processes(jobs, n_workers, done)
                 else:
@@ -1365,45 +1377,75 @@ def _stop(pool, procs) -> None:
                     proc.join(STOP_GRACE)
 
 
-def _on_cluster(jobs, scheduler, done) -> None:
-    """A ``dask.distributed`` scheduler (address or Client); `done` runs as futures finish."""
+def _connect(scheduler):
+    """``(client, own)``: a ``dask.distributed`` Client for `scheduler` (an address, or a
+    Client, which is used as it is: `own` False) and whether this batch must close it.
+
+    Raises
+    ------
+    ImportError
+        dask.distributed is not installed (naming the extra).
+    ValueError
+        `scheduler` is no address (naming the argument).
+    OSError
+        The scheduler cannot be reached (naming the argument and the address; it was a
+        bare "Timed out trying to connect" after an empty batch.jsonl was made, a check).
+    """
     _dask()
     try:
-        from distributed import Client, as_completed
+        from distributed import Client
     except ImportError as e:  # (dask alone is a common install: named, an audit)
         raise ImportError("facetlift batch on a cluster (a scheduler) needs dask.distributed, "
                           "which comes with the batch extra: pip install 'facetlift[batch]'"
                           ) from e
-
-    own = not isinstance(scheduler, Client)
+    if isinstance(scheduler, Client):
+        return scheduler, False
     try:
-        client = Client(scheduler) if own else scheduler
+        return Client(scheduler), True
     except (ValueError, TypeError) as e:  # (said "missing port number in address 'threads'"
         # to scheduler='threads', without naming the argument, a review)
         raise ValueError(f"`scheduler` {scheduler!r}: {e}; give a dask.distributed "
                          "scheduler's address (tcp://host:8786) or a Client, or leave it out "
                          "for local worker processes (workers=N)") from None
+    except OSError as e:
+        raise OSError(f"`scheduler` {scheduler!r}: no dask.distributed scheduler answered "
+                      f"({e}); check that it runs and that its address and port are right, "
+                      "or leave it out for local worker processes (workers=N). Nothing "
+                      "was run") from None
+
+
+def _on_cluster(jobs, client, done) -> None:
+    """Run `jobs` on a ``dask.distributed`` `client` (:func:`_connect`); `done` runs here as
+    futures finish."""
+    from distributed import as_completed
+
+    futures = {}
     try:
-        futures = {}
         for it, j in jobs:
             futures[client.submit(run_item, j, 1, pure=False)] = it
-        for fut in as_completed(list(futures)):
-            it = futures[fut]
-            try:
-                rec = fut.result()
-            except Exception as e:  # a worker died or the task could not run at all
-                rec = _failed("bug", f"{type(e).__name__}: {e}", exit=3)
-                # (a killed worker was "a bug in facetlift", exit 3, a review)
-                if type(e).__name__ == "KilledWorker":
-                    rec.update(status="killed", exit=1, error=(
-                        f"the cluster's workers running it died ({e}: killed, e.g. out of "
-                        "memory, or crashed); the other items went on"))
-                elif isinstance(e, ImportError):  # (a worker without facetlift or an extra)
-                    rec.update(status="error", exit=1, error=f"on the cluster's worker: {e}")
-            done(it, rec)
-    finally:
-        if own:
-            client.close()
+        _collect(futures, done, as_completed)
+    except BaseException:  # (Ctrl-C or SIGTERM: the cluster's tasks ran on, a review)
+        with contextlib.suppress(Exception):
+            client.cancel(list(futures))
+        raise
+
+
+def _collect(futures, done, as_completed) -> None:
+    """Each finished future's record to `done` (:func:`_on_cluster`)."""
+    for fut in as_completed(list(futures)):
+        it = futures[fut]
+        try:
+            rec = fut.result()
+        except Exception as e:  # a worker died or the task could not run at all
+            rec = _failed("bug", f"{type(e).__name__}: {e}", exit=3)
+            # (a killed worker was "a bug in facetlift", exit 3, a review)
+            if type(e).__name__ == "KilledWorker":
+                rec.update(status="killed", exit=1, error=(
+                    f"the cluster's workers running it died ({e}: killed, e.g. out of "
+                    "memory, or crashed); the other items went on"))
+            elif isinstance(e, ImportError):  # (a worker without facetlift or an extra)
+                rec.update(status="error", exit=1, error=f"on the cluster's worker: {e}")
+        done(it, rec)
 
 
 class _Bar:
