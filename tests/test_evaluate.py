@@ -298,9 +298,16 @@ def test_evaluate_takes_K_in_python():
     got = metrics.evaluate(est, gt, mask, K=K)
     assert got["perspective"] is True and got["made"] == pytest.approx(want["made"])
     assert metrics.evaluate(est, gt, mask, K=K.tolist(), perspective=True) == got
-    with pytest.raises(ValueError, match=r"`K` must be a finite 3 x 3 camera matrix; got "
-                                         r"shape \(3,\)"):
+    with pytest.raises(ValueError, match=r"`K` must be a 3x3 intrinsics matrix or four "
+                                         r"numbers.*shape \(3,\)"):
         metrics.evaluate(est, gt, mask, K=[1.0, 2.0, 3.0])
+    # (as integrate takes K: four numbers and a Pinhole; a transposed K refused, a review)
+    from facetlift.camera import Pinhole
+
+    assert metrics.evaluate(est, gt, mask, K=[40.0, 40.0, 12.5, 9.5]) == got
+    assert metrics.evaluate(est, gt, mask, K=Pinhole(K)) == got
+    with pytest.raises(ValueError, match=r"looks transposed"):
+        metrics.evaluate(est, gt, mask, K=K.T)
     with pytest.raises(ValueError, match=r"`K` and perspective=False contradict"):
         metrics.evaluate(est, gt, mask, K=K, perspective=False)
     s = facetlift.integrate(facetlift.normals_from_gradients(np.full((20, 26), 0.01),
@@ -532,3 +539,84 @@ def test_a_few_ground_truth_pixels_setting_the_range_are_warned_about():
     bad[r, c] = 1e3
     with pytest.warns(UserWarning, match=rf"a few pixels set it .*\(row {r}, col {c}\)"):
         metrics.evaluate(s.depth, bad, gt.mask)
+
+
+def test_a_flat_result_is_scored_with_a_warning_not_a_crash(tmp_path):
+    """A result of constant depth (normals all facing the camera) raised ZeroDivisionError in
+    evaluate, and integrate of a dataset folder with a depth_gt exited 3 for it (a review)."""
+    est, gt, mask = scene()
+    flat = np.where(np.isfinite(est), 0.0, np.nan)
+    with pytest.warns(UserWarning, match=r"the result is flat"):
+        rec = metrics.evaluate(flat, gt - 1500.0, mask)
+    assert rec["range_ratio"] == 0 and rec["normalized_error"] > 0.1
+    ds = tmp_path / "ds"
+    ds.mkdir()
+    normals = np.zeros((20, 26, 3))
+    normals[..., 2] = 1.0
+    np.save(ds / "normal_map.npy", normals)
+    np.save(ds / "depth_gt.npy", np.where(np.isfinite(gt), gt - 1500.0, np.nan))
+    code = main(["integrate", str(ds), "-o", str(tmp_path / "out"), "--save", "npy"])
+    assert code == 0 and (tmp_path / "out" / "depth.npy").is_file()
+
+
+def test_a_mask_with_a_gap_does_not_split_the_result():
+    """A false step across a connected result, where the mask leaves two columns out: scored
+    0 as the pieces were cut at the mask (11 % with the same columns NaN in the truth, a
+    review). A background stored as a number outside the mask still separates objects."""
+    r, c = np.mgrid[0:24, 0:30].astype(float)
+    gt = 0.1 * c + 0.05 * np.sin(r / 3)
+    est = gt + np.where(c >= 15, 0.5, 0.0)  # (a false step at column 15)
+    mask = np.ones(gt.shape, bool)
+    mask[:, 14:16] = False
+    hole = gt.copy()
+    hole[:, 14:16] = np.nan
+    want = metrics.normalized_error(est, hole)[0]
+    assert want > 0.05
+    assert metrics.normalized_error(est, gt, mask)[0] == pytest.approx(want, rel=1e-12)
+    assert metrics.evaluate(est, gt, mask)["normalized_error"] == pytest.approx(want, rel=1e-12)
+    # two objects, each with its own offset, on a background stored as 0: two pieces
+    two = np.zeros_like(gt)
+    two[:, :12] = gt[:, :12]
+    two[:, 18:] = gt[:, 18:] + 3.0
+    sel = np.zeros(gt.shape, bool)
+    sel[:, :12] = sel[:, 18:] = True
+    assert metrics.normalized_error(two, gt, sel)[0] < 1e-12
+
+
+def test_a_perspective_result_of_several_pieces_gets_a_note():
+    """Two pieces, each exact up to its own scale: MADE's one median scale scores the scales
+    between them (1.86 for two exact spheres, without a word, a review); a note gives MADE
+    with a scale per piece."""
+    est, gt, mask = scene()
+    two = est.copy()
+    two[:, 13] = np.nan  # (two pieces)
+    two[:, 14:] *= 1.3  # (the right one at another scale)
+    rec = metrics.evaluate(two, gt, mask, perspective=True)
+    note = [n for n in rec["notes"] if "separate pieces" in n]
+    assert len(note) == 1 and "2 separate pieces" in note[0]
+    each = float(note[0].rsplit(" ", 1)[1])
+    assert each < 0.1 * rec["made"]
+    assert not [n for n in metrics.evaluate(est, gt, mask, perspective=True)["notes"]
+                if "separate pieces" in n]
+
+
+def test_a_negative_camera_z_truth_is_told_to_negate():
+    """A ground truth stored as OpenGL's or Blender's camera z (negative in front) was asked
+    whether 0 meant undefined (a review)."""
+    est, gt, mask = scene()
+    with pytest.raises(ValueError, match=r"all are < 0.*negate it"):
+        metrics.evaluate(est, -gt, mask, perspective=True)
+
+
+def test_an_orthographic_surface_with_positive_depths_is_not_told_to_give_K(tmp_path, capsys):
+    """An orthographic result fused with a positive prior, saved as surface.npz (its camera
+    stored as orthographic): evaluate noted "give --K", then refused the --K (a review)."""
+    r, c = np.mgrid[0:20, 0:26].astype(float)
+    depth = 100.0 + 0.1 * c + 0.05 * r
+    normals = facetlift.normals_from_gradients(np.full((20, 26), -0.1), np.full((20, 26), 0.05))
+    s = facetlift.integrate(normals, prior=depth, prior_weight=10.0)
+    assert (s.depth > 0).all()
+    s.save(tmp_path / "surface.npz")
+    np.save(tmp_path / "gt.npy", depth)
+    code, out, err = run(capsys, "evaluate", tmp_path / "surface.npz", "--gt", tmp_path / "gt.npy")
+    assert code == 0 and "--K" not in out

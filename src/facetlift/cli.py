@@ -1248,7 +1248,7 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
     for w in caught:
         reemit(w)
     rec["warnings"] = [_as_flags(str(w.message)) for w in caught]
-    if not perspective and rec["scale"] is not None and K is None:
+    if not perspective and rec["scale"] is not None and K is None and not orthographic:
         rec["notes"].append("the result's depths are all > 0, as a perspective result's are "
                             "(an orthographic one has mean 0): give --K to score it as one "
                             "(or --fov, as integrate took it)")

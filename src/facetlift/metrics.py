@@ -94,10 +94,30 @@ def _piece_centred(est, gt, m, region) -> tuple[np.ndarray, np.ndarray]:
     return e - (np.bincount(k, e, n) / size)[k], g - (np.bincount(k, g, n) / size)[k]
 
 
+#: Share of the finite result pixels outside the scoring mask that hold one exact value above
+#: which :func:`_region` takes that value for a background stored as a number.
+BACKGROUND_SHARE = 0.5
+
+
 def _region(est, mask) -> np.ndarray:
     """The pixels whose 8-connected components are the result's pieces: its finite ones,
-    within `mask` where one is given."""
-    return np.isfinite(est) if mask is None else np.isfinite(est) & np.asarray(mask, bool)
+    less, where `mask` is given, the pixels outside it that hold a background stored as a
+    number (one value held by :data:`BACKGROUND_SHARE` of the finite pixels outside the
+    mask, e.g. 0: it would join separate objects, a review). The rest of the result outside
+    the mask joins its pieces: a mask with a gap across a connected result (columns left
+    out) scored a false step there as 0 when the pieces were cut at the mask (a review)."""
+    fin = np.isfinite(est)
+    if mask is None:
+        return fin
+    mask = np.asarray(mask, bool)
+    if mask.shape != fin.shape:  # (_pair names the shapes)
+        return fin
+    outside = est[fin & ~mask]
+    if outside.size:
+        values, counts = np.unique(outside, return_counts=True)
+        if counts.max() >= BACKGROUND_SHARE * outside.size:
+            fin &= mask | (est != values[counts.argmax()])
+    return fin
 
 
 def _pieces(m, region) -> tuple[np.ndarray, int]:
@@ -220,6 +240,12 @@ def _range_check(est, gt, m, words: str = "python", region=None) -> float | None
     ratio = _range_ratio(est, gt, m, _region(est, None) if region is None else region)
     if ratio is None or 1.0 / RANGE_MISMATCH <= ratio <= RANGE_MISMATCH:
         return ratio
+    if ratio == 0:  # (a flat result: 1 / ratio raised ZeroDivisionError, and a dataset
+        # folder's integrate with a depth_gt exited 3, a review)
+        warn(f"the result is flat: its depths do not vary over the {int(m.sum())} pixels "
+             "scored (1st to 99th percentile), where the ground truth's do; its errors are "
+             "those of a plane (were its normals all facing the camera?)")
+        return ratio
     say = _WORDS[words]
     head = (f"the result's depth range (1st to 99th percentile over the {int(m.sum())} pixels "
             f"scored) is {ratio:.3g} times the ground truth's: the normalised error compares "
@@ -315,7 +341,7 @@ def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None, K=N
         Whether the result is a perspective depth (a camera's z, defined up to scale). Default:
         a Surface's camera says; an array is taken as orthographic (a height, defined up to an
         offset per piece).
-    K : (3, 3) array_like, optional
+    K : (3, 3) array_like, four numbers or facetlift.camera.Pinhole, optional
         The result's camera, as given to :func:`facetlift.integrate` (``facetlift evaluate
         --K``): the same as ``perspective=True`` (the scores need no more of it); refused
         beside ``perspective=False``, or where `estimate` is a Surface with another camera.
@@ -338,15 +364,16 @@ def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None, K=N
     ValueError
         Shapes that differ; no pixel where the mask, the estimate and the truth are all
         defined (with how many each has); depths <= 0 where a scale is needed: in a
-        perspective result, or in the truth of one; a `K` that is no 3 x 3 matrix, or that
+        perspective result, or in the truth of one; a `K` that is no valid camera, or that
         contradicts `perspective` or the Surface's camera (an orthographic Surface has
         none).
     """
     if K is not None:  # (evaluate(depth, gt, mask, K=K) was a TypeError, a review)
-        cam = np.asarray(K, dtype=float) if np.ndim(K) == 2 else None
-        if cam is None or cam.shape != (3, 3) or not np.isfinite(cam).all():
-            raise ValueError(f"`K` must be a finite 3 x 3 camera matrix; got "
-                             f"{'shape ' + str(np.shape(K)) if cam is None else cam.tolist()}")
+        from .camera import Pinhole, check_K
+
+        # (as integrate takes it: four numbers or a Pinhole were refused, a transposed K
+        # taken, a review)
+        cam = check_K(K.K if isinstance(K, Pinhole) else K)
         if perspective is False:
             raise ValueError("`K` and perspective=False contradict each other: a camera "
                              "scores the result as a perspective depth; give one of them")
@@ -395,12 +422,19 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
         a = est if which == "estimate" else gt
         # (a result's background stored as 0 was told it might be orthographic, an audit)
         zeros = int((a[m] == 0).sum()) == bad[which]
+        if (a[m] < 0).all():  # (an OpenGL or Blender camera's z, negative in front: the
+            # 0? hint misled, a review)
+            hint = (" (all are < 0: a camera z stored negative in front, as OpenGL's and "
+                    "Blender's are? negate it)" if which == "truth" else " (an orthographic "
+                    "result, or a height? score it without a camera)")
+        elif which == "truth" or zeros:
+            hint = " (0 where undefined? store NaN there, or give a mask)"
+        else:
+            hint = " (an orthographic result? score it without a camera)"
         raise ValueError(
             f"`{which}` has {bad[which]} depths <= 0 of the {out['pixels']} scored: a "
             "perspective result is scored after a median scale, which needs z-depths > 0 in "
-            "both" + (" (0 where undefined? store NaN there, or give a mask)"
-                      if which == "truth" or zeros else " (an orthographic result? score it "
-                      "without a camera)"))
+            "both" + hint)
     if any(bad.values()):
         out["notes"].append(
             f"no scale: the {' and the '.join(k for k, v in bad.items() if v)} "
@@ -412,6 +446,8 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
     if perspective:
         out["notes"].append("no normalised error: a perspective result is scored after a "
                             "scale (MADE), not an offset")
+        if out["made"] is not None:
+            _pieces_note(est, gt, m, region, out)
     else:
         out["range_ratio"] = ratio = _range_check(est, gt, m, words, region)
         off = ratio is not None and not 1.0 / RANGE_MISMATCH <= ratio <= RANGE_MISMATCH
@@ -432,6 +468,29 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
             _outlier_range_check(gt, m)
             _sign_check(est, gt, m, out["normalized_error"], region)
     return out
+
+
+def _pieces_note(est, gt, m, region, out) -> None:
+    """A note where a perspective result has several pieces: each piece's scale is free
+    unless a depth prior fixed it, and MADE's one median scale (BiNI's evaluation) then
+    scores the scales between them (two exact spheres scored 1.86 with 0.0007 and 0.0016
+    each, without a word, a review): MADE with one median scale per piece beside it."""
+    k, n = _pieces(m, region)
+    if n < 2:
+        return
+    e, g = est[m], gt[m]
+    order = np.argsort(k, kind="stable")
+    starts = np.searchsorted(k[order], np.arange(n))
+    ratio = (g / e)[order]
+    scale = np.ones(n)
+    for i, (a, b) in enumerate(zip(starts, np.r_[starts[1:], k.size], strict=True)):
+        if b > a:
+            scale[i] = np.median(ratio[a:b])
+    each = float(np.mean(np.abs(scale[k] * e - g)))
+    out["notes"].append(
+        f"the result has {n} separate pieces: without a depth prior each piece's scale is "
+        "free, and MADE takes one median scale for all (as BiNI's evaluation does), so it "
+        f"scores their scales too; with a median scale per piece it is {each:.6g}")
 
 
 #: Share of the scored pixels at which both depths are exactly 0 above which, without a mask,
