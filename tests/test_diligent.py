@@ -308,3 +308,14 @@ def test_the_release_folder_itself_points_to_its_objects_and_an_empty_K_is_named
     (tmp_path / "K.txt").write_text("")
     with pytest.raises(ValueError, match=r"the file is empty"):
         io.read_K(tmp_path / "K.txt")
+
+
+def test_a_folder_with_a_jpeg_normal_map_says_so(tmp_path):
+    """A dataset folder holding normal_map.jpg was told it has no normal_map file, without a
+    word of the JPEG (a review)."""
+    f = tmp_path / "obj"
+    f.mkdir()
+    (f / "normal_map.jpg").write_bytes(b"\xff\xd8\xff\xe0 not read")
+    with pytest.raises(ValueError, match=r"has no normal_map file .*normal_map\.jpg is a JPEG, "
+                                         r"which is not read.*convert it to normal_map\.png"):
+        io.read_dataset(f)

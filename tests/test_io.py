@@ -227,6 +227,37 @@ def test_exr_xyz_channels(tmp_path, normals):
     np.testing.assert_allclose(back, n, atol=1e-7)
 
 
+def test_an_exr_data_window_is_placed_in_its_display_window(tmp_path, normals):
+    """A compositor's bounding-box crop stores the pixels of part of the frame (its data
+    window): it was read at that part's size, so a K or a mask of the frame missed it by
+    the window's offset (a review). Now placed in the frame, NaN (alpha 0) around it."""
+    import OpenEXR
+
+    n, _ = normals
+    H, W = n.shape[:2]
+    part = n[2:H - 3, 3:W - 1].astype(np.float32)
+    ch = {k: np.ascontiguousarray(part[..., i]) for i, k in enumerate("RGB")}
+    ch["A"] = np.ones(part.shape[:2], np.float32)
+    hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+           "dataWindow": (np.array([3, 2], np.int32), np.array([W - 2, H - 4], np.int32)),
+           "displayWindow": (np.array([0, 0], np.int32), np.array([W - 1, H - 1], np.int32))}
+    OpenEXR.File(hdr, ch).write(str(tmp_path / "crop.exr"))
+    back, alpha = io.read_normals(tmp_path / "crop.exr")
+    assert back.shape == n.shape
+    np.testing.assert_allclose(back[2:H - 3, 3:W - 1], part, atol=1e-7)
+    inside = np.zeros((H, W), bool)
+    inside[2:H - 3, 3:W - 1] = True
+    assert np.isnan(back[~inside]).all()
+    np.testing.assert_array_equal(alpha, inside)
+    # a data window reaching past the display window: the shared part
+    hdr["dataWindow"] = (np.array([-2, -1], np.int32), np.array([W - 3, H - 2], np.int32))
+    ch = {k: np.ascontiguousarray(n[..., i].astype(np.float32)) for i, k in enumerate("RGB")}
+    OpenEXR.File(hdr, ch).write(str(tmp_path / "over.exr"))
+    back, _ = io.read_normals(tmp_path / "over.exr")
+    np.testing.assert_allclose(back[:-1, :-2], n[1:, 2:], atol=1e-7)
+    assert np.isnan(back[-1]).all() and np.isnan(back[:, -2:]).all()
+
+
 def test_exr_normals_under_other_channel_names_and_cycles_denoising_layers(tmp_path, normals):
     """An audit of real exports: lowercase x, y, z (N.x), Nuke's red, green, blue and a
     Cycles multilayer file with 'Denoising Data' on (ViewLayer.Denoising Normal beside
@@ -1834,3 +1865,78 @@ def test_a_texture_artists_maps_are_named(tmp_path, capsys):
     assert code == 0 and "hint:" not in capsys.readouterr().err
     with pytest.raises(ValueError, match=r"`surface` must be a facetlift.Surface; got ndarray"):
         io.write_height(tmp_path / "h.png", h)
+
+
+def test_outputs_on_a_full_disk_name_the_file_and_the_cause(tmp_path):
+    """npy, PLY and STL went through ndarray.tofile, whose OSError has no errno: a full disk
+    or a file size limit said "313344 requested and 25584 written" and named no file (a
+    review). Written through Python's write now: EFBIG (or ENOSPC), the file named."""
+    import errno
+    import resource
+    import signal
+
+    s = facetlift.integrate(facetlift.normals_from_gradients(np.full((60, 70), 0.1),
+                                                             np.zeros((60, 70))))
+    before = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    limits = resource.getrlimit(resource.RLIMIT_FSIZE)
+    try:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, limits[1]))
+        for name in ("depth.npy", "mesh.ply", "mesh.stl"):
+            with pytest.raises(OSError) as e:
+                s.save(tmp_path / name)
+            assert e.value.errno == errno.EFBIG and name in str(e.value), name
+            assert not list(tmp_path.iterdir())  # (no partial file, no temporary)
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, limits)
+        signal.signal(signal.SIGXFSZ, before)
+
+
+def test_a_long_non_ascii_output_name_is_written(tmp_path):
+    """The temporary's name was cut at 96 characters, not bytes: 80 CJK characters (240
+    bytes, a legal name) made it too long for the file system (a review)."""
+    s = facetlift.integrate(facetlift.normals_from_gradients(np.full((6, 7), 0.1),
+                                                             np.zeros((6, 7))))
+    path = tmp_path / ("\u65e5" * 80 + ".npy")
+    s.save(path)
+    np.testing.assert_array_equal(np.load(path), s.depth)
+
+
+def test_an_interrupt_while_writing_a_mesh_stays_an_interrupt(tmp_path):
+    """ndarray.tofile swallowed a pending Ctrl-C and then failed as a TypeError ("expected
+    str, bytes or os.PathLike object, not BufferedWriter"), which the command line reported
+    as a bug (a review: 27 of 200 interrupted writes)."""
+    import signal
+
+    v = np.random.default_rng(0).random((100_000, 3))
+    f = np.random.default_rng(1).integers(0, len(v), (100_000, 4))
+
+    def stop(*a):
+        raise KeyboardInterrupt
+
+    before = signal.signal(signal.SIGALRM, stop)
+    seen = set()
+    try:
+        for i in range(40):
+            signal.setitimer(signal.ITIMER_REAL, 0.001 + 0.0005 * (i % 20))
+            try:
+                io.write_mesh(tmp_path / "m.ply", v, f)
+                seen.add("finished")
+            except KeyboardInterrupt:
+                seen.add("interrupted")
+            finally:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+    finally:
+        signal.signal(signal.SIGALRM, before)
+    assert seen <= {"finished", "interrupted"} and "interrupted" in seen
+
+
+def test_a_multi_page_tiff_is_named_a_stack(tmp_path):
+    """A TIFF of several pages was refused by its shape alone, (3, 4, 4, 3) (a review)."""
+    import tifffile
+
+    a = np.random.default_rng(0).random((3, 4, 4, 3)).astype(np.float32)
+    tifffile.imwrite(tmp_path / "stack.tif", a)
+    with pytest.raises(ValueError, match=r"holds 3 pages \(a stack of images.*key=0"):
+        io.read_normals(tmp_path / "stack.tif")
+    tifffile.imwrite(tmp_path / "one.tif", a[0])
+    assert io.read_normals(tmp_path / "one.tif")[0].shape == (4, 4, 3)

@@ -33,9 +33,11 @@ def atomic_path(path):
         raise FileNotFoundError(f"cannot write {target}: its folder {target.parent} does not "
                                 "exist")
     # (the name cut short: a target name near the file system's limit would leave no room
-    # for the temporary's prefix and suffix)
-    tmp = target.with_name(f".{target.name[:96]}.{_host()}.{os.getpid()}."
-                           f"{secrets.token_hex(4)}.tmp")
+    # for the temporary's prefix and suffix; cut in bytes, as the limit counts them: 80 CJK
+    # characters, 240 bytes, failed when cut at 96 characters, a review)
+    short = os.fsencode(target.name)[:96].decode(errors="ignore") if os.name != "nt" \
+        else target.name[:96]
+    tmp = target.with_name(f".{short}.{_host()}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
     try:
         yield tmp
         fd = os.open(tmp, os.O_RDONLY)
@@ -66,9 +68,20 @@ def _write_bytes(path: Path, data: bytes) -> None:
         fh.write(data)
 
 
+class _Stream:
+    """A file seen by numpy as a stream (a ``write`` method alone): :func:`numpy.save` then
+    writes it in chunks through Python's ``write`` instead of ``ndarray.tofile``, whose
+    OSError on a full disk or a file size limit has no errno ("313344 requested and 25584
+    written": neither the file nor the cause was named) and which turned a Ctrl-C into a
+    TypeError, reported as a bug (a review)."""
+
+    def __init__(self, fh):
+        self.write, self.name = fh.write, fh.name
+
+
 def _save_npy(path: Path, arr: np.ndarray) -> None:
     with atomic_path(path) as tmp, open(tmp, "xb") as fh:
-        np.save(fh, arr, allow_pickle=False)
+        np.save(_Stream(fh), arr, allow_pickle=False)
 
 
 # --------------------------------------------------------------------------------------------

@@ -855,6 +855,11 @@ def _no_normals(f: Path) -> str:
     that its images are photographs."""
     looked = (f"looked for normal_map with extension {', '.join(NORMAL_READ_FORMATS)}, or "
               f"DiLiGenT's {DILIGENT_NORMALS}")
+    jpeg = sorted(p.name for p in f.glob("normal_map.*") if p.suffix.lower() in (".jpg", ".jpeg"))
+    if jpeg:  # (it was not named: a review)
+        looked += (f"; {jpeg[0]} is a JPEG, which is not read: its lossy 8 bits still "
+                   "integrate well, convert it to normal_map.png first, e.g. with Pillow, "
+                   "Image.open(p).save(q)")
     if (f / "light_directions.txt").is_file():  # (DiLiGenT's 001.png ... are photographs)
         return (f"`folder`: {f} has no normal_map file ({looked}): it looks like a photometric "
                 "stereo folder (light_directions.txt), whose images are photographs, not "

@@ -33,6 +33,10 @@ DEPTH_FORMATS = (".npy", ".exr", ".tif", ".tiff")
 # decoding
 
 
+class _Refused(Exception):
+    """A readable file :func:`_decode_image` refuses, with its message."""
+
+
 def _decode_image(path: Path, ext: str, arg: str) -> np.ndarray:
     """Pixels of a PNG or TIFF file as stored (no conversion); ValueError if unreadable."""
     try:
@@ -46,9 +50,19 @@ def _decode_image(path: Path, ext: str, arg: str) -> np.ndarray:
         with tifffile.TiffFile(path) as tif:
             a = np.asarray(tif.asarray())
             planar = tif.pages[0].planarconfig == tifffile.PLANARCONFIG.SEPARATE
+            pages = len(tif.pages)
+        # (refused by its shape alone before, a review; an (H, W, 2) map is stored as H
+        # pages of (W, 2) by tifffile: no stack)
+        if pages > 1 and a.shape[0] == pages and (a.ndim == 4 or (
+                a.ndim == 3 and a.shape[-1] > 4)):
+            raise _Refused(f"`{arg}`: {path} holds {pages} pages (a stack of images, shape "
+                           f"{a.shape}); one image per file is read: save the page you mean "
+                           "alone, e.g. tifffile.imwrite(q, tifffile.imread(p, key=0))")
         if planar and a.ndim == 3 and a.shape[0] in (2, 3, 4):  # (C, H, W) -> (H, W, C)
             a = np.moveaxis(a, 0, -1)
         return a
+    except _Refused as e:
+        raise ValueError(str(e)) from None
     except OSError as e:
         raise ValueError(f"`{arg}`: cannot read {path}: {e}") from None
     except Exception as e:  # corrupt or truncated files: each library has its own errors
@@ -124,11 +138,44 @@ def _read_exr(path: Path, arg: str) -> dict[str, np.ndarray]:
         import OpenEXR
 
         with _stdout_to_stderr(), OpenEXR.File(str(path), separate_channels=True) as f:
-            return {k: np.asarray(v.pixels) for k, v in f.channels().items()}
+            header = dict(f.header())  # (before channels(), after which it lacks the windows)
+            ch = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
     except Exception as e:
         raise ValueError(
             f"`{arg}`: {path} is not a readable OpenEXR image ({type(e).__name__}: {e})"
         ) from None
+    return _in_display_window(ch, header)
+
+
+def _in_display_window(ch: dict[str, np.ndarray], header: dict) -> dict[str, np.ndarray]:
+    """The channels `ch` of an EXR file placed in its display window (the image's size and
+    place), where its data window (the pixels stored) differs: NaN outside the data window
+    (0 in integer channels and alphas). A compositor's bounding-box crop (Nuke) stores only
+    part of the frame: it was read at the data window's size, so a K or a mask of the frame
+    missed it by the window's offset, without a word (a review)."""
+    data, shown = header.get("dataWindow"), header.get("displayWindow")
+    if data is None or shown is None:
+        return ch
+    (x0, y0), (x1, y1) = (tuple(int(v) for v in corner) for corner in data)
+    (u0, v0), (u1, v1) = (tuple(int(v) for v in corner) for corner in shown)
+    if (x0, y0, x1, y1) == (u0, v0, u1, v1):
+        return ch
+    H, W = v1 - v0 + 1, u1 - u0 + 1
+    # the rows and columns the two windows share, in the display window's pixels
+    r0, r1, c0, c1 = max(y0, v0), min(y1, v1), max(x0, u0), min(x1, u1)
+    out = {}
+    for name, a in ch.items():
+        if a.shape[:2] != (y1 - y0 + 1, x1 - x0 + 1):  # (a subsampled channel: as stored)
+            out[name] = a
+            continue
+        alpha = name.rpartition(".")[2].upper() in ("A", "ALPHA")
+        fill = np.nan if a.dtype.kind == "f" and not alpha else 0
+        placed = np.full((H, W) + a.shape[2:], fill, dtype=a.dtype)
+        if r0 <= r1 and c0 <= c1:
+            placed[r0 - v0:r1 - v0 + 1, c0 - u0:c1 - u0 + 1] = \
+                a[r0 - y0:r1 - y0 + 1, c0 - x0:c1 - x0 + 1]
+        out[name] = placed
+    return out
 
 
 def _normal_layer(layer: str) -> bool:

@@ -106,7 +106,7 @@ def _write_ply(path, v: np.ndarray, f: np.ndarray | None, props: dict) -> None:
             rec["x"], rec["y"], rec["z"] = v[part].T
             for k, a in props.items():
                 rec[k] = a[part]
-            rec.tofile(fh)
+            fh.write(rec.tobytes())  # (not tofile: see io.atomic._Stream)
         if f is not None:
             face = np.empty(min(len(f), PLY_BLOCK),
                             dtype=[("n", "u1"), ("v", "<i4", (f.shape[1],))])
@@ -115,7 +115,7 @@ def _write_ply(path, v: np.ndarray, f: np.ndarray | None, props: dict) -> None:
                 part = f[start:start + PLY_BLOCK]
                 out = face[:len(part)]
                 out["v"] = part
-                out.tofile(fh)
+                fh.write(out.tobytes())
 
 
 #: Records per block of :func:`_write_ply` (a few MiB of temporaries each).
@@ -191,7 +191,7 @@ def _write_stl(path, v: np.ndarray, f: np.ndarray) -> None:
             out = buf[:len(part)]
             out["normal"] = _facet_normals(v, part)
             out["corners"] = v[part]
-            out.tofile(fh)
+            fh.write(out.tobytes())  # (not tofile: see io.atomic._Stream)
 
 
 def _facet_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
