@@ -394,3 +394,30 @@ def test_a_height_named_depth_file_warns(tmp_path):
         warnings.simplefilter("error")
         s.save(tmp_path / "height.exr")
         s.save(tmp_path / "bear_depth.exr")
+
+
+@pytest.mark.parametrize("K", [None, np.array([[60.0, 0, 15], [0, 60.0, 12], [0, 0, 1]])])
+def test_scaled_changes_the_units_of_every_array_together(K):
+    """s.depth *= 1000 left the mesh in metres (an audit): scaled() scales every depth, and
+    an orthographic pixel size, so the points and the mesh follow as one."""
+    from facetlift import synthetic
+
+    g = synthetic.analytic("steps", 24) if K is None else None
+    if K is None:
+        s = facetlift.integrate(g.normals, g.mask, discontinuities=True)
+    else:
+        n = facetlift.normals_from_gradients(np.full((24, 30), 0.05), np.zeros((24, 30)))
+        s = facetlift.integrate(n, K=K)
+        s = facetlift.Surface(s.depth * 2.0, s.vertex_depth * 2.0, s.mask, s.info, K=K)
+    t = s.scaled(1000)
+    np.testing.assert_allclose(t.depth, s.depth * 1000)
+    np.testing.assert_allclose(t.points(), s.points() * 1000, rtol=1e-12)
+    np.testing.assert_allclose(t.to_mesh()[0], s.to_mesh()[0] * 1000, rtol=1e-12)
+    np.testing.assert_allclose(t.points("vertices"), s.points("vertices") * 1000, rtol=1e-12)
+    if K is None:
+        assert t.pixel_size == 1000 * s.pixel_size and t.split is not None
+    else:
+        np.testing.assert_array_equal(t.K, K)
+    for bad in (0, -1.0, float("nan"), "x", True):
+        with pytest.raises(ValueError, match=r"`factor` must be a positive finite number"):
+            s.scaled(bad)

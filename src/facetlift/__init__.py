@@ -38,7 +38,7 @@ _LAZY = {
     "clean_mask": ("problem", "clean_mask"),
     "gradients_from_normals": ("problem", "gradients_from_normals"),
     "normals_from_gradients": ("problem", "normals_from_gradients"),
-    "prepare": ("problem", "prepare"),
+    "prepare": ("api", "prepare"),
     "Surface": ("surface", "Surface"),
 }
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import inspect
 import logging
 import time
@@ -17,7 +18,8 @@ from .linalg import SolverError
 from .metrics import diagnose
 from .options import validate
 from .prior_fit import check as prior_fit_check
-from .problem import Problem, check_prior_outliers, normals_from_gradients, prepare
+from .problem import Problem, check_prior_outliers, normals_from_gradients
+from .problem import prepare as _prepare
 from .surface import Surface
 
 log = logging.getLogger("facetlift")
@@ -289,7 +291,7 @@ def integrate(
     # (and the words on world-space normals: whether a rotation was given)
     with (contextlib.nullcontext() if frames.is_identity(normal_frame)
           else frames.read_in(normal_frame)), frames.rotation_given(normal_rotation is not None):
-        problem = prepare(
+        problem = _prepare(
             normals, mask, known=known, pixel_size=pixel_size, K=K, backfacing=backfacing,
             outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight,
             confidence=confidence, grazing_note=note, prior_blur=prior_blur,
@@ -315,14 +317,20 @@ def _keyword_hints(options: dict) -> dict:
     """What to give instead of keywords :func:`integrate` has not but users expect (an
     audit: ``fov=60``, the command line's --fov, was told "unknown option(s) ['fov']" and
     the method's options alone), for :func:`facetlift.options.validate`."""
+    hints = {}
+    if "camera" in options:  # (prepare's keyword: an audit was told of dgp's options alone)
+        hints["camera"] = ("integrate takes the camera as K= (a 3 x 3 matrix, four numbers or "
+                           "a facetlift.camera.Pinhole) or pixel_size= (orthographic); "
+                           "camera= is facetlift.prepare's")
     if "fov" not in options:
-        return {}
+        return hints
     fov = options["fov"]
     text = (f"{fov:g}" if isinstance(fov, (int, float)) and not isinstance(fov, bool)
             else repr(fov))
-    return {"fov": ("integrate takes no field of view: give the camera it makes as "
+    hints["fov"] = ("integrate takes no field of view: give the camera it makes as "
                     f"K=facetlift.camera.K_from_fov(normals.shape[:2], {text}) (degrees across "
-                    "the width; the command line's --fov)")}
+                    "the width; the command line's --fov)")
+    return hints
 
 
 def _no_perspective(method: str) -> ValueError:
@@ -488,6 +496,15 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
     return surface
 
 
+@functools.wraps(_prepare)
+def prepare(normals, mask=None, **kwargs) -> Problem:
+    # (the checks integrate makes on the normals as given, first: prepare + solve took a
+    # uint8 map as raw 0..255, and [0, 1]-encoded or undecoded float maps, without a word,
+    # where integrate decodes or refuses them; architecture.md calls prepare the boundary
+    # check, an audit)
+    return _prepare(frames.checked(normals, mask), mask, **kwargs)
+
+
 def integrate_gradients(
     p, q, mask=None, *, gradient_frame: str = "xy", pixel_size: float = 1.0, **kwargs
 ) -> Surface:
@@ -496,19 +513,30 @@ def integrate_gradients(
     Parameters
     ----------
     p, q : (H, W) array_like of float
-        The height's slopes, in height units per world unit; NaN marks a missing sample, and
-        an infinite slope is a vertical (edge-on) facet: a grazing normal, counted as missing.
+        The height's slopes, in height units per world unit (the world width of a pixel is
+        `pixel_size`: slopes of a height in other units than the pixels' are no geometric
+        slopes); NaN marks a missing sample. The grazing rule of normal maps applies: a
+        slope steeper than ``tan(acos(outlier_eps))`` (11.43, 85 degrees, by default; an
+        infinite one is a vertical, edge-on facet) is counted as a missing sample, as an
+        edge-on normal is (the paper's outlier rule). An exact field with true steep slopes
+        (rendered, analytic) keeps them with ``outlier_eps=0``; a field in other height units
+        is steeper or flatter by their ratio, so the rule drops other samples (an audit: a
+        bump 297.5 high and 6 px wide lost half its samples, the same field in thousandths
+        none).
         With ``gradient_frame="xy"`` (default) ``p = dz/dx`` (x right) and ``q = dz/dy``
         (y up); with ``"rowcol"`` (aliases ``"queau"``, ``"numpy"``: Quéau's toolbox,
         ``np.gradient(z)``) ``p = dz/d(row)`` downward and ``q = dz/d(col)``; with ``"image"``
         (aliases ``"matlab"``, ``"opencv"``: MATLAB's ``[FX, FY] = gradient(Z)``, OpenCV's
         Sobel dx and dy) ``p = dz/d(col)`` and ``q = dz/d(row)`` downward.
     mask : (H, W) array_like of bool, optional
+        The domain, as for :func:`integrate`; default: where p and q are finite.
     gradient_frame : str
+        The layout of (p, q), above ("xy", "rowcol", "image" and their aliases).
     pixel_size : float
+        The world width of a pixel: the unit of the slopes' run (default 1: slopes per pixel).
     **kwargs
-        As for :func:`integrate` (method, known, solver, method options); an orthographic
-        view only.
+        As for :func:`integrate` (method, known, solver, outlier_eps, method options); an
+        orthographic view only.
 
     Returns
     -------

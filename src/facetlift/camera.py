@@ -295,7 +295,9 @@ class Pinhole(Camera):
 
     def __repr__(self) -> str:
         K = self.K
-        return f"Pinhole(fx={K[0, 0]:g}, fy={K[1, 1]:g}, cx={K[0, 2]:g}, cy={K[1, 2]:g})"
+        # (as it is made, every digit and the skew: "Pinhole(fx=60, ...)" was refused by the
+        # constructor and hid the skew, an audit)
+        return f"Pinhole({K.tolist()!r})"
 
 
 #: A field of view (degrees) below which :func:`K_from_fov` asks whether it was given in
@@ -399,6 +401,10 @@ def make_camera(pixel_size=1.0, K=None) -> Camera:
     """
     if isinstance(K, Pinhole):  # (a camera object: its intrinsics)
         K = K.K
+    elif isinstance(K, Orthographic):  # (was "must be a real numeric array; got dtype
+        # object", an audit)
+        raise ValueError(f"`K` is an orthographic camera ({K!r}): leave K out and give "
+                         f"pixel_size={K.pixel_size:g} instead")
     if isinstance(pixel_size, (str, bytes)):  # (float("1") would take it)
         raise ValueError(f"`pixel_size` must be a positive number; got {pixel_size!r}")
     if K is not None:

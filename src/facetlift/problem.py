@@ -472,7 +472,7 @@ def _bool_image(a, name: str, shape: tuple[int, int]) -> np.ndarray:
         raise ValueError(f"`{name}` must have shape {shape} to match `normals`; got {arr.shape}")
     if arr.dtype.kind == "f" and not np.isfinite(arr).all():
         raise ValueError(f"`{name}` contains NaN or inf")
-    inside = arr != 0
+    inside = negatives_outside(arr, f"`{name}`")
     if arr.dtype.kind == "f" and inside.any():
         # (a soft matte or a probability map: every value above 0 was inside, the domain grew
         # by 66 % on a blurred mask, an audit; read_mask warns about soft files alike)
@@ -483,6 +483,19 @@ def _bool_image(a, name: str, shape: tuple[int, int]) -> np.ndarray:
                  f"({int(inside.sum())} pixels); threshold it first (e.g. {name} > 0.5) if "
                  "that is not meant")
     return inside
+
+
+def negatives_outside(arr: np.ndarray, name: str) -> np.ndarray:
+    """(H, W) bool: the pixels of the mask values `arr` above 0, with a warning naming `name`
+    where some are negative, which count as outside. A logit or a signed mask (-5 outside,
+    5 inside) made every pixel inside as "nonzero", the background's NaN normals filled in
+    as surface without a word (an audit)."""
+    negative = int(np.count_nonzero(arr < 0)) if arr.dtype.kind in "if" else 0
+    if negative:
+        warn(f"{name} holds {negative} negative values (a logit or a signed map?): they count "
+             f"as outside, the {int(np.count_nonzero(arr > 0))} above 0 as inside; threshold "
+             "it yourself if another split is meant")
+    return arr > 0
 
 
 #: Share of a float mask's inside pixels with values strictly between 0 and 1 above which it

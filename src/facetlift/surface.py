@@ -49,6 +49,12 @@ class Surface:
     split : (corners, i, j, depth) or None
         The split mesh behind `cuts`: facet corners (m, 4) into split vertices, their grid
         positions (i, j) and depths (each (n,)); :meth:`to_mesh` uses it.
+
+    The arrays belong together: :meth:`to_mesh` and ``points("vertices")`` read
+    `vertex_depth` (or `split`), ``points()`` reads `depth`, so editing one of them in place
+    leaves the others as they were (a depth multiplied by 1000 beside a mesh still in metres,
+    an audit). For other units use :meth:`scaled`; for a depth from elsewhere,
+    :meth:`from_depth`.
     """
 
     def __init__(
@@ -135,6 +141,31 @@ class Surface:
             vu = np.where(count > 0, total / np.maximum(count, 1), np.nan)
         vdepth = np.where(count > 0, camera.to_depth(np.where(count > 0, vu, 0.0)), np.nan)
         return cls(np.where(m, d, np.nan), vdepth, m, camera=camera)
+
+    def scaled(self, factor: float) -> Surface:
+        """The same surface in other units: every depth (`depth`, `vertex_depth`, the split
+        mesh's, the jump heights of `discontinuities`) times `factor`, and an orthographic
+        pixel size too, so that its points and mesh scale as one (a pinhole camera's K is in
+        pixels and stays). Metres to millimetres: ``s.scaled(1000)``. `info` is shared.
+
+        Raises
+        ------
+        ValueError
+            A `factor` that is no positive finite number.
+        """
+        try:
+            f = float(factor)
+        except (TypeError, ValueError):
+            f = float("nan")
+        if isinstance(factor, (bool, np.bool_)) or not (np.isfinite(f) and f > 0):
+            raise ValueError(f"`factor` must be a positive finite number; got {factor!r}")
+        cam = self.camera
+        camera = cam if cam.perspective else make_camera(cam.pixel_size * f)
+        split = None if self.split is None else (*self.split[:3], self.split[3] * f)
+        return Surface(self.depth * f, self.vertex_depth * f, self.mask, self.info,
+                       camera=camera, cuts=self.cuts, split=split,
+                       discontinuities=None if self.discontinuities is None
+                       else self.discontinuities * f)
 
     @property
     def pixel_size(self) -> float:

@@ -397,10 +397,11 @@ def oracle(gt, normals) -> tuple[float, float, float, float]:
     from scipy import ndimage
 
     from .. import methods
-    from ..api import make_surface, prepare
+    from ..api import make_surface
     from ..methods import MethodResult
     from ..methods.dgp import SMALL_PIECE, targets
     from ..methods.dgp.split import occlusion_offsets, solve_pieces, split
+    from ..problem import prepare  # (the renders' normals need no input checks)
 
     t0 = time.perf_counter()
     with warnings.catch_warnings():

@@ -612,8 +612,10 @@ def _soft_edge_check(plane: np.ndarray | None, m: np.ndarray, p, arg: str) -> No
 
 def read_mask(path, shape: tuple[int, int] | None = None, *, of: str = "the normal map"
               ) -> np.ndarray:
-    """Read a mask image: nonzero is inside (a warning where many inside pixels hold values
-    below the largest: an antialiased edge, :func:`_soft_edge_check`).
+    """Read a mask image: above 0 is inside, nonzero for image files (a warning where many
+    inside pixels hold values below the largest: an antialiased edge,
+    :func:`_soft_edge_check`; and where a float or signed map holds negative values, which
+    count as outside).
 
     Parameters
     ----------
@@ -655,7 +657,9 @@ def read_mask(path, shape: tuple[int, int] | None = None, *, of: str = "the norm
                 m = alpha if one else m & alpha
                 plane = a[..., -1] if one else plane
     elif a.ndim == 2:
-        m = a != 0
+        from ..problem import negatives_outside
+
+        m = negatives_outside(a, f"`{arg}` {p}")  # (a float or signed map's negatives: out)
         plane = a
     else:
         raise ValueError(
