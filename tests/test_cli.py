@@ -1503,3 +1503,27 @@ def test_a_settings_warning_is_said_before_a_later_checks_error(tmp_path, capsys
     err = capsys.readouterr().err
     assert code == 1 and "applies to the mesh and point outputs" in err
     assert "--height-range must be two finite numbers" in err
+
+
+def test_save_normals_writes_the_results_own_normals_in_the_inputs_frame(tmp_path, capsys):
+    """--save normals: the result's facet normals (each facet's own corners where split at
+    jumps) as a 16-bit PNG normal map, in the frame the input came in, to set beside it."""
+    from facetlift import frames, io, metrics, synthetic
+
+    g = synthetic.analytic("steps", 40)
+    rng = np.random.default_rng(3)
+    noisy = synthetic.add_angular_noise(g.normals, 2.0, rng)
+    np.save(tmp_path / "n.npy", frames.from_facetlift(noisy, "opencv"))
+    code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "--normal-frame", "opencv",
+                       "--discontinuities", "-o", tmp_path / "out", "-s", "normals", "-s", "npz")
+    assert code == 0, err
+    s = io.load_surface(tmp_path / "out" / "surface.npz")
+    want = metrics.surface_normals(s)
+    back, _ = io.read_normals(tmp_path / "out" / "result_normals.png", frame="opencv")
+    np.testing.assert_allclose(back, want, atol=3e-5)
+    # the result's normals are not the input's: the noise is gone
+    assert np.nanmean(np.abs(back - noisy)) > 10 * np.nanmean(np.abs(back - want))
+    # Surface.save writes the same file, given the frame (the command line's --normal-frame)
+    s.save(tmp_path / "result_normals.png", frame="opencv")
+    assert (tmp_path / "result_normals.png").read_bytes() == (
+        tmp_path / "out" / "result_normals.png").read_bytes()

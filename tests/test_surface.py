@@ -421,3 +421,22 @@ def test_scaled_changes_the_units_of_every_array_together(K):
     for bad in (0, -1.0, float("nan"), "x", True):
         with pytest.raises(ValueError, match=r"`factor` must be a positive finite number"):
             s.scaled(bad)
+
+
+def test_result_normals_come_back_in_the_frame_and_world_of_the_input(tmp_path):
+    """Surface.save("result_normals.png") (--save normals): the result's normals where
+    integrate was given an OpenCV-frame map turned from world space come back in that frame
+    and world, within 16-bit steps of the input where the surface fits it exactly."""
+    from facetlift import frames, io, synthetic
+
+    g = synthetic.analytic("sphere", 40)
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # world -> camera
+    world = frames.rotate(frames.from_facetlift(g.normals, "opencv"), R.T)
+    s = facetlift.integrate(world, g.mask, normal_frame="opencv", normal_rotation=R)
+    s.save(tmp_path / "result_normals.png")
+    back, alpha = io.read_normals(tmp_path / "result_normals.png")
+    np.testing.assert_array_equal(alpha, g.mask)
+    angle = np.degrees(np.arccos(np.clip(np.sum(back * world, -1), -1, 1)))[g.mask]
+    assert np.median(angle) < 1.0 and np.median(angle) < 2 * s.info["mean_deviation"] + 0.01
+    with pytest.raises(ValueError, match=r"takes only \['frame'\]"):
+        s.save(tmp_path / "result_normals.png", bits=8)

@@ -334,7 +334,9 @@ _JOB_OPTIONS = [
                  "0..1 (alpha only where pixels are outside the mask; its range in the "
                  "summary and --json's depth_range; see --height-range), height-exr = the "
                  "heights themselves as float32 EXR (channel Y), points = a PLY point cloud "
-                 "(a point per pixel with the input's normal). Default: npy, ply, png."),
+                 "(a point per pixel with the input's normal), normals = the result's own "
+                 "normals as a 16-bit PNG normal map in the input's frame. Default: npy, ply, "
+                 "png."),
     click.option("--height-range", "height_range", nargs=2, type=float, default=None,
                  metavar="LOW HIGH",
                  help="The heights (in the depth's units: texels with --pixel-size 1) that "

@@ -22,7 +22,8 @@ SURFACE_FORMATS = DEPTH_FORMATS + (".npz",) + MESH_FORMATS + (".png",)
 #: write the point cloud and the jump map (a review); ``height.exr`` held the depth where
 #: ``-s height-exr`` writes the heights.
 CLI_NAMES = {"points.ply": "points", "discontinuities.png": "discontinuities",
-             "report.png": "report", "height.exr": "height-exr"}
+             "report.png": "report", "height.exr": "height-exr",
+             "result_normals.png": "normals"}
 
 
 #: ``.png`` names that :func:`save_surface` writes as a 16-bit height map
@@ -156,7 +157,7 @@ def save_surface(surface, path, **kwargs) -> Path:
 
 #: The keywords each of :data:`CLI_NAMES`' writers takes.
 _CLI_KEYWORDS = {"points": ("frame", "normals", "colors"), "discontinuities": ("min_size",),
-                 "report": ("dpi", "normals"), "height-exr": ()}
+                 "report": ("dpi", "normals"), "height-exr": (), "normals": ("frame",)}
 
 
 def _height_named(p: Path) -> bool:
@@ -185,6 +186,13 @@ def _save_as_cli(surface, p: Path, kind: str, kwargs: dict) -> Path:
         return write_points(p, surface.points(frame=frame),
                             None if pn is None else frames.from_facetlift(pn, frame, "frame"),
                             None if colors is None else point_colors(surface, colors))
+    if kind == "normals":
+        from .images import write_normals
+
+        # (in the frame given, else in integrate's normal_frame: the input's)
+        frame = kwargs.get("frame") or (surface.info if isinstance(surface.info, dict)
+                                        else {}).get("normal_frame")
+        return write_normals(p, result_normals(surface), surface.mask, bits=16, frame=frame)
     if kind == "discontinuities":
         from .preview import write_discontinuities
 
@@ -223,6 +231,24 @@ def camera_normals(surface, normals) -> np.ndarray:
     R = info.get("normal_rotation")
     if R is not None:
         n = frames.rotate(n, frames.rotation_in_facetlift(np.asarray(R, float), frame))
+    return n
+
+
+def result_normals(surface) -> np.ndarray:
+    """(H, W, 3) unit normals of the result's facets (:func:`facetlift.metrics.surface_normals`:
+    each facet's own corners where the surface is split at jumps), NaN outside its mask, in
+    the frame the input normals were given in: ``normal_rotation`` of ``surface.info`` undone
+    (a world-space map gives world-space normals back) and stored in its ``normal_frame`` by
+    the writer. What ``--save normals`` writes, to set beside the input map."""
+    from .. import frames
+    from ..metrics import surface_normals
+
+    n = surface_normals(surface)
+    info = surface.info if isinstance(surface.info, dict) else {}
+    R = info.get("normal_rotation")
+    if R is not None:  # (the inverse of camera_normals' turn, a rotation: its transpose)
+        turn = frames.rotation_in_facetlift(np.asarray(R, float), info.get("normal_frame"))
+        n = frames.rotate(n, np.asarray(turn, float).T)
     return n
 
 
