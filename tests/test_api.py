@@ -774,3 +774,13 @@ def test_camera_objects_given_to_integrate_are_taken_or_named():
     K = [[60.123456789, 0.5, 15.25], [0.0, 61.0, 12.0], [0.0, 0.0, 1.0]]
     cam = eval(repr(Pinhole(K)), {"Pinhole": Pinhole})
     np.testing.assert_array_equal(cam.K, K)
+
+
+def test_a_progress_callable_of_the_wrong_arity_is_refused_before_the_solve():
+    """progress=lambda i: ... failed as a TypeError once the solve had begun (an audit)."""
+    n = facetlift.normals_from_gradients(np.full((8, 9), 0.1), np.zeros((8, 9)))
+    with pytest.raises(ValueError, match=r"progress\(iteration, value\).*cannot take two"):
+        facetlift.integrate(n, solver="iterative", progress=lambda i: None)
+    seen = []
+    facetlift.integrate(n, solver="iterative", max_iter=2, progress=lambda *a: seen.append(a))
+    assert seen and all(len(a) == 2 for a in seen)

@@ -440,3 +440,12 @@ def test_result_normals_come_back_in_the_frame_and_world_of_the_input(tmp_path):
     assert np.median(angle) < 1.0 and np.median(angle) < 2 * s.info["mean_deviation"] + 0.01
     with pytest.raises(ValueError, match=r"takes only \['frame'\]"):
         s.save(tmp_path / "result_normals.png", bits=8)
+
+
+def test_save_to_a_file_object_is_named():
+    """s.save(BytesIO()) was a bare TypeError (an audit)."""
+    import io as _io
+
+    s = facetlift.integrate(facetlift.normals_from_gradients(np.zeros((5, 6)), np.zeros((5, 6))))
+    with pytest.raises(ValueError, match=r"`path` must be a file name.*got BytesIO"):
+        s.save(_io.BytesIO())

@@ -641,6 +641,17 @@ def _progress_option(options: dict, info) -> None:
     if not (value is True or callable(value)):
         raise ValueError(f"`progress` must be True (a progress bar on stderr), False, a "
                          f"callable or None; got {value!r}")
+    if value is not True:  # (one of the wrong arity failed as a TypeError once the solve had
+        # begun, an audit)
+        try:
+            inspect.signature(value).bind(0, 0.0)
+        except TypeError:
+            raise ValueError(f"`progress` is called as progress(iteration, value) (the "
+                             f"iteration's count and its measure: a deviation, a residual); "
+                             f"{getattr(value, '__name__', value)!r} cannot take two "
+                             "arguments") from None
+        except ValueError:  # (no signature to read: a builtin; called as it is)
+            pass
     if "progress" not in info.options():
         options.pop("progress")
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -63,16 +64,23 @@ def save_surface(surface, path, **kwargs) -> Path:
     (:func:`~facetlift.io.preview.write_discontinuities`, keyword ``min_size``; a surface
     without one is refused), ``report.png`` the report
     (:func:`~facetlift.io.report.write_report`, needs matplotlib; keywords ``normals``,
-    ``dpi``) and ``height.exr`` the heights (:func:`~facetlift.io.preview.write_height`);
+    ``dpi``), ``height.exr`` the heights (:func:`~facetlift.io.preview.write_height`) and
+    ``result_normals.png`` the result's own normals (a 16-bit normal map, keyword ``frame``,
+    default the ``normal_frame`` integrate was given: :func:`result_normals`);
     any other name keeps its extension's meaning (``mesh_points.ply`` is a mesh). Returns
     the path written.
 
     Raises
     ------
     ValueError
-        Unknown extension (the message lists the valid ones) or keywords the format does not
-        take.
+        A `path` that is no file name (a file object: the extension picks the format),
+        an unknown extension (the message lists the valid ones) or keywords the format does
+        not take.
     """
+    if not isinstance(path, (str, os.PathLike)):  # (a BytesIO was a bare TypeError, an audit)
+        raise ValueError(f"`path` must be a file name (str or os.PathLike), whose extension "
+                         f"picks the format; got {type(path).__name__}: write to a file, then "
+                         "read it into your buffer")
     p = Path(path)
     ext = _suffix(p, SURFACE_FORMATS, "surface", "path")
 
