@@ -916,7 +916,9 @@ def render_perspective(
         K = DILIGENT_K.copy()
         if (H, W) != (512, 612):  # the focal lengths by one factor (square pixels stay
             # square: scaled per axis, a 1536 x 2048 image got fx / fy 1.12), the principal
-            # point to the same place in the image
+            # point scaled with the image: within half a pixel of the same place (the resize
+            # rule s (c + 1/2) - 1/2 of docs/perspective.md; kept, the renders of other sizes
+            # were made so; the K returned is the one used, a review)
             K[0] *= W / 612
             K[1, 1] *= W / 612
             K[1, 2] *= H / 512
@@ -1013,7 +1015,11 @@ def jump_edges(gt: GroundTruth, *, tol: float = 0.5) -> tuple[np.ndarray, np.nda
     across an edge is compared with the one the two normals predict (trapezoid rule on their
     grid slopes); the edge is a jump when they differ by more than
     ``0.5 |g_a - g_b| + tol`` pixel footprints -- a bound a single crease of a continuous
-    piecewise planar surface never exceeds.
+    piecewise planar surface never exceeds. Approximate on renders: a curved surface whose
+    slope between the centres exceeds both ends', and a silhouette pixel whose supersampled
+    normal mixes two surfaces, are cut where the surface is continuous; a grazing jump,
+    where the allowance grows with the slope, can be missed (measured in docs/results.md,
+    "Known limits").
 
     Returns
     -------
