@@ -1198,8 +1198,9 @@ def test_an_unreachable_scheduler_names_the_argument_and_leaves_nothing(tmp_path
     maps(src, n=1)
     with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
         with pytest.raises(OSError, match=r"`scheduler` 'tcp://127\.0\.0\.1:1'.*answered"):
-            fb.batch([str(src)], tmp_path / "out", scheduler="tcp://127.0.0.1:1")
-    assert not (tmp_path / "out").exists()
+            fb.batch([str(src)], tmp_path / "nest" / "a" / "out",
+                     scheduler="tcp://127.0.0.1:1")
+    assert not (tmp_path / "nest").exists()  # (nor the parents it made, a review)
 
 
 def _sleep_forever():  # (a worker that ignores SIGTERM, as one busy in C code may)

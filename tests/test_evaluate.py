@@ -620,3 +620,38 @@ def test_an_orthographic_surface_with_positive_depths_is_not_told_to_give_K(tmp_
     np.save(tmp_path / "gt.npy", depth)
     code, out, err = run(capsys, "evaluate", tmp_path / "surface.npz", "--gt", tmp_path / "gt.npy")
     assert code == 0 and "--K" not in out
+
+
+def test_a_zero_background_never_joins_objects_whatever_the_mask_leaves_out():
+    """A review: with a mask that left out more of the objects than of the background, the
+    background's zeros (43 % of the pixels outside it) joined two objects into one piece:
+    27 % error and a unit warning for a result exact up to each object's offset."""
+    r, c = np.mgrid[0:30, 0:40].astype(float)
+    gt = 0.1 * c + 0.05 * np.sin(r / 3)
+    est = np.zeros_like(gt)
+    est[:, :15] = gt[:, :15]
+    est[:, 22:] = gt[:, 22:] + 3.0
+    roi = np.zeros(gt.shape, bool)
+    roi[5:25, 2:10] = roi[5:25, 28:36] = True  # (most of each object left out)
+    assert metrics.evaluate(est, gt, roi)["normalized_error"] < 1e-12
+
+
+def test_scoring_masks_count_negative_values_as_outside_and_pieces_are_scored_ones():
+    """metrics.evaluate counted a logit mask's negatives inside (twice the pixels), and the
+    pieces note counted a piece the mask left out (a review)."""
+    est, gt, mask = scene()
+    logit = np.where(mask, 3.0, -3.0)
+    with pytest.warns(UserWarning, match=r"negative values"):
+        rec = metrics.evaluate(est, gt, logit, perspective=True)
+    assert rec["pixels"] == metrics.evaluate(est, gt, mask, perspective=True)["pixels"]
+    two = est.copy()
+    two[:, 13] = np.nan
+    two[:, 14:] *= 1.3
+    left = mask.copy()
+    left[:, 13:] = False  # (only the left piece scored)
+    notes = metrics.evaluate(two, gt, left, perspective=True)["notes"]
+    assert not [n for n in notes if "separate pieces" in n]
+    from facetlift.camera import Orthographic
+
+    with pytest.raises(ValueError, match=r"`K` is an orthographic camera"):
+        metrics.evaluate(est, gt, mask, K=Orthographic(1.0))

@@ -505,6 +505,9 @@ def prepare(normals, mask=None, **kwargs) -> Problem:
     return _prepare(frames.checked(normals, mask), mask, **kwargs)
 
 
+prepare.__module__ = __name__  # (functools.wraps gave it facetlift.problem's, a review)
+
+
 def integrate_gradients(
     p, q, mask=None, *, gradient_frame: str = "xy", pixel_size: float = 1.0, **kwargs
 ) -> Surface:

@@ -817,6 +817,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     found = _own_files(items(inputs, list_file=list_file), template)
     _unused_folder_files(found, template)
     root = Path(out).resolve()
+    new = [p for p in (root, *root.parents) if not p.exists()]  # (the folders it will make)
     created = prepare_folder(root)  # created and checked before any work
     log_path = root / LOG_NAME if log is None else Path(log)
     records = list(_finished_records(log_path))  # (the log read once)
@@ -886,9 +887,10 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         try:
             client, own = _connect(scheduler)
         except BaseException:
-            if created:
+            if created:  # (and the parents it made: they stayed, a review)
                 with contextlib.suppress(OSError):
-                    root.rmdir()  # (only if empty)
+                    for folder in new:
+                        folder.rmdir()  # (only if empty; the deepest first)
             raise
     with contextlib.ExitStack() as stack:
         if own:
@@ -1406,12 +1408,13 @@ def _connect(scheduler):
         # to scheduler='threads', without naming the argument, a review)
         raise ValueError(f"`scheduler` {scheduler!r}: {e}; give a dask.distributed "
                          "scheduler's address (tcp://host:8786) or a Client, or leave it out "
-                         "for local worker processes (workers=N)") from None
+                         "for local worker processes (workers=N; --workers N on the command "
+                         "line)") from None
     except OSError as e:
         raise OSError(f"`scheduler` {scheduler!r}: no dask.distributed scheduler answered "
                       f"({e}); check that it runs and that its address and port are right, "
-                      "or leave it out for local worker processes (workers=N). Nothing "
-                      "was run") from None
+                      "or leave it out for local worker processes (workers=N; --workers N "
+                      "on the command line). Nothing was run") from None
 
 
 def _on_cluster(jobs, client, done) -> None:

@@ -401,10 +401,6 @@ def make_camera(pixel_size=1.0, K=None) -> Camera:
     """
     if isinstance(K, Pinhole):  # (a camera object: its intrinsics)
         K = K.K
-    elif isinstance(K, Orthographic):  # (was "must be a real numeric array; got dtype
-        # object", an audit)
-        raise ValueError(f"`K` is an orthographic camera ({K!r}): leave K out and give "
-                         f"pixel_size={K.pixel_size:g} instead")
     if isinstance(pixel_size, (str, bytes)):  # (float("1") would take it)
         raise ValueError(f"`pixel_size` must be a positive number; got {pixel_size!r}")
     if K is not None:
@@ -442,6 +438,10 @@ def check_K(K) -> np.ndarray:
     Four numbers ``(fx, fy, cx, cy)`` are taken too, as the command line's K files are."""
     from .problem import numeric_array
 
+    if isinstance(K, Orthographic):  # (was "must be a real numeric array; got dtype object",
+        # from integrate and metrics.evaluate alike, an audit)
+        raise ValueError(f"`K` is an orthographic camera ({K!r}): leave K out and give "
+                         f"pixel_size={K.pixel_size:g} instead")
     Km = numeric_array(K, "K").astype(float)
     if Km.shape == (4,):  # (fx, fy, cx, cy): cx a column, cy a row from the top
         fx, fy, cx, cy = Km

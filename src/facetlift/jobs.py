@@ -964,6 +964,10 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                     raise
                 raise ValueError(said) from None
         t_integrate = time.perf_counter() - t1
+        if not inp.field and not frames.is_identity(job.normal_frame):
+            # (the frame the map was read in: the result's normals are written in it, also
+            # from its surface.npz, as --save normals writes them, a review)
+            surface.info["input_frame"] = frames.axis_string(job.normal_frame)
         if job.strict:  # (before the outputs: nothing is written)
             _strict_check(caught, surface)
         t2 = time.perf_counter()

@@ -612,10 +612,9 @@ def _soft_edge_check(plane: np.ndarray | None, m: np.ndarray, p, arg: str) -> No
 
 def read_mask(path, shape: tuple[int, int] | None = None, *, of: str = "the normal map"
               ) -> np.ndarray:
-    """Read a mask image: above 0 is inside, nonzero for image files (a warning where many
-    inside pixels hold values below the largest: an antialiased edge,
-    :func:`_soft_edge_check`; and where a float or signed map holds negative values, which
-    count as outside).
+    """Read a mask image: a value above 0 is inside (a warning where many inside pixels hold
+    values below the largest: an antialiased edge, :func:`_soft_edge_check`; and where a
+    float or signed one-channel map holds negative values, which count as outside).
 
     Parameters
     ----------

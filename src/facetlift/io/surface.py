@@ -197,9 +197,10 @@ def _save_as_cli(surface, p: Path, kind: str, kwargs: dict) -> Path:
     if kind == "normals":
         from .images import write_normals
 
-        # (in the frame given, else in integrate's normal_frame: the input's)
-        frame = kwargs.get("frame") or (surface.info if isinstance(surface.info, dict)
-                                        else {}).get("normal_frame")
+        # (in the frame given, else the input's: the frame the command line read the map in,
+        # or integrate's normal_frame)
+        info = surface.info if isinstance(surface.info, dict) else {}
+        frame = kwargs.get("frame") or info.get("input_frame") or info.get("normal_frame")
         return write_normals(p, result_normals(surface), surface.mask, bits=16, frame=frame)
     if kind == "discontinuities":
         from .preview import write_discontinuities
@@ -290,6 +291,8 @@ def _frame_arrays(surface) -> dict:
     out = {}
     if info.get("normal_frame") is not None:
         out["normal_frame"] = np.str_(info["normal_frame"])
+    if info.get("input_frame") is not None:  # (the command line's, for result_normals.png)
+        out["input_frame"] = np.str_(info["input_frame"])
     if info.get("normal_rotation") is not None:
         out["normal_rotation"] = np.asarray(info["normal_rotation"], float)
     return out
@@ -366,6 +369,8 @@ def load_surface(path):
     info = {}  # (only how the integrated normals reach the camera frame, _frame_arrays)
     if "normal_frame" in data:
         info["normal_frame"] = str(data["normal_frame"])
+    if "input_frame" in data:
+        info["input_frame"] = str(data["input_frame"])
     if "normal_rotation" in data and data["normal_rotation"].shape == (3, 3):
         info["normal_rotation"] = data["normal_rotation"].tolist()
     return Surface(depth, data["vertex_depth"], data["mask"].astype(bool), info,
