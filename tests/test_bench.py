@@ -194,7 +194,7 @@ def test_placed_oracle_ignores_missing_ground_truth(monkeypatch):
 
     gt = synthetic.analytic("steps", 64)
     edges = synthetic.jump_edges(gt)
-    monkeypatch.setattr(synthetic, "jump_edges", lambda g: edges)
+    monkeypatch.setattr(synthetic, "jump_edges", lambda g, **kw: edges)
     holes = np.random.default_rng(0).random(gt.depth.shape) < 0.6
     err, _, _, placed = D.oracle(replace(gt, depth=np.where(holes, np.nan, gt.depth)),
                                  gt.normals)

@@ -141,8 +141,9 @@ def _sources_digest(sources) -> str:
     return hashlib.sha1(("|".join(parts) + f"|{CACHE_VERSION}").encode()).hexdigest()
 
 
-#: Part of every cached render's digest: raise it when the renderer changes what it returns.
-CACHE_VERSION = 1
+#: Part of every cached render's digest: raise it when the renderer changes what it returns
+#: (2: the renders carry their depth jumps from the geometry, ``GroundTruth.jump_sizes``).
+CACHE_VERSION = 2
 
 
 def _cached(ctx: Context, key: str, make, sources=()) -> synthetic.GroundTruth:
@@ -158,17 +159,22 @@ def _cached(ctx: Context, key: str, make, sources=()) -> synthetic.GroundTruth:
                 stored = str(z["sources"]) if "sources" in z.files else ""
                 if stored == digest:
                     K = z["K"] if z["K"].size else None
+                    jumps = ((z["jump_right"], z["jump_down"]) if "jump_right" in z.files
+                             else None)
                     return synthetic.GroundTruth(z["depth"], z["normals"], z["mask"],
-                                                 float(z["pixel_size"]), str(z["name"]), K)
+                                                 float(z["pixel_size"]), str(z["name"]), K,
+                                                 jumps)
             log.info("cached scene %s was rendered from other files: rendered anew", path)
         except Exception as e:  # (a truncated or foreign file: rendered anew)
             log.warning("cached scene %s cannot be read (%s): rendered anew", path, e)
     gt = make()
     tmp = path.with_name(f"{key}.{os.getpid()}.{secrets.token_hex(4)}.tmp.npz")
     try:  # (a name of its own: two runs sharing the cache moved each other's away, an audit)
+        jumps = {} if gt.jump_sizes is None else {"jump_right": gt.jump_sizes[0],
+                                                   "jump_down": gt.jump_sizes[1]}
         np.savez_compressed(tmp, depth=gt.depth, normals=gt.normals, mask=gt.mask,
                             pixel_size=gt.pixel_size, name=gt.name,
-                            K=np.zeros(0) if gt.K is None else gt.K, sources=digest)
+                            K=np.zeros(0) if gt.K is None else gt.K, sources=digest, **jumps)
         os.replace(tmp, path)
     finally:
         with contextlib.suppress(OSError):
@@ -243,17 +249,18 @@ def scenes(ctx: Context) -> list[tuple[str, str, object]]:
             add("perspective", f"{path.stem}@{view}", f"pin_{path.stem}_{view}_{tag}",
                 lambda p=path, v=view: synthetic.render_perspective(
                     load_mesh(p), _pinhole(res), res, view=v, samples=s.disc_samples,
-                    name=f"{p.stem}@{v}"), (path,))
+                    jumps=True, name=f"{p.stem}@{v}"), (path,))
         for view in s.disc_wide_views:
             add("wide", f"{path.stem}@{view}", f"wide_{path.stem}_{view}_{tag}",
                 lambda p=path, v=view: synthetic.render_perspective(
                     load_mesh(p), _pinhole(res, f_wide), res, view=v, distance=WIDE_DISTANCE,
-                    samples=s.disc_samples, name=f"{p.stem}@{v}"), (path,))
+                    samples=s.disc_samples, jumps=True, name=f"{p.stem}@{v}"), (path,))
         for view in s.disc_ortho_views:
             n = s.disc_ortho_size
             add("ortho", f"{path.stem}@{view}", f"ortho_{path.stem}_{view}_{n}",
                 lambda p=path, v=view, n=n: synthetic.render_mesh(load_mesh(p), n, view=v,
-                                                                   name=f"{p.stem}@{v}"),
+                                                                   name=f"{p.stem}@{v}",
+                                                                   jumps=True),
                 (path,))
     for i in range(s.disc_tabletop if len(meshes) >= 2 else 0):
         pick = tabletop_meshes(meshes, i)
@@ -262,7 +269,8 @@ def scenes(ctx: Context) -> list[tuple[str, str, object]]:
         add("tabletop", name, f"table{TABLE_VERSION}_{i}_{name}_f{TABLE_FILL:g}_{tag}",
             lambda pick=pick, i=i, name=name: synthetic.render_perspective(
                 synthetic.tabletop([load_mesh(p) for p in pick], seed=i), _pinhole(res), res,
-                view=synthetic.TABLE_VIEW, fill=TABLE_FILL, samples=s.disc_samples, name=name),
+                view=synthetic.TABLE_VIEW, fill=TABLE_FILL, samples=s.disc_samples,
+                jumps=True, name=name),
             tuple(pick))
     rres = tuple(s.disc_room_resolution)
     rtag = f"{rres[0]}x{rres[1]}_s{s.disc_samples}"
@@ -273,7 +281,8 @@ def scenes(ctx: Context) -> list[tuple[str, str, object]]:
             lambda pick=pick, i=i, name=name: synthetic.render_perspective(
                 synthetic.room([load_mesh(p) for p in pick], seed=i),
                 _pinhole(rres, WIDE_F * rres[1] / 612.0), rres, view=synthetic.room_view(i),
-                fill=ROOM_FILL, distance=WIDE_DISTANCE, samples=s.disc_samples, name=name),
+                fill=ROOM_FILL, distance=WIDE_DISTANCE, samples=s.disc_samples, jumps=True,
+                name=name),
             tuple(pick))
     for kind in s.disc_vessels:
         for elev in s.disc_vessel_elevations:
@@ -281,7 +290,8 @@ def scenes(ctx: Context) -> list[tuple[str, str, object]]:
             add("vessel", name, f"vessel{VESSEL_VERSION}_{kind}_e{elev:g}_{tag}",
                 lambda kind=kind, elev=elev, name=name: synthetic.render_perspective(
                     synthetic.vessel(kind), _pinhole(res), res,
-                    view=synthetic.vessel_view(elev), samples=s.disc_samples, name=name), ())
+                    view=synthetic.vessel_view(elev), samples=s.disc_samples, jumps=True,
+                    name=name), ())
     for name in s.disc_analytic:
         n = s.disc_ortho_size
         out.append(("ortho", name, lambda name=name, n=n: synthetic.analytic(name, n)))
@@ -331,7 +341,7 @@ def heldout_scenes(ctx: Context) -> list[tuple[str, str, object]]:
             out.append(("heldout", name, lambda p=path, v=view, f=fill, name=name, key=key: _cached(
                 ctx, key, lambda: synthetic.render_perspective(
                     load_mesh(p), _pinhole(res), res, view=v, fill=f, samples=s.disc_samples,
-                    name=name), (p,))))
+                    jumps=True, name=name), (p,))))
     if ctx.models:
         out = [t for t in out if t[1] in ctx.models or t[1].split("@")[0] in ctx.models]
     return out
@@ -380,7 +390,7 @@ def error_of(gt, depth) -> float:
     return 100.0 * metrics.normalized_error(depth, gt.depth, gt.mask)[0]
 
 
-def oracle(gt, normals) -> tuple[float, float, float, float]:
+def oracle(gt, normals, geometric: bool = False) -> tuple[float, float, float, float]:
     """(error, deviation, seconds, placed error) of the facet integration with the true jumps
     cut: the pieces they separate placed by the occlusion rule, and (the last) each piece moved
     to its true place, the median difference to the ground truth in the camera's unknown (an
@@ -393,7 +403,11 @@ def oracle(gt, normals) -> tuple[float, float, float, float]:
     started from the split solve's arbitrary constant per piece, as until the twenty-seventh
     session, the side was a coin flip on the pairs of large pieces (53 % right on the
     development renders; `dgp-disc`, whose own soft solve decides it, 100 %), so the oracle
-    was no floor (docs/results.md, "The oracle's occluding sides")."""
+    was no floor (docs/results.md, "The oracle's occluding sides").
+
+    `geometric`: cut the jumps of the render's geometry (``synthetic.jump_edges(gt,
+    geometric=True)``, a render made with ``jumps=True``) instead of the pixel-centre test's
+    (benchmarks/bench_oracle_cuts.py compares the two)."""
     from scipy import ndimage
 
     from .. import methods
@@ -413,7 +427,7 @@ def oracle(gt, normals) -> tuple[float, float, float, float]:
                           outlier_eps=route.jump_grazing, isolated=route.jump_isolated,
                           grazing_share=route.jump_grazing_share)
         bx, by, target = targets(problem)
-        right, down = synthetic.jump_edges(gt)
+        right, down = synthetic.jump_edges(gt, geometric=geometric)
         mesh = split(problem.domain, right, down)
         z, _ = solve_pieces(mesh, bx, by, target)  # (an arbitrary constant per piece)
         k = mesh.n_pieces
