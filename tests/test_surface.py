@@ -449,3 +449,13 @@ def test_save_to_a_file_object_is_named():
     s = facetlift.integrate(facetlift.normals_from_gradients(np.zeros((5, 6)), np.zeros((5, 6))))
     with pytest.raises(ValueError, match=r"`path` must be a file name.*got BytesIO"):
         s.save(_io.BytesIO())
+
+
+def test_a_surface_made_of_lists_works_as_one_of_arrays(tmp_path):
+    """Surface(lists) failed in repr, points() and the mesh writers (an audit)."""
+    depth = [[1.0, 2.0], [3.0, 4.0]]
+    vd = np.arange(9.0).reshape(3, 3).tolist()
+    s = facetlift.Surface(depth, vd, [[True, True], [True, False]])
+    assert "2" in repr(s) and s.points().shape == (3, 3)
+    s.save(tmp_path / "m.ply")
+    assert (tmp_path / "m.ply").stat().st_size > 0

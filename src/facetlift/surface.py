@@ -61,9 +61,10 @@ class Surface:
         self, depth, vertex_depth, mask, info=None, *, pixel_size: float = 1.0, K=None,
         camera: Camera | None = None, cuts=None, discontinuities=None, split=None,
     ):
-        self.depth = depth
-        self.vertex_depth = vertex_depth
-        self.mask = mask
+        # (as arrays: lists made repr, points() and the mesh writers fail, an audit)
+        self.depth = np.asarray(depth, dtype=float)
+        self.vertex_depth = np.asarray(vertex_depth, dtype=float)
+        self.mask = np.asarray(mask, dtype=bool)
         self.info = {} if info is None else info
         self.camera = make_camera(pixel_size, K) if camera is None else camera
         self.cuts = cuts
