@@ -94,7 +94,8 @@ class GroundTruth:
         :func:`render_perspective`, :func:`_jump_sizes`): the jump across each edge between
         4-neighbouring mask pixels in pixel footprints of the camera's unknown, 0 where the
         surface is continuous there (or the jump is under a quarter footprint), inf where
-        the line between the two centres leaves the surface. ``jump_edges(gt,
+        a ray cast between the two centres misses the surface (a feature narrower than the
+        rays' spacing, a quarter pixel at first, can go unseen). ``jump_edges(gt,
         geometric=True)`` cuts by it.
     """
 
@@ -754,8 +755,11 @@ def _first_hits(mesh, origins, direction):
 #: :func:`_jump_sizes`: rays along each edge at first (the points between the two centres),
 #: halvings of the intervals, the halvings over which a step must keep more than half its
 #: size to be a jump (a continuous surface's step halves with each, a grazing one's shrinks
-#: by 1/sqrt(2), a jump's stays), and the most intervals followed per edge (the largest
-#: steps: a jump's interval keeps its step, a steep ramp's shrink, so it stays among them).
+#: by 1/sqrt(2), a jump's stays), and the most intervals followed per edge (those of the
+#: largest steps: a jump's interval keeps its step while a ramp's shrink, but beside a ramp
+#: that runs the other way at more than about 64 times the jump per pixel the ramp's fill
+#: the places first and the jump is lost, a review; the cap bounds the cost on surfaces
+#: steep everywhere).
 JUMP_SAMPLES, JUMP_HALVINGS, JUMP_KEEP, JUMP_LIVE = 4, 10, 3, 64
 
 
@@ -774,11 +778,14 @@ def _jump_sizes(cast, camera, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     surface's step shrinks with the halvings (by half where it is smooth, by 1/sqrt(2) where
     it turns edge-on), a jump's does not: the edge's size is the largest final step of an
     interval that kept more than half of its step over the last :data:`JUMP_KEEP` halvings,
-    else 0. Following only the larger half at each halving lost a jump of 2 footprints beside
-    a steep ramp of 16. Steps under a quarter footprint read as 0; inf where a ray between
-    the two centres misses the surface. The pixel-centre test (:func:`jump_edges` without
-    them) cut continuous surfaces and missed grazing jumps on the benchmark's renders
-    (docs/results.md, "Known limits")."""
+    else 0 (the step over the last interval: a steep ramp adds up to its slope / 4096).
+    Following only the larger half at each halving lost a jump of 2 footprints beside a
+    steep ramp of 16; the cap of :data:`JUMP_LIVE` can still lose one beside a much steeper
+    ramp running the other way, and a feature narrower than the first rays' spacing (a
+    quarter pixel) goes unseen. Steps under a quarter footprint read as 0; inf where a ray
+    cast between the two centres misses the surface. The pixel-centre test
+    (:func:`jump_edges` without them) cut continuous surfaces and missed grazing jumps on
+    the benchmark's renders (docs/results.md, "Known limits")."""
     H, W = mask.shape
     foot = camera.footprint()
     least = 0.25 * foot
