@@ -28,8 +28,10 @@ def test_python_quick_start_runs_verbatim(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     scope: dict = {}
     exec(compile(code, str(README), "exec"), scope)  # noqa: S102 - the README's own code
-    for name in ("depth.exr", "mesh.ply", "preview.png", "mesh_split.ply", "jumps.png"):
+    for name in ("depth.exr", "mesh.ply", "preview.png", "mesh_split.ply", "jumps.png",
+                 "result_normals.png"):
         assert (tmp_path / name).stat().st_size > 0, name
+    assert np.allclose(scope["in_mm"].depth, 1000 * scope["surface"].depth, equal_nan=True)
     assert np.isfinite(scope["surface"].depth[gt.mask]).all()
     assert scope["jumps"].discontinuities is not None
     import meshio
