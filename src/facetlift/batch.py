@@ -818,7 +818,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     _unused_folder_files(found, template)
     root = Path(out).resolve()
     new = [p for p in (root, *root.parents) if not p.exists()]  # (the folders it will make)
-    created = prepare_folder(root)  # created and checked before any work
+    prepare_folder(root)  # created and checked before any work
     log_path = root / LOG_NAME if log is None else Path(log)
     records = list(_finished_records(log_path))  # (the log read once)
     earlier = {rec["item"]: rec for rec in records} if resume else {}  # (each item's last)
@@ -887,10 +887,9 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         try:
             client, own = _connect(scheduler)
         except BaseException:
-            if created:  # (and the parents it made: they stayed, a review)
-                with contextlib.suppress(OSError):
-                    for folder in new:
-                        folder.rmdir()  # (only if empty; the deepest first)
+            with contextlib.suppress(OSError):  # (and the parents it made, a review)
+                for folder in new:
+                    folder.rmdir()  # (only if empty; the deepest first)
             raise
     with contextlib.ExitStack() as stack:
         if own:
@@ -1420,21 +1419,21 @@ def _connect(scheduler):
 def _on_cluster(jobs, client, done) -> None:
     """Run `jobs` on a ``dask.distributed`` `client` (:func:`_connect`); `done` runs here as
     futures finish."""
-    from distributed import as_completed
-
     futures = {}
     try:
         for it, j in jobs:
             futures[client.submit(run_item, j, 1, pure=False)] = it
-        _collect(futures, done, as_completed)
+        _collect(futures, done)
     except BaseException:  # (Ctrl-C or SIGTERM: the cluster's tasks ran on, a review)
         with contextlib.suppress(Exception):
             client.cancel(list(futures))
         raise
 
 
-def _collect(futures, done, as_completed) -> None:
+def _collect(futures, done) -> None:
     """Each finished future's record to `done` (:func:`_on_cluster`)."""
+    from distributed import as_completed
+
     for fut in as_completed(list(futures)):
         it = futures[fut]
         try:

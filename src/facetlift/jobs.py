@@ -978,7 +978,7 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
         for kind, name in zip(save, names, strict=True):
             try:
                 _write(surface, kind, out.path(name), inp.normals, job.triangles,
-                       job.output_frame, job.height_range, rgb, job.normal_frame)
+                       job.output_frame, job.height_range, rgb)
             except OSError as e:  # (say which and where: the file written is a staging one)
                 if e.errno is None:
                     raise
@@ -1150,12 +1150,12 @@ def _depth_range(surface, height_range=None) -> list | None:
 
 
 def _write(surface, kind: str, path: Path, normals, triangles, frame=None,
-           height_range=None, colors=None, normal_frame=None) -> None:
+           height_range=None, colors=None) -> None:
     """Output `kind` at `path` (named :data:`OUTPUTS`' `kind`): by :meth:`Surface.save`,
     which writes the command line's file names as ``--save`` does (one writer for both: its
     points.ply was a mesh, a review). `colors`: the (H, W, 3) image painted on the kinds of
-    :data:`COLOURED`; `normal_frame`: the frame the input normals were read in (the result's
-    normals are written in it)."""
+    :data:`COLOURED`. The result's normals are written in the frame the input was read in,
+    which the surface records (``info["input_frame"]``)."""
     if Path(path).name != OUTPUTS[kind]:  # pragma: no cover - a caller's bug
         raise ValueError(f"{kind} output must be named {OUTPUTS[kind]}; got {path}")
     if kind in ("ply", "obj"):
@@ -1164,8 +1164,7 @@ def _write(surface, kind: str, path: Path, normals, triangles, frame=None,
         kw = {"frame": frame}
     else:
         kw = {"report": {"normals": normals}, "points": {"normals": normals, "frame": frame},
-              "height": {"height_range": height_range},
-              "normals": {"frame": normal_frame}}.get(kind, {})
+              "height": {"height_range": height_range}}.get(kind, {})
     if colors is not None and kind in COLOURED:
         kw["colors"] = colors
     surface.save(path, **kw)

@@ -37,14 +37,9 @@ def _as_mask(mask):
     """A scoring mask as bool: values above 0 inside, negative ones outside with a warning, as
     integrate and read_mask take masks (a logit mask scored twice its pixels here, a
     review); None stays None."""
-    if mask is None:
-        return None
-    m = np.asarray(mask)
-    if m.dtype.kind in "if":
-        from .problem import negatives_outside
+    from .problem import negatives_outside
 
-        return negatives_outside(m, "`mask`")
-    return m.astype(bool)
+    return None if mask is None else negatives_outside(np.asarray(mask), "`mask`")
 
 
 def _pair(estimate, truth, mask):
@@ -498,14 +493,10 @@ def _pieces_note(est, gt, m, region, out) -> None:
     n = int(k.max()) + 1 if k.size else 0  # one the mask leaves out was counted, a review)
     if n < 2:
         return
+    from scipy import ndimage
+
     e, g = est[m], gt[m]
-    order = np.argsort(k, kind="stable")
-    starts = np.searchsorted(k[order], np.arange(n))
-    ratio = (g / e)[order]
-    scale = np.ones(n)
-    for i, (a, b) in enumerate(zip(starts, np.r_[starts[1:], k.size], strict=True)):
-        if b > a:
-            scale[i] = np.median(ratio[a:b])
+    scale = np.atleast_1d(ndimage.median(g / e, k + 1, np.arange(1, n + 1)))
     each = float(np.mean(np.abs(scale[k] * e - g)))
     out["notes"].append(
         f"the result has {n} separate pieces: without a depth prior each piece's scale is "

@@ -804,7 +804,7 @@ def _jump_sizes(cast, camera, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         # every interval of an edge with some step above a quarter footprint (a jump beside
         # an opposite ramp can leave its own interval's step small at first)
         edge, k = np.nonzero(np.repeat((step > least).any(axis=1, keepdims=True), n, axis=1))
-        lo, width = t[k], np.full(k.size, 1.0 / n)
+        lo, width = t[k], 1.0 / n  # (every interval of a level is as wide)
         ulo, uhi = u[edge, k], u[edge, k + 1]
         hist = np.repeat(step[edge, k][:, None], JUMP_KEEP + 1, axis=1)  # (the last steps)
         for level in range(JUMP_HALVINGS):
@@ -817,7 +817,7 @@ def _jump_sizes(cast, camera, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]
             # both halves, each with its own step; those above a quarter footprint go on
             edge = np.r_[edge, edge]
             lo = np.r_[lo, mid]
-            width = np.r_[0.5 * width, 0.5 * width]
+            width *= 0.5
             ulo, uhi = np.r_[ulo, um], np.r_[um, uhi]
             new = np.r_[left, right]
             hist = np.column_stack([np.r_[hist[:, 1:], hist[:, 1:]], new])
@@ -830,8 +830,7 @@ def _jump_sizes(cast, camera, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]
             counts = np.diff(np.r_[first, order.size])
             rank[order] = np.arange(order.size) - np.repeat(first, counts)
             keep &= rank < JUMP_LIVE
-            edge, lo, width, ulo, uhi, hist = (a[keep] for a in (edge, lo, width, ulo, uhi,
-                                                                  hist))
+            edge, lo, ulo, uhi, hist = (a[keep] for a in (edge, lo, ulo, uhi, hist))
         last, before = hist[:, -1], hist[:, 0]
         with np.errstate(invalid="ignore"):
             jump = (last > 0.5 * before) | np.isinf(last)
