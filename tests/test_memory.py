@@ -335,3 +335,18 @@ def test_info_names_the_factorization_the_facet_cg_route_may_take():
     est = describe.estimate(p)
     assert est["route"] == "dgp-pcg" and est["bytes_factorized"] > est["bytes"]
     assert "bytes_factorized" not in describe.estimate(p, backend="pcg")
+
+
+def test_refusal_names_the_options_that_ask_for_the_memory():
+    """Where an option, not the map, makes the plan too large, the refusal names it (an audit:
+    diffusion's sigma=1e9 on 6,800 pixels was told to crop the input)."""
+    from facetlift import synthetic
+
+    gt = synthetic.analytic("sphere", 48, pixel_size=2 / 48)
+    with pytest.raises(MemoryLimitError, match=r"lower its sigma=1000000000\.0 \(with the "):
+        facetlift.integrate(gt.normals, gt.mask, method="diffusion", pixel_size=gt.pixel_size,
+                            sigma=1e9, max_memory="200M")
+    with pytest.raises(MemoryLimitError) as e:  # (the map itself too large: no such advice)
+        facetlift.integrate(gt.normals, gt.mask, method="diffusion", pixel_size=gt.pixel_size,
+                            max_memory="1K")
+    assert "lower its sigma" not in str(e.value)

@@ -6,6 +6,8 @@ constant) and, where a range is used, relative to the true depth range.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -253,9 +255,9 @@ def test_deterministic():
 @pytest.mark.parametrize(
     "options, match",
     [
-        ({"sigma": 0}, "`sigma` must be a number >= 0.001; got 0"),
-        ({"sigma": float("nan")}, "`sigma` must be a number >= 0.001; got nan"),
-        ({"sigma": "wide"}, "`sigma` must be a number >= 0.001; got 'wide'"),
+        ({"sigma": 0}, "`sigma` must be a number >= 0.75; got 0"),
+        ({"sigma": float("nan")}, "`sigma` must be a number >= 0.75; got nan"),
+        ({"sigma": "wide"}, "`sigma` must be a number >= 0.75; got 'wide'"),
         ({"reg": -1e-3}, "`reg` must be a number >= 0; got -0.001"),
         ({"tile": 3}, "`tile` must be an integer >= 4"),
         ({"tile": 8.5}, "`tile` must be an integer >= 4"),
@@ -383,3 +385,61 @@ def test_noisy_tileable_maps_are_not_told_they_do_not_tile():
         facetlift.integrate(n, method="frankot_chellappa", pad="none")
         facetlift.integrate(np.round((low + 1) / 2 * 255).astype(np.uint8),
                             method="frankot_chellappa", pad="none")
+
+
+def test_kernel_refuses_a_width_too_small_to_fit():
+    """Below 3/4 of a pixel the fit fails without a sign (an audit: a 64^2 paraboloid 0.63 of its
+    range off at sigma 0.5, mean deviation 33 deg): refused, naming the option."""
+    z, p, q, h = saddle(32)
+    n = normals_from_gradients(p, q)
+    with pytest.raises(ValueError, match="sigma"):
+        facetlift.integrate(n, method="kernel", pixel_size=h, sigma=0.5)
+    s = facetlift.integrate(n, method="kernel", pixel_size=h, sigma=0.75)
+    assert err(s, z)[0] < 0.05 * np.ptp(z)
+
+
+def test_kernel_info_reports_the_tile_it_used():
+    """fit_tiles widens a tile below two blend widths; info says the tile used (an audit)."""
+    z, p, q, h = saddle(32)
+    n = normals_from_gradients(p, q)
+    s = facetlift.integrate(n, method="kernel", pixel_size=h, sigma=3.0, tile=4)
+    assert s.info["tile"] == 6
+
+
+def test_kernel_gram_matrix_within_the_planned_bytes():
+    """The Gram matrix of a fit window is built in place (56 n^2 bytes with its tables), which
+    memory._kernel_tiles plans; its temporaries and LAPACK's copy once took about 80 n^2, so
+    a job passed max_memory and went over it (an audit)."""
+    import tracemalloc
+
+    from facetlift.methods.kernel import _factor
+
+    known = np.ones((24, 24), bool)
+    known[5:9, 7:12] = False
+    n = int(known.sum())
+    tracemalloc.start()
+    try:
+        _factor(known, 3.0, 1e-6)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak <= 56 * n * n * 1.05
+
+
+def test_periodic_fc_says_it_drops_a_tilt():
+    """pad='none' drops the mean slope (a periodic height has none): a tilted plane came back
+    flat with no word (an audit); now a warning says so, and a tileable map gets none."""
+    N = 48
+    h = 1.0 / N
+    p = np.full((N, N), 0.3)
+    q = np.full((N, N), -0.2)
+    with pytest.warns(UserWarning, match="no mean slope"):
+        facetlift.integrate(normals_from_gradients(p, q), method="frankot_chellappa",
+                            pixel_size=h, pad="none")
+    x, y = centres(N, N, h)
+    p = 2 * np.pi * np.cos(2 * np.pi * x) * np.cos(2 * np.pi * y) * 0.1
+    q = -2 * np.pi * np.sin(2 * np.pi * x) * np.sin(2 * np.pi * y) * 0.1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        facetlift.integrate(normals_from_gradients(p, q), method="frankot_chellappa",
+                            pixel_size=h, pad="none")

@@ -420,8 +420,10 @@ def _gaussian(sigma: float, B: int) -> float:
 
 
 def _kernel_tiles(options: dict, shape) -> float:
-    """The dense local fits of "kernel": per worker a (2k, 2k) Gram matrix and its (k, k)
-    distance and kernel tables, k the samples of one fit window; plus the evaluation."""
+    """The dense local fits of "kernel": per worker a (2k, 2k) Gram matrix and its three (k, k)
+    distance and kernel tables (56 k^2 bytes, the Gram matrix factorized in place; with the
+    old temporaries and LAPACK's copy it was about 80, an audit), k the samples of one fit
+    window; plus the evaluation."""
     sigma = float(options.get("sigma", 2.0))
     tile = float(options.get("tile", 16))
     margin = options.get("margin")
@@ -435,7 +437,7 @@ def _kernel_tiles(options: dict, shape) -> float:
     from ._threads import cores
 
     workers = min(cores(), 8)  # (kernel's threads, one per tile in flight)
-    return workers * (8.0 * 6 * k * k + 8.0 * 5 * ev * k)
+    return workers * (8.0 * 7 * k * k + 8.0 * 5 * ev * k)
 
 
 def _sparse_prior(problem) -> bool:
@@ -549,6 +551,11 @@ def estimate(problem, method: str, options: dict) -> tuple[float, str]:
     return out, f"{method}-{route}"
 
 
+#: The options that size a method's memory beside the map (its dense tables and filters):
+#: a refusal names those given where the defaults would fit.
+SIZED_BY = {"kernel": ("sigma", "tile", "margin"), "diffusion": ("sigma",)}
+
+
 def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
     """Estimate the job's peak and refuse it when it exceeds the limit.
 
@@ -575,9 +582,15 @@ def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
     est, route = estimate(problem, method, options)
     p = Plan(int(min(est, 2**62)), lim, route)
     if est > lim:
-        leaner = ""
+        leaner = first = ""
         if method != "dgp":
             leaner = "use a route that needs less (the default method='dgp' is the leanest), "
+            given = {k: v for k, v in options.items() if k in SIZED_BY.get(method, ())}
+            plain = estimate(problem, method, {k: v for k, v in options.items()
+                                               if k not in given})[0]
+            if given and plain <= lim:  # (the options ask for it, not the map's size)
+                first = (f"lower its {', '.join(f'{k}={v!r}' for k, v in given.items())} "
+                         f"(with the defaults about {_size(plain)}), ")
         elif options.get("discontinuities"):
             smooth = estimate(problem, method, {**options, "discontinuities": False})[0]
             if smooth <= lim:
@@ -586,7 +599,7 @@ def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
             f"method {method!r} would need about {_size(est)} at its peak ({route}, "
             f"{problem.domain.n_facets:,} mask pixels), more than the "
             f"{_size(lim)} allowed ({source}); "
-            "crop the input or lower its resolution, " + leaner
+            + first + "crop the input or lower its resolution, " + leaner
             + ("or raise or lift ulimit -v (max_memory= / --max-memory cannot go beyond it)"
                if source == ADDRESS_SPACE else
                "or raise the limit with max_memory= / --max-memory if the memory is there")

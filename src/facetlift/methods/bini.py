@@ -172,6 +172,7 @@ def run(problem, *, discontinuities, k, max_iter, tol, cg_tol, cg_max_iter, prog
         u, info = linalg.cg(M.tocsr(), rhs, lambda r, d=d: r / d, x0=u, rtol=cg_tol,
                             maxiter=cg_max_iter)
         cg_its.append(info.iterations)
+        solved = info  # (the last solve's: its iterate is the result)
         if discontinuities:
             sq = [(Ai @ u) ** 2 for Ai in A]
             wx = _sigmoid(k * (sq[1] - sq[0]))
@@ -189,6 +190,12 @@ def run(problem, *, discontinuities, k, max_iter, tol, cg_tol, cg_max_iter, prog
     if not converged:
         warn(f"bini: the energy still changed by {changes[-1]:.2g} after {max_iter} iterations",
              ConvergenceWarning)
+    if not solved.converged:  # (the result is that solve's iterate: not the energy's minimum)
+        res = solved.residuals[-1] if solved.residuals else float("nan")
+        warn(f"bini: the linear solve stopped at cg_max_iter={cg_max_iter} iterations with a "
+             f"relative residual of {res:.2g} (cg_tol={cg_tol:g}): raise cg_max_iter",
+             ConvergenceWarning)
+        converged = False
     u, filled = fill_unreached(problem, A, u)
     u, pinched = join_pinches(problem, u)
     info = {

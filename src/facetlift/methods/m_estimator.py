@@ -118,6 +118,7 @@ def run(problem, *, weight, k, scale, max_iter, tol, backend, progress) -> Metho
         w = np.full(graph.n_edges, g.FILL_WEIGHT)
         wd = weights(r / s, weight, k)
         w[has] = np.maximum(wd / wd.max(), g.FILL_WEIGHT) if wd.size else wd
+        robust = w[has] < 1.0  # (the edges the M-estimator turned down: not the confidence's)
         w[has] *= conf[has]
         z_new = g.solve_weighted(domain, graph, w, t, series=series, prior=prior)
         change = g.relative_change(z_new, z)
@@ -142,7 +143,7 @@ def run(problem, *, weight, k, scale, max_iter, tol, backend, progress) -> Metho
         "k": float(k),
         "scale": float(s),
         "changes": changes,
-        "downweighted": int((w[has] < 1.0).sum()),
+        "downweighted": int(robust.sum()),
         "seconds": {"solve": t1 - t0},
     }
     return MethodResult(values=z, info=info)

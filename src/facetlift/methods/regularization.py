@@ -125,10 +125,12 @@ def run(problem, *, lam, prior, max_iter, tol, backend, progress) -> MethodResul
                 converged = True
                 break
             slope = (z[graph.head] - z[graph.tail]) / h
-        if not converged:
+        if not converged and not changes:  # (max_iter 1: the test compares two rounds)
+            warn(f"regularization: max_iter={n_iter} ran one round, and the convergence test "
+                 "compares two: raise `max_iter` to 2 or more", ConvergenceWarning)
+        elif not converged:
             warn(f"regularization: no convergence in {n_iter} rounds (last relative change "
-                 f"{changes[-1] if changes else float('nan'):.3g} >= tol={tol}); raise `max_iter`",
-                 ConvergenceWarning)
+                 f"{changes[-1]:.3g} >= tol={tol}); raise `max_iter`", ConvergenceWarning)
         info.update(iterations=n_iter, converged=converged, changes=changes)
     info["seconds"] = {"solve": time.perf_counter() - t0}
     return MethodResult(values=z, info=info)
