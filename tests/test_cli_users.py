@@ -1630,3 +1630,26 @@ def test_the_command_lines_objects_and_options_as_a_script_reads_them(tmp_path, 
     code, out, err = run(capsys, "integrate", str(tmp_path / "flip.png"), "-o",
                          str(tmp_path / "m"), "--mat-keys", "a,b", "--no-progress")
     assert "--mat-keys a,b name a MATLAB file's variables" in err  # (ignored silently before)
+
+
+def test_a_pfm_map_and_prior_run_from_the_command_line(tmp_path, capsys):
+    """Portable Float Maps (MiDaS's depth, a renderer's normal AOV) are read as NORMALS,
+    --prior and a dataset folder's normal_map / prior_depth."""
+    from test_io_inputs import write_pfm
+
+    n = dome()
+    write_pfm(tmp_path / "n.pfm", n)
+    code, out, err = run(capsys, "integrate", tmp_path / "n.pfm", "-o", tmp_path / "a",
+                         "--save", "npy")
+    assert code == 0, err
+    ref = facetlift.integrate(n)
+    np.testing.assert_allclose(np.load(tmp_path / "a" / "depth.npy"), ref.depth, atol=1e-5)
+    folder = tmp_path / "set"
+    folder.mkdir()
+    write_pfm(folder / "normal_map.pfm", n)
+    prior = np.full(n.shape[:2], np.nan)
+    prior[10, 12] = 5.0
+    write_pfm(folder / "prior_depth.pfm", prior)
+    code, out, err = run(capsys, "integrate", folder, "-o", tmp_path / "b", "--save", "npy")
+    assert code == 0, err
+    assert np.load(tmp_path / "b" / "depth.npy")[10, 12] == pytest.approx(5.0, abs=1e-3)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import os
+import re
 import struct
 import subprocess
 import sys
@@ -303,3 +304,62 @@ def test_integer_npy_maps_decode_like_png_or_are_refused(tmp_path):
     np.save(tmp_path / "i64.npy", np.ones((4, 5, 3), np.int64))
     with pytest.raises(ValueError, match="pixel type int64; normal maps must be uint8, uint16"):
         io.read_normals(tmp_path / "i64.npy")
+
+
+# ------------------------------------------------------------------------- Portable Float Map
+
+
+def write_pfm(path, a, little=True):
+    """A PFM file as MiDaS's and Middlebury's writers make it: rows from the bottom."""
+    a = np.asarray(a, np.float32)
+    kind = b"PF" if a.ndim == 3 else b"Pf"
+    rows = np.ascontiguousarray(a[::-1]).astype("<f4" if little else ">f4")
+    head = kind + b"\n%d %d\n%s\n" % (a.shape[1], a.shape[0], b"-1.0" if little else b"1.0")
+    Path(path).write_bytes(head + rows.tobytes())
+    return Path(path)
+
+
+@pytest.mark.parametrize("little", [True, False])
+def test_pfm_normal_map_is_read_top_row_first(tmp_path, little):
+    """A PFM normal map (a renderer's or denoiser's normal AOV) is read as stored, its rows
+    turned the right way up (the file keeps them from the bottom) in either byte order."""
+    rng = np.random.default_rng(0)
+    n = rng.normal(size=(6, 5, 3))
+    n[..., 2] = np.abs(n[..., 2]) + 1.0
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    got, alpha = io.read_normals(write_pfm(tmp_path / "n.pfm", n, little))
+    assert alpha is None
+    np.testing.assert_allclose(got, n, atol=1e-6)
+
+
+def test_pfm_planes_prior_depth_and_gradients(tmp_path):
+    """A one-channel PFM is a depth prior (MiDaS writes its output so), a weight map, a
+    ground-truth depth and a gradient component; NaN stays unknown."""
+    d = np.arange(20, dtype=float).reshape(4, 5) + 1.0
+    d[1, 2] = np.nan
+    f = write_pfm(tmp_path / "d.pfm", d)
+    np.testing.assert_array_equal(io.read_prior(f), d)
+    np.testing.assert_array_equal(io.read_depth(f), d)
+    np.testing.assert_array_equal(read_gradient(f), d)
+    w = write_pfm(tmp_path / "w.pfm", np.full((4, 5), 0.5))
+    np.testing.assert_array_equal(io.read_weights(w), np.full((4, 5), 0.5))
+
+
+@pytest.mark.parametrize("data, words", [
+    (b"P6\n2 2\n255\n" + bytes(12), "not a Portable Float Map"),
+    (b"PF4\n2 2\n-1.0\n" + bytes(64), "not a Portable Float Map"),
+    (b"Pf\n2 2\n0\n" + bytes(16), "must be a non-zero number"),
+    (b"Pf\n2 2\n-1.0\n" + bytes(12), "12 bytes of pixels where its header (2 x 2, 1 channel(s)) "
+                                     "asks for 16"),
+])
+def test_damaged_pfm_files_are_named(tmp_path, data, words):
+    p = tmp_path / "bad.pfm"
+    p.write_bytes(data)
+    with pytest.raises(ValueError, match=re.escape(words)):
+        io.read_prior(p)
+
+
+def test_a_colour_pfm_is_no_depth(tmp_path):
+    f = write_pfm(tmp_path / "c.pfm", np.ones((3, 4, 3)))
+    with pytest.raises(ValueError, match=r"must hold an \(H, W\) depth prior map; got shape "):
+        io.read_prior(f)

@@ -14,7 +14,7 @@ import numpy as np
 from ._paths import _existing, _suffix
 from .images import load_mat, read_mask, read_plane
 
-GRADIENT_FORMATS = (".npy", ".exr", ".tif", ".tiff")
+GRADIENT_FORMATS = (".npy", ".exr", ".tif", ".tiff", ".pfm")
 
 
 def read_gradient(path, arg: str = "p") -> np.ndarray:

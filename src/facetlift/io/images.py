@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import sys
 import threading
 import zipfile
@@ -23,7 +24,7 @@ from ..problem import numeric_array
 from ._paths import _existing, _suffix
 from .atomic import _save_npy, _write_bytes, atomic_path
 
-NORMAL_READ_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy")
+NORMAL_READ_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy", ".pfm")
 NORMAL_WRITE_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy")
 MASK_FORMATS = (".png", ".tif", ".tiff", ".npy")
 DEPTH_FORMATS = (".npy", ".exr", ".tif", ".tiff")
@@ -239,6 +240,43 @@ def _exr_normal_channels(ch: dict, p: Path, arg: str,
         which = ("; x and y alone are a two-channel (BC5/RG) map: read it with "
                  "--normal-encoding xy (encoding='xy'), which rebuilds z")
     raise ValueError(f"`{arg}`: {p} must have channels {want}; got {sorted(ch)}{which}")
+
+
+_PFM_HEADER = re.compile(rb"(PF|Pf)\s+(\d+)\s+(\d+)\s+([-+0-9.eE]+)\s")
+
+
+def _read_pfm(path: Path, arg: str) -> np.ndarray:
+    """A Portable Float Map as (H, W) (``Pf``) or (H, W, 3) (``PF``) float32, rows from the top
+    (the file stores them from the bottom). A negative scale means little-endian; its size is a
+    brightness factor for HDR pictures, left out here (MiDaS writes 1)."""
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise ValueError(f"`{arg}`: cannot read {path}: {e}") from None
+    head = _PFM_HEADER.match(data[:256])
+    if head is None:
+        raise ValueError(f"`{arg}`: {path} is not a Portable Float Map (it does not start with "
+                         "'PF' or 'Pf', the width, the height and the scale; 'PF4', four "
+                         "channels, is not read)")
+    channels = 3 if head[1] == b"PF" else 1
+    width, height = int(head[2]), int(head[3])
+    try:
+        scale = float(head[4])
+    except ValueError:
+        scale = float("nan")
+    if not (np.isfinite(scale) and scale != 0):
+        raise ValueError(f"`{arg}`: {path} has a scale of {head[4].decode()!r} in its header; "
+                         "its sign gives the byte order (negative: little-endian), so it "
+                         "must be a non-zero number")
+    want = width * height * channels * 4
+    body = data[head.end():]
+    if len(body) != want or width == 0 or height == 0:
+        raise ValueError(f"`{arg}`: {path} holds {len(body):,} bytes of pixels where its "
+                         f"header ({width} x {height}, {channels} channel(s)) asks for "
+                         f"{want:,}: a truncated or damaged file")
+    a = np.frombuffer(body, dtype="<f4" if scale < 0 else ">f4")
+    a = a.reshape(height, width, channels)[::-1].astype(np.float32)
+    return a[..., 0] if channels == 1 else a
 
 
 def _read_npy(path: Path, arg: str) -> np.ndarray:
@@ -567,8 +605,8 @@ def read_normals(
             n = frames.decode_unsigned(n, f"`{arg}`: {p}", counted, n.shape[-1])
         if encoding == "xy":
             n = frames.decode_xy(n, frame=frame)
-    else:
-        arr = _read_npy(p, arg)
+    else:  # (.npy, or a Portable Float Map: float, as stored)
+        arr = _read_npy(p, arg) if ext == ".npy" else _read_pfm(p, arg)
         rgb, alpha = _split_alpha(arr, p, arg, check_alpha and mask is None, encoding)
         counted = _counted(mask, alpha, rgb.shape[:2])
         if rgb.shape[-1] == 3:
@@ -699,6 +737,8 @@ def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = (),
     ext = _suffix(p, formats, what, arg)
     if ext == ".npy":
         a = _read_npy(p, arg)
+    elif ext == ".pfm":
+        a = _read_pfm(p, arg)
     elif ext == ".mat":
         a = _read_mat_plane(p, arg, mat_names, what)
     elif ext == ".npz":  # (Surface.save's archive: its depth)
@@ -782,7 +822,7 @@ def read_depth(path, *, npz_names: tuple[str, ...] = ("depth",), arg: str = "pat
     ground truth's, e.g. ``("depth_gt", "depth")`` for BiNI's DiLiGenT ``depth_gt.npz``.
     `arg`: the argument the messages name. `zero_unknown`: in an integer array (a sensor's
     16-bit TIFF) 0 means no depth and becomes NaN."""
-    a = read_plane(path, DEPTH_FORMATS + (".npz",), "depth", arg, prefer=("Z",),
+    a = read_plane(path, DEPTH_FORMATS + (".npz", ".pfm"), "depth", arg, prefer=("Z",),
                    npz_names=tuple(npz_names))
     integer = a.dtype.kind in "ui"
     a = a.astype(np.float64)
@@ -1019,7 +1059,7 @@ def write_mask(path, mask) -> Path:
 #: Formats of a depth prior (16-bit PNG needs a scale) and of weight maps (a MATLAB file:
 #: the variable of one of the names :func:`read_prior` and :func:`read_weights` look for, or
 #: its only (H, W) one).
-PRIOR_FORMATS = (".npy", ".exr", ".tif", ".tiff", ".png", ".mat")
+PRIOR_FORMATS = (".npy", ".exr", ".tif", ".tiff", ".png", ".mat", ".pfm")
 
 #: Variable names of a ``.mat`` depth prior (Quéau's toolbox calls it ``z0``), of the
 #: normals' confidence and of the prior's weight map (Quéau's ``lambda``, the weight of
