@@ -26,6 +26,17 @@ def _suffix(path: Path, allowed: tuple[str, ...], what: str, arg: str,
     return ext
 
 
+def _file_name(path, arg: str = "path") -> Path:
+    """`path` as a Path where it is a file name (str or os.PathLike), else a ValueError: the
+    writers pick the format by the extension and write atomically by renaming, so a file object
+    cannot be one (a BytesIO was a bare TypeError, an audit)."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise ValueError(f"`{arg}` must be a file name (str or os.PathLike), whose extension "
+                         f"picks the format; got {type(path).__name__}: write to a file, then "
+                         "read it into your buffer")
+    return Path(path)
+
+
 def _existing(path, arg: str) -> Path:
     if not isinstance(path, (str, os.PathLike)):
         raise ValueError(f"`{arg}` must be a path (str or os.PathLike); got {path!r}")

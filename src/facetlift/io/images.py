@@ -21,7 +21,7 @@ from .. import frames
 from .._warnings import warn
 from ..frames import ENCODED_LENGTH_RANGE  # noqa: F401  (re-exported by facetlift.io)
 from ..problem import numeric_array
-from ._paths import _existing, _suffix
+from ._paths import _existing, _file_name, _suffix
 from .atomic import _save_npy, _write_bytes, atomic_path
 
 NORMAL_READ_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy", ".pfm")
@@ -939,7 +939,7 @@ def _image_array(a, name: str, ndim: int) -> np.ndarray:
 def write_depth(path, depth) -> Path:
     """Write an (H, W) depth map: ``.npy`` (float64), ``.exr`` (float32, channel Z) or
     ``.tif``/``.tiff`` (float32). NaN (outside the domain) is kept. Returns the path."""
-    p = Path(path)
+    p = _file_name(path)
     ext = _suffix(p, DEPTH_FORMATS, "depth", "path")
     d = _image_array(depth, "depth", 2).astype(np.float64)
     if ext == ".npy":
@@ -978,7 +978,7 @@ def write_normals(
     y_down : bool
         Alias of ``frame="directx"``: store y pointing down.
     """
-    p = Path(path)
+    p = _file_name(path)
     ext = _suffix(p, NORMAL_WRITE_FORMATS, "normal map", "path")
     allowed = {".png": (8, 16), ".tif": (8, 16, 32), ".tiff": (8, 16, 32)}
     if ext in allowed and bits not in allowed[ext]:  # (before any decoding and its warning)
@@ -1039,7 +1039,7 @@ def write_normals(
 
 def write_mask(path, mask) -> Path:
     """Write an (H, W) mask: PNG or TIFF (8-bit, 255 inside) or ``.npy`` (bool)."""
-    p = Path(path)
+    p = _file_name(path)
     ext = _suffix(p, MASK_FORMATS, "mask", "path")
     from ..problem import unmasked
 

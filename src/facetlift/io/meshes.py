@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._paths import _suffix
+from ._paths import _file_name, _suffix
 from .atomic import atomic_path
 
 MESH_FORMATS = (".ply", ".obj", ".stl")
@@ -39,7 +39,7 @@ def write_mesh(path, vertices, faces, colors=None) -> Path:
         Bad shapes, non-finite vertices, indices out of range, unknown extension, quads for
         ``.stl``, colours of another shape or outside [0, 1], colours for ``.stl``.
     """
-    p = Path(path)
+    p = _file_name(path)
     ext = _suffix(p, MESH_FORMATS, "mesh", "path")
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces)
@@ -211,7 +211,7 @@ def write_points(path, points, normals=None, colors=None) -> Path:
     point without a finite normal gets (0, 0, 0)) and optional `colors` (n, 3), floats in
     [0, 1] or uint8, as ``red``, ``green``, ``blue`` (uchar). Points with a non-finite
     coordinate are left out."""
-    p = Path(path)
+    p = _file_name(path)
     _suffix(p, (".ply",), "point cloud", "path")
     v = np.asarray(points, dtype=np.float64)
     if v.ndim != 2 or v.shape[1] != 3:
@@ -219,7 +219,11 @@ def write_points(path, points, normals=None, colors=None) -> Path:
     keep = np.isfinite(v).all(axis=1)
     data = {}
     if normals is not None:
-        n = np.asarray(normals, dtype=np.float64)
+        from ..frames import as_float_normals
+
+        # (uint8/uint16 decoded, as integrate does: written raw, 29830.0 per component, an
+        # audit)
+        n = np.asarray(as_float_normals(np.asarray(normals), "normals"), dtype=np.float64)
         if n.shape != v.shape:
             raise ValueError(f"`normals` must have the shape of `points` {v.shape}; got "
                              f"{n.shape}")

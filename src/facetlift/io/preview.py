@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .._warnings import warn
-from ._paths import _suffix
+from ._paths import _file_name, _suffix
 from .images import (
     _decode_image,
     _exr_quantity,
@@ -121,7 +121,7 @@ def write_preview(
         A bad `light`, `colormap`, `min_size` (an integer up to :data:`MAX_MIN_SIZE`) or
         `background`, naming it.
     """
-    p = Path(path)
+    p = _file_name(path)
     _suffix(p, (".png",), "preview", "path")
     if not all(hasattr(surface, a) for a in ("depth", "mask", "camera")):
         # (a depth array gave an AttributeError from deep inside, an audit)
@@ -180,7 +180,7 @@ def write_discontinuities(path, surface, *, min_size: int = 256) -> Path:
     ValueError
         If the surface has no discontinuity map (a method without ``discontinuities=True``).
     """
-    p = Path(path)
+    p = _file_name(path)
     _suffix(p, (".png",), "discontinuity map", "path")
     min_size = _min_size(min_size)
     jumps = getattr(surface, "discontinuities", None)
@@ -277,7 +277,7 @@ def write_height(path, surface, *, height_range=None) -> tuple[Path, tuple[float
         A path that is neither ``.png`` nor ``.exr``; a surface without a finite depth; a bad
         `height_range`, or one given for EXR.
     """
-    p = Path(path)
+    p = _file_name(path)
     ext = _suffix(p, HEIGHT_FORMATS, "height map", "path")
     given = check_height_range(height_range)
     if not hasattr(surface, "depth"):  # (a bare AttributeError for an array, an audit)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._paths import _suffix
+from ._paths import _file_name, _suffix
 from .atomic import _write_bytes
 from .preview import shade
 
@@ -59,8 +59,12 @@ def write_report(path, surface, normals=None, *, dpi: int = 100,
     ImportError
         matplotlib is missing (``pip install 'facetlift[plot]'``).
     """
-    p = Path(path)
+    p = _file_name(path)
     _suffix(p, (".png",), "report", "path")
+    if normals is not None:  # (uint8/uint16 decoded once, for both panels, an audit)
+        from ..frames import as_float_normals
+
+        normals = np.asarray(as_float_normals(np.asarray(normals), "normals"), dtype=float)
     try:
         from matplotlib.figure import Figure  # no pyplot: no backend, no global state
     except ImportError as e:
@@ -104,10 +108,12 @@ def write_report(path, surface, normals=None, *, dpi: int = 100,
     rows = -(-len(panels) // cols)
     aspect = crop[0] / max(crop[1], 1)
     fig = Figure(figsize=(4.2 * cols, 4.2 * rows * min(max(aspect, 0.3), 3.0) + 0.6))
-    method = info.get("method", "?")
-    if info.get("solver") == "discontinuous":  # ("method dgp" alone hid the route)
+    method = info.get("method")
+    if method is not None and info.get("solver") == "discontinuous":  # ("method dgp" alone
+        # hid the route)
         method += ", discontinuities"
-    fig.suptitle(f"{H}x{W}, {int(surface.mask.sum())} facets, method {method}")
+    fig.suptitle(f"{H}x{W}, {int(surface.mask.sum())} facets"
+                 + ("" if method is None else f", method {method}"))
     for k, (title, img, cmap, label, top) in enumerate(panels):
         ax = fig.add_subplot(rows, cols, k + 1)
         kw = {} if top is None else {"vmin": 0.0, "vmax": top}

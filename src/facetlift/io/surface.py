@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
-from ._paths import _suffix
+from ._paths import _file_name, _suffix
 from .atomic import atomic_path
 from .colors import mesh_colors, point_colors
 from .images import DEPTH_FORMATS, write_depth
@@ -77,11 +76,7 @@ def save_surface(surface, path, **kwargs) -> Path:
         an unknown extension (the message lists the valid ones) or keywords the format does
         not take.
     """
-    if not isinstance(path, (str, os.PathLike)):  # (a BytesIO was a bare TypeError, an audit)
-        raise ValueError(f"`path` must be a file name (str or os.PathLike), whose extension "
-                         f"picks the format; got {type(path).__name__}: write to a file, then "
-                         "read it into your buffer")
-    p = Path(path)
+    p = _file_name(path)  # (a BytesIO was a bare TypeError, an audit)
     ext = _suffix(p, SURFACE_FORMATS, "surface", "path")
 
     def no_kwargs():
@@ -295,6 +290,9 @@ def _frame_arrays(surface) -> dict:
         out["input_frame"] = np.str_(info["input_frame"])
     if info.get("normal_rotation") is not None:
         out["normal_rotation"] = np.asarray(info["normal_rotation"], float)
+    for key in ("method", "solver"):  # (the report's title read "method ?" after a reload)
+        if isinstance(info.get(key), str):
+            out[key] = np.str_(info[key])
     return out
 
 
@@ -318,7 +316,7 @@ def load_surface(path):
     discontinuity map and split mesh (files written before 2026-12-05 lack the split mesh:
     their mesh is then the unsplit one). ``info`` is not stored (``--json`` has it), but its
     ``normal_frame`` and ``normal_rotation``, which :meth:`~facetlift.Surface.save`'s
-    ``normals=`` needs.
+    ``normals=`` needs, and its ``method`` and ``solver`` (the report's title).
 
     Raises
     ------
@@ -373,6 +371,9 @@ def load_surface(path):
         info["input_frame"] = str(data["input_frame"])
     if "normal_rotation" in data and data["normal_rotation"].shape == (3, 3):
         info["normal_rotation"] = data["normal_rotation"].tolist()
+    for key in ("method", "solver"):
+        if key in data:
+            info[key] = str(data[key])
     return Surface(depth, data["vertex_depth"], data["mask"].astype(bool), info,
                    pixel_size=float(data["pixel_size"]) if K is None else 1.0, K=K, cuts=cuts,
                    discontinuities=data.get("discontinuities"), split=split)
