@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import warnings
 
 import meshio
 import numpy as np
@@ -508,3 +509,18 @@ def test_the_writers_name_a_file_object_given_for_a_path(write):
             "write_normals": (np.dstack([np.zeros((4, 4, 2)), np.ones((4, 4))]),)}[write]
     with pytest.raises(ValueError, match="`path` must be a file name .* got BytesIO"):
         getattr(io, write)(bytes_io.BytesIO(), *args)
+
+
+@pytest.mark.parametrize("name, writes", [("bear_report.png", "a shaded preview"),
+                                          ("bear-points.ply", "a mesh"),
+                                          ("obj_result_normals.png", "a shaded preview")])
+def test_a_name_that_looks_like_a_cli_output_is_warned_about(tmp_path, name, writes):
+    """Only the command line's own names write its special outputs; a name ending in one
+    (bear_report.png) kept its extension's meaning without a word (an audit)."""
+    s = facetlift.integrate(synthetic.analytic("sphere", 16).normals)
+    with pytest.warns(UserWarning, match=f"keeps its extension's meaning .*: {writes}"):
+        s.save(tmp_path / name)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s.save(tmp_path / "mesh.ply")
+        s.save(tmp_path / "preview.png")

@@ -413,9 +413,10 @@ def _cost(route: str, m: int, B: int, factorized: int = 0) -> float:
 
 
 def _gaussian(sigma: float, B: int) -> float:
-    """scipy's Gaussian filter: a kernel of 2 * int(4 sigma + 0.5) + 1 taps, an image-sized
-    output per pass."""
-    taps = 2 * int(min(4.0 * float(sigma) + 0.5, 1e300)) + 1
+    """scipy's Gaussian filter: a kernel of 2 * int(4 sigma + 0.5) + 1 taps (its radius at
+    most the image's side, at most `B`: :func:`facetlift.methods.diffusion.tensor`), an
+    image-sized output per pass."""
+    taps = 2 * int(min(4.0 * float(sigma) + 0.5, B)) + 1
     return 8.0 * taps + 16.0 * B
 
 
@@ -585,9 +586,12 @@ def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
         leaner = first = ""
         if method != "dgp":
             leaner = "use a route that needs less (the default method='dgp' is the leanest), "
-            given = {k: v for k, v in options.items() if k in SIZED_BY.get(method, ())}
-            plain = estimate(problem, method, {k: v for k, v in options.items()
-                                               if k not in given})[0]
+            from .methods import REGISTRY
+
+            defaults = REGISTRY[method].options() if method in REGISTRY else {}
+            given = {k: v for k, v in options.items()
+                     if k in SIZED_BY.get(method, ()) and k in defaults and v != defaults[k]}
+            plain = estimate(problem, method, {**options, **{k: defaults[k] for k in given}})[0]
             if given and plain <= lim:  # (the options ask for it, not the map's size)
                 first = (f"lower its {', '.join(f'{k}={v!r}' for k, v in given.items())} "
                          f"(with the defaults about {_size(plain)}), ")

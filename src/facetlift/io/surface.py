@@ -66,8 +66,9 @@ def save_surface(surface, path, **kwargs) -> Path:
     ``dpi``), ``height.exr`` the heights (:func:`~facetlift.io.preview.write_height`) and
     ``result_normals.png`` the result's own normals (a 16-bit normal map, keyword ``frame``,
     default the ``normal_frame`` integrate was given: :func:`result_normals`);
-    any other name keeps its extension's meaning (``mesh_points.ply`` is a mesh). Returns
-    the path written.
+    any other name keeps its extension's meaning (``mesh_points.ply`` is a mesh, with a
+    warning that names the point cloud's writer: a name ending in ``_`` or ``-`` and one of
+    those names looks meant as it). Returns the path written.
 
     Raises
     ------
@@ -86,6 +87,17 @@ def save_surface(surface, path, **kwargs) -> Path:
     kind = CLI_NAMES.get(p.name.lower())
     if kind is not None:
         return _save_as_cli(surface, p, kind, kwargs)
+    like = next((name for name in CLI_NAMES if name != "height.exr" and p.name.lower().endswith(
+        tuple(sep + name for sep in "_-"))), None)
+    if like is not None:  # (bear_report.png was a shaded preview without a word, an audit)
+        from .._warnings import warn
+
+        writer = {"points": "io.write_points", "report": "io.write_report",
+                  "discontinuities": "io.write_discontinuities"}.get(CLI_NAMES[like])
+        warn(f"{p.name}: only the name {like} itself writes what --save {CLI_NAMES[like]} "
+             f"writes; this one keeps its extension's meaning ({ext}: "
+             + ("a mesh" if ext == ".ply" else "a shaded preview") + f"): name it {like}"
+             + (f", or call {writer}" if writer else ""))
 
     if ext in DEPTH_FORMATS:
         no_kwargs()
