@@ -350,7 +350,10 @@ def test_pfm_planes_prior_depth_and_gradients(tmp_path):
     (b"PF4\n2 2\n-1.0\n" + bytes(64), "not a Portable Float Map"),
     (b"Pf\n2 2\n0\n" + bytes(16), "must be a non-zero number"),
     (b"Pf\n2 2\n-1.0\n" + bytes(12), "12 bytes of pixels where its header (2 x 2, 1 channel(s)) "
-                                     "asks for 16"),
+                                     "asks for 16: a truncated file"),
+    (b"Pf\n2 2\n-1.0\n" + bytes(17), "17 bytes of pixels where its header (2 x 2, 1 channel(s)) "
+                                     "asks for 16: bytes after the pixels"),
+    (b"Pf\n0 2\n-1.0\n", "declares an empty image (0 x 2)"),
 ])
 def test_damaged_pfm_files_are_named(tmp_path, data, words):
     p = tmp_path / "bad.pfm"
@@ -359,7 +362,29 @@ def test_damaged_pfm_files_are_named(tmp_path, data, words):
         io.read_prior(p)
 
 
+def test_pfm_header_lines_ended_by_crlf_or_spaces(tmp_path):
+    """Line-based readers (MiDaS's, Middlebury's) take a header with CR LF or trailing spaces;
+    so does ours (a review: refused as 'truncated')."""
+    d = np.arange(20, dtype="<f4").reshape(4, 5)
+    for head in (b"Pf\r\n5 4\r\n-1.0\r\n", b"Pf\n5 4\n-1.000000  \n"):
+        p = tmp_path / "h.pfm"
+        p.write_bytes(head + d[::-1].tobytes())
+        np.testing.assert_array_equal(io.read_prior(p), d)
+
+
 def test_a_colour_pfm_is_no_depth(tmp_path):
     f = write_pfm(tmp_path / "c.pfm", np.ones((3, 4, 3)))
     with pytest.raises(ValueError, match=r"must hold an \(H, W\) depth prior map; got shape "):
         io.read_prior(f)
+
+
+def test_pfm_masks_and_grey_weights(tmp_path):
+    """A PFM mask (a renderer's alpha pass) is read as any float mask; a three-channel PFM of
+    equal channels is a grey weight map, as RGB TIFF and PNG are (a review)."""
+    m = np.zeros((4, 5))
+    m[1:3, 1:4] = 1.0
+    np.testing.assert_array_equal(io.read_mask(write_pfm(tmp_path / "m.pfm", m)), m > 0)
+    w = np.full((4, 5), 0.25)
+    w[0, 0] = np.nan
+    got = io.read_weights(write_pfm(tmp_path / "w.pfm", np.dstack([w, w, w])))
+    np.testing.assert_array_equal(got, w)

@@ -343,13 +343,18 @@ def test_refusal_names_the_options_that_ask_for_the_memory():
     from facetlift import synthetic
 
     gt = synthetic.analytic("sphere", 48, pixel_size=2 / 48)
-    with pytest.raises(MemoryLimitError, match=r"lower its sigma=50\.0 \(with the "):
+    with pytest.raises(MemoryLimitError, match=r"lower its sigma=50\.0 \(at its default "):
         facetlift.integrate(gt.normals, gt.mask, method="kernel", pixel_size=gt.pixel_size,
                             sigma=50.0, max_memory="200M")
     with pytest.raises(MemoryLimitError) as e:  # (the map itself too large: no such advice)
         facetlift.integrate(gt.normals, gt.mask, method="kernel", pixel_size=gt.pixel_size,
                             max_memory="1K")
     assert "lower its sigma" not in str(e.value)
+    with pytest.raises(MemoryLimitError) as e:  # (only those given that ask for more, a review)
+        facetlift.integrate(gt.normals, gt.mask, method="kernel", pixel_size=gt.pixel_size,
+                            sigma=50.0, tile=4, max_memory="200M")
+    assert "lower its sigma=50.0 (at its default" in str(e.value)
+    assert "tile" not in str(e.value)
 
 
 def test_a_structure_tensor_wider_than_the_map_is_cut_at_its_side():

@@ -189,7 +189,7 @@ CAMERA_FILE = _CameraFile(exists=True, dir_okay=False, path_type=Path)
 #: The options ``integrate`` and ``batch`` share: what to read and how to integrate it.
 _JOB_OPTIONS = [
     click.option("-m", "--mask", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-                 help="Mask image (PNG/TIFF/npy, nonzero = integrate). Default: the dataset's "
+                 help="Mask image (PNG/TIFF/npy/PFM, nonzero = integrate). Default: the dataset's "
                  "mask.png, else the alpha channel, else every pixel with a valid normal."),
     click.option("--normal-frame", "normal_frame", metavar="FRAME",
                  help="Frame of the normal map: opengl (default: x right, y up, z toward the "
@@ -278,7 +278,7 @@ _JOB_OPTIONS = [
                  "cut's sharpness is --option discontinuity_k=K (default 4; --method bini: "
                  "--option k=K, default 2), the jumps' map --save discontinuities."),
     click.option("--prior", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-                 help="Depth prior (npy, EXR, TIFF, MATLAB .mat, an earlier result's npz, or "
+                 help="Depth prior (npy, EXR, TIFF, PFM, MATLAB .mat, an earlier result's npz, or "
                  "16-bit PNG with --prior-scale), NaN where unknown (0 too in integer "
                  "files, but for --prior-fit), or a points file (.csv/.txt: one sample per "
                  "line under a header naming the columns, e.g. u,v,depth: pixels, not a "
@@ -292,7 +292,7 @@ _JOB_OPTIONS = [
                  "[default: 1, or 0.003 with --prior-blur]."),
     click.option("--prior-weight-map", type=click.Path(exists=True, dir_okay=False,
                  path_type=Path), help="Per-pixel prior weights, times --prior-weight (npy, "
-                 "EXR, float TIFF as stored; 8/16-bit PNG or TIFF = v/max)."),
+                 "EXR, float TIFF, PFM as stored; 8/16-bit PNG or TIFF = v/max)."),
     click.option("--prior-blur", type=float, default=None, metavar="SIGMA",
                  help="The prior is coarse or blurred (a monocular network, a low-resolution "
                  "sensor, a map upsampled from a coarse grid): the standard deviation in "
@@ -313,7 +313,7 @@ _JOB_OPTIONS = [
                  "normals-only surface, piece by piece, then fused; the result keeps the "
                  "normals' units. docs/fusion.md, 'A monocular depth map'."),
     click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-                 help="Per-pixel weights >= 0 of the normals (npy, EXR, float TIFF as stored; "
+                 help="Per-pixel weights >= 0 of the normals (npy, EXR, float TIFF, PFM as stored; "
                  "8/16-bit PNG or TIFF = v/max); "
                  "0 = missing normal. A dataset folder's confidence.* is used automatically."),
     click.option("--no-prior", "no_prior", is_flag=True,
@@ -621,7 +621,7 @@ class _FieldFile(click.Path):
 @click.option("--gradients", nargs=2, type=_FieldFile(exists=True, dir_okay=False,
                                                        path_type=Path),
               metavar="P Q", help="Integrate a gradient field instead: two files (npy, EXR, "
-              "TIFF) holding p and q; see --gradient-frame.")
+              "TIFF, PFM) holding p and q; see --gradient-frame.")
 @_job_options
 @click.option("-o", "--out", "outdir", type=click.Path(file_okay=False), callback=_out_dir,
               help="Output folder, its files named by -s (depth.npy, ...); a name ending "
@@ -639,8 +639,8 @@ class _FieldFile(click.Path):
 def integrate(normals, gradients, progress, as_json, **flags):
     """Integrate a normal map NORMALS into a depth map, a mesh and a preview.
 
-    NORMALS is a normal-map file (PNG 8/16 bit, TIFF, EXR or .npy; by default x right, y up,
-    z toward the viewer, 8/16-bit values v decoded as v/max*2-1), a dataset folder holding
+    NORMALS is a normal-map file (PNG 8/16 bit, TIFF, EXR, .npy or .pfm; by default x right,
+    y up, z toward the viewer, 8/16-bit values v decoded as v/max*2-1), a dataset folder holding
     normal_map.png, mask.png and, for a perspective camera, K.txt, or a .mat file holding
     gradients p, q or a normal map (--mat-keys). A gradient field in two files is given
     with --gradients P Q instead.
@@ -1149,7 +1149,7 @@ def _split(text):
 @click.option("--gt", "gt", required=True,
               type=click.Path(exists=True, path_type=Path),
               help="Ground-truth depth map: .npy, .npz (its depth_gt or depth array, or its "
-              "only one), .exr (channel Z or its only one), .tif, or a 16-bit PNG with "
+              "only one), .exr (channel Z or its only one), .tif, .pfm, or a 16-bit PNG with "
               "--gt-scale; NaN (0 in a PNG or an integer TIFF) where undefined. Or a "
               "dataset folder (BiNI's DiLiGenT folders): its depth_gt.*, and its mask.png "
               "and K.txt where --mask and --K are not given and the result keeps no camera.")

@@ -456,6 +456,11 @@ def _file_facts(src: Path) -> dict:
         elif ext == ".npy":
             a = np.load(f, mmap_mode="r", allow_pickle=False)
             facts.update(dtype=str(a.dtype), stored_shape=list(a.shape), encoding="as stored")
+        elif ext == ".pfm":  # (a review: no facts were given for it)
+            from .io.images import _read_pfm
+
+            a = _read_pfm(f, "normals")
+            facts.update(dtype="float32", stored_shape=list(a.shape), encoding="as stored")
         elif ext in (".tif", ".tiff"):
             import tifffile
 

@@ -589,12 +589,16 @@ def plan(problem, method: str, options: dict, max_memory=None) -> Plan:
             from .methods import REGISTRY
 
             defaults = REGISTRY[method].options() if method in REGISTRY else {}
+            # (those given away from their default that ask for more than it: a review saw
+            # defaults and a tile below its default named)
             given = {k: v for k, v in options.items()
-                     if k in SIZED_BY.get(method, ()) and k in defaults and v != defaults[k]}
+                     if k in SIZED_BY.get(method, ()) and k in defaults and v != defaults[k]
+                     and estimate(problem, method, {**options, k: defaults[k]})[0] < est}
             plain = estimate(problem, method, {**options, **{k: defaults[k] for k in given}})[0]
             if given and plain <= lim:  # (the options ask for it, not the map's size)
                 first = (f"lower its {', '.join(f'{k}={v!r}' for k, v in given.items())} "
-                         f"(with the defaults about {_size(plain)}), ")
+                         f"(at {'their defaults' if len(given) > 1 else 'its default'} "
+                         f"about {_size(plain)}), ")
         elif options.get("discontinuities"):
             smooth = estimate(problem, method, {**options, "discontinuities": False})[0]
             if smooth <= lim:

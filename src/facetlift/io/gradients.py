@@ -19,7 +19,7 @@ GRADIENT_FORMATS = (".npy", ".exr", ".tif", ".tiff", ".pfm")
 
 def read_gradient(path, arg: str = "p") -> np.ndarray:
     """One (H, W) float component of a gradient field: ``.npy``, a one-channel OpenEXR file,
-    or a float TIFF.
+    a float TIFF or a one-channel PFM.
 
     Raises
     ------

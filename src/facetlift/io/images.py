@@ -26,7 +26,7 @@ from .atomic import _save_npy, _write_bytes, atomic_path
 
 NORMAL_READ_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy", ".pfm")
 NORMAL_WRITE_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy")
-MASK_FORMATS = (".png", ".tif", ".tiff", ".npy")
+MASK_FORMATS = (".png", ".tif", ".tiff", ".npy", ".pfm")
 DEPTH_FORMATS = (".npy", ".exr", ".tif", ".tiff")
 
 
@@ -268,12 +268,17 @@ def _read_pfm(path: Path, arg: str) -> np.ndarray:
         raise ValueError(f"`{arg}`: {path} has a scale of {head[4].decode()!r} in its header; "
                          "its sign gives the byte order (negative: little-endian), so it "
                          "must be a non-zero number")
+    if width == 0 or height == 0:
+        raise ValueError(f"`{arg}`: {path} declares an empty image ({width} x {height})")
     want = width * height * channels * 4
     body = data[head.end():]
-    if len(body) != want or width == 0 or height == 0:
+    if len(body) > want and not body[:len(body) - want].strip():
+        body = body[len(body) - want:]  # (a header line ended by CR LF or trailing spaces)
+    if len(body) != want:
         raise ValueError(f"`{arg}`: {path} holds {len(body):,} bytes of pixels where its "
                          f"header ({width} x {height}, {channels} channel(s)) asks for "
-                         f"{want:,}: a truncated or damaged file")
+                         f"{want:,}: " + ("a truncated file" if len(body) < want else
+                                          "bytes after the pixels: a damaged file"))
     a = np.frombuffer(body, dtype="<f4" if scale < 0 else ">f4")
     a = a.reshape(height, width, channels)[::-1].astype(np.float32)
     return a[..., 0] if channels == 1 else a
@@ -509,7 +514,8 @@ def read_normals(
     path : str or Path
         ``.png`` (8 or 16 bit RGB/RGBA), ``.tif``/``.tiff`` (uint8, uint16 or float, 3 or 4
         channels), ``.exr`` (HALF or FLOAT channels R, G, B or X, Y, Z, optionally A) or
-        ``.npy`` ((H, W, 3) or (H, W, 4); float, or uint8/uint16 decoded like PNG pixels).
+        ``.npy`` ((H, W, 3) or (H, W, 4); float, or uint8/uint16 decoded like PNG pixels) or
+        ``.pfm`` (a three-channel Portable Float Map, as stored; rows read the right way up).
         Palette and 1/2/4-bit PNGs, UINT EXR channels and other integer types are refused.
     frame : str, optional
         The frame the file stores: ``"opengl"`` (default: x right, y up, z toward the
@@ -657,10 +663,10 @@ def read_mask(path, shape: tuple[int, int] | None = None, *, of: str = "the norm
     Parameters
     ----------
     path : str or Path
-        ``.png``, ``.tif``/``.tiff`` or ``.npy``; grey, grey+alpha, RGB or RGBA. A colour pixel
-        is inside when any of its colour channels is nonzero and its alpha, if any, is > 0;
-        an alpha that is the same everywhere is ignored, and with one colour everywhere the
-        alpha alone is the mask.
+        ``.png``, ``.tif``/``.tiff``, ``.npy`` or ``.pfm``; grey, grey+alpha, RGB or RGBA. A
+        colour pixel is inside when any of its colour channels is nonzero and its alpha, if
+        any, is > 0; an alpha that is the same everywhere is ignored, and with one colour
+        everywhere the alpha alone is the mask.
     shape : (H, W), optional
         Required shape (that of the normal map).
     of : str
@@ -679,7 +685,8 @@ def read_mask(path, shape: tuple[int, int] | None = None, *, of: str = "the norm
     arg = "mask"
     p = _existing(path, arg)
     ext = _suffix(p, MASK_FORMATS, "mask", arg)
-    a = _decode_image(p, ext, arg) if ext != ".npy" else _read_npy(p, arg)
+    a = (_read_npy(p, arg) if ext == ".npy" else _read_pfm(p, arg) if ext == ".pfm"
+         else _decode_image(p, ext, arg))
     plane = None  # (the values whose in-between levels would be an antialiased edge)
     if a.ndim == 3 and a.shape[-1] in (1, 2, 3, 4):
         colour = a[..., :3] if a.shape[-1] >= 3 else a[..., :1]
@@ -814,8 +821,9 @@ def _read_npz_depth(p: Path, arg: str, wanted: tuple[str, ...] = ("depth",)) -> 
 
 def read_depth(path, *, npz_names: tuple[str, ...] = ("depth",), arg: str = "path",
                zero_unknown: bool = False) -> np.ndarray:
-    """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF) or
-    the ``depth`` of a :meth:`facetlift.Surface.save` ``.npz``; a ``height.exr`` of
+    """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF), a
+    one-channel ``.pfm`` (Middlebury's, MiDaS's) or the ``depth`` of a
+    :meth:`facetlift.Surface.save` ``.npz``; a ``height.exr`` of
     :func:`facetlift.io.write_height` (marked so in its header) is read back as depth.
 
     `npz_names`: the arrays of a ``.npz`` looked for, in order (else its only one): a
@@ -1086,8 +1094,9 @@ def read_prior(path, scale: float | None = None, *, arg: str = "prior",
     """A depth prior: an (H, W) map, NaN where unknown, or from a points file a ``(rows,
     cols, depths)`` triple (:func:`facetlift.integrate`'s other form of `prior`).
 
-    ``.npy``, OpenEXR (channel Z or the only one), TIFF, a MATLAB ``.mat`` file (its variable
-    of :data:`MAT_PRIOR_NAMES`, e.g. Quéau's ``z0``, or its only (H, W) one) and a
+    ``.npy``, OpenEXR (channel Z or the only one), TIFF, a one-channel PFM, a MATLAB ``.mat``
+    file (its variable of :data:`MAT_PRIOR_NAMES`, e.g. Quéau's ``z0``, or its only (H, W)
+    one) and a
     :meth:`facetlift.Surface.save` ``.npz`` (its ``depth``: an earlier result) hold depth as
     stored (NaN, or 0 in an integer TIFF, where unknown); a 16-bit PNG holds
     ``depth / scale`` (`scale` in depth units per count, e.g. 0.001 for millimetres stored as
@@ -1241,9 +1250,9 @@ def _numeric(word: str) -> bool:
 def read_weights(path, *, arg: str = "weights") -> np.ndarray:
     """An (H, W) map of weights (``--confidence``, ``--prior-weight-map``; their values, >= 0
     where they apply, are checked by :func:`facetlift.integrate` against the mask, so a
-    sentinel outside it is no error): ``.npy``,
-    EXR and floating-point TIFF as stored; an 8- or 16-bit image (PNG or TIFF) as ``value /
-    255`` or ``value / 65535`` (the same mask gives the same weights in either format; a TIFF
+    sentinel outside it is no error): ``.npy``, EXR, floating-point TIFF and PFM (Portable
+    Float Map) as stored; an 8- or 16-bit image (PNG or TIFF) as ``value / 255`` or
+    ``value / 65535`` (the same mask gives the same weights in either format; a TIFF
     of 255s was read as 255). A grey image stored as RGB(A), or an EXR with equal R, G, B
     channels, is read as its grey level (an EXR's Y channel where it has one); colour
     channels that differ are refused (only the first was read). A MATLAB ``.mat`` file: its
@@ -1251,11 +1260,14 @@ def read_weights(path, *, arg: str = "weights") -> np.ndarray:
     of :data:`MAT_CONFIDENCE_NAMES` otherwise, or its only (H, W) one."""
     p = _existing(path, arg)
     ext = _suffix(p, PRIOR_FORMATS, "weight", arg)
-    if ext in (".png", ".tif", ".tiff"):
-        a = _decode_image(p, ext, arg)
+    if ext in (".png", ".tif", ".tiff", ".pfm"):
+        a = _decode_image(p, ext, arg) if ext != ".pfm" else _read_pfm(p, arg)
         if a.ndim == 3 and a.shape[-1] in (2, 3, 4):  # (grey + alpha, RGB, RGBA)
             grey = a[..., :3] if a.shape[-1] >= 3 else a[..., :1]
-            if not (grey == grey[..., :1]).all():
+            same = grey == grey[..., :1]
+            if grey.dtype.kind == "f":  # (a float TIFF's or a PFM's NaN: the same unknown)
+                same |= np.isnan(grey) & np.isnan(grey[..., :1])
+            if not same.all():
                 raise ValueError(f"`{arg}`: {p} has colour channels that differ; give a "
                                  "single-channel (grey) image of the weights")
             a = a[..., 0]
