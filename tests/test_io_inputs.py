@@ -384,6 +384,8 @@ def test_pfm_masks_and_grey_weights(tmp_path):
     m = np.zeros((4, 5))
     m[1:3, 1:4] = 1.0
     np.testing.assert_array_equal(io.read_mask(write_pfm(tmp_path / "m.pfm", m)), m > 0)
+    with pytest.raises(ValueError, match="unsupported mask format '.pfm'"):  # (read only)
+        io.write_mask(tmp_path / "out.pfm", m)
     w = np.full((4, 5), 0.25)
     w[0, 0] = np.nan
     got = io.read_weights(write_pfm(tmp_path / "w.pfm", np.dstack([w, w, w])))

@@ -27,6 +27,7 @@ from .atomic import _save_npy, _write_bytes, atomic_path
 NORMAL_READ_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy", ".pfm")
 NORMAL_WRITE_FORMATS = (".png", ".tif", ".tiff", ".exr", ".npy")
 MASK_FORMATS = (".png", ".tif", ".tiff", ".npy", ".pfm")
+MASK_WRITE_FORMATS = (".png", ".tif", ".tiff", ".npy")
 DEPTH_FORMATS = (".npy", ".exr", ".tif", ".tiff")
 
 
@@ -1048,7 +1049,7 @@ def write_normals(
 def write_mask(path, mask) -> Path:
     """Write an (H, W) mask: PNG or TIFF (8-bit, 255 inside) or ``.npy`` (bool)."""
     p = _file_name(path)
-    ext = _suffix(p, MASK_FORMATS, "mask", "path")
+    ext = _suffix(p, MASK_WRITE_FORMATS, "mask", "path")  # (a .pfm is read, not written)
     from ..problem import unmasked
 
     m = _image_array(unmasked(mask, 0.0), "mask", 2) != 0  # (masked entries: outside)
