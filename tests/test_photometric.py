@@ -1,5 +1,7 @@
 """facetlift.photometric: the robust least-squares fit and the image simulation."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -424,3 +426,59 @@ def test_light_mistakes_are_named():
     with pytest.raises(ValueError, match=r"`gt` must be a facetlift.synthetic.GroundTruth"):
         photometric.simulate(gt.normals, L)
     assert photometric.simulate(gt, L[:1], 0).shape == (1,) + gt.mask.shape
+
+
+def test_photometric_is_an_attribute_of_the_package():
+    """README writes facetlift.photometric.fit(...); after a plain import it was an
+    AttributeError (an audit)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", "import facetlift; print(facetlift.photometric"
+                          ".fit.__name__)"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "fit", out.stderr
+
+
+def _ring_of_lights(count=12, tilt=35.0):
+    t = np.radians(tilt)
+    phi = np.arange(count) * 2 * np.pi / count
+    return np.stack([np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi),
+                     np.full(count, np.cos(t))], axis=1)
+
+
+def test_a_saturation_cut_that_takes_most_observations_is_warned_and_can_be_turned_off():
+    """A flat target under a ring of lights, 16-bit images at half the sensor's range: every
+    value lies within 2 % of their 99.9th percentile and the cut took them all as clipped,
+    silently (an audit). Now a warning names saturation=None, which keeps them."""
+    L = _ring_of_lights()
+    n = np.zeros((16, 16, 3))
+    n[..., 2] = 1.0
+    images = np.rint(0.6 * np.einsum("hwc,kc->khw", n, L) * 65535).astype(np.uint16)
+    with pytest.warns(UserWarning, match="pass saturation=None"):
+        lost, _ = photometric.fit(images, L)
+    assert np.isnan(lost).all()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        kept, _ = photometric.fit(images, L, saturation=None)
+    np.testing.assert_allclose(kept, n, atol=1e-4)
+
+
+def test_the_colour_hint_leaves_alpha_out_and_divides_by_the_intensities():
+    """The hint for (k, H, W, 4) images said images.mean(axis=-1), which averaged alpha in
+    (12 deg off, an audit)."""
+    with pytest.raises(ValueError, match=r"images\[\.\.\., :3\] / intensities.*alpha, left out"):
+        photometric.fit(np.ones((4, 8, 8, 4)), _ring_of_lights(4))
+
+
+@pytest.mark.parametrize("kwargs, words", [({"reach": -1}, "`reach`"),
+                                           ({"reach": float("nan")}, "`reach`"),
+                                           ({"thickness": -1}, "`thickness`"),
+                                           ({"thickness": "a"}, "`thickness`")])
+def test_cast_shadows_refuses_arguments_that_silently_gave_no_shadow(kwargs, words):
+    gt = synthetic.analytic("occluder", 32)
+    with pytest.raises(ValueError, match=words):
+        photometric.cast_shadows(gt, _ring_of_lights(3), **kwargs)
+    with pytest.raises(ValueError, match="`gt` must be"):
+        photometric.cast_shadows(gt.depth, _ring_of_lights(3))
+    with pytest.raises(ValueError, match="`albedo` must be finite"):
+        photometric.simulate(gt, _ring_of_lights(3), albedo=np.full(gt.mask.shape, np.nan))

@@ -49,7 +49,7 @@ __all__ = sorted(_LAZY)
 #: first use, like numpy's): ``facetlift.io.read_normals(...)``.
 _SUBMODULES = ("io", "synthetic", "metrics", "frames", "camera", "conventions", "linalg",
                "memory", "jobs", "methods", "operators", "bench", "errors", "problem",
-               "surface", "domain", "api", "describe", "options", "perspective")
+               "surface", "domain", "api", "describe", "options", "perspective", "photometric")
 
 
 def __getattr__(name: str):
