@@ -456,11 +456,13 @@ def _file_facts(src: Path) -> dict:
         elif ext == ".npy":
             a = np.load(f, mmap_mode="r", allow_pickle=False)
             facts.update(dtype=str(a.dtype), stored_shape=list(a.shape), encoding="as stored")
-        elif ext == ".pfm":  # (a review: no facts were given for it)
-            from .io.images import _read_pfm
+        elif ext == ".pfm":  # (a review: no facts were given for it; its header alone)
+            from .io.images import _pfm_header
 
-            a = _read_pfm(f, "normals")
-            facts.update(dtype="float32", stored_shape=list(a.shape), encoding="as stored")
+            with open(f, "rb") as fh:
+                channels, width, height, _, _ = _pfm_header(fh.read(256), f, "normals")
+            facts.update(dtype="float32", encoding="as stored",
+                         stored_shape=[height, width] + ([3] if channels == 3 else []))
         elif ext in (".tif", ".tiff"):
             import tifffile
 

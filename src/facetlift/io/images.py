@@ -40,7 +40,10 @@ class _Refused(Exception):
 
 
 def _decode_image(path: Path, ext: str, arg: str) -> np.ndarray:
-    """Pixels of a PNG or TIFF file as stored (no conversion); ValueError if unreadable."""
+    """Pixels of a PNG, TIFF or PFM file as stored (no conversion); ValueError if
+    unreadable."""
+    if ext == ".pfm":  # (its own messages: a damaged header, a truncated file)
+        return _read_pfm(path, arg)
     try:
         if ext == ".png":
             import imagecodecs
@@ -246,20 +249,14 @@ def _exr_normal_channels(ch: dict, p: Path, arg: str,
 _PFM_HEADER = re.compile(rb"(PF|Pf)\s+(\d+)\s+(\d+)\s+([-+0-9.eE]+)\s")
 
 
-def _read_pfm(path: Path, arg: str) -> np.ndarray:
-    """A Portable Float Map as (H, W) (``Pf``) or (H, W, 3) (``PF``) float32, rows from the top
-    (the file stores them from the bottom). A negative scale means little-endian; its size is a
-    brightness factor for HDR pictures, left out here (MiDaS writes 1)."""
-    try:
-        data = path.read_bytes()
-    except OSError as e:
-        raise ValueError(f"`{arg}`: cannot read {path}: {e}") from None
+def _pfm_header(data: bytes, path: Path, arg: str) -> tuple[int, int, int, bool, int]:
+    """``(channels, width, height, little_endian, end)`` of a Portable Float Map's header in
+    `data` (its first bytes; 256 hold any header), `end` where its pixels may begin."""
     head = _PFM_HEADER.match(data[:256])
     if head is None:
         raise ValueError(f"`{arg}`: {path} is not a Portable Float Map (it does not start with "
                          "'PF' or 'Pf', the width, the height and the scale; 'PF4', four "
                          "channels, is not read)")
-    channels = 3 if head[1] == b"PF" else 1
     width, height = int(head[2]), int(head[3])
     try:
         scale = float(head[4])
@@ -271,8 +268,20 @@ def _read_pfm(path: Path, arg: str) -> np.ndarray:
                          "must be a non-zero number")
     if width == 0 or height == 0:
         raise ValueError(f"`{arg}`: {path} declares an empty image ({width} x {height})")
+    return 3 if head[1] == b"PF" else 1, width, height, scale < 0, head.end()
+
+
+def _read_pfm(path: Path, arg: str) -> np.ndarray:
+    """A Portable Float Map as (H, W) (``Pf``) or (H, W, 3) (``PF``) float32, rows from the top
+    (the file stores them from the bottom). A negative scale means little-endian; its size is a
+    brightness factor for HDR pictures, left out here (MiDaS writes 1)."""
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise ValueError(f"`{arg}`: cannot read {path}: {e}") from None
+    channels, width, height, little, end = _pfm_header(data, path, arg)
     want = width * height * channels * 4
-    body = data[head.end():]
+    body = data[end:]
     if len(body) > want and not body[:len(body) - want].strip():
         body = body[len(body) - want:]  # (a header line ended by CR LF or trailing spaces)
     if len(body) != want:
@@ -280,7 +289,7 @@ def _read_pfm(path: Path, arg: str) -> np.ndarray:
                          f"header ({width} x {height}, {channels} channel(s)) asks for "
                          f"{want:,}: " + ("a truncated file" if len(body) < want else
                                           "bytes after the pixels: a damaged file"))
-    a = np.frombuffer(body, dtype="<f4" if scale < 0 else ">f4")
+    a = np.frombuffer(body, dtype="<f4" if little else ">f4")
     a = a.reshape(height, width, channels)[::-1].astype(np.float32)
     return a[..., 0] if channels == 1 else a
 
@@ -613,7 +622,7 @@ def read_normals(
         if encoding == "xy":
             n = frames.decode_xy(n, frame=frame)
     else:  # (.npy, or a Portable Float Map: float, as stored)
-        arr = _read_npy(p, arg) if ext == ".npy" else _read_pfm(p, arg)
+        arr = _read_npy(p, arg) if ext == ".npy" else _decode_image(p, ext, arg)
         rgb, alpha = _split_alpha(arr, p, arg, check_alpha and mask is None, encoding)
         counted = _counted(mask, alpha, rgb.shape[:2])
         if rgb.shape[-1] == 3:
@@ -686,8 +695,7 @@ def read_mask(path, shape: tuple[int, int] | None = None, *, of: str = "the norm
     arg = "mask"
     p = _existing(path, arg)
     ext = _suffix(p, MASK_FORMATS, "mask", arg)
-    a = (_read_npy(p, arg) if ext == ".npy" else _read_pfm(p, arg) if ext == ".pfm"
-         else _decode_image(p, ext, arg))
+    a = _decode_image(p, ext, arg) if ext != ".npy" else _read_npy(p, arg)
     plane = None  # (the values whose in-between levels would be an antialiased edge)
     if a.ndim == 3 and a.shape[-1] in (1, 2, 3, 4):
         colour = a[..., :3] if a.shape[-1] >= 3 else a[..., :1]
@@ -745,8 +753,6 @@ def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = (),
     ext = _suffix(p, formats, what, arg)
     if ext == ".npy":
         a = _read_npy(p, arg)
-    elif ext == ".pfm":
-        a = _read_pfm(p, arg)
     elif ext == ".mat":
         a = _read_mat_plane(p, arg, mat_names, what)
     elif ext == ".npz":  # (Surface.save's archive: its depth)
@@ -1262,7 +1268,7 @@ def read_weights(path, *, arg: str = "weights") -> np.ndarray:
     p = _existing(path, arg)
     ext = _suffix(p, PRIOR_FORMATS, "weight", arg)
     if ext in (".png", ".tif", ".tiff", ".pfm"):
-        a = _decode_image(p, ext, arg) if ext != ".pfm" else _read_pfm(p, arg)
+        a = _decode_image(p, ext, arg)
         if a.ndim == 3 and a.shape[-1] in (2, 3, 4):  # (grey + alpha, RGB, RGBA)
             grey = a[..., :3] if a.shape[-1] >= 3 else a[..., :1]
             same = grey == grey[..., :1]

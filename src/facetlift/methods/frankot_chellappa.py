@@ -116,7 +116,8 @@ def _check_tiles(P: np.ndarray, Q: np.ndarray) -> None:
         return
     # (slopes within a few 8-bit code steps of flat: quantisation's correlated error would
     # read as a seam, a review)
-    if np.sqrt((np.mean(P * P) + np.mean(Q * Q)) / 2) < TILE_FLAT:
+    squares = np.mean(P * P), np.mean(Q * Q)  # (the flat test's, and the tilt's RMS below)
+    if np.sqrt(sum(squares) / 2) < TILE_FLAT:
         return
     climbs = [P.sum(axis=1), Q.sum(axis=0)]  # (each row's and column's height across)
     rows = np.cumsum(P, axis=1)
@@ -129,7 +130,7 @@ def _check_tiles(P: np.ndarray, Q: np.ndarray) -> None:
 
     varies = np.sqrt((smooth(climbs[0]) + smooth(climbs[1])) / 2)
     mean = np.hypot(P.mean(), Q.mean())
-    rms = np.hypot(np.sqrt(np.mean(P * P)), np.sqrt(np.mean(Q * Q)))
+    rms = np.sqrt(sum(squares))
     if mean > TILT_SHARE * rms:
         warn(f"pad='none' integrates the map as periodic, and a periodic height has no mean "
              f"slope: the map's ({mean:.3g}, against an RMS slope of {rms:.3g}) is dropped (a "
