@@ -390,7 +390,8 @@ def error_of(gt, depth) -> float:
     return 100.0 * metrics.normalized_error(depth, gt.depth, gt.mask)[0]
 
 
-def oracle(gt, normals, geometric: bool = False) -> tuple[float, float, float, float]:
+def oracle(gt, normals, geometric: bool = False, *, cuts=None,
+           sides=None) -> tuple[float, float, float, float]:
     """(error, deviation, seconds, placed error) of the facet integration with the true jumps
     cut: the pieces they separate placed by the occlusion rule, and (the last) each piece moved
     to its true place, the median difference to the ground truth in the camera's unknown (an
@@ -407,7 +408,13 @@ def oracle(gt, normals, geometric: bool = False) -> tuple[float, float, float, f
 
     `geometric`: cut the jumps of the render's geometry (``synthetic.jump_edges(gt,
     geometric=True)``, a render made with ``jumps=True``) instead of the pixel-centre test's
-    (benchmarks/bench_oracle_cuts.py compares the two)."""
+    (benchmarks/bench_oracle_cuts.py compares the two).
+
+    `cuts`: other edges to cut, ``(right, down)`` as :attr:`facetlift.Surface.cuts` (a route's
+    own, or a mix of its and the truth's: benchmarks/bench_cut_errors.py); `sides`: a depth map
+    (H, W) whose per-piece placement starts the occlusion rule instead of the truth's, so that
+    it decides the occluding sides (a route's result). The placed error still moves each piece
+    to the truth."""
     from scipy import ndimage
 
     from .. import methods
@@ -427,7 +434,7 @@ def oracle(gt, normals, geometric: bool = False) -> tuple[float, float, float, f
                           outlier_eps=route.jump_grazing, isolated=route.jump_isolated,
                           grazing_share=route.jump_grazing_share)
         bx, by, target = targets(problem)
-        right, down = synthetic.jump_edges(gt, geometric=geometric)
+        right, down = synthetic.jump_edges(gt, geometric=geometric) if cuts is None else cuts
         mesh = split(problem.domain, right, down)
         z, _ = solve_pieces(mesh, bx, by, target)  # (an arbitrary constant per piece)
         k = mesh.n_pieces
@@ -437,21 +444,28 @@ def oracle(gt, normals, geometric: bool = False) -> tuple[float, float, float, f
             return make_surface(problem, MethodResult(values=v[mesh.corners].mean(axis=1),
                                                       extras={"corner_values": v[mesh.corners]}))
 
-        try:  # each piece's median difference to the truth over the pixels where both are
-            # finite (the surface's depth, as returned: not at facets without a normal; a
-            # piece without one stays put: scipy's median of an empty label is not NaN)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mine = cam.from_depth(surface_of(z).depth[r, c])
+
+        def moves(depth):  # each piece's median difference to `depth` over the pixels where
+            # both are finite (the surface's depth, as returned: not at facets without a
+            # normal; a piece without one stays put: scipy's median of an empty label is not
+            # NaN)
             with np.errstate(invalid="ignore", divide="ignore"):
-                true = cam.from_depth(gt.depth[r, c])
-                mine = cam.from_depth(surface_of(z).depth[r, c])
-            ok = np.isfinite(true) & np.isfinite(mine)
-            move = np.atleast_1d(ndimage.median(np.where(ok, true - mine, 0.0),
-                                                np.where(ok, mesh.facet_piece + 1, 0),
-                                                np.arange(1, k + 1)))
-            move = np.where(np.bincount(mesh.facet_piece[ok], minlength=k) > 0, move, 0.0)
+                ref = cam.from_depth(depth[r, c])
+            ok = np.isfinite(ref) & np.isfinite(mine)
+            out = np.atleast_1d(ndimage.median(np.where(ok, ref - mine, 0.0),
+                                               np.where(ok, mesh.facet_piece + 1, 0),
+                                               np.arange(1, k + 1)))
+            return np.where(np.bincount(mesh.facet_piece[ok], minlength=k) > 0, out, 0.0)
+
+        try:
+            move = moves(gt.depth)
         except Exception as e:  # (the rule then decides the sides from the arbitrary start)
             log.info("true placement failed on %s: %s", gt.name, e)
             move = None
-        start = z if move is None else z + move[mesh.piece]
+        first = move if sides is None else moves(np.asarray(sides, float))
+        start = z if first is None else z + first[mesh.piece]
         # (the route's rule, line pieces included: SMALL_PIECE; every pair closed, as with a
         # prior: split.TOUCH would keep far pairs at their true places)
         offsets = occlusion_offsets(mesh, start, bx, by, target,

@@ -1,0 +1,74 @@
+"""benchmarks/bench_cut_errors.py: the route's cuts against the true jumps."""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from facetlift import synthetic
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def ce():
+    spec = importlib.util.spec_from_file_location("bench_cut_errors",
+                                                  ROOT / "benchmarks" / "bench_cut_errors.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(autouse=True)
+def own_cache(tmp_path, monkeypatch):
+    """The script points $FACETLIFT_BENCH_CACHE at its --cache: restored after each test."""
+    monkeypatch.setenv("FACETLIFT_BENCH_CACHE", str(tmp_path / "cache"))
+
+
+def test_near_counts_a_cut_beside_the_jump(ce):
+    """A true jump between columns 2 and 3; cuts on it, one column beside it and two columns
+    off: within one pixel the first two are near, within none only the first."""
+    shape = (6, 7)
+    true_right = np.zeros((6, 6), bool)
+    true_right[:, 2] = True
+    own_right = np.zeros((6, 6), bool)
+    own_right[:, [2, 3, 5]] = True
+    down = np.zeros((5, 7), bool)
+    pixels = ce.touched(true_right, down, shape)
+    assert pixels[:, [2, 3]].all() and pixels.sum() == 12
+    r1, d1 = ce.near(own_right, down, pixels, 1)
+    r0, _ = ce.near(own_right, down, pixels, 0)
+    assert np.flatnonzero(r1[0]).tolist() == [2, 3] and r1.sum() == 12 and not d1.any()
+    assert np.flatnonzero(r0[0]).tolist() == [2] and r0.sum() == 6
+    assert ce.count((r1, d1)) == 12
+
+
+def test_script_on_an_analytic_scene(ce, tmp_path, capsys):
+    """The orthographic `occluder` (no data needed): the route's error as integrate gives
+    it, the oracle's as the benchmark's, the true cuts with the route's sides at the oracle
+    (the sides of one occluding plate are clear), and precision / recall as shares."""
+    import facetlift
+    from facetlift.bench import discontinuities as D
+    from facetlift.bench.core import Settings
+
+    data = tmp_path / "data"
+    data.mkdir()
+    out = tmp_path / "rows.csv"
+    assert ce.main(["--data", str(data), "--cache", str(tmp_path / "cache"), "--groups",
+                    "ortho", "--models", "occluder", "--conditions", "exact", "--csv",
+                    str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert [(r["scene"], r["condition"]) for r in rows] == [("occluder", "exact")]
+    row = {k: float(v) for k, v in rows[0].items() if k not in ("group", "scene", "condition")}
+    gt = synthetic.analytic("occluder", Settings().disc_ortho_size)
+    s = facetlift.integrate(gt.normals, gt.mask, discontinuities=True)
+    assert row["route"] == pytest.approx(D.error_of(gt, s.depth), rel=1e-9)
+    assert row["oracle"] == pytest.approx(D.oracle(gt, gt.normals)[0], rel=1e-9)
+    assert row["true"] == pytest.approx(row["oracle"], rel=1e-6)
+    assert 0.0 <= row["precision"] <= 1.0 and 0.0 <= row["recall"] <= 1.0
+    assert row["jumps"] == sum(int(e.sum()) for e in synthetic.jump_edges(gt)) > 0
+    assert "| ortho | exact | 1 |" in capsys.readouterr().out
