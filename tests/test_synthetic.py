@@ -377,7 +377,7 @@ def test_render_perspective_depth_normals_and_camera():
     assert np.median(ang3) < 1.0
     with pytest.raises(ValueError, match="`samples` must be an integer >= 1"):
         synthetic.render_perspective(trimesh.creation.icosphere(), K, (8, 8), samples=0)
-    with pytest.raises(ValueError, match="`distance` must be a positive"):
+    with pytest.raises(ValueError, match="`distance` must be a finite number > 0"):
         synthetic.render_perspective(trimesh.creation.icosphere(), K, (8, 8), distance=-1)
     # the default camera at another aspect ratio keeps DiLiGenT's pixel shape (both focal
     # lengths scaled by W / 612: per axis, 1536 x 2048 got fx / fy 1.12, a user's check)
@@ -607,3 +607,97 @@ def test_render_jumps_come_from_the_geometry():
         assert np.all(right[big_r]) and np.all(down[big_d])
     with pytest.raises(ValueError, match=r"render it with jumps=True"):
         synthetic.jump_edges(synthetic.render_mesh(front, 16), geometric=True)
+
+
+def test_perturbations_read_normals_as_integrate_does():
+    """A uint8 map is decoded as integrate decodes it (its raw codes were rotated as vectors:
+    0.577 normalised error after 1 degree of noise), signed integers are refused, and normals
+    off unit length are scaled first (a map times 2 was turned by half the angle asked and
+    perturb_fraction recorded angles it had not applied); a zero vector becomes missing."""
+    from facetlift.frames import FrameWarning
+
+    gt = analytic("face", (48, 56))
+    n = np.where(gt.mask[..., None], gt.normals, np.nan)
+    codes = np.round((np.nan_to_num(n) + 1) / 2 * 255).astype(np.uint8)
+    with pytest.warns(FrameWarning, match="decoded as v / 255"):
+        same = add_angular_noise(codes, 0.0, 0)
+    assert np.nanmax(_angle(same, n)[gt.mask]) < 0.5  # (8-bit rounding)
+    with pytest.warns(FrameWarning):
+        assert np.isfinite(synthetic.quantize(codes, 8)).all()
+    with pytest.raises(ValueError, match="`normals` holds int16 values"):
+        add_angular_noise(codes.astype(np.int16), 1.0, 0)
+    a = add_angular_noise(n, 5.0, np.random.default_rng(3))
+    b = add_angular_noise(2.0 * n, 5.0, np.random.default_rng(3))
+    np.testing.assert_allclose(b[gt.mask], a[gt.mask], atol=1e-12)
+    moved, chosen, angles = perturb_fraction(2.0 * n, 1.0, rng=0)
+    assert chosen.sum() == gt.mask.sum()
+    np.testing.assert_allclose(_angle(moved, n)[gt.mask], angles[gt.mask], atol=1e-6)
+    z = n.copy()
+    z[20, 20] = 0.0
+    with np.errstate(all="raise"):  # (no 0 / 0 left to numpy)
+        out = add_angular_noise(z, 1.0, 0)
+    rest = gt.mask.copy()
+    rest[20, 20] = False
+    assert gt.mask[20, 20] and np.isnan(out[20, 20]).all() and np.isfinite(out[rest]).all()
+    assert remove_samples(2.0 * n, 0.0, 0)[0][gt.mask].max() > 1.5  # (values kept as given)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda n: add_angular_noise(n, 40.0), "`sigma_deg` must be a finite number in \\[0, 30\\]"),
+    (lambda n: add_angular_noise(n, "5"), "`sigma_deg` must be a finite number"),
+    (lambda n: add_angular_noise(n, None), "`sigma_deg` must be a finite number"),
+    (lambda n: add_angular_noise(n, 1.0, "x"), "`rng` must be a numpy.random.Generator"),
+    (lambda n: add_smooth_noise(n, 1.0, 0, length="8"), "`length` must be a finite number > 0"),
+    (lambda n: perturb_fraction(n, "0.5"), "`fraction` must be a finite number in \\[0, 1\\]"),
+    (lambda n: perturb_fraction(n, 0.5, max_deg=None), "`max_deg` must be a finite number"),
+    (lambda n: remove_samples(n, 2.0), "`fraction` must be a finite number in \\[0, 1\\]"),
+])
+def test_perturbations_name_a_bad_argument(call, message):
+    n = analytic("sphere", 16).normals
+    with pytest.raises(ValueError, match=message):
+        call(n)
+
+
+def test_scene_builders_check_their_arguments(tmp_path):
+    """tabletop, room, room_view, analytic and GroundTruth refuse what built a wrong scene
+    or failed deep inside numpy (an audit), and take one mesh path as a list of one."""
+    box = trimesh.creation.box(extents=(0.4, 0.3, 0.2))
+    path = tmp_path / "box.ply"
+    box.export(path)
+    one = synthetic.tabletop(str(path))  # (its characters were taken for file names)
+    np.testing.assert_array_equal(one.vertices, synthetic.tabletop([str(path)]).vertices)
+    bad = [
+        (lambda: synthetic.tabletop([box], margin=-5), "`margin` must be a finite number >= 0"),
+        (lambda: synthetic.tabletop([box], spacing=-1), "`spacing` must be a finite number > 0"),
+        (lambda: synthetic.tabletop([box], behind=(0.6, 0.1)), "`behind` must be \\(low, high\\)"),
+        (lambda: synthetic.tabletop(3), "`meshes` must be a list"),
+        (lambda: synthetic.room([box], size=0), "`size` must be a finite number > 0"),
+        (lambda: synthetic.room([box], height=-2), "`height` must be a finite number > 0"),
+        (lambda: synthetic.room([box], radius=(0.6, 0.35)), "`radius` must be \\(low, high\\)"),
+        (lambda: synthetic.room([box], radius=(0, 0)), "`radius` must be a finite number > 0"),
+        (lambda: synthetic.room([box], boxes=1.5), "`boxes` must be an integer >= 0"),
+        (lambda: synthetic.room([box], seed=None), "`seed` must be an integer >= 0"),
+        (lambda: synthetic.room_view("a"), "`seed` must be an integer >= 0"),
+        (lambda: synthetic.room_view(1.5), "`seed` must be an integer >= 0"),
+        (lambda: render_mesh(trimesh.Trimesh(), 32), "`mesh` holds no triangles"),
+        (lambda: render_mesh(box, 32, margin="0.1"), "`margin` must be a finite number"),
+        (lambda: synthetic.render_perspective(trimesh.Trimesh(), None, 32),
+         "`mesh` holds no triangles"),
+        (lambda: synthetic.render_perspective(box, None, 32, samples=None),
+         "`samples` must be an integer >= 1"),
+        (lambda: analytic_height("face", 0.0, 0.0, scale=0), "`scale` must be a finite number > 0"),
+        (lambda: analytic_height("face", 0.0, 0.0, scale=-1), "`scale` must be a finite number"),
+        (lambda: analytic("plane", 16, pixel_size=None), "`pixel_size` must be a finite number"),
+        (lambda: analytic(["plane"], 16), "`name` must be one of"),
+        (lambda: synthetic.jump_edges(analytic("steps", 16), tol=None), "`tol` must be a finite"),
+        (lambda: GroundTruth(np.zeros((2, 2)), np.zeros((3, 3, 3)), np.ones((4, 4), bool)),
+         "`depth` must have the mask's shape \\(4, 4\\)"),
+        (lambda: GroundTruth(np.zeros((4, 4)), np.zeros((4, 4, 2)), np.ones((4, 4), bool)),
+         "`normals` must have shape \\(4, 4, 3\\)"),
+        (lambda: GroundTruth(np.zeros((4, 4)), np.zeros((4, 4, 3)), np.ones((4, 4))),
+         "`mask` must be an \\(H, W\\) bool array"),
+    ]
+    for call, message in bad:
+        with pytest.raises(ValueError, match=message):
+            call()
+    assert synthetic.render_perspective(box, None, 32, samples=2.0).mask.any()

@@ -107,6 +107,21 @@ class GroundTruth:
     K: np.ndarray | None = None
     jump_sizes: tuple | None = None
 
+    def __post_init__(self):
+        """The arrays checked against each other (ones that did not fit built and printed,
+        then failed deep inside jump_edges or the camera, an audit)."""
+        mask = np.asarray(self.mask)
+        if mask.ndim != 2 or mask.dtype != bool:
+            raise ValueError(f"GroundTruth: `mask` must be an (H, W) bool array; got "
+                             f"{mask.dtype} of shape {mask.shape}")
+        H, W = mask.shape
+        if np.shape(self.depth) != (H, W):
+            raise ValueError(f"GroundTruth: `depth` must have the mask's shape {(H, W)}; got "
+                             f"{np.shape(self.depth)}")
+        if np.shape(self.normals) != (H, W, 3):
+            raise ValueError(f"GroundTruth: `normals` must have shape {(H, W, 3)}; got "
+                             f"{np.shape(self.normals)}")
+
     def __repr__(self) -> str:  # (not the arrays: a notebook printed them whole, a user's)
         H, W = self.mask.shape
         view = "orthographic" if self.K is None else "perspective"
@@ -334,8 +349,9 @@ def analytic_height(name: str, x, y, *, scale: float = 1.0):
         Height and its derivatives ``dz/dx``, ``dz/dy`` (NaN outside the surface's domain).
     inside : array of bool
     """
-    if name not in _SURFACES:
+    if not isinstance(name, str) or name not in _SURFACES:
         raise ValueError(f"`name` must be one of {list(ANALYTIC)}; got {name!r}")
+    scale = _real(scale, "scale", 0, open_low=True)  # (0: inf and NaN; < 0: mirrored)
     u = np.asarray(x, float) / scale
     v = np.asarray(y, float) / scale
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -374,12 +390,10 @@ def analytic(name: str, size=128, *, pixel_size: float = 1.0) -> GroundTruth:
     ValueError
         Unknown `name`, bad `size` or `pixel_size`.
     """
-    if name not in _SURFACES:
+    if not isinstance(name, str) or name not in _SURFACES:
         raise ValueError(f"`name` must be one of {list(ANALYTIC)}; got {name!r}")
     H, W = _size(size)
-    h = float(pixel_size)
-    if not (np.isfinite(h) and h > 0):
-        raise ValueError(f"`pixel_size` must be a positive number; got {pixel_size!r}")
+    h = _real(pixel_size, "pixel_size", 0, open_low=True)
     rows, cols = np.mgrid[0:H, 0:W].astype(float)
     x = (cols + 0.5 - W / 2) * h
     y = (H / 2 - rows - 0.5) * h
@@ -445,13 +459,49 @@ def tabletop(meshes, *, seed: int = 0, spacing: float = 0.9, behind=(0.1, 0.6),
     return trimesh.util.concatenate(parts + [table])
 
 
+def _meshes(meshes, least: int = 1) -> list:
+    """The `meshes` argument of :func:`tabletop` and :func:`room` as a list: one mesh or path
+    alone is a list of one (a path's characters were taken for file names, an audit)."""
+    if isinstance(meshes, (str, Path)) or hasattr(meshes, "faces"):
+        return [meshes]
+    try:
+        out = list(meshes)
+    except TypeError:
+        raise ValueError("`meshes` must be a list of trimesh.Trimesh or mesh file paths; got "
+                         f"{type(meshes).__name__}") from None
+    if len(out) < least:
+        raise ValueError("`meshes` must name at least one mesh")
+    return out
+
+
+def _pair(value, name: str, low: float, *, open_low: bool = False) -> tuple[float, float]:
+    """`value` as two numbers ``low <= a <= b`` (above `low` with `open_low`), by `name`."""
+    try:
+        a, b = value
+    except (TypeError, ValueError):
+        raise ValueError(f"`{name}` must be two numbers (low, high); got {value!r}") from None
+    a = _real(a, name, low, open_low=open_low)
+    b = _real(b, name, low, open_low=open_low)
+    if a > b:
+        raise ValueError(f"`{name}` must be (low, high) with low <= high; got {value!r}")
+    return a, b
+
+
+def _seed(seed, name: str = "seed") -> int:
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"`{name}` must be an integer >= 0; got {seed!r}")
+    return int(seed)
+
+
 def _tabletop_parts(meshes, seed, spacing, behind, margin):
     """The objects of :func:`tabletop`, placed, and the table: (list, trimesh.Trimesh)."""
     trimesh = _trimesh("tabletop")
 
-    if len(meshes) == 0:
-        raise ValueError("`meshes` must name at least one mesh")
-    rng = np.random.default_rng(seed)
+    meshes = _meshes(meshes)
+    spacing = _real(spacing, "spacing", 0, open_low=True)
+    behind = _pair(behind, "behind", 0)
+    margin = _real(margin, "margin", 0)
+    rng = _rng(seed)
     parts = []
     k = len(meshes)
     for i, mesh in enumerate(meshes):
@@ -499,6 +549,7 @@ def room_view(seed: int = 0) -> tuple[float, float, float]:
     """The view of :func:`room` scene `seed` (the direction the rays travel, toward -z):
     :data:`ROOM_ELEVATIONS` below the horizontal in turn, turned 20 degrees toward its side
     wall (render with ``view=room_view(seed)``)."""
+    seed = _seed(seed)
     side = -1.0 if seed % 2 == 0 else 1.0  # (the wall's side: left for even seeds)
     el = np.radians(ROOM_ELEVATIONS[seed % len(ROOM_ELEVATIONS)])
     az = np.radians(20.0)
@@ -526,6 +577,11 @@ def room(meshes, *, seed: int = 0, size: float = 4.0, height: float = 2.0, boxes
     trimesh.Trimesh
     """
     trimesh = _trimesh("room")
+    meshes, seed = _meshes(meshes, least=0), _seed(seed)  # (an empty room is a room)
+    size = _real(size, "size", 0, open_low=True)
+    height = _real(height, "height", 0, open_low=True)
+    boxes = _seed(boxes, "boxes")
+    radius = _pair(radius, "radius", 0, open_low=True)
     rng = np.random.default_rng(seed)
     half = size / 2.0
     parts = []
@@ -591,10 +647,10 @@ def _vessel_outer(kind: str) -> tuple[np.ndarray, float]:
 
 def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256,
            rim: str = "round"):
-    """An open vessel as one closed triangle mesh (y up, resting on y = 0, 0.43-1 unit tall): a
-    surface of revolution whose profile runs up the outside, over a rim `thickness` wide, down
-    the inside (the outside wall moved inward by `thickness` along the radius) and across a
-    flat floor to the axis.
+    """An open vessel as one closed triangle mesh (y up, resting on y = 0, about 0.45-1 unit
+    tall): a surface of revolution whose profile runs up the outside, over a rim `thickness`
+    wide, down the inside (the outside wall moved inward by `thickness` along the radius) and
+    across a flat floor to the axis.
 
     Seen from above the rim (:func:`vessel_view`), the inside shows through the mouth: the
     front of the rim hides part of the inside (a depth jump whose height grows toward the
@@ -669,7 +725,8 @@ def vessel(kind: str = "cup", *, thickness: float = 0.03, sections: int = 256,
 def vessel_view(elevation_deg: float) -> tuple[float, float, float]:
     """The viewing direction of a camera `elevation_deg` degrees above the horizontal (below it
     for a negative angle), looking at a y-up scene from its front (for
-    ``render_perspective(..., view=...)``; above about 82 degrees the image's up turns)."""
+    ``render_perspective(..., view=...)``; the image's up is the scene's up, turning toward
+    its back, -z, as the camera rises: no jump in between)."""
     try:
         e = float(elevation_deg)
     except (TypeError, ValueError):
@@ -715,6 +772,8 @@ def _trimesh(caller: str):
 def _load_mesh(mesh, caller: str = "render_mesh"):
     trimesh = _trimesh(caller)
     if isinstance(mesh, trimesh.Trimesh):
+        if len(mesh.faces) == 0:  # (numpy's "zero-size array to reduction" otherwise)
+            raise ValueError("`mesh` holds no triangles")
         return mesh
     if isinstance(mesh, (str, Path)):
         p = Path(mesh)
@@ -895,7 +954,8 @@ def render_mesh(
     resolution : int or (H, W)
     view : str or (3,) array_like
         A name in :data:`VIEWS` or the direction the rays travel, in mesh coordinates. The
-        image's up is the mesh's +y (or +-z when looking along y).
+        image's up is the mesh's +y (or +-z when looking within 8.1 degrees of the y axis: seen
+        from above, the mesh's -z, its back, is up).
     margin : float
         Empty border on each side, as a fraction of the image size, in [0, 0.45].
     pixel_size : float
@@ -919,8 +979,7 @@ def render_mesh(
         If trimesh is not installed (``pip install 'facetlift[render]'``).
     """
     H, W = _size(resolution, "resolution")
-    if not (0 <= margin <= 0.45):
-        raise ValueError(f"`margin` must be in [0, 0.45]; got {margin!r}")
+    margin = _real(margin, "margin", 0, 0.45)
     h = float(pixel_size)
     if not (np.isfinite(h) and h > 0):
         raise ValueError(f"`pixel_size` must be a positive number; got {pixel_size!r}")
@@ -1002,7 +1061,9 @@ def render_perspective(
     mesh : trimesh.Trimesh or path
     K : (3, 3) array_like, optional
         Default :data:`DILIGENT_K`, scaled to `resolution` if it differs from 512 x 612: both
-        focal lengths by W / 612, the principal point to the same place in the image.
+        focal lengths by W / 612 and the principal point too (``s * c``: a quarter to half a
+        pixel from the same place in the image, ``s * (c + 0.5) - 0.5`` of docs/conventions.md;
+        kept so that the benchmark's cached renders stay the same).
     resolution : (H, W) or int
     view : str or (3,) array_like
         A name in :data:`VIEWS` or the direction the rays travel, in mesh coordinates.
@@ -1047,11 +1108,11 @@ def render_perspective(
             K[1, 1] *= W / 612
             K[1, 2] *= H / 512
     K = check_K(K)
-    if not (np.isfinite(distance) and distance > 0):
-        raise ValueError(f"`distance` must be a positive number; got {distance!r}")
-    if not (0 < fill <= 4):
-        raise ValueError(f"`fill` must be in (0, 4]; got {fill!r}")
-    if isinstance(samples, bool) or int(samples) != samples or samples < 1:
+    distance = _real(distance, "distance", 0, open_low=True)
+    fill = _real(fill, "fill", 0, 4, open_low=True)
+    if (isinstance(samples, (bool, np.bool_))
+            or not isinstance(samples, (int, float, np.integer, np.floating))
+            or not float(samples).is_integer() or samples < 1):
         raise ValueError(f"`samples` must be an integer >= 1; got {samples!r}")
     label, m, frame, P = _mesh_in_view(mesh, view, name, "render_perspective")
     centre = (P.min(axis=0) + P.max(axis=0)) / 2
@@ -1134,7 +1195,7 @@ def quantize(normals, bits: int) -> np.ndarray:
 
     if bits not in (8, 16):
         raise ValueError(f"`bits` must be 8 or 16; got {bits!r}")
-    n = _check_normals(normals)
+    n = _check_normals(normals, unit=False)
     top = 2**bits - 1
     finite = np.isfinite(n).all(axis=-1)
     with np.errstate(invalid="ignore"):
@@ -1168,8 +1229,7 @@ def jump_edges(gt: GroundTruth, *, tol: float = 0.5,
     down : (H-1, W) bool
         Jump between pixel (r, c) and (r+1, c).
     """
-    if not (tol >= 0):
-        raise ValueError(f"`tol` must be >= 0; got {tol!r}")
+    tol = _real(tol, "tol", 0)
     if geometric:  # (a render's own, from its geometry)
         if gt.jump_sizes is None:
             raise ValueError(f"jump_edges(geometric=True): {gt.name or 'the ground truth'} "
@@ -1212,8 +1272,7 @@ def depth_jumps(gt: GroundTruth, *, tol: float = 0.5) -> np.ndarray:
     (H, W) bool
         Mask pixels with at least one such neighbour.
     """
-    if not (tol >= 0):
-        raise ValueError(f"`tol` must be >= 0; got {tol!r}")
+    tol = _real(tol, "tol", 0)
     # (in the camera's unknown and footprints, as jump_edges: with orthographic slopes in
     # pixel-size units a perspective render in mm had 4,066 of a sphere's 4,664 pixels
     # flagged, and continuous_region kept 598, an audit)
@@ -1263,11 +1322,56 @@ def continuous_region(gt: GroundTruth, *, tol: float = 0.5) -> GroundTruth:
 # perturbations
 
 
-def _check_normals(normals) -> np.ndarray:
-    n = np.asarray(normals, dtype=float)
+#: How far from unit length a normal may be and still be taken as it is by the perturbations
+#: (others are scaled to unit length first: their rotations assume unit vectors).
+UNIT_TOL = 1e-6
+
+
+def _check_normals(normals, unit: bool = True) -> np.ndarray:
+    """`normals` (..., 3) as floats, as :func:`facetlift.integrate` reads them: a uint8 /
+    uint16 map decoded (``v / max * 2 - 1``, with the reader's warning; its raw codes were
+    perturbed as vectors, an audit), signed integers and flags refused. With `unit`, a finite
+    row further than :data:`UNIT_TOL` from unit length is scaled to it and a zero-length one
+    set to NaN (a missing sample): the rotations assume unit vectors (a map scaled by 2 was
+    turned by half the angle asked, and ``perturb_fraction`` recorded angles it did not
+    apply)."""
+    from .frames import as_float_normals
+
+    a = np.asarray(normals)
+    if a.dtype.kind == "u" and a.ndim >= 1 and a.shape[-1] == 3:
+        a = as_float_normals(a, "normals")
+    elif a.dtype.kind in "ib":
+        raise ValueError(f"`normals` holds {a.dtype} values: pass float normals (uint8 / uint16 "
+                         "maps are decoded as v / max * 2 - 1, as integrate decodes them)")
+    try:
+        n = np.asarray(a, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"`normals` must be an array of numbers; got {a.dtype} values") from None
     if n.ndim < 1 or n.shape[-1] != 3:
         raise ValueError(f"`normals` must have shape (..., 3); got {n.shape}")
+    if unit:
+        length = np.linalg.norm(n, axis=-1, keepdims=True)
+        off = np.isfinite(length) & (np.abs(length - 1.0) > UNIT_TOL)
+        if off.any():
+            with np.errstate(invalid="ignore", divide="ignore"):
+                n = np.where(off, np.where(length > 0, n / length, np.nan), n)
     return n
+
+
+def _real(value, name: str, low=None, high=None, *, open_low: bool = False) -> float:
+    """`value` as a float, refused by `name` unless a finite real number within the bounds."""
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
+        value, (bool, np.bool_)) and bool(np.isfinite(value))
+    if ok and low is not None:
+        ok = value > low if open_low else value >= low
+    if ok and high is not None:
+        ok = value <= high
+    if not ok:
+        where = ("" if low is None and high is None else
+                 f" {'>' if open_low else '>='} {low}" if high is None else
+                 f" in {'(' if open_low else '['}{low}, {high}]")
+        raise ValueError(f"`{name}` must be a finite number{where}; got {value!r}")
+    return float(value)
 
 
 def _check_map(normals) -> np.ndarray:
@@ -1278,7 +1382,13 @@ def _check_map(normals) -> np.ndarray:
 
 
 def _rng(rng):
-    return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+    if isinstance(rng, np.random.Generator):
+        return rng
+    try:
+        return np.random.default_rng(rng)
+    except (TypeError, ValueError):
+        raise ValueError("`rng` must be a numpy.random.Generator, a seed (an integer >= 0) or "
+                         f"None; got {rng!r}") from None
 
 
 def _rotate(n, angles, rng, keep_front):
@@ -1296,9 +1406,11 @@ def add_angular_noise(normals, sigma_deg: float, rng=None, *, keep_front: bool =
     Parameters
     ----------
     normals : (..., 3) array_like
-        Unit normals; NaN rows stay NaN.
+        Unit normals (others are scaled to unit length, a zero-length one becomes NaN;
+        uint8 / uint16 codes are decoded as ``integrate`` decodes them); NaN rows stay NaN.
     sigma_deg : float
-        Standard deviation of the rotation angle in degrees (the paper uses 5).
+        Standard deviation of the rotation angle in degrees (the paper uses 5), at most 30:
+        beyond, angles past 90 degrees are common and the distribution below no longer holds.
     rng : numpy.random.Generator or seed
     keep_front : bool
         Where a rotation would turn a front-facing normal away from the viewer (``n_z <= 0``),
@@ -1310,8 +1422,7 @@ def add_angular_noise(normals, sigma_deg: float, rng=None, *, keep_front: bool =
         The noisy normals; the angle to the input is ``|N(0, sigma)|`` per normal.
     """
     n = _check_normals(normals)
-    if not (np.isfinite(sigma_deg) and sigma_deg >= 0):
-        raise ValueError(f"`sigma_deg` must be a finite number >= 0; got {sigma_deg!r}")
+    sigma_deg = _real(sigma_deg, "sigma_deg", 0, 30)
     rng = _rng(rng)
     flat = n.reshape(-1, 3).copy()
     ok = np.isfinite(flat).all(axis=1)
@@ -1334,7 +1445,7 @@ def add_smooth_noise(normals, sigma_deg: float, rng=None, *, length: float = 8.0
     Parameters
     ----------
     normals : (H, W, 3) array_like
-        Unit normals; NaN rows stay NaN.
+        Unit normals (as in :func:`add_angular_noise`); NaN rows stay NaN.
     sigma_deg : float
         Root mean square rotation angle in degrees, at most 30 (single angles reach about
         three times the RMS).
@@ -1353,10 +1464,8 @@ def add_smooth_noise(normals, sigma_deg: float, rng=None, *, length: float = 8.0
     from scipy.ndimage import gaussian_filter
 
     n = _check_map(normals)
-    if not (np.isfinite(sigma_deg) and 0 <= sigma_deg <= 30):
-        raise ValueError(f"`sigma_deg` must be a number in [0, 30]; got {sigma_deg!r}")
-    if not (np.isfinite(length) and length > 0):
-        raise ValueError(f"`length` must be a finite number of pixels > 0; got {length!r}")
+    sigma_deg = _real(sigma_deg, "sigma_deg", 0, 30)
+    length = _real(length, "length", 0, open_low=True)
     rng = _rng(rng)
     field = np.zeros(n.shape)
     for i in range(2):
@@ -1504,8 +1613,7 @@ def _turn(v, side, angle, keep_front):
 
 
 def _pick(ok: np.ndarray, fraction: float, rng) -> np.ndarray:
-    if not (0 <= fraction <= 1):
-        raise ValueError(f"`fraction` must be in [0, 1]; got {fraction!r}")
+    fraction = _real(fraction, "fraction", 0, 1)
     idx = np.nonzero(ok)[0]
     k = int(round(fraction * idx.size))
     chosen = np.zeros(ok.size, bool)
@@ -1521,7 +1629,7 @@ def perturb_fraction(
     Parameters
     ----------
     normals : (H, W, 3) array_like
-        Unit normals; NaN samples are never chosen.
+        Unit normals (as in :func:`add_angular_noise`); NaN samples are never chosen.
     fraction : float
         In [0, 1]; ``round(fraction * number of finite samples)`` are perturbed.
     max_deg : float
@@ -1540,8 +1648,7 @@ def perturb_fraction(
         The rotation angle in degrees (0 where not perturbed, NaN where the input is NaN).
     """
     n = _check_normals(normals)
-    if not (np.isfinite(max_deg) and 0 <= max_deg <= 90):
-        raise ValueError(f"`max_deg` must be in [0, 90]; got {max_deg!r}")
+    max_deg = _real(max_deg, "max_deg", 0, 90)
     rng = _rng(rng)
     flat = n.reshape(-1, 3).copy()
     ok = np.isfinite(flat).all(axis=1)
@@ -1563,7 +1670,7 @@ def remove_samples(normals, fraction: float, rng=None):
         A copy with NaN rows at the removed samples.
     removed : (...) bool
     """
-    n = _check_normals(normals)
+    n = _check_normals(normals, unit=False)
     rng = _rng(rng)
     flat = n.reshape(-1, 3).copy()
     ok = np.isfinite(flat).all(axis=1)
