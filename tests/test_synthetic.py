@@ -701,3 +701,19 @@ def test_scene_builders_check_their_arguments(tmp_path):
         with pytest.raises(ValueError, match=message):
             call()
     assert synthetic.render_perspective(box, None, 32, samples=2.0).mask.any()
+
+
+def test_flags_and_masks_of_the_renders_and_filters():
+    """`jumps='no'` ran the jump search (a string is true) and a float mask of 0.5 was cast
+    to all True: both are named."""
+    box = trimesh.creation.box(extents=(0.4, 0.3, 0.2))
+    with pytest.raises(ValueError, match="`jumps` must be True or False"):
+        render_mesh(box, 24, jumps="no")
+    with pytest.raises(ValueError, match="`jumps` must be True or False"):
+        synthetic.render_perspective(box, None, 24, jumps="no")
+    n = analytic("sphere", 16).normals
+    with pytest.raises(ValueError, match="`mask` must be a bool"):
+        synthetic.blur_normals(n, 1.0, mask=np.full((16, 16), 0.5))
+    ones = np.isfinite(n).all(axis=-1).astype(np.uint8)
+    np.testing.assert_array_equal(synthetic.resample_normals(n, 2, mask=ones),
+                                  synthetic.resample_normals(n, 2, mask=ones.astype(bool)))

@@ -1019,6 +1019,8 @@ def render_mesh(
     depth, normals = cast(rows.ravel(), cols.ravel())
     gt = _hits(depth.reshape(H, W), normals.reshape(H, W, 3),
                np.isfinite(depth.reshape(H, W)), pixel_size=h, name=label)
+    if not isinstance(jumps, (bool, np.bool_)):  # ('no' is true: the search ran, an audit)
+        raise ValueError(f"`jumps` must be True or False; got {jumps!r}")
     if jumps:
         gt.jump_sizes = _jump_sizes(lambda r, c: cast(r, c)[0], gt.camera, gt.mask)
     return gt
@@ -1157,6 +1159,8 @@ def render_perspective(
         normals = _supersampled_normals(cam_mesh, K, H, W, int(samples))
     gt = _hits(depth, normals, np.isfinite(depth) & np.isfinite(normals).all(-1), name=label,
                K=K)
+    if not isinstance(jumps, (bool, np.bool_)):  # ('no' is true: the search ran, an audit)
+        raise ValueError(f"`jumps` must be True or False; got {jumps!r}")
     if jumps:
         gt.jump_sizes = _jump_sizes(lambda r, c: cast(r, c)[0], gt.camera, gt.mask)
     return gt
@@ -1533,7 +1537,12 @@ def _filtered_pixels(n: np.ndarray, mask) -> np.ndarray:
     its shape is not the map's)."""
     ok = np.isfinite(n).all(axis=-1)
     if mask is not None:
-        mask = np.asarray(mask, dtype=bool)
+        raw = np.asarray(mask)
+        if raw.dtype != bool and not (raw.dtype.kind in "iuf" and np.isin(raw, (0, 1)).all()):
+            # (0.5 everywhere was cast to all True without a word, an audit)
+            raise ValueError(f"`mask` must be a bool (or 0 / 1) array; got {raw.dtype} values "
+                             "other than 0 and 1")
+        mask = raw.astype(bool)
         if mask.shape != n.shape[:2]:
             raise ValueError(f"`mask` must have shape {n.shape[:2]}; got {mask.shape}")
         ok &= mask
