@@ -611,7 +611,7 @@ def test_render_jumps_come_from_the_geometry():
 
 def test_perturbations_read_normals_as_integrate_does():
     """A uint8 map is decoded as integrate decodes it (its raw codes were rotated as vectors:
-    0.577 normalised error after 1 degree of noise), signed integers are refused, and normals
+    0.577 normalised error after 1 degree of noise), signed integers are numbers, and normals
     off unit length are scaled first (a map times 2 was turned by half the angle asked and
     perturb_fraction recorded angles it had not applied); a zero vector becomes missing."""
     from facetlift.frames import FrameWarning
@@ -624,8 +624,8 @@ def test_perturbations_read_normals_as_integrate_does():
     assert np.nanmax(_angle(same, n)[gt.mask]) < 0.5  # (8-bit rounding)
     with pytest.warns(FrameWarning):
         assert np.isfinite(synthetic.quantize(codes, 8)).all()
-    with pytest.raises(ValueError, match="`normals` holds int16 values"):
-        add_angular_noise(codes.astype(np.int16), 1.0, 0)
+    up = add_angular_noise(np.array([[0, 0, 1]]), 1.0, 0)  # (integers as numbers, as before)
+    assert abs(_angle(up, np.array([0.0, 0.0, 1.0]))[0] - 1.0) < 1.0
     a = add_angular_noise(n, 5.0, np.random.default_rng(3))
     b = add_angular_noise(2.0 * n, 5.0, np.random.default_rng(3))
     np.testing.assert_allclose(b[gt.mask], a[gt.mask], atol=1e-12)
@@ -677,6 +677,8 @@ def test_scene_builders_check_their_arguments(tmp_path):
         (lambda: synthetic.room([box], radius=(0, 0)), "`radius` must be a finite number > 0"),
         (lambda: synthetic.room([box], boxes=1.5), "`boxes` must be an integer >= 0"),
         (lambda: synthetic.room([box], seed=None), "`seed` must be an integer >= 0"),
+        (lambda: synthetic.tabletop([box], seed=-1), "`seed` must be a numpy.random.Generator"),
+        (lambda: synthetic.room([box], size=np.array(0.0)), "`size` must be a finite number"),
         (lambda: synthetic.room_view("a"), "`seed` must be an integer >= 0"),
         (lambda: synthetic.room_view(1.5), "`seed` must be an integer >= 0"),
         (lambda: render_mesh(trimesh.Trimesh(), 32), "`mesh` holds no triangles"),
@@ -701,6 +703,7 @@ def test_scene_builders_check_their_arguments(tmp_path):
         with pytest.raises(ValueError, match=message):
             call()
     assert synthetic.render_perspective(box, None, 32, samples=2.0).mask.any()
+    assert synthetic.room([box], size=np.array(4.0), seed=2).faces.size  # (a 0-d array: a number)
 
 
 def test_flags_and_masks_of_the_renders_and_filters():

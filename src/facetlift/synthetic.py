@@ -445,7 +445,7 @@ def tabletop(meshes, *, seed: int = 0, spacing: float = 0.9, behind=(0.1, 0.6),
     Parameters
     ----------
     meshes : sequence of trimesh.Trimesh or paths
-    seed : int
+    seed : int or numpy.random.Generator
         Seeds the turns, the jitter along x and the gaps behind.
     spacing, behind, margin : float, (float, float), float
         In units of the objects' radius (1 after the scaling).
@@ -501,7 +501,7 @@ def _tabletop_parts(meshes, seed, spacing, behind, margin):
     spacing = _real(spacing, "spacing", 0, open_low=True)
     behind = _pair(behind, "behind", 0)
     margin = _real(margin, "margin", 0)
-    rng = _rng(seed)
+    rng = _rng(seed, "seed")
     parts = []
     k = len(meshes)
     for i, mesh in enumerate(meshes):
@@ -1332,9 +1332,9 @@ UNIT_TOL = 1e-6
 
 
 def _check_normals(normals, unit: bool = True) -> np.ndarray:
-    """`normals` (..., 3) as floats, as :func:`facetlift.integrate` reads them: a uint8 /
-    uint16 map decoded (``v / max * 2 - 1``, with the reader's warning; its raw codes were
-    perturbed as vectors, an audit), signed integers and flags refused. With `unit`, a finite
+    """`normals` (..., 3) as floats: a uint8 / uint16 map decoded as :func:`facetlift.integrate`
+    decodes it (``v / max * 2 - 1``, with the reader's warning; its raw codes were perturbed
+    as vectors, an audit), other numbers taken as they are. With `unit`, a finite
     row further than :data:`UNIT_TOL` from unit length is scaled to it and a zero-length one
     set to NaN (a missing sample): the rotations assume unit vectors (a map scaled by 2 was
     turned by half the angle asked, and ``perturb_fraction`` recorded angles it did not
@@ -1344,9 +1344,6 @@ def _check_normals(normals, unit: bool = True) -> np.ndarray:
     a = np.asarray(normals)
     if a.dtype.kind == "u" and a.ndim >= 1 and a.shape[-1] == 3:
         a = as_float_normals(a, "normals")
-    elif a.dtype.kind in "ib":
-        raise ValueError(f"`normals` holds {a.dtype} values: pass float normals (uint8 / uint16 "
-                         "maps are decoded as v / max * 2 - 1, as integrate decodes them)")
     try:
         n = np.asarray(a, dtype=float)
     except (TypeError, ValueError):
@@ -1363,9 +1360,14 @@ def _check_normals(normals, unit: bool = True) -> np.ndarray:
 
 
 def _real(value, name: str, low=None, high=None, *, open_low: bool = False) -> float:
-    """`value` as a float, refused by `name` unless a finite real number within the bounds."""
-    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
-        value, (bool, np.bool_)) and bool(np.isfinite(value))
+    """`value` as a float, refused by `name` unless a finite real number within the bounds
+    (a 0-d array is its number)."""
+    import numbers
+
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value.item()
+    ok = isinstance(value, (numbers.Real, np.integer, np.floating)) and not isinstance(
+        value, (bool, np.bool_)) and bool(np.isfinite(float(value)))
     if ok and low is not None:
         ok = value > low if open_low else value >= low
     if ok and high is not None:
@@ -1385,14 +1387,14 @@ def _check_map(normals) -> np.ndarray:
     return n
 
 
-def _rng(rng):
+def _rng(rng, name: str = "rng"):
     if isinstance(rng, np.random.Generator):
         return rng
     try:
         return np.random.default_rng(rng)
     except (TypeError, ValueError):
-        raise ValueError("`rng` must be a numpy.random.Generator, a seed (an integer >= 0) or "
-                         f"None; got {rng!r}") from None
+        raise ValueError(f"`{name}` must be a numpy.random.Generator, a seed (an integer >= 0) "
+                         f"or None; got {rng!r}") from None
 
 
 def _rotate(n, angles, rng, keep_front):
@@ -1505,9 +1507,12 @@ def blur_normals(normals, sigma: float, mask=None):
     Parameters
     ----------
     normals : (H, W, 3) array_like
-        Unit normals; NaN rows stay NaN and give no weight.
+        Unit normals (others are scaled to unit length first; a zero-length one is a missing
+        sample, as NaN; uint8 / uint16 codes are decoded as ``integrate`` decodes them); NaN
+        rows stay NaN and give no weight.
     sigma : float
-        Standard deviation of the Gaussian in pixels (>= 0; 0 returns a copy).
+        Standard deviation of the Gaussian in pixels (>= 0; 0 returns a copy, scaled to unit
+        length where the input was not).
     mask : (H, W) bool, optional
         The pixels that are blurred and give weight (default: the finite normals).
 
@@ -1576,7 +1581,7 @@ def resample_normals(normals, factor: int, mask=None):
     Parameters
     ----------
     normals : (H, W, 3) array_like
-        Unit normals.
+        Unit normals (read as by :func:`blur_normals`).
     factor : int
         The resolution's reduction (>= 1; 1 returns a copy).
     mask : (H, W) bool, optional

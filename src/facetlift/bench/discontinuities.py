@@ -464,7 +464,14 @@ def oracle(gt, normals, geometric: bool = False, *, cuts=None,
         except Exception as e:  # (the rule then decides the sides from the arbitrary start)
             log.info("true placement failed on %s: %s", gt.name, e)
             move = None
-        first = move if sides is None else moves(np.asarray(sides, float))
+        if sides is not None:
+            sides = np.asarray(sides, float)
+            if sides.shape != gt.mask.shape:
+                raise ValueError(f"oracle: `sides` must be a depth map of the scene's shape "
+                                 f"{gt.mask.shape}; got {sides.shape}")
+            if not np.isfinite(sides[gt.mask]).any():
+                raise ValueError("oracle: `sides` has no finite depth inside the mask")
+        first = move if sides is None else moves(sides)
         start = z if first is None else z + first[mesh.piece]
         # (the route's rule, line pieces included: SMALL_PIECE; every pair closed, as with a
         # prior: split.TOUCH would keep far pairs at their true places)
