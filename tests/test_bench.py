@@ -413,7 +413,7 @@ def test_room_scenes_take_every_mesh_in_turn(tmp_path):
     assert not [g for g, _, _ in D.scenes(ctx) if g == "room"]
 
 
-def test_a_tabletop_scene_renders(tmp_path):
+def test_a_tabletop_scene_renders(tmp_path, monkeypatch):
     """The tabletop group's loader renders its scene with the benchmark's pinhole camera (two
     small meshes, a small image) and caches it."""
     import trimesh
@@ -421,6 +421,7 @@ def test_a_tabletop_scene_renders(tmp_path):
     from facetlift.bench import discontinuities as D
     from facetlift.bench.core import Context, Settings
 
+    monkeypatch.delenv("FACETLIFT_BENCH_CACHE", raising=False)  # (the cache under out/)
     data = tmp_path / "data"
     (data / "meshes").mkdir(parents=True)
     trimesh.creation.icosphere(subdivisions=3).export(data / "meshes" / "ball.ply")
@@ -437,7 +438,7 @@ def test_a_tabletop_scene_renders(tmp_path):
     assert list((tmp_path / "out" / "cache").glob("table2_0_ball+box@table0_*.npz"))
 
 
-def test_a_vessel_scene_renders_with_the_jump_at_its_rim(tmp_path):
+def test_a_vessel_scene_renders_with_the_jump_at_its_rim(tmp_path, monkeypatch):
     """The vessel group's loader renders an open cup seen from 40 degrees above with the
     benchmark's pinhole camera (no mesh of the data folder needed) and caches it: the front of
     the rim hides part of the inside, a depth jump."""
@@ -445,6 +446,7 @@ def test_a_vessel_scene_renders_with_the_jump_at_its_rim(tmp_path):
     from facetlift.bench import discontinuities as D
     from facetlift.bench.core import Context, Settings
 
+    monkeypatch.delenv("FACETLIFT_BENCH_CACHE", raising=False)  # (the cache under out/)
     settings = Settings(disc_tabletop=0, disc_resolution=(96, 112), disc_samples=1,
                         disc_views=(), disc_wide_views=(), disc_ortho_views=(), disc_analytic=(),
                         disc_vessels=("cup",), disc_vessel_elevations=(40.0,))
