@@ -1517,3 +1517,38 @@ def test_steep_planar_caps_planes_more_than_a_silhouette_s_band_and_never_clean_
     bx, by, target = dgp.targets(problem)
     assert disc.steep_planar(problem.domain, problem.normals, target, bx, by,
                              problem.camera.footprint(), normal_noise(problem)) is None
+
+
+def test_pieces_are_numbered_by_size_and_tinted_in_the_jump_map(tmp_path, monkeypatch):
+    """Surface.pieces labels the mesh's pieces, largest first (what the cuts separate:
+    where each lies against the others the normals do not say), and the discontinuity map
+    tints every piece but the largest, so that a user sees where a depth sample would decide
+    a place (the plane of the test above, loose without its steep-plane cap)."""
+    from facetlift import io
+
+    H, W = 48, 64
+    n, _ = _tilted(H, W, lambda c: np.full_like(c, 0.15), 3.0)
+    mask = np.ones((H, W), bool)
+    monkeypatch.setattr(disc, "STEEP_TAU", 0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        s = facetlift.integrate(n, mask, discontinuities=True)
+    lab = s.pieces()
+    sizes = np.bincount(lab[mask])
+    assert lab.shape == mask.shape and sizes.size == s.info["mesh_pieces"] > 5
+    assert (np.diff(sizes) <= 0).all()  # (largest first)
+    # (a piece's facets share corners of the split mesh; none across a cut)
+    right, down = s.cuts
+    assert ((lab[:, :-1] == lab[:, 1:]) | right).all() and ((lab[:-1] == lab[1:]) | down).all()
+    path = io.write_discontinuities(tmp_path / "jumps.png", s, min_size=0)
+    import imagecodecs
+
+    img = imagecodecs.png_decode(path.read_bytes())[..., :3].astype(int)
+    cut = s.discontinuities > 0
+    grey = (img[..., 0] == img[..., 1]) & (img[..., 1] == img[..., 2])
+    assert grey[(lab == 0) & ~cut].all()
+    assert not grey[(lab > 0) & ~cut].any()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        unsplit = facetlift.integrate(n, mask)
+    np.testing.assert_array_equal(unsplit.pieces(), np.zeros((H, W), int))

@@ -524,3 +524,18 @@ def test_a_name_that_looks_like_a_cli_output_is_warned_about(tmp_path, name, wri
         warnings.simplefilter("error")
         s.save(tmp_path / "mesh.ply")
         s.save(tmp_path / "preview.png")
+
+
+def test_pieces_of_a_surface_without_cuts_are_its_mask_components():
+    """Facets sharing a corner are one piece (a diagonal touch joins, as the mesh's shared
+    vertex does); apart, the larger is piece 0; outside the mask -1."""
+    mask = np.zeros((6, 9), bool)
+    mask[0:2, 0:2] = True  # 4 facets
+    mask[2, 2] = True  # touches the first at a corner only: the same piece
+    mask[3:6, 5:9] = True  # 12 facets, apart
+    s = facetlift.Surface(np.where(mask, 1.0, np.nan), np.ones((7, 10)), mask)
+    lab = s.pieces()
+    assert (lab[~mask] == -1).all()
+    assert (lab[3:6, 5:9] == 0).all() and (lab[0:2, 0:2] == 1).all() and lab[2, 2] == 1
+    empty = facetlift.Surface(np.full((3, 3), np.nan), np.ones((4, 4)), np.zeros((3, 3), bool))
+    assert (empty.pieces() == -1).all()

@@ -33,8 +33,6 @@ differences are smaller than a sharp surface's, which made its scale 1.5-3x too 
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 #: The values of ``prior_fit``.
 KINDS = ("none", "scale", "affine", "disparity")
@@ -112,22 +110,9 @@ def check(value, has_prior: bool, perspective: bool) -> str:
 
 def pieces(surface) -> np.ndarray:
     """(H, W) int: the connected piece of every mask pixel of `surface` (-1 outside): facets
-    sharing a corner vertex (of the split mesh where the surface is cut at jumps)."""
-    mask = surface.mask
-    if surface.split is not None:
-        corners = surface.split[0]
-    else:
-        from .domain import Domain
-
-        corners = Domain.from_mask(mask).corners
-    m = corners.shape[0]
-    n = int(corners.max()) + 1 if m else 0
-    rows = np.repeat(np.arange(m), 4)
-    A = sp.csr_matrix((np.ones(4 * m), (rows, corners.ravel())), shape=(m, n))
-    _, lab = connected_components(A @ A.T, directed=False)
-    out = np.full(mask.shape, -1, dtype=np.int64)
-    out[mask] = lab
-    return out
+    sharing a corner vertex (of the split mesh where the surface is cut at jumps);
+    :meth:`facetlift.Surface.pieces`."""
+    return surface.pieces()
 
 
 def fit(prior_img: np.ndarray, weight, surface, kind: str, perspective: bool,

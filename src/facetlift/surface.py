@@ -9,6 +9,7 @@ import numpy as np
 from . import frames
 from .camera import Camera, make_camera
 from .domain import Domain
+from .operators.split import _pieces
 
 
 class Surface:
@@ -231,6 +232,34 @@ class Surface:
                 f"facets (the first at vertex ({i}, {j})): no mesh or vertex points of it; "
                 "narrow `mask` to the facets whose four corners have a depth")
         return np.nonzero(vm)
+
+    def pieces(self) -> np.ndarray:
+        """(H, W) int: the mesh piece of every pixel of the mask, -1 outside it; 0 is the
+        largest piece, 1 the next largest, and so on (ties by their first pixel, row-major).
+
+        A piece is what the mesh (:meth:`to_mesh`) holds together: facets sharing a corner,
+        and with depth jumps (:attr:`cuts`) not across a cut, so a cut that closes around a
+        part makes it a piece of its own. Normals fix a piece's shape but not where it lies
+        against the others (one depth offset per piece, a scale with a camera): those the
+        occlusion rule or the solve chose (docs/perspective.md, "Separated pieces"), which a
+        depth sample on the piece decides instead (docs/fusion.md). Without cuts the pieces
+        are the mask's components (8-connected).
+        """
+        r, c = np.nonzero(self.mask)
+        out = np.full(self.mask.shape, -1, dtype=np.int64)
+        if r.size == 0:
+            return out
+        corners = np.asarray(self.split[0] if self.split is not None
+                             else Domain.from_mask(self.mask).corners)
+        labels, _ = _pieces(corners, int(corners.max()) + 1)  # (of the vertices)
+        labels = labels[corners[:, 0]]  # (a facet's corners are one piece)
+        _, first, piece = np.unique(labels, return_index=True, return_inverse=True)
+        sizes = np.bincount(piece)
+        order = np.lexsort((first, -sizes))  # (largest first; ties by the first pixel)
+        rank = np.empty_like(order)
+        rank[order] = np.arange(order.size)
+        out[r, c] = rank[piece]
+        return out
 
     def to_mesh(self, triangles: bool = False, frame=None) -> tuple[np.ndarray, np.ndarray]:
         """The facet mesh: vertices (n, 3) and faces (m, 4) quads or (2m, 3) triangles

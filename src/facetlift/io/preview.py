@@ -168,12 +168,24 @@ def write_preview(
     return p
 
 
+#: Tints of the pieces after the largest in :func:`write_discontinuities` (RGB, in turn; no
+#: red, the cuts' colour).
+PIECE_TINTS = np.array([(60, 120, 230), (40, 170, 90), (170, 80, 210), (0, 170, 175),
+                        (225, 165, 0), (130, 130, 40), (235, 110, 180), (90, 90, 160)])
+#: Share of a tinted piece's colour that is its tint (the rest its grey shading).
+PIECE_TINT = 0.55
+
+
 def write_discontinuities(path, surface, *, min_size: int = 256) -> Path:
     """Write a PNG of where the surface is cut by depth jumps.
 
     The surface is shaded in grey (:func:`shade`) and every pixel next to a cut edge
     (:attr:`facetlift.Surface.cuts`) is drawn in red, brighter for a larger jump (relative to
-    the largest); white outside the mask. No matplotlib needed.
+    the largest); white outside the mask. Where the cuts (or the mask) leave the mesh in
+    several pieces (:meth:`facetlift.Surface.pieces`), every piece but the largest is tinted
+    in a colour of :data:`PIECE_TINTS`, in turn from the next largest: where such a piece
+    lies against the others the normals do not say (docs/perspective.md, "Separated
+    pieces"), and one depth sample on it decides it (docs/fusion.md). No matplotlib needed.
 
     Raises
     ------
@@ -204,6 +216,12 @@ def write_discontinuities(path, surface, *, min_size: int = 256) -> Path:
     inside = surface.mask
     grey = np.round(200 * np.nan_to_num(s[inside]) + 30).astype(np.uint8)
     img[inside] = grey[:, None]
+    pieces = surface.pieces()
+    other = pieces > 0
+    if other.any():  # (the largest stays grey)
+        tint = PIECE_TINTS[(pieces[other] - 1) % len(PIECE_TINTS)]
+        g = img[other].astype(float)
+        img[other] = np.round((1.0 - PIECE_TINT) * g + PIECE_TINT * tint).astype(np.uint8)
     cut = inside & (np.nan_to_num(jumps) > 0)
     if cut.any():
         rel = jumps[cut] / np.nanmax(jumps[cut])

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from ..domain import Domain
 
@@ -150,8 +151,6 @@ def split(domain: Domain, right=None, down=None) -> SplitMesh:
 def _pieces(corners: np.ndarray, n: int) -> tuple[np.ndarray, int]:
     """Connected pieces of the split vertices, joined by the facets (each facet's corners
     chained by three edges: a third of the entries of the incidence product ``C^T C``)."""
-    from scipy.sparse.csgraph import connected_components
-
     m = corners.shape[0]
     graph = sp.csr_matrix((np.ones(3 * m, np.int8), (corners[:, :3].ravel(),
                                                      corners[:, 1:].ravel())), shape=(n, n))
