@@ -980,9 +980,8 @@ def render_mesh(
     """
     H, W = _size(resolution, "resolution")
     margin = _real(margin, "margin", 0, 0.45)
-    h = float(pixel_size)
-    if not (np.isfinite(h) and h > 0):
-        raise ValueError(f"`pixel_size` must be a positive number; got {pixel_size!r}")
+    h = _real(pixel_size, "pixel_size", 0, open_low=True)
+    _flag(jumps, "jumps")
     label, m, frame, P = _mesh_in_view(mesh, view, name)
     lo, hi = P.min(axis=0), P.max(axis=0)
     ext = hi - lo
@@ -1019,8 +1018,6 @@ def render_mesh(
     depth, normals = cast(rows.ravel(), cols.ravel())
     gt = _hits(depth.reshape(H, W), normals.reshape(H, W, 3),
                np.isfinite(depth.reshape(H, W)), pixel_size=h, name=label)
-    if not isinstance(jumps, (bool, np.bool_)):  # ('no' is true: the search ran, an audit)
-        raise ValueError(f"`jumps` must be True or False; got {jumps!r}")
     if jumps:
         gt.jump_sizes = _jump_sizes(lambda r, c: cast(r, c)[0], gt.camera, gt.mask)
     return gt
@@ -1110,6 +1107,7 @@ def render_perspective(
             K[1, 1] *= W / 612
             K[1, 2] *= H / 512
     K = check_K(K)
+    _flag(jumps, "jumps")
     distance = _real(distance, "distance", 0, open_low=True)
     fill = _real(fill, "fill", 0, 4, open_low=True)
     if (isinstance(samples, (bool, np.bool_))
@@ -1159,8 +1157,6 @@ def render_perspective(
         normals = _supersampled_normals(cam_mesh, K, H, W, int(samples))
     gt = _hits(depth, normals, np.isfinite(depth) & np.isfinite(normals).all(-1), name=label,
                K=K)
-    if not isinstance(jumps, (bool, np.bool_)):  # ('no' is true: the search ran, an audit)
-        raise ValueError(f"`jumps` must be True or False; got {jumps!r}")
     if jumps:
         gt.jump_sizes = _jump_sizes(lambda r, c: cast(r, c)[0], gt.camera, gt.mask)
     return gt
@@ -1378,6 +1374,11 @@ def _real(value, name: str, low=None, high=None, *, open_low: bool = False) -> f
                  f" in {'(' if open_low else '['}{low}, {high}]")
         raise ValueError(f"`{name}` must be a finite number{where}; got {value!r}")
     return float(value)
+
+
+def _flag(value, name: str) -> None:
+    if not isinstance(value, (bool, np.bool_)):  # ('no' is true: the jump search ran, an audit)
+        raise ValueError(f"`{name}` must be True or False; got {value!r}")
 
 
 def _check_map(normals) -> np.ndarray:
