@@ -5,11 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage
 
 from . import frames
 from .camera import Camera, make_camera
 from .domain import Domain
 from .operators.split import _pieces
+from .operators.split import split as split_mesh
 
 
 class Surface:
@@ -249,10 +251,18 @@ class Surface:
         out = np.full(self.mask.shape, -1, dtype=np.int64)
         if r.size == 0:
             return out
-        corners = np.asarray(self.split[0] if self.split is not None
-                             else Domain.from_mask(self.mask).corners)
-        labels, _ = _pieces(corners, int(corners.max()) + 1)  # (of the vertices)
-        labels = labels[corners[:, 0]]  # (a facet's corners are one piece)
+        split = self.split
+        if split is not None and np.shape(split[0])[0] != r.size:
+            split = None  # (a mask changed after the solve: the split's facets are not its own)
+        if split is None and self.cuts is None:  # (the mask's 8-connected components)
+            labels = ndimage.label(self.mask, structure=np.ones((3, 3), bool))[0][r, c]
+        else:
+            if split is not None:
+                corners = np.asarray(split[0])
+            else:  # (the cuts on this mask: a surface saved without its split mesh)
+                corners = split_mesh(Domain.from_mask(self.mask), *self.cuts).corners
+            labels, _ = _pieces(corners, int(corners.max()) + 1)  # (of the vertices)
+            labels = labels[corners[:, 0]]  # (a facet's corners are one piece)
         _, first, piece = np.unique(labels, return_index=True, return_inverse=True)
         sizes = np.bincount(piece)
         order = np.lexsort((first, -sizes))  # (largest first; ties by the first pixel)

@@ -168,10 +168,10 @@ def write_preview(
     return p
 
 
-#: Tints of the pieces after the largest in :func:`write_discontinuities` (RGB, in turn; no
-#: red, the cuts' colour).
+#: Tints of the pieces after the largest in :func:`write_discontinuities` (RGB, in turn,
+#: repeated from the ninth piece on; no red, the cuts' colour).
 PIECE_TINTS = np.array([(60, 120, 230), (40, 170, 90), (170, 80, 210), (0, 170, 175),
-                        (225, 165, 0), (130, 130, 40), (235, 110, 180), (90, 90, 160)])
+                        (225, 165, 0), (130, 130, 40), (235, 110, 180), (120, 210, 240)])
 #: Share of a tinted piece's colour that is its tint (the rest its grey shading).
 PIECE_TINT = 0.55
 
@@ -183,7 +183,8 @@ def write_discontinuities(path, surface, *, min_size: int = 256) -> Path:
     (:attr:`facetlift.Surface.cuts`) is drawn in red, brighter for a larger jump (relative to
     the largest); white outside the mask. Where the cuts (or the mask) leave the mesh in
     several pieces (:meth:`facetlift.Surface.pieces`), every piece but the largest is tinted
-    in a colour of :data:`PIECE_TINTS`, in turn from the next largest: where such a piece
+    in a colour of :data:`PIECE_TINTS`, in turn from the next largest (the eight repeat from
+    the ninth piece on): where such a piece
     lies against the others the normals do not say (docs/perspective.md, "Separated
     pieces"), and one depth sample on it decides it (docs/fusion.md). No matplotlib needed.
 
