@@ -1179,8 +1179,12 @@ def test_summary_says_when_the_mesh_is_in_pieces(tmp_path, capsys):
     args = ("integrate", str(tmp_path / "n.npy"), "--mask", str(_all_mask(tmp_path, (48, 48))))
     code, out, _ = run(capsys, *args, "-o", str(tmp_path / "a"), "--discontinuities")
     m = re.search(r"cuts split the mesh into (\d+) more pieces? \(closed by the occlusion "
-                  r"rule where they nearly touch, else left where the solve put them\)", out)
+                  r"rule where they nearly touch, else left where the solve put them\); "
+                  r"--save discontinuities tints them", out)
     assert code == 0 and m and int(m.group(1)) >= 1
+    code, out, _ = run(capsys, *args, "-o", str(tmp_path / "c"), "--discontinuities", "-s",
+                       "discontinuities")
+    assert code == 0 and "more piece" in out and "tints them" not in out
     code, out, _ = run(capsys, *args, "-o", str(tmp_path / "b"))
     assert code == 0 and "piece" not in out
     two = np.zeros((20, 30), bool)

@@ -553,10 +553,13 @@ def summary(record: dict) -> str:
                 and (prior.get("samples") or 0) > 0)
         # (without a prior the pieces the rule closes come out joined: those counted are
         # mostly ones too far apart to close, methods.dgp.split.TOUCH)
+        # (where they are: the jump map tints them, Surface.pieces)
+        shown = "discontinuities" in (record.get("outputs") or {})
         parts.append(f"cuts split the mesh into {cut} more piece{'s' if cut != 1 else ''} "
                      + ("(placed by the prior where they hold samples, else the occlusion "
                         "rule)" if held else "(closed by the occlusion rule where they nearly "
-                        "touch, else left where the solve put them)"))
+                        "touch, else left where the solve put them)")
+                     + ("" if shown else "; --save discontinuities tints them"))
     counts = info.get("input") or {}
     missing = counts.get("missing") or 0
     if missing:  # (NaN inside the mask: no warning, being the documented way to say it)
