@@ -1,5 +1,6 @@
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -640,6 +641,9 @@ def test_perturbations_read_normals_as_integrate_does():
     rest[20, 20] = False
     assert gt.mask[20, 20] and np.isnan(out[20, 20]).all() and np.isfinite(out[rest]).all()
     assert remove_samples(2.0 * n, 0.0, 0)[0][gt.mask].max() > 1.5  # (values kept as given)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (no file-encoding warning for a scaled map)
+        np.testing.assert_array_equal(synthetic.quantize(2.0 * n, 8), synthetic.quantize(n, 8))
 
 
 @pytest.mark.parametrize("call, message", [

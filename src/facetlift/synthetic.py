@@ -1187,15 +1187,17 @@ def quantize(normals, bits: int) -> np.ndarray:
     """Normals as stored in an integer image and read back: ``round((n + 1) / 2 * max)``, then
     decoded as facetlift's reader decodes a PNG (:func:`facetlift.frames.decode`: ``v / max *
     2 - 1``, and an 8-bit zero plateau, code 128 in a flat area, read as exactly 0); not
-    renormalised (:func:`facetlift.prepare` does that).
+    renormalised after the decoding (:func:`facetlift.prepare` does that).
 
-    `bits` is 8 or 16; NaN stays NaN.
+    `bits` is 8 or 16; NaN stays NaN. Normals off unit length are scaled to it first, as the
+    perturbations do (a map times 2 was clipped to the cube's faces and then warned about as
+    a file's encoding).
     """
     from .frames import decode
 
     if bits not in (8, 16):
         raise ValueError(f"`bits` must be 8 or 16; got {bits!r}")
-    n = _check_normals(normals, unit=False)
+    n = _check_normals(normals)  # (scaled to unit length: the codes hold unit vectors)
     top = 2**bits - 1
     finite = np.isfinite(n).all(axis=-1)
     with np.errstate(invalid="ignore"):
