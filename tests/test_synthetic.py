@@ -707,6 +707,11 @@ def test_scene_builders_check_their_arguments(tmp_path):
         with pytest.raises(ValueError, match=message):
             call()
     assert synthetic.render_perspective(box, None, 32, samples=2.0).mask.any()
+    ball = trimesh.creation.icosphere(subdivisions=2)
+    wide = [[20.0, 0.0, 12.0], [0.0, 20.0, 12.0], [0.0, 0.0, 1.0]]  # (about 62 deg across)
+    with pytest.raises(ValueError, match="the camera sits inside the closed mesh"):
+        synthetic.render_perspective(ball, wide, 24, fill=4.0)
+    assert synthetic.render_perspective(ball, wide, 24, fill=1.5).mask.all()  # (outside it)
     assert synthetic.room([box], size=np.array(4.0), seed=2).faces.size  # (a 0-d array: a number)
 
 

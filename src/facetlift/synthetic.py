@@ -1125,6 +1125,10 @@ def render_perspective(
     import trimesh
 
     cam_mesh = trimesh.Trimesh(vertices=C, faces=np.asarray(m.faces), process=False)
+    if fill > 1 and cam_mesh.is_watertight and bool(cam_mesh.contains(np.zeros((1, 3)))[0]):
+        # (it rendered the inside, every pixel in the mask, without a word: an audit's wish)
+        raise ValueError(f"render_perspective: at fill={fill:g} the camera sits inside the "
+                         f"closed mesh {label!r}; lower `fill` (1 frames the whole object)")
     faces_n = np.asarray(cam_mesh.face_normals, dtype=float)
     Kinv = np.linalg.inv(K).T
 
