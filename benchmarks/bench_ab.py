@@ -201,7 +201,7 @@ def _run(ctx, spec, constants, gt, normals, error_of):
 
 def main(argv=None) -> int:
     sys.path.insert(0, str(HERE))
-    from bench_jump_free import context, scene_arguments
+    from bench_jump_free import add_conditions, conditions_of, context, scene_arguments
 
     from facetlift.bench import discontinuities as D
 
@@ -211,9 +211,7 @@ def main(argv=None) -> int:
                     help="a setting of side A (repeatable; A is the defaults plus these)")
     ap.add_argument("--b", action="append", default=[], metavar="KEY=VALUE",
                     help="a setting of side B (repeatable; B is the defaults plus these)")
-    ap.add_argument("--conditions", default="exact,8bit,noise3",
-                    help="comma-separated conditions of the benchmark (default "
-                    f"exact,8bit,noise3; known: {', '.join(D.CONDITIONS)})")
+    add_conditions(ap, "exact,8bit,noise3")
     ap.add_argument("--heldout-seed", type=int, default=None,
                     help="a held-out set's scenes instead of the development benchmark's")
     ap.add_argument("--models", default=None,
@@ -238,11 +236,7 @@ def main(argv=None) -> int:
         ap.error(str(e))
     if not 0.0 <= args.margin < 1.0:
         ap.error(f"--margin must be at least 0 and below 1; got {args.margin}")
-    conditions = _names(args.conditions)
-    unknown = [c for c in conditions if c not in D.CONDITIONS]
-    if not conditions or unknown:
-        ap.error(f"--conditions: {'unknown ' + ', '.join(unknown) if unknown else 'none given'}"
-                 f"; known: {', '.join(D.CONDITIONS)}")
+    conditions = conditions_of(ap, args.conditions)
     if not args.data.is_dir():
         ap.error(f"--data: no folder {args.data} (the shared data: its meshes make the scenes)")
     ctx = context(args)  # (the render cache: --cache, $FACETLIFT_BENCH_CACHE)

@@ -98,15 +98,14 @@ def decompose(gt, normals, surface, tolerance: int = 1) -> dict:
 
 def main(argv=None) -> int:
     sys.path.insert(0, str(HERE))
-    from bench_jump_free import context, scene_arguments
+    from bench_jump_free import add_conditions, conditions_of, context, scene_arguments
 
     from facetlift.bench import discontinuities as D
     from facetlift.bench.core import Spec, method_status
 
     ap = scene_arguments(__doc__.split("\n\n")[0])
     ap.set_defaults(groups="perspective,wide,ortho,tabletop,room,vessel")
-    ap.add_argument("--conditions", default="exact",
-                    help=f"comma-separated conditions (known: {', '.join(D.CONDITIONS)})")
+    add_conditions(ap, "exact")
     ap.add_argument("--models", default="",
                     help="comma-separated mesh or scene names (default: every scene)")
     ap.add_argument("--tolerance", type=int, default=1,
@@ -115,11 +114,7 @@ def main(argv=None) -> int:
                     "pixels, is near)")
     ap.add_argument("--csv", type=Path, default=None, help="write every run here")
     args = ap.parse_args(argv)
-    conditions = [c.strip() for c in args.conditions.split(",") if c.strip()]
-    unknown = [c for c in conditions if c not in D.CONDITIONS]
-    if not conditions or unknown:
-        ap.error(f"--conditions: {'unknown ' + ', '.join(unknown) if unknown else 'none given'}"
-                 f"; known: {', '.join(D.CONDITIONS)}")
+    conditions = conditions_of(ap, args.conditions)
     if args.tolerance < 0:
         ap.error(f"--tolerance must be 0 or more; got {args.tolerance}")
     ctx = context(args)

@@ -116,6 +116,29 @@ def scene_arguments(description: str) -> argparse.ArgumentParser:
     return ap
 
 
+def add_conditions(ap: argparse.ArgumentParser, default: str) -> None:
+    """The --conditions option of a script over the benchmark's renders (read it with
+    :func:`conditions_of`)."""
+    from facetlift.bench.discontinuities import CONDITIONS
+
+    ap.add_argument("--conditions", default=default,
+                    help=f"comma-separated conditions of the benchmark (default {default}; "
+                    f"known: {', '.join(CONDITIONS)})")
+
+
+def conditions_of(ap: argparse.ArgumentParser, text: str) -> list[str]:
+    """The conditions named in `text` (comma-separated), or the parser's usage error naming
+    the unknown ones, or that none was given."""
+    from facetlift.bench.discontinuities import CONDITIONS
+
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    unknown = [c for c in names if c not in CONDITIONS]
+    if not names or unknown:
+        ap.error(f"--conditions: {'unknown ' + ', '.join(unknown) if unknown else 'none given'}"
+                 f"; known: {', '.join(CONDITIONS)}")
+    return names
+
+
 def context(a):
     """The benchmark's context for parsed :func:`scene_arguments` (warnings silenced)."""
     from facetlift.bench.core import Context, Settings

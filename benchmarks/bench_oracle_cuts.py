@@ -36,7 +36,7 @@ HERE = Path(__file__).resolve().parent
 
 def main(argv=None) -> int:
     sys.path.insert(0, str(HERE))
-    from bench_jump_free import context, scene_arguments
+    from bench_jump_free import add_conditions, conditions_of, context, scene_arguments
 
     from facetlift import synthetic
     from facetlift.bench import discontinuities as D
@@ -44,16 +44,12 @@ def main(argv=None) -> int:
 
     ap = scene_arguments(__doc__.split("\n\n")[0])
     ap.set_defaults(groups="perspective,wide,ortho,tabletop,room,vessel")
-    ap.add_argument("--conditions", default="exact",
-                    help=f"comma-separated conditions (known: {', '.join(D.CONDITIONS)})")
+    add_conditions(ap, "exact")
     ap.add_argument("--heldout-seed", type=int, default=None,
                     help="a held-out set's scenes instead of the development benchmark's")
     ap.add_argument("--csv", type=Path, default=None, help="write every run here")
     args = ap.parse_args(argv)
-    conditions = [c.strip() for c in args.conditions.split(",") if c.strip()]
-    unknown = [c for c in conditions if c not in D.CONDITIONS]
-    if not conditions or unknown:
-        ap.error(f"--conditions: unknown {unknown}; known: {', '.join(D.CONDITIONS)}")
+    conditions = conditions_of(ap, args.conditions)
     ctx = context(args)
     ctx.settings = Settings()
     ctx.status = method_status(["dgp"])

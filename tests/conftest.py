@@ -7,12 +7,15 @@ sampled with the facetlift conventions: pixel ``(r, c)`` has its centre at
 
 Fixtures: ``make_plane(p, q)``, ``saddle`` (x^2 - y^2), ``wave`` (sin x cos y) and
 ``rel_err(estimate, truth)``;  ``brick_texture``
-(:func:`bricks`: a brick texture's height and normals).
+(:func:`bricks`: a brick texture's height and normals); ``load_script`` (a script of the
+repository, e.g. ``benchmarks/bench_ab.py``, loaded as a module).
 """
 
 from __future__ import annotations
 
+import importlib.util
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -120,6 +123,21 @@ def bricks(size=512, brick=(128, 64), depth=6.0, bevel=(1.5, 7.0), heights=None)
     p = (height(x + e, down) - height(x - e, down)) / (2 * e)
     q = -(height(x, down + e) - height(x, down - e)) / (2 * e)  # (y up: rows run down)
     return height(x, down), facetlift.normals_from_gradients(p, q)
+
+
+@pytest.fixture(scope="session")
+def load_script():
+    """``load(path, name=None)``: the file at `path` (relative to the repository) executed
+    as a module named `name` (default: its stem), for the scripts outside the package."""
+    root = Path(__file__).resolve().parent.parent
+
+    def load(path: str, name: str | None = None):
+        spec = importlib.util.spec_from_file_location(name or Path(path).stem, root / path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    return load
 
 
 @pytest.fixture

@@ -3,22 +3,16 @@
 from __future__ import annotations
 
 import csv
-import importlib.util
 import math
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
 SETTLE = "facetlift.methods.dgp.discontinuous.SETTLE_AFTER"
 
 
 @pytest.fixture(scope="module")
-def ab():
-    spec = importlib.util.spec_from_file_location("bench_ab", ROOT / "benchmarks" / "bench_ab.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def ab(load_script):
+    return load_script("benchmarks/bench_ab.py")
 
 
 @pytest.fixture(autouse=True)

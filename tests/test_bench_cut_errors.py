@@ -3,24 +3,16 @@
 from __future__ import annotations
 
 import csv
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from facetlift import synthetic
 
-ROOT = Path(__file__).resolve().parent.parent
-
 
 @pytest.fixture(scope="module")
-def ce():
-    spec = importlib.util.spec_from_file_location("bench_cut_errors",
-                                                  ROOT / "benchmarks" / "bench_cut_errors.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def ce(load_script):
+    return load_script("benchmarks/bench_cut_errors.py")
 
 
 @pytest.fixture(autouse=True)

@@ -1,21 +1,14 @@
 """The demo script runs end to end on a small grid and reports a small error."""
 
-import importlib.util
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-DEMO = Path(__file__).parents[1] / "examples" / "demo.py"
-
 
 @pytest.fixture(scope="module")
-def demo():
-    spec = importlib.util.spec_from_file_location("facetlift_demo", DEMO)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def demo(load_script):
+    return load_script("examples/demo.py", "facetlift_demo")
 
 
 def test_demo_runs_and_reports_small_error(demo, tmp_path, capsys):

@@ -259,14 +259,8 @@ def test_fit_in_blocks_is_the_fit_at_once(monkeypatch):
     assert np.degrees(np.arccos(np.clip((sampled[ok] * whole[0][ok]).sum(-1), -1, 1))).mean() < 1
 
 
-def test_the_fit_benchmark_runs_and_recovers_its_normals(capsys):
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parent.parent / "benchmarks" / "bench_photometric.py"
-    spec = importlib.util.spec_from_file_location("bench_photometric", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+def test_the_fit_benchmark_runs_and_recovers_its_normals(capsys, load_script):
+    bench = load_script("benchmarks/bench_photometric.py")
     r = bench.case(24, 6)
     assert r["size"] == 24 and r["lights"] == 6 and r["max_error"] < 1e-10
     assert bench.main(["--sizes", "16", "--lights", "5"]) == 0
