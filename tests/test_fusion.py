@@ -122,6 +122,46 @@ def test_exact_samples_recover_every_step_height_with_discontinuities():
     assert np.nanmedian(np.abs(s0.depth - depth - np.nanmean(s0.depth - depth))) > 1.0
 
 
+def test_one_sample_per_component_moves_the_normals_only_surface_as_a_whole():
+    """One depth sample in a component only fixes its constant (an offset; with a camera a
+    scale): the discontinuity route keeps the shape it gives without the prior. Run with the
+    sample it left out its final weights, closed every pair of pieces and ran the prior's
+    reweightings (a point on orthographic cow@front: 0.507 -> 2.334 % of the depth range)."""
+    from test_discontinuities import scissor_ortho, scissor_persp
+
+    n, depth, _ = scissor_ortho()
+    mask = np.ones(depth.shape, bool)
+    mask[:, 60:62] = False  # (a second component, right of the gap)
+    free = run(n, mask, discontinuities=True)
+    prior = np.full(depth.shape, np.nan)
+    prior[40, 10] = 7.5  # (one sample in the larger component, none in the other)
+    s = run(n, mask, discontinuities=True, prior=prior, prior_weight=1e-3)
+    assert s.info["prior_one_per_component"]
+    assert s.depth[40, 10] == pytest.approx(7.5, abs=1e-9)
+    big = mask & (np.arange(depth.shape[1]) < 60)
+    shift = s.depth - free.depth
+    np.testing.assert_allclose(shift[big], 7.5 - free.depth[40, 10], atol=1e-9)
+    np.testing.assert_allclose(s.depth[mask & ~big], free.depth[mask & ~big], atol=1e-9)
+    assert s.info["prior"]["gauged_components"] == [2]
+    prior[20, 65] = -3.0  # (one in each: each moved to its own)
+    s = run(n, mask, discontinuities=True, prior=prior)
+    assert s.info["prior_one_per_component"]
+    np.testing.assert_allclose((s.depth - free.depth)[mask & ~big],
+                               -3.0 - free.depth[20, 65], atol=1e-9)
+    prior[10, 30] = depth[10, 30]  # (two in one component: the prior's own route)
+    assert not run(n, mask, discontinuities=True, prior=prior).info["prior_one_per_component"]
+    # perspective: the sample sets the scale
+    n, K, depth, _ = scissor_persp()
+    free = run(n, K=K, discontinuities=True)
+    prior = np.full(depth.shape, np.nan)
+    prior[30, 20] = 4.0
+    s = run(n, K=K, discontinuities=True, prior=prior)
+    assert s.info["prior_one_per_component"] and s.depth[30, 20] == pytest.approx(4.0)
+    np.testing.assert_allclose(s.depth / free.depth, 4.0 / free.depth[30, 20], rtol=1e-9)
+    np.testing.assert_allclose(s.vertex_depth / free.vertex_depth, 4.0 / free.depth[30, 20],
+                               rtol=1e-9)
+
+
 def test_discontinuities_solve_each_reweighting_whatever_the_prior_offset():
     """A prior far from zero dominates the right-hand side; the reweightings' CG tolerance is
     relative to the normals' part, so the surface does not depend on where depth zero is (a
@@ -468,6 +508,23 @@ def test_cli_prior_and_confidence(tmp_path, capsys):
     assert code == 0, capsys.readouterr().err
     out = np.load(tmp_path / "o" / "depth.npy")
     assert np.abs(out[sel] - prior[sel]).max() < 1e-3
+
+
+def test_cli_says_when_one_sample_per_component_moved_the_surface(tmp_path, capsys):
+    n, depth = wave()
+    np.save(tmp_path / "n.npy", n)
+    prior = np.full(depth.shape, np.nan)
+    prior[5, 6] = 3.0
+    np.save(tmp_path / "one.npy", prior)
+    args = ["integrate", str(tmp_path / "n.npy"), "--discontinuities", "-s", "npy"]
+    assert main(args + ["--prior", str(tmp_path / "one.npy"), "-o", str(tmp_path / "a")]) == 0
+    assert "1 sample fixing 1 of 1 components, one in each: the surface moved to them " \
+           "whole" in capsys.readouterr().out
+    assert np.load(tmp_path / "a" / "depth.npy")[5, 6] == pytest.approx(3.0)
+    prior[15, 20] = depth[15, 20] - depth[5, 6] + 3.0
+    np.save(tmp_path / "two.npy", prior)
+    assert main(args + ["--prior", str(tmp_path / "two.npy"), "-o", str(tmp_path / "b")]) == 0
+    assert "one in each" not in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("layout", ["plain", "header", "comments", "spreadsheet"])

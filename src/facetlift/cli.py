@@ -535,10 +535,14 @@ def summary(record: dict) -> str:
     elif isinstance(prior, dict):  # (also a dataset folder's prior_depth file, read silently)
         outside = prior.get("outside_mask") or 0
         named = f" ({record['prior_file']})" if record.get("prior_file") else ""
-        parts.append(f"depth prior{named}: {prior.get('samples')} samples fixing "
+        count = prior.get("samples")
+        parts.append(f"depth prior{named}: {count} sample{'' if count == 1 else 's'} fixing "
                      f"{len(prior.get('prior_components', []))} of "
                      f"{prior.get('components')} components"
-                     + (f" ({outside} outside the mask, unused)" if outside else ""))
+                     + (f" ({outside} outside the mask, unused)" if outside else "")
+                     # (dgp.lone_samples: the normals' surface moved, not reshaped)
+                     + (", one in each: the surface moved to them whole"
+                        if info.get("prior_one_per_component") else ""))
         removed = (prior.get("outliers") or {}).get("removed") or 0
         if removed:
             parts.append(f"{removed} prior outlier{'s' if removed != 1 else ''} left out")

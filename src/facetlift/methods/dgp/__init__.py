@@ -345,6 +345,16 @@ def _add_pass(info, other, counts, lists, before=False):
                        for key, value in info["seconds"].items()}
 
 
+def cuts_first(prior, blur, max_iter) -> bool:
+    """Whether the discontinuity route's reweightings with the prior terms `prior` (None: no
+    prior) start from the normals' own cuts: a pointwise prior on at most
+    :data:`PRIOR_CUTS_FIRST` of the facets, or a blurred one (`blur`) while
+    :data:`BLURRED_CUTS_FIRST`; only with reweightings (`max_iter` > 0)."""
+    return prior is not None and max_iter > 0 and (
+        (blur is None and 0 < np.mean(prior[0] > 0) <= PRIOR_CUTS_FIRST)
+        or (blur is not None and BLURRED_CUTS_FIRST))
+
+
 def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
                    footprint=None, deviation=None, **kw):
     """:func:`solve_discontinuous`, from the normals' own cuts where a depth prior is compared
@@ -360,9 +370,7 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
     prior-free run they came from, which measures it when given `deviation`). Returns ``z, y,
     w, info`` as :func:`solve_discontinuous` and the split of `y` where the islands' search
     formed it (else None) for :func:`place_pieces`."""
-    if not (prior is not None and kw["max_iter"] > 0 and (
-            (blur is None and 0 < np.mean(prior[0] > 0) <= PRIOR_CUTS_FIRST)
-            or (blur is not None and BLURRED_CUTS_FIRST))):
+    if not cuts_first(prior, blur, kw["max_iter"]):
         out = solve_discontinuous(domain, bx, by, target, prior=prior, blur=blur, x0=x0,
                                   final_weights=final_weights, **kw)
         kept = _CUTS.get()
@@ -405,9 +413,12 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
     if islands is not None and islands[0].any():
         w = np.where(islands[0][domain.corners], w_first, w)  # (their corners glued back)
         announce(kw.get("callback"), "islands glued back")
+        # (the final solve's normal weights, where it had them: FINAL_COS_POWER)
+        final = {"weights": final_weights} if info["final_weights"] else {}
         z, y, w, again = solve_discontinuous(domain, bx, by, target, prior=prior, x0=z, w0=w,
                                              final_weights=final_weights, blur=blur,
-                                             **{**kw, "max_iter": 0, "callback": None})
+                                             **{**kw, "max_iter": 0, "callback": None,
+                                                **final})
         # (the last system solved again to the same tolerance, by CG on a new hierarchy)
         info["polish"] = "direct" if again["factorizations"] else "multigrid"
         info["cut_corners"] = again["cut_corners"]  # (of the weights returned)
@@ -454,6 +465,13 @@ def run(
                              "discontinuities=True (the blurred prior's target is corrected "
                              "between reweightings); got discontinuity_iter=0")
         blur, prior = blurred()
+    lone = None  # (a pointwise prior of one sample per component: lone_samples)
+    if discontinuities and prior is not None and blur is None:
+        lone = lone_samples(domain, prior)
+        if lone is not None:  # the route without it (its confidence scaled as prepare
+            prior = None  # scales it without a prior), each sampled component moved after
+            if weights is not None and target.any():
+                weights = weights / weights[target].max()
     if discontinuities:
         empty_components(domain, target, offset=problem.extras.get("offset", (0, 0)))
         given = target  # (the input's own normals: the deviation is measured on them)
@@ -483,7 +501,10 @@ def run(
         z0 = start(prior)
         final = None
         power = discontinuous.FINAL_COS_POWER  # (docs/perspective.md, "Final weights")
-        if (prior is None or blur is not None) and power:
+        # (with a pointwise prior only where it starts from the normals' cuts, a sparse one:
+        # FINAL_COS_POWER; a dense one's weight is in units of a normal term of weight 1)
+        if (prior is None or blur is not None
+                or cuts_first(prior, None, discontinuity_iter)) and power:
             final = np.where(target, cosines, 1.0) ** power
             final = final if weights is None else final * weights
         from ...frames import normal_noise
@@ -520,9 +541,15 @@ def run(
                                               **common)
         free = info.get("prior_free", {}).get("deviation")  # (the normals' own cuts' surface)
         announce(progress, "placing pieces")
-        copies, pinfo = place_pieces(domain, y, bx, by, target, s, split=split,
-                                     anchored=None if prior is None else prior[0] > 0,
-                                     hang_anchored=blur is not None)
+        if lone is None:
+            copies, pinfo = place_pieces(domain, y, bx, by, target, s, split=split,
+                                         anchored=None if prior is None else prior[0] > 0,
+                                         hang_anchored=blur is not None)
+        else:  # (placed as without the prior, the pieces no sample holds counted for the
+            # warning below; then each sampled component moved to its sample)
+            copies, pinfo = place_pieces(domain, y, bx, by, target, s, split=split,
+                                         anchored=terms[0] > 0, by_prior=False)
+            copies = meet_samples(domain, copies, terms, lone)
 
         def trouble():
             """Whether the blurred prior ran away (:func:`blur_astray`) or bent the surface
@@ -587,7 +614,7 @@ def run(
                                 pinfo["mesh_pieces"],
                                 blurred=prior if prior is not None and not pointwise else None,
                                 noise=noise, agrees=agrees)
-        if pointwise and pinfo.get("unanchored_pieces"):
+        if (pointwise or lone is not None) and pinfo.get("unanchored_pieces"):
             size, row, col = pinfo["unanchored_largest"]
             r0, c0 = problem.extras.get("offset", (0, 0))  # (the image's rows and columns)
             row, col = row + r0, col + c0
@@ -604,6 +631,8 @@ def run(
         # angle, 1.8 deg where the result's was 0.68, described a surface not returned)
         info["deviation"] = [deviation(copies)]
         info["gaps_filled"] = 0 if filled is None else int(filled.sum())
+        if terms is not None and problem.prior_blur == 0:
+            info["prior_one_per_component"] = lone is not None
         extras = {"corner_values": copies}
         if split_mesh is not None:  # (make_surface splits the copies itself otherwise)
             extras["split_mesh"] = split_mesh
@@ -1125,6 +1154,35 @@ def fusion_terms(problem):
     return w, t, problem.prior_components
 
 
+def lone_samples(domain, prior):
+    """The facets of the pointwise prior's samples (:func:`fusion_terms`' `prior`) where no
+    connected component of the domain holds more than one, else None.
+
+    One sample in a component says nothing about its shape or its cuts: it fixes that
+    component's constant (its offset; with a perspective camera its scale), which the normals
+    leave free. The discontinuity route then runs without the prior and moves each sampled
+    component to its sample (:func:`meet_samples`), which is where the prior's energy has its
+    minimum at any weight. Run with the sample, the route left out its final weights, closed
+    every pair of pieces and ran the prior's reweightings: one depth point on orthographic
+    ``cow@front`` made 0.507 % of the depth range 2.334 %, and perspective
+    ``max_planck@front`` 0.023 mm 0.186 mm (docs/fusion.md, "One sample per component")."""
+    facets = np.flatnonzero(prior[0] > 0)
+    if facets.size == 0:
+        return None
+    counts = np.bincount(domain.facet_component[facets], minlength=domain.n_components)
+    return facets if counts.max() <= 1 else None
+
+
+def meet_samples(domain, copies, prior, facets):
+    """The facets' corner copies (m, 4) with every component that holds one of the samples
+    `facets` (:func:`lone_samples`) moved as a whole (the camera's unknown offset) so that
+    the sample's facet centre meets its target in `prior` (:func:`fusion_terms`)."""
+    comp = domain.facet_component
+    shift = np.zeros(domain.n_components)
+    shift[comp[facets]] = prior[1][facets] - copies[facets].mean(axis=1)
+    return copies + shift[comp][:, None]
+
+
 def normal_scale(problem):
     """(m,) ``c_f``: each usable normal's cosine to the viewing ray per pixel footprint (the
     factor BiNI calls ``n~_z``), 0 where a facet has no usable normal."""
@@ -1198,7 +1256,7 @@ TORN_BEST = 0.01
 
 
 def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
-                 hang_anchored=False, split=None):
+                 hang_anchored=False, split=None, by_prior=True):
     """The facets' corner copies (m, 4) with the pieces the jumps separate placed by the
     occlusion rule (:func:`facetlift.methods.dgp.split.occlusion_offsets`): the mesh is split
     where neighbouring copies part by more than :data:`facetlift.operators.split.GAP`
@@ -1215,25 +1273,30 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
     ``"unanchored_facets"`` and, where there are such pieces, ``"unanchored_largest"``;
     ``"_mesh"``, the split of the copies returned where the hanging made one, else None, is
     for :func:`run`, which takes it out). `split`: :func:`facetlift.operators.split.from_copies`
-    of `copies` where the caller formed it already (the islands' search), else formed here."""
+    of `copies` where the caller formed it already (the islands' search), else formed here.
+    Without `by_prior` the pieces are placed as without `anchored`, which only counts the
+    pieces no sample holds (the samples of :func:`lone_samples`, which move whole components
+    afterwards)."""
     from ...operators.split import GAP, from_copies
     from .split import TOUCH, absorb_small_pieces, occlusion_offsets
 
     mesh, values = split if split is not None else from_copies(domain, copies,
                                                                GAP * footprint)
-    fixed = None
+    fixed = held_pieces = None
     if anchored is not None:
-        fixed = np.bincount(mesh.facet_piece[anchored], minlength=mesh.n_pieces) > 0
+        held_pieces = np.bincount(mesh.facet_piece[anchored], minlength=mesh.n_pieces) > 0
+        fixed = held_pieces if by_prior else None
+    hold = anchored if by_prior else None  # (the samples that keep their small pieces)
     # (a gap of more than TOUCH footprints is left as the solve has it; with a prior every
     # pair is closed: TOUCH there made 31 of 136 sparse-prior runs better and 58 worse,
     # vessels +22 %, docs/results.md "The occlusion rule only where pieces nearly touch")
     offsets = occlusion_offsets(mesh, values, bx, by, target, scale=footprint, fixed=fixed,
-                                small=SMALL_PIECE, touch=TOUCH if anchored is None else None)
+                                small=SMALL_PIECE, touch=TOUCH if fixed is None else None)
     moved = int((np.abs(offsets) > GAP * footprint).sum())
     loose = {}
-    if fixed is not None:  # (large pieces no sample holds: placed by the rule, not measured)
-        sizes = np.bincount(mesh.facet_piece, minlength=mesh.n_pieces)
-        big = ~fixed & (sizes >= max(UNANCHORED_MIN, UNANCHORED_SHARE * domain.n_facets))
+    if held_pieces is not None:  # (large pieces no sample holds: placed by the rule, not
+        sizes = np.bincount(mesh.facet_piece, minlength=mesh.n_pieces)  # measured)
+        big = ~held_pieces & (sizes >= max(UNANCHORED_MIN, UNANCHORED_SHARE * domain.n_facets))
         # (only in components that hold a sample: a component without one keeps the camera's
         # gauge, warned about on its own, and no cut separates it, a review)
         comp = domain.facet_component
@@ -1263,7 +1326,7 @@ def place_pieces(domain, copies, bx, by, target, footprint, anchored=None,
         # own depth blurred by 4 px, 547 pieces, MADE 0.853 mm; hung 99 pieces, 0.727; on 9
         # coarse blurred priors better or within 0.5 %)
         hung = absorb_small_pieces(after, placed, SMALL_PIECE, GAP * footprint,
-                                   None if hang_anchored else anchored, with_mesh=True)
+                                   None if hang_anchored else hold, with_mesh=True)
         if hung is None:
             break
         placed, after = hung
