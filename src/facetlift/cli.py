@@ -541,7 +541,9 @@ def summary(record: dict) -> str:
                      f"{prior.get('components')} components"
                      + (f" ({outside} outside the mask, unused)" if outside else "")
                      # (dgp.lone_samples: the normals' surface moved, not reshaped)
-                     + (", one in each: the surface moved to them whole"
+                     + ((", alone in its component: the surface moved to it whole"
+                         if count == 1 else
+                         ", each alone in its component: the surface moved to them whole")
                         if info.get("prior_one_per_component") else ""))
         removed = (prior.get("outliers") or {}).get("removed") or 0
         if removed:

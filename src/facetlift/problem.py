@@ -705,6 +705,7 @@ def prepare(
     if kept is not None:
         bad["grazing"] &= ~kept
     usable = front & ~bad["grazing"]
+    conf_top = None  # (a confidence above 1 beside a prior: warned about below)
     if conf is not None:
         # (a normal of confidence 0 is missing whatever it is, also a grazing one: it is then
         # filled like one by the discontinuity route, not left as a silhouette's gap)
@@ -718,13 +719,10 @@ def prepare(
             conf = conf / float(conf[usable].max())
         elif usable.any() and float(conf[usable].max()) > CONFIDENCE_ABOVE_ONE:
             # (with a prior the values weigh the normals against it as given: an 8-bit map
-            # given as 0..255 weighed the prior 255x less, 12x the error, no word, an audit)
-            top = float(conf[usable].max())
-            warn(f"`confidence` reaches {top:.4g} (with a prior its values weigh the normals "
-                 f"against it as given: 1 is a normal of the prior's weight's units, so the "
-                 f"prior weighs {1 / top:.3g} of what it would beside a confidence of 1); an "
-                 "8-bit map given as 0..255? Give confidence / confidence.max(), or raise "
-                 "prior_weight to match (docs/fusion.md, 'Units of the weights')")
+            # given as 0..255 weighed the prior 255x less, 12x the error, no word, an audit;
+            # said once the prior is read, unless its samples are one per component at most,
+            # whose weight does not matter: methods.dgp.lone_samples)
+            conf_top = float(conf[usable].max())
         if usable.any():
             conf = _confidence_floor(conf, usable)
         # (after the scaling: the facets without a usable normal keep the weight 1 of their
@@ -879,6 +877,13 @@ def prepare(
                          "and prior=None")
     prior_outliers = check_prior_outliers(prior_outliers, prior is not None)
     blur = check_prior_blur(prior_blur, prior is not None, (H, W))
+    if conf_top is not None and pw is not None and (blur > 0 or np.bincount(
+            domain.facet_component[pw > 0], minlength=1).max() > 1):
+        warn(f"`confidence` reaches {conf_top:.4g} (with a prior its values weigh the normals "
+             f"against it as given: 1 is a normal of the prior's weight's units, so the prior "
+             f"weighs {1 / conf_top:.3g} of what it would beside a confidence of 1); an 8-bit "
+             "map given as 0..255? Give confidence / confidence.max(), or raise prior_weight "
+             "to match (docs/fusion.md, 'Units of the weights')")
     if blur > 0 and pw is not None:
         used = pw[pw > 0]
         typical = float(np.median(used)) if used.size else 0.0

@@ -413,14 +413,14 @@ def _discontinuous(domain, bx, by, target, *, prior, blur, x0, final_weights,
     if islands is not None and islands[0].any():
         w = np.where(islands[0][domain.corners], w_first, w)  # (their corners glued back)
         announce(kw.get("callback"), "islands glued back")
-        # (the final solve's normal weights, where it had them: FINAL_COS_POWER)
-        final = {"weights": final_weights} if info["final_weights"] else {}
+        # (with the final weights, as the solve it repeats: solve_discontinuous with w0)
         z, y, w, again = solve_discontinuous(domain, bx, by, target, prior=prior, x0=z, w0=w,
                                              final_weights=final_weights, blur=blur,
-                                             **{**kw, "max_iter": 0, "callback": None,
-                                                **final})
-        # (the last system solved again to the same tolerance, by CG on a new hierarchy)
-        info["polish"] = "direct" if again["factorizations"] else "multigrid"
+                                             **{**kw, "max_iter": 0, "callback": None})
+        # (the last system solved again to the same tolerance, by CG on a new hierarchy, then
+        # with the final weights as the polish solves them)
+        info["polish"] = again["polish"] or (
+            "direct" if again["factorizations"] else "multigrid")
         info["cut_corners"] = again["cut_corners"]  # (of the weights returned)
         info["cut_corners_inside"] = again["cut_corners_inside"]
         _add_pass(info, again, _BUILDS, ("cg_iterations", "unsolved"))
@@ -470,8 +470,9 @@ def run(
         lone = lone_samples(domain, prior)
         if lone is not None:  # the route without it (its confidence scaled as prepare
             prior = None  # scales it without a prior), each sampled component moved after
-            if weights is not None and target.any():
-                weights = weights / weights[target].max()
+            if weights is not None and target.any():  # (not the facets without a normal,
+                # which prepare gives 1 after its scaling, as _discontinuous's first pass)
+                weights = np.where(target, weights / weights[target].max(), weights)
     if discontinuities:
         empty_components(domain, target, offset=problem.extras.get("offset", (0, 0)))
         given = target  # (the input's own normals: the deviation is measured on them)
@@ -1165,7 +1166,8 @@ def lone_samples(domain, prior):
     minimum at any weight. Run with the sample, the route left out its final weights, closed
     every pair of pieces and ran the prior's reweightings: one depth point on orthographic
     ``cow@front`` made 0.507 % of the depth range 2.334 %, and perspective
-    ``max_planck@front`` 0.023 mm 0.186 mm (docs/fusion.md, "One sample per component")."""
+    ``max_planck@front`` 0.023 mm 0.186 mm (docs/fusion.md, "One sample per component, and
+    final weights with sparse samples")."""
     facets = np.flatnonzero(prior[0] > 0)
     if facets.size == 0:
         return None

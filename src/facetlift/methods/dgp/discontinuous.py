@@ -73,8 +73,11 @@ Final weights
     weighting of the slopes; times the confidence, if any): steep facets, whose slopes are
     least reliable and whose planes fit a curved surface worst, no longer bend whole smooth
     regions. The ``energy`` trace is the reweightings' (uniform normal weights, times the
-    confidence where one is given). Not with a depth
-    prior compared pixel by pixel; with a blurred one (``prior_blur``) yes: the last solve then
+    confidence where one is given). With a sparse pointwise depth prior too (on at most a
+    quarter of the facets, :func:`facetlift.methods.dgp.cuts_first`): each sample's weight is
+    then scaled as its facet's normal term, which keeps their ratio (``prior_weight``'s
+    units), and both halves of the prior (``PRIOR_OWN``) stay; not with a dense one compared
+    pixel by pixel. With a blurred one (``prior_blur``) yes: the last solve then
     keeps the prior's half on the glued vertices and drops the half on the facets' own copies
     (``PRIOR_OWN``) with the uniform normal weights it was paired with (measured that way on
     the fusion benchmark; keeping both halves lowered the blurred mismatch but raised the
@@ -331,8 +334,8 @@ GROW = True
 #: blurred prior (``prior_blur``) too, and with a sparse pointwise one (the prior's
 #: reweightings start from the normals' cuts, :func:`facetlift.methods.dgp.cuts_first`;
 #: each sample's weight in the final solve scaled as its facet's normal term, so that
-#: ``prior_weight`` keeps its units); not with a dense pointwise one (docs/fusion.md, "Final
-#: weights with sparse samples").
+#: ``prior_weight`` keeps its units); not with a dense pointwise one (docs/fusion.md, "One
+#: sample per component, and final weights with sparse samples").
 FINAL_COS_POWER = 2
 
 #: Facets per block of the energy trace's sums (a diagnostic, ``info["energy"]``): its
@@ -994,7 +997,8 @@ def solve_discontinuous(
         when the cap stopped them; instead of `weights`: the route passes the view cosine
         squared, :data:`FINAL_COS_POWER`, times the confidence, without a prior or with a
         sparse or blurred one, :func:`facetlift.methods.dgp.cuts_first`); not with
-        ``max_iter = 0``.
+        ``max_iter = 0`` unless `w0` is given. A pointwise prior's weights are scaled in that
+        solve as its facets' normal terms (``final_weights / weights``).
     blur : BlurredPrior, optional
         The `prior` seen through a blur (``prior_blur``,
         :class:`~facetlift.methods.dgp.common.BlurredPrior`): its target is corrected after
@@ -1003,7 +1007,8 @@ def solve_discontinuous(
         the last target.
     w0 : (m, 4) float, optional
         Corner glue weights to start from (default all 1: the smooth solution); with
-        ``max_iter = 0`` the system of these weights is solved once to `cg_rtol`.
+        ``max_iter = 0`` the system of these weights is solved once to `cg_rtol`, and with
+        `final_weights` again with those (weights a pass before settled).
     polish_last : bool
         Solve the last system to `cg_rtol` after the reweightings (default). False where only
         the weights are wanted (:data:`facetlift.methods.dgp.PRIOR_CUTS_FIRST`): `z` and `y`
@@ -1394,7 +1399,9 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         unsettled = float((np.abs(own - w) > CUT).mean())
         del own  # (freed before the final solve)
     slow = amg["slow"]
-    final = polish_last and final_weights is not None and it > 0
+    # (on weights that reweightings settled: these or a pass before, w0; the second pass of
+    # a sparse prior whose first used up max_iter, and the islands' repeated solve)
+    final = polish_last and final_weights is not None and (it > 0 or w0 is not None)
     if moving and not final:  # (the cap stopped the reweightings: the last target's system)
         M = Ma = K = rhs = None
         M, Ma, K, rhs, scale = state(w)
@@ -1403,7 +1410,8 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         if prior is not None and blur is None:  # a pointwise prior: each sample's weight
             # scaled as its facet's normal term, which keeps their ratio, prior_weight's units
             # (left as given, the samples of 1 % noise at weight 1 were fitted closer: mean
-            # MADE 0.576 -> 0.582 mm, 22 of 36 scenes worse by 1 %; scaled 0.574, 2 worse)
+            # MADE 0.576 -> 0.582 mm on the 36 perspective fusion scenes, 22 worse by 1 %;
+            # scaled, here and in the islands' repeated solve, 0.564, 2 worse)
             c = fusion[0]
             lam = prior[0] * np.divide(final_weights, c, out=np.ones(m), where=c > 0)
             fusion = (final_weights, PRIOR_OWN * lam, prior[1])
@@ -1415,9 +1423,10 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         M = Ma = K = rhs = None
         M, Ma, K, rhs, scale = state(w)
     polish = None  # (how the final system was solved to cg_rtol: info["polish"])
-    if it > 0 and polish_last:  # (a final solve follows: the polish, or the final weights')
+    if (it > 0 or final) and polish_last:  # (a final solve follows: the polish, or the
+        # final weights')
         announce(callback, "final solve")
-    if polish_last and it > 0 and (LOOSE_RTOL > cg_rtol or forced or final):  # solved loosely
+    if polish_last and (it > 0 or final) and (LOOSE_RTOL > cg_rtol or forced or final):  # loose
         # on the hierarchy at hand when it does so quickly (large smooth maps: 2-3 CG
         # iterations, where a new hierarchy costs seconds), else by a factorization where
         # affordable (DIRECT_POLISH; at once where the loop was slow: DIRECT_FIRST), else by

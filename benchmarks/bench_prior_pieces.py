@@ -1,0 +1,184 @@
+"""Depth points in the pieces: the discontinuity route given a point in what its cuts separate.
+
+For every ``--step``-th render of ``--groups`` under ``--conditions`` this runs ``dgp-disc``
+without a prior, labels the pieces its cuts separate (:meth:`facetlift.Surface.pieces`), and
+runs it again with depth points read from the ground truth at ``prior_weight`` ``--weight``:
+
+* ``one``: a point at the middle pixel of the largest piece only. A single sample in its
+  component: the route keeps the normals-only surface and moves it to the point
+  (:func:`facetlift.methods.dgp.lone_samples`), so this column is the normals-only error
+  wherever the scene has one component;
+* ``per piece``: a point at the middle pixel of every piece of at least ``--min-piece``
+  pixels (docs/recipes.md, "Parts the normals cannot place").
+
+The middle pixel is the middle one of the piece's pixels in row-major order. Reported per
+group and condition: the mean error of the normals alone and of each prior, the scenes
+better / worse than the normals alone by more than 1 %, the median time ratio to the
+normals-only run, and the median number of points. Errors are the benchmark's aligned ones
+(:func:`facetlift.bench.discontinuities.error_of`: MADE in mm after the median scale for a
+camera, the paper's error in % for ``ortho``). ``--csv`` writes every run.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_prior_pieces.py --cache /tmp/bcache \\
+        --groups perspective,wide,ortho,tabletop,room,vessel
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+#: The priors, in the table's order (see the module docstring).
+KINDS = ("one", "per piece")
+
+
+def points(depth, pieces, min_size: int) -> np.ndarray:
+    """(H, W) prior: `depth` at the middle pixel (row-major order) of every piece of
+    `pieces` (labels, -1 outside) of at least `min_size` pixels whose depth there is finite;
+    NaN elsewhere."""
+    prior = np.full(pieces.shape, np.nan)
+    order = np.argsort(pieces, axis=None, kind="stable")  # (row-major within a piece)
+    labels = pieces.ravel()[order]
+    ids = np.arange(int(pieces.max()) + 1)
+    starts = np.searchsorted(labels, ids)
+    for a, b in zip(starts, np.searchsorted(labels, ids, side="right"), strict=True):
+        if b - a >= max(min_size, 1):
+            i = order[a + (b - a) // 2]
+            if np.isfinite(depth.ravel()[i]):
+                prior.ravel()[i] = depth.ravel()[i]
+    return prior
+
+
+def run_scene(gt, normals, min_piece: int = 100, weight: float = 100.0) -> dict:
+    """The normals-only error and time, and for each of :data:`KINDS` the error, the time
+    and the number of points, on one scene."""
+    import facetlift
+    from facetlift.bench import discontinuities as D
+
+    def timed(**kw):
+        t = time.perf_counter()
+        s = facetlift.integrate(normals, gt.mask, K=gt.K, pixel_size=gt.pixel_size,
+                                discontinuities=True, **kw)
+        return s, time.perf_counter() - t
+
+    free, seconds = timed()
+    row = {"normals only": D.error_of(gt, free.depth), "normals only s": seconds}
+    pieces = free.pieces()
+    largest = np.where(pieces == 0, 0, -1)
+    for kind, prior in (("one", points(gt.depth, largest, 1)),
+                        ("per piece", points(gt.depth, pieces, min_piece))):
+        n = int(np.isfinite(prior).sum())
+        if n:
+            s, seconds = timed(prior=prior, prior_weight=weight)
+            row[kind] = D.error_of(gt, s.depth)
+            row[kind + " s"] = seconds
+        else:  # (no piece large enough: nothing to give)
+            row[kind], row[kind + " s"] = row["normals only"], row["normals only s"]
+        row[kind + " points"] = n
+    return row
+
+
+def table(rows) -> str:
+    """Markdown: each group's and condition's means, better / worse, time and points."""
+    head = ("| group | condition | scenes | normals only | "
+            + " | ".join(f"{k} | better / worse | time ratio | points" for k in KINDS)
+            + " |\n|---|---|---|---|" + "---|---|---|---|" * len(KINDS))
+    lines = [head]
+    for cond in dict.fromkeys(r[2] for r in rows):
+        for g in dict.fromkeys(r[0] for r in rows):
+            sel = [r[3] for r in rows if r[0] == g and r[2] == cond]
+            if not sel:
+                continue
+            free = np.array([s["normals only"] for s in sel])
+            cells = [f"{free.mean():.3f}"]
+            for k in KINDS:
+                e = np.array([s[k] for s in sel])
+                ratio = np.array([s[k + " s"] / s["normals only s"] for s in sel])
+                n = np.array([s[k + " points"] for s in sel])
+                cells += [f"{e.mean():.3f}", f"{int((e < 0.99 * free).sum())} / "
+                          f"{int((e > 1.01 * free).sum())}", f"{np.median(ratio):.2f}",
+                          f"{np.median(n):.0f}"]
+            lines.append(f"| {g} | {cond} | {len(sel)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    sys.path.insert(0, str(HERE))
+    from bench_jump_free import add_conditions, conditions_of, context, scene_arguments
+
+    from facetlift.bench import discontinuities as D
+
+    ap = scene_arguments(__doc__.split("\n\n")[0])
+    ap.set_defaults(groups="perspective,wide,ortho,tabletop,room,vessel")
+    add_conditions(ap, "exact")
+    ap.add_argument("--models", default="",
+                    help="comma-separated mesh or scene names (default: every scene)")
+    ap.add_argument("--min-piece", type=int, default=100,
+                    help="pixels of the smallest piece given a point in 'per piece' "
+                    "(default 100)")
+    ap.add_argument("--weight", type=float, default=100.0,
+                    help="prior_weight of the points (default 100)")
+    ap.add_argument("--csv", type=Path, default=None, help="write every run here")
+    args = ap.parse_args(argv)
+    conditions = conditions_of(ap, args.conditions)
+    if args.min_piece < 1:
+        ap.error(f"--min-piece must be 1 or more; got {args.min_piece}")
+    if not (np.isfinite(args.weight) and args.weight > 0):
+        ap.error(f"--weight must be a positive number; got {args.weight}")
+    ctx = context(args)
+    ctx.models = tuple(m.strip() for m in args.models.split(",") if m.strip()) or None
+    groups = [g.strip() for g in args.groups.split(",") if g.strip()]
+    scenes = [t for t in D.scenes(ctx) if t[0] in groups][::max(args.step, 1)]
+    if not scenes:
+        print("no scene selected (see --data, --groups, --models)", file=sys.stderr)
+        return 1
+    keys = ("normals only", "normals only s",
+            *(f"{k}{x}" for k in KINDS for x in ("", " s", " points")))
+    rows = []
+    try:
+        fh = open(args.csv, "w", newline="") if args.csv else None
+    except OSError as e:
+        ap.error(f"--csv: {e}")
+    writer = csv.writer(fh) if fh else None
+    if writer:
+        writer.writerow(["group", "scene", "condition", *keys])
+    t0 = time.time()
+    logging.disable(logging.INFO)  # (the solvers' notes)
+    try:
+        for group, name, gt in D.usable(ctx, scenes, "scenes"):
+            for cond in conditions:
+                normals = D.condition(gt, cond, f"{group}:{name}")
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    try:
+                        row = run_scene(gt, normals, args.min_piece, args.weight)
+                    except Exception as e:  # (recorded; the run goes on, as the benchmark's)
+                        print(f"{group} {name} {cond}: {type(e).__name__}: {e}",
+                              file=sys.stderr)
+                        continue
+                rows.append((group, name, cond, row))
+                if writer:
+                    writer.writerow([group, name, cond, *(row[k] for k in keys)])
+                    fh.flush()
+                errors = "  ".join(f"{k} {row[k]:8.3f}" for k in ("normals only", *KINDS))
+                print(f"{group:11s} {name:40s} {cond:6s} {errors}  points "
+                      f"{row['per piece points']}  [{time.time() - t0:.0f} s]", flush=True)
+    finally:
+        logging.disable(logging.NOTSET)  # (main runs in-process too: the tests')
+        if fh:
+            fh.close()
+    print(table(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
