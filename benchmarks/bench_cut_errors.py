@@ -28,12 +28,9 @@ Usage::
 
 from __future__ import annotations
 
-import csv
-import logging
 import math
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -98,16 +95,22 @@ def decompose(gt, normals, surface, tolerance: int = 1) -> dict:
 
 def main(argv=None) -> int:
     sys.path.insert(0, str(HERE))
-    from bench_jump_free import add_conditions, conditions_of, context, scene_arguments
+    from bench_jump_free import (
+        add_conditions,
+        add_models,
+        conditions_of,
+        context,
+        scene_arguments,
+        scene_runs,
+        selected_scenes,
+    )
 
-    from facetlift.bench import discontinuities as D
     from facetlift.bench.core import Spec, method_status
 
     ap = scene_arguments(__doc__.split("\n\n")[0])
     ap.set_defaults(groups="perspective,wide,ortho,tabletop,room,vessel")
     add_conditions(ap, "exact")
-    ap.add_argument("--models", default="",
-                    help="comma-separated mesh or scene names (default: every scene)")
+    add_models(ap)
     ap.add_argument("--tolerance", type=int, default=1,
                     help="pixels between a cut and a true jump that still count as the same "
                     "place (default 1: a cut one pixel beside the jump, across a row of mixed "
@@ -119,54 +122,28 @@ def main(argv=None) -> int:
         ap.error(f"--tolerance must be 0 or more; got {args.tolerance}")
     ctx = context(args)
     ctx.status = method_status(["dgp"])
-    ctx.models = tuple(m.strip() for m in args.models.split(",") if m.strip()) or None
-    groups = [g.strip() for g in args.groups.split(",") if g.strip()]
-    scenes = [t for t in D.scenes(ctx) if t[0] in groups][::max(args.step, 1)]
+    scenes = selected_scenes(ctx, args)
     if not scenes:
         print("no scene selected (see --data, --groups, --models)", file=sys.stderr)
         return 1
     spec = Spec("dgp-disc", "dgp", (("discontinuities", True),))
     keys = (*COLUMNS, "cuts", "jumps", "precision", "recall")
-    rows = []
-    try:
-        fh = open(args.csv, "w", newline="") if args.csv else None
-    except OSError as e:
-        ap.error(f"--csv: {e}")
-    writer = csv.writer(fh) if fh else None
-    if writer:
-        writer.writerow(["group", "scene", "condition", *keys])
     t0 = time.time()
-    logging.disable(logging.INFO)  # (the solvers' notes)
-    try:
-        for group, name, gt in D.usable(ctx, scenes, "scenes"):
-            for cond in conditions:
-                normals = D.condition(gt, cond, f"{group}:{name}")
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    r = ctx.measure(spec, normals, gt.mask, lambda s: s,
-                                    pixel_size=gt.pixel_size, K=gt.K)
-                    if r[0].status != "ok":
-                        print(f"{group} {name} {cond}: the route failed: {r[0].message}",
-                              file=sys.stderr)
-                        continue
-                    try:
-                        row = decompose(gt, normals, r[1], args.tolerance)
-                    except Exception as e:  # (recorded; the run goes on, as the benchmark's)
-                        print(f"{group} {name} {cond}: {type(e).__name__}: {e}",
-                              file=sys.stderr)
-                        continue
-                rows.append((group, name, cond, row))
-                if writer:
-                    writer.writerow([group, name, cond, *(row[k] for k in keys)])
-                    fh.flush()
-                errors = "  ".join(f"{k} {row[k]:8.3f}" for k in COLUMNS)
-                print(f"{group:11s} {name:40s} {cond:6s} {errors}  precision "
-                      f"{row['precision']:.2f} recall {row['recall']:.2f}  "
-                      f"[{time.time() - t0:.0f} s]", flush=True)
-    finally:
-        logging.disable(logging.NOTSET)  # (main runs in-process too: the tests')
-        if fh:
-            fh.close()
+
+    def measure(group, name, cond, gt, normals):
+        r = ctx.measure(spec, normals, gt.mask, lambda s: s, pixel_size=gt.pixel_size, K=gt.K)
+        if r[0].status != "ok":
+            print(f"{group} {name} {cond}: the route failed: {r[0].message}", file=sys.stderr)
+            return None
+        return decompose(gt, normals, r[1], args.tolerance)
+
+    def line(group, name, cond, row):
+        errors = "  ".join(f"{k} {row[k]:8.3f}" for k in COLUMNS)
+        return (f"{group:11s} {name:40s} {cond:6s} {errors}  precision "
+                f"{row['precision']:.2f} recall {row['recall']:.2f}  "
+                f"[{time.time() - t0:.0f} s]")
+
+    rows = scene_runs(ap, ctx, scenes, conditions, args.csv, keys, measure, line)
     print(table(rows))
     return 0
 

@@ -139,6 +139,69 @@ def conditions_of(ap: argparse.ArgumentParser, text: str) -> list[str]:
     return names
 
 
+def add_models(ap: argparse.ArgumentParser) -> None:
+    """The --models option (read by :func:`selected_scenes`)."""
+    ap.add_argument("--models", default="",
+                    help="comma-separated mesh or scene names (default: every scene)")
+
+
+def selected_scenes(ctx, a) -> list:
+    """``(group, name, loader)`` of the benchmark's scenes that parsed arguments `a` select
+    (--groups, --models of :func:`add_models`, every --step-th); `ctx.models` set."""
+    from facetlift.bench import discontinuities as D
+
+    ctx.models = tuple(m.strip() for m in a.models.split(",") if m.strip()) or None
+    groups = [g.strip() for g in a.groups.split(",") if g.strip()]
+    return [t for t in D.scenes(ctx) if t[0] in groups][::max(a.step, 1)]
+
+
+def scene_runs(ap, ctx, scenes, conditions, csv_path, keys, measure, line) -> list:
+    """Every usable scene of `scenes` (``(group, name, loader)``) under each of `conditions`:
+    ``measure(group, name, condition, gt, normals)`` gives a row (a dict with `keys`; None, or
+    an exception, which is printed, skips the run and the script goes on), written to
+    `csv_path` (if given; an unwritable path is the parser `ap`'s error) and printed as
+    ``line(group, name, condition, row)``; the solvers' notes silenced meanwhile, restored
+    after (the tests run scripts in-process). Returns ``[(group, name, condition, row)]``."""
+    import csv
+    import logging
+
+    from facetlift.bench import discontinuities as D
+
+    try:
+        fh = open(csv_path, "w", newline="") if csv_path else None
+    except OSError as e:
+        ap.error(f"--csv: {e}")
+    writer = csv.writer(fh) if fh else None
+    if writer:
+        writer.writerow(["group", "scene", "condition", *keys])
+    rows = []
+    logging.disable(logging.INFO)
+    try:
+        for group, name, gt in D.usable(ctx, scenes, "scenes"):
+            for cond in conditions:
+                normals = D.condition(gt, cond, f"{group}:{name}")
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    try:
+                        row = measure(group, name, cond, gt, normals)
+                    except Exception as e:  # (recorded; the run goes on, as the benchmark's)
+                        print(f"{group} {name} {cond}: {type(e).__name__}: {e}",
+                              file=sys.stderr)
+                        continue
+                if row is None:
+                    continue
+                rows.append((group, name, cond, row))
+                if writer:
+                    writer.writerow([group, name, cond, *(row[k] for k in keys)])
+                    fh.flush()
+                print(line(group, name, cond, row), flush=True)
+    finally:
+        logging.disable(logging.NOTSET)
+        if fh:
+            fh.close()
+    return rows
+
+
 def context(a):
     """The benchmark's context for parsed :func:`scene_arguments` (warnings silenced)."""
     from facetlift.bench.core import Context, Settings

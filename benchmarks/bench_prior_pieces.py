@@ -26,11 +26,8 @@ Usage::
 
 from __future__ import annotations
 
-import csv
-import logging
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -113,15 +110,20 @@ def table(rows) -> str:
 
 def main(argv=None) -> int:
     sys.path.insert(0, str(HERE))
-    from bench_jump_free import add_conditions, conditions_of, context, scene_arguments
-
-    from facetlift.bench import discontinuities as D
+    from bench_jump_free import (
+        add_conditions,
+        add_models,
+        conditions_of,
+        context,
+        scene_arguments,
+        scene_runs,
+        selected_scenes,
+    )
 
     ap = scene_arguments(__doc__.split("\n\n")[0])
     ap.set_defaults(groups="perspective,wide,ortho,tabletop,room,vessel")
     add_conditions(ap, "exact")
-    ap.add_argument("--models", default="",
-                    help="comma-separated mesh or scene names (default: every scene)")
+    add_models(ap)
     ap.add_argument("--min-piece", type=int, default=100,
                     help="pixels of the smallest piece given a point in 'per piece' "
                     "(default 100)")
@@ -135,47 +137,22 @@ def main(argv=None) -> int:
     if not (np.isfinite(args.weight) and args.weight > 0):
         ap.error(f"--weight must be a positive number; got {args.weight}")
     ctx = context(args)
-    ctx.models = tuple(m.strip() for m in args.models.split(",") if m.strip()) or None
-    groups = [g.strip() for g in args.groups.split(",") if g.strip()]
-    scenes = [t for t in D.scenes(ctx) if t[0] in groups][::max(args.step, 1)]
+    scenes = selected_scenes(ctx, args)
     if not scenes:
         print("no scene selected (see --data, --groups, --models)", file=sys.stderr)
         return 1
     keys = ("normals only", "normals only s",
             *(f"{k}{x}" for k in KINDS for x in ("", " s", " points")))
-    rows = []
-    try:
-        fh = open(args.csv, "w", newline="") if args.csv else None
-    except OSError as e:
-        ap.error(f"--csv: {e}")
-    writer = csv.writer(fh) if fh else None
-    if writer:
-        writer.writerow(["group", "scene", "condition", *keys])
     t0 = time.time()
-    logging.disable(logging.INFO)  # (the solvers' notes)
-    try:
-        for group, name, gt in D.usable(ctx, scenes, "scenes"):
-            for cond in conditions:
-                normals = D.condition(gt, cond, f"{group}:{name}")
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    try:
-                        row = run_scene(gt, normals, args.min_piece, args.weight)
-                    except Exception as e:  # (recorded; the run goes on, as the benchmark's)
-                        print(f"{group} {name} {cond}: {type(e).__name__}: {e}",
-                              file=sys.stderr)
-                        continue
-                rows.append((group, name, cond, row))
-                if writer:
-                    writer.writerow([group, name, cond, *(row[k] for k in keys)])
-                    fh.flush()
-                errors = "  ".join(f"{k} {row[k]:8.3f}" for k in ("normals only", *KINDS))
-                print(f"{group:11s} {name:40s} {cond:6s} {errors}  points "
-                      f"{row['per piece points']}  [{time.time() - t0:.0f} s]", flush=True)
-    finally:
-        logging.disable(logging.NOTSET)  # (main runs in-process too: the tests')
-        if fh:
-            fh.close()
+
+    def line(group, name, cond, row):
+        errors = "  ".join(f"{k} {row[k]:8.3f}" for k in ("normals only", *KINDS))
+        return (f"{group:11s} {name:40s} {cond:6s} {errors}  points "
+                f"{row['per piece points']}  [{time.time() - t0:.0f} s]")
+
+    rows = scene_runs(ap, ctx, scenes, conditions, args.csv, keys,
+                      lambda g, n, c, gt, normals: run_scene(gt, normals, args.min_piece,
+                                                             args.weight), line)
     print(table(rows))
     return 0
 

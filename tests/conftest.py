@@ -141,6 +141,13 @@ def load_script():
 
 
 @pytest.fixture
+def own_bench_cache(tmp_path, monkeypatch):
+    """$FACETLIFT_BENCH_CACHE, which a benchmark script run in-process points at its
+    --cache, restored after the test (a module's ``pytestmark = usefixtures(...)``)."""
+    monkeypatch.setenv("FACETLIFT_BENCH_CACHE", str(tmp_path / "cache"))
+
+
+@pytest.fixture
 def brick_texture():
     """:func:`bricks`."""
     return bricks

@@ -10,15 +10,12 @@ import pytest
 SETTLE = "facetlift.methods.dgp.discontinuous.SETTLE_AFTER"
 
 
+pytestmark = pytest.mark.usefixtures("own_bench_cache")  # (the scripts set it)
+
+
 @pytest.fixture(scope="module")
 def ab(load_script):
     return load_script("benchmarks/bench_ab.py")
-
-
-@pytest.fixture(autouse=True)
-def own_cache(tmp_path, monkeypatch):
-    """The script points $FACETLIFT_BENCH_CACHE at its --cache: restored after each test."""
-    monkeypatch.setenv("FACETLIFT_BENCH_CACHE", str(tmp_path / "cache"))
 
 
 def quick(tmp_path, *more):

@@ -9,16 +9,12 @@ import pytest
 
 from facetlift import synthetic
 
+pytestmark = pytest.mark.usefixtures("own_bench_cache")  # (the scripts set it)
+
 
 @pytest.fixture(scope="module")
 def ce(load_script):
     return load_script("benchmarks/bench_cut_errors.py")
-
-
-@pytest.fixture(autouse=True)
-def own_cache(tmp_path, monkeypatch):
-    """The script points $FACETLIFT_BENCH_CACHE at its --cache: restored after each test."""
-    monkeypatch.setenv("FACETLIFT_BENCH_CACHE", str(tmp_path / "cache"))
 
 
 def test_near_counts_a_cut_beside_the_jump(ce):

@@ -9,16 +9,12 @@ import pytest
 
 from facetlift import synthetic
 
+pytestmark = pytest.mark.usefixtures("own_bench_cache")  # (the scripts set it)
+
 
 @pytest.fixture(scope="module")
 def pp(load_script):
     return load_script("benchmarks/bench_prior_pieces.py")
-
-
-@pytest.fixture(autouse=True)
-def own_cache(tmp_path, monkeypatch):
-    """The script points $FACETLIFT_BENCH_CACHE at its --cache: restored after each test."""
-    monkeypatch.setenv("FACETLIFT_BENCH_CACHE", str(tmp_path / "cache"))
 
 
 def test_points_take_the_middle_pixel_of_each_large_piece(pp):
