@@ -619,6 +619,11 @@ def test_final_solve_weighs_normals_by_the_view_cosine(monkeypatch):
     # (measured: mean error 0.068 mm, without the final weights 0.099)
     assert fused.info["final_weights"] and np.abs(fused.depth - depth)[mask].mean() < 0.08
     assert not dense.info["final_weights"] and not none.info["final_weights"]
+    # (also where the prior-free pass used up discontinuity_iter: its weights settled there, a
+    # review: the second pass's one solve had no final weights)
+    few = facetlift.integrate(n, mask, K=K, discontinuities=True, prior=prior,
+                              discontinuity_iter=2)
+    assert few.info["prior_free"]["iterations"] == 2 and few.info["final_weights"]
 
 
 def test_unconverged_cg_falls_back_to_the_solver_layer(monkeypatch):

@@ -1799,10 +1799,10 @@ def test_islands_around_samples_are_glued_back_where_the_normals_show_no_jump(mo
     glued, info = error(16)
     assert info["islands_reglued"] >= 3 and "islands_reglued" not in off
     assert glued < 0.7 * kept
-    # (two more solves: the system with the islands glued, then with the final weights)
-    assert len(info["cg_iterations"]) == len(off["cg_iterations"]) + 2
+    # (one more solve: the system with the islands glued, with the final weights)
+    assert len(info["cg_iterations"]) == len(off["cg_iterations"]) + 1
     assert info["final_weights"] and off["final_weights"]
-    assert info["polish"] in ("direct", "trial", "multigrid")  # (the final solve's)
+    assert info["polish"] == "multigrid"
     # samples that agree with the normals make no island
     flat = run(n, mask, prior=np.where(np.isfinite(prior), 20.0, np.nan), prior_weight=100.0,
                discontinuities=True)

@@ -997,8 +997,9 @@ def solve_discontinuous(
         when the cap stopped them; instead of `weights`: the route passes the view cosine
         squared, :data:`FINAL_COS_POWER`, times the confidence, without a prior or with a
         sparse or blurred one, :func:`facetlift.methods.dgp.cuts_first`); not with
-        ``max_iter = 0`` unless `w0` is given. A pointwise prior's weights are scaled in that
-        solve as its facets' normal terms (``final_weights / weights``).
+        ``max_iter = 0`` unless `w0` is given (then its one solve). A pointwise prior's
+        weights are scaled in that solve as its facets' normal terms (``final_weights /
+        weights``).
     blur : BlurredPrior, optional
         The `prior` seen through a blur (``prior_blur``,
         :class:`~facetlift.methods.dgp.common.BlurredPrior`): its target is corrected after
@@ -1007,8 +1008,9 @@ def solve_discontinuous(
         the last target.
     w0 : (m, 4) float, optional
         Corner glue weights to start from (default all 1: the smooth solution); with
-        ``max_iter = 0`` the system of these weights is solved once to `cg_rtol`, and with
-        `final_weights` again with those (weights a pass before settled).
+        ``max_iter = 0`` the system of these weights is solved once to `cg_rtol`: with
+        `final_weights` (weights a pass before settled) the final weights' system, else
+        with `weights`.
     polish_last : bool
         Solve the last system to `cg_rtol` after the reweightings (default). False where only
         the weights are wanted (:data:`facetlift.methods.dgp.PRIOR_CUTS_FIRST`): `z` and `y`
@@ -1099,6 +1101,18 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
            polish_last=True, seeded=False):
     t0 = time.perf_counter()
     m = domain.n_facets
+    # (no reweighting on weights a pass before settled, w0: its one solve is the final
+    # weights' own, not a solve of the plain system and then that one: the islands' repeated
+    # solve did both)
+    final_first = (max_iter == 0 and polish_last and final_weights is not None
+                   and w0 is not None and blur is None)
+    if final_first:
+        final_weights = np.asarray(final_weights, dtype=float)
+        if prior is not None:  # (its samples' weights scaled as in the final solve below)
+            c = np.ones(m) if weights is None else np.asarray(weights, float)
+            prior = (prior[0] * np.divide(final_weights, c, out=np.ones(m), where=c > 0),
+                     *prior[1:])
+        weights = final_weights
     fusion = None
     if weights is not None or prior is not None:  # docs/fusion.md
         c = np.ones(m) if weights is None else np.asarray(weights, float)
@@ -1400,8 +1414,12 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         del own  # (freed before the final solve)
     slow = amg["slow"]
     # (on weights that reweightings settled: these or a pass before, w0; the second pass of
-    # a sparse prior whose first used up max_iter, and the islands' repeated solve)
-    final = polish_last and final_weights is not None and (it > 0 or w0 is not None)
+    # a sparse prior whose first used up max_iter, and the islands' repeated solve, whose
+    # one solve is the final system's: final_first)
+    # (not a blurred prior's pass without reweightings: its target was never corrected, a
+    # review: plateau with discontinuity_iter 1, 2.36 -> 3.13 with the final weights)
+    final = (polish_last and final_weights is not None
+             and (it > 0 or (w0 is not None and blur is None)) and not final_first)
     if moving and not final:  # (the cap stopped the reweightings: the last target's system)
         M = Ma = K = rhs = None
         M, Ma, K, rhs, scale = state(w)
@@ -1469,7 +1487,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         "multigrid_refreshes": amg["refreshes"],
         "block_coarse_space": slow,
         "unsettled_corners": unsettled,
-        "final_weights": bool(final),
+        "final_weights": bool(final or final_first),
         "polish": polish,
         "factorizations": amg["factorized"],  # (systems solved by a factorization)
         # relative residuals of the solves whose unfinished CG iterate was kept (too large to
