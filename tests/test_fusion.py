@@ -540,6 +540,19 @@ def test_cli_says_when_one_sample_per_component_moved_the_surface(tmp_path, caps
     np.save(tmp_path / "two.npy", prior)
     assert main(args + ["--prior", str(tmp_path / "two.npy"), "-o", str(tmp_path / "b")]) == 0
     assert "alone in its component" not in capsys.readouterr().out
+    # the pieces the cuts add: placed as without a prior, said so (the occluder: 2 more)
+    from facetlift import synthetic
+
+    g = synthetic.analytic("occluder", 48)
+    np.save(tmp_path / "occ.npy", g.normals)
+    one = np.full(g.mask.shape, np.nan)
+    one[10, 10] = g.depth[10, 10]
+    np.save(tmp_path / "occ_one.npy", one)
+    assert main(["integrate", str(tmp_path / "occ.npy"), "--discontinuities", "-s", "npy",
+                 "--prior", str(tmp_path / "occ_one.npy"), "-o", str(tmp_path / "c")]) == 0
+    out = capsys.readouterr().out
+    assert "cuts split the mesh into 2 more pieces (closed by the occlusion rule" in out
+    assert "alone in its component" in out
 
 
 @pytest.mark.parametrize("layout", ["plain", "header", "comments", "spreadsheet"])

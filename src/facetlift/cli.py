@@ -556,7 +556,8 @@ def summary(record: dict) -> str:
     cut = info.get("cut_pieces") or 0
     if cut > 0:  # (docs/results.md, "What the remaining error is")
         held = (isinstance(prior, dict) and not prior.get("left_out")
-                and (prior.get("samples") or 0) > 0)
+                and (prior.get("samples") or 0) > 0
+                and not info.get("prior_one_per_component"))  # (placed as without one)
         # (without a prior the pieces the rule closes come out joined: those counted are
         # mostly ones too far apart to close, methods.dgp.split.TOUCH)
         # (where they are: the jump map tints them, Surface.pieces)
