@@ -95,27 +95,15 @@ def decompose(gt, normals, surface, tolerance: int = 1) -> dict:
 
 def main(argv=None) -> int:
     sys.path.insert(0, str(HERE))
-    from bench_jump_free import (
-        add_conditions,
-        add_models,
-        conditions_of,
-        context,
-        scene_arguments,
-        scene_runs,
-        selected_scenes,
-    )
+    from bench_jump_free import conditions_of, context, run_arguments, scene_runs, selected_scenes
 
     from facetlift.bench.core import Spec, method_status
 
-    ap = scene_arguments(__doc__.split("\n\n")[0])
-    ap.set_defaults(groups="perspective,wide,ortho,tabletop,room,vessel")
-    add_conditions(ap, "exact")
-    add_models(ap)
+    ap = run_arguments(__doc__.split("\n\n")[0])
     ap.add_argument("--tolerance", type=int, default=1,
                     help="pixels between a cut and a true jump that still count as the same "
                     "place (default 1: a cut one pixel beside the jump, across a row of mixed "
                     "pixels, is near)")
-    ap.add_argument("--csv", type=Path, default=None, help="write every run here")
     args = ap.parse_args(argv)
     conditions = conditions_of(ap, args.conditions)
     if args.tolerance < 0:
@@ -124,7 +112,6 @@ def main(argv=None) -> int:
     ctx.status = method_status(["dgp"])
     scenes = selected_scenes(ctx, args)
     if not scenes:
-        print("no scene selected (see --data, --groups, --models)", file=sys.stderr)
         return 1
     spec = Spec("dgp-disc", "dgp", (("discontinuities", True),))
     keys = (*COLUMNS, "cuts", "jumps", "precision", "recall")

@@ -139,20 +139,30 @@ def conditions_of(ap: argparse.ArgumentParser, text: str) -> list[str]:
     return names
 
 
-def add_models(ap: argparse.ArgumentParser) -> None:
-    """The --models option (read by :func:`selected_scenes`)."""
+def run_arguments(description: str) -> argparse.ArgumentParser:
+    """:func:`scene_arguments` of a script that runs every group of the renders
+    (:func:`scene_runs`): also --conditions (default exact), --models and --csv."""
+    ap = scene_arguments(description)
+    ap.set_defaults(groups="perspective,wide,ortho,tabletop,room,vessel")
+    add_conditions(ap, "exact")
     ap.add_argument("--models", default="",
                     help="comma-separated mesh or scene names (default: every scene)")
+    ap.add_argument("--csv", type=Path, default=None, help="write every run here")
+    return ap
 
 
 def selected_scenes(ctx, a) -> list:
-    """``(group, name, loader)`` of the benchmark's scenes that parsed arguments `a` select
-    (--groups, --models of :func:`add_models`, every --step-th); `ctx.models` set."""
+    """``(group, name, loader)`` of the benchmark's scenes that parsed arguments `a` of
+    :func:`run_arguments` select (--groups, --models, every --step-th; `ctx.models` set),
+    where none is said so on stderr."""
     from facetlift.bench import discontinuities as D
 
     ctx.models = tuple(m.strip() for m in a.models.split(",") if m.strip()) or None
     groups = [g.strip() for g in a.groups.split(",") if g.strip()]
-    return [t for t in D.scenes(ctx) if t[0] in groups][::max(a.step, 1)]
+    scenes = [t for t in D.scenes(ctx) if t[0] in groups][::max(a.step, 1)]
+    if not scenes:
+        print("no scene selected (see --data, --groups, --models)", file=sys.stderr)
+    return scenes
 
 
 def scene_runs(ap, ctx, scenes, conditions, csv_path, keys, measure, line) -> list:

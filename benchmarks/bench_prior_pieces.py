@@ -121,26 +121,14 @@ def table(rows) -> str:
 
 def main(argv=None) -> int:
     sys.path.insert(0, str(HERE))
-    from bench_jump_free import (
-        add_conditions,
-        add_models,
-        conditions_of,
-        context,
-        scene_arguments,
-        scene_runs,
-        selected_scenes,
-    )
+    from bench_jump_free import conditions_of, context, run_arguments, scene_runs, selected_scenes
 
-    ap = scene_arguments(__doc__.split("\n\n")[0])
-    ap.set_defaults(groups="perspective,wide,ortho,tabletop,room,vessel")
-    add_conditions(ap, "exact")
-    add_models(ap)
+    ap = run_arguments(__doc__.split("\n\n")[0])
     ap.add_argument("--min-piece", type=int, default=100,
                     help="pixels of the smallest piece given a point in 'per piece' "
                     "(default 100)")
     ap.add_argument("--weight", type=float, default=100.0,
                     help="prior_weight of the points (default 100)")
-    ap.add_argument("--csv", type=Path, default=None, help="write every run here")
     args = ap.parse_args(argv)
     conditions = conditions_of(ap, args.conditions)
     if args.min_piece < 1:
@@ -150,7 +138,6 @@ def main(argv=None) -> int:
     ctx = context(args)
     scenes = selected_scenes(ctx, args)
     if not scenes:
-        print("no scene selected (see --data, --groups, --models)", file=sys.stderr)
         return 1
     keys = ("normals only", "normals only s",
             *(f"{k}{x}" for k in KINDS for x in ("", " s", " points")))

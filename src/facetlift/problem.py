@@ -877,8 +877,8 @@ def prepare(
                          "and prior=None")
     prior_outliers = check_prior_outliers(prior_outliers, prior is not None)
     blur = check_prior_blur(prior_blur, prior is not None, (H, W))
-    if conf_top is not None and pw is not None and (blur > 0 or np.bincount(
-            domain.facet_component[pw > 0], minlength=1).max() > 1):
+    if conf_top is not None and pw is not None and (
+            blur > 0 or not one_sample_per_component(domain, pw)):
         warn(f"`confidence` reaches {conf_top:.4g} (with a prior its values weigh the normals "
              f"against it as given: 1 is a normal of the prior's weight's units, so the prior "
              f"weighs {1 / conf_top:.3g} of what it would beside a confidence of 1); an 8-bit "
@@ -916,6 +916,13 @@ def prepare(
     if problem.has_prior and not problem.prior_components.all():
         _warn_unfixed(problem)
     return problem
+
+
+def one_sample_per_component(domain: Domain, weight: np.ndarray) -> bool:
+    """Whether no connected component of `domain` holds more than one prior sample (a facet of
+    the (m,) prior `weight` above 0): such samples fix only their components' constants, at
+    any weight (:func:`facetlift.methods.dgp.lone_samples`)."""
+    return bool(np.bincount(domain.facet_component[weight > 0], minlength=1).max() <= 1)
 
 
 #: ``prior_outliers=`` choices (:func:`prepare`).

@@ -1168,11 +1168,10 @@ def lone_samples(domain, prior):
     ``cow@front`` made 0.507 % of the depth range 2.334 %, and perspective
     ``max_planck@front`` 0.023 mm 0.186 mm (docs/fusion.md, "One sample per component, and
     final weights with sparse samples")."""
+    from ...problem import one_sample_per_component
+
     facets = np.flatnonzero(prior[0] > 0)
-    if facets.size == 0:
-        return None
-    counts = np.bincount(domain.facet_component[facets], minlength=domain.n_components)
-    return facets if counts.max() <= 1 else None
+    return facets if facets.size and one_sample_per_component(domain, prior[0]) else None
 
 
 def meet_samples(domain, copies, prior, facets):

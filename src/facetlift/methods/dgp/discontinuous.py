@@ -1096,6 +1096,20 @@ def _cut_inside(domain, w: np.ndarray) -> float:
     return float((w[inside] < CUT).mean()) if inside.any() else float("nan")
 
 
+def _on_vertices(domain, lam, target):
+    """The prior's share on the glued vertices (``1 - PRIOR_OWN`` of the (m,) weights `lam`
+    toward `target`): each facet block's diagonal addition and the right-hand side."""
+    share = (1.0 - PRIOR_OWN) * lam
+    return share * CENTRE_BLOCK[0, 0], prior_form(domain, share, target, matrix=False)
+
+
+def _as_final(lam, final_weights, weights):
+    """A pointwise prior's (m,) weights `lam` in the final solve: each scaled as its facet's
+    normal term, from `weights` to `final_weights` (1 where a facet's normal weight is 0),
+    which keeps their ratio, ``prior_weight``'s units."""
+    return lam * np.divide(final_weights, weights, out=np.ones(len(lam)), where=weights > 0)
+
+
 def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, cg_rtol,
            callback, prior=None, weights=None, x0=None, final_weights=None, blur=None, w0=None,
            polish_last=True, seeded=False):
@@ -1110,8 +1124,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         final_weights = np.asarray(final_weights, dtype=float)
         if prior is not None:  # (its samples' weights scaled as in the final solve below)
             c = np.ones(m) if weights is None else np.asarray(weights, float)
-            prior = (prior[0] * np.divide(final_weights, c, out=np.ones(m), where=c > 0),
-                     *prior[1:])
+            prior = (_as_final(prior[0], final_weights, c), *prior[1:])
         weights = final_weights
     fusion = None
     if weights is not None or prior is not None:  # docs/fusion.md
@@ -1128,8 +1141,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         # w / 16 on every entry of a facet's block) is added to the eliminated blocks as they
         # are assembled: no second matrix and no sparse sum per reweighting (the noisy
         # fusion scenes: 1-2 ms of 30-40 a reweighting)
-        pz = (1.0 - PRIOR_OWN) * prior[0] * CENTRE_BLOCK[0, 0]
-        rP = prior_form(domain, (1.0 - PRIOR_OWN) * prior[0], prior[1], matrix=False)
+        pz, rP = _on_vertices(domain, prior[0], prior[1])
     corners = domain.corners
     # (4, 3): corner vector -> (x-slope, y-slope, twist)
     slope_twist = np.stack([E_X, E_Y, E_TWIST], axis=1)
@@ -1146,7 +1158,7 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
         prior = (prior[0], t_new, prior[2])
         fusion = (fusion[0], fusion[1], t_new)
         A_other, a = _facet_system(bx, by, flat_weight, fusion, target)
-        rP = prior_form(domain, (1.0 - PRIOR_OWN) * prior[0], t_new, matrix=False)
+        rP = _on_vertices(domain, prior[0], t_new)[1]
 
     def state(w):
         M = GlueInverse(target, w, A_other, fusion)
@@ -1430,11 +1442,9 @@ def _solve(domain, bx, by, target, normal_scale, k, max_iter, tol, flat_weight, 
             # (left as given, the samples of 1 % noise at weight 1 were fitted closer: mean
             # MADE 0.576 -> 0.582 mm on the 36 perspective fusion scenes, 22 worse by 1 %;
             # scaled, here and in the islands' repeated solve, 0.564, 2 worse)
-            c = fusion[0]
-            lam = prior[0] * np.divide(final_weights, c, out=np.ones(m), where=c > 0)
+            lam = _as_final(prior[0], final_weights, fusion[0])
             fusion = (final_weights, PRIOR_OWN * lam, prior[1])
-            pz = (1.0 - PRIOR_OWN) * lam * CENTRE_BLOCK[0, 0]
-            rP = prior_form(domain, (1.0 - PRIOR_OWN) * lam, prior[1], matrix=False)
+            pz, rP = _on_vertices(domain, lam, prior[1])
         else:  # (a blurred prior's final solve: on the glued vertices only, as measured)
             fusion = (final_weights, np.zeros(m), np.zeros(m))
         A_other, a = _facet_system(bx, by, flat_weight, fusion, target)
