@@ -309,9 +309,10 @@ def test_diligent_bear_made():
     issue 9's limit 0.10 mm is missed here; 0.079 with 10), and since the occlusion rule closes
     only pieces within split.TOUCH footprints (0.020 with every pair closed, 0.311 with
     none; 0.046 with the isolated normals kept, 0.050 before the final view-cosine weights),
-    BiNI's reference 0.334 mm). The discontinuity route's grazing rule (cos 87.5
-    deg) decides most of it: with the pinhole default 1/255 the neck's fading ends stay
-    bridged (0.18 mm; 0.28 with SETTLE_AFTER 10)."""
+    BiNI's reference 0.334 mm; 0.115 since the curl seed is the default, 2026-12-07). The
+    discontinuity route's grazing rule (cos 87.5 deg) decides most of it: with the pinhole
+    default 1/255 the neck's fading ends stay bridged (0.149 mm; 0.18 from the smooth start,
+    0.28 with SETTLE_AFTER 10)."""
     from facetlift.io import read_dataset
 
     data = read_dataset(DILIGENT)  # the PNG is 16-bit; read_normals keeps all 16
@@ -329,7 +330,7 @@ def test_diligent_bear_made():
     bridged = made(facetlift.integrate(n, mask, K=K, discontinuities=True,
                                        outlier_eps=1 / 255))
     assert smooth < 0.5
-    assert made(jumps) < 0.13 and 0.15 < bridged
+    assert made(jumps) < 0.13 and 0.14 < bridged
 
 
 def test_iterative_loop_stops_on_angles_in_perspective():

@@ -239,14 +239,15 @@ def test_a_prior_that_is_not_blurred_as_said_is_warned_about(monkeypatch):
 
     monkeypatch.setitem(methods.REGISTRY, "dgp",
                         dataclasses.replace(methods.get("dgp"), jump_isolated=None))
-    # (and the prior-free pass's schedule of then: with SETTLE_AFTER 20 it no longer runs away)
+    # (and the prior-free pass's schedule of then: with SETTLE_AFTER 20 it no longer runs away,
+    # nor from the curl seed, the default since 2026-12-07)
     from facetlift.methods.dgp import discontinuous as disc
 
     monkeypatch.setattr(disc, "SETTLE_AFTER", 10)
     with pytest.warns(UserWarning, match=r"prior_blur: the surface returned meets the blurred "):
         s = facetlift.integrate(data["normals"][rows, cols], mask, K=K, prior=prior,
                                 prior_blur=4, prior_weight=0.003, discontinuities=True,
-                                outlier_eps=np.cos(np.radians(85.0)))
+                                outlier_eps=np.cos(np.radians(85.0)), discontinuity_seed=False)
     assert s.info["prior_blur"]["retried"] > 1 and not s.info["prior_blur"]["fallback"]
     n, depth, mask = two_bumps((48, 64))
     coarse_prior, sigma = coarse(depth, mask)

@@ -128,12 +128,12 @@ OPTIONS = (
            kind="int", low=0, when=_DISC),
     Option("discontinuity_tol", DEFAULT_TOL, "stop when no corner weight (0..4) changes "
            "by more than this (and grow cuts only by larger steps)", low=0.0, when=_DISC),
-    Option("discontinuity_seed", False, "start the reweightings from cuts where the normals' "
+    Option("discontinuity_seed", True, "start the reweightings from cuts where the normals' "
            "curl says a jump is (one whose height changes along it: a sheet over another, a "
-           "vessel's rim), not from the smooth surface (the reweightings without a prior, or "
-           "those a sparse or blurred prior starts from; not with a dense pointwise prior); "
-           "off by default: better on the development benchmark, mixed on held-out views "
-           "(docs/results.md)", kind="bool",
+           "vessel's rim) and the normals around differ little (no crease), not from the "
+           "smooth surface (the reweightings without a prior, or those a sparse or blurred "
+           "prior starts from; not with a dense pointwise prior); measured better on the "
+           "development benchmark and on held-out views (docs/results.md)", kind="bool",
            when=_DISC),
 )
 
@@ -518,7 +518,7 @@ def run(
         if discontinuity_seed and discontinuity_iter > 0:  # (the prior-free reweightings
             # from the normals' curl; with no reweighting the smooth surface, as documented)
             seed = discontinuous.curl_seed(domain, bx, by, target, cosines, s,
-                                           float(np.radians(noise)))
+                                           float(np.radians(noise)), problem.normals)
         # (a plane seen nearly edge-on through noisy normals: its facets' sharpness capped)
         k_scale = discontinuous.steep_planar(domain, problem.normals, target, bx, by, s, noise,
                                              given=given)

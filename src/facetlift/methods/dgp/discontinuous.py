@@ -84,7 +84,7 @@ Final weights
     error of a test sphere from 0.45 to 0.74). ``info["prior_blur"]["mismatch"]`` is measured
     on the surface returned.
 
-Seeded by the curl (``discontinuity_seed``, off by default)
+Seeded by the curl (``discontinuity_seed``, on by default since the forty-sixth session)
     From the smooth surface a jump is seen only where the two sides' differences differ: a
     cliff between two surfaces of about the same slope (a sheet lying over another, a rim
     seen from the front) bends the smooth surface over whole regions and is never cut (the
@@ -93,11 +93,14 @@ Seeded by the curl (``discontinuity_seed``, off by default)
     that change as curl there. With ``discontinuity_seed`` the first solve starts from corner
     weights lowered where the curl (:func:`curl_seed`: summed over 3 x 3 vertices, so that a
     crease's sampling curl cancels, scaled to an angle and compared with the larger of
-    :data:`SEED_TAU` and :data:`SEED_NOISE` times the normals' noise) says so; the
-    reweightings then keep or glue back those cuts as from the smooth start
-    (``info["seeded_corners"]``). A jump of constant height leaves no curl and is not seeded.
-    Measured on the development benchmark and a held-out set (docs/results.md, "Seeded by the
-    curl"): better on the first as a whole, mixed on the second, hence off by default.
+    :data:`SEED_TAU` and :data:`SEED_NOISE` times the normals' noise) says so, and not where
+    the normals around differ so much that the smooth start sees the jump anyway and a
+    crease's mixed pixels leave curl (:data:`SEED_SPREAD`); the reweightings then keep or
+    glue back those cuts as from the smooth start (``info["seeded_corners"]``). A jump of
+    constant height leaves no curl and is not seeded. Measured on the development benchmark
+    and four held-out sets (docs/results.md, "Seeded by the curl" and "Seeded by the curl,
+    not at creases"): without that gate better on the first as a whole and mixed on the
+    second (off by default then); with it better on both (on by default).
 
 Grazing normals
     The route is run (``facetlift.integrate``) with a grazing threshold of cos 87.5 deg on
@@ -764,9 +767,24 @@ class GlueInverse:
 SEED_TAU = 0.01
 SEED_NOISE = 3.0
 SEED_WINDOW = 3
+#: A vertex is seeded only where that curl is also more than this many times the largest
+#: angle (radians) between the normals of two facets around a vertex of its window (with
+#: `normals` given to :func:`curl_seed`; 0: not used). The seed is for jumps between surfaces
+#: of about one slope, which the smooth start cannot see; where the normals differ across the
+#: line the bilateral weights see it anyway, and a crease's mixed pixels (their averaged
+#: normals are no mean of the two slopes) leave curl that did not cancel in the window: the
+#: walls and floor of the benchmark's rooms were seeded along every crease. On the
+#: development renders' exact normals, of the vertices whose curl exceeds the threshold,
+#: those more than two pixels from a true jump fell from 1,000-2,900 per table or room to
+#: 0-48 with 0.2, those near one to about half; the analytic `fold` kept all 577. Chosen on the
+#: development benchmark and three held-out sets (docs/results.md, "Seeded by the curl, not
+#: at creases"): 0.2 against the ungated seed 106 / 76 development runs better / worse
+#: than no seed (the ungated seed 104 / 78, rooms +26 %); 0.3 against 0.2: 72 / 89.
+SEED_SPREAD = 0.2
 
 
-def curl_seed(domain, bx, by, target, cosines, footprint: float, noise: float):
+def curl_seed(domain, bx, by, target, cosines, footprint: float, noise: float,
+              normals=None):
     """(m, 4) starting corner weights from the curl of the target slopes, or None where no
     corner is seeded below 1 (see :data:`SEED_TAU`).
 
@@ -797,9 +815,28 @@ def curl_seed(domain, bx, by, target, cosines, footprint: float, noise: float):
         curl = ndi.uniform_filter(curl, size=SEED_WINDOW, mode="constant") * SEED_WINDOW
     tau = max(SEED_TAU, SEED_NOISE * (noise if np.isfinite(noise) else 0.0))
     g = 1.0 / (1.0 + np.square(curl / tau))
+    if normals is not None and SEED_SPREAD > 0:
+        g[np.abs(curl) <= SEED_SPREAD * _spread(domain, normals, target)] = 1.0
     if g.min() >= 1.0:
         return None
     return np.stack([g[r + dr, c + dc] for dr, dc in CORNER_OFFSETS], axis=1)
+
+
+def _spread(domain, normals, target):
+    """(H + 1, W + 1) the largest angle (radians) between the normals of two facets around a
+    vertex, its largest over a window of :data:`SEED_WINDOW` vertices a side."""
+    import scipy.ndimage as ndi
+
+    H, W = domain.shape
+    r, c = domain.pixels
+    img = np.full((H + 2, W + 2, 3), np.nan)
+    img[r + 1, c + 1] = np.where(target[:, None], normals, np.nan)
+    quad = (img[:-1, :-1], img[:-1, 1:], img[1:, :-1], img[1:, 1:])
+    out = np.zeros((H + 1, W + 1))
+    for i, j in itertools.combinations(range(4), 2):
+        cos = np.clip(np.einsum("ijk,ijk->ij", quad[i], quad[j]), -1.0, 1.0)
+        np.fmax(out, np.arccos(cos), out=out)  # (NaN where a facet has no normal: ignored)
+    return ndi.maximum_filter(out, size=SEED_WINDOW, mode="constant")
 
 
 def neighbours(domain) -> dict[str, np.ndarray]:
