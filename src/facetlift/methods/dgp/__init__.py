@@ -517,8 +517,11 @@ def run(
         seed = None
         if discontinuity_seed and discontinuity_iter > 0:  # (the prior-free reweightings
             # from the normals' curl; with no reweighting the smooth surface, as documented)
+            # (the spread of the input's own normals: not a confidence-0 normal's direction,
+            # which is missing whatever it is; a review)
             seed = discontinuous.curl_seed(domain, bx, by, target, cosines, s,
-                                           float(np.radians(noise)), problem.normals)
+                                           float(np.radians(noise)),
+                                           np.where(given[:, None], problem.normals, np.nan))
         # (a plane seen nearly edge-on through noisy normals: its facets' sharpness capped)
         k_scale = discontinuous.steep_planar(domain, problem.normals, target, bx, by, s, noise,
                                              given=given)

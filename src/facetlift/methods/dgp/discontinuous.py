@@ -98,7 +98,7 @@ Seeded by the curl (``discontinuity_seed``, on by default since the forty-sixth 
     crease's mixed pixels leave curl (:data:`SEED_SPREAD`); the reweightings then keep or
     glue back those cuts as from the smooth start (``info["seeded_corners"]``). A jump of
     constant height leaves no curl and is not seeded. Measured on the development benchmark
-    and four held-out sets (docs/results.md, "Seeded by the curl" and "Seeded by the curl,
+    and three held-out sets (docs/results.md, "Seeded by the curl" and "Seeded by the curl,
     not at creases"): without that gate better on the first as a whole and mixed on the
     second (off by default then); with it better on both (on by default).
 
@@ -769,7 +769,8 @@ SEED_NOISE = 3.0
 SEED_WINDOW = 3
 #: A vertex is seeded only where that curl is also more than this many times the largest
 #: angle (radians) between the normals of two facets around a vertex of its window (with
-#: `normals` given to :func:`curl_seed`; 0: not used). The seed is for jumps between surfaces
+#: `normals` given to :func:`curl_seed`, NaN where a facet has none of its own; 0: not
+#: used). The seed is for jumps between surfaces
 #: of about one slope, which the smooth start cannot see; where the normals differ across the
 #: line the bilateral weights see it anyway, and a crease's mixed pixels (their averaged
 #: normals are no mean of the two slopes) leave curl that did not cancel in the window: the
@@ -795,7 +796,10 @@ def curl_seed(domain, bx, by, target, cosines, footprint: float, noise: float,
     a wide lens' off-axis curl larger, a review); the signed curl is summed over a window of
     :data:`SEED_WINDOW` vertices a side and divided by the window's width, so that a jump
     line's curl (its height's change along it) adds up and a crease's (the sampling's, of
-    either sign along it) cancels. `noise` is in radians.
+    either sign along it) cancels. `noise` is in radians. With `normals` (m, 3), the facets'
+    own unit normals (NaN where a facet has none of its own: missing, or of confidence 0), a
+    vertex is seeded only where its curl also exceeds :data:`SEED_SPREAD` times their largest
+    angle around it (:func:`_spread`).
     """
     import scipy.ndimage as ndi
 
