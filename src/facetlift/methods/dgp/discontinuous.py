@@ -836,10 +836,11 @@ def _spread(domain, normals, target):
     img = np.full((H + 2, W + 2, 3), np.nan)
     img[r + 1, c + 1] = np.where(target[:, None], normals, np.nan)
     quad = (img[:-1, :-1], img[:-1, 1:], img[1:, :-1], img[1:, 1:])
-    out = np.zeros((H + 1, W + 1))
+    low = np.ones((H + 1, W + 1))  # (the smallest cosine: the largest angle, one arccos)
     for i, j in itertools.combinations(range(4), 2):
-        cos = np.clip(np.einsum("ijk,ijk->ij", quad[i], quad[j]), -1.0, 1.0)
-        np.fmax(out, np.arccos(cos), out=out)  # (NaN where a facet has no normal: ignored)
+        # (NaN where a facet has no normal: fmin ignores it)
+        np.fmin(low, np.einsum("ijk,ijk->ij", quad[i], quad[j]), out=low)
+    out = np.arccos(np.clip(low, -1.0, 1.0, out=low), out=low)
     return ndi.maximum_filter(out, size=SEED_WINDOW, mode="constant")
 
 
