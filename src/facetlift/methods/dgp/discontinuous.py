@@ -769,18 +769,18 @@ SEED_NOISE = 3.0
 SEED_WINDOW = 3
 #: A vertex is seeded only where that curl is also more than this many times the largest
 #: angle (radians) between the normals of two facets around a vertex of its window (with
-#: `normals` given to :func:`curl_seed`, NaN where a facet has none of its own; 0: not
-#: used). The seed is for jumps between surfaces
-#: of about one slope, which the smooth start cannot see; where the normals differ across the
-#: line the bilateral weights see it anyway, and a crease's mixed pixels (their averaged
-#: normals are no mean of the two slopes) leave curl that did not cancel in the window: the
-#: walls and floor of the benchmark's rooms were seeded along every crease. On the
-#: development renders' exact normals, of the vertices whose curl exceeds the threshold,
-#: those more than two pixels from a true jump fell from 1,000-2,900 per table or room to
-#: 0-48 with 0.2, those near one to about half; the analytic `fold` kept all 577. Chosen on the
-#: development benchmark and three held-out sets (docs/results.md, "Seeded by the curl, not
-#: at creases"): 0.2 against the ungated seed 106 / 76 development runs better / worse
-#: than no seed (the ungated seed 104 / 78, rooms +26 %); 0.3 against 0.2: 72 / 89.
+#: `normals` given to :func:`curl_seed`, NaN where a facet has none of its own; 0: not used).
+#: The seed is for jumps between surfaces of about one slope, which the smooth start cannot
+#: see; where the normals differ across the line the bilateral weights see it anyway, and a
+#: crease's mixed pixels (their averaged normals are no mean of the two slopes) leave curl
+#: that does not cancel in the window: the walls and floor of the benchmark's rooms were
+#: seeded along every crease. On the development renders' exact normals, of the vertices whose
+#: curl exceeds the threshold, those more than two pixels from a true jump fell from
+#: 1,000-2,900 per table or room to 0-48 with 0.2, those near one to about half; the analytic
+#: `fold` kept all 577. Chosen on the development benchmark and three held-out sets
+#: (docs/results.md, "Seeded by the curl, not at creases"): with 0.2 the seed made 106
+#: development runs better and 76 worse than the smooth start (ungated 104 / 78, the rooms
+#: +26 %); 0.3 against 0.2: 72 / 89.
 SEED_SPREAD = 0.2
 
 
