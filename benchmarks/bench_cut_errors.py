@@ -139,16 +139,14 @@ def table(rows) -> str:
     """Markdown: each group's and condition's mean of every column."""
     head = ("| group | condition | scenes | " + " | ".join(COLUMNS)
             + " | precision | recall |\n|---|---|---|" + "---|" * (len(COLUMNS) + 2))
+    from bench_jump_free import grouped  # (on the path: main put it there)
+
     lines = [head]
-    for cond in dict.fromkeys(r[2] for r in rows):
-        for g in dict.fromkeys(r[0] for r in rows):
-            sel = [r[3] for r in rows if r[0] == g and r[2] == cond]
-            if not sel:
-                continue
-            means = [float(np.nanmean([s[k] for s in sel])) for k in
-                     (*COLUMNS, "precision", "recall")]
-            lines.append(f"| {g} | {cond} | {len(sel)} | "
-                         + " | ".join(f"{m:.3f}" for m in means) + " |")
+    for cond, g, sel in grouped(rows):
+        means = [float(np.nanmean([s[k] for s in sel])) for k in
+                 (*COLUMNS, "precision", "recall")]
+        lines.append(f"| {g} | {cond} | {len(sel)} | "
+                     + " | ".join(f"{m:.3f}" for m in means) + " |")
     return "\n".join(lines)
 
 

@@ -212,6 +212,16 @@ def scene_runs(ap, ctx, scenes, conditions, csv_path, keys, measure, line) -> li
     return rows
 
 
+def grouped(rows):
+    """``(condition, group, [row dicts])`` of :func:`scene_runs`' rows for every condition and
+    group that has runs, each in the order first met (the scripts' tables of means)."""
+    for cond in dict.fromkeys(r[2] for r in rows):
+        for g in dict.fromkeys(r[0] for r in rows):
+            sel = [r[3] for r in rows if r[0] == g and r[2] == cond]
+            if sel:
+                yield cond, g, sel
+
+
 def context(a):
     """The benchmark's context for parsed :func:`scene_arguments` (warnings silenced)."""
     from facetlift.bench.core import Context, Settings

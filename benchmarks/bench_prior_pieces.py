@@ -100,22 +100,20 @@ def table(rows) -> str:
     head = ("| group | condition | scenes | normals only | "
             + " | ".join(f"{k} | better / worse | time ratio | points" for k in KINDS)
             + " |\n|---|---|---|---|" + "---|---|---|---|" * len(KINDS))
+    from bench_jump_free import grouped  # (on the path: main put it there)
+
     lines = [head]
-    for cond in dict.fromkeys(r[2] for r in rows):
-        for g in dict.fromkeys(r[0] for r in rows):
-            sel = [r[3] for r in rows if r[0] == g and r[2] == cond]
-            if not sel:
-                continue
-            free = np.array([s["normals only"] for s in sel])
-            cells = [f"{free.mean():.3f}"]
-            for k in KINDS:
-                e = np.array([s[k] for s in sel])
-                ratio = np.array([s[k + " s"] / s["normals only s"] for s in sel])
-                n = np.array([s[k + " points"] for s in sel])
-                cells += [f"{e.mean():.3f}", f"{int((e < 0.99 * free).sum())} / "
-                          f"{int((e > 1.01 * free).sum())}", f"{np.median(ratio):.2f}",
-                          f"{np.median(n):.0f}"]
-            lines.append(f"| {g} | {cond} | {len(sel)} | " + " | ".join(cells) + " |")
+    for cond, g, sel in grouped(rows):
+        free = np.array([s["normals only"] for s in sel])
+        cells = [f"{free.mean():.3f}"]
+        for k in KINDS:
+            e = np.array([s[k] for s in sel])
+            ratio = np.array([s[k + " s"] / s["normals only s"] for s in sel])
+            n = np.array([s[k + " points"] for s in sel])
+            cells += [f"{e.mean():.3f}", f"{int((e < 0.99 * free).sum())} / "
+                      f"{int((e > 1.01 * free).sum())}", f"{np.median(ratio):.2f}",
+                      f"{np.median(n):.0f}"]
+        lines.append(f"| {g} | {cond} | {len(sel)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
