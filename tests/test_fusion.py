@@ -351,7 +351,9 @@ def test_perspective_prior_must_be_positive():
         facetlift.integrate(n, K=K, prior=sparse.reshape(24, 28))
     sparse[idx[:4]] = -5.0
     with pytest.raises(ValueError, match=r"`prior` must hold positive z-depths .*\(4 "
-                       r"non-positive sample\(s\), 4 of them negative, of 50\)"):
+                       r"non-positive sample\(s\), 4 of them negative, of 50\); up to 3 "
+                       r"negative samples, or 1% .* left out as bad pixels.* if a negative "
+                       r"value \(e.g. -1\) marks unknown depths, write NaN"):
         facetlift.integrate(n, K=K, prior=sparse.reshape(24, 28))
     few = np.full(24 * 28, np.nan)  # (3 of 6 negative: a zero-mean relative depth, refused)
     few[idx[:6]] = [-1.0, -0.5, -0.2, 0.3, 0.6, 1.0]
