@@ -1528,3 +1528,32 @@ def test_save_normals_writes_the_results_own_normals_in_the_inputs_frame(tmp_pat
     s.save(tmp_path / "result_normals.png")
     assert (tmp_path / "result_normals.png").read_bytes() == (
         tmp_path / "out" / "result_normals.png").read_bytes()
+
+
+def test_a_dataset_folders_prior_named_in_value_errors(tmp_path, capsys):
+    """A user's check: a folder's prior_depth.npy with no finite sample, or with negative
+    depths beside the folder's K.txt, was refused as `prior`, a Python name the user had not
+    typed; the message names the file and --no-prior now. A --prior given as a flag keeps
+    its flag's name, with no such tail."""
+    H, W = 24, 30
+    n = np.dstack([np.zeros((H, W, 2)), np.ones((H, W))])
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", n)
+    np.save(folder / "prior_depth.npy", np.full((H, W), np.nan))
+    code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "o")
+    err = " ".join(err.split())
+    assert code == 1 and "`prior` (the folder's prior_depth.npy) has no finite depth sample" \
+        in err and err.endswith("or leave it unread with --no-prior"), err
+    np.savetxt(folder / "K.txt", [[50.0, 0, 15], [0, 50.0, 12], [0, 0, 1]])
+    np.save(folder / "prior_depth.npy", np.full((H, W), -1.0))
+    code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "o")
+    err = " ".join(err.split())
+    assert code == 1 and "`prior` (the folder's prior_depth.npy) must hold positive z-depths" \
+        in err and "write NaN there" in err and "--no-prior" in err, err
+    code, _, err = run(capsys, "integrate", folder, "--prior", folder / "prior_depth.npy",
+                       "-o", tmp_path / "o")
+    err = " ".join(err.split())
+    assert code == 1 and "--prior must hold positive z-depths" in err, err
+    assert "--no-prior" not in err, err
+    assert not (tmp_path / "o").exists()

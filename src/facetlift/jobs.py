@@ -665,7 +665,7 @@ def _from_folder(message: str, job: Job, inp: Input) -> str:
     from . import methods
 
     if not any(f"does not take a `{w}`" in message for w in ("prior", "confidence")):
-        return message
+        return _folder_named(message, job, inp)
     try:
         able = methods.get(job.method)
     except (KeyError, ValueError):
@@ -691,6 +691,19 @@ def _from_folder(message: str, job: Job, inp: Input) -> str:
     return (f"{message} ({what}, "
             f"which this method does not take: {flags} leave{'s' if len(files) == 1 else ''} "
             f"{'it' if len(files) == 1 else 'them'} out)")
+
+
+def _folder_named(message: str, job: Job, inp: Input) -> str:
+    """`message` about the `prior` or `confidence` that a dataset folder gave (no such flag:
+    ``facetlift.cli`` leaves the Python name, which pointed nowhere, a user's check) with the
+    file named and the flag that leaves it unread."""
+    for name, flag in (("prior", "--no-prior"), ("confidence", "--no-confidence")):
+        file = getattr(inp, f"{name}_file")
+        if (message.startswith(f"`{name}`") and getattr(job, name) is None and file
+                and name not in job.beside):  # (a batch's own files: _beside_file's)
+            return (f"`{name}` ({file}){message[len(name) + 2:]}; or leave it unread with "
+                    f"{flag}")
+    return message
 
 
 def check_fov(job: Job) -> None:
