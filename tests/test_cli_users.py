@@ -1041,6 +1041,30 @@ def test_sigint_during_the_write_leaves_nothing(dome_png, tmp_path):
     assert not out.exists()
 
 
+def test_ctrl_c_after_the_commit_says_the_set_was_written(tmp_path, capsys, monkeypatch):
+    """A user's check: a Ctrl-C that landed just after the outputs were moved into place said
+    "nothing partial was written", though the complete new set was there (and had replaced
+    an earlier one). It says so now; one before the commit still says nothing was written."""
+    from facetlift.io import atomic
+
+    path = io.write_normals(tmp_path / "dome.npy", dome())
+    commit = atomic.OutputSet.commit
+
+    def then_interrupted(self):
+        commit(self)
+        raise KeyboardInterrupt
+    monkeypatch.setattr(atomic.OutputSet, "commit", then_interrupted)
+    code, _, err = run(capsys, "integrate", path, "-s", "npy", "-o", tmp_path / "o")
+    assert code == 130 and "interrupted (Ctrl-C) after the outputs were written" in err, err
+    assert (tmp_path / "o" / "depth.npy").exists()
+
+    def interrupted(self):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(atomic.OutputSet, "commit", interrupted)
+    code, _, err = run(capsys, "integrate", path, "-s", "npy", "-o", tmp_path / "p")
+    assert code == 130 and "nothing partial was written" in err, err
+
+
 def test_a_linalg_error_inside_a_method_is_a_solver_error(monkeypatch):
     _break_dgp(monkeypatch, np.linalg.LinAlgError("Singular matrix"))
     with pytest.raises(facetlift.SolverError, match="linear algebra failed .Singular matrix"):

@@ -297,8 +297,11 @@ _JOB_OPTIONS = [
                  help="The prior is coarse or blurred (a monocular network, a low-resolution "
                  "sensor, a map upsampled from a coarse grid): the standard deviation in "
                  "pixels of its blur, so that only its coarse shape counts (for a map "
-                 "upsampled by a factor f, about 1.1 f); --prior-weight then defaults to "
-                 "0.003. docs/fusion.md, 'Blurred priors'."),
+                 "upsampled by a factor f from block means or a blurred coarse map, about "
+                 "1.1 f); --prior-weight then defaults to 0.003. A map interpolated from "
+                 "point samples of a coarse grid is no blurred map: give those samples "
+                 "instead (NaN between them, or a points file). docs/fusion.md, 'Blurred "
+                 "priors'."),
     click.option("--prior-outliers", type=click.Choice(["remove", "keep"]), default=None,
                  help="remove (the default): samples of a sparse prior that disagree with "
                  "every neighbouring sample along the normals are left out, counted and "
@@ -1208,8 +1211,12 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         result = _result_in_folder(result)
     est = io.read_depth(result, arg="result")
     folder_notes = []
+    shown = K  # (the camera as the text names it)
     if gt.is_dir():  # (a BiNI user's `--gt bear` was refused as a directory, an audit)
+        typed = K
         gt, mask, K, folder_notes = _gt_folder(gt, mask, K, fov, result, est)
+        if K is not None and typed is None:  # (not typed: the folder's, named so)
+            shown = f"the folder's {K}"
     camera = None
     orthographic = False  # (a surface.npz that records an orthographic camera)
     if result.suffix.lower() == ".npz":  # (a surface's: its camera, NaN when orthographic)
@@ -1272,7 +1279,7 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         click.echo(json.dumps(jsonable(dict(rec, status="ok", exit_code=EXIT_OK))))
         _STATE["printed_json"] = True
         return EXIT_OK
-    for line in _evaluate_lines(rec, K if fov is None else f"fov {fov:g} deg",
+    for line in _evaluate_lines(rec, shown if fov is None else f"fov {fov:g} deg",
                                 surface=result.suffix.lower() == ".npz"):
         click.echo(line)
     return EXIT_OK
@@ -1357,7 +1364,8 @@ def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
     def num(v):
         return "-" if v is None else f"{v:.6g}"
 
-    given = (f"--{K}" if str(K).startswith("fov ") else f"--K {K}") if K is not None else None
+    given = (K if str(K).startswith("the folder's ") else f"--{K}" if str(K).startswith("fov ")
+             else f"--K {K}") if K is not None else None
     camera = ("perspective" + (f" ({given})" if K is not None else " (the surface's camera)")
               if rec["perspective"] else "orthographic (the surface's camera)" if surface
               else "no camera given: scored as orthographic (up to an offset per piece)")
@@ -1583,14 +1591,20 @@ def _stopped(how: str) -> str:
     if command == "bench":  # (its files are written experiment by experiment, an audit)
         return (f"{how}; the finished experiments' files are in the output folder, and its "
                 "report.md lists them and the one interrupted")
+    from .io.atomic import COMMITTED
+
+    if COMMITTED and command != "batch":  # (after the set was moved in: it is complete)
+        return (f"{how} after the outputs were written: {COMMITTED[-1]} holds the complete "
+                "new set")
     return (f"{how}; nothing partial was written"
             + (" (a batch's finished items are in its log)" if command == "batch" else ""))
 
 
 def _main(args: list[str]) -> int:
     from .errors import MemoryLimitError, WorkersDied
-    from .io.atomic import Terminated
+    from .io.atomic import COMMITTED, Terminated
 
+    COMMITTED.clear()  # (this command's commits only: _stopped)
     try:
         with warnings.catch_warnings():  # (restores Python's own display afterwards)
             warnings.showwarning = _show_warning

@@ -346,6 +346,7 @@ class OutputSet:
             # (done: nothing to roll back; removed before the staging folder, whose removal
             # a kill may cut short, a review)
             (self.staging / MOVING).unlink()
+            COMMITTED.append(self.outdir)
         except BaseException as e:
             for name, target in done.items():
                 with contextlib.suppress(OSError):
@@ -402,6 +403,11 @@ class OutputSet:
 def _raise_terminated(signum, frame):
     raise Terminated(f"terminated by signal {signum}")
 
+
+#: The output folders whose sets this process moved into place, in order: a Ctrl-C that
+#: lands after a commit must not say that nothing was written (``facetlift.cli``, which
+#: clears it per command; a user's check).
+COMMITTED: list[Path] = []
 
 #: Whether this process is a local batch worker (:func:`die_on_sigterm`).
 _WORKER = False
