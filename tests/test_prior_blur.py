@@ -306,6 +306,9 @@ def test_blur_bent_needs_both_the_angle_and_the_ratio():
     assert blur_bent(BENT - 1, None) is None
     assert blur_bent(BENT + 1, (BENT + 1) / BENT_RATIO * 0.9) == BENT + 1
     assert blur_bent(BENT + 1, (BENT + 1) / BENT_RATIO * 1.1) is None  # (noisy normals)
+    # (the warning's lower limit, BENT_WARN, and no angle measured: nothing)
+    assert blur_bent(BENT - 1, None, BENT - 2) == BENT - 1
+    assert blur_bent(None, 0.1) is None and blur_bent(None, None, 0.0) is None
 
 
 def test_a_blurred_prior_that_bends_the_surface_away_from_its_normals_falls_back(monkeypatch):
