@@ -64,9 +64,11 @@ def test_a_map_inside_a_dataset_folder_names_the_folder_files_it_leaves_unread(t
     assert code == 0, err
     assert re.search(r"lies in a dataset folder whose K.txt .* and mask.png .* does not read",
                      err) and f"facetlift integrate {tmp_path}" in err
-    code, _, err = run(capsys, "integrate", npath, "--K", tmp_path / "K.txt", "--mask", mpath,
-                       "-s", "npy", "-o", tmp_path / "b")
+    code, out, err = run(capsys, "integrate", npath, "--K", tmp_path / "K.txt", "--mask", mpath,
+                         "-s", "npy", "-o", tmp_path / "b")
     assert code == 0 and "dataset folder" not in err
+    # (the summary names the camera's file, not "K", a user's check)
+    assert f"perspective (--K {tmp_path / 'K.txt'})" in out + err, out + err
     code, _, err = run(capsys, "integrate", npath, "--orthographic", "-s", "npy", "-o",
                        tmp_path / "c")  # (orthographic asked for: only the mask is named)
     assert code == 0 and "mask.png (its mask)" in err and "K.txt (its camera" not in err

@@ -505,6 +505,20 @@ def _samples(field: bool, count: int = 2) -> str:
     return word if count == 1 else f"{word}s"
 
 
+def _camera_given(camera: str) -> str:
+    """A record's camera as the summary names it: "K", the camera given, as the --K typed
+    (its file: a user's check read "perspective (K)" for a DiLiGenT Calib_Results.mat)."""
+    args = list(_STATE.get("args") or ())
+    if camera != "K":
+        return camera
+    for i, a in enumerate(args):
+        if a == "--K" and i + 1 < len(args):
+            return f"--K {args[i + 1]}"
+        if a.startswith("--K="):
+            return f"--K {a[len('--K='):]}"
+    return camera
+
+
 def summary(record: dict) -> str:
     """The one-line text summary of a job's record."""
     info = record["info"]
@@ -521,8 +535,8 @@ def summary(record: dict) -> str:
     rotation = record.get("normal_rotation")
     parts = [
         f"{H}x{W} pixels, {record['facets']} facets (mask: {source})",
-        (f"perspective ({record.get('camera', 'K')})" if record.get("perspective")
-         else "orthographic"),
+        (f"perspective ({_camera_given(record.get('camera', 'K'))})"
+         if record.get("perspective") else "orthographic"),
         *([f"normals turned from world space ({rotation['file']})"] if rotation else []),
         f"method {info.get('method')}" + (f" ({info['solver']})" if "solver" in info else ""),
     ]
