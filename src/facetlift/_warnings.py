@@ -22,6 +22,9 @@ def warn(message: str, category: type[Warning] = UserWarning, **fields) -> None:
     while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE):
         frame = frame.f_back
         level += 1
+    rename = getattr(_LOCAL, "rename", None)
+    if rename is not None:  # (renamed: a dataset folder's file for `prior`, jobs.run)
+        message = rename(message)
     w = category(message, **fields)
     w.from_facetlift = True  # (told from others' warnings where facetlift re-emits a record)
     stack = getattr(_LOCAL, "stack", None)
@@ -31,6 +34,20 @@ def warn(message: str, category: type[Warning] = UserWarning, **fields) -> None:
         stack[-1](w, category, *where, None, None)
         return
     warnings.warn(w, category, stacklevel=level)
+
+
+@contextlib.contextmanager
+def renamed(rename):
+    """Within the block, this thread's facetlift warnings have their message passed through
+    `rename` (callable(str) -> str) before they are raised: a caller that knows what an
+    argument's name stands for says it (a dataset folder's ``confidence.npy`` for
+    `confidence`, :func:`facetlift.jobs.run`)."""
+    old = getattr(_LOCAL, "rename", None)
+    _LOCAL.rename = rename
+    try:
+        yield
+    finally:
+        _LOCAL.rename = old
 
 
 def reemit(w) -> None:

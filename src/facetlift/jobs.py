@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ._progress import announce
-from ._warnings import recording, reemit, said_if_raised, warn
+from ._warnings import recording, reemit, renamed, said_if_raised, warn
 from .errors import CameraWarning
 
 #: Output kinds (``--save``) -> file names written into the output folder.
@@ -693,16 +693,17 @@ def _from_folder(message: str, job: Job, inp: Input) -> str:
             f"{'it' if len(files) == 1 else 'them'} out)")
 
 
-def _folder_named(message: str, job: Job, inp: Input) -> str:
+def _folder_named(message: str, job: Job, inp: Input, warning: bool = False) -> str:
     """`message` about the `prior` or `confidence` that a dataset folder gave (no such flag:
     ``facetlift.cli`` leaves the Python name, which pointed nowhere, a user's check) with the
-    file named and the flag that leaves it unread."""
+    file named and the flag that leaves it unread (a `warning`'s: that it can be)."""
     for name, flag in (("prior", "--no-prior"), ("confidence", "--no-confidence")):
         file = getattr(inp, f"{name}_file")
         if (message.startswith(f"`{name}`") and getattr(job, name) is None and file
                 and name not in job.beside):  # (a batch's own files: _beside_file's)
-            return (f"`{name}` ({file}){message[len(name) + 2:]}; or leave it unread with "
-                    f"{flag}")
+            tail = (f" ({flag} leaves it unread)" if warning
+                    else f"; or leave it unread with {flag}")
+            return f"`{name}` ({file}){message[len(name) + 2:]}{tail}"
     return message
 
 
@@ -958,19 +959,20 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                             layout=inp.layout,
                             normal_range=frames.normal_range(job.normal_range)):
             try:
-                surface = facetlift.integrate(
-                    inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size,
-                    K=inp.K, backfacing=job.backfacing, outlier_eps=job.outlier_eps,
-                    normal_rotation=turn,
-                    prior=depth_prior,
-                    prior_weight=inp.prior_weight if inp.prior is not None else None,
-                    confidence=inp.confidence,
-                    prior_blur=job.prior_blur if inp.prior is not None else None,
-                    **({} if job.prior_outliers is None or inp.prior is None
-                       else {"prior_outliers": job.prior_outliers}),
-                    **({} if job.prior_fit is None or inp.prior is None
-                       else {"prior_fit": job.prior_fit}), **opts,
-                )
+                with renamed(lambda m: _folder_named(m, job, inp, warning=True)):
+                    surface = facetlift.integrate(
+                        inp.normals, inp.mask, method=job.method, pixel_size=job.pixel_size,
+                        K=inp.K, backfacing=job.backfacing, outlier_eps=job.outlier_eps,
+                        normal_rotation=turn,
+                        prior=depth_prior,
+                        prior_weight=inp.prior_weight if inp.prior is not None else None,
+                        confidence=inp.confidence,
+                        prior_blur=job.prior_blur if inp.prior is not None else None,
+                        **({} if job.prior_outliers is None or inp.prior is None
+                           else {"prior_outliers": job.prior_outliers}),
+                        **({} if job.prior_fit is None or inp.prior is None
+                           else {"prior_fit": job.prior_fit}), **opts,
+                    )
             except ValueError as e:
                 said = _from_folder(str(e), job, inp)
                 if said == str(e):
