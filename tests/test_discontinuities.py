@@ -474,6 +474,12 @@ def test_stopping_rule_and_cap():
     assert capped.info["iterations"] == 2 and not capped.info["converged"]
     loose = facetlift.integrate(n, discontinuities=True, discontinuity_tol=0.5)
     assert loose.info["converged"] and loose.info["iterations"] < s.info["iterations"]
+    # (a tolerance no weight step can exceed, the weights lying in 0..4: one reweighting,
+    # said, a review)
+    with pytest.warns(UserWarning, match=r"`discontinuity_tol` 5: the corner weights lie in "
+                                         r"0\.\.4, .* stop after the first"):
+        once = facetlift.integrate(n, discontinuities=True, discontinuity_tol=5.0)
+    assert once.info["iterations"] == 1 and once.info["converged"]
     seen = []
     facetlift.integrate(n, discontinuities=True, progress=lambda it, ch: seen.append((it, ch)))
     assert [it for it, _ in seen] == list(range(1, len(seen) + 1))

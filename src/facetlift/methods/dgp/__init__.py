@@ -474,6 +474,10 @@ def run(
                 # which prepare gives 1 after its scaling, as _discontinuous's first pass)
                 weights = np.where(target, weights / weights[target].max(), weights)
     if discontinuities:
+        if discontinuity_tol >= 4.0 and discontinuity_iter > 0:  # (a review: said nowhere)
+            warn(f"`discontinuity_tol` {discontinuity_tol:g}: the corner weights lie in 0..4, "
+                 "so no step exceeds it and the reweightings stop after the first (reported "
+                 f"converged); the default is {DEFAULT_TOL:g}")
         empty_components(domain, target, offset=problem.extras.get("offset", (0, 0)))
         given = target  # (the input's own normals: the deviation is measured on them)
         scale = normal_scale(problem)
