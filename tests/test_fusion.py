@@ -351,9 +351,11 @@ def test_perspective_prior_must_be_positive():
         facetlift.integrate(n, K=K, prior=sparse.reshape(24, 28))
     sparse[idx[:4]] = -5.0
     with pytest.raises(ValueError, match=r"`prior` must hold positive z-depths .*\(4 "
-                       r"non-positive sample\(s\), 4 of them negative, of 50\); up to 3 "
-                       r"negative samples, or 1% .* left out as bad pixels.* if a negative "
-                       r"value \(e.g. -1\) marks unknown depths, write NaN"):
+                       r"non-positive sample\(s\), 4 of them negative, of 50\); negative "
+                       r"samples are left out as bad pixels while they are at most 1% of the "
+                       r"nonzero ones, or at most 3 and a quarter of them, and positive ones "
+                       r"remain.* if a negative value \(e.g. -1\) marks unknown depths, "
+                       r"write NaN"):
         facetlift.integrate(n, K=K, prior=sparse.reshape(24, 28))
     few = np.full(24 * 28, np.nan)  # (3 of 6 negative: a zero-mean relative depth, refused)
     few[idx[:6]] = [-1.0, -0.5, -0.2, 0.3, 0.6, 1.0]
@@ -361,8 +363,9 @@ def test_perspective_prior_must_be_positive():
         facetlift.integrate(n, K=K, prior=few.reshape(24, 28))
     # a map of nothing but 0 (a user's check): the message says to write NaN
     with pytest.raises(ValueError, match=r"672 of them are 0: if 0 marks an unknown depth, "
-                       "write NaN"):
+                       "write NaN") as e:
         facetlift.integrate(n, K=K, prior=np.zeros((24, 28)))
+    assert "negative samples are left out" not in str(e.value)  # (none is negative)
     # a depth sensor's map, 0 where unknown, with samples: the zeros are left out, said
     prior = np.zeros((24, 28))
     prior[3, 4] = 5.0

@@ -1891,13 +1891,17 @@ def check_prior(prior, prior_weight, shape, mask, camera):
                         "disparity or inverse-depth map (0 at the far end) must be inverted "
                         "into depth first (docs/fusion.md, 'Recipes')" if zeros.any() else "")
                 # (a few bad pixels are left out, more are refused: say where the line is,
-                # and that a sentinel such as -1 is no depth, a review)
-                hint += (f"; up to {NEGATIVE_FEW} negative samples, or {NEGATIVE_SHARE:.0%} of "
-                         "the nonzero ones, are left out as bad pixels, more are taken for "
-                         "a map that is no metric depth: if a negative value (e.g. -1) marks "
-                         "unknown depths, write NaN there; relative depth or disparity from "
-                         "a monocular network (any sign, up to scale and shift): "
-                         "prior_fit='affine' or 'disparity' (--prior-fit)")
+                # and that a sentinel such as -1 is no depth; only where some are negative,
+                # a review)
+                if below.any():
+                    hint += (f"; negative samples are left out as bad pixels while they are "
+                             f"at most {NEGATIVE_SHARE:.0%} of the nonzero ones, or at most "
+                             f"{NEGATIVE_FEW} and a quarter of them, and positive ones remain; "
+                             "more are taken for a map that is no metric depth: if a negative "
+                             "value (e.g. -1) marks unknown depths, write NaN there")
+                hint += ("; relative depth or disparity from a monocular network (any sign, "
+                         "up to scale and shift): prior_fit='affine' or 'disparity' "
+                         "(--prior-fit)")
                 raise ValueError(
                     "`prior` must hold positive z-depths for a perspective camera (`K`); got "
                     f"{float(depth[k])!r} ({int(neg.sum())} non-positive sample(s), "
