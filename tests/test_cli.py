@@ -1546,7 +1546,8 @@ def test_a_dataset_folders_prior_named_in_value_errors(tmp_path, capsys):
     code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "o")
     err = " ".join(err.split())
     assert code == 1 and "`prior` (the folder's prior_depth.npy) has no finite depth sample" \
-        in err and err.endswith("or leave it unread with --no-prior"), err
+        in err and err.endswith("or leave it unread with --no-prior (dataset_prior=False in "
+                                 "Python)"), err
     np.savetxt(folder / "K.txt", [[50.0, 0, 15], [0, 50.0, 12], [0, 0, 1]])
     np.save(folder / "prior_depth.npy", np.full((H, W), -1.0))
     code, _, err = run(capsys, "integrate", folder, "-o", tmp_path / "o")
@@ -1578,7 +1579,7 @@ def test_a_dataset_folders_confidence_named_in_warnings(tmp_path, capsys):
     err = " ".join(err.split())
     assert code == 0, err
     assert "`confidence` (the folder's confidence.npy) reaches 255" in err, err
-    assert "(--no-confidence leaves it unread)" in err
+    assert "(--no-confidence leaves it unread, dataset_confidence=False in Python)" in err
     code, out, err = run(capsys, "integrate", folder, "--confidence", folder / "confidence.npy",
                          "-s", "npy", "-o", tmp_path / "p")
     err = " ".join(err.split())
@@ -1586,3 +1587,44 @@ def test_a_dataset_folders_confidence_named_in_warnings(tmp_path, capsys):
     # (the renaming is this job's only: a library call afterwards says `confidence`)
     with pytest.warns(UserWarning, match=r"^`confidence` reaches 255"):
         facetlift.integrate(n, prior=prior, confidence=np.full((H, W), 255.0))
+
+
+def test_a_batchs_files_beside_the_maps_named_in_messages(tmp_path, capsys):
+    """A review: a batch's own NAME_confidence.* (0..255 beside a prior) and NAME_prior_depth.*
+    (no finite sample) were refused or warned about as `confidence` and `prior`, the Python
+    names; the messages name the file and the flag that leaves such files unread."""
+    H, W = 24, 30
+    n = np.dstack([np.zeros((H, W, 2)), np.ones((H, W))])
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    prior = np.full((H, W), np.nan)
+    prior[::6, ::6] = 0.0
+    for name in ("a", "b"):
+        np.save(maps / f"{name}.npy", n)
+    np.save(maps / "a_prior_depth.npy", prior)
+    np.save(maps / "a_confidence.npy", np.full((H, W), 255.0))
+    np.save(maps / "b_prior_depth.npy", np.full((H, W), np.nan))
+    code, out, err = run(capsys, "batch", str(maps / "[ab].npy"), "-o", tmp_path / "out",
+                         "-s", "npy", "--workers", "1")
+    err = " ".join(err.split())
+    assert "`confidence` (a_confidence.npy) reaches 255" in err, err
+    assert "`prior` (b_prior_depth.npy) has no finite depth sample" in err, err
+    assert err.count("--no-prior") >= 1 and "--no-confidence" in err, err
+
+
+def test_info_names_a_dataset_folders_prior_in_its_refusal(tmp_path, capsys):
+    """A review: `facetlift info FOLDER` said "cannot be integrated as read: `prior` must
+    hold positive z-depths" for the folder's prior_depth.npy, without the file or
+    --no-prior, where integrate names both."""
+    H, W = 24, 30
+    n = np.dstack([np.zeros((H, W, 2)), np.ones((H, W))])
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    np.save(folder / "normal_map.npy", n)
+    np.savetxt(folder / "K.txt", [[50.0, 0, 15], [0, 50.0, 12], [0, 0, 1]])
+    np.save(folder / "prior_depth.npy", np.full((H, W), -1.0))
+    code, out, err = run(capsys, "info", folder)
+    text = " ".join((out + err).split())
+    assert "cannot be integrated as read: `prior` (the folder's prior_depth.npy) must hold " \
+        "positive z-depths" in text, text
+    assert "--no-prior" in text

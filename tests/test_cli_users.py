@@ -1043,8 +1043,9 @@ def test_sigint_during_the_write_leaves_nothing(dome_png, tmp_path):
 
 def test_ctrl_c_after_the_commit_says_the_set_was_written(tmp_path, capsys, monkeypatch):
     """A user's check: a Ctrl-C that landed just after the outputs were moved into place said
-    "nothing partial was written", though the complete new set was there (and had replaced
-    an earlier one). It says so now; one before the commit still says nothing was written."""
+    "nothing partial was written", though the complete new set was there (where the folder
+    held an earlier set, it had replaced it). It says so now; one before the commit still
+    says nothing was written."""
     from facetlift.io import atomic
 
     path = io.write_normals(tmp_path / "dome.npy", dome())

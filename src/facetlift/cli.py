@@ -511,12 +511,13 @@ def _camera_given(camera: str) -> str:
     args = list(_STATE.get("args") or ())
     if camera != "K":
         return camera
-    for i, a in enumerate(args):
+    typed = camera
+    for i, a in enumerate(args):  # (the last given: click takes the last, a review)
         if a == "--K" and i + 1 < len(args):
-            return f"--K {args[i + 1]}"
-        if a.startswith("--K="):
-            return f"--K {a[len('--K='):]}"
-    return camera
+            typed = f"--K {args[i + 1]}"
+        elif a.startswith("--K="):
+            typed = f"--K {a[len('--K='):]}"
+    return typed
 
 
 def summary(record: dict) -> str:

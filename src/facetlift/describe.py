@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._warnings import recording
+from ._warnings import recording, renamed
 
 #: Planner route -> (fastest, slowest) seconds per mask pixel of the default dgp solve, over
 #: the mask shapes of docs/benchmarks.md ("Mask-shape suite", the 2048² rows: orthographic and
@@ -195,7 +195,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
     """
     from . import frames
     from .io.dataset import K_value
-    from .jobs import Job, camera_source, read, recorded_warnings, rotation_record
+    from .jobs import Job, _folder_named, camera_source, read, recorded_warnings, rotation_record
     from .problem import UnusableNormalsWarning, no_camera_hint, prepare
 
     job = Job(normals=None if path is None else str(path),
@@ -316,16 +316,19 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
                 # (read in it already: hints relative to it; a field's speak of its samples,
                 # as integrate's do)
                 checked = frames.checked(n, inp.mask, frame=None, rotation=turn)
-            # (a prior to be aligned is checked as values, not as depths: any sign)
-            problem = prepare(checked, inp.mask, K=inp.K,
-                              prior=None if fitted else prior_map, confidence=inp.confidence)
+            # (a prior to be aligned is checked as values, not as depths: any sign; a
+            # folder's files named as integrate names them, a review)
+            with renamed(lambda m: _folder_named(m, job, inp, warning=True)):
+                problem = prepare(checked, inp.mask, K=inp.K,
+                                  prior=None if fitted else prior_map,
+                                  confidence=inp.confidence)
         except ValueError as e:
             # (the warnings that came first too: a K for another image is what makes a map
             # unusable, and its warning was dropped, a review)
             out["warnings"] += [str(w.message) for w in caught if not issubclass(
                 w.category, UnusableNormalsWarning)]
             out["camera_warned"] = _camera_warned(read_caught, caught)
-            return unusable(e)
+            return unusable(ValueError(_folder_named(str(e), job, inp)))
     d = problem.domain
     with_prior = None
     if fitted:

@@ -698,12 +698,19 @@ def _folder_named(message: str, job: Job, inp: Input, warning: bool = False) -> 
     ``facetlift.cli`` leaves the Python name, which pointed nowhere, a user's check) with the
     file named and the flag that leaves it unread (a `warning`'s: that it can be)."""
     for name, flag in (("prior", "--no-prior"), ("confidence", "--no-confidence")):
+        if not message.startswith(f"`{name}`"):
+            continue
+        rest = message[len(name) + 2:]
+        if name in job.beside:  # (a batch's NAME_prior_depth.* beside the map, a review)
+            tail = _beside_tail(job, name)
+            return (f"`{name}` ({Path(getattr(job, name)).name}){rest}"
+                    + (f" ({tail[len('; or '):]})" if warning else tail))
         file = getattr(inp, f"{name}_file")
-        if (message.startswith(f"`{name}`") and getattr(job, name) is None and file
-                and name not in job.beside):  # (a batch's own files: _beside_file's)
-            tail = (f" ({flag} leaves it unread)" if warning
-                    else f"; or leave it unread with {flag}")
-            return f"`{name}` ({file}){message[len(name) + 2:]}{tail}"
+        if getattr(job, name) is None and file:
+            python = f"dataset_{name}=False in Python"
+            tail = (f" ({flag} leaves it unread, {python})" if warning
+                    else f"; or leave it unread with {flag} ({python})")
+            return f"`{name}` ({file}){rest}{tail}"
     return message
 
 

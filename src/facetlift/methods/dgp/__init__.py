@@ -476,8 +476,9 @@ def run(
     if discontinuities:
         if discontinuity_tol >= 4.0 and discontinuity_iter > 0:  # (a review: said nowhere)
             warn(f"`discontinuity_tol` {discontinuity_tol:g}: the corner weights lie in 0..4, "
-                 "so no step exceeds it and the reweightings stop after the first (reported "
-                 f"converged); the default is {DEFAULT_TOL:g}")
+                 "so no step exceeds it and the reweightings stop at the first that may "
+                 "(the first, or with a blurred prior the first its target settles at; "
+                 f"reported converged); the default is {DEFAULT_TOL:g}")
         empty_components(domain, target, offset=problem.extras.get("offset", (0, 0)))
         given = target  # (the input's own normals: the deviation is measured on them)
         scale = normal_scale(problem)
