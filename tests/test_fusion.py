@@ -1942,6 +1942,20 @@ def test_confidence_zero_on_a_grazing_normal_equals_a_missing_one(prior):
     np.testing.assert_allclose(a.depth, b.depth, atol=1e-9 * np.ptp(depth))
 
 
+def _shared_bear():
+    """(the DiLiGenT bear's dataset, its ground-truth depth) from ../shared, or a skip."""
+    from pathlib import Path
+
+    from facetlift import io
+
+    bear = Path(__file__).resolve().parents[2] / "shared" / "data" / "normal_maps" / \
+        "diligent_bear"
+    if not bear.is_dir():
+        pytest.skip("shared DiLiGenT bear not available")
+    with np.load(bear / "depth_gt.npz") as z:
+        return io.read_dataset(bear), np.asarray(z["depth_gt"], float)
+
+
 def test_a_blurred_prior_that_tears_the_surface_is_warned_about(monkeypatch):
     """An audit's 4x coarse sensor (block means of the DiLiGenT bear's depth with 3 mm of
     noise, 5 % dropouts, whole millimetres, upsampled bilinearly) given with prior_blur tore
@@ -1950,20 +1964,11 @@ def test_a_blurred_prior_that_tears_the_surface_is_warned_about(monkeypatch):
     better. Since the twenty-eighth session that surface, 17.9 deg from its own normals on
     average, is caught as bent (methods.dgp.BENT) and the prior compared pixel by pixel:
     MADE 0.20 mm, 73 mesh pieces (checked below; the torn warning with BENT off)."""
-    from pathlib import Path
-
     from scipy.ndimage import map_coordinates
 
     import facetlift.methods.dgp as dgp
-    from facetlift import io
 
-    bear = Path(__file__).resolve().parents[2] / "shared" / "data" / "normal_maps" / \
-        "diligent_bear"
-    if not bear.is_dir():
-        pytest.skip("shared DiLiGenT bear not available")
-    ds = io.read_dataset(bear)
-    with np.load(bear / "depth_gt.npz") as z:
-        gt = np.asarray(z["depth_gt"], float)
+    ds, gt = _shared_bear()
     f, (H, W) = 4, gt.shape
     blocks = gt.reshape(H // f, f, W // f, f)
     with warnings.catch_warnings():
@@ -1999,20 +2004,11 @@ def test_a_resized_point_grid_declared_blurred_is_warned_about():
     of block means) came out 14.9 deg from its own normals, under the fallback's BENT, and
     2.7 mm off, without a word. It is kept but warned about (BENT_WARN), naming the samples as
     the better input; given as samples, the same depths give about 0.01 mm."""
-    from pathlib import Path
-
     from scipy.ndimage import distance_transform_edt, zoom
 
     import facetlift.methods.dgp as dgp
-    from facetlift import io
 
-    bear = Path(__file__).resolve().parents[2] / "shared" / "data" / "normal_maps" / \
-        "diligent_bear"
-    if not bear.is_dir():
-        pytest.skip("shared DiLiGenT bear not available")
-    ds = io.read_dataset(bear)
-    with np.load(bear / "depth_gt.npz") as z:
-        gt = np.asarray(z["depth_gt"], float)
+    ds, gt = _shared_bear()
     m = ds["mask"]
     near = distance_transform_edt(~m, return_distances=False, return_indices=True)
     filled = np.where(m, gt, np.nan)[tuple(near)]
