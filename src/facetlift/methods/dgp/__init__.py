@@ -521,7 +521,8 @@ def run(
         k_used = discontinuous.sharpness(discontinuity_k, noise, steps)
         seed = None
         if discontinuity_seed and discontinuity_iter > 0:  # (the prior-free reweightings
-            # from the normals' curl; with no reweighting the smooth surface, as documented)
+            # from the normals' curl; with no reweighting every corner glued: docs/cli.md,
+            # `converged`, says what that run is)
             # (the spread of the input's own normals: not a confidence-0 normal's direction,
             # which is missing whatever it is; a review)
             seed = discontinuous.curl_seed(domain, bx, by, target, cosines, s,
