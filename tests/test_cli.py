@@ -1430,6 +1430,9 @@ def test_info_json_words_warnings_as_the_command_line_and_says_camera_warned(tmp
     assert any(w.startswith("--K: the principal point") for w in rec["warnings"]), rec
     code, out, _ = run(capsys, "info", npath, "--mask", mpath, "--json")
     assert json.loads(out)["camera_warned"] is False
+    # (the text names the camera as typed, not "K", a review)
+    code, out, _ = run(capsys, "info", npath, "--mask", mpath, "--K", "50 50 25.5 19.5")
+    assert "camera: perspective (--K 50 50 25.5 19.5), K = " in out, out
 
 
 def test_methods_refuses_json_with_markdown_and_a_flipped_plane_is_told_its_frame(capsys):

@@ -890,7 +890,8 @@ def _info_lines(rec: dict) -> list[str]:
                      f"{rotation['file']} ({rotation['given_as'].replace('_', '-')})")
     source = rec.get("camera")
     lines.append(f"  camera: {rec['projection']}"
-                 + (f" ({source})" if rec["K"] and source not in (None, "orthographic") else "")
+                 + (f" ({_camera_given(source)})" if rec["K"]
+                    and source not in (None, "orthographic") else "")
                  + (f", K = {rec['K']}" if rec["K"] else ""))
     for name, what in (("prior", "depth prior"), ("confidence", "normal confidence")):
         if rec.get(name):  # (--prior / --confidence, or a dataset folder's own files)
