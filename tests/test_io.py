@@ -578,8 +578,12 @@ def test_read_dataset_folder(tmp_path, normals):
 
 
 def test_read_dataset_errors(tmp_path):
-    with pytest.raises(ValueError, match="not a directory"):
+    with pytest.raises(ValueError, match="nope does not exist"):  # (InputFileNotFound)
         io.read_dataset(tmp_path / "nope")
+    (tmp_path / "file.txt").write_text("x")
+    with pytest.raises(ValueError, match="file.txt is not a directory"):
+        io.read_dataset(tmp_path / "file.txt")
+    (tmp_path / "file.txt").unlink()
     with pytest.raises(ValueError, match="no normal_map"):
         io.read_dataset(tmp_path)
     # a file that cannot be used is said, not skipped; two candidates are not picked from
@@ -1942,3 +1946,30 @@ def test_a_multi_page_tiff_is_named_a_stack(tmp_path):
         io.read_normals(tmp_path / "stack.tif")
     tifffile.imwrite(tmp_path / "one.tif", a[0])
     assert io.read_normals(tmp_path / "one.tif")[0].shape == (4, 4, 3)
+
+
+def test_surface_shapes_dataset_folder_and_nan_masks_checked(tmp_path):
+    """A review: a Surface of disagreeing shapes was cropped by points() and saved as a
+    surface.npz that load_surface refused; read_dataset raised a plain ValueError for a
+    missing folder where every other reader raises InputFileNotFound; write_mask and
+    clean_mask took a NaN as inside, where integrate refuses it."""
+    import facetlift
+    from facetlift.errors import InputFileNotFound
+
+    with pytest.raises(ValueError, match=r"`mask` must have the shape of `depth`, \(4, 5\)"):
+        facetlift.Surface(np.zeros((4, 5)), np.zeros((5, 6)), np.ones((3, 5), bool))
+    with pytest.raises(ValueError, match=r"`vertex_depth` must be \(H \+ 1, W \+ 1\) = \(4, 4\)"):
+        facetlift.Surface(np.zeros((3, 3)), np.zeros((5, 6)), np.ones((3, 3), bool))
+    with pytest.raises(ValueError, match=r"`depth` must be an \(H, W\) array"):
+        facetlift.Surface(np.zeros(3), np.zeros(4), np.ones(3, bool))
+    s = facetlift.Surface(np.zeros((3, 4)), np.zeros((4, 5)), np.ones((3, 4), bool))
+    assert len(s.points()) == 12
+    with pytest.raises(InputFileNotFound, match=r"`folder`: .*nowhere does not exist"):
+        io.read_dataset(tmp_path / "nowhere")
+    m = np.ones((6, 6))
+    m[2, 2] = np.nan
+    with pytest.raises(ValueError, match=r"`mask` contains NaN or inf"):
+        io.write_mask(tmp_path / "m.png", m)
+    assert not (tmp_path / "m.png").exists()
+    with pytest.raises(ValueError, match=r"`mask` contains NaN or inf"):
+        facetlift.clean_mask(m)

@@ -2324,7 +2324,10 @@ def clean_mask(mask, min_size: int = 2) -> np.ndarray:
                                                                    np.floating))
     if not ok or not np.isfinite(min_size) or min_size < 0:  # (0.01 * m.sum() is a float)
         raise ValueError(f"`min_size` must be a number of pixels >= 0; got {min_size!r}")
-    m = numeric_array(unmasked(mask, 0.0), "mask", "a boolean or numeric array") != 0
+    a = numeric_array(unmasked(mask, 0.0), "mask", "a boolean or numeric array")
+    if a.dtype.kind == "f" and not np.isfinite(a).all():  # (as integrate refuses it, a review)
+        raise ValueError("`mask` contains NaN or inf")
+    m = a != 0
     if m.ndim != 2:
         raise ValueError(f"`mask` must be an (H, W) array; got shape {m.shape}")
     d = Domain.from_mask(m)

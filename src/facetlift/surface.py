@@ -68,6 +68,18 @@ class Surface:
         self.depth = np.asarray(depth, dtype=float)
         self.vertex_depth = np.asarray(vertex_depth, dtype=float)
         self.mask = np.asarray(mask, dtype=bool)
+        # (shapes that disagree were cropped by points() or failed deep inside it, and saved
+        # a surface.npz that load_surface refused, a review)
+        if self.depth.ndim != 2:
+            raise ValueError(f"`depth` must be an (H, W) array; got shape {self.depth.shape}")
+        H, W = self.depth.shape
+        if self.mask.shape != (H, W):
+            raise ValueError(f"`mask` must have the shape of `depth`, {(H, W)}; got "
+                             f"{self.mask.shape}")
+        if self.vertex_depth.shape != (H + 1, W + 1):
+            raise ValueError(f"`vertex_depth` must be (H + 1, W + 1) = {(H + 1, W + 1)} for a "
+                             f"depth of {(H, W)} (the facets' corners); got "
+                             f"{self.vertex_depth.shape}")
         self.info = {} if info is None else info
         self.camera = make_camera(pixel_size, K) if camera is None else camera
         self.cuts = cuts

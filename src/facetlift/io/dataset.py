@@ -757,6 +757,10 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
         If the folder or its normal map is missing, or any file is unreadable.
     """
     f = Path(folder)
+    if not f.exists():  # (a FileNotFoundError as every other reader's, a review)
+        from ..errors import InputFileNotFound
+
+        raise InputFileNotFound(f"`folder`: {f} does not exist")
     if not f.is_dir():
         raise ValueError(f"`folder`: {f} is not a directory")
     formats = _dataset_formats()

@@ -1058,7 +1058,10 @@ def write_mask(path, mask) -> Path:
     ext = _suffix(p, MASK_WRITE_FORMATS, "mask", "path")  # (a .pfm is read, not written)
     from ..problem import unmasked
 
-    m = _image_array(unmasked(mask, 0.0), "mask", 2) != 0  # (masked entries: outside)
+    a = _image_array(unmasked(mask, 0.0), "mask", 2)  # (masked entries: outside)
+    if a.dtype.kind == "f" and not np.isfinite(a).all():  # (as integrate refuses it, a review)
+        raise ValueError("`mask` contains NaN or inf")
+    m = a != 0
     if ext == ".npy":
         _save_npy(p, m)
     elif ext == ".png":
