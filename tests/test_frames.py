@@ -1279,3 +1279,17 @@ def test_the_second_reviews_inputs_are_read_right():
     with pytest.raises(ValueError, match="face away") as e:
         facetlift.integrate(np.where(m[..., None], cv, np.nan), m)
     assert "is it a normal map at all" not in str(e.value)
+
+
+def test_rotate_takes_only_rotations_of_3_vectors():
+    """A review: frames.rotate scaled the normals by 2 * I in silence and gave numpy's
+    broadcast errors for a 2x2 matrix or 2-component vectors."""
+    n = np.dstack([np.zeros((2, 2, 2)), np.ones((2, 2))])
+    with pytest.raises(ValueError, match=r"`R` is not a rotation"):
+        frames.rotate(n, 2 * np.eye(3))
+    with pytest.raises(ValueError, match=r"`R` must be a 3x3 rotation matrix"):
+        frames.rotate(n, np.eye(2))
+    with pytest.raises(ValueError, match=r"`normals` must be \(\.\.\., 3\) vectors"):
+        frames.rotate(np.zeros((2, 2, 2)), np.eye(3))
+    turn = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    np.testing.assert_allclose(frames.rotate(n, turn), n @ turn.T)

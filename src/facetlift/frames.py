@@ -364,10 +364,16 @@ def rotation_in_facetlift(R: np.ndarray | None, frame) -> np.ndarray | None:
 
 def rotate(normals: np.ndarray, R: np.ndarray | None) -> np.ndarray:
     """(..., 3) normals turned by `R` (``R @ n`` at every pixel; a new array; NaN stays NaN,
-    a missing sample); unchanged where `R` is None."""
+    a missing sample); unchanged where `R` is None. `R` must be a proper rotation
+    (:func:`check_rotation`: a scaled matrix scaled the normals in silence, a review), and
+    `normals` end in 3 components."""
     if R is None:
         return normals
-    return np.einsum("ij,...j->...i", R, np.asarray(normals, dtype=float))
+    R = check_rotation(R, "R")
+    n = np.asarray(normals, dtype=float)
+    if n.ndim < 1 or n.shape[-1] != 3:
+        raise ValueError(f"`normals` must be (..., 3) vectors; got shape {n.shape}")
+    return np.einsum("ij,...j->...i", R, n)
 
 
 #: Whether :func:`facetlift.integrate` was given a rotation (``normal_rotation``), for the
