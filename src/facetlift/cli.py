@@ -1232,7 +1232,7 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         typed = K
         gt, mask, K, folder_notes = _gt_folder(gt, mask, K, fov, result, est)
         if K is not None and typed is None:  # (not typed: the folder's, named so)
-            shown = f"the folder's {K}"
+            shown = f"the folder's {Path(K).name}"  # (as integrate's summary names it)
     camera = None
     orthographic = False  # (a surface.npz that records an orthographic camera)
     if result.suffix.lower() == ".npz":  # (a surface's: its camera, NaN when orthographic)
