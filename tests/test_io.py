@@ -1973,3 +1973,19 @@ def test_surface_shapes_dataset_folder_and_nan_masks_checked(tmp_path):
     assert not (tmp_path / "m.png").exists()
     with pytest.raises(ValueError, match=r"`mask` contains NaN or inf"):
         facetlift.clean_mask(m)
+
+
+def test_scaled_and_y_down_refuse_strings(tmp_path):
+    """A review: Surface.scaled("2") scaled by 2 and read_normals(y_down="yes") read a
+    DirectX map; both take only what their docs say now."""
+    import facetlift
+
+    s = facetlift.Surface(np.zeros((3, 4)), np.zeros((4, 5)), np.ones((3, 4), bool))
+    with pytest.raises(ValueError, match=r"`factor` must be a positive finite number; got '2'"):
+        s.scaled("2")
+    assert s.scaled(np.float32(2)).depth.shape == (3, 4)
+    n = np.dstack([np.zeros((4, 5, 2)), np.ones((4, 5))])
+    path = io.write_normals(tmp_path / "n.png", n)
+    with pytest.raises(ValueError, match=r"`y_down` must be True or False; got 'yes'"):
+        io.read_normals(path, y_down="yes")
+    np.testing.assert_allclose(io.read_normals(path, y_down=np.True_)[0], n, atol=1e-4)

@@ -260,6 +260,8 @@ def mirrors(frame, name: str = "frame") -> bool:
 def resolve(frame, y_down: bool, name: str = "frame") -> str | None:
     """One frame from a `frame` argument (called `name` in the message) and the older
     ``y_down`` flag (its alias)."""
+    if not isinstance(y_down, (bool, np.bool_)):  # ("yes" was taken as True, a review)
+        raise ValueError(f"`y_down` must be True or False; got {y_down!r}")
     if not y_down or frame is None:
         return "directx" if y_down else frame
     (ch, sg), (ch_dx, sg_dx) = parse(frame, name), parse("directx")

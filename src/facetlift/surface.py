@@ -173,7 +173,8 @@ class Surface:
             f = float(factor)
         except (TypeError, ValueError):
             f = float("nan")
-        if isinstance(factor, (bool, np.bool_)) or not (np.isfinite(f) and f > 0):
+        if isinstance(factor, (bool, np.bool_, str, bytes)) or not (np.isfinite(f) and f > 0):
+            # (a string was converted, "2" taken as 2, a review)
             raise ValueError(f"`factor` must be a positive finite number; got {factor!r}")
         cam = self.camera
         camera = cam if cam.perspective else make_camera(cam.pixel_size * f)
