@@ -340,9 +340,11 @@ class Surface:
         discontinuities`` writes it), but ``height.png`` (also ``heightmap``, ``height_map``,
         ``displacement``) the 16-bit height map of ``--save height`` (keyword
         ``height_range``). ``frame=`` writes a mesh in another frame
-        (:meth:`to_mesh`); ``colors=`` an image of the object, (H, W, 3) or (H, W), painted
-        on a mesh's vertices or ``points.ply``'s points (:mod:`facetlift.io.colors`; files
-        through :func:`facetlift.io.read_colors`).
+        (:meth:`to_mesh`); ``colors=`` an image of the object, (H, W, 3) or (H, W) (also
+        (H, W, 2) or (H, W, 4), grey or RGB with an alpha that is dropped), painted on a
+        mesh's vertices or ``points.ply``'s points; non-finite colours are painted black
+        (:func:`facetlift.io.colors.colour_image`; files through
+        :func:`facetlift.io.read_colors`).
 
         The command line's own file names write what its ``--save`` writes under them
         (:data:`facetlift.io.surface.CLI_NAMES`): ``points.ply`` the point cloud of ``-s
