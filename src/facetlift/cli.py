@@ -1227,12 +1227,13 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         result = _result_in_folder(result)
     est = io.read_depth(result, arg="result")
     folder_notes = []
-    shown = K  # (the camera as the text names it)
+    # (the camera as the text names it: the flag typed, or the folder's file)
+    shown = f"--fov {fov:g} deg" if fov is not None else None if K is None else f"--K {K}"
     if gt.is_dir():  # (a BiNI user's `--gt bear` was refused as a directory, an audit)
         typed = K
         gt, mask, K, folder_notes = _gt_folder(gt, mask, K, fov, result, est)
-        if K is not None and typed is None:  # (not typed: the folder's, named so)
-            shown = f"the folder's {Path(K).name}"  # (as integrate's summary names it)
+        if K is not None and typed is None:  # (not typed: as integrate's summary names it)
+            shown = f"the folder's {Path(K).name}"
     camera = None
     orthographic = False  # (a surface.npz that records an orthographic camera)
     if result.suffix.lower() == ".npz":  # (a surface's: its camera, NaN when orthographic)
@@ -1295,8 +1296,7 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         click.echo(json.dumps(jsonable(dict(rec, status="ok", exit_code=EXIT_OK))))
         _STATE["printed_json"] = True
         return EXIT_OK
-    for line in _evaluate_lines(rec, shown if fov is None else f"fov {fov:g} deg",
-                                surface=result.suffix.lower() == ".npz"):
+    for line in _evaluate_lines(rec, shown, surface=result.suffix.lower() == ".npz"):
         click.echo(line)
     return EXIT_OK
 
@@ -1372,17 +1372,16 @@ def _result_in_folder(folder: Path) -> Path:
 STALE_SECONDS = 2.0
 
 
-def _evaluate_lines(rec: dict, K, surface: bool = False) -> list[str]:
+def _evaluate_lines(rec: dict, given, surface: bool = False) -> list[str]:
     """``facetlift evaluate``'s text: one line per measure, '-' where it does not apply (the
-    notes say why). `surface`: the result is a surface .npz, which says its camera (a depth
-    file without --K says none: not "orthographic", a perspective depth.npy was labelled so,
-    an audit)."""
+    notes say why). `given`: the camera as the text names it ("--K FILE", "--fov D deg", "the
+    folder's K.txt"; None: none given). `surface`: the result is a surface .npz, which says
+    its camera (a depth file without --K says none: not "orthographic", a perspective
+    depth.npy was labelled so, an audit)."""
     def num(v):
         return "-" if v is None else f"{v:.6g}"
 
-    given = (K if str(K).startswith("the folder's ") else f"--{K}" if str(K).startswith("fov ")
-             else f"--K {K}") if K is not None else None
-    camera = ("perspective" + (f" ({given})" if K is not None else " (the surface's camera)")
+    camera = ("perspective" + (f" ({given})" if given is not None else " (the surface's camera)")
               if rec["perspective"] else "orthographic (the surface's camera)" if surface
               else "no camera given: scored as orthographic (up to an offset per piece)")
     uncovered = (f"; {rec['uncovered']} mask pixels left out, where a depth is undefined"

@@ -462,6 +462,14 @@ def unmasked(a, fill=np.nan):
     return np.ma.getdata(a) if np.ma.isMaskedArray(a) else a
 
 
+def finite_values(a: np.ndarray, name: str) -> np.ndarray:
+    """`a`, refused (ValueError naming `name`) where it is a float array holding NaN or inf:
+    a mask's or a weight's values must all be numbers."""
+    if a.dtype.kind == "f" and not np.isfinite(a).all():
+        raise ValueError(f"`{name}` contains NaN or inf")
+    return a
+
+
 def _float_array(a, name: str) -> np.ndarray:
     return numeric_array(a, name).astype(float, copy=True)
 
@@ -470,8 +478,7 @@ def _bool_image(a, name: str, shape: tuple[int, int]) -> np.ndarray:
     arr = numeric_array(unmasked(a, 0.0), name, "a boolean or numeric array")  # (masked: out)
     if arr.shape != shape:
         raise ValueError(f"`{name}` must have shape {shape} to match `normals`; got {arr.shape}")
-    if arr.dtype.kind == "f" and not np.isfinite(arr).all():
-        raise ValueError(f"`{name}` contains NaN or inf")
+    finite_values(arr, name)
     inside = negatives_outside(arr, f"`{name}`")
     if arr.dtype.kind == "f" and inside.any():
         # (a soft matte or a probability map: every value above 0 was inside, the domain grew
@@ -2324,10 +2331,9 @@ def clean_mask(mask, min_size: int = 2) -> np.ndarray:
                                                                    np.floating))
     if not ok or not np.isfinite(min_size) or min_size < 0:  # (0.01 * m.sum() is a float)
         raise ValueError(f"`min_size` must be a number of pixels >= 0; got {min_size!r}")
-    a = numeric_array(unmasked(mask, 0.0), "mask", "a boolean or numeric array")
-    if a.dtype.kind == "f" and not np.isfinite(a).all():  # (as integrate refuses it, a review)
-        raise ValueError("`mask` contains NaN or inf")
-    m = a != 0
+    # (NaN refused as integrate refuses it, not taken as inside, a review)
+    m = finite_values(numeric_array(unmasked(mask, 0.0), "mask", "a boolean or numeric array"),
+                      "mask") != 0
     if m.ndim != 2:
         raise ValueError(f"`mask` must be an (H, W) array; got shape {m.shape}")
     d = Domain.from_mask(m)

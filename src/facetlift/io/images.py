@@ -1056,12 +1056,10 @@ def write_mask(path, mask) -> Path:
     """Write an (H, W) mask: PNG or TIFF (8-bit, 255 inside) or ``.npy`` (bool)."""
     p = _file_name(path)
     ext = _suffix(p, MASK_WRITE_FORMATS, "mask", "path")  # (a .pfm is read, not written)
-    from ..problem import unmasked
+    from ..problem import finite_values, unmasked
 
-    a = _image_array(unmasked(mask, 0.0), "mask", 2)  # (masked entries: outside)
-    if a.dtype.kind == "f" and not np.isfinite(a).all():  # (as integrate refuses it, a review)
-        raise ValueError("`mask` contains NaN or inf")
-    m = a != 0
+    # (masked entries: outside; NaN refused as integrate refuses it, a review)
+    m = finite_values(_image_array(unmasked(mask, 0.0), "mask", 2), "mask") != 0
     if ext == ".npy":
         _save_npy(p, m)
     elif ext == ".png":

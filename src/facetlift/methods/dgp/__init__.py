@@ -569,7 +569,7 @@ def run(
             nonlocal astray, bent, angle
             astray = blur_astray(blur, copies.mean(axis=1))
             angle = None if astray is not None else deviation(copies)
-            bent = None if astray is not None else blur_bent(angle, free)
+            bent = blur_bent(angle, free)  # (None with no angle)
             return astray is not None or bent is not None
 
         if blur is not None and trouble() and "prior_free" in info:
