@@ -1238,6 +1238,18 @@ def test_an_orthographic_map_given_a_camera_is_not_told_to_flip(tmp_path, capsys
         facetlift.integrate(room, K=K)
     said = [str(w.message) for w in rec if issubclass(w.category, UnusableNormalsWarning)]
     assert said and "--normal-frame directx" in said[0] and "orthographic" not in said[0]
+    # a room with side walls, x and y both negated (a y-down map read with x flipped): told
+    # to negate both (it was told it was orthographic, and integrated so came out
+    # inside-out, a review)
+    walls = np.zeros((H, W, 3))
+    walls[..., 2] = 1.0
+    walls[:, :25], walls[:, 95:], walls[60:, 25:95] = (1.0, 0, 0), (-1.0, 0, 0), (0, 1.0, 0)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        facetlift.integrate(walls * [-1, -1, 1], K=K)
+    said = [str(w.message) for w in rec if issubclass(w.category, UnusableNormalsWarning)]
+    assert said and "x and y axes probably run the other way" in said[0], said
+    assert "--normal-frame=-x,-y,z" in said[0] and "orthographic" not in said[0], said
     np.save(tmp_path / "n.npy", np.where(g.mask[..., None], g.normals, np.nan))
     code = main(["info", str(tmp_path / "n.npy"), "--fov", "60", "--json"])
     out = capsys.readouterr().out

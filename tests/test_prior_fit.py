@@ -675,3 +675,75 @@ def test_a_pair_fit_stands_with_a_few_invalid_markers():
     got = prior_fit._levels(-3.0, rfit, P, surface, lab, "affine", True, ok, 100)
     assert got is not None and got["shift"] / got["scale"] == pytest.approx(-3.0)
     assert prior_fit._levels(-20.0, rfit, P, surface, lab, "affine", True, ok, 100) is None
+
+
+def test_a_relative_depth_given_as_depth_is_named_with_a_blur_and_with_jumps():
+    """A review as a monocular-network user: a 0..1 relative depth given with K and
+    --prior-blur was not checked at all (the relief check stepped aside for blurred priors)
+    and came out with depths of 1e-151 to 1e6, and with --discontinuities the torn-surface
+    warning spoke of noise and weights only. A blurred prior's relief is checked on its
+    high side, and the torn warnings name prior_fit where the prior is perspective."""
+    from facetlift.methods.dgp import _discontinuity_warnings, blur_bent
+
+    H, W = 192, 256  # (a sphere of radius 1 whose front is 1.2 from the camera)
+    K = np.array([[240.0, 0, W / 2 - 0.3], [0, 240.0, H / 2 + 0.2], [0, 0, 1]])
+    rr, cc = np.mgrid[0:H, 0:W]
+    d = rays(K, rr.ravel(), cc.ravel()).reshape(H, W, 3)
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    b = d[..., 2] * 2.2
+    disc = b * b - (2.2 ** 2 - 1.0)
+    depth = (b - np.sqrt(np.where(disc > 0, disc, np.nan))) * d[..., 2]
+    mask = np.isfinite(depth) & (disc > 0.1)
+    n = normals_from_depth(np.where(mask, depth, np.nan), K)
+    mask &= np.isfinite(n).all(-1)
+    z = depth[mask]
+    relative = np.where(mask, (depth - z.min()) / np.ptp(z) * 0.99 + 0.01, np.nan)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        s = facetlift.integrate(n, mask, K=K, prior=relative, prior_blur=2.0)
+    said = [str(w.message) for w in rec]
+    assert s.info["prior"]["relief_ratio"] > 4
+    assert any("relative relief (of log-depth)" in w and "prior_fit='affine'" in w
+               for w in said), said
+    # a metric prior with a blur stays quiet
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        facetlift.integrate(n, mask, K=K, prior=np.where(mask, 2.0 * depth, np.nan),
+                            prior_blur=2.0)
+    assert not [w for w in rec if "relief" in str(w.message)]
+    # the torn warnings' words (their thresholds are tests/test_fusion.py's)
+    info = {"cut_corners": 0.7, "cut_corners_inside": 0.7, "unsolved": []}
+    problem = facetlift.prepare(n, mask, K=K, prior=np.where(mask, depth, np.nan))
+    from facetlift.methods.dgp import fusion_terms
+
+    for relative_flag in (True, False):
+        with warnings.catch_warnings(record=True) as rec:
+            warnings.simplefilter("always")
+            _discontinuity_warnings(info, fusion_terms(problem), problem.domain, 500,
+                                    relative=relative_flag)
+        text = " ".join(str(w.message) for w in rec)
+        assert "tear the surface apart" in text
+        assert ("prior_fit='affine' or 'disparity'" in text) == relative_flag
+    # depths that overflowed leave no angle to measure: taken as bent (it was passed)
+    assert blur_bent(float("nan"), 0.5) == float("inf")
+    assert blur_bent(None, 0.5) is None and blur_bent(3.0, 0.5) is None
+
+
+def test_a_degenerate_result_is_named():
+    """A perspective result spanning more than DEGENERATE_RANGE in depth is warned about
+    (the review's run above exited 0 with its mean deviation left out of the summary)."""
+    from facetlift import api
+
+    n, depth, mask, K, comp = spheres()
+    s = run(n, mask, K=K)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        api._degenerate_check(s, s.info["mean_deviation"], True, False)
+    assert not rec
+    broken = s.depth.copy()
+    broken[mask & (comp == 0)] *= 1e-9
+    s.depth = broken
+    with pytest.warns(UserWarning, match=r"degenerate: its depths span .* Check K"):
+        api._degenerate_check(s, s.info["mean_deviation"], True, False)
+    with pytest.warns(UserWarning, match=r"cannot be measured .* relative depth"):
+        api._degenerate_check(run(n, mask), float("nan"), True, True)

@@ -750,6 +750,8 @@ def _solve(problem, method, t0, max_memory, options):
                            dense=out["prior"].get("samples", 0) > 0.25 * problem.domain.n_facets)
         _prior_fight_check(out.get("mean_deviation"), out.get("solver") == "discontinuous",
                            problem.camera.projection == "orthographic")
+    _degenerate_check(surface, out.get("mean_deviation"), bool(problem.usable.any()),
+                      problem.prior is not None)
     seconds = dict(out.get("seconds", {}))
     seconds["prepare"] = t1 - t0
     seconds["total"] = time.perf_counter() - t0
@@ -818,6 +820,33 @@ def _prior_fight_check(deviation, discontinuities: bool, orthographic: bool = Fa
              "network's relative depth or disparity needs its scale and shift fitted: "
              "prior_fit='affine' or 'disparity', --prior-fit; docs/fusion.md, 'Recipes')? "
              "Else lower prior_weight (--prior-weight)")
+
+
+#: A perspective result whose farthest facet is more than this many times as far as its
+#: nearest is reported as degenerate (:func:`_degenerate_check`): a review's monocular 0..1
+#: depth, not fitted (prior_fit) and declared blurred, returned depths from 1e-28 to 3e7 with
+#: exit 0 and its mean deviation left out of the summary. A real scene seen by one camera
+#: spans far less (a room 0.5-20 m, a street to a few hundred metres: 1e3).
+DEGENERATE_RANGE = 1e6
+
+
+def _degenerate_check(surface, deviation, usable: bool, prior: bool) -> None:
+    """Warn where the result is numerically degenerate: a perspective depth range beyond
+    :data:`DEGENERATE_RANGE`, or no measurable deviation from the normals (overflow) where
+    there are usable normals."""
+    d = surface.depth[np.isfinite(surface.depth)]
+    why = None
+    if surface.camera.perspective and d.size and d.min() > 0 and (
+            d.max() > DEGENERATE_RANGE * d.min()):
+        why = f"its depths span {d.min():.3g} to {d.max():.3g}"
+    elif usable and (deviation is None or not np.isfinite(deviation)):
+        why = "its deviation from the input normals cannot be measured (overflow)"
+    if why is not None:
+        cause = ("A depth prior of another kind than the depth (a relative depth or a "
+                 "disparity not fitted, prior_fit / --prior-fit; values near 0) or a wrong K "
+                 "can do this; check them, or integrate without the prior to see the normals' "
+                 "own surface" if prior else "Check K (--K, --fov) and the normals' frame")
+        warn(f"the surface returned is degenerate: {why}. {cause}")
 
 
 #: A prior sample lies far from the surface returned when its depth difference exceeds both

@@ -626,11 +626,15 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
             guess["likely"] = (f"no camera, or a narrower one: {away:.0%} of the normals face "
                                f"away from the camera's rays, yet {1 - axial:.1%} face the "
                                "viewer along the optical axis, as an orthographic view's map "
-                               "does (try --orthographic, or check the K or --fov; a flip "
-                               "would not mend it)")
+                               "does (try --orthographic, or check the K or --fov; "
+                               + (f"or x and y both flipped, which the facing cannot tell "
+                                  f"apart: try {_try(frame, 'xy', field)})"
+                                  if problem.counts.get("facing_away_both") else
+                                  "a flip would not mend it)"))
         elif mend is not None:  # (as prepare's warning: a y-down map over a floor, an audit)
-            guess["likely"] = (f"{mend[0]} flipped: {away:.0%} of the normals face away from "
-                               f"the camera as read, {mend[1]:.1%} with {mend[0]} negated (try "
+            which = "x and y" if mend[0] == "xy" else mend[0]
+            guess["likely"] = (f"{which} flipped: {away:.0%} of the normals face away from "
+                               f"the camera as read, {mend[1]:.1%} with {which} negated (try "
                                f"{_try(frame, mend[0], field)}; your estimator's frame is in "
                                "docs/conventions.md)")
         elif away > BACKFACING_FRAME_HINT:

@@ -26,7 +26,7 @@ from ._warnings import warn
 from .camera import Camera, make_camera
 from .domain import Domain
 from .errors import CameraWarning
-from .frames import EDGE_ON, GRADIENT_FIELD, reading, world_note
+from .frames import EDGE_ON, GRADIENT_FIELD, flip_advice, reading, world_note
 
 #: ``backfacing=`` choices: treat such normals as missing samples, or raise.
 BACKFACING = ("missing", "error", "outlier")
@@ -56,12 +56,15 @@ def _faces_the_axis(cam, nf, clear, away: float):
 
 def _flip_shares(cam, r, c, nf, clear) -> dict:
     """``{axis: share}``: the share of the `clear` normals that would face away from the
-    pinhole camera with x or y negated ({} without a camera or clear normals)."""
+    pinhole camera with x, y or both ("xy") negated ({} without a camera or clear normals).
+    Both: a y-down map read with x flipped (a DSINE map given the other estimator's flag),
+    which the single flips did not mend and was called orthographic, a review."""
     k = np.flatnonzero(clear)
     if k.size == 0 or not getattr(cam, "perspective", False):
         return {}
     shares = {}
-    for axis, sign in (("y", (1.0, -1.0, 1.0)), ("x", (-1.0, 1.0, 1.0))):
+    for axis, sign in (("y", (1.0, -1.0, 1.0)), ("x", (-1.0, 1.0, 1.0)),
+                       ("xy", (-1.0, -1.0, 1.0))):
         with np.errstate(invalid="ignore"):
             cf = cam.view_cosine(r[k], c[k], nf[k] * np.array(sign), unit=True)
         shares[axis] = float(np.mean(cf < 0))
@@ -81,9 +84,13 @@ def _flip_mends_facing(cam, r, c, nf, clear, away: float, shares=None):
         shares = _flip_shares(cam, r, c, nf, clear)
     if not shares:
         return None
-    axis = min(shares, key=shares.get)
-    share = shares[axis]
-    return (axis, share) if share <= min(BACKFACING_FRAME_HINT, away / 4) else None
+    # (a single flip first, where one mends: a y-down room's front wall faces the camera
+    # either way, so negating both mended it as well as y alone)
+    for axes in (("x", "y"), ("xy",)):
+        axis = min((a for a in axes if a in shares), key=shares.get, default=None)
+        if axis is not None and shares[axis] <= min(BACKFACING_FRAME_HINT, away / 4):
+            return axis, shares[axis]
+    return None
 
 
 #: View cosine below which a grazing normal is dropped even where :func:`prepare`'s
@@ -811,6 +818,7 @@ def prepare(
         away = int((clear & (cos < 0)).sum()) / max(int(clear.sum()), 1)
         counts["facing_away"] = away  # (for info's frame guess: the same share)
         axial = _faces_the_axis(cam, nf, clear, away)
+        both = False
         shares = (_flip_shares(cam, r, c, nf, clear) if away > BACKFACING_FRAME_HINT
                   else {})
         mended = _flip_mends_facing(cam, r, c, nf, clear, away, shares)
@@ -819,28 +827,44 @@ def prepare(
             # or y mends it about equally; a y-down map over a floor, whose normals face the
             # axis too, is mended by one flip far more than by the other: the flip's advice,
             # as before; a review found a flipped room told it was orthographic)
-            even = max(shares.values()) <= FLIPS_EVEN * min(shares.values()) + 1e-3
-            if not (even and axial < 0.5 * mended[1]):
+            one = (shares["x"], shares["y"])  # (the single flips: both negated is no test)
+            even = max(one) <= FLIPS_EVEN * min(one) + 1e-3
+            if mended[0] == "xy":
+                # (negating both mends an orthographic view's rim as well as a map whose x and
+                # y both run the other way: the facing cannot tell them apart, so both are
+                # named, a review: a room read with x and y negated was told it was
+                # orthographic, and integrated so came out inside-out without a word)
+                both = even
+                axial = axial if even else None
+            elif not (even and axial < 0.5 * mended[1]):
                 axial = None
         if axial is not None:
             counts["facing_away_axial"] = axial  # (info's frame guess names it too)
+            if both:
+                counts["facing_away_both"] = True
             Kc = cam.K
             frame = (f"; {away:.0%} of the normals face away from the camera's rays, though "
                      f"{1 - axial:.1%} of them face the viewer along the optical axis (z > "
                      "0): a map of an orthographic view given a camera, or a camera whose "
                      f"field of view is too wide for it (fx {Kc[0, 0]:g}, fy {Kc[1, 1]:g} for "
                      f"this {W} x {H} (W x H) image): integrate it without the camera "
-                     "(--orthographic; no K in Python), or check the K or --fov; a flip of x "
-                     "or y would not mend it")
+                     "(--orthographic; no K in Python), or check the K or --fov; "
+                     + (f"or the map's x and y both run the other way (a y-down map read "
+                        f"with x flipped; try {flip_advice(reading(), 'xy')}), which "
+                        "negating both mends alike: the facing cannot tell these apart, the "
+                        "object's silhouette can (docs/conventions.md)" if both else
+                        "a flip of x or y would not mend it"))
         elif mended is not None:
             counts["facing_away_flip"] = list(mended)  # (info's frame guess names it too)
             # (a y-down map with a camera over a floor: its floor faces away, and the warning
             # asked about BGR order, world frames and K, never about y; an audit)
-            from .frames import flip_advice
 
+            axes = ("x and y", "axes", "run") if mended[0] == "xy" else (
+                mended[0], "axis", "runs")
             frame = (f"; {away:.0%} of the normals face away from the camera, and with "
-                     f"{mended[0]} negated {mended[1]:.1%} would: the map's {mended[0]} axis "
-                     f"probably runs the other way: try {flip_advice(reading(), mended[0])}; "
+                     f"{axes[0]} negated {mended[1]:.1%} would: the map's {axes[0]} {axes[1]} "
+                     f"probably {axes[2]} the other way: try "
+                     f"{flip_advice(reading(), mended[0])}; "
                      "docs/conventions.md lists the frames of common sources")
         elif away > BACKFACING_FRAME_HINT:
             frame = (f"; {away:.0%} of the normals face away from the "
@@ -1003,6 +1027,12 @@ def _check_trend(problem: Problem) -> None:
 #: 50 of those sparse priors and the bear the ratios moved by at most 4 %, the bear's to 0.403
 #: and 1.012, and the flat `plateau` views gained a ratio of 1.0-1.14.)
 RELIEF_FACTOR, RELIEF_FACTOR_DENSE, RELIEF_SPARSE = 2.0, 10.0, 0.25
+#: ... and a dense perspective one's (log-depth) relief this many times the normals': a
+#: monocular network's relative depth (0..1, min-max) read 4.6 on a review's bunny and 6.1-6.4
+#: on a sphere 1.2-1.5 away (a room spanning 0.9-2.4 m, 1.75, is not told apart), where the
+#: fusion benchmark's coarse dense priors read at most 2.64 (above). A metric map with a band
+#: of background blended in at the silhouettes read 8.3 (named in the warning too).
+RELIEF_FACTOR_DENSE_PERSPECTIVE = 4.0
 RELIEF_FACTOR_DENSE_LOW = 30.0
 #: A dense prior whose relief ratio is at most this (negative included) over at least
 #: RELIEF_UNRELATED_PAIRS pairs does not follow the normals at all (:func:`_check_relief`): a
@@ -1030,14 +1060,19 @@ def _check_relief(problem: Problem) -> None:
     :func:`_check_trend`'s."""
     from .prior_fit import relief_ratio
 
-    if problem.prior_blur > 0:
-        return  # (a declared blur removes the relief between the pairs: no measure of units)
     got = relief_ratio(problem)
     if got is None:
         return
     ratio, pairs = got
     problem.extras["prior_relief"] = ratio
     sparse = float(np.mean(problem.prior_weight > 0)) <= RELIEF_SPARSE
+    # (a declared blur lowers the relief between the pairs, so only a relief too large is
+    # named then: a review's monocular 0..1 depth given with K and --prior-blur 4 was not
+    # checked at all and came out hundreds of mm off, with words on noise only)
+    factor = RELIEF_FACTOR if sparse else (
+        RELIEF_FACTOR_DENSE_PERSPECTIVE if problem.perspective else RELIEF_FACTOR_DENSE)
+    if problem.prior_blur > 0 and not ratio > factor:
+        return
     if not sparse and ratio <= RELIEF_UNRELATED and pairs >= RELIEF_UNRELATED_PAIRS:
         # (the jump hint not silenced: a blurred prior reads so too, a review: a registered
         # map blurred by 4 px 0.48, by 6 px 0.31, whose cure is its blur declared)
@@ -1058,7 +1093,6 @@ def _check_relief(problem: Problem) -> None:
              "(shifted, flipped, turned, cropped differently)? Its depths pull the surface off "
              "its normals")
         return
-    factor = RELIEF_FACTOR if sparse else RELIEF_FACTOR_DENSE
     low = RELIEF_FACTOR if sparse else RELIEF_FACTOR_DENSE_LOW
     if pairs < RELIEF_WARN_PAIRS:  # (24 pairs of noisy metric SfM points read 2.03, and the
         return  # advice, prior_fit, then left the prior out: the result no longer metric)
@@ -1072,7 +1106,9 @@ def _check_relief(problem: Problem) -> None:
              "perspective prior must be depth along the optical axis, in any units but "
              "without an offset. A relative depth known only up to scale and shift (a "
              "monocular network's, e.g. 0..1) needs prior_fit='affine' (--prior-fit affine), "
-             "an inverse depth prior_fit='disparity'; or is K's focal length wrong?")
+             "an inverse depth prior_fit='disparity'; or is K's focal length wrong"
+             + ("" if sparse else ", or the background blended into the map at the "
+                "silhouettes (zero weight there, --prior-weight-map)") + "?")
     elif ratio > 0 and not 1.0 / low <= ratio <= factor:
         problem.extras["prior_relief_warned"] = True  # (the jump hint then stays quiet)
         h = problem.pixel_size

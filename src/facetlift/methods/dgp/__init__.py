@@ -592,7 +592,12 @@ def run(
             copies, pinfo = place_pieces(domain, y, bx, by, target, s, anchored=prior[0] > 0,
                                          split=split)
             blur.returned = blur.rms(copies.mean(axis=1))  # (of the surface returned)
-            if bent is not None:
+            if bent is not None and not np.isfinite(bent):
+                why = ("the surface's depths overflowed (no deviation from its normals could "
+                       "be measured): the blurred prior's corrections ran away (sigma "
+                       f"{problem.prior_blur:g} px; a prior near 0 or of another kind, e.g. a "
+                       "relative depth not fitted, prior_fit=, can do so, docs/fusion.md)")
+            elif bent is not None:
                 free_text = "" if free is None else f" (the normals' own cuts: {free:.2g} deg)"
                 why = (f"the surface departed from its own normals by {bent:.3g} deg on "
                        f"average{free_text}, more than a surface of these normals can: the "
@@ -637,7 +642,8 @@ def run(
         _discontinuity_warnings(info, prior if pointwise else None, domain,
                                 pinfo["mesh_pieces"],
                                 blurred=prior if prior is not None and not pointwise else None,
-                                noise=noise, agrees=agrees)
+                                noise=noise, agrees=agrees,
+                                relative=problem.perspective and not fitted)
         if (pointwise or lone is not None) and pinfo.get("unanchored_pieces"):
             size, row, col = pinfo["unanchored_largest"]
             r0, c0 = problem.extras.get("offset", (0, 0))  # (the image's rows and columns)
@@ -981,12 +987,18 @@ def prior_mismatch(domain, prior, bx, by, target, footprint: float) -> float:
 
 def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
                             blurred=None, noise: float = float("nan"),
-                            agrees=False) -> None:
+                            agrees=False, relative=False) -> None:
     """The discontinuity route's warnings on the solve returned: a pointwise `prior` that tore
     the surface apart (:data:`TORN`, :data:`TORN_PIECES`; None: no such prior), or a
     `blurred` one (``prior_blur``, the prior's terms as `prior`'s) that did, a run without a
     prior that cut too much (:data:`CUT_MANY`; the normals' noise, `noise` in degrees as the
-    route read it, named), and solves left unfinished."""
+    route read it, named), and solves left unfinished. `relative`: a perspective prior not
+    aligned by ``prior_fit``, so the torn warnings name a relative depth too."""
+    # (a review: a monocular network's 0..1 depth given with K tore the bunny into 8,167
+    # pieces, 407 mm off, and was told of noise and weights only)
+    fit = (" Or it is a relative depth, known only up to scale and shift (a monocular "
+           "network's, e.g. 0..1, or a disparity): fit it with prior_fit='affine' or "
+           "'disparity' (--prior-fit)." if relative else "")
     if prior is not None and prior[0].max() > PRIOR_STRONG:
         warn(f"discontinuities with prior_weight up to {prior[0].max():g}: above "
              f"{PRIOR_STRONG:g} the reweightings' solves stop before the normals' part is "
@@ -1020,7 +1032,7 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
              "follows the prior and may be right though the mesh is in pieces: judge it by "
              "the depth. Or the prior is not in the normals' scale (pixel_size, K, the "
              "prior's units: a pixel_size 32 times too small tore a sphere's exact samples "
-             "apart so)")
+             f"apart so).{fit}")
     if blurred is not None and (info["cut_corners"] > TORN or pieces > many):
         # (an audit's 4x coarse sensor with 3 mm of noise, prior_blur 2: 37 % of the corners
         # cut, 827 pieces, 2.56 mm on the DiLiGenT bear against 0.16 at prior_weight 0.001
@@ -1032,7 +1044,7 @@ def _discontinuity_warnings(info: dict, prior, domain, pieces: int = 0,
              "low prior_weight (0.001 did best for a 4x coarse sensor with noise of about 7 "
              "pixel footprints, docs/fusion.md 'A depth sensor'), the coarse map's pixels as "
              "points at their footprints' centres, or integrating without discontinuities may "
-             "do better")
+             f"do better.{fit}")
     # (counted away from the mask's edge, info["cut_corners_inside"]: a slope's edge facets
     # read as cut with nothing to separate, and a 3-pixel strip of a plane was warned
     # about, a review)
@@ -1146,6 +1158,9 @@ def blur_bent(angle: float | None, free: float | None, limit: float | None = Non
     `limit` (default :data:`BENT`) and :data:`BENT_RATIO` times `free` (the normals' own
     cuts' surface's; None: not measured), else None (also for an `angle` of None)."""
     limit = BENT if limit is None else limit
+    if angle is not None and not np.isfinite(angle):  # (depths overflowed: no angle to
+        return float("inf")  # measure; a review's relative prior with a blended silhouette
+        # band, declared blurred, returned depths of 1e-156 to 1e9 with no word)
     if angle is not None and angle > limit and (free is None or angle > BENT_RATIO * free):
         return angle
     return None
