@@ -1631,3 +1631,14 @@ def test_info_names_a_dataset_folders_prior_in_its_refusal(tmp_path, capsys):
     assert "cannot be integrated as read: `prior` (the folder's prior_depth.npy) must hold " \
         "positive z-depths" in text, text
     assert "--no-prior" in text
+
+
+def test_a_camera_from_fov_is_named_as_fov_where_a_method_refuses_it(tmp_path, capsys):
+    """A review: `--method kernel --fov 40` was told the method does not support `K`, a name
+    the user had not typed."""
+    g = facetlift.synthetic.analytic("sphere", 32)
+    np.save(tmp_path / "n.npy", np.where(g.mask[..., None], g.normals, np.nan))
+    code = main(["integrate", str(tmp_path / "n.npy"), "--method", "kernel", "--fov", "40",
+                 "-o", str(tmp_path / "o"), "-s", "npy"])
+    err = capsys.readouterr().err
+    assert code == 1 and "does not support perspective input (--fov)" in err, err

@@ -449,3 +449,20 @@ def test_periodic_fc_says_it_drops_a_tilt():
         warnings.simplefilter("error")
         facetlift.integrate(normals_from_gradients(p, q), method="frankot_chellappa",
                             pixel_size=h, pad="none")
+
+
+def test_a_long_kernel_fit_is_said_before_it_starts(monkeypatch):
+    """A review: sigma=12 at 512^2 (about 1.9e14 flops of factorizations, hours) ran past a
+    minute with no word, within memory. The fits' work is estimated from their sizes once
+    they are grouped, and a long one warned about before any is factorized."""
+    from facetlift.methods import kernel
+
+    g = facetlift.synthetic.analytic("sphere", 40)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        facetlift.integrate(g.normals, g.mask, method="kernel")
+    assert not [w for w in rec if "local fits" in str(w.message)]
+    monkeypatch.setattr(kernel, "KERNEL_WARN_SECONDS", 0.0)
+    with pytest.warns(UserWarning, match=r"kernel: \d+ local fits of up to [\d,]+ unknowns "
+                      r"\(sigma 2, tile 16, margin 4\).*a smaller sigma"):
+        facetlift.integrate(g.normals, g.mask, method="kernel")

@@ -1508,6 +1508,10 @@ def _as_flags(message: str) -> str:
         names["prior_weight"] = ("--prior-weight-map" if "prior_weight" not in names
                                  else f"--prior-weight-map (times {names['prior_weight']})")
     names.setdefault("mat_keys", "--mat-keys")
+    # (a camera from --fov is integrate's `K`: a method without perspective support named
+    # `K` to a user who typed --fov, a review)
+    if "K" not in names and any(a == "--fov" or a.startswith("--fov=") for a in args):
+        names["K"] = "--fov"
     # (a method option given as --option KEY=VALUE: named so, `k` alone was a name the user
     # had not typed, a user's check)
     given = [b for a, b in zip(args, args[1:], strict=False) if a == "--option"] + [

@@ -95,6 +95,7 @@ import scipy.sparse.linalg as spla
 
 from .. import linalg
 from .._threads import cores, single_blas_thread
+from .._warnings import warn
 from ..options import Option
 from . import MethodResult
 
@@ -242,6 +243,16 @@ def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin, progress=None)
         if kn.any():
             groups.setdefault((kn.shape, kn.tobytes()), []).append(i)
     fits = [np.zeros(inside[er, ec].shape) for _, (er, ec), _ in specs]
+    # (the work of the factorizations, (2 n)^3 / 3 each: a review's sigma=12 at 512^2 ran for
+    # many minutes without a word, within memory; said where it is long, KERNEL_WARN_FLOPS)
+    sizes = [2 * np.count_nonzero(known[specs[m[0]][2]]) for m in groups.values()]
+    seconds = sum(float(n) ** 3 / 3.0 for n in sizes) / KERNEL_FLOPS
+    if seconds > KERNEL_WARN_SECONDS:
+        warn(f"kernel: {len(groups):,} local fits of up to {max(sizes):,} unknowns (sigma "
+             f"{sigma:g}, tile {tile}, margin {margin}) take about {seconds / 60:.0f} min or "
+             "more (their factorizations alone, at the 2-core VM's rate); each fit's work "
+             "grows as the sixth power of its window (tile + 2 ceil(sigma) + 2 margin): a "
+             "smaller sigma, tile or margin, or the method dgp, is far faster")
 
     def fit_group(members):
         _, _, (fr, fc) = specs[members[0]]
@@ -291,6 +302,18 @@ def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin, progress=None)
         "seconds": {"fit": t1 - t0, "blend": time.perf_counter() - t1},
     }
     return z, info
+
+
+#: Flops per second of the kernel fits' factorizations, measured on the 2-core VM (the
+#: analytic vase at 512^2, sigma 2 / 3 / 4: (2n)^3 / 3 summed over the distinct fits, 4.6e10 /
+#: 1.8e11 / 5.8e11, in 2.7 / 7.6 / 21.7 s: 17-27 GFlop/s with the rest of the run), taken at
+#: the fast end so that the estimate is a lower bound.
+KERNEL_FLOPS = 3.0e10
+
+#: A kernel fit estimated (:data:`KERNEL_FLOPS`) to take longer than this is warned about
+#: before it starts (a review: sigma=12 at 512^2, about 1.9e14 flops, ran past a minute with no
+#: word, within memory).
+KERNEL_WARN_SECONDS = 120.0
 
 
 def _factor(known, sigma, reg):
