@@ -1642,3 +1642,15 @@ def test_a_camera_from_fov_is_named_as_fov_where_a_method_refuses_it(tmp_path, c
                  "-o", str(tmp_path / "o"), "-s", "npy"])
     err = capsys.readouterr().err
     assert code == 1 and "does not support perspective input (--fov)" in err, err
+
+
+@pytest.mark.parametrize("flag", ["--quads", "--triangles"])
+def test_mesh_faces_without_a_mesh_output_are_warned_about(tmp_path, capsys, flag):
+    """A review: --quads / --triangles with no mesh saved were ignored in silence, where
+    --colors and --output-frame warn."""
+    g = facetlift.synthetic.analytic("sphere", 24)
+    np.save(tmp_path / "n.npy", np.where(g.mask[..., None], g.normals, np.nan))
+    code = main(["integrate", str(tmp_path / "n.npy"), flag, "-o", str(tmp_path / "o"),
+                 "-s", "npy"])
+    err = capsys.readouterr().err
+    assert code == 0 and f"the mesh faces ({flag};" in err and "add -s ply" in err, err

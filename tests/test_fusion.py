@@ -2058,6 +2058,10 @@ def test_info_counts_a_sensor_maps_zeros_as_unknown_with_a_camera(tmp_path, caps
                       r"the first at \(row 0, col 1\): left out of the fit"):
         s = facetlift.integrate(n, K=K, prior=q, prior_fit="scale")
     assert s.info["prior"]["fit"]["scale"] == pytest.approx(1 / 3)
+    # a disparity's 0 is no sensor's mark: said so (a review)
+    with pytest.warns(UserWarning, match=r"hold exactly 0.*a disparity of 0 lies infinitely"):
+        facetlift.integrate(n, K=K, prior=np.where(p > 0, 1.0 / (3.0 * d), 0.0),
+                            prior_fit="disparity")
     assert s.info["input"]["prior_samples"] == 42
     # zeros only outside the mask (a map's background): no word (an audit)
     inner = np.zeros((24, 28), bool)
