@@ -1653,4 +1653,6 @@ def test_mesh_faces_without_a_mesh_output_are_warned_about(tmp_path, capsys, fla
     code = main(["integrate", str(tmp_path / "n.npy"), flag, "-o", str(tmp_path / "o"),
                  "-s", "npy"])
     err = capsys.readouterr().err
-    assert code == 0 and f"the mesh faces ({flag};" in err and "add -s ply" in err, err
+    said = (f"mesh faces as {flag[2:]} ({flag}, triangles={flag == '--triangles'} in Python) "
+            "apply to the ply and obj meshes, neither of which is saved: add -s ply or -s obj")
+    assert code == 0 and said in err, err

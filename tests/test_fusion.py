@@ -370,7 +370,8 @@ def test_perspective_prior_must_be_positive():
     prior = np.zeros((24, 28))
     prior[3, 4] = 5.0
     with pytest.warns(UserWarning, match=r"671 sample\(s\) in the mask with a non-positive "
-                      r"z-depth .* \(671 of them 0, as a depth sensor marks unknown pixels\)"):
+                      r"z-depth .* \(671 of them 0, as a depth sensor marks unknown pixels, "
+                      r"or as the near end of a relative map"):
         a = facetlift.integrate(n, K=K, prior=prior).depth
     b = facetlift.integrate(n, K=K, prior=np.where(prior > 0, prior, np.nan)).depth
     np.testing.assert_array_equal(a, b)
@@ -2058,8 +2059,8 @@ def test_info_counts_a_sensor_maps_zeros_as_unknown_with_a_camera(tmp_path, caps
                       r"the first at \(row 0, col 1\): left out of the fit"):
         s = facetlift.integrate(n, K=K, prior=q, prior_fit="scale")
     assert s.info["prior"]["fit"]["scale"] == pytest.approx(1 / 3)
-    # a disparity's 0 is no sensor's mark: said so (a review)
-    with pytest.warns(UserWarning, match=r"hold exactly 0.*a disparity of 0 lies infinitely"):
+    # a normalised map's 0 is no sensor's mark only: said so (a review)
+    with pytest.warns(UserWarning, match=r"hold exactly 0.*or the end of a map normalised"):
         facetlift.integrate(n, K=K, prior=np.where(p > 0, 1.0 / (3.0 * d), 0.0),
                             prior_fit="disparity")
     assert s.info["input"]["prior_samples"] == 42

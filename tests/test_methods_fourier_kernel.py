@@ -466,3 +466,12 @@ def test_a_long_kernel_fit_is_said_before_it_starts(monkeypatch):
     with pytest.warns(UserWarning, match=r"kernel: \d+ local fits of up to [\d,]+ unknowns "
                       r"\(sigma 2, tile 16, margin 4\).*a smaller sigma"):
         facetlift.integrate(g.normals, g.mask, method="kernel")
+    # once for the whole run, over every piece of the mask (per piece, four pieces each under
+    # the limit went unsaid, the next review)
+    calls = []
+    monkeypatch.setattr(kernel, "_time_check", lambda sizes, *a: calls.append(list(sizes)))
+    pieces = np.zeros((64, 64), bool)
+    pieces[2:28, 2:28] = pieces[36:62, 2:28] = pieces[2:28, 36:62] = pieces[36:62, 36:62] = True
+    n = np.where(pieces[..., None], facetlift.synthetic.analytic("sphere", 64).normals, np.nan)
+    s = facetlift.integrate(n, pieces, method="kernel")
+    assert len(calls) == 1 and len(calls[0]) == s.info["factorizations"] > 4

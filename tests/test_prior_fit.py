@@ -724,6 +724,13 @@ def test_a_relative_depth_given_as_depth_is_named_with_a_blur_and_with_jumps():
         text = " ".join(str(w.message) for w in rec)
         assert "tear the surface apart" in text
         assert ("prior_fit='affine' or 'disparity'" in text) == relative_flag
+    # ... only where the prior's relief does not read as metric (a review: a metric map
+    # with 3 mm of noise, ratio 1.03, was told to fit it, which loses its scale)
+    from facetlift.problem import relief_says_relative
+
+    assert not relief_says_relative(1.03) and not relief_says_relative(0.7)
+    assert relief_says_relative(None) and relief_says_relative(4.6)
+    assert relief_says_relative(0.5)
     # depths that overflowed leave no angle to measure: taken as bent (it was passed)
     assert blur_bent(float("nan"), 0.5) == float("inf")
     assert blur_bent(None, 0.5) is None and blur_bent(3.0, 0.5) is None

@@ -430,14 +430,12 @@ def _fitted_runs(kind, normals, mask, raw, weight, t0, *, prior_weight, prior_bl
         inside = zeros & first.mask
         if inside.any():
             r, c = np.argwhere(inside)[0]
-            # (a review: a network's min-max map holds 0 as a value, and a disparity's 0 is the
-            # sky; both were called a sensor's mark)
-            why = ("a disparity of 0 lies infinitely far: no depth there" if kind == "disparity"
-                   else "a depth sensor's mark, or the end of a map normalised to 0..1, whose "
-                   "few pixels there are little lost")
+            # (a review: a network's min-max map holds 0 as a value, at one end; it was called
+            # a sensor's mark only)
             warn(f"`prior`: {int(inside.sum())} pixel(s) in the mask hold exactly 0, the first "
                  f"at (row {r}, col {c}): left out of the fit and the fusion as unknown depths "
-                 f"({why}; NaN is the way to mark unknown depths)")
+                 "(a depth sensor's mark, or the end of a map normalised to 0..1, whose few "
+                 "pixels there are little lost; NaN is the way to mark unknown depths)")
     with recording() as fitting:
         # (the fit took 16 s of an audit's 1280 x 720 run, under a bar that still read
         # "integrating: 24it" and then counted again from 0 without a word)

@@ -178,7 +178,10 @@ def torn_hint(job, info: dict) -> str | None:
             "wants --prior-blur SIGMA (its weight then 0.003), a noisy sensor a lower "
             "--prior-weight (0.001-0.01), and a band of foreground and background blended at "
             "the silhouette zero weight (--prior-weight-map); docs/fusion.md")
-    if info.get("projection") == "perspective" and not prior.get("fit"):
+    from .problem import relief_says_relative
+
+    if (info.get("projection") == "perspective" and not prior.get("fit")
+            and relief_says_relative(prior.get("relief_ratio"))):
         # (a review: a monocular network's 0..1 depth given with --fov, torn into 8,167 pieces)
         hint += (". A relative depth (a monocular network's 0..1 map, a disparity) needs "
                  "--prior-fit affine or disparity")

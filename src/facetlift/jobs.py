@@ -928,10 +928,10 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                  "neither of which is saved: mesh.stl holds triangles (STL has no quads)")
         elif job.triangles is not None and not set(save) & {"ply", "obj", "stl"}:
             # (accepted and ignored before, where --colors and --output-frame warn, a review)
-            which = "--triangles; `triangles` True" if job.triangles else (
-                "--quads; `triangles` False")
-            warn(f"the mesh faces ({which}) apply to the ply and obj meshes, neither of which "
-                 "is saved: add -s ply or -s obj")
+            which = ("triangles (--triangles, triangles=True in Python)" if job.triangles
+                     else "quads (--quads, triangles=False in Python)")
+            warn(f"mesh faces as {which} apply to the ply and obj meshes, neither of which is "
+                 "saved: add -s ply or -s obj")
         check_height_range(job, save)
     src = job.source
     outdir = default_outdir(src) if job.outdir is None else Path(job.outdir)

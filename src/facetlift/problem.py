@@ -71,6 +71,21 @@ def _flip_shares(cam, r, c, nf, clear) -> dict:
     return shares
 
 
+def _silhouette_right(domain, nf, known, axes: str) -> bool:
+    """Whether the mask's edge, where it is a silhouette, says every axis of `axes` ("x",
+    "y" or "xy") runs as read: its normals point out of the object along them
+    (:func:`facetlift.frames.silhouette`). A flip that mends the facing is then no flip but a
+    camera too wide for the map, e.g. an orthographic one's (a review: a right orthographic
+    vase given a 90-degree field of view was told that x runs the other way, and a spot
+    render that both do; following either turned the surface inside out)."""
+    from types import SimpleNamespace
+
+    from .frames import _silhouette_says, silhouette
+
+    sil = silhouette(SimpleNamespace(domain=domain, extras={}, known=known, normals=nf))
+    return all(_silhouette_says(sil, a) == "out" for a in axes)
+
+
 def _flip_mends_facing(cam, r, c, nf, clear, away: float, shares=None):
     """``(axis, share)`` where many normals face away from a pinhole camera (``away`` above
     :data:`BACKFACING_FRAME_HINT`) and negating x or y alone turns all but a few of them
@@ -822,6 +837,8 @@ def prepare(
         shares = (_flip_shares(cam, r, c, nf, clear) if away > BACKFACING_FRAME_HINT
                   else {})
         mended = _flip_mends_facing(cam, r, c, nf, clear, away, shares)
+        if mended is not None and _silhouette_right(domain, nf, ok, mended[0]):
+            mended = None  # (the object's own silhouette says the axes are right as read)
         if axial is not None and mended is not None:
             # (an orthographic map's silhouette faces away on every side alike, so negating x
             # or y mends it about equally; a y-down map over a floor, whose normals face the
@@ -832,10 +849,11 @@ def prepare(
             if mended[0] == "xy":
                 # (negating both mends an orthographic view's rim as well as a map whose x and
                 # y both run the other way: the facing cannot tell them apart, so both are
-                # named, a review: a room read with x and y negated was told it was
-                # orthographic, and integrated so came out inside-out without a word)
-                both = even
-                axial = axial if even else None
+                # named, the orthographic view first (a review: a room read with x and y
+                # negated was told it was orthographic, and integrated so came out inside-out
+                # without a word; the next review: told only of the flip, right orthographic
+                # maps of uneven objects came out inside-out following it)
+                both = True
             elif not (even and axial < 0.5 * mended[1]):
                 axial = None
         if axial is not None:
@@ -1046,6 +1064,21 @@ RELIEF_UNRELATED, RELIEF_UNRELATED_PAIRS = 0.5, 1000
 RELIEF_WARN_PAIRS = 50
 
 
+#: A perspective prior whose relief ratio lies within these bounds reads as metric: the
+#: warnings of a torn surface then do not name a relative depth among its causes
+#: (:func:`relief_says_relative`; a review: a metric bunny depth with 3 mm of noise, ratio
+#: 1.03, was told to fit it as relative, which loses its metric scale). Metric dense priors of
+#: the same review and the fusion benchmark read 0.5-2.6; relative 0..1 maps 4.3-72 (rooms
+#: 1.75-2.8, a map offset to 1..2 below 1).
+RELATIVE_QUIET = (2.0 / 3.0, 1.5)
+
+
+def relief_says_relative(ratio) -> bool:
+    """Whether a perspective prior's relief ratio (``info["prior"]["relief_ratio"]``, None
+    where it was not measured) leaves a relative depth among the causes worth naming."""
+    return ratio is None or not RELATIVE_QUIET[0] <= float(ratio) <= RELATIVE_QUIET[1]
+
+
 def _check_relief(problem: Problem) -> None:
     """Warn where a prior's relief differs from the normals' by a factor (a perspective
     one's relative relief: :func:`facetlift.prior_fit.relief_ratio` in log-depth, the same in
@@ -1098,17 +1131,30 @@ def _check_relief(problem: Problem) -> None:
         return  # advice, prior_fit, then left the prior out: the result no longer metric)
     if ratio > 0 and not 1.0 / low <= ratio <= factor and problem.perspective:
         problem.extras["prior_relief_warned"] = True
+        relative = ("A relative depth known only up to scale and shift (a monocular "
+                    "network's, e.g. 0..1) needs prior_fit='affine' (--prior-fit affine), an "
+                    "inverse depth prior_fit='disparity'")
+        # (a dense map's causes, which the ratio cannot tell apart: a review's metric maps
+        # blurred with their background read 4.6-24, and the advice led with prior_fit, which
+        # loses a metric map's scale; the blend first where a blur was declared)
+        causes = ["it is a relative depth known only up to scale and shift (a monocular "
+                  "network's, e.g. 0..1: prior_fit='affine', --prior-fit affine; an inverse "
+                  "depth: prior_fit='disparity')",
+                  "its background is blended in at the silhouettes (fill it with the nearest "
+                  "object depth, or give it zero weight, --prior-weight-map)"]
+        if problem.prior_blur > 0:
+            causes.reverse()
+        dense = (f"A dense map reads so when {causes[0]}, when {causes[1]}, or when K's focal "
+                 "length is wrong; the ratio cannot tell these apart (and fitting a metric "
+                 "map, prior_fit, gives up its metric scale)")
         # (log-depth relief: the same in any units, so a metric prior gives 1 whatever they
         # are; a relative depth with an offset does not: a fresh user's 0..1 map with K cut
         # 71 % of the corners and was told of noise, not of prior_fit)
         warn(f"prior: its relative relief (of log-depth) is {ratio:.3g} times what the normals "
              f"give with this K (the median over {pairs} pairs of nearby samples): a "
              "perspective prior must be depth along the optical axis, in any units but "
-             "without an offset. A relative depth known only up to scale and shift (a "
-             "monocular network's, e.g. 0..1) needs prior_fit='affine' (--prior-fit affine), "
-             "an inverse depth prior_fit='disparity'; or is K's focal length wrong"
-             + ("" if sparse else ", or the background blended into the map at the "
-                "silhouettes (zero weight there, --prior-weight-map)") + "?")
+             "without an offset. " + (relative + "; or is K's focal length wrong?" if sparse
+                                      else dense))
     elif ratio > 0 and not 1.0 / low <= ratio <= factor:
         problem.extras["prior_relief_warned"] = True  # (the jump hint then stays quiet)
         h = problem.pixel_size
@@ -1924,9 +1970,10 @@ def check_prior(prior, prior_weight, shape, mask, camera):
                 r, c = np.argwhere(mask)[k]
                 warn(f"`prior`: {int(neg.sum())} sample(s) in the mask with a non-positive "
                      f"z-depth for a perspective camera ({int(zeros.sum())} of them 0, as a "
-                     f"depth sensor marks unknown pixels), the first {float(depth[k])!r} at "
-                     f"(row {r}, col {c}); they were left out (NaN is the way to mark unknown "
-                     "depths)")
+                     "depth sensor marks unknown pixels, or as the near end of a relative map "
+                     "normalised to 0..1, which needs prior_fit='affine'), the first "
+                     f"{float(depth[k])!r} at (row {r}, col {c}); they were left out (NaN is "
+                     "the way to mark unknown depths)")
                 have &= ~neg
             else:
                 hint = (f"; {int(zeros.sum())} of them are 0: if 0 marks an unknown depth, "

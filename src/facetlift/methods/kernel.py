@@ -170,8 +170,8 @@ def run(problem, *, sigma, reg, tile, margin, progress) -> MethodResult:
         progress(done["groups"] + k,
                  (done["facets"] + share * done["box"]) / max(d.n_facets, 1))
 
+    boxes = []  # (facets, (r0, c0), known, inside, the box's tile plan)
     for f in groups:
-        done["box"] = f.size
         r, c = rows[f], cols[f]
         r0, c0 = r.min(), c.min()
         shape = (int(r.max() - r0 + 1), int(c.max() - c0 + 1))
@@ -180,12 +180,22 @@ def run(problem, *, sigma, reg, tile, margin, progress) -> MethodResult:
         known = np.zeros(shape, dtype=bool)
         ok = problem.usable[f]
         known[r[ok] - r0, c[ok] - c0] = True
-        gc = np.zeros(shape)
-        gr = np.zeros(shape)
+        boxes.append((f, (r0, c0), known, inside,
+                      plan_tiles(known, inside, sigma=sigma, tile=tile, margin=margin)))
+    # (the whole run's factorizations, said once before any starts: KERNEL_WARN_SECONDS; per
+    # box, a mask of several pieces each under the limit went unsaid, a review)
+    _time_check([size for *_, plan in boxes for size in plan[2]], sigma, tile, margin)
+    for f, (r0, c0), known, inside, plan in boxes:
+        done["box"] = f.size
+        r, c = rows[f], cols[f]
+        ok = problem.usable[f]
+        gc = np.zeros(inside.shape)
+        gr = np.zeros(inside.shape)
         gc[r - r0, c - c0] = np.where(ok, gx[f], 0.0)  # dz / d col
         gr[r - r0, c - c0] = np.where(ok, -gy[f], 0.0)  # dz / d row (y is up)
         z, part = fit_tiles(gc, gr, known, inside, sigma=sigma, reg=reg, tile=tile,
-                            margin=margin, progress=step if progress is not None else None)
+                            margin=margin, progress=step if progress is not None else None,
+                            plan=plan)
         values[f] = z[r - r0, c - c0]
         for key in ("tiles", "factorizations"):
             info[key] = info.get(key, 0) + part[key]
@@ -199,25 +209,10 @@ def run(problem, *, sigma, reg, tile, margin, progress) -> MethodResult:
     return MethodResult(values=values, info=info)
 
 
-def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin, progress=None):
-    """Tiled Gaussian-kernel fit on a box (see the module docstring).
-
-    Parameters
-    ----------
-    gc, gr : (H, W) float
-        Height derivatives along columns and rows (pixel units) at the known pixels.
-    known, inside : (H, W) bool
-        Pixels with a sample, and pixels where the height is wanted.
-    progress : callable(groups done, share of the tiles fitted), optional
-        Called in the calling thread as each group of tiles is fitted.
-
-    Returns
-    -------
-    z : (H, W) float
-        Height at the `inside` pixels (0 elsewhere), any constant per connected piece.
-    info : dict
-    """
-    t0 = time.perf_counter()
+def plan_tiles(known, inside, *, sigma, tile, margin):
+    """The tiles of a box (:func:`fit_tiles`) and their grouping by sample pattern:
+    ``(specs, groups, sizes)``, each tile's (core, blend region, fit window) slices, the
+    groups' tile indices keyed by pattern, and each group's unknowns (twice its samples)."""
     H, W = inside.shape
     o = math.ceil(sigma)
     tile = max(tile, 2 * o)  # at most two blend regions overlap along an axis
@@ -233,26 +228,59 @@ def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin, progress=None)
             fc = slice(max(ec.start - margin, 0), min(ec.stop + margin, W))
             specs.append(((lo_r, hi_r, lo_c, hi_c), (er, ec), (fr, fc)))
     # One factorisation per distinct sample pattern, used for all tiles with that pattern
-    # and then dropped (only `workers` factors live at a time). Groups run on a thread pool
-    # with single-threaded BLAS: for many small Cholesky factorisations a multi-threaded BLAS
-    # is slower, several times so on a loaded machine. Results do not depend on scheduling:
-    # every tile is computed the same way and assembled in order.
     groups: dict = {}
     for i, (_, _, (fr, fc)) in enumerate(specs):
         kn = known[fr, fc]
         if kn.any():
             groups.setdefault((kn.shape, kn.tobytes()), []).append(i)
-    fits = [np.zeros(inside[er, ec].shape) for _, (er, ec), _ in specs]
-    # (the work of the factorizations, (2 n)^3 / 3 each: a review's sigma=12 at 512^2 ran for
-    # many minutes without a word, within memory; said where it is long, KERNEL_WARN_FLOPS)
-    sizes = [2 * np.count_nonzero(known[specs[m[0]][2]]) for m in groups.values()]
+    sizes = [2 * int(np.count_nonzero(known[specs[m[0]][2]])) for m in groups.values()]
+    return specs, groups, sizes
+
+
+def _time_check(sizes, sigma, tile, margin) -> None:
+    """Warn where the fits' factorizations (`sizes`: each one's unknowns; (2 n)^3 / 3 flops
+    each) are estimated at more than :data:`KERNEL_WARN_SECONDS` (:data:`KERNEL_FLOPS`): a
+    review's sigma=12 at 512^2 ran for many minutes without a word, within memory."""
     seconds = sum(float(n) ** 3 / 3.0 for n in sizes) / KERNEL_FLOPS
     if seconds > KERNEL_WARN_SECONDS:
-        warn(f"kernel: {len(groups):,} local fits of up to {max(sizes):,} unknowns (sigma "
-             f"{sigma:g}, tile {tile}, margin {margin}) take about {seconds / 60:.0f} min or "
-             "more (their factorizations alone, at the 2-core VM's rate); each fit's work "
-             "grows as the sixth power of its window (tile + 2 ceil(sigma) + 2 margin): a "
-             "smaller sigma, tile or margin, or the method dgp, is far faster")
+        warn(f"kernel: {len(sizes):,} local fits of up to {max(sizes):,} unknowns (sigma "
+             f"{sigma:g}, tile {max(tile, 2 * math.ceil(sigma))}, margin {margin}) take "
+             f"about {seconds / 60:.0f} min or more (their factorizations alone, at the 2-core "
+             "VM's rate); each fit's work grows as the sixth power of its window (tile + 2 "
+             "ceil(sigma) + 2 margin): a smaller sigma, tile or margin, or the method dgp, is "
+             "far faster")
+
+
+def fit_tiles(gc, gr, known, inside, *, sigma, reg, tile, margin, progress=None, plan=None):
+    """Tiled Gaussian-kernel fit on a box (see the module docstring).
+
+    Parameters
+    ----------
+    gc, gr : (H, W) float
+        Height derivatives along columns and rows (pixel units) at the known pixels.
+    known, inside : (H, W) bool
+        Pixels with a sample, and pixels where the height is wanted.
+    progress : callable(groups done, share of the tiles fitted), optional
+        Called in the calling thread as each group of tiles is fitted.
+    plan : tuple, optional
+        :func:`plan_tiles` of this box, where the caller has it.
+
+    Returns
+    -------
+    z : (H, W) float
+        Height at the `inside` pixels (0 elsewhere), any constant per connected piece.
+    info : dict
+    """
+    t0 = time.perf_counter()
+    H, W = inside.shape
+    o = math.ceil(sigma)
+    # (groups run on a thread pool with single-threaded BLAS: for many small Cholesky
+    # factorisations a multi-threaded BLAS is slower, several times so on a loaded machine.
+    # Results do not depend on scheduling: every tile is computed the same way and assembled
+    # in order; only `workers` factors live at a time)
+    specs, groups, _ = (plan_tiles(known, inside, sigma=sigma, tile=tile, margin=margin)
+                        if plan is None else plan)
+    fits = [np.zeros(inside[er, ec].shape) for _, (er, ec), _ in specs]
 
     def fit_group(members):
         _, _, (fr, fc) = specs[members[0]]

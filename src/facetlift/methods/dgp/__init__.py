@@ -82,6 +82,7 @@ from ...errors import ConvergenceWarning
 from ...linalg.dense import rowwise
 from ...operators.stencil import E_X, E_Y
 from ...options import Option
+from ...problem import relief_says_relative
 from .. import MethodResult
 from . import discontinuous
 from .common import BlurredPrior, average_deviation, empty_components, mean_angle, targets
@@ -643,7 +644,8 @@ def run(
                                 pinfo["mesh_pieces"],
                                 blurred=prior if prior is not None and not pointwise else None,
                                 noise=noise, agrees=agrees,
-                                relative=problem.perspective and not fitted)
+                                relative=problem.perspective and not fitted
+                                and relief_says_relative(problem.extras.get("prior_relief")))
         if (pointwise or lone is not None) and pinfo.get("unanchored_pieces"):
             size, row, col = pinfo["unanchored_largest"]
             r0, c0 = problem.extras.get("offset", (0, 0))  # (the image's rows and columns)
