@@ -876,7 +876,6 @@ def prepare(
             counts["facing_away_flip"] = list(mended)  # (info's frame guess names it too)
             # (a y-down map with a camera over a floor: its floor faces away, and the warning
             # asked about BGR order, world frames and K, never about y; an audit)
-
             axes = ("x and y", "axes", "run") if mended[0] == "xy" else (
                 mended[0], "axis", "runs")
             frame = (f"; {away:.0%} of the normals face away from the camera, and with "
