@@ -23,7 +23,10 @@ from facetlift.cli import main
 from facetlift.errors import MemoryLimitError
 from facetlift.jobs import Job
 
-BEAR = "../shared/data/normal_maps/diligent_bear"
+BEAR = str(Path(__file__).resolve().parents[2] / "shared" / "data" / "normal_maps"
+           / "diligent_bear")
+NEEDS_BEAR = pytest.mark.skipif(not Path(BEAR).is_dir(), reason="../shared/data (the "
+                                "DiLiGenT bear) not beside the checkout")
 
 
 def run(capsys, *argv):
@@ -302,6 +305,7 @@ def test_mat_input_in_queau_layout_with_keys(tmp_path, capsys):
 # ------------------------------------------------------------------------------ info
 
 
+@NEEDS_BEAR
 def test_info_on_the_bear(capsys):
     code, out, err = run(capsys, "info", BEAR)
     assert code == 0, err

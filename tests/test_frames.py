@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +14,11 @@ import facetlift
 from facetlift import frames, io
 from facetlift.problem import prepare
 
-BEAR = "../shared/data/normal_maps/diligent_bear"
+BEAR = str(Path(__file__).resolve().parents[2] / "shared" / "data" / "normal_maps"
+           / "diligent_bear")
+#: (a fresh clone without ../shared/data skips these, a review: they failed there)
+NEEDS_BEAR = pytest.mark.skipif(not Path(BEAR).is_dir(), reason="../shared/data (the "
+                                "DiLiGenT bear) not beside the checkout")
 
 
 def bump(shape=(24, 30), h=0.1):
@@ -455,6 +460,7 @@ def test_flip_check_names_the_axis_whose_flip_decided_with_a_camera():
     assert guess["likely"].startswith("x flipped") and "curl_x_flipped" in guess
 
 
+@NEEDS_BEAR
 def test_flip_check_on_the_real_bear_as_read_and_flipped():
     data = io.read_dataset(BEAR)
     ok = frames.flip_check(prepare(data["normals"], data["mask"], K=data["K"]))
@@ -603,6 +609,7 @@ def test_integrate_gradients_refusals():
         facetlift.integrate_gradients(p, np.zeros((4, 5)))
 
 
+@NEEDS_BEAR
 def test_relative_curl_of_a_pinhole_does_not_depend_on_the_object_place():
     """The same perspective view padded with empty columns on the left (and cx moved with it):
     the same curl (the strips' crop once fed shifted columns to the camera); 0.219 over every
@@ -621,6 +628,7 @@ def test_relative_curl_of_a_pinhole_does_not_depend_on_the_object_place():
     assert a == pytest.approx(0.2190, abs=2e-3) and b == pytest.approx(a, rel=1e-9)
 
 
+@NEEDS_BEAR
 def test_facing_away_is_judged_on_the_object_without_a_mask():
     """An OpenCV-frame map with a zero background and no mask: the object (13 % of the image)
     faces away; the background's zeros are no normals and must not outvote it."""
@@ -1114,6 +1122,7 @@ def test_decode_unsigned_names_undecoded_integer_values_as_floats():
     assert np.isnan(frames.decode_unsigned(v, "m")[0, 0]).all()
 
 
+@NEEDS_BEAR
 @pytest.mark.parametrize("deg", [1.0, 3.0, 6.0])
 def test_normal_noise_reads_the_angular_noise_from_the_curl(deg):
     """frames.normal_noise: about 0 for a surface's own normals, about the rotation angle's

@@ -1495,6 +1495,9 @@ def test_a_pixel_whose_points_disagree_is_left_out():
     assert img[2, 3] == pytest.approx(2.0 * (1 + CONFLICT / 4))
 
 
+@pytest.mark.skipif(not (Path(__file__).resolve().parents[2] / "shared" / "data" / "meshes"
+                         / "armadillo.ply").is_file(),
+                    reason="../shared/data not beside the checkout")
 def test_exact_sparse_samples_on_a_render_with_rim_slivers_do_not_warn_of_tearing():
     """A fresh SfM user's exact 1 % samples on the armadillo render were told the prior tore
     the surface (1,564 pieces, counted before the slivers of at most SMALL_PIECE facets hang

@@ -71,6 +71,7 @@ def test_exact_and_noisy_samples_are_all_kept(name):
         assert problem.counts["prior_samples"] == k.size
 
 
+@pytest.mark.skipif(not BEAR.is_dir(), reason="../shared/data not beside the checkout")
 def test_the_bear_with_outliers_and_the_discontinuity_route():
     """3 % of 1 % samples of the DiLiGenT bear moved 30-80 mm: removed before the solve,
     with no exact sample among them; the discontinuity route no longer cuts blobs loose
@@ -259,6 +260,7 @@ def test_samples_compared_too_little_to_be_removed_are_named_beside_the_outliers
     assert s.info["prior"]["outliers"]["unconfirmed_pixels"] == [[1, 2], [3, 4]]
 
 
+@pytest.mark.skipif(not BEAR.is_dir(), reason="../shared/data not beside the checkout")
 def test_a_prior_that_runs_against_the_normals_is_named():
     """A user's disparity given as the prior at a low weight deviated 26 deg without a word
     (below the fight warning's 45): the prior's changes between neighbouring samples are
