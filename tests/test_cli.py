@@ -375,6 +375,13 @@ def test_version_and_help(capsys):
     assert code == 0 and "Examples:" in stdout and "--mask" in stdout
     code, stdout, _ = run(capsys)
     assert code == 0 and "Usage: facetlift" in stdout and "integrate" in stdout
+    # __version__ and pyproject.toml's version are kept by hand: they agree (a review)
+    from pathlib import Path
+
+    tomllib = pytest.importorskip("tomllib")  # (Python 3.11)
+    project = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml")
+                            .read_text())["project"]
+    assert project["version"] == facetlift.__version__
 
 
 def _one_line_error(err):

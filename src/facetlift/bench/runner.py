@@ -83,7 +83,12 @@ def _provenance(ctx: Context) -> list[str]:
     data = ctx.data.resolve() if ctx.data is not None else None
     return [f"Code: {code}; {libs}  ",
             f"Date: {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC  ",
-            f"Data: {data}; render cache: {Path(cache).resolve()}  ",
+            # (a run without a data folder said only "Data: None", and its tables of the
+            # analytic surfaces alone looked whole, a packaging review)
+            (f"Data: {data}; render cache: {Path(cache).resolve()}  " if data is not None else
+             "Data: none found (--data, $FACETLIFT_DATA, or a shared/data folder beside the "
+             "checkout): no mesh file and no real map was read; their scenes, tables and "
+             "figures are missing  "),
             f"Settings: methods {', '.join(s.methods) if s.methods else 'all'}; models "
             f"{', '.join(ctx.models) if ctx.models else 'all'}; discontinuity conditions "
             f"{', '.join(s.disc_conditions)}; held-out seed {s.heldout_seed}\n"]
