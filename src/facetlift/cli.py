@@ -806,6 +806,9 @@ def integrate(normals, gradients, progress, as_json, **flags):
 @click.option("--prior-fit", type=click.Choice(["none", "affine", "scale", "disparity"]),
               default=None, help="What the prior is known up to, as for 'integrate': its "
               "values are not checked as depths, and the time estimate allows for two runs.")
+@click.option("--prior-blur", "prior_blur", type=float, default=None, metavar="SIGMA",
+              help="The prior's blur in pixels, as for 'integrate': its relief is then "
+              "checked as a blurred map's (a review: integrate's flag was refused here).")
 @click.option("--confidence", type=click.Path(exists=True, dir_okay=False, path_type=Path),
               help="A confidence map to check against the map, as for 'integrate'.")
 @click.option("--no-prior", "no_prior", is_flag=True,
@@ -818,7 +821,7 @@ def integrate(normals, gradients, progress, as_json, **flags):
 def info(normals, gradients, mask, K, fov, normal_frame, y_down, world_to_camera,
          camera_to_world, normal_encoding, normal_range, gradient_frame, mat_keys, prior,
          prior_scale,
-         prior_fit, confidence, no_prior, no_confidence, orthographic, as_json):
+         prior_fit, prior_blur, confidence, no_prior, no_confidence, orthographic, as_json):
     """Describe an input without integrating it: size, pixel type, detected frame and
     encoding, mask and components, unusable normals, K, and the memory planner's estimate of
     the peak memory the default integration would need (the figure --max-memory is checked
@@ -847,7 +850,8 @@ def info(normals, gradients, mask, K, fov, normal_frame, y_down, world_to_camera
                    mat_keys=_split(mat_keys),
                    gradient_frame=gradient_frame,
                    prior_scale=prior_scale, prior=prior, confidence=confidence,
-                   prior_fit=prior_fit, world_to_camera=world_to_camera,
+                   prior_fit=prior_fit, prior_blur=prior_blur,
+                   world_to_camera=world_to_camera,
                    camera_to_world=camera_to_world, dataset_prior=not no_prior,
                    dataset_confidence=not no_confidence, orthographic=orthographic)
     # (for preflight scripts: as integrate would fail, on the map or on a folder's files)

@@ -136,7 +136,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
              normal_encoding: str = "xyz", normal_range: str = "signed", mat_keys=None,
              gradient_frame: str = "xy",
              prior_scale=None, prior=None, confidence=None, prior_fit=None,
-             fov=None, world_to_camera=None, camera_to_world=None,
+             prior_blur=None, fov=None, world_to_camera=None, camera_to_world=None,
              dataset_prior: bool = True, dataset_confidence: bool = True,
              orthographic: bool = False) -> dict:
     """What ``facetlift info`` reports about an input: size, pixel type, detected frame and
@@ -182,6 +182,9 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
         What the prior is known up to, as for ``integrate`` (:mod:`facetlift.prior_fit`): its
         values are then not checked as depths (any sign), and the time estimate allows for
         the route's two runs.
+    prior_blur : float, optional
+        The prior's blur in pixels, as for ``integrate``: its relief is checked as a blurred
+        map's (only a relief too large is named).
     dataset_prior, dataset_confidence : bool
         Read a dataset folder's ``prior_depth.*`` / ``confidence.*`` (``integrate``'s
         ``--no-prior`` / ``--no-confidence`` set them False).
@@ -321,6 +324,7 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
             with renamed(lambda m: _folder_named(m, job, inp, warning=True)):
                 problem = prepare(checked, inp.mask, K=inp.K,
                                   prior=None if fitted else prior_map,
+                                  prior_blur=None if fitted else prior_blur,
                                   confidence=inp.confidence)
         except ValueError as e:
             # (the warnings that came first too: a K for another image is what makes a map
