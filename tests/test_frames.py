@@ -1324,3 +1324,24 @@ def test_rotate_takes_only_rotations_of_3_vectors():
         frames.rotate(np.zeros((2, 2, 2)), np.eye(3))
     turn = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
     np.testing.assert_allclose(frames.rotate(n, turn), n @ turn.T)
+
+
+def test_info_lets_the_camera_decide_where_the_curls_cannot(tmp_path, capsys):
+    """A review: a right room map with --fov 60 and a little noise was told "as read, or y
+    flipped: the check cannot tell", though with its camera the facing can (its y-down
+    version is caught there, 22 % facing away). Where the map faces the camera as read and
+    either flip would turn more than 5 % away, info says it is as read."""
+    from facetlift.cli import main
+
+    H, W = 90, 120
+    K = np.array([[100.0, 0, 59.5], [0, 100.0, 44.5], [0, 0, 1]])
+    walls = np.zeros((H, W, 3))
+    walls[..., 2] = 1.0
+    walls[:, :25], walls[:, 95:], walls[60:, 25:95] = (1.0, 0, 0), (-1.0, 0, 0), (0, 1.0, 0)
+    n = facetlift.synthetic.add_angular_noise(walls, 3.0, rng=np.random.default_rng(0))
+    np.save(tmp_path / "n.npy", n)
+    np.savetxt(tmp_path / "K.txt", K)
+    main(["info", str(tmp_path / "n.npy"), "--K", str(tmp_path / "K.txt"), "--json"])
+    likely = json.loads(capsys.readouterr().out)["frame"]["likely"]
+    assert likely.startswith("as read (consistent with the camera: 0.0% of the normals face "
+                             "away from it as read, 42% with x negated, 19% with y negated"), likely

@@ -531,6 +531,28 @@ def _try(frame, axes: str, field: bool) -> str:
     return frames.flip_advice(frames.GRADIENT_FIELD if field else frame, axes)
 
 
+def _facing_says_as_read(problem, away: float):
+    """``(x share, y share)``: the shares of the clear normals that would face away from a
+    pinhole camera with x or with y negated, where both are above
+    :data:`facetlift.problem.BACKFACING_FRAME_HINT` and the map as read faces it (`away` at
+    most that): the facing then says the frame is right. None otherwise (no camera)."""
+    from .frames import EDGE_ON
+    from .problem import BACKFACING_FRAME_HINT, _flip_shares
+
+    cam = problem.camera
+    if not cam.perspective or not away <= BACKFACING_FRAME_HINT:
+        return None
+    r, c = problem.domain.pixels
+    nf = problem.normals
+    with np.errstate(invalid="ignore"):
+        cos = cam.view_cosine(r, c, nf, unit=True)
+    clear = np.asarray(problem.known, bool) & (np.abs(cos) > EDGE_ON)
+    shares = _flip_shares(cam, r, c, nf, clear)
+    if not shares or min(shares["x"], shares["y"]) <= BACKFACING_FRAME_HINT:
+        return None
+    return shares["x"], shares["y"]
+
+
 def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False,
                     rotation=None, normal_range: str = "signed") -> dict:
     """:func:`_frame_guess` from the normals alone."""
@@ -652,6 +674,14 @@ def _frame_evidence(n, mask, K, problem=None, *, frame=None, field: bool = False
                                + (f"{swapped}; " if swapped else "")
                                + f"see docs/conventions.md; "
                                f"{frames.world_note(rotation is not None)}")
+        elif (own > frames.FLIP_MIN_CURL and flipped < UNTOLD * own
+              and (facing := _facing_says_as_read(problem, away)) is not None):
+            # (with a camera the facing can tell where the curls cannot: a review's right room
+            # with --fov 60 was told "as read, or y flipped", and its y-down version was caught
+            # by the facing, 22 % away)
+            guess["likely"] = (f"as read (consistent with the camera: {away:.1%} of the "
+                               f"normals face away from it as read, {facing[0]:.0%} with x "
+                               f"negated, {facing[1]:.0%} with y negated)")
         elif own > frames.FLIP_MIN_CURL and flipped < UNTOLD * own:
             # (a texture artist's y-down detail map, slopes under 1 deg in 8 bits, was called
             # consistent: as read 43.9 % RMS, with --y-down 1.7 %)
