@@ -903,8 +903,8 @@ def test_dataset_folder_picks_up_prior_and_confidence(tmp_path, capsys):
     # both at once, where the method takes neither (a review: one refusal after the other)
     assert main(["integrate", str(folder), "--method", "bini", "-o", str(tmp_path / "b")]) == 1
     assert ("prior_depth.* and confidence.* files, which this method does not take: "
-            "--no-prior --no-confidence leave them out") in " ".join(
-                capsys.readouterr().err.split())
+            "--no-prior --no-confidence leave them out, dataset_prior=False, "
+            "dataset_confidence=False in Python") in " ".join(capsys.readouterr().err.split())
 
 
 @pytest.mark.parametrize("extra,match", [

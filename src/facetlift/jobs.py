@@ -688,9 +688,12 @@ def _from_folder(message: str, job: Job, inp: Input) -> str:
         what = ("the dataset folder's " + " and ".join(f"{stem}.*" for stem, _ in files)
                 + f" file{plural}")
     flags = " ".join(flag for _, flag in files)
+    # (and the Python switches: facetlift.batch's user was named the flags only, a review)
+    python = ", ".join(f"dataset_{'prior' if stem == 'prior_depth' else stem}=False"
+                       for stem, _ in files)
     return (f"{message} ({what}, "
             f"which this method does not take: {flags} leave{'s' if len(files) == 1 else ''} "
-            f"{'it' if len(files) == 1 else 'them'} out)")
+            f"{'it' if len(files) == 1 else 'them'} out, {python} in Python)")
 
 
 def _folder_named(message: str, job: Job, inp: Input, warning: bool = False) -> str:
