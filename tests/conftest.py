@@ -8,7 +8,8 @@ sampled with the facetlift conventions: pixel ``(r, c)`` has its centre at
 Fixtures: ``make_plane(p, q)``, ``saddle`` (x^2 - y^2), ``wave`` (sin x cos y) and
 ``rel_err(estimate, truth)``;  ``brick_texture``
 (:func:`bricks`: a brick texture's height and normals); ``load_script`` (a script of the
-repository, e.g. ``benchmarks/bench_ab.py``, loaded as a module).
+repository, e.g. ``benchmarks/bench_ab.py``, loaded as a module); ``near_sphere``
+(:func:`sphere_seen_close`: a pinhole view of a sphere 1.2-1.5 units away).
 """
 
 from __future__ import annotations
@@ -177,3 +178,28 @@ def rel_err():
 def analytic():
     """The :class:`Analytic` class, to build other height fields: ``analytic(z, p, q)``."""
     return Analytic
+
+
+def sphere_seen_close(H: int = 192, W: int = 256):
+    """A sphere of radius 1 whose front is 1.2 from a pinhole camera (f = 1.25 W): normals
+    (H, W, 3), depth (NaN off it), mask and K. Its log-depth relief is large enough for the
+    prior checks' relief ratio (:func:`facetlift.prior_fit.relief_ratio`)."""
+    from facetlift.perspective import normals_from_depth, rays
+
+    K = np.array([[1.25 * H, 0, W / 2 - 0.3], [0, 1.25 * H, H / 2 + 0.2], [0, 0, 1]])
+    rr, cc = np.mgrid[0:H, 0:W]
+    d = rays(K, rr.ravel(), cc.ravel()).reshape(H, W, 3)
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    b = d[..., 2] * 2.2
+    disc = b * b - (2.2 ** 2 - 1.0)
+    depth = (b - np.sqrt(np.where(disc > 0, disc, np.nan))) * d[..., 2]
+    mask = np.isfinite(depth) & (disc > 0.1)
+    n = normals_from_depth(np.where(mask, depth, np.nan), K)
+    mask &= np.isfinite(n).all(-1)
+    return n, depth, mask, K
+
+
+@pytest.fixture
+def near_sphere():
+    """:func:`sphere_seen_close` at 192 x 256."""
+    return sphere_seen_close()

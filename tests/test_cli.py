@@ -1665,23 +1665,12 @@ def test_mesh_faces_without_a_mesh_output_are_warned_about(tmp_path, capsys, fla
     assert code == 0 and said in err, err
 
 
-def test_info_takes_prior_blur_and_checks_a_blurred_relative_prior(tmp_path, capsys):
+def test_info_takes_prior_blur_and_checks_a_blurred_relative_prior(tmp_path, capsys,
+                                                                   near_sphere):
     """A review: `info ... --prior-blur 4`, integrate's flag, was refused as unknown; it is
     taken, a blurred prior's relief checked as integrate checks it, and without a prior
     refused as integrate refuses it."""
-    from facetlift.perspective import normals_from_depth, rays
-
-    H, W = 192, 256
-    K = np.array([[240.0, 0, W / 2 - 0.3], [0, 240.0, H / 2 + 0.2], [0, 0, 1]])
-    rr, cc = np.mgrid[0:H, 0:W]
-    d = rays(K, rr.ravel(), cc.ravel()).reshape(H, W, 3)
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    b = d[..., 2] * 2.2
-    disc = b * b - (2.2 ** 2 - 1.0)
-    depth = (b - np.sqrt(np.where(disc > 0, disc, np.nan))) * d[..., 2]
-    mask = np.isfinite(depth) & (disc > 0.1)
-    n = normals_from_depth(np.where(mask, depth, np.nan), K)
-    mask &= np.isfinite(n).all(-1)
+    n, depth, mask, K = near_sphere
     z = depth[mask]
     np.save(tmp_path / "n.npy", np.where(mask[..., None], n, np.nan))
     np.save(tmp_path / "p.npy", np.where(mask, (depth - z.min()) / np.ptp(z) * 0.99 + 0.01,

@@ -677,7 +677,7 @@ def test_a_pair_fit_stands_with_a_few_invalid_markers():
     assert prior_fit._levels(-20.0, rfit, P, surface, lab, "affine", True, ok, 100) is None
 
 
-def test_a_relative_depth_given_as_depth_is_named_with_a_blur_and_with_jumps():
+def test_a_relative_depth_given_as_depth_is_named_with_a_blur_and_with_jumps(near_sphere):
     """A review as a monocular-network user: a 0..1 relative depth given with K and
     --prior-blur was not checked at all (the relief check stepped aside for blurred priors)
     and came out with depths of 1e-151 to 1e6, and with --discontinuities the torn-surface
@@ -685,17 +685,7 @@ def test_a_relative_depth_given_as_depth_is_named_with_a_blur_and_with_jumps():
     high side, and the torn warnings name prior_fit where the prior is perspective."""
     from facetlift.methods.dgp import _discontinuity_warnings, blur_bent
 
-    H, W = 192, 256  # (a sphere of radius 1 whose front is 1.2 from the camera)
-    K = np.array([[240.0, 0, W / 2 - 0.3], [0, 240.0, H / 2 + 0.2], [0, 0, 1]])
-    rr, cc = np.mgrid[0:H, 0:W]
-    d = rays(K, rr.ravel(), cc.ravel()).reshape(H, W, 3)
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    b = d[..., 2] * 2.2
-    disc = b * b - (2.2 ** 2 - 1.0)
-    depth = (b - np.sqrt(np.where(disc > 0, disc, np.nan))) * d[..., 2]
-    mask = np.isfinite(depth) & (disc > 0.1)
-    n = normals_from_depth(np.where(mask, depth, np.nan), K)
-    mask &= np.isfinite(n).all(-1)
+    n, depth, mask, K = near_sphere
     z = depth[mask]
     relative = np.where(mask, (depth - z.min()) / np.ptp(z) * 0.99 + 0.01, np.nan)
     with warnings.catch_warnings(record=True) as rec:
