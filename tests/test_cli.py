@@ -1684,3 +1684,43 @@ def test_info_takes_prior_blur_and_checks_a_blurred_relative_prior(tmp_path, cap
     code = main(args + ["--prior-blur", "4"])
     err = capsys.readouterr().err
     assert code == 1 and "--prior-blur 4 applies only with a prior" in err, err
+
+
+def test_out_of_memory_while_writing_says_the_solve_had_finished(tmp_path, capsys,
+                                                                  monkeypatch):
+    """A review: a 4096^2 job that fit died writing preview.png after a 35 s solve, told to
+    try a crop or a smaller map; it now names the output and that the solve had finished."""
+    from facetlift import jobs
+
+    def short(surface, kind, *a, **k):
+        raise MemoryError("Unable to allocate 384. MiB")
+
+    monkeypatch.setattr(jobs, "_write", short)
+    g = facetlift.synthetic.analytic("sphere", 24)
+    np.save(tmp_path / "n.npy", np.where(g.mask[..., None], g.normals, np.nan))
+    code = main(["integrate", str(tmp_path / "n.npy"), "-o", str(tmp_path / "o"),
+                 "-s", "png"])
+    err = capsys.readouterr().err
+    assert code == 1 and "writing preview.png after the solve had finished" in err, err
+    assert "try a crop" not in err and not (tmp_path / "o").exists()
+
+
+def test_sigterm_during_info_ends_with_its_message_and_no_word_on_outputs(tmp_path, capsys,
+                                                                         monkeypatch):
+    """A review: SIGTERM during `info` killed it by the signal, with no message and no --json
+    object; Ctrl-C there said "nothing partial was written", though info writes nothing."""
+    import signal
+
+    from facetlift import describe
+
+    def slow(*a, **k):
+        signal.raise_signal(signal.SIGTERM)
+
+    monkeypatch.setattr(describe, "describe", slow)
+    g = facetlift.synthetic.analytic("sphere", 16)
+    np.save(tmp_path / "n.npy", np.where(g.mask[..., None], g.normals, np.nan))
+    code = main(["info", str(tmp_path / "n.npy"), "--json"])
+    out, err = capsys.readouterr()
+    assert code == 143 and json.loads(out)["status"] == "terminated", (out, err)
+    assert "nothing partial" not in err
+    assert signal.getsignal(signal.SIGTERM) is not None  # (put back)

@@ -10,6 +10,7 @@ See ``docs/cli.md``.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -79,7 +80,17 @@ def cli(verbose, debug):
 
 
 class _StderrHandler(logging.StreamHandler):
-    """Logs to whatever ``sys.stderr`` is when a record is emitted."""
+    """Logs to whatever ``sys.stderr`` is when a record is emitted, through ``tqdm.write``:
+    a progress bar in flight is cleared and drawn again below the line (with -v --progress a
+    review's log lines were glued to the bar's text)."""
+
+    def emit(self, record):
+        try:
+            from tqdm import tqdm
+
+            tqdm.write(self.format(record), file=sys.stderr)
+        except Exception:  # pragma: no cover - logging's own policy
+            self.handleError(record)
 
     @property
     def stream(self):
@@ -1606,6 +1617,10 @@ _STATUS = {EXIT_INPUT: "error", EXIT_SOLVER: "solver_error", EXIT_BUG: "internal
            EXIT_INTERRUPTED: "interrupted", EXIT_TERMINATED: "terminated"}
 
 
+#: The commands that write no file.
+_READ_ONLY = ("info", "evaluate", "methods")
+
+
 def _stopped(how: str) -> str:
     """What Ctrl-C ("interrupted (Ctrl-C)") or SIGTERM says: the outputs are staged and moved
     in as a set; a batch's finished items are in its log (said by a batch only: a plain
@@ -1616,6 +1631,8 @@ def _stopped(how: str) -> str:
                 "report.md lists them and the one interrupted")
     from .io.atomic import COMMITTED
 
+    if command in _READ_ONLY:  # (they write nothing: no word on partial outputs, a review)
+        return how
     if COMMITTED and command != "batch":  # (after the set was moved in: it is complete)
         return (f"{how} after the outputs were written: {COMMITTED[-1]} holds the complete "
                 "new set")
@@ -1625,11 +1642,16 @@ def _stopped(how: str) -> str:
 
 def _main(args: list[str]) -> int:
     from .errors import MemoryLimitError, WorkersDied
-    from .io.atomic import COMMITTED, Terminated
+    from .io.atomic import COMMITTED, Terminated, sigterm_raises
 
     COMMITTED.clear()  # (this command's commits only: _stopped)
+    command = next((a for a in args if not a.startswith("-")), None)
     try:
-        with warnings.catch_warnings():  # (restores Python's own display afterwards)
+        # (the commands that write nothing end on SIGTERM with their message too: info died
+        # by the signal with none, and no --json object, a review; the others install it
+        # around their outputs)
+        with warnings.catch_warnings(), (sigterm_raises() if command in _READ_ONLY
+                                         else contextlib.nullcontext()):
             warnings.showwarning = _show_warning
             rv = cli.main(args=args, prog_name="facetlift", standalone_mode=False)
     except click.exceptions.Exit as e:  # pragma: no cover - returned, not raised, by click 8
@@ -1653,7 +1675,9 @@ def _main(args: list[str]) -> int:
                                                                         "--workers 1"))
         return EXIT_INPUT
     except MemoryError as e:
-        _error(f"out of memory ({_one_line(e)}); try a crop, a smaller map or another method")
+        text = _one_line(e)
+        _error(f"out of memory ({text})" if "after the solve had finished" in text else
+               f"out of memory ({text}); try a crop, a smaller map or another method")
         return EXIT_INPUT
     except (ValueError, OSError) as e:
         _error(_as_flags(_one_line(e)))

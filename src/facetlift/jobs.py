@@ -1015,6 +1015,11 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                     raise
                 raise OSError(e.errno, f"{e.strerror} (writing {name} for {outdir}; nothing "
                                        "was written there)") from e
+            except MemoryError as e:  # (after a whole solve: said which output, a review's
+                # 4096^2 job that fit died here with "try a crop, a smaller map")
+                raise MemoryError(f"{e}, writing {name} after the solve had finished; "
+                                  f"nothing was written to {outdir}: save fewer or smaller "
+                                  "outputs (-s), or free memory") from e
         # (a dataset folder's depth_gt.*, as BiNI's DiLiGenT folders hold it: scored by
         # facetlift evaluate's measures, so a batch over such folders compares methods; here,
         # where its warning is the record's)

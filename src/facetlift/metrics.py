@@ -617,15 +617,43 @@ def _quad_normals(P0, P1, P2, P3) -> np.ndarray:
 DEVIATION_SAMPLE = 2**16
 
 
+#: Rows of facets whose normals :func:`surface_normals` and :func:`surface_normal_rows` form at
+#: a time: the whole frame at once took 2.7 GB of temporaries at 4096^2 for a 0.8 MB
+#: preview.png, more than the solve, and a job that fit died writing it (a review).
+NORMAL_ROWS = 256
+
+
+def surface_normal_rows(surface):
+    """The facet normals of :func:`surface_normals` by blocks of :data:`NORMAL_ROWS` rows:
+    yields ``(r0, r1, normals)``, normals (r1 - r0, W, 3)."""
+    m = surface.mask
+    H, W = m.shape
+    split = surface.split is not None
+    if split:  # (each block's facets, in the facets' row-major order over the mask)
+        starts = np.concatenate([[0], np.cumsum(m.sum(axis=1))])
+    for r0 in range(0, H, NORMAL_ROWS):
+        r1 = min(r0 + NORMAL_ROWS, H)
+        if not split:
+            vd = np.asarray(surface.vertex_depth[r0:r1 + 1], dtype=float)
+            i, j = np.mgrid[r0:r1 + 1, 0:W + 1]
+            P = surface.camera.points(i.ravel(), j.ravel(), vd.ravel()).reshape(vd.shape + (3,))
+            yield r0, r1, _quad_normals(P[:-1, :-1], P[:-1, 1:], P[1:, 1:], P[1:, :-1])
+            continue
+        out = np.full((r1 - r0, W, 3), np.nan)
+        rr, cc = np.nonzero(m[r0:r1])
+        out[rr, cc] = _own_normals(surface, rr + r0, cc,
+                                   np.arange(int(starts[r0]), int(starts[r1])))
+        yield r0, r1, out
+
+
 def surface_normals(surface) -> np.ndarray:
     """(H, W, 3) unit facet normals of a result, toward the viewer, NaN outside its mask: from
     each facet's own corners where the surface is split at jumps (``discontinuities=True``),
-    else from the vertex grid (:func:`facet_normals`)."""
-    if surface.split is None:
-        return facet_normals(surface.vertex_depth, camera=surface.camera)
-    r, c = np.nonzero(surface.mask)
-    out = np.full((*surface.mask.shape, 3), np.nan)
-    out[r, c] = _own_normals(surface, r, c, np.arange(r.size))
+    else from the vertex grid (:func:`facet_normals`), formed by blocks of rows
+    (:func:`surface_normal_rows`)."""
+    out = np.empty((*surface.mask.shape, 3))
+    for r0, r1, n in surface_normal_rows(surface):
+        out[r0:r1] = n
     return out
 
 

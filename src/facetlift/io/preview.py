@@ -75,11 +75,13 @@ def shade(surface, *, light=(-1.0, 1.0, 2.0), ambient: float = 0.15) -> np.ndarr
     and cut ones shade correctly too (:func:`facetlift.metrics.surface_normals`). `light`
     points from the surface toward the light (default: upper left, in front).
     """
-    from ..metrics import surface_normals
+    from ..metrics import surface_normal_rows
 
-    n = surface_normals(surface)
     L = _light(light)
-    s = ambient + (1.0 - ambient) * np.clip(n @ L, 0.0, 1.0)
+    s = np.empty(surface.mask.shape)
+    for r0, r1, n in surface_normal_rows(surface):  # (by blocks: a review's 4096^2 preview
+        # took 2.7 GB of temporaries for the whole frame's normals at once)
+        s[r0:r1] = ambient + (1.0 - ambient) * np.clip(n @ L, 0.0, 1.0)
     s[~surface.mask] = np.nan
     return s
 
