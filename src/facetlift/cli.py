@@ -370,10 +370,11 @@ _JOB_OPTIONS = [
                  "string such as 'x,-y,-z', as for --normal-frame. For the ply, obj, stl and "
                  "points outputs; depth maps are unchanged."),
     click.option("--max-memory", default=None, metavar="SIZE",
-                 help="Refuse the job if its estimated peak memory, above the input as "
-                 "loaded, exceeds SIZE (bytes, or 8G, 512M); optional factorizations then stay "
-                 "within it too. Default: the available memory minus a margin, ulimit -v "
-                 "honoured."),
+                 help="Refuse the job if its estimated peak memory, above the prepared "
+                 "input (the map as read and checked), exceeds SIZE (bytes, or 8G, 512M); "
+                 "optional factorizations then stay within it too; the preparation itself and "
+                 "the outputs' writing are not counted. Default: the available memory minus a "
+                 "margin, ulimit -v honoured."),
     click.option("--progress/--no-progress", default=None,
                  help="Progress bar on stderr: the iterations of routes that iterate and the "
                  "steps of the job (reading, integrating, writing; for batches, the items). "
