@@ -837,12 +837,13 @@ def _degenerate_check(surface, deviation, usable: bool, prior: bool) -> None:
     """Warn where the result is numerically degenerate: a perspective depth range beyond
     :data:`DEGENERATE_RANGE`, or no measurable deviation from the normals (overflow) where
     there are usable normals."""
-    d = surface.depth[np.isfinite(surface.depth)]
     why = None
-    if surface.camera.perspective and d.size and d.min() > 0 and (
-            d.max() > DEGENERATE_RANGE * d.min()):
-        why = f"its depths span {d.min():.3g} to {d.max():.3g}"
-    elif usable and (deviation is None or not np.isfinite(deviation)):
+    if surface.camera.perspective:  # (fmin / fmax pass over NaN: no copy of a large map)
+        d = surface.depth.ravel()
+        lo, hi = float(np.fmin.reduce(d)), float(np.fmax.reduce(d))
+        if lo > 0 and hi > DEGENERATE_RANGE * lo:  # (False where all are NaN)
+            why = f"its depths span {lo:.3g} to {hi:.3g}"
+    if why is None and usable and (deviation is None or not np.isfinite(deviation)):
         why = "its deviation from the input normals cannot be measured (overflow)"
     if why is not None:
         cause = ("A depth prior of another kind than the depth (a relative depth or a "

@@ -520,9 +520,9 @@ def _samples(field: bool, count: int = 2) -> str:
 def _camera_given(camera: str) -> str:
     """A record's camera as the summary names it: "K", the camera given, as the --K typed
     (its file: a user's check read "perspective (K)" for a DiLiGenT Calib_Results.mat)."""
-    args = list(_STATE.get("args") or ())
     if camera != "K":
         return camera
+    args = list(_STATE.get("args") or ())
     typed = camera
     for i, a in enumerate(args):  # (the last given: click takes the last, a review)
         if a == "--K" and i + 1 < len(args):
@@ -1622,11 +1622,16 @@ _STATUS = {EXIT_INPUT: "error", EXIT_SOLVER: "solver_error", EXIT_BUG: "internal
 _READ_ONLY = ("info", "evaluate", "methods")
 
 
+def _command(args) -> str | None:
+    """The command named in a command line's arguments (its first word that is no flag)."""
+    return next((a for a in args if not a.startswith("-")), None)
+
+
 def _stopped(how: str) -> str:
     """What Ctrl-C ("interrupted (Ctrl-C)") or SIGTERM says: the outputs are staged and moved
     in as a set; a batch's finished items are in its log (said by a batch only: a plain
     integrate's message spoke of one, an audit)."""
-    command = next((a for a in _STATE.get("args", ()) if not a.startswith("-")), None)
+    command = _command(_STATE.get("args", ()))
     if command == "bench":  # (its files are written experiment by experiment, an audit)
         return (f"{how}; the finished experiments' files are in the output folder, and its "
                 "report.md lists them and the one interrupted")
@@ -1646,7 +1651,7 @@ def _main(args: list[str]) -> int:
     from .io.atomic import COMMITTED, Terminated, sigterm_raises
 
     COMMITTED.clear()  # (this command's commits only: _stopped)
-    command = next((a for a in args if not a.startswith("-")), None)
+    command = _command(args)
     try:
         # (the commands that write nothing end on SIGTERM with their message too: info died
         # by the signal with none, and no --json object, a review; the others install it
@@ -1676,9 +1681,11 @@ def _main(args: list[str]) -> int:
                                                                         "--workers 1"))
         return EXIT_INPUT
     except MemoryError as e:
-        text = _one_line(e)
-        _error(f"out of memory ({text})" if "after the solve had finished" in text else
-               f"out of memory ({text}); try a crop, a smaller map or another method")
+        from .errors import OutputMemoryError
+
+        _error(f"out of memory ({_one_line(e)})" + ("" if isinstance(e, OutputMemoryError)
+                                                     else "; try a crop, a smaller map or "
+                                                     "another method"))
         return EXIT_INPUT
     except (ValueError, OSError) as e:
         _error(_as_flags(_one_line(e)))

@@ -35,6 +35,11 @@ class MemoryLimitError(MemoryError):
     the estimate, the limit and what to do instead."""
 
 
+class OutputMemoryError(MemoryError):
+    """Memory ran out writing an output after the solve had finished: the message names the
+    output (the command line then gives no advice about the map's size)."""
+
+
 class FrameWarning(UserWarning):
     """The input is probably not in the frame or encoding it was read in: far more
     integrable with y (or x) flipped, a gradient field in the other layout

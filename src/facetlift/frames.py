@@ -1505,10 +1505,17 @@ def silhouette(problem) -> dict:
     front-facing normal counts, grazing ones too (a contour's own); a cropped problem's
     neighbours beyond its box count where they are inside the image (``extras`` "offset" and
     "image_shape", :func:`facetlift.api.crop`)."""
-    d = problem.domain
+    return silhouette_of(problem.domain, problem.known, problem.normals,
+                         offset=problem.extras.get("offset", (0, 0)),
+                         image_shape=problem.extras.get("image_shape"))
+
+
+def silhouette_of(d, known, normals, *, offset=(0, 0), image_shape=None) -> dict:
+    """:func:`silhouette` of a domain `d`, its facets' given normals `known` (m,) bool and
+    `normals` (m, 3), a box at `offset` in an image of `image_shape` (default: the box)."""
     H, W = d.shape
-    r0, c0 = problem.extras.get("offset", (0, 0))
-    IH, IW = problem.extras.get("image_shape", (H, W))
+    r0, c0 = offset
+    IH, IW = (H, W) if image_shape is None else image_shape
     m = np.pad(d.mask, 1)
     rr = np.arange(-1, H + 1) + r0
     cc = np.arange(-1, W + 1) + c0
@@ -1524,10 +1531,10 @@ def silhouette(problem) -> dict:
     r, c = d.pixels  # (row-major: the facets' order)
     f = np.searchsorted(r.astype(np.int64) * W + c, er.astype(np.int64) * W + ec)
     ox, oy = ox[er, ec], oy[er, ec]
-    known = np.asarray(problem.known, bool)[f]
+    known = np.asarray(known, bool)[f]
     res = {}
     counts = []
-    for axis, o, comp in (("x", ox, problem.normals[f, 0]), ("y", oy, problem.normals[f, 1])):
+    for axis, o, comp in (("x", ox, normals[f, 0]), ("y", oy, normals[f, 1])):
         with np.errstate(invalid="ignore"):
             sel = known & (o != 0) & (np.abs(comp) > SILHOUETTE_TILT)
         k = int(sel.sum())

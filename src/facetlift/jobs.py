@@ -672,7 +672,7 @@ def _from_folder(message: str, job: Job, inp: Input) -> str:
         return message
     # (a batch's NAME_prior_depth.* beside the map alike: --no-prior leaves those out too)
     own = [w for w in ("prior", "confidence") if w in job.beside]
-    files = [(stem, flag) for what, given, stem, flag in (
+    files = [(what, stem, flag) for what, given, stem, flag in (
         ("prior", (job.prior is None or "prior" in own) and inp.prior is not None,
          "prior_depth", "--no-prior"),
         ("confidence", (job.confidence is None or "confidence" in own)
@@ -682,15 +682,14 @@ def _from_folder(message: str, job: Job, inp: Input) -> str:
         return message
     plural = "s" if len(files) > 1 else ""
     if own:
-        what = (" and ".join(f"NAME_{stem}.*" for stem, _ in files)
+        what = (" and ".join(f"NAME_{stem}.*" for _, stem, _ in files)
                 + f" file{plural} beside the map")
     else:
-        what = ("the dataset folder's " + " and ".join(f"{stem}.*" for stem, _ in files)
+        what = ("the dataset folder's " + " and ".join(f"{stem}.*" for _, stem, _ in files)
                 + f" file{plural}")
-    flags = " ".join(flag for _, flag in files)
+    flags = " ".join(flag for *_, flag in files)
     # (and the Python switches: facetlift.batch's user was named the flags only, a review)
-    python = ", ".join(f"dataset_{'prior' if stem == 'prior_depth' else stem}=False"
-                       for stem, _ in files)
+    python = ", ".join(f"dataset_{name}=False" for name, _, _ in files)
     return (f"{message} ({what}, "
             f"which this method does not take: {flags} leave{'s' if len(files) == 1 else ''} "
             f"{'it' if len(files) == 1 else 'them'} out, {python} in Python)")
@@ -1017,9 +1016,11 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
                                        "was written there)") from e
             except MemoryError as e:  # (after a whole solve: said which output, a review's
                 # 4096^2 job that fit died here with "try a crop, a smaller map")
-                raise MemoryError(f"{e}, writing {name} after the solve had finished; "
-                                  f"nothing was written to {outdir}: save fewer or smaller "
-                                  "outputs (-s), or free memory") from e
+                from .errors import OutputMemoryError
+
+                raise OutputMemoryError(f"{e}, writing {name} after the solve had finished; "
+                                        f"nothing was written to {outdir}: save fewer or "
+                                        "smaller outputs (-s), or free memory") from e
         # (a dataset folder's depth_gt.*, as BiNI's DiLiGenT folders hold it: scored by
         # facetlift evaluate's measures, so a batch over such folders compares methods; here,
         # where its warning is the record's)

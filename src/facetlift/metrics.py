@@ -600,7 +600,12 @@ def facet_normals(vertex_depth, *, pixel_size: float = 1.0, K=None, camera=None)
     from .camera import make_camera
 
     cam = make_camera(pixel_size, K) if camera is None else camera
-    i, j = np.mgrid[0 : vd.shape[0], 0 : vd.shape[1]]
+    return _grid_normals(vd, cam)
+
+
+def _grid_normals(vd: np.ndarray, cam, row0: int = 0) -> np.ndarray:
+    """:func:`facet_normals` of vertex rows `vd` whose first row is the grid's row `row0`."""
+    i, j = np.mgrid[row0 : row0 + vd.shape[0], 0 : vd.shape[1]]
     P = cam.points(i.ravel(), j.ravel(), vd.ravel()).reshape(vd.shape + (3,))
     return _quad_normals(P[:-1, :-1], P[:-1, 1:], P[1:, 1:], P[1:, :-1])
 
@@ -635,9 +640,7 @@ def surface_normal_rows(surface):
         r1 = min(r0 + NORMAL_ROWS, H)
         if not split:
             vd = np.asarray(surface.vertex_depth[r0:r1 + 1], dtype=float)
-            i, j = np.mgrid[r0:r1 + 1, 0:W + 1]
-            P = surface.camera.points(i.ravel(), j.ravel(), vd.ravel()).reshape(vd.shape + (3,))
-            yield r0, r1, _quad_normals(P[:-1, :-1], P[:-1, 1:], P[1:, 1:], P[1:, :-1])
+            yield r0, r1, _grid_normals(vd, surface.camera, r0)
             continue
         out = np.full((r1 - r0, W, 3), np.nan)
         rr, cc = np.nonzero(m[r0:r1])

@@ -78,11 +78,9 @@ def _silhouette_right(domain, nf, known, axes: str) -> bool:
     camera too wide for the map, e.g. an orthographic one's (a review: a right orthographic
     vase given a 90-degree field of view was told that x runs the other way, and a spot
     render that both do; following either turned the surface inside out)."""
-    from types import SimpleNamespace
+    from .frames import _silhouette_says, silhouette_of
 
-    from .frames import _silhouette_says, silhouette
-
-    sil = silhouette(SimpleNamespace(domain=domain, extras={}, known=known, normals=nf))
+    sil = silhouette_of(domain, known, nf)
     return all(_silhouette_says(sil, a) == "out" for a in axes)
 
 
