@@ -28,6 +28,15 @@ Solver (as BiNI's reference code)
     the same path is kept here. Pieces that the weights cut off keep whatever constant the
     path leaves them: BiNI has no rule for them.
 
+Without the bilateral weights
+    ``discontinuities=False`` keeps ``w = 1/2`` and solves once. It is not ``poisson``: each
+    term keeps its ``c_p`` (BiNI's ``n_z``, or ``n~_z``), so it is a least squares weighted by
+    ``c_p^2``, which leans on the flat parts. Measured on 2026-12-07: mean error 3.6e-4 against
+    poisson's 7.4e-5 on the analytic ``face`` at 128^2 (with ``c_p = 1`` both give 7.4e-5);
+    MADE 0.20 mm against 0.056 on the bunny rendered without jumps at 256 x 306, and 1.20 mm
+    against 0.52 on the DiLiGenT bear. A tighter ``cg_tol`` changes neither (1e-10: 0.202,
+    1.202).
+
 Missing samples
     A pixel without a usable normal has no terms of its own; its neighbours' terms toward it
     place it. Inside a larger hole no term reaches a pixel, and CG would leave it at its start:
@@ -65,8 +74,8 @@ from . import MethodResult
 _BILATERAL = {"discontinuities": True}
 
 OPTIONS = (
-    Option("discontinuities", True, "bilateral weights (False: both sides 1/2, a Poisson-like "
-           "least squares)", kind="bool"),
+    Option("discontinuities", True, "bilateral weights (False: both sides 1/2, one least squares "
+           "whose terms keep BiNI's n_z weights: not poisson's result)", kind="bool"),
     Option("k", 2.0, "sharpness of the bilateral sigmoid, in squared pixel footprints",
            low=0.0, low_open=True, when=_BILATERAL),
     Option("max_iter", 150, "most reweightings", kind="int", low=1, when=_BILATERAL),
