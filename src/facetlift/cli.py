@@ -1195,8 +1195,9 @@ def _split(text):
 @click.option("--gt", "gt", required=True,
               type=click.Path(exists=True, path_type=Path),
               help="Ground-truth depth map: .npy, .npz (its depth_gt or depth array, or its "
-              "only one), .exr (channel Z or its only one), .tif, .pfm, or a 16-bit PNG with "
-              "--gt-scale; NaN (0 in a PNG or an integer TIFF) where undefined. Or a "
+              "only one), .exr (channel Z or its only one), .tif, .pfm, .mat (its depth_gt, "
+              "depth or z, or its only map), or a 16-bit PNG with --gt-scale; NaN (0 in a PNG or "
+              "an integer TIFF) where undefined. Or a "
               "dataset folder (BiNI's DiLiGenT folders): its depth_gt.*, and its mask.png "
               "and K.txt where --mask and --K are not given and the result keeps no camera.")
 @click.option("--gt-scale", "gt_scale", type=float, default=None, metavar="S",
@@ -1216,7 +1217,8 @@ def _split(text):
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
     """Score a result RESULT (depth.npy, .exr, .tif or surface.npz, as integrate writes them,
-    or integrate's output folder: its surface.npz, else its depth.npy, .exr or .tif) against
+    or integrate's output folder: its surface.npz, else its depth.npy, .exr or .tif; another
+    tool's .npy, .npz, .pfm or .mat: its depth or z, or its only map) against
     a ground-truth depth map: MADE (BiNI's: the result times the median of GT /
     RESULT, then the mean absolute error), that scale, the RMSE after it, the mean absolute
     error without a scale (for metric depth, e.g. a result fused with a depth prior) and, for
@@ -1283,9 +1285,13 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
         if gt_scale is not None:
             truth = truth * gt_scale
     if truth.shape != est.shape:
+        # (a result stored transposed, (W, H), was told to give another ground truth, a
+        # review)
+        swapped = (" (the result's is the ground truth's transposed: stored as (W, H)? "
+                   "transpose it)" if truth.shape == est.shape[::-1] else "")
         raise ValueError(f"`gt`: {gt} is {truth.shape[0]}x{truth.shape[1]} (HxW) but `result` "
-                         f"{result} is {est.shape[0]}x{est.shape[1]}: give the ground truth of "
-                         "the same view and crop")
+                         f"{result} is {est.shape[0]}x{est.shape[1]}{swapped}: give the ground "
+                         "truth of the same view and crop")
     sel = None if mask is None else io.read_mask(mask, est.shape, of=f"the result {result}")
     perspective = camera is not None
     from ._warnings import recording, reemit
@@ -1301,7 +1307,10 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
     for w in caught:
         reemit(w)
     rec["warnings"] = [_as_flags(str(w.message)) for w in caught]
-    if not perspective and rec["scale"] is not None and K is None and not orthographic:
+    if (not perspective and rec["scale"] is not None and K is None and not orthographic
+            and not (rec["correlation"] is not None
+                     and rec["correlation"] < metrics.HEIGHT_CORRELATION)):  # (a positive
+        # height was told to give --K, a review: the warning asks whether it is a height)
         rec["notes"].append("the result's depths are all > 0, as a perspective result's are "
                             "(an orthographic one has mean 0): give --K to score it as one "
                             "(or --fov, as integrate took it)")

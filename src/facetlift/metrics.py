@@ -48,7 +48,10 @@ def _pair(estimate, truth, mask):
     if est.ndim != 2:
         raise ValueError(f"`estimate` must be an (H, W) depth map; got shape {est.shape}")
     if gt.shape != est.shape:
-        raise ValueError(f"`truth` must have the shape of `estimate` {est.shape}; got {gt.shape}")
+        swapped = (" (`estimate`'s transposed: one stored as (W, H)?)"
+                   if est.ndim == 2 and gt.shape == est.shape[::-1] else "")
+        raise ValueError(f"`truth` must have the shape of `estimate` {est.shape}; got "
+                         f"{gt.shape}{swapped}")
     if mask is None:
         m = np.isfinite(gt)
     else:
@@ -58,7 +61,9 @@ def _pair(estimate, truth, mask):
         m = _as_mask(m) & np.isfinite(gt)
     m = m & np.isfinite(est)
     if not m.any():
-        raise ValueError("no pixel where `mask`, `estimate` and `truth` are all defined")
+        raise ValueError("no pixel where `mask`, `estimate` and `truth` are all defined"
+                         if mask is not None else
+                         "no pixel where `estimate` and `truth` are both defined")
     return est, gt, m
 
 
@@ -242,10 +247,12 @@ _WORDS = {
 }
 
 
-def _range_check(est, gt, m, words: str = "python", region=None) -> float | None:
+def _range_check(est, gt, m, words: str = "python", region=None,
+                 against: bool = False) -> float | None:
     """:func:`evaluate`'s warning on an orthographic result in other units than the truth
     (:data:`RANGE_MISMATCH`), naming the settings in `words` (:data:`_WORDS`); the ratio of
-    the ranges (:func:`_range_ratio`)."""
+    the ranges (:func:`_range_ratio`). `against`: the result's depths run against the
+    truth's (a height): positive ones are then not taken for a perspective result's."""
     from ._warnings import warn
 
     ratio = _range_ratio(est, gt, m, _region(est, None) if region is None else region)
@@ -261,7 +268,8 @@ def _range_check(est, gt, m, words: str = "python", region=None) -> float | None
     head = (f"the result's depth range (1st to 99th percentile over the {int(m.sum())} pixels "
             f"scored) is {ratio:.3g} times the ground truth's: the normalised error compares "
             "them as stored, in units that then differ, and means little")
-    if (est[m] > 0).all():  # (positive depths: a perspective result, up to scale)
+    if (est[m] > 0).all() and not against:  # (positive depths: a perspective result, up to
+        # scale; not a positive height, which was told to give --K, a review)
         warn(f"{head}. Its depths are all > 0, as a perspective result's are (defined up to "
              f"scale, median depth 1): score it with its camera ({say['camera']}), after a "
              "median scale (MADE)")
@@ -273,7 +281,8 @@ def _range_check(est, gt, m, words: str = "python", region=None) -> float | None
              f"was integrated with ({say['pixel']}: the world width of a pixel, 1 by default, "
              "so depth in pixels): integrate again with the ground truth's, about "
              f"{1.0 / ratio:.3g} times the one used (e.g. {say['set'].format(1.0 / ratio)} "
-             f"where it was 1){jumps}")
+             "where it was 1; a factor read from the two ranges, not measured: where the "
+             f"ground truth's pixel size is known, give that){jumps}")
     return ratio
 
 
@@ -363,7 +372,12 @@ def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None, K=N
         ``pixels`` (the number scored), ``uncovered`` (mask pixels left out: the estimate or
         the truth undefined there; 0 without a mask), ``perspective``, ``made``, ``scale``,
         ``rmse_scaled``, ``mae`` (unaligned), ``normalized_error`` (a fraction; None for a
-        perspective result), ``range_ratio`` (an orthographic result's depth range over the
+        perspective result), ``coverage`` (the share of the mask's pixels with a defined truth
+        that the result defines; None without a mask: below :data:`COVERAGE` a warning says
+        that the pixels left out are not scored), ``correlation`` (of the result's and the
+        truth's depths, each piece of the result less its mean; below
+        :data:`HEIGHT_CORRELATION` a warning asks whether the result is a height or a
+        disparity), ``range_ratio`` (an orthographic result's depth range over the
         truth's, 1st to 99th percentile; None for a perspective one or a flat truth: beyond
         :data:`RANGE_MISMATCH` a warning says the units differ, and names the pixel size),
         and ``notes``: why a measure is None. ``made``, ``scale`` and ``rmse_scaled`` are None
@@ -415,7 +429,9 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
         if sel.shape == est.shape and not (sel & np.isfinite(est) & np.isfinite(gt)).any():
             both = int((np.isfinite(est) & np.isfinite(gt)).sum())
             raise ValueError(
-                "no pixel where `mask`, `estimate` and `truth` are all defined: "
+                ("no pixel where `mask`, `estimate` and `truth` are all defined: "
+                 if mask is not None else "no pixel where `estimate` and `truth` are both "
+                 "defined: ")
                 + (f"`mask` has {int(sel.sum())} pixels, " if mask is not None else "")
                 + f"`estimate` {int(np.isfinite(est).sum())} finite, `truth` "
                 f"{int(np.isfinite(gt).sum())} finite, {both} both; are they of the same view "
@@ -424,11 +440,17 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
     region = _region(est, mask)
     if mask is None:
         _zero_background_check(est, gt, m)
+    corr = _correlation(est, gt, m, region)
     out = {"pixels": int(m.sum()),
            "uncovered": 0 if mask is None else int(np.asarray(mask, bool).sum() - m.sum()),
+           "coverage": None if mask is None else _coverage_check(est, gt, mask),
+           "correlation": corr,
            "perspective": bool(perspective), "made": None, "scale": None,
            "rmse_scaled": None, "mae": float(np.mean(np.abs(est[m] - gt[m]))),
            "normalized_error": None, "range_ratio": None, "notes": []}
+    # (depths that run against the truth's: a height or a disparity, scored as a perspective
+    # depth without a word, or told to give --K as one, a review)
+    against = corr is not None and corr < HEIGHT_CORRELATION
     bad = {which: int((a[m] <= 0).sum()) for which, a in (("estimate", est), ("truth", gt))}
     if perspective and any(bad.values()):
         which = "estimate" if bad["estimate"] else "truth"
@@ -441,7 +463,11 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
                     "Blender's are? negate it)" if which == "truth" else " (an orthographic "
                     "result, or a height? score it without a camera)")
         elif which == "truth" or zeros:
-            hint = " (0 where undefined? store NaN there, or give a mask)"
+            # (given with a mask, its 0s were inside it: "or give a mask" misled, a review)
+            hint = (" (0 where undefined? store NaN there, or give a mask)" if mask is None
+                    else " (0 where undefined? store NaN there, or leave those pixels out of "
+                    "the mask" + ("" if which == "truth" else "; a relative depth scaled to "
+                                  "0..1 is no camera z-depth") + ")")
         else:
             hint = " (an orthographic result? score it without a camera)"
         raise ValueError(
@@ -461,10 +487,13 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
                             "scale (MADE), not an offset")
         if out["made"] is not None:
             _pieces_note(est, gt, m, region, out)
+            if against:
+                _warn_against(corr)
     else:
-        out["range_ratio"] = ratio = _range_check(est, gt, m, words, region)
+        out["range_ratio"] = ratio = _range_check(est, gt, m, words, region, against)
         off = ratio is not None and not 1.0 / RANGE_MISMATCH <= ratio <= RANGE_MISMATCH
-        if off and (est[m] > 0).all() and (gt[m] > 0).all():  # (a perspective result
+        if off and not against and (est[m] > 0).all() and (gt[m] > 0).all():  # (a perspective
+            # result
             # scored without its camera:
             # its "normalised error" of 20.8 % on the bear was a number without meaning, a
             # reproduction; the warning above says how to score it)
@@ -479,8 +508,78 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
             out["notes"].append(f"no normalised error: {e}")
         else:
             _outlier_range_check(gt, m)
-            _sign_check(est, gt, m, out["normalized_error"], region)
+            _sign_check(est, gt, m, out["normalized_error"], region, corr)
+            _offsets_note(est, gt, m, mask, region, out)
     return out
+
+
+#: Share of the mask's pixels with a defined ground truth that the result must define before
+#: :func:`evaluate` warns that it leaves many out (they are left out of every score: a result
+#: that leaves its hard pixels undefined scored better, and one stored upside down lost a
+#: third of the bear without a word, a review).
+COVERAGE = 0.95
+
+
+def _coverage_check(est, gt, mask) -> float | None:
+    """The share of `mask`'s pixels with a finite truth where `est` is finite too (None where
+    the truth has none), with a warning below :data:`COVERAGE`."""
+    from ._warnings import warn
+
+    known = np.asarray(mask, bool) & np.isfinite(gt)
+    n = int(known.sum())
+    if n == 0:
+        return None
+    lost = int(np.count_nonzero(known & ~np.isfinite(est)))
+    if lost > (1.0 - COVERAGE) * n:
+        warn(f"the result is undefined (NaN) at {lost} of the {n} mask pixels where the ground "
+             f"truth is defined ({100.0 * lost / n:.3g} %): every score leaves them out, so a "
+             "result that leaves its hard pixels undefined scores better than one that fills "
+             "them. Is it of the same view and crop (not flipped or shifted) and of this mask?")
+    return (n - lost) / n
+
+
+def _correlation(est, gt, m, region) -> float | None:
+    """The correlation of the result's and the truth's depths over `m`, each piece of the
+    result (:func:`_pieces`) less its mean; None where either does not vary."""
+    e, g = _piece_centred(est, gt, m, region)
+    scale = float(np.sqrt(np.sum(e * e) * np.sum(g * g)))
+    return float(np.sum(e * g)) / scale if scale > 0 else None
+
+
+def _warn_against(corr: float) -> None:
+    """A perspective result's depths that run against the truth's (:data:`HEIGHT_CORRELATION`:
+    a height of 10 + (max - depth) / 0.397 scored MADE 561.7 on the bear, a disparity 17.7,
+    without a word, a review)."""
+    from ._warnings import warn
+
+    warn(f"the result's depths run against the ground truth's (correlation {corr:.2f}): a "
+         "height (larger = nearer), a disparity (1 / depth), or a surface integrated inside "
+         "out (its normals in another frame)? A perspective result is the camera's z-depth, "
+         "larger = farther; MADE scores it as given")
+
+
+def _offsets_note(est, gt, m, mask, region, out) -> None:
+    """A note where an orthographic result has more pieces over the scored pixels than the
+    ground truth: the normalised error aligns each piece of the result by its own offset, so
+    a result cut by lines of undefined pixels was forgiven its offsets between them (a tilted
+    face: 7.54 % whole, 1.84 % cut into 16 pieces by 1-pixel NaN lines, a review); the error
+    with one offset per piece of the truth beside it."""
+    def count(labels):
+        return int(np.unique(labels).size)
+
+    truth = np.isfinite(gt) if mask is None else np.asarray(mask, bool) & np.isfinite(gt)
+    own, theirs = _pieces(m, region)[0], _pieces(m, truth)[0]
+    if count(own) <= count(theirs):
+        return
+    with np.errstate(all="ignore"):
+        joined, _ = _normalized(*_offset_aligned(est, gt, m, False, truth))
+    out["notes"].append(
+        f"the result has {count(own)} separate pieces over the scored pixels where the ground "
+        f"truth has {count(theirs)}: the normalised error aligns each piece of the result by "
+        "its own offset (the paper's), so the offsets between them are not scored; with one "
+        f"offset per piece of the ground truth it is {100.0 * joined:.4g} % (separate objects "
+        "integrated without a prior have offsets no normal shows: there the first is the "
+        "fair one)")
 
 
 def _pieces_note(est, gt, m, region, out) -> None:
@@ -529,22 +628,20 @@ def _zero_background_check(est, gt, m) -> None:
 HEIGHT_CORRELATION = -0.8
 
 
-def _sign_check(est, gt, m, error: float, region) -> None:
+def _sign_check(est, gt, m, error: float, region, corr: float | None) -> None:
     """A warning where an orthographic result looks like a height (``-depth``: another tool's
     convention, or facetlift's height map read as depth): its depths run against the truth's
     (:data:`HEIGHT_CORRELATION`) and negated it scores at most half the error (20.7 % as
     given, 0.0076 % negated, without a word, an audit)."""
     from ._warnings import warn
 
-    e, g = _piece_centred(est, gt, m, region)
-    scale = float(np.sqrt(np.sum(e * e) * np.sum(g * g)))
-    if not scale > 0 or float(np.sum(e * g)) / scale > HEIGHT_CORRELATION:
+    if corr is None or corr > HEIGHT_CORRELATION:  # (:func:`_correlation`)
         return
     with np.errstate(all="ignore"):
         flipped, _ = _normalized(*_offset_aligned(-est, gt, m, False, region))
     if flipped <= 0.5 * error:
         warn(f"the result's depths run against the ground truth's (correlation "
-             f"{float(np.sum(e * g)) / scale:.2f}); negated it scores {100 * flipped:.3g} % "
+             f"{corr:.2f}); negated it scores {100 * flipped:.3g} % "
              f"instead of {100 * error:.3g} %: is it a height (-depth)? facetlift's depth is "
              "larger = farther (a height map of facetlift's, height.exr, is read back as "
              "depth by facetlift.io.read_depth)")

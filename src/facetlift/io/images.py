@@ -829,7 +829,8 @@ def _read_npz_depth(p: Path, arg: str, wanted: tuple[str, ...] = ("depth",)) -> 
 def read_depth(path, *, npz_names: tuple[str, ...] = ("depth",), arg: str = "path",
                zero_unknown: bool = False) -> np.ndarray:
     """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF), a
-    one-channel ``.pfm`` (Middlebury's, MiDaS's) or the ``depth`` of a
+    one-channel ``.pfm`` (Middlebury's, MiDaS's), a MATLAB ``.mat`` file (its variable named
+    first in `npz_names`, else ``z``, else its only (H, W) one) or the ``depth`` of a
     :meth:`facetlift.Surface.save` ``.npz``; a ``height.exr`` of
     :func:`facetlift.io.write_height` (marked so in its header) is read back as depth.
 
@@ -837,8 +838,11 @@ def read_depth(path, *, npz_names: tuple[str, ...] = ("depth",), arg: str = "pat
     ground truth's, e.g. ``("depth_gt", "depth")`` for BiNI's DiLiGenT ``depth_gt.npz``.
     `arg`: the argument the messages name. `zero_unknown`: in an integer array (a sensor's
     16-bit TIFF) 0 means no depth and becomes NaN."""
-    a = read_plane(path, DEPTH_FORMATS + (".npz", ".pfm"), "depth", arg, prefer=("Z",),
-                   npz_names=tuple(npz_names))
+    # (a MATLAB .mat too: DiLiGenT's ground truth and the toolboxes' results are stored so,
+    # and were refused, a review; its variable as an .npz's, or Quéau's z)
+    a = read_plane(path, DEPTH_FORMATS + (".npz", ".pfm", ".mat"), "depth", arg,
+                   prefer=("Z",), npz_names=tuple(npz_names),
+                   mat_names=tuple(npz_names) + ("z",))
     integer = a.dtype.kind in "ui"
     a = a.astype(np.float64)
     if Path(path).suffix.lower() == ".exr" and _exr_quantity(Path(path)) == "height":
