@@ -1686,3 +1686,35 @@ def test_a_pfm_map_and_prior_run_from_the_command_line(tmp_path, capsys):
     code, out, err = run(capsys, "integrate", folder, "-o", tmp_path / "b", "--save", "npy")
     assert code == 0, err
     assert np.load(tmp_path / "b" / "depth.npy")[10, 12] == pytest.approx(5.0, abs=1e-3)
+
+
+def test_info_names_p_and_q_exchanged_not_a_frame(tmp_path, capsys):
+    """info said 'likely the other gradient layout: --gradient-frame swapped', no frame (a
+    review): it names the order, as integrate's warning does."""
+    n = dome()
+    p, q = facetlift.gradients_from_normals(n)
+    np.save(tmp_path / "p.npy", p)
+    np.save(tmp_path / "q.npy", q)
+    code, out, _ = run(capsys, "info", "--gradients", tmp_path / "q.npy", tmp_path / "p.npy")
+    assert code == 0 and "--gradient-frame swapped" not in out
+    assert "likely p and q exchanged: give them in the other order (--gradients Q P" in out
+
+
+def test_a_mat_mask_with_nan_or_negative_background_counts_it_outside(tmp_path, capsys):
+    """A .mat mask of 1 inside and NaN (or -1) outside took every pixel inside (``m != 0``):
+    the whole image integrated, its missing slopes filled as surface (a review)."""
+    n = dome()
+    p, q = facetlift.gradients_from_normals(n)
+    inside = np.zeros(p.shape, bool)
+    inside[3:-3, 4:-4] = True
+    for name, outside in (("nan", np.nan), ("neg", -1.0)):
+        mask = np.where(inside, 1.0, outside)
+        sio.savemat(tmp_path / f"{name}.mat", {"p": np.where(inside, p, np.nan),
+                                               "q": np.where(inside, q, np.nan), "mask": mask})
+        code, out, err = run(capsys, "integrate", tmp_path / f"{name}.mat", "-o",
+                             tmp_path / name, "-s", "npy")
+        assert code == 0, err
+        assert ("NaN values: they count as outside" if name == "nan" else "negative values") \
+            in " ".join(err.split())
+        depth = np.load(tmp_path / name / "depth.npy")
+        assert np.isfinite(depth[inside]).all() and np.isnan(depth[~inside]).all()

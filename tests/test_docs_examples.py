@@ -94,7 +94,10 @@ RECIPE_TEXTURE = ("docs/recipes.md",
 RECIPE_TWO_CHANNEL = ("docs/recipes.md",
                       "## A material texture (a tangent-space map of a flat surface)",
                       'encoding="xy"')
-RECIPE_QUEAU = ("docs/recipes.md", "## A gradient field from Quéau's toolbox (`.mat`)", None)
+RECIPE_QUEAU = ("docs/recipes.md", "## A gradient field from Quéau's toolbox (`.mat`)",
+                "loadmat")
+RECIPE_QUEAU_H5 = ("docs/recipes.md", "## A gradient field from Quéau's toolbox (`.mat`)",
+                   "h5py")
 RECIPE_PHOTOMETRIC = ("docs/recipes.md", "## A photometric-stereo pipeline in Python",
                       "photometric.fit")  # tests/test_readme.py
 RECIPE_WARNINGS = ("docs/recipes.md", "## A photometric-stereo pipeline in Python",
@@ -116,6 +119,7 @@ FUSION_SETTINGS = ("docs/fusion.md", "## Results", None)
 RUN = [README_QUICK_START, README_PERSPECTIVE, PERSPECTIVE, CONVENTIONS_FOV, ARCH_METHOD,
        ARCH_REGISTER, METHODS_CALL, METHODS_GRAPH, METHODS_FOURIER, RECIPE_DILIGENT,
        RECIPE_ESTIMATOR, RECIPE_BLENDER, RECIPE_TEXTURE, RECIPE_TWO_CHANNEL, RECIPE_QUEAU,
+       RECIPE_QUEAU_H5,
        RECIPE_PHOTOMETRIC, RECIPE_WARNINGS, RECIPE_FROM_DEPTH, RECIPE_PIECES, FUSION_INTRO,
        FUSION_SFM,
        FUSION_MONO, FUSION_MANUAL, FUSION_COARSE, FUSION_BLURRED, FUSION_SETTINGS]
@@ -415,6 +419,42 @@ def test_a_queau_mat_file_gives_the_height_of_its_slopes(tmp_path, monkeypatch):
     e = (s.height - z)[mask]
     assert np.isnan(s.height[~mask]).all()
     assert np.abs(e - e.mean()).max() < 1e-3 * np.ptp(z[mask])
+
+
+def test_a_v73_mat_file_read_with_h5py_as_the_recipe_says(tmp_path, monkeypatch):
+    """h5py gives MATLAB's arrays transposed (a review: the advice to read a v7.3 file with
+    h5py gave a transposed surface, and following the layout warning hid it): the recipe's
+    .T gives the height of the slopes. h5py is no dependency: a stand-in serves MATLAB's
+    column-major arrays as h5py does."""
+    r, c = np.mgrid[0:30, 0:36].astype(float)
+    z = 0.02 * (c - 17) ** 2 - 0.03 * (r - 14) * (c - 17) + 0.2 * r
+    p, q = -0.03 * (c - 17) + 0.2, 0.04 * (c - 17) - 0.03 * (r - 14)
+    mask = (r - 14) ** 2 + (c - 17) ** 2 < 13**2
+    stored = {"p": p.T, "q": q.T, "mask": mask.T.astype(float)}  # (as h5py reads them)
+
+    class Dataset:
+        def __init__(self, a):
+            self.a = a
+
+        def __getitem__(self, key):
+            return self.a[key]
+
+    class File(dict):
+        def __init__(self, path, mode):
+            assert path == "vase.mat" and mode == "r"
+            super().__init__((k, Dataset(v)) for k, v in stored.items())
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+    monkeypatch.setitem(sys.modules, "h5py", types.SimpleNamespace(File=File))
+    monkeypatch.chdir(tmp_path)
+    s = run(RECIPE_QUEAU_H5, facetlift=facetlift)["s"]
+    e = (s.height - z)[mask]
+    assert s.height.shape == z.shape and np.abs(e - e.mean()).max() < 1e-3 * np.ptp(z[mask])
 
 
 def test_a_frame_warning_made_an_error_stops_the_job(tmp_path, monkeypatch):

@@ -1345,3 +1345,38 @@ def test_info_lets_the_camera_decide_where_the_curls_cannot(tmp_path, capsys):
     likely = json.loads(capsys.readouterr().out)["frame"]["likely"]
     assert likely.startswith("as read (consistent with the camera: 0.0% of the normals face "
                              "away from it as read, 42% with x negated, 19% with y negated"), likely
+
+
+def test_a_field_all_but_integrable_in_another_reading_is_named_below_the_curl_floor():
+    """A review: a nearly symmetric sine surface's columns-first field read as rowcol had a
+    relative curl of 0.107 as read (below the 0.3 floor) and 0.00019 with p and q exchanged,
+    and came out 31 % of its range wrong without a word. Below the floor, another reading
+    with less than 1/20 of the curl is named; the right reading stays silent."""
+    r, c = np.indices((96, 128)) + 0.5
+    z = 3 * np.sin(2 * np.pi * c / 40) * np.sin(2 * np.pi * r / 50)
+    dz_drow, dz_dcol = np.gradient(z)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert frames.layout_check(dz_dcol, dz_drow, "image")["suggested"] is None
+    with pytest.warns(frames.LayoutWarning, match=r"exchanged"):
+        out = frames.layout_check(dz_dcol, dz_drow, "rowcol")
+    assert out["suggested"] == "swapped"
+    assert frames.LAYOUT_LOW_CURL < out["curl"] < frames.LAYOUT_MIN_CURL
+    assert out["curl_swapped"] < frames.LAYOUT_STRONG_RATIO * out["curl"]
+
+
+def test_a_field_mostly_past_the_grazing_rule_is_asked_about_its_units():
+    """A review: a paraboloid's slopes times 100 (up to 127) lost 99 % of their samples to
+    the grazing rule and came out flat, exit 0, with the rule's words alone. Where most of a
+    field is that steep the warning asks about the units; a field with a steep rim does not."""
+    r, c = np.indices((48, 64)) + 0.5
+    x, y = c - 32, 24 - r
+    with pytest.warns(UserWarning, match=r"of the field is this steep: slopes in other units"):
+        facetlift.integrate_gradients(100 * 0.02 * x, 100 * 0.02 * y)
+    p, q = 0.02 * x, 0.02 * y
+    p[:, :2] = 50.0  # (a steep rim: 4 % of the field)
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        facetlift.integrate_gradients(p, q)
+    said = " ".join(str(w.message) for w in got)
+    assert "grazing" in said and "this steep" not in said

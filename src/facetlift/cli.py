@@ -239,7 +239,10 @@ _JOB_OPTIONS = [
     click.option("--gradient-frame", default="xy", show_default=True,
                  help="Layout of a gradient field: xy (p = dz/dx right, q = dz/dy up), "
                  "rowcol (aliases queau, numpy: p = dz/d(row) down, q = dz/d(col)) or image "
-                 "(aliases matlab, opencv: p = dz/d(col), q = dz/d(row) down)."),
+                 "(aliases matlab, opencv: p = dz/d(col), q = dz/d(row) down). z is a "
+                 "height (larger = nearer): slopes of a depth map are negated. The slopes are "
+                 "depth per unit of x and y, a pixel being --pixel-size wide; a gradient field "
+                 "is orthographic (--K and --fov do not apply)."),
     click.option("--mat-keys", metavar="P,Q[,MASK] | N[,MASK]",
                  help="Variable names in a .mat input: a gradient field p,q[,mask] or a "
                  "normal map N[,mask]. Default: p,q[,mask], else the only HxWx3 variable."),

@@ -512,7 +512,11 @@ def _frame_guess(n, mask, K, problem=None, *, frame=None, layout=None,
     if field:  # (no normal frame was given: "read as opengl (x,y,z)" was a normal map's words)
         g = frames.gradient_frame(gradient_frame)
         guess["as_read"] = f"a gradient field, --gradient-frame {g} ({frames.GRADIENT_FRAMES[g]})"
-    if layout is not None:
+    if layout == "swapped":  # (p and q exchanged: "--gradient-frame swapped" was advised,
+        # which is no frame, a review)
+        guess["likely"] = ("p and q exchanged: give them in the other order (--gradients Q "
+                           "P; integrate_gradients(q, p))")
+    elif layout is not None:
         guess["likely"] = (f"the other gradient layout: --gradient-frame {layout} "
                            f"(gradient_frame='{layout}')")
     return guess

@@ -1716,13 +1716,20 @@ def flip_check(problem) -> dict:
              "the image itself may be flipped or mirrored (rows or columns reversed by an "
              "export): flip it back instead", FrameWarning)
     elif verdict == "claim":
-        head = (f"the normals are far more integrable with {a} flipped (relative curl "
-                f"{own:.2f} as given, {flips})")
         if frame == GRADIENT_FIELD:
-            warn(f"{head}: the field's {a} slope probably has the wrong sign: negate "
-                 f"{slope[a]} ({'p' if a == 'y' else 'q'} with --gradient-frame rowcol), or the "
-                 f"{b} slope instead if the surface then comes out inside-out", FrameWarning)
+            # (a field is spoken of as one, and a y slope down the rows, as MATLAB's gradient()
+            # and OpenCV's Sobel give it, is named as the frame that reads it: its user was
+            # told of normals and to negate q, a review)
+            rows = ("; a field whose second slope runs down the rows, as MATLAB's gradient() "
+                    "and OpenCV's Sobel give it, is --gradient-frame image" if a == "y" else "")
+            warn(f"the gradient field is far more integrable with {a} flipped (relative curl "
+                 f"{own:.2f} as given, {flips}): the field's {a} slope probably has the wrong "
+                 f"sign: negate {slope[a]} ({'p' if a == 'y' else 'q'} with --gradient-frame "
+                 f"rowcol), or the {b} slope instead if the surface then comes out "
+                 f"inside-out{rows}", FrameWarning)
         else:
+            head = (f"the normals are far more integrable with {a} flipped (relative curl "
+                    f"{own:.2f} as given, {flips})")
             read = "" if is_identity(frame) else f" (read in the frame {axis_string(frame)})"
             warn(f"{head}: its frame{read} is probably wrong in {a}{_silhouette_note(sil, a)}: "
                  f"try {flip_advice(frame, a)}, or {flip_advice(frame, b)} if the surface "
@@ -1768,6 +1775,14 @@ def gradient_frame(name) -> str:
 #: 0.46 in the wrong layout and 0.005 in the right one, the BiNI human map's field 0.56 and
 #: 0.16; a saddle's field is about equal in both, noise or not).
 LAYOUT_MIN_CURL = 0.3
+
+#: Below :data:`LAYOUT_MIN_CURL`, a curl as read above this still counts where another reading
+#: has less than :data:`LAYOUT_STRONG_RATIO` of it (a field all but integrable in the other
+#: layout: a nearly symmetric sine surface read in the wrong one had 0.107 against 0.00019).
+#: Noise and quantisation add curl to every reading alike, and a harmonic surface (a saddle)
+#: has none in any, so neither reaches the ratio.
+LAYOUT_LOW_CURL = 0.05
+LAYOUT_STRONG_RATIO = 0.05
 
 
 class LayoutWarning(FrameWarning):
@@ -1868,9 +1883,17 @@ def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
     # (the other layout of "image" is no named frame: its exchange is "rowcol"'s, below)
     other = {"xy": "rowcol", "rowcol": "xy"}.get(given)
     # (not where a slope's sign explains it better: flip_check names that after the solve)
-    if not own > LAYOUT_MIN_CURL or flip <= min(alt, swap):
+    if flip <= min(alt, swap):
         return out
-    if other is not None and alt < LAYOUT_RATIO * own and alt <= swap:
+    # (a smaller curl as read counts where another reading is all but integrable: a sine
+    # field read in the wrong layout, 0.107 as read and 0.00019 exchanged, came out 31 % of
+    # its range wrong without a word, a review)
+    clear = own > LAYOUT_MIN_CURL or (own > LAYOUT_LOW_CURL
+                                      and min(alt, swap) < LAYOUT_STRONG_RATIO * own)
+    ratio = LAYOUT_RATIO if own > LAYOUT_MIN_CURL else LAYOUT_STRONG_RATIO
+    if not clear:
+        return out
+    if other is not None and alt < ratio * own and alt <= swap:
         out["suggested"] = other
         meaning = GRADIENT_FRAMES[other]
         warn(
@@ -1878,7 +1901,7 @@ def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
             f"{own:.2f} read as {given!r}, {alt:.2f} as {other!r}: {meaning}): try "
             f"--gradient-frame {other} (gradient_frame='{other}')", LayoutWarning, other=other
         )
-    elif swap < LAYOUT_RATIO * own:
+    elif swap < ratio * own:
         out["suggested"] = "swapped"
         also = (" (or --gradient-frame rowcol: MATLAB's gradient() and OpenCV's Sobel give "
                 "columns first, numpy's np.gradient rows first)" if given == "image" else

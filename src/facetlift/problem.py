@@ -512,6 +512,11 @@ def _bool_image(a, name: str, shape: tuple[int, int]) -> np.ndarray:
     return inside
 
 
+#: Share of a gradient field's samples past the grazing rule above which its warning asks
+#: whether the slopes are in other units (:func:`prepare`).
+STEEP_FIELD = 0.5
+
+
 def negatives_outside(arr: np.ndarray, name: str) -> np.ndarray:
     """(H, W) bool: the pixels of the mask values `arr` above 0, with a warning naming `name`
     where some are negative, which count as outside. A logit or a signed mask (-5 outside,
@@ -815,6 +820,14 @@ def prepare(
                 "outlier_eps / --outlier-eps sets another: a smaller one keeps more, 0 all")
             steep = (f" (a slope steeper than {np.sqrt(1 - eps * eps) / eps:.4g}, or "
                      "infinite)" if field and eps > 0 else "")
+            share = int(problems["grazing"].sum()) / max(counts["pixels"], 1)
+            if field and eps > 0 and share > STEEP_FIELD:
+                # (a field in other units: a paraboloid's slopes times 100 lost 99 % of its
+                # samples and came out flat, exit 0, with the rule's words alone, a review)
+                steep += (f"; {share:.0%} of the field is this steep: slopes in other units? "
+                          "(they are read as depth per unit of x and y, a pixel being "
+                          "pixel_size / --pixel-size wide: divide slopes per pixel by it and "
+                          "give it)")
             rule = (f"; grazing: view cosine < {eps:.4g}{steep}"
                     f"{'' if note is None else ', ' + note}")
         if "isolated" in problems:

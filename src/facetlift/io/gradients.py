@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._warnings import warn
 from ._paths import _existing, _suffix
 from .images import load_mat, read_mask, read_plane
 
@@ -124,8 +125,27 @@ def read_mat(path, keys=None) -> dict:
         m = rest[0]
         if m.shape != shape:
             raise ValueError(f"`mat_keys`: the mask of {f} has shape {m.shape}; expected {shape}")
-        out["mask"] = m != 0
+        out["mask"] = _mat_mask(m, f"the mask of {f}")
     return out
+
+
+def _mat_mask(m: np.ndarray, name: str) -> np.ndarray:
+    """A .mat file's mask as bool: above 0 inside; NaN outside (MATLAB code marks the
+    background so), counted in a warning; negatives outside with a warning, as every other
+    mask. ``m != 0`` took a NaN or a -1 background inside: the whole image was integrated,
+    its missing samples filled in as surface, without a word (a review)."""
+    from ..problem import negatives_outside
+
+    if m.dtype.kind not in "biuf":
+        raise ValueError(f"`mat_keys`: {name} has type {m.dtype}; a mask is numeric or "
+                         "logical")
+    if m.dtype.kind == "f":
+        nan = int(np.count_nonzero(np.isnan(m)))
+        if nan:
+            warn(f"{name} holds {nan} NaN values: they count as outside (MATLAB's mark of a "
+                 "background), the values above 0 as inside")
+            m = np.where(np.isnan(m), 0.0, m)
+    return negatives_outside(m, name)
 
 
 def _default_keys(data: dict, names: list[str]) -> list[str]:

@@ -782,7 +782,9 @@ def load_mat(p: Path, arg: str, then: str = "pass the arrays") -> dict:
     except NotImplementedError:
         raise ValueError(
             f"`{arg}`: {p} is a MATLAB v7.3 (HDF5) file, which scipy cannot read; save it "
-            f"with save(..., '-v7') in MATLAB, or read it with h5py and {then}") from None
+            f"with save(..., '-v7') in MATLAB, or read it with h5py and {then} (h5py gives "
+            "MATLAB's arrays transposed, (W, H): take each one's .T, e.g. f['p'][()].T)"
+        ) from None
     except Exception as e:
         raise ValueError(
             f"`{arg}`: {p} is not a readable .mat file ({type(e).__name__}: {e})") from None
