@@ -1531,12 +1531,35 @@ def silhouette_of(d, known, normals, *, offset=(0, 0), image_shape=None) -> dict
     r, c = d.pixels  # (row-major: the facets' order)
     f = np.searchsorted(r.astype(np.int64) * W + c, er.astype(np.int64) * W + ec)
     ox, oy = ox[er, ec], oy[er, ec]
-    known = np.asarray(known, bool)[f]
+    known_all = np.asarray(known, bool)
+    known = known_all[f]
+    key = r.astype(np.int64) * W + c
+
+    def inward(o, dr, dc):
+        """Per edge pixel: its facet, or where it has no normal the facet one step inward
+        along the axis (``np.gradient`` of a depth with a NaN background leaves the rim's
+        slopes NaN, and a field integrated inside out went unvoted on, a review), with
+        whether it has a normal."""
+        ir, ic = er - dr * o, ec - dc * o
+        inside = (~known) & (o != 0) & (ir >= 0) & (ir < H) & (ic >= 0) & (ic < W)
+        g = f.copy()
+        if inside.any():
+            kk = ir[inside].astype(np.int64) * W + ic[inside]
+            pos = np.minimum(np.searchsorted(key, kk), key.size - 1)
+            hit = key[pos] == kk
+            idx = np.flatnonzero(inside)[hit]
+            g[idx] = pos[hit]
+        return g, known_all[g]
+
     res = {}
     counts = []
-    for axis, o, comp in (("x", ox, normals[f, 0]), ("y", oy, normals[f, 1])):
+    # (x: +1 where the mask ends to the right, inward is left; y: +1 where it ends above,
+    # inward is a row down)
+    for axis, o, col, (dr, dc) in (("x", ox, 0, (0, 1)), ("y", oy, 1, (-1, 0))):
+        g, has = inward(o, dr, dc)
+        comp = normals[g, col]
         with np.errstate(invalid="ignore"):
-            sel = known & (o != 0) & (np.abs(comp) > SILHOUETTE_TILT)
+            sel = has & (o != 0) & (np.abs(comp) > SILHOUETTE_TILT)
         k = int(sel.sum())
         counts.append(k)
         res[axis] = (float(np.mean(np.sign(comp[sel]) == o[sel])) if k >= SILHOUETTE_MIN
