@@ -105,7 +105,7 @@ def items(inputs, *, list_file=None) -> list[Item]:
     ValueError
         No normal map found at all (every input missing, or none holds a map).
     """
-    from .io.dataset import is_dataset, is_rotation_file, one_channel
+    from .io.dataset import is_rotation_file, one_channel
     from .io.images import MASK_FORMATS, NORMAL_READ_FORMATS
 
     if isinstance(inputs, (str, os.PathLike)):  # (one input: a str was read letter by letter)
@@ -129,28 +129,14 @@ def items(inputs, *, list_file=None) -> list[Item]:
     paths: list[tuple[Path, bool]] = []  # (path, named explicitly)
     absent: list[tuple[str, str]] = []  # (the input as given, why it cannot run)
     for spec in specs:
-        if _GLOB & set(spec) and not Path(spec).exists():  # (a file named 'a[1].png' is one)
-            # (`**` any depth of folders, as shells with globstar read it: it matched one
-            # level alone, and 'maps/**/*.png' skipped maps/a.png without a word, a review)
-            found = sorted(glob.glob(spec, recursive=True))
-            if not found:
-                absent.append((spec, f"`inputs`: the pattern {spec!r} matches nothing"))
-            for f in map(Path, found):  # (a matched folder is read as a named one: 'in/*'
-                # made in/a and in/b failed items, an audit; the batch's own OUT is skipped)
-                if f.is_dir() and not is_dataset(f):
-                    if not (f / LOG_NAME).is_file():
-                        paths += _folder_items(f)
-                elif not _batch_output(f):
-                    paths.append((f, False))
-            continue
-        p = Path(spec)
-        if not p.exists():
-            absent.append((spec, f"`inputs`: {p} does not exist"))
-            continue
-        if p.is_dir() and not is_dataset(p):
-            paths += _folder_items(p)
-        else:
-            paths.append((p, True))
+        # (a folder that cannot be searched or listed is a failed item, not the end of the
+        # batch: "[Errno 13] Permission denied" stopped it with no log, a review)
+        try:
+            paths += _input_paths(spec, absent)
+        except OSError as e:
+            absent.append((spec, f"`inputs`: {spec} cannot be read ({e.strerror or e}"
+                           + (f": {e.filename}" if e.filename and str(e.filename) != spec
+                              else "") + ")"))
     found, seen, lone, grey, photos = [], set(), [], [], []
     given = {os.path.abspath(p) for p, _ in paths}
     files = _Listing()  # (each folder listed once: a lookup per file was quadratic)
@@ -248,6 +234,37 @@ def items(inputs, *, list_file=None) -> list[Item]:
     return out
 
 
+def _input_paths(spec: str, absent: list) -> list[tuple[Path, bool]]:
+    """The ``(path, named explicitly)`` of one input `spec` of :func:`items`; where it
+    names nothing, ``(spec, why)`` added to `absent`. An OSError where a folder cannot be
+    searched or listed."""
+    from .io.dataset import is_dataset
+
+    paths: list[tuple[Path, bool]] = []
+    if _GLOB & set(spec) and not Path(spec).exists():  # (a file named 'a[1].png' is one)
+        # (`**` any depth of folders, as shells with globstar read it: it matched one level
+        # alone, and 'maps/**/*.png' skipped maps/a.png without a word, a review)
+        found = sorted(glob.glob(spec, recursive=True))
+        if not found:
+            absent.append((spec, f"`inputs`: the pattern {spec!r} matches nothing"))
+        for f in map(Path, found):  # (a matched folder is read as a named one: 'in/*' made
+            # in/a and in/b failed items, an audit; the batch's own OUT is skipped)
+            if f.is_dir() and not is_dataset(f):
+                if not (f / LOG_NAME).is_file():
+                    paths += _folder_items(f)
+            elif not _batch_output(f):
+                paths.append((f, False))
+        return paths
+    p = Path(spec)
+    if not p.exists():
+        absent.append((spec, f"`inputs`: {p} does not exist"))
+    elif p.is_dir() and not is_dataset(p):
+        paths += _folder_items(p)
+    else:
+        paths.append((p, True))
+    return paths
+
+
 def _folder_items(p: Path) -> list[tuple[Path, bool]]:
     """The items a plain folder given as an input holds, one level deep: its dataset
     folders and map files (not a camera file or facetlift's own outputs), with a warning
@@ -274,6 +291,12 @@ def _folder_items(p: Path) -> list[tuple[Path, bool]]:
             "an input to integrate it", stacklevel=3)
     deeper = [c.name for c, dataset in folders.items()
               if not dataset and _holds_maps(c)]
+    locked = [c.name for c, dataset in folders.items() if not dataset and _unlistable(c)]
+    if locked:  # (skipped without a word before, a review)
+        warnings.warn(
+            f"batch: {p}: skipped {len(locked)} subfolder(s) that cannot be read "
+            f"({', '.join(locked[:3])}{', ...' if len(locked) > 3 else ''}): check their "
+            "permissions", stacklevel=3)
     if deeper:  # (a user's folder of days, each a folder of maps: silently skipped)
         warnings.warn(
             f"batch: {p}: skipped {len(deeper)} subfolder(s) holding maps but no "
@@ -324,6 +347,18 @@ def _own_files(found: list[Item], template: Job) -> list[Item]:
                 f"{', ...' if len(names) > 3 else ''}): leave `{field}` out to give each map "
                 "its own", stacklevel=3)
     return out
+
+
+def _unlistable(folder: Path) -> bool:
+    """Whether `folder` (not hidden) cannot be listed (its permissions)."""
+    if folder.name.startswith("."):
+        return False
+    try:
+        with os.scandir(folder) as it:
+            next(it, None)
+    except OSError:
+        return True
+    return False
 
 
 def _holds_maps(folder: Path) -> bool:
@@ -513,6 +548,7 @@ def run_item(job: Job, threads: int | None = None) -> dict:
     failed). Runs in the worker processes, where `threads` limits the BLAS threads (one worker
     process per core: more threads would only compete)."""
     from .errors import MemoryLimitError, SolverError
+    from .io.atomic import Cancelled
     from .jobs import finished_unconverged, run
 
     t0 = time.perf_counter()
@@ -542,6 +578,8 @@ def run_item(job: Job, threads: int | None = None) -> dict:
         rec.update(status="error", error=str(e), exit=1)
     except SolverError as e:
         rec.update(status="solver", error=str(e), exit=2)
+    except Cancelled as e:  # (its batch was interrupted: _on_cluster)
+        rec.update(status="cancelled", error=str(e), exit=1)
     except MemoryError as e:
         rec.update(status="memory", error=f"out of memory ({e})", exit=1)
     except Exception as e:
@@ -642,7 +680,8 @@ def settings(job: Job) -> dict:
     # (unread_beside: which warnings are given, not the result)
     # (beside: which of an item's files came from beside its map, the item's own)
     out = {k: v for k, v in asdict(job).items()
-           if k not in ("normals", "gradients", "outdir", "unread_beside", "beside")}
+           if k not in ("normals", "gradients", "outdir", "unread_beside", "beside",
+                        "cancel_mark")}
     out["options"] = {k: v for k, v in job.options.items() if k not in NEUTRAL_OPTIONS}
     out["save"] = sorted(set(job.save))
     for key in ("fov", "output_frame", "height_range", "world_to_camera",
@@ -668,6 +707,41 @@ def settings(job: Job) -> dict:
         if out["output_frame"] == "x,y,z":
             out.pop("output_frame")
     return jsonable(out)
+
+
+def _comparable(asked) -> dict | None:
+    """A log's settings (:func:`settings`) as a resume compares them: the options given at
+    their method's defaults left out, and the normal frame by its axes (the identity as
+    None): ``--solver direct`` or ``--normal-frame gl`` asked the same as before and ran
+    every item again (a review). Applied to the recorded settings too, so older logs
+    compare alike."""
+    if not isinstance(asked, dict):
+        return None
+    from . import frames
+    from .methods import get
+
+    out = dict(asked)
+    try:
+        defaults = get(out.get("method", "dgp")).options()
+    except (ValueError, TypeError):  # (an unknown method: the items' own runs say so)
+        defaults = {}
+    if isinstance(out.get("options"), dict):
+        out["options"] = {k: v for k, v in out["options"].items()
+                          if not (k in defaults and _same_value(v, defaults[k]))}
+    if out.get("normal_frame") is not None:
+        with contextlib.suppress(ValueError, TypeError):  # (a bad frame: the runs say so)
+            out["normal_frame"] = frames.axis_string(out["normal_frame"])
+            if out["normal_frame"] == "x,y,z":
+                out["normal_frame"] = None
+    return out
+
+
+def _same_value(a, b) -> bool:
+    """Whether an option's value `a` is its default `b` (of the same type: True is no 1)."""
+    try:
+        return type(a) is type(b) and bool(a == b)
+    except Exception:  # (arrays and the like: not a default)
+        return False
 
 
 #: The template's fields that name a file read for every item (:func:`fingerprint`).
@@ -713,12 +787,45 @@ def fingerprint(item: Item, template: Job | None = None) -> list:
     return out
 
 
+def _end_line(path: Path, fh) -> None:
+    """A newline into the log `fh` (open to append to `path`) where its last line was cut
+    short (a disk full, a kill in a write): the next record was glued onto the fragment,
+    lost, and the log kept an invalid line for good (a review)."""
+    try:
+        with open(path, "rb") as f:
+            f.seek(0, os.SEEK_END)
+            if f.tell() == 0:
+                return
+            f.seek(-1, os.SEEK_END)
+            last = f.read(1)
+    except OSError:
+        return
+    if last != b"\n":
+        fh.write("\n")
+        fh.flush()
+
+
+def _settled(folder: Path) -> bool:
+    """Whether an item's output `folder` holds no unfinished commit: a run killed while it
+    moved its outputs in (kill -9, the OOM killer) left a set half new, half old, which a
+    resume kept as done because its last record was ``ok`` (a review). A dead run's of this
+    host is rolled back here (:func:`facetlift.io.atomic.sweep`: the set is the earlier one
+    again); one of another host's, or of a live process, leaves the item to run again."""
+    from .io.atomic import MOVING, STAGING_PREFIX, sweep
+
+    sweep(folder)
+    try:
+        return not any((p / MOVING).exists() for p in folder.glob(STAGING_PREFIX + "*"))
+    except OSError:
+        return False
+
+
 def _complete(rec: dict, asked: dict, stamp: list | None = None) -> bool:
     """Whether an earlier record finished what is asked now: ``ok``, with the same settings
     (outputs, method, options, frames ...; a record without them, from an older log, does
     not count), the same inputs (:func:`fingerprint`, where given) and every output it wrote
     still there."""
-    return (rec.get("status") == "ok" and rec.get("settings") == asked
+    return (rec.get("status") == "ok" and _comparable(rec.get("settings")) == _comparable(asked)
             and (stamp is None or rec.get("input_stamp") == stamp)
             and all(Path(p).is_file() for p in rec.get("outputs", {}).values()))
 
@@ -833,7 +940,7 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     for it in found:
         rec = earlier.get(it.path)
         if rec is not None and _complete(rec, asked, stamps[it.path]) and mine.get(
-                it.path) == rec.get("name"):
+                it.path) == rec.get("name") and _settled(root / rec["name"]):
             results[it.path] = dict(rec, resumed=True)
     # the folders of the items kept from an earlier run are theirs, and so are the folders
     # the log gives to inputs not run now: an item run now that would take one of those names
@@ -891,10 +998,13 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
                 for folder in new:
                     folder.rmdir()  # (only if empty; the deepest first)
             raise
+        jobs = _for_cluster(jobs, template, root)
+    _drop_old_cancel_marks(root)
     with contextlib.ExitStack() as stack:
         if own:
             stack.callback(client.close)
         fh = stack.enter_context(open(log_path, "a", encoding="utf-8"))
+        _end_line(log_path, fh)
         bar = stack.enter_context(_Bar(len(found), len(results), bool(progress)))
 
         def done(it: Item, rec: dict) -> None:
@@ -1416,15 +1526,55 @@ def _connect(scheduler):
                       "on the command line). Nothing was run") from None
 
 
+def _for_cluster(jobs, template: Job, root: Path) -> list:
+    """`jobs` as a cluster runs them: the template's files as absolute paths (the workers run
+    in another folder: a relative --K, --mask or --prior failed every item with "does not
+    exist", a review) and a cancel mark in `root` (:attr:`Job.cancel_mark`, written when the
+    batch is interrupted). The settings the log records keep the paths as given."""
+    import secrets
+
+    from .io.atomic import CANCEL_PREFIX
+
+    fields = [f for f in (*TEMPLATE_FILES, "colors")
+              if isinstance(getattr(template, f, None), (str, os.PathLike))
+              and os.path.isfile(getattr(template, f))]
+    mark = str(root / f"{CANCEL_PREFIX}{secrets.token_hex(6)}")
+    out = []
+    for it, j in jobs:
+        fixed = {f: os.path.abspath(getattr(j, f)) for f in fields
+                 if getattr(j, f) == getattr(template, f)}
+        out.append((it, replace(j, cancel_mark=mark, **fixed)))
+    return out
+
+
+def _drop_old_cancel_marks(root: Path) -> None:
+    """Remove the cancel marks of interrupted cluster batches into `root` older than
+    :data:`facetlift.io.atomic.CANCEL_KEEP` (their tasks have long finished)."""
+    from .io.atomic import CANCEL_KEEP, CANCEL_PREFIX
+
+    now = time.time()
+    with contextlib.suppress(OSError):
+        for p in root.glob(CANCEL_PREFIX + "*"):
+            with contextlib.suppress(OSError):
+                if now - p.stat().st_mtime > CANCEL_KEEP:
+                    p.unlink()
+
+
 def _on_cluster(jobs, client, done) -> None:
     """Run `jobs` on a ``dask.distributed`` `client` (:func:`_connect`); `done` runs here as
-    futures finish."""
+    futures finish. Interrupted, it writes the jobs' cancel mark (:attr:`Job.cancel_mark`)
+    before cancelling the futures: a task already running cannot be stopped, and discards
+    its outputs when it finds the mark."""
     futures = {}
     try:
         for it, j in jobs:
             futures[client.submit(run_item, j, 1, pure=False)] = it
         _collect(futures, done)
     except BaseException:  # (Ctrl-C or SIGTERM: the cluster's tasks ran on, a review)
+        marks = {j.cancel_mark for _, j in jobs if j.cancel_mark is not None}
+        for mark in marks:
+            with contextlib.suppress(OSError):
+                Path(mark).touch()
         with contextlib.suppress(Exception):
             client.cancel(list(futures))
         raise

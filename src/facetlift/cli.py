@@ -1654,8 +1654,15 @@ def _stopped(how: str) -> str:
     if COMMITTED and command != "batch":  # (after the set was moved in: it is complete)
         return (f"{how} after the outputs were written: {COMMITTED[-1]} holds the complete "
                 "new set")
+    args = _STATE.get("args", ())
+    cluster = command == "batch" and any(a == "--scheduler" or str(a).startswith(
+        "--scheduler=") for a in args)
     return (f"{how}; nothing partial was written"
-            + (" (a batch's finished items are in its log)" if command == "batch" else ""))
+            + (" (a batch's finished items are in its log)" if command == "batch" else "")
+            # (a cluster's running tasks cannot be stopped: they wrote their outputs after
+            # the command had exited, a review; they now find the batch's cancel mark)
+            + ("; items already running on the cluster run to their end and then discard "
+               "their outputs" if cluster else ""))
 
 
 def _main(args: list[str]) -> int:

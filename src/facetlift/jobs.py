@@ -141,6 +141,12 @@ class Job:
     #: ``NAME_prior_depth.*`` and ``NAME_confidence.*`` (not given by the user): their
     #: errors name the file and what leaves it unread (``dataset_prior=False``, --no-prior).
     beside: tuple = ()
+    #: A file whose existence cancels the job: checked before it starts and again before its
+    #: outputs are moved into place (nothing is then written). A batch on a cluster gives its
+    #: items one and writes it when interrupted: a task already running on a worker cannot
+    #: be stopped, and such tasks wrote their outputs after the command had exited, over a
+    #: later run's (a review).
+    cancel_mark: str | None = None
 
     def with_input(self, path, outdir) -> Job:
         """The same job on another normal-map input (a batch item)."""
@@ -941,7 +947,8 @@ def run(job: Job, *, progress=None, on_warning=None) -> dict:
     # (one record of the whole job's warnings, the gradient layout's, ...: given again if any
     # phase fails, a write or the outputs' commit too)
     with recorded_warnings(on_warning) as caught, \
-            io.OutputSet(outdir, names, inputs=input_paths(job)) as out:
+            io.OutputSet(outdir, names, inputs=input_paths(job),
+                         cancel=job.cancel_mark) as out:
         for w in early:
             reemit(w)
         announce(progress, "reading")

@@ -97,6 +97,16 @@ class Terminated(BaseException):
 #: temporary files are ``.<name>.<host>.<pid>.<hex>.tmp``.
 STAGING_PREFIX = ".facetlift-staging-"
 
+#: The name of a batch's cancel mark in its output folder (:class:`OutputSet`'s `cancel`):
+#: ``.facetlift-cancel-<token>``; marks older than :data:`CANCEL_KEEP` seconds are removed by
+#: the next batch into the folder.
+CANCEL_PREFIX = ".facetlift-cancel-"
+CANCEL_KEEP = 86400.0
+
+
+class Cancelled(Exception):
+    """An :class:`OutputSet` whose cancel mark exists: nothing was written."""
+
 
 def _host() -> str:
     return "".join(ch if ch.isalnum() else "_" for ch in socket.gethostname())[:40] or "host"
@@ -270,8 +280,13 @@ class OutputSet:
         `outdir` cannot be created or written.
     """
 
-    def __init__(self, outdir, names=(), inputs=()):
+    def __init__(self, outdir, names=(), inputs=(), cancel=None):
         self.outdir = Path(outdir)
+        # (a file whose existence cancels the set before anything moves: a cluster batch's
+        # interrupt, which cannot stop a running task, jobs.Job.cancel_mark)
+        self.cancel = None if cancel is None else Path(cancel)
+        if self.cancel is not None and self.cancel.exists():
+            raise Cancelled(f"cancelled ({self.cancel} exists): nothing was written")
         for name in names:
             target = self.outdir / name
             for src in inputs:
@@ -321,6 +336,9 @@ class OutputSet:
             names it and says that the folder was left as it was.
         """
         moves = [(name, p, self.outdir / name) for name, p in self.staged.items() if p.exists()]
+        if self.cancel is not None and self.cancel.exists():
+            self.abort()
+            raise Cancelled(f"cancelled ({self.cancel} exists): nothing was written")
         self._in_the_way(name for name, _, _ in moves)
         aside = self.staging / ".replaced"
         import json
