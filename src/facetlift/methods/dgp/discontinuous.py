@@ -783,6 +783,16 @@ SEED_WINDOW = 3
 #: +26 %); 0.3 against 0.2: 72 / 89; 0.15 against 0.2: 82 / 56 with the mean level (vessels
 #: +5 %).
 SEED_SPREAD = 0.2
+#: A vertex is seeded only where its own curl is at least this share of the largest in its
+#: window (0: not used, the default). The window's sum spreads a jump line's curl over the
+#: vertices beside it, whose seeded corners can cut a facet off the wrong side: on BiNI's tent
+#: the flat column beside each side's jump hangs on the slope as a comb (a review), which 0.3,
+#: 0.5 and 0.8 all mend (mean deviation 0.304 -> 0.125 deg). Not taken (docs/results.md,
+#: "Seeds at the curl's peak"): on the development benchmark 0.5 made 103 runs better and 67
+#: worse, but the DiLiGenT-like perspective group with exact and 8-bit normals worse with each
+#: value (+0.5 to +9 %), and both held-out sets tried worse with exact normals (+5.2 %,
+#: +3.4 %); kept for A/B runs (benchmarks/bench_ab.py).
+SEED_PEAK = 0.0
 
 
 def curl_seed(domain, bx, by, target, cosines, footprint: float, noise: float,
@@ -816,8 +826,12 @@ def curl_seed(domain, bx, by, target, cosines, footprint: float, noise: float,
     curl = 0.5 * ((tl[0] + tr[0] - bl[0] - br[0]) - (tr[1] + br[1] - tl[1] - bl[1]))
     curl *= curl_to_angle(0.25 * (tl[2] + tr[2] + bl[2] + br[2]))  # (radians)
     np.nan_to_num(curl, copy=False, nan=0.0)  # (a vertex without four targets: no curl)
+    raw = curl
     if SEED_WINDOW > 1:
         curl = ndi.uniform_filter(curl, size=SEED_WINDOW, mode="constant") * SEED_WINDOW
+        if SEED_PEAK > 0:
+            peak = ndi.maximum_filter(np.abs(raw), size=SEED_WINDOW, mode="constant")
+            curl = np.where(np.abs(raw) >= SEED_PEAK * peak, curl, 0.0)
     tau = max(SEED_TAU, SEED_NOISE * (noise if np.isfinite(noise) else 0.0))
     g = 1.0 / (1.0 + np.square(curl / tau))
     if normals is not None and SEED_SPREAD > 0:
