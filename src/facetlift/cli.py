@@ -287,7 +287,8 @@ _JOB_OPTIONS = [
     click.option("--discontinuities", is_flag=True,
                  help="Allow depth jumps (methods that handle discontinuities: 'facetlift "
                  "methods'). About 30 reweighted solves: up to 10-20x the time of the smooth "
-                 "integration (the DiLiGenT bear about 8x, 0.13 -> 1.1 s; 'facetlift info' "
+                 "integration (the DiLiGenT bear's solve about 10x, 0.12 -> 1.2-1.4 s; 0.37 -> "
+                 "1.6 s as the summary line counts it, with its checks; 'facetlift info' "
                  "estimates it); the "
                  "cut's sharpness is --option discontinuity_k=K (default 4; --method bini: "
                  "--option k=K, default 2), the jumps' map --save discontinuities."),
