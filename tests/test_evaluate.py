@@ -745,3 +745,20 @@ def test_evaluate_reads_mat_results_and_ground_truths(tmp_path, capsys):
     np.save(tmp_path / "t.npy", est.T)
     code, _, err = run(capsys, "evaluate", tmp_path / "t.npy", "--gt", tmp_path / "gt.mat")
     assert code == 1 and "transposed" in err
+
+
+def test_a_grey_rgb_exr_result_is_read_and_a_colour_one_refused(tmp_path, capsys):
+    """A depth saved as a grey R, G, B EXR was refused ("must hold channel Z or one
+    channel", a review): equal channels are one map; unequal ones are still refused."""
+    import OpenEXR
+
+    est, gt, _ = scene()
+    est = np.where(np.isfinite(gt), est, np.nan).astype(np.float32)
+    np.save(tmp_path / "gt.npy", gt)
+    for name, chans in (("grey", (est, est, est)), ("colour", (est, 2 * est, est))):
+        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+        with OpenEXR.File(header, dict(zip("RGB", chans, strict=True))) as f:
+            f.write(str(tmp_path / f"{name}.exr"))
+    assert np.array_equal(io.read_depth(tmp_path / "grey.exr"), est, equal_nan=True)
+    code, _, err = run(capsys, "evaluate", tmp_path / "colour.exr", "--gt", tmp_path / "gt.npy")
+    assert code == 1 and "must hold channel Z or one channel" in err

@@ -760,6 +760,11 @@ def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = (),
     elif ext == ".exr":
         ch = _read_exr(p, arg)
         name = next((c for c in prefer if c in ch), next(iter(ch)) if len(ch) == 1 else None)
+        if name is None and ch:  # (a grey image saved as R, G, B: one map, refused before,
+            # a review)
+            first = next(iter(ch.values()))
+            if all(np.array_equal(v, first, equal_nan=True) for v in ch.values()):
+                name = next(iter(ch))
         if name is None:
             wanted = f"channel {' or '.join(prefer)} or one channel" if prefer else "one channel"
             raise ValueError(f"`{arg}`: {p} must hold {wanted}; got channels {sorted(ch)}")
