@@ -1399,3 +1399,17 @@ def test_the_silhouette_votes_one_pixel_inward_where_the_rim_has_no_slope():
         warnings.simplefilter("always")
         facetlift.integrate_gradients(-dr, -dc, inside, gradient_frame="numpy")
     assert not [w for w in got if "into the object" in str(w.message)]
+
+
+def test_a_gradient_field_stacked_as_two_channels_is_pointed_to_integrate_gradients(
+        tmp_path, capsys):
+    """An (H, W, 2) stack of p and q was told of normal maps alone (a review)."""
+    from facetlift.cli import main
+
+    with pytest.raises(ValueError, match=r"stacked as \(H, W, 2\) is given as "
+                       r"facetlift.integrate_gradients"):
+        facetlift.integrate(np.zeros((20, 30, 2)))
+    np.save(tmp_path / "pq.npy", np.zeros((20, 30, 2)))
+    code = main(["integrate", str(tmp_path / "pq.npy"), "-o", str(tmp_path / "o")])
+    err = " ".join(capsys.readouterr().err.split())
+    assert code == 1 and "--gradients P Q" in err

@@ -628,7 +628,10 @@ def prepare(
     n = n.astype(float, copy=False)
     if n.ndim != 3 or n.shape[-1] != 3:
         raise ValueError(f"`normals` must have shape (H, W, 3); got {n.shape}"
-                         + _channel_first_hint(n.shape))
+                         + (_channel_first_hint(n.shape) or (
+                             "; a gradient field (p, q) stacked as (H, W, 2) is given as "
+                             "facetlift.integrate_gradients(a[..., 0], a[..., 1])"
+                             if n.ndim == 3 and n.shape[-1] == 2 else "")))
     H, W = n.shape[:2]
     if H < 1 or W < 1:
         raise ValueError(f"`normals` must have at least one pixel; got shape {n.shape}")

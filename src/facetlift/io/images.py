@@ -395,8 +395,11 @@ def _split_alpha(pixels: np.ndarray, path: Path, arg: str, check: bool = True,
                    "--normal-encoding xy, encoding='xy'), or as a two-channel .npy, TIFF or "
                    "EXR file")
         elif two:
+            # (a gradient field stacked as (H, W, 2) was told of normal maps alone, a review)
             why = ("; a two-channel map storing x and y alone (BC5, RG) is read with "
-                   "--normal-encoding xy (encoding='xy'), which rebuilds z")
+                   "--normal-encoding xy (encoding='xy'), which rebuilds z; a gradient field "
+                   "(p, q) stacked so is given as two files, --gradients P Q "
+                   "(integrate_gradients(a[..., 0], a[..., 1]) in Python)")
         else:
             first = pixels.ndim == 3 and pixels.shape[0] in (2, 3, 4) and pixels.shape[-1] > 4
             xy = (" (x, y alone: then (H, W, 2) with --normal-encoding xy)"
