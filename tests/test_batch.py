@@ -1621,3 +1621,13 @@ def test_a_cluster_batch_makes_its_files_absolute_and_cancels_running_items(tmp_
     with pytest.raises(atomic.Cancelled):
         out.commit()
     assert not (tmp_path / "o3" / "a.npy").exists()
+
+
+def test_a_list_file_expands_the_home_folder(tmp_path, monkeypatch):
+    """'~/maps/m0.png' in a --list file was a folder named '~' beside the list (a review)."""
+    maps(tmp_path / "home" / "maps", n=1)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    (tmp_path / "list.txt").write_text("~/maps/m0.png\n")
+    found = fb.items([], list_file=tmp_path / "list.txt")
+    assert [it.error for it in found] == [None]
+    assert found[0].path == str(tmp_path / "home" / "maps" / "m0.png")

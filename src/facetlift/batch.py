@@ -124,7 +124,8 @@ def items(inputs, *, list_file=None) -> list[Item]:
         for line in lines:
             # (a comment starts the line or follows a space: 'obj#3.png' is a file name)
             line = _COMMENT.sub("", line).strip()
-            if line:
+            if line:  # (~ as a shell expands it: it was a folder named "~", a review)
+                line = os.path.expanduser(line)
                 specs.append(line if os.path.isabs(line) else str(base / line))
     paths: list[tuple[Path, bool]] = []  # (path, named explicitly)
     absent: list[tuple[str, str]] = []  # (the input as given, why it cannot run)

@@ -1027,8 +1027,8 @@ def _say_item(r: dict) -> None:
 @click.argument("inputs", nargs=-1)
 @click.option("--list", "list_file", type=click.Path(exists=True, dir_okay=False),
               help="A text file with more inputs, one path or glob pattern per line; relative "
-              "paths are relative to the file's folder, '#' at a line's start or after a space "
-              "starts a comment.")
+              "paths are relative to the file's folder (~ is the home folder), '#' at a "
+              "line's start or after a space starts a comment.")
 @_job_options
 @click.option("-o", "--out", "outdir", required=True,
               type=click.Path(file_okay=False), callback=_out_dir,
