@@ -679,11 +679,16 @@ def test_a_perspective_height_or_disparity_is_told_and_not_sent_to_give_K(tmp_pa
             rec = metrics.evaluate(bad, gt, mask, perspective=True)
         assert rec["made"] is not None and rec["correlation"] < -0.9
     height = np.nanmax(gt) + 10.0 - gt
-    np.save(tmp_path / "h.npy", height)
     np.save(tmp_path / "gt.npy", gt)
-    code, out, err = run(capsys, "evaluate", tmp_path / "h.npy", "--gt", tmp_path / "gt.npy")
-    assert code == 0 and "is it a height (-depth)?" in err
-    assert "give --K" not in out + err and "-" != out.split("normalised error:")[1].split()[0]
+    # (scored without a camera, a positive height or a disparity is named too, with no
+    # normalised error, and not sent to give --K nor a pixel size: a review)
+    for bad, name in ((height, "h.npy"), (1.0 / gt, "d.npy")):
+        np.save(tmp_path / name, bad)
+        code, out, err = run(capsys, "evaluate", tmp_path / name, "--gt", tmp_path / "gt.npy")
+        err = " ".join(err.split())
+        assert code == 0 and "run against the ground truth's" in err and "a disparity" in err
+        assert "give --K" not in out + err and "--pixel-size" not in err
+        assert out.split("normalised error:")[1].split()[0] == "-"
 
 
 def test_a_result_that_leaves_much_of_the_mask_undefined_is_warned_about():

@@ -806,17 +806,24 @@ def _end_line(path: Path, fh) -> None:
         fh.flush()
 
 
-def _settled(folder: Path) -> bool:
-    """Whether an item's output `folder` holds no unfinished commit: a run killed while it
-    moved its outputs in (kill -9, the OOM killer) left a set half new, half old, which a
-    resume kept as done because its last record was ``ok`` (a review). A dead run's of this
-    host is rolled back here (:func:`facetlift.io.atomic.sweep`: the set is the earlier one
-    again); one of another host's, or of a live process, leaves the item to run again."""
+def _settled(folder: Path, outputs) -> bool:
+    """Whether an item's output `folder` holds no unfinished commit older than its record's
+    `outputs`: a run killed while it moved its outputs in (kill -9, the OOM killer) left a
+    set half new, half old, which a resume kept as done because its last record was ``ok``
+    (a review). A dead run's of this host is rolled back here
+    (:func:`facetlift.io.atomic.sweep`: the set is the earlier one again); one of another
+    host's, or of a live process, leaves the item to run again, unless every output was
+    written after it (a run since has committed a whole set over it: it ran again on every
+    resume, a review)."""
     from .io.atomic import MOVING, STAGING_PREFIX, sweep
 
     sweep(folder)
     try:
-        return not any((p / MOVING).exists() for p in folder.glob(STAGING_PREFIX + "*"))
+        marks = [p / MOVING for p in folder.glob(STAGING_PREFIX + "*") if (p / MOVING).exists()]
+        if not marks:
+            return True
+        newest = max(mark.stat().st_mtime_ns for mark in marks)
+        return all(Path(o).stat().st_mtime_ns > newest for o in outputs)
     except OSError:
         return False
 
@@ -940,8 +947,10 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     mine = _folders_of(owners, found, stamps)  # (each input's folder by the log)
     for it in found:
         rec = earlier.get(it.path)
-        if rec is not None and _complete(rec, asked, stamps[it.path]) and mine.get(
-                it.path) == rec.get("name") and _settled(root / rec["name"]):
+        # (settled first: its roll-back may take out an output, which _complete then misses)
+        if rec is not None and mine.get(it.path) == rec.get("name") and _settled(
+                root / rec["name"], rec.get("outputs", {}).values()) and _complete(
+                rec, asked, stamps[it.path]):
             results[it.path] = dict(rec, resumed=True)
     # the folders of the items kept from an earlier run are theirs, and so are the folders
     # the log gives to inputs not run now: an item run now that would take one of those names

@@ -1296,11 +1296,11 @@ def evaluate(result, gt, mask, K, fov, as_json, gt_scale=None):
     if truth.shape != est.shape:
         # (a result stored transposed, (W, H), was told to give another ground truth, a
         # review)
-        swapped = (" (the result's is the ground truth's transposed: stored as (W, H)? "
-                   "transpose it)" if truth.shape == est.shape[::-1] else "")
+        advice = ("the result's shape is the ground truth's transposed: one of them was "
+                  "stored as (W, H)? transpose it" if truth.shape == est.shape[::-1] else
+                  "give the ground truth of the same view and crop")
         raise ValueError(f"`gt`: {gt} is {truth.shape[0]}x{truth.shape[1]} (HxW) but `result` "
-                         f"{result} is {est.shape[0]}x{est.shape[1]}{swapped}: give the ground "
-                         "truth of the same view and crop")
+                         f"{result} is {est.shape[0]}x{est.shape[1]}: {advice}")
     sel = None if mask is None else io.read_mask(mask, est.shape, of=f"the result {result}")
     perspective = camera is not None
     from ._warnings import recording, reemit

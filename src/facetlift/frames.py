@@ -1802,10 +1802,14 @@ LAYOUT_MIN_CURL = 0.3
 #: Below :data:`LAYOUT_MIN_CURL`, a curl as read above this still counts where another reading
 #: has less than :data:`LAYOUT_STRONG_RATIO` of it (a field all but integrable in the other
 #: layout: a nearly symmetric sine surface read in the wrong one had 0.107 against 0.00019).
-#: Noise and quantisation add curl to every reading alike, and a harmonic surface (a saddle)
-#: has none in any, so neither reaches the ratio.
+#: Noise adds curl to every reading alike, so it does not reach the ratio; a separable field
+#: (a saddle z = k x y: p of y alone, q of x alone) keeps exactly none in the other readings
+#: whatever its quantisation, and is not judged by this rule.
 LAYOUT_LOW_CURL = 0.05
 LAYOUT_STRONG_RATIO = 0.05
+#: The fewest pixels of a field for the rule below :data:`LAYOUT_MIN_CURL` (a 2 x 2 map is
+#: one block, whose noise alone reads as a layout).
+LAYOUT_LOW_PIXELS = 64
 
 
 class LayoutWarning(FrameWarning):
@@ -1911,7 +1915,12 @@ def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
     # (a smaller curl as read counts where another reading is all but integrable: a sine
     # field read in the wrong layout, 0.107 as read and 0.00019 exchanged, came out 31 % of
     # its range wrong without a word, a review)
-    clear = own > LAYOUT_MIN_CURL or (own > LAYOUT_LOW_CURL
+    # (not where the other reading's curl is exactly 0: a separable field, p of y and q of x
+    # as a saddle z = k x y has, is integrable in both layouts, and quantised slopes leave
+    # curl in one reading alone, which was told to change its layout, a review; nor on a
+    # map of a few pixels)
+    clear = own > LAYOUT_MIN_CURL or (own > LAYOUT_LOW_CURL and min(alt, swap) > 0.0
+                                      and np.size(p) >= LAYOUT_LOW_PIXELS
                                       and min(alt, swap) < LAYOUT_STRONG_RATIO * own)
     ratio = LAYOUT_RATIO if own > LAYOUT_MIN_CURL else LAYOUT_STRONG_RATIO
     if not clear:

@@ -488,8 +488,15 @@ def _evaluate(estimate, truth, mask, perspective, words: str) -> dict:
         if out["made"] is not None:
             _pieces_note(est, gt, m, region, out)
             if against:
-                _warn_against(corr)
+                _warn_against(corr, camera=True)
     else:
+        if against and out["made"] is not None:  # (positive depths against the truth's: a
+            # disparity or a positive height scored without a camera was given pixel-size
+            # advice and a normalised error, a review)
+            _warn_against(corr, camera=False)
+            out["notes"].append("no normalised error: the result's depths are all > 0 and "
+                                "run against the truth's")
+            return out
         out["range_ratio"] = ratio = _range_check(est, gt, m, words, region, against)
         off = ratio is not None and not 1.0 / RANGE_MISMATCH <= ratio <= RANGE_MISMATCH
         if off and not against and (est[m] > 0).all() and (gt[m] > 0).all():  # (a perspective
@@ -546,16 +553,21 @@ def _correlation(est, gt, m, region) -> float | None:
     return float(np.sum(e * g)) / scale if scale > 0 else None
 
 
-def _warn_against(corr: float) -> None:
-    """A perspective result's depths that run against the truth's (:data:`HEIGHT_CORRELATION`:
-    a height of 10 + (max - depth) / 0.397 scored MADE 561.7 on the bear, a disparity 17.7,
-    without a word, a review)."""
+def _warn_against(corr: float, *, camera: bool) -> None:
+    """A result whose depths run against the truth's (:data:`HEIGHT_CORRELATION`): a height
+    of 10 + (max - depth) / 0.397 scored MADE 561.7 on the bear with its camera, a disparity
+    17.7, without a word (a review). Correct results can do it too, where the normals cannot
+    show the depth jumps between faces tilted against them (slats, shingles: a review's
+    blinds, -0.98): the warning names that as well."""
     from ._warnings import warn
 
     warn(f"the result's depths run against the ground truth's (correlation {corr:.2f}): a "
-         "height (larger = nearer), a disparity (1 / depth), or a surface integrated inside "
-         "out (its normals in another frame)? A perspective result is the camera's z-depth, "
-         "larger = farther; MADE scores it as given")
+         "height (larger = nearer), a disparity (1 / depth), a surface integrated inside out "
+         "(its normals in another frame), or depth jumps the normals cannot show (faces "
+         "tilted against the jumps between them, as slats are)? "
+         + ("A perspective result is the camera's z-depth, larger = farther; MADE scores it "
+            "as given" if camera else "Scored as given, with no normalised error: facetlift's "
+            "depth is larger = farther"))
 
 
 def _offsets_note(est, gt, m, mask, region, out) -> None:
@@ -642,7 +654,9 @@ def _sign_check(est, gt, m, error: float, region, corr: float | None) -> None:
     if flipped <= 0.5 * error:
         warn(f"the result's depths run against the ground truth's (correlation "
              f"{corr:.2f}); negated it scores {100 * flipped:.3g} % "
-             f"instead of {100 * error:.3g} %: is it a height (-depth)? facetlift's depth is "
+             f"instead of {100 * error:.3g} %: is it a height (-depth)? (Or are there "
+             "depth jumps its normals cannot show, between faces tilted against them?) "
+             "facetlift's depth is "
              "larger = farther (a height map of facetlift's, height.exr, is read back as "
              "depth by facetlift.io.read_depth)")
 

@@ -746,8 +746,8 @@ def check_mask_size(m: np.ndarray, path, shape: tuple[int, ...] | None, *,
 
 
 def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = (),
-               mat_names: tuple[str, ...] = (), npz_names: tuple[str, ...] = ("depth",)
-               ) -> np.ndarray:
+               mat_names: tuple[str, ...] = (), npz_names: tuple[str, ...] = ("depth",),
+               grey: bool = False) -> np.ndarray:
     """One (H, W) array as stored: ``.npy``, OpenEXR (its channel named in `prefer`, or its
     only channel), TIFF, a MATLAB ``.mat`` file (its variable named in `mat_names`, or its
     only (H, W) one) or a ``.npz`` archive (its array named first in `npz_names`, or its only
@@ -763,8 +763,8 @@ def read_plane(path, formats, what: str, arg: str, prefer: tuple[str, ...] = (),
     elif ext == ".exr":
         ch = _read_exr(p, arg)
         name = next((c for c in prefer if c in ch), next(iter(ch)) if len(ch) == 1 else None)
-        if name is None and ch:  # (a grey image saved as R, G, B: one map, refused before,
-            # a review)
+        if name is None and ch and grey:  # (a grey depth saved as R, G, B: one map,
+            # refused before, a review; not for gradients, where R, G, B is a normal map)
             first = next(iter(ch.values()))
             if all(np.array_equal(v, first, equal_nan=True) for v in ch.values()):
                 name = next(iter(ch))
@@ -840,8 +840,9 @@ def read_depth(path, *, npz_names: tuple[str, ...] = ("depth",), arg: str = "pat
                zero_unknown: bool = False) -> np.ndarray:
     """Read an (H, W) depth map written by :func:`write_depth` (``.npy``, ``.exr``, TIFF), a
     one-channel ``.pfm`` (Middlebury's, MiDaS's), a MATLAB ``.mat`` file (its variable named
-    first in `npz_names`, else ``z``, else its only (H, W) one) or the ``depth`` of a
-    :meth:`facetlift.Surface.save` ``.npz``; a ``height.exr`` of
+    first in `npz_names`, else ``z`` or ``Z``, else its only (H, W) one) or the ``depth`` of a
+    :meth:`facetlift.Surface.save` ``.npz``; an OpenEXR file's channel Z, its only one, or
+    R, G, B that are all equal (a grey image); a ``height.exr`` of
     :func:`facetlift.io.write_height` (marked so in its header) is read back as depth.
 
     `npz_names`: the arrays of a ``.npz`` looked for, in order (else its only one): a
@@ -852,7 +853,7 @@ def read_depth(path, *, npz_names: tuple[str, ...] = ("depth",), arg: str = "pat
     # and were refused, a review; its variable as an .npz's, or Quéau's z)
     a = read_plane(path, DEPTH_FORMATS + (".npz", ".pfm", ".mat"), "depth", arg,
                    prefer=("Z",), npz_names=tuple(npz_names),
-                   mat_names=tuple(npz_names) + ("z",))
+                   mat_names=tuple(npz_names) + ("z", "Z"), grey=True)
     integer = a.dtype.kind in "ui"
     a = a.astype(np.float64)
     if Path(path).suffix.lower() == ".exr" and _exr_quantity(Path(path)) == "height":
