@@ -193,3 +193,18 @@ def test_surface_normals_by_blocks_of_rows_equal_the_whole_frame(monkeypatch, di
         np.testing.assert_array_equal(metrics.surface_normals(s), whole)
         np.testing.assert_array_equal(shade(s), lit)
     assert np.isfinite(whole[s.mask]).all()
+
+
+def test_angular_error_of_a_depth_array_names_surface_from_depth():
+    """Another tool's depth map given to angular_error was told to use facet_normals, whose
+    corner depths it is not (a review); Surface.from_depth makes a Surface of it."""
+    import facetlift
+    from facetlift import metrics
+
+    r, c = np.indices((24, 30)) + 0.5
+    z = 0.05 * (c - 15) ** 2 / 10 + 0.02 * r
+    n = facetlift.normals_from_gradients(*np.gradient(-z)[::-1] * np.array([[[1.0]], [[-1.0]]]))
+    with pytest.raises(ValueError, match=r"Surface.from_depth\(depth, mask, K=K\) makes one"):
+        metrics.angular_error(z, n)
+    mean, _, _ = metrics.angular_error(facetlift.Surface.from_depth(z), n)
+    assert mean < 1.0

@@ -859,9 +859,12 @@ def angular_error(surface, normals, mask=None) -> tuple[float, float, np.ndarray
         Degrees, NaN outside the compared pixels.
     """
     if not all(hasattr(surface, a) for a in ("mask", "camera", "vertex_depth")):
+        # (the advice was metrics.facet_normals, whose (H + 1, W + 1) corner depths another
+        # tool's depth map is not, a review)
         raise ValueError(f"`surface` must be a facetlift.Surface (its camera and mask give the "
-                         f"facet normals); got {type(surface).__name__}: for a depth map, "
-                         "metrics.facet_normals(vertex_depth, K=...) gives its normals")
+                         f"facet normals); got {type(surface).__name__}: for another "
+                         "tool's depth map, facetlift.Surface.from_depth(depth, mask, K=K) "
+                         "makes one")
     from .frames import as_float_normals
 
     # (a uint8/uint16 map decoded as integrate decodes it: taken raw, the bear's PNG read
