@@ -2114,7 +2114,9 @@ def _mask_fit_check(n: np.ndarray, m: np.ndarray, share: float) -> None:
         return bool(out.any()) and float(have[out].mean()) < 0.5
 
     out = ~m
-    varied = _varied(_sampled(n, out)) if out.any() else 0.0
+    # (only where it can matter: a sort of up to a sample of the outside's normals, 0.05 s a
+    # run at 512^2, was made for every map with 30 % of its normals missing)
+    varied = _varied(_sampled(n, out)) if share > 0.5 and out.any() else 0.0
     if share > 0.5 and varied > 0.5:
         # (most of the mask without a normal, most of its outside with varied ones, an
         # object's, not a fill: the mask of the background; one ring of the object's pixels
