@@ -282,7 +282,7 @@ def test_cli_batch_exit_codes_and_count(tmp_path, capsys):
                                                          "camera", "depth_range", "normals",
                                                          "evaluation", "prior_file",
                                                          "confidence_file", "colors_file",
-                                                         "normal_rotation"}
+                                                         "normal_rotation", "output_bytes"}
     code = main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "p"), "--workers", "1",
                  "-s", "npy", "--progress"])
     assert code == 1 and "batch:" in capsys.readouterr().err  # the bar, on stderr
@@ -1634,3 +1634,19 @@ def test_a_list_file_expands_the_home_folder(tmp_path, monkeypatch):
     found = fb.items([], list_file=tmp_path / "list.txt")
     assert [it.error for it in found] == [None]
     assert found[0].path == str(tmp_path / "home" / "maps" / "m0.png")
+
+
+def test_resume_runs_again_an_item_whose_output_was_cut_short(tmp_path):
+    """--resume checked only that the outputs exist: a depth.npy truncated to 100 bytes was
+    taken as done (a review). The record keeps each output's size (output_bytes)."""
+    maps(tmp_path / "in", n=2)
+    out = tmp_path / "out"
+    first = facetlift.batch([tmp_path / "in"], out, workers=1, save=("npy",))
+    depth = Path(first[0]["outputs"]["npy"])
+    assert first[0]["output_bytes"]["npy"] == depth.stat().st_size
+    depth.write_bytes(depth.read_bytes()[:100])
+    again = facetlift.batch([tmp_path / "in"], out, workers=1, save=("npy",), resume=True)
+    assert [bool(r.get("resumed")) for r in again] == [False, True]
+    assert np.load(depth).shape == (16, 18)
+    logged = [json.loads(ln) for ln in (out / fb.LOG_NAME).read_text().splitlines()]
+    assert all("output_bytes" in rec for rec in logged)

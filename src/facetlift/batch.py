@@ -833,9 +833,23 @@ def _complete(rec: dict, asked: dict, stamp: list | None = None) -> bool:
     (outputs, method, options, frames ...; a record without them, from an older log, does
     not count), the same inputs (:func:`fingerprint`, where given) and every output it wrote
     still there."""
+    outputs = rec.get("outputs", {})
     return (rec.get("status") == "ok" and _comparable(rec.get("settings")) == _comparable(asked)
             and (stamp is None or rec.get("input_stamp") == stamp)
-            and all(Path(p).is_file() for p in rec.get("outputs", {}).values()))
+            and all(Path(p).is_file() for p in outputs.values())
+            # (the sizes they were written with, where the record has them: older logs not)
+            and ("output_bytes" not in rec or _sizes(outputs) == rec["output_bytes"]))
+
+
+def _sizes(outputs: dict) -> dict:
+    """Each output's size in bytes (None where it cannot be read)."""
+    out = {}
+    for kind, p in outputs.items():
+        try:
+            out[kind] = os.path.getsize(p)
+        except OSError:
+            out[kind] = None
+    return out
 
 
 def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
@@ -1020,6 +1034,9 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
         def done(it: Item, rec: dict) -> None:
             rec = dict(rec, item=it.path, name=it.name, settings=asked,
                        input_stamp=stamps[it.path])
+            if rec.get("status") == "ok":  # (for --resume: a truncated output, a disk full
+                # or a copy cut short, was taken as done, a review)
+                rec["output_bytes"] = _sizes(rec.get("outputs") or {})
             if wording is not None:
                 rec["warnings"] = [wording(str(w)) for w in rec.get("warnings") or ()]
                 if rec.get("error") is not None:
@@ -1199,7 +1216,7 @@ def log_record(rec: dict) -> dict:
             "shape", "facets", "mask_source", "converged", "warnings", "resumed", "settings",
             "input_stamp", "perspective", "camera", "prior_file", "confidence_file", "colors_file",
             "depth_range", "normals", "evaluation", "hints", "normal_rotation",
-            "camera_warned")
+            "camera_warned", "output_bytes")
     # (mask_source: whether NAME_mask.png was used, a user asked; perspective: whether a
     # camera was used, a dataset folder's K.txt included; camera: which, a DiLiGenT folder's
     # being its parent's Calib_Results.mat; depth_range: height.png's scale;
