@@ -1718,3 +1718,21 @@ def test_a_mat_mask_with_nan_or_negative_background_counts_it_outside(tmp_path, 
             in " ".join(err.split())
         depth = np.load(tmp_path / name / "depth.npy")
         assert np.isfinite(depth[inside]).all() and np.isnan(depth[~inside]).all()
+
+
+def test_a_mat_files_mask_is_found_in_any_case(tmp_path, capsys):
+    """MATLAB code's 'Mask' was left unread (only 'mask' was looked for): the whole image was
+    integrated, its missing slopes filled as surface, without a word (a review)."""
+    n = dome()
+    p, q = facetlift.gradients_from_normals(n)
+    inside = np.zeros(p.shape, bool)
+    inside[3:-3, 4:-4] = True
+    sio.savemat(tmp_path / "g.mat", {"p": np.where(inside, p, np.nan),
+                                     "q": np.where(inside, q, np.nan),
+                                     "Mask": inside.astype(np.uint8)})
+    code, out, err = run(capsys, "integrate", tmp_path / "g.mat", "-o", tmp_path / "o",
+                         "-s", "npy")
+    assert code == 0, err
+    assert f"{int(inside.sum())} facets (mask: g.mat mask)" in out
+    depth = np.load(tmp_path / "o" / "depth.npy")
+    assert np.isfinite(depth[inside]).all() and np.isnan(depth[~inside]).all()

@@ -63,8 +63,8 @@ def read_mat(path, keys=None) -> dict:
     keys : sequence of str, optional
         Variable names: ``(p, q)`` or ``(p, q, mask)`` for a gradient field, ``(normals,)`` or
         ``(normals, mask)`` for a normal map (an (H, W, 3) variable). Default: ``p`` and
-        ``q`` (and ``mask`` when present) if the file has them, else its only (H, W, 3)
-        variable (and ``mask``).
+        ``q`` (and ``mask``, in any case, when present) if the file has them, else its only
+        (H, W, 3) variable (and ``mask``).
 
     Returns
     -------
@@ -149,7 +149,9 @@ def _mat_mask(m: np.ndarray, name: str) -> np.ndarray:
 
 
 def _default_keys(data: dict, names: list[str]) -> list[str]:
-    mask = ["mask"] if "mask" in data else []
+    # (the mask's name in any case: MATLAB code's Mask was left unread without a word, the
+    # whole image integrated, a review)
+    mask = ["mask"] if "mask" in data else [k for k in names if k.lower() == "mask"][:1]
     if "p" in data and "q" in data:
         return ["p", "q"] + mask
     maps = [k for k in names if np.ndim(data[k]) == 3 and np.shape(data[k])[-1] == 3]
