@@ -828,13 +828,13 @@ def _settled(folder: Path, outputs) -> bool:
         return False
 
 
-def _complete(rec: dict, asked: dict, stamp: list | None = None) -> bool:
+def _complete(rec: dict, wanted: dict, stamp: list | None = None) -> bool:
     """Whether an earlier record finished what is asked now: ``ok``, with the same settings
     (outputs, method, options, frames ...; a record without them, from an older log, does
     not count), the same inputs (:func:`fingerprint`, where given) and every output it wrote
-    still there."""
+    still there. `wanted`: the settings asked now, as :func:`_comparable` gives them."""
     outputs = rec.get("outputs", {})
-    return (rec.get("status") == "ok" and _comparable(rec.get("settings")) == _comparable(asked)
+    return (rec.get("status") == "ok" and _comparable(rec.get("settings")) == wanted
             and (stamp is None or rec.get("input_stamp") == stamp)
             and all(Path(p).is_file() for p in outputs.values())
             # (the sizes they were written with, where the record has them: older logs not)
@@ -959,12 +959,13 @@ def batch(inputs, out, *, job: Job | None = None, workers: int | None = None,
     jobs, results = [], {}
     stamps = {it.path: fingerprint(it, template) for it in found}
     mine = _folders_of(owners, found, stamps)  # (each input's folder by the log)
+    wanted = _comparable(asked)  # (once: each record is compared with it)
     for it in found:
         rec = earlier.get(it.path)
         # (settled first: its roll-back may take out an output, which _complete then misses)
         if rec is not None and mine.get(it.path) == rec.get("name") and _settled(
                 root / rec["name"], rec.get("outputs", {}).values()) and _complete(
-                rec, asked, stamps[it.path]):
+                rec, wanted, stamps[it.path]):
             results[it.path] = dict(rec, resumed=True)
     # the folders of the items kept from an earlier run are theirs, and so are the folders
     # the log gives to inputs not run now: an item run now that would take one of those names

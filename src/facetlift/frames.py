@@ -1529,11 +1529,11 @@ def silhouette_of(d, known, normals, *, offset=(0, 0), image_shape=None) -> dict
     oy = out[:-2, 1:-1].astype(np.int8) - out[2:, 1:-1]  # (+1: it ends above: y up)
     er, ec = np.nonzero(d.mask & ((ox != 0) | (oy != 0)))
     r, c = d.pixels  # (row-major: the facets' order)
-    f = np.searchsorted(r.astype(np.int64) * W + c, er.astype(np.int64) * W + ec)
+    key = r.astype(np.int64) * W + c
+    f = np.searchsorted(key, er.astype(np.int64) * W + ec)
     ox, oy = ox[er, ec], oy[er, ec]
     known_all = np.asarray(known, bool)
     known = known_all[f]
-    key = r.astype(np.int64) * W + c
 
     def inward(o, dr, dc):
         """Per edge pixel: its facet, or where it has no normal the facet one step inward
@@ -1919,12 +1919,11 @@ def layout_check(p, q, frame: str = "xy", mask=None) -> dict:
     # as a saddle z = k x y has, is integrable in both layouts, and quantised slopes leave
     # curl in one reading alone, which was told to change its layout, a review; nor on a
     # map of a few pixels)
-    clear = own > LAYOUT_MIN_CURL or (own > LAYOUT_LOW_CURL and min(alt, swap) > 0.0
-                                      and np.size(p) >= LAYOUT_LOW_PIXELS
-                                      and min(alt, swap) < LAYOUT_STRONG_RATIO * own)
-    ratio = LAYOUT_RATIO if own > LAYOUT_MIN_CURL else LAYOUT_STRONG_RATIO
-    if not clear:
+    # (the ratio itself is the tests below, with the stronger one under the floor)
+    if not (own > LAYOUT_MIN_CURL or (own > LAYOUT_LOW_CURL and min(alt, swap) > 0.0
+                                      and np.size(p) >= LAYOUT_LOW_PIXELS)):
         return out
+    ratio = LAYOUT_RATIO if own > LAYOUT_MIN_CURL else LAYOUT_STRONG_RATIO
     if other is not None and alt < ratio * own and alt <= swap:
         out["suggested"] = other
         meaning = GRADIENT_FRAMES[other]

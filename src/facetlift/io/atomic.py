@@ -285,8 +285,7 @@ class OutputSet:
         # (a file whose existence cancels the set before anything moves: a cluster batch's
         # interrupt, which cannot stop a running task, jobs.Job.cancel_mark)
         self.cancel = None if cancel is None else Path(cancel)
-        if self.cancel is not None and self.cancel.exists():
-            raise Cancelled(f"cancelled ({self.cancel} exists): nothing was written")
+        self._check_cancel()
         for name in names:
             target = self.outdir / name
             for src in inputs:
@@ -336,9 +335,7 @@ class OutputSet:
             names it and says that the folder was left as it was.
         """
         moves = [(name, p, self.outdir / name) for name, p in self.staged.items() if p.exists()]
-        if self.cancel is not None and self.cancel.exists():
-            self.abort()
-            raise Cancelled(f"cancelled ({self.cancel} exists): nothing was written")
+        self._check_cancel(abort=True)
         self._in_the_way(name for name, _, _ in moves)
         aside = self.staging / ".replaced"
         import json
@@ -380,6 +377,14 @@ class OutputSet:
             raise
         shutil.rmtree(self.staging, ignore_errors=True)
         return done
+
+    def _check_cancel(self, abort: bool = False) -> None:
+        """Raise :class:`Cancelled` where the cancel mark exists (having removed the staging
+        folder, with `abort`)."""
+        if self.cancel is not None and self.cancel.exists():
+            if abort:
+                self.abort()
+            raise Cancelled(f"cancelled ({self.cancel} exists): nothing was written")
 
     def _in_the_way(self, names) -> None:
         """Refuse a target that is a folder (a user's 'mkdir out/preview.png'), before work."""

@@ -170,7 +170,7 @@ def run(problem, *, sigma, reg, tile, margin, progress) -> MethodResult:
         progress(done["groups"] + k,
                  (done["facets"] + share * done["box"]) / max(d.n_facets, 1))
 
-    boxes = []  # (facets, (r0, c0), known, inside, the box's tile plan)
+    boxes = []  # (facets, their rows, columns and usable, (r0, c0), known, inside, plan)
     for f in groups:
         r, c = rows[f], cols[f]
         r0, c0 = r.min(), c.min()
@@ -180,15 +180,13 @@ def run(problem, *, sigma, reg, tile, margin, progress) -> MethodResult:
         known = np.zeros(shape, dtype=bool)
         ok = problem.usable[f]
         known[r[ok] - r0, c[ok] - c0] = True
-        boxes.append((f, (r0, c0), known, inside,
+        boxes.append((f, (r, c, ok), (r0, c0), known, inside,
                       plan_tiles(known, inside, sigma=sigma, tile=tile, margin=margin)))
     # (the whole run's factorizations, said once before any starts: KERNEL_WARN_SECONDS; per
     # box, a mask of several pieces each under the limit went unsaid, a review)
     _time_check([size for *_, plan in boxes for size in plan[2]], sigma, tile, margin)
-    for f, (r0, c0), known, inside, plan in boxes:
+    for f, (r, c, ok), (r0, c0), known, inside, plan in boxes:
         done["box"] = f.size
-        r, c = rows[f], cols[f]
-        ok = problem.usable[f]
         gc = np.zeros(inside.shape)
         gr = np.zeros(inside.shape)
         gc[r - r0, c - c0] = np.where(ok, gx[f], 0.0)  # dz / d col
