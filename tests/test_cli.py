@@ -815,17 +815,24 @@ def test_a_prior_of_another_size_is_told_to_be_resized_and_declared_blurred(tmp_
     code, _, err = run(capsys, "integrate", tmp_path / "n.npy", "--prior", tmp_path / "mono.npy",
                        "-o", tmp_path / "x")
     err = " ".join(err.split())
-    assert code == 1 and "--prior: size 52x52 (HxW) but the normal map is 54x96; resize it to " \
-        "54x96, the normal map's size, with any image tool" in err, err
+    assert code == 1 and "--prior: size 52x52 (HxW) but the normal map is 54x96; a depth " \
+        "sensor's map belongs in the normal map's camera: reproject its points with the " \
+        "sensor's own K and pose" in err, err
+    assert "resize it to 54x96, the normal map's size, with any image tool" in err, err
     assert "--prior-blur / prior_blur about 2 to say it is blurred (1.1 x the 1.8x" in err
     assert "its width/height (1) is not the map's (1.78): undo the resize" in err
     assert "--prior-fit affine or disparity" in err and "'A monocular depth map'" in err
     assert "coarser" not in err
-    with pytest.raises(ValueError, match=r"got shape \(52, 52\); resize it to 54x96"):
+    with pytest.raises(ValueError, match=r"got shape \(52, 52\); a depth sensor's map .* "
+                       r"resize it to 54x96"):
         facetlift.integrate(n, prior=np.ones((52, 52)))
     with pytest.raises(ValueError, match=r"resize it to 54x96, the normal map's size, with any "
                        r"image tool \(bilinear\); a monocular"):  # (made smaller: no blur)
         facetlift.integrate(n, prior=np.ones((108, 192)))
+    # (a VGA sensor's 480 x 640 beside 512 x 612: taller but narrower, so not "enlarged")
+    with pytest.raises(ValueError, match=r"image tool \(bilinear\); its width/height"):
+        facetlift.integrate(np.dstack([np.zeros((51, 61, 2)), np.ones((51, 61))]),
+                            prior=np.ones((48, 64)))
     folder = tmp_path / "ds"
     folder.mkdir()
     np.save(folder / "normal_map.npy", n)

@@ -104,15 +104,51 @@ def test_the_bear_with_outliers_and_the_discontinuity_route():
     assert errs["remove"] < 0.1, errs  # mm, against 0.16 kept (measured)
 
 
-def test_dense_and_blurred_priors_are_not_checked():
+def test_a_dense_priors_lone_wrong_pixels_are_left_out_by_their_neighbours():
+    """A dense map's sample is compared with its eight neighbouring samples and left out where
+    most of them disagree (a sensor's flying pixels), where a sparse prior's must agree with
+    none: a correct sample beside a wrong one stays."""
     gt = synthetic.analytic("sphere", 48)
     dense = np.where(gt.mask, gt.depth, np.nan)
-    dense[20, 20] += 5.0
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    span = np.nanmax(gt.depth) - np.nanmin(gt.depth)
+    dense[20, 20] += 5.0 * span
+    dense[30, 21] -= 3.0 * span
+    dense[30, 22] -= 2.0 * span  # (beside another wrong one: most of its neighbours still right)
+    with pytest.warns(UserWarning, match=r"prior: 3 of the \d+ samples disagree with most of "
+                      r"their neighbouring samples .* flying pixels"):
         s = facetlift.integrate(gt.normals, gt.mask, prior=dense, prior_weight=0.01)
     out = s.info["prior"]["outliers"]
-    assert out["removed"] == 0 and "dense prior" in out["skipped"]
+    assert out["removed"] == 3 and out["dense"]
+    assert sorted(map(tuple, out["pixels"])) == [(20, 20), (30, 21), (30, 22)]
+    err = np.nanmean(np.abs(s.depth - gt.depth)[gt.mask])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        kept = facetlift.integrate(gt.normals, gt.mask, prior=dense, prior_weight=0.01,
+                                   prior_outliers="keep")
+    clean = facetlift.integrate(gt.normals, gt.mask, prior=np.where(gt.mask, gt.depth, np.nan),
+                                prior_weight=0.01)
+    err_clean = np.nanmean(np.abs(clean.depth - gt.depth)[gt.mask])
+    assert err < 1.05 * err_clean < 0.5 * np.nanmean(np.abs(kept.depth - gt.depth)[gt.mask])
+    # a right map, with noise, loses none
+    noisy = np.where(gt.mask, gt.depth, np.nan)
+    noisy += np.random.default_rng(0).normal(0, 0.002 * span, noisy.shape)
+    problem = facetlift.prepare(gt.normals, gt.mask, prior=noisy, prior_weight=0.01)
+    assert problem.extras["prior_outliers"]["removed"] == 0
+
+
+@pytest.mark.parametrize("name", ["steps", "occluder"])
+def test_a_dense_prior_across_depth_jumps_keeps_the_jumps_edges(name):
+    """Exact depth across jumps the normals do not show: a sample on a jump's straight edge
+    has most of its neighbours on its own side and stays; only corners may go."""
+    gt = synthetic.analytic(name, 96)
+    dense = np.where(gt.mask, gt.depth, np.nan)
+    problem = facetlift.prepare(gt.normals, gt.mask, pixel_size=gt.pixel_size, prior=dense)
+    out = problem.extras["prior_outliers"]
+    assert out["removed"] <= 0.002 * out["checked"], out["removed"]
+
+
+def test_blurred_and_few_samples_priors_are_not_checked():
+    gt = synthetic.analytic("sphere", 48)
     _, r, c, z = _sphere_samples(40)
     problem = facetlift.prepare(gt.normals, gt.mask, prior=(r * 0.75, c * 0.75, z),
                                 prior_blur=2.0, prior_weight=0.001)
@@ -286,5 +322,7 @@ def test_a_prior_that_runs_against_the_normals_is_named():
                           prior_weight=0.01)
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)
+        # (the bear's one lone normal 85 deg or more from the ray: problem.STEEP_ISOLATED)
+        warnings.simplefilter("ignore", facetlift.problem.UnusableNormalsWarning)
         p = facetlift.prepare(d["normals"], d["mask"], K=d["K"], prior=depth, prior_weight=0.01)
     assert p.extras["prior_trend"]["agreement"] > 0.9

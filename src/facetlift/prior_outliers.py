@@ -24,8 +24,11 @@ the samples' depth range, taken per mask component between the 5th and 95th perc
 that the outliers sought and other objects at other depths do not widen it).
 
 Dense priors (samples on more than :data:`DENSE` of the facets: a depth sensor's map, a
-monocular network's) and blurred ones (``prior_blur``) are not checked: a dense map's errors
-are smooth, not isolated, and a blurred prior's samples differ from the surface by design.
+monocular network's) are checked pixel by pixel: each sample against its eight neighbouring
+samples, across rims too (a sensor's flying pixels lie on the silhouette's grazing rim), and
+left out where fewer than half of at least :data:`DENSE_KNOWN` comparisons agree
+(docs/fusion.md, "Dense priors: a sensor's flying pixels"). Blurred priors (``prior_blur``)
+are not checked: their samples differ from the surface by design.
 """
 
 from __future__ import annotations
@@ -41,8 +44,11 @@ KNOWN = 0.75
 #: Agreement tolerance: FAR times the median disagreement over all comparisons, and at least
 #: FLOOR (relative depth with a camera; a share of the depth range or object width without).
 FAR, FLOOR = 10.0, 0.02
-#: Priors with samples on more than this share of the facets are not checked.
-DENSE = 0.25
+#: Priors with samples on more than this share of the facets are dense (a depth map): each
+#: sample is compared with its eight neighbouring samples instead of its :data:`K_NEAR`
+#: nearest, and is an outlier where at least :data:`DENSE_KNOWN` comparisons are made and
+#: fewer than half of them agree (a sensor's flying pixels, stray returns).
+DENSE, DENSE_KNOWN = 0.25, 3
 #: Lines longer than this many pixels are not compared.
 MAX_LENGTH = 128
 #: Points along the lines per pixel of their length.
@@ -70,10 +76,8 @@ def find_outliers(problem) -> tuple[np.ndarray | None, dict]:
     n = s.size
     if n < 5:
         return None, {"skipped": f"{n} samples (fewer than 5)"}
-    if n > DENSE * d.n_facets:
-        return None, {"skipped": f"a dense prior (samples on more than {DENSE:.0%} of the "
-                                 "mask's pixels)"}
-    a, b, predicted = _predicted(problem, s)
+    dense = n > DENSE * d.n_facets
+    a, b, predicted = _predicted(problem, s, neighbours=dense)
     e = np.abs((u[s[b]] - u[s[a]]) - predicted)
     made = np.isfinite(e)
     if made.sum() < 3:
@@ -90,12 +94,18 @@ def find_outliers(problem) -> tuple[np.ndarray | None, dict]:
         return np.bincount(a[sel], minlength=n) + np.bincount(b[sel], minlength=n)
 
     total, compared, agreeing = tally(slice(None)), tally(made), tally(agree)
-    bad = (compared >= 3) & (compared >= KNOWN * total) & (agreeing == 0)
+    if dense:
+        # (a map's neighbours: most of a sample's comparisons across a jump or a flying
+        # point beside it still disagree, so the majority decides, not "agrees with none")
+        bad = (compared >= DENSE_KNOWN) & (2 * agreeing < compared)
+    else:
+        bad = (compared >= 3) & (compared >= KNOWN * total) & (agreeing == 0)
     # (and those that agree with none of the few comparisons made: kept, but counted)
     doubtful = (compared >= 1) & (agreeing == 0) & ~bad
     out = np.zeros(d.n_facets, dtype=bool)
     out[s[bad]] = True
-    return out, {"checked": int(n), "comparisons": int(made.sum()), "threshold": threshold,
+    return out, {"checked": int(n), "dense": bool(dense), "comparisons": int(made.sum()),
+                 "threshold": threshold,
                  "unconfirmed": int(doubtful.sum()),
                  "unconfirmed_pixels": image_pixels(d, s[doubtful])}
 
@@ -196,19 +206,30 @@ def _spread(values: np.ndarray, component: np.ndarray) -> float:
     return float(np.max(hi - lo)) if v.size else 0.0
 
 
-def _predicted(problem, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _predicted(problem, s: np.ndarray, neighbours: bool = False
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(a, b, predicted)``: pairs of the samples at facets `s` (indices into `s`, each with
-    its :data:`K_NEAR` nearest, every pair once) and the change of the unknown from a to b
-    that the normals predict along the line (NaN where not compared: rims, no normal,
-    outside the mask, too long)."""
+    its :data:`K_NEAR` nearest, or with `neighbours` its eight neighbouring pixels that hold
+    samples; every pair once) and the change of the unknown from a to b that the normals
+    predict along the line (NaN where not compared: rims, no normal, outside the mask, too
+    long)."""
     d = problem.domain
     r, c = d.pixels
-    index = np.full(d.shape, -1, dtype=np.int64)
-    index[r, c] = np.arange(r.size)
     gx, gy = problem.grid_slopes
-    rim = problem.view_cosines < STEEP  # (also where there is no usable normal: cosine 0)
+    # (also where there is no usable normal: cosine 0; a map's neighbours are compared across
+    # a rim too: a sensor's flying pixels lie on the silhouette's grazing rim, and a step of
+    # one pixel there predicts far less than they are off)
+    rim = problem.view_cosines <= 0 if neighbours else problem.view_cosines < STEEP
     gx = np.where(rim, np.nan, gx)
     gy = np.where(rim, np.nan, gy)
+    if neighbours:  # (the midpoint rule over the two facets: a step of one pixel)
+        a, b = _adjacent(d.shape, r[s], c[s])
+        fa, fb = s[a], s[b]
+        dr, dc = r[fb] - r[fa], c[fb] - c[fa]
+        # (x along columns, y up: a step down the rows is a step of -1 in y)
+        return a, b, 0.5 * ((gx[fa] + gx[fb]) * dc - (gy[fa] + gy[fb]) * dr)
+    index = np.full(d.shape, -1, dtype=np.int64)
+    index[r, c] = np.arange(r.size)
     pts = np.column_stack([r[s], c[s]]).astype(float)
     a, b = _pairs(pts, min(K_NEAR, s.size - 1))
     return a, b, _line_integrals(pts, a, b, index, gx, gy)
@@ -223,6 +244,21 @@ def _pairs(pts: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     a = np.repeat(np.arange(len(pts)), k)
     pair = np.unique(np.sort(np.column_stack([a, near.ravel()]), axis=1), axis=0)
     return pair[:, 0], pair[:, 1]
+
+
+def _adjacent(shape, r: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs of the samples at pixels (`r`, `c`) that are 8-neighbours, each once."""
+    at = np.full(shape, -1, dtype=np.int64)
+    at[r, c] = np.arange(r.size)
+    a, b = [], []
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        rr, cc = r + dr, c + dc
+        ok = (rr < shape[0]) & (cc >= 0) & (cc < shape[1])
+        j = np.full(r.size, -1, dtype=np.int64)
+        j[ok] = at[rr[ok], cc[ok]]
+        a.append(np.flatnonzero(j >= 0))
+        b.append(j[j >= 0])
+    return np.concatenate(a), np.concatenate(b)
 
 
 def _line_integrals(pts, a, b, index, gx, gy) -> np.ndarray:

@@ -596,7 +596,8 @@ def prepare(
         (:func:`check_prior_blur`, docs/fusion.md); None or 0: none.
     prior_outliers : {"remove", "keep"}
         "remove" (default): samples of a sparse prior that disagree with every neighbouring
-        sample along the normals are left out, counted and named in a warning
+        sample along the normals, and of a dense one (a depth map) with most of the eight
+        beside them, are left out, counted and named in a warning
         (:mod:`facetlift.prior_outliers`); "keep": every sample is used.
     grazing_share : float in (0, 1], optional
         The most of a connected component's front-facing normals the grazing rule may drop:
@@ -1199,8 +1200,10 @@ def _remove_outliers(problem: Problem) -> None:
         # tolerance follows the median disagreement, so this is seldom reached)
         problem.extras["prior_outliers"] = {"removed": 0, "disagreeing": k, "first": None,
                                             "pixels": [], "tolerance": tol, **details}
-        warn(f"prior: {k} of the {details['checked']} samples disagree with every "
-             "neighbouring sample along the normals, too many to be outliers: all are used. "
+        whom = ("most of their neighbouring samples" if details.get("dense")
+                else "every neighbouring sample")
+        warn(f"prior: {k} of the {details['checked']} samples disagree with {whom} "
+             "along the normals, too many to be outliers: all are used. "
              "The prior and the normals disagree; check the prior's units, `pixel_size` or "
              "`K`, and the normals' frame (info['prior']['outliers']; docs/fusion.md, "
              "'Outlier samples')")
@@ -1218,12 +1221,19 @@ def _remove_outliers(problem: Problem) -> None:
         more = (f"; {doubt} more disagree with the few they could be compared with and were "
                 "kept (info['prior']['outliers']['unconfirmed_pixels']; a lower prior_weight "
                 "limits what they can do)" if doubt else "")
-        warn(f"prior: {k} of the {details['checked']} samples disagree with every "
-             f"neighbouring sample they could be compared with, by more than {tol} along "
-             f"the normals (the first at row {first[0]}, col {first[1]}): left out as "
-             f"outliers, such as mismatched SfM points or a sensor's stray returns, or a "
-             "correct sample beside a depth jump that the normals do not show (one on a piece "
-             f"of its own beyond the jump){more} "
+        if details.get("dense"):
+            what = (f"disagree with most of their neighbouring samples (pixels) by more than "
+                    f"{tol} along the normals (the first at row {first[0]}, col {first[1]}): "
+                    "left out as outliers, such as a depth sensor's flying pixels along "
+                    "depth edges and silhouettes or its stray returns, or a correct sample at "
+                    "the corner of a depth jump that the normals do not show")
+        else:
+            what = (f"disagree with every neighbouring sample they could be compared with, by "
+                    f"more than {tol} along the normals (the first at row {first[0]}, col "
+                    f"{first[1]}): left out as outliers, such as mismatched SfM points or a "
+                    "sensor's stray returns, or a correct sample beside a depth jump that the "
+                    "normals do not show (one on a piece of its own beyond the jump)")
+        warn(f"prior: {k} of the {details['checked']} samples {what}{more} "
              "(all: info['prior']['outliers']['pixels'], --json; prior_outliers='keep', "
              "--prior-outliers keep, uses them; docs/fusion.md, 'Outlier samples')")
 
@@ -1822,7 +1832,8 @@ def resize_prior_hint(small, shape) -> str:
     if min(h, w, H, W) <= 0:
         return ""
     f = max(H / h, W / w)
-    if f > 1.05:
+    if f > 1.05 and min(H / h, W / w) >= 1.0:  # (enlarged both ways: a VGA sensor's 480 x 640
+        # beside 512 x 612 is shrunk across, a review)
         blur = (f", and give --prior-blur / prior_blur about {1.1 * f:.2g} to say it is blurred "
                 f"(1.1 x the {f:.2g}x it is enlarged by; more for a network's output, softer "
                 "than its pixels; --prior-weight then defaults to 0.003)")
@@ -1833,7 +1844,11 @@ def resize_prior_hint(small, shape) -> str:
         aspect = (f"; its width/height ({w / h:.3g}) is not the map's ({W / H:.3g}): undo the "
                   "resize that made it (stretch it back where the frame was squashed to the "
                   "network's input, put it in place where the frame was cropped)")
-    return (f"; resize it to {H}x{W}, the normal map's size, with any image tool (bilinear)"
+    return (f"; a depth sensor's map belongs in the normal map's camera: reproject its "
+            "points with the sensor's own K and pose (a plain resize is right only where both "
+            "share one camera and field of view; a sparse points prior, (rows, cols, depths), "
+            "takes the reprojected points as they are); a network's or an upsampled map: "
+            f"resize it to {H}x{W}, the normal map's size, with any image tool (bilinear)"
             f"{blur}"
             f"{aspect}; a monocular network's relative depth or disparity also wants "
             "--prior-fit affine or disparity (prior_fit=), which fits its scale and shift to "
