@@ -296,6 +296,7 @@ def integrate(
             outlier_eps=outlier_eps, prior=prior, prior_weight=prior_weight,
             confidence=confidence, grazing_note=note, prior_blur=prior_blur,
             prior_outliers=prior_outliers, isolated=isolated, grazing_share=share,
+            steep_isolated=info.steep_isolated and not options.get("discontinuities"),
         )
         surface = _solve(problem, method, t0, max_memory, options)
     # (how the caller's normals reach the camera's facetlift frame: Surface.save's

@@ -952,9 +952,11 @@ def _info_lines(rec: dict) -> list[str]:
                      f"than {HOLE_PIXELS} pixels without a {valid}, left out as real holes "
                      "(a ring's; if they are NaN / background fill inside the object, a mask, "
                      "--mask, integrates across them as missing samples)")
+    # (zero confidence too, as the JSON and integrate count it: an audit; isolated: the smooth
+    # DGP's lone steep normals, problem.STEEP_ISOLATED)
     bad = ", ".join(f"{c[k]} {k.replace('_', ' ')}" for k in (
-        "missing", "non-finite", "zero-length", "back-facing", "grazing", "zero_confidence")
-        if c.get(k))  # (zero confidence too, as the JSON and integrate count it: an audit)
+        "missing", "non-finite", "zero-length", "back-facing", "grazing", "isolated",
+        "zero_confidence") if c.get(k))
     first = rec.get("first_unusable")
     lines.append(f"  unusable {_samples(field)}: {bad or 'none'}"
                  + (f"; first at (row {first[0]}, col {first[1]})" if first else ""))

@@ -322,10 +322,14 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
             # (a prior to be aligned is checked as values, not as depths: any sign; a
             # folder's files named as integrate names them, a review)
             with renamed(lambda m: _folder_named(m, job, inp, warning=True)):
+                # (the default integration's rules: the smooth DGP's lone steep normals too)
+                from . import methods
+
                 problem = prepare(checked, inp.mask, K=inp.K,
                                   prior=None if fitted else prior_map,
                                   prior_blur=None if fitted else prior_blur,
-                                  confidence=inp.confidence)
+                                  confidence=inp.confidence,
+                                  steep_isolated=methods.get("dgp").steep_isolated)
         except ValueError as e:
             # (the warnings that came first too: a K for another image is what makes a map
             # unusable, and its warning was dropped, a review)
@@ -434,6 +438,9 @@ def _jump_grazing(problem) -> dict:
     if eps is None:
         return {}
     iso = None if route.jump_isolated is None else problem.isolated(route.jump_isolated)
+    steep = problem.extras.get("steep_isolated")  # (the default route's, left out already)
+    if iso is not None and steep is not None:
+        iso = iso | steep
     camera = problem.counts.get("outlier_eps", eps)
     # (the route's edge-on share applies where its threshold is the larger one)
     between = problem.grazing_between(camera, eps, without=iso,

@@ -103,6 +103,9 @@ class MethodInfo:
     #: than `deviation` from the median of its eight neighbours, which agree within
     #: `agreement`, is a missing sample (:func:`facetlift.problem.isolated_normals`); None: kept.
     jump_isolated: tuple | None = None
+    #: Without ``discontinuities``: with a pinhole camera, lone normals more than 85 deg from
+    #: their ray are missing samples (:data:`facetlift.problem.STEEP_ISOLATED`).
+    steep_isolated: bool = False
     #: With ``discontinuities=True`` the surface carries its cut edges and jump map
     #: (``Surface.discontinuities``, ``--save discontinuities``) and a mesh split at them.
     jump_map: bool = False
@@ -177,6 +180,10 @@ register(
         # normals"; JUMP_ISOLATED)
         jump_isolated=JUMP_ISOLATED,
         jump_map=True,
+        # a wrong normal nearly edge-on inside an object bends the whole smooth surface, which
+        # the pinhole camera's grazing rule (1/255) keeps (docs/perspective.md, "Lone steep
+        # normals")
+        steep_isolated=True,
     )
 )
 
