@@ -66,8 +66,8 @@ def read_K(path, shape=None) -> np.ndarray:
     ------
     ValueError
         Missing or unparsable file, another count of numbers, or a matrix that is not valid
-        intrinsics (see :mod:`facetlift.conventions`; a transposed matrix is named so); with
-        `shape`, a stated image size that differs.
+        intrinsics (see :mod:`facetlift.conventions`; a transposed matrix is named so, with
+        MATLAB's 1-based principal point); with `shape`, a stated image size that differs.
     """
     K, stated = read_K_stated(path)
     if shape is not None:
