@@ -2004,3 +2004,16 @@ def test_a_transposed_K_is_told_matlabs_one_based_principal_point():
                        r"fy 42, s 0.5, cx 14.5, cy 9.5 \(cx 15.5, cy 10.5 for a transposed K "
                        r"that was 0-based already\)"):
         facetlift.camera.check_K(matlab)
+
+
+def test_K_as_nine_numbers_is_taken_in_python(tmp_path):
+    """A review: integrate(K=K.ravel()) was refused ("got shape (9,)") where read_K and --K
+    take nine numbers row by row; it is the same camera as the matrix now."""
+    import facetlift
+
+    n = np.dstack([np.zeros((20, 30, 2)), np.ones((20, 30))])
+    K = np.array([[40.0, 0, 14.5], [0, 41.0, 9.5], [0, 0, 1]])
+    a = facetlift.integrate(n, K=K.ravel().tolist())
+    b = facetlift.integrate(n, K=K)
+    np.testing.assert_array_equal(a.depth, b.depth)
+    np.testing.assert_array_equal(facetlift.camera.check_K(K.ravel()), K)

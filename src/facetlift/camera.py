@@ -435,7 +435,9 @@ PIXEL_SIZE_RANGE = (1e-12, 1e12)
 
 def check_K(K) -> np.ndarray:
     """`K` as a (3, 3) float array of valid intrinsics, or a ValueError naming what is wrong.
-    Four numbers ``(fx, fy, cx, cy)`` are taken too, as the command line's K files are."""
+    Four numbers ``(fx, fy, cx, cy)`` are taken too, and nine, the matrix row by row, as the
+    command line's K files are (a flat ``K.ravel()`` was refused by integrate while read_K
+    and --K took it, a review)."""
     from .problem import numeric_array
 
     if isinstance(K, Orthographic):  # (was "must be a real numeric array; got dtype object",
@@ -446,9 +448,11 @@ def check_K(K) -> np.ndarray:
     if Km.shape == (4,):  # (fx, fy, cx, cy): cx a column, cy a row from the top
         fx, fy, cx, cy = Km
         Km = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    elif Km.shape == (9,):  # (the matrix row by row)
+        Km = Km.reshape(3, 3)
     if Km.shape != (3, 3):
-        raise ValueError(f"`K` must be a 3x3 intrinsics matrix or four numbers (fx, fy, cx, "
-                         f"cy); got shape {Km.shape}")
+        raise ValueError(f"`K` must be a 3x3 intrinsics matrix, its nine numbers row by row, "
+                         f"or four numbers (fx, fy, cx, cy); got shape {Km.shape}")
     if not np.isfinite(Km).all():
         raise ValueError("`K` contains NaN or inf")
     if not (Km[0, 0] > 0 and Km[1, 1] > 0):

@@ -570,7 +570,7 @@ def prepare(
         Pixels whose normal is given; the others in the mask are missing samples.
     pixel_size : float
         Pixel width in world units (orthographic views).
-    K : (3, 3) array_like or four numbers (fx, fy, cx, cy), optional
+    K : (3, 3) array_like, nine numbers (row by row) or four (fx, fy, cx, cy), optional
         Perspective intrinsics, OpenCV layout.
     camera : facetlift.camera.Camera, optional
         Instead of `pixel_size` and `K`.
