@@ -654,3 +654,58 @@ def test_a_2x2_matrix_is_refused_as_such_and_four_numbers_in_a_column_are_fx_fy_
         io.read_K(p)
     p.write_text("3000\n3100\n300\n250\n")
     np.testing.assert_array_equal(io.read_K(p), [[3000, 0, 300], [0, 3100, 250], [0, 0, 1]])
+
+
+def test_json_K_under_a_key_or_nested_in_an_object(tmp_path):
+    """A review: a JSON K file was read only as a list or as an object with fx, fy, cx, cy at
+    its top. The matrix under K, intrinsics, camera_matrix or intrinsic_matrix (3x3, or nine
+    numbers row by row), and fx ... cy or such a matrix in one object inside it are read
+    too; two of them, or none, are named."""
+    rows = K.tolist()
+    for i, data in enumerate([
+            {"K": rows}, {"intrinsics": K.ravel().tolist()}, {"Camera_Matrix": rows},
+            {"intrinsic_matrix": rows, "width": 640}, {"camera": {"fx": 500, "fy": 510,
+                                                                 "cx": 320.5, "cy": 240.25}},
+            {"cam0": {"K": rows}, "baseline": 0.1}]):
+        got, said = read(tmp_path, f"k{i}.json", json.dumps(data))
+        np.testing.assert_array_equal(got, K)
+        assert said == [], (data, said)
+    for data, match in [
+            ({"K": rows, "intrinsics": rows}, r"holding both K and intrinsics: which is K"),
+            ({"left": {"K": rows}, "right": {"K": rows}},
+             r"several cameras \(left, right\): which is the image's"),
+            ({"focal": 500}, r"a JSON object needs fx, fy, cx, cy; .* missing \(or the matrix "
+                             r"under K, intrinsics, camera_matrix, intrinsic_matrix")]:
+        (tmp_path / "bad.json").write_text(json.dumps(data))
+        with pytest.raises(ValueError, match=match):
+            io.read_K(tmp_path / "bad.json")
+
+
+def test_a_4x4_intrinsics_file_gives_its_top_left_3x3(tmp_path):
+    """A review: ScanNet's intrinsic_color.txt (K in the top-left of a 4x4, last row and
+    column 0 0 0 1) was refused as 16 numbers. Taken where the rest is the identity's; a 4x4
+    that is not (a pose) is refused, naming its last row and column."""
+    K4 = np.eye(4)
+    K4[:3, :3] = K
+    np.savetxt(tmp_path / "intrinsic_color.txt", K4, fmt="%f")
+    np.testing.assert_array_equal(io.read_K(tmp_path / "intrinsic_color.txt"), K)
+    np.save(tmp_path / "K4.npy", K4)
+    np.testing.assert_array_equal(io.read_K(tmp_path / "K4.npy"), K)
+    pose = K4.copy()
+    pose[:3, 3] = [0.1, 0.2, 1.5]
+    np.savetxt(tmp_path / "pose.txt", pose)
+    with pytest.raises(ValueError, match=r"pose\.txt holds a 4x4 matrix whose last row and "
+                       r"column are not 0 0 0 1 .*column \[0\.1, 0\.2, 1\.5\]"):
+        io.read_K(tmp_path / "pose.txt")
+
+
+def test_K_that_is_neither_a_file_nor_numbers_says_what_K_takes(tmp_path, capsys):
+    """A review: --K 420 and --K "fx=420 ..." were told "File '420' does not exist" alone."""
+    from test_cli import write_input
+
+    npath, _, _ = write_input(tmp_path)
+    for typed in ("420", "fx=420 fy=420 cx=12 cy=9"):
+        code, err = main(["integrate", str(npath), "--K", typed]), capsys.readouterr()[1]
+        assert code != 0 and f"File {typed!r} does not exist, and it is no K typed inline: " \
+            "--K takes a K file" in err, err
+        assert "or four numbers fx fy cx cy" in err and "--fov DEG" in err
