@@ -699,6 +699,97 @@ def test_a_4x4_intrinsics_file_gives_its_top_left_3x3(tmp_path):
         io.read_K(tmp_path / "pose.txt")
 
 
+def _other_camera_file(path, name):
+    """Write a camera file named `name` (:data:`OTHER_CAMERA_FILES`) as its tool writes it,
+    fx 500 in each."""
+    K4 = np.eye(4)
+    K4[:3, :3] = K
+    writers = {
+        "cameras.txt": lambda p: p.write_text(colmap("1 PINHOLE 640 480 500 510 321 240.75")),
+        "cameras.bin": lambda p: p.write_bytes(colmap_bin((1, 1, 640, 480,
+                                                           (500, 510, 321, 240.75)))),
+        "calib.yml": lambda p: p.write_text(OPENCV_YAML),
+        "calib.yaml": lambda p: p.write_text(OPENCV_YAML),
+        "calib.xml": lambda p: p.write_text(OPENCV_XML),
+        "camera_info.yaml": lambda p: p.write_text(ROS_CAMERA_INFO),
+        "camera_info.yml": lambda p: p.write_text(ROS_CAMERA_INFO),
+        "transforms.json": lambda p: p.write_text(json.dumps(
+            {"fl_x": 500, "fl_y": 510, "cx": 321, "cy": 240.75, "w": 640, "h": 480})),
+        "K.json": lambda p: p.write_text(json.dumps({"K": K.tolist()})),
+        "K.npy": lambda p: np.save(p, K),
+        "K.yml": lambda p: p.write_text("500 0 320.5\n0 510 240.25\n0 0 1\n"),
+        "K.yaml": lambda p: p.write_text(OPENCV_YAML),
+        "K.xml": lambda p: p.write_text(OPENCV_XML),
+        "intrinsics.txt": lambda p: p.write_text("500 510 320.5 240.25\n"),
+        "intrinsics.json": lambda p: p.write_text(json.dumps(
+            {"fx": 500, "fy": 510, "cx": 320.5, "cy": 240.25})),
+        "intrinsics.npy": lambda p: np.save(p, K.ravel()),
+        "intrinsic_color.txt": lambda p: np.savetxt(p, K4),
+    }
+    writers[name](path / name)
+
+
+def test_every_camera_file_named_as_unread_is_one_that_K_reads(tmp_path):
+    """The warning on other tools' camera files beside a map (OTHER_CAMERA_FILES) tells the
+    user to give one with --K: each name it looks for is one read_K reads."""
+    from facetlift.io.dataset import OTHER_CAMERA_FILES
+
+    for name in OTHER_CAMERA_FILES:
+        _other_camera_file(tmp_path, name)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # (the files' distortion)
+            got = io.read_K(tmp_path / name)
+        assert got[0, 0] == 500 and got[1, 1] == 510, name
+
+
+def test_a_camera_file_that_is_not_read_by_itself_is_named(tmp_path, capsys):
+    """A review: a dataset folder (or a map file) with COLMAP's cameras.txt, OpenCV's
+    calib.yml, a transforms.json, K.npy ... beside it ran orthographically without a word:
+    only a folder's K.txt and Calib_Results.mat are read by themselves. Such files are named
+    with --K (not read: which camera, and whether it is this image's, is the user's to say)
+    by integrate and info (its camera line too), and by a batch once per folder, whose
+    K.npy is no map; none where a camera is given or --orthographic says so."""
+    from test_cli import write_input
+
+    npath, mpath, _ = write_input(tmp_path)  # (20 x 26)
+    ds = tmp_path / "ds"
+    ds.mkdir()
+    np.save(ds / "normal_map.npy", np.load(npath) if npath.suffix == ".npy" else
+            io.read_normals(npath)[0])
+    _other_camera_file(ds, "cameras.txt")
+    code = main(["integrate", str(ds), "-s", "npy", "-o", str(tmp_path / "o1")])
+    _, err = capsys.readouterr()
+    assert code == 0 and (f"warning: the dataset folder {ds} holds cameras.txt: a camera "
+                          "file that is not read by itself") in err, err
+    assert f"integrated orthographically; give --K {ds / 'cameras.txt'}" in err
+    code = main(["info", str(ds)])
+    out, err = capsys.readouterr()
+    assert code == 0 and (f"camera: orthographic (cameras.txt beside it not read: --K "
+                          f"{ds / 'cameras.txt'} to use it)") in out, out
+    for flags in (["--orthographic"], ["--K", "26 26 12.5 9.5"]):
+        code = main(["integrate", str(ds), *flags, "-s", "npy", "-o", str(tmp_path / "o2")])
+        _, err = capsys.readouterr()
+        assert code == 0 and "cameras.txt" not in err, (flags, err)
+    # beside a map file
+    _other_camera_file(tmp_path, "K.npy")
+    _other_camera_file(tmp_path, "calib.yml")
+    code = main(["integrate", str(npath), "--mask", str(mpath), "-s", "npy", "-o",
+                 str(tmp_path / "o3")])
+    _, err = capsys.readouterr()
+    assert code == 0 and (f"{npath.name} has calib.yml and K.npy beside it: camera files that "
+                          "are not read by themselves") in err, err
+    # a batch: once for the folder, and K.npy is no map
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    for name in ("a.npy", "b.npy"):
+        np.save(maps / name, np.load(ds / "normal_map.npy"))
+    _other_camera_file(maps, "K.npy")
+    code = main(["batch", str(maps), "-s", "npy", "-o", str(tmp_path / "bo")])
+    out, err = capsys.readouterr()
+    assert code == 0 and err.count("K.npy") == 2 and "2 of 2 succeeded" in out, (out, err)
+    assert f"batch: {maps} holds K.npy beside its normal maps, a camera file that" in err
+
+
 def test_K_that_is_neither_a_file_nor_numbers_says_what_K_takes(tmp_path, capsys):
     """A review: --K 420 and --K "fx=420 ..." were told "File '420' does not exist" alone."""
     from test_cli import write_input

@@ -925,7 +925,10 @@ def _info_lines(rec: dict) -> list[str]:
     lines.append(f"  camera: {rec['projection']}"
                  + (f" ({_camera_given(source)})" if rec["K"]
                     and source not in (None, "orthographic") else "")
-                 + (f", K = {rec['K']}" if rec["K"] else ""))
+                 + (f", K = {rec['K']}" if rec["K"] else "")
+                 + (f" ({', '.join(Path(f).name for f in unread)} beside it not read: --K "
+                    f"{unread[0]} to use it)" if (unread := rec.get("camera_files_unread"))
+                    else ""))
     for name, what in (("prior", "depth prior"), ("confidence", "normal confidence")):
         if rec.get(name):  # (--prior / --confidence, or a dataset folder's own files)
             got = rec[name]

@@ -605,6 +605,44 @@ DILIGENT_NORMALS = "Normal_gt.mat"
 CAMERA_FILES = ("K.txt", "Calib_Results.mat")
 
 
+#: Camera files other tools write (COLMAP, OpenCV, ROS, nerfstudio, ScanNet, a user's own),
+#: which :func:`read_dataset` does not read by itself beside a normal map, but which
+#: :func:`read_K` (``--K FILE``) reads: :func:`unread_camera_files` finds them, so that a job
+#: without a camera can name them (a folder holding cameras.txt ran orthographically with no
+#: word, a review). Not read automatically: which of them, and whether the map is the
+#: calibrated image's, is the user's to say.
+OTHER_CAMERA_FILES = (
+    "cameras.txt", "cameras.bin",  # COLMAP's sparse model
+    "calib.yml", "calib.yaml", "calib.xml",  # OpenCV FileStorage
+    "camera_info.yaml", "camera_info.yml",  # ROS
+    "transforms.json",  # nerfstudio, instant-ngp
+    "K.json", "K.npy", "K.yml", "K.yaml", "K.xml",  # K.txt in another format
+    "intrinsics.txt", "intrinsics.json", "intrinsics.npy",
+    "intrinsic_color.txt",  # ScanNet's (4x4)
+)
+
+
+def unread_camera_files(folder) -> list[Path]:
+    """The files of `folder` named in :data:`OTHER_CAMERA_FILES` (the case of their letters
+    aside), which no reading takes by itself: without --K their camera goes unused. An empty
+    list where it holds none, or cannot be listed."""
+    f = Path(folder)
+    try:  # (listed once for every name)
+        names = os.listdir(f)
+    except OSError:
+        return []
+    found = []
+    for name in OTHER_CAMERA_FILES:
+        try:
+            p = _named(f, name, names)
+        except ValueError:  # (two names that differ only in case: both are named)
+            found += [f / n for n in names if n.lower() == name.lower()]
+            continue
+        if p is not None and p.is_file():
+            found.append(p)
+    return found
+
+
 def normals_file(folder) -> Path | None:
     """The normal map :func:`read_dataset` reads from `folder`: its ``normal_map.*``, else its
     ``Normal_gt.mat`` (:data:`DILIGENT_NORMALS`), else None. A ValueError naming `folder`
@@ -760,7 +798,10 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
     ``mask.png`` (or ``.tif``, ``.tiff``, ``.npy``) and, for a perspective camera, ``K.txt``
     or ``Calib_Results.mat`` (its ``KK``; where it has both, they must agree). Without one the
-    view is orthographic. Pixels outside the mask may hold anything.
+    view is orthographic; other tools' camera files (:data:`OTHER_CAMERA_FILES`: COLMAP's
+    ``cameras.txt``, OpenCV's ``calib.yml``, a ``transforms.json``, ``K.npy`` ...) are not
+    read by themselves (``K=read_K(path)``; the command line names them and ``--K``).
+    Pixels outside the mask may hold anything.
 
     The DiLiGenT release's object folders (``<obj>PNG/``) are read as they are: without a
     ``normal_map.*``, the normals are those of ``Normal_gt.mat`` (:data:`DILIGENT_NORMALS`,
