@@ -25,8 +25,9 @@ from .images import (
 def read_K(path, shape=None) -> np.ndarray:
     """Read 3x3 perspective intrinsics (OpenCV layout) from a file; with `shape` (the normal
     map's (H, W), or its (H, W, 3)), refused where the file states another image size, as
-    the command line's ``--K`` is (:func:`read_K_stated`,
-    :func:`facetlift.camera.check_image_size`: the message gives K scaled for a resize).
+    the command line's ``--K`` is (:func:`facetlift.io.dataset.read_K_stated`, which
+    returns the stated size too; :func:`facetlift.camera.check_image_size`: the message gives
+    K scaled for a resize).
     Without it a stated size goes unchecked (a K of the 1.5x larger image bent a surface 9x
     more than the right one in Python, while ``--K`` refused it: a perspective audit).
 
