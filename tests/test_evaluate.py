@@ -298,8 +298,8 @@ def test_evaluate_takes_K_in_python():
     got = metrics.evaluate(est, gt, mask, K=K)
     assert got["perspective"] is True and got["made"] == pytest.approx(want["made"])
     assert metrics.evaluate(est, gt, mask, K=K.tolist(), perspective=True) == got
-    with pytest.raises(ValueError, match=r"`K` must be a 3x3 intrinsics matrix or four "
-                                         r"numbers.*shape \(3,\)"):
+    with pytest.raises(ValueError, match=r"`K` must be a 3x3 intrinsics matrix, its nine "
+                                         r"numbers row by row, or four numbers.*shape \(3,\)"):
         metrics.evaluate(est, gt, mask, K=[1.0, 2.0, 3.0])
     # (as integrate takes K: four numbers and a Pinhole; a transposed K refused, a review)
     from facetlift.camera import Pinhole

@@ -1989,3 +1989,31 @@ def test_scaled_and_y_down_refuse_strings(tmp_path):
     with pytest.raises(ValueError, match=r"`y_down` must be True or False; got 'yes'"):
         io.read_normals(path, y_down="yes")
     np.testing.assert_allclose(io.read_normals(path, y_down=np.True_)[0], n, atol=1e-4)
+
+
+def test_a_transposed_K_is_told_matlabs_one_based_principal_point():
+    """A review: the transposed-K advice said to give its transpose, but not that MATLAB's
+    IntrinsicMatrix counts the first pixel's centre as (1, 1): cx and cy must drop by 1 for
+    the OpenCV layout (as MATLAB's cameraIntrinsicsToOpenCV does). The message gives both."""
+    import facetlift
+
+    matlab = np.array([[40.0, 0, 0], [0.5, 42.0, 0], [15.5, 10.5, 1]])  # (IntrinsicMatrix)
+    with pytest.raises(ValueError, match=r"looks transposed .*give its transpose, and for "
+                       r"MATLAB's also subtract 1 from cx and cy \(MATLAB counts the first "
+                       r"pixel's centre as \(1, 1\), OpenCV and facetlift as \(0, 0\)\): fx 40, "
+                       r"fy 42, s 0.5, cx 14.5, cy 9.5 \(cx 15.5, cy 10.5 for a transposed K "
+                       r"that was 0-based already\)"):
+        facetlift.camera.check_K(matlab)
+
+
+def test_K_as_nine_numbers_is_taken_in_python(tmp_path):
+    """A review: integrate(K=K.ravel()) was refused ("got shape (9,)") where read_K and --K
+    take nine numbers row by row; it is the same camera as the matrix now."""
+    import facetlift
+
+    n = np.dstack([np.zeros((20, 30, 2)), np.ones((20, 30))])
+    K = np.array([[40.0, 0, 14.5], [0, 41.0, 9.5], [0, 0, 1]])
+    a = facetlift.integrate(n, K=K.ravel().tolist())
+    b = facetlift.integrate(n, K=K)
+    np.testing.assert_array_equal(a.depth, b.depth)
+    np.testing.assert_array_equal(facetlift.camera.check_K(K.ravel()), K)

@@ -671,3 +671,27 @@ def test_a_perspective_audits_camera_mistakes_are_named(tmp_path):
     assert "fx 83.52, fy 83.52, cx 47.5, cy 47.5" in said[0]
     np.testing.assert_array_equal(inline_K("[[600, 0, 60], [0, 450, 200], [0, 0, 1]]"),
                                   [[600, 0, 60], [0, 450, 200], [0, 0, 1]])
+
+
+def test_fx_against_fy_beyond_the_tolerance_is_asked_about():
+    """A review: nothing checked fx against fy, and a map resized in one direction with fy
+    left as it was (13x the error) went without a word. fx / fy off 1 by more than
+    ASPECT_TOLERANCE (5 %) is a CameraWarning asking about a one-way resize (a warning: an
+    anamorphic lens's pixels are not square); a calibration's 0.3 % (DiLiGenT's) is not."""
+    from facetlift.errors import CameraWarning
+    from facetlift.problem import ASPECT_TOLERANCE
+
+    assert ASPECT_TOLERANCE == 0.05
+    n, mask, *_ = sphere_scene(H=60, W=80, K=_K(f=100.0, H=60, W=80))
+    squeezed = _K(f=100.0, H=60, W=80)
+    squeezed[0, 0], squeezed[1, 1] = 50.0, 100.0  # (the columns halved, fy kept: 0.5)
+    with pytest.warns(CameraWarning, match=r"`K`: fx 50 and fy 100 differ by a factor 0.5 "
+                      r"\(fx / fy\).*resized in one direction.*anamorphic"):
+        facetlift.prepare(n, mask, K=squeezed)
+    for fy in (100.0 * 1.04, 100.0 / 1.04, 100.0 * 3759.01 / 3772.08):
+        K = _K(f=100.0, H=60, W=80)
+        K[1, 1] = fy
+        with warnings.catch_warnings(record=True) as got:
+            warnings.simplefilter("always")
+            facetlift.prepare(n, mask, K=K)
+        assert not [w for w in got if "differ by a factor" in str(w.message)], fy

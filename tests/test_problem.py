@@ -371,9 +371,10 @@ def test_bad_pixel_size(pixel_size, match):
 @pytest.mark.parametrize(
     "K, match",
     [
-        (np.eye(2), r"`K` must be a 3x3 intrinsics matrix or four numbers \(fx, fy, cx, cy\); "
-                    r"got shape \(2, 2\)"),
-        (np.ones(9), r"`K` must be a 3x3 intrinsics matrix .*; got shape \(9,\)"),
+        (np.eye(2), r"`K` must be a 3x3 intrinsics matrix, its nine numbers row by row, or "
+                    r"four numbers \(fx, fy, cx, cy\); got shape \(2, 2\)"),
+        (np.ones(8), r"`K` must be a 3x3 intrinsics matrix.*; got shape \(8,\)"),
+        (np.ones(9), r"`K` must be upper-triangular"),  # (nine: the matrix row by row)
         ([500, -500, 3, 3], r"`K` must have positive focal lengths"),
         ([[500, 0, np.nan], [0, 500, 3], [0, 0, 1]], "`K` contains NaN or inf"),
         ([[np.inf, 0, 3], [0, 500, 3], [0, 0, 1]], "`K` contains NaN or inf"),

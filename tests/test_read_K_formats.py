@@ -654,3 +654,149 @@ def test_a_2x2_matrix_is_refused_as_such_and_four_numbers_in_a_column_are_fx_fy_
         io.read_K(p)
     p.write_text("3000\n3100\n300\n250\n")
     np.testing.assert_array_equal(io.read_K(p), [[3000, 0, 300], [0, 3100, 250], [0, 0, 1]])
+
+
+def test_json_K_under_a_key_or_nested_in_an_object(tmp_path):
+    """A review: a JSON K file was read only as a list or as an object with fx, fy, cx, cy at
+    its top. The matrix under K, intrinsics, camera_matrix or intrinsic_matrix (3x3, or nine
+    numbers row by row), and fx ... cy or such a matrix in one object inside it are read
+    too; two of them, or none, are named."""
+    rows = K.tolist()
+    for i, data in enumerate([
+            {"K": rows}, {"intrinsics": K.ravel().tolist()}, {"Camera_Matrix": rows},
+            {"intrinsic_matrix": rows, "width": 640}, {"camera": {"fx": 500, "fy": 510,
+                                                                 "cx": 320.5, "cy": 240.25}},
+            {"cam0": {"K": rows}, "baseline": 0.1}]):
+        got, said = read(tmp_path, f"k{i}.json", json.dumps(data))
+        np.testing.assert_array_equal(got, K)
+        assert said == [], (data, said)
+    for data, match in [
+            ({"K": rows, "intrinsics": rows}, r"holding both K and intrinsics: which is K"),
+            ({"left": {"K": rows}, "right": {"K": rows}},
+             r"several cameras \(left, right\): which is the image's"),
+            ({"focal": 500}, r"a JSON object needs fx, fy, cx, cy; .* missing \(or the matrix "
+                             r"under K, intrinsics, camera_matrix, intrinsic_matrix")]:
+        (tmp_path / "bad.json").write_text(json.dumps(data))
+        with pytest.raises(ValueError, match=match):
+            io.read_K(tmp_path / "bad.json")
+
+
+def test_a_4x4_intrinsics_file_gives_its_top_left_3x3(tmp_path):
+    """A review: ScanNet's intrinsic_color.txt (K in the top-left of a 4x4, last row and
+    column 0 0 0 1) was refused as 16 numbers. Taken where the rest is the identity's; a 4x4
+    that is not (a pose) is refused, naming its last row and column."""
+    K4 = np.eye(4)
+    K4[:3, :3] = K
+    np.savetxt(tmp_path / "intrinsic_color.txt", K4, fmt="%f")
+    np.testing.assert_array_equal(io.read_K(tmp_path / "intrinsic_color.txt"), K)
+    np.save(tmp_path / "K4.npy", K4)
+    np.testing.assert_array_equal(io.read_K(tmp_path / "K4.npy"), K)
+    pose = K4.copy()
+    pose[:3, 3] = [0.1, 0.2, 1.5]
+    np.savetxt(tmp_path / "pose.txt", pose)
+    with pytest.raises(ValueError, match=r"pose\.txt holds a 4x4 matrix whose last row and "
+                       r"column are not 0 0 0 1 .*column \[0\.1, 0\.2, 1\.5\]"):
+        io.read_K(tmp_path / "pose.txt")
+
+
+def _other_camera_file(path, name):
+    """Write a camera file named `name` (:data:`OTHER_CAMERA_FILES`) as its tool writes it,
+    fx 500 in each."""
+    K4 = np.eye(4)
+    K4[:3, :3] = K
+    writers = {
+        "cameras.txt": lambda p: p.write_text(colmap("1 PINHOLE 640 480 500 510 321 240.75")),
+        "cameras.bin": lambda p: p.write_bytes(colmap_bin((1, 1, 640, 480,
+                                                           (500, 510, 321, 240.75)))),
+        "calib.yml": lambda p: p.write_text(OPENCV_YAML),
+        "calib.yaml": lambda p: p.write_text(OPENCV_YAML),
+        "calib.xml": lambda p: p.write_text(OPENCV_XML),
+        "camera_info.yaml": lambda p: p.write_text(ROS_CAMERA_INFO),
+        "camera_info.yml": lambda p: p.write_text(ROS_CAMERA_INFO),
+        "transforms.json": lambda p: p.write_text(json.dumps(
+            {"fl_x": 500, "fl_y": 510, "cx": 321, "cy": 240.75, "w": 640, "h": 480})),
+        "K.json": lambda p: p.write_text(json.dumps({"K": K.tolist()})),
+        "K.npy": lambda p: np.save(p, K),
+        "K.yml": lambda p: p.write_text("500 0 320.5\n0 510 240.25\n0 0 1\n"),
+        "K.yaml": lambda p: p.write_text(OPENCV_YAML),
+        "K.xml": lambda p: p.write_text(OPENCV_XML),
+        "intrinsics.txt": lambda p: p.write_text("500 510 320.5 240.25\n"),
+        "intrinsics.json": lambda p: p.write_text(json.dumps(
+            {"fx": 500, "fy": 510, "cx": 320.5, "cy": 240.25})),
+        "intrinsics.npy": lambda p: np.save(p, K.ravel()),
+        "intrinsic_color.txt": lambda p: np.savetxt(p, K4),
+    }
+    writers[name](path / name)
+
+
+def test_every_camera_file_named_as_unread_is_one_that_K_reads(tmp_path):
+    """The warning on other tools' camera files beside a map (OTHER_CAMERA_FILES) tells the
+    user to give one with --K: each name it looks for is one read_K reads."""
+    from facetlift.io.dataset import OTHER_CAMERA_FILES
+
+    for name in OTHER_CAMERA_FILES:
+        _other_camera_file(tmp_path, name)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # (the files' distortion)
+            got = io.read_K(tmp_path / name)
+        assert got[0, 0] == 500 and got[1, 1] == 510, name
+
+
+def test_a_camera_file_that_is_not_read_by_itself_is_named(tmp_path, capsys):
+    """A review: a dataset folder (or a map file) with COLMAP's cameras.txt, OpenCV's
+    calib.yml, a transforms.json, K.npy ... beside it ran orthographically without a word:
+    only a folder's K.txt and Calib_Results.mat are read by themselves. Such files are named
+    with --K (not read: which camera, and whether it is this image's, is the user's to say)
+    by integrate and info (its camera line too), and by a batch once per folder, whose
+    K.npy is no map; none where a camera is given or --orthographic says so."""
+    from test_cli import write_input
+
+    npath, mpath, _ = write_input(tmp_path)  # (20 x 26)
+    ds = tmp_path / "ds"
+    ds.mkdir()
+    np.save(ds / "normal_map.npy", np.load(npath) if npath.suffix == ".npy" else
+            io.read_normals(npath)[0])
+    _other_camera_file(ds, "cameras.txt")
+    code = main(["integrate", str(ds), "-s", "npy", "-o", str(tmp_path / "o1")])
+    _, err = capsys.readouterr()
+    assert code == 0 and (f"warning: the dataset folder {ds} holds cameras.txt: a camera "
+                          "file that is not read by itself") in err, err
+    assert f"integrated orthographically; give --K {ds / 'cameras.txt'}" in err
+    code = main(["info", str(ds)])
+    out, err = capsys.readouterr()
+    assert code == 0 and (f"camera: orthographic (cameras.txt beside it not read: --K "
+                          f"{ds / 'cameras.txt'} to use it)") in out, out
+    for flags in (["--orthographic"], ["--K", "26 26 12.5 9.5"]):
+        code = main(["integrate", str(ds), *flags, "-s", "npy", "-o", str(tmp_path / "o2")])
+        _, err = capsys.readouterr()
+        assert code == 0 and "cameras.txt" not in err, (flags, err)
+    # beside a map file
+    _other_camera_file(tmp_path, "K.npy")
+    _other_camera_file(tmp_path, "calib.yml")
+    code = main(["integrate", str(npath), "--mask", str(mpath), "-s", "npy", "-o",
+                 str(tmp_path / "o3")])
+    _, err = capsys.readouterr()
+    assert code == 0 and (f"{npath.name} has calib.yml and K.npy beside it: camera files that "
+                          "are not read by themselves") in err, err
+    # a batch: once for the folder, and K.npy is no map
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    for name in ("a.npy", "b.npy"):
+        np.save(maps / name, np.load(ds / "normal_map.npy"))
+    _other_camera_file(maps, "K.npy")
+    code = main(["batch", str(maps), "-s", "npy", "-o", str(tmp_path / "bo")])
+    out, err = capsys.readouterr()
+    assert code == 0 and err.count("K.npy") == 2 and "2 of 2 succeeded" in out, (out, err)
+    assert f"batch: {maps} holds K.npy beside its normal maps, a camera file that" in err
+
+
+def test_K_that_is_neither_a_file_nor_numbers_says_what_K_takes(tmp_path, capsys):
+    """A review: --K 420 and --K "fx=420 ..." were told "File '420' does not exist" alone."""
+    from test_cli import write_input
+
+    npath, _, _ = write_input(tmp_path)
+    for typed in ("420", "fx=420 fy=420 cx=12 cy=9"):
+        code, err = main(["integrate", str(npath), "--K", typed]), capsys.readouterr()[1]
+        assert code != 0 and f"File {typed!r} does not exist, and it is no K typed inline: " \
+            "--K takes a K file" in err, err
+        assert "or four numbers fx fy cx cy" in err and "--fov DEG" in err

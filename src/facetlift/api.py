@@ -64,7 +64,7 @@ def integrate(
         A registered method, see ``facetlift.methods.REGISTRY`` or ``facetlift methods``.
     pixel_size : float
         Pixel width in world units for orthographic input.
-    K : (3, 3) array_like, four numbers (fx, fy, cx, cy) or facetlift.Pinhole, optional
+    K : (3, 3) array_like, nine numbers (row by row), four (fx, fy, cx, cy) or Pinhole, optional
         Perspective intrinsics (OpenCV layout: cx a column, cy a row from the top); None for
         an orthographic view.
     known : (H, W) array_like of bool, optional
@@ -320,8 +320,8 @@ def _keyword_hints(options: dict) -> dict:
     the method's options alone), for :func:`facetlift.options.validate`."""
     hints = {}
     if "camera" in options:  # (prepare's keyword: an audit was told of dgp's options alone)
-        hints["camera"] = ("integrate takes the camera as K= (a 3 x 3 matrix, four numbers or "
-                           "a facetlift.camera.Pinhole) or pixel_size= (orthographic); "
+        hints["camera"] = ("integrate takes the camera as K= (a 3 x 3 matrix, nine or four "
+                           "numbers or a facetlift.camera.Pinhole) or pixel_size= (orthographic); "
                            "camera= is facetlift.prepare's")
     if "fov" not in options:
         return hints

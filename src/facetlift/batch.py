@@ -270,7 +270,7 @@ def _folder_items(p: Path) -> list[tuple[Path, bool]]:
     """The items a plain folder given as an input holds, one level deep: its dataset
     folders and map files (not a camera file or facetlift's own outputs), with a warning
     naming the outputs and the subfolders of maps it skips."""
-    from .io.dataset import CAMERA_FILES, is_dataset
+    from .io.dataset import CAMERA_FILES, OTHER_CAMERA_FILES, is_dataset
     from .io.images import NORMAL_READ_FORMATS
 
     kinds = NORMAL_READ_FORMATS + (".mat",)
@@ -279,7 +279,8 @@ def _folder_items(p: Path) -> list[tuple[Path, bool]]:
     # (DiLiGenT's Calib_Results.mat beside its object folders is their camera: it
     # ran as a normal map and failed, an audit)
     outputs = set(OUTPUTS.values())
-    cameras = {n.lower() for n in CAMERA_FILES}  # (calib_results.mat too, a review)
+    # (K.npy, intrinsics.npy too: a camera, named by _unused_folder_files, not a failed map)
+    cameras = {n.lower() for n in CAMERA_FILES + OTHER_CAMERA_FILES}
     out = [(c, False) for c in children if folders.get(c)
            or (c.is_file() and c.suffix.lower() in kinds
                and c.name.lower() not in cameras and c.name not in outputs)]
@@ -366,9 +367,10 @@ def _holds_maps(folder: Path) -> bool:
     """Whether `folder` (not hidden, no facetlift output folder) holds a file that may be a
     normal map: an extension of one, and neither a mask, a camera or rotation file nor an
     output's name; False where it cannot be listed."""
-    from .io.dataset import CAMERA_FILES, is_rotation_file
+    from .io.dataset import CAMERA_FILES, OTHER_CAMERA_FILES, is_rotation_file
     from .io.images import NORMAL_READ_FORMATS
 
+    cameras = {n.lower() for n in CAMERA_FILES + OTHER_CAMERA_FILES}
     if folder.name.startswith(".") or folder.name.endswith("_facetlift"):
         return False
     kinds = NORMAL_READ_FORMATS + (".mat",)
@@ -381,7 +383,7 @@ def _holds_maps(folder: Path) -> bool:
         return False
     return any(Path(n).suffix.lower() in kinds and Path(n).stem not in OUTPUT_STEMS
                and Path(n).stem.lower() != "mask" and _companion(Path(n).stem) is None
-               and n not in CAMERA_FILES and not is_rotation_file(n) for n in names)
+               and n.lower() not in cameras and not is_rotation_file(n) for n in names)
 
 
 def _batch_output(f: Path) -> bool:
@@ -423,6 +425,22 @@ def _unused_folder_files(found, template: Job) -> None:
         if it.error is None and Path(it.path).is_file():
             by_folder.setdefault(Path(it.path).parent, []).append(it)
     camera = camera_unset(template)
+    if camera:  # (other tools' camera files, which only --K reads: the items, which do not
+        # look beside themselves in a batch, ran orthographically without a word, a review)
+        from .io.dataset import unread_camera_files
+
+        for folder in sorted(by_folder):
+            others = unread_camera_files(folder)
+            if others:
+                one = len(others) == 1
+                warnings.warn(
+                    f"batch: {folder} holds {' and '.join(p.name for p in others)} beside its "
+                    f"normal maps, {'a camera file that is' if one else 'camera files that are'}"
+                    f" not read by {'itself' if one else 'themselves'} (only a "
+                    "dataset folder's K.txt or Calib_Results.mat is): these maps are "
+                    f"integrated orthographically; give --K {others[0]} (K=) to use "
+                    f"{'that camera' if len(others) == 1 else 'one of them'} for every map, "
+                    "or --orthographic if orthographic is meant", stacklevel=3)
     # (a dataset folder's own normal_map.* given as a file is warned about by its item,
     # jobs._beside_dataset_files, which names the folder's mask too: not twice)
     for folder in sorted(f for f in by_folder if not is_dataset(f)):

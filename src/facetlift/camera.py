@@ -435,7 +435,9 @@ PIXEL_SIZE_RANGE = (1e-12, 1e12)
 
 def check_K(K) -> np.ndarray:
     """`K` as a (3, 3) float array of valid intrinsics, or a ValueError naming what is wrong.
-    Four numbers ``(fx, fy, cx, cy)`` are taken too, as the command line's K files are."""
+    Four numbers ``(fx, fy, cx, cy)`` are taken too, and nine, the matrix row by row, as the
+    command line's K files are (a flat ``K.ravel()`` was refused by integrate while read_K
+    and --K took it, a review)."""
     from .problem import numeric_array
 
     if isinstance(K, Orthographic):  # (was "must be a real numeric array; got dtype object",
@@ -446,9 +448,11 @@ def check_K(K) -> np.ndarray:
     if Km.shape == (4,):  # (fx, fy, cx, cy): cx a column, cy a row from the top
         fx, fy, cx, cy = Km
         Km = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    elif Km.shape == (9,):  # (the matrix row by row)
+        Km = Km.reshape(3, 3)
     if Km.shape != (3, 3):
-        raise ValueError(f"`K` must be a 3x3 intrinsics matrix or four numbers (fx, fy, cx, "
-                         f"cy); got shape {Km.shape}")
+        raise ValueError(f"`K` must be a 3x3 intrinsics matrix, its nine numbers row by row, "
+                         f"or four numbers (fx, fy, cx, cy); got shape {Km.shape}")
     if not np.isfinite(Km).all():
         raise ValueError("`K` contains NaN or inf")
     if not (Km[0, 0] > 0 and Km[1, 1] > 0):
@@ -466,10 +470,25 @@ def check_K(K) -> np.ndarray:
         raise ValueError(
             "`K` must be upper-triangular with last row [0, 0, 1] (OpenCV layout "
             f"[[fx, s, cx], [0, fy, cy], [0, 0, 1]]); got {Km.tolist()}"
-            + ("; it looks transposed (a column-vector layout, e.g. MATLAB's): give its "
-               "transpose" if transposed else "")
+            + (_transposed_advice(Km) if transposed else "")
         )
     return Km
+
+
+def _transposed_advice(Km: np.ndarray) -> str:
+    """check_K's words for a K that looks transposed (`Km`, as given): give its transpose;
+    and where it is MATLAB's ``IntrinsicMatrix`` (cameraParameters, cameraIntrinsics), whose
+    image coordinates put the first pixel's centre at (1, 1) where OpenCV's and facetlift's
+    put it at (0, 0), subtract 1 from cx and cy too (as MATLAB's own
+    ``cameraIntrinsicsToOpenCV`` does): the transpose alone leaves the principal point a
+    pixel off (a review)."""
+    fx, fy, s, cx, cy = Km[0, 0], Km[1, 1], Km[1, 0], Km[2, 0], Km[2, 1]
+    skew = f"s {s:g}, " if s else ""
+    return ("; it looks transposed (a column-vector layout, e.g. MATLAB's IntrinsicMatrix): "
+            "give its transpose, and for MATLAB's also subtract 1 from cx and cy (MATLAB "
+            "counts the first pixel's centre as (1, 1), OpenCV and facetlift as (0, 0)): "
+            f"fx {fx:g}, fy {fy:g}, {skew}cx {cx - 1:g}, cy {cy - 1:g} (cx {cx:g}, cy {cy:g} "
+            "for a transposed K that was 0-based already)")
 
 
 #: The largest numerator and denominator of a scale between a calibration's image size and

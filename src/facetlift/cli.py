@@ -191,6 +191,14 @@ class _CameraFile(click.Path):
             inline = inline_value(value)
             if inline is not None:
                 return inline
+            # (what --K takes, where it is neither: "--K 420" and "--K 'fx=420 ...'" were
+            # told "File '420' does not exist" alone, a review)
+            self.fail(f"File {value!r} does not exist, and it is no K typed inline: --K takes "
+                      "a K file (text, JSON, .npy, .mat, or a calibration tool's: OpenCV "
+                      ".yml/.xml, ROS camera_info, COLMAP cameras.txt/.bin, transforms.json), "
+                      "or four numbers fx fy cx cy (--K \"420 420 319.5 239.5\"), or the "
+                      "matrix's nine row by row, as numbers alone (no names, no '='); for a "
+                      "field of view, --fov DEG", param, ctx)
         return super().convert(value, param, ctx)
 
 
@@ -917,7 +925,10 @@ def _info_lines(rec: dict) -> list[str]:
     lines.append(f"  camera: {rec['projection']}"
                  + (f" ({_camera_given(source)})" if rec["K"]
                     and source not in (None, "orthographic") else "")
-                 + (f", K = {rec['K']}" if rec["K"] else ""))
+                 + (f", K = {rec['K']}" if rec["K"] else "")
+                 + (f" ({', '.join(Path(f).name for f in unread)} beside it not read: --K "
+                    f"{unread[0]} to use it)" if (unread := rec.get("camera_files_unread"))
+                    else ""))
     for name, what in (("prior", "depth prior"), ("confidence", "normal confidence")):
         if rec.get(name):  # (--prior / --confidence, or a dataset folder's own files)
             got = rec[name]

@@ -262,7 +262,10 @@ def describe(path=None, *, gradients=None, mask=None, K=None, normal_frame=None,
                  gradient_field=bool(inp.field),
                  # (where K came from, as integrate's summary says: a DiLiGenT folder's is
                  # its parent's Calib_Results.mat, which info did not name, a second audit)
-                 camera=camera_source(job, inp))
+                 camera=camera_source(job, inp),
+                 # (other tools' camera files beside it, unread without --K: a review)
+                 **({"camera_files_unread": list(inp.camera_unread)} if inp.camera_unread
+                    else {}))
 
     def unusable(e: ValueError) -> dict:  # (integrate would refuse it: why, and the frame)
         out.update(usable=False, problem=str(e),

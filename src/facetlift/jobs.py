@@ -191,6 +191,9 @@ class Input:
     rotation: np.ndarray | None = None
     rotation_file: str | None = None
     rotation_as: str | None = None
+    #: Other tools' camera files beside the input that no K was read from (COLMAP's
+    #: cameras.txt, ...; :func:`_unread_camera_files`, which warns of them), for info.
+    camera_unread: tuple[str, ...] = ()
 
 
 def rotation_field(job: Job) -> str | None:
@@ -388,6 +391,8 @@ def read(job: Job) -> Input:
         K = K_from_fov(n.shape[:2], job.fov)
     if job.orthographic:
         K = None
+    unread_cameras = () if K is not None or field_input or not camera_unset(job) else tuple(
+        _unread_camera_files(src, job))
     if job.prior is not None:
         with _beside_file(job, "prior"):
             prior = io.read_prior(job.prior, _prior_scale(job), zero_unknown=_zero_unknown(job))
@@ -424,7 +429,40 @@ def read(job: Job) -> Input:
                  else _camera_name(K_file, src),
                  prior_file=files["prior"] if prior is not None else None,
                  confidence_file=files["confidence"] if conf is not None else None,
-                 rotation=rotation, rotation_file=rotation_file, rotation_as=rotation_as)
+                 rotation=rotation, rotation_file=rotation_file, rotation_as=rotation_as,
+                 camera_unread=unread_cameras)
+
+
+def _unread_camera_files(src: Path, job: Job) -> list[str]:
+    """Warn where a job without a camera (no K read, none given) has beside its input other
+    tools' camera files (:data:`facetlift.io.dataset.OTHER_CAMERA_FILES`: COLMAP's
+    cameras.txt, OpenCV's calib.yml, a transforms.json, K.npy, ...), which only --K reads: the
+    map is integrated orthographically (a folder holding cameras.txt did so without a word, a
+    review). Looked for in a dataset folder given as the input, and beside a map file given
+    by its path (not in a batch's items, whose folders the batch names once,
+    :func:`facetlift.batch._unused_folder_files`). Returns the files' paths, for info."""
+    from .io.dataset import unread_camera_files
+
+    if src.is_dir():
+        folder = src
+    elif job.unread_beside:
+        folder = src.parent
+    else:
+        return []
+    found = unread_camera_files(folder)
+    if not found:
+        return []
+    names = " and ".join(p.name for p in found)
+    one = len(found) == 1
+    where = (f"the dataset folder {src} holds {names}" if folder == src
+             else f"{src.name} has {names} beside it")
+    warn(f"{where}: {'a camera file' if one else 'camera files'} that "
+         f"{'is' if one else 'are'} not read by {'itself' if one else 'themselves'} (only a "
+         "dataset folder's K.txt or Calib_Results.mat is), so without a camera the map is "
+         f"integrated orthographically; give --K {found[0]} (K=facetlift.io.read_K(path) in "
+         f"Python) to use {'it' if one else 'one of them'}, or --orthographic if orthographic "
+         "is meant", UserWarning)
+    return [str(p) for p in found]
 
 
 def _beside_tail(job: Job, name: str) -> str:

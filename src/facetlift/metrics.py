@@ -361,7 +361,7 @@ def evaluate(estimate, truth, mask=None, *, perspective: bool | None = None, K=N
         Whether the result is a perspective depth (a camera's z, defined up to scale). Default:
         a Surface's camera says; an array is taken as orthographic (a height, defined up to an
         offset per piece).
-    K : (3, 3) array_like, four numbers or facetlift.camera.Pinhole, optional
+    K : (3, 3) array_like, nine or four numbers or facetlift.camera.Pinhole, optional
         The result's camera, as given to :func:`facetlift.integrate` (``facetlift evaluate
         --K``): the same as ``perspective=True`` (the scores need no more of it); refused
         beside ``perspective=False``, or where `estimate` is a Surface with another camera.

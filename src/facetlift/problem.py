@@ -582,7 +582,7 @@ def prepare(
         Pixels whose normal is given; the others in the mask are missing samples.
     pixel_size : float
         Pixel width in world units (orthographic views).
-    K : (3, 3) array_like or four numbers (fx, fy, cx, cy), optional
+    K : (3, 3) array_like, nine numbers (row by row) or four (fx, fy, cx, cy), optional
         Perspective intrinsics, OpenCV layout.
     camera : facetlift.camera.Camera, optional
         Instead of `pixel_size` and `K`.
@@ -670,6 +670,7 @@ def prepare(
     if not _check_normalised(cam, H, W):
         _check_principal_point(cam, H, W)
         _check_focal_length(cam, H, W, given=K)
+        _check_aspect(cam)
     eps = cam.grazing if outlier_eps is None else _check_eps(outlier_eps)
     isolated = _check_isolated(isolated)
     if grazing_share is not None and not (isinstance(grazing_share, (int, float, np.number))
@@ -1359,6 +1360,36 @@ def _check_focal_length(cam, H: int, W: int, given=None) -> None:
              "in pixels / the sensor's width in mm; a camera's field of view gives it too "
              "(--fov, or fx = (W / 2) / tan(fov / 2); docs/conventions.md). A camera that "
              "wide is seldom a pinhole: if yours is, all is well", CameraWarning)
+
+
+#: A pinhole K whose fx / fy differs from 1 by more than this gets a warning
+#: (:func:`_check_aspect`). A camera's pixels are square within about 1 % (a calibration's fx
+#: and fy agree that closely), so 5 % leaves room for a calibration's noise and names a map
+#: resized in one direction without its focal length (a review: fy left as it was, 13x the
+#: error, and no word; a sphere's rows halved so, 1.37 % against 0.04 % relative depth
+#: error); an anamorphic lens's pixels are not square, which is why it is a warning, not an
+#: error.
+ASPECT_TOLERANCE = 0.05
+
+
+def _check_aspect(cam) -> None:
+    """A warning where a pinhole camera's fx / fy differs from 1 by more than
+    :data:`ASPECT_TOLERANCE`: usually an image resized in one direction (or to another aspect
+    ratio) with its focal lengths not scaled to match."""
+    Kc = getattr(cam, "K", None)
+    if Kc is None:
+        return
+    fx, fy = float(Kc[0, 0]), float(Kc[1, 1])
+    ratio = fx / fy
+    if abs(ratio - 1.0) <= ASPECT_TOLERANCE:
+        return
+    warn(f"`K`: fx {fx:g} and fy {fy:g} differ by a factor {ratio:.4g} (fx / fy), where a "
+         f"camera's pixels are square within about 1 % (the check allows "
+         f"{ASPECT_TOLERANCE:.0%}): was the image resized in one direction, or to another "
+         "aspect ratio, without the matching focal length? A resize by sx across and sy down "
+         "scales fx and cx by sx, fy and cy by sy (c -> s (c + 0.5) - 0.5). An anamorphic "
+         "lens's pixels are not square: then K is right (docs/conventions.md, 'A K for "
+         "another image')", CameraWarning)
 
 
 #: A principal point within this share of the image's size of the centre with x and y

@@ -25,8 +25,9 @@ from .images import (
 def read_K(path, shape=None) -> np.ndarray:
     """Read 3x3 perspective intrinsics (OpenCV layout) from a file; with `shape` (the normal
     map's (H, W), or its (H, W, 3)), refused where the file states another image size, as
-    the command line's ``--K`` is (:func:`read_K_stated`,
-    :func:`facetlift.camera.check_image_size`: the message gives K scaled for a resize).
+    the command line's ``--K`` is (:func:`facetlift.io.dataset.read_K_stated`, which
+    returns the stated size too; :func:`facetlift.camera.check_image_size`: the message gives
+    K scaled for a resize).
     Without it a stated size goes unchecked (a K of the 1.5x larger image bent a surface 9x
     more than the right one in Python, while ``--K`` refused it: a perspective audit).
 
@@ -34,10 +35,15 @@ def read_K(path, shape=None) -> np.ndarray:
     tabs or commas), or its nine numbers on one line (row by row), or the four numbers
     ``fx fy cx cy`` (cx a column, cy a row from the top), the four possibly under a header
     naming them in any order (``cx cy fx fy``); or JSON: a 3x3 list, nine or four numbers, or
-    an object with ``fx``, ``fy``, ``cx``, ``cy``. A ``.npy`` file holds a (3, 3) array, nine or
-    four numbers likewise. A MATLAB ``.mat`` file (v4 to v7) holds it as the variable ``KK``
-    (the calibration toolbox's ``Calib_Results.mat``, DiLiGenT's, whose ``nx`` / ``ny``
-    state its image's size: :func:`read_K_stated`; its lens distortion ``kc`` is warned about
+    an object with ``fx``, ``fy``, ``cx``, ``cy``, or with the matrix (3x3 or nine numbers)
+    under ``K``, ``intrinsics``, ``camera_matrix`` or ``intrinsic_matrix``
+    (:data:`JSON_K_KEYS`), either of them also in one object inside it (``{"camera": {"fx":
+    ...}}``). A ``.npy`` file holds a (3, 3) array, nine or four numbers likewise. A 4x4
+    matrix (ScanNet's ``intrinsic_color.txt``, text or ``.npy``) gives its top-left 3x3 where
+    its last row and column are the identity's, 0 0 0 1. A MATLAB ``.mat`` file (v4 to v7)
+    holds it as the variable ``KK`` (the calibration toolbox's ``Calib_Results.mat``,
+    DiLiGenT's, whose ``nx`` / ``ny`` state its image's size:
+    :func:`facetlift.io.dataset.read_K_stated`; its lens distortion ``kc`` is warned about
     where a coefficient exceeds :data:`MAT_DISTORTION_TOLERANCE`), ``K``, or its only 3x3
     numeric variable.
 
@@ -66,8 +72,8 @@ def read_K(path, shape=None) -> np.ndarray:
     ------
     ValueError
         Missing or unparsable file, another count of numbers, or a matrix that is not valid
-        intrinsics (see :mod:`facetlift.conventions`; a transposed matrix is named so); with
-        `shape`, a stated image size that differs.
+        intrinsics (see :mod:`facetlift.conventions`; a transposed matrix is named so, with
+        MATLAB's 1-based principal point); with `shape`, a stated image size that differs.
     """
     K, stated = read_K_stated(path)
     if shape is not None:
@@ -117,6 +123,8 @@ def read_K_stated(path) -> tuple[np.ndarray, tuple[int, int] | None]:
         raise ValueError(f"`{arg}`: {p} holds a 2x2 matrix; expected a "
                          "3x3 matrix (three rows, or nine numbers), or the four numbers "
                          "fx fy cx cy (in one row or one column)") from None
+    elif K.shape == (4, 4):  # (ScanNet's intrinsic_color.txt: K padded to 4x4)
+        K = _K_of_4x4(K, p, arg)
     elif K.size == 4:  # fx fy cx cy
         fx, fy, cx, cy = K.ravel()
         K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
@@ -128,6 +136,19 @@ def read_K_stated(path) -> tuple[np.ndarray, tuple[int, int] | None]:
         return check_K(K), size
     except ValueError as e:  # (check_K names a transposed K)
         raise ValueError(f"`{arg}`: {p}: {e}") from None
+
+
+def _K_of_4x4(K4: np.ndarray, p, arg: str = "K") -> np.ndarray:
+    """The intrinsics of a 4x4 matrix (ScanNet's ``intrinsic_color.txt``): its top-left 3x3,
+    where the rest is the identity's (last row and column 0 0 0 1); a ValueError naming `p`
+    otherwise (a 4x4 pose, say, is no K)."""
+    rest = np.concatenate([K4[:3, 3], K4[3, :]])
+    if not np.allclose(rest, [0, 0, 0, 0, 0, 0, 1]):
+        raise ValueError(f"`{arg}`: {p} holds a 4x4 matrix whose last row and column are not "
+                         f"0 0 0 1 (row {K4[3].tolist()}, column {K4[:3, 3].tolist()}): a 4x4 "
+                         "intrinsics file (ScanNet's) holds K in its top-left 3x3 and the "
+                         "identity's 0 0 0 1 around it; a pose or a projection matrix is no K")
+    return K4[:3, :3]
 
 
 class InlineK(str):
@@ -287,6 +308,42 @@ def _mat_distortion(p: Path, kc) -> None:
 _K_NAMES = ("fx", "fy", "cx", "cy")
 
 
+#: The keys under which a JSON K file's object may hold the matrix (3x3 nested, or its nine
+#: numbers row by row), the case of their letters aside.
+JSON_K_KEYS = ("K", "intrinsics", "camera_matrix", "intrinsic_matrix")
+
+
+def _json_K(data: dict):
+    """The numbers of a JSON K file's object (:func:`_K_text`): ``fx``, ``fy``, ``cx``,
+    ``cy``; or the matrix under one of :data:`JSON_K_KEYS`; or either of these in one object
+    nested in it (``{"camera": {"fx": ...}}``). A ValueError says what it looks for where it
+    finds none, or several."""
+    def own(obj: dict):
+        low = {str(k).lower(): v for k, v in obj.items()}
+        if all(k in low for k in _K_NAMES):
+            return [low[k] for k in _K_NAMES]
+        found = [k for k in JSON_K_KEYS if k.lower() in low]
+        if len(found) > 1:
+            raise ValueError(f"a JSON object holding both {' and '.join(found)}: which is K?")
+        return low[found[0].lower()] if found else None
+
+    top = own(data)
+    if top is not None:
+        return top
+    nested = {str(k): v for k, v in data.items() if isinstance(v, dict)}
+    inner = {k: got for k, v in nested.items() if (got := own(v)) is not None}
+    if len(inner) == 1:
+        return next(iter(inner.values()))
+    if len(inner) > 1:
+        raise ValueError(f"a JSON object with several cameras ({', '.join(inner)}): which is "
+                         "the image's? Save that one as a K file of its own")
+    low = {str(k).lower() for k in data}
+    missing = [k for k in _K_NAMES if k not in low]
+    raise ValueError(f"a JSON object needs {', '.join(_K_NAMES)}; {missing} missing (or the "
+                     f"matrix under {', '.join(JSON_K_KEYS)}, 3x3 or nine numbers row by row, "
+                     "at its top or in one object inside it)")
+
+
 def _K_text(p: Path):
     """The numbers of a text K file (:func:`read_K`): JSON (a nerfstudio transforms.json
     too), YAML (OpenCV's, ROS's), COLMAP's cameras.txt, a header of names over the four
@@ -303,11 +360,7 @@ def _K_text(p: Path):
         if isinstance(data, dict) and _kfiles.is_transforms(data):
             return _kfiles.K_transforms(data, p)
         if isinstance(data, dict):
-            low = {str(k).lower(): v for k, v in data.items()}
-            missing = [k for k in _K_NAMES if k not in low]
-            if missing:
-                raise ValueError(f"a JSON object needs {', '.join(_K_NAMES)}; {missing} missing")
-            data = [low[k] for k in _K_NAMES]
+            data = _json_K(data)
         return np.asarray(data, dtype=float), None
     if _kfiles.is_yaml(p, text):
         return _kfiles.K_yaml(p, text)
@@ -553,6 +606,44 @@ DILIGENT_NORMALS = "Normal_gt.mat"
 CAMERA_FILES = ("K.txt", "Calib_Results.mat")
 
 
+#: Camera files other tools write (COLMAP, OpenCV, ROS, nerfstudio, ScanNet, a user's own),
+#: which :func:`read_dataset` does not read by itself beside a normal map, but which
+#: :func:`read_K` (``--K FILE``) reads: :func:`unread_camera_files` finds them, so that a job
+#: without a camera can name them (a folder holding cameras.txt ran orthographically with no
+#: word, a review). Not read automatically: which of them, and whether the map is the
+#: calibrated image's, is the user's to say.
+OTHER_CAMERA_FILES = (
+    "cameras.txt", "cameras.bin",  # COLMAP's sparse model
+    "calib.yml", "calib.yaml", "calib.xml",  # OpenCV FileStorage
+    "camera_info.yaml", "camera_info.yml",  # ROS
+    "transforms.json",  # nerfstudio, instant-ngp
+    "K.json", "K.npy", "K.yml", "K.yaml", "K.xml",  # K.txt in another format
+    "intrinsics.txt", "intrinsics.json", "intrinsics.npy",
+    "intrinsic_color.txt",  # ScanNet's (4x4)
+)
+
+
+def unread_camera_files(folder) -> list[Path]:
+    """The files of `folder` named in :data:`OTHER_CAMERA_FILES` (the case of their letters
+    aside), which no reading takes by itself: without --K their camera goes unused. An empty
+    list where it holds none, or cannot be listed."""
+    f = Path(folder)
+    try:  # (listed once for every name)
+        names = os.listdir(f)
+    except OSError:
+        return []
+    found = []
+    for name in OTHER_CAMERA_FILES:
+        try:
+            p = _named(f, name, names)
+        except ValueError:  # (two names that differ only in case: both are named)
+            found += [f / n for n in names if n.lower() == name.lower()]
+            continue
+        if p is not None and p.is_file():
+            found.append(p)
+    return found
+
+
 def normals_file(folder) -> Path | None:
     """The normal map :func:`read_dataset` reads from `folder`: its ``normal_map.*``, else its
     ``Normal_gt.mat`` (:data:`DILIGENT_NORMALS`), else None. A ValueError naming `folder`
@@ -708,7 +799,10 @@ def read_dataset(folder, *, frame: str | None = None, y_down: bool = False,
     The folder holds ``normal_map.png`` (or ``.tif``, ``.tiff``, ``.exr``, ``.npy``), usually
     ``mask.png`` (or ``.tif``, ``.tiff``, ``.npy``) and, for a perspective camera, ``K.txt``
     or ``Calib_Results.mat`` (its ``KK``; where it has both, they must agree). Without one the
-    view is orthographic. Pixels outside the mask may hold anything.
+    view is orthographic; other tools' camera files (:data:`OTHER_CAMERA_FILES`: COLMAP's
+    ``cameras.txt``, OpenCV's ``calib.yml``, a ``transforms.json``, ``K.npy`` ...) are not
+    read by themselves (``K=read_K(path)``; the command line names them and ``--K``).
+    Pixels outside the mask may hold anything.
 
     The DiLiGenT release's object folders (``<obj>PNG/``) are read as they are: without a
     ``normal_map.*``, the normals are those of ``Normal_gt.mat`` (:data:`DILIGENT_NORMALS`,
