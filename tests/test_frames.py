@@ -1413,3 +1413,27 @@ def test_a_gradient_field_stacked_as_two_channels_is_pointed_to_integrate_gradie
     code = main(["integrate", str(tmp_path / "pq.npy"), "-o", str(tmp_path / "o")])
     err = " ".join(capsys.readouterr().err.split())
     assert code == 1 and "--gradients P Q" in err
+
+
+def test_a_hint_the_silhouette_confirms_becomes_a_claim():
+    """A review's y-down render got only the hint (relative curl 0.86 as given, 0.48 with y
+    flipped: between FLIP_RATIO and FLIP_HINT) though every edge pixel's normal pointed into
+    the object along y: where the silhouette says the named axis points inward and the other
+    outward, the hint is a claim. Not where the other axis says nothing (a room seen from
+    inside has inward walls along x on a right map)."""
+    from test_perspective import sphere_scene
+
+    n, mask, K, _ = sphere_scene(min_cos=0.05)
+    flipped = np.array(n) * (1, -1, 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        problem = prepare(flipped, mask, K=K)
+    hint = {"curl": 0.86, "curl_y_flipped": 0.48, "curl_x_flipped": 0.9}
+    f = frames.flip_assessment(problem, hint)
+    assert f["says"] == {"x": "out", "y": "in"} and f["a"] == "y"
+    assert f["verdict"] == "claim"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        right = prepare(np.array(n), mask, K=K)
+    f = frames.flip_assessment(right, hint)  # (right: the silhouette says out, the hint stays)
+    assert f["says"] == {"x": "out", "y": "out"} and f["verdict"] == "hint"
