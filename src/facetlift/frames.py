@@ -869,7 +869,10 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals", rotation=N
         kept = drop_fill(n, name)
         if kept is not n:
             n, sample = kept, _inside(kept, mask, sample=CHECK_SAMPLE)
-    n = rotate(to_facetlift(n, frame), turn)
+    n = to_facetlift(n, frame)
+    if mask is None:  # (in the map's own camera frame: the flat fill is its (0, 0, 1))
+        flat_fill_check(n, name)
+    n = rotate(n, turn)
     if sample is not None:
         _check_facing(rotate(to_facetlift(sample, frame), turn), name, read,
                       rotated=turn is not None, decoded=not floats)
@@ -1138,6 +1141,74 @@ def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
              f"{'; '.join(said)} (a repeated vector at the image's corners; a unit normal has "
              "length 1); give a mask to choose the pixels yourself")
     return out
+
+
+#: :func:`flat_fill_check`: the least share of the image that one flat vector, repeated exactly
+#: in regions holding the image's corners, must fill to be asked about; the most that
+#: the normals along its edge may face the viewer (median z of the unit normals there).
+FLAT_FILL_SHARE, FLAT_FILL_RIM_Z = 0.2, 0.5
+#: A flat vector's x and y at most this far from 0: one 8-bit code (128 decodes to +1/255,
+#: 127 to -1/255; a 16-bit code's half-step is far below).
+FLAT_FILL_XY = 1.0 / 255 + 1e-9
+
+
+def flat_fill_check(n: np.ndarray, name: str = "normals") -> None:
+    """Warn where normals `n` (H, W, 3), in facetlift's frame and given without a mask, hold
+    one and the same flat vector (x, y within :data:`FLAT_FILL_XY` of 0, z > 0: the encoding
+    of a normal facing the camera, (128, 128, 255) in 8 bits) at all four corners of the
+    image, and in the connected regions of it holding them over more than
+    :data:`FLAT_FILL_SHARE` of the image, and the normals next to those regions are steep
+    (median z below :data:`FLAT_FILL_RIM_Z`: an object's outline, its rim turning away from
+    the viewer). Such a fill is a unit normal, so neither the decoding nor :func:`drop_fill`
+    leaves it out, and the bear on a flat-blue background was integrated joined to one large
+    plane: MADE 2.82 mm instead of 0.60, with "unusable normals: none" (a review). A surface
+    that really faces the camera stays silent where it meets the rest along gentle slopes
+    (BiNI's tent, its ground 65 % of the image in one 16-bit code, meets the roof at z 0.71)
+    or leaves a corner to another surface (a wall above a floor); a floor seen from above
+    with objects standing on it is asked about: the normals cannot tell it from a fill. Not
+    dropped, then: the warning names the count and asks for a mask."""
+    H, W = n.shape[:2]
+    if H < 3 or W < 3:
+        return
+    corners = [(r, c) for r in (0, H - 1) for c in (0, W - 1)]
+    v = tuple(float(x) for x in n[0, 0])
+    if not (np.isfinite(v).all() and abs(v[0]) <= FLAT_FILL_XY and abs(v[1]) <= FLAT_FILL_XY
+            and v[2] > 0) or any(tuple(n[r, c]) != v for r, c in corners):
+        return  # (a background holds every corner: a wall above a floor holds two)
+    hit = (n[..., 0] == v[0]) & (n[..., 1] == v[1]) & (n[..., 2] == v[2])
+    if np.count_nonzero(hit) <= FLAT_FILL_SHARE * H * W:
+        return  # (too few in all: no component of them can be enough)
+    from scipy import ndimage
+
+    labels, _ = ndimage.label(hit)
+    region = np.zeros((H, W), bool)
+    for k in {int(labels[r, c]) for r, c in corners}:
+        region |= labels == k
+    count = int(np.count_nonzero(region))
+    if count <= FLAT_FILL_SHARE * H * W:
+        return
+    others = ~hit & np.isfinite(n[..., 0]) & np.isfinite(n[..., 1]) & np.isfinite(n[..., 2])
+    if np.count_nonzero(others) < FILL_SHARE * H * W:
+        return  # (a flat image, or nearly: a plane)
+    rim = np.zeros((H, W), bool)  # (the pixels beside the region, across an edge)
+    rim[1:] |= region[:-1]
+    rim[:-1] |= region[1:]
+    rim[:, 1:] |= region[:, :-1]
+    rim[:, :-1] |= region[:, 1:]
+    rim &= others
+    if np.count_nonzero(rim) < ENCODING_CHECK_PIXELS:
+        return
+    w = n[rim]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = float(np.median(w[:, 2] / np.sqrt(np.einsum("ij,ij->i", w, w))))
+    if z < FLAT_FILL_RIM_Z:  # (else gentle slopes meet it: a surface facing the camera)
+        warn(f"`{name}`: {count} of the {H * W} pixels ({count / (H * W):.0%}), reaching the "
+             f"image's corners, hold one and the same flat normal ({v[0]:.3g}, {v[1]:.3g}, "
+             f"{v[2]:.3g}; (128, 128, 255) in 8 bits), and the normals along its edge are "
+             f"steep (median z {z:.2f}), as along an object's outline: a background filled "
+             "with the flat-normal colour? Without a mask it is integrated as a plane the "
+             "object is joined to; give a mask (--mask FILE; mask= in Python) to integrate "
+             "the object alone (a floor or wall that really faces the camera may stay)")
 
 
 def _check_facing(v: np.ndarray, name: str, frame=None, rotated: bool = False,
