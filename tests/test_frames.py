@@ -1226,7 +1226,7 @@ def _ball_on_flat_fill(N=96, R=30):
     return n, m
 
 
-def test_a_flat_normal_fill_without_a_mask_is_named(tmp_path):
+def test_a_flat_normal_fill_without_a_mask_is_named(tmp_path, brick_texture):
     """A review: the bear on a background of the flat-normal colour (128, 128, 255), a unit
     normal, given without a mask was integrated joined to one large plane (MADE 2.82 mm
     instead of 0.60), "unusable normals: none" and no word. Floats, an 8-bit array and a
@@ -1259,6 +1259,10 @@ def test_a_flat_normal_fill_without_a_mask_is_named(tmp_path):
     flat = np.abs(bumpy[..., :2]).max(-1) < 1e-3
     bumpy[flat] = (0.0, 0.0, 1.0)
     silent(bumpy)
+    # a texture's bricks with steep bevels on flat grooves that hold the corners: dozens of
+    # raised pieces, no object on a fill (without the pieces' rule it was asked about)
+    _, tiles = brick_texture(512, brick=(64, 32), bevel=(4, 6))
+    silent(tiles)
     held = n.copy()  # (a fill that leaves one corner out is no background: a wall above a
     held[-30:, -30:] = (0.0, 0.6, 0.8)  # floor holds two)
     silent(held)

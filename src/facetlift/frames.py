@@ -1150,6 +1150,9 @@ FLAT_FILL_SHARE, FLAT_FILL_RIM_Z = 0.2, 0.5
 #: A flat vector's x and y at most this far from 0: one 8-bit code (128 decodes to +1/255,
 #: 127 to -1/255; a 16-bit code's half-step is far below).
 FLAT_FILL_XY = 1.0 / 255 + 1e-9
+#: The most objects a fill is taken to stand around: at least half of the other normals lie
+#: in this many connected pieces (a texture's bricks or rivets on a flat plate are dozens).
+FLAT_FILL_PIECES = 4
 
 
 def flat_fill_check(n: np.ndarray, name: str = "normals") -> None:
@@ -1163,9 +1166,11 @@ def flat_fill_check(n: np.ndarray, name: str = "normals") -> None:
     leaves it out, and the bear on a flat-blue background was integrated joined to one large
     plane: MADE 2.82 mm instead of 0.60, with "unusable normals: none" (a review). A surface
     that really faces the camera stays silent where it meets the rest along gentle slopes
-    (BiNI's tent, its ground 65 % of the image in one 16-bit code, meets the roof at z 0.71)
-    or leaves a corner to another surface (a wall above a floor); a floor seen from above
-    with objects standing on it is asked about: the normals cannot tell it from a fill. Not
+    (BiNI's tent, its ground 65 % of the image in one 16-bit code, meets the roof at z 0.71),
+    leaves a corner to another surface (a wall above a floor) or carries many raised
+    features (a texture's bricks or rivets: fewer than half of the other normals in the
+    :data:`FLAT_FILL_PIECES` largest connected pieces); a floor seen from above with a few
+    objects standing on it is asked about: the normals cannot tell it from a fill. Not
     dropped, then: the warning names the count and asks for a mask."""
     H, W = n.shape[:2]
     if H < 3 or W < 3:
@@ -1188,8 +1193,13 @@ def flat_fill_check(n: np.ndarray, name: str = "normals") -> None:
     if count <= FLAT_FILL_SHARE * H * W:
         return
     others = ~hit & np.isfinite(n[..., 0]) & np.isfinite(n[..., 1]) & np.isfinite(n[..., 2])
-    if np.count_nonzero(others) < FILL_SHARE * H * W:
+    total = np.count_nonzero(others)
+    if total < FILL_SHARE * H * W:
         return  # (a flat image, or nearly: a plane)
+    pieces, _ = ndimage.label(others)
+    sizes = np.sort(np.bincount(pieces.ravel())[1:])[::-1]
+    if sizes[:FLAT_FILL_PIECES].sum() < 0.5 * total:
+        return  # (a texture's many raised features on its flat plate: bricks, rivets)
     rim = np.zeros((H, W), bool)  # (the pixels beside the region, across an edge)
     rim[1:] |= region[:-1]
     rim[:-1] |= region[1:]
@@ -1203,7 +1213,7 @@ def flat_fill_check(n: np.ndarray, name: str = "normals") -> None:
         z = float(np.median(w[:, 2] / np.sqrt(np.einsum("ij,ij->i", w, w))))
     if z < FLAT_FILL_RIM_Z:  # (else gentle slopes meet it: a surface facing the camera)
         warn(f"`{name}`: {count} of the {H * W} pixels ({count / (H * W):.0%}), reaching the "
-             f"image's corners, hold one and the same flat normal ({v[0]:.3g}, {v[1]:.3g}, "
+             f"image's corners, hold one and the same flat normal ({v[0] + 0:.3g}, {v[1] + 0:.3g}, "
              f"{v[2]:.3g}; (128, 128, 255) in 8 bits), and the normals along its edge are "
              f"steep (median z {z:.2f}), as along an object's outline: a background filled "
              "with the flat-normal colour? Without a mask it is integrated as a plane the "
