@@ -831,6 +831,33 @@ def test_an_srgb_encoded_map_is_named_with_the_curve_that_undoes_it():
         frames.decode(stored)
 
 
+def test_noisy_lengths_are_told_from_a_missing_z():
+    """A review: a JPEG-compressed bear (as PNG) was told that 8 % of its normals were longer
+    than unit length, asked whether z was stored and pointed to --normal-encoding xy; 13.5 %
+    were as much shorter: compression noise. Lengths spread both ways are now named as noise
+    or lossy compression, without the flag; a blue channel fixed at 255 (x, y only stored),
+    noisy too, keeps the z message."""
+    yy, xx = np.mgrid[0:96, 0:96]
+    n = np.dstack([-0.5 * np.cos(xx / 10), -0.3 * np.sin(yy / 7), np.ones((96, 96))])
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    rng = np.random.default_rng(0)
+    for dtype in (np.uint8, np.uint16):
+        top = np.iinfo(dtype).max
+        noisy = n * rng.uniform(0.94, 1.06, (96, 96, 1))  # (lengths off both ways, as a JPEG's)
+        v = np.round((np.clip(noisy, -1, 1) + 1) / 2 * top).astype(dtype)
+        with pytest.warns(facetlift.FrameWarning, match=r"lengths are noisy: \d+% are longer "
+                          r"than unit length and \d+% shorter .*lossy compression") as rec:
+            frames.decode(v)
+        said = " ".join(str(w.message) for w in rec)
+        assert "is z stored" not in said and "--normal-encoding" not in said, said
+        z = np.round((np.clip(n + rng.normal(0, 0.004, n.shape), -1, 1) + 1) / 2 * top)
+        z[..., 2] = top  # (a two-channel map's blue fill read as z)
+        with pytest.warns(facetlift.FrameWarning, match=r"longer than unit length .* is z "
+                          r"stored .*--normal-encoding xy") as rec:
+            frames.decode(z.astype(dtype))
+        assert "noisy" not in " ".join(str(w.message) for w in rec)
+
+
 def test_the_grazing_warning_names_the_option_that_keeps_steep_walls():
     """A stamp whose near-vertical walls were dropped by the paper's rule vanished (plateau 0
     instead of 20); the smooth route's warning did not name --outlier-eps."""

@@ -421,7 +421,8 @@ def decode(pixels: np.ndarray, where=None, frame=None) -> np.ndarray:
     """uint8/uint16 pixels -> float64 normals ``v / max * 2 - 1``; NaN where the decoded
     length is outside :data:`ENCODED_LENGTH_RANGE` (background fill, not a normal). A warning
     where many of them (among `where`, (H, W) bool: the mask or alpha, where known) are
-    longer than unit length (:data:`UNIT_TOLERANCE`): z not stored.
+    longer than unit length (:data:`UNIT_TOLERANCE`): z not stored, or an sRGB curve; or,
+    where more than :data:`NOISE_SHORT` as many are shorter, noise (lossy compression).
 
     8-bit flat areas (uint8 only): the component 0 falls exactly between two codes, 127 and
     128 (``0.5 * 255 = 127.5``); encoders write it as round(127.5) = 128 (some truncate to
@@ -456,27 +457,49 @@ def decode(pixels: np.ndarray, where=None, frame=None) -> np.ndarray:
     n[bad] = np.nan
     # (longer only: averaging, resizing and noise shorten vectors, which renormalising fixes)
     off = length[seen] > 1.0 + UNIT_TOLERANCE
-    if flat_z is not None and not (off.size and off.mean() > UNIT_SHARE):
+    longer = float(off.mean()) if off.size else 0.0
+    gamma = blamed = None
+    if longer > UNIT_SHARE:
+        # (a texture artist's map with the blue channel fixed at 255, as two-channel bakes are
+        # often filled, read as 'consistent' and lost 29 % of its height)
+        picked = pixels[seen]
+        picked = picked[:: max(1, len(picked) // GAMMA_SAMPLE)]  # (6 s at 4096^2: a review)
+        gamma = _gamma_hint(picked.astype(np.float64) / maxval, longer)
+        short = float(np.mean(length[seen] < 1.0 - UNIT_TOLERANCE))
+        # (a stored z or a colour curve makes vectors longer; noise, a JPEG's above all, as
+        # many shorter: a JPEG-compressed bear, 8 % longer and 13.5 % shorter, was asked
+        # whether z was stored and told of --normal-encoding xy, a review)
+        blamed = gamma is not None or short <= NOISE_SHORT * longer
+    if flat_z is not None and not blamed:
         # (a two-channel map whose blue fill decodes between 0 and 1: its flat texels too
         # short, left out as fill, the rest bent; 31 % of a texture kept, 29.7 % RMS, and no
         # word, a texture artist's audit; 0 faces away and 255 is too long: said elsewhere)
         warn(f"the map's z channel holds one code, {flat_z}, at "
              "every pixel while x and y vary: is z stored? A two-channel map (BC5, RG) "
              f"stores x and y only, and its filled channel is not z: {REBUILD_Z}", FrameWarning)
-    if off.size and off.mean() > UNIT_SHARE:
-        # (a texture artist's map with the blue channel fixed at 255, as two-channel bakes are
-        # often filled, read as 'consistent' and lost 29 % of its height)
-        picked = pixels[seen]
-        picked = picked[:: max(1, len(picked) // GAMMA_SAMPLE)]  # (6 s at 4096^2: a review)
-        gamma = _gamma_hint(picked.astype(np.float64) / maxval, off.mean())
-        warn(f"{off.mean():.0%} of the decoded normals are longer than unit length (by more "
+    elif blamed:
+        warn(f"{longer:.0%} of the decoded normals are longer than unit length (by more "
              f"than {UNIT_TOLERANCE:.0%}, median length {np.median(length[seen]):.3g}): "
              + (gamma or "is z stored (a blue channel fixed at one value, as two-channel maps "
                 "are often filled, must be rebuilt as z = sqrt(1 - x^2 - y^2) first: "
                 "--normal-encoding xy, encoding='xy' in facetlift.io.read_normals)?")
              + " facetlift renormalises each vector, which is right only where it points the "
              "right way", FrameWarning)
+    elif blamed is not None:
+        warn(f"the decoded normals' lengths are noisy: {longer:.0%} are longer than unit length "
+             f"and {short:.0%} shorter (by more than {UNIT_TOLERANCE:.0%}; median length "
+             f"{np.median(length[seen]):.3g}), as lossy compression (a JPEG, or a map once "
+             "saved as one) or noise leaves them, not a stored z or a colour curve, which "
+             "make them longer. facetlift renormalises each vector, but the directions keep "
+             "that noise: read a losslessly saved original (PNG, TIFF, EXR) where there is "
+             "one", FrameWarning)
     return n
+
+
+#: :func:`decode`: the most vectors shorter than unit length, as a share of those longer, for
+#: the longer ones to be blamed on a stored z (a filled blue channel: none shorter) rather than
+#: on noise, which spreads them both ways (a JPEG's: 1.2-3.6 times as many shorter).
+NOISE_SHORT = 0.25
 
 
 #: How a normal map stores its normals: ``"xyz"`` (the default), x, y, z in its first three
