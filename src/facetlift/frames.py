@@ -870,7 +870,8 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals", rotation=N
     grey_check(n, _where(mask, n.shape[:2], hidden), f"`{name}`")  # (before the decode's
     n = as_float_normals(n, name, mask, hidden, frame)  # warning)
     read = _READ_IN.get()
-    read = None if read == GRADIENT_FIELD else read  # (such normals never face away)
+    field = read == GRADIENT_FIELD
+    read = None if field else read  # (such normals never face away)
     # (the reader's frame, already applied, to undo for the values as stored; none where
     # `frame` is still to be applied)
     undo = read if is_identity(frame) else None
@@ -893,7 +894,8 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals", rotation=N
         if kept is not n:
             n, sample = kept, _inside(kept, mask, sample=CHECK_SAMPLE)
     n = to_facetlift(n, frame)
-    if mask is None:  # (in the map's own camera frame: the flat fill is its (0, 0, 1))
+    if mask is None and not field:  # (in the map's own camera frame: the fill is its (0, 0,
+        # 1); a gradient field's zero slopes around an object are a height's ground, no fill)
         flat_fill_check(n, name)
     n = rotate(n, turn)
     if sample is not None:
