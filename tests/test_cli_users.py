@@ -1278,7 +1278,8 @@ def test_ctrl_c_while_the_command_loads_is_one_line(tmp_path, monkeypatch):
 
 def test_a_corrupt_exr_keeps_stdout_for_the_json(tmp_path):
     """OpenEXR prints its complaints about a corrupt file itself; with --json stdout (a pipe,
-    as a script reads it) holds the one object."""
+    as a script reads it) holds the one object, and stderr facetlift's one line (a review:
+    the library's two lines came first, on stdout and stderr)."""
     io.write_normals(tmp_path / "good.exr",
                      np.dstack([np.zeros((64, 64, 2)), np.ones((64, 64))]).astype(np.float32))
     data = (tmp_path / "good.exr").read_bytes()
@@ -1287,6 +1288,8 @@ def test_a_corrupt_exr_keeps_stdout_for_the_json(tmp_path):
     res = subprocess.run([str(exe), "integrate", str(tmp_path / "bad.exr"), "--json", "-o",
                           str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
     assert res.returncode == 1 and json.loads(res.stdout)["status"] == "error", res.stdout
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "bad.exr is truncated or corrupt; OpenEXR: " in lines[0], lines
 
 
 def test_messages_name_flags_only_where_the_flag_was_given(tmp_path, capsys):

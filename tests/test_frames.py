@@ -831,6 +831,33 @@ def test_an_srgb_encoded_map_is_named_with_the_curve_that_undoes_it():
         frames.decode(stored)
 
 
+def test_noisy_lengths_are_told_from_a_missing_z():
+    """A review: a JPEG-compressed bear (as PNG) was told that 8 % of its normals were longer
+    than unit length, asked whether z was stored and pointed to --normal-encoding xy; 13.5 %
+    were as much shorter: compression noise. Lengths spread both ways are now named as noise
+    or lossy compression, without the flag; a blue channel fixed at 255 (x, y only stored),
+    noisy too, keeps the z message."""
+    yy, xx = np.mgrid[0:96, 0:96]
+    n = np.dstack([-0.5 * np.cos(xx / 10), -0.3 * np.sin(yy / 7), np.ones((96, 96))])
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    rng = np.random.default_rng(0)
+    for dtype in (np.uint8, np.uint16):
+        top = np.iinfo(dtype).max
+        noisy = n * rng.uniform(0.94, 1.06, (96, 96, 1))  # (lengths off both ways, as a JPEG's)
+        v = np.round((np.clip(noisy, -1, 1) + 1) / 2 * top).astype(dtype)
+        with pytest.warns(facetlift.FrameWarning, match=r"lengths are noisy: \d+% are longer "
+                          r"than unit length and \d+% shorter .*lossy compression") as rec:
+            frames.decode(v)
+        said = " ".join(str(w.message) for w in rec)
+        assert "is z stored" not in said and "--normal-encoding" not in said, said
+        z = np.round((np.clip(n + rng.normal(0, 0.004, n.shape), -1, 1) + 1) / 2 * top)
+        z[..., 2] = top  # (a two-channel map's blue fill read as z)
+        with pytest.warns(facetlift.FrameWarning, match=r"longer than unit length .* is z "
+                          r"stored .*--normal-encoding xy") as rec:
+            frames.decode(z.astype(dtype))
+        assert "noisy" not in " ".join(str(w.message) for w in rec)
+
+
 def test_the_grazing_warning_names_the_option_that_keeps_steep_walls():
     """A stamp whose near-vertical walls were dropped by the paper's rule vanished (plateau 0
     instead of 20); the smooth route's warning did not name --outlier-eps."""
@@ -1212,6 +1239,73 @@ def test_a_float_maps_background_fill_is_left_out(fill):
         p, q = -np.sign(xx - 31.5), np.sign(yy - 31.5)
         pyramid = np.dstack([-p, -q, np.ones_like(p)]).astype(float)
         assert np.isfinite(facetlift.integrate(pyramid).depth).all()
+
+
+def _ball_on_flat_fill(N=96, R=30):
+    """A hemisphere's unit normals inside a disc and the flat normal (0, 0, 1) around it,
+    and the disc."""
+    r, c = np.mgrid[0:N, 0:N] + 0.5
+    x, y = c - N / 2, N / 2 - r
+    s = R * R - x * x - y * y
+    m = s > 2
+    n = np.stack([x / R, y / R, np.sqrt(np.clip(s, 0, None)) / R], -1)
+    n[~m] = (0.0, 0.0, 1.0)
+    return n, m
+
+
+def test_a_flat_normal_fill_without_a_mask_is_named(tmp_path, brick_texture):
+    """A review: the bear on a background of the flat-normal colour (128, 128, 255), a unit
+    normal, given without a mask was integrated joined to one large plane (MADE 2.82 mm
+    instead of 0.60), "unusable normals: none" and no word. Floats, an 8-bit array and a
+    16-bit PNG are now warned about, counting the fill and naming --mask; with the mask, and
+    where the flat surface meets the rest along gentle slopes (a tent's ground), no word."""
+    n, m = _ball_on_flat_fill()
+    said = (rf"`normals`: {int((~m).sum())} of the {m.size} pixels \(\d+%\), reaching the "
+            r"image's corners, hold one and the same flat normal .*--mask FILE; mask= in Python")
+    with pytest.warns(UserWarning, match=said):
+        facetlift.integrate(n)
+    codes = np.round((n + 1) / 2 * 255).astype(np.uint8)
+    assert (codes[0, 0] == (128, 128, 255)).all()
+    with pytest.warns(UserWarning, match=said):
+        facetlift.integrate(codes)
+    path = io.write_normals(tmp_path / "n.png", n, bits=16)
+    with pytest.warns(UserWarning, match=r"`normals`: \d+ of the 9216 pixels.*flat normal"):
+        facetlift.integrate(io.read_normals(path)[0])
+
+    def silent(normals, mask=None):
+        with warnings.catch_warnings(record=True) as rec:
+            warnings.simplefilter("always")
+            facetlift.integrate(normals, mask)
+        assert not [w for w in rec if "flat normal" in str(w.message)], rec
+
+    silent(n, m)  # (given the mask: the fill is outside it)
+    with warnings.catch_warnings(record=True) as rec:  # (a gradient field's zero slopes around
+        warnings.simplefilter("always")  # an object: a height's ground, no fill)
+        facetlift.integrate_gradients(-n[..., 0] / n[..., 2], -n[..., 1] / n[..., 2])
+    assert not [w for w in rec if "flat normal" in str(w.message)], rec
+    tent = facetlift.synthetic.analytic("tent", 96)  # (ground at every corner, roof at 45 deg)
+    silent(tent.normals)
+    silent(facetlift.synthetic.quantize(tent.normals, 8))
+    bumpy, _ = bump((60, 60))  # (a bump rising gently from a plane: nothing steep beside it)
+    flat = np.abs(bumpy[..., :2]).max(-1) < 1e-3
+    bumpy[flat] = (0.0, 0.0, 1.0)
+    silent(bumpy)
+    # a texture's bricks with steep bevels on flat grooves that hold the corners: dozens of
+    # raised pieces, no object on a fill (without the pieces' rule it was asked about)
+    _, tiles = brick_texture(512, brick=(64, 32), bevel=(4, 6))
+    silent(tiles)
+    held = n.copy()  # (a fill that leaves one corner out is no background: a wall above a
+    held[-30:, -30:] = (0.0, 0.6, 0.8)  # floor holds two)
+    silent(held)
+    for width, share in ((4, 0.16), (8, 0.31)):  # (a flat frame around a steep plane: asked
+        framed = np.full_like(n, (0.0, 0.0, 1.0))  # about above 20 % of the image alone)
+        framed[width:-width, width:-width] = (0.954, 0.0, 0.3)
+        assert round((framed == (0.0, 0.0, 1.0)).all(-1).mean(), 2) == share
+        if share <= frames.FLAT_FILL_SHARE:
+            silent(framed)
+        else:
+            with pytest.warns(UserWarning, match=r"\(31%\), reaching the image's corners"):
+                facetlift.integrate(framed)
 
 
 def test_an_orthographic_map_given_a_camera_is_not_told_to_flip(tmp_path, capsys):

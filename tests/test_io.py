@@ -971,7 +971,8 @@ def test_planar_tiff_reads_as_its_contiguous_twin(tmp_path, normals):
 
 def test_stdout_redirection_of_overlapping_readers_is_undone(monkeypatch):
     """The first reader leaves while the second is still inside (the order a per-reader
-    save-and-restore gets wrong: fd 1 ended on stderr)."""
+    save-and-restore gets wrong: fd 1 ended on stderr); stdout and stderr both come back,
+    and the last to leave is given what was printed meanwhile."""
     import os
     import threading
 
@@ -979,44 +980,88 @@ def test_stdout_redirection_of_overlapping_readers_is_undone(monkeypatch):
 
     monkeypatch.setitem(images._REDIRECT, "enabled", True)  # (the command line's setting)
 
-    before = os.fstat(1)
+    before = [os.fstat(fd) for fd in (1, 2)]
     first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
+    said = {}
 
     def first():
-        with images._stdout_to_stderr():
+        with images._library_quiet() as s:
+            os.write(2, b"from the library\n")
             first_in.set()
             second_in.wait(10)
+        said["first"] = s.text
         first_out.set()
 
     def second():
         first_in.wait(10)
-        with images._stdout_to_stderr():
+        with images._library_quiet() as s:
             second_in.set()
             first_out.wait(10)
+        said["second"] = s.text
 
     threads = [threading.Thread(target=first), threading.Thread(target=second)]
     for t in threads:
         t.start()
     for t in threads:
         t.join()
-    after = os.fstat(1)
-    assert (before.st_dev, before.st_ino) == (after.st_dev, after.st_ino)
+    after = [os.fstat(fd) for fd in (1, 2)]
+    assert [(b.st_dev, b.st_ino) for b in before] == [(a.st_dev, a.st_ino) for a in after]
     assert images._REDIRECT["depth"] == 0 and images._REDIRECT["saved"] is None
+    assert said == {"first": "", "second": "from the library\n"}
 
 
 def test_a_library_caller_s_stdout_is_left_alone(monkeypatch):
-    """Only the command line sends stdout to stderr around the C readers: a library's host
-    printing from another thread meanwhile wrote to stderr (fd 1 is the process's)."""
+    """Only the command line catches stdout and stderr around the C readers: a library's
+    host printing from another thread meanwhile would lose its words (fds 1 and 2 are the
+    process's)."""
     import os
 
     from facetlift.io import images
 
     monkeypatch.setitem(images._REDIRECT, "enabled", False)
-    before = os.fstat(1)
-    with images._stdout_to_stderr():
-        inside = os.fstat(1)
+    before = [os.fstat(fd) for fd in (1, 2)]
+    with images._library_quiet() as said:
+        inside = [os.fstat(fd) for fd in (1, 2)]
         assert images._REDIRECT["depth"] == 0
-    assert (before.st_dev, before.st_ino) == (inside.st_dev, inside.st_ino)
+    assert [(b.st_dev, b.st_ino) for b in before] == [(i.st_dev, i.st_ino) for i in inside]
+    assert said.text == ""
+
+
+def test_a_truncated_exr_is_one_line_naming_the_file(tmp_path, capfd):
+    """A review: a truncated EXR printed OpenEXR's own lines (one on stdout, one on stderr)
+    before facetlift's error, which ended "Invalid part index '0': file has 0 parts". The
+    command line now prints one line naming the file as truncated or corrupt, with the
+    library's reason, and nothing on stdout (--json: the object alone); Python gets the same
+    words (the library's own lines are left where it prints them: the host's descriptors)."""
+    import json
+
+    from facetlift.cli import main
+
+    r, c = np.mgrid[0:64, 0:64]
+    n = np.dstack([np.sin(c / 9) * 0.4, np.cos(r / 7) * 0.3, np.ones((64, 64))])
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    good = io.write_normals(tmp_path / "good.exr", n)
+    data = good.read_bytes()
+    cut = tmp_path / "cut.exr"
+    cut.write_bytes(data[: len(data) // 2])
+    capfd.readouterr()
+    assert main(["info", str(cut)]) == 1
+    out, err = capfd.readouterr()
+    assert out == "" and len(err.splitlines()) == 1, (out, err)
+    assert f"{cut} is truncated or corrupt; OpenEXR: " in err and "0 parts" not in err, err
+    assert main(["integrate", str(cut), "-o", str(tmp_path / "o"), "--json"]) == 1
+    out, err = capfd.readouterr()
+    assert "truncated or corrupt" in json.loads(out)["error"] and err.count("\n") <= 1, err
+    with pytest.raises(ValueError, match=r"cut\.exr is truncated or corrupt; OpenEXR: "):
+        io.read_normals(cut)
+    (tmp_path / "text.exr").write_bytes(b"this is not an image at all")
+    with pytest.raises(ValueError, match=r"text\.exr is not an OpenEXR file: it does not "
+                       r"begin with the EXR signature"):
+        io.read_normals(tmp_path / "text.exr")
+    capfd.readouterr()
+    assert main(["info", str(good)]) == 0  # (a whole file: nothing caught is lost or said)
+    out, err = capfd.readouterr()
+    assert "OpenEXR: " not in out + err and "Warning" not in out + err
 
 
 def test_atomic_write_errors_name_the_target(tmp_path, monkeypatch):

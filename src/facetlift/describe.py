@@ -491,9 +491,11 @@ def _file_facts(src: Path) -> dict:
         elif ext == ".exr":
             import OpenEXR
 
-            from .io.images import _stdout_to_stderr
+            from .io.images import _library_quiet
 
-            with _stdout_to_stderr(), OpenEXR.File(str(f), separate_channels=True) as e:
+            # (what the library prints is dropped: the reading after this one passes it on,
+            # or puts it in its error)
+            with _library_quiet(), OpenEXR.File(str(f), separate_channels=True) as e:
                 ch = e.channels()
                 facts.update(channels=sorted(ch),
                              dtype=sorted({str(np.asarray(v.pixels).dtype) for v in ch.values()}),

@@ -421,7 +421,8 @@ def decode(pixels: np.ndarray, where=None, frame=None) -> np.ndarray:
     """uint8/uint16 pixels -> float64 normals ``v / max * 2 - 1``; NaN where the decoded
     length is outside :data:`ENCODED_LENGTH_RANGE` (background fill, not a normal). A warning
     where many of them (among `where`, (H, W) bool: the mask or alpha, where known) are
-    longer than unit length (:data:`UNIT_TOLERANCE`): z not stored.
+    longer than unit length (:data:`UNIT_TOLERANCE`): z not stored, or an sRGB curve; or,
+    where more than :data:`NOISE_SHORT` as many are shorter, noise (lossy compression).
 
     8-bit flat areas (uint8 only): the component 0 falls exactly between two codes, 127 and
     128 (``0.5 * 255 = 127.5``); encoders write it as round(127.5) = 128 (some truncate to
@@ -456,27 +457,49 @@ def decode(pixels: np.ndarray, where=None, frame=None) -> np.ndarray:
     n[bad] = np.nan
     # (longer only: averaging, resizing and noise shorten vectors, which renormalising fixes)
     off = length[seen] > 1.0 + UNIT_TOLERANCE
-    if flat_z is not None and not (off.size and off.mean() > UNIT_SHARE):
+    longer = float(off.mean()) if off.size else 0.0
+    gamma = blamed = None
+    if longer > UNIT_SHARE:
+        # (a texture artist's map with the blue channel fixed at 255, as two-channel bakes are
+        # often filled, read as 'consistent' and lost 29 % of its height)
+        picked = pixels[seen]
+        picked = picked[:: max(1, len(picked) // GAMMA_SAMPLE)]  # (6 s at 4096^2: a review)
+        gamma = _gamma_hint(picked.astype(np.float64) / maxval, longer)
+        short = float(np.mean(length[seen] < 1.0 - UNIT_TOLERANCE))
+        # (a stored z or a colour curve makes vectors longer; noise, a JPEG's above all, as
+        # many shorter: a JPEG-compressed bear, 8 % longer and 13.5 % shorter, was asked
+        # whether z was stored and told of --normal-encoding xy, a review)
+        blamed = gamma is not None or short <= NOISE_SHORT * longer
+    if flat_z is not None and not blamed:
         # (a two-channel map whose blue fill decodes between 0 and 1: its flat texels too
         # short, left out as fill, the rest bent; 31 % of a texture kept, 29.7 % RMS, and no
         # word, a texture artist's audit; 0 faces away and 255 is too long: said elsewhere)
         warn(f"the map's z channel holds one code, {flat_z}, at "
              "every pixel while x and y vary: is z stored? A two-channel map (BC5, RG) "
              f"stores x and y only, and its filled channel is not z: {REBUILD_Z}", FrameWarning)
-    if off.size and off.mean() > UNIT_SHARE:
-        # (a texture artist's map with the blue channel fixed at 255, as two-channel bakes are
-        # often filled, read as 'consistent' and lost 29 % of its height)
-        picked = pixels[seen]
-        picked = picked[:: max(1, len(picked) // GAMMA_SAMPLE)]  # (6 s at 4096^2: a review)
-        gamma = _gamma_hint(picked.astype(np.float64) / maxval, off.mean())
-        warn(f"{off.mean():.0%} of the decoded normals are longer than unit length (by more "
+    elif blamed:
+        warn(f"{longer:.0%} of the decoded normals are longer than unit length (by more "
              f"than {UNIT_TOLERANCE:.0%}, median length {np.median(length[seen]):.3g}): "
              + (gamma or "is z stored (a blue channel fixed at one value, as two-channel maps "
                 "are often filled, must be rebuilt as z = sqrt(1 - x^2 - y^2) first: "
                 "--normal-encoding xy, encoding='xy' in facetlift.io.read_normals)?")
              + " facetlift renormalises each vector, which is right only where it points the "
              "right way", FrameWarning)
+    elif blamed is not None:
+        warn(f"the decoded normals' lengths are noisy: {longer:.0%} are longer than unit length "
+             f"and {short:.0%} shorter (by more than {UNIT_TOLERANCE:.0%}; median length "
+             f"{np.median(length[seen]):.3g}), as lossy compression (a JPEG, or a map once "
+             "saved as one) or noise leaves them, not a stored z or a colour curve, which "
+             "make them longer. facetlift renormalises each vector, but the directions keep "
+             "that noise: read a losslessly saved original (PNG, TIFF, EXR) where there is "
+             "one", FrameWarning)
     return n
+
+
+#: :func:`decode`: the most vectors shorter than unit length, as a share of those longer, for
+#: the longer ones to be blamed on a stored z (a filled blue channel: none shorter) rather than
+#: on noise, which spreads them both ways (a JPEG's: 1.2-3.6 times as many shorter).
+NOISE_SHORT = 0.25
 
 
 #: How a normal map stores its normals: ``"xyz"`` (the default), x, y, z in its first three
@@ -847,7 +870,8 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals", rotation=N
     grey_check(n, _where(mask, n.shape[:2], hidden), f"`{name}`")  # (before the decode's
     n = as_float_normals(n, name, mask, hidden, frame)  # warning)
     read = _READ_IN.get()
-    read = None if read == GRADIENT_FIELD else read  # (such normals never face away)
+    field = read == GRADIENT_FIELD
+    read = None if field else read  # (such normals never face away)
     # (the reader's frame, already applied, to undo for the values as stored; none where
     # `frame` is still to be applied)
     undo = read if is_identity(frame) else None
@@ -869,7 +893,11 @@ def checked(normals, mask=None, *, frame=None, name: str = "normals", rotation=N
         kept = drop_fill(n, name)
         if kept is not n:
             n, sample = kept, _inside(kept, mask, sample=CHECK_SAMPLE)
-    n = rotate(to_facetlift(n, frame), turn)
+    n = to_facetlift(n, frame)
+    if mask is None and not field:  # (in the map's own camera frame: the fill is its (0, 0,
+        # 1); a gradient field's zero slopes around an object are a height's ground, no fill)
+        flat_fill_check(n, name)
+    n = rotate(n, turn)
     if sample is not None:
         _check_facing(rotate(to_facetlift(sample, frame), turn), name, read,
                       rotated=turn is not None, decoded=not floats)
@@ -1138,6 +1166,84 @@ def drop_fill(n: np.ndarray, name: str = "normals") -> np.ndarray:
              f"{'; '.join(said)} (a repeated vector at the image's corners; a unit normal has "
              "length 1); give a mask to choose the pixels yourself")
     return out
+
+
+#: :func:`flat_fill_check`: the least share of the image that one flat vector, repeated exactly
+#: in regions holding the image's corners, must fill to be asked about; the most that
+#: the normals along its edge may face the viewer (median z of the unit normals there).
+FLAT_FILL_SHARE, FLAT_FILL_RIM_Z = 0.2, 0.5
+#: A flat vector's x and y at most this far from 0: one 8-bit code (128 decodes to +1/255,
+#: 127 to -1/255; a 16-bit code's half-step is far below).
+FLAT_FILL_XY = 1.0 / 255 + 1e-9
+#: The most objects a fill is taken to stand around: at least half of the other normals lie
+#: in this many connected pieces (a texture's bricks or rivets on a flat plate are dozens).
+FLAT_FILL_PIECES = 4
+
+
+def flat_fill_check(n: np.ndarray, name: str = "normals") -> None:
+    """Warn where normals `n` (H, W, 3), in facetlift's frame and given without a mask, hold
+    one and the same flat vector (x, y within :data:`FLAT_FILL_XY` of 0, z > 0: the encoding
+    of a normal facing the camera, (128, 128, 255) in 8 bits) at all four corners of the
+    image, and in the connected regions of it holding them over more than
+    :data:`FLAT_FILL_SHARE` of the image, and the normals next to those regions are steep
+    (median z below :data:`FLAT_FILL_RIM_Z`: an object's outline, its rim turning away from
+    the viewer). Such a fill is a unit normal, so neither the decoding nor :func:`drop_fill`
+    leaves it out, and the bear on a flat-blue background was integrated joined to one large
+    plane: MADE 2.82 mm instead of 0.60, with "unusable normals: none" (a review). A surface
+    that really faces the camera stays silent where it meets the rest along gentle slopes
+    (BiNI's tent, its ground 65 % of the image in one 16-bit code, meets the roof at z 0.71),
+    leaves a corner to another surface (a wall above a floor) or carries many raised
+    features (a texture's bricks or rivets: fewer than half of the other normals in the
+    :data:`FLAT_FILL_PIECES` largest connected pieces); a floor seen from above with a few
+    objects standing on it is asked about: the normals cannot tell it from a fill. Not
+    dropped, then: the warning names the count and asks for a mask."""
+    H, W = n.shape[:2]
+    if H < 3 or W < 3:
+        return
+    corners = [(r, c) for r in (0, H - 1) for c in (0, W - 1)]
+    v = tuple(float(x) for x in n[0, 0])
+    if not (np.isfinite(v).all() and abs(v[0]) <= FLAT_FILL_XY and abs(v[1]) <= FLAT_FILL_XY
+            and v[2] > 0) or any(tuple(n[r, c]) != v for r, c in corners):
+        return  # (a background holds every corner: a wall above a floor holds two)
+    hit = (n[..., 0] == v[0]) & (n[..., 1] == v[1]) & (n[..., 2] == v[2])
+    if np.count_nonzero(hit) <= FLAT_FILL_SHARE * H * W:
+        return  # (too few in all: no component of them can be enough)
+    from scipy import ndimage
+
+    labels, _ = ndimage.label(hit)
+    region = np.zeros((H, W), bool)
+    for k in {int(labels[r, c]) for r, c in corners}:
+        region |= labels == k
+    count = int(np.count_nonzero(region))
+    if count <= FLAT_FILL_SHARE * H * W:
+        return
+    others = ~hit & np.isfinite(n[..., 0]) & np.isfinite(n[..., 1]) & np.isfinite(n[..., 2])
+    total = np.count_nonzero(others)
+    if total < FILL_SHARE * H * W:
+        return  # (a flat image, or nearly: a plane)
+    pieces, _ = ndimage.label(others)
+    sizes = np.sort(np.bincount(pieces.ravel())[1:])[::-1]
+    if sizes[:FLAT_FILL_PIECES].sum() < 0.5 * total:
+        return  # (a texture's many raised features on its flat plate: bricks, rivets)
+    rim = np.zeros((H, W), bool)  # (the pixels beside the region, across an edge)
+    rim[1:] |= region[:-1]
+    rim[:-1] |= region[1:]
+    rim[:, 1:] |= region[:, :-1]
+    rim[:, :-1] |= region[:, 1:]
+    rim &= others
+    if np.count_nonzero(rim) < ENCODING_CHECK_PIXELS:
+        return
+    w = n[rim]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = float(np.median(w[:, 2] / np.sqrt(np.einsum("ij,ij->i", w, w))))
+    if z < FLAT_FILL_RIM_Z:  # (else gentle slopes meet it: a surface facing the camera)
+        warn(f"`{name}`: {count} of the {H * W} pixels ({count / (H * W):.0%}), reaching the "
+             f"image's corners, hold one and the same flat normal ({v[0] + 0:.3g}, {v[1] + 0:.3g}, "
+             f"{v[2]:.3g}; (128, 128, 255) in 8 bits), and the normals along its edge are "
+             f"steep (median z {z:.2f}), as along an object's outline: a background filled "
+             "with the flat-normal colour? Without a mask it is integrated as a plane the "
+             "object is joined to; give a mask (--mask FILE; mask= in Python) to integrate "
+             "the object alone (a floor or wall that really faces the camera may stay)")
 
 
 def _check_facing(v: np.ndarray, name: str, frame=None, rotated: bool = False,

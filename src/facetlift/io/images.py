@@ -76,46 +76,134 @@ def _decode_image(path: Path, ext: str, arg: str) -> np.ndarray:
         ) from None
 
 
-_REDIRECT = {"lock": threading.Lock(), "depth": 0, "saved": None, "enabled": False}
+_REDIRECT = {"lock": threading.Lock(), "depth": 0, "saved": None, "caught": None,
+             "enabled": False}
 
 
 def protect_stdout(enabled: bool = True) -> None:
-    """Whether the readers send the C libraries' own prints to stderr while they run
-    (:func:`_stdout_to_stderr`): the command line turns it on (its stdout carries the --json
-    object alone), a library caller's stdout is left alone (file descriptor 1 is the whole
-    process's: a host thread printing meanwhile would write to stderr)."""
+    """Whether the readers catch the C libraries' own prints while they run
+    (:func:`_library_quiet`): the command line turns it on (its stdout carries the --json
+    object alone, its stderr one line per error), a library caller's descriptors are left
+    alone (file descriptors 1 and 2 are the whole process's: a host thread printing meanwhile
+    would have its words caught)."""
     _REDIRECT["enabled"] = bool(enabled)
 
 
+class _Said:
+    """What a C library printed inside a :func:`_library_quiet` block, its stdout and stderr
+    together: ``text``, set as the block is left ('' where nothing was caught)."""
+
+    text = ""
+
+
 @contextlib.contextmanager
-def _stdout_to_stderr():
-    """The C library's own prints (OpenEXR warns about a corrupt file on stdout) go to stderr
-    meanwhile, where :func:`protect_stdout` is on: stdout carries the command line's --json
-    object alone. File descriptor 1 is the process's: overlapping readers (threads) share
-    one redirection, undone by the last to leave."""
+def _library_quiet():
+    """The C library's own prints go to a temporary file meanwhile, where
+    :func:`protect_stdout` is on, and come back as the yielded :class:`_Said`'s ``text``:
+    a reader puts them in its one-line error, or passes them on to stderr after a read that
+    worked (:func:`_pass_on`). OpenEXR, given a truncated file, printed a line on stdout and
+    another on stderr before facetlift's error, which itself ended "Invalid part index '0':
+    file has 0 parts" (a review); and stdout carries the command line's --json object alone.
+    File descriptors 1 and 2 are the process's: overlapping readers (threads) share one
+    redirection, undone by the last to leave, which is given all that was caught."""
+    said = _Said()
     if not _REDIRECT["enabled"]:
-        yield
+        yield said
         return
     with _REDIRECT["lock"]:
         if _REDIRECT["depth"] == 0:
-            try:
-                sys.stdout.flush()
-                saved = os.dup(1)
-                os.dup2(2, 1)
-            except (OSError, ValueError, AttributeError):  # (no real stdout: nothing to keep
-                saved = None  # clean)
-            _REDIRECT["saved"] = saved
+            _REDIRECT["saved"], _REDIRECT["caught"] = _catch_prints()
         _REDIRECT["depth"] += 1
     try:
-        yield
+        yield said
     finally:
         with _REDIRECT["lock"]:
             _REDIRECT["depth"] -= 1
             if _REDIRECT["depth"] == 0 and _REDIRECT["saved"] is not None:
-                _flush_c_stdio()  # (what the library buffered goes where it was written)
-                os.dup2(_REDIRECT["saved"], 1)
-                os.close(_REDIRECT["saved"])
-                _REDIRECT["saved"] = None
+                said.text = _release_prints(_REDIRECT["saved"], _REDIRECT["caught"])
+                _REDIRECT["saved"] = _REDIRECT["caught"] = None
+
+
+class _Into:
+    """A text stream that writes into the file descriptor `fd` (:func:`_catch_prints`)."""
+
+    encoding, errors = "utf-8", "replace"
+
+    def __init__(self, fd: int):
+        self.fd = fd
+
+    def write(self, text: str) -> int:
+        with contextlib.suppress(OSError):
+            os.write(self.fd, str(text).encode("utf-8", "replace"))
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+    def isatty(self) -> bool:
+        return False
+
+
+def _catch_prints():
+    """``(saved, caught)``: file descriptors 1 and 2 sent to a temporary file `caught`, and
+    Python's sys.stdout and sys.stderr too (OpenEXR's bindings print through Python's print:
+    a host's streams, pytest's or a notebook's, need not write to fds 1 and 2), their old
+    targets in `saved` ({fd: duplicate, "streams": (stdout, stderr)}); ``(None, None)``
+    where no descriptor could be (no real stdout or stderr, no temporary file: the prints go
+    where they went)."""
+    import tempfile
+
+    for stream in (sys.stdout, sys.stderr):  # (what Python holds goes out first)
+        with contextlib.suppress(Exception):
+            stream.flush()
+    _flush_c_stdio()
+    try:
+        caught = tempfile.TemporaryFile()
+    except OSError:
+        return None, None
+    saved = {}
+    for fd in (1, 2):
+        try:
+            old = os.dup(fd)
+        except (OSError, ValueError):
+            continue
+        try:
+            os.dup2(caught.fileno(), fd)
+        except (OSError, ValueError):
+            os.close(old)
+            continue
+        saved[fd] = old
+    if not saved:
+        caught.close()
+        return None, None
+    saved["streams"] = sys.stdout, sys.stderr
+    sys.stdout = sys.stderr = _Into(caught.fileno())
+    return saved, caught
+
+
+def _release_prints(saved: dict, caught) -> str:
+    """Undo :func:`_catch_prints`; the text caught."""
+    sys.stdout, sys.stderr = saved.pop("streams")
+    _flush_c_stdio()  # (what the library buffered goes into the file, not after it)
+    for fd, old in saved.items():
+        os.dup2(old, fd)
+        os.close(old)
+    try:
+        caught.seek(0)
+        return caught.read().decode("utf-8", "replace")
+    except OSError:
+        return ""
+    finally:
+        caught.close()
+
+
+def _pass_on(text: str) -> None:
+    """Write what a library printed during a read that worked to stderr (its warnings are
+    still the user's to see; on stdout they would break --json)."""
+    if text:
+        with contextlib.suppress(Exception):
+            sys.stderr.write(text if text.endswith("\n") else text + "\n")
+            sys.stderr.flush()
 
 
 def _flush_c_stdio() -> None:
@@ -127,28 +215,68 @@ def _flush_c_stdio() -> None:
 
 def _exr_quantity(path: Path) -> str | None:
     """The :data:`EXR_QUANTITY` of an EXR file's header (None where it has none or cannot be
-    read: the reading itself says why)."""
-    try:
-        import OpenEXR
+    read: the reading itself says why, so what the library printed then is dropped)."""
+    value = None
+    with _library_quiet() as said:
+        try:
+            import OpenEXR
 
-        with _stdout_to_stderr(), OpenEXR.File(str(path), header_only=True) as f:
-            value = f.header().get(EXR_QUANTITY)
-    except Exception:
-        return None
+            with OpenEXR.File(str(path), header_only=True) as f:
+                value = f.header().get(EXR_QUANTITY)
+        except Exception:
+            said = None
+    if said is not None:
+        _pass_on(said.text)
     return value if isinstance(value, str) else None
 
 
-def _read_exr(path: Path, arg: str) -> dict[str, np.ndarray]:
-    try:
-        import OpenEXR
+#: The first four bytes of every OpenEXR file.
+EXR_MAGIC = b"\x76\x2f\x31\x01"
 
-        with _stdout_to_stderr(), OpenEXR.File(str(path), separate_channels=True) as f:
-            header = dict(f.header())  # (before channels(), after which it lacks the windows)
-            ch = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
-    except Exception as e:
-        raise ValueError(
-            f"`{arg}`: {path} is not a readable OpenEXR image ({type(e).__name__}: {e})"
-        ) from None
+
+def _exr_unreadable(path: Path, arg: str, error: Exception, said: str) -> str:
+    """The one-line error for an EXR file OpenEXR could not read: not an EXR at all (no
+    signature), or truncated or corrupt, with the library's own line where it printed one
+    (the exception's text, "Invalid part index '0': file has 0 parts" for a truncated file,
+    says less), else the exception's."""
+    if isinstance(error, ImportError):
+        return f"`{arg}`: reading {path} needs the OpenEXR package ({error})"
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except OSError:
+        head = EXR_MAGIC
+    if head != EXR_MAGIC:
+        return (f"`{arg}`: {path} is not an OpenEXR file: "
+                + ("it is empty (0 bytes)" if not head else
+                   "it does not begin with the EXR signature (76 2f 31 01)"))
+    lines = [x.strip() for x in said.splitlines() if x.strip()]
+    line = next((x for x in lines if "EXR_ERR" in x), lines[0] if lines else "")
+    for prefix in (f"{path}: ", f"{path.name}: "):
+        line = line[len(prefix):] if line.startswith(prefix) else line
+    code = re.match(r"\((EXR_ERR_\w+)\)\s*(.*)", line)
+    reason = (f"{code[2]} ({code[1]})" if code else line) or (
+        "no part of the image could be read" if "has 0 parts" in str(error)  # (the bindings'
+        else f"{type(error).__name__}: {error}")  # words for a truncated file's pixels)
+    if len(reason) > 200:
+        reason = reason[:197] + "..."
+    return f"`{arg}`: {path} is truncated or corrupt; OpenEXR: {reason}"
+
+
+def _read_exr(path: Path, arg: str) -> dict[str, np.ndarray]:
+    failed = None
+    with _library_quiet() as said:
+        try:
+            import OpenEXR
+
+            with OpenEXR.File(str(path), separate_channels=True) as f:
+                header = dict(f.header())  # (before channels(), after which it lacks the
+                ch = {k: np.asarray(v.pixels) for k, v in f.channels().items()}  # windows)
+        except Exception as e:
+            failed = e
+    if failed is not None:
+        raise ValueError(_exr_unreadable(path, arg, failed, said.text)) from None
+    _pass_on(said.text)
     return _in_display_window(ch, header)
 
 
