@@ -473,6 +473,10 @@ def test_points_behind_the_camera_are_left_out_and_swapped_axes_are_named():
     np.testing.assert_array_equal(a, b)
     with pytest.raises(ValueError, match="positive z-depths"):  # (all of them: refused)
         facetlift.integrate(n, K=K, prior=(rows, cols, [-5.0, -5.0, -5.0, -3.0]))
+    # (a sensor's 0 "unknown" kept in points made from its map: named as such, a review)
+    with pytest.warns(UserWarning, match=r"2 sample\(s\) with a non-positive z-depth .* \(2 of "
+                      r"them exactly 0: a depth sensor's or a map's mark for an unknown"):
+        facetlift.integrate(n, K=K, prior=(rows, cols, [5.0, 0.0, 5.0, 0.0]))
     mask = np.zeros((24, 28), bool)
     mask[:, :5] = True
     with pytest.warns(UserWarning, match=r"1 of the 4 sample\(s\) lie on the mask, 4 would "

@@ -1761,9 +1761,13 @@ def prior_samples(prior, shape: tuple[int, int], positive: bool = False,
             # the image, before the averaging mixes them with good ones; a user's LiDAR cloud
             # with 10 such points was refused whole)
             k = int(np.flatnonzero(behind)[0])
+            zero = int((keep & (depths == 0)).sum())
+            # (a points file made from a sensor's map keeps its 0 "unknown": named, a review)
+            said = (f" ({zero} of them exactly 0: a depth sensor's or a map's mark for an "
+                    "unknown depth, best left out of the points)" if zero else "")
             warn(f"`prior` (rows, cols, depths): {int(behind.sum())} sample(s) with a "
                  f"non-positive z-depth (behind the camera), the first {float(depths[k])!r} "
-                 f"at (row {r[k]}, col {c[k]}); they were left out")
+                 f"at (row {r[k]}, col {c[k]}){said}; they were left out")
             keep &= ~behind
         idx = r[keep] * W + c[keep]
         d = depths[keep]
