@@ -144,6 +144,9 @@ class _Into:
         return False
 
 
+_INTO = _Into(-1)
+
+
 def _catch_prints():
     """``(saved, caught)``: file descriptors 1 and 2 sent to a temporary file `caught`, and
     Python's sys.stdout and sys.stderr too (OpenEXR's bindings print through Python's print:
@@ -177,13 +180,18 @@ def _catch_prints():
         caught.close()
         return None, None
     saved["streams"] = sys.stdout, sys.stderr
-    sys.stdout = sys.stderr = _Into(caught.fileno())
+    # (one stream object for the process, kept alive: print() in another thread holds only a
+    # borrowed reference to sys.stdout, and a fresh object freed on restore crashed it, the
+    # diff review; a late write after the restore meets a closed descriptor and is dropped)
+    _INTO.fd = caught.fileno()
+    sys.stdout = sys.stderr = _INTO
     return saved, caught
 
 
 def _release_prints(saved: dict, caught) -> str:
     """Undo :func:`_catch_prints`; the text caught."""
     sys.stdout, sys.stderr = saved.pop("streams")
+    _INTO.fd = -1  # (a late write is dropped, not sent to a file that reuses the number)
     _flush_c_stdio()  # (what the library buffered goes into the file, not after it)
     for fd, old in saved.items():
         os.dup2(old, fd)
