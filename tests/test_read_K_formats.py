@@ -800,3 +800,32 @@ def test_K_that_is_neither_a_file_nor_numbers_says_what_K_takes(tmp_path, capsys
         assert code != 0 and f"File {typed!r} does not exist, and it is no K typed inline: " \
             "--K takes a K file" in err, err
         assert "or four numbers fx fy cx cy" in err and "--fov DEG" in err
+
+
+def test_json_K_as_open3d_and_opencv_filestorage_write_it(tmp_path):
+    """The diff review: Open3D's camera JSON stores ``intrinsic_matrix`` column-major and was
+    refused as transposed (with MATLAB's advice); OpenCV FileStorage's JSON holds the matrix
+    as {"type_id": "opencv-matrix", "data": [...]}; {"K": {"fx": ...}} nests the four; K and
+    fx ... cy that differ are refused, as two matrices are."""
+    import json
+
+    from facetlift.io import read_K
+
+    want = [[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]
+    cases = {
+        "open3d": {"width": 640, "height": 480,
+                   "intrinsic_matrix": [500, 0, 0, 0, 500, 0, 320, 240, 1]},
+        "filestorage": {"camera_matrix": {"type_id": "opencv-matrix", "rows": 3, "cols": 3,
+                                          "dt": "d", "data": [500, 0, 320, 0, 500, 240, 0, 0,
+                                                              1]}},
+        "nested": {"K": {"fx": 500, "fy": 500, "cx": 320, "cy": 240}},
+        "agreeing": {"K": want, "fx": 500, "fy": 500, "cx": 320, "cy": 240},
+    }
+    for name, obj in cases.items():
+        f = tmp_path / f"{name}.json"
+        f.write_text(json.dumps(obj))
+        assert read_K(f).tolist() == want, name
+    f = tmp_path / "differ.json"
+    f.write_text(json.dumps({"K": want, "fx": 510, "fy": 500, "cx": 320, "cy": 240}))
+    with pytest.raises(ValueError, match="both K and fx, fy, cx, cy, which differ"):
+        read_K(f)

@@ -318,14 +318,41 @@ def _json_K(data: dict):
     ``cy``; or the matrix under one of :data:`JSON_K_KEYS`; or either of these in one object
     nested in it (``{"camera": {"fx": ...}}``). A ValueError says what it looks for where it
     finds none, or several."""
+    def matrix(key: str, v):
+        """The value under a matrix key: a nested fx ... cy object, OpenCV FileStorage's
+        JSON matrix ({"type_id": "opencv-matrix", "rows", "cols", "data"}), or Open3D's
+        column-major ``intrinsic_matrix`` (its nine numbers [fx, 0, 0, 0, fy, 0, cx, cy, 1]:
+        refused as transposed, with MATLAB's advice, the diff review)."""
+        if isinstance(v, dict):
+            inner = {str(k).lower(): x for k, x in v.items()}
+            if all(k in inner for k in _K_NAMES):
+                return [inner[k] for k in _K_NAMES]
+            if "data" in inner:
+                return inner["data"]
+            return v
+        flat = np.asarray(v, dtype=object).ravel() if isinstance(v, list) else None
+        if (key == "intrinsic_matrix" and flat is not None and flat.size == 9
+                and all(isinstance(x, (int, float)) for x in flat)):
+            a = np.asarray(flat, float)
+            if (a[[1, 2, 3, 5]] == 0).all() and a[8] == 1 and (a[[6, 7]] != 0).any():
+                return a.reshape(3, 3).T.ravel().tolist()  # (column-major: Open3D's)
+        return v
+
     def own(obj: dict):
         low = {str(k).lower(): v for k, v in obj.items()}
-        if all(k in low for k in _K_NAMES):
-            return [low[k] for k in _K_NAMES]
         found = [k for k in JSON_K_KEYS if k.lower() in low]
         if len(found) > 1:
             raise ValueError(f"a JSON object holding both {' and '.join(found)}: which is K?")
-        return low[found[0].lower()] if found else None
+        named = all(k in low for k in _K_NAMES)
+        if named and found:  # (two answers: the same one, or refused, the diff review)
+            m = np.asarray(matrix(found[0].lower(), low[found[0].lower()]), float).ravel()
+            mine = [float(low[k]) for k in _K_NAMES]
+            if m.size != 9 or not np.allclose(m[[0, 4, 2, 5]], mine):
+                raise ValueError(f"a JSON object holding both {found[0]} and fx, fy, cx, cy, "
+                                 "which differ: which is K?")
+        if named:
+            return [low[k] for k in _K_NAMES]
+        return matrix(found[0].lower(), low[found[0].lower()]) if found else None
 
     top = own(data)
     if top is not None:
