@@ -991,8 +991,12 @@ def _info_lines(rec: dict) -> list[str]:
     if jg.get("isolated"):
         from .problem import isolated_rule_text
 
+        # (all the route drops: the default's lone steep ones counted above among them,
+        # said so, the diff review read them as more)
+        steep = (rec.get("counts") or {}).get("isolated") or 0
+        among = f", the {steep} above among them" if steep else ""
         lines.append(f"  with --discontinuities (dgp): {jg['isolated']} isolated "
-                     f"({isolated_rule_text(jg['isolated_rule'])}), treated as missing")
+                     f"({isolated_rule_text(jg['isolated_rule'])}{among}), treated as missing")
     for key, what in (("estimate", "default integration"),
                       ("estimate_discontinuities", "with --discontinuities")):
         e = rec.get(key)

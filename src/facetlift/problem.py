@@ -1241,7 +1241,7 @@ def _remove_outliers(problem: Problem) -> None:
         # tolerance follows the median disagreement, so this is seldom reached)
         problem.extras["prior_outliers"] = {"removed": 0, "disagreeing": k, "first": None,
                                             "pixels": [], "tolerance": tol, **details}
-        whom = ("most of their neighbouring samples" if details.get("dense")
+        whom = ("most of their neighbouring samples" if details.get("majority")
                 else "every neighbouring sample")
         warn(f"prior: {k} of the {details['checked']} samples disagree with {whom} "
              "along the normals, too many to be outliers: all are used. "
@@ -1263,7 +1263,9 @@ def _remove_outliers(problem: Problem) -> None:
                 "kept (info['prior']['outliers']['unconfirmed_pixels']; a lower prior_weight "
                 "limits what they can do)" if doubt else "")
         if details.get("dense"):
-            what = (f"disagree with most of their neighbouring samples (pixels) by more than "
+            whom = ("most of their neighbouring samples (pixels)" if details.get("majority")
+                    else "every neighbouring sample (pixel) they could be compared with")
+            what = (f"disagree with {whom} by more than "
                     f"{tol} along the normals (the first at row {first[0]}, col {first[1]}): "
                     "left out as outliers, such as a depth sensor's flying pixels along "
                     "depth edges and silhouettes or its stray returns, or a correct sample at "
