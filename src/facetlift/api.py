@@ -18,6 +18,7 @@ from .linalg import SolverError
 from .metrics import diagnose
 from .options import validate
 from .prior_fit import check as prior_fit_check
+from .prior_outliers import DENSE
 from .problem import Problem, check_prior_outliers, normals_from_gradients
 from .problem import prepare as _prepare
 from .surface import Surface
@@ -751,7 +752,7 @@ def _solve(problem, method, t0, max_memory, options):
         blurred = problem.prior_blur > 0 and not (out.get("prior_blur") or {}).get("fallback")
         _far_samples_check(out["prior"], blurred, out.get("solver") == "discontinuous"
                            or not getattr(info, "discontinuities", False),
-                           dense=out["prior"].get("samples", 0) > 0.25 * problem.domain.n_facets,
+                           dense=out["prior"].get("samples", 0) > DENSE * problem.domain.n_facets,
                            deviation=out.get("mean_deviation"))
         _prior_fight_check(out.get("mean_deviation"), out.get("solver") == "discontinuous",
                            problem.camera.projection == "orthographic")

@@ -427,20 +427,14 @@ def _unused_folder_files(found, template: Job) -> None:
     camera = camera_unset(template)
     if camera:  # (other tools' camera files, which only --K reads: the items, which do not
         # look beside themselves in a batch, ran orthographically without a word, a review)
-        from .io.dataset import unread_camera_files
+        from .io.dataset import unread_camera_advice, unread_camera_files
 
         for folder in sorted(by_folder):
             others = unread_camera_files(folder)
             if others:
-                one = len(others) == 1
                 warnings.warn(
                     f"batch: {folder} holds {' and '.join(p.name for p in others)} beside its "
-                    f"normal maps, {'a camera file that is' if one else 'camera files that are'}"
-                    f" not read by {'itself' if one else 'themselves'} (only a "
-                    "dataset folder's K.txt or Calib_Results.mat is): these maps are "
-                    f"integrated orthographically; give --K {others[0]} (K=) to use "
-                    f"{'that camera' if len(others) == 1 else 'one of them'} for every map, "
-                    "or --orthographic if orthographic is meant", stacklevel=3)
+                    f"normal maps, {unread_camera_advice(others, every=True)}", stacklevel=3)
     # (a dataset folder's own normal_map.* given as a file is warned about by its item,
     # jobs._beside_dataset_files, which names the folder's mask too: not twice)
     for folder in sorted(f for f in by_folder if not is_dataset(f)):

@@ -441,7 +441,7 @@ def _unread_camera_files(src: Path, job: Job) -> list[str]:
     review). Looked for in a dataset folder given as the input, and beside a map file given
     by its path (not in a batch's items, whose folders the batch names once,
     :func:`facetlift.batch._unused_folder_files`). Returns the files' paths, for info."""
-    from .io.dataset import unread_camera_files
+    from .io.dataset import unread_camera_advice, unread_camera_files
 
     if src.is_dir():
         folder = src
@@ -453,15 +453,9 @@ def _unread_camera_files(src: Path, job: Job) -> list[str]:
     if not found:
         return []
     names = " and ".join(p.name for p in found)
-    one = len(found) == 1
     where = (f"the dataset folder {src} holds {names}" if folder == src
              else f"{src.name} has {names} beside it")
-    warn(f"{where}: {'a camera file' if one else 'camera files'} that "
-         f"{'is' if one else 'are'} not read by {'itself' if one else 'themselves'} (only a "
-         "dataset folder's K.txt or Calib_Results.mat is), so without a camera the map is "
-         f"integrated orthographically; give --K {found[0]} (K=facetlift.io.read_K(path) in "
-         f"Python) to use {'it' if one else 'one of them'}, or --orthographic if orthographic "
-         "is meant", UserWarning)
+    warn(f"{where}: {unread_camera_advice(found)}", UserWarning)
     return [str(p) for p in found]
 
 

@@ -112,8 +112,9 @@ def find_outliers(problem) -> tuple[np.ndarray | None, dict]:
     return _result(d, s, bad, compared, agreeing, int(made.sum()), threshold, dense=False)
 
 
-def _result(d, s, bad, compared, agreeing, comparisons: int, threshold: float, dense: bool):
-    """:func:`find_outliers`' answer from the samples' tallies."""
+def _result(d, s, bad, compared, agreeing, comparisons: int, threshold: float, dense: bool,
+            **more):
+    """:func:`find_outliers`' answer from the samples' tallies (`more`: other details)."""
     # (and those that agree with none of the few comparisons made: kept, but counted)
     doubtful = (compared >= 1) & (agreeing == 0) & ~bad
     out = np.zeros(d.n_facets, dtype=bool)
@@ -121,7 +122,7 @@ def _result(d, s, bad, compared, agreeing, comparisons: int, threshold: float, d
     return out, {"checked": int(s.size), "dense": dense, "comparisons": comparisons,
                  "threshold": threshold,
                  "unconfirmed": int(doubtful.sum()),
-                 "unconfirmed_pixels": image_pixels(d, s[doubtful])}
+                 "unconfirmed_pixels": image_pixels(d, s[doubtful]), **more}
 
 
 #: Comparisons of the median disagreement of a dense prior (:func:`_dense`): a random subset
@@ -136,9 +137,9 @@ def _dense(problem, s: np.ndarray, floor: float):
     grazing rim, and a step of one pixel there predicts far less than they are off; only
     facets without a usable normal are not compared). An outlier where at least
     :data:`DENSE_KNOWN` comparisons are made and (:data:`DENSE`) fewer than half agree with a
-    pinhole camera, none orthographically. None where
-    fewer than half of the samples have :data:`DENSE_KNOWN` neighbours to be compared with (a
-    prior in scan lines, or scattered: the sparse rule decides)."""
+    pinhole camera, none orthographically. None where fewer than half of the samples have
+    :data:`DENSE_KNOWN` neighbours to be compared with (a prior in scan lines, or scattered:
+    the sparse rule decides)."""
     d = problem.domain
     H, W = d.shape
     r, c = d.pixels
@@ -188,9 +189,8 @@ def _dense(problem, s: np.ndarray, floor: float):
         bad = (known >= DENSE_KNOWN) & (2 * agree < known)
     else:
         bad = (known >= DENSE_KNOWN) & (agree == 0)
-    out = _result(d, s, bad, known, agree, comparisons, threshold, dense=True)
-    out[1]["majority"] = bool(problem.camera.perspective)
-    return out
+    return _result(d, s, bad, known, agree, comparisons, threshold, dense=True,
+                   majority=bool(problem.camera.perspective))
 
 
 #: Samples (a random subset of a denser prior) whose differences are compared with the

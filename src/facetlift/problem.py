@@ -109,11 +109,11 @@ def _flip_mends_facing(cam, r, c, nf, clear, away: float, shares=None):
 #: With a pinhole camera (whose grazing rule keeps rims down to a view cosine of 1/255), no
 #: isolated-normal rule given and ``steep_isolated`` (the smooth DGP's), a normal steeper
 #: than this view cosine (85 deg from the ray, the orthographic default's outlier_eps) that
-#: is isolated by
-#: :data:`STEEP_ISOLATED_RULE` (the discontinuity route's rule) becomes a missing sample: a
-#: wrong normal nearly edge-on inside an object, not a rim, whose slope of up to 255
-#: footprints per pixel bends the whole surface (a review: 80 such pixels on the DiLiGenT bear,
-#: 0.2 % of its mask, raised its MADE 0.47 -> 3.9 mm; 30 on a 256^2 render 1.4 -> 6.9 mm).
+#: is isolated by :data:`STEEP_ISOLATED_RULE` (the discontinuity route's rule) becomes a
+#: missing sample: a wrong normal nearly edge-on inside an object, not a rim, whose slope of
+#: up to 255 footprints per pixel bends the whole surface (a review: 80 such pixels on the
+#: DiLiGenT bear, 0.2 % of its mask, raised its MADE 0.47 -> 3.9 mm; 30 on a 256^2 render
+#: 1.4 -> 6.9 mm).
 STEEP_ISOLATED, STEEP_ISOLATED_RULE = float(np.cos(np.radians(85.0))), (15.0, 10.0)
 
 

@@ -345,9 +345,14 @@ def _json_K(data: dict):
             raise ValueError(f"a JSON object holding both {' and '.join(found)}: which is K?")
         named = all(k in low for k in _K_NAMES)
         if named and found:  # (two answers: the same one, or refused, the diff review)
-            m = np.asarray(matrix(found[0].lower(), low[found[0].lower()]), float).ravel()
-            mine = [float(low[k]) for k in _K_NAMES]
-            if m.size != 9 or not np.allclose(m[[0, 4, 2, 5]], mine):
+            from ..camera import check_K
+
+            try:
+                same = np.allclose(check_K(matrix(found[0].lower(), low[found[0].lower()])),
+                                   check_K([low[k] for k in _K_NAMES]))
+            except (TypeError, ValueError):
+                same = False
+            if not same:
                 raise ValueError(f"a JSON object holding both {found[0]} and fx, fy, cx, cy, "
                                  "which differ: which is K?")
         if named:
@@ -648,6 +653,20 @@ OTHER_CAMERA_FILES = (
     "intrinsics.txt", "intrinsics.json", "intrinsics.npy",
     "intrinsic_color.txt",  # ScanNet's (4x4)
 )
+
+
+def unread_camera_advice(found, every: bool = False) -> str:
+    """The words on other tools' camera files `found` (paths) that no K was read from: not
+    read by themselves, so the map (`every`: every map of a folder) is integrated
+    orthographically, and what to give instead."""
+    one = len(found) == 1
+    maps = "these maps are" if every else "the map is"
+    return (f"{'a camera file that is' if one else 'camera files that are'} not read by "
+            f"{'itself' if one else 'themselves'} (only a dataset folder's K.txt or "
+            f"Calib_Results.mat is), so without a camera {maps} integrated orthographically; "
+            f"give --K {found[0]} (K=facetlift.io.read_K(path) in Python) to use "
+            f"{'it' if one else 'one of them'}{' for every map' if every else ''}, or "
+            "--orthographic if orthographic is meant")
 
 
 def unread_camera_files(folder) -> list[Path]:
